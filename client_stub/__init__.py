@@ -1,0 +1,1 @@
+"""The TTES stub image generator (pyrender). Never imports `server`."""

@@ -1,0 +1,23 @@
+"""Shared test configuration.
+
+Hypothesis profiles: ``ci`` (default, bounded so `make test` stays fast) and
+``fuzz`` (HYPOTHESIS_PROFILE=fuzz, used by `make fuzz` for the long runs).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from hypothesis import HealthCheck, settings
+
+settings.register_profile(
+    "ci", max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True
+)
+settings.register_profile(
+    "fuzz", max_examples=100_000, deadline=None, suppress_health_check=list(HealthCheck)
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+REPO = Path(__file__).resolve().parent.parent
+SHARED = REPO.parent / "shared"

@@ -1,0 +1,3 @@
+from ttes.cli import main
+
+raise SystemExit(main())

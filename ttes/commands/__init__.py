@@ -1,0 +1,1 @@
+"""One module per `ttes` subcommand (group); each defines ``register(subparsers)``."""
