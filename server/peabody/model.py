@@ -50,6 +50,10 @@ class Psurf:
     face_attributes: np.ndarray | None = None  # (f,) int attribute index per face
     attributes: list[dict] = field(default_factory=list)  # {"name":..., "ambient":..., "diffuse":..., ...}
     filename: str | None = None
+    # (e, 2) 0-based node pairs listed in the file's edge section, or None (psurf.psurf_edges computes them)
+    edges: np.ndarray | None = None
+    # (nnodes, nedges, nfaces) per csurf (8.3), in order; empty means one csurf holding everything
+    csurfs: list[tuple[int, int, int]] = field(default_factory=list)
 
     @property
     def polygon_count(self) -> int:
@@ -116,6 +120,7 @@ class Figure:
     root: Site | None = None
     location: np.ndarray = field(default_factory=identity)  # global transform of the root site
     filename: str | None = None  # the figure file it was read from ("DI.fig"): the protofiletype
+    source: str | None = None  # absolute path of that file when instantiated with `file = "DI.fig";`
 
     def add_segment(self, segment: Segment) -> Segment:
         segment.figure = self
