@@ -1,0 +1,127 @@
+"""Binary caches of channelset files: ``X.chset.npz`` beside ``X.chset.env``.
+
+Parsing a big channelset text file costs far more than loading its arrays, so the first load writes the arrays
+to an ``.npz`` (no pickles) beside the text. A cache is used only when it is readable, has this format version
+and records the text file's current size and modification time; otherwise the text is parsed again and the
+cache rewritten (atomically, and silently skipped when the folder is read-only). Caches are never committed
+(``*.chset.npz`` is in ``.gitignore``).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from server.motion.channelset import Channelset, SharedChannel
+
+FORMAT_VERSION = 1
+log = logging.getLogger(__name__)
+
+
+def cache_path(path: str | Path) -> Path:
+    """``X.chset.env`` → ``X.chset.npz`` (any other name gets ``.npz`` appended)."""
+    path = Path(path)
+    if path.suffix == ".env":
+        return path.with_suffix(".npz")
+    return path.with_name(path.name + ".npz")
+
+
+def _strings(values: list[str]) -> np.ndarray:
+    return np.array(values, dtype=str) if values else np.zeros(0, dtype="<U1")
+
+
+def save_npz(chset: Channelset, target: str | Path, source_stat: os.stat_result | None = None) -> None:
+    """Write ``chset`` to ``target`` atomically (temp file + rename)."""
+    target = Path(target)
+    chans = chset.channels
+    arrays = {
+        "format_version": np.array(FORMAT_VERSION),
+        "name": np.array(chset.name),
+        "fps": np.array(chset.fps, dtype=np.float64),
+        "source": np.array(chset.source or ""),
+        "source_size": np.array(source_stat.st_size if source_stat else -1, dtype=np.int64),
+        "source_mtime_ns": np.array(source_stat.st_mtime_ns if source_stat else -1, dtype=np.int64),
+        "ch_name": _strings([c.name for c in chans]),
+        "ch_type": _strings([c.type for c in chans]),
+        "ch_proto": _strings([c.protofiletype for c in chans]),
+        "ch_object": _strings([c.object for c in chans]),
+        "ch_column": np.array([c.column for c in chans], dtype=np.int64),
+        "ch_width": np.array([c.width for c in chans], dtype=np.int64),
+        "joint_data": chset.joint_data,
+        "fig_pos": chset.fig_pos,
+        "fig_quat": chset.fig_quat,
+        "fig_root": chset.fig_root,
+        "root_names": _strings(list(chset.root_names)),
+    }
+    fd, tmp = tempfile.mkstemp(prefix="." + target.name, suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, **arrays)
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_npz(path: str | Path, source_stat: os.stat_result | None = None) -> Channelset | None:
+    """The cached channelset, or None when the cache is missing, unreadable, stale or of another version."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if int(z["format_version"]) != FORMAT_VERSION:
+                return None
+            if source_stat is not None and (
+                int(z["source_size"]) != source_stat.st_size
+                or int(z["source_mtime_ns"]) != source_stat.st_mtime_ns
+            ):
+                return None
+            channels = tuple(
+                SharedChannel(str(n), str(t), str(p), str(o), int(c), int(w))  # type: ignore[arg-type]
+                for n, t, p, o, c, w in zip(
+                    z["ch_name"],
+                    z["ch_type"],
+                    z["ch_proto"],
+                    z["ch_object"],
+                    z["ch_column"],
+                    z["ch_width"],
+                    strict=True,
+                )
+            )
+            source = str(z["source"]) or None
+            return Channelset(
+                name=str(z["name"]),
+                fps=float(z["fps"]),
+                channels=channels,
+                joint_data=z["joint_data"],
+                fig_pos=z["fig_pos"],
+                fig_quat=z["fig_quat"],
+                fig_root=z["fig_root"],
+                root_names=tuple(str(s) for s in z["root_names"]),
+                source=source,
+            )
+    except (OSError, KeyError, ValueError, TypeError, zipfile.BadZipFile, EOFError):
+        return None
+
+
+def load_channelset(path: str | Path, *, use_cache: bool = True) -> Channelset:
+    """Load the one channelset in a ``.chset.env`` file, through its ``.npz`` cache when fresh."""
+    from server.motion.channelset_file import read_channelset  # parsing pulls in the Peabody language
+
+    path = Path(path)
+    if not use_cache:
+        return read_channelset(path)
+    st = path.stat()
+    cpath = cache_path(path)
+    cached = load_npz(cpath, st)
+    if cached is not None:
+        return cached
+    chset = read_channelset(path)
+    try:
+        save_npz(chset, cpath, st)
+    except OSError as exc:  # a read-only data folder still works, just slower
+        log.debug("cannot write channelset cache %s: %s", cpath, exc)
+    return chset

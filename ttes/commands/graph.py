@@ -1,0 +1,105 @@
+"""`ttes graph`: posture graph files (seed 002, 3.4.2): shortest paths in time and summaries."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("graph", help="posture graph (.graph) files: paths and summaries", description=__doc__)
+    cmds = p.add_subparsers(dest="graph_command", metavar="SUBCOMMAND")
+    cmds.required = True
+    path = cmds.add_parser(
+        "path",
+        help="quickest sequence of transitions between two postures",
+        description="Dijkstra over arc times; arcs with time -1 use their channelset's stored duration.",
+    )
+    path.add_argument("graph", help="a .graph file")
+    path.add_argument("start", metavar="FROM", help="starting posture")
+    path.add_argument("goal", metavar="TO", help="goal posture")
+    path.add_argument("--json", action="store_true", help="machine-readable output")
+    path.set_defaults(func=run_path)
+    info = cmds.add_parser(
+        "info", help="postures, channelset files and arcs of a graph", description="Summarise a .graph file."
+    )
+    info.add_argument("graph", help="a .graph file")
+    info.add_argument("--load", action="store_true", help="also load (and cache) every channelset it lists")
+    info.add_argument("--json", action="store_true", help="machine-readable output")
+    info.set_defaults(func=run_info)
+
+
+def _durations(graph_path: str, graph) -> list[float] | None:  # type: ignore[no-untyped-def]
+    """Stored channelset durations, loaded only when some arc needs them (time -1)."""
+    if all(a.time > 0 for a in graph.arcs):
+        return None
+    from server.motion.posture_change import load_posture_graph
+
+    return load_posture_graph(graph_path).durations
+
+
+def run_path(args: argparse.Namespace) -> int:
+    from server.motion.posture_graph import read_posture_graph
+    from ttes.output import print_json
+
+    graph = read_posture_graph(args.graph)
+    durations = _durations(args.graph, graph)
+    arcs = graph.shortest_path(args.start, args.goal, durations)
+    result = {
+        "path": [args.start, *(a.end for a in arcs)],
+        "arcs": [
+            {
+                "from": a.start,
+                "to": a.end,
+                "channelset": graph.files[a.channelset],
+                "direction": a.direction,
+                "time": graph.arc_time(a, durations),
+            }
+            for a in arcs
+        ],
+        "time_s": graph.path_time(arcs, durations),
+    }
+    if args.json:
+        print_json(result)
+        return 0
+    print(" -> ".join(result["path"]) + f"  ({result['time_s']:.3f} s)")
+    for a in result["arcs"]:
+        print(f"  {a['from']:<14} {a['to']:<14} {a['channelset']:<32} {a['direction']:<8} {a['time']:g} s")
+    return 0
+
+
+def run_info(args: argparse.Namespace) -> int:
+    from server.motion.posture_graph import read_posture_graph
+    from ttes.output import print_json
+
+    graph = read_posture_graph(args.graph)
+    result: dict[str, object] = {
+        "file": args.graph,
+        "postures": graph.postures,
+        "channelsets": graph.files,
+        "arcs": [
+            {
+                "from": a.start,
+                "to": a.end,
+                "channelset": a.channelset,
+                "direction": a.direction,
+                "time": a.time,
+            }
+            for a in graph.arcs
+        ],
+    }
+    if args.load:
+        from server.motion.posture_change import load_posture_graph
+
+        loaded = load_posture_graph(args.graph)
+        result["channelset_durations_s"] = loaded.durations
+        result["channelset_bytes"] = sum(c.nbytes for c in loaded.channelsets)
+        result["protofiletypes"] = loaded.protofiletypes
+    if args.json:
+        print_json(result)
+        return 0
+    counts = f"{len(graph.postures)} postures, {len(graph.files)} channelsets, {len(graph.arcs)} arcs"
+    print(f"{args.graph}: {counts}")
+    print("  postures: " + ", ".join(graph.postures))
+    if args.load:
+        print(f"  channelset data: {result['channelset_bytes']} bytes")
+    return 0
