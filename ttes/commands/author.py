@@ -75,3 +75,136 @@ def run_figures(args: argparse.Namespace) -> int:
 
 # --- check and contact-sheet (helper block: motion library quality and contact sheets) -------------------
 
+
+def _register_check(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "check",
+        help="measure the motion library's quality (foot skate, ground, palms on rifle, limits, continuity)",
+        description=(
+            "Check every clip of the posture graphs: foot skate in stance (world frame, ground motion added "
+            "back for locomotion), ground penetration, palm centres to the rifle's grip/handguard, "
+            "joint-limit violations, frame-to-frame jumps, locomotion stride data; and continuity at every "
+            "posture node of every graph. Exit status 1 when a threshold fails, 2 when nothing was checked."
+        ),
+    )
+    p.add_argument(
+        "--graphs",
+        type=Path,
+        nargs="*",
+        default=None,
+        help="posture graph files (default: every posture_graphs/*.graph)",
+    )
+    p.add_argument("--clips", type=Path, nargs="*", default=[], help="extra channelset files to check")
+    p.add_argument("--figures", type=Path, default=None, help="figure folder (default: figures/)")
+    p.add_argument("--json", action="store_true", help="one JSON object: clips, continuity, summary")
+    p.set_defaults(func=run_check)
+
+
+def run_check(args: argparse.Namespace) -> int:
+    from server.authoring.quality import QualityError, check_library
+    from server.motion.errors import ChannelsetError, PostureGraphError
+    from server.peabody.language import PeabodyError
+    from ttes.output import print_json
+    from ttes.paths import FIGURES, POSTURE_GRAPHS
+
+    graphs = sorted(POSTURE_GRAPHS.glob("*.graph")) if args.graphs is None else list(args.graphs)
+    if not graphs and not args.clips:
+        print("ttes author check: nothing to check (no posture graphs, no --clips)", file=sys.stderr)
+        return 2
+    try:
+        result = check_library(graphs, args.figures or FIGURES, clips=args.clips)
+    except (QualityError, ChannelsetError, PostureGraphError, PeabodyError) as exc:
+        print(f"ttes author check: {exc}", file=sys.stderr)
+        return 2
+    summary = result["summary"]
+    if args.json:
+        print_json(result)
+    else:
+        for c in result["clips"]:
+            verdict = "ok  " if c["pass"] else "FAIL"
+            extra = f" ({', '.join(c['failures'])})" if c["failures"] else ""
+            print(
+                f"{verdict} {c['name']:<34} skate {c['foot_skate_cm']:6.2f} cm  ground "
+                f"{c['ground_penetration_cm']:5.2f} cm  "
+                f"palms {c.get('palm_rifle_cm', float('nan')):5.2f} cm  "
+                f"limits {c['joint_limit_violations']}  jump {c['max_frame_jump_deg']:5.1f} deg{extra}"
+            )
+        for r in result["continuity"]:
+            if not r["pass"]:
+                print(
+                    f"FAIL {r['graph']}:{r['posture']} continuity {r['continuity_deg']:.3f} deg "
+                    f"root {r['continuity_root_cm']:.2f} cm ({', '.join(r['worst_pair'])})"
+                )
+        print(
+            f"{summary['clips']} clips, {summary['clips_failing']} failing; "
+            f"{summary['postures_checked']} posture nodes checked"
+        )
+        for key, row in summary["thresholds"].items():
+            print(
+                f"  {'pass' if row['pass'] else 'FAIL'}  {key}: worst {row['worst']} (limit {row['limit']})"
+                f"{' at ' + str(row['where']) if row['where'] else ''}"
+            )
+    return 0 if summary["pass"] else 1
+
+
+def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "contact-sheet",
+        help="render every posture and a strip of frames from every clip into one PNG",
+        description=(
+            "Offscreen render (pyrender, headless EGL: PYOPENGL_PLATFORM=egl) of each posture node and "
+            "evenly spaced frames of each clip of the posture graphs that drive the chosen figure, on a "
+            "checkered ground (50 cm squares), with labels."
+        ),
+    )
+    p.add_argument("--out", type=Path, required=True, help="PNG file to write")
+    p.add_argument("--figure", choices=("DI", "soldier"), default="DI", help="which soldier figure's clips")
+    p.add_argument(
+        "--graphs",
+        type=Path,
+        nargs="*",
+        default=None,
+        help="posture graph files (default: every posture_graphs/*.graph)",
+    )
+    p.add_argument("--frames", type=int, default=6, help="frames per clip (default 6)")
+    p.add_argument("--tile", type=int, default=200, help="tile size in pixels (default 200)")
+    p.add_argument("--json", action="store_true", help="machine-readable summary")
+    p.set_defaults(func=run_contact_sheet)
+
+
+def run_contact_sheet(args: argparse.Namespace) -> int:
+    from server.authoring.contact_sheet import ContactSheetError, library_sheet_inputs, render_contact_sheet
+    from server.motion.errors import ChannelsetError, PostureGraphError
+    from server.peabody.language import PeabodyError
+    from ttes.output import print_json
+    from ttes.paths import FIGURES, POSTURE_GRAPHS
+
+    graphs = sorted(POSTURE_GRAPHS.glob("*.graph")) if args.graphs is None else list(args.graphs)
+    if args.frames < 1 or args.tile < 32:
+        print("ttes author contact-sheet: --frames must be >= 1 and --tile >= 32", file=sys.stderr)
+        return 2
+    try:
+        postures, clips, types = library_sheet_inputs(graphs, f"{args.figure}.fig")
+        if not clips:
+            print(f"ttes author contact-sheet: no clips drive {args.figure}.fig", file=sys.stderr)
+            return 2
+        info = render_contact_sheet(
+            [FIGURES / t for t in types],
+            clips,
+            args.out,
+            postures=postures,
+            frames_per_clip=args.frames,
+            tile=args.tile,
+            title=f"{args.figure}.fig motion library",
+        )
+    except (ContactSheetError, ChannelsetError, PostureGraphError, PeabodyError) as exc:
+        print(f"ttes author contact-sheet: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print_json(info)
+    else:
+        print(f"wrote {info['out']} ({info['width']}x{info['height']}, {info['tiles']} tiles)")
+    return 0
+
+
+AUTHOR_STEPS.extend([_register_check, _register_contact_sheet])

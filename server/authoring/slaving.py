@@ -1,0 +1,368 @@
+"""Slaving and re-recording (seed 002, 3.4.4): drive the low-resolution DI.fig from a soldier.fig master.
+
+Per frame (all frames of a clip at once):
+
+1. **Copy** the master's joint angles to the slave's joints of the same name (legs, arms, clavicles, neck,
+   head; the slave's ``eyes`` take the master's ``left_eye``).
+2. **Blend the spine**: the master's ``waist`` + 17 vertebral joints are folded onto the slave's torso joints
+   by matching segment orientations — slave ``waist`` turns ``lumbar`` like the master's ``l3`` (waist, vl5,
+   vl4), ``belly`` turns ``middle_torso`` like ``t12`` (vl3, vl2, vl1), ``upper_spine`` turns ``upper_torso``
+   like the master's (vt12 .. vt1); each composed rotation is decomposed into the slave joint's DOF angles
+   (:func:`server.authoring.ik.decompose_rotation`). ``spine_compression`` starts at 0.
+3. **Solve the constraint table** (:data:`SLAVE_CONSTRAINTS`) with the palm centres at the highest priority,
+   so that when not every site can match the hands stay on the gun.
+
+The seed's joint chains are kept except that the palm goals may also turn the shoulder: at the highest
+priority they must be able to win, and the elbow goals (shoulder chain) then act in their null space — the
+seed's stated intent. Every goal pulls towards the copied angles in its null space, so unconstrained DOFs
+keep the master's values.
+
+``slave_parameters("yes","yes","yes","yes",0.50,"yes",0.50,"yes","yes")`` — the seed shows the call but not
+its meaning; our reading, in order: copy joint angles, blend the spine, match the torso (DI_belly, DI_torso),
+match the sight, torso/sight goal weight, match the palms, elbow goal weight, match the elbows, palms at the
+highest priority. :func:`reslave_channelset` is the re-recording: play a soldier channelset on the master
+(:func:`create_channelset_motion`), slave every frame, record ``DI`` plus the untouched rifle channel.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from server.authoring import ik
+from server.motion.binding import bind_channelset, protofiletype
+from server.motion.channelset import Channelset, FigureTrack, JointTrack, make_channelset
+from server.motion.errors import ChannelsetError
+from server.motion.recording import Recording, recording_to_channelset, site_name
+from server.peabody.fk import FigureKinematics
+from server.peabody.model import Figure
+
+
+@dataclass(frozen=True)
+class SlaveConstraint:
+    """One row of the seed's table: slave end effector, master goal site, slave joint chain."""
+
+    name: str
+    slave_site: str
+    master_site: str
+    joints: tuple[str, ...]
+    group: str  # "torso", "sight", "palm", "elbow"
+
+
+SLAVE_CONSTRAINTS: tuple[SlaveConstraint, ...] = (
+    SlaveConstraint(
+        "DI_belly", "middle_torso.upper_torso", "t12.DI_middletarget", ("waist", "belly"), "torso"
+    ),
+    SlaveConstraint(
+        "DI_torso",
+        "upper_torso.distal",
+        "upper_torso.distal",
+        ("belly", "spine_compression", "upper_spine"),
+        "torso",
+    ),
+    SlaveConstraint("DI_sight", "bottom_head.sight", "bottom_head.sight", ("neck", "head"), "sight"),
+    SlaveConstraint(
+        "DI_leftpalm",
+        "left_palm.palmcenter",
+        "left_palm.palmcenter",
+        ("left_clavicle", "left_shoulder", "left_elbow", "left_wrist"),
+        "palm",
+    ),
+    SlaveConstraint(
+        "DI_rightpalm",
+        "right_palm.palmcenter",
+        "right_palm.palmcenter",
+        ("right_clavicle", "right_shoulder", "right_elbow", "right_wrist"),
+        "palm",
+    ),
+    SlaveConstraint(
+        "DI_leftelbow",
+        "left_upper_arm.distal",
+        "left_upper_arm.distal",
+        ("left_clavicle", "left_shoulder"),
+        "elbow",
+    ),
+    SlaveConstraint(
+        "DI_rightelbow",
+        "right_upper_arm.distal",
+        "right_upper_arm.distal",
+        ("right_clavicle", "right_shoulder"),
+        "elbow",
+    ),
+)
+
+# slave torso joint -> (master segment below the folded joints, master segment above them)
+SPINE_BLEND: dict[str, tuple[str, str]] = {
+    "waist": ("lower_torso", "l3"),
+    "belly": ("l3", "t12"),
+    "upper_spine": ("t12", "upper_torso"),
+}
+NAME_MAP: dict[str, str] = {"eyes": "left_eye"}  # slave joint -> master joint where the names differ
+
+
+@dataclass
+class SlaveParameters:
+    """What the slaving does; see the module docstring for the reading of the seed's 9 arguments."""
+
+    copy_angles: bool = True
+    blend_spine: bool = True
+    match_torso: bool = True
+    match_sight: bool = True
+    torso_weight: float = 0.5
+    match_palms: bool = True
+    elbow_weight: float = 0.5
+    match_elbows: bool = True
+    palm_priority: bool = True
+
+
+def _yes(v: Any, what: str) -> bool:
+    if isinstance(v, bool):
+        return v
+    s = str(v).strip().lower()
+    if s in ("yes", "y", "true", "on", "1"):
+        return True
+    if s in ("no", "n", "false", "off", "0"):
+        return False
+    raise ValueError(f'slave_parameters: {what} must be "yes" or "no", not {v!r}')
+
+
+def slave_parameters(*args: Any) -> SlaveParameters:
+    """Parse the seed's 9-argument form ``("yes","yes","yes","yes",0.50,"yes",0.50,"yes","yes")``."""
+    names = [f.name for f in dataclasses.fields(SlaveParameters)]
+    if len(args) != len(names):
+        raise ValueError(
+            f"slave_parameters takes {len(names)} arguments ({', '.join(names)}), got {len(args)}"
+        )
+    values: dict[str, Any] = {}
+    for name, v in zip(names, args, strict=True):
+        if name.endswith("weight"):
+            w = float(v)
+            if not (np.isfinite(w) and w > 0):
+                raise ValueError(f"slave_parameters: {name} must be a positive number, not {v!r}")
+            values[name] = w
+        else:
+            values[name] = _yes(v, name)
+    return SlaveParameters(**values)
+
+
+@dataclass
+class MasterSlavePair:
+    """A soldier.fig master, a DI.fig slave and (optionally) the rifle they carry."""
+
+    master: Figure
+    slave: Figure
+    rifle: Figure | None = None
+    parameters: SlaveParameters = field(default_factory=SlaveParameters)
+    on: bool = True
+    ik_options: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.master_kin = FigureKinematics(self.master)
+        self.slave_kin = FigureKinematics(self.slave)
+        mk, sk = self.master_kin, self.slave_kin
+        src: list[int] = []
+        dst: list[int] = []
+        for jname, sl in sk.dof_slices.items():
+            mname = NAME_MAP.get(jname, jname)
+            msl = mk.dof_slices.get(mname)
+            if jname in SPINE_BLEND or msl is None or sl.stop - sl.start != msl.stop - msl.start:
+                continue
+            src.extend(range(msl.start, msl.stop))
+            dst.extend(range(sl.start, sl.stop))
+        self._src = np.array(src, dtype=np.intp)
+        self._dst = np.array(dst, dtype=np.intp)
+        self._spine = [
+            (j, mk.segment_names.index(a), mk.segment_names.index(b))
+            for j, (a, b) in SPINE_BLEND.items()
+            if j in sk.dof_slices and sk.dof_slices[j].stop - sk.dof_slices[j].start == 3
+        ]
+        if self.slave.root is None or self.master.root is None:
+            raise ValueError("master and slave need root sites")
+        self._slave_root = site_name(self.slave.root)
+        if self._slave_root not in mk.site_names:
+            raise ValueError(f"master has no site {self._slave_root!r} to place the slave's root on")
+        for c in SLAVE_CONSTRAINTS:
+            if c.slave_site not in sk.site_names or c.master_site not in mk.site_names:
+                raise ValueError(
+                    f"{c.name}: site missing ({c.slave_site} on slave, {c.master_site} on master)"
+                )
+
+    def slave_parameters(self, *args: Any) -> SlaveParameters:
+        """Jack's ``slave_parameters`` on this pair (9 arguments, see :func:`slave_parameters`)."""
+        self.parameters = slave_parameters(*args)
+        return self.parameters
+
+    def turn_slave_on(self) -> None:
+        self.on = True
+
+    def turn_slave_off(self) -> None:
+        self.on = False
+
+    # -- slaving ----------------------------------------------------------------------------------------
+    def copy_pose(self, master_pose: np.ndarray, master_globals: np.ndarray) -> np.ndarray:
+        """Steps 1-2: the slave's starting pose ``(..., ndof)`` from master poses and segment globals."""
+        sk = self.slave_kin
+        batch = master_pose.shape[:-1]
+        out = np.broadcast_to(sk.neutral_pose(), (*batch, sk.ndof)).copy()
+        if self.parameters.copy_angles:
+            out[..., self._dst] = master_pose[..., self._src]
+        if self.parameters.blend_spine:
+            for jname, lo_seg, hi_seg in self._spine:
+                rel = (
+                    np.swapaxes(master_globals[..., lo_seg, :3, :3], -1, -2)
+                    @ master_globals[..., hi_seg, :3, :3]
+                )
+                sl = sk.dof_slices[jname]
+                joint = self.slave.joints[jname]
+                axes = np.array([d.axis for d in joint.dofs])
+                ang = ik.decompose_rotation(rel, axes, lower=sk.lower[sl], upper=sk.upper[sl])
+                out[..., sl] = ang
+            if "spine_compression" in sk.dof_slices:
+                out[..., sk.dof_slices["spine_compression"]] = 0.0
+        return np.clip(out, sk.lower, sk.upper)
+
+    def goals(self, master_sites: np.ndarray) -> list[ik.Goal]:
+        """Step 3's goals from the master's site globals ``(..., nsite, 4, 4)``."""
+        p = self.parameters
+        mk = self.master_kin
+        on = {"torso": p.match_torso, "sight": p.match_sight, "palm": p.match_palms, "elbow": p.match_elbows}
+        weight = {"torso": p.torso_weight, "sight": p.torso_weight, "palm": 1.0, "elbow": p.elbow_weight}
+        out = []
+        for c in SLAVE_CONSTRAINTS:
+            if not on[c.group]:
+                continue
+            target = master_sites[..., mk.site_names.index(c.master_site), :3, 3]
+            priority = 2 if (c.group == "palm" and p.palm_priority) else 1
+            out.append(ik.Goal(c.slave_site, target, None, weight[c.group], priority, c.joints))
+        return out
+
+    def slave_pose(
+        self, master_pose: np.ndarray, master_location: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(slave_pose, slave_location)`` for master poses ``(ndof,)`` or ``(..., ndof)`` and the master's
+        root site globals (default: the master figure's location). The slave's root site is put where the
+        master's site of the same name is."""
+        mk, sk = self.master_kin, self.slave_kin
+        q = np.asarray(master_pose, dtype=np.float64)
+        loc = self.master.location if master_location is None else np.asarray(master_location, np.float64)
+        batch = np.broadcast_shapes(q.shape[:-1], loc.shape[:-2])
+        q = np.broadcast_to(q, (*batch, mk.ndof))
+        loc = np.broadcast_to(loc, (*batch, 4, 4))
+        segs = mk.segment_globals(q, loc)
+        sites = mk.site_globals(q, loc)
+        slave_loc = sites[..., mk.site_names.index(self._slave_root), :, :].copy()
+        start = self.copy_pose(q, segs)
+        goals = self.goals(sites)
+        if not goals:
+            return start, slave_loc
+        opts: dict[str, Any] = {"iterations": 80, "rest_gain": 0.1, "tolerance": 0.02}
+        opts.update(self.ik_options)
+        pose, self.last_report = ik.solve(sk, start, goals, slave_loc, rest_pose=start, **opts)
+        return pose, slave_loc
+
+    def update(self) -> None:
+        """The SimulationFunction: when on, set the slave figure from the master figure's current state."""
+        if not self.on:
+            return
+        pose, loc = self.slave_pose(self.master_kin.neutral_pose(), self.master.location)
+        self.slave_kin.set_pose(pose)
+        self.slave.location = loc
+
+
+def create_master_slave_pair(master: Figure, slave: Figure, rifle: Figure | None = None) -> MasterSlavePair:
+    """Jack's ``create_master_slave_pair``: a soldier.fig master and a DI.fig slave (plus their rifle)."""
+    return MasterSlavePair(master, slave, rifle)
+
+
+def turn_slave_on(pair: MasterSlavePair) -> None:
+    pair.turn_slave_on()
+
+
+def turn_slave_off(pair: MasterSlavePair) -> None:
+    pair.turn_slave_off()
+
+
+def create_channelset_motion(channelset: Channelset, figures: Sequence[Figure]) -> Recording:
+    """Jack's ``create_channelset_motion`` + interpolation: every frame of ``channelset`` played on
+    ``figures`` as a :class:`Recording` (each figure's root site and its global, re-expressed for the
+    figure's own root site when the channel recorded another one)."""
+    bound = bind_channelset(channelset, list(figures))
+    rec = Recording(list(figures))
+    n = channelset.nframes
+    by_name = {f.name: f for f in figures}
+    for bf in bound.figures:
+        fig = by_name[bf.figure]
+        if fig.root is None:
+            raise ChannelsetError(f"figure {fig.name!r} has no root site", channelset.source)
+        poses = np.tile(bf.neutral.astype(np.float64), (n, 1))
+        poses[:, bf.dst] = channelset.joint_data[:, bf.src]
+        root = site_name(fig.root)
+        if bf.figure_channel < 0:
+            locs = np.broadcast_to(fig.location, (n, 4, 4))
+        else:
+            chan = next(c for c in channelset.figure_channels() if c.column == bf.figure_channel)
+            locs = channelset.transforms(chan)
+            roots = channelset.roots(chan)
+            if any(r != root for r in roots):
+                kin = FigureKinematics(fig)
+                g = kin.site_globals(poses, np.broadcast_to(np.eye(4), (n, 4, 4)))
+                idx = np.array([kin.site_names.index(r) for r in roots])
+                rel = np.linalg.inv(g[np.arange(n), idx]) @ g[:, kin.site_names.index(root)]
+                locs = locs @ rel
+        rec.poses[fig.name].extend(poses)
+        rec.roots[fig.name].extend([root] * n)
+        rec.locations[fig.name].extend(np.asarray(locs, dtype=np.float64))
+    missing = [f.name for f in figures if not rec.poses[f.name]]
+    if missing:
+        raise ChannelsetError(f"{channelset.name}: nothing drives figure {missing[0]!r}", channelset.source)
+    return rec
+
+
+_CORE_FIELDS = {
+    "name",
+    "fps",
+    "channels",
+    "joint_data",
+    "fig_pos",
+    "fig_quat",
+    "fig_root",
+    "root_names",
+    "source",
+}
+
+
+def low_name(name: str) -> str:
+    """``ststow2kstow.chset`` -> ``ststow2kstow_low.chset`` (the seed's names for re-recorded clips)."""
+    for suffix in (".chset.env", ".chset"):
+        if name.endswith(suffix):
+            return name[: -len(suffix)] + "_low" + suffix
+    return name + "_low"
+
+
+def reslave_channelset(channelset: Channelset, pair: MasterSlavePair, name: str | None = None) -> Channelset:
+    """Re-record a master channelset for the slave: slave channels (figure + joints) replace the master's,
+    every other sharedchannel (the rifle) is copied unchanged, and optional fields (``ground_speed``,
+    ``stride_length``, ...) are carried over."""
+    rec = create_channelset_motion(channelset, [pair.master])
+    n = rec.nframes
+    q = np.asarray(rec.poses[pair.master.name], dtype=np.float64)
+    loc = np.asarray(rec.locations[pair.master.name], dtype=np.float64)
+    pose, slave_loc = pair.slave_pose(q, loc)
+    out = Recording([pair.slave])
+    out.poses[pair.slave.name].extend(pose)
+    out.roots[pair.slave.name].extend([pair._slave_root] * n)
+    out.locations[pair.slave.name].extend(slave_loc)
+    slave_cs = recording_to_channelset(channelset.name, out, 0, n - 1, channelset.fps)
+    master_type = protofiletype(pair.master)
+    kept: list[JointTrack | FigureTrack] = [t for t in channelset.tracks() if t.protofiletype != master_type]
+    result = make_channelset(
+        name or low_name(channelset.name), channelset.fps, [*slave_cs.tracks(), *kept], channelset.source
+    )
+    for key, value in vars(channelset).items():  # optional fields, declared or set on the instance
+        if key not in _CORE_FIELDS and not key.startswith("_"):
+            setattr(result, key, value)
+    return result
