@@ -1,0 +1,184 @@
+"""Events of the TTES wire protocol: what ``Connection.next_event`` yields and ``Connection.send`` takes.
+
+Every event is a frozen dataclass. The ones carrying numpy arrays (``EntityRequests``, ``JointUpdates``)
+compare by identity (``eq=False``): compare their arrays yourself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from protocol.framing import DEFAULT_MAX_FRAME
+from protocol.update_table import UpdateTable
+
+PROTOCOL_VERSION = 1
+SUPPORTED_VERSIONS = (1,)
+DEFAULT_MAX_SOLDIERS = 16384
+ROLES = ("controller", "observer")
+
+
+class Event:
+    """Base class of all protocol events."""
+
+
+@dataclass(frozen=True)
+class Hello(Event):
+    """Client → server, first frame: who I am and the largest frame I accept."""
+
+    name: str
+    role: str = "controller"
+    max_frame: int = DEFAULT_MAX_FRAME
+    version: int = PROTOCOL_VERSION
+
+
+@dataclass(frozen=True)
+class Accept(Event):
+    """Server → client, answer to Hello: the version spoken and the server's limits."""
+
+    name: str
+    max_frame: int = DEFAULT_MAX_FRAME
+    max_soldiers: int = DEFAULT_MAX_SOLDIERS
+    version: int = PROTOCOL_VERSION
+
+
+@dataclass(frozen=True)
+class Error(Event):
+    """Either direction: ``code`` from :class:`ErrorCode` (< 100 fatal), ``ref`` the request id or None."""
+
+    code: int
+    message: str
+    ref: int | None = None
+
+
+@dataclass(frozen=True)
+class Goodbye(Event):
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class Ping(Event):
+    nonce: int = 0
+
+
+@dataclass(frozen=True)
+class Pong(Event):
+    nonce: int = 0
+
+
+@dataclass(frozen=True)
+class Jcl(Event):
+    """Client → server: JCL command text, e.g. ``read_file("jack-ttes-soldier_low.jcl");``."""
+
+    text: str
+    id: int = 0
+
+
+@dataclass(frozen=True)
+class Ready(Event):
+    """Server → client: what ``start_ttes_socket_simulation()`` signals; soldiers as (index, table) pairs."""
+
+    soldiers: tuple[tuple[int, int], ...] = ()
+
+
+@dataclass(frozen=True)
+class Status(Event):
+    """Server → client, every ``set_ttes_report_interval`` seconds."""
+
+    time: float
+    soldiers: int
+    update_rate: float
+    text: str = ""
+
+
+@dataclass(frozen=True)
+class CreateSoldier(Event):
+    """Client → server: a soldier of ``figure`` carrying ``weapon`` ("" = none) at ``index`` or a free one."""
+
+    id: int
+    figure: str = "DI.fig"
+    weapon: str = "AK_47.fig"
+    index: int | None = None
+
+
+@dataclass(frozen=True)
+class SoldierCreated(Event):
+    """Server → client, answer to CreateSoldier ``id``: the soldier's index and its update table."""
+
+    id: int
+    index: int
+    table: int
+
+
+@dataclass(frozen=True)
+class RemoveSoldier(Event):
+    index: int
+
+
+@dataclass(frozen=True)
+class Subscribe(Event):
+    """Client → server: send me joint updates for these soldiers (a full update first)."""
+
+    indices: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Unsubscribe(Event):
+    indices: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class RequestFullUpdate(Event):
+    """Client → server: resend these soldiers in full (empty = every subscribed soldier)."""
+
+    indices: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class EntityRequests(Event):
+    """Client → server: a batch of JackPackIn requests (:data:`protocol.entity.ENTITY_REQUEST_DTYPE` rows)."""
+
+    rows: np.ndarray
+
+
+@dataclass(frozen=True)
+class UpdateTableMsg(Event):
+    """Server → client: the update table that JointUpdates with this ``table_id`` are read with."""
+
+    table: UpdateTable
+
+
+@dataclass(frozen=True, eq=False)
+class JointUpdates(Event):
+    """Server → client: soldier poses for one update table at server tick ``tick``.
+
+    On send: the *current* pose of any soldiers; the connection sends only subscribed soldiers and only the
+    entries that changed since that client last received them. On receive: the reconstructed current pose of
+    the soldiers in the frame, and ``changed`` (n, entries) saying which entries the frame carried.
+    ``dofs`` (n, D) radians/metres in table order; ``positions`` (n, G, 3) metres; ``orientations``
+    (n, G, 4) unit quaternions (w, x, y, z); G = figure entries in table order.
+    """
+
+    table: int
+    indices: np.ndarray
+    dofs: np.ndarray
+    positions: np.ndarray
+    orientations: np.ndarray
+    tick: int = 0
+    changed: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ProtocolError(Event):
+    """Local event: the peer broke the protocol (``code`` < 100). The connection is now ERROR and has queued
+    an Error frame for the peer in :meth:`Connection.data_to_send`."""
+
+    code: int
+    message: str
+    location: str = ""
+
+
+@dataclass(frozen=True)
+class ConnectionClosed(Event):
+    """Local event: the stream ended cleanly (EOF on a frame boundary) or the connection is CLOSED/ERROR."""

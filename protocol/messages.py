@@ -1,0 +1,370 @@
+"""Message types and the codec of the stateless messages (handshake and msgpack control messages).
+
+Each control message body is one msgpack map with string keys, checked field by field on receipt: a missing
+field or a field of the wrong type is a SCHEMA error, a value out of range (or NaN/inf) a BAD_VALUE error.
+Unknown keys are ignored, so later minor versions can add optional fields.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Callable, Mapping
+from enum import IntEnum
+from types import MappingProxyType
+from typing import Any
+
+import msgpack
+import numpy as np
+
+from protocol.entity import decode_entity_requests, encode_entity_requests
+from protocol.errors import ErrorCode, WireError
+from protocol.events import (
+    ROLES,
+    SUPPORTED_VERSIONS,
+    Accept,
+    CreateSoldier,
+    EntityRequests,
+    Error,
+    Event,
+    Goodbye,
+    Hello,
+    Jcl,
+    JointUpdates,
+    Ping,
+    Pong,
+    Ready,
+    RemoveSoldier,
+    RequestFullUpdate,
+    SoldierCreated,
+    Status,
+    Subscribe,
+    Unsubscribe,
+    UpdateTableMsg,
+)
+from protocol.framing import MIN_MAX_FRAME
+from protocol.update_table import table_from_wire, table_to_wire
+
+MAGIC = b"TTES"
+HANDSHAKE_PREFIX = struct.Struct(">4sH")  # magic, version
+U32 = 0xFFFFFFFF
+U64 = 0xFFFFFFFFFFFFFFFF
+MAX_SOLDIERS_LIMIT = 0x10000  # soldier indices are u16 on the wire
+
+
+class MessageType(IntEnum):
+    """The type byte of a frame. HELLO, ACCEPT and ERROR keep their numbers and layouts in every version."""
+
+    HELLO = 0x01
+    ACCEPT = 0x02
+    ERROR = 0x03
+    GOODBYE = 0x04
+    PING = 0x05
+    PONG = 0x06
+    JCL = 0x10
+    READY = 0x11
+    STATUS = 0x12
+    CREATE_SOLDIER = 0x20
+    SOLDIER_CREATED = 0x21
+    REMOVE_SOLDIER = 0x22
+    SUBSCRIBE = 0x23
+    UNSUBSCRIBE = 0x24
+    REQUEST_FULL_UPDATE = 0x25
+    ENTITY_REQUESTS = 0x30
+    UPDATE_TABLE = 0x31
+    JOINT_UPDATES = 0x32
+
+
+BOTH = frozenset({MessageType.ERROR, MessageType.GOODBYE, MessageType.PING, MessageType.PONG})
+CLIENT_SENDS = BOTH | {
+    MessageType.HELLO,
+    MessageType.JCL,
+    MessageType.CREATE_SOLDIER,
+    MessageType.REMOVE_SOLDIER,
+    MessageType.SUBSCRIBE,
+    MessageType.UNSUBSCRIBE,
+    MessageType.REQUEST_FULL_UPDATE,
+    MessageType.ENTITY_REQUESTS,
+}
+SERVER_SENDS = BOTH | {
+    MessageType.ACCEPT,
+    MessageType.READY,
+    MessageType.STATUS,
+    MessageType.SOLDIER_CREATED,
+    MessageType.UPDATE_TABLE,
+    MessageType.JOINT_UPDATES,
+}
+
+
+# -- field-by-field schema checks ---------------------------------------------------------------------------
+
+
+class Body:
+    """A received msgpack map, read one typed field at a time."""
+
+    def __init__(self, raw: Any, what: str) -> None:
+        if not isinstance(raw, dict):
+            raise WireError(ErrorCode.SCHEMA, f"body is {type(raw).__name__}, not a map", what)
+        self.raw = raw
+        self.what = what
+
+    def _get(self, key: str) -> Any:
+        if key not in self.raw:
+            raise WireError(ErrorCode.SCHEMA, f"missing field {key!r}", self.what)
+        return self.raw[key]
+
+    def _type(self, key: str, value: Any, want: str) -> WireError:
+        return WireError(
+            ErrorCode.SCHEMA, f"field {key!r} must be {want}, got {type(value).__name__}", self.what
+        )
+
+    def _range(self, key: str, msg: str) -> WireError:
+        return WireError(ErrorCode.BAD_VALUE, f"field {key!r} {msg}", self.what)
+
+    def str(self, key: str, *, nonempty: bool = False) -> str:
+        v = self._get(key)
+        if not isinstance(v, str):
+            raise self._type(key, v, "a string")
+        if nonempty and not v:
+            raise self._range(key, "must not be empty")
+        return v
+
+    def int(self, key: str, lo: int, hi: int, *, nullable: bool = False) -> Any:
+        v = self._get(key)
+        if v is None and nullable:
+            return None
+        if not isinstance(v, int) or isinstance(v, bool):
+            raise self._type(key, v, "an int" + (" or nil" if nullable else ""))
+        if not lo <= v <= hi:
+            raise self._range(key, f"= {v} not in {lo}..{hi}")
+        return v
+
+    def float(self, key: str, lo: float = -math.inf) -> float:
+        v = self._get(key)
+        if not isinstance(v, int | float) or isinstance(v, bool):
+            raise self._type(key, v, "a number")
+        v = float(v)
+        if not math.isfinite(v) or v < lo:
+            raise self._range(key, f"= {v} must be finite and >= {lo}")
+        return v
+
+    def ints(self, key: str, lo: int, hi: int, *, width: int = 0) -> np.ndarray:
+        """A list of ints (``width`` > 0: a list of ``width``-int lists), checked in one numpy pass."""
+        v = self._get(key)
+        if not isinstance(v, list):
+            raise self._type(key, v, "a list")
+        shape = (len(v), width) if width else (len(v),)
+        if not v:
+            return np.zeros(shape, np.int64)
+        try:
+            arr = np.asarray(v)
+        except (ValueError, TypeError):
+            arr = np.zeros(0, object)
+        flat = (x for row in v for x in row) if width and arr.shape == shape else v
+        if arr.dtype.kind not in "iu" or arr.shape != shape or any(isinstance(x, bool) for x in flat):
+            want = f"a list of [{width} ints]" if width else "a list of ints"
+            raise WireError(ErrorCode.SCHEMA, f"field {key!r} must be {want}", self.what)
+        bad = (arr < lo) | (arr > hi)
+        if bad.any():
+            at = int(np.flatnonzero(bad.reshape(len(v), -1).any(axis=1))[0])
+            raise self._range(key, f"item {at} not in {lo}..{hi}")
+        return arr.astype(np.int64)
+
+
+def unpack_body(payload: bytes, what: str) -> Body:
+    try:
+        raw = msgpack.unpackb(payload, raw=False, strict_map_key=True, use_list=True)
+    except Exception as exc:  # any msgpack failure on untrusted bytes is one SCHEMA error
+        raise WireError(
+            ErrorCode.SCHEMA, f"undecodable msgpack ({type(exc).__name__}: {exc})", what
+        ) from None
+    return Body(raw, what)
+
+
+def pack_body(body: dict[str, Any]) -> bytes:
+    return msgpack.packb(body, use_bin_type=True)
+
+
+# -- per message ------------------------------------------------------------------------------------------
+
+
+def _handshake(payload: bytes, what: str) -> tuple[int, bytes]:
+    if len(payload) < HANDSHAKE_PREFIX.size:
+        raise WireError(ErrorCode.MALFORMED_FRAME, "shorter than magic + version", what)
+    magic, version = HANDSHAKE_PREFIX.unpack_from(payload)
+    if magic != MAGIC:
+        raise WireError(ErrorCode.BAD_MAGIC, f"magic {magic!r} is not {MAGIC!r}", what)
+    if version not in SUPPORTED_VERSIONS:
+        raise WireError(
+            ErrorCode.UNSUPPORTED_VERSION,
+            f"protocol version {version} is not supported; supported: {list(SUPPORTED_VERSIONS)}",
+            what,
+        )
+    return version, payload[HANDSHAKE_PREFIX.size :]
+
+
+def handshake_version(payload: bytes) -> int | None:
+    """The version field of a HELLO/ACCEPT payload, if it has one (for error messages)."""
+    if len(payload) < HANDSHAKE_PREFIX.size:
+        return None
+    return int(HANDSHAKE_PREFIX.unpack_from(payload)[1])
+
+
+def _dec_hello(payload: bytes, ctx: int) -> Hello:
+    version, rest = _handshake(payload, "HELLO")
+    b = unpack_body(rest, "HELLO")
+    role = b.str("role")
+    if role not in ROLES:
+        raise WireError(ErrorCode.BAD_VALUE, f"role {role!r} not in {ROLES}", "HELLO")
+    return Hello(b.str("name", nonempty=True), role, b.int("max_frame", MIN_MAX_FRAME, U32), version)
+
+
+def _dec_accept(payload: bytes, ctx: int) -> Accept:
+    version, rest = _handshake(payload, "ACCEPT")
+    b = unpack_body(rest, "ACCEPT")
+    return Accept(
+        b.str("name", nonempty=True),
+        b.int("max_frame", MIN_MAX_FRAME, U32),
+        b.int("max_soldiers", 1, MAX_SOLDIERS_LIMIT),
+        version,
+    )
+
+
+def _enc_handshake(version: int, body: dict[str, Any]) -> bytes:
+    return HANDSHAKE_PREFIX.pack(MAGIC, version) + pack_body(body)
+
+
+def _indices(b: Body, key: str, max_soldiers: int) -> tuple[int, ...]:
+    return tuple(b.ints(key, 0, max_soldiers - 1).tolist())
+
+
+def _dec_error(p: bytes, n: int) -> Error:
+    b = unpack_body(p, "ERROR")
+    return Error(b.int("code", 0, 0xFFFF), b.str("message"), b.int("ref", 0, U32, nullable=True))
+
+
+def _dec_jcl(p: bytes, n: int) -> Jcl:
+    b = unpack_body(p, "JCL")
+    return Jcl(b.str("text"), b.int("id", 0, U32))
+
+
+def _dec_ready(p: bytes, n: int) -> Ready:
+    pairs = unpack_body(p, "READY").ints("soldiers", 0, 0xFFFF, width=2)
+    if (pairs[:, 0] >= n).any():
+        raise WireError(ErrorCode.BAD_VALUE, f"field 'soldiers': index >= max_soldiers {n}", "READY")
+    return Ready(tuple((int(i), int(t)) for i, t in pairs.tolist()))
+
+
+def _dec_status(p: bytes, n: int) -> Status:
+    b = unpack_body(p, "STATUS")
+    return Status(b.float("time"), b.int("soldiers", 0, U32), b.float("update_rate", 0.0), b.str("text"))
+
+
+def _dec_create(p: bytes, n: int) -> CreateSoldier:
+    b = unpack_body(p, "CREATE_SOLDIER")
+    return CreateSoldier(
+        b.int("id", 0, U32),
+        b.str("figure", nonempty=True),
+        b.str("weapon"),
+        b.int("index", 0, n - 1, nullable=True),
+    )
+
+
+def _dec_created(p: bytes, n: int) -> SoldierCreated:
+    b = unpack_body(p, "SOLDIER_CREATED")
+    return SoldierCreated(b.int("id", 0, U32), b.int("index", 0, n - 1), b.int("table", 0, 0xFFFF))
+
+
+def _enc_status(e: Status) -> bytes:
+    return pack_body(
+        {"time": float(e.time), "soldiers": e.soldiers, "update_rate": float(e.update_rate), "text": e.text}
+    )
+
+
+Encoder = Callable[[Any], bytes]
+Decoder = Callable[[bytes, int], Event]
+
+# type -> (event class, encode(event) -> payload, decode(payload, max_soldiers) -> event)
+_CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
+    MessageType.HELLO: (
+        Hello,
+        lambda e: _enc_handshake(e.version, {"name": e.name, "role": e.role, "max_frame": e.max_frame}),
+        _dec_hello,
+    ),
+    MessageType.ACCEPT: (
+        Accept,
+        lambda e: _enc_handshake(
+            e.version, {"name": e.name, "max_frame": e.max_frame, "max_soldiers": e.max_soldiers}
+        ),
+        _dec_accept,
+    ),
+    MessageType.ERROR: (
+        Error,
+        lambda e: pack_body({"code": e.code, "message": e.message, "ref": e.ref}),
+        _dec_error,
+    ),
+    MessageType.GOODBYE: (
+        Goodbye,
+        lambda e: pack_body({"reason": e.reason}),
+        lambda p, n: Goodbye(unpack_body(p, "GOODBYE").str("reason")),
+    ),
+    MessageType.PING: (
+        Ping,
+        lambda e: pack_body({"nonce": e.nonce}),
+        lambda p, n: Ping(unpack_body(p, "PING").int("nonce", 0, U64)),
+    ),
+    MessageType.PONG: (
+        Pong,
+        lambda e: pack_body({"nonce": e.nonce}),
+        lambda p, n: Pong(unpack_body(p, "PONG").int("nonce", 0, U64)),
+    ),
+    MessageType.JCL: (Jcl, lambda e: pack_body({"id": e.id, "text": e.text}), _dec_jcl),
+    MessageType.READY: (Ready, lambda e: pack_body({"soldiers": [list(s) for s in e.soldiers]}), _dec_ready),
+    MessageType.STATUS: (Status, _enc_status, _dec_status),
+    MessageType.CREATE_SOLDIER: (
+        CreateSoldier,
+        lambda e: pack_body({"id": e.id, "figure": e.figure, "weapon": e.weapon, "index": e.index}),
+        _dec_create,
+    ),
+    MessageType.SOLDIER_CREATED: (
+        SoldierCreated,
+        lambda e: pack_body({"id": e.id, "index": e.index, "table": e.table}),
+        _dec_created,
+    ),
+    MessageType.REMOVE_SOLDIER: (
+        RemoveSoldier,
+        lambda e: pack_body({"index": e.index}),
+        lambda p, n: RemoveSoldier(unpack_body(p, "REMOVE_SOLDIER").int("index", 0, n - 1)),
+    ),
+    MessageType.SUBSCRIBE: (
+        Subscribe,
+        lambda e: pack_body({"indices": list(e.indices)}),
+        lambda p, n: Subscribe(_indices(unpack_body(p, "SUBSCRIBE"), "indices", n)),
+    ),
+    MessageType.UNSUBSCRIBE: (
+        Unsubscribe,
+        lambda e: pack_body({"indices": list(e.indices)}),
+        lambda p, n: Unsubscribe(_indices(unpack_body(p, "UNSUBSCRIBE"), "indices", n)),
+    ),
+    MessageType.REQUEST_FULL_UPDATE: (
+        RequestFullUpdate,
+        lambda e: pack_body({"indices": list(e.indices)}),
+        lambda p, n: RequestFullUpdate(_indices(unpack_body(p, "REQUEST_FULL_UPDATE"), "indices", n)),
+    ),
+    MessageType.ENTITY_REQUESTS: (
+        EntityRequests,
+        lambda e: encode_entity_requests(e.rows),
+        lambda p, n: EntityRequests(decode_entity_requests(p, n)),
+    ),
+    MessageType.UPDATE_TABLE: (
+        UpdateTableMsg,
+        lambda e: pack_body(table_to_wire(e.table)),
+        lambda p, n: UpdateTableMsg(table_from_wire(unpack_body(p, "UPDATE_TABLE").raw)),
+    ),
+}
+
+# read-only views: no module-level state any connection could change
+CODECS: Mapping[MessageType, tuple[type[Event], Encoder, Decoder]] = MappingProxyType(_CODECS)
+TYPE_OF: Mapping[type[Event], MessageType] = MappingProxyType(
+    {**{cls: t for t, (cls, _, _) in _CODECS.items()}, JointUpdates: MessageType.JOINT_UPDATES}
+)
