@@ -87,9 +87,10 @@ def first_bad_row(rows: np.ndarray, max_soldiers: int) -> tuple[int, str] | None
     """``(row, reason)`` for the first invalid request, or ``None``; vectorised over the batch."""
     app = rows["appearance"].astype(np.int64)
     wpn = rows["weapon"].astype(np.int64)
-    floats = np.concatenate(
-        [rows["velocity"].astype(np.float64), rows["heading"][:, None], rows["position"]], axis=1
-    )
+    with np.errstate(invalid="ignore"):  # signalling NaNs from the wire are reported below, not warned
+        floats = np.concatenate(
+            [rows["velocity"].astype(np.float64), rows["heading"][:, None], rows["position"]], axis=1
+        )
     checks = [
         (rows["index"].astype(np.int64) >= max_soldiers, f"index >= max_soldiers {max_soldiers}"),
         ((app < Appearance.DEAD) | (app > Appearance.CRAWL), "appearance not in 1..5"),
@@ -129,7 +130,8 @@ def decode_entity_requests(payload: bytes, max_soldiers: int) -> np.ndarray:
             f"entity requests: {count} rows need {expected} payload bytes, got {len(payload)}",
         )
     wire = np.frombuffer(payload, WIRE_ENTITY_DTYPE, count=count, offset=2)
-    rows = wire.astype(ENTITY_REQUEST_DTYPE)
+    with np.errstate(invalid="ignore"):
+        rows = wire.astype(ENTITY_REQUEST_DTYPE)
     bad = first_bad_row(rows, max_soldiers)
     if bad is not None:
         raise WireError(ErrorCode.BAD_VALUE, bad[1], f"row {bad[0]}")

@@ -183,7 +183,8 @@ def decode_update_packet(
     end = offset + PACKET_HEADER.size + 4 * size
     if len(data) < end:
         raise WireError(ErrorCode.TRUNCATED, f"needs {end - offset} bytes, has {len(data) - offset}", where)
-    floats = np.frombuffer(data, ">f4", size, offset + PACKET_HEADER.size).astype(np.float64)
+    with np.errstate(invalid="ignore"):  # signalling NaNs are rejected just below
+        floats = np.frombuffer(data, ">f4", size, offset + PACKET_HEADER.size).astype(np.float64)
     if not np.isfinite(floats).all():
         raise WireError(ErrorCode.BAD_VALUE, "NaN or inf in data", where)
     dofs = np.full(table.ndofs, np.nan)
