@@ -1,0 +1,339 @@
+"""The motion library a soldier manager plays from: three posture graphs bound into one ClipLibrary per set.
+
+Seed 002, 3.4.2 and 3.6: Jack loads ``soldier_low.graph`` (static posture transitions), ``soldier_loco.graph``
+(walking and running) and ``soldier_crawl.graph`` (crawling); the last two are only containers of channelsets.
+:class:`MotionLibrary` puts every channelset of the three into one
+:class:`~server.motion.sampling.ClipLibrary` per *figure set* (soldier figure + weapon, e.g. ``DI.fig`` +
+``AK_47.fig``), always in the same order so a clip id means the same clip in every set, and precomputes what
+the manager needs per clip: which graph it came from (for the heading offsets), its stored duration, its
+ground speed; per posture node the pose a resting soldier shows; per Figure-5 state and foot the locomotion
+clip; and quickest paths between postures (cached).
+
+Locomotion clips are found by name in the loco / crawl graphs: the file stem (``walk_start_l.chset.env`` →
+``walk_start_l``; a ``_low``/``_high`` suffix is ignored) or the channelset name. Missing families degrade:
+no ``run_*`` clips → no running; no ``bwalk_*`` → backward walking plays the forward walk backwards; no
+``walk_*`` → standing soldiers do not walk; no crawl clips → prone soldiers do not crawl. A footless
+``walk_cycle`` serves both feet.
+
+**Local motion.** Updates carry motion relative to the soldier's feet; heading and position are the client's
+(seed 3.7). A locomotion clip recorded travelling forwards would jump back at every cycle, so each loco/crawl
+clip has the horizontal travel of its figure channels removed (a linear ramp from the first to the last frame,
+only where the root site never changes) — every step then starts and ends over the same spot.
+
+**Ground speed** (playback rate = speed / ground speed): the channelset's ``ground_speed`` field (cm/s) if
+present, else ``stride_length`` (cm) / duration, else the travel measured above / duration, else
+:data:`DEFAULT_GROUND_SPEED` for the clip's family (m/s).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from server.motion.binding import protofiletype
+from server.motion.channelset import Channelset
+from server.motion.errors import PostureGraphError
+from server.motion.posture_change import LoadedPostureGraph
+from server.motion.sampling import ClipLibrary
+from server.peabody.model import Figure
+from server.soldier.locomotion import CLIP_OF, NSTATES
+from server.soldier.state import CRAWL_NODE, STAND_STOWED, LocoState
+
+GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL = 0, 1, 2
+GRAPH_NAMES = ("static", "loco", "crawl")
+
+# m/s per clip family, used when a locomotion clip has no stride/ground-speed data and no measurable travel
+DEFAULT_GROUND_SPEED: dict[str, float] = {
+    "walk": 1.4,
+    "bwalk": 0.9,
+    "run": 4.0,
+    "walk2run": 2.8,
+    "run2walk": 2.8,
+    "crawl": 0.4,
+}
+MIN_TRAVEL_CM = 1.0
+_SUFFIXES = (".chset.env", ".env", ".chset")
+_QUALITY = ("_low", "_high", "_hi", "_lo")
+
+
+def clip_stem(filename: str) -> str:
+    """``"walk_start_l_low.chset.env"`` → ``"walk_start_l_low"`` (the path and channelset suffix removed)."""
+    name = filename.replace("\\", "/").rsplit("/", 1)[-1]
+    for suf in _SUFFIXES:
+        if name.endswith(suf):
+            return name[: -len(suf)]
+    return name
+
+
+def _lookup_keys(stem: str) -> list[str]:
+    keys = [stem]
+    for q in _QUALITY:
+        if stem.endswith(q):
+            keys.append(stem[: -len(q)])
+    return keys
+
+
+def _family(base: str) -> str:
+    if base.startswith("walk2run") or base.startswith("run2walk"):
+        return base[:8]
+    return base.split("_", 1)[0]
+
+
+def _field(cs: Channelset, name: str) -> float | None:
+    """An optional numeric channelset field (adapter: attribute or a ``fields``/``extra`` mapping)."""
+    v = getattr(cs, name, None)
+    if v is None:
+        for holder in ("fields", "extra", "metadata", "extras"):
+            m = getattr(cs, holder, None)
+            if isinstance(m, dict) and m.get(name) is not None:
+                v = m[name]
+                break
+    try:
+        f = float(v) if v is not None else None
+    except (TypeError, ValueError):
+        return None
+    return f if f is not None and math.isfinite(f) and f > 0 else None
+
+
+@dataclass(frozen=True)
+class PathStep:
+    """One arc of a posture change: play ``clip`` forwards or backwards over ``duration`` s into ``end``."""
+
+    clip: int
+    forward: bool
+    duration: float
+    start: int  # posture node index
+    end: int
+
+
+@dataclass(frozen=True)
+class ClipInfo:
+    name: str
+    graph: int  # GRAPH_STATIC / GRAPH_LOCO / GRAPH_CRAWL
+    duration: float  # stored seconds
+    nframes: int
+    fps: float
+    ground_speed: float  # m/s (0 for static clips)
+    travel_cm: float  # horizontal travel removed from the clip (0 if none)
+
+
+class MotionLibrary:
+    """Three posture graphs bound to one or more figure sets as ClipLibraries with shared clip ids."""
+
+    def __init__(
+        self,
+        static: LoadedPostureGraph,
+        figure_sets: Sequence[Sequence[Figure]],
+        loco: LoadedPostureGraph | None = None,
+        crawl: LoadedPostureGraph | None = None,
+        *,
+        in_place: bool = True,
+    ) -> None:
+        if not figure_sets:
+            raise ValueError("a motion library needs at least one figure set")
+        self.static, self.loco, self.crawl = static, loco, crawl
+        self.postures: list[str] = list(static.graph.postures)
+        self._node = {p: i for i, p in enumerate(self.postures)}
+        entries: list[tuple[str, int, Channelset, str]] = []  # (clip name, graph, channelset, stem)
+        for gi, loaded in ((GRAPH_STATIC, static), (GRAPH_LOCO, loco), (GRAPH_CRAWL, crawl)):
+            if loaded is None:
+                continue
+            for fname, cs in zip(loaded.graph.files, loaded.channelsets, strict=True):
+                stem = clip_stem(fname)
+                entries.append((f"{loaded.name}/{stem}", gi, cs, stem))
+        infos: list[ClipInfo] = []
+        prepared: list[Channelset] = []
+        ref_type = protofiletype(figure_sets[0][0])
+        for name, gi, cs, stem in entries:
+            travel, gs = 0.0, 0.0
+            if gi != GRAPH_STATIC:
+                gs_travel = _travel(cs, ref_type)
+                gs = _ground_speed(cs, gs_travel, _family(_lookup_keys(stem)[-1]))
+                cs, travel = _strip_travel(cs, ref_type) if in_place else (cs, 0.0)
+            infos.append(ClipInfo(name, gi, cs.duration, cs.nframes, cs.fps, gs, travel))
+            prepared.append(dataclasses.replace(cs, name=name))
+        self.clips = infos
+        self.clip_names = [c.name for c in infos]
+        self.sets: list[ClipLibrary] = []
+        self.set_keys: list[tuple[str, str]] = []
+        for figs in figure_sets:
+            lib = ClipLibrary(list(figs))
+            lib.extend(prepared)
+            if self.sets and (lib.ndof, lib.nfig) != (self.sets[0].ndof, self.sets[0].nfig):
+                raise ValueError(
+                    f"figure set {lib.name!r} has {lib.ndof} DOFs / {lib.nfig} figures, "
+                    f"{self.sets[0].name!r} has {self.sets[0].ndof} / {self.sets[0].nfig}"
+                )
+            self.sets.append(lib)
+            types = [protofiletype(f) for f in figs]
+            self.set_keys.append((types[0], types[1] if len(types) > 1 else ""))
+        first = self.sets[0]
+        self.ndof, self.nfig = first.ndof, first.nfig
+        self.clip_graph = np.array([c.graph for c in infos], np.int8)
+        self.clip_duration = np.array([c.duration for c in infos], np.float64)
+        self.clip_nframes = np.array([c.nframes for c in infos], np.int64)
+        self.clip_ground_speed = np.array([c.ground_speed for c in infos], np.float64)
+        self.clip_frame_time = self.clip_duration / np.maximum(self.clip_nframes - 1, 1)
+        self.static_clip = list(range(len(static.graph.files)))  # static clips come first, by token
+        self._loco_table(entries)
+        self._rest_poses()
+        self._paths: dict[tuple[int, int], tuple[PathStep, ...] | None] = {}
+
+    # -- construction helpers ----------------------------------------------------------------------------
+    def _loco_table(self, entries: list[tuple[str, int, Channelset, str]]) -> None:
+        by_key: dict[tuple[int, str], int] = {}
+        for cid, (_, gi, _, stem) in enumerate(entries):
+            if gi == GRAPH_STATIC:
+                continue
+            for k in _lookup_keys(stem):
+                by_key.setdefault((gi, k), cid)
+        self.loco_clip = np.full((NSTATES, 2), -1, np.int32)
+        self.loco_dir = np.ones(NSTATES, np.int8)
+        for state, (base, footed, direction) in CLIP_OF.items():
+            gi = GRAPH_CRAWL if base.startswith("crawl") else GRAPH_LOCO
+            for foot, suffix in ((0, "_l"), (1, "_r")):
+                cid = by_key.get((gi, base + suffix)) if footed else None
+                if cid is None:
+                    cid = by_key.get((gi, base))
+                if cid is None and footed:  # only one foot recorded: use it for both
+                    cid = by_key.get((gi, base + ("_r" if foot == 0 else "_l")))
+                if cid is not None:
+                    self.loco_clip[state, foot] = cid
+            self.loco_dir[state] = direction
+        s = LocoState
+        have = (self.loco_clip >= 0).all(axis=1)
+        self.can_walk = bool(have[[s.WALK_START, s.WALK_CYCLE, s.WALK_END]].all()) and (
+            STAND_STOWED in self._node
+        )
+        self.can_run = self.can_walk and bool(
+            have[[s.RUN_START, s.RUN_CYCLE, s.RUN_END, s.WALK2RUN, s.RUN2WALK]].all()
+        )
+        if self.can_walk and not have[[s.BWALK_START, s.BWALK_CYCLE, s.BWALK_END]].all():
+            # no backward recordings: a backward step is the forward step played backwards, the start step
+            # reversed being the end step (and vice versa)
+            for b, f in (
+                (s.BWALK_START, s.WALK_END),
+                (s.BWALK_CYCLE, s.WALK_CYCLE),
+                (s.BWALK_END, s.WALK_START),
+            ):
+                self.loco_clip[b] = self.loco_clip[f]
+                self.loco_dir[b] = -1
+        self.can_crawl = bool(have[[s.CRAWL_START, s.CRAWL_CYCLE, s.CRAWL_END]].all()) and (
+            CRAWL_NODE in self._node
+        )
+
+    def _rest_poses(self) -> None:
+        """Per posture node a clip held at the frame that shows the posture (``rest_dir`` +1: last frame)."""
+        n = len(self.postures)
+        self.rest_clip = np.zeros(n, np.int32)
+        self.rest_dir = np.ones(n, np.int8)
+        g = self.static.graph
+        for node, p in enumerate(self.postures):
+            arc = next((a for a in g.arcs if a.end == p), None)
+            if arc is not None:  # ends there: forwards → last frame, backwards → first frame
+                self.rest_clip[node], self.rest_dir[node] = arc.channelset, 1 if arc.forward else -1
+                continue
+            arc = next((a for a in g.arcs if a.start == p), None)
+            if arc is not None:  # starts there: forwards → first frame, backwards → last frame
+                self.rest_clip[node], self.rest_dir[node] = arc.channelset, -1 if arc.forward else 1
+
+    # -- queries -----------------------------------------------------------------------------------------
+    @property
+    def nclips(self) -> int:
+        return len(self.clips)
+
+    def node(self, posture: str) -> int:
+        try:
+            return self._node[posture]
+        except KeyError:
+            raise KeyError(f"posture graph {self.static.name!r} has no posture {posture!r}") from None
+
+    def has_node(self, posture: str) -> bool:
+        return posture in self._node
+
+    def clip_id(self, name: str) -> int:
+        """A clip id by full name (``"soldier_loco/walk_cycle_l"``) or by stem if that is unambiguous."""
+        if name in self.clip_names:
+            return self.clip_names.index(name)
+        hits = [i for i, c in enumerate(self.clip_names) if name in _lookup_keys(c.rsplit("/", 1)[-1])]
+        if len(hits) == 1:
+            return hits[0]
+        raise KeyError(f"no clip {name!r}" if not hits else f"clip name {name!r} is ambiguous")
+
+    def set_index(self, figure: str, weapon: str) -> int:
+        """The figure set of ``figure`` + ``weapon`` file names (base names compared)."""
+        fig, wpn = figure.rsplit("/", 1)[-1], weapon.rsplit("/", 1)[-1]
+        for i, (f, w) in enumerate(self.set_keys):
+            if f == fig and wpn in ("", w):
+                return i
+        raise KeyError(f"no figure set for figure {figure!r} with weapon {weapon!r} (have {self.set_keys})")
+
+    def path(self, start: int, goal: int) -> tuple[PathStep, ...] | None:
+        """Quickest path in time between posture nodes (None if unreachable; () if the same)."""
+        key = (start, goal)
+        if key not in self._paths:
+            try:
+                arcs = self.static.shortest_path(self.postures[start], self.postures[goal])
+            except PostureGraphError:
+                self._paths[key] = None
+            else:
+                self._paths[key] = tuple(
+                    PathStep(
+                        self.static_clip[a.channelset],
+                        a.forward,
+                        float(self.static.arc_time(a)),
+                        self._node[a.start],
+                        self._node[a.end],
+                    )
+                    for a in arcs
+                )
+        return self._paths[key]
+
+    @property
+    def nbytes(self) -> int:
+        return sum(s.nbytes for s in self.sets)
+
+
+def _soldier_channel(cs: Channelset, ref_type: str) -> int:
+    figs = cs.figure_channels()
+    for c in figs:
+        if c.protofiletype == ref_type:
+            return c.column
+    return figs[0].column if figs else -1
+
+
+def _travel(cs: Channelset, ref_type: str) -> float:
+    k = _soldier_channel(cs, ref_type)
+    if k < 0 or cs.nframes < 2 or (cs.fig_root[:, k] != cs.fig_root[0, k]).any():
+        return 0.0
+    d = cs.fig_pos[-1, k].astype(np.float64) - cs.fig_pos[0, k]
+    return float(math.hypot(d[0], d[2]))  # Jack: Y up, X/Z horizontal
+
+
+def _strip_travel(cs: Channelset, ref_type: str) -> tuple[Channelset, float]:
+    """The clip with its soldier's horizontal travel removed from all figure channels; the travel (cm)."""
+    travel = _travel(cs, ref_type)
+    if travel < MIN_TRAVEL_CM:
+        return cs, 0.0
+    k = _soldier_channel(cs, ref_type)
+    d = cs.fig_pos[-1, k].astype(np.float64) - cs.fig_pos[0, k]
+    d[1] = 0.0
+    ramp = np.linspace(0.0, 1.0, cs.nframes)[:, None, None] * d[None, None, :]
+    pos = (cs.fig_pos.astype(np.float64) - ramp).astype(np.float32)
+    return dataclasses.replace(cs, fig_pos=pos), travel
+
+
+def _ground_speed(cs: Channelset, travel_cm: float, family: str) -> float:
+    gs = _field(cs, "ground_speed")
+    if gs is not None:
+        return gs / 100.0
+    stride = _field(cs, "stride_length")
+    if stride is None and travel_cm >= MIN_TRAVEL_CM:
+        stride = travel_cm
+    if stride is not None and cs.duration > 0:
+        return stride / 100.0 / cs.duration
+    return DEFAULT_GROUND_SPEED.get(family, DEFAULT_GROUND_SPEED["walk"])
