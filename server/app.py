@@ -1,0 +1,393 @@
+"""The trio server: listener, per-client reader/writer tasks, the tick loop, status reports, shutdown.
+
+Structure (one trio nursery):
+
+* the **tick loop** advances every soldier at ``tick_hz`` on trio's clock (``SoldierManager.tick``: one
+  vectorised advance + sample), writes the poses once into the shared :class:`~server.session.PoseBoard`
+  and wakes the writers — it never waits for a client;
+* per client a **reader** (bytes → protocol events → the world) and a **writer** (control queue + the
+  latest poses, encoded against what that client last received) — see :mod:`server.session` for why memory
+  stays bounded and a stalled client cannot slow anyone else;
+* a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
+* **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
+  :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
+  then cancel everything.
+
+The manager reads no clock: ``now`` is trio's clock minus the server's start time, so tests drive it with
+``autojump_clock`` and real TCP sockets.
+
+Debugging over the wire: the JCL commands ``report_ttes_status("s0", ...)`` and ``report_ttes_clips("s0")``
+answer the calling client with a STATUS whose ``text`` is JSON — each soldier's mode, posture, current clip,
+its start and duration (``SoldierManager.soldier_info``), or the clips it started (``set_ttes_clip_recording
+("yes")`` or ``record_clips = true`` in the config).
+"""
+
+from __future__ import annotations
+
+import errno
+import math
+import signal
+import time
+from collections.abc import Callable
+from typing import Any
+
+import trio
+
+from protocol.connection import State
+from server.config import ServerConfig
+from server.logging import get_logger
+from server.session import BoardRef, PoseBoard, Session
+from server.startup import ServerWorld
+
+FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
+SHUTDOWN_GRACE_S = 1.0
+MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
+log = get_logger("app")
+
+
+class TtesServer:
+    """``ttes server``: the world (JCL, manager, library) behind a TCP listener."""
+
+    def __init__(self, config: ServerConfig, world: ServerWorld | None = None) -> None:
+        self.config = config
+        self._t0 = 0.0
+        self.world = world or ServerWorld(
+            config.data_dir, max_soldiers=config.max_soldiers, record_clips=config.record_clips
+        )
+        self.world.clock = self.request_time
+        self._last_stamp = 0.0
+        self.world.events.ready = self._on_ready
+        self.world.events.soldier_created = self._on_created
+        self.world.events.soldier_removed = self._on_removed
+        self.world.events.report = self._on_report
+        self.board_ref = BoardRef()
+        self.sessions: dict[int, Session] = {}
+        self.addresses: list[tuple[str, int]] = []
+        self.ticks = 0
+        self.tick_overruns = 0
+        self.ticks_skipped = 0
+        self.clients_total = 0
+        self.clients_dropped = 0
+        self._batches_window = (0.0, 0)  # (time, ticks that published poses) at the last status report
+        self._published_ticks = 0
+        self._shutdown = trio.Event()
+        self.stopped = trio.Event()
+        self.started = False
+        self._cancel: trio.CancelScope | None = None
+        self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
+
+    # -- clock -------------------------------------------------------------------------------------------
+    def now(self) -> float:
+        """Server time in seconds since start (trio's clock)."""
+        try:
+            return trio.current_time() - self._t0
+        except RuntimeError:  # outside trio (start-up before the run loop)
+            return 0.0
+
+    def request_time(self) -> float:
+        """The time stamped on a request (and on soldiers created): now, remembered so that no tick runs
+        the manager at an earlier time than a request it has already taken."""
+        self._last_stamp = max(self._last_stamp, self.now())
+        return self._last_stamp
+
+    # -- world events ------------------------------------------------------------------------------------
+    def _board(self) -> PoseBoard | None:
+        if self.board_ref.board is None and self.world.library is not None:
+            table = self.world.sets[0].table
+            self.board_ref.board = PoseBoard(table.ndofs, table.nfigures)
+        return self.board_ref.board
+
+    def _on_ready(self, caller: object | None) -> None:
+        self._board()
+        for s in self.sessions.values():
+            if s is caller or not s.ready_sent:
+                s.send_ready()
+
+    def _on_created(self, index: int) -> None:
+        board = self._board()
+        if board is not None:
+            board.add(index, self.world.table_of(index))
+        for s in self.sessions.values():
+            s.conn.reset_soldiers([index])  # a reused index starts with a full update
+            s.force[index] = True
+
+    def _on_removed(self, index: int) -> None:
+        if self.board_ref.board is not None:
+            self.board_ref.board.remove(index)
+        for s in self.sessions.values():
+            s.owned.discard(index)
+
+    def _on_report(self, caller: object | None, text: str) -> None:
+        if isinstance(caller, Session):
+            caller.report(text)
+
+    # -- running -----------------------------------------------------------------------------------------
+    def start_world(self) -> None:
+        """Run the start-up script (JclError if it fails) and apply the config's overrides; once."""
+        if self.started:
+            return
+        self.started = True
+        t = time.perf_counter()
+        if self.config.startup_script:
+            self.world.run_startup(self.config.startup_script)
+        if self.config.throttle is not None:
+            self.world.set_throttle(self.config.throttle)
+        if self.config.report_interval is not None:
+            self.world.set_report_interval(self.config.report_interval)
+        self._board()
+        m = self.world.manager
+        log.info(
+            "startup_done",
+            seconds=round(time.perf_counter() - t, 3),
+            ready=self.world.ready,
+            soldiers=m.count if m else 0,
+            data_dir=str(self.world.data_dir),
+        )
+
+    async def serve(self, *, task_status: Any = trio.TASK_STATUS_IGNORED) -> None:
+        """Start up, listen, and run until :meth:`shutdown`; ``task_status.started(addresses)``."""
+        self._t0 = trio.current_time()
+        self.start_world()
+        listeners = await trio.open_tcp_listeners(self.config.port, host=self.config.host)
+        self.addresses = [tuple(ln.socket.getsockname()[:2]) for ln in listeners]  # type: ignore[misc]
+        async with trio.open_nursery() as nursery:
+            self._cancel = nursery.cancel_scope
+            nursery.start_soon(self._tick_loop)
+            nursery.start_soon(self._status_loop)
+            nursery.start_soon(self._accept_all, listeners, nursery)
+            log.info("listening", addresses=[f"{h}:{p}" for h, p in self.addresses], ready=self.world.ready)
+            task_status.started(self.addresses)
+            await self._shutdown.wait()
+            for ln in listeners:
+                await ln.aclose()
+            for s in list(self.sessions.values()):
+                s.goodbye("server shutting down")
+            with trio.move_on_after(SHUTDOWN_GRACE_S):
+                while self.sessions:
+                    await trio.sleep(0.01)
+            nursery.cancel_scope.cancel()
+        self.stopped.set()
+        log.info("stopped", ticks=self.ticks, clients=self.clients_total)
+
+    def shutdown(self) -> None:
+        self._shutdown.set()
+
+    async def _accept_all(self, listeners: list[trio.SocketListener], nursery: trio.Nursery) -> None:
+        async def one(listener: trio.SocketListener) -> None:
+            while True:
+                try:
+                    stream = await listener.accept()
+                except trio.ClosedResourceError:
+                    return
+                except OSError as exc:  # EMFILE and friends: back off, keep serving the others
+                    log.warning(
+                        "accept_failed", error=str(exc), errno=errno.errorcode.get(exc.errno or 0, "")
+                    )
+                    await trio.sleep(0.1)
+                    continue
+                nursery.start_soon(self._client, stream)
+
+        async with trio.open_nursery() as inner:
+            for ln in listeners:
+                inner.start_soon(one, ln)
+
+    # -- one client --------------------------------------------------------------------------------------
+    async def _client(self, stream: trio.SocketStream) -> None:
+        try:
+            host, port = stream.socket.getpeername()[:2]
+            peer = f"{host}:{port}"
+        except OSError:
+            peer = "?"
+        self.clients_total += 1
+        session = Session(self.world, self.board_ref, self.config, peer)
+        session.full = len(self.sessions) >= self.config.max_clients
+        self.sessions[session.id] = session
+        try:
+            async with trio.open_nursery() as n:
+                n.start_soon(self._writer, session, stream, n.cancel_scope)
+                await self._reader(session, stream)
+                session.drop(session.drop_reason or "closed")
+                with trio.move_on_after(FLUSH_ON_CLOSE_S):
+                    await session.writer_done.wait()
+                    if session.lingering:
+                        await _linger(stream)
+                n.cancel_scope.cancel()
+        finally:
+            self.sessions.pop(session.id, None)
+            with trio.CancelScope(shield=True):
+                await trio.aclose_forcefully(stream)
+            if session.dropped:
+                self.clients_dropped += 1
+            log.info(
+                "client_closed",
+                session=session.id,
+                peer=peer,
+                name=session.name,
+                reason=session.drop_reason,
+                bytes_out=session.bytes_out,
+            )
+
+    async def _reader(self, session: Session, stream: trio.SocketStream) -> None:
+        with trio.move_on_after(self.config.handshake_timeout):
+            while session.conn.state is State.HANDSHAKE and not session.closing:
+                data = await _receive(stream)
+                session.feed(data)
+                if not data:
+                    session.drop(session.drop_reason or "closed")
+        if session.conn.state is State.HANDSHAKE and not session.closing:
+            session.drop("no HELLO in time", dropped=True)
+        while not session.closing:
+            data = await _receive(stream)
+            wait = session.feed(data, self.now())
+            while wait > 0 and not session.closing:  # over the request rate: stop reading (backpressure)
+                await trio.sleep(wait)
+                wait = session.resume(self.now())
+            if not data:
+                session.drop(session.drop_reason or "closed")
+                return
+
+    async def _writer(self, session: Session, stream: trio.SocketStream, scope: trio.CancelScope) -> None:
+        """Write control bytes and the latest poses whenever woken; exits (cancelling the session) when the
+        session is closing and flushed, the peer is gone, or one write stalls for ``write_timeout``."""
+        timeout = self.config.write_timeout
+        try:
+            while True:
+                await session.wake.wait()
+                session.wake = trio.Event()
+                data = session.take_output()
+                if data:
+                    with trio.move_on_after(timeout) as cs:
+                        await stream.send_all(data)
+                    if cs.cancelled_caught:
+                        log.warning("client_stalled", session=session.id, name=session.name, seconds=timeout)
+                        session.drop(f"write stalled for {timeout:g} s", dropped=True)
+                        session.lingering = False
+                        return
+                    session.bytes_out += len(data)
+                if session.closing and not session.control:
+                    return
+        except (trio.BrokenResourceError, trio.ClosedResourceError):
+            session.drop(session.drop_reason or "connection lost")
+            session.lingering = False
+        finally:
+            session.writer_done.set()
+            if not session.lingering:
+                scope.cancel()
+
+    # -- ticks and reports -------------------------------------------------------------------------------
+    async def _tick_loop(self) -> None:
+        period = 1.0 / self.config.tick_hz
+        next_t = trio.current_time()
+        while True:
+            await trio.sleep_until(next_t)
+            self.tick(next_t - self._t0)
+            next_t += period
+            now = trio.current_time()
+            if now - next_t > MAX_TICK_BACKLOG * period:  # fell far behind: skip, do not burst
+                skipped = math.floor((now - next_t) / period)
+                self.ticks_skipped += skipped
+                next_t += skipped * period
+                self.tick_overruns += 1
+
+    def tick(self, scheduled: float | None = None) -> None:
+        """One server tick: advance + sample every soldier, publish the poses, wake the writers.
+
+        The manager runs at the tick's *scheduled* time, not the time the loop woke up: wake-up jitter would
+        otherwise make a soldier throttled to one update per tick period miss every other tick, and frame
+        choice would wobble. (A request taken after the scheduled time moves the tick's time up to it.)"""
+        m, board = self.world.manager, self._board()
+        if m is None or board is None or not self.world.ready:
+            return
+        self.ticks += 1
+        now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
+        update = m.tick(now)
+        if self.on_tick is not None:
+            self.on_tick(update)
+        if board.publish(update, self.world):
+            self._published_ticks += 1
+            for s in self.sessions.values():
+                if s.tables_sent:
+                    s.notify()
+
+    async def _status_loop(self) -> None:
+        while True:
+            await trio.sleep(self.world.report_interval)
+            self.report_status()
+
+    def report_status(self) -> None:
+        now = self.now()
+        t_prev, n_prev = self._batches_window
+        rate = (self._published_ticks - n_prev) / (now - t_prev) if now > t_prev else 0.0
+        self._batches_window = (now, self._published_ticks)
+        m = self.world.manager
+        st = m.status() if m is not None else {}
+        soldiers = int(st.get("soldiers", 0))
+        text = (
+            f"{soldiers} soldiers, {len(self.sessions)} clients, {rate:.1f} Hz, "
+            f"tick {st.get('mean_tick_us', 0.0):.0f} us mean"
+        )
+        log.info(
+            "status",
+            time=round(now, 3),
+            soldiers=soldiers,
+            clients=len(self.sessions),
+            update_rate=round(rate, 2),
+            ticks=self.ticks,
+            overruns=self.tick_overruns,
+            mean_tick_us=round(st.get("mean_tick_us", 0.0), 1),
+            modes=st.get("modes", {}),
+        )
+        for s in self.sessions.values():
+            s.status(now, soldiers, rate, text)
+
+
+async def _linger(stream: trio.SocketStream, limit: int = 1 << 20) -> None:
+    """After a fatal error: half-close and discard what the peer still sends, so closing the socket does not
+    reset the connection (and destroy our ERROR frame) while unread bytes wait in the receive buffer."""
+    try:
+        await stream.send_eof()
+        got = 0
+        while got < limit:
+            chunk = await stream.receive_some(65536)
+            if not chunk:
+                return
+            got += len(chunk)
+    except (trio.BrokenResourceError, trio.ClosedResourceError, OSError):
+        return
+
+
+async def _receive(stream: trio.SocketStream) -> bytes:
+    try:
+        return bytes(await stream.receive_some(65536))
+    except (trio.BrokenResourceError, trio.ClosedResourceError):
+        return b""
+
+
+async def run_server(
+    server: TtesServer,
+    *,
+    on_listening: Callable[[TtesServer], None] | None = None,
+    handle_signals: bool = True,
+) -> None:
+    """Serve until SIGINT/SIGTERM (or :meth:`TtesServer.shutdown`), then shut down gracefully: stop
+    accepting, GOODBYE to every client, a short flush, cancel."""
+    async with trio.open_nursery() as nursery:
+        await nursery.start(server.serve)
+        if on_listening is not None:
+            on_listening(server)
+        if handle_signals:
+            with trio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+                async with trio.open_nursery() as waiter:
+
+                    async def stop_on_signal() -> None:
+                        async for sig in signals:
+                            log.info("signal", signal=signal.Signals(sig).name)
+                            server.shutdown()
+                            return
+
+                    waiter.start_soon(stop_on_signal)
+                    await server.stopped.wait()
+                    waiter.cancel_scope.cancel()
+
+
+__all__ = ["TtesServer", "run_server"]

@@ -1,0 +1,143 @@
+"""The server's settings: one dataclass, loaded from TOML (``tomllib``) and validated field by field.
+
+A TOML file may hold the keys at the top level or in a ``[server]`` table. Unknown keys, wrong types and
+out-of-range values are :class:`ConfigError` naming the file and the key, so a typo never silently falls back
+to a default. Command-line flags override the file (:meth:`ServerConfig.with_overrides`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+# the repository root (or an installed checkout): where figures/, channelsets/, posture_graphs/ live
+DEFAULT_DATA_DIR = Path(__file__).resolve().parent.parent
+DEFAULT_STARTUP_SCRIPT = "jack-ttes-soldier_low.jcl"
+MAX_SOLDIERS_LIMIT = 65536
+
+
+class ConfigError(ValueError):
+    """A bad setting; ``where`` names the file and key."""
+
+    def __init__(self, message: str, where: str = "") -> None:
+        self.message = message
+        self.where = where
+        super().__init__(f"{where}: {message}" if where else message)
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    """Everything ``ttes server`` can be told. Times in seconds, rates per second."""
+
+    host: str = "127.0.0.1"  # loopback by default: exposing the server is an explicit choice
+    port: int = 7000  # 0 = any free port (tests)
+    data_dir: Path = field(default_factory=lambda: DEFAULT_DATA_DIR)
+    startup_script: str = DEFAULT_STARTUP_SCRIPT  # "" = none: a client's JCL starts the simulation
+    tick_hz: float = 30.0
+    throttle: float | None = None  # None: what the start-up script sets (set_ttes_soldier_throttle)
+    report_interval: float | None = None  # None: what the script sets (set_ttes_report_interval), else 30
+    max_clients: int = 256
+    max_soldiers: int = 16384  # soldier indices 0 .. max_soldiers-1 (announced in ACCEPT)
+    max_soldiers_per_client: int = 4096  # soldiers one client may create (CREATE_SOLDIER)
+    max_frame: int = 1 << 20  # largest frame we accept (announced in ACCEPT)
+    max_requests_per_s: float = 1e6  # entity rows + other messages per client and second; more: slower reads
+    handshake_timeout: float = 10.0  # a connection that sends no HELLO in time is closed
+    write_timeout: float = 30.0  # a client that takes no bytes for this long is dropped
+    control_queue: int = 256  # control messages waiting for one client; overflow drops the client
+    name: str = "jack-ttes"
+    json_logs: bool = False
+    record_clips: bool = False  # keep every soldier's clip starts (debug; report_ttes_clips)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    def with_overrides(self, **changes: Any) -> ServerConfig:
+        """A copy with the given fields replaced (``None`` values are ignored: flag not given)."""
+        given = {k: v for k, v in changes.items() if v is not None}
+        if "data_dir" in given:
+            given["data_dir"] = Path(given["data_dir"])
+        return dataclasses.replace(self, **given)
+
+
+_FIELDS = {f.name: f for f in dataclasses.fields(ServerConfig)}
+
+
+def _check_number(
+    name: str, v: Any, lo: float, hi: float, *, integer: bool = False, lo_open: bool = False
+) -> None:
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ConfigError(f"must be a number, not {type(v).__name__}", name)
+    if integer and not isinstance(v, int):
+        raise ConfigError("must be an integer", name)
+    if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
+        bound = f"({lo}, {hi}]" if lo_open else f"[{lo}, {hi}]"
+        raise ConfigError(f"{v!r} is outside {bound}", name)
+
+
+def validate(c: ServerConfig) -> None:
+    """Raise :class:`ConfigError` for the first bad field."""
+    if not isinstance(c.host, str) or not c.host:
+        raise ConfigError("must be a non-empty string", "host")
+    _check_number("port", c.port, 0, 65535, integer=True)
+    if not isinstance(c.data_dir, Path):
+        raise ConfigError("must be a path", "data_dir")
+    if not isinstance(c.startup_script, str):
+        raise ConfigError("must be a string", "startup_script")
+    _check_number("tick_hz", c.tick_hz, 0.0, 1000.0, lo_open=True)
+    if c.throttle is not None:
+        _check_number("throttle", c.throttle, 0.0, 60.0)
+    if c.report_interval is not None:
+        _check_number("report_interval", c.report_interval, 0.0, 86400.0, lo_open=True)
+    _check_number("max_clients", c.max_clients, 1, 100_000, integer=True)
+    _check_number("max_soldiers", c.max_soldiers, 1, MAX_SOLDIERS_LIMIT, integer=True)
+    _check_number("max_soldiers_per_client", c.max_soldiers_per_client, 0, MAX_SOLDIERS_LIMIT, integer=True)
+    _check_number("max_frame", c.max_frame, 4096, 2**32 - 1, integer=True)
+    _check_number("max_requests_per_s", c.max_requests_per_s, 0.0, 1e9, lo_open=True)
+    _check_number("handshake_timeout", c.handshake_timeout, 0.0, 3600.0, lo_open=True)
+    _check_number("write_timeout", c.write_timeout, 0.0, 3600.0, lo_open=True)
+    _check_number("control_queue", c.control_queue, 8, 1_000_000, integer=True)
+    if not isinstance(c.name, str) or not c.name:
+        raise ConfigError("must be a non-empty string", "name")
+    for flag in ("json_logs", "record_clips"):
+        if not isinstance(getattr(c, flag), bool):
+            raise ConfigError("must be true or false", flag)
+
+
+def config_from_mapping(
+    values: dict[str, Any], source: str = "<config>", base_dir: Path | None = None
+) -> ServerConfig:
+    """A config from a TOML-like mapping; a relative ``data_dir`` is taken relative to ``base_dir``."""
+    if "server" in values and isinstance(values["server"], dict):
+        rest = {k: v for k, v in values.items() if k != "server"}
+        if rest:
+            raise ConfigError(f"keys outside [server]: {sorted(rest)}", source)
+        values = values["server"]
+    unknown = sorted(set(values) - set(_FIELDS))
+    if unknown:
+        raise ConfigError(f"unknown key(s) {unknown}; known: {sorted(_FIELDS)}", source)
+    kwargs = dict(values)
+    if "data_dir" in kwargs:
+        if not isinstance(kwargs["data_dir"], str) or not kwargs["data_dir"]:
+            raise ConfigError("must be a non-empty string", f"{source}: data_dir")
+        p = Path(kwargs["data_dir"]).expanduser()
+        kwargs["data_dir"] = p if p.is_absolute() or base_dir is None else base_dir / p
+    try:
+        return ServerConfig(**kwargs)
+    except ConfigError as exc:
+        raise ConfigError(exc.message, f"{source}: {exc.where}") from None
+
+
+def load_config(path: str | Path) -> ServerConfig:
+    """Read a TOML config file (``ConfigError`` with the file name on any problem)."""
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(f"cannot read: {exc.strerror or exc}", str(p)) from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"not valid TOML: {exc}", str(p)) from None
+    return config_from_mapping(data, str(p), p.resolve().parent)

@@ -1,0 +1,519 @@
+"""One client's session: its protocol connection, subscriptions, limits and bounded output.
+
+Memory per client is bounded whatever the client does:
+
+* **joint updates are latest-wins**: the tick loop never queues poses per client. It writes every soldier's
+  newest wire-ready pose once into the shared :class:`PoseBoard` and wakes the writers. A session's writer,
+  whenever its socket can take bytes, encodes the *current* poses of its subscribed soldiers that changed
+  since its last write (the connection's ``UpdateEncoder`` diffs against what this client last received, so
+  skipped ticks cost nothing and deltas stay exact). A stalled reader therefore holds at most one encoded
+  batch, and never slows the tick or other clients;
+* **control messages** (errors, READY, STATUS, answers) go through a small bounded queue; overflow means the
+  client is not reading at all, and it is dropped;
+* reading stops (TCP backpressure) while the client exceeds its request rate, and a frame longer than
+  ``max_frame`` is refused before it is buffered (the connection checks the length prefix).
+
+Heading-only changes (the seed's "send the last update packet with heading change",
+``TickUpdate.heading_only``) need nothing here: heading and position are the client's and the pose is
+unchanged, so the encoder sends 0 bytes for them.
+
+The :class:`Session` is driven by :mod:`server.app` (reader and writer tasks); the per-message handling lives
+here so it can be tested without sockets.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import TYPE_CHECKING
+
+import numpy as np
+import trio
+
+from protocol.connection import NEED_DATA, PAUSED, SERVER, Connection, State
+from protocol.errors import ErrorCode, LocalProtocolError
+from protocol.events import (
+    Accept,
+    ConnectionClosed,
+    CreateSoldier,
+    EntityRequests,
+    Error,
+    Event,
+    Goodbye,
+    Hello,
+    Jcl,
+    JointUpdates,
+    Ping,
+    Pong,
+    ProtocolError,
+    Ready,
+    RemoveSoldier,
+    RequestFullUpdate,
+    SoldierCreated,
+    Status,
+    Subscribe,
+    Unsubscribe,
+    UpdateTableMsg,
+)
+from server.config import ServerConfig
+from server.jcl import JclError
+from server.logging import get_logger
+from server.soldier.manager import REQUEST_BAD_VALUE, REQUEST_UNKNOWN_SOLDIER, TickUpdate
+
+if TYPE_CHECKING:
+    from server.startup import ServerWorld
+
+RECEIVE_BYTES = 65536
+log = get_logger("session")
+
+
+class PoseBoard:
+    """The newest wire-ready pose of every soldier (Performer units, table order), written once per tick.
+
+    ``version[i]`` is the board tick at which soldier ``i``'s pose last changed; sessions send what changed
+    since the board tick of their last write. All figure sets of one library share the pose shape, so one set
+    of arrays serves every update table (``table_of`` says which).
+    """
+
+    def __init__(self, ndofs: int, nfigs: int, capacity: int = 64) -> None:
+        self.ndofs, self.nfigs = ndofs, nfigs
+        self.tick = 0
+        self.capacity = 0
+        self.dofs = np.zeros((0, ndofs))
+        self.positions = np.zeros((0, nfigs, 3))
+        self.orientations = np.zeros((0, nfigs, 4))
+        self.version = np.zeros(0, np.int64)
+        self.valid = np.zeros(0, bool)
+        self.table_of = np.zeros(0, np.int32)
+        self._grow(capacity)
+
+    def _grow(self, n: int) -> None:
+        old = self.capacity
+        if n <= old:
+            return
+
+        def pad(a: np.ndarray, fill: float = 0) -> np.ndarray:
+            out = np.full((n, *a.shape[1:]), fill, a.dtype)
+            out[:old] = a
+            return out
+
+        self.dofs, self.positions, self.orientations = (
+            pad(self.dofs),
+            pad(self.positions),
+            pad(self.orientations),
+        )
+        self.version, self.valid, self.table_of = pad(self.version), pad(self.valid), pad(self.table_of, -1)
+        self.capacity = n
+
+    def ensure(self, index: int) -> None:
+        if index >= self.capacity:
+            self._grow(max(index + 1, 2 * self.capacity))
+
+    def add(self, index: int, table: int) -> None:
+        """A soldier (possibly a reused index): no pose until its first tick."""
+        self.ensure(index)
+        self.valid[index] = False
+        self.table_of[index] = table
+
+    def remove(self, index: int) -> None:
+        if index < self.capacity:
+            self.valid[index] = False
+            self.table_of[index] = -1
+
+    def publish(self, update: TickUpdate, world: ServerWorld) -> int:
+        """Take one tick's poses (converted per figure set); returns the number of soldiers written."""
+        self.tick += 1
+        n = len(update)
+        if n == 0:
+            return 0
+        assert world.manager is not None
+        idx = np.asarray(update.indices, np.int64)
+        self.ensure(int(idx.max()))
+        fset = world.manager.table.fset[idx]
+        sets = world.sets
+        groups = [np.arange(n)] if len(sets) == 1 else [np.flatnonzero(fset == k) for k in range(len(sets))]
+        for k, sel in enumerate(groups):
+            if len(sel) == 0:
+                continue
+            part = update if len(sel) == n else _select(update, sel)
+            ju = sets[k].converter.convert(part)
+            rows = idx[sel]
+            self.dofs[rows] = ju.dofs
+            self.positions[rows] = ju.positions
+            self.orientations[rows] = ju.orientations
+            self.table_of[rows] = sets[k].table.table_id
+        self.version[idx] = self.tick
+        self.valid[idx] = True
+        return n
+
+
+def _select(update: TickUpdate, sel: np.ndarray) -> TickUpdate:
+    return TickUpdate(
+        update.indices[sel],
+        update.joints[sel],
+        update.figures[sel],
+        update.heading_only[sel],
+        now=update.now,
+        tick=update.tick,
+    )
+
+
+class Session:
+    """One client connection: protocol state, subscriptions, limits and its two bounded outputs."""
+
+    _ids = 0
+
+    def __init__(self, world: ServerWorld, board_ref: BoardRef, config: ServerConfig, peer: str = "") -> None:
+        Session._ids += 1
+        self.id = Session._ids
+        self.world = world
+        self.board_ref = board_ref
+        self.config = config
+        self.peer = peer
+        self.conn = Connection(SERVER, max_frame=config.max_frame, max_soldiers=config.max_soldiers)
+        self.name = ""
+        self.role = ""
+        self.control: deque[bytes] = deque()
+        self.wake = trio.Event()
+        self.closing = False  # no more reading; the writer flushes the control queue and closes
+        self.tables_sent = False
+        self.ready_sent = False
+        self.flushed_tick = 0
+        self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
+        self.owned: set[int] = set()  # soldiers this client created (max_soldiers_per_client)
+        self.tokens = float(config.max_requests_per_s)
+        self.tokens_at = 0.0
+        self.cost = 0.0  # request tokens used since the last charge
+        self.bytes_out = 0
+        self.batches_out = 0
+        self.drop_reason = ""
+        self.dropped = False  # ended by the server (error, stall, overflow), not by the client
+        self.lingering = False  # after a fatal error: half-close and drain before closing the socket
+        self.full = False  # the server had max_clients already: refuse the HELLO
+        self.writer_done = trio.Event()
+
+    # -- output ------------------------------------------------------------------------------------------
+    def notify(self) -> None:
+        self.wake.set()
+
+    def queue(self, data: bytes) -> None:
+        """Queue control bytes; a full queue means the client reads nothing: drop it."""
+        if not data:
+            return
+        if len(self.control) >= self.config.control_queue:
+            self.drop(f"control queue full ({self.config.control_queue} messages): client not reading", True)
+            return
+        self.control.append(data)
+        self.wake.set()
+
+    def send(self, event: Event) -> None:
+        if self.conn.state in (State.CLOSED, State.ERROR):
+            return
+        self.queue(self.conn.send(event))
+
+    def fatal(self, code: ErrorCode, message: str) -> None:
+        """Send a fatal error and close (the connection goes to ERROR)."""
+        if self.conn.state not in (State.CLOSED, State.ERROR):
+            self.control.append(self.conn.send(Error(int(code), message)))
+        self.lingering = True
+        self.drop(message, True)
+
+    def drop(self, reason: str, dropped: bool = False) -> None:
+        """End the session: no more reading; the writer flushes the control queue, then the socket closes."""
+        if not self.closing:
+            self.closing = True
+            self.drop_reason = reason
+            self.dropped = dropped
+        self.wake.set()
+
+    def take_output(self) -> bytes:
+        """Everything to write now: queued control bytes, then the latest joint updates (latest-wins)."""
+        out = b"".join(self.control)
+        self.control.clear()
+        if self.closing or self.conn.state is not State.OPEN or not self.tables_sent:
+            return out
+        return out + self._joint_updates()
+
+    def _joint_updates(self) -> bytes:
+        board = self.board_ref.board
+        if board is None:
+            return b""
+        sub = self.conn.subscribed
+        since = self.flushed_tick
+        self.flushed_tick = board.tick
+        if len(sub) == 0:
+            return b""
+        sub = sub[sub < board.capacity]
+        due = board.valid[sub] & ((board.version[sub] > since) | self.force[sub])
+        idx = sub[due]
+        if len(idx) == 0:
+            return b""
+        self.force[idx] = False
+        tables = board.table_of[idx]
+        chunks = []
+        for t in np.unique(tables).tolist():
+            rows = idx if len(tables) == 1 or (tables == t).all() else idx[tables == t]
+            chunks.append(
+                self.conn.send(
+                    JointUpdates(
+                        int(t),
+                        rows,
+                        board.dofs[rows],
+                        board.positions[rows],
+                        board.orientations[rows],
+                        board.tick & 0xFFFFFFFF,
+                    )
+                )
+            )
+        data = b"".join(chunks)
+        if data:
+            self.batches_out += 1
+        return data
+
+    # -- input -------------------------------------------------------------------------------------------
+    def feed(self, data: bytes, now: float | None = None) -> float:
+        """Bytes from the socket (``b""`` = EOF): handle complete events while the request budget lasts.
+
+        Returns the seconds to wait before calling :meth:`resume` (0.0: everything buffered was handled). The
+        budget is checked between events, so frames that arrived together in one read are throttled too.
+        """
+        self.conn.receive_data(data)
+        return self.resume(now)
+
+    def resume(self, now: float | None = None) -> float:
+        """Handle buffered events until the buffer is empty (0.0) or the budget is spent (seconds to wait)."""
+        while not self.closing:
+            if now is not None:
+                wait = self.charge(now)
+                if wait > 0:
+                    return wait
+            ev = self.conn.next_event()
+            if ev is NEED_DATA or ev is PAUSED:
+                return 0.0
+            self.handle(ev)  # type: ignore[arg-type]
+        return 0.0
+
+    def charge(self, now: float) -> float:
+        """Pay for the requests handled since the last call (one token per entity row or other message);
+        returns the seconds to wait before reading more (the rate limit is TCP backpressure, not a drop)."""
+        rate = self.config.max_requests_per_s
+        self.tokens = min(rate, self.tokens + (now - self.tokens_at) * rate)
+        self.tokens_at = now
+        self.tokens -= self.cost
+        self.cost = 0.0
+        if self.tokens >= 0:
+            return 0.0
+        # at least a millisecond: a wait below the clock's float resolution would never refill the bucket
+        return max(-self.tokens / rate, 1e-3)
+
+    def handle(self, ev: Event) -> None:
+        try:
+            self._handle(ev)
+        except LocalProtocolError as exc:  # we were about to send something invalid: a bug, report it
+            log.error("internal_protocol_error", session=self.id, error=str(exc))
+            self.fatal(ErrorCode.INTERNAL, f"internal error: {exc.message}")
+
+    def _handle(self, ev: Event) -> None:
+        self.cost += len(ev.rows) if isinstance(ev, EntityRequests) else 1
+        if isinstance(ev, ProtocolError):
+            self.control.append(self.conn.data_to_send())  # the Error frame the connection queued
+            log.warning(
+                "client_protocol_error",
+                session=self.id,
+                peer=self.peer,
+                code=ev.code,
+                error=f"{ev.location}: {ev.message}" if ev.location else ev.message,
+            )
+            self.lingering = True
+            self.drop(f"protocol error {ev.code}", True)
+        elif isinstance(ev, ConnectionClosed):
+            self.drop("closed")
+        elif isinstance(ev, Hello):
+            self._hello(ev)
+        elif isinstance(ev, Goodbye):
+            log.info("client_goodbye", session=self.id, reason=ev.reason)
+            self.drop("goodbye")
+        elif isinstance(ev, Error):
+            if ev.code < 100:
+                self.drop(f"client sent fatal error {ev.code}")
+            else:
+                log.info("client_error", session=self.id, code=ev.code, message=ev.message)
+        elif isinstance(ev, Ping):
+            self.send(Pong(ev.nonce))
+        elif isinstance(ev, Pong):
+            pass
+        elif isinstance(ev, Jcl):
+            self._jcl(ev)
+        elif isinstance(ev, CreateSoldier):
+            self._create(ev)
+        elif isinstance(ev, RemoveSoldier):
+            self._remove(ev)
+        elif isinstance(ev, Subscribe):
+            self.force[np.asarray(ev.indices, np.int64)] = True
+            self.notify()
+        elif isinstance(ev, RequestFullUpdate):
+            idx = np.asarray(ev.indices, np.int64) if ev.indices else self.conn.subscribed
+            self.force[idx] = True
+            self.notify()
+        elif isinstance(ev, Unsubscribe):
+            pass  # the connection forgets them; subscribing again starts with a full update
+        elif isinstance(ev, EntityRequests):
+            self._requests(ev)
+
+    def _hello(self, ev: Hello) -> None:
+        self.name, self.role = ev.name, ev.role
+        if self.full:
+            self.send(Error(int(ErrorCode.NOT_PERMITTED), f"server full ({self.config.max_clients} clients)"))
+            self.goodbye("server full")
+            self.dropped = True
+            return
+        self.send(Accept(self.config.name, self.config.max_frame, self.config.max_soldiers))
+        log.info("client_accepted", session=self.id, peer=self.peer, name=ev.name, role=ev.role)
+        if self.world.ready:
+            self.send_ready()
+
+    def send_tables(self) -> None:
+        if not self.tables_sent and self.conn.state is State.OPEN:
+            for t in self.world.tables:
+                self.send(UpdateTableMsg(t))
+            self.tables_sent = True
+            self.force[self.conn.subscribed] = True
+
+    def send_ready(self) -> None:
+        """Tables (first time) then READY with every soldier and its table."""
+        if self.conn.state is not State.OPEN:
+            return
+        self.send_tables()
+        m = self.world.manager
+        soldiers: tuple[tuple[int, int], ...] = ()
+        if m is not None:
+            live = m.table.live
+            fset = m.table.fset[live]
+            ids = np.array([s.table.table_id for s in self.world.sets], np.int64)[fset]
+            soldiers = tuple(zip(live.tolist(), ids.tolist(), strict=True))
+        self.send(Ready(soldiers))
+        self.ready_sent = True
+
+    def _permitted(self, ref: int | None, what: str) -> bool:
+        if self.role == "observer":
+            self.send(Error(int(ErrorCode.NOT_PERMITTED), f"an observer may not send {what}", ref))
+            return False
+        return True
+
+    def _is_ready(self, ref: int | None, what: str) -> bool:
+        if not self.world.ready:
+            self.send(Error(int(ErrorCode.NOT_READY), f"{what} before READY", ref))
+            return False
+        return True
+
+    def _jcl(self, ev: Jcl) -> None:
+        if not self._permitted(ev.id, "JCL"):
+            return
+        try:
+            self.world.run_jcl(ev.text, self, f"<jcl {ev.id} from {self.name or self.peer}>")
+        except JclError as exc:
+            self.send(Error(int(ErrorCode.JCL_ERROR), str(exc), ev.id))
+            log.info("jcl_error", session=self.id, error=str(exc))
+
+    def _create(self, ev: CreateSoldier) -> None:
+        if not (self._permitted(ev.id, "CREATE_SOLDIER") and self._is_ready(ev.id, "CREATE_SOLDIER")):
+            return
+        m = self.world.manager
+        assert m is not None
+        code, msg = self._create_error(ev)
+        if code is None:
+            try:
+                i = self.world.create_soldier(ev.figure, ev.weapon, ev.index)
+            except (ValueError, KeyError) as exc:
+                code, msg = ErrorCode.NO_FREE_SOLDIER, str(exc)
+            else:
+                self.owned.add(i)
+                self.send(SoldierCreated(ev.id, i, self.world.table_of(i)))
+                log.info("soldier_created", session=self.id, index=i, figure=ev.figure, weapon=ev.weapon)
+                return
+        self.send(Error(int(code), msg, ev.id))
+
+    def _create_error(self, ev: CreateSoldier) -> tuple[ErrorCode | None, str]:
+        m = self.world.manager
+        assert m is not None
+        lib = m.library
+        if len(self.owned) >= self.config.max_soldiers_per_client:
+            return (
+                ErrorCode.NO_FREE_SOLDIER,
+                f"this client may create {self.config.max_soldiers_per_client} soldiers",
+            )
+        fig = ev.figure.rsplit("/", 1)[-1]
+        wpn = ev.weapon.rsplit("/", 1)[-1]
+        if not any(f == fig for f, _ in lib.set_keys):
+            return (
+                ErrorCode.UNKNOWN_FIGURE,
+                f"no figure {ev.figure!r} (have {sorted({f for f, _ in lib.set_keys})})",
+            )
+        if wpn and not any(f == fig and w == wpn for f, w in lib.set_keys):
+            return ErrorCode.UNKNOWN_WEAPON, f"no weapon {ev.weapon!r} for {ev.figure!r}"
+        if ev.index is not None:
+            if m.table.is_live(ev.index):
+                return ErrorCode.SOLDIER_EXISTS, f"soldier {ev.index} exists"
+        elif m.count >= self.config.max_soldiers:
+            return ErrorCode.NO_FREE_SOLDIER, f"all {self.config.max_soldiers} soldier indices are in use"
+        return None, ""
+
+    def _remove(self, ev: RemoveSoldier) -> None:
+        if not (self._permitted(None, "REMOVE_SOLDIER") and self._is_ready(None, "REMOVE_SOLDIER")):
+            return
+        try:
+            self.world.remove_soldier(ev.index)
+        except KeyError:
+            self.send(Error(int(ErrorCode.UNKNOWN_SOLDIER), f"no soldier {ev.index}"))
+            return
+        log.info("soldier_removed", session=self.id, index=ev.index)
+
+    def _requests(self, ev: EntityRequests) -> None:
+        if not (self._permitted(None, "ENTITY_REQUESTS") and self._is_ready(None, "ENTITY_REQUESTS")):
+            return
+        m = self.world.manager
+        assert m is not None
+        status = m.apply_requests(ev.rows, self.world.clock())
+        bad = np.flatnonzero(status == REQUEST_BAD_VALUE)
+        if len(bad):
+            self.fatal(
+                ErrorCode.BAD_VALUE, f"entity requests row {int(bad[0])}: speed above the server's limit"
+            )
+            return
+        unknown = np.flatnonzero(status == REQUEST_UNKNOWN_SOLDIER)
+        if len(unknown):
+            row = int(unknown[0])
+            self.send(
+                Error(
+                    int(ErrorCode.UNKNOWN_SOLDIER),
+                    f"entity requests row {row}: no soldier {int(ev.rows['index'][row])}"
+                    + (f" ({len(unknown)} rows)" if len(unknown) > 1 else ""),
+                )
+            )
+
+    # -- server → client ---------------------------------------------------------------------------------
+    def status(self, now: float, soldiers: int, update_rate: float, text: str) -> None:
+        if self.conn.state is State.OPEN and self.ready_sent:
+            self.send(
+                Status(
+                    float(now), int(soldiers), float(update_rate) if math.isfinite(update_rate) else 0.0, text
+                )
+            )
+
+    def report(self, text: str) -> None:
+        """A JCL report for this client: a STATUS whose text is the report."""
+        if self.conn.state is State.OPEN:
+            m = self.world.manager
+            self.send(Status(float(self.world.clock()), m.count if m else 0, 0.0, text))
+
+    def goodbye(self, reason: str) -> None:
+        if self.conn.state in (State.OPEN, State.HANDSHAKE):
+            self.control.append(self.conn.send(Goodbye(reason)))
+        self.drop(reason)
+
+
+class BoardRef:
+    """Where sessions find the board (it exists once the motion library does)."""
+
+    def __init__(self) -> None:
+        self.board: PoseBoard | None = None

@@ -1,0 +1,106 @@
+"""`ttes server`: run the Jack/TTES animation server (seed 002, sections 3.6-3.7) until SIGINT/SIGTERM.
+
+Runs the start-up script (`jack-ttes-soldier_low.jcl` in the data dir) and prints a line containing `ready`
+and the bound address once it accepts connections. Binds 127.0.0.1 unless told otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("server", help="run the Jack/TTES animation server", description=__doc__)
+    p.add_argument("--host", help="address to bind (default 127.0.0.1; 0.0.0.0 inside a container)")
+    p.add_argument("--port", type=int, help="TCP port (default 7000; 0 = any free port)")
+    p.add_argument(
+        "--data-dir", help="folder with the start-up script, figures/, channelsets/, posture_graphs/"
+    )
+    p.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
+    p.add_argument("--tick-hz", type=float, help="simulation ticks per second (default 30)")
+    p.add_argument(
+        "--startup-script", help='JCL run at start-up (default jack-ttes-soldier_low.jcl; "" = none)'
+    )
+    p.add_argument(
+        "--throttle", type=float, help="seconds between two updates of one soldier (overrides JCL)"
+    )
+    p.add_argument("--json-logs", action="store_true", default=None, help="log one JSON object per line")
+    p.add_argument(
+        "--synthetic",
+        action="store_true",
+        help="serve a generated synthetic motion library (from a temporary data dir) instead of --data-dir",
+    )
+    p.add_argument("--json", action="store_true", help="print the ready line as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import logging
+    import tempfile
+
+    import trio
+
+    from server.app import TtesServer, run_server
+    from server.config import ServerConfig, load_config
+    from server.logging import configure
+    from ttes.output import print_json
+
+    cfg = load_config(args.config) if args.config else ServerConfig()
+    cfg = cfg.with_overrides(
+        host=args.host,
+        port=args.port,
+        data_dir=args.data_dir,
+        tick_hz=args.tick_hz,
+        startup_script=args.startup_script,
+        throttle=args.throttle,
+        json_logs=args.json_logs,
+    )
+    tmp = None
+    if args.synthetic:
+        from server.startup import write_synthetic_data_dir
+
+        tmp = tempfile.TemporaryDirectory(prefix="ttes-synthetic-")
+        synth = write_synthetic_data_dir(tmp.name)
+        cfg = cfg.with_overrides(data_dir=synth.path, startup_script=synth.startup_script)
+    configure(json_logs=cfg.json_logs, level=logging.DEBUG if args.verbose > 1 else logging.INFO)
+    try:
+        server = TtesServer(cfg)
+        server.start_world()  # a bad script or data dir fails here, before listening
+
+        def listening(s: TtesServer) -> None:
+            host, port = s.addresses[0]
+            m = s.world.manager
+            soldiers = m.count if m is not None else 0
+            if args.json:
+                print_json(
+                    {
+                        "event": "ready" if s.world.ready else "listening",
+                        "host": host,
+                        "port": port,
+                        "addresses": [f"{h}:{p}" for h, p in s.addresses],
+                        "soldiers": soldiers,
+                    }
+                )
+            else:
+                state = "ready" if s.world.ready else "listening (not ready: waiting for a client's JCL)"
+                print(f"ttes server: {state} on {host}:{port} ({soldiers} soldiers)", flush=True)
+            sys.stdout.flush()
+
+        try:
+            trio.run(lambda: run_server(server, on_listening=listening))
+        except BaseExceptionGroup as group:  # errors inside trio's nurseries arrive grouped
+            leaf = _first_leaf(group)
+            if isinstance(leaf, OSError | ValueError):
+                raise leaf from None
+            raise
+        return 0
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+
+
+def _first_leaf(exc: BaseException) -> BaseException:
+    while isinstance(exc, BaseExceptionGroup) and exc.exceptions:
+        exc = exc.exceptions[0]
+    return exc
