@@ -21,6 +21,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     info.add_argument("path", type=Path, help="a .fig file")
     info.add_argument("--json", action="store_true", help="machine-readable output")
     info.set_defaults(figure_func=_info)
+    spit = actions.add_parser(
+        "spit",
+        help="write figures as a .tips file for the stub (Jack's spit)",
+        description="Write every figure of the given .fig/.env files as a TIPS file (seed 002, section 7).",
+    )
+    spit.add_argument("inputs", nargs="+", type=Path, help=".fig or .env files (ENV_OR_FIG ...)")
+    spit.add_argument("out", type=Path, help="the .tips file to write")
+    spit.add_argument("--json", action="store_true", help="machine-readable output")
+    spit.set_defaults(figure_func=_spit)
     p.set_defaults(func=run)
 
 
@@ -41,6 +50,26 @@ def _info(args: argparse.Namespace) -> int:
     label = "length" if summary["segments"] == 1 else "height"
     print(f"  {label:<9} {summary['height_cm']:.1f} cm")
     print(f"  root      {summary['root']}")
+    return 0
+
+
+def _spit(args: argparse.Namespace) -> int:
+    import sys
+
+    from server.peabody.language import PeabodyError
+    from server.peabody.tips import spit
+    from ttes.output import print_json
+
+    try:
+        env = spit(args.inputs, args.out)
+    except (PeabodyError, OSError, ValueError) as exc:
+        print(f"ttes figure spit: {exc}", file=sys.stderr)
+        return 1
+    summary = {"out": str(args.out), "figures": list(env.figures), "bytes": args.out.stat().st_size}
+    if args.json:
+        print_json(summary)
+    else:
+        print(f"wrote {summary['out']}: {len(env.figures)} figure(s) {', '.join(env.figures)}")
     return 0
 
 

@@ -1,0 +1,205 @@
+"""`ttes stub`: the TTES stub image generator (seed 002, 3.5 and 4): a village, soldiers, keys, Jack.
+
+With a display it opens a window (press ? for the keys); with --headless it renders offscreen (EGL) to a
+video or a PNG, touring every posture and locomotion mode. Soldiers are posed by a Jack/TTES server
+(--host/--port, or --spawn-server to start `ttes server` on a free loopback port), or offline without one.
+`ttes stub make-terrain` regenerates the village mesh.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import sys
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("stub", help="the TTES stub image generator (pyrender)", description=__doc__)
+    p.add_argument(
+        "--headless", action="store_true", help="render offscreen (EGL) instead of opening a window"
+    )
+    p.add_argument("--seconds", type=float, default=40.0, help="headless: length of the run (default 40)")
+    p.add_argument(
+        "--out", type=Path, default=Path("ttes-stub.mp4"), help="headless: .mp4/.gif video or .png"
+    )
+    p.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
+    p.add_argument("--size", default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument("--host", help="Jack/TTES server host")
+    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
+    p.add_argument("--spawn-server", action="store_true", help="start `ttes server` on a free loopback port")
+    p.add_argument(
+        "--server-data-dir",
+        type=Path,
+        help="--spawn-server: the server's data dir (default: the repository's if it has the start-up "
+        "script, else a stand-in: synthetic motions on the shipped figures)",
+    )
+    p.add_argument("--terrain", type=Path, help="terrain mesh (OBJ, glTF, PLY); default: the village")
+    p.add_argument(
+        "--terrain-up", choices=("y", "z"), help="the terrain file's up axis (default: y for glTF)"
+    )
+    p.add_argument("--artic-dir", type=Path, help="where the TIPS loader writes the .artic files")
+    p.add_argument("--no-tour", action="store_true", help="headless: no scripted key presses")
+    p.add_argument("--ready-timeout", type=float, default=30.0, help="seconds to wait for the server's READY")
+    p.add_argument("--json", action="store_true", help="machine-readable summary")
+    actions = p.add_subparsers(dest="stub_command", metavar="ACTION")
+    terrain = actions.add_parser(
+        "make-terrain",
+        help="regenerate the village mesh (client_stub/data/village.glb)",
+        description="Write the generated village (glTF binary) and its landmarks (.json beside it).",
+    )
+    terrain.add_argument(
+        "--out", dest="terrain_out", type=Path, help="output .glb (default: the shipped one)"
+    )
+    terrain.add_argument("--json", dest="terrain_json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=run)
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise SystemExit(f"ttes stub: --size must be WxH, not {text!r}") from None
+    if not (16 <= w <= 8192 and 16 <= h <= 8192):
+        raise SystemExit("ttes stub: --size out of range")
+    return w, h
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.stub_command == "make-terrain":
+        return _make_terrain(args)
+    from ttes.output import print_json
+
+    width, height = _size(args.size)
+    if args.headless:
+        os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    elif not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or sys.platform in ("darwin", "win32")
+    ):
+        print("ttes stub: no display; use --headless", file=sys.stderr)
+        return 2
+    from client_stub.app import StubApp, populate_demo
+    from client_stub.jack import JackError, JackProc, ServerProcess
+    from client_stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
+
+    try:
+        terrain = load_terrain(args.terrain or DEFAULT_TERRAIN, args.terrain_up)
+    except TerrainError as exc:
+        print(f"ttes stub: {exc}", file=sys.stderr)
+        return 1
+    app = StubApp(terrain, artic_dir=args.artic_dir)
+    populate_demo(app)
+    server = None
+    stack = contextlib.ExitStack()
+    try:
+        if args.spawn_server or args.host:
+            host, port = args.host or "127.0.0.1", args.port
+            try:
+                if args.spawn_server:
+                    data_dir = args.server_data_dir or _server_data_dir(stack)
+                    server = ServerProcess(extra=["--data-dir", str(data_dir)])
+                    server.wait_listening()
+                    host, port = server.host, server.port
+                jack = JackProc()
+                jack.initsocketconnection(host, port)
+            except JackError as exc:
+                print(f"ttes stub: {exc}", file=sys.stderr)
+                return 1
+            if not app.connect(jack, args.ready_timeout):
+                print(
+                    f"ttes stub: server not ready ({jack.failure or 'timeout'}); posing offline",
+                    file=sys.stderr,
+                )
+        from client_stub.render import StubRenderer
+
+        app.renderer = StubRenderer(width, height, offscreen=args.headless)
+        app.renderer.add_terrain(terrain.meshes)
+        if not args.headless:
+            from client_stub.viewer import run_viewer
+
+            run_viewer(app, width, height, args.fps)
+            return 0
+        from client_stub.headless import run_headless
+
+        summary = run_headless(
+            app, args.seconds, args.out, fps=args.fps, realtime=app.jack is not None, tour=not args.no_tour
+        )
+        app.renderer.close()
+    finally:
+        app.close()
+        if server is not None:
+            code = server.stop()
+            print(f"ttes server stopped (exit {code})", file=sys.stderr)
+        stack.close()
+    if args.json:
+        print_json(summary)
+    else:
+        print(
+            f"wrote {summary['out']}: {summary['frames']} frames, {summary['soldiers']} soldiers, "
+            f"render {summary['render_fps']} fps, server {'yes' if summary['server'] else 'no'}"
+        )
+    return 0
+
+
+def _make_terrain(args: argparse.Namespace) -> int:
+    from client_stub.terrain_gen import DEFAULT_OUT, write_village
+    from ttes.output import print_json
+
+    summary = write_village(args.terrain_out or DEFAULT_OUT)
+    if args.terrain_json:
+        print_json(summary)
+    else:
+        print(
+            f"wrote {summary['file']}: {summary['bytes']} bytes, {summary['triangles']} triangles, "
+            f"{summary['buildings']} buildings"
+        )
+    return 0
+
+
+STARTUP_SCRIPT = "jack-ttes-soldier_low.jcl"
+
+
+def _server_data_dir(stack: contextlib.ExitStack) -> Path:
+    """The repository's data dir when it holds the start-up script, else a temporary stand-in."""
+    import tempfile
+
+    import ttes.paths
+
+    if (ttes.paths.ROOT / STARTUP_SCRIPT).is_file():
+        return ttes.paths.ROOT
+    tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="ttes-stub-server-")))
+    return stand_in_data_dir(tmp)
+
+
+def stand_in_data_dir(directory: Path, soldiers: int = 10) -> Path:
+    """A server data dir with the shipped figures (DI.fig, AK_47.fig, M16.fig) and the synthetic motion
+    library of ``server.soldier.synthetic`` recorded on them, plus the seed's start-up files: until authored
+    channelsets ship, this lets the stub and a real server agree on the figure (same joints, same table)."""
+    import shutil
+
+    import ttes.paths
+    from server.peabody.loader import read_figure
+    from server.soldier.synthetic import write_synthetic_library
+
+    figures = directory / "figures"
+    figures.mkdir(parents=True, exist_ok=True)
+    for name in ("DI.fig", "AK_47.fig", "AK_47.pss", "M16.fig", "M16.pss"):
+        shutil.copy(ttes.paths.FIGURES / name, figures / name)
+    shutil.copytree(ttes.paths.FIGURES / "DI", figures / "DI", dirs_exist_ok=True)
+    figs = [read_figure(figures / "DI.fig"), read_figure(figures / "AK_47.fig")]
+    write_synthetic_library(directory / "posture_graphs", figs)
+    env = "".join(
+        f'figure Di2_{i} {{ file = "DI.fig"; }}\nfigure AK_47_{i} {{ file = "AK_47.fig"; }}\n'
+        for i in range(soldiers)
+    )
+    (directory / "jack-ttes-soldier_low.env").write_text(env, encoding="utf-8")
+    script = ['read_file("jack-ttes-soldier_low.env");']
+    script += [f'create_soldier_state("s{i}","Di2_{i}","AK_47_{i}");' for i in range(soldiers)]
+    script += [
+        'set_channelset_parameters("no");',
+        "set_ttes_soldier_throttle(0.04);",
+        "start_ttes_socket_simulation();",
+    ]
+    (directory / STARTUP_SCRIPT).write_text("\n".join(script) + "\n", encoding="utf-8")
+    return directory
