@@ -1,0 +1,147 @@
+"""`ttes loadtest`: drive N soldiers over C connections with a realistic DIS-rate mix and measure the server.
+
+Measures over the steady state: steady-mover updates received per second against those expected (every
+walking, running or crawling soldier in every tick), request -> first reflecting update latency (p50, p99,
+max), bytes per soldier update, dropped and late updates, and the server's CPU (when it was spawned, or
+given by --server-pid). --ramp grows N until the server falls behind and reports the largest N it
+sustained. Loopback by default; every loop is bounded in count and time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "loadtest", help="load-test a Jack/TTES server with many soldiers", description=__doc__
+    )
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--spawn-server", action="store_true", help="run a `ttes server` child on loopback")
+    where.add_argument("--host", default="127.0.0.1", help="server address (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
+    p.add_argument("--soldiers", type=int, default=100, help="soldiers N (the first stage with --ramp)")
+    p.add_argument("--clients", type=int, default=2, help="client connections C sharing the soldiers")
+    p.add_argument("--rate", type=float, default=30.0, help="update rate HZ (the spawned server's tick rate)")
+    p.add_argument("--seconds", type=float, default=10.0, help="steady-state seconds measured (per stage)")
+    p.add_argument("--warmup", type=float, default=3.0, help="seconds before measuring (per stage)")
+    p.add_argument("--mix", choices=("realistic", "moving"), default="realistic", help="what the soldiers do")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument(
+        "--subscribe-all", action="store_true", help="every connection subscribes to every soldier"
+    )
+    p.add_argument("--decode", action="store_true", help="decode every joint update (as an image generator)")
+    p.add_argument(
+        "--server-data",
+        choices=("auto", "synthetic", "default"),
+        default="auto",
+        help="spawned server's motion library (auto: the shipped one if present, else synthetic)",
+    )
+    p.add_argument(
+        "--throttle", default="0", help="spawned server's --throttle seconds, or 'script' (default 0)"
+    )
+    p.add_argument("--server-pid", type=int, help="PID of an external server on this machine (for its CPU)")
+    p.add_argument("--ramp", action="store_true", help="grow N until the server falls behind")
+    p.add_argument("--ramp-factor", type=float, default=1.3, help="N multiplier per ramp stage")
+    p.add_argument("--ramp-max-soldiers", type=int, default=8000)
+    p.add_argument("--ramp-max-seconds", type=float, default=600.0, help="wall-clock bound of the ramp")
+    p.add_argument("--min-delivered-pct", type=float, default=99.0, help="ramp criterion: delivered/expected")
+    p.add_argument("--max-p99-ms", type=float, default=33.0, help="ramp criterion: p99 latency")
+    p.add_argument(
+        "--latency-metric",
+        choices=("request", "delivery"),
+        default="request",
+        help="ramp latency criterion: request->update, or server tick->arrival (excludes the tick wait)",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--plot", metavar="FILE.png", help="write throughput and latency over time")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from client_stub.loadtest import LoadTestConfig, run_loadtest
+    from client_stub.loadtest_client import LoadError
+    from client_stub.loadtest_server import SpawnError
+    from ttes.output import print_json
+
+    throttle: float | None = None if args.throttle == "script" else float(args.throttle)
+    cfg = LoadTestConfig(
+        soldiers=args.soldiers,
+        clients=args.clients,
+        rate_hz=args.rate,
+        seconds=args.seconds,
+        warmup_s=args.warmup,
+        host=args.host,
+        port=args.port,
+        spawn_server=args.spawn_server,
+        server_data=args.server_data,
+        server_pid=args.server_pid,
+        throttle=throttle,
+        mix=args.mix,
+        seed=args.seed,
+        subscribe_all=args.subscribe_all,
+        decode=args.decode,
+        ramp=args.ramp,
+        ramp_factor=args.ramp_factor,
+        ramp_max_soldiers=args.ramp_max_soldiers,
+        ramp_max_s=args.ramp_max_seconds,
+        min_delivered_pct=args.min_delivered_pct,
+        max_p99_ms=args.max_p99_ms,
+        latency_metric=args.latency_metric,
+    )
+    try:
+        result = run_loadtest(cfg)
+    except (LoadError, SpawnError) as exc:
+        print(f"ttes loadtest: error: {exc}", file=sys.stderr)
+        return 1
+    if args.plot:
+        from client_stub.loadtest_plot import plot_result
+
+        plot_result(result, args.plot)
+    if args.json:
+        print_json(result)
+    else:
+        print(format_result(result))
+    return 0
+
+
+def format_result(r: dict) -> str:
+    """A short human summary."""
+
+    def f(key: str, unit: str = "") -> str:
+        v = r.get(key)
+        return "n/a" if v is None else f"{v}{unit}"
+
+    if r.get("ramp"):
+        lines = [
+            f"ttes loadtest --ramp: {r['clients']} clients at {r['rate_hz']:g} Hz, criteria {r['criteria']}",
+            f"  largest sustained N = {r['largest_sustained_soldiers']} "
+            f"(first failed: {r['first_failed_soldiers']})",
+        ]
+        for s in r["stages"]:
+            lines.append(
+                f"  N={s['soldiers']:>6}  delivered {s['delivered_pct']}%  updates/s {s['updates_per_s']} of "
+                f"{s['expected_updates_per_s']}  latency p50/p99 "
+                f"{s['latency_ms_p50']}/{s['latency_ms_p99']} ms  "
+                f"tick->arrival p99 {s['delivery_ms_p99']} ms  server CPU {s['server_cpu_pct']}%  "
+                f"{'ok' if s['passed'] else 'FAIL'}"
+            )
+        return "\n".join(lines)
+    return "\n".join(
+        [
+            f"ttes loadtest: {r['soldiers']} soldiers, {r['clients']} clients, {r['rate_hz']:g} Hz, "
+            f"{r['seconds']:g} s steady state ({r.get('mode')} mode)",
+            f"  steady-mover updates/s  {f('updates_per_s')} of {f('expected_updates_per_s')} expected "
+            f"({f('delivered_pct', '%')}; {f('steady_movers_mean')} movers on average)",
+            f"  all soldier updates/s   {f('all_updates_per_s')} "
+            f"(nominal N x rate = {f('nominal_updates_per_s')})",
+            f"  latency request->update p50 {f('latency_ms_p50', ' ms')}, p99 {f('latency_ms_p99', ' ms')}, "
+            f"max {f('latency_ms_max', ' ms')} ({f('latency_samples')} probes)",
+            f"  tick->arrival p50 {f('delivery_ms_p50', ' ms')}, p99 {f('delivery_ms_p99', ' ms')}; "
+            f"dropped {f('dropped_updates')}, late {f('late_updates')} ({f('late_pct', '%')})",
+            f"  bytes per update        {f('bytes_per_update')} ({f('bytes_per_s')} bytes/s)",
+            f"  server CPU              {f('server_cpu_pct', '%')} of one core; load generator "
+            f"{f('client_cpu_pct', '%')}",
+        ]
+    )
