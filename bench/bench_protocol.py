@@ -4,8 +4,9 @@ Table: 23 joints / 50 DOFs (12-bit codes) + 2 figures (soldier, rifle: 16-bit mm
 quaternion). Motion: 70% of soldiers move (every DOF a 1 Hz sine of amplitude 0.02..0.5 rad sampled at 30 Hz,
 the root bobbing ±2 cm and yawing ±5°), 30% stand idle. Reports µs per batch for encode and decode
 (UpdateEncoder / UpdateDecoder, then the same through a server/client Connection pair), and bytes per full,
-moving and idle soldier. Times are medians of this process's CPU time (robust on a shared machine); the
-``*_wall_*`` fields are wall-clock medians. ``--json`` prints one JSON object.
+moving and idle soldier. ``quantise_us_per_batch`` is the float-to-code share of encode, which a server can do
+once per tick for every client (``UpdateEncoder.encode_codes``). Times are medians of this process's CPU time
+(robust on a shared machine); the ``*_wall_*`` fields are wall-clock medians. ``--json``: one JSON object.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from protocol.connection import CLIENT, SERVER, Connection
 from protocol.events import Accept, Hello, JointUpdates, Subscribe, UpdateTableMsg
 from protocol.legacy import packet_floats
 from protocol.update_table import example_di_table
-from protocol.updates import UpdateDecoder, UpdateEncoder
+from protocol.updates import UpdateDecoder, UpdateEncoder, quantise
 
 N = 10_000
 HZ = 30.0
@@ -66,7 +67,7 @@ def run(ticks: int) -> dict[str, object]:
         dec.decode(p)
     full_bytes = sum(len(p) for p in full)
 
-    enc_us, dec_us, enc_wall, dec_wall, moving_bytes = [], [], [], [], []
+    enc_us, dec_us, enc_wall, dec_wall, moving_bytes, quant_us = [], [], [], [], [], []
     poses = [crowd.pose(k) for k in range(1, ticks + 1)]
     for k, pose in enumerate(poses, 1):
         c0, t0 = time.process_time(), time.perf_counter()
@@ -80,6 +81,9 @@ def run(ticks: int) -> dict[str, object]:
         enc_wall.append((t1 - t0) * 1e6)
         dec_wall.append((t2 - t1) * 1e6)
         moving_bytes.append(sum(len(p) for p in payloads))
+        c3 = time.process_time()
+        quantise(table, *pose)  # the share of encode a server could do once per tick for all clients
+        quant_us.append((time.process_time() - c3) * 1e6)
     exact = bool(np.array_equal(dec.codes(idx), enc.codes(idx)))
 
     idle_only = np.flatnonzero(~crowd.moving)
@@ -95,6 +99,7 @@ def run(ticks: int) -> dict[str, object]:
         "ticks": ticks,
         "encode_us_per_batch": round(statistics.median(enc_us)),
         "decode_us_per_batch": round(statistics.median(dec_us)),
+        "quantise_us_per_batch": round(statistics.median(quant_us)),
         "encode_decode_us_per_batch": round(statistics.median(np.add(enc_us, dec_us).tolist())),
         "encode_wall_us_per_batch": round(statistics.median(enc_wall)),
         "decode_wall_us_per_batch": round(statistics.median(dec_wall)),
@@ -144,6 +149,7 @@ def main() -> int:
     for kind, suffix in (("CPU", ""), ("wall", "_wall")):
         e, d = r[f"encode{suffix}_us_per_batch"], r[f"decode{suffix}_us_per_batch"]
         print(f"  encode {e:>8} µs/batch   decode {d:>8} µs/batch ({kind})")
+    print(f"  of which quantise {r['quantise_us_per_batch']} µs/batch (shareable: encode_codes)")
     print(
         f"  encode+decode {r['encode_decode_us_per_batch']} µs/batch; via Connection pair "
         f"{r['connection_send_receive_us_per_batch']} µs/batch"

@@ -10,6 +10,8 @@ then OR-ed into place (window ``k``'s low half and window ``k + 1``'s high half 
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 _U64 = np.uint64
@@ -57,3 +59,148 @@ def read_fields(words: np.ndarray, starts: np.ndarray, widths: np.ndarray) -> np
     word = starts >> 5
     window = ((words[word] << _U64(32)) | words[word + 1]) << (starts & 31).view(_U64)
     return ((window >> _U64(1)) >> (63 - widths).view(_U64)).astype(np.int64)
+
+
+# -- grouped 64-bit packing: the joint-update hot path -------------------------------------------------------
+#
+# A soldier's fields are handled as a dense (n, C) matrix (absent fields have width 0), C a multiple of the
+# group size g. Each run of g neighbouring fields is first merged into one *group* of at most 64 bits held
+# top-aligned in a uint64 (bits beyond the group's width are 0), so every later pass touches C / g elements
+# instead of C. A group starting at stream bit s lies in the 64-bit words s >> 6 and (s >> 6) + 1; groups are
+# in stream order, so those starting in the same word are contiguous and one ``bitwise_or.reduceat`` per half
+# assembles the words. numpy defines shifts by 64 or more as 0, which absent (width-0) groups rely on.
+
+
+class Scratch:
+    """Named work buffers reused from call to call (per thread: see :func:`scratch`).
+
+    A fresh multi-megabyte numpy array costs a page fault per 4 KiB page on first touch, which on a VM costs
+    more than the arithmetic done on it; batches of similar size therefore reuse these. Buffers above
+    ``limit`` bytes are not kept (memory stays bounded whatever the batch), and a caller must not let a
+    buffer escape (return copies) nor ask for one name twice while still using it.
+    """
+
+    def __init__(self, limit: int = 64 << 20) -> None:
+        self.limit = limit
+        self._bufs: dict[str, np.ndarray] = {}
+
+    def get(self, name: str, shape: tuple[int, ...], dtype: type | np.dtype) -> np.ndarray:
+        dt = np.dtype(dtype)
+        nbytes = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
+        buf = self._bufs.get(name)
+        if buf is None or buf.nbytes < nbytes:
+            buf = np.empty(max(nbytes, 64), np.uint8)
+            if nbytes <= self.limit:
+                self._bufs[name] = buf
+        return buf[:nbytes].view(dt).reshape(shape)
+
+
+_LOCAL = threading.local()
+
+
+def scratch() -> Scratch:
+    """This thread's :class:`Scratch`."""
+    s = getattr(_LOCAL, "scratch", None)
+    if s is None:
+        s = _LOCAL.scratch = Scratch()
+    return s
+
+
+def group_size(max_width: int) -> int:
+    """Fields merged per group: as many as always fit 64 bits."""
+    return max(1, 64 // max(1, max_width))
+
+
+def merge_groups(values: np.ndarray, widths: np.ndarray, g: int) -> tuple[np.ndarray, np.ndarray]:
+    """Top-aligned groups (n, C/g) uint64 and their bit widths (n, C/g) int64 of ``values`` (n, C).
+
+    ``values`` may hold bits above ``widths`` (e.g. negative deltas): they are dropped. The results are
+    :func:`scratch` buffers (``merge.*``), valid until the next call.
+    """
+    sc = scratch()
+    n, c = values.shape
+    shape = (n, c // g)
+    w = widths.reshape(n, c // g, g)
+    group = sc.get("merge.group", shape, _U64)
+    used = sc.get("merge.used", shape, _U64)
+    wj = sc.get("merge.wj", shape, _U64)
+    group[:] = 0
+    used[:] = 0
+    top = sc.get("merge.top", (n, c), _U64)  # every field top-aligned in one contiguous pass
+    sh = sc.get("merge.sh", (n, c), _U64)
+    np.subtract(64, widths, out=sh, dtype=_U64)
+    np.copyto(top, values, casting="unsafe")
+    np.left_shift(top, sh, out=top)
+    t3 = top.reshape(n, c // g, g)
+    for j in range(g):  # over the g fields of a group (a table constant), each pass vectorised
+        np.right_shift(t3[:, :, j], used, out=wj)
+        np.bitwise_or(group, wj, out=group)
+        np.add(used, w[:, :, j], out=used, dtype=_U64)
+    return group, used.view(np.int64)
+
+
+def place_groups(groups: np.ndarray, starts: np.ndarray, nwords: int) -> np.ndarray:
+    """Native uint64 words (``nwords`` + 2 of slack) holding top-aligned ``groups`` at bit ``starts``.
+
+    ``starts`` must be non-decreasing in flat order and the groups must not overlap. The result is a
+    :func:`scratch` buffer (``place.words``), valid until the next call.
+    """
+    sc = scratch()
+    s = starts.reshape(-1)
+    gr = groups.reshape(-1)
+    m = len(s)
+    words = sc.get("place.words", (nwords + 2,), _U64)
+    words[:] = 0
+    if m == 0:
+        return words
+    word = sc.get("place.word", (m,), np.int64)
+    off = sc.get("place.off", (m,), _U64)
+    part = sc.get("place.part", (m,), _U64)
+    np.right_shift(s, 6, out=word)
+    np.bitwise_and(s, 63, out=off, casting="unsafe")
+    edge = sc.get("place.edge", (m,), bool)
+    edge[0] = True
+    np.not_equal(word[1:], word[:-1], out=edge[1:])
+    first = np.flatnonzero(edge)
+    at = word[first]
+    np.right_shift(gr, off, out=part)
+    words[at] = np.bitwise_or.reduceat(part, first)
+    np.subtract(_U64(64), off, out=off)
+    np.left_shift(gr, off, out=part)
+    words[at + 1] |= np.bitwise_or.reduceat(part, first)
+    return words
+
+
+def be_words(data: bytes | memoryview) -> np.ndarray:
+    """``data`` as native uint64 of its big-endian 64-bit words, zero-padded, with two words of slack."""
+    nwords = (len(data) + 7) // 8 + 2
+    buf = np.zeros(nwords * 8, np.uint8)
+    buf[: len(data)] = np.frombuffer(data, np.uint8)
+    return buf.view(">u8").astype(_U64)
+
+
+def read_groups(words: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Top-aligned 64-bit windows of :func:`be_words` output at bit ``starts`` (any shape)."""
+    word = starts >> 6
+    off = (starts & 63).view(_U64)
+    return (words[word] << off) | (words[word + 1] >> (_U64(64) - off))
+
+
+def split_groups(groups: np.ndarray, widths: np.ndarray, g: int) -> np.ndarray:
+    """Inverse of :func:`merge_groups`: the unsigned fields (n, C) int32 given their ``widths`` (n, C)."""
+    sc = scratch()
+    n, c = widths.shape
+    shape = (n, c // g)
+    w = widths.reshape(n, c // g, g)
+    out = np.empty((n, c // g, g), np.int32)
+    used = sc.get("split.used", shape, _U64)
+    sh = sc.get("split.sh", shape, _U64)
+    x = sc.get("split.x", shape, _U64)
+    used[:] = 0
+    for j in range(g):
+        np.subtract(64, w[:, :, j], out=sh, dtype=_U64)
+        np.left_shift(groups, used, out=x)
+        np.right_shift(x, sh, out=x)
+        np.copyto(out[:, :, j], x, casting="unsafe")
+        np.add(used, w[:, :, j], out=used, dtype=_U64)
+    return out.reshape(n, c)

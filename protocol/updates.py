@@ -20,7 +20,14 @@ import struct
 
 import numpy as np
 
-from protocol.bitpack import body_words, pack_bits, read_fields
+from protocol.bitpack import (
+    be_words,
+    group_size,
+    merge_groups,
+    place_groups,
+    read_groups,
+    split_groups,
+)
 from protocol.errors import ErrorCode, WireError
 from protocol.events import DEFAULT_MAX_SOLDIERS, JointUpdates
 from protocol.update_table import UpdateTable
@@ -32,6 +39,14 @@ MAX_COUNT = 0xFFFF
 DECODE_CHUNK = 1 << 20  # field cells decoded per numpy pass
 _OTHERS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]], np.int64)  # components kept per qidx
 _OTHERS.setflags(write=False)
+
+
+def _cols(fields: np.ndarray) -> slice | np.ndarray:
+    """``fields`` as a slice when they are a contiguous run (a cheaper column assignment)."""
+    f = np.asarray(fields, np.int64).reshape(-1)
+    if len(f) and (len(f) == 1 or (np.diff(f) == 1).all()):
+        return slice(int(f[0]), int(f[-1]) + 1)
+    return f
 
 
 def quantise(
@@ -53,7 +68,9 @@ def quantise(
             f"shapes dofs {dofs.shape}, positions {positions.shape}, orientations {orientations.shape} "
             f"do not match table {table.table_id}: (n, {len(lay.dof_fields)}), (n, {g}, 3), (n, {g}, 4)"
         )
-    parts = [dofs]
+    raw = np.empty((n, lay.nfields))  # written column block by column block: no concatenate + gather
+    if len(lay.dof_fields):
+        raw[:, _cols(lay.dof_fields)] = dofs
     if g:
         norm = np.linalg.norm(orientations, axis=-1, keepdims=True)
         if (norm < 1e-9).any():  # NaN norms pass here and are caught with the other non-finite values
@@ -64,17 +81,17 @@ def quantise(
         lead = np.take_along_axis(quat, qidx[..., None], -1)
         quat = np.where(lead < 0, -quat, quat)
         comps = np.take_along_axis(quat, _OTHERS[qidx], -1)
-        parts += [positions.reshape(n, 3 * g), qidx.astype(np.float64), comps.reshape(n, 3 * g)]
-    raw = np.concatenate(parts, axis=1)
-    if lay.gather is not None:
-        raw = np.take(raw, lay.gather, axis=1)
-    if not np.isfinite(raw).all():
+        raw[:, _cols(lay.pos_fields)] = positions.reshape(n, 3 * g)
+        raw[:, _cols(lay.qidx_fields)] = qidx
+        raw[:, _cols(lay.comp_fields)] = comps.reshape(n, 3 * g)
+    # one summing pass proves finiteness; only an inf/NaN sum (or a finite overflow) pays the exact check
+    if not np.isfinite(np.add.reduce(raw, axis=None)) and not np.isfinite(raw).all():
         row = int(np.flatnonzero(~np.isfinite(raw).all(axis=1))[0])
         raise ValueError(f"row {row}: dofs, positions or orientations not finite")
     np.subtract(raw, lay.lo, out=raw)
     np.multiply(raw, 1.0 / lay.step, out=raw)
     np.rint(raw, out=raw)
-    np.clip(raw, 0.0, ((np.int64(1) << lay.width) - 1).astype(np.float64), out=raw)
+    np.clip(raw, 0.0, lay.max_code.astype(np.float64), out=raw)
     return raw.astype(np.int32)
 
 
@@ -96,6 +113,52 @@ def dequantise(table: UpdateTable, q: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return dofs, positions, quat
 
 
+class _Plan:
+    """Per-table constants of the packer: fields padded to whole groups (see :mod:`protocol.bitpack`)."""
+
+    def __init__(self, table: UpdateTable) -> None:
+        lay = table.layout
+        nf = lay.nfields
+        self.nent = len(lay.entry_start)
+        self.g = group_size(max(int(lay.width.max()), MAX_DELTA_BITS))
+        self.cols = -(-nf // self.g) * self.g
+        pad = self.cols - nf
+        self.width = np.concatenate([lay.width, np.zeros(pad, np.int64)]).astype(np.uint8)
+        self.notq = np.concatenate([~lay.is_qidx, np.zeros(pad, bool)]).astype(np.uint8)
+        self.entry_of = np.concatenate([lay.entry_of, np.zeros(pad, np.int64)])  # pad: width 0 anyway
+        self.absbits = lay.entry_absbits
+        self.ndelta = lay.entry_ndelta
+        self.mode_shift = np.arange(MODE_BITS - 1, -1, -1, dtype=np.uint8)
+        # field -> entry membership as bit masks over the row's packed diff bits (no per-entry loop, no BLAS)
+        self.nwords = -(-nf // 64)
+        member = np.zeros((self.nent, self.nwords * 64), bool)
+        member[lay.entry_of, np.arange(nf)] = True
+        self.member = np.packbits(member, axis=1).view(">u8").astype(np.uint64)  # (E, nwords)
+
+    def changed(self, diff: np.ndarray) -> np.ndarray:
+        """(n, E) bool: entries with at least one changed field, from the (n, F) bool ``diff``."""
+        n = diff.shape[0]
+        packed = np.zeros((n, self.nwords * 8), np.uint8)
+        packed[:, : (diff.shape[1] + 7) >> 3] = np.packbits(diff, axis=1)
+        rows = packed.view(">u8").astype(np.uint64)  # (n, nwords)
+        if self.nwords == 1:
+            return (rows & self.member[:, 0]) != 0
+        return ((rows[:, None, :] & self.member) != 0).any(axis=2)
+
+    def widths(self, absolute: np.ndarray, k: np.ndarray, incl: np.ndarray) -> np.ndarray:
+        """(n, cols) uint8 field widths: the field's width (mode 0) or k (delta, not qidx); 0 if absent."""
+        w = np.where(absolute[:, None], self.width, k.astype(np.uint8)[:, None] * self.notq)
+        w *= incl
+        return w
+
+    def padded(self, values: np.ndarray) -> np.ndarray:
+        if values.shape[1] == self.cols:
+            return values
+        out = np.zeros((values.shape[0], self.cols), values.dtype)
+        out[:, : values.shape[1]] = values
+        return out
+
+
 class UpdateEncoder:
     """Server side, one per client and update table: what this client last received, and the packer."""
 
@@ -104,6 +167,7 @@ class UpdateEncoder:
         self.max_soldiers = max_soldiers
         self._last = np.zeros((max_soldiers, table.layout.nfields), np.int32)
         self._known = np.zeros(max_soldiers, bool)
+        self._plan = _Plan(table)
 
     def reset(self, indices: np.ndarray | list[int] | None = None) -> None:
         """Forget what these soldiers (all if None) last sent: their next update is full."""
@@ -124,49 +188,60 @@ class UpdateEncoder:
 
         Raises ValueError on bad input (shapes, non-finite values, duplicate or out-of-range indices).
         """
-        table, lay = self.table, self.table.layout
         idx = np.asarray(updates.indices, np.int64).reshape(-1)
         if len(idx) and (idx.min() < 0 or idx.max() >= self.max_soldiers):
             raise ValueError(f"soldier index outside 0..{self.max_soldiers - 1}")
-        q_all = quantise(table, updates.dofs, updates.positions, updates.orientations)
+        q_all = quantise(self.table, updates.dofs, updates.positions, updates.orientations)
         if len(idx) != q_all.shape[0]:
             raise ValueError(f"{len(idx)} indices for {q_all.shape[0]} poses")
-        order = np.argsort(idx, kind="stable")
-        idx = idx[order]
-        if len(idx) > 1 and (np.diff(idx) == 0).any():
-            raise ValueError("duplicate soldier index in one JointUpdates")
-        q_new = q_all[order]
-        known = self._known[idx]
-        q_old = self._last[idx]
-        diff = q_new != q_old
-        changed = np.logical_or.reduceat(diff, lay.entry_start, axis=1) if len(idx) else diff[:, :0]
-        changed[~known] = True
-        send = changed.any(axis=1)
-        if not send.any():
+        return self.encode_codes(idx, q_all, updates.tick, max_payload)
+
+    def encode_codes(
+        self, indices: np.ndarray, codes: np.ndarray, tick: int, max_payload: int
+    ) -> list[bytes]:
+        """Like :meth:`encode` for poses already quantised (:func:`quantise`, rows matching ``indices``).
+
+        Lets a server quantise a tick's poses once and share the codes between every client's encoder.
+        """
+        plan, lay = self._plan, self.table.layout
+        idx = np.asarray(indices, np.int64).reshape(-1)
+        q = np.asarray(codes, np.int32)
+        if q.shape != (len(idx), lay.nfields):
+            raise ValueError(f"codes of shape {q.shape} for {len(idx)} indices and {lay.nfields} fields")
+        if len(idx) and (idx.min() < 0 or idx.max() >= self.max_soldiers):
+            raise ValueError(f"soldier index outside 0..{self.max_soldiers - 1}")
+        if len(idx) > 1 and (np.diff(idx) <= 0).any():
+            order = np.argsort(idx, kind="stable")
+            idx, q = idx[order], q[order]
+            if (np.diff(idx) == 0).any():
+                raise ValueError("duplicate soldier index in one JointUpdates")
+        if len(idx) == 0:
             return []
-        idx, q_new, q_old, diff, changed, known = (a[send] for a in (idx, q_new, q_old, diff, changed, known))
-        incl = np.take(changed, lay.entry_of, axis=1)
-        dmask = incl & ~lay.is_qidx
-        delta = q_new - q_old
-        mag = ((delta ^ (delta >> 31)) * dmask).max(axis=1)  # x ^ (x >> 31) is -x - 1 for negative x
+        known = self._known[idx]
+        delta = q - self._last[idx]
+        diff = delta != 0
+        changed = plan.changed(diff)
+        if not known.all():
+            changed[~known] = True
+        send = changed.any(axis=1)
+        if not send.all():
+            if not send.any():
+                return []
+            idx, q, delta, diff, changed, known = (a[send] for a in (idx, q, delta, diff, changed, known))
+        # smallest k holding every delta: bit length of max(d, -d - 1) plus a sign (unchanged fields are 0)
+        mag = np.maximum(delta.max(axis=1), ~delta.min(axis=1))
         k = np.frexp(mag.astype(np.float64))[1] + 1
-        qidx_moved = (diff & lay.is_qidx).any(axis=1)
-        delta_bits = k * dmask.sum(axis=1)
-        abs_w = incl * lay.width
-        abs_bits = abs_w.sum(axis=1)
+        qidx_moved = diff[:, lay.qidx_fields].any(axis=1)
+        changed_i = changed.view(np.uint8)
+        delta_bits = k * (changed_i @ plan.ndelta)
+        abs_bits = changed_i @ plan.absbits
         absolute = ~known | qidx_moved | (k > MAX_DELTA_BITS) | (delta_bits >= abs_bits)
         mode = np.where(absolute, 0, k)
-        widths = np.where(absolute[:, None], abs_w, dmask * mode[:, None])
-        values = np.where(absolute[:, None], q_new, delta & ((1 << mode) - 1).astype(np.int32)[:, None])
-        sel = widths > 0
-        flat_w = widths[sel]
-        flat_v = values[sel]
-        row_fields = np.concatenate([[0], np.cumsum(sel.sum(axis=1))])
-        row_bits = widths.sum(axis=1)
-        payloads = self._chunks(
-            idx, mode, changed, row_bits, row_fields, flat_v, flat_w, updates.tick, max_payload
-        )
-        self._last[idx] = q_new
+        row_bits = np.where(absolute, abs_bits, delta_bits)
+        widths = plan.widths(absolute, k, np.take(changed_i, plan.entry_of, axis=1))
+        values = np.where(absolute[:, None], q, delta)  # deltas keep their sign bits: the packer drops them
+        payloads = self._chunks(idx, mode, changed_i, row_bits, values, widths, tick, max_payload)
+        self._last[idx] = q
         self._known[idx] = True
         return payloads
 
@@ -176,34 +251,50 @@ class UpdateEncoder:
         mode: np.ndarray,
         changed: np.ndarray,
         row_bits: np.ndarray,
-        row_fields: np.ndarray,
-        flat_v: np.ndarray,
-        flat_w: np.ndarray,
+        values: np.ndarray,
+        widths: np.ndarray,
         tick: int,
         max_payload: int,
     ) -> list[bytes]:
+        """Split rows into frames; pack all frames' fields in one pass (each frame's body word-aligned)."""
+        plan = self._plan
         nent = changed.shape[1]
         per_row = 16 + MODE_BITS + nent + row_bits  # index + header + fields
         capacity = (max_payload - UPDATE_HEADER.size - 2) * 8  # 2 bytes slack for the two paddings
         if capacity < int(per_row.max()):
             raise ValueError(f"max_payload {max_payload} cannot hold one soldier update")
         cum = np.concatenate([[0], np.cumsum(per_row)])
-        out: list[bytes] = []
-        a = 0
-        while a < len(idx):
+        bounds = [0]
+        while bounds[-1] < len(idx):  # one iteration per frame, not per soldier
+            a = bounds[-1]
             b = int(np.searchsorted(cum, cum[a] + capacity, side="right")) - 1
-            b = min(max(b, a + 1), a + MAX_COUNT, len(idx))
-            hdr = np.zeros((b - a, MODE_BITS + nent), np.uint8)
-            hdr[:, :MODE_BITS] = (mode[a:b, None] >> np.arange(MODE_BITS - 1, -1, -1)) & 1
-            hdr[:, MODE_BITS:] = changed[a:b]
-            fa, fb = row_fields[a], row_fields[b]
+            bounds.append(min(max(b, a + 1), a + MAX_COUNT, len(idx)))
+        fbits = np.concatenate([[0], np.cumsum(row_bits)])
+        frame_bits = np.diff(fbits[bounds])
+        frame_word = np.concatenate([[0], np.cumsum((frame_bits + 63) >> 6)])  # each body starts a word
+        row_start = fbits[:-1].copy()
+        for f in range(len(bounds) - 1):
+            a, b = bounds[f], bounds[f + 1]
+            row_start[a:b] += frame_word[f] * 64 - fbits[a]
+        groups, gwidth = merge_groups(plan.padded(values), widths, plan.g)
+        starts = np.cumsum(gwidth, axis=1)
+        starts -= gwidth
+        starts += row_start[:, None]
+        body = place_groups(groups, starts, int(frame_word[-1])).astype(">u8").tobytes()
+        hdr = np.empty((len(idx), MODE_BITS + nent), np.uint8)
+        np.bitwise_and(mode.astype(np.uint8)[:, None] >> plan.mode_shift, 1, out=hdr[:, :MODE_BITS])
+        hdr[:, MODE_BITS:] = changed
+        index = idx.astype(">u2").tobytes()
+        out: list[bytes] = []
+        for f in range(len(bounds) - 1):
+            a, b = bounds[f], bounds[f + 1]
+            at = int(frame_word[f]) * 8
             out.append(
                 UPDATE_HEADER.pack(self.table.table_id, tick & 0xFFFFFFFF, b - a)
-                + idx[a:b].astype(">u2").tobytes()
-                + np.packbits(hdr.ravel()).tobytes()
-                + pack_bits(flat_v[fa:fb], flat_w[fa:fb])
+                + index[2 * a : 2 * b]
+                + np.packbits(hdr[a:b].reshape(-1)).tobytes()
+                + body[at : at + ((int(frame_bits[f]) + 7) >> 3)]
             )
-            a = b
         return out
 
 
@@ -215,6 +306,7 @@ class UpdateDecoder:
         self.max_soldiers = max_soldiers
         self._state = np.zeros((max_soldiers, table.layout.nfields), np.int32)
         self._known = np.zeros(max_soldiers, bool)
+        self._plan = _Plan(table)
 
     def known(self, indices: np.ndarray) -> np.ndarray:
         return self._known[np.asarray(indices, np.int64)]
@@ -235,16 +327,27 @@ class UpdateDecoder:
         Dense over (m, F): absent fields read as width 0 and leave their value alone. Returns the row of the
         first soldier whose new value leaves its field's range (``q`` is then left half-updated).
         """
-        lay = self.table.layout
-        k = mode[:, None]
-        sel = np.take(mask, lay.entry_of, axis=1) & ~(lay.is_qidx & (k != 0))
-        width = np.where(sel, np.where(k == 0, lay.width, k), 0)
-        flat_w = width.reshape(-1)
-        starts = bit0 + np.cumsum(flat_w) - flat_w
-        vals = read_fields(words, starts, flat_w).reshape(q.shape)
-        delta = vals - ((vals >> np.maximum(k - 1, 0)) << k)  # k-bit two's complement; 0 where k == 0
-        new = np.where(sel & (k == 0), vals, q + delta)
-        bad = ((new < 0) | (new > lay.max_code)).any(axis=1)
+        plan, lay = self._plan, self.table.layout
+        nf = lay.nfields
+        absolute = mode == 0
+        widths = plan.widths(absolute, mode, np.take(mask.view(np.uint8), plan.entry_of, axis=1))
+        gwidth = widths.reshape(len(q), -1, plan.g).sum(axis=2, dtype=np.int64)
+        starts = np.cumsum(gwidth.reshape(-1)).reshape(gwidth.shape)  # rows are consecutive in the stream
+        starts -= gwidth
+        starts += bit0
+        vals = split_groups(read_groups(words, starts), widths, plan.g)[:, :nf]
+        sign = np.where(absolute, 0, np.left_shift(1, np.maximum(mode, 1) - 1)).astype(np.int32)[:, None]
+        vals ^= sign  # k-bit two's complement: (v ^ 2^(k-1)) - 2^(k-1); absent fields (v = 0) stay 0
+        vals -= sign
+        # delta rows read sign-extended deltas (0 where absent); absolute rows replace their present fields
+        if absolute.any():
+            keep = ~(absolute[:, None] & (widths[:, :nf] != 0))
+            new = np.where(keep, q, 0)
+            new += vals
+        else:
+            new = vals
+            new += q
+        bad = (new.view(np.uint32) > lay.max_code).any(axis=1)  # negative codes wrap to huge
         q[:] = new
         return int(np.flatnonzero(bad)[0]) if bad.any() else None
 
@@ -306,8 +409,8 @@ class UpdateDecoder:
             )
         if total & 7 and body[-1] & ((1 << (8 - (total & 7))) - 1):
             raise WireError(ErrorCode.MALFORMED_FRAME, "joint updates: field padding bits not zero")
-        q = self._state[indices].astype(np.int64)
-        words = body_words(body)
+        q = self._state[indices]
+        words = be_words(body)
         row_start = np.concatenate([[0], np.cumsum(row_bits)])
         step = max(1, DECODE_CHUNK // lay.nfields)  # soldiers per pass: bounded memory for any frame
         for a in range(0, count, step):
