@@ -53,13 +53,26 @@ class JsonFormatter(logging.Formatter):
         return json.dumps(out, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o))
 
 
+class _CurrentStderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is at emit time, so a replaced (and later closed) stderr — an
+    embedding program's or a test runner's capture — never leaves the server logging into a closed file."""
+
+    @property  # type: ignore[override]
+    def stream(self) -> TextIO:
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: TextIO) -> None:
+        pass
+
+
 def configure(*, json_logs: bool = False, level: int = logging.INFO, stream: TextIO | None = None) -> None:
     """Send the server's logs to ``stream`` (stderr) in one of the two formats; idempotent."""
     logger = logging.getLogger(LOGGER_NAME)
     for h in list(logger.handlers):
         if getattr(h, "_ttes", False):
             logger.removeHandler(h)
-    handler = logging.StreamHandler(stream or sys.stderr)
+    handler = logging.StreamHandler(stream) if stream is not None else _CurrentStderrHandler()
     handler.setFormatter(JsonFormatter() if json_logs else KeyValueFormatter())
     handler._ttes = True  # type: ignore[attr-defined]
     logger.addHandler(handler)
