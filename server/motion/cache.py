@@ -19,7 +19,7 @@ import numpy as np
 
 from server.motion.channelset import Channelset, SharedChannel
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 log = logging.getLogger(__name__)
 
 
@@ -57,6 +57,8 @@ def save_npz(chset: Channelset, target: str | Path, source_stat: os.stat_result 
         "fig_quat": chset.fig_quat,
         "fig_root": chset.fig_root,
         "root_names": _strings(list(chset.root_names)),
+        "stride_length": np.array(np.nan if chset.stride_length is None else chset.stride_length),
+        "ground_speed": np.array(np.nan if chset.ground_speed is None else chset.ground_speed),
     }
     fd, tmp = tempfile.mkstemp(prefix="." + target.name, suffix=".tmp", dir=target.parent)
     try:
@@ -92,6 +94,7 @@ def load_npz(path: str | Path, source_stat: os.stat_result | None = None) -> Cha
                 )
             )
             source = str(z["source"]) or None
+            stride, speed = float(z["stride_length"]), float(z["ground_speed"])
             return Channelset(
                 name=str(z["name"]),
                 fps=float(z["fps"]),
@@ -102,6 +105,8 @@ def load_npz(path: str | Path, source_stat: os.stat_result | None = None) -> Cha
                 fig_root=z["fig_root"],
                 root_names=tuple(str(s) for s in z["root_names"]),
                 source=source,
+                stride_length=None if np.isnan(stride) else stride,
+                ground_speed=None if np.isnan(speed) else speed,
             )
     except (OSError, KeyError, ValueError, TypeError, zipfile.BadZipFile, EOFError):
         return None

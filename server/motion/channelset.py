@@ -21,6 +21,7 @@ is the number of *intervals*, so ``duration = size / fps`` (the seed's ``size = 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
@@ -93,6 +94,10 @@ class Channelset:
     fig_root: np.ndarray
     root_names: tuple[str, ...]
     source: str | None = None
+    # locomotion clips (optional file fields): distance covered by the recorded step (cm) and the constant
+    # ground speed it was recorded at (cm/s), so playback can be scaled to a requested speed
+    stride_length: float | None = None
+    ground_speed: float | None = None
     _by_name: dict[str, int] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -124,6 +129,14 @@ class Channelset:
             raise ChannelsetError(f"channelset {self.name!r}: values must be finite float32", self.source)
         if nfig and (self.fig_root.min() < 0 or self.fig_root.max() >= len(self.root_names)):
             raise ChannelsetError(f"channelset {self.name!r}: root site index out of range", self.source)
+        for what in ("stride_length", "ground_speed"):
+            v = getattr(self, what)
+            if v is not None:
+                v = float(v)
+                if not (math.isfinite(v) and v >= 0):
+                    msg = f"channelset {self.name!r}: {what} must be >= 0, not {v}"
+                    raise ChannelsetError(msg, self.source)
+                setattr(self, what, v)
         self._by_name = {}
         for i, c in enumerate(self.channels):
             self._by_name.setdefault(c.name, i)

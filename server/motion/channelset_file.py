@@ -6,6 +6,8 @@
       size = 48;          // intervals: frames 0..48 (a file whose size counts frames, 0..47, reads too)
       fps = 60;
       count = 2;          // number of sharedchannels
+      stride_length = 71.5;   // optional, locomotion clips: cm covered by the recorded step
+      ground_speed = 143;     // optional: cm/s the step was recorded at
       sharedchannel soldier {
         type = "sharedfigure";  protofiletype = "soldier_cam.fig";  object = "soldier";
         frame[0] = ("lower_torso.proximal", trans(31.68cm,43.53cm,-31.05cm));
@@ -29,6 +31,7 @@ decimals (about 2e-8 rad), so orientations round-trip within 1e-6 per quaternion
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from pathlib import Path
@@ -49,6 +52,7 @@ from server.peabody.language import Assign, Block, Loc, Number, PeabodyError, Va
 from server.peabody.loader import LoadContext, register_block
 from server.peabody.model import Environment
 
+_OPTIONAL_FIELDS = ("stride_length", "ground_speed")
 _PLAIN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z0-9_]+)*")
 
 
@@ -143,12 +147,7 @@ def channelset_from_block(block: Block) -> Channelset:
             isinstance(st, Assign)
             and st.owner is None
             and st.index is None
-            and st.target
-            in (
-                "size",
-                "fps",
-                "count",
-            )
+            and st.target in ("size", "fps", "count", *_OPTIONAL_FIELDS)
         ):
             if st.target in header:
                 raise _err(f"{st.target} given twice", st.loc)
@@ -175,10 +174,18 @@ def channelset_from_block(block: Block) -> Channelset:
         size = _int_field(header["size"], "size")
         if size not in (n - 1, n):  # intervals (what we write) or, tolerated, a frame count
             raise _err(f"size = {size} but the sharedchannels have frames 0..{n - 1}", header["size"].loc)
+    extra: dict[str, float] = {}
+    for what in _OPTIONAL_FIELDS:
+        if what in header:
+            v = V.number(header[what].value)
+            if not (math.isfinite(v) and v >= 0):
+                raise _err(f"{what} must be a non-negative number", header[what].value.loc)
+            extra[what] = v
     try:
-        return make_channelset(block.name, fps, tracks, block.loc.file)
+        chset = make_channelset(block.name, fps, tracks, block.loc.file)
     except ChannelsetError as exc:
         raise _err(exc.message, block.loc) from None
+    return dataclasses.replace(chset, **extra) if extra else chset
 
 
 def _decode(data: str | bytes, filename: str) -> str:
@@ -247,6 +254,10 @@ def format_channelset(chset: Channelset) -> str:
         f"  fps = {_fps_text(chset.fps)};",
         f"  count = {chset.count};",
     ]
+    for what in _OPTIONAL_FIELDS:
+        v = getattr(chset, what)
+        if v is not None:
+            out.append(f"  {what} = {_fps_text(v)};")
     for c in chset.channels:
         kind = "figure position" if c.is_figure else "joint angles"
         out += [

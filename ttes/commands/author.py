@@ -208,3 +208,53 @@ def run_contact_sheet(args: argparse.Namespace) -> int:
 
 
 AUTHOR_STEPS.extend([_register_check, _register_contact_sheet])
+
+
+# --- author build (the motion library: channelsets, posture graphs, start-up files) -------------------------
+
+
+def _register_build(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "build",
+        help="record the motion library (channelsets, posture graphs, start-up files)",
+        description=(
+            "Solve the key postures, record every clip on soldier.fig into channelsets/*.chset.env, slave "
+            "them onto DI.fig into channelsets/*_low.chset.env, and write the posture graphs and the "
+            "jack-ttes-soldier_low.jcl/.env start-up files into posture_graphs/. Deterministic."
+        ),
+    )
+    p.add_argument(
+        "--only", metavar="PATTERN", default=None, help="only clips whose name matches (shell pattern)"
+    )
+    p.add_argument(
+        "--figure",
+        choices=("soldier", "DI", "all"),
+        default="all",
+        help="soldier: record soldier.fig clips; DI: re-slave the committed soldier.fig clips; all: both",
+    )
+    p.add_argument("--out", type=Path, default=None, help="output root (default: the repository)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+    p.set_defaults(func=run_build)
+
+
+def run_build(args: argparse.Namespace) -> int:
+    from server.authoring.build import build
+    from ttes.output import print_json
+    from ttes.paths import FIGURES, ROOT
+
+    root = args.out if args.out is not None else ROOT
+    try:
+        written = build(root, FIGURES, only=args.only, figure=args.figure, progress=not args.no_progress)
+    except (ValueError, OSError) as exc:
+        print(f"ttes author build: {exc}", file=sys.stderr)
+        return 2
+    files = [p.relative_to(root).as_posix() if p.is_relative_to(root) else str(p) for p in written]
+    if args.json:
+        print_json({"out": str(root), "files": files})
+    else:
+        print(f"wrote {len(files)} files under {root}")
+    return 0
+
+
+AUTHOR_STEPS.append(_register_build)

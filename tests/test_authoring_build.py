@@ -1,0 +1,149 @@
+"""The committed motion library (channelsets/, posture_graphs/) and `ttes author build` that makes it."""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from server.authoring import build as B
+from server.authoring import gait, postures, transitions
+from server.jcl import parse_jcl
+from server.motion.cache import load_npz, save_npz
+from server.motion.channelset_file import format_channelset, parse_channelsets
+from server.motion.posture_change import load_posture_graph
+from server.motion.synthetic import synthetic_channelset, toy_rifle, toy_soldier
+from server.peabody.loader import read_environment, read_figure
+from ttes.cli import main
+from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
+
+GRAPHS = [g for fs in B.GRAPH_FILES.values() for g in fs.values()]
+
+
+def test_stride_length_and_ground_speed_round_trip(tmp_path: Path):
+    cs = synthetic_channelset("walk_cycle_l.chset", [toy_soldier(), toy_rifle()], 5, 60.0)
+    cs = dataclasses.replace(cs, stride_length=74.25, ground_speed=134.5)
+    text = format_channelset(cs)
+    assert "stride_length = 74.25;" in text and "ground_speed = 134.5;" in text
+    back = parse_channelsets(text)[0]
+    assert (back.stride_length, back.ground_speed) == (74.25, 134.5)
+    assert format_channelset(back) == text
+    save_npz(back, tmp_path / "c.npz")
+    cached = load_npz(tmp_path / "c.npz")
+    assert cached is not None and (cached.stride_length, cached.ground_speed) == (74.25, 134.5)
+    plain = parse_channelsets(
+        format_channelset(dataclasses.replace(cs, stride_length=None, ground_speed=None))
+    )[0]
+    assert plain.stride_length is None and plain.ground_speed is None
+    with pytest.raises(Exception, match="ground_speed"):
+        parse_channelsets(text.replace("ground_speed = 134.5", "ground_speed = -1"))
+
+
+@pytest.mark.parametrize("name", GRAPHS)
+def test_graphs_load_and_every_arc_has_its_channelset(name: str):
+    loaded = load_posture_graph(POSTURE_GRAPHS / name)
+    graph = loaded.graph
+    assert len(loaded.channelsets) == len(graph.files)
+    want = (
+        "DI.fig" if "low" in name or name in ("soldier_loco.graph", "soldier_crawl.graph") else "soldier.fig"
+    )
+    for cs in loaded.channelsets:
+        types = {c.protofiletype for c in cs.figure_channels()}
+        assert types == {want, "AK_47.fig"}, cs.name
+        assert cs.fps == 60
+    for arc in graph.arcs:
+        assert 0 <= arc.channelset < len(graph.files)
+
+
+def test_static_graph_is_figure_7():
+    graph = load_posture_graph(POSTURE_GRAPHS / "soldier_low.graph").graph
+    assert graph.postures == list(postures.POSTURES)
+    assert len(graph.files) == 17
+    assert graph.files[0].endswith("ststow2stfire_low.chset.env")
+    assert graph.files[16].endswith("stfire2kstow_low.chset.env")
+    arcs = {(a.start, a.end): a for a in graph.arcs}
+    dead = arcs[("DEAD", "STAND_STOWED")]
+    assert (
+        not dead.forward
+        and dead.time == 10.0
+        and graph.files[dead.channelset].endswith("ststow2dead_low.chset.env")
+    )
+    assert (
+        arcs[("STAND_STOWED", "STAND_FIRE")].time == 0.8
+        and arcs[("STAND_STOWED", "KNEEL_STOWED")].time == 1.6
+    )
+    path = [a.end for a in graph.shortest_path("STAND_STOWED", "PRONE_FIRE")]
+    assert path == ["CRAWL", "PRONE_STOWED", "PRONE_FIRE"]
+
+
+def test_startup_environment_and_script():
+    env = read_environment(POSTURE_GRAPHS / "jack-ttes-soldier_low.env")
+    for i in range(10):
+        assert env.figures[f"Di2_{i}"].filename == "DI.fig"
+        assert env.figures[f"AK_47_{i}"].filename == "AK_47.fig"
+    calls = parse_jcl((POSTURE_GRAPHS / "jack-ttes-soldier_low.jcl").read_text(), "jack-ttes-soldier_low.jcl")
+    assert calls[0].name == "read_file" and calls[0].args == ("jack-ttes-soldier_low.env",)
+    states = [c.args for c in calls if c.name == "create_soldier_state"]
+    assert states == [(f"s{i}", f"Di2_{i}", f"AK_47_{i}") for i in range(10)]
+    assert [c.name for c in calls[-2:]] == ["start_ttes_socket_simulation", "disable_graphics"]
+
+
+def test_locomotion_clips_record_stride_and_speed():
+    from server.motion.cache import load_channelset
+
+    for name in gait.LOCO_CLIPS:
+        for suffix in ("", "_low"):
+            c = load_channelset(CHANNELSETS / f"{name}{suffix}.chset.env")
+            assert c.stride_length is not None and c.stride_length > 0, name
+            assert c.ground_speed == pytest.approx(c.stride_length / c.duration, rel=1e-3, abs=0.02), name
+    walk = load_channelset(CHANNELSETS / "walk_cycle_l.chset.env")
+    run = load_channelset(CHANNELSETS / "run_cycle_l.chset.env")
+    assert 100 < walk.ground_speed < 180 and run.ground_speed > 250
+
+
+def test_transitions_start_and_end_in_their_graph_postures():
+    from server.motion.cache import load_channelset
+
+    soldier = read_figure(FIGURES / "soldier.fig")
+    rifle = read_figure(FIGURES / "AK_47.fig")
+    keys = postures.build_postures(soldier, rifle, list(postures.POSTURES))
+    for t in transitions.TRANSITIONS:
+        cs = load_channelset(CHANNELSETS / f"{t.name}.chset.env")
+        for frame, posture in ((0, t.start), (-1, t.end)):
+            q = keys[posture].poses[postures.SOLDIER]
+            got = np.concatenate(
+                [cs.angles(cs.channel(j))[frame] for j, jt in soldier.joints.items() if jt.ndofs]
+            )
+            np.testing.assert_allclose(got, q, atol=1e-5, err_msg=f"{t.name}[{frame}] vs {posture}")
+
+
+def test_build_of_one_clip_reproduces_the_committed_bytes(tmp_path: Path, capsys):
+    rc = main(
+        ["author", "build", "--only", "ststow2stfire", "--out", str(tmp_path), "--no-progress", "--json"]
+    )
+    assert rc == 0
+    assert '"channelsets/ststow2stfire_low.chset.env"' in capsys.readouterr().out
+    for rel in ("channelsets/ststow2stfire.chset.env", "channelsets/ststow2stfire_low.chset.env"):
+        assert (tmp_path / rel).read_bytes() == (CHANNELSETS.parent / rel).read_bytes(), rel
+    for name in [*GRAPHS, "jack-ttes-soldier_low.env", "jack-ttes-soldier_low.jcl"]:
+        assert (tmp_path / "posture_graphs" / name).read_bytes() == (POSTURE_GRAPHS / name).read_bytes(), name
+
+
+def test_build_rejects_unknown_clips_and_figure_sets(tmp_path: Path, capsys):
+    assert main(["author", "build", "--only", "no_such_clip", "--out", str(tmp_path), "--no-progress"]) == 2
+    assert "no clip matches" in capsys.readouterr().err
+    with pytest.raises(ValueError):
+        B.build(tmp_path, FIGURES, figure="M16")
+
+
+def test_di_only_build_reslaves_committed_clips(tmp_path: Path):
+    (tmp_path / "channelsets").mkdir()
+    shutil.copy(CHANNELSETS / "ststow2stfire.chset.env", tmp_path / "channelsets")
+    written = B.build(tmp_path, FIGURES, only="ststow2stfire", figure="DI", progress=False)
+    assert tmp_path / "channelsets" / "ststow2stfire.chset.env" not in written
+    assert (tmp_path / "channelsets" / "ststow2stfire_low.chset.env").read_bytes() == (
+        CHANNELSETS / "ststow2stfire_low.chset.env"
+    ).read_bytes()
