@@ -79,57 +79,64 @@ def run_headless(
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     video = out.suffix.lower() in (".mp4", ".mov", ".mkv", ".avi", ".gif")
-    writer = None
-    if video:
-        kwargs = {"fps": fps}
-        if out.suffix.lower() != ".gif":
-            kwargs.update(codec="libx264", quality=7, macro_block_size=8, pixelformat="yuv420p")
-        writer = imageio.get_writer(out, **kwargs)
     nframes = max(round(seconds * fps), 1)
     script = Tour(seconds) if tour else None
     t = 0.0
     dt = 1.0 / fps
     frame = None
+    frames: list[np.ndarray] = []
+    rendered = 0
     render_time = 0.0
     start = time.perf_counter()
     last = start
-    try:
-        for i in range(nframes):
-            if realtime:
-                now = time.perf_counter()
-                target = start + i * dt
-                if now < target:
-                    time.sleep(target - now)
-                    now = target
-                step, last = now - last, now
-            else:
-                step = dt if i else 0.0
-            t += step
-            if script is not None:
-                for key in script.due(t):
-                    message = app.handle_key(key)
-                    if message and not quiet:
-                        print(f"[{t:5.1f} s] {key}: {message}")
-            app.frame(step)
-            app.draw()
-            r0 = time.perf_counter()
-            frame = renderer.render()
-            render_time += time.perf_counter() - r0
-            if writer is not None:
-                writer.append_data(frame)
-    finally:
-        if writer is not None:
-            writer.close()
+    while True:
+        if realtime:
+            # the server runs on the wall clock: the run lasts `seconds` of it, however fast we render
+            now = time.perf_counter()
+            target = start + rendered * dt
+            if now < target:
+                time.sleep(target - now)
+                now = target
+            step, last = now - last, now
+            if rendered and now - start >= seconds:
+                break
+        else:
+            if rendered >= nframes:
+                break
+            step = dt if rendered else 0.0
+        t += step
+        if script is not None:
+            for key in script.due(t):
+                message = app.handle_key(key)
+                if message and not quiet:
+                    print(f"[{t:5.1f} s] {key}: {message}")
+        app.frame(step)
+        app.draw()
+        r0 = time.perf_counter()
+        frame = renderer.render()
+        render_time += time.perf_counter() - r0
+        rendered += 1
+        if video:
+            frames.append(frame)
+    wall = time.perf_counter() - start
+    if video and frames:
+        # a real-time run plays back at the rate it achieved, so the video's time is the scene's time
+        rate = fps if not realtime else max(1.0, min(fps, rendered / max(wall, 1e-6)))
+        kwargs: dict = {"fps": rate}
+        if out.suffix.lower() != ".gif":
+            kwargs.update(codec="libx264", quality=7, macro_block_size=8, pixelformat="yuv420p")
+        with imageio.get_writer(out, **kwargs) as writer:
+            for f in frames:
+                writer.append_data(f)
     if not video and frame is not None:
         imageio.imwrite(out, frame)
-    wall = time.perf_counter() - start
     return {
         "out": str(out),
-        "frames": nframes,
+        "frames": rendered,
         "seconds": seconds,
         "fps": fps,
         "wall_s": round(wall, 3),
-        "render_fps": round(nframes / render_time, 2) if render_time > 0 else None,
+        "render_fps": round(rendered / render_time, 2) if render_time > 0 else None,
         "soldiers": int(app.soldiers.count),
         "server": app.jack is not None,
         "last_frame_mean": None if frame is None else float(np.asarray(frame).mean()),

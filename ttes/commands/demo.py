@@ -15,7 +15,9 @@ from pathlib import Path
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="run the demo on the shipped data", description=__doc__)
     p.add_argument("--out-dir", type=Path, default=Path("out"), help="where demo.mp4 and demo.png go (out/)")
-    p.add_argument("--seconds", type=float, default=20.0, help="length of the rendered tour (default 20)")
+    p.add_argument(
+        "--seconds", type=float, default=40.0, help="wall-clock length of the tour (default 40: all of it)"
+    )
     p.add_argument("--figures-only", action="store_true", help="print the figure summary and stop")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=run)
