@@ -1,0 +1,161 @@
+"""`ttes gateway`: live DIS from UDP into the Jack/TTES server (one soldier per lifeform entity).
+
+Listens for DIS on UDP (broadcast or multicast) bound to one interface, loopback by default: --interface
+0.0.0.0 hears broadcasts on every interface, --dis-group joins a multicast group on --interface. Each lifeform
+entity becomes a server soldier (created on first sight, removed after --timeout seconds of silence or when
+deactivated); appearance, velocity and heading become entity requests; Fire PDUs make a standing-still shooter
+fire for a moment. Malformed datagrams, unknown PDU types and bursts are counted in the status line, never
+fatal. Stop with Ctrl-C: the gateway's soldiers are removed from the server.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from client_stub.gateway import DisGateway
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "gateway",
+        help="live DIS (UDP) into the Jack/TTES server",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--dis-port", type=int, default=3000, help="UDP port to listen on (default 3000)")
+    p.add_argument("--dis-group", metavar="ADDR", help="multicast group to join (default: none)")
+    p.add_argument("--interface", default="127.0.0.1", metavar="ADDR",
+                   help="local address to bind / join on (default 127.0.0.1; 0.0.0.0: all)")  # fmt: skip
+    p.add_argument("--host", help="Jack/TTES server host (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
+    p.add_argument("--with-server", action="store_true", help="run a private server in this process")
+    p.add_argument("--data-dir", help="private server: its data directory")
+    p.add_argument("--synthetic-server", action="store_true", help="private server: synthetic motion library")
+    p.add_argument("--timeout", type=float, default=12.0, help="seconds without a PDU before a soldier goes")
+    p.add_argument("--entities", metavar="FILTER", help="keep only these entities (as in `ttes replay`)")
+    p.add_argument("--origin", metavar="LAT,LON,H", help="local frame origin (default: the first entity)")
+    p.add_argument("--status-every", type=float, default=5.0, help="seconds between status lines (0: none)")
+    p.add_argument("--seconds", type=float, help="stop after this many seconds (default: run until Ctrl-C)")
+    p.add_argument("--json", action="store_true", help="status lines and the final summary as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from client_stub.gateway import DisGateway, GatewayConfig
+    from client_stub.replay import EntityFilter, FilterError
+    from ttes.commands.replay import parse_origin
+
+    try:
+        cfg = GatewayConfig(
+            port=args.dis_port,
+            interface=args.interface,
+            group=args.dis_group,
+            timeout=args.timeout,
+            origin=parse_origin(args.origin),
+            entity_filter=EntityFilter.parse(args.entities) if args.entities else None,
+        )
+        if not (0 <= args.dis_port <= 65535 and math.isfinite(args.timeout) and args.timeout > 0):
+            raise ValueError("--dis-port must be 0..65535 and --timeout > 0")
+        if args.seconds is not None and not (math.isfinite(args.seconds) and args.seconds > 0):
+            raise ValueError("--seconds must be > 0")
+    except (FilterError, ValueError) as exc:
+        print(f"ttes gateway: {exc}", file=sys.stderr)
+        return 2
+    if args.with_server and args.host:
+        print("ttes gateway: --with-server or --host, not both", file=sys.stderr)
+        return 2
+    gateway = DisGateway(cfg)
+    data_dir = Path(args.data_dir) if args.data_dir else None
+    try:
+        summary = _serve(args, gateway, data_dir)
+    except OSError as exc:
+        print(f"ttes gateway: cannot listen on {args.interface}:{args.dis_port}: {exc.strerror or exc}",
+              file=sys.stderr)  # fmt: skip
+        return 1
+    if summary is None:
+        return 1
+    _print(summary, args.json, final=True)
+    return 0
+
+
+def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None) -> dict | None:
+    import contextlib
+
+    import trio
+
+    from client_stub.jack import JackError
+    from client_stub.replay.link import ServerLink
+    from client_stub.replay.sink import ServerSink
+    from ttes.commands.replay import private_server, stop_on_signal
+
+    async def main() -> dict:
+        async with contextlib.AsyncExitStack() as stack:
+            host, port = args.host or "127.0.0.1", args.port
+            if args.with_server:
+                server = await stack.enter_async_context(private_server(data_dir, args.synthetic_server))
+                host, port = server.addresses[0]
+            nursery = await stack.enter_async_context(trio.open_nursery())
+            link = ServerLink("ttes-gateway")
+            await link.open(nursery, host, port)
+            sink = ServerSink(link)
+            with trio.CancelScope() as scope:
+                if args.seconds is not None:
+                    scope.deadline = trio.current_time() + args.seconds
+                async with trio.open_nursery() as inner:
+                    inner.start_soon(stop_on_signal, inner.cancel_scope)
+                    await inner.start(gateway.serve, sink)
+                    assert gateway.address is not None
+                    host_, port_ = gateway.address
+                    if not args.json:
+                        print(f"ttes gateway: listening for DIS on {host_}:{port_}"
+                              f"{' group ' + args.dis_group if args.dis_group else ''}, server {host}:{port}",
+                              file=sys.stderr, flush=True)  # fmt: skip
+                    if args.status_every > 0:
+                        inner.start_soon(_status_loop, gateway, args.status_every, args.json)
+            sink.apply(gateway.stop())
+            summary = {**gateway.snapshot(), **{f"sink_{k}": v for k, v in sink.stats.items()}}
+            summary["server_errors"] = len(link.errors)
+            await link.aclose()
+            return summary
+
+    try:
+        return trio.run(main)
+    except JackError as exc:
+        print(f"ttes gateway: {exc}", file=sys.stderr)
+        return None
+
+
+async def _status_loop(gateway: DisGateway, every: float, as_json: bool) -> None:
+    import trio
+
+    while True:
+        await trio.sleep(every)
+        _print(gateway.snapshot(), as_json)
+
+
+def _print(status: dict, as_json: bool, final: bool = False) -> None:
+    if as_json:
+        from ttes.output import print_json
+
+        print_json({"event": "summary" if final else "status", **status})
+        sys.stdout.flush()
+        return
+    bad = status["corrupt"] + status["non_dis"] + status["unsupported_version"]
+    parts = [
+        f"{status['alive']} soldiers alive ({status['translator_created']} created)",
+        f"{status['datagrams']} datagrams",
+        f"{status['pdus']} PDUs",
+        f"{status['lifeforms']} lifeform states",
+        f"{status['fire']} fire",
+        f"{status['detonation']} detonation",
+        f"{status['other_pdus']} other PDUs",
+        f"{bad} malformed/foreign",
+        f"largest burst {status['max_burst']}",
+    ]
+    out = sys.stdout if final else sys.stderr
+    print(f"{'gateway summary' if final else 'gateway'}: " + ", ".join(parts), file=out, flush=True)

@@ -1,0 +1,431 @@
+"""`ttes replay`: replay a DIS logfile (pcap, pcapng, .dislog or raw PDUs) through Jack/TTES into the stub.
+
+One soldier per lifeform entity: created on first sight, removed after the DIS timeout (12 s) or when the
+entity is deactivated, dead-reckoned between PDUs with its own algorithm, placed on the stub's terrain in a
+local frame about --origin (default: the first entity). Appearance, velocity and heading become entity
+requests for the server; Fire PDUs make a standing-still shooter fire for a moment. Paced by the capture's
+receipt times, scaled by --speed (0 = as fast as possible).
+
+With a display it opens the stub window (cameras and soldier selection on the keys; ? lists them);
+--headless --out demo.mp4 renders a video; --no-stub only drives the server. The server: --host/--port for a
+running one; by default a private one (its own process for the window; in this process for --no-stub, and for
+--headless under a virtual clock, so the video is exact however slowly it renders). --offline: no server, the
+stub poses the soldiers itself. The stub's terrain point (0, 0) is the local frame's origin.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import os
+import sys
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "replay",
+        help="replay a DIS logfile through Jack/TTES into the stub",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("logfile", type=Path, help="pcap, pcapng, .dislog or raw DIS PDUs")
+    p.add_argument("--speed", type=_speed, default=1.0, help="replay speed factor (default 1; 0 = unlimited)")
+    p.add_argument(
+        "--loop", action="store_true", help="start again at the end (soldiers are removed and re-made)"
+    )
+    p.add_argument("--start", type=float, default=0.0, metavar="T", help="begin T seconds into the log")
+    p.add_argument("--entities", metavar="FILTER",
+                   help="keep only these, comma-separated: SITE:APP:ENTITY (numbers or *), force=N, "
+                        "friendly, opposing, neutral, marking=TEXT or marking=PREFIX*")  # fmt: skip
+    p.add_argument("--origin", metavar="LAT,LON,H", help="local frame origin (default: the first entity)")
+    p.add_argument("--timeout", type=float, default=12.0, help="seconds without a PDU before a soldier goes")
+    p.add_argument("--format", choices=("auto", "pcap", "pcapng", "dislog", "raw"), default="auto")
+    p.add_argument("--dis-port", type=int, default=3000, help="UDP port of DIS in captures (default 3000)")
+    p.add_argument("--any-port", action="store_true", help="read DIS on every UDP port of a capture")
+    p.add_argument(
+        "--headless", action="store_true", help="render offscreen (EGL) to --out instead of a window"
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("ttes-replay.mp4"), help="headless: .mp4/.gif video or .png"
+    )
+    p.add_argument("--seconds", type=float, help="headless: video length (default: the log, at --speed)")
+    p.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
+    p.add_argument("--size", default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument("--camera", choices=("squad", "birds-eye", "soldier", "overhead"), default="squad",
+                   help="start camera (default: one framing the whole squad; keys take over)")  # fmt: skip
+    p.add_argument("--no-stub", action="store_true", help="no image generator: only drive the server")
+    p.add_argument("--host", help="Jack/TTES server host (default: a private server)")
+    p.add_argument("--port", type=int, default=7000, help="server port with --host (default 7000)")
+    p.add_argument("--offline", action="store_true", help="no server: the stub poses the soldiers itself")
+    p.add_argument(
+        "--data-dir", type=Path, help="private server: its data directory (default: the project's)"
+    )
+    p.add_argument("--synthetic-server", action="store_true",
+                   help="private server: serve the generated synthetic motion library")  # fmt: skip
+    p.add_argument("--terrain", type=Path, help="terrain mesh (default: the village)")
+    p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
+    p.set_defaults(func=run)
+
+
+def _speed(text: str) -> float:
+    if text.lower() in ("0", "inf", "max", "unlimited"):
+        return math.inf
+    v = float(text)
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError("speed must be > 0 (or 0 for unlimited)")
+    return v
+
+
+def parse_origin(text: str | None) -> Any:
+    """``LAT,LON,H`` -> LocalFrame (ValueError with the reason)."""
+    if not text:
+        return None
+    from protocol.dis import LocalFrame
+
+    try:
+        lat, lon, h = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"--origin must be LAT,LON,H in degrees and metres, not {text!r}") from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 360 and math.isfinite(h)):
+        raise ValueError(f"--origin {text!r} out of range")
+    return LocalFrame(lat, lon, h)
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--size must be WxH, not {text!r}") from None
+    if not (16 <= w <= 8192 and 16 <= h <= 8192):
+        raise ValueError("--size out of range")
+    return w, h
+
+
+@contextlib.asynccontextmanager
+async def private_server(data_dir: Path | None, synthetic: bool, quiet: bool = True) -> AsyncIterator[Any]:
+    """A Jack/TTES server in this trio run on a free loopback port. The project's data dir first; without a
+    motion library there (or with ``synthetic``) the generated synthetic one."""
+    import logging
+    import tempfile
+
+    import trio
+
+    from server.app import TtesServer
+    from server.config import ServerConfig
+    from server.jcl import JclError
+    from server.logging import configure
+    from server.startup import write_synthetic_data_dir
+
+    configure(level=logging.WARNING if quiet else logging.INFO)
+    with tempfile.TemporaryDirectory(prefix="ttes-replay-") as tmp:
+        server = None
+        if not synthetic:
+            cfg = ServerConfig(port=0).with_overrides(data_dir=data_dir)
+            server = TtesServer(cfg)
+            try:
+                server.start_world()
+            except (JclError, OSError, ValueError) as exc:
+                print(f"ttes: private server: {exc}; using the synthetic motion library", file=sys.stderr)
+                server = None
+        if server is None:
+            synth = write_synthetic_data_dir(tmp)
+            server = TtesServer(
+                ServerConfig(port=0, data_dir=synth.path, startup_script=synth.startup_script)
+            )
+            server.start_world()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(server.serve)
+            try:
+                yield server
+            finally:
+                server.shutdown()
+
+
+def run(args: argparse.Namespace) -> int:
+    from client_stub.replay import EntityFilter, FilterError, Replayer
+    from protocol.dis import DisError, read_log
+
+    try:
+        entity_filter = EntityFilter.parse(args.entities) if args.entities else None
+        origin = parse_origin(args.origin)
+        size = _size(args.size)
+        if not (math.isfinite(args.start) and args.start >= 0):
+            raise ValueError("--start must be >= 0 seconds")
+        if not (math.isfinite(args.timeout) and args.timeout > 0):
+            raise ValueError("--timeout must be > 0 seconds")
+        log = read_log(args.logfile, fmt=args.format, port=None if args.any_port else args.dis_port)
+    except (FilterError, DisError, ValueError) as exc:
+        print(f"ttes replay: {exc}", file=sys.stderr)
+        return 2
+    if not len(log.batch):
+        print(f"ttes replay: {args.logfile}: no lifeform Entity State PDUs ({log.counters})", file=sys.stderr)
+        return 1
+    if args.offline and args.no_stub:
+        print("ttes replay: --offline --no-stub would do nothing", file=sys.stderr)
+        return 2
+    replayer = Replayer(log, speed=args.speed, loop=args.loop, start=args.start, entity_filter=entity_filter,
+                        origin=origin, timeout=args.timeout)  # fmt: skip
+    if args.no_stub:
+        summary = _run_server_only(args, replayer)
+    elif args.headless:
+        if args.loop and args.seconds is None:
+            print("ttes replay: --loop --headless needs --seconds", file=sys.stderr)
+            return 2
+        os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+        summary = _run_headless(args, replayer, size)
+    else:
+        if not (
+            os.environ.get("DISPLAY")
+            or os.environ.get("WAYLAND_DISPLAY")
+            or sys.platform in ("darwin", "win32")
+        ):
+            print("ttes replay: no display; use --headless --out FILE.mp4 (or --no-stub)", file=sys.stderr)
+            return 2
+        summary = _run_window(args, replayer, size)
+    if summary is None:
+        return 1
+    if args.json:
+        from ttes.output import print_json
+
+        print_json(summary)
+    else:
+        extra = f", wrote {summary['out']} ({summary['frames']} frames)" if "out" in summary else ""
+        print(f"replayed {summary['replay_time']:.1f} s: {summary['created']} soldiers, "
+              f"{summary['pdus']} PDUs, {summary['requests']} requests{extra}")  # fmt: skip
+    return 0
+
+
+async def stop_on_signal(scope: Any) -> None:
+    """Cancel ``scope`` on SIGINT / SIGTERM (so the caller can still take its soldiers off the server)."""
+    import signal
+
+    import trio
+
+    with trio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        async for _ in signals:
+            scope.cancel()
+            return
+
+
+# -- server only ---------------------------------------------------------------------------------
+def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
+    import trio
+
+    from client_stub.jack import JackError
+    from client_stub.replay.drive import ProgressLine, replay_to_server
+    from client_stub.replay.link import ServerLink
+    from client_stub.replay.sink import ServerSink
+
+    async def main() -> dict:
+        async with contextlib.AsyncExitStack() as stack:
+            host, port = args.host, args.port
+            if host is None:
+                server = await stack.enter_async_context(private_server(args.data_dir, args.synthetic_server))
+                host, port = server.addresses[0]
+            async with trio.open_nursery() as nursery:
+                link = ServerLink()
+                await link.open(nursery, host, port)
+                sink = ServerSink(link)
+                progress = ProgressLine(out=None if args.json else sys.stderr)
+                async with trio.open_nursery() as inner:  # Ctrl-C ends the replay, not the clean-up
+                    inner.start_soon(stop_on_signal, inner.cancel_scope)
+                    await replay_to_server(replayer, sink, progress=progress, drain=link.drain, finish=False)
+                    inner.cancel_scope.cancel()
+                sink.apply(replayer.finish())  # the soldiers leave the server
+                summary = {**replayer.status(), **{f"sink_{k}": v for k, v in sink.stats.items()}}
+                summary["server_errors"] = len(link.errors)
+                await link.aclose()
+                return summary
+
+    try:
+        return trio.run(main)
+    except JackError as exc:
+        print(f"ttes replay: {exc}", file=sys.stderr)
+        return None
+
+
+# -- headless video ------------------------------------------------------------------------------
+def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) -> dict | None:
+    import time
+
+    import trio
+    import trio.testing
+
+    from client_stub.jack import JackError
+
+    seconds = args.seconds
+    if seconds is None:
+        seconds = (
+            (replayer.cursor.t_end - replayer.t_begin) / replayer.speed + 1.0
+            if not replayer.unlimited
+            else 1.0
+        )
+    fps = args.fps
+    if not (math.isfinite(fps) and 1 <= fps <= 120 and 0 < seconds <= 24 * 3600):
+        print("ttes replay: --fps must be 1..120 and --seconds positive", file=sys.stderr)
+        return None
+    realtime = args.host is not None  # a server we do not own runs on the wall clock
+
+    async def main() -> dict:
+        async with contextlib.AsyncExitStack() as stack:
+            link = None
+            if not args.offline:
+                from client_stub.replay.link import ServerLink
+
+                host, port = args.host, args.port
+                if host is None:
+                    server = await stack.enter_async_context(
+                        private_server(args.data_dir, args.synthetic_server)
+                    )
+                    host, port = server.addresses[0]
+                nursery = await stack.enter_async_context(trio.open_nursery())
+                link = ServerLink()
+                await link.open(nursery, host, port)
+            app = _make_app(args, replayer, link)
+            try:
+                summary = await _render(app, seconds, fps, size, args)
+            finally:
+                app.finish()  # the soldiers leave the server
+                if link is not None:
+                    await link.aclose()
+            if link is not None:
+                summary["server_errors"] = len(link.errors)
+            return summary
+
+    t = time.perf_counter()
+    try:
+        if realtime:
+            summary = trio.run(main)
+        else:
+            summary = trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
+    except JackError as exc:
+        print(f"ttes replay: {exc}", file=sys.stderr)
+        return None
+    summary["wall_s"] = round(time.perf_counter() - t, 2)
+    return summary
+
+
+def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
+    from client_stub.camera import View
+    from client_stub.replay.drive import ProgressLine
+    from client_stub.replay.stubapp import ReplayApp
+    from client_stub.terrain import DEFAULT_TERRAIN, load_terrain
+
+    terrain = load_terrain(args.terrain or DEFAULT_TERRAIN)
+    app = ReplayApp(
+        terrain, replayer, link=link, progress=ProgressLine(out=None if args.json else sys.stderr)
+    )
+    camera = getattr(args, "camera", "squad")
+    app.squad_view = camera == "squad"
+    if camera == "overhead":
+        app.camera.overhead()
+    elif camera != "squad":
+        app.camera.view = View.BIRDS_EYE if camera == "birds-eye" else View.SOLDIER_CAM
+    return app
+
+
+async def _render(
+    app: Any, seconds: float, fps: float, size: tuple[int, int], args: argparse.Namespace
+) -> dict:
+    import imageio.v2 as imageio
+    import numpy as np
+    import trio
+
+    from client_stub.render import StubRenderer
+
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    app.renderer = StubRenderer(*size, offscreen=True)
+    app.renderer.add_terrain(app.terrain.meshes)
+    video = out.suffix.lower() in (".mp4", ".mov", ".mkv", ".avi", ".gif")
+    writer = None
+    if video:
+        kw: dict[str, Any] = {"fps": fps}
+        if out.suffix.lower() != ".gif":
+            kw.update(codec="libx264", quality=7, macro_block_size=8, pixelformat="yuv420p")
+        writer = imageio.get_writer(out, **kw)
+    nframes = max(round(seconds * fps), 1)
+    dt = 1.0 / fps
+    t0 = trio.current_time()
+    frame = None
+    try:
+        for i in range(nframes):
+            await trio.sleep_until(t0 + i * dt)
+            app.frame(dt if i else 0.0)
+            app.draw()
+            frame = app.renderer.render()
+            if writer is not None:
+                writer.append_data(frame)
+    finally:
+        if writer is not None:
+            writer.close()
+        app.renderer.close()
+    if not video and frame is not None:
+        imageio.imwrite(out, frame)
+    if app.progress is not None:
+        app.progress.update(app.elapsed, app.source.replay_time, app.translator.alive, app.source.pdus, True)
+    return {
+        **app.source.status(),
+        **({f"sink_{k}": v for k, v in app.sink.stats.items()} if app.sink is not None else {}),
+        "out": str(out),
+        "frames": nframes,
+        "fps": fps,
+        "server": app.link is not None,
+        "last_frame_mean": None if frame is None else float(np.asarray(frame).mean()),
+    }
+
+
+# -- the window ----------------------------------------------------------------------------------
+def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) -> dict | None:
+    from client_stub.jack import JackError, JackProc, ServerProcess
+    from client_stub.render import StubRenderer
+    from client_stub.replay.sink import JackProcLink
+    from client_stub.viewer import run_viewer
+
+    server = jack = None
+    try:
+        link = None
+        if not args.offline:
+            host, port = args.host, args.port
+            try:
+                if host is None:
+                    extra = ["--synthetic"] if args.synthetic_server else []
+                    if args.data_dir:
+                        extra += ["--data-dir", str(args.data_dir)]
+                    server = ServerProcess(extra=extra)
+                    try:
+                        server.wait_listening()
+                    except JackError:
+                        server.stop()
+                        server = ServerProcess(
+                            extra=["--synthetic"]
+                        )  # no motion library here: the synthetic one
+                        server.wait_listening()
+                    host, port = server.host, server.port
+                jack = JackProc("ttes-replay")
+                jack.initsocketconnection(host, port)
+                jack.start()
+                if not jack.wait_ready(30.0):
+                    raise JackError(jack.failure or "server not ready")
+            except JackError as exc:
+                print(f"ttes replay: {exc}", file=sys.stderr)
+                return None
+            link = JackProcLink(jack)
+        app = _make_app(args, replayer, link)
+        app.renderer = StubRenderer(*size, offscreen=False)
+        app.renderer.add_terrain(app.terrain.meshes)
+        run_viewer(app, *size, args.fps)
+        app.finish()
+        summary = {**replayer.status()}
+        if app.sink is not None:
+            summary.update({f"sink_{k}": v for k, v in app.sink.stats.items()})
+        return summary
+    finally:
+        if jack is not None:
+            jack.quit()
+        if server is not None:
+            server.stop()
