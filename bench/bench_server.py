@@ -123,6 +123,35 @@ def client_process(
 
 
 # -- the server (this process) ------------------------------------------------------------------------------
+def instrument(server: object) -> dict[str, list[float]]:
+    """Wrap the server's hot spots to split its CPU per tick: ``advance`` (manager tick: advance + sample),
+    ``publish`` (PoseBoard.publish: wire conversion + quantisation + change detection), ``encode`` (every
+    session's joint-update encoding, summed over clients); the rest of the process's CPU (socket writes,
+    reading requests, trio's scheduling) is reported as ``other``."""
+    from server.session import PoseBoard, Session
+
+    cost: dict[str, list[float]] = {k: [0.0, 0] for k in ("advance", "publish", "encode")}
+
+    def timed(fn, key: str):  # type: ignore[no-untyped-def]
+        def wrapper(*a, **kw):  # type: ignore[no-untyped-def]
+            t = time.process_time()
+            try:
+                return fn(*a, **kw)
+            finally:
+                c = cost[key]
+                c[0] += time.process_time() - t
+                c[1] += 1
+
+        return wrapper
+
+    m = server.world.manager  # type: ignore[attr-defined]
+    m.tick = timed(m.tick, "advance")
+    PoseBoard.publish = timed(PoseBoard.publish, "publish")  # type: ignore[method-assign]
+    Session._joint_updates = timed(Session._joint_updates, "encode")  # type: ignore[method-assign]
+
+    return cost
+
+
 def run(soldiers: int, clients: int, seconds: float, tick_hz: float, decode: bool) -> dict[str, object]:
     import trio
 
@@ -156,6 +185,7 @@ def run(soldiers: int, clients: int, seconds: float, tick_hz: float, decode: boo
         tick_s.append(time.perf_counter() - t)
 
     server.tick = timed_tick  # type: ignore[method-assign]
+    cost = instrument(server)
     result: dict[str, object] = {}
 
     async def main() -> None:
@@ -171,12 +201,16 @@ def run(soldiers: int, clients: int, seconds: float, tick_hz: float, decode: boo
                 await trio.sleep(0.05)
             await trio.sleep(1.0)  # warm-up: the first full updates, the initial requests
             tick_s.clear()
+            for v in cost.values():
+                v[:] = [0.0, 0]
             bytes0 = sum(s.bytes_out for s in server.sessions.values())
             batches0 = sum(s.batches_out for s in server.sessions.values())
             over0, skipped0 = server.tick_overruns, server.ticks_skipped
             w0, c0 = time.perf_counter(), time.process_time()
             await trio.sleep(seconds)
             wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+            spent = {k: v[0] for k, v in cost.items()}
+            encode_calls = cost["encode"][1]
             sessions = list(server.sessions.values())
             bytes_out = sum(s.bytes_out for s in sessions) - bytes0
             batches = sum(s.batches_out for s in sessions) - batches0
@@ -186,6 +220,9 @@ def run(soldiers: int, clients: int, seconds: float, tick_hz: float, decode: boo
             period_ms = 1e3 / tick_hz
             m = server.world.manager
             assert m is not None
+            ticks = max(1, len(ms))
+            split = {k: round(1e3 * v / ticks, 3) for k, v in spent.items()}
+            split["other"] = round(1e3 * cpu / ticks - sum(split.values()), 3)
             result.update(
                 soldiers=soldiers,
                 clients=clients,
@@ -206,6 +243,9 @@ def run(soldiers: int, clients: int, seconds: float, tick_hz: float, decode: boo
                 batches_per_s_per_client=round(batches / wall / max(1, clients), 1),
                 bytes_received_by_clients=[s["bytes"] for s in stats],
                 modes=m.status()["modes"],
+                cpu_ms_per_tick=round(1e3 * cpu / ticks, 3),
+                cpu_split_ms_per_tick=split,
+                encode_calls_per_tick=round(encode_calls / ticks, 2),
             )
             server.shutdown()
 
@@ -244,6 +284,12 @@ def main() -> int:
         f"  out: {int(r['bytes_per_s']) / 1e6:.2f} MB/s total, "
         f"{int(r['bytes_per_s_per_client']) / 1e3:.0f} kB/s "
         f"and {r['batches_per_s_per_client']} batches/s per client"
+    )
+    sp = r["cpu_split_ms_per_tick"]
+    print(
+        f"  server CPU per tick {r['cpu_ms_per_tick']} ms: "
+        + ", ".join(f"{k} {v}" for k, v in sp.items())  # type: ignore[union-attr]
+        + f" ms ({r['encode_calls_per_tick']} encode calls per tick)"
     )
     print(f"  modes at the end: {r['modes']}")
     return 0

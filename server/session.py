@@ -42,7 +42,6 @@ from protocol.events import (
     Goodbye,
     Hello,
     Jcl,
-    JointUpdates,
     Ping,
     Pong,
     ProtocolError,
@@ -55,6 +54,10 @@ from protocol.events import (
     Unsubscribe,
     UpdateTableMsg,
 )
+from protocol.framing import encode_frame
+from protocol.messages import MessageType
+from protocol.update_table import UpdateTable
+from protocol.updates import quantise
 from server.config import ServerConfig
 from server.jcl import JclError
 from server.logging import get_logger
@@ -70,9 +73,12 @@ log = get_logger("session")
 class PoseBoard:
     """The newest wire-ready pose of every soldier (Performer units, table order), written once per tick.
 
-    ``version[i]`` is the board tick at which soldier ``i``'s pose last changed; sessions send what changed
-    since the board tick of their last write. All figure sets of one library share the pose shape, so one set
-    of arrays serves every update table (``table_of`` says which).
+    The tick also quantises each pose once (``codes``, the update table's field values) so that no client
+    repeats that work: a session's encoder only diffs and packs the shared codes. ``version[i]`` is the board
+    tick at which soldier ``i``'s *codes* last changed (a pose that moved less than one quantisation step
+    keeps its version), so sessions send — and encode — only what changed on the wire since the board tick
+    of their last write; an idle soldier costs a client nothing. All figure sets of one library share the
+    pose shape, so one set of arrays serves every update table (``table_of`` says which).
     """
 
     def __init__(self, ndofs: int, nfigs: int, capacity: int = 64) -> None:
@@ -82,9 +88,12 @@ class PoseBoard:
         self.dofs = np.zeros((0, ndofs))
         self.positions = np.zeros((0, nfigs, 3))
         self.orientations = np.zeros((0, nfigs, 4))
+        self.codes = np.zeros((0, 0), np.int32)  # quantised fields; width set by the first table quantised
         self.version = np.zeros(0, np.int64)
         self.valid = np.zeros(0, bool)
         self.table_of = np.zeros(0, np.int32)
+        self.rows_published = 0  # soldiers the ticks handed in
+        self.rows_changed = 0  # of which had new codes (what clients are sent)
         self._grow(capacity)
 
     def _grow(self, n: int) -> None:
@@ -97,13 +106,20 @@ class PoseBoard:
             out[:old] = a
             return out
 
-        self.dofs, self.positions, self.orientations = (
+        self.dofs, self.positions, self.orientations, self.codes = (
             pad(self.dofs),
             pad(self.positions),
             pad(self.orientations),
+            pad(self.codes),
         )
         self.version, self.valid, self.table_of = pad(self.version), pad(self.valid), pad(self.table_of, -1)
         self.capacity = n
+
+    def _code_width(self, nfields: int) -> None:
+        if self.codes.shape[1] != nfields:
+            if self.valid.any():
+                raise ValueError(f"update tables of {self.codes.shape[1]} and {nfields} fields on one board")
+            self.codes = np.zeros((self.capacity, nfields), np.int32)
 
     def ensure(self, index: int) -> None:
         if index >= self.capacity:
@@ -121,7 +137,8 @@ class PoseBoard:
             self.table_of[index] = -1
 
     def publish(self, update: TickUpdate, world: ServerWorld) -> int:
-        """Take one tick's poses (converted per figure set); returns the number of soldiers written."""
+        """Take one tick's poses (converted and quantised per figure set); returns the number of soldiers
+        whose codes changed (0: nothing for any client to send)."""
         self.tick += 1
         n = len(update)
         if n == 0:
@@ -132,19 +149,54 @@ class PoseBoard:
         fset = world.manager.table.fset[idx]
         sets = world.sets
         groups = [np.arange(n)] if len(sets) == 1 else [np.flatnonzero(fset == k) for k in range(len(sets))]
+        changed = 0
         for k, sel in enumerate(groups):
             if len(sel) == 0:
                 continue
             part = update if len(sel) == n else _select(update, sel)
             ju = sets[k].converter.convert(part)
+            table = sets[k].table
             rows = idx[sel]
-            self.dofs[rows] = ju.dofs
-            self.positions[rows] = ju.positions
-            self.orientations[rows] = ju.orientations
-            self.table_of[rows] = sets[k].table.table_id
-        self.version[idx] = self.tick
-        self.valid[idx] = True
-        return n
+            dofs, positions, orientations = ju.dofs, ju.positions, ju.orientations
+            q, ok = _quantise_rows(table, dofs, positions, orientations)
+            self._code_width(q.shape[1])
+            if not ok.all():  # a bug upstream (non-finite pose): never let it reach a client or stop the tick
+                log.error("bad_pose", soldiers=rows[~ok][:8].tolist(), count=int((~ok).sum()))
+                self.valid[rows[~ok]] = False
+                rows, q, dofs, positions, orientations = (
+                    a[ok] for a in (rows, q, dofs, positions, orientations)
+                )
+            new = ~self.valid[rows] | (self.table_of[rows] != table.table_id)
+            new |= (self.codes[rows] != q).any(axis=1)
+            self.dofs[rows] = dofs
+            self.positions[rows] = positions
+            self.orientations[rows] = orientations
+            self.codes[rows] = q
+            self.table_of[rows] = table.table_id
+            self.valid[rows] = True
+            moved = rows[new] if not new.all() else rows
+            self.version[moved] = self.tick
+            changed += len(moved)
+        self.rows_published += n
+        self.rows_changed += changed
+        return changed
+
+
+def _quantise_rows(
+    table: UpdateTable, dofs: np.ndarray, positions: np.ndarray, orientations: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(codes, ok)``: the poses quantised for ``table``; ``ok`` is False for rows that cannot be
+    (non-finite values, zero quaternion), whose codes are 0. The row check runs only when quantising fails."""
+    try:
+        return quantise(table, dofs, positions, orientations), np.ones(len(dofs), bool)
+    except ValueError:
+        norm = np.linalg.norm(orientations, axis=-1)
+        ok = np.isfinite(dofs).all(axis=1) & np.isfinite(positions).all(axis=(1, 2))
+        ok &= np.isfinite(norm).all(axis=1) & (norm >= 1e-9).all(axis=1)
+        q = quantise(table, dofs[ok], positions[ok], orientations[ok])
+        full = np.zeros((len(dofs), q.shape[1]), np.int32)
+        full[ok] = q
+        return full, ok
 
 
 def _select(update: TickUpdate, sel: np.ndarray) -> TickUpdate:
@@ -235,6 +287,8 @@ class Session:
         return out + self._joint_updates()
 
     def _joint_updates(self) -> bytes:
+        """The subscribed soldiers whose codes changed since the last write (or that are owed a full update),
+        encoded from the board's shared codes: this client only diffs and packs, it never re-quantises."""
         board = self.board_ref.board
         if board is None:
             return b""
@@ -250,21 +304,19 @@ class Session:
             return b""
         self.force[idx] = False
         tables = board.table_of[idx]
+        tick = board.tick & 0xFFFFFFFF
+        max_payload = self.conn.peer_max_frame - 1
         chunks = []
         for t in np.unique(tables).tolist():
             rows = idx if len(tables) == 1 or (tables == t).all() else idx[tables == t]
-            chunks.append(
-                self.conn.send(
-                    JointUpdates(
-                        int(t),
-                        rows,
-                        board.dofs[rows],
-                        board.positions[rows],
-                        board.orientations[rows],
-                        board.tick & 0xFFFFFFFF,
-                    )
-                )
-            )
+            encoder = self.conn._encoders.get(t)  # the connection's per-table delta state (set by the table)
+            if encoder is None:
+                raise LocalProtocolError(ErrorCode.UNKNOWN_TABLE, f"send UpdateTableMsg {t} first")
+            try:
+                payloads = encoder.encode_codes(rows, board.codes[rows], tick, max_payload)
+            except ValueError as exc:
+                raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
+            chunks.extend(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
         data = b"".join(chunks)
         if data:
             self.batches_out += 1

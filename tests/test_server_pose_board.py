@@ -1,0 +1,156 @@
+"""The shared pose board: poses quantised once per tick, versions bumped only for changed codes, so idle
+soldiers cost a client no encoder work, and every client gets exactly the bytes the per-client float path
+(``Connection.send(JointUpdates)``) would have produced."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from test_server_support import make_server
+
+from protocol.connection import CLIENT, NEED_DATA, PAUSED, SERVER, Connection
+from protocol.entity import Appearance, make_entity_requests
+from protocol.events import Accept, ConnectionClosed, Error, Hello, JointUpdates, Subscribe, UpdateTableMsg
+from protocol.updates import UpdateEncoder, quantise
+from server.app import TtesServer
+from server.session import Session
+
+
+class Pair:
+    """A session and its client, wired without sockets; ``shadow`` is a server connection fed the same
+    client bytes that encodes from the board's floats (the path sessions used before the shared codes)."""
+
+    def __init__(self, server: TtesServer, name: str) -> None:
+        self.server = server
+        self.session = Session(server.world, server.board_ref, server.config, name)
+        server.sessions[self.session.id] = self.session
+        cfg = server.config
+        self.client = Connection(CLIENT)
+        self.shadow = Connection(SERVER, max_frame=cfg.max_frame, max_soldiers=cfg.max_soldiers)
+        self.to_server(self.client.send(Hello(name, "observer")))
+        self.shadow.send(Accept(cfg.name, cfg.max_frame, cfg.max_soldiers))
+        for t in server.world.tables:
+            self.shadow.send(UpdateTableMsg(t))
+        self.updates: list[JointUpdates] = []
+        self.flush()
+
+    def to_server(self, data: bytes) -> None:
+        self.session.feed(data)
+        self.shadow.receive_data(data)
+        while (ev := self.shadow.next_event()) is not NEED_DATA and ev is not PAUSED:
+            pass
+
+    def subscribe(self, indices: tuple[int, ...]) -> None:
+        self.to_server(self.client.send(Subscribe(indices)))
+
+    def flush(self) -> bytes:
+        """The session's output, decoded by the client; returns the joint-update bytes of it."""
+        data = self.session.take_output()
+        if not data:
+            return data  # (b"" would mean EOF to the client)
+        self.client.receive_data(data)
+        while (ev := self.client.next_event()) is not NEED_DATA and ev is not PAUSED:
+            if isinstance(ev, JointUpdates):
+                self.updates.append(ev)
+            assert not isinstance(ev, (ConnectionClosed, Error)), ev
+        return data
+
+    def expected(self) -> bytes:
+        """What the float path sends now: every valid subscribed soldier, diffed against this client."""
+        board = self.server.board_ref.board
+        assert board is not None
+        sub = self.shadow.subscribed
+        rows = sub[board.valid[sub]]
+        return self.shadow.send(
+            JointUpdates(
+                1, rows, board.dofs[rows], board.positions[rows], board.orientations[rows], board.tick
+            )
+        )
+
+
+def spy_encoder(session: Session, table: int = 1) -> list[np.ndarray]:
+    """Record the soldier rows every ``encode_codes`` call of this session's encoder is given."""
+    enc: UpdateEncoder = session.conn._encoders[table]
+    calls: list[np.ndarray] = []
+    plain = enc.encode_codes
+
+    def encode_codes(indices: np.ndarray, codes: np.ndarray, tick: int, max_payload: int) -> Any:
+        calls.append(np.asarray(indices).copy())
+        return plain(indices, codes, tick, max_payload)
+
+    enc.encode_codes = encode_codes  # type: ignore[method-assign]
+    return calls
+
+
+def walk(server: TtesServer, indices: list[int], speed: float = 1.4) -> None:
+    m = server.world.manager
+    assert m is not None
+    n = len(indices)
+    vel = np.tile([0.0, speed, 0.0], (n, 1))
+    rows = make_entity_requests(np.array(indices), [int(Appearance.UPRIGHT)] * n, [1] * n, vel, [0.0] * n)
+    m.apply_requests(rows, server.request_time())
+
+
+def test_unchanged_codes_keep_their_version_and_cost_no_encoder_work() -> None:
+    server = make_server(throttle=0.0)
+    server.start_world()
+    ticks: list[Any] = []
+    server.on_tick = ticks.append
+    a = Pair(server, "a")
+    a.subscribe(tuple(range(10)))
+    server.tick(1 / 30)
+    want = a.expected()
+    assert a.flush() == want
+    board = server.board_ref.board
+    assert board is not None
+    assert sorted({int(i) for u in a.updates for i in u.indices}) == list(range(10))
+    calls = spy_encoder(a.session)
+    version = board.version.copy()
+    # the manager hands the same (resting) poses in again: new board ticks, no changed codes
+    for _ in range(3):
+        assert board.publish(ticks[0], server.world) == 0
+    np.testing.assert_array_equal(board.version, version)
+    assert a.flush() == b"" and calls == []
+    # one soldier walks: only it reaches the encoder, and the bytes are the float path's
+    walk(server, [3])
+    for k in range(2, 8):
+        server.tick(k / 30)
+        want = a.expected()
+        assert a.flush() == want
+    assert calls and all(c.tolist() == [3] for c in calls)
+    assert board.rows_changed < board.rows_published
+
+
+def test_two_clients_get_identical_correct_poses_and_the_float_paths_bytes() -> None:
+    server = make_server(throttle=0.0)
+    server.start_world()
+    a, b = Pair(server, "a"), Pair(server, "b")
+    a.subscribe(tuple(range(10)))
+    b.subscribe(tuple(range(0, 10, 2)))
+    walk(server, [0, 1, 2, 5, 8], 1.4)
+    walk(server, [4], 4.0)
+    board = server.board_ref.board
+    assert board is not None
+    for k in range(1, 40):
+        server.tick(k / 30)
+        if k == 20:
+            b.subscribe(tuple(range(10)))  # late: b's first updates of the odd soldiers are full
+        want_a = a.expected()
+        assert a.flush() == want_a
+        if k % 3 == 0:  # b reads every third tick only: deltas span skipped ticks
+            want_b = b.expected()
+            assert b.flush() == want_b
+    want_b = b.expected()
+    assert b.flush() == want_b
+    idx = np.arange(10)
+    table = server.world.sets[0].table
+    truth = quantise(table, board.dofs[idx], board.positions[idx], board.orientations[idx])
+    np.testing.assert_array_equal(board.codes[idx], truth)
+    for p in (a, b):
+        dec = p.client.decoder(1)
+        assert dec is not None and dec.known(idx).all()
+        np.testing.assert_array_equal(dec.codes(idx), truth)
+    dofs_a = a.client.decoder(1).current(idx)[0]  # type: ignore[union-attr]
+    np.testing.assert_allclose(dofs_a, board.dofs[idx], atol=2 * np.pi / 4096)
+    assert len(b.updates) < len(a.updates)
