@@ -470,3 +470,21 @@ def test_moving_during_a_transition_walks_after_it_and_immediate_overrides(lib) 
         [],
         False,
     )
+
+
+@pytest.mark.parametrize("fast_at", [0.9, 1.3, 1.7, 2.1])
+def test_one_footed_gait_transitions_wait_for_their_foot(lib, fast_at: float) -> None:
+    # walk2run / run2walk are recorded once, swinging the right foot after the left one lands: whenever the
+    # speed crosses the threshold they follow a left step (one more stride first if needed), never a right one
+    m, i = manager(lib)
+    request(m, i, 0.0, speed=1.4)
+    run(m, 0.0, fast_at)
+    request(m, i, fast_at, speed=4.0)
+    run(m, fast_at, fast_at + 2.0)
+    request(m, i, fast_at + 2.0, speed=1.4)
+    run(m, fast_at + 2.0, fast_at + 4.0)
+    n = names(m, i)
+    for transition in ("walk2run", "run2walk"):
+        k = n.index(transition)
+        assert n[k - 1].endswith("_l"), n
+        assert n[k + 1].endswith("_l"), n  # the right foot swung in the transition: the left one is next

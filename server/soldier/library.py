@@ -205,6 +205,12 @@ class MotionLibrary:
                     self.loco_clip[state, foot] = cid
             self.loco_dir[state] = direction
         s = LocoState
+        # a gait transition recorded once (no _l/_r variants) swings the right foot: see locomotion.GAIT_STAY
+        self.transition_foot = np.full(NSTATES, -1, np.int8)
+        for state in (s.WALK2RUN, s.RUN2WALK):
+            base = CLIP_OF[state][0]
+            if (GRAPH_LOCO, base + "_l") not in by_key and (GRAPH_LOCO, base + "_r") not in by_key:
+                self.transition_foot[state] = 1
         have = (self.loco_clip >= 0).all(axis=1)
         self.can_walk = bool(have[[s.WALK_START, s.WALK_CYCLE, s.WALK_END]].all()) and (
             STAND_STOWED in self._node

@@ -80,6 +80,12 @@ CLIP_OF: dict[S, tuple[str, bool, int]] = {
 }
 
 
+# Gait transitions recorded with one swinging foot only (the shipped walk2run/run2walk start where the
+# left foot lands and swing the right one) are entered only when that foot steps next, else after one more
+# stride of the current gait: ``GAIT_STAY`` is that stride's state.
+GAIT_STAY: dict[S, S] = {S.WALK2RUN: S.WALK_CYCLE, S.RUN2WALK: S.RUN_CYCLE}
+
+
 def conditions(
     state: np.ndarray, moving: np.ndarray, backward: np.ndarray, fast: np.ndarray, can_run: bool = True
 ) -> np.ndarray:

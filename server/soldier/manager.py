@@ -40,7 +40,7 @@ from protocol import coords
 from protocol.entity import Appearance, WeaponState
 from server.soldier.blend import blend_into, smoothstep, yaw_rotate
 from server.soldier.library import MotionLibrary, PathStep
-from server.soldier.locomotion import SCALED, conditions, next_states, start_state
+from server.soldier.locomotion import GAIT_STAY, SCALED, conditions, next_states, start_state
 from server.soldier.state import BASE_POSTURE, STAND_STOWED, LocoState, Mode, Movement, goal_posture, movement
 from server.soldier.table import SoldierTable
 
@@ -58,6 +58,9 @@ _CRAWL_CYCLE = int(LocoState.CRAWL_CYCLE)
 # plain ints for the per-event Python paths (enum attribute access costs a few hundred ns each)
 _IDLE, _TRANSITION, _LOCO, _CRAWL = (int(m) for m in (Mode.IDLE, Mode.TRANSITION, Mode.LOCO, Mode.CRAWL))
 _NONE = int(LocoState.NONE)
+_GAIT_STAY = np.arange(len(LocoState), dtype=np.int8)  # state -> itself, but a gait transition -> its stay
+for _t, _stay in GAIT_STAY.items():
+    _GAIT_STAY[_t] = _stay
 _FIRING = int(WeaponState.FIRING)
 _MOVE_CRAWL = int(Movement.CRAWL)
 _SCALED: tuple[bool, ...] = tuple(SCALED.tolist())
@@ -516,6 +519,11 @@ class SoldierManager:
             self.library.can_run,
         )
         nxt = next_states(tb.loco[idx], cond)
+        # a one-footed gait transition waits for its foot: one more stride of the current gait first
+        want = self.library.transition_foot[nxt]
+        wrong_foot = (want >= 0) & ((1 - tb.foot[idx]) != want)
+        if wrong_foot.any():
+            nxt = np.where(wrong_foot, _GAIT_STAY[nxt], nxt)
         done = nxt == _NONE
         cont = ~done
         self._enter_states(idx[cont], nxt[cont], t[cont])
