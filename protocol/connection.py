@@ -354,6 +354,30 @@ class Connection:
             raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
         return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
 
+    def send_update_codes(self, table: int, indices: np.ndarray, codes: np.ndarray, tick: int) -> bytes:
+        """JOINT_UPDATES frames from codes already quantised for ``table`` (server side).
+
+        For servers that quantise every soldier once per tick and share the codes between their clients: the
+        same checks, delta state and bytes as ``send(JointUpdates(...))`` with the poses those codes encode.
+        """
+        if self.role is not SERVER:
+            raise LocalProtocolError(ErrorCode.UNEXPECTED_MESSAGE, "a client may not send JOINT_UPDATES")
+        self._check_send_state(MessageType.JOINT_UPDATES)
+        encoder = self._encoders.get(table)
+        if encoder is None:
+            raise LocalProtocolError(ErrorCode.UNKNOWN_TABLE, f"send UpdateTableMsg {table} first")
+        idx = np.asarray(indices, np.int64).reshape(-1)
+        if len(idx) and (idx.min() < 0 or idx.max() >= self.max_soldiers):
+            raise LocalProtocolError(ErrorCode.BAD_VALUE, f"soldier index outside 0..{self.max_soldiers - 1}")
+        keep = self._subscribed[idx]
+        if not keep.all():
+            idx, codes = idx[keep], np.asarray(codes)[keep]
+        try:
+            payloads = encoder.encode_codes(idx, codes, tick & 0xFFFFFFFF, self.peer_max_frame - 1)
+        except ValueError as exc:
+            raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
+        return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
+
     def _send_requests(self, event: EntityRequests) -> bytes:
         rows = np.asarray(event.rows)
         if rows.dtype.names != ENTITY_REQUEST_DTYPE.names:

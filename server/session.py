@@ -54,8 +54,6 @@ from protocol.events import (
     Unsubscribe,
     UpdateTableMsg,
 )
-from protocol.framing import encode_frame
-from protocol.messages import MessageType
 from protocol.update_table import UpdateTable
 from protocol.updates import quantise
 from server.config import ServerConfig
@@ -304,19 +302,10 @@ class Session:
             return b""
         self.force[idx] = False
         tables = board.table_of[idx]
-        tick = board.tick & 0xFFFFFFFF
-        max_payload = self.conn.peer_max_frame - 1
         chunks = []
         for t in np.unique(tables).tolist():
             rows = idx if len(tables) == 1 or (tables == t).all() else idx[tables == t]
-            encoder = self.conn._encoders.get(t)  # the connection's per-table delta state (set by the table)
-            if encoder is None:
-                raise LocalProtocolError(ErrorCode.UNKNOWN_TABLE, f"send UpdateTableMsg {t} first")
-            try:
-                payloads = encoder.encode_codes(rows, board.codes[rows], tick, max_payload)
-            except ValueError as exc:
-                raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
-            chunks.extend(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
+            chunks.append(self.conn.send_update_codes(t, rows, board.codes[rows], board.tick))
         data = b"".join(chunks)
         if data:
             self.batches_out += 1
