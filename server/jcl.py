@@ -167,8 +167,10 @@ class JclCommand:
 class JclInterpreter:
     """Runs parsed JCL against a table of registered commands, inside one data directory."""
 
-    def __init__(self, data_dir: str | Path) -> None:
+    def __init__(self, data_dir: str | Path, search_subdirs: tuple[str, ...] = ()) -> None:
         self.data_dir = Path(data_dir).resolve()
+        # relative names not found in the data dir are looked up in these sub-folders (like Jack's data path)
+        self.search_dirs = [self.data_dir / s for s in search_subdirs]
         self._commands: dict[str, JclCommand] = {}
         self._depth = 0
         self.register("read_file", self._read_file, (str,))
@@ -195,13 +197,22 @@ class JclInterpreter:
 
     def resolve_path(self, name: str) -> Path:
         """A path named by a script, inside the data directory or an error (no ``..`` escapes, no absolute
-        paths outside it, symlinks resolved)."""
+        paths outside it, symlinks resolved); then the search sub-folders, each candidate confined too."""
         if not name or "\x00" in name:
             raise JclError(f"bad path {name!r}")
         path = (self.data_dir / name).resolve()
-        if path != self.data_dir and self.data_dir not in path.parents:
+        if not self._inside(path):
             raise JclError(f"path {name!r} is outside the data directory")
+        if path.exists() or Path(name).is_absolute():
+            return path
+        for folder in self.search_dirs:
+            candidate = (folder / name).resolve()
+            if candidate.exists() and self._inside(candidate):
+                return candidate
         return path
+
+    def _inside(self, path: Path) -> bool:
+        return path == self.data_dir or self.data_dir in path.parents
 
     def run_text(self, text: str, filename: str = "<jcl>") -> list[object]:
         return [self.call(c) for c in parse_jcl(text, filename)]

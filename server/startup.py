@@ -48,25 +48,6 @@ DEFAULT_REPORT_INTERVAL = 30.0
 log = get_logger("startup")
 
 
-class SearchPathInterpreter(JclInterpreter):
-    """A JCL interpreter whose paths are looked up in the data dir, then its ``figures/``, ``channelsets/``
-    and ``posture_graphs/`` folders — every candidate confined to the data directory."""
-
-    def __init__(self, data_dir: str | Path, subdirs: Sequence[str] = SEARCH_SUBDIRS) -> None:
-        super().__init__(data_dir)
-        self.search_dirs = [self.data_dir, *(self.data_dir / s for s in subdirs)]
-
-    def resolve_path(self, name: str) -> Path:
-        first = super().resolve_path(name)  # the confinement check (raises for escapes)
-        if first.exists() or Path(name).is_absolute():
-            return first
-        for folder in self.search_dirs[1:]:
-            candidate = (folder / name).resolve()
-            if candidate.exists() and (candidate == self.data_dir or self.data_dir in candidate.parents):
-                return candidate
-        return first
-
-
 @dataclass
 class WorldEvents:
     """Callbacks the trio layer installs (all optional; called synchronously)."""
@@ -114,7 +95,7 @@ class ServerWorld:
         self.max_soldiers = max_soldiers
         self.clock = clock
         self.events = WorldEvents()
-        self.jcl = SearchPathInterpreter(self.data_dir)
+        self.jcl = JclInterpreter(self.data_dir, SEARCH_SUBDIRS)
         self.environment = Environment()
         self.env_files: set[Path] = set()
         self.channelsets: dict[str, Channelset] = {}

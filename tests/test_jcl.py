@@ -126,3 +126,20 @@ def test_fuzz_mutated_script(data: st.DataObject) -> None:
         assert exc.line >= 1
     else:
         assert all(isinstance(a, str | float) for c in calls for a in c.args)
+
+
+def test_search_subfolders_are_searched_and_confined(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    (data / "posture_graphs").mkdir(parents=True)
+    (data / "posture_graphs" / "start.jcl").write_text("mark(2);")
+    (data / "start.jcl").write_text("mark(1);")
+    (tmp_path / "outside.jcl").write_text("mark(9);")
+    marks: list[float] = []
+    jcl = JclInterpreter(data, ("posture_graphs",))
+    jcl.register("mark", marks.append, (float,))
+    jcl.run_text('read_file("start.jcl");')  # the data dir wins over the search folders
+    (data / "start.jcl").unlink()
+    jcl.run_text('read_file("start.jcl");')  # then found in posture_graphs/
+    assert marks == [1.0, 2.0]
+    with pytest.raises(JclError, match="outside the data directory"):
+        jcl.run_text('read_file("../outside.jcl");')

@@ -475,22 +475,22 @@ def _solve(
     kin: FigureKinematics,
     pose: np.ndarray,
     goals: Sequence[Goal],
-    root_location: np.ndarray | None = None,
+    root_location: np.ndarray | None,
     *,
-    iterations: int = 60,
-    damping: float = 0.5,
-    error_damping: float = 1.0,
-    tolerance: float = 0.01,
-    orientation_tolerance: float = 1e-3,
-    max_step: float = 15.0,
-    max_dof_step: float = 0.35,
-    rest_pose: np.ndarray | None = None,
-    rest_gain: float = 0.0,
-    stall: float = 1e-4,
-    root_dofs: Sequence[str] = (),
-    respect_limits: bool = True,
+    iterations: int,
+    damping: float,
+    error_damping: float,
+    tolerance: float,
+    orientation_tolerance: float,
+    max_step: float,
+    max_dof_step: float,
+    rest_pose: np.ndarray | None,
+    rest_gain: float,
+    stall: float,
+    root_dofs: Sequence[str],
+    respect_limits: bool,
 ) -> tuple[np.ndarray, SolveReport]:
-    """:func:`solve` on a figure that holds only what the goals need."""
+    """:func:`solve` on a figure that holds only what the goals need (the defaults live in :func:`solve`)."""
     tab = _tables(kin)
     q0 = np.asarray(pose, dtype=np.float64)
     if q0.shape[-1:] != (kin.ndof,):

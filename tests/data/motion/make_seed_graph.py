@@ -24,40 +24,11 @@ sys.path.insert(0, str(HERE.parents[2]))
 from server.motion.channelset import FigureTrack, JointTrack, make_channelset  # noqa: E402
 from server.motion.channelset_file import save_channelset  # noqa: E402
 from server.motion.posture_graph import Arc, PostureGraph, write_posture_graph  # noqa: E402
+from server.soldier.synthetic import ONE_WAY, POSTURES, STATIC_FILES  # noqa: E402  (the same Figure 7 table)
 
-POSTURES = [
-    "STAND_STOWED",
-    "STAND_FIRE",
-    "KNEEL_STOWED",
-    "KNEEL_FIRE",
-    "PRONE_STOWED",
-    "PRONE_FIRE",
-    "CRAWL",
-    "DEAD",
-]
-SS, SF, KS, KF, PS, PF, CR, DE = POSTURES
 FPS = 10
-# token: (file stem, start, end, seconds); every file is played forwards start->end
-FILES = [
-    ("ststow2stfire", SS, SF, 0.8),
-    ("ststow2kstow", SS, KS, 1.6),
-    ("ststow2crawl", SS, CR, 2.0),
-    ("ststow2kfire", SS, KF, 1.8),
-    ("ststow2dead", SS, DE, 1.5),
-    ("stfire2kfire", SF, KF, 1.2),
-    ("stfire2dead", SF, DE, 1.2),
-    ("kstow2kfire", KS, KF, 0.8),
-    ("kstow2crawl", KS, CR, 1.4),
-    ("kstow2dead", KS, DE, 1.0),
-    ("kfire2dead", KF, DE, 1.0),
-    ("crawl2prstow", CR, PS, 0.8),
-    ("prstow2prfire", PS, PF, 0.8),
-    ("crawl2dead", CR, DE, 1.0),
-    ("prstow2dead", PS, DE, 1.0),
-    ("prfire2dead", PF, DE, 0.8),
-    ("stfire2kstow", SF, KS, 1.6),
-]
-ONE_WAY = {DE}  # transitions into DEAD are not reversed (except DEAD -> STAND_STOWED via file 4)
+FILES = STATIC_FILES  # token: (file stem, start, end, seconds); every file is played forwards start->end
+SS, SF, KS, KF, PS, PF, CR, DE = POSTURES
 
 # pose vector (waist x3, neck x2, right_knee, left_knee), pelvis height (cm), heading (deg), rifle raised?
 POSES = {
