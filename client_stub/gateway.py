@@ -20,14 +20,12 @@ import logging
 import socket
 from dataclasses import dataclass, field
 
-import numpy as np
 import trio
 
 from client_stub.replay.cursor import EntityFilter
 from client_stub.replay.sink import ServerSink
 from client_stub.replay.translator import DIS_TIMEOUT, DisTranslator, Translation
-from protocol.dis import DEFAULT_PORT, DisError, DisLog, LocalFrame
-from protocol.dis.logfile import _decode, _Segments  # the library's datagram decoder (no public wrapper yet)
+from protocol.dis import DEFAULT_PORT, DisError, DisLog, LocalFrame, read_datagrams
 
 log = logging.getLogger("ttes.gateway")
 MAX_DATAGRAM = 65535
@@ -111,23 +109,9 @@ class DisGateway:
         st["datagrams"] += n
         st["bursts"] += 1
         st["max_burst"] = max(st["max_burst"], n)
-        sizes = np.fromiter((len(d) for d in datagrams), np.int64, n)
-        st["bytes"] += int(sizes.sum())
-        end = np.cumsum(sizes)
-        start = end - sizes
-        seg = _Segments(
-            b"".join(datagrams),
-            start,
-            end,
-            np.full(n, now),
-            np.arange(1, n + 1, dtype=np.int64),
-            start,
-            counters={"records": n, "datagrams": n},
-            t0=now,
-            t_end=now,
-        )
+        st["bytes"] += sum(len(d) for d in datagrams)
         try:
-            got = _decode(seg, "<udp>", "udp", True)
+            got = read_datagrams(datagrams, now)
         except (DisError, ValueError, IndexError) as exc:  # never expected: the decoder reports issues itself
             st["decode_failures"] += 1
             log.warning("burst of %d datagrams not decoded: %s", n, exc)

@@ -24,6 +24,7 @@ from protocol.dis import (
     encode_entity_state,
     encode_fire,
     read_bytes,
+    read_datagrams,
     read_log,
 )
 from protocol.dis.logfile import detect_format
@@ -302,6 +303,17 @@ def test_raw_times_come_from_dis_timestamps() -> None:
         )
     log = read_bytes(b"".join(pdus), fmt="raw")
     np.testing.assert_allclose(log.times, [3590.0, 3599.5, 3602.0], atol=1e-5)
+
+
+def test_a_live_burst_of_datagrams() -> None:
+    burst = [espdu(1), espdu(2, TANK), espdu(3) + FIRE, b"not DIS", espdu(4)[:90]]
+    log = read_datagrams(burst, 42.0)
+    assert log.batch.records["entity_id"]["entity"].tolist() == [1, 3]  # lifeforms, arrival order
+    np.testing.assert_allclose(log.times, [42.0, 42.0])
+    assert [e.kind for e in log.events] == ["fire"] and log.events[0].t == 42.0
+    assert log.counters["non_lifeforms"] == 1 and log.counters["non_dis"] == 1
+    assert len(log.issues) == 1 and log.issues[0].record == 5  # datagrams are numbered from 1
+    assert len(read_datagrams([], 0.0).batch) == 0
 
 
 def test_empty_inputs() -> None:

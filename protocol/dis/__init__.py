@@ -45,7 +45,7 @@ from protocol.dis.geo import (
     heading_deg,
     orientation_from_heading,
 )
-from protocol.dis.logfile import DisLog, PduStatus, read_bytes, read_log
+from protocol.dis.logfile import DisLog, PduStatus, read_bytes, read_datagrams, read_log
 from protocol.dis.pdu import DEFAULT_PORT, PduType
 from protocol.dis.tokens import TOKEN_DTYPE, translate
 from protocol.dis.warfare import (
@@ -105,6 +105,7 @@ __all__ = [
     "make_marking",
     "orientation_from_heading",
     "read_bytes",
+    "read_datagrams",
     "read_log",
     "rifle_code",
     "rifle_figure",

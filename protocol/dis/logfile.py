@@ -28,7 +28,7 @@ import base64
 import binascii
 import io
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 from pathlib import Path
@@ -194,6 +194,29 @@ def read_bytes(
     else:
         raise DisError(f"unknown log format {fmt!r} (one of {', '.join(FORMATS)})", 0)
     return _decode(seg, name, fmt, lifeforms_only)
+
+
+def read_datagrams(
+    datagrams: Sequence[bytes], now: float, *, lifeforms_only: bool = True, name: str = "<udp>"
+) -> DisLog:
+    """Decode a burst of UDP payloads received at ``now`` (each one or more PDUs), as a live gateway hears
+    them: records are numbered 1.. in arrival order and every PDU is stamped ``now``."""
+    n = len(datagrams)
+    sizes = np.fromiter((len(d) for d in datagrams), np.int64, n)
+    end = np.cumsum(sizes)
+    start = end - sizes
+    seg = _Segments(
+        b"".join(datagrams),
+        start,
+        end,
+        np.full(n, float(now)),
+        np.arange(1, n + 1, dtype=np.int64),
+        start,
+        counters={"records": n, "datagrams": n},
+        t0=float(now),
+        t_end=float(now),
+    )
+    return _decode(seg, name, "udp", lifeforms_only)
 
 
 # --- captures ---------------------------------------------------------------------------------------------
