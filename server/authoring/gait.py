@@ -5,10 +5,13 @@ a timeline of **footfalls** (which foot, when it lands, where, turned how). Betw
 
 * it lands pitched (heel first; backwards, toes first) and rocks flat about that contact point;
 * it stays flat while it carries the body;
-* before the other foot lands its heel rises, the foot rocking about the planted ball (the toes stay flat);
-* it leaves the ground and swings along an arc ``lift`` cm high to its next footfall.
+* before the other foot lands its heel rises, the foot rocking about the ball of the foot (a point
+  ``ROCK_UP`` above the ball site, so the ball and the flat toes' tip each move under a centimetre);
+* it leaves the ground and swings along an arc ``lift`` cm high to its next footfall, turning in the air.
 
-A rocker's contact point never moves, so a foot on the ground never slides. The pelvis follows the
+A rocker's contact point never moves, so a foot on the ground never slides; a foot on the ground never
+turns either (a pivot would sweep its toe tip or heel across the ground): a foot that must change its
+place or yaw takes a step. The pelvis follows the
 footfalls: it progresses at the gait's speed (accelerating out of the base posture in the start step and
 slowing into it in the end step), bobs (lowest after a walking footfall, at mid-stance when running), sways
 over the supporting foot and turns with the swinging leg; its speed profile is integrated so that it arrives
@@ -19,9 +22,14 @@ trajectory (hip, knee, ankle) and keeps the palm centres on the rifle
 
 A **session** is a start step (one foot swings out of the base posture), cycle steps and an end step (the
 other foot swings back into the base posture); clips are cut at footfalls, so one ends exactly where the
-next begins. Session ``left`` gives ``start_l, cycle_r, cycle_l, end_r``; session ``right`` gives
-``start_r, end_l`` (its cycles are the same steps: both sessions place the feet by the same rules, the
-standing foot of a start step turning straight about its ball). The letter is the foot that swings.
+next begins. The base stance is staggered with the feet turned out, the gait's feet point straight, so
+the start step begins with a little step of the standing foot (lifted ``ADJUST_LIFT`` cm, placed straight
+about where its ball stood) before the first foot swings, and the end step ends with a little step of
+the last foot to its base place and yaw once the trailing foot has landed. While the pelvis pulls away
+in the start step, the standing heel peels off early (``Footfall.early``) so the leg is never
+overstretched. Session ``left`` gives ``start_l, cycle_r, cycle_l, end_r``; session ``right`` gives
+``start_r, end_l`` (its cycles are the same steps: both sessions place the feet by the same rules). The
+letter is the foot that swings.
 
 Clips are **local motion**: a clip's origin is the ground point under the pelvis at its first frame, less
 the base posture's pelvis offset (so a standing soldier's origin is between his feet), and the pelvis's
@@ -57,6 +65,18 @@ FPS = 60
 DEG = math.pi / 180.0
 SIDES = ("left", "right")
 BASE = "STAND_STOWED"  # the base posture of locomotion: standing, rifle at the ready (seed 002, 3.3)
+
+
+# the rocker of a rising heel: this far (cm) above the ball site, half way to the toe joint (3 cm above it)
+ROCK_UP = 1.5
+# a standing foot that must change its place or yaw (into or out of the base stance) takes a little step:
+# the heel rises on the ball (s), the foot swings (s) this high (cm) and lands flat, then settles (s)
+ADJUST_RISE = 0.12
+ADJUST_SWING = 0.22
+ADJUST_LIFT = 6.0
+ADJUST_PITCH = 15.0
+ADJUST_SETTLE = 0.2
+ADJUST_SWAY = 3.0  # the pelvis leans this far (cm) over the other foot meanwhile
 
 
 def _frames(t: float) -> float:
@@ -158,6 +178,10 @@ class Footfall:
     toe_off_pitch: float = 35.0
     yaw_off: float | None = None  # None: keeps ``yaw``
     turn_by: float | None = None  # the turn to ``yaw_off`` is done by this time (default t_off)
+    lift: float | None = None  # clearance of the swing that leaves this footfall (None: the gait's)
+    # (from, join): the heel starts rising early at ``from``, meeting the regular rise at ``join`` (the pelvis
+    # of a start step pulls away from the standing foot sooner than in the cycle it joins)
+    early: tuple[float, float] | None = None
 
 
 def _smooth(s: np.ndarray) -> np.ndarray:
@@ -183,7 +207,10 @@ def foot_track(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Heel frames ``(n, 4, 4)`` and toe-joint angles (radians) of one foot at times ``t``.
 
-    ``ball``: the ball relative to the heel on the flat foot (foot frame)."""
+    ``ball``: the ball relative to the heel on the flat foot (foot frame). The foot rocks about a point
+    ``ROCK_UP`` above the ball (the rounded ball of the foot, between the ball site on the sole and the toe
+    joint above it), so neither the ball nor the flat toes' tip slides more than ``ROCK_UP * sin(pitch)``."""
+    ball = np.asarray(ball, dtype=float) + np.array([0.0, ROCK_UP, 0.0])
     n = len(t)
     heel = np.zeros((n, 3))
     yaw = np.zeros(n)
@@ -207,9 +234,16 @@ def foot_track(
             land = tt < f.t_flat
             p = np.where(land, f.strike * (1.0 - _smooth((tt - f.t_on) / max(f.t_flat - f.t_on, 1e-9))), p)
             on_ball |= land & (f.strike < 0)
-        rising = (tt >= f.t_heel) & (tt < f.t_off)
+        t_rise = f.t_heel if f.early is None else min(f.t_heel, f.early[0])
+        rising = (tt >= t_rise) & (tt < f.t_off)
         if rising.any():
             r = _smooth((tt[rising] - f.t_heel) / max(f.t_off - f.t_heel, 1e-9))
+            if f.early is not None:
+                e0, ej = f.early
+                rj = _smooth(np.array([(ej - f.t_heel) / max(f.t_off - f.t_heel, 1e-9)]))[0]
+                ramp = rj * _smooth((tt[rising] - e0) / max(ej - e0, 1e-9))
+                r_early = np.where(tt[rising] <= ej, ramp, 0.0)
+                r = np.maximum(r, r_early)
             p[rising] = -f.toe_off_pitch * r
         on_ball |= rising
         h = np.tile([f.heel[0], 0.0, f.heel[1]], (len(tt), 1))
@@ -227,7 +261,7 @@ def foot_track(
                 nb = b + V.rot_y(nxt.yaw * DEG)[:3, :3] @ ball
                 b = nb - _frame(np.zeros((1, 3)), [nxt.yaw], [nxt.strike])[0, :3, :3] @ ball
             hs = a + u[:, None] * (b - a)
-            hs[:, 1] += lift * np.sin(np.pi * np.clip(s, 0.0, 1.0))
+            hs[:, 1] += (lift if f.lift is None else f.lift) * np.sin(np.pi * np.clip(s, 0.0, 1.0))
             h[swing] = hs
             p[swing] = -f.toe_off_pitch + _smooth((s - 0.15) / 0.7) * (nxt.strike + f.toe_off_pitch)
             y[swing] = yaw_off + u * (nxt.yaw - yaw_off)
@@ -331,29 +365,26 @@ def _pelvis_z(g: Gait, heel_z: float) -> float:
 
 
 def plan_session(gait: Gait, first: str, cycles: int, base: BaseStance) -> Session:
-    """A start step (``first`` swings out of the base posture), ``cycles`` cycle steps, an end step."""
+    """A start step (``first`` swings out of the base posture), ``cycles`` cycle steps, an end step.
+
+    The base stance is staggered (feet turned out), the gait's feet point straight: in the start step the
+    standing foot first takes a little step (:data:`ADJUST_RISE`...) to its gait place (turned straight
+    about its ball), then ``first`` swings; in the end step, once the trailing foot has landed, the last
+    foot takes a little step to its base place. A foot on the ground never pivots, so it never scrapes."""
     g = gait
     T, d, L, v = g.step_time, g.direction, g.step_length, g.speed
     other = "right" if first == "left" else "left"
     track = {s: base.track(s) for s in SIDES}
     falls: dict[str, list[Footfall]] = {s: [] for s in SIDES}
-    t_start = _frames(g.start_time)
-    # the base stance: the first foot lifts early in the start step; the standing foot rises on its ball and
-    # turns straight by the first footfall (its ball stays where it stood)
-    falls[first].append(
-        Footfall(
-            first,
-            -np.inf,
-            base.heel[first],
-            base.yaw[first],
-            -np.inf,
-            0.15 * t_start,
-            0.4 * t_start,
-            0.0,
-            g.toe_off_pitch,
-            0.0,
-        )
-    )
+    # the standing foot's little step, the first foot's weight-bearing meanwhile
+    a_heel = 0.03
+    a_off = a_heel + ADJUST_RISE
+    a_land = _frames(a_off + ADJUST_SWING)
+    t_heel = a_land + 0.05  # the first foot rises as soon as the other has landed
+    t_start = _frames(t_heel + 0.85 * g.start_time)
+    z0, z1 = float(base.pelvis[1]), _pelvis_z(g, float(track[other][1]) - d * L)
+    t_push = max(a_land, t_start - 2.0 * abs(z1 - z0) / v)  # the pelvis sets off
+    t_early = max(a_land + 0.1, t_push)  # the standing heel peels off as the pelvis pulls away
     falls[other].append(
         Footfall(
             other,
@@ -361,12 +392,39 @@ def plan_session(gait: Gait, first: str, cycles: int, base: BaseStance) -> Sessi
             base.heel[other],
             base.yaw[other],
             -np.inf,
+            a_heel,
+            a_off,
+            0.0,
+            ADJUST_PITCH,
+            lift=ADJUST_LIFT,
+        )
+    )
+    falls[other].append(
+        Footfall(
+            other,
+            a_land,
+            (float(track[other][0]), float(track[other][1])),
+            0.0,
+            a_land,
             t_start + (g.heel_off - 1.0) * T,
             t_start + (g.toe_off - 1.0) * T,
             0.0,
             g.toe_off_pitch,
+            early=(t_early, min(t_start, t_start + (g.toe_off - 1.0) * T)),
+        )
+    )
+    # the first foot rises at its base yaw and turns straight in the air
+    falls[first].append(
+        Footfall(
+            first,
+            -np.inf,
+            base.heel[first],
+            base.yaw[first],
+            -np.inf,
+            t_heel,
+            t_heel + 0.3 * g.start_time,
             0.0,
-            t_start,
+            g.toe_off_pitch,
         )
     )
     z = float(track[other][1]) - d * L
@@ -381,15 +439,22 @@ def plan_session(gait: Gait, first: str, cycles: int, base: BaseStance) -> Sessi
         landings.append((t, nxt))
         cuts.append((f"cycle_{nxt[0]}", t - T, t))
         side = nxt
-    # end step: the last foot stays, turning to its base yaw about its ball (heel barely lifted); the trailing
-    # foot swings to its base place relative to it and lands flat
+    # end step: the last foot stays flat while the trailing foot swings to its base place relative to it and
+    # lands flat; then the last foot steps (about its ball) to its base place and yaw
     last, trail = side, ("right" if side == "left" else "left")
     lf = falls[last][-1]
     shift = np.array(lf.heel) - track[last]  # how far the whole base stance moved
     t_land = _frames(t + 0.7 * g.end_time)
-    t_end = _frames(t + g.end_time)
+    e_heel = t_land + 0.02
+    e_off = e_heel + ADJUST_RISE
+    e_land = _frames(e_off + ADJUST_SWING)
+    t_end = _frames(e_land + ADJUST_SETTLE)
     falls[last][-1] = Footfall(
-        last, lf.t_on, lf.heel, 0.0, lf.t_flat, lf.t_flat + 0.1, t_end, lf.strike, 6.0, base.yaw[last], t_land
+        last, lf.t_on, lf.heel, 0.0, lf.t_flat, e_heel, e_off, lf.strike, ADJUST_PITCH, lift=ADJUST_LIFT
+    )
+    lh = np.array(base.heel[last]) + shift
+    falls[last].append(
+        Footfall(last, e_land, (float(lh[0]), float(lh[1])), base.yaw[last], e_land, np.inf, np.inf)
     )
     th = np.array(base.heel[trail]) + shift
     old_trail = [*falls[trail], _steady(g, trail, t + T, (float(track[trail][0]), z - d * L))]
@@ -397,20 +462,26 @@ def plan_session(gait: Gait, first: str, cycles: int, base: BaseStance) -> Sessi
         Footfall(trail, t_land, (float(th[0]), float(th[1])), base.yaw[trail], t_land, np.inf, np.inf)
     )
     cuts.append((f"end_{trail[0]}", t, t_end))
-    # the pelvis: still until it must go, at speed between the first and last footfalls, stopping at the base
+    # the pelvis: still until it must go, at speed between the first and last footfalls, stopping at the base;
+    # leaning over the supporting foot during the little steps
     x_mid = 0.5 * float(track["left"][0] + track["right"][0])
-    z0, z1 = float(base.pelvis[1]), _pelvis_z(g, falls[first][1].heel[1])
     zl, ze = _pelvis_z(g, lf.heel[1]), float(base.pelvis[1] + shift[1])
-    t_push = max(0.0, t_start - 2.0 * abs(z1 - z0) / v)
-    t_stop = min(t + 2.0 * abs(ze - zl) / v, t_end)
+    t_stop = min(t + 2.0 * abs(ze - zl) / v, t_land)
     z_keys = [(0.0, z0, 0.0), (t_push, z0, 0.0), (t_start, z1, -d * v), (t, zl, -d * v), (t_stop, ze, 0.0)]
     if t_stop < t_end:
         z_keys.append((t_end, ze, 0.0))
+    lean_start = ADJUST_SWAY * (1.0 if first == "right" else -1.0)  # towards the first foot (left is -x)
+    lean_end = ADJUST_SWAY * (1.0 if trail == "right" else -1.0)
+    bx_end = float(base.pelvis[0] + shift[0])
     x_keys = [
         (0.0, float(base.pelvis[0])),
+        (a_off, float(base.pelvis[0]) + lean_start),
+        (a_land, float(base.pelvis[0]) + lean_start),
         (t_start, x_mid),
         (t, x_mid),
-        (t_end, float(base.pelvis[0] + shift[0])),
+        (e_heel, bx_end + lean_end),
+        (e_land, bx_end + lean_end),
+        (t_end, bx_end),
     ]
     return Session(
         falls,
