@@ -60,6 +60,9 @@ class Goal:
     ``weight`` may be a scalar or one weight per pose (0 switches the goal off for that pose).
     ``orientation_weight`` says how many cm of position error one radian of orientation error is worth
     (Jack's position/orientation weight). ``target_position=None`` makes an orientation-only goal.
+    ``radius`` (cm, default 0) makes the position goal a ball: a site within ``radius`` of the target counts
+    as there and is not pulled further, so a secondary goal does not chase its last millimetres through a
+    singular pose or round a saddle (see :mod:`~server.authoring.slaving`).
     """
 
     site: str
@@ -69,13 +72,14 @@ class Goal:
     priority: int = 0
     joints: Sequence[str] | None = None
     orientation_weight: float = 20.0
+    radius: float = 0.0
 
 
 @dataclass
 class SolveReport:
     """What :func:`solve` achieved, per pose (leading batch shape of the input) and goal (input order)."""
 
-    position_error: np.ndarray  # (..., ngoals) cm; 0 for orientation-only goals
+    position_error: np.ndarray  # (..., ngoals) cm (beyond the goal's radius); 0 for orientation-only goals
     orientation_error: np.ndarray  # (..., ngoals) rad; 0 for goals without an orientation target
     iterations: int
     converged: np.ndarray  # (...,) bool: every goal with a non-zero weight within tolerance
@@ -364,6 +368,7 @@ class _Prepared:
     weight: np.ndarray  # (B,)
     priority: int
     ow: float
+    radius: float = 0.0
 
 
 def _prepare(tab: _Tables, goals: Sequence[Goal], b: int) -> list[_Prepared]:
@@ -381,8 +386,13 @@ def _prepare(tab: _Tables, goals: Sequence[Goal], b: int) -> list[_Prepared]:
         w = np.broadcast_to(np.asarray(g.weight, np.float64), (b,)).copy()
         if not np.all(np.isfinite(w)) or np.any(w < 0):
             raise ValueError(f"goal on {g.site!r}: weights must be finite and >= 0")
+        radius = float(g.radius)
+        if not (np.isfinite(radius) and radius >= 0):
+            raise ValueError(f"goal on {g.site!r}: radius must be finite and >= 0")
         out.append(
-            _Prepared(tab.site_index[g.site], idx, sign, pos, ori, w, int(g.priority), g.orientation_weight)
+            _Prepared(
+                tab.site_index[g.site], idx, sign, pos, ori, w, int(g.priority), g.orientation_weight, radius
+            )
         )
     return out
 
@@ -546,6 +556,9 @@ def _solve(
             if p.pos is not None:
                 e = p.pos[rows] - site[:, :3, 3]
                 dist = np.linalg.norm(e, axis=-1)
+                if p.radius > 0:  # aim at the ball's surface: no pull inside it
+                    e = e * np.maximum(0.0, 1.0 - p.radius / np.maximum(dist, 1e-12))[:, None]
+                    dist = np.maximum(dist - p.radius, 0.0)
                 pos_err[rows, k] = dist
                 cap = np.minimum(1.0, max_step / np.maximum(dist, 1e-12))
                 jp = np.zeros((len(rows), 3, n))
@@ -629,6 +642,8 @@ def _solve(
         site = g[:, p.site]
         if p.pos is not None:
             pos_err[:, k] = np.linalg.norm(p.pos - site[:, :3, 3], axis=-1)
+            if p.radius > 0:
+                pos_err[:, k] = np.maximum(pos_err[:, k] - p.radius, 0.0)
         if p.ori is not None:
             ori_err[:, k] = np.linalg.norm(rotation_log(p.ori @ np.swapaxes(site[:, :3, :3], 1, 2)), axis=-1)
     wmat = np.stack([p.weight for p in prepared], axis=1) if prepared else np.zeros((b, 0))

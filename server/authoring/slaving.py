@@ -11,6 +11,16 @@ Per frame (all frames of a clip at once):
    (:func:`server.authoring.ik.decompose_rotation`). ``spine_compression`` starts at 0.
 3. **Solve the constraint table** (:data:`SLAVE_CONSTRAINTS`) with the palm centres at the highest priority,
    so that when not every site can match the hands stay on the gun.
+4. **Make the clip temporally coherent** (:meth:`MasterSlavePair.slave_clip`, used by the re-recording):
+   a frame solved alone resolves the chains' redundancy wherever its iterations stop, so the slave's offset
+   from the copied angles is smoothed over the clip and the goals solved again from there in small steps;
+   the first and last frames stay the frames solved alone, so clips meeting at a posture node agree.
+
+The sight and elbow goals are balls (:data:`GOAL_RADIUS`, ``ik.Goal.radius``): within 0.9 cm of the master's
+site they count as met. Chased to the millimetre they made the slave pop: prone with the neck at its
+extension limit the last 0.75 cm of sight could only be had by bending and twisting the neck 14/21 degrees,
+to either side (a saddle), and the left shoulder's Euler angles swung round their pole when the arm passed
+90 degrees while falling.
 
 The seed's joint chains are kept except that the palm goals may also turn the shoulder: at the highest
 priority they must be able to win, and the elbow goals (shoulder chain) then act in their null space — the
@@ -102,6 +112,12 @@ SPINE_BLEND: dict[str, tuple[str, str]] = {
     "upper_spine": ("t12", "upper_torso"),
 }
 NAME_MAP: dict[str, str] = {"eyes": "left_eye"}  # slave joint -> master joint where the names differ
+# cm: how close a slave site must come to the master's for its goal to count as met (ik.Goal.radius). The
+# sight and elbows are secondary: chasing their last centimetre twists the neck round a saddle (prone, neck
+# at its extension limit) or swings the shoulder's Euler angles round their pole (arm raised 90 degrees).
+GOAL_RADIUS: dict[str, float] = {"torso": 0.0, "sight": 0.9, "palm": 0.0, "elbow": 0.9}
+SMOOTH_SIGMA_FRAMES = 3.0  # Gaussian smoothing of the slave's offset from the copied angles over a clip
+SMOOTH_MAX_DOF_STEP = 0.05  # rad per iteration of the re-solve after smoothing: stays on its branch
 
 
 @dataclass
@@ -237,7 +253,17 @@ class MasterSlavePair:
                 continue
             target = master_sites[..., mk.site_names.index(c.master_site), :3, 3]
             priority = 2 if (c.group == "palm" and p.palm_priority) else 1
-            out.append(ik.Goal(c.slave_site, target, None, weight[c.group], priority, c.joints))
+            out.append(
+                ik.Goal(
+                    c.slave_site,
+                    target,
+                    None,
+                    weight[c.group],
+                    priority,
+                    c.joints,
+                    radius=GOAL_RADIUS[c.group],
+                )
+            )
         return out
 
     def slave_pose(
@@ -263,6 +289,44 @@ class MasterSlavePair:
         opts.update(self.ik_options)
         pose, self.last_report = ik.solve(sk, start, goals, slave_loc, rest_pose=start, **opts)
         return pose, slave_loc
+
+    def slave_clip(
+        self, master_poses: np.ndarray, master_locations: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`slave_pose` over the frames ``(n, ndof)`` of a clip, made temporally coherent.
+
+        Each frame solved alone resolves the chains' redundancy (clavicle against shoulder, the arm's twist)
+        wherever its iterations happen to stop, so neighbouring frames can differ by tens of degrees. So the
+        slave's offset from the copied angles is smoothed over the clip (Gaussian, ``SMOOTH_SIGMA_FRAMES``),
+        tapered to none at the first and last frame, and the goals solved again from there in small steps
+        (``SMOOTH_MAX_DOF_STEP``) pulled towards the smoothed pose. DOFs no goal moves keep the master's
+        angles; the first and last frames stay exactly :meth:`slave_pose`'s (a frame's solution alone), so
+        every clip meeting at a posture node is slaved to the same pose there."""
+        mk, sk = self.master_kin, self.slave_kin
+        q = np.asarray(master_poses, dtype=np.float64)
+        loc = np.asarray(master_locations, dtype=np.float64)
+        pose, slave_loc = self.slave_pose(q, loc)
+        n = len(pose)
+        goals = self.goals(mk.site_globals(q, loc))
+        if n < 3 or not goals:
+            return pose, slave_loc
+        start = self.copy_pose(q, mk.segment_globals(q, loc))
+        offset = pose - start
+        half = int(np.ceil(3.0 * SMOOTH_SIGMA_FRAMES))
+        k = np.arange(-half, half + 1, dtype=np.float64)
+        kernel = np.exp(-0.5 * (k / SMOOTH_SIGMA_FRAMES) ** 2)
+        kernel /= kernel.sum()
+        padded = np.concatenate([np.repeat(offset[:1], half, 0), offset, np.repeat(offset[-1:], half, 0)])
+        smooth = np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(sk.ndof)], axis=1)
+        frames = np.arange(n)
+        taper = np.minimum(1.0, np.minimum(frames, frames[::-1]) / half)[:, None]
+        blend = sk.clamp(pose + taper * (start + smooth - pose))
+        opts: dict[str, Any] = {"iterations": 60, "rest_gain": 0.1, "tolerance": 0.02}
+        opts.update(self.ik_options)
+        opts["max_dof_step"] = SMOOTH_MAX_DOF_STEP
+        out, self.last_report = ik.solve(sk, blend, goals, slave_loc, rest_pose=blend, **opts)
+        out[[0, -1]] = pose[[0, -1]]
+        return out, slave_loc
 
     def update(self) -> None:
         """The SimulationFunction: when on, set the slave figure from the master figure's current state."""
@@ -351,7 +415,7 @@ def reslave_channelset(channelset: Channelset, pair: MasterSlavePair, name: str 
     n = rec.nframes
     q = np.asarray(rec.poses[pair.master.name], dtype=np.float64)
     loc = np.asarray(rec.locations[pair.master.name], dtype=np.float64)
-    pose, slave_loc = pair.slave_pose(q, loc)
+    pose, slave_loc = pair.slave_clip(q, loc)
     out = Recording([pair.slave])
     out.poses[pair.slave.name].extend(pose)
     out.roots[pair.slave.name].extend([pair._slave_root] * n)
