@@ -64,6 +64,7 @@ PARTS: dict[str, tuple[str, ...]] = {
 }
 FEET = ("left_foot", "right_foot")
 SPECIAL = ("root", "rifle", *FEET)
+CONTACTS = ("{s}_foot.heel", "{s}_foot.ball", "{s}_toes.distal")  # the points of a foot that touch the ground
 
 
 @dataclass(frozen=True)
@@ -73,7 +74,11 @@ class Step:
 
     ``part`` is a joint group of :data:`PARTS`, ``"root"`` (the pelvis placement), ``"rifle"`` (the carry of
     the gun) or a foot (``"left_foot"``: the heel frame follows an arc ``lift`` cm high; outside its steps a
-    foot with any step is planted where it last was, a foot without steps is free).
+    foot with any step is planted where it last was, a foot without steps is free). A foot step with
+    ``follow`` goes where the interpolated leg carries it, the knee folded just enough to clear the ground
+    by the arc (:func:`_fold_knee`), instead of the straight path: where that path needs a pose far from the
+    interpolation (the front leg of a kneeling man swinging back under him), IK tracking it wanders through
+    a hip singularity and pops.
     """
 
     part: str
@@ -82,6 +87,7 @@ class Step:
     duration: float
     velocity: VelocityControl = EASE
     lift: float = 0.0
+    follow: bool = False
 
 
 @dataclass(frozen=True)
@@ -281,6 +287,48 @@ def _foot_track(
     return out
 
 
+def _fold_knee(
+    kin: FigureKinematics,
+    side: str,
+    steps: Sequence[Step],
+    track: np.ndarray,
+    poses: np.ndarray,
+    roots: np.ndarray,
+    times: np.ndarray,
+) -> np.ndarray:
+    """For each ``follow`` step of this foot: fold the knee of the interpolated ``poses`` (in place) by a
+    smooth bump, the least that keeps the foot ``lift`` cm clear of the ground (scaled by the arc), and
+    return ``track`` with the step's window replaced by the heel frames of those poses (shifted so they meet
+    the track at both ends)."""
+    out = np.array(track)
+    knee = kin.dof_slices[f"{side}_knee"].start
+    contacts = [kin.site_names.index(c.format(s=side)) for c in CONTACTS]
+    for st in steps:
+        if not st.follow:
+            continue
+        live = (times >= st.start) & (times <= st.start + st.duration)
+        if not live.any():
+            continue
+        s = np.clip((times[live] - st.start) / max(st.duration, 1e-9), 0.0, 1.0)
+        arc = np.sin(np.pi * s)
+        base = poses[live]
+        mid = arc >= 0.5  # (at the ends of the step the foot is at its keys' places, on the ground)
+        for bump in np.radians(np.arange(0.0, 91.0, 5.0)):  # fixed candidates: deterministic
+            q = base.copy()
+            q[:, knee] = np.minimum(q[:, knee] + bump * arc, kin.upper[knee])
+            low = kin.site_globals(q, roots[live])[:, contacts, 1, 3].min(axis=1)
+            if np.all(low[mid] >= st.lift * arc[mid]):
+                break
+        poses[live] = q
+        fk = heel_frame(kin, side, q, roots[live])
+        i, j = np.flatnonzero(live)[[0, -1]]
+        a = track[i - 1] if i > 0 else track[i]  # planted before the step, at its key after it
+        b = track[min(j + 1, len(track) - 1)]
+        fix = slerp_frames(a @ rigid_inverse(fk[0]), b @ rigid_inverse(fk[-1]), _progress(st, times[live]))
+        out[live] = fix @ fk
+    return out
+
+
 def script_for(
     spec: TransitionSpec, keys: Mapping[str, KeyPosture], figures: Sequence[Figure]
 ) -> MotionScript:
@@ -386,6 +434,7 @@ def record_transition(
         if not steps:
             continue
         track = _foot_track(kin, side, steps, keys, first, times)
+        track = _fold_knee(kin, side, steps, track, poses, roots, times)
         goals.append(ik.Goal(f"{side}_foot.heel", track[:, :3, 3], track[:, :3, :3], 1.0, 2, leg(side)))
     q = track_solve(kin, poses, goals, roots)
     # the ends are the graph's postures exactly
@@ -455,25 +504,37 @@ def _down_to_crawl(src_end: float, t: float) -> tuple[Step, ...]:
     )
 
 
-def _fall(src: str, t: float, knees: bool = True, feet: bool = True) -> tuple[Step, ...]:
-    """Killed: the knees buckle onto the ground (``SLUMP``, the first ~40 %), then the body falls forward;
-    with ``feet`` the feet flop back along arcs (IK), else they just follow the legs' joints."""
+def _fall(src: str, t: float, knees: bool = True, kneeling: bool = False) -> tuple[Step, ...]:
+    """Killed: the knees buckle onto the ground (``SLUMP``, the first ~40 %), then the body falls forward.
+
+    No foot slides along the ground: a foot on it is planted (IK) until it moves, and it moves along an arc
+    clear of the ground. Standing, both feet kick back off the ground as the knees hit it (the kneeling
+    ``SLUMP`` has the feet behind the knees); ``kneeling`` (on the right knee), the shin on the ground stays
+    where it is and the front foot lifts as its knee goes down beside the other. Then the legs flop up
+    into ``DEAD`` as the body lands."""
     out: tuple[Step, ...] = ()
     t1 = 0.4 * t if knees else 0.0
     if knees:
         out += (
             Step("root", "SLUMP", 0.0, t1, VelocityControl.ACCELERATE),
-            Step("legs", "SLUMP", 0.0, t1, VelocityControl.ACCELERATE),
+            Step("legs", "SLUMP", 0.0, t1, EASE if kneeling else VelocityControl.ACCELERATE),
             Step("spine", "SLUMP", 0.0, t1),
             Step("head", "SLUMP", 0.05 * t, t1),
             *_carry("SLUMP", 0.0, t1),
         )
+        if kneeling:
+            out += (Step("left_foot", "SLUMP", 0.0, t1, lift=6.0, follow=True),)
+        else:
+            out += (
+                Step("left_foot", "SLUMP", 0.05 * t, t1 - 0.08 * t, lift=8.0),
+                Step("right_foot", "SLUMP", 0.08 * t, t1 - 0.1 * t, lift=8.0),
+            )
     fall = t - t1
-    if feet:  # the legs flop back as the body goes down: the feet leave the ground rather than slide along it
-        out += (
-            Step("left_foot", "DEAD", t1, fall, lift=12.0),
-            Step("right_foot", "DEAD", t1 + 0.05 * t, fall - 0.05 * t, lift=12.0),
-        )
+    d = 0.05 * t if knees else 0.0  # from the knees the feet leave just after the body starts to fall
+    out += (
+        Step("left_foot", "DEAD", t1 + d, fall - d, lift=12.0),
+        Step("right_foot", "DEAD", t1 + d + 0.05 * t, fall - d - 0.05 * t, lift=12.0),
+    )
     return (
         *out,
         Step("root", "DEAD", t1, fall, VelocityControl.ACCELERATE),
@@ -486,8 +547,11 @@ def _fall(src: str, t: float, knees: bool = True, feet: bool = True) -> tuple[St
     )
 
 
-def _whole_to(dst: str, t: float, velocity: VelocityControl = EASE) -> tuple[Step, ...]:
-    return tuple(
+def _whole_to(dst: str, t: float, velocity: VelocityControl = EASE, lift: float = 0.0) -> tuple[Step, ...]:
+    """Every body part to ``dst`` together; with ``lift`` the feet leave the ground along arcs that high
+    (IK) rather than drag their toes to their new places."""
+    feet = tuple(Step(f, dst, 0.0, t, velocity, lift) for f in FEET) if lift else ()
+    return feet + tuple(
         Step(p, dst, 0.0, t, velocity) for p in ("root", "legs", "spine", "head", "arms", "hands", "rifle")
     )
 
@@ -565,8 +629,8 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
             *_down_to_crawl(0.5, 1.4),
         ),
     ),
-    TransitionSpec("kstow2dead", "KNEEL_STOWED", "DEAD", 1.0, _fall("KNEEL_STOWED", 1.0, feet=False)),
-    TransitionSpec("kfire2dead", "KNEEL_FIRE", "DEAD", 1.0, _fall("KNEEL_FIRE", 1.0, feet=False)),
+    TransitionSpec("kstow2dead", "KNEEL_STOWED", "DEAD", 1.0, _fall("KNEEL_STOWED", 1.0, kneeling=True)),
+    TransitionSpec("kfire2dead", "KNEEL_FIRE", "DEAD", 1.0, _fall("KNEEL_FIRE", 1.0, kneeling=True)),
     TransitionSpec(
         "crawl2prstow",
         "CRAWL",
@@ -590,8 +654,8 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         _raise_rifle("PRONE_STOWED", "PRONE_FIRE", 0.8),
     ),
     TransitionSpec("crawl2dead", "CRAWL", "DEAD", 1.0, _fall("CRAWL", 1.0, knees=False)),
-    TransitionSpec("prstow2dead", "PRONE_STOWED", "DEAD", 1.0, _whole_to("DEAD", 1.0)),
-    TransitionSpec("prfire2dead", "PRONE_FIRE", "DEAD", 0.8, _whole_to("DEAD", 0.8)),
+    TransitionSpec("prstow2dead", "PRONE_STOWED", "DEAD", 1.0, _whole_to("DEAD", 1.0, lift=10.0)),
+    TransitionSpec("prfire2dead", "PRONE_FIRE", "DEAD", 0.8, _whole_to("DEAD", 0.8, lift=10.0)),
     TransitionSpec(
         "stfire2kstow",
         "STAND_FIRE",
