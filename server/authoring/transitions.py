@@ -12,7 +12,16 @@ bring the rifle up"). Targets are the graph's postures (:mod:`server.authoring.p
 2. the rifle is put in the world (``upper_torso`` global times the carry);
 3. one batched IK solve over all frames (:func:`server.authoring.ik.solve`) keeps the palm centres on the
    rifle's grip and handguard (highest priority) and the feet on their trajectories (planted, or stepping
-   along an arc with ``lift``), pulling towards the interpolated joints in the null space.
+   along an arc with ``lift``; stepping back into a kneel the ball of the foot follows the arc and the foot
+   turns ahead of it, so it peels off and lands on its toes), pulling towards the interpolated joints in the
+   null space. Kneeling transitions also put the kneecaps on tracks (planted, or lifted and put down), and a
+   ``free`` step leaves a foot or knee to the interpolated joints until it lands.
+
+In-between keys may be derived from the postures (:data:`DERIVED_KEYS`: moved along the ground, some joints
+turned, the pelvis hiked, the legs solved onto other keys' contacts). Getting down to crawl, the soldier
+kneels with his right knee and toes where the crawl has them, folds the left leg back onto its knee beside
+the right one (the foot never touches the ground on the way), then pivots forward about knees and toes onto
+his forearms, so no contact on the ground slides.
 
 Every target of step 3 interpolates the *actual* states of the start and end key postures, so the first
 and last frames are exactly the graph's postures and consecutive clips join without a jump.
@@ -63,7 +72,8 @@ PARTS: dict[str, tuple[str, ...]] = {
     "hands": tuple(f"{s}_{f}" for s in ("left", "right") for f in FINGERS),
 }
 FEET = ("left_foot", "right_foot")
-SPECIAL = ("root", "rifle", *FEET)
+KNEES = ("left_knee", "right_knee")  # kneecaps (``lower_leg.knee``) put on tracks like the feet (kneeling)
+SPECIAL = ("root", "rifle", *FEET, *KNEES)
 CONTACTS = ("{s}_foot.heel", "{s}_foot.ball", "{s}_toes.distal")  # the points of a foot that touch the ground
 
 
@@ -73,10 +83,12 @@ class Step:
     ``[start, start + duration]``.
 
     ``part`` is a joint group of :data:`PARTS`, ``"root"`` (the pelvis placement), ``"rifle"`` (the carry of
-    the gun) or a foot (``"left_foot"``: the heel frame follows an arc ``lift`` cm high; outside its steps a
-    foot with any step is planted where it last was, a foot without steps is free). A foot step with
-    ``follow`` goes where the interpolated leg carries it, the knee folded just enough to clear the ground
-    by the arc (:func:`_fold_knee`), instead of the straight path: where that path needs a pose far from the
+    the gun), a foot (``"left_foot"``: the heel frame follows an arc ``lift`` cm high; outside its steps a
+    foot with any step is planted where it last was, a foot without steps is free) or a kneecap
+    (``"left_knee"``, likewise, position only). A ``free`` step leaves the foot or knee to the joints (no
+    goal) until it arrives where ``to`` has it, planted there from then on. A foot step with ``follow``
+    goes where the interpolated leg carries it, the knee folded just enough to clear the ground by the arc
+    (:func:`_fold_knee`), instead of the straight path: where that path needs a pose far from the
     interpolation (the front leg of a kneeling man swinging back under him), IK tracking it wanders through
     a hip singularity and pops.
     """
@@ -87,6 +99,8 @@ class Step:
     duration: float
     velocity: VelocityControl = EASE
     lift: float = 0.0
+    arc_site: str = "heel"  # foot steps: the foot site that follows the arc ("ball": peel off the toes)
+    free: bool = False
     follow: bool = False
 
 
@@ -100,6 +114,8 @@ class TransitionSpec:
     duration: float
     steps: tuple[Step, ...] = field(default_factory=tuple)
     in_hand: bool = False  # the right hand carries the rifle (its arm interpolated), not the upper torso
+    # in_hand: when (s) the rifle turns in the right hand from its start to its end grip (default: the clip)
+    hand_turn: tuple[float, float] | None = None
 
 
 # --- clip frames --------------------------------------------------------------------------------------------
@@ -255,6 +271,122 @@ def lift_off_ground(
     return lift
 
 
+# --- in-between keys derived from the postures -------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DerivedKey:
+    """An in-between key built from the posture ``base``: moved along the ground by ``fraction`` of the shift
+    that puts the mean of ``sites`` on the key ``ref``'s (``ref=None``: not moved), with some joints turned
+    by ``joints`` (degrees added to the base's angles), the pelvis hiked (the whole figure turned about the
+    forward axis through one hip joint until the other, ``hike_side``, is ``hike`` cm higher); then the legs
+    are solved so that each ``hold`` site (a foot's heel frame, a kneecap's position) is where the named key
+    has it. The animator's way to a pose between two postures, with every contact where it belongs."""
+
+    base: str
+    ref: str | None = None
+    sites: tuple[str, ...] = ()
+    joints: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
+    fraction: float = 1.0
+    hold: tuple[tuple[str, str], ...] = ()
+    hike: float = 0.0
+    hike_side: str = "left"
+
+
+KNEES_AT_CRAWL = "KNEEL_BOTH@CRAWL"  # on both knees, knees and toes where the crawl has them
+KNEEL_AT_CRAWL = "KNEEL_STOWED@CRAWL"  # on the right knee, that knee and its toes where the crawl has them
+SHUFFLED = "KNEEL_STOWED@SHUFFLED"  # right knee and toes as there, hips most of the way, left foot stays
+SHUFFLING = "KNEEL_STOWED@SHUFFLING"  # on the way there, the right hip hiked so the right knee can lift
+FOLD = "FOLD@CRAWL"  # shuffled, the left heel pulled up behind the left thigh (the foot off the ground)
+TUCK = "TUCK@CRAWL"  # on both knees at the crawl's places, the left shin still folded up behind
+# Knees and toes already where the crawl has them, the soldier only pivots forward about them onto his
+# forearms. Fold and tuck bring the front leg back onto its knee without the foot touching the ground.
+DERIVED_KEYS: dict[str, DerivedKey] = {
+    KNEES_AT_CRAWL: DerivedKey("KNEEL_BOTH", "CRAWL", ("left_toes.distal", "right_toes.distal")),
+    KNEEL_AT_CRAWL: DerivedKey("KNEEL_STOWED", KNEES_AT_CRAWL, ("right_toes.distal",)),
+    SHUFFLED: DerivedKey(
+        "KNEEL_STOWED",
+        KNEES_AT_CRAWL,
+        ("right_toes.distal",),
+        fraction=0.85,
+        hold=(
+            ("right_foot.heel", KNEEL_AT_CRAWL),
+            ("right_lower_leg.knee", KNEEL_AT_CRAWL),
+            ("left_foot.heel", "KNEEL_STOWED"),
+        ),
+    ),
+    SHUFFLING: DerivedKey(
+        "KNEEL_STOWED",
+        KNEES_AT_CRAWL,
+        ("right_toes.distal",),
+        fraction=0.85,
+        hold=(("left_foot.heel", "KNEEL_STOWED"),),
+        hike=5.0,
+        hike_side="right",
+    ),
+    FOLD: DerivedKey(SHUFFLED, joints={"left_hip": (0.0, 40.0, 0.0), "left_knee": (75.0,)}),
+    TUCK: DerivedKey(KNEES_AT_CRAWL, joints={"left_knee": (59.0,)}, hike=4.0),
+}
+
+
+def _derive(kin: FigureKinematics, keys: dict[str, KeyPosture], name: str) -> KeyPosture:
+    """Key ``name`` from ``keys``, or built from :data:`DERIVED_KEYS` (and its bases) and added to them."""
+    if name in keys:
+        return keys[name]
+    d = DERIVED_KEYS[name]
+    base = _derive(kin, keys, d.base)
+    pose = np.array(base.poses[SOLDIER], dtype=np.float64)
+    for j, deg in d.joints.items():
+        pose[kin.dof_slices[j]] += np.radians(deg)
+    pose = kin.clamp(pose)
+    shift = np.eye(4)
+    if d.ref is not None:
+        idx = [kin.site_names.index(s) for s in d.sites]
+
+        def mean_xz(key: KeyPosture) -> np.ndarray:
+            g = kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])
+            return g[idx, :3, 3].mean(axis=0) * np.array([1.0, 0.0, 1.0])
+
+        shift[:3, 3] = d.fraction * (mean_xz(_derive(kin, keys, d.ref)) - mean_xz(base))
+    if d.hike:
+        g = kin.site_globals(pose, shift @ base.locations[SOLDIER])
+        other = "right" if d.hike_side == "left" else "left"
+        pivot = g[kin.site_names.index(f"lower_torso.{other}_hip"), :3, 3]
+        up = g[kin.site_names.index(f"lower_torso.{d.hike_side}_hip"), :3, 3]
+        a = np.arcsin(d.hike / np.linalg.norm(up - pivot)) * np.sign(up[0] - pivot[0])
+        turn = np.eye(4)
+        turn[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]  # about world Z
+        about = np.eye(4)
+        about[:3, 3] = pivot
+        shift = about @ turn @ rigid_inverse(about) @ shift
+    locations = {f: shift @ loc for f, loc in base.locations.items()}
+    if d.hold:
+        goals = []
+        for site, src in d.hold:
+            key = _derive(kin, keys, src)
+            g = kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])[kin.site_names.index(site)]
+            rot = g[:3, :3] if site.endswith(".heel") else None
+            goals.append(ik.Goal(site, g[:3, 3], rot, 1.0, 1, leg(site.split("_")[0])))
+        pose, _ = ik.solve(
+            kin, pose, goals, locations[SOLDIER], iterations=200, rest_pose=pose, rest_gain=0.1
+        )
+    keys[name] = KeyPosture(name, {**base.poses, SOLDIER: pose}, locations)
+    return keys[name]
+
+
+def with_derived_keys(
+    kin: FigureKinematics, keys: Mapping[str, KeyPosture], spec: TransitionSpec
+) -> Mapping[str, KeyPosture]:
+    """``keys`` plus the :data:`DERIVED_KEYS` that ``spec`` steps to (other specs get ``keys`` unchanged)."""
+    wanted = sorted({st.to for st in spec.steps if st.to in DERIVED_KEYS and st.to not in keys})
+    if not wanted:
+        return keys
+    out = dict(keys)
+    for name in wanted:
+        _derive(kin, out, name)
+    return out
+
+
 # --- recording a transition ---------------------------------------------------------------------------------
 
 
@@ -271,18 +403,60 @@ def _foot_track(
     first: KeyPosture,
     times: np.ndarray,
 ) -> np.ndarray:
-    """Heel frames over the clip: planted, then each step's arc to its key's heel frame."""
+    """Heel frames over the clip: planted, then each step's arc to its key's heel frame.
+
+    A step's ``arc_site`` (a site of the foot segment) is the point that follows the lerp + lift arc while
+    the foot turns about it; stepping back into a kneel it is the ball, so the ball leaves the ground at once
+    instead of being pressed down as the heel rises (the heel arc dragged it along the ground)."""
     cur = heel_frame(kin, side, first.poses[SOLDIER], first.locations[SOLDIER])
     out = np.broadcast_to(cur, (len(times), 4, 4)).copy()
     for st in sorted(steps, key=lambda s: s.start):
         key = keys[st.to]
         nxt = heel_frame(kin, side, key.poses[SOLDIER], key.locations[SOLDIER])
+        off = np.eye(4)
+        if st.arc_site != "heel":  # the site's frame relative to the heel's (both on the foot segment)
+            g = kin.site_globals(first.poses[SOLDIER], first.locations[SOLDIER])
+            heel = g[kin.site_names.index(f"{side}_foot.heel")]
+            off = rigid_inverse(heel) @ g[kin.site_names.index(f"{side}_foot.{st.arc_site}")]
         live = times >= st.start
         u = _progress(st, times[live])
-        track = slerp_frames(cur, nxt, u)
+        track = slerp_frames(cur @ off, nxt @ off, u)
+        if st.arc_site != "heel":  # the foot turns ahead of its travel (the heel peels up first), so the
+            # ankle need not bend past its limit while the knee is still straight
+            track[:, :3, :3] = slerp_frames(cur @ off, nxt @ off, np.sqrt(u))[:, :3, :3]
         s = np.clip((times[live] - st.start) / max(st.duration, 1e-9), 0.0, 1.0)
         track[:, 1, 3] += st.lift * np.sin(np.pi * s)
-        out[live] = track
+        out[live] = track @ rigid_inverse(off)
+        cur = nxt
+    return out
+
+
+def _knee_track(
+    kin: FigureKinematics,
+    side: str,
+    steps: Sequence[Step],
+    keys: Mapping[str, KeyPosture],
+    first: KeyPosture,
+    times: np.ndarray,
+) -> np.ndarray:
+    """Kneecap positions over the clip: planted, then each step's arc (lerp + ``lift``) to its key's. A knee
+    goes over to its new place only in the middle 70 % of the step, so it leaves and lands vertically
+    instead of sliding along the ground."""
+    i = kin.site_names.index(f"{side}_lower_leg.knee")
+
+    def at(key: KeyPosture) -> np.ndarray:
+        return kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])[i, :3, 3]
+
+    cur = at(first)
+    out = np.broadcast_to(cur, (len(times), 3)).copy()
+    for st in sorted(steps, key=lambda s: s.start):
+        nxt = at(keys[st.to])
+        live = times >= st.start
+        u = _progress(st, times[live])
+        s = np.clip((times[live] - st.start) / max(st.duration, 1e-9), 0.0, 1.0)
+        u_over = np.asarray(st.velocity(np.clip((s - 0.15) / 0.7, 0.0, 1.0)), np.float64)
+        out[live] = cur + u_over[:, None] * (nxt - cur)
+        out[live, 1] = cur[1] + u * (nxt[1] - cur[1]) + st.lift * np.sin(np.pi * s)
         cur = nxt
     return out
 
@@ -329,12 +503,24 @@ def _fold_knee(
     return out
 
 
+def _goal_weight(steps: Sequence[Step], times: np.ndarray) -> float | np.ndarray:
+    """1 where a foot or knee goal holds, 0 during its ``free`` steps (scalar 1 when it has none)."""
+    free = [st for st in steps if st.free]
+    if not free:
+        return 1.0
+    w = np.ones(len(times))
+    for st in free:
+        w[(times >= st.start) & (times < st.start + st.duration)] = 0.0
+    return w
+
+
 def script_for(
     spec: TransitionSpec, keys: Mapping[str, KeyPosture], figures: Sequence[Figure]
 ) -> MotionScript:
     """The primitive motions of ``spec`` as a motion script (rifle location = its carry, see module doc)."""
     soldier, rifle = figures
     kin = FigureKinematics(soldier)
+    keys = with_derived_keys(kin, keys, spec)
     first = keys[spec.start]
     initial = KeyPosture(
         "initial",
@@ -367,7 +553,7 @@ def script_for(
                     name=f"{st.part}->{st.to}",
                 )
             )
-        elif st.part not in FEET:
+        elif st.part not in FEET + KNEES:
             raise KeyError(f"{spec.name}: unknown body part {st.part!r}")
     return script
 
@@ -392,7 +578,8 @@ def _in_right_hand(
         g = kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])[i]
         return rigid_inverse(g) @ key.locations[RIFLE] @ grip
 
-    u = np.asarray(EASE(np.clip(times / spec.duration, 0.0, 1.0)), np.float64)
+    a, b = spec.hand_turn or (0.0, spec.duration)
+    u = np.asarray(EASE(np.clip((times - a) / (b - a), 0.0, 1.0)), np.float64)
     held = np.stack([slerp_frames(rel(first), rel(last), np.array([w]))[0] for w in u])
     return palm @ held @ rigid_inverse(grip)
 
@@ -404,6 +591,7 @@ def record_transition(
     soldier, rifle = figures
     kin = FigureKinematics(soldier)
     rkin = FigureKinematics(rifle)
+    keys = with_derived_keys(kin, keys, spec)
     frames = script_for(spec, keys, figures).evaluate(fps)
     times = frames.times
     poses = frames.poses[SOLDIER]
@@ -435,7 +623,15 @@ def record_transition(
             continue
         track = _foot_track(kin, side, steps, keys, first, times)
         track = _fold_knee(kin, side, steps, track, poses, roots, times)
-        goals.append(ik.Goal(f"{side}_foot.heel", track[:, :3, 3], track[:, :3, :3], 1.0, 2, leg(side)))
+        w = _goal_weight(steps, times)
+        goals.append(ik.Goal(f"{side}_foot.heel", track[:, :3, 3], track[:, :3, :3], w, 2, leg(side)))
+    for knee in KNEES:  # only kneeling transitions have knee steps
+        side = knee.split("_")[0]
+        steps = [s for s in spec.steps if s.part == knee]
+        if steps:
+            pos = _knee_track(kin, side, steps, keys, first, times)
+            w = _goal_weight(steps, times)
+            goals.append(ik.Goal(f"{side}_lower_leg.knee", pos, None, w, 2, leg(side)))
     q = track_solve(kin, poses, goals, roots)
     # the ends are the graph's postures exactly
     q[0], q[-1] = first.poses[SOLDIER], last.poses[SOLDIER]
@@ -475,12 +671,18 @@ def _kneel_down(dst: str, t: float) -> tuple[Step, ...]:
     """Standing -> kneeling on the right knee: step the left foot forward, lower the hips, right knee down."""
     return (
         Step("left_foot", dst, 0.0, 0.35 * t, lift=8.0),
-        Step("right_foot", dst, 0.2 * t, 0.65 * t, lift=4.0),
+        Step("right_foot", dst, 0.2 * t, 0.65 * t, lift=10.0, arc_site="ball"),
         Step("root", dst, 0.08 * t, 0.8 * t),
         Step("legs", dst, 0.08 * t, 0.8 * t),
         Step("spine", dst, 0.15 * t, 0.8 * t),
         Step("head", dst, 0.25 * t, 0.75 * t),
     )
+
+
+def _arms(dst: str, start: float, duration: float) -> tuple[Step, ...]:
+    """Arms and fingers to ``dst`` (the rifle in the right hand follows them): an in-between carry of an
+    ``in_hand`` clip, whose palms keep their start grip until its one rifle step (the last carry)."""
+    return (Step("arms", dst, start, duration), Step("hands", dst, start, duration))
 
 
 def _carry(dst: str, start: float, duration: float) -> tuple[Step, ...]:
@@ -492,10 +694,66 @@ def _carry(dst: str, start: float, duration: float) -> tuple[Step, ...]:
     )
 
 
+def _left_knee_down(t0: float, t1: float) -> tuple[Step, ...]:
+    """On the right knee (knees where the crawl has them), bring the left leg back onto its knee beside the
+    right one by ``t1``: the left heel comes up behind the thigh (:data:`FOLD`, the foot leaves the
+    ground), the thigh swings down until the knee is on its place (:data:`TUCK`), then the shin
+    comes down behind onto the toes; knee and toes stay from then on."""
+    d = t1 - t0
+    return (
+        Step("left_foot", KNEES_AT_CRAWL, t0, d, free=True),
+        Step("left_knee", KNEES_AT_CRAWL, 0.0, t1, free=True),
+        Step("right_foot", KNEES_AT_CRAWL, t0, d),
+        Step("right_knee", KNEES_AT_CRAWL, t0, d),
+        Step("legs", FOLD, t0, 0.25 * d),
+        Step("legs", TUCK, t0 + 0.25 * d, 0.45 * d),
+        Step("legs", KNEES_AT_CRAWL, t0 + 0.7 * d, 0.3 * d),
+        Step("root", TUCK, t0, 0.6 * d),
+        Step("root", KNEES_AT_CRAWL, t0 + 0.6 * d, 0.4 * d),
+        Step("spine", KNEES_AT_CRAWL, t0, d),
+        Step("head", KNEES_AT_CRAWL, t0, d),
+        *_arms(KNEES_AT_CRAWL, t0, d),
+    )
+
+
+def _stand_to_crawl(ta: float, tb: float, t: float) -> tuple[Step, ...]:
+    """Standing -> crawl: kneel down (the right foot steps back onto its knee where the crawl has it, the
+    left foot forward: :data:`SHUFFLED` at ``ta``), bring the left knee down beside the right one (``tb``),
+    then pivot forward about knees and toes onto the forearms (``t``)."""
+    return (
+        *_kneel_down(SHUFFLED, ta),
+        Step("right_knee", SHUFFLED, 0.0, ta, free=True),
+        *_arms(SHUFFLED, 0.1 * ta, 0.85 * ta),
+        *_left_knee_down(ta, tb),
+        *_down_to_crawl(tb, t),
+    )
+
+
+def _kneel_to_crawl(ta: float, tb: float, t: float) -> tuple[Step, ...]:
+    """Kneeling -> crawl: shuffle the right knee back (the right hip hikes, the knee is lifted and put down
+    where the crawl has it: :data:`SHUFFLED` at ``ta``), bring the left knee down beside the right
+    (``tb``), then pivot forward onto the forearms (``t``)."""
+    return (
+        Step("right_foot", SHUFFLED, 0.05 * ta, 0.8 * ta, lift=5.0, arc_site="ball"),
+        Step("right_knee", SHUFFLED, 0.05 * ta, 0.8 * ta, lift=5.0),
+        Step("left_foot", SHUFFLED, 0.0, ta),
+        Step("root", SHUFFLING, 0.0, 0.5 * ta),
+        Step("root", SHUFFLED, 0.5 * ta, 0.5 * ta),
+        Step("legs", SHUFFLED, 0.0, ta),
+        *_left_knee_down(ta, tb),
+        *_down_to_crawl(tb, t),
+    )
+
+
 def _down_to_crawl(src_end: float, t: float) -> tuple[Step, ...]:
-    """From both knees (reached at ``src_end``) forward onto the forearms: the CRAWL posture at ``t``."""
+    """From both knees (reached at ``src_end``) forward onto the forearms: the CRAWL posture at ``t``. The
+    knees and toes are already where the crawl has them, so the body pivots about them (feet held)."""
     d = t - src_end
     return (
+        Step("left_foot", "CRAWL", src_end, d),
+        Step("right_foot", "CRAWL", src_end, d),
+        Step("left_knee", "CRAWL", src_end, d),
+        Step("right_knee", "CRAWL", src_end, d),
         Step("root", "CRAWL", src_end, d),
         Step("legs", "CRAWL", src_end, d),
         Step("spine", "CRAWL", src_end, 0.85 * d),
@@ -577,14 +835,8 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         "STAND_STOWED",
         "CRAWL",
         2.0,
-        (
-            Step("root", "KNEEL_BOTH", 0.0, 0.9),
-            Step("legs", "KNEEL_BOTH", 0.0, 0.9),
-            Step("spine", "KNEEL_BOTH", 0.1, 0.8),
-            Step("head", "KNEEL_BOTH", 0.1, 0.8),
-            *_carry("KNEEL_BOTH", 0.1, 0.8),
-            *_down_to_crawl(0.9, 2.0),
-        ),
+        _stand_to_crawl(0.75, 1.35, 2.0),
+        hand_turn=(1.35, 1.95),
     ),
     TransitionSpec(
         "ststow2kfire",
@@ -620,14 +872,8 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         "KNEEL_STOWED",
         "CRAWL",
         1.4,
-        (
-            Step("root", "KNEEL_BOTH", 0.0, 0.5),
-            Step("legs", "KNEEL_BOTH", 0.0, 0.5),
-            Step("spine", "KNEEL_BOTH", 0.0, 0.5),
-            Step("head", "KNEEL_BOTH", 0.0, 0.5),
-            *_carry("KNEEL_BOTH", 0.0, 0.5),
-            *_down_to_crawl(0.5, 1.4),
-        ),
+        _kneel_to_crawl(0.3, 0.85, 1.4),
+        hand_turn=(0.85, 1.35),
     ),
     TransitionSpec("kstow2dead", "KNEEL_STOWED", "DEAD", 1.0, _fall("KNEEL_STOWED", 1.0, kneeling=True)),
     TransitionSpec("kfire2dead", "KNEEL_FIRE", "DEAD", 1.0, _fall("KNEEL_FIRE", 1.0, kneeling=True)),
