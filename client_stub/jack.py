@@ -125,31 +125,92 @@ class UpdateBuffer:
         return front, self.fresh, self.dofs, self.positions, self.orientations
 
 
+class ServerView:
+    """What a client knows of the server, kept from its events: the handshake, update tables and their
+    double buffers, READY's soldiers, created and refused soldiers, STATUS, errors, the reason it failed.
+
+    Shared by :class:`JackProc` (its own network thread) and :class:`client_stub.replay.link.ServerLink`
+    (inside the caller's trio run); each adds only what its concurrency needs (events, locks, replies)."""
+
+    def __init__(self) -> None:
+        self.accept: Accept | None = None
+        self.tables: dict[int, UpdateTable] = {}
+        self.ready_soldiers: dict[int, int] = {}  # server index -> update table, from READY
+        self.created: dict[int, int] = {}  # server index -> update table, from SOLDIER_CREATED
+        self.refused: dict[int, Error] = {}  # CREATE_SOLDIER id -> its error
+        self.errors: list[Error | ProtocolError] = []
+        self.status: Status | None = None
+        self.failure: str | None = None
+        self.last_tick = 0
+        self._buffers: dict[int, UpdateBuffer] = {}
+
+    def _absorb(self, event: object) -> None:
+        """Keep what ``event`` says (a :class:`JackProc` calls it with its lock held)."""
+        if isinstance(event, JointUpdates):
+            buf = self._buffers.get(event.table)
+            if buf is not None:
+                buf.write(event)
+            self.last_tick = event.tick
+        elif isinstance(event, Accept):
+            self.accept = event
+        elif isinstance(event, UpdateTableMsg):
+            self.tables[event.table.table_id] = event.table
+            self._buffers[event.table.table_id] = UpdateBuffer(event.table)
+        elif isinstance(event, Ready):
+            self.ready_soldiers = dict(event.soldiers)
+        elif isinstance(event, SoldierCreated):
+            self.created[event.index] = event.table
+        elif isinstance(event, Status):
+            self.status = event
+        elif isinstance(event, Error):
+            self.errors.append(event)
+            if event.ref is not None:
+                self.refused[event.ref] = event
+            if is_fatal(event.code):
+                self.failure = f"server error {event.code}: {event.message}"
+        elif isinstance(event, Goodbye):
+            self.failure = self.failure or f"server said goodbye: {event.reason}"
+
+    def _flip(self) -> list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """Flip every table's double buffer (a :class:`JackProc` calls it with its lock held)."""
+        return [(tid, *buf.flip()) for tid, buf in self._buffers.items()]
+
+    @staticmethod
+    def _fresh(
+        flipped: list[tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    ) -> list[UpdateBatch]:
+        """The rows of the flipped front buffers that arrived since the last swap, marked taken."""
+        out = []
+        for tid, front, fresh, dofs, positions, orientations in flipped:
+            rows = np.flatnonzero(fresh[front])
+            if not len(rows):
+                continue
+            fresh[front, rows] = False
+            out.append(
+                UpdateBatch(tid, rows, dofs[front, rows], positions[front, rows], orientations[front, rows])
+            )
+        return out
+
+
 @dataclass
 class _Pending:
     done: threading.Event = field(default_factory=threading.Event)
     result: SoldierCreated | Error | None = None
 
 
-class JackProc:
+class JackProc(ServerView):
     """Figure 9: the connection to Jack (the server), its update tables and its soldiers."""
 
     def __init__(self, name: str = "ttes-stub", role: str = "controller") -> None:
+        super().__init__()
         self.name = name
         self.role = role
         self.connected = False  # handshake done
         self.jackready = False  # READY received
         self.quitting = False
         self.closed = threading.Event()  # the network task has ended
-        self.accept: Accept | None = None
-        self.tables: dict[int, UpdateTable] = {}
-        self.ready_soldiers: dict[int, int] = {}  # server index -> update table, from READY
         self.table: dict[int, JackSoldier] = {}  # Figure 9's table of soldiers, by server index
-        self.errors: list[Error | ProtocolError] = []
-        self.status: Status | None = None
-        self.last_tick = 0
         self._lock = threading.Lock()
-        self._buffers: dict[int, UpdateBuffer] = {}
         self._pending: dict[int, _Pending] = {}
         self._next_id = 1
         self._connected = threading.Event()
@@ -160,7 +221,6 @@ class JackProc:
         self._conn: Connection | None = None
         self._outbox: trio.MemorySendChannel[bytes] | None = None
         self._cancel: trio.CancelScope | None = None
-        self.failure: str | None = None
 
     # -- connecting ----------------------------------------------------------------------------------------
 
@@ -250,21 +310,10 @@ class JackProc:
 
     def swap(self) -> list[UpdateBatch]:
         """Take every pose that arrived since the last call (the consumer side of the double buffers)."""
-        flipped = []
         with self._lock:
             self._updated.clear()
-            for tid, buf in self._buffers.items():
-                flipped.append((tid, *buf.flip()))
-        out = []
-        for tid, front, fresh, dofs, positions, orientations in flipped:
-            rows = np.flatnonzero(fresh[front])
-            if not len(rows):
-                continue
-            fresh[front, rows] = False
-            out.append(
-                UpdateBatch(tid, rows, dofs[front, rows], positions[front, rows], orientations[front, rows])
-            )
-        return out
+            flipped = self._flip()
+        return self._fresh(flipped)
 
     def quit(self, reason: str = "quit", timeout: float = 5.0) -> None:
         """Say goodbye and stop the network thread."""
@@ -366,40 +415,24 @@ class JackProc:
             self._handle(event)
 
     def _handle(self, event: object) -> None:
-        if isinstance(event, JointUpdates):
-            with self._lock:
-                buf = self._buffers.get(event.table)
-                if buf is not None:
-                    buf.write(event)
+        with self._lock:
+            self._absorb(event)
+            if isinstance(event, JointUpdates):
                 self._updated.set()
-            self.last_tick = event.tick
-        elif isinstance(event, Accept):
-            self.accept = event
+        if isinstance(event, Accept):
             self.connected = True
             self._connected.set()
-        elif isinstance(event, UpdateTableMsg):
-            with self._lock:
-                self.tables[event.table.table_id] = event.table
-                self._buffers[event.table.table_id] = UpdateBuffer(event.table)
         elif isinstance(event, Ready):
-            self.ready_soldiers = dict(event.soldiers)
             self.jackready = True
             self._ready.set()
         elif isinstance(event, SoldierCreated):
             self._resolve(event.id, event)
         elif isinstance(event, Ping):
             self._send_now(Pong(event.nonce))
-        elif isinstance(event, Status):
-            self.status = event
         elif isinstance(event, Error):
-            self.errors.append(event)
             log.warning("server error %d: %s", event.code, event.message)
             if event.ref is not None:
                 self._resolve(event.ref, event)
-            if is_fatal(event.code):
-                self.failure = f"server error {event.code}: {event.message}"
-        elif isinstance(event, Goodbye):
-            self.failure = self.failure or f"server said goodbye: {event.reason}"
 
     def _resolve(self, rid: int, result: SoldierCreated | Error) -> None:
         with self._lock:

@@ -16,10 +16,10 @@ import logging
 import numpy as np
 import trio
 
-from client_stub.jack import STARTUP_JCL, JackError, UpdateBatch, UpdateBuffer
+from client_stub.jack import STARTUP_JCL, JackError, ServerView, UpdateBatch
 from protocol.connection import CLIENT, NEED_DATA, Connection
 from protocol.entity import ENTITY_REQUEST_DTYPE
-from protocol.errors import LocalProtocolError, is_fatal
+from protocol.errors import LocalProtocolError
 from protocol.events import (
     Accept,
     ConnectionClosed,
@@ -30,40 +30,27 @@ from protocol.events import (
     Goodbye,
     Hello,
     Jcl,
-    JointUpdates,
     Ping,
     Pong,
     ProtocolError,
     Ready,
     RemoveSoldier,
-    SoldierCreated,
-    Status,
     Subscribe,
-    UpdateTableMsg,
 )
-from protocol.update_table import UpdateTable
 
 log = logging.getLogger("ttes.replay.link")
 
 
-class ServerLink:
+class ServerLink(ServerView):
     """One TCP connection to the server; open it with :meth:`open` inside a nursery."""
 
     def __init__(self, name: str = "ttes-replay", role: str = "controller") -> None:
+        super().__init__()
         self.name = name
         self.role = role
-        self.accept: Accept | None = None
-        self.tables: dict[int, UpdateTable] = {}
-        self.ready_soldiers: dict[int, int] = {}
-        self.created: dict[int, int] = {}  # server index -> update table, from SOLDIER_CREATED
-        self.refused: dict[int, Error] = {}  # CREATE_SOLDIER id -> its error
-        self.errors: list[Error | ProtocolError] = []
-        self.status: Status | None = None
-        self.failure: str | None = None
         self.bytes_sent = 0
         self._conn = Connection(CLIENT)
         self._next_id = 1
-        self._buffers: dict[int, UpdateBuffer] = {}
         self._accepted = trio.Event()
         self._ready = trio.Event()
         self._closed = trio.Event()
@@ -149,18 +136,7 @@ class ServerLink:
 
     def swap(self) -> list[UpdateBatch]:
         """Every pose that arrived since the last call (as ``JackProc.swap``)."""
-        out = []
-        for tid, buf in self._buffers.items():
-            front, fresh, dofs, positions, orientations = buf.flip()
-            rows = np.flatnonzero(fresh[front])
-            if len(rows):
-                fresh[front, rows] = False
-                out.append(
-                    UpdateBatch(
-                        tid, rows, dofs[front, rows], positions[front, rows], orientations[front, rows]
-                    )
-                )
-        return out
+        return self._fresh(self._flip())
 
     async def drain(self) -> None:
         """Wait until everything queued so far has been handed to the socket."""
@@ -242,21 +218,11 @@ class ServerLink:
             self._handle(event)
 
     def _handle(self, event: object) -> None:
-        if isinstance(event, JointUpdates):
-            buf = self._buffers.get(event.table)
-            if buf is not None:
-                buf.write(event)
-        elif isinstance(event, Accept):
-            self.accept = event
+        self._absorb(event)
+        if isinstance(event, Accept):
             self._accepted.set()
-        elif isinstance(event, UpdateTableMsg):
-            self.tables[event.table.table_id] = event.table
-            self._buffers[event.table.table_id] = UpdateBuffer(event.table)
         elif isinstance(event, Ready):
-            self.ready_soldiers = dict(event.soldiers)
             self._ready.set()
-        elif isinstance(event, SoldierCreated):
-            self.created[event.index] = event.table
         elif isinstance(event, Ping):
             self.send(Pong(event.nonce))
         elif isinstance(event, Pong):
@@ -264,14 +230,5 @@ class ServerLink:
             if pong is not None:
                 self._answered.add(event.nonce)
                 pong.set()
-        elif isinstance(event, Status):
-            self.status = event
         elif isinstance(event, Error):
-            self.errors.append(event)
-            if event.ref is not None:
-                self.refused[event.ref] = event
-            if is_fatal(event.code):
-                self.failure = f"server error {event.code}: {event.message}"
             log.debug("server error %d: %s", event.code, event.message)
-        elif isinstance(event, Goodbye):
-            self.failure = self.failure or f"server said goodbye: {event.reason}"
