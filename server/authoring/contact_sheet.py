@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from server.authoring.quality import BACKWARD_WORDS, channelset_field
+from server.authoring.quality import BACKWARD_WORDS
 from server.motion.channelset import Channelset
 from server.peabody.fk import FigureKinematics
 from server.peabody.model import Figure
@@ -205,7 +205,7 @@ def render_contact_sheet(
 
     def segment_states(cs: Channelset) -> dict[str, np.ndarray]:
         played = _play(cs, figures)
-        speed = channelset_field(cs, "ground_speed") if ground_motion else None
+        speed = cs.ground_speed if ground_motion else None
         if speed:  # in-place locomotion: put the entity's travel back so strides cross the checkerboard
             sign = 1.0 if any(w in cs.name.lower() for w in BACKWARD_WORDS) else -1.0
             travel = sign * speed * np.arange(cs.nframes) / cs.fps

@@ -38,6 +38,7 @@ axes, Shuster & Markley 2003).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -73,6 +74,22 @@ class Goal:
     joints: Sequence[str] | None = None
     orientation_weight: float = 20.0
     radius: float = 0.0
+
+    def rows(self, rows: slice | np.ndarray) -> Goal:
+        """This goal for the poses ``rows`` only: per-pose targets and weights sliced, shared ones kept."""
+
+        def pick(v: Any, ndim: int) -> Any:
+            if v is None:
+                return None
+            a = np.asarray(v, np.float64)
+            return a[rows] if a.ndim > ndim else a
+
+        return dataclasses.replace(
+            self,
+            target_position=pick(self.target_position, 1),
+            target_orientation=pick(self.target_orientation, 2),
+            weight=pick(self.weight, 0),
+        )
 
 
 @dataclass

@@ -410,7 +410,7 @@ class MotionScript:
         rows = np.flatnonzero(np.any(weights > 0, axis=0))
         if not len(rows):
             return
-        sub = [_rows_of(g, rows) for g in goals]
+        sub = [g.rows(rows) for g in goals]
         pose = frames.poses[name][rows]
         opts = dict(self.ik_options)
         q, report = ik.solve(kin, pose, sub, frames.locations[name][rows], rest_pose=pose, **opts)
@@ -476,26 +476,6 @@ class MotionScript:
             t = rot
         ori = t[:, :3, :3] if item.orientation else None
         return ik.Goal(item.site, t[:, :3, 3], ori, w, item.priority, item.joints, item.orientation_weight)
-
-
-def _rows_of(goal: ik.Goal, rows: np.ndarray) -> ik.Goal:
-    """The goal restricted to the frames ``rows`` (per-frame targets and weights are sliced)."""
-
-    def pick(v: Any, ndim: int) -> Any:
-        if v is None:
-            return None
-        a = np.asarray(v, np.float64)
-        return a[rows] if a.ndim > ndim else a
-
-    return ik.Goal(
-        goal.site,
-        pick(goal.target_position, 1),
-        pick(goal.target_orientation, 2),
-        pick(goal.weight, 0),
-        goal.priority,
-        goal.joints,
-        goal.orientation_weight,
-    )
 
 
 def _slerp(q0: np.ndarray, q1: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -163,23 +163,6 @@ def play(channelset: Channelset, figures: FigureSet) -> ClipFrames:
     return ClipFrames(channelset, poses, locs)
 
 
-def channelset_field(cs: Channelset, name: str) -> float | None:
-    """An optional numeric channelset field (``ground_speed``, ``stride_length``): an attribute, or an entry
-    of a ``fields``/``extra``/``metadata`` mapping; None when absent or not a finite number."""
-    v = getattr(cs, name, None)
-    if v is None:
-        for holder in ("fields", "extra", "metadata", "extras"):
-            m = getattr(cs, holder, None)
-            if isinstance(m, dict) and m.get(name) is not None:
-                v = m[name]
-                break
-    try:
-        f = float(v) if v is not None else None
-    except (TypeError, ValueError):
-        return None
-    return f if f is not None and np.isfinite(f) else None
-
-
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """``[start, stop)`` of the runs of True."""
     d = np.diff(np.r_[0, mask.astype(np.int8), 0])
@@ -241,8 +224,8 @@ def check_clip(
     }
     sites = kin.site_globals(q, loc)
     # ground motion added back for in-place locomotion
-    speed = channelset_field(cs, "ground_speed")
-    stride = channelset_field(cs, "stride_length")
+    speed = cs.ground_speed
+    stride = cs.stride_length
     shift = np.zeros((n, 3))
     if locomotion and speed is not None:
         shift[:, 2] = direction * speed * t

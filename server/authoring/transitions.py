@@ -186,24 +186,6 @@ def slerp_frames(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
     return quaternion.to_transform(p, q)
 
 
-def _goal_rows(goal: ik.Goal, rows: slice) -> ik.Goal:
-    def pick(v: object, ndim: int) -> object:
-        if v is None:
-            return None
-        a = np.asarray(v, np.float64)
-        return a[rows] if a.ndim > ndim else a
-
-    return ik.Goal(
-        goal.site,
-        pick(goal.target_position, 1),
-        pick(goal.target_orientation, 2),
-        pick(goal.weight, 0),
-        goal.priority,
-        goal.joints,
-        goal.orientation_weight,
-    )
-
-
 def _track(
     kin: FigureKinematics,
     poses: np.ndarray,
@@ -219,7 +201,7 @@ def _track(
     prev_out = poses[order[0]]
     for i in order:
         start = kin.clamp(prev_out + (poses[i] - prev_in))
-        sub = [_goal_rows(g, slice(i, i + 1)) for g in goals]
+        sub = [g.rows(slice(i, i + 1)) for g in goals]
         q, _ = ik.solve(
             kin,
             start[None],

@@ -83,22 +83,6 @@ def _family(base: str) -> str:
     return base.split("_", 1)[0]
 
 
-def _field(cs: Channelset, name: str) -> float | None:
-    """An optional numeric channelset field (adapter: attribute or a ``fields``/``extra`` mapping)."""
-    v = getattr(cs, name, None)
-    if v is None:
-        for holder in ("fields", "extra", "metadata", "extras"):
-            m = getattr(cs, holder, None)
-            if isinstance(m, dict) and m.get(name) is not None:
-                v = m[name]
-                break
-    try:
-        f = float(v) if v is not None else None
-    except (TypeError, ValueError):
-        return None
-    return f if f is not None and math.isfinite(f) and f > 0 else None
-
-
 @dataclass(frozen=True)
 class PathStep:
     """One arc of a posture change: play ``clip`` forwards or backwards over ``duration`` s into ``end``."""
@@ -334,10 +318,10 @@ def _strip_travel(cs: Channelset, ref_type: str) -> tuple[Channelset, float]:
 
 
 def _ground_speed(cs: Channelset, travel_cm: float, family: str) -> float:
-    gs = _field(cs, "ground_speed")
-    if gs is not None:
+    gs = cs.ground_speed
+    if gs:  # recorded (0 or absent: derive it)
         return gs / 100.0
-    stride = _field(cs, "stride_length")
+    stride = cs.stride_length or None
     if stride is None and travel_cm >= MIN_TRAVEL_CM:
         stride = travel_cm
     if stride is not None and cs.duration > 0:
