@@ -428,3 +428,49 @@ def test_record_bind_sample_and_reroot_on_the_shipped_di_figure(tmp_path: Path) 
     site = kin.site_names[-1]
     rerooted = reroot_figure_channel(back, di, site, kin)
     assert set(rerooted.roots(rerooted.channel("Di2_0"))) == {site}
+
+
+# --- optional fields: release_frame and end_offset ----------------------------------------------------------
+
+
+def test_release_frame_and_end_offset_round_trip_through_text_and_cache(tmp_path: Path) -> None:
+    import dataclasses
+
+    cs = synthetic_channelset("turn", [make_soldier(ndof=6), toy_rifle()], nframes=12)
+    cs = dataclasses.replace(cs, release_frame=7, end_offset=(-40.0, 12.5, 90.0))
+    text = format_channelset(cs)
+    assert "release_frame = 7;" in text and "end_offset = (-40, 12.5, 90);" in text
+    (back,) = parse_channelsets(text, "x")
+    assert back.release_frame == 7 and back.end_offset == (-40.0, 12.5, 90.0)
+    save_npz(back, tmp_path / "c.npz")
+    cached = load_npz(tmp_path / "c.npz")
+    assert cached is not None and cached.release_frame == 7 and cached.end_offset == (-40.0, 12.5, 90.0)
+    plain = synthetic_channelset("plain", [make_soldier(ndof=6)], nframes=4)
+    save_npz(plain, tmp_path / "p.npz")
+    again = load_npz(tmp_path / "p.npz")
+    assert again is not None and again.release_frame is None and again.end_offset is None
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("release_frame", "12", r"release_frame = 12 but the frames are 0\.\.2"),
+        ("release_frame", "1.5", "release_frame must be a non-negative integer"),
+        ("end_offset", "(1, 2)", "expected 3 numbers"),
+    ],
+)
+def test_bad_optional_fields_are_located_errors(field: str, value: str, message: str) -> None:
+    text = FIGURE6.replace("  count = 2;", f"  count = 2;\n  {field} = {value};")
+    with pytest.raises(ChannelsetError, match=message) as info:
+        parse_channelsets(text, "bad.chset.env")
+    assert "bad.chset.env" in str(info.value)
+
+
+def test_release_frame_out_of_range_is_refused_by_the_channelset() -> None:
+    import dataclasses
+
+    cs = synthetic_channelset("c", [make_soldier(ndof=6)], nframes=4)
+    with pytest.raises(ChannelsetError, match=r"release_frame must be a frame 0\.\.3"):
+        dataclasses.replace(cs, release_frame=4)
+    with pytest.raises(ChannelsetError, match="end_offset must be three finite numbers"):
+        dataclasses.replace(cs, end_offset=(0.0, math.nan, 0.0))

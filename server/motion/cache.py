@@ -19,7 +19,7 @@ import numpy as np
 
 from server.motion.channelset import Channelset, SharedChannel
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 log = logging.getLogger(__name__)
 
 
@@ -59,6 +59,8 @@ def save_npz(chset: Channelset, target: str | Path, source_stat: os.stat_result 
         "root_names": _strings(list(chset.root_names)),
         "stride_length": np.array(np.nan if chset.stride_length is None else chset.stride_length),
         "ground_speed": np.array(np.nan if chset.ground_speed is None else chset.ground_speed),
+        "release_frame": np.array(-1 if chset.release_frame is None else chset.release_frame, np.int64),
+        "end_offset": np.array(chset.end_offset if chset.end_offset is not None else [np.nan] * 3),
     }
     fd, tmp = tempfile.mkstemp(prefix="." + target.name, suffix=".tmp", dir=target.parent)
     try:
@@ -95,6 +97,7 @@ def load_npz(path: str | Path, source_stat: os.stat_result | None = None) -> Cha
             )
             source = str(z["source"]) or None
             stride, speed = float(z["stride_length"]), float(z["ground_speed"])
+            release, offset = int(z["release_frame"]), [float(v) for v in z["end_offset"]]
             return Channelset(
                 name=str(z["name"]),
                 fps=float(z["fps"]),
@@ -107,6 +110,8 @@ def load_npz(path: str | Path, source_stat: os.stat_result | None = None) -> Cha
                 source=source,
                 stride_length=None if np.isnan(stride) else stride,
                 ground_speed=None if np.isnan(speed) else speed,
+                release_frame=None if release < 0 else release,
+                end_offset=None if np.isnan(offset).any() else (offset[0], offset[1], offset[2]),
             )
     except (OSError, KeyError, ValueError, TypeError, zipfile.BadZipFile, EOFError):
         return None

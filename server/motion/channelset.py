@@ -98,6 +98,12 @@ class Channelset:
     # ground speed it was recorded at (cm/s), so playback can be scaled to a requested speed
     stride_length: float | None = None
     ground_speed: float | None = None
+    # the frame from which the hands no longer hold the rifle (a death lets go of it): palms are checked on
+    # the grip, and slaving holds them there, only before it
+    release_frame: int | None = None
+    # the entity's own move over the clip, (x cm, z cm, yaw degrees about +Y, + = to the left), for clips
+    # that turn or step the soldier to a new place: its last frame is its start posture moved by this
+    end_offset: tuple[float, float, float] | None = None
     _by_name: dict[str, int] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -137,6 +143,18 @@ class Channelset:
                     msg = f"channelset {self.name!r}: {what} must be >= 0, not {v}"
                     raise ChannelsetError(msg, self.source)
                 setattr(self, what, v)
+        if self.release_frame is not None:
+            r = self.release_frame
+            if not (float(r).is_integer() and 0 <= r < n):
+                msg = f"channelset {self.name!r}: release_frame must be a frame 0..{n - 1}, not {r}"
+                raise ChannelsetError(msg, self.source)
+            self.release_frame = int(r)
+        if self.end_offset is not None:
+            off = tuple(float(v) for v in self.end_offset)
+            if len(off) != 3 or not all(math.isfinite(v) for v in off):
+                msg = f"channelset {self.name!r}: end_offset must be three finite numbers (x, z cm, yaw deg)"
+                raise ChannelsetError(msg, self.source)
+            self.end_offset = (off[0], off[1], off[2])
         self._by_name = {}
         for i, c in enumerate(self.channels):
             self._by_name.setdefault(c.name, i)

@@ -8,6 +8,8 @@
       count = 2;          // number of sharedchannels
       stride_length = 71.5;   // optional, locomotion clips: cm covered by the recorded step
       ground_speed = 143;     // optional: cm/s the step was recorded at
+      release_frame = 40;     // optional: from this frame the hands no longer hold the rifle (deaths)
+      end_offset = (0, 0, 90);  // optional: the entity's move over the clip (x cm, z cm, yaw deg, + = left)
       sharedchannel soldier {
         type = "sharedfigure";  protofiletype = "soldier_cam.fig";  object = "soldier";
         frame[0] = ("lower_torso.proximal", trans(31.68cm,43.53cm,-31.05cm));
@@ -147,7 +149,7 @@ def channelset_from_block(block: Block) -> Channelset:
             isinstance(st, Assign)
             and st.owner is None
             and st.index is None
-            and st.target in ("size", "fps", "count", *_OPTIONAL_FIELDS)
+            and st.target in ("size", "fps", "count", "release_frame", "end_offset", *_OPTIONAL_FIELDS)
         ):
             if st.target in header:
                 raise _err(f"{st.target} given twice", st.loc)
@@ -174,13 +176,24 @@ def channelset_from_block(block: Block) -> Channelset:
         size = _int_field(header["size"], "size")
         if size not in (n - 1, n):  # intervals (what we write) or, tolerated, a frame count
             raise _err(f"size = {size} but the sharedchannels have frames 0..{n - 1}", header["size"].loc)
-    extra: dict[str, float] = {}
+    extra: dict[str, object] = {}
     for what in _OPTIONAL_FIELDS:
         if what in header:
             v = V.number(header[what].value)
             if not (math.isfinite(v) and v >= 0):
                 raise _err(f"{what} must be a non-negative number", header[what].value.loc)
             extra[what] = v
+    if "release_frame" in header:
+        r = _int_field(header["release_frame"], "release_frame")
+        if r >= n:
+            raise _err(f"release_frame = {r} but the frames are 0..{n - 1}", header["release_frame"].loc)
+        extra["release_frame"] = r
+    if "end_offset" in header:
+        value = header["end_offset"].value
+        try:
+            extra["end_offset"] = tuple(V.numbers(value, 3, "numbers (x cm, z cm, yaw deg)"))
+        except PeabodyError as exc:
+            raise _err(f"end_offset: {exc.message}", value.loc) from None
     try:
         chset = make_channelset(block.name, fps, tracks, block.loc.file)
     except ChannelsetError as exc:
@@ -258,6 +271,10 @@ def format_channelset(chset: Channelset) -> str:
         v = getattr(chset, what)
         if v is not None:
             out.append(f"  {what} = {_fps_text(v)};")
+    if chset.release_frame is not None:
+        out.append(f"  release_frame = {chset.release_frame};")
+    if chset.end_offset is not None:
+        out.append(f"  end_offset = ({', '.join(_fps_text(round(v, 4)) for v in chset.end_offset)});")
     for c in chset.channels:
         kind = "figure position" if c.is_figure else "joint angles"
         out += [
