@@ -62,7 +62,7 @@ PIVOT_RISE = 1.5  # cm the pelvis rises while the body stands on the pivot ball
 LEAN = 9.0  # cm the pelvis leans towards the supporting foot
 STEP_LIFT = 7.0  # cm a stepping foot clears the ground
 SIDESTEP = 45.0  # cm a side-step moves the soldier
-CLEAR = 0.08  # s after lift-off before a stepping foot travels, and before landing that it stops
+CLEAR = 0.1  # s after lift-off before a stepping foot travels, and before landing that it stops
 SIDESTEP_DIP = 4.0  # cm the pelvis lowers while the feet are wide apart
 
 
