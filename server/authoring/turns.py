@@ -64,6 +64,7 @@ STEP_LIFT = 7.0  # cm a stepping foot clears the ground
 SIDESTEP = 45.0  # cm a side-step moves the soldier
 CLEAR = 0.1  # s after lift-off before a stepping foot travels, and before landing that it stops
 SIDESTEP_DIP = 4.0  # cm the pelvis lowers while the feet are wide apart
+LOOK_AHEAD = 0.12  # s the head leads the body's turn (the soldier looks where he turns)
 
 
 @dataclass
@@ -249,7 +250,7 @@ def record_plan(
     plan: StepPlan, kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture, base: BaseStance
 ) -> ClipFrames:
     """Every frame of a plan: the body's placement, the feet, then IK (palms on the rifle, heels on their
-    tracks, eyes level ahead)."""
+    tracks, eyes level and turning ``LOOK_AHEAD`` s ahead of the body)."""
     n = round(plan.t_end * FPS) + 1
     t = np.arange(n) / FPS
     q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
@@ -288,7 +289,8 @@ def record_plan(
             ik.Goal(f"{s}_palm.palmcenter", None, tg[:, :3, :3], 1.0, 1, arm(s), orientation_weight=8.0)
         )
         goals.append(ik.Goal(f"{s}_foot.heel", heels[s][:, :3, 3], heels[s][:, :3, :3], 1.0, 2, leg(s)))
-    goals.append(ik.Goal("bottom_head.sight", None, body[:, :3, :3] @ sight, 1.0, 1, ("neck", "head")))
+    look = _about(plan.pivot, _keyed(plan.turn_keys, t + LOOK_AHEAD))[:, :3, :3] @ sight
+    goals.append(ik.Goal("bottom_head.sight", None, look, 1.0, 1, ("neck", "head")))
     poses, report = ik.solve(kin, rest, goals, roots, iterations=60, rest_pose=rest, rest_gain=0.1)
     _REPORTS[plan.name] = report
     rifles = carrier_globals(kin, poses, roots) @ carry
