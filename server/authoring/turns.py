@@ -59,10 +59,11 @@ MAX_STEP_TURN = 90.0  # degrees one step of the outer foot turns at most
 PIVOT_PITCH = 14.0  # degrees the pivot heel rises (heel ~5 cm up: off the ground while the foot turns)
 PIVOT_TOES = 18.0  # degrees the pivot toes bend up past flat, so their tips clear the ground too
 PIVOT_RISE = 1.5  # cm the pelvis rises while the body stands on the pivot ball
-LEAN = 9.0  # cm the pelvis leans towards the supporting foot
-STEP_LIFT = 7.0  # cm a stepping foot clears the ground
+LEAN = 0.65  # of the way the pelvis moves towards the pivot foot (the weight goes onto it)
+SIDESTEP_LEAN = 4.0  # cm the pelvis leans over the standing foot while the other steps
+STEP_LIFT = 8.0  # cm a stepping foot clears the ground
 SIDESTEP = 45.0  # cm a side-step moves the soldier
-CLEAR = 0.1  # s after lift-off before a stepping foot travels, and before landing that it stops
+CLEAR = 0.12  # s after lift-off before a stepping foot travels, and before landing that it stops
 SIDESTEP_DIP = 4.0  # cm the pelvis lowers while the feet are wide apart
 LOOK_AHEAD = 0.12  # s the head leads the body's turn (the soldier looks where he turns)
 
@@ -71,13 +72,13 @@ LOOK_AHEAD = 0.12  # s the head leads the body's turn (the soldier looks where h
 class StepPlan:
     """One clip's plan (times s, lengths cm, angles degrees, clip frame = the start posture's).
 
-    The body (pelvis, upper body, rifle) is the base posture moved by ``T(shift) Rot(pivot, turn)``: turned
-    ``turn_keys`` about the ground point ``pivot``, shifted by ``x_keys`` / ``z_keys`` (world) and leaning
-    ``lean_keys`` cm towards ``lean_to`` (x, z of a point in the start stance, turned with the body), risen
-    ``rise_keys``. Each foot follows ``falls`` (None: the pivot's heel lift ``pivot_lift`` = (rise start,
-    up, lower start, down)) in the start stance, carried about ``pivot`` by its own ``foot_turn`` keys and
-    sideways by its ``foot_shift`` keys (cm along x): a stepping foot steps on the spot and is carried
-    while it is clear of the ground, so nothing moves across the ground while touching it."""
+    The body (pelvis, upper body, rifle) is the base posture turned ``turn_keys`` about the ground point
+    ``pivot``, shifted by ``x_keys`` / ``z_keys`` (world), leaning ``lean_keys`` (a fraction) of the way
+    towards ``lean_to`` (x, z of a point in the start stance, turned with the body) and risen ``rise_keys``.
+    Each foot follows ``falls`` in the start stance (None: the pivot's heel lift ``pivot_lift`` = (rise
+    start, up, lower start, down)), carried about ``pivot`` by its ``foot_turn`` keys and sideways by its
+    ``foot_shift`` keys (cm along x): a stepping foot steps on the spot and is carried only while clear of
+    the ground, so nothing moves across the ground while touching it."""
 
     name: str
     t_end: float
@@ -224,7 +225,7 @@ def plan_sidestep(base: BaseStance, direction: str, distance: float = SIDESTEP) 
         for s, step in ((lead, lead_step), (trail, trail_step))
     }
     t_end = 1.85
-    lean = 0.45 * LEAN * (1.0 if trail == "right" else -1.0)  # over the trailing foot first (left is -x)
+    lean = SIDESTEP_LEAN * (1.0 if trail == "right" else -1.0)  # over the trailing foot first (left is -x)
     x_keys = [(0.0, 0.0), (0.26, lean), (0.36, lean), (0.9, 0.55 * dx), (1.35, dx - 0.5 * lean), (t_end, dx)]
     dip = [(0.0, 0.0), (0.42, 0.0), (0.72, -SIDESTEP_DIP), (1.0, -SIDESTEP_DIP), (1.45, 0.0)]
     return StepPlan(
@@ -259,9 +260,7 @@ def record_plan(
     # lean towards a point of the start stance, turned with the body
     to = body @ np.array([plan.lean_to[0], 0.0, plan.lean_to[1], 1.0])
     pelvis = body @ np.array([root0[0, 3], 0.0, root0[2, 3], 1.0])
-    toward = to[:, [0, 2]] - pelvis[:, [0, 2]]
-    toward /= np.maximum(np.linalg.norm(toward, axis=1, keepdims=True), 1e-9)
-    lean = _keyed(plan.lean_keys, t)[:, None] * toward
+    lean = _keyed(plan.lean_keys, t)[:, None] * (to[:, [0, 2]] - pelvis[:, [0, 2]])
     body[:, 0, 3] += _keyed(plan.x_keys, t) + lean[:, 0]
     body[:, 2, 3] += _keyed(plan.z_keys, t) + lean[:, 1]
     body[:, 1, 3] += _keyed(plan.rise_keys, t)
