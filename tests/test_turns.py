@@ -1,6 +1,6 @@
 """Turns in place and side-steps (committed soldier.fig and DI.fig clips): each reaches its yaw or its
-sideways displacement, ends in STAND_STOWED moved by its ``end_offset``, pivots on the inside foot's ball
-with the heel up, and never slides a foot that touches the ground."""
+sideways displacement, ends in STAND_STOWED moved by its ``end_offset``, turns a foot only while it is in
+the air (stepping round the inside foot's ball), and never slides a foot that touches the ground."""
 
 from __future__ import annotations
 
@@ -102,26 +102,43 @@ def test_feet_never_slide_on_or_sink_into_the_ground(name: str, suffix: str, fig
                 assert slide <= 2.0, f"{name}{suffix} {side}_{p} slides {slide:.2f} cm in frames {a}..{b}"
 
 
+def _foot_yaw(kin, sites, side: str) -> np.ndarray:
+    """Degrees about +Y of the heel-to-ball direction of a foot, per frame (unwrapped)."""
+    d = _point(kin, sites, side, "foot.ball") - _point(kin, sites, side, "foot.heel")
+    return np.degrees(np.unwrap(np.arctan2(-d[:, 0], -d[:, 2])))
+
+
+def test_turn_steps_alternate_feet_never_more_than_45_degrees_apart():
+    assert turns.turn_steps(45) == [("inside", 45.0), ("outer", 45.0)]
+    assert turns.turn_steps(90) == [("inside", 45.0), ("outer", 90.0), ("inside", 90.0)]
+    assert [y for _, y in turns.turn_steps(180)] == [45.0, 90.0, 135.0, 180.0, 180.0]
+
+
 @pytest.mark.parametrize("suffix", SUFFIXES)
 @pytest.mark.parametrize(("name", "side", "angle"), TURNS)
-def test_turn_pivots_on_the_inside_ball_heel_up_while_the_other_foot_steps(
+def test_turn_steps_round_the_inside_ball_and_turns_feet_only_in_the_air(
     name: str, side: str, angle: int, suffix: str, figures: FigureSet
 ):
     _, cf, body, kin, sites = _played(name, suffix, figures)
-    other = "right" if side == "left" else "left"
+    sign = 1.0 if side == "left" else -1.0
     ball = _point(kin, sites, side, "foot.ball")
-    assert np.linalg.norm((ball - ball[0])[:, [0, 2]], axis=1).max() < 1.5
-    yaw = np.array([_yaw(m) for m in cf.locations[body]]) - _yaw(cf.locations[body][0])
-    yaw = (yaw + 180.0) % 360.0 - 180.0 if angle < 180 else np.unwrap(yaw * math.pi / 180) * 180 / math.pi
-    turning = np.abs(np.gradient(yaw)) > 0.5  # degrees per frame
-    assert turning.any()
-    for p in ("foot.heel", "toes.distal"):  # only the ball of the pivot foot is on the ground while it turns
-        assert _point(kin, sites, side, p)[turning, 1].min() > CONTACT, p
-    # the outer foot is in the air while it travels round the pivot
-    for p in FOOT_POINTS:
-        pts = _point(kin, sites, other, p)
-        moving = np.linalg.norm(np.gradient(pts[:, [0, 2]], axis=0), axis=1) * cf.channelset.fps > 10.0
-        assert pts[moving, 1].min() > CONTACT, p
+    np.testing.assert_allclose(ball[-1], ball[0], atol=0.5)  # the inside foot ends where it began, turned
+    down = {}
+    for s in ("left", "right"):
+        low = np.min([_point(kin, sites, s, p)[:, 1] for p in FOOT_POINTS], axis=0) <= CONTACT
+        down[s] = low
+        yaw = _foot_yaw(kin, sites, s)
+        edges = np.flatnonzero(np.diff(np.r_[0, low.astype(int), 0]))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):  # a foot touching the ground does not turn
+            assert np.ptp(yaw[a:b]) < 1.0, f"{name}{suffix} {s} foot turns on the ground in frames {a}..{b}"
+        lifts = len(edges) // 2 - 1
+        want = sum(1 for role, _ in turns.turn_steps(angle) if (role == "inside") == (s == side))
+        assert lifts == want, s
+    assert (down["left"] | down["right"]).all()  # a step, never a hop
+    body_yaw = np.array([_yaw(m) for m in cf.locations[body]])
+    progress = sign * np.degrees(np.unwrap(np.radians(body_yaw - body_yaw[0])))
+    assert progress.min() > -0.5 and progress.max() < angle + 0.5
+    assert np.diff(progress).min() > -0.2  # the body never turns back
 
 
 @pytest.mark.parametrize("suffix", SUFFIXES)

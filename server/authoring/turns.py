@@ -1,22 +1,27 @@
 """Turning in place and side-stepping (issue 14): STAND_STOWED to STAND_STOWED moved on the ground.
 
-A **turn** pivots on the ball of the foot on the inside of the turn (the left foot for a left turn): that
-heel rises (``PIVOT_PITCH``) and the toes bend up past flat (``PIVOT_TOES``) so that only the ball is on the
-ground, the pelvis leans over the pivot foot, then the body turns about the pivot ball while the other foot
-takes a step round it and lands flat at its place in the turned stance; the pivot heel comes down and the
-pelvis settles. A turn of more than ``MAX_STEP_TURN`` degrees is taken in equal steps of the outer foot while
-the pivot heel stays up. A right turn is a different motion from a left turn played backwards (its pivot is
-the right foot, the rear foot of the staggered stance), so every turn is its own clip.
+A **turn** is a few steps, none of which turns a foot on the ground: the feet take turns, each stepping on
+the spot turned about the inside foot's ball (the inside foot is the one on the side of the turn, the left
+foot for a left turn), the inside foot first and last, each landing at most ``STEP_AHEAD`` degrees beyond
+the other (:func:`turn_steps`: 45 degrees in two steps, 90 in three, 180 in five); the pelvis leans over
+the standing foot. The outer foot thus travels on an arc about the inside ball and never crosses it. The
+body turns about the inside ball with the mean of the feet, kept ``BODY_BIAS`` to the left of it on the
+way: from STAND_STOWED the legs turn a foot inwards (to the right) by up to 60 degrees but outwards hardly
+at all, so on a left turn the body leads the feet and on a right turn it follows them; the head looks a
+little ahead. (A pivot on the ball of a planted foot, heel up, sweeps the ball's contact patch 5-15 cm across
+the ground over 45-180 degrees, and every mesh node within 2.5 cm of the ground is touching it.) A right
+turn is not a left turn played backwards, so every turn is its own clip.
 
 A **side-step** steps the leading foot out sideways (the pelvis first leans over the trailing foot) and
 draws the trailing foot after it to its place in the moved stance; the feet never cross.
 
-Feet use the gait machinery (:mod:`server.authoring.gait`): the stepping foot's track is a
+Feet use the gait machinery (:mod:`server.authoring.gait`): a stepping foot's track is a
 :class:`~server.authoring.gait.Footfall` sequence (heel rising on the ball, lift, flat landing) from
-:func:`~server.authoring.gait.foot_track`; in a turn it is a step on the spot in the *start* stance carried
-round the pivot by the foot's own turn, so it travels on an arc about the pivot and never crosses the pivot
-foot. The upper body keeps STAND_STOWED with the rifle at the ready, turned with the pelvis; IK puts the
-heels on their tracks and the palms on the rifle, as for walking.
+:func:`~server.authoring.gait.foot_track`, a step on the spot in the *start* stance carried (turned about
+the inside ball, or shifted sideways) only while it is clear of the ground, so no foot moves across the
+ground while touching it and the outer foot never crosses the inside one. The upper body keeps
+STAND_STOWED with the rifle at the ready, turned with the pelvis; IK puts the heels on their tracks and the
+palms on the rifle, as for walking.
 
 Unlike the gait clips these clips really move the soldier: the clip frame is the start posture's, and the
 last frame is STAND_STOWED moved by the ground-plane rigid move ``p -> Ry(yaw) p + (x, 0, z)`` recorded as
@@ -37,12 +42,10 @@ from server.authoring.gait import (
     ADJUST_PITCH,
     BASE,
     FPS,
-    ROCK_UP,
     BaseStance,
     Footfall,
     _frame,
     _keyed,
-    _smooth,
     foot_track,
 )
 from server.authoring.motion import KeyPosture
@@ -55,17 +58,20 @@ DEG = math.pi / 180.0
 SIDES = ("left", "right")
 
 TURN_ANGLES = (45, 90, 180)
-MAX_STEP_TURN = 90.0  # degrees one step of the outer foot turns at most
-PIVOT_PITCH = 14.0  # degrees the pivot heel rises (heel ~5 cm up: off the ground while the foot turns)
-PIVOT_TOES = 18.0  # degrees the pivot toes bend up past flat, so their tips clear the ground too
-PIVOT_RISE = 1.5  # cm the pelvis rises while the body stands on the pivot ball
-LEAN = 0.65  # of the way the pelvis moves towards the pivot foot (the weight goes onto it)
+# the soldier's legs turn the feet out (left) only a little from STAND_STOWED, in (right) by up to 60 degrees:
+# a foot steps at most this far beyond the other, and the body keeps BODY_BIAS to the left of its feet
+STEP_AHEAD = 45.0
+BODY_BIAS = 30.0
+FIRST_HEEL = 0.2  # s: the first heel rises (the pelvis already leaning over the other foot)
+LEAN_OUT = 0.5  # of the way the pelvis moves towards the outer foot while the inside foot steps
+LEAN_IN = 0.65  # of the way it moves towards the inside foot while the outer foot steps round it
 SIDESTEP_LEAN = 4.0  # cm the pelvis leans over the standing foot while the other steps
 STEP_LIFT = 8.0  # cm a stepping foot clears the ground
 SIDESTEP = 45.0  # cm a side-step moves the soldier
 CLEAR = 0.12  # s after lift-off before a stepping foot travels, and before landing that it stops
 SIDESTEP_DIP = 4.0  # cm the pelvis lowers while the feet are wide apart
-LOOK_AHEAD = 0.12  # s the head leads the body's turn (the soldier looks where he turns)
+LOOK_AHEAD = 0.12  # s the head leads the body's turn (the soldier looks where he turns) ...
+LOOK_MAX = 15.0  # ... by at most this many degrees (the neck's twist)
 
 
 @dataclass
@@ -73,12 +79,10 @@ class StepPlan:
     """One clip's plan (times s, lengths cm, angles degrees, clip frame = the start posture's).
 
     The body (pelvis, upper body, rifle) is the base posture turned ``turn_keys`` about the ground point
-    ``pivot``, shifted by ``x_keys`` / ``z_keys`` (world), leaning ``lean_keys`` (a fraction) of the way
-    towards ``lean_to`` (x, z of a point in the start stance, turned with the body) and risen ``rise_keys``.
-    Each foot follows ``falls`` in the start stance (None: the pivot's heel lift ``pivot_lift`` = (rise
-    start, up, lower start, down)), carried about ``pivot`` by its ``foot_turn`` keys and sideways by its
-    ``foot_shift`` keys (cm along x): a stepping foot steps on the spot and is carried only while clear of
-    the ground, so nothing moves across the ground while touching it."""
+    ``pivot``, shifted by ``x_keys`` (world), risen ``rise_keys`` and leaning ``lean_keys[side]`` (a
+    fraction) of the way towards the middle of that foot. Each foot follows ``falls`` (steps on the spot in
+    the start stance), carried about ``pivot`` by its ``foot_turn`` keys and sideways by its ``foot_shift``
+    keys (cm along x) only while it is clear of the ground."""
 
     name: str
     t_end: float
@@ -86,14 +90,12 @@ class StepPlan:
     end_move: tuple[float, float, float]
     turn_keys: list[tuple[float, float]]
     x_keys: list[tuple[float, float]]
-    z_keys: list[tuple[float, float]]
-    lean_keys: list[tuple[float, float]]
-    lean_to: tuple[float, float]
     rise_keys: list[tuple[float, float]]
-    falls: dict[str, list[Footfall] | None]
+    falls: dict[str, list[Footfall]]
+    lean_keys: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     foot_turn: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     foot_shift: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
-    pivot_lift: dict[str, tuple[float, float, float, float]] = field(default_factory=dict)
+    body_follows_feet: float = 0.0  # a turn by this many degrees: the body turns with the feet (BODY_BIAS)
 
 
 def ground_move(x: float, z: float, yaw: float) -> np.ndarray:
@@ -119,37 +121,16 @@ def _turn_move(pivot: tuple[float, float], yaw: float) -> tuple[float, float, fl
 # --- feet ---------------------------------------------------------------------------------------------------
 
 
-def pivot_track(
-    base: BaseStance, side: str, t: np.ndarray, lift: tuple[float, float, float, float]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Heel frames and toe angles (rad) of a pivot foot in the start stance: the heel rises and comes down
-    rocking about the ball (the rocker ``ROCK_UP`` above the ball site, as in the gait), the toes bent up
-    past flat by ``PIVOT_TOES`` meanwhile so only the ball touches the ground."""
-    a, b, c, d = lift
-    up = _smooth((t - a) / (b - a)) - _smooth((t - c) / (d - c))
-    pitch = -PIVOT_PITCH * up
-    yaw = np.full(len(t), base.yaw[side])
-    rock = base.ball[side] + np.array([0.0, ROCK_UP, 0.0])
-    heel = np.array([base.heel[side][0], 0.0, base.heel[side][1]])
-    rocker = heel + V.rot_y(base.yaw[side] * DEG)[:3, :3] @ rock
-    frames = _frame(np.zeros((len(t), 3)), yaw, pitch)
-    frames[:, :3, 3] = rocker - frames[:, :3, :3] @ rock
-    return frames, (PIVOT_PITCH + PIVOT_TOES) * up * DEG
-
-
-def step_falls(
-    base: BaseStance, side: str, steps: list[tuple[float, float, float]], heels: list[tuple[float, float]]
-) -> list[Footfall]:
-    """Footfalls of a foot that stands at its base place and takes ``steps`` = (heel rise, lift-off, landing)
-    to the heel places ``heels`` (at its base yaw), landing flat."""
+def step_falls(base: BaseStance, side: str, steps: list[tuple[float, float, float]]) -> list[Footfall]:
+    """Footfalls of a foot that stands at its base place and takes ``steps`` = (heel rise, lift-off,
+    landing) on the spot, landing flat (where it lands is the carrying's business)."""
     falls: list[Footfall] = []
-    t_on, heel = -np.inf, base.heel[side]
-    for (t_heel, t_off, t_land), nxt in zip(steps, heels, strict=True):
-        falls.append(
-            Footfall(side, t_on, heel, base.yaw[side], t_on, t_heel, t_off, 0.0, ADJUST_PITCH, lift=STEP_LIFT)
-        )
-        t_on, heel = t_land, nxt
-    falls.append(Footfall(side, t_on, heel, base.yaw[side], t_on, np.inf, np.inf))
+    t_on = -np.inf
+    heel, yaw = base.heel[side], base.yaw[side]
+    for t_heel, t_off, t_land in steps:
+        falls.append(Footfall(side, t_on, heel, yaw, t_on, t_heel, t_off, 0.0, ADJUST_PITCH, lift=STEP_LIFT))
+        t_on = t_land
+    falls.append(Footfall(side, t_on, heel, yaw, t_on, np.inf, np.inf))
     return falls
 
 
@@ -160,52 +141,59 @@ def _r(t: float) -> float:
     return round(t * FPS) / FPS
 
 
+def turn_steps(angle: float) -> list[tuple[str, float]]:
+    """("inside" / "outer", yaw reached) of each step of a turn by ``angle`` degrees (> 0): the feet take
+    turns, each at most ``STEP_AHEAD`` degrees beyond the other, the inside foot first and last."""
+    yaw = {"inside": 0.0, "outer": 0.0}
+    out: list[tuple[str, float]] = []
+    role = "inside"
+    while min(yaw.values()) < angle:
+        other = "outer" if role == "inside" else "inside"
+        yaw[role] = min(yaw[other] + STEP_AHEAD, float(angle))
+        out.append((role, yaw[role]))
+        role = other
+    return out
+
+
 def plan_turn(base: BaseStance, direction: str, angle: float) -> StepPlan:
-    """Turn ``angle`` degrees to ``direction`` ("left" / "right") pivoting on that foot's ball."""
-    pivot_side = direction
-    stepper = "right" if pivot_side == "left" else "left"
+    """Turn ``angle`` degrees to ``direction`` ("left" / "right") in the steps of :func:`turn_steps`, every
+    foot turning about the inside foot's ball while it is in the air; the body follows the feet."""
+    inside = direction
+    outer = "right" if inside == "left" else "left"
+    role_side = {"inside": inside, "outer": outer}
     sign = 1.0 if direction == "left" else -1.0
-    ball = tuple(float(v) for v in base.ball_at(pivot_side))
-    k = max(1, math.ceil(angle / MAX_STEP_TURN - 1e-9))
-    part = angle / k
-    swing = _r(0.3 + 0.3 * part / 90.0)  # seconds per step of the outer foot
-    t_heel, t_off = 0.2, 0.38  # the outer heel rises, the foot leaves the ground
-    lift_up = (0.12, 0.34)  # the pivot heel rises before anything turns
-    steps: list[tuple[float, float, float]] = []
-    turn_keys: list[tuple[float, float]] = [(0.0, 0.0)]
-    foot_keys: list[tuple[float, float]] = [(0.0, 0.0)]
-    for i in range(k):
+    ball = tuple(float(v) for v in base.ball_at(inside))
+    steps: dict[str, list[tuple[float, float, float]]] = {inside: [], outer: []}
+    keys: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
+    lean: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
+    yaw = {inside: 0.0, outer: 0.0}
+    t_heel = FIRST_HEEL
+    for role, target in turn_steps(angle):
+        side = role_side[role]
+        other = outer if side == inside else inside
+        swing = _r(0.35 + 0.15 * (target - yaw[side]) / 90.0)
+        t_off = _r(t_heel + 0.08)
         t_land = _r(t_off + swing)
-        steps.append((t_heel, t_off, t_land))
-        done, now = sign * part * i, sign * part * (i + 1)
-        turn_keys += [(t_off - 0.06, done), (t_land - 0.04, now)]
-        foot_keys += [(t_off + CLEAR, done), (t_land - CLEAR, now)]
-        t_heel, t_off = t_land + 0.04, _r(t_land + 0.16)
-    t_land = steps[-1][2]
-    lift = (*lift_up, t_land, t_land + 0.22)
-    t_end = _r(t_land + 0.5)
-    falls: dict[str, list[Footfall] | None] = {
-        pivot_side: None,
-        stepper: step_falls(base, stepper, steps, [base.heel[stepper]] * k),
-    }
-    yaw = sign * angle
-    foot_keys.append((t_end, yaw))
-    turn_keys.append((t_end, yaw))
-    mid = (0.5 * (base.heel[pivot_side][0] + ball[0]), 0.5 * (base.heel[pivot_side][1] + ball[1]))
+        steps[side].append((t_heel, t_off, t_land))
+        keys[side] += [(t_off + CLEAR, sign * yaw[side]), (t_land - CLEAR, sign * target)]
+        w = LEAN_IN if other == inside else LEAN_OUT  # the weight onto the standing foot
+        lean[other] += [(t_heel - 0.15, 0.0), (t_off, w), (t_land - 0.05, w), (t_land + 0.12, 0.0)]
+        yaw[side] = target
+        t_heel = t_land - 0.02
+    t_end = _r(t_heel + 0.42)
+    falls = {s: step_falls(base, s, steps[s]) for s in SIDES}
     return StepPlan(
         f"turn_{direction[0]}{angle:g}",
         t_end,
         ball,
-        _turn_move(ball, yaw),
-        turn_keys,
+        _turn_move(ball, sign * angle),
         [(0.0, 0.0)],
         [(0.0, 0.0)],
-        [(0.0, 0.0), (lift_up[1], LEAN), (t_land, LEAN), (t_end - 0.05, 0.0)],
-        mid,
-        [(0.0, 0.0), (lift_up[1], PIVOT_RISE), (t_land, PIVOT_RISE), (t_land + 0.25, 0.0)],
+        [(0.0, 0.0)],
         falls,
-        foot_turn={pivot_side: turn_keys, stepper: foot_keys},
-        pivot_lift={pivot_side: lift},
+        lean,
+        foot_turn=keys,
+        body_follows_feet=angle,
     )
 
 
@@ -216,10 +204,7 @@ def plan_sidestep(base: BaseStance, direction: str, distance: float = SIDESTEP) 
     dx = -distance if direction == "left" else distance  # left is -x
     lead_step = (0.18, 0.3, 0.72)
     trail_step = (0.86, 0.98, 1.4)
-    falls: dict[str, list[Footfall] | None] = {
-        lead: step_falls(base, lead, [lead_step], [base.heel[lead]]),
-        trail: step_falls(base, trail, [trail_step], [base.heel[trail]]),
-    }
+    falls = {lead: step_falls(base, lead, [lead_step]), trail: step_falls(base, trail, [trail_step])}
     shift = {
         s: [(0.0, 0.0), (step[1] + CLEAR, 0.0), (step[2] - CLEAR, dx)]
         for s, step in ((lead, lead_step), (trail, trail_step))
@@ -235,9 +220,6 @@ def plan_sidestep(base: BaseStance, direction: str, distance: float = SIDESTEP) 
         (dx, 0.0, 0.0),
         [(0.0, 0.0)],
         x_keys,
-        [(0.0, 0.0)],
-        [(0.0, 0.0)],
-        (0.0, 0.0),
         dip,
         falls,
         foot_shift=shift,
@@ -245,6 +227,22 @@ def plan_sidestep(base: BaseStance, direction: str, distance: float = SIDESTEP) 
 
 
 # --- recording ----------------------------------------------------------------------------------------------
+
+
+def body_turn(plan: StepPlan, t: np.ndarray) -> np.ndarray:
+    """The body's yaw (degrees) at ``t``: its keys, plus for a turn the mean of the feet's turns and
+    ``BODY_BIAS`` to the left while the feet are on their way (none at either end), never turned back
+    against the turn nor past its end."""
+    turn = _keyed(plan.turn_keys, t)
+    angle = plan.body_follows_feet
+    if angle:
+        mean = 0.5 * sum(_keyed(plan.foot_turn[s], t) for s in SIDES)
+        ramp = min(STEP_AHEAD, 0.5 * angle)  # the bias grows over the first half step and fades over the last
+        done = np.abs(mean)
+        bias = BODY_BIAS * np.clip(done / ramp, 0, 1) * np.clip((angle - done) / ramp, 0, 1)
+        sign = 1.0 if plan.end_move[2] > 0 else -1.0
+        turn = turn + sign * np.clip(sign * (mean + bias), 0.0, angle)  # never back, never past the end
+    return turn
 
 
 def record_plan(
@@ -255,28 +253,28 @@ def record_plan(
     n = round(plan.t_end * FPS) + 1
     t = np.arange(n) / FPS
     q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
-    turn = _keyed(plan.turn_keys, t)
+    turn = body_turn(plan, t)
     body = _about(plan.pivot, turn)
-    # lean towards a point of the start stance, turned with the body
-    to = body @ np.array([plan.lean_to[0], 0.0, plan.lean_to[1], 1.0])
-    pelvis = body @ np.array([root0[0, 3], 0.0, root0[2, 3], 1.0])
-    lean = _keyed(plan.lean_keys, t)[:, None] * (to[:, [0, 2]] - pelvis[:, [0, 2]])
-    body[:, 0, 3] += _keyed(plan.x_keys, t) + lean[:, 0]
-    body[:, 2, 3] += _keyed(plan.z_keys, t) + lean[:, 1]
+    body[:, 0, 3] += _keyed(plan.x_keys, t)
     body[:, 1, 3] += _keyed(plan.rise_keys, t)
-    roots = body @ root0
     rest = np.broadcast_to(q0, (n, kin.ndof)).copy()
     heels: dict[str, np.ndarray] = {}
+    pelvis = (body @ np.array([root0[0, 3], 0.0, root0[2, 3], 1.0]))[:, [0, 2]]
+    lean = np.zeros((n, 2))
     for s in SIDES:
-        falls = plan.falls[s]
-        if falls is not None:
-            local, toes = foot_track(base.ball[s], falls, t, STEP_LIFT)
-        else:
-            local, toes = pivot_track(base, s, t, plan.pivot_lift[s])
+        local, toes = foot_track(base.ball[s], plan.falls[s], t, STEP_LIFT)
         carried = _about(plan.pivot, _keyed(plan.foot_turn.get(s, [(0.0, 0.0)]), t))
         carried[:, 0, 3] += _keyed(plan.foot_shift.get(s, [(0.0, 0.0)]), t)
         heels[s] = carried @ local
         rest[:, kin.dof_slices[f"{s}_toes"]] = toes[:, None]
+        if s in plan.lean_keys:  # towards the middle of the foot (where it is when it carries weight)
+            mx, mz = 0.5 * (np.array(base.heel[s]) + base.ball_at(s))
+            mid = np.array([mx, 0.0, mz, 1.0])
+            foot = (carried @ mid)[:, [0, 2]]
+            lean += _keyed(plan.lean_keys[s], t)[:, None] * (foot - pelvis)
+    body[:, 0, 3] += lean[:, 0]
+    body[:, 2, 3] += lean[:, 1]
+    roots = body @ root0
     carry = carry_of(kin, key)
     rifles = carrier_globals(kin, rest, roots) @ carry
     sight = kin.site_globals(q0, root0)[kin.site_names.index("bottom_head.sight"), :3, :3]
@@ -288,7 +286,8 @@ def record_plan(
             ik.Goal(f"{s}_palm.palmcenter", None, tg[:, :3, :3], 1.0, 1, arm(s), orientation_weight=8.0)
         )
         goals.append(ik.Goal(f"{s}_foot.heel", heels[s][:, :3, 3], heels[s][:, :3, :3], 1.0, 2, leg(s)))
-    look = _about(plan.pivot, _keyed(plan.turn_keys, t + LOOK_AHEAD))[:, :3, :3] @ sight
+    ahead = np.clip(body_turn(plan, t + LOOK_AHEAD) - turn, -LOOK_MAX, LOOK_MAX)
+    look = _about(plan.pivot, turn + ahead)[:, :3, :3] @ sight
     goals.append(ik.Goal("bottom_head.sight", None, look, 1.0, 1, ("neck", "head")))
     poses, report = ik.solve(kin, rest, goals, roots, iterations=60, rest_pose=rest, rest_gain=0.1)
     _REPORTS[plan.name] = report
