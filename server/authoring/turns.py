@@ -5,12 +5,13 @@ the spot turned about the inside foot's ball (the inside foot is the one on the 
 foot for a left turn), the inside foot first and last, each landing at most ``STEP_AHEAD`` degrees beyond
 the other (:func:`turn_steps`: 45 degrees in two steps, 90 in three, 180 in five); the pelvis leans over
 the standing foot. The outer foot thus travels on an arc about the inside ball and never crosses it. The
-body turns about the inside ball with the mean of the feet, kept ``BODY_BIAS`` to the left of it on the
-way: from STAND_STOWED the legs turn a foot inwards (to the right) by up to 60 degrees but outwards hardly
-at all, so on a left turn the body leads the feet and on a right turn it follows them; the head looks a
-little ahead. (A pivot on the ball of a planted foot, heel up, sweeps the ball's contact patch 5-15 cm across
-the ground over 45-180 degrees, and every mesh node within 2.5 cm of the ground is touching it.) A right
-turn is not a left turn played backwards, so every turn is its own clip.
+body turns about the inside ball, smoothly, through the middle of the yaws both legs can reach once each
+foot has landed (:data:`FOOT_TURN_RANGE`: from STAND_STOWED the legs turn a foot inwards, to the right, by
+up to 60 degrees but outwards hardly at all, so on a left turn the body leads the feet and on a right turn
+it follows them); the head looks a little ahead. (A pivot on the ball of a planted foot, heel up, sweeps
+the ball's contact patch 5-15 cm across the ground over 45-180 degrees, and every mesh node within 2.5 cm
+of the ground is touching it.) A right turn is not a left turn played backwards, so every turn is its own
+clip.
 
 A **side-step** steps the leading foot out sideways (the pelvis first leans over the trailing foot) and
 draws the trailing foot after it to its place in the moved stance; the feet never cross.
@@ -58,10 +59,10 @@ DEG = math.pi / 180.0
 SIDES = ("left", "right")
 
 TURN_ANGLES = (45, 90, 180)
-# the soldier's legs turn the feet out (left) only a little from STAND_STOWED, in (right) by up to 60 degrees:
-# a foot steps at most this far beyond the other, and the body keeps BODY_BIAS to the left of its feet
-STEP_AHEAD = 45.0
-BODY_BIAS = 30.0
+STEP_AHEAD = 45.0  # degrees a stepping foot lands at most beyond the other one
+# how far each foot can turn from its STAND_STOWED yaw relative to the body (+ = to the left), degrees: IK on
+# soldier.fig's legs reaches about -60..+5 (left) and -65..+15 (right); the body's turn keeps within both
+FOOT_TURN_RANGE = {"left": (-55.0, 3.0), "right": (-60.0, 12.0)}
 FIRST_HEEL = 0.2  # s: the first heel rises (the pelvis already leaning over the other foot)
 LEAN_OUT = 0.5  # of the way the pelvis moves towards the outer foot while the inside foot steps
 LEAN_IN = 0.65  # of the way it moves towards the inside foot while the outer foot steps round it
@@ -78,7 +79,8 @@ LOOK_MAX = 15.0  # ... by at most this many degrees (the neck's twist)
 class StepPlan:
     """One clip's plan (times s, lengths cm, angles degrees, clip frame = the start posture's).
 
-    The body (pelvis, upper body, rifle) is the base posture turned ``turn_keys`` about the ground point
+    The body (pelvis, upper body, rifle) is the base posture turned ``turn_keys`` (monotone cubic between
+    the keys) about the ground point
     ``pivot``, shifted by ``x_keys`` (world), risen ``rise_keys`` and leaning ``lean_keys[side]`` (a
     fraction) of the way towards the middle of that foot. Each foot follows ``falls`` (steps on the spot in
     the start stance), carried about ``pivot`` by its ``foot_turn`` keys and sideways by its ``foot_shift``
@@ -95,7 +97,6 @@ class StepPlan:
     lean_keys: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     foot_turn: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
     foot_shift: dict[str, list[tuple[float, float]]] = field(default_factory=dict)
-    body_follows_feet: float = 0.0  # a turn by this many degrees: the body turns with the feet (BODY_BIAS)
 
 
 def ground_move(x: float, z: float, yaw: float) -> np.ndarray:
@@ -155,6 +156,19 @@ def turn_steps(angle: float) -> list[tuple[str, float]]:
     return out
 
 
+def body_yaw(feet: dict[str, float], end: float) -> float:
+    """The body's yaw (degrees) once the feet stand turned ``feet``: the middle of the yaws that both legs
+    reach (:data:`FOOT_TURN_RANGE`), kept between the start (0) and the turn's ``end``; the end itself once
+    both feet are there."""
+    if all(v == end for v in feet.values()):
+        return end
+    lo = max(feet[s] - FOOT_TURN_RANGE[s][1] for s in SIDES)
+    hi = min(feet[s] - FOOT_TURN_RANGE[s][0] for s in SIDES)
+    a, b = sorted((0.0, end))
+    lo, hi = max(lo, a), min(hi, b)
+    return 0.5 * (lo + hi) if lo <= hi else 0.5 * sum(feet.values())
+
+
 def plan_turn(base: BaseStance, direction: str, angle: float) -> StepPlan:
     """Turn ``angle`` degrees to ``direction`` ("left" / "right") in the steps of :func:`turn_steps`, every
     foot turning about the inside foot's ball while it is in the air; the body follows the feet."""
@@ -167,18 +181,20 @@ def plan_turn(base: BaseStance, direction: str, angle: float) -> StepPlan:
     keys: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
     lean: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
     yaw = {inside: 0.0, outer: 0.0}
+    body: list[tuple[float, float]] = [(0.0, 0.0), (0.05, 0.0)]  # starting from rest
     t_heel = FIRST_HEEL
     for role, target in turn_steps(angle):
         side = role_side[role]
         other = outer if side == inside else inside
-        swing = _r(0.35 + 0.15 * (target - yaw[side]) / 90.0)
+        swing = _r(0.35 + 0.15 * (target - sign * yaw[side]) / 90.0)
         t_off = _r(t_heel + 0.08)
         t_land = _r(t_off + swing)
         steps[side].append((t_heel, t_off, t_land))
-        keys[side] += [(t_off + CLEAR, sign * yaw[side]), (t_land - CLEAR, sign * target)]
+        keys[side] += [(t_off + CLEAR, yaw[side]), (t_land - CLEAR, sign * target)]
         w = LEAN_IN if other == inside else LEAN_OUT  # the weight onto the standing foot
         lean[other] += [(t_heel - 0.15, 0.0), (t_off, w), (t_land - 0.05, w), (t_land + 0.12, 0.0)]
-        yaw[side] = target
+        yaw[side] = sign * target
+        body.append((t_land, body_yaw(yaw, sign * angle)))
         t_heel = t_land - 0.02
     t_end = _r(t_heel + 0.42)
     falls = {s: step_falls(base, s, steps[s]) for s in SIDES}
@@ -187,13 +203,12 @@ def plan_turn(base: BaseStance, direction: str, angle: float) -> StepPlan:
         t_end,
         ball,
         _turn_move(ball, sign * angle),
-        [(0.0, 0.0)],
+        [*body, (t_end, sign * angle)],
         [(0.0, 0.0)],
         [(0.0, 0.0)],
         falls,
         lean,
         foot_turn=keys,
-        body_follows_feet=angle,
     )
 
 
@@ -230,19 +245,14 @@ def plan_sidestep(base: BaseStance, direction: str, distance: float = SIDESTEP) 
 
 
 def body_turn(plan: StepPlan, t: np.ndarray) -> np.ndarray:
-    """The body's yaw (degrees) at ``t``: its keys, plus for a turn the mean of the feet's turns and
-    ``BODY_BIAS`` to the left while the feet are on their way (none at either end), never turned back
-    against the turn nor past its end."""
-    turn = _keyed(plan.turn_keys, t)
-    angle = plan.body_follows_feet
-    if angle:
-        mean = 0.5 * sum(_keyed(plan.foot_turn[s], t) for s in SIDES)
-        ramp = min(STEP_AHEAD, 0.5 * angle)  # the bias grows over the first half step and fades over the last
-        done = np.abs(mean)
-        bias = BODY_BIAS * np.clip(done / ramp, 0, 1) * np.clip((angle - done) / ramp, 0, 1)
-        sign = 1.0 if plan.end_move[2] > 0 else -1.0
-        turn = turn + sign * np.clip(sign * (mean + bias), 0.0, angle)  # never back, never past the end
-    return turn
+    """The body's yaw (degrees) at ``t``: a monotone cubic through ``turn_keys`` (it never overshoots a key
+    nor turns back between two), constant outside them."""
+    times, values = np.array(plan.turn_keys).T
+    if len(times) < 2:
+        return np.full(len(t), values[0])
+    from scipy.interpolate import PchipInterpolator
+
+    return PchipInterpolator(times, values)(np.clip(t, times[0], times[-1]))
 
 
 def record_plan(
