@@ -160,7 +160,7 @@ def _lying(figset: FigureSet, n: int = N, lift: float = 0.0):
     g = kin.segment_globals(q[None], loc[None])[0]
     loc[1, 3] += lift - np.einsum("kj,kj->k", g[segs, 1, :], nodes).min()
     rifle = np.eye(4)
-    rifle[:3, 3] = (60.0, 20.0, 0.0)  # lying beside him
+    rifle[:3, 3] = (60.0, 40.0, 0.0)  # beside him, clear of the ground
     return np.tile(q, (n, 1)), np.tile(loc, (n, 1, 1)), np.tile(rifle, (n, 1, 1))
 
 
@@ -174,6 +174,21 @@ def test_every_contact_slides_not_just_feet(figset: FigureSet) -> None:
     assert row["contact_slide_part"] in ("pelvis", "belly", "chest")
     assert row["contact_slides"]["pelvis"] == pytest.approx(10.0, abs=0.05)
     assert "contact_slide_cm" in row["failures"] and row["foot_skate_cm"] == 0.0  # the feet are up
+    # rolled onto his left side: the left hand and forearm carry him, and slide 10 cm along the ground
+    poses, body, rifle = _lying(figset)
+    roll = np.eye(4)
+    roll[:2, :2] = [[0.0, -1.0], [1.0, 0.0]]  # +90 degrees about the long axis: the left side down
+    body = roll @ body
+    kin, (nodes, segs) = figset.kin["DI.fig"], figset.nodes("DI.fig")
+    body[:, 1, 3] -= np.einsum(
+        "kj,kj->k", kin.segment_globals(poses[:1], body[:1])[0][segs, 1, :], nodes
+    ).min()
+    body[:, 2, 3] += np.linspace(0.0, 10.0, N)
+    row = check_clip(_clip("side_drag.chset", figset, poses, body, rifle), figset)
+    assert row["contact_slides"]["left_forearm"] == pytest.approx(10.0, abs=0.05)
+    assert (
+        set(row["contact_slides"]) == {"left_forearm", "left_hand"} and "contact_slide_cm" in row["failures"]
+    )
 
 
 def test_a_skimming_foot_is_a_sliding_foot(figset: FigureSet, holding) -> None:

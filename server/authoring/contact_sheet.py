@@ -205,11 +205,17 @@ def render_contact_sheet(
     def draw(
         states: Mapping[str, tuple[np.ndarray, np.ndarray]],
         frames: Sequence[int],
-        target: np.ndarray,
+        aim: tuple[np.ndarray, np.ndarray],
         view: str,
     ):
         images = []
-        eye = target + VIEWS[view] / np.linalg.norm(VIEWS[view]) * CAMERA_DISTANCE
+        target, corners = aim
+        toward = VIEWS[view] / np.linalg.norm(VIEWS[view])
+        rel = corners - target  # back off until what the tile shows fits (a body lying towards the camera)
+        along = rel @ toward
+        across = np.linalg.norm(rel - along[:, None] * toward, axis=1)
+        fit = (along + 1.1 * across / np.tan(CAMERA_YFOV / 2.0)).max()
+        eye = target + toward * max(CAMERA_DISTANCE, float(fit))
         pose = _look_at(eye, target)
         scene.set_pose(cam_node, pose)
         scene.set_pose(key_node, _look_at(eye + np.array([0.0, 200.0, 0.0]), target))
@@ -233,13 +239,17 @@ def render_contact_sheet(
                 loc[:, 2, 3] += travel
         return {n: placed[n].globals(q, loc) for n, (q, loc) in played.items() if n in placed}
 
-    def centre(states: Mapping[str, np.ndarray], frames: Sequence[int]) -> np.ndarray:
+    def centre(states: Mapping[str, np.ndarray], frames: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+        """The camera's target and the corners of the box the body sweeps over ``frames``."""
         body = max(states, key=lambda n: placed[n].kin.ndof)
         pts = np.concatenate([placed[body].points(states[body][k]) for k in frames])
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         c = (lo + hi) / 2.0
         c[1] = max(c[1], 45.0)
-        return c
+        corners = np.array(
+            [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        )
+        return c, corners
 
     font = _font(13)
     small = _font(11)
@@ -278,9 +288,9 @@ def render_contact_sheet(
         cs = row.channelset
         states = segment_states(cs)
         frames = np.unique(np.linspace(0, cs.nframes - 1, frames_per_clip).round().astype(int)).tolist()
-        target = centre(states, frames)
+        aim = centre(states, frames)
         for view in views:
-            images = draw(states, frames, target, view)
+            images = draw(states, frames, aim, view)
             pen.text((8, y + LABEL_HEIGHT + 6), row.label, fill=(20, 20, 20), font=font)
             pen.text(
                 (8, y + LABEL_HEIGHT + 24),
