@@ -17,8 +17,8 @@ from server.authoring.quality import (
     check_clip,
     check_library,
     foot_skate,
-    offset_transform,
 )
+from server.authoring.quality_postures import offset_transform
 from server.motion.channelset import Channelset
 from server.motion.channelset_file import save_channelset
 from server.motion.posture_graph import Arc, PostureGraph, write_posture_graph

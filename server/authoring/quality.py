@@ -38,32 +38,35 @@ Across clips, along every posture graph, at each posture node:
   pelvis and the chest or belly) and, DEAD only, ``rest_foot_cm`` (each foot's heel and lowest node).
 
 :func:`check_library` returns one object per clip, one per posture node and a ``summary`` with, per threshold,
-the limit, the worst value, where it happened and pass/fail.
+the limit, the worst value, where it happened and pass/fail. Playing clips on figures lives in
+:mod:`~server.authoring.quality_frames`, the posture-node checks in :mod:`~server.authoring.quality_postures`,
+body parts, contact runs and segment hulls in :mod:`~server.authoring.body_parts`.
 """
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from server.authoring.body_parts import (
-    FOOT_PARTS,
-    HAND_PARTS,
-    KNEE_RADIUS_CM,
-    SegmentHulls,
-    contact_slides,
-    part_of,
-)
-from server.motion.binding import bind_channelset
+from server.authoring.body_parts import FOOT_PARTS, contact_slides
+from server.authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
+from server.authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from server.motion.channelset import Channelset
-from server.motion.posture_change import LoadedPostureGraph, load_posture_graph
-from server.peabody.fk import FigureKinematics
-from server.peabody.model import Figure
+from server.motion.posture_change import load_posture_graph
+
+__all__ = [
+    "ClipFrames",
+    "FigureSet",
+    "QualityError",
+    "check_clip",
+    "check_continuity",
+    "check_library",
+    "play",
+    "summarise",
+]
 
 THRESHOLDS: dict[str, float] = {
     "foot_skate_cm": 2.0,
@@ -75,21 +78,9 @@ THRESHOLDS: dict[str, float] = {
     "end_speed_m_s": 0.5,
     "joint_limit_violations": 0.0,
     "max_frame_jump_deg": 20.0,
-    "continuity_deg": 0.5,
-    "continuity_root_cm": 1.0,
-    "continuity_root_deg": 0.5,
-    "continuity_rifle_cm": 1.0,
-    "rest_contact_cm": 2.0,
-    "rest_foot_cm": 15.0,
+    **POSTURE_LIMITS,
 }
-POSTURE_KEYS = (
-    "continuity_deg",
-    "continuity_root_cm",
-    "continuity_root_deg",
-    "continuity_rifle_cm",
-    "rest_contact_cm",
-    "rest_foot_cm",
-)
+POSTURE_KEYS = tuple(POSTURE_LIMITS)
 # (low, high) per gait family of cycle clips; None: recorded only
 GAIT_LIMITS: dict[str, dict[str, tuple[float, float] | None]] = {
     "walk": {"gait_speed_m_s": (1.2, 1.6), "gait_steps_per_s": (1.7, 2.1)},
@@ -98,151 +89,12 @@ GAIT_LIMITS: dict[str, dict[str, tuple[float, float] | None]] = {
     "bwalk": {"gait_speed_m_s": None, "gait_steps_per_s": None},
 }
 STEPS_PER_CYCLE_CLIP = {"crawl": 2}  # gait.py cuts one step per cycle clip; crawl.py one full cycle
-# weight-bearing parts of resting postures ("chest|belly": either of them)
-REST_PARTS: dict[str, tuple[str, ...]] = {
-    "PRONE": ("chest|belly", "left_forearm", "right_forearm"),
-    "KNEEL": ("right_kneecap",),
-    "CRAWL": ("left_kneecap", "right_kneecap", "left_forearm", "right_forearm"),
-    "DEAD": ("lowest", "pelvis", "chest|belly"),
-}
 CONTACT_HEIGHT_CM = 2.5
 END_FRAMES = 3  # frames over which an end's speed is measured
 LIMIT_SLACK = 1e-4  # rad / cm: float32 rounding of recorded angles
 PALM_PAIRS = (("right_palm.palmcenter", "grip"), ("left_palm.palmcenter", "handguard"))
 LOCOMOTION_GRAPH_WORDS = ("loco", "crawl")
 BACKWARD_WORDS = ("bwalk", "backward", "back_walk", "walkback")
-
-
-class QualityError(Exception):
-    """A library that cannot be checked (missing figure, unbindable channelset); carries the file."""
-
-    def __init__(self, message: str, source: str | None = None) -> None:
-        super().__init__(f"{source}: {message}" if source else message)
-        self.source = source
-
-
-@dataclass
-class FigureSet:
-    """Figures (by file type, e.g. ``"DI.fig"``) with cached kinematics and mesh nodes."""
-
-    figures: dict[str, Figure]
-
-    def __post_init__(self) -> None:
-        self.kin = {t: FigureKinematics(f) for t, f in self.figures.items()}
-        self._nodes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        self._cache: dict[str, Any] = {}
-
-    @classmethod
-    def from_dir(cls, folder: Path, types: Sequence[str]) -> FigureSet:
-        from server.peabody.loader import read_figure
-
-        figs = {}
-        for t in types:
-            path = Path(folder) / t
-            if not path.is_file():
-                raise QualityError(f"figure file {t!r} not found in {folder}")
-            figs[t] = read_figure(path)
-        return cls(figs)
-
-    def nodes(self, ptype: str) -> tuple[np.ndarray, np.ndarray]:
-        """Mesh nodes ``(k, 4)`` (homogeneous, segment frames) and their segments; sites if no psurfs."""
-        hit = self._nodes.get(ptype)
-        if hit is not None:
-            return hit
-        fig = self.figures[ptype]
-        kin = self.kin[ptype]
-        pts, segs = [], []
-        for i, name in enumerate(kin.segment_names):
-            seg = fig.segments[name]
-            if seg.psurf is None or not len(seg.psurf.nodes):
-                continue
-            nodes = np.c_[
-                np.asarray(seg.psurf.nodes, np.float64).reshape(-1, 3), np.ones(len(seg.psurf.nodes))
-            ]
-            if seg.psurf_transform is not None:
-                nodes = nodes @ np.asarray(seg.psurf_transform).T
-            pts.append(nodes)
-            segs.append(np.full(len(nodes), i))
-        if not pts:  # no geometry loaded: use the sites
-            for s in fig.sites():
-                if s.segment is None:
-                    continue
-                pts.append(np.asarray(s.location)[None, :, 3])
-                segs.append(np.array([kin.segment_names.index(s.segment.name)]))
-        out = (np.concatenate(pts), np.concatenate(segs))
-        self._nodes[ptype] = out
-        return out
-
-    def node_parts(self, ptype: str) -> np.ndarray:
-        """Per mesh node its body part (``left_foot``, ``chest``, ...; kneecap nodes are ``*_kneecap``)."""
-        key = f"parts:{ptype}"
-        hit = self._cache.get(key)
-        if hit is None:
-            nodes, segs = self.nodes(ptype)
-            kin, fig = self.kin[ptype], self.figures[ptype]
-            hit = np.array([part_of(kin.segment_names[s]) for s in segs], dtype=object)
-            for side in ("left", "right"):
-                name = f"{side}_lower_leg"
-                if f"{name}.knee" not in kin.site_names:
-                    continue
-                knee = np.asarray(fig.site(f"{name}.knee").location)[:3, 3]
-                near = np.linalg.norm(nodes[:, :3] - knee, axis=1) < KNEE_RADIUS_CM
-                hit[(segs == kin.segment_names.index(name)) & near] = f"{side}_kneecap"
-            self._cache[key] = hit
-        return hit
-
-    def hulls(self, ptype: str) -> SegmentHulls:
-        """Convex hulls of the body segments a rifle must stay out of (all but the hands)."""
-        key = f"hulls:{ptype}"
-        hit = self._cache.get(key)
-        if hit is None:
-            nodes, segs = self.nodes(ptype)
-            names = self.kin[ptype].segment_names
-            keep = np.array([s for s in np.unique(segs) if part_of(names[s]) not in HAND_PARTS], dtype=int)
-            hit = SegmentHulls.build(nodes, segs, keep)
-            self._cache[key] = hit
-        return hit
-
-
-@dataclass
-class ClipFrames:
-    """A channelset played on its figures: per figure file type, poses ``(n, ndof)`` and root globals."""
-
-    channelset: Channelset
-    poses: dict[str, np.ndarray]
-    locations: dict[str, np.ndarray]
-
-
-def play(channelset: Channelset, figures: FigureSet) -> ClipFrames:
-    """Every frame of ``channelset`` as pose vectors and root-site globals for each figure type it drives."""
-    types = sorted({c.protofiletype for c in channelset.channels})
-    missing = [t for t in types if t not in figures.figures]
-    if missing:
-        raise QualityError(f"no figure of type {missing[0]!r} to play {channelset.name}", channelset.source)
-    figs = [figures.figures[t] for t in types]
-    bound = bind_channelset(channelset, figs)
-    n = channelset.nframes
-    poses, locs = {}, {}
-    for bf in bound.figures:
-        ptype = bf.protofiletype
-        fig = figures.figures[ptype]
-        kin = figures.kin[ptype]
-        q = np.tile(bf.neutral.astype(np.float64), (n, 1))
-        q[:, bf.dst] = channelset.joint_data[:, bf.src]
-        if bf.figure_channel < 0:
-            loc = np.broadcast_to(fig.location, (n, 4, 4)).copy()
-        else:
-            chan = next(c for c in channelset.figure_channels() if c.column == bf.figure_channel)
-            loc = channelset.transforms(chan)
-            roots = channelset.roots(chan)
-            root = kin.root_name
-            if any(r != root for r in roots):
-                g = kin.site_globals(q, np.broadcast_to(np.eye(4), (n, 4, 4)))
-                idx = np.array([kin.site_names.index(r) for r in roots])
-                loc = loc @ np.linalg.inv(g[np.arange(n), idx]) @ g[:, kin.site_names.index(root)]
-        poses[ptype] = q
-        locs[ptype] = loc
-    return ClipFrames(channelset, poses, locs)
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -432,185 +284,12 @@ def check_clip(
     return out
 
 
-# --- posture nodes: continuity and resting postures ------------------------------------------------------
-
-
-def offset_transform(offset: tuple[float, float, float] | None) -> np.ndarray:
-    """The ground-plane rigid move of an ``end_offset`` (x cm, z cm, yaw degrees about +Y, + = left)."""
-    m = np.eye(4)
-    if offset is None:
-        return m
-    x, z, yaw = offset
-    c, s = np.cos(np.radians(yaw)), np.sin(np.radians(yaw))
-    m[:3, :3] = [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]
-    m[0, 3], m[2, 3] = x, z
-    return m
-
-
-def posture_location(cf: ClipFrames, frame: int, ptype: str) -> np.ndarray:
-    """A figure's root global at ``frame``, the clip's own move taken out at its last frame (``end_offset``)
-    so it can be compared with the posture where other arcs arrive or leave."""
-    loc = cf.locations[ptype][frame]
-    if frame == cf.channelset.nframes - 1 and cf.channelset.end_offset is not None:
-        loc = np.linalg.inv(offset_transform(cf.channelset.end_offset)) @ loc
-    return loc
-
-
-def rest_kind(node: str) -> str | None:
-    """``PRONE``, ``KNEEL``, ``CRAWL`` or ``DEAD`` for a resting posture node (``NAME@variant`` too)."""
-    base = node.split("@", 1)[0]
-    if base in ("CRAWL", "DEAD"):
-        return base
-    m = re.match(r"(PRONE|KNEEL)_", base)
-    return m.group(1) if m else None
-
-
-def part_lows(cf: ClipFrames, frame: int, figures: FigureSet) -> dict[str, float]:
-    """Height (cm) of the lowest mesh node of every body part at one frame (kneecaps as ``*_kneecap``,
-    ``lowest`` the whole body, ``*_heel`` the heel sites)."""
-    body = max(cf.poses, key=lambda k: figures.kin[k].ndof)
-    kin = figures.kin[body]
-    nodes, segs = figures.nodes(body)
-    parts = figures.node_parts(body)
-    g = kin.segment_globals(cf.poses[body][frame : frame + 1], cf.locations[body][frame : frame + 1])[0]
-    y = np.einsum("kj,kj->k", g[segs, 1, :], nodes)
-    out = {str(p): float(y[parts == p].min()) for p in np.unique(parts)}
-    for side in ("left", "right"):  # a kneecap is part of the knee too
-        if f"{side}_kneecap" in out and f"{side}_knee" in out:
-            out[f"{side}_knee"] = min(out[f"{side}_knee"], out[f"{side}_kneecap"])
-    out["lowest"] = float(y.min())
-    out["chest|belly"] = min(out.get("chest", np.inf), out.get("belly", np.inf))
-    sg = kin.site_globals(cf.poses[body][frame : frame + 1], cf.locations[body][frame : frame + 1])[0]
-    for side in ("left", "right"):
-        if f"{side}_foot.heel" in kin.site_names:
-            out[f"{side}_heel"] = float(sg[kin.site_names.index(f"{side}_foot.heel"), 1, 3])
-    return out
-
-
-def rest_endpoint(cf: ClipFrames, frame: int, figures: FigureSet, kind: str) -> dict[str, Any]:
-    """The weight-bearing parts of a resting posture at one endpoint: their heights and the worst."""
-    lows = part_lows(cf, frame, figures)
-    parts = {p: round(lows.get(p, np.inf), 3) for p in REST_PARTS[kind]}
-    worst = max(parts, key=lambda p: parts[p])
-    row: dict[str, Any] = {
-        "clip": cf.channelset.name,
-        "frame": frame,
-        "parts_cm": parts,
-        "rest_contact_cm": parts[worst],
-        "rest_part": worst,
-    }
-    if kind == "DEAD":
-        feet = {
-            side: max(lows.get(f"{side}_foot", -np.inf), lows.get(f"{side}_heel", -np.inf))
-            for side in ("left", "right")
-        }
-        side = max(feet, key=lambda s: feet[s])
-        row["rest_foot_cm"] = round(feet[side], 3)
-        row["rest_foot"] = f"{side}_foot"
-    return row
-
-
-def _endpoint(clips: Mapping[int, ClipFrames], token: int, forward: bool, arrive: bool) -> dict[str, Any]:
-    cf = clips[token]
-    last = cf.channelset.nframes - 1
-    frame = (last if forward else 0) if arrive else (0 if forward else last)
-    return {"clip": cf.channelset.name, "frame": frame, "cf": cf}
-
-
-def check_continuity(
-    loaded: LoadedPostureGraph, clips: Mapping[int, ClipFrames], figures: FigureSet
-) -> list[dict]:
-    """Per posture node, the largest disagreement between the poses of arcs arriving and leaving there, and
-    for resting postures whether the weight-bearing parts are on the ground at every endpoint."""
-    by_node: dict[str, list[dict[str, Any]]] = {}
-    for arc in loaded.graph.arcs:
-        fwd = arc.forward
-        by_node.setdefault(arc.end, []).append(_endpoint(clips, arc.channelset, fwd, True))
-        by_node.setdefault(arc.start, []).append(_endpoint(clips, arc.channelset, fwd, False))
-    out = []
-    for node, ends in by_node.items():
-        worst = {"deg": 0.0, "root_cm": 0.0, "root_deg": 0.0, "rifle_cm": 0.0}
-        pair: dict[str, list[str]] = {k: [] for k in worst}
-        for i in range(len(ends)):
-            for j in range(i + 1, len(ends)):
-                a, b = ends[i], ends[j]
-                d = _difference(a["cf"], a["frame"], b["cf"], b["frame"], figures)
-                for k, v in d.items():
-                    if v > worst[k]:
-                        worst[k] = v
-                        pair[k] = [f"{a['clip']}[{a['frame']}]", f"{b['clip']}[{b['frame']}]"]
-        row: dict[str, Any] = {
-            "graph": loaded.name,
-            "posture": node,
-            "endpoints": len(ends),
-            "continuity_deg": round(worst["deg"], 4),
-            "continuity_root_cm": round(worst["root_cm"], 4),
-            "continuity_root_deg": round(worst["root_deg"], 4),
-            "continuity_rifle_cm": round(worst["rifle_cm"], 4),
-            "worst_pair": pair["deg"] or pair["root_cm"] or pair["rifle_cm"],
-        }
-        kind = rest_kind(node)
-        if kind is not None:
-            seen: dict[tuple[str, int], dict[str, Any]] = {}
-            for e in ends:
-                if (e["clip"], e["frame"]) not in seen:
-                    seen[(e["clip"], e["frame"])] = rest_endpoint(e["cf"], e["frame"], figures, kind)
-            rest = list(seen.values())
-            w = max(rest, key=lambda r: r["rest_contact_cm"])
-            row.update(rest=rest, rest_kind=kind, rest_contact_cm=w["rest_contact_cm"])
-            row["rest_where"] = f"{w['clip']}[{w['frame']}] {w['rest_part']}"
-            if kind == "DEAD":
-                wf = max(rest, key=lambda r: r["rest_foot_cm"])
-                row["rest_foot_cm"] = wf["rest_foot_cm"]
-                row["rest_foot_where"] = f"{wf['clip']}[{wf['frame']}] {wf['rest_foot']}"
-        out.append(row)
-    for row in out:
-        fails = [k for k in POSTURE_KEYS if row.get(k) is not None and row[k] > THRESHOLDS[k]]
-        row["failures"] = fails
-        row["pass"] = not fails
-    return out
-
-
-def _difference(a: ClipFrames, fa: int, b: ClipFrames, fb: int, figures: FigureSet) -> dict[str, float]:
-    out = {"deg": 0.0, "root_cm": 0.0, "root_deg": 0.0, "rifle_cm": 0.0}
-    for ptype in set(a.poses) & set(b.poses):
-        kin = figures.kin[ptype]
-        if kin.ndof:
-            rot = np.array([d.kind == "R" for j in figures.figures[ptype].joints.values() for d in j.dofs])
-            dq = np.abs(a.poses[ptype][fa] - b.poses[ptype][fb])
-            out["deg"] = max(out["deg"], float(np.degrees(dq[rot].max(initial=0.0))))
-        la, lb = posture_location(a, fa, ptype), posture_location(b, fb, ptype)
-        dp = float(np.linalg.norm(la[:3, 3] - lb[:3, 3]))
-        cos = np.clip((np.trace(la[:3, :3].T @ lb[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
-        if kin.ndof:
-            out["root_cm"] = max(out["root_cm"], dp)
-            out["root_deg"] = max(out["root_deg"], float(np.degrees(np.arccos(cos))))
-        else:
-            out["rifle_cm"] = max(out["rifle_cm"], dp)
-    return out
-
-
 # --- the library ------------------------------------------------------------------------------------------
 
 
 def _is_locomotion(graph_path: Path) -> bool:
     stem = graph_path.stem.lower()
     return any(w in stem for w in LOCOMOTION_GRAPH_WORDS)
-
-
-def static_nodes(loaded: LoadedPostureGraph, locomotion: bool) -> set[str]:
-    """Posture nodes where the soldier stands still: every node of a static graph; in a locomotion graph
-    those no cycle clip touches (``STAND_STOWED``, ``CRAWL``; not ``WALK_L`` or ``CRAWLING``)."""
-    nodes = {n for arc in loaded.graph.arcs for n in (arc.start, arc.end)}
-    if not locomotion:
-        return nodes
-    moving = {
-        n
-        for arc in loaded.graph.arcs
-        if "cycle" in loaded.channelsets[arc.channelset].name.lower()
-        for n in (arc.start, arc.end)
-    }
-    return nodes - moving
 
 
 def check_library(
