@@ -151,17 +151,23 @@ def test_body_parts_of_both_figures(figset: FigureSet) -> None:
 
 def _lying(figset: FigureSet, n: int = N, lift: float = 0.0):
     """DI lying on his back, arms by his sides (neutral pose), the lowest mesh node ``lift`` cm up."""
-    kin, di = figset.kin["DI.fig"], figset.figures["DI.fig"]
-    q = kin.neutral_pose()
+    q = figset.kin["DI.fig"].neutral_pose()
     rot = np.eye(4)
     rot[1:3, 1:3] = [[0.0, -1.0], [1.0, 0.0]]  # +90 degrees about X: the front faces up
-    loc = rot @ di.location
-    nodes, segs = figset.nodes("DI.fig")
-    g = kin.segment_globals(q[None], loc[None])[0]
-    loc[1, 3] += lift - np.einsum("kj,kj->k", g[segs, 1, :], nodes).min()
     rifle = np.eye(4)
     rifle[:3, 3] = (60.0, 40.0, 0.0)  # beside him, clear of the ground
-    return np.tile(q, (n, 1)), np.tile(loc, (n, 1, 1)), np.tile(rifle, (n, 1, 1))
+    body = np.tile(rot @ figset.figures["DI.fig"].location, (n, 1, 1))
+    return _floored(figset, np.tile(q, (n, 1)), body, np.tile(rifle, (n, 1, 1)), lift)
+
+
+def _floored(figset: FigureSet, poses: np.ndarray, body: np.ndarray, rifle: np.ndarray, lift: float = 0.0):
+    """The clip moved up or down so that the body's lowest mesh node in its first frame is ``lift`` cm up."""
+    kin, (nodes, segs) = figset.kin["DI.fig"], figset.nodes("DI.fig")
+    dy = lift - np.einsum("kj,kj->k", kin.segment_globals(poses[:1], body[:1])[0][segs, 1, :], nodes).min()
+    body, rifle = body.copy(), rifle.copy()
+    body[:, 1, 3] += dy
+    rifle[:, 1, 3] += dy
+    return poses, body, rifle
 
 
 def test_every_contact_slides_not_just_feet(figset: FigureSet) -> None:
@@ -178,11 +184,7 @@ def test_every_contact_slides_not_just_feet(figset: FigureSet) -> None:
     poses, body, rifle = _lying(figset)
     roll = np.eye(4)
     roll[:2, :2] = [[0.0, -1.0], [1.0, 0.0]]  # +90 degrees about the long axis: the left side down
-    body = roll @ body
-    kin, (nodes, segs) = figset.kin["DI.fig"], figset.nodes("DI.fig")
-    body[:, 1, 3] -= np.einsum(
-        "kj,kj->k", kin.segment_globals(poses[:1], body[:1])[0][segs, 1, :], nodes
-    ).min()
+    poses, body, rifle = _floored(figset, poses, roll @ body, rifle)
     body[:, 2, 3] += np.linspace(0.0, 10.0, N)
     row = check_clip(_clip("side_drag.chset", figset, poses, body, rifle), figset)
     assert row["contact_slides"]["left_forearm"] == pytest.approx(10.0, abs=0.05)
@@ -385,9 +387,14 @@ def test_resting_postures_rest(tmp_path: Path, figset: FigureSet, holding, capsy
     lying = _clip("lie.chset", figset, *_lying(figset))
     hover = _clip("hover.chset", figset, *_lying(figset, lift=6.0))
     stand = _clip("stand.chset", figset, *_standing(figset, holding))
+    poses, body, rifle = _lying(figset)
+    tilt = np.eye(4)
+    tilt[1:3, 1:3] = [[np.cos(0.3), -np.sin(0.3)], [np.sin(0.3), np.cos(0.3)]]  # feet (-Z) up by 17 degrees
+    tilted = _clip("tilted.chset", figset, *_floored(figset, poses, tilt @ body, tilt @ rifle))
     arcs = [("STAND_STOWED", "DEAD", "lie", True), ("STAND_STOWED", "DEAD@kneel", "hover", True)]
+    arcs += [("DEAD@fall", "STAND_STOWED", "tilted", False)]
     arcs += [("STAND_STOWED", "KNEEL_STOWED", "stand", True), ("STAND_STOWED", "PRONE_FIRE", "stand", True)]
-    graph = _graph(tmp_path, figset, {"lie": lying, "hover": hover, "stand": stand}, arcs)
+    graph = _graph(tmp_path, figset, {"lie": lying, "hover": hover, "stand": stand, "tilted": tilted}, arcs)
     result = check_library([graph], FIGURES)
     rows = {r["posture"]: r for r in result["continuity"]}
     dead = rows["DEAD"]
@@ -398,12 +405,15 @@ def test_resting_postures_rest(tmp_path: Path, figset: FigureSet, holding, capsy
     assert floating["rest_kind"] == "DEAD"
     assert floating["rest_contact_cm"] == pytest.approx(6.0 + dead["rest_contact_cm"], abs=0.01)
     assert floating["failures"] == ["rest_contact_cm"]
+    feet_up = rows["DEAD@fall"]  # head on the ground, body and heels up a 17 degree slope
+    assert feet_up["rest_foot_cm"] > 30.0 and "rest_foot_cm" in feet_up["failures"]
+    assert feet_up["rest_foot_where"].startswith(f"tilted.chset[{N - 1}]")  # a backward arc leaves there
     kneel, prone = rows["KNEEL_STOWED"], rows["PRONE_FIRE"]  # standing is neither
     assert kneel["rest_contact_cm"] > 30.0 and kneel["rest_where"].endswith("right_kneecap")
     assert prone["rest_contact_cm"] > 30.0 and "rest_contact_cm" in prone["failures"]
     assert "rest_contact_cm" not in rows["STAND_STOWED"]  # not a resting posture
     summary = result["summary"]["thresholds"]["rest_contact_cm"]
-    assert summary["failing"] == 3 and not summary["pass"]
+    assert summary["failing"] == 4 and not summary["pass"]
     assert main(["author", "check", "--graphs", str(graph)]) == 1  # the table names the node, value and clip
     text = capsys.readouterr().out
     assert "FAIL soldier_low:DEAD@kneel rest_contact_cm = 6.4" in text and "hover.chset[" in text

@@ -206,8 +206,7 @@ def check_clip(
         val = float(slide[i]) if mask[i] else 0.0
         out[f"{key}_cm"] = round(val, 3)
         out[f"{key}_part"] = str(parts[i]).replace("_kneecap", "_knee") if val > 0 else None
-    foot_down = np.stack([(pts[:, parts == f, 1] <= CONTACT_HEIGHT_CM).any(axis=1) for f in FOOT_PARTS
-                          if (parts == f).any()])  # fmt: skip
+    foot_down = [(pts[:, parts == f, 1] <= CONTACT_HEIGHT_CM).any(axis=1) for f in FOOT_PARTS]
     out["stance_phases"] = sum(1 for row in foot_down for a, b in _runs(row) if b - a >= 3)
     ys = pts[..., 1]
     low = np.unravel_index(int(np.argmin(ys)), ys.shape)
