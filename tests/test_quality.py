@@ -202,6 +202,7 @@ def test_a_skimming_foot_is_a_sliding_foot(figset: FigureSet, holding) -> None:
     rifle[:, 0, 3] += skim
     row = check_clip(_clip("skim.chset", figset, poses, body, rifle), figset)
     assert row["foot_skate_cm"] == pytest.approx(300.0, abs=0.5) and "foot_skate_cm" in row["failures"]
+    assert row["foot_skate_frames"] == [0, N - 1] and row["foot_skate_part"] in ("left_foot", "right_foot")
     assert row["end_speed_m_s"] == pytest.approx(6.0, abs=0.01) and "end_speed_m_s" in row["failures"]
 
 
@@ -289,6 +290,7 @@ def test_joint_limit_violations_and_pops(figset: FigureSet, holding) -> None:
     assert row["joint_limit_violations"] == 5
     assert row["violating_joints"] == ["left_knee"]
     assert row["max_frame_jump_deg"] == pytest.approx(30.0, abs=1e-3)
+    assert row["max_frame_jump_where"] == "neck[19-20]"
     assert set(row["failures"]) >= {"joint_limit_violations", "max_frame_jump_deg"}
 
 
@@ -409,7 +411,7 @@ def test_resting_postures_rest(tmp_path: Path, figset: FigureSet, holding, capsy
     assert feet_up["rest_foot_cm"] > 30.0 and "rest_foot_cm" in feet_up["failures"]
     assert feet_up["rest_foot_where"].startswith(f"tilted.chset[{N - 1}]")  # a backward arc leaves there
     kneel, prone = rows["KNEEL_STOWED"], rows["PRONE_FIRE"]  # standing is neither
-    assert kneel["rest_contact_cm"] > 30.0 and kneel["rest_where"].endswith("right_kneecap")
+    assert kneel["rest_contact_cm"] > 30.0 and kneel["rest_contact_where"].endswith("right_kneecap")
     assert prone["rest_contact_cm"] > 30.0 and "rest_contact_cm" in prone["failures"]
     assert "rest_contact_cm" not in rows["STAND_STOWED"]  # not a resting posture
     summary = result["summary"]["thresholds"]["rest_contact_cm"]

@@ -152,7 +152,7 @@ def check_continuity(
             rest = list(seen.values())
             w = max(rest, key=lambda r: r["rest_contact_cm"])
             row.update(rest=rest, rest_kind=kind, rest_contact_cm=w["rest_contact_cm"])
-            row["rest_where"] = f"{w['clip']}[{w['frame']}] {w['rest_part']}"
+            row["rest_contact_where"] = f"{w['clip']}[{w['frame']}] {w['rest_part']}"
             if kind == "DEAD":
                 wf = max(rest, key=lambda r: r["rest_foot_cm"])
                 row["rest_foot_cm"] = wf["rest_foot_cm"]

@@ -145,7 +145,7 @@ def _cell(value: object, width: int, fmt: str) -> str:
 def print_check_table(result: dict) -> None:
     """The check as a table: one line per clip (cm, m/s, degrees), the failing values named with their
     limits, the failing posture nodes, then the summary per threshold."""
-    from server.authoring.quality import GAIT_LIMITS, THRESHOLDS
+    from server.authoring.quality import GAIT_LIMITS, THRESHOLDS, where_detail
 
     summary = result["summary"]
     head = " ".join(f"{h:>{w}}" for _, h, w, _ in CHECK_COLUMNS)
@@ -155,18 +155,12 @@ def print_check_table(result: dict) -> None:
         print(f"{'ok  ' if c['pass'] else 'FAIL'} {c['name']:<28} {cells}")
         for k in c["failures"]:
             limit = GAIT_LIMITS[c["gait"]][k] if k.startswith("gait_") else THRESHOLDS.get(k)
-            where = {
-                "foot_skate_cm": c.get("foot_skate_part"),
-                "contact_slide_cm": c.get("contact_slide_part"),
-                "rifle_in_body_cm": c.get("rifle_in_body_where"),
-                "end_speed_m_s": c.get("end_speed_where"),
-                "ground_penetration_cm": c.get("lowest_segment"),
-            }.get(k)
+            where = where_detail(c, k)
             print(f"       {k} = {c.get(k)} (limit {limit}){' at ' + where if where else ''}")
     for r in result["continuity"]:
         if not r["pass"]:
             for k in r["failures"]:
-                where = r.get("rest_where") if k == "rest_contact_cm" else r.get("rest_foot_where")
+                where = r.get("rest_contact_where") if k == "rest_contact_cm" else r.get("rest_foot_where")
                 if k.startswith("continuity"):
                     where = ", ".join(r["worst_pair"])
                 print(f"FAIL {r['graph']}:{r['posture']} {k} = {r[k]} (limit {THRESHOLDS[k]}) at {where}")
