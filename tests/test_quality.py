@@ -337,6 +337,17 @@ def test_check_library_continuity_and_cli(tmp_path: Path, figset: FigureSet, hol
     assert main(["author", "check", "--graphs", str(bad)]) == 1
     text = capsys.readouterr().out
     assert "FAIL" in text and "continuity_deg" in text
+    assert main(["author", "check", "--graphs", str(good), "--only", "a2b", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [c["name"] for c in out["clips"]] == ["a2b.chset"] and {
+        r["posture"] for r in out["continuity"]
+    } == {
+        "A",
+        "B",
+    }
+    assert main(["author", "check", "--graphs", str(bad), "--only", "a2b"]) == 1  # a2b arrives at B
+    capsys.readouterr()
+    assert main(["author", "check", "--graphs", str(good), "--only", "zz*"]) == 2
     assert main(["author", "check", "--graphs"]) == 2  # nothing to check
     assert main(["author", "check", "--graphs", str(tmp_path / "missing.graph")]) == 2
 

@@ -11,7 +11,6 @@ view and each clip one row per view. Labels are drawn with Pillow.
 
 from __future__ import annotations
 
-import fnmatch
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -20,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from server.authoring.quality import BACKWARD_WORDS
+from server.authoring.quality import BACKWARD_WORDS, clip_matches
 from server.motion.channelset import Channelset
 from server.peabody.fk import FigureKinematics
 from server.peabody.model import Figure
@@ -318,16 +317,6 @@ def render_contact_sheet(
         "views": list(views),
         "tiles": len(views) * (len(postures) + sum(min(frames_per_clip, r.channelset.nframes) for r in rows)),
     }
-
-
-def clip_matches(filename: str, pattern: str | None) -> bool:
-    """Whether a clip file (``stfire2dead_low.chset.env``) matches a shell pattern on clip names
-    (``stfire2dead``, ``*2dead``; a DI clip's ``_low`` suffix may be left out)."""
-    if not pattern:
-        return True
-    name = Path(filename).name.split(".", 1)[0]
-    names = (name, name.removesuffix("_low"), Path(filename).name)
-    return any(fnmatch.fnmatchcase(n, pattern) for n in names)
 
 
 def library_sheet_inputs(

@@ -45,6 +45,7 @@ body parts, contact runs and segment hulls in :mod:`~server.authoring.body_parts
 
 from __future__ import annotations
 
+import fnmatch
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -64,6 +65,8 @@ __all__ = [
     "check_clip",
     "check_continuity",
     "check_library",
+    "clip_matches",
+    "only_clips",
     "play",
     "summarise",
 ]
@@ -418,6 +421,7 @@ def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[s
                      "pass": failing == 0}  # fmt: skip
     for key in ("gait_speed_m_s", "gait_steps_per_s"):
         judged = [(c, GAIT_LIMITS[c["gait"]][key]) for c in clips if c.get(key) is not None]
+        judged = [(c, lim) for c, lim in judged if lim is not None]  # recorded-only families are not judged
         limit = {f: v[key] for f, v in GAIT_LIMITS.items() if v[key] is not None}
         bad = [(c, lim) for c, lim in judged if _range_failure(c[key], lim)]
 
@@ -448,3 +452,22 @@ def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[s
         "thresholds": rows,
         "pass": ok,
     }
+
+
+def clip_matches(filename: str, pattern: str | None) -> bool:
+    """Whether a clip file (``stfire2dead_low.chset.env``) matches a shell pattern on clip names
+    (``stfire2dead``, ``*2dead``; a DI clip's ``_low`` suffix may be left out)."""
+    if not pattern:
+        return True
+    name = Path(filename).name.split(".", 1)[0]
+    names = (name, name.removesuffix("_low"), Path(filename).name)
+    return any(fnmatch.fnmatchcase(n, pattern) for n in names)
+
+
+def only_clips(result: Mapping[str, Any], pattern: str) -> dict[str, Any]:
+    """A :func:`check_library` result cut down to the clips matching ``pattern`` (see :func:`clip_matches`)
+    and the posture nodes where one of them arrives or leaves, with its own summary."""
+    clips = [c for c in result["clips"] if clip_matches(c["file"] or c["name"], pattern)]
+    names = {c["name"] for c in clips}
+    nodes = [r for r in result["continuity"] if names & set(r.get("clips", ()))]
+    return {"clips": clips, "continuity": nodes, "summary": summarise(clips, nodes), "only": pattern}

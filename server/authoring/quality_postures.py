@@ -137,6 +137,7 @@ def check_continuity(
             "graph": loaded.name,
             "posture": node,
             "endpoints": len(ends),
+            "clips": sorted({e["clip"] for e in ends}),
             "continuity_deg": round(worst["deg"], 4),
             "continuity_root_cm": round(worst["root_cm"], 4),
             "continuity_root_deg": round(worst["root_deg"], 4),

@@ -97,13 +97,20 @@ def _register_check(sub: argparse._SubParsersAction) -> None:
         help="posture graph files (default: every posture_graphs/*.graph)",
     )
     p.add_argument("--clips", type=Path, nargs="*", default=[], help="extra channelset files to check")
+    p.add_argument(
+        "--only",
+        metavar="PATTERN",
+        default=None,
+        help="report (and pass or fail on) only the clips whose name matches this shell pattern and the "
+        "posture nodes they reach; a DI clip's _low suffix may be left out",
+    )
     p.add_argument("--figures", type=Path, default=None, help="figure folder (default: figures/)")
     p.add_argument("--json", action="store_true", help="one JSON object: clips, continuity, summary")
     p.set_defaults(func=run_check)
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from server.authoring.quality import QualityError, check_library
+    from server.authoring.quality import QualityError, check_library, only_clips
     from server.motion.errors import ChannelsetError, PostureGraphError
     from server.peabody.language import PeabodyError
     from ttes.output import print_json
@@ -118,6 +125,11 @@ def run_check(args: argparse.Namespace) -> int:
     except (QualityError, ChannelsetError, PostureGraphError, PeabodyError) as exc:
         print(f"ttes author check: {exc}", file=sys.stderr)
         return 2
+    if args.only:
+        result = only_clips(result, args.only)
+        if not result["clips"]:
+            print(f"ttes author check: no clip matches {args.only!r}", file=sys.stderr)
+            return 2
     summary = result["summary"]
     if args.json:
         print_json(result)
