@@ -120,6 +120,8 @@ def test_foot_skate_ignores_swinging_feet_but_not_a_skim() -> None:
     pts[:, 0, 1] = 1.0  # a skim at 1 cm, 6 m/s at 60 fps: contact is judged by height alone
     pts[:, 0, 0] = np.arange(n) * 10.0
     assert foot_skate(pts, 60.0)[0] == pytest.approx(590.0)
+    pts[:, 0, 1] = 2.0  # 2 cm up, as a toe leaving the ground: out of the contact band
+    assert foot_skate(pts, 60.0) == (0.0, 0)
 
 
 def test_contact_slides_per_node_and_run() -> None:
