@@ -214,8 +214,9 @@ def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
         "--view",
         choices=("quarter", "side", "front", "both"),
         default="quarter",
-        help="camera: three-quarter from the front left (default), from his left side, from the front, or "
-        "both side and front (one row each)",
+        help="camera: three-quarter from the front left (default; sliding against the checkerboard), from "
+        "his left side or from the front at ground level (daylight under a hovering body), or both side and "
+        "front (one row each)",
     )
     p.add_argument("--frames", type=int, default=6, help="frames per clip (default 6)")
     p.add_argument("--tile", type=int, default=200, help="tile size in pixels (default 200)")
