@@ -492,3 +492,27 @@ def test_contact_sheet_views_and_clip_pattern(tmp_path: Path, figset: FigureSet,
     info = json.loads(capsys.readouterr().out)
     assert info["clips"] == ["a2b.chset.env"] and info["views"] == ["side", "front"]
     assert main(["author", "contact-sheet", "--graphs", str(graph), "--out", str(out), "--clips", "zz*"]) == 2
+
+
+def test_locomotion_graphs_check_speeds_only_at_the_base_posture(
+    tmp_path: Path, figset: FigureSet, holding
+) -> None:
+    poses, body, rifle = _standing(figset, holding)
+    t = np.linspace(0.0, 1.0, N)
+    start_b, start_r, cycle_b, cycle_r = body.copy(), rifle.copy(), body.copy(), rifle.copy()
+    start_b[:, 0, 3] += 40.0 * t * t  # eases out of STAND_STOWED, leaves for WALK_L at 1.6 m/s
+    start_r[:, 0, 3] += 40.0 * t * t
+    cycle_b[:, 0, 3] += 40.0 * t  # 0.8 m/s at both ends: WALK_L is not a static posture
+    cycle_r[:, 0, 3] += 40.0 * t
+    clips = {"walk_start_l": _clip("walk_start_l.chset", figset, poses, start_b, start_r),
+             "walk_cycle_l": _clip("walk_cycle_l.chset", figset, poses, cycle_b, cycle_r)}  # fmt: skip
+    for cs in clips.values():
+        cs.stride_length, cs.ground_speed = 0.0, 0.0
+    arcs = [("STAND_STOWED", "WALK_L", "walk_start_l", True), ("WALK_L", "WALK_L", "walk_cycle_l", True)]
+    graph = _graph(tmp_path, figset, clips, arcs)
+    loco = graph.rename(tmp_path / "soldier_loco.graph")
+    rows = {c["name"]: c for c in check_library([loco], FIGURES)["clips"]}
+    start, cycle = rows["walk_start_l.chset"], rows["walk_cycle_l.chset"]
+    assert start["locomotion"] and start["end_speed_m_s"] < 0.2 and start["end_speeds_m_s"]["last"] > 1.4
+    assert start["end_speed_where"].endswith("(first frames)") and "end_speed_m_s" not in start["failures"]
+    assert cycle["end_speed_m_s"] is None and cycle["end_speeds_m_s"]["first"] > 0.7
