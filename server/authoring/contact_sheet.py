@@ -216,6 +216,8 @@ def render_contact_sheet(
     ):
         images = []
         target, corners = aim
+        if view in GROUND_LEVEL_VIEWS:  # aim at the middle of the body, however low it lies
+            target = np.r_[target[0], corners[:, 1].mean(), target[2]]
         toward = VIEWS[view] / np.linalg.norm(VIEWS[view])
         rel = corners - target  # back off until what the tile shows fits (a body lying towards the camera)
         along = rel @ toward
