@@ -174,3 +174,13 @@ def test_turn_plan_moves_the_stance_about_the_pivot_ball():
             bx, bz = base.ball_at(side)
             ball = np.array([bx, 0.0, bz, 1.0])
             np.testing.assert_allclose(turns.ground_move(*plan.end_move) @ ball, ball, atol=1e-9)
+
+
+def test_rebuilding_a_turn_reproduces_the_committed_bytes(tmp_path):
+    from server.authoring import build as B
+
+    B.build(tmp_path, FIGURES, only="turn_r45", figure="soldier", progress=False)
+    rel = "channelsets/turn_r45.chset.env"
+    assert (tmp_path / rel).read_bytes() == (CHANNELSETS / "turn_r45.chset.env").read_bytes()
+    graph = "posture_graphs/soldier_turn_hi.graph"
+    assert (tmp_path / graph).read_bytes() == (POSTURE_GRAPHS / "soldier_turn_hi.graph").read_bytes()
