@@ -106,6 +106,8 @@ def test_foot_skate_is_measured_in_stance_and_in_the_world_frame(figset: FigureS
     del cs.ground_speed  # type: ignore[attr-defined]
     missing = check_clip(cs, figset, locomotion=True)
     assert "locomotion_recorded" in missing["failures"]
+    cs.end_offset = (0.0, 0.0, 90.0)  # a turn in place in a locomotion graph moves for real: no speed needed
+    assert "locomotion_recorded" not in check_clip(cs, figset, locomotion=True)["failures"]
 
 
 def test_foot_skate_ignores_swinging_feet_but_not_a_skim() -> None:

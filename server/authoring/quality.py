@@ -22,9 +22,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``END_FRAMES`` frames: things ease in and out, deaths end at rest.
 * ``joint_limit_violations`` (float32 slack allowed) and ``max_frame_jump_deg`` (pops, IK flips).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
-  recorded (``locomotion_recorded``); cycle clips are judged for realism, ``gait_speed_m_s`` and
-  ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a walk or run cycle clip holds one step, cut at footfalls;
-  the crawl cycle both legs' moves).
+  recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
+  cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
+  walk or run cycle clip holds one step, cut at footfalls; the crawl cycle both legs' moves).
 
 Across clips, along every posture graph, at each posture node:
 
@@ -282,11 +282,12 @@ def check_clip(
         out["stride_length"] = stride
         out["ground_speed"] = speed
         out["cadence"] = round(speed / stride, 4) if speed and stride else None
-        out["locomotion_recorded"] = speed is not None and stride is not None
+        # an in-place clip must say how fast it goes; one with an end_offset (a turn, a side-step) moves
+        out["locomotion_recorded"] = (speed is not None and stride is not None) or cs.end_offset is not None
         if not out["locomotion_recorded"]:
             failures.append("locomotion_recorded")
         family = gait_family(name)
-        if family is not None and out["locomotion_recorded"] and cs.duration > 0:
+        if family is not None and speed is not None and stride is not None and cs.duration > 0:
             out["gait"] = family
             out["gait_speed_m_s"] = round(float(speed) / 100.0, 4)
             out["gait_steps_per_s"] = round(STEPS_PER_CYCLE_CLIP.get(family, 1) / cs.duration, 4)
