@@ -15,6 +15,7 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``rifle_in_body_cm``: how deep rifle mesh nodes go into the body, measured against the convex hull (Qhull)
   of each body segment's mesh in the segment's frame — the hands and fingers that hold it excepted — with
   bounding spheres to pick the candidate (frame, segment, node) triples first.
+* ``rifle_slide_cm`` (information, no limit): the rifle's slide on the ground, e.g. once a death drops it.
 * ``palm_rifle_cm`` — right palm centre to the rifle's ``grip``, left palm centre to its ``handguard``, only
   while the rifle is held (before the channelset's ``release_frame``).
 * ``end_speed_m_s`` — at each end of the clip that is a static posture (both ends of a static-graph clip, the
@@ -244,6 +245,10 @@ def check_clip(
         out["rifle_penetration_cm"] = round(max(0.0, -float(rpts[..., 1].min(initial=np.inf))), 3)
         if out["rifle_penetration_cm"] > 0:
             out["rifle_penetration_where"] = f"frame {int(np.argmin(rpts[..., 1].min(axis=1)))}"
+        rruns = contact_runs(rpts + shift[:, None, :], CONTACT_HEIGHT_CM)  # information: a dropped rifle
+        r = rruns.worst(np.ones(len(rnodes), dtype=bool))
+        out["rifle_slide_cm"] = 0.0 if r is None else round(float(rruns.slide[r]), 3)
+        out["rifle_slide_frames"] = None if r is None else [int(rruns.first[r]), int(rruns.last[r])]
         depth, frame, seg = figures.hulls(body_type).depth(rpts, segg)
         out["rifle_in_body_cm"] = round(depth, 3)
         out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None
