@@ -16,7 +16,7 @@ from server.motion.cache import load_channelset
 from server.motion.posture_change import load_posture_graph
 from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
 
-CONTACT = 2.5  # cm: a foot point this low is touching the ground, whatever its speed
+CONTACT = 2.5  # cm: a foot point this low is touching the ground, whatever its speed (the check: 1.25)
 SUFFIXES = {"": "soldier.fig", "_low": "DI.fig"}
 TURNS = [(f"turn_{d[0]}{a}", d, a) for d in ("left", "right") for a in turns.TURN_ANGLES]
 FOOT_POINTS = ("foot.heel", "foot.ball", "toes.distal")
