@@ -63,7 +63,7 @@ STEP_AHEAD = 45.0  # degrees a stepping foot lands at most beyond the other one
 # how far each foot can turn from its STAND_STOWED yaw relative to the body (+ = to the left), degrees: IK on
 # soldier.fig's legs reaches about -60..+5 (left) and -65..+15 (right); the body's turn keeps within both
 FOOT_TURN_RANGE = {"left": (-55.0, 3.0), "right": (-60.0, 12.0)}
-FIRST_HEEL = 0.2  # s: the first heel rises (the pelvis already leaning over the other foot)
+FIRST_HEEL = 0.3  # s: the first heel rises (the pelvis already leaning over the other foot)
 LEAN_OUT = 0.5  # of the way the pelvis moves towards the outer foot while the inside foot steps
 LEAN_IN = 0.65  # of the way it moves towards the inside foot while the outer foot steps round it
 SIDESTEP_LEAN = 4.0  # cm the pelvis leans over the standing foot while the other steps
@@ -181,7 +181,7 @@ def plan_turn(base: BaseStance, direction: str, angle: float) -> StepPlan:
     keys: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
     lean: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
     yaw = {inside: 0.0, outer: 0.0}
-    body: list[tuple[float, float]] = [(0.0, 0.0), (0.05, 0.0)]  # starting from rest
+    body: list[tuple[float, float]] = [(0.0, 0.0), (0.15, 0.0)]  # starting from rest
     t_heel = FIRST_HEEL
     for role, target in turn_steps(angle):
         side = role_side[role]
