@@ -219,7 +219,8 @@ def _register_build(sub: argparse._SubParsersAction) -> None:
         help="record the motion library (channelsets, posture graphs, start-up files)",
         description=(
             "Solve the key postures, record every clip on soldier.fig into channelsets/*.chset.env, slave "
-            "them onto DI.fig into channelsets/*_low.chset.env, and write the posture graphs and the "
+            "them onto DI.fig into channelsets/*_low.chset.env (AK-47) and *_m16_low.chset.env (M16), "
+            "and write the posture graphs and the "
             "jack-ttes-soldier_low.jcl/.env start-up files into posture_graphs/. Deterministic."
         ),
     )
@@ -228,9 +229,12 @@ def _register_build(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--figure",
-        choices=("soldier", "DI", "all"),
+        choices=("soldier", "DI", "M16", "all"),
         default="all",
-        help="soldier: record soldier.fig clips; DI: re-slave the committed soldier.fig clips; all: both",
+        help=(
+            "soldier: record soldier.fig clips; DI / M16: re-slave the committed soldier.fig clips for "
+            "DI.fig with the AK-47 (*_low) / the M16 (*_m16_low); all: everything"
+        ),
     )
     p.add_argument("--out", type=Path, default=None, help="output root (default: the repository)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
