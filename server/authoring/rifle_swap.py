@@ -8,8 +8,8 @@ puts them on the M16's own grip and handguard (:func:`server.authoring.slaving.r
 
 The M16 is 11 cm longer in front of the butt and shaped differently underneath, so it can reach the ground
 where the AK did not (prone): those frames pitch the muzzle up about the butt by the least angle that
-clears the ground (:func:`clear_ground`), smoothed over the clip so the rifle does not twitch, and exact at
-the first and last frames so that clips meeting at a posture node still agree there.
+clears the ground (:func:`clear_ground`), smoothed over the clip so the rifle does not twitch (the build then
+makes clips meeting at a posture node agree there exactly, rifle included: ``build.snap_endpoints``).
 
 After the channelset's ``release_frame`` the rifle is a free body (a death lets go of it): the M16 follows
 the AK's fall, and where the AK comes to the ground the M16 is lowered onto it too, rather than resting on
@@ -69,8 +69,8 @@ def pitch_about(locations: np.ndarray, pivot: np.ndarray, degrees: np.ndarray) -
 
 
 def _smooth_above(need: np.ndarray, sigma: float) -> np.ndarray:
-    """A smooth curve at or above ``need`` (a running maximum, then Gaussian), tapered back to ``need``
-    at the first and last frame."""
+    """A smooth curve at or above ``need``: a running maximum, then Gaussian. It rises ahead of a rifle
+    that comes down fast, and equals ``need`` at an end where the rifle is at rest (a posture node)."""
     n = len(need)
     half = int(np.ceil(3.0 * sigma))
     if n < 3 or not need.any():
@@ -80,10 +80,7 @@ def _smooth_above(need: np.ndarray, sigma: float) -> np.ndarray:
     runmax = np.pad(windows.max(axis=-1), half, mode="edge")
     k = np.arange(-half, half + 1, dtype=np.float64)
     kernel = np.exp(-0.5 * (k / sigma) ** 2)
-    smooth = np.convolve(runmax, kernel / kernel.sum(), mode="valid")
-    frames = np.arange(n)
-    taper = np.minimum(1.0, np.minimum(frames, frames[::-1]) / half)
-    return np.maximum(need, need + taper * (smooth - need))
+    return np.maximum(need, np.convolve(runmax, kernel / kernel.sum(), mode="valid"))
 
 
 def clear_ground(figures: FigureSet, ptype: str, locations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

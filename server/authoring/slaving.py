@@ -121,6 +121,7 @@ RIFLE_HOLDS: dict[str, str] = {
     "right_palm.palmcenter": "rifle.grip",
     "left_palm.palmcenter": "rifle.handguard",
 }
+ELBOW_FOLLOW = 0.5  # an elbow goal moves by this much of its palm's move onto another rifle's site
 SMOOTH_SIGMA_FRAMES = 3.0  # Gaussian smoothing of the slave's offset from the copied angles over a clip
 SMOOTH_MAX_DOF_STEP = 0.05  # rad per iteration of the re-solve after smoothing: stays on its branch
 
@@ -247,10 +248,10 @@ class MasterSlavePair:
         return np.clip(out, sk.lower, sk.upper)
 
     def goals(
-        self, master_sites: np.ndarray, palm_targets: Mapping[str, np.ndarray] | None = None
+        self, master_sites: np.ndarray, targets: Mapping[str, np.ndarray] | None = None
     ) -> list[ik.Goal]:
-        """Step 3's goals from the master's site globals ``(..., nsite, 4, 4)``; ``palm_targets`` (slave palm
-        site -> positions ``(..., 3)``) puts the palms there instead of on the master's palms."""
+        """Step 3's goals from the master's site globals ``(..., nsite, 4, 4)``; ``targets`` (slave site ->
+        positions ``(..., 3)``) sends those sites there instead of to the master's sites."""
         p = self.parameters
         mk = self.master_kin
         on = {"torso": p.match_torso, "sight": p.match_sight, "palm": p.match_palms, "elbow": p.match_elbows}
@@ -260,8 +261,8 @@ class MasterSlavePair:
             if not on[c.group]:
                 continue
             target = master_sites[..., mk.site_names.index(c.master_site), :3, 3]
-            if palm_targets is not None and c.group == "palm" and c.slave_site in palm_targets:
-                target = np.asarray(palm_targets[c.slave_site], np.float64)
+            if targets is not None and c.slave_site in targets:
+                target = np.asarray(targets[c.slave_site], np.float64)
             priority = 2 if (c.group == "palm" and p.palm_priority) else 1
             out.append(
                 ik.Goal(
@@ -280,7 +281,7 @@ class MasterSlavePair:
         self,
         master_pose: np.ndarray,
         master_location: np.ndarray | None = None,
-        palm_targets: Mapping[str, np.ndarray] | None = None,
+        targets: Mapping[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(slave_pose, slave_location)`` for master poses ``(ndof,)`` or ``(..., ndof)`` and the master's
         root site globals (default: the master figure's location). The slave's root site is put where the
@@ -295,7 +296,7 @@ class MasterSlavePair:
         sites = mk.site_globals(q, loc)
         slave_loc = sites[..., mk.site_names.index(self._slave_root), :, :].copy()
         start = self.copy_pose(q, segs)
-        goals = self.goals(sites, palm_targets)
+        goals = self.goals(sites, targets)
         if not goals:
             return start, slave_loc
         opts: dict[str, Any] = {"iterations": 80, "rest_gain": 0.1, "tolerance": 0.02}
@@ -307,7 +308,7 @@ class MasterSlavePair:
         self,
         master_poses: np.ndarray,
         master_locations: np.ndarray,
-        palm_targets: Mapping[str, np.ndarray] | None = None,
+        targets: Mapping[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`slave_pose` over the frames ``(n, ndof)`` of a clip, made temporally coherent.
 
@@ -321,9 +322,9 @@ class MasterSlavePair:
         mk, sk = self.master_kin, self.slave_kin
         q = np.asarray(master_poses, dtype=np.float64)
         loc = np.asarray(master_locations, dtype=np.float64)
-        pose, slave_loc = self.slave_pose(q, loc, palm_targets)
+        pose, slave_loc = self.slave_pose(q, loc, targets)
         n = len(pose)
-        goals = self.goals(mk.site_globals(q, loc), palm_targets)
+        goals = self.goals(mk.site_globals(q, loc), targets)
         if n < 3 or not goals:
             return pose, slave_loc
         start = self.copy_pose(q, mk.segment_globals(q, loc))
@@ -423,12 +424,36 @@ def low_name(name: str) -> str:
     return name + "_low"
 
 
-def held_palm_targets(rifle: Figure, rifle_locations: np.ndarray) -> dict[str, np.ndarray]:
-    """Per slave palm (:data:`RIFLE_HOLDS`), where it goes on ``rifle`` placed at ``rifle_locations``
-    ``(n, 4, 4)`` (its root site's globals)."""
+def held_rifle_targets(
+    pair: MasterSlavePair,
+    master_poses: np.ndarray,
+    master_locations: np.ndarray,
+    rifle: Figure,
+    rifle_locations: np.ndarray,
+    release_frame: int | None = None,
+) -> dict[str, np.ndarray]:
+    """Slave site -> positions ``(n, 3)`` for a slave holding ``rifle`` (at root-site globals
+    ``rifle_locations``) where the master holds its own: each palm on its rifle site (:data:`RIFLE_HOLDS`)
+    until ``release_frame`` (then the master's palm again), and the elbow goal moved by ``ELBOW_FOLLOW`` of
+    the palm's move, so that elbow and palm goals do not pull the arm against its limits."""
+    mk = pair.master_kin
+    master = mk.site_globals(master_poses, master_locations)[..., :3, 3]
     kin = FigureKinematics(rifle)
     sites = kin.site_globals(np.zeros(0), np.asarray(rifle_locations, np.float64))
-    return {palm: sites[:, kin.site_names.index(site), :3, 3] for palm, site in RIFLE_HOLDS.items()}
+    out: dict[str, np.ndarray] = {}
+    for palm, site in RIFLE_HOLDS.items():
+        target = sites[:, kin.site_names.index(site), :3, 3].copy()
+        own = master[:, mk.site_names.index(palm)]
+        if release_frame is not None:
+            target[release_frame:] = own[release_frame:]
+        out[palm] = target
+        side = palm.split("_", 1)[0]
+        for c in SLAVE_CONSTRAINTS:
+            if c.group == "elbow" and c.slave_site.startswith(side):
+                out[c.slave_site] = master[:, mk.site_names.index(c.master_site)] + ELBOW_FOLLOW * (
+                    target - own
+                )
+    return out
 
 
 def reslave_channelset(
@@ -455,12 +480,7 @@ def reslave_channelset(
         if rifle_locations is None or np.shape(rifle_locations) != (n, 4, 4):
             raise ValueError(f"{channelset.name}: rifle_locations must be ({n}, 4, 4)")
         figures.append(rifle)
-        targets = held_palm_targets(rifle, rifle_locations)
-        let_go = channelset.release_frame
-        if let_go is not None:  # the hands have let go of the rifle: the palms follow the master's again
-            master_sites = pair.master_kin.site_globals(q[let_go:], loc[let_go:])
-            for palm, t in targets.items():
-                t[let_go:] = master_sites[:, pair.master_kin.site_names.index(palm), :3, 3]
+        targets = held_rifle_targets(pair, q, loc, rifle, rifle_locations, channelset.release_frame)
     pose, slave_loc = pair.slave_clip(q, loc, targets)
     out = Recording(figures)
     out.poses[pair.slave.name].extend(pose)
