@@ -158,7 +158,12 @@ def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("--out", type=Path, required=True, help="PNG file to write")
-    p.add_argument("--figure", choices=("DI", "soldier"), default="DI", help="which soldier figure's clips")
+    p.add_argument(
+        "--figure",
+        choices=("DI", "soldier", "M16"),
+        default="DI",
+        help="which figure's clips (M16: the DI.fig clips holding an M16)",
+    )
     p.add_argument(
         "--graphs",
         type=Path,
