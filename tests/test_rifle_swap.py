@@ -60,3 +60,14 @@ def test_after_release_the_m16_comes_down_with_the_ak(figs: FigureSet) -> None:
     low = R.lowest_point(figs, "M16.fig", m16)
     assert low[-1] == pytest.approx(R.GROUND_MARGIN_CM, abs=1e-6)  # on the ground, not on a longer magazine
     assert np.abs(np.diff(m16[:, 1, 3])).max() < 6.0
+
+
+def test_a_released_rifle_on_its_side_is_lifted_not_swung(figs: FigureSet) -> None:
+    on_side = np.eye(4)
+    on_side[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # rolled 90 degrees about Z
+    ak = np.tile(on_side, (30, 1, 1))
+    ak[:, 1, 3] = 1.0 - R.lowest_point(figs, "AK_47.fig", ak[:1])[0]  # resting 1 cm up
+    m16 = R.place_swapped_rifle(ak, "AK_47.fig", "M16.fig", figs, release_frame=0, fps=60.0)
+    np.testing.assert_allclose(m16[:, :3, :3], ak[:, :3, :3])  # same orientation: moved only up or down
+    assert R.lowest_point(figs, "M16.fig", m16).min() >= R.GROUND_MARGIN_CM - 1e-6
+    assert R.lowest_point(figs, "M16.fig", m16)[-1] == pytest.approx(1.0, abs=1e-6)  # resting as the AK

@@ -83,14 +83,19 @@ def _smooth_above(need: np.ndarray, sigma: float) -> np.ndarray:
     return np.maximum(need, np.convolve(runmax, kernel / kernel.sum(), mode="valid"))
 
 
-def clear_ground(figures: FigureSet, ptype: str, locations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(placements, pitch_deg)``: the rifle pitched muzzle-up about its butt, in the frames where it would
-    be less than ``GROUND_MARGIN_CM`` above the ground, by the least angle that clears it (smoothed)."""
+def clear_ground(
+    figures: FigureSet, ptype: str, locations: np.ndarray, frames: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(placements, pitch_deg)``: the rifle pitched muzzle-up about its butt, in the frames (``frames``:
+    a mask, default all) where it would be less than ``GROUND_MARGIN_CM`` above the ground, by the least
+    angle that clears it (smoothed; where none does, the angle that gets it highest)."""
     kin = figures.kin[ptype]
     butt = _site(kin, "rifle.butt")[:, 3]
     locs = np.asarray(locations, np.float64)
     need = np.zeros(len(locs))
     low = lowest_point(figures, ptype, locs) < GROUND_MARGIN_CM
+    if frames is not None:
+        low &= frames
     if low.any():
         steps = np.arange(0.0, PITCH_MAX_DEG + PITCH_STEP_DEG / 2, PITCH_STEP_DEG)
         sub = locs[low]
@@ -98,7 +103,8 @@ def clear_ground(figures: FigureSet, ptype: str, locations: np.ndarray) -> tuple
             [lowest_point(figures, ptype, pitch_about(sub, butt, np.full(len(sub), a))) for a in steps], -1
         )
         clear = heights >= GROUND_MARGIN_CM
-        need[low] = np.where(clear.any(-1), steps[np.argmax(clear, axis=-1)], PITCH_MAX_DEG)
+        best = steps[np.argmax(heights, axis=-1)]
+        need[low] = np.where(clear.any(-1), steps[np.argmax(clear, axis=-1)], best)
     pitch = _smooth_above(need, PITCH_SIGMA_FRAMES)
     return pitch_about(locs, butt, pitch), pitch
 
@@ -112,11 +118,14 @@ def place_swapped_rifle(
     fps: float = 60.0,
 ) -> np.ndarray:
     """``(n, 4, 4)`` root placements of ``other_type`` (``"M16.fig"``) from those of ``held_type``
-    (``"AK_47.fig"``) in a clip: butt on butt, same orientation, clear of the ground; from ``release_frame``
-    on lowered with the falling AK onto the ground where it lands."""
+    (``"AK_47.fig"``) in a clip: butt on butt, same orientation, clear of the ground. From ``release_frame``
+    on (a free body: it may lie on its side, where a pitch would swing it over the ground) its height is
+    moved instead: never into the ground, and down onto it with the AK as the AK lands."""
     held = np.asarray(held_locations, np.float64)
     offset = swap_offset(figures.figures[held_type], figures.figures[other_type])
-    placed, _ = clear_ground(figures, other_type, held @ offset)
+    frames = np.arange(len(held))
+    in_hands = None if release_frame is None else frames < release_frame
+    placed, _ = clear_ground(figures, other_type, held @ offset, in_hands)
     if release_frame is None:
         return placed
     r = release_frame
@@ -124,8 +133,9 @@ def place_swapped_rifle(
     m_low = lowest_point(figures, other_type, placed[r:])
     fade = np.minimum(1.0, np.arange(len(ak_low)) / max(1.0, RELEASE_BLEND_S * fps))
     near = np.clip(1.0 - ak_low / NEAR_GROUND_CM, 0.0, 1.0)
-    drop = fade * near * np.maximum(0.0, m_low - np.maximum(ak_low, GROUND_MARGIN_CM))
-    placed[r:, 1, 3] -= drop
+    rest = np.maximum(ak_low, GROUND_MARGIN_CM)  # where the AK rests, or just above the ground
+    shift = fade * near * (rest - m_low)
+    placed[r:, 1, 3] += np.maximum(shift, GROUND_MARGIN_CM - m_low)
     return placed
 
 
