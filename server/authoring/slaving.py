@@ -248,7 +248,7 @@ class MasterSlavePair:
         return np.clip(out, sk.lower, sk.upper)
 
     def goals(
-        self, master_sites: np.ndarray, targets: Mapping[str, np.ndarray] | None = None
+        self, master_sites: np.ndarray, *, targets: Mapping[str, np.ndarray] | None = None
     ) -> list[ik.Goal]:
         """Step 3's goals from the master's site globals ``(..., nsite, 4, 4)``; ``targets`` (slave site ->
         positions ``(..., 3)``) sends those sites there instead of to the master's sites."""
@@ -281,6 +281,7 @@ class MasterSlavePair:
         self,
         master_pose: np.ndarray,
         master_location: np.ndarray | None = None,
+        *,
         targets: Mapping[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(slave_pose, slave_location)`` for master poses ``(ndof,)`` or ``(..., ndof)`` and the master's
@@ -296,7 +297,7 @@ class MasterSlavePair:
         sites = mk.site_globals(q, loc)
         slave_loc = sites[..., mk.site_names.index(self._slave_root), :, :].copy()
         start = self.copy_pose(q, segs)
-        goals = self.goals(sites, targets)
+        goals = self.goals(sites, targets=targets)
         if not goals:
             return start, slave_loc
         opts: dict[str, Any] = {"iterations": 80, "rest_gain": 0.1, "tolerance": 0.02}
@@ -308,6 +309,7 @@ class MasterSlavePair:
         self,
         master_poses: np.ndarray,
         master_locations: np.ndarray,
+        *,
         targets: Mapping[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`slave_pose` over the frames ``(n, ndof)`` of a clip, made temporally coherent.
@@ -322,9 +324,9 @@ class MasterSlavePair:
         mk, sk = self.master_kin, self.slave_kin
         q = np.asarray(master_poses, dtype=np.float64)
         loc = np.asarray(master_locations, dtype=np.float64)
-        pose, slave_loc = self.slave_pose(q, loc, targets)
+        pose, slave_loc = self.slave_pose(q, loc, targets=targets)
         n = len(pose)
-        goals = self.goals(mk.site_globals(q, loc), targets)
+        goals = self.goals(mk.site_globals(q, loc), targets=targets)
         if n < 3 or not goals:
             return pose, slave_loc
         start = self.copy_pose(q, mk.segment_globals(q, loc))
@@ -481,7 +483,7 @@ def reslave_channelset(
             raise ValueError(f"{channelset.name}: rifle_locations must be ({n}, 4, 4)")
         figures.append(rifle)
         targets = held_rifle_targets(pair, q, loc, rifle, rifle_locations, channelset.release_frame)
-    pose, slave_loc = pair.slave_clip(q, loc, targets)
+    pose, slave_loc = pair.slave_clip(q, loc, targets=targets)
     out = Recording(figures)
     out.poses[pair.slave.name].extend(pose)
     out.roots[pair.slave.name].extend([pair._slave_root] * n)
