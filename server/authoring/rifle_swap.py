@@ -12,8 +12,8 @@ clears the ground (:func:`clear_ground`), smoothed over the clip so the rifle do
 makes clips meeting at a posture node agree there exactly, rifle included: ``build.snap_endpoints``).
 
 After the channelset's ``release_frame`` the rifle is a free body (a death lets go of it): the M16 follows
-the AK's fall, and where the AK comes to the ground the M16 is lowered onto it too, rather than resting on
-a magazine it does not have.
+the AK's fall with its lowest point at the AK's, so it comes to rest where the AK does rather than on a
+magazine it does not have.
 """
 
 from __future__ import annotations
@@ -31,8 +31,7 @@ GROUND_MARGIN_CM = 0.3  # the lowest rifle point is kept this far above the grou
 PITCH_STEP_DEG = 0.1  # resolution of the muzzle-up pitch search
 PITCH_MAX_DEG = 45.0
 PITCH_SIGMA_FRAMES = 4.0  # Gaussian smoothing of the pitch over a clip
-RELEASE_BLEND_S = 0.25  # after letting go, the lowering onto the ground fades in over this time
-NEAR_GROUND_CM = 15.0  # ... and while the AK's lowest point comes down from this height
+RELEASE_BLEND_S = 0.25  # after letting go, matching the AK's lowest point fades in over this time
 
 
 def _site(kin: FigureKinematics, name: str) -> np.ndarray:
@@ -120,7 +119,8 @@ def place_swapped_rifle(
     """``(n, 4, 4)`` root placements of ``other_type`` (``"M16.fig"``) from those of ``held_type``
     (``"AK_47.fig"``) in a clip: butt on butt, same orientation, clear of the ground. From ``release_frame``
     on (a free body: it may lie on its side, where a pitch would swing it over the ground) its height is
-    moved instead: never into the ground, and down onto it with the AK as the AK lands."""
+    moved instead: its lowest point goes where the AK's is (on the ground or on the body where the AK
+    comes to rest, never into the ground)."""
     held = np.asarray(held_locations, np.float64)
     offset = swap_offset(figures.figures[held_type], figures.figures[other_type])
     frames = np.arange(len(held))
@@ -132,9 +132,8 @@ def place_swapped_rifle(
     ak_low = lowest_point(figures, held_type, held[r:])
     m_low = lowest_point(figures, other_type, placed[r:])
     fade = np.minimum(1.0, np.arange(len(ak_low)) / max(1.0, RELEASE_BLEND_S * fps))
-    near = np.clip(1.0 - ak_low / NEAR_GROUND_CM, 0.0, 1.0)
-    rest = np.maximum(ak_low, GROUND_MARGIN_CM)  # where the AK rests, or just above the ground
-    shift = fade * near * (rest - m_low)
+    rest = np.maximum(ak_low, GROUND_MARGIN_CM)  # where the AK rests (ground or body), never below ground
+    shift = fade * (rest - m_low)
     placed[r:, 1, 3] += np.maximum(shift, GROUND_MARGIN_CM - m_low)
     return placed
 
