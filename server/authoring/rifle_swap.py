@@ -8,8 +8,9 @@ puts them on the M16's own grip and handguard (:func:`server.authoring.slaving.r
 
 The M16 is 11 cm longer in front of the butt and shaped differently underneath, so it can reach the ground
 where the AK did not (prone): those frames pitch the muzzle up about the butt by the least angle that
-clears the ground (:func:`clear_ground`), smoothed over the clip so the rifle does not twitch (the build then
-makes clips meeting at a posture node agree there exactly, rifle included: ``build.snap_endpoints``).
+clears the ground (:func:`clear_ground`), smoothed over the clip so the rifle does not twitch, and exact at
+its first and last frames, so clips meeting at a posture node agree there (``build.snap_endpoints`` then
+removes what the slaving's tolerance leaves).
 
 After the channelset's ``release_frame`` the rifle is a free body (a death lets go of it): the M16 follows
 the AK's fall with its lowest point at the AK's, so it comes to rest where the AK does rather than on a
@@ -68,8 +69,10 @@ def pitch_about(locations: np.ndarray, pivot: np.ndarray, degrees: np.ndarray) -
 
 
 def _smooth_above(need: np.ndarray, sigma: float) -> np.ndarray:
-    """A smooth curve at or above ``need``: a running maximum, then Gaussian. It rises ahead of a rifle
-    that comes down fast, and equals ``need`` at an end where the rifle is at rest (a posture node)."""
+    """A smooth curve at or above ``need``: a running maximum, then Gaussian, so it rises ahead of a rifle
+    that comes down fast. Its first and last values are ``need``'s (the difference fades in linearly over
+    the ends' ``3 sigma`` frames): a posture node's pitch depends on its pose alone, so every clip meeting
+    there agrees and none starts with a jump."""
     n = len(need)
     half = int(np.ceil(3.0 * sigma))
     if n < 3 or not need.any():
@@ -79,7 +82,12 @@ def _smooth_above(need: np.ndarray, sigma: float) -> np.ndarray:
     runmax = np.pad(windows.max(axis=-1), half, mode="edge")
     k = np.arange(-half, half + 1, dtype=np.float64)
     kernel = np.exp(-0.5 * (k / sigma) ** 2)
-    return np.maximum(need, np.convolve(runmax, kernel / kernel.sum(), mode="valid"))
+    smooth = np.convolve(runmax, kernel / kernel.sum(), mode="valid")
+    frames = np.arange(n, dtype=np.float64)
+    to_first = np.maximum(0.0, 1.0 - frames / half)
+    to_last = np.maximum(0.0, 1.0 - frames[::-1] / half)
+    smooth += to_first * (need[0] - smooth[0]) + to_last * (need[-1] - smooth[-1])
+    return np.maximum(need, smooth)
 
 
 def clear_ground(
