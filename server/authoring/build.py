@@ -196,17 +196,14 @@ def crawl_graph(suffix: str) -> PostureGraph:
 
 GRAPH_FILES: dict[str, dict[str, str]] = {
     "DI": {"static": "soldier_low.graph", "loco": "soldier_loco.graph", "crawl": "soldier_crawl.graph"},
-    "M16": {
-        "static": "soldier_low_m16.graph",
-        "loco": "soldier_loco_m16.graph",
-        "crawl": "soldier_crawl_m16.graph",
-    },
     "soldier": {
         "static": "soldier_hi.graph",
         "loco": "soldier_loco_hi.graph",
         "crawl": "soldier_crawl_hi.graph",
     },
 }
+# the M16 library's graphs: the DI.fig ones with "_m16" before ".graph" (soldier_low_m16.graph, ...)
+GRAPH_FILES["M16"] = {kind: name.replace(".graph", "_m16.graph") for kind, name in GRAPH_FILES["DI"].items()}
 _GRAPH_HEADERS = {
     "static": "static posture transitions (seed 002, Figures 3 and 7)",
     "loco": "walking, backward walking and running (seed 002, 3.3 and Figure 5): a container of channelsets",
