@@ -230,6 +230,8 @@ def run_contact_sheet(args: argparse.Namespace) -> int:
     from ttes.paths import FIGURES, POSTURE_GRAPHS
 
     graphs = sorted(POSTURE_GRAPHS.glob("*.graph")) if args.graphs is None else list(args.graphs)
+    if args.graphs is None and args.figure == "DI":  # the DI.fig clips holding the AK (--figure M16: the M16)
+        graphs = [g for g in graphs if not g.stem.endswith("_m16")]
     if args.frames < 1 or args.tile < 32:
         print("ttes author contact-sheet: --frames must be >= 1 and --tile >= 32", file=sys.stderr)
         return 2
