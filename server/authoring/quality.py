@@ -45,13 +45,14 @@ body parts, contact runs and segment hulls in :mod:`~server.authoring.body_parts
 
 from __future__ import annotations
 
+import fnmatch
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from server.authoring.body_parts import FOOT_PARTS, contact_slides
+from server.authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
 from server.authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from server.authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from server.motion.channelset import Channelset
@@ -64,6 +65,8 @@ __all__ = [
     "check_clip",
     "check_continuity",
     "check_library",
+    "clip_matches",
+    "only_clips",
     "play",
     "summarise",
 ]
@@ -89,7 +92,7 @@ GAIT_LIMITS: dict[str, dict[str, tuple[float, float] | None]] = {
     "bwalk": {"gait_speed_m_s": None, "gait_steps_per_s": None},
 }
 STEPS_PER_CYCLE_CLIP = {"crawl": 2}  # gait.py cuts one step per cycle clip; crawl.py one full cycle
-CONTACT_HEIGHT_CM = 2.5
+CONTACT_HEIGHT_CM = 1.25  # a 1 cm skim is contact; a toe leaving the ground at 2 cm is not
 END_FRAMES = 3  # frames over which an end's speed is measured
 LIMIT_SLACK = 1e-4  # rad / cm: float32 rounding of recorded angles
 PALM_PAIRS = (("right_palm.palmcenter", "grip"), ("left_palm.palmcenter", "handguard"))
@@ -195,23 +198,26 @@ def check_clip(
     parts = figures.node_parts(body_type)
     segg = kin.segment_globals(q, loc)  # (n, nseg, 4, 4)
     pts = np.einsum("fkij,kj->fki", segg[:, segs, :3, :], nodes) + shift[:, None, :]
-    slide, _ = contact_slides(pts, CONTACT_HEIGHT_CM)
+    runs = contact_runs(pts, CONTACT_HEIGHT_CM)
+    slide, _ = runs.per_node(len(parts))
     feet = np.isin(parts, FOOT_PARTS)
-    per_part: dict[str, float] = {}
-    for p in np.unique(parts[slide > 0]):
-        per_part[str(p)] = round(float(slide[parts == p].max()), 3)
-    out["contact_slides"] = per_part
+    shown = np.char.replace(parts.astype(str), "_kneecap", "_knee")  # a kneecap slides as the knee
+    out["contact_slides"] = {
+        str(p): round(float(slide[shown == p].max()), 3) for p in np.unique(shown[slide > 0])
+    }
     for key, mask in (("foot_skate", feet), ("contact_slide", ~feet)):
-        i = int(np.argmax(np.where(mask, slide, -1.0)))
-        val = float(slide[i]) if mask[i] else 0.0
+        r = runs.worst(mask)
+        val = 0.0 if r is None else float(runs.slide[r])
         out[f"{key}_cm"] = round(val, 3)
-        out[f"{key}_part"] = str(parts[i]).replace("_kneecap", "_knee") if val > 0 else None
+        out[f"{key}_part"] = str(shown[runs.node[r]]) if val > 0 else None
+        out[f"{key}_frames"] = [int(runs.first[r]), int(runs.last[r])] if val > 0 else None
     foot_down = [(pts[:, parts == f, 1] <= CONTACT_HEIGHT_CM).any(axis=1) for f in FOOT_PARTS]
     out["stance_phases"] = sum(1 for row in foot_down for a, b in _runs(row) if b - a >= 3)
     ys = pts[..., 1]
     low = np.unravel_index(int(np.argmin(ys)), ys.shape)
     out["ground_penetration_cm"] = round(max(0.0, -float(ys[low])), 3)
     out["lowest_segment"] = kin.segment_names[int(segs[low[1]])]
+    out["ground_penetration_where"] = f"{out['lowest_segment']}[{int(low[0])}]"
     site_pos = sites[..., :3, 3] + shift[:, None, :]
     site_names = list(kin.site_names)
     if rifle_type is not None:
@@ -228,12 +234,16 @@ def check_clip(
                     sites[:held, kin.site_names.index(palm), :3, 3] - rs[:held, rnames[rsite], :3, 3], axis=-1
                 )
                 out[f"{palm.split('.')[0]}_rifle_cm"] = round(float(d.max()), 3)
-                worst = max(worst, float(d.max()))
+                if d.max() >= worst:
+                    worst = float(d.max())
+                    out["palm_rifle_where"] = f"{palm.split('.')[0]}[{int(np.argmax(d))}]"
         out["palm_rifle_cm"] = round(worst, 3)
         rnodes, rsegs = figures.nodes(rifle_type)
         rg = rk.segment_globals(rq, rloc)
         rpts = np.einsum("fkij,kj->fki", rg[:, rsegs, :3, :], rnodes)
         out["rifle_penetration_cm"] = round(max(0.0, -float(rpts[..., 1].min(initial=np.inf))), 3)
+        if out["rifle_penetration_cm"] > 0:
+            out["rifle_penetration_where"] = f"frame {int(np.argmin(rpts[..., 1].min(axis=1)))}"
         depth, frame, seg = figures.hulls(body_type).depth(rpts, segg)
         out["rifle_in_body_cm"] = round(depth, 3)
         out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None
@@ -259,8 +269,13 @@ def check_clip(
         names = [j for j, sl in kin.dof_slices.items() if np.any((bad >= sl.start) & (bad < sl.stop))]
         out["violating_joints"] = names
     rot = np.array([d.kind == "R" for j in figures.figures[body_type].joints.values() for d in j.dofs])
-    jump = np.abs(np.diff(q[:, rot], axis=0)).max(initial=0.0)
-    out["max_frame_jump_deg"] = round(float(np.degrees(jump)), 3)
+    steps = np.abs(np.diff(q[:, rot], axis=0))
+    out["max_frame_jump_deg"] = round(float(np.degrees(steps.max(initial=0.0))), 3)
+    if steps.size:
+        frame, col = np.unravel_index(int(np.argmax(steps)), steps.shape)
+        dof = int(np.flatnonzero(rot)[col])
+        joint = next(j for j, sl in kin.dof_slices.items() if sl.start <= dof < sl.stop)
+        out["max_frame_jump_where"] = f"{joint}[{int(frame)}-{int(frame) + 1}]"
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
     if locomotion:
         speed, stride = cs.ground_speed, cs.stride_length
@@ -368,17 +383,26 @@ def check_library(
     return {"clips": clip_rows, "continuity": continuity, "summary": summarise(clip_rows, continuity)}
 
 
+def _part_frames(row: Mapping[str, Any], key: str) -> str | None:
+    """``left_foot, frames 5-8`` for a slide metric of a clip row."""
+    part, frames = row.get(f"{key}_part"), row.get(f"{key}_frames")
+    return f"{part}, frames {frames[0]}-{frames[1]}" if part and frames else part
+
+
+def where_detail(row: Mapping[str, Any], key: str) -> str | None:
+    """Where in a clip (part, segment, site, frames) or at which posture endpoint a metric's value was
+    measured, for the reports."""
+    if key in ("foot_skate_cm", "contact_slide_cm"):
+        return _part_frames(row, key.removesuffix("_cm"))
+    if key.startswith("rest_"):
+        return row.get(f"{key.removesuffix('_cm')}_where")
+    base = key.removesuffix("_cm").removesuffix("_m_s").removesuffix("_deg")
+    return row.get(f"{base}_where")
+
+
 def _where(row: Mapping[str, Any], key: str) -> str:
     name = row.get("name") or f"{row.get('graph')}:{row.get('posture')}"
-    detail = {
-        "foot_skate_cm": row.get("foot_skate_part"),
-        "contact_slide_cm": row.get("contact_slide_part"),
-        "rifle_in_body_cm": row.get("rifle_in_body_where"),
-        "end_speed_m_s": row.get("end_speed_where"),
-        "ground_penetration_cm": row.get("lowest_segment"),
-        "rest_contact_cm": row.get("rest_where"),
-        "rest_foot_cm": row.get("rest_foot_where"),
-    }.get(key)
+    detail = where_detail(row, key)
     return f"{name} ({detail})" if detail else name
 
 
@@ -397,6 +421,7 @@ def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[s
                      "pass": failing == 0}  # fmt: skip
     for key in ("gait_speed_m_s", "gait_steps_per_s"):
         judged = [(c, GAIT_LIMITS[c["gait"]][key]) for c in clips if c.get(key) is not None]
+        judged = [(c, lim) for c, lim in judged if lim is not None]  # recorded-only families are not judged
         limit = {f: v[key] for f, v in GAIT_LIMITS.items() if v[key] is not None}
         bad = [(c, lim) for c, lim in judged if _range_failure(c[key], lim)]
 
@@ -427,3 +452,22 @@ def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[s
         "thresholds": rows,
         "pass": ok,
     }
+
+
+def clip_matches(filename: str, pattern: str | None) -> bool:
+    """Whether a clip file (``stfire2dead_low.chset.env``) matches a shell pattern on clip names
+    (``stfire2dead``, ``*2dead``; a DI clip's ``_low`` suffix may be left out)."""
+    if not pattern:
+        return True
+    name = Path(filename).name.split(".", 1)[0]
+    names = (name, name.removesuffix("_low"), Path(filename).name)
+    return any(fnmatch.fnmatchcase(n, pattern) for n in names)
+
+
+def only_clips(result: Mapping[str, Any], pattern: str) -> dict[str, Any]:
+    """A :func:`check_library` result cut down to the clips matching ``pattern`` (see :func:`clip_matches`)
+    and the posture nodes where one of them arrives or leaves, with its own summary."""
+    clips = [c for c in result["clips"] if clip_matches(c["file"] or c["name"], pattern)]
+    names = {c["name"] for c in clips}
+    nodes = [r for r in result["continuity"] if names & set(r.get("clips", ()))]
+    return {"clips": clips, "continuity": nodes, "summary": summarise(clips, nodes), "only": pattern}

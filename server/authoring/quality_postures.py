@@ -137,6 +137,7 @@ def check_continuity(
             "graph": loaded.name,
             "posture": node,
             "endpoints": len(ends),
+            "clips": sorted({e["clip"] for e in ends}),
             "continuity_deg": round(worst["deg"], 4),
             "continuity_root_cm": round(worst["root_cm"], 4),
             "continuity_root_deg": round(worst["root_deg"], 4),
@@ -152,7 +153,7 @@ def check_continuity(
             rest = list(seen.values())
             w = max(rest, key=lambda r: r["rest_contact_cm"])
             row.update(rest=rest, rest_kind=kind, rest_contact_cm=w["rest_contact_cm"])
-            row["rest_where"] = f"{w['clip']}[{w['frame']}] {w['rest_part']}"
+            row["rest_contact_where"] = f"{w['clip']}[{w['frame']}] {w['rest_part']}"
             if kind == "DEAD":
                 wf = max(rest, key=lambda r: r["rest_foot_cm"])
                 row["rest_foot_cm"] = wf["rest_foot_cm"]
