@@ -298,13 +298,11 @@ def _graph_endpoints(kind: str) -> dict[str, list[tuple[str, int]]]:
     return out
 
 
-def snap_endpoints(chsets: dict[str, Channelset], figures: Sequence[str] = ()) -> None:
-    """Make the clips meeting at a posture node agree exactly there (joint channels, and the figure channels
-    of the ``figures`` types, e.g. ``("DI.fig", "M16.fig")``; in place).
+def snap_endpoints(chsets: dict[str, Channelset]) -> None:
+    """Make the clips meeting at a posture node agree exactly there (joint channels, in place).
 
     Recorded soldier clips already meet exactly; re-slaved DI clips can differ by the slave solver's
-    tolerance (and, holding an M16, by its clip's smoothed muzzle lift and the body's lift off the ground
-    that follows), so the first clip's pose at each node is copied to the others' endpoints."""
+    tolerance, so the first clip's pose at each node is copied to the others' endpoints."""
     nodes: dict[str, list[tuple[str, int]]] = {}
     for kind in ("static", "loco", "crawl"):  # a node of several graphs (STAND_STOWED, CRAWL) is one pose
         for node, ends in _graph_endpoints(kind).items():
@@ -313,15 +311,9 @@ def snap_endpoints(chsets: dict[str, Channelset], figures: Sequence[str] = ()) -
         have = [(c, f) for c, f in ends if c in chsets]
         if len(have) < 2:
             continue
-        first = chsets[have[0][0]]
-        ref = first.joint_data[have[0][1]].copy()
-        held = [ch for ch in first.figure_channels() if ch.protofiletype in figures]
+        ref = chsets[have[0][0]].joint_data[have[0][1]].copy()
         for c, f in have[1:]:
             chsets[c].joint_data[f] = ref
-            for ch in held:
-                mine = chsets[c].channel(ch.name)
-                chsets[c].fig_pos[f, mine.column] = first.fig_pos[have[0][1], ch.column]
-                chsets[c].fig_quat[f, mine.column] = first.fig_quat[have[0][1], ch.column]
 
 
 def build(
@@ -356,8 +348,8 @@ def build(
         if pair is not None:
             for fs, out in slaved.items():
                 out[job.name] = slave_one(hi[job.name], pair, ctx, fs, f"{job.name}{SUFFIXES[fs]}.chset")
-    for fs, out in slaved.items():
-        snap_endpoints(out, ("DI.fig", "M16.fig") if fs == "M16" else ())
+    for out in slaved.values():
+        snap_endpoints(out)
     written: list[Path] = []
     for name in (j.name for j in jobs):
         if figure in ("soldier", "all"):

@@ -9,8 +9,7 @@ puts them on the M16's own grip and handguard (:func:`server.authoring.slaving.r
 The M16 is 11 cm longer in front of the butt and shaped differently underneath, so it can reach the ground
 where the AK did not (prone): those frames pitch the muzzle up about the butt by the least angle that
 clears the ground (:func:`clear_ground`), smoothed over the clip so the rifle does not twitch, and exact at
-its first and last frames, so clips meeting at a posture node agree there (``build.snap_endpoints`` then
-removes what the slaving's tolerance leaves).
+its first and last frames (a function of the pose there), so clips meeting at a posture node agree there.
 
 After the channelset's ``release_frame`` the rifle is a free body (a death lets go of it): the M16 follows
 the AK's fall with its lowest point at the AK's, so it comes to rest where the AK does rather than on a
