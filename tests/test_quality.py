@@ -106,6 +106,8 @@ def test_foot_skate_is_measured_in_stance_and_in_the_world_frame(figset: FigureS
     del cs.ground_speed  # type: ignore[attr-defined]
     missing = check_clip(cs, figset, locomotion=True)
     assert "locomotion_recorded" in missing["failures"]
+    cs.end_offset = (0.0, 0.0, 90.0)  # a turn in place in a locomotion graph moves for real: no speed needed
+    assert "locomotion_recorded" not in check_clip(cs, figset, locomotion=True)["failures"]
 
 
 def test_foot_skate_ignores_swinging_feet_but_not_a_skim() -> None:
@@ -237,6 +239,10 @@ def test_rifle_in_the_ground_and_in_the_body(figset: FigureSet, holding) -> None
     rifle[:, 1, 3] -= 120.0  # the whole rifle well into the ground
     row = check_clip(_clip("dig.chset", figset, poses, body, rifle), figset)
     assert row["rifle_penetration_cm"] > 20.0 and "rifle_penetration_cm" in row["failures"]
+    rifle[:, 0, 3] += np.linspace(0.0, 20.0, N)  # dragged 20 cm through the dirt: recorded, not judged
+    row = check_clip(_clip("drag.chset", figset, poses, body, rifle), figset)
+    assert row["rifle_slide_cm"] == pytest.approx(20.0, abs=0.05) and row["rifle_slide_frames"] == [0, N - 1]
+    assert "rifle_slide_cm" not in row["failures"]
     poses, body, rifle = _standing(figset, holding)
     kin = figset.kin["DI.fig"]
     chest = kin.site_globals(poses[:1], body[:1])[0, kin.site_names.index("upper_torso.sternum"), :3, 3]

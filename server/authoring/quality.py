@@ -15,6 +15,7 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``rifle_in_body_cm``: how deep rifle mesh nodes go into the body, measured against the convex hull (Qhull)
   of each body segment's mesh in the segment's frame — the hands and fingers that hold it excepted — with
   bounding spheres to pick the candidate (frame, segment, node) triples first.
+* ``rifle_slide_cm`` (information, no limit): the rifle's slide on the ground, e.g. once a death drops it.
 * ``palm_rifle_cm`` — right palm centre to the rifle's ``grip``, left palm centre to its ``handguard``, only
   while the rifle is held (before the channelset's ``release_frame``).
 * ``end_speed_m_s`` — at each end of the clip that is a static posture (both ends of a static-graph clip, the
@@ -22,9 +23,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``END_FRAMES`` frames: things ease in and out, deaths end at rest.
 * ``joint_limit_violations`` (float32 slack allowed) and ``max_frame_jump_deg`` (pops, IK flips).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
-  recorded (``locomotion_recorded``); cycle clips are judged for realism, ``gait_speed_m_s`` and
-  ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a walk or run cycle clip holds one step, cut at footfalls;
-  the crawl cycle both legs' moves).
+  recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
+  cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
+  walk or run cycle clip holds one step, cut at footfalls; the crawl cycle both legs' moves).
 
 Across clips, along every posture graph, at each posture node:
 
@@ -244,6 +245,10 @@ def check_clip(
         out["rifle_penetration_cm"] = round(max(0.0, -float(rpts[..., 1].min(initial=np.inf))), 3)
         if out["rifle_penetration_cm"] > 0:
             out["rifle_penetration_where"] = f"frame {int(np.argmin(rpts[..., 1].min(axis=1)))}"
+        rruns = contact_runs(rpts + shift[:, None, :], CONTACT_HEIGHT_CM)  # information: a dropped rifle
+        r = rruns.worst(np.ones(len(rnodes), dtype=bool))
+        out["rifle_slide_cm"] = 0.0 if r is None else round(float(rruns.slide[r]), 3)
+        out["rifle_slide_frames"] = None if r is None else [int(rruns.first[r]), int(rruns.last[r])]
         depth, frame, seg = figures.hulls(body_type).depth(rpts, segg)
         out["rifle_in_body_cm"] = round(depth, 3)
         out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None
@@ -282,11 +287,12 @@ def check_clip(
         out["stride_length"] = stride
         out["ground_speed"] = speed
         out["cadence"] = round(speed / stride, 4) if speed and stride else None
-        out["locomotion_recorded"] = speed is not None and stride is not None
+        # an in-place clip must say how fast it goes; one with an end_offset (a turn, a side-step) moves
+        out["locomotion_recorded"] = (speed is not None and stride is not None) or cs.end_offset is not None
         if not out["locomotion_recorded"]:
             failures.append("locomotion_recorded")
         family = gait_family(name)
-        if family is not None and out["locomotion_recorded"] and cs.duration > 0:
+        if family is not None and speed is not None and stride is not None and cs.duration > 0:
             out["gait"] = family
             out["gait_speed_m_s"] = round(float(speed) / 100.0, 4)
             out["gait_steps_per_s"] = round(STEPS_PER_CYCLE_CLIP.get(family, 1) / cs.duration, 4)
