@@ -31,7 +31,10 @@ keep the master's values.
 its meaning; our reading, in order: copy joint angles, blend the spine, match the torso (DI_belly, DI_torso),
 match the sight, torso/sight goal weight, match the palms, elbow goal weight, match the elbows, palms at the
 highest priority. :func:`reslave_channelset` is the re-recording: play a soldier channelset on the master
-(:func:`create_channelset_motion`), slave every frame, record ``DI`` plus the untouched rifle channel.
+(:func:`create_channelset_motion`), slave every frame, record ``DI`` plus the untouched rifle channel — or,
+given a rifle figure of the slave's own and its placements (the M16 library,
+:mod:`~server.authoring.rifle_swap`), the palms on that rifle's grip and handguard (:data:`RIFLE_HOLDS`, the
+elbows following half their move) and its channel in place of the master's rifle.
 """
 
 from __future__ import annotations
