@@ -549,7 +549,8 @@ IN_BETWEEN: dict[str, PostureSpec] = {
     "RUN_READY": PostureSpec(
         "RUN_READY",
         root=Placement((0.0, 92.0, 0.0), (-10.0, 0.0, 0.0)),
-        rifle=Placement((0.0, 0.0, 0.0), (-45.0, 15.0, 0.0)),
+        # muzzle across the body, not so low that the right thigh swings into the rifle
+        rifle=Placement((0.0, 0.0, 0.0), (-35.0, 20.0, 0.0)),
         joints={**_STANDING, "neck": (0.0, -5.0, 20.0)},
         spine=(-2.0, 8.0, -25.0),
         contacts=(FootFlat("left", (-11.0, 0.0), 0.0), FootFlat("right", (11.0, 0.0), 0.0)),
