@@ -5,7 +5,8 @@
    (:mod:`~server.authoring.transitions`), walking / backward walking / running
    (:mod:`~server.authoring.gait`)
    and crawling (:mod:`~server.authoring.crawl`) — into ``channelsets/NAME.chset.env``.
-3. Slave a ``DI.fig`` to a soldier.fig master (:mod:`~server.authoring.slaving`) and re-record each clip into
+3. Slave a ``DI.fig`` to a soldier.fig master (:mod:`~server.authoring.slaving`), put it on its kneeling
+   knees where the master kneels (:mod:`~server.authoring.slave_contacts`) and re-record each clip into
    ``channelsets/NAME_low.chset.env``.
 4. Write the posture graph files of both figure types and the TTES start-up script and environment into
    ``posture_graphs/``.
@@ -26,8 +27,11 @@ import numpy as np
 
 from server.authoring import crawl, gait, postures, transitions
 from server.authoring.motion import KeyPosture
+from server.authoring.quality_frames import FigureSet
+from server.authoring.slave_contacts import rest_slave_knees
 from server.authoring.slaving import MasterSlavePair
 from server.authoring.transitions import ClipFrames, clip_to_channelset
+from server.motion.binding import protofiletype
 from server.motion.cache import load_channelset
 from server.motion.channelset import Channelset
 from server.motion.channelset_file import format_channelset, parse_channelsets, save_channelset
@@ -314,6 +318,7 @@ def build(
     hi: dict[str, Channelset] = {}
     low: dict[str, Channelset] = {}
     pair = slave_pair(ctx) if figure in ("DI", "all") else None
+    figset = FigureSet({protofiletype(f): f for f in (ctx.soldier, ctx.di, ctx.rifle)})
     bar = _progress(jobs, progress)
     for job in bar:
         if hasattr(bar, "set_postfix_str"):
@@ -328,6 +333,7 @@ def build(
             from server.authoring.slaving import reslave_channelset
 
             low[job.name] = reslave_channelset(hi[job.name], pair, f"{job.name}_low.chset")
+            rest_slave_knees(hi[job.name], low[job.name], figset)
             lift_off_ground(low[job.name], ctx.di)
     snap_endpoints(low)
     written: list[Path] = []

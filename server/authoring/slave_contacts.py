@@ -1,0 +1,83 @@
+"""Kneeling contacts carried over to the slave: where the master's kneecap rests on the ground, so does the
+slave's.
+
+Slaving copies the legs' joint angles, and DI.fig and soldier.fig share the leg skeleton, but DI.fig's
+kneecap mesh sits about 1.4 cm higher on its knee site than soldier.fig's; a DI soldier kneeling with the
+master's angles floats on his knee. A kneeling thigh hangs straight down from the hip, so the knee cannot go
+lower by the leg alone: in the frames where the master's kneecap (the lower-leg mesh nodes near the ``knee``
+site, as the quality check counts them) is on or near the ground, the slave figure and its rifle are lowered
+by how far the slave's kneecap is above the master's, and the legs solved so that every foot stays where it
+was, except that a kneeling leg goes down with the body. The lowering fades in as the master's kneecap
+comes down (from ``REACH_CM`` to ``REST_CM`` above the ground), so a knee going down or coming up does
+not jump. The build's ``lift_off_ground`` then raises any frame where something else would sink.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from server.authoring import ik
+from server.authoring.postures import leg
+from server.authoring.quality_frames import FigureSet, play
+from server.motion.binding import bind_channelset
+from server.motion.channelset import Channelset
+
+REST_CM = 2.0  # the master's kneecap this close to the ground: the slave's goes as low (full weight)
+REACH_CM = 6.0  # ... this far up: no goal
+SIDES = ("left", "right")
+
+
+def kneecap_heights(poses: np.ndarray, locations: np.ndarray, figures: FigureSet, ptype: str) -> dict:
+    """Per side, the height (cm) of the lowest kneecap node in every frame ``(n,)``."""
+    kin = figures.kin[ptype]
+    nodes, segs = figures.nodes(ptype)
+    parts = figures.node_parts(ptype)
+    out = {}
+    for side in SIDES:
+        sel = parts == f"{side}_kneecap"
+        if not sel.any():
+            continue
+        g = kin.segment_globals(poses, locations)[:, segs[sel], 1, :]  # (n, k, 4) rows giving world y
+        out[side] = np.einsum("fkj,kj->fk", g, nodes[sel]).min(axis=1)
+    return out
+
+
+def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
+    """Lower the slave onto its kneeling knees where the master rests on them (``slave``'s figure and joint
+    channels, in place); returns the lowering per frame (cm)."""
+    mf, sf = play(master, figures), play(slave, figures)
+    mtype = max(mf.poses, key=lambda k: figures.kin[k].ndof)
+    stype = max(sf.poses, key=lambda k: figures.kin[k].ndof)
+    kin = figures.kin[stype]
+    q, loc = sf.poses[stype], sf.locations[stype]
+    m_h = kneecap_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype)
+    s_h = kneecap_heights(q, loc, figures, stype)
+    weight: dict[str, np.ndarray] = {}
+    drop = np.zeros(len(q))
+    for side in SIDES:
+        if side not in m_h or side not in s_h:
+            continue
+        w = np.clip((REACH_CM - m_h[side]) / (REACH_CM - REST_CM), 0.0, 1.0)
+        weight[side] = w * w * (3.0 - 2.0 * w)
+        drop = np.maximum(drop, weight[side] * np.maximum(0.0, s_h[side] - np.maximum(m_h[side], 0.0)))
+    if not drop.any():
+        return drop
+    lowered = loc.copy()
+    lowered[:, 1, 3] -= drop
+    sites = kin.site_globals(q, loc)
+    goals: list[ik.Goal] = []
+    for side in SIDES:
+        heel = sites[:, kin.site_names.index(f"{side}_foot.heel")].copy()
+        heel[:, 1, 3] -= weight.get(side, 0.0) * drop  # a kneeling leg goes down with the body
+        goals.append(ik.Goal(f"{side}_foot.heel", heel[:, :3, 3], heel[:, :3, :3], 1.0, 2, leg(side)))
+    # heavily damped small steps: a kneeling front thigh is near its hip's gimbal (flexion ~90 degrees), where
+    # an undamped solve swaps abduction for twist and the hip's angles jump by tens of degrees between frames
+    pose, _ = ik.solve(
+        kin, q, goals, lowered, iterations=60, damping=6.0, rest_pose=q, rest_gain=0.05, tolerance=0.02,
+        max_dof_step=0.02,
+    )  # fmt: skip
+    bound = bind_channelset(slave, [figures.figures[stype]])
+    bf = bound.figures[0]
+    slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
+    slave.fig_pos[:, :, 1] -= drop[:, None].astype(slave.fig_pos.dtype)  # the figure and its rifle
+    return drop
