@@ -6,8 +6,9 @@ kneecap mesh sits about 1.4 cm higher on its knee site than soldier.fig's; a DI 
 master's angles floats on his knee. A kneeling thigh hangs straight down from the hip, so the knee cannot go
 lower by the leg alone: in the frames where the master's kneecap (the lower-leg mesh nodes near the ``knee``
 site, as the quality check counts them) is on or near the ground, the slave figure and its rifle are lowered
-by how far the slave's kneecap is above the master's, and the legs solved so that every foot stays where it
-was, except that a kneeling leg goes down with the body. The lowering fades in as the master's kneecap
+by how far the slave's kneecap is above the master's (but not into the ground with the rest of the body), and
+the legs solved so that every foot stays where it was and a kneeling knee goes down with the body. The
+lowering fades in as the master's kneecap
 comes down (from ``REACH_CM`` to ``REST_CM`` above the ground), so a knee going down or coming up does
 not jump. The build's ``lift_off_ground`` then raises any frame where something else would sink.
 """
@@ -17,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from server.authoring import ik
-from server.authoring.postures import leg
+from server.authoring.postures import leg, segment_heights
 from server.authoring.quality_frames import FigureSet, play
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -25,6 +26,7 @@ from server.motion.channelset import Channelset
 REST_CM = 2.0  # the master's kneecap this close to the ground: the slave's goes as low (full weight)
 REACH_CM = 6.0  # ... this far up: no goal
 SIDES = ("left", "right")
+LEG_SEGMENTS = ("upper_leg", "lower_leg", "foot", "toes")
 
 
 def kneecap_heights(poses: np.ndarray, locations: np.ndarray, figures: FigureSet, ptype: str) -> dict:
@@ -60,16 +62,23 @@ def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) 
         w = np.clip((REACH_CM - m_h[side]) / (REACH_CM - REST_CM), 0.0, 1.0)
         weight[side] = w * w * (3.0 - 2.0 * w)
         drop = np.maximum(drop, weight[side] * np.maximum(0.0, s_h[side] - np.maximum(m_h[side], 0.0)))
+    # never lower the rest of the body into the ground (lying on the forearms, the knees are not what the
+    # slave rests on); the legs are solved again, so they do not count
+    rest = [h for seg, h in segment_heights(kin, q, loc).items() if not seg.endswith(LEG_SEGMENTS)]
+    drop = np.minimum(drop, np.maximum(0.0, np.min(rest, axis=0)))
     if not drop.any():
         return drop
     lowered = loc.copy()
     lowered[:, 1, 3] -= drop
     sites = kin.site_globals(q, loc)
     goals: list[ik.Goal] = []
-    for side in SIDES:
-        heel = sites[:, kin.site_names.index(f"{side}_foot.heel")].copy()
-        heel[:, 1, 3] -= weight.get(side, 0.0) * drop  # a kneeling leg goes down with the body
+    for side in SIDES:  # every foot stays where it is; a kneeling knee goes down with the body
+        heel = sites[:, kin.site_names.index(f"{side}_foot.heel")]
         goals.append(ik.Goal(f"{side}_foot.heel", heel[:, :3, 3], heel[:, :3, :3], 1.0, 2, leg(side)))
+        if side in weight:
+            knee = sites[:, kin.site_names.index(f"{side}_lower_leg.knee"), :3, 3].copy()
+            knee[:, 1] -= drop
+            goals.append(ik.Goal(f"{side}_lower_leg.knee", knee, None, weight[side], 1, leg(side)))
     # heavily damped small steps: a kneeling front thigh is near its hip's gimbal (flexion ~90 degrees), where
     # an undamped solve swaps abduction for twist and the hip's angles jump by tens of degrees between frames
     pose, _ = ik.solve(
