@@ -12,7 +12,7 @@ pytest.importorskip("scipy")
 
 from server.authoring.build import BuildContext, slave_pair
 from server.authoring.quality_frames import FigureSet, play
-from server.authoring.slave_contacts import kneecap_heights, rest_slave_knees
+from server.authoring.slave_contacts import part_heights, rest_slave_knees
 from server.authoring.slaving import reslave_channelset
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
@@ -27,10 +27,10 @@ def kneeling():
     return figs, master, slave
 
 
-def _knees(figs: FigureSet, cs) -> np.ndarray:
+def _knees(figs: FigureSet, cs, part: str = "kneecap") -> np.ndarray:
     f = play(cs, figs)
     ptype = max(f.poses, key=lambda k: figs.kin[k].ndof)
-    return kneecap_heights(f.poses[ptype], f.locations[ptype], figs, ptype)["right"]
+    return part_heights(f.poses[ptype], f.locations[ptype], figs, ptype, part)["right"]
 
 
 def _sites(figs: FigureSet, cs, names: tuple[str, ...]) -> np.ndarray:
@@ -48,6 +48,9 @@ def test_the_slave_kneels_on_his_kneecap_where_the_master_does(kneeling) -> None
     assert np.all(before - m > 1.0)  # DI.fig's kneecap mesh sits higher on the same skeleton
     np.testing.assert_allclose(after, m, atol=0.1)
     np.testing.assert_allclose(drop, before - m, atol=0.1)
+    # the toes behind the kneeling knee come down onto the ground with it
+    assert np.all(_knees(figs, slave, "foot") - _knees(figs, master, "foot") > 0.5)
+    np.testing.assert_allclose(_knees(figs, lowered, "foot"), _knees(figs, master, "foot"), atol=0.1)
     # the front foot stays planted (within 3 mm); the rifle went down with the body: the palms still hold it
     feet = ("left_foot.heel", "left_foot.ball")
     np.testing.assert_allclose(_sites(figs, lowered, feet), _sites(figs, slave, feet), atol=0.3)

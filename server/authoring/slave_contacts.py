@@ -2,15 +2,16 @@
 slave's.
 
 Slaving copies the legs' joint angles, and DI.fig and soldier.fig share the leg skeleton, but DI.fig's
-kneecap mesh sits about 1.4 cm higher on its knee site than soldier.fig's; a DI soldier kneeling with the
-master's angles floats on his knee. A kneeling thigh hangs straight down from the hip, so the knee cannot go
-lower by the leg alone: in the frames where the master's kneecap (the lower-leg mesh nodes near the ``knee``
-site, as the quality check counts them) is on or near the ground, the slave figure and its rifle are lowered
-by how far the slave's kneecap is above the master's (but not into the ground with the rest of the body), and
-the legs solved so that every foot stays where it was and a kneeling knee goes down with the body. The
-lowering fades in as the master's kneecap
-comes down (from ``REACH_CM`` to ``REST_CM`` above the ground), so a knee going down or coming up does
-not jump. The build's ``lift_off_ground`` then raises any frame where something else would sink.
+kneecap mesh sits about 1.4 cm higher on its knee site than soldier.fig's (and its toes 0.7 cm): a DI
+soldier kneeling with the master's angles floats on his knee and toes. A kneeling thigh hangs straight down
+from the hip, so the knee cannot go lower by the leg alone: in the frames where the master's kneecap (the
+lower-leg mesh nodes near the ``knee`` site, as the quality check counts them) is on or near the ground, the
+slave figure and its rifle are lowered by how far the slave's kneecap is above the master's (never taking the
+rest of the body below the ground), and the legs are solved so that every foot stays where it was (a
+kneeling leg's toes come down to where the master's are) and a kneeling knee goes down with the body. The
+lowering fades in as the master's kneecap comes down (from ``REACH_CM`` to ``REST_CM`` above the ground),
+so a knee going down or coming up does not jump. The build's ``lift_off_ground`` then raises any frame
+where something else would sink.
 """
 
 from __future__ import annotations
@@ -29,18 +30,20 @@ SIDES = ("left", "right")
 LEG_SEGMENTS = ("upper_leg", "lower_leg", "foot", "toes")
 
 
-def kneecap_heights(poses: np.ndarray, locations: np.ndarray, figures: FigureSet, ptype: str) -> dict:
-    """Per side, the height (cm) of the lowest kneecap node in every frame ``(n,)``."""
+def part_heights(
+    poses: np.ndarray, locations: np.ndarray, figures: FigureSet, ptype: str, part: str = "kneecap"
+) -> dict[str, np.ndarray]:
+    """Per side, the height (cm) of the lowest node of ``{side}_{part}`` (as the quality check names body
+    parts: ``kneecap``, ``foot``) in every frame ``(n,)``."""
     kin = figures.kin[ptype]
     nodes, segs = figures.nodes(ptype)
     parts = figures.node_parts(ptype)
     out = {}
+    g = kin.segment_globals(poses, locations)[..., 1, :]  # (n, nseg, 4): the rows giving world y
     for side in SIDES:
-        sel = parts == f"{side}_kneecap"
-        if not sel.any():
-            continue
-        g = kin.segment_globals(poses, locations)[:, segs[sel], 1, :]  # (n, k, 4) rows giving world y
-        out[side] = np.einsum("fkj,kj->fk", g, nodes[sel]).min(axis=1)
+        sel = parts == f"{side}_{part}"
+        if sel.any():
+            out[side] = np.einsum("fkj,kj->fk", g[:, segs[sel]], nodes[sel]).min(axis=1)
     return out
 
 
@@ -52,8 +55,10 @@ def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) 
     stype = max(sf.poses, key=lambda k: figures.kin[k].ndof)
     kin = figures.kin[stype]
     q, loc = sf.poses[stype], sf.locations[stype]
-    m_h = kneecap_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype)
-    s_h = kneecap_heights(q, loc, figures, stype)
+    m_h = part_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype)
+    s_h = part_heights(q, loc, figures, stype)
+    m_foot = part_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype, "foot")
+    s_foot = part_heights(q, loc, figures, stype, "foot")
     weight: dict[str, np.ndarray] = {}
     drop = np.zeros(len(q))
     for side in SIDES:
@@ -73,7 +78,9 @@ def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) 
     sites = kin.site_globals(q, loc)
     goals: list[ik.Goal] = []
     for side in SIDES:  # every foot stays where it is; a kneeling knee goes down with the body
-        heel = sites[:, kin.site_names.index(f"{side}_foot.heel")]
+        heel = sites[:, kin.site_names.index(f"{side}_foot.heel")].copy()
+        if side in weight:  # and a kneeling leg's toes, if they float above the master's, go down to them
+            heel[:, 1, 3] -= weight[side] * np.maximum(0.0, s_foot[side] - np.maximum(m_foot[side], 0.0))
         goals.append(ik.Goal(f"{side}_foot.heel", heel[:, :3, 3], heel[:, :3, :3], 1.0, 2, leg(side)))
         if side in weight:
             knee = sites[:, kin.site_names.index(f"{side}_lower_leg.knee"), :3, 3].copy()
