@@ -6,7 +6,8 @@
    (:mod:`~server.authoring.gait`)
    and crawling (:mod:`~server.authoring.crawl`), turns in place and side-steps
    (:mod:`~server.authoring.turns`) — into ``channelsets/NAME.chset.env``.
-3. Slave a ``DI.fig`` to a soldier.fig master (:mod:`~server.authoring.slaving`) and re-record each clip into
+3. Slave a ``DI.fig`` to a soldier.fig master (:mod:`~server.authoring.slaving`), put it on its kneeling
+   knees where the master kneels (:mod:`~server.authoring.slave_contacts`) and re-record each clip into
    ``channelsets/NAME_low.chset.env``; slave it again with ``M16.fig`` in the hands instead of the AK
    (:mod:`~server.authoring.rifle_swap`, the M16 library) into ``channelsets/NAME_m16_low.chset.env``.
 4. Write the posture graph files of both figure types and the TTES start-up script and environment into
@@ -29,8 +30,11 @@ import numpy as np
 
 from server.authoring import crawl, gait, postures, transitions, turns
 from server.authoring.motion import KeyPosture
+from server.authoring.quality_frames import FigureSet
+from server.authoring.slave_contacts import rest_slave_knees
 from server.authoring.slaving import MasterSlavePair
 from server.authoring.transitions import ClipFrames, clip_to_channelset
+from server.motion.binding import protofiletype
 from server.motion.cache import load_channelset
 from server.motion.channelset import Channelset
 from server.motion.channelset_file import format_channelset, parse_channelsets, save_channelset
@@ -55,6 +59,7 @@ class BuildContext:
     di: Figure
     m16: Figure
     _keys: dict[str, KeyPosture] = field(default_factory=dict)
+    _figure_set: FigureSet | None = None
 
     @classmethod
     def load(cls, figures_dir: Path) -> BuildContext:
@@ -64,6 +69,14 @@ class BuildContext:
             read_figure(figures_dir / "DI.fig"),
             read_figure(figures_dir / "M16.fig"),
         )
+
+    @property
+    def figure_set(self) -> FigureSet:
+        """Every figure of the build by file type, with cached kinematics (for playing clips back)."""
+        if self._figure_set is None:
+            figs = (self.soldier, self.di, self.rifle, self.m16)
+            self._figure_set = FigureSet({protofiletype(f): f for f in figs})
+        return self._figure_set
 
     @property
     def keys(self) -> dict[str, KeyPosture]:
@@ -158,6 +171,7 @@ def slave_one(
         out = reslave_holding(chset, pair, ctx.m16, name)
     else:
         out = reslave_channelset(chset, pair, name)
+    rest_slave_knees(chset, out, ctx.figure_set)  # DI's kneecaps sit higher than the master's
     lift_off_ground(out, ctx.di)
     return out
 
