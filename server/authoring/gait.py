@@ -652,6 +652,22 @@ class Recorded:
 _LAST_REPORT: dict[str, ik.SolveReport] = {}
 
 
+def carried_rifle_goals(
+    rkin: FigureKinematics, rifles: np.ndarray, heels: dict[str, np.ndarray]
+) -> list[ik.Goal]:
+    """IK goals of a standing soldier on his feet with the rifle in his hands: palm centres on the rifle
+    (position first, then the hold's orientation) and each heel frame on its track."""
+    goals: list[ik.Goal] = []
+    for s in ("right", "left"):
+        tg = palm_targets(rkin, rifles, s)
+        goals.append(ik.Goal(f"{s}_palm.palmcenter", tg[:, :3, 3], None, 1.0, 3, arm(s)))
+        goals.append(
+            ik.Goal(f"{s}_palm.palmcenter", None, tg[:, :3, :3], 1.0, 1, arm(s), orientation_weight=8.0)
+        )
+        goals.append(ik.Goal(f"{s}_foot.heel", heels[s][:, :3, 3], heels[s][:, :3, :3], 1.0, 2, leg(s)))
+    return goals
+
+
 def record_session(
     session: Session,
     kin: FigureKinematics,
@@ -716,14 +732,7 @@ def record_session(
         rest[:, k] = np.maximum(rest[:, k], 12.0 * DEG)
     # IK: palms on the rifle (carried by the rest pose's upper torso), heels on their tracks, eyes ahead
     rifles = carrier_globals(kin, rest, roots) @ carries
-    goals: list[ik.Goal] = []
-    for s in ("right", "left"):
-        tg = palm_targets(rkin, rifles, s)
-        goals.append(ik.Goal(f"{s}_palm.palmcenter", tg[:, :3, 3], None, 1.0, 3, arm(s)))
-        goals.append(
-            ik.Goal(f"{s}_palm.palmcenter", None, tg[:, :3, :3], 1.0, 1, arm(s), orientation_weight=8.0)
-        )
-        goals.append(ik.Goal(f"{s}_foot.heel", heels[s][:, :3, 3], heels[s][:, :3, :3], 1.0, 2, leg(s)))
+    goals = carried_rifle_goals(rkin, rifles, heels)
     goals.append(ik.Goal("bottom_head.sight", None, np.eye(3), 1.0, 1, ("neck", "head")))
     poses, report = ik.solve(kin, rest, goals, roots, iterations=60, rest_pose=rest, rest_gain=0.1)
     _LAST_REPORT[tag] = report

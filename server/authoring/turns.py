@@ -47,10 +47,11 @@ from server.authoring.gait import (
     Footfall,
     _frame,
     _keyed,
+    carried_rifle_goals,
     foot_track,
 )
 from server.authoring.motion import KeyPosture
-from server.authoring.postures import RIFLE, SOLDIER, arm, leg, palm_targets
+from server.authoring.postures import RIFLE, SOLDIER
 from server.authoring.transitions import ClipFrames, carrier_globals, carry_of
 from server.peabody import values as V
 from server.peabody.fk import FigureKinematics
@@ -288,14 +289,7 @@ def record_plan(
     carry = carry_of(kin, key)
     rifles = carrier_globals(kin, rest, roots) @ carry
     sight = kin.site_globals(q0, root0)[kin.site_names.index("bottom_head.sight"), :3, :3]
-    goals: list[ik.Goal] = []
-    for s in ("right", "left"):
-        tg = palm_targets(rkin, rifles, s)
-        goals.append(ik.Goal(f"{s}_palm.palmcenter", tg[:, :3, 3], None, 1.0, 3, arm(s)))
-        goals.append(
-            ik.Goal(f"{s}_palm.palmcenter", None, tg[:, :3, :3], 1.0, 1, arm(s), orientation_weight=8.0)
-        )
-        goals.append(ik.Goal(f"{s}_foot.heel", heels[s][:, :3, 3], heels[s][:, :3, :3], 1.0, 2, leg(s)))
+    goals = carried_rifle_goals(rkin, rifles, heels)
     ahead = np.clip(body_turn(plan, t + LOOK_AHEAD) - turn, -LOOK_MAX, LOOK_MAX)
     look = _about(plan.pivot, turn + ahead)[:, :3, :3] @ sight
     goals.append(ik.Goal("bottom_head.sight", None, look, 1.0, 1, ("neck", "head")))
