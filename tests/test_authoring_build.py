@@ -47,9 +47,7 @@ def test_graphs_load_and_every_arc_has_its_channelset(name: str):
     loaded = load_posture_graph(POSTURE_GRAPHS / name)
     graph = loaded.graph
     assert len(loaded.channelsets) == len(graph.files)
-    want = (
-        "DI.fig" if "low" in name or name in ("soldier_loco.graph", "soldier_crawl.graph") else "soldier.fig"
-    )
+    want = "soldier.fig" if name.endswith("_hi.graph") else "DI.fig"
     for cs in loaded.channelsets:
         types = {c.protofiletype for c in cs.figure_channels()}
         assert types == {want, "AK_47.fig"}, cs.name
