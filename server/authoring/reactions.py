@@ -79,8 +79,8 @@ REACTIONS: tuple[Reaction, ...] = (
     Reaction("prfire_recoil", "PRONE_FIRE", "recoil", (0.0, -1.5, 0.0), _RECOIL, kick=(1.5, 3.0)),
     Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
     Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),
-    Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=3.0),
-    Reaction("kfire_flinch", "KNEEL_FIRE", "flinch", (0.0, 8.0, 0.0), _DUCK, drop=3.0),
+    Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 10.0, 0.0), _DUCK),
+    Reaction("kfire_flinch", "KNEEL_FIRE", "flinch", (0.0, 8.0, 0.0), _DUCK),
     # on the forearms: the head goes down behind the rifle, which stays where it lies
     Reaction("prstow_flinch", "PRONE_STOWED", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
     Reaction("prfire_flinch", "PRONE_FIRE", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
