@@ -60,3 +60,13 @@ def test_reaction_leaves_and_returns_to_its_posture_and_keeps_its_contacts(r, fi
     else:  # the head ducks
         assert nose[:, 1].min() <= nose[0, 1] - 3.0
         assert 0.5 <= cs.duration <= 0.8
+
+
+def test_build_of_a_reaction_reproduces_the_committed_bytes(tmp_path):
+    from server.authoring import build
+
+    build.build(tmp_path, FIGURES, only="stfire_recoil", figure="soldier", progress=False)
+    rel = "channelsets/stfire_recoil.chset.env"
+    assert (tmp_path / rel).read_bytes() == (CHANNELSETS.parent / rel).read_bytes()
+    name = "posture_graphs/soldier_react_hi.graph"
+    assert (tmp_path / name).read_bytes() == (POSTURE_GRAPHS.parent / name).read_bytes()
