@@ -10,8 +10,9 @@ stays where it is. The clip is recorded like a transition (:func:`server.authori
 record_transition`: the body parts move to the key and back, feet and knees planted, the other contacts
 held, then eased in and out of the posture).
 
-* **recoil** (standing, kneeling and prone fire, 0.3 s): the rifle kicks back into the shoulder and its
-  muzzle rises a few degrees in 70 ms, the shoulders and head go with it, and it all settles back.
+* **recoil** (standing, kneeling and prone fire, 0.3 s): the rifle kicks back, the shoulders and head
+  rocking back with it (the butt stays in the shoulder pocket: kicked further, it went into the arm), and
+  its muzzle climbs a few degrees; then it all settles back.
 * **flinch** (every posture but dead, 0.65 s): a duck in 0.2 s — head down, shoulders up, back hunched,
   knees giving a little — held a moment, then back.
 """
@@ -74,12 +75,12 @@ _DUCK = {**_HEAD_DOWN, **_SHRUG}
 _RECOIL = {"neck": (0.0, -3.0, 0.0), "head": (0.0, -2.0, 0.0)}
 
 REACTIONS: tuple[Reaction, ...] = (
-    Reaction("stfire_recoil", "STAND_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(1.5, 4.0)),
-    Reaction("kfire_recoil", "KNEEL_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(1.5, 4.0)),
+    Reaction("stfire_recoil", "STAND_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
+    Reaction("kfire_recoil", "KNEEL_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
     Reaction("prfire_recoil", "PRONE_FIRE", "recoil", (0.0, -1.5, 0.0), _RECOIL, kick=(1.5, 3.0)),
     Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
     Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),
-    Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 10.0, 0.0), _DUCK),
+    Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 8.0, -10.0), _DUCK, kick=(0.0, -5.0)),
     Reaction("kfire_flinch", "KNEEL_FIRE", "flinch", (0.0, 8.0, 0.0), _DUCK),
     # on the forearms: the head goes down behind the rifle, which stays where it lies
     Reaction("prstow_flinch", "PRONE_STOWED", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
