@@ -26,6 +26,7 @@ from server.peabody.fk import FigureKinematics
 END_SPEED = 0.4  # m/s: the target at the ends (the check's limit is 0.5; margin for the slaved DI clip)
 END_FRAMES = 3  # frame steps measured at each end
 RAMPS = (0.0, 0.05, 0.08, 0.11, 0.14, 0.17, 0.2, 0.25, 0.3, 0.35)  # s, candidate ramp lengths, shortest first
+RAMP_SHARE = 0.5  # a ramp takes at most half the clip (the two never overlap)
 SUBSTEPS = 64  # integration steps per frame of the warp's rate
 
 
@@ -103,17 +104,18 @@ def ease_ends(
     limit: float = END_SPEED,
 ) -> Frames:
     """``clip`` retimed so that it leaves its first frame (``start``) and reaches its last (``end``) at no
-    more than ``limit`` m/s: each end gets the shortest ramp of :data:`RAMPS` that does it (the longest if
-    none does); unchanged if both ends already do."""
+    more than ``limit`` m/s: each end gets the shortest ramp of :data:`RAMPS` that does it (the longest
+    within :data:`RAMP_SHARE` of the clip if none does); unchanged if both ends already do."""
     n = len(clip.poses)
     if n < 2 * END_FRAMES + 2:
         return clip
+    ramps = [r for r in RAMPS if r <= RAMP_SHARE * (n - 1) / clip.fps]
     pick = [0.0, 0.0]
     for _ in range(2):  # each ramp slightly speeds up the clip between them: settle both
         for k, want in enumerate((start, end)):
             if not want:
                 continue
-            for r in RAMPS:
+            for r in ramps:
                 trial = list(pick)
                 trial[k] = r
                 eased = retime(clip, warp(n, clip.fps, *trial))
