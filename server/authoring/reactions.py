@@ -27,7 +27,7 @@ import numpy as np
 
 from server.authoring import ik
 from server.authoring.motion import KeyPosture
-from server.authoring.postures import DEG, RIFLE, SOLDIER, SPINE, arm, leg, spine_angles
+from server.authoring.postures import DEG, POSTURES, RIFLE, SOLDIER, SPINE, arm, leg, spine_angles
 from server.authoring.transitions import (
     ClipFrames,
     Step,
@@ -87,7 +87,7 @@ REACTIONS: tuple[Reaction, ...] = (
     Reaction("prfire_flinch", "PRONE_FIRE", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
     Reaction("crawl_flinch", "CRAWL", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
 )
-REACT_NODES: tuple[str, ...] = tuple(dict.fromkeys(r.posture for r in REACTIONS))
+REACT_NODES: tuple[str, ...] = tuple(p for p in POSTURES if any(r.posture == p for r in REACTIONS))
 
 
 def react_arcs() -> list[tuple[str, str, str, bool]]:
