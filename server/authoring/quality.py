@@ -89,7 +89,7 @@ GAIT_LIMITS: dict[str, dict[str, tuple[float, float] | None]] = {
     "bwalk": {"gait_speed_m_s": None, "gait_steps_per_s": None},
 }
 STEPS_PER_CYCLE_CLIP = {"crawl": 2}  # gait.py cuts one step per cycle clip; crawl.py one full cycle
-CONTACT_HEIGHT_CM = 2.5
+CONTACT_HEIGHT_CM = 1.25  # a 1 cm skim is contact; a toe leaving the ground at 2 cm is not
 END_FRAMES = 3  # frames over which an end's speed is measured
 LIMIT_SLACK = 1e-4  # rad / cm: float32 rounding of recorded angles
 PALM_PAIRS = (("right_palm.palmcenter", "grip"), ("left_palm.palmcenter", "handguard"))
