@@ -54,8 +54,8 @@ def test_reaction_leaves_and_returns_to_its_posture_and_keeps_its_contacts(r, fi
     gun = rk.site_globals(frames.poses["AK_47.fig"], frames.locations["AK_47.fig"])[..., :3, 3]
     axis = gun[:, rk.site_names.index("rifle.muzzle")] - gun[:, rk.site_names.index("rifle.butt")]
     pitch = np.degrees(np.arctan2(axis[:, 1], np.linalg.norm(axis[:, [0, 2]], axis=1)))
-    if r.kind == "recoil":  # the muzzle climbs a few degrees and comes back down
-        assert 3.0 <= pitch.max() - pitch[0] <= 10.0
+    if r.kind == "recoil":  # the muzzle climbs a few degrees (less prone, on the elbows) and comes back
+        assert 1.5 <= pitch.max() - pitch[0] <= 10.0
         assert 0.3 <= cs.duration <= 0.35
     else:  # the head ducks
         assert nose[:, 1].min() <= nose[0, 1] - 3.0

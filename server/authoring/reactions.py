@@ -7,8 +7,8 @@ spine, the neck, the clavicles), the pelvis sunk a little, and the rifle kicked 
 shoulder, muzzle up) or left where it lies; it is solved so that the palms stay on the rifle and every part
 of the body that touches the ground in the posture (heels, balls, toe tips, kneecaps, elbows, forearms)
 stays where it is. The clip is recorded like a transition (:func:`server.authoring.transitions.
-record_transition`: the body parts move to the key and back, feet and knees planted, the other contacts
-held, then eased in and out of the posture).
+record_transition`: the body parts move to the key and back, feet and knees planted, then eased in and out
+of the posture).
 
 * **recoil** (standing, kneeling and prone fire, 0.3 s): the rifle kicks back, the shoulders and head
   rocking back with it (the butt stays in the shoulder pocket: kicked further, it went into the arm), and
@@ -77,7 +77,8 @@ _RECOIL = {"neck": (0.0, -3.0, 0.0), "head": (0.0, -2.0, 0.0)}
 REACTIONS: tuple[Reaction, ...] = (
     Reaction("stfire_recoil", "STAND_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
     Reaction("kfire_recoil", "KNEEL_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
-    Reaction("prfire_recoil", "PRONE_FIRE", "recoil", (0.0, -1.5, 0.0), _RECOIL, kick=(1.5, 3.0)),
+    # prone, on the elbows: a smaller climb (more kick moved the elbows 2-3 cm with the hands)
+    Reaction("prfire_recoil", "PRONE_FIRE", "recoil", joints=_RECOIL, kick=(0.0, 2.0)),
     Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
     Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),
     Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 8.0, -10.0), _DUCK, kick=(0.0, -5.0)),
@@ -156,9 +157,10 @@ def reaction_key(kin: FigureKinematics, rkin: FigureKinematics, base: KeyPosture
     return KeyPosture(r.key, {SOLDIER: q, RIFLE: np.zeros(0)}, {SOLDIER: root, RIFLE: rifle})
 
 
-def reaction_spec(r: Reaction, legs: list[str], arms: list[str]) -> TransitionSpec:
+def reaction_spec(r: Reaction, legs: list[str]) -> TransitionSpec:
     """The primitive motions: every body part and the rifle to the key and back; the feet and kneecaps on
-    the ground planted, the arm contacts held."""
+    the ground planted. The forearms on the ground stay by interpolation between two poses that have them
+    in the same place (IK holding them too over-constrained the arms: the wrists shook)."""
     go, hold, back = TIMING[r.kind]
     t = go + hold + back
     steps: list[Step] = []
@@ -171,7 +173,7 @@ def reaction_spec(r: Reaction, legs: list[str], arms: list[str]) -> TransitionSp
             steps.append(Step(f"{side}_foot", r.posture, 0.0, t))
         if f"{side}_lower_leg.knee" in legs:
             steps.append(Step(f"{side}_knee", r.posture, 0.0, t))
-    return TransitionSpec(r.name, r.posture, r.posture, round(t, 6), tuple(steps), holds=tuple(arms))
+    return TransitionSpec(r.name, r.posture, r.posture, round(t, 6), tuple(steps))
 
 
 def record_reaction(
@@ -180,9 +182,9 @@ def record_reaction(
     """Solve the reaction key on its posture and record the clip."""
     kin, rkin = FigureKinematics(figures[0]), FigureKinematics(figures[1])
     base = keys[r.posture]
-    legs, arms = ground_contacts(kin, base)
+    legs, _ = ground_contacts(kin, base)
     key = reaction_key(kin, rkin, base, r)
-    return record_transition(reaction_spec(r, legs, arms), {**keys, r.key: key}, figures)
+    return record_transition(reaction_spec(r, legs), {**keys, r.key: key}, figures)
 
 
 def reaction_clips() -> dict[str, Callable[[Any], tuple[ClipFrames, None, None]]]:

@@ -118,8 +118,6 @@ class TransitionSpec:
     in_hand: bool = False  # the right hand carries the rifle (its arm interpolated), not the upper torso
     # in_hand: when (s) the rifle turns in the right hand from its start to its end grip (default: the clip)
     hand_turn: tuple[float, float] | None = None
-    # sites held where the start posture has them through the clip (IK), e.g. an elbow on the ground
-    holds: tuple[str, ...] = ()
 
 
 # --- clip frames --------------------------------------------------------------------------------------------
@@ -570,22 +568,6 @@ def _in_right_hand(
     return palm @ held @ rigid_inverse(grip)
 
 
-def hold_goals(kin: FigureKinematics, key: KeyPosture, sites: Sequence[str]) -> list[ik.Goal]:
-    """Keep each site (``"left_upper_arm.distal"``) where ``key`` has it, moving only its own limb: the
-    clavicle and shoulder for an elbow (the hand stays on the rifle), the arm for other arm sites, else the
-    leg."""
-    g = kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])
-    goals = []
-    for site in sites:
-        side, part = site.split("_", 1)
-        if part.startswith("upper_arm"):
-            chain: tuple[str, ...] = (f"{side}_clavicle", f"{side}_shoulder")
-        else:
-            chain = arm(side) if "arm" in part or "palm" in part else leg(side)
-        goals.append(ik.Goal(site, g[kin.site_names.index(site), :3, 3], None, 1.0, 2, chain))
-    return goals
-
-
 def record_transition(
     spec: TransitionSpec, keys: Mapping[str, KeyPosture], figures: Sequence[Figure], fps: float = FPS
 ) -> ClipFrames:
@@ -634,7 +616,6 @@ def record_transition(
             pos = _knee_track(kin, side, steps, keys, first, times)
             w = _goal_weight(steps, times)
             goals.append(ik.Goal(f"{side}_lower_leg.knee", pos, None, w, 2, leg(side)))
-    goals += hold_goals(kin, first, spec.holds)
     q = track_solve(kin, poses, goals, roots)
     # the ends are the graph's postures exactly
     q[0], q[-1] = first.poses[SOLDIER], last.poses[SOLDIER]
