@@ -106,6 +106,8 @@ def test_foot_skate_is_measured_in_stance_and_in_the_world_frame(figset: FigureS
     del cs.ground_speed  # type: ignore[attr-defined]
     missing = check_clip(cs, figset, locomotion=True)
     assert "locomotion_recorded" in missing["failures"]
+    cs.end_offset = (0.0, 0.0, 90.0)  # a turn in place in a locomotion graph moves for real: no speed needed
+    assert "locomotion_recorded" not in check_clip(cs, figset, locomotion=True)["failures"]
 
 
 def test_foot_skate_ignores_swinging_feet_but_not_a_skim() -> None:
@@ -120,6 +122,8 @@ def test_foot_skate_ignores_swinging_feet_but_not_a_skim() -> None:
     pts[:, 0, 1] = 1.0  # a skim at 1 cm, 6 m/s at 60 fps: contact is judged by height alone
     pts[:, 0, 0] = np.arange(n) * 10.0
     assert foot_skate(pts, 60.0)[0] == pytest.approx(590.0)
+    pts[:, 0, 1] = 2.0  # 2 cm up, as a toe leaving the ground: out of the contact band
+    assert foot_skate(pts, 60.0) == (0.0, 0)
 
 
 def test_contact_slides_per_node_and_run() -> None:
@@ -202,6 +206,7 @@ def test_a_skimming_foot_is_a_sliding_foot(figset: FigureSet, holding) -> None:
     rifle[:, 0, 3] += skim
     row = check_clip(_clip("skim.chset", figset, poses, body, rifle), figset)
     assert row["foot_skate_cm"] == pytest.approx(300.0, abs=0.5) and "foot_skate_cm" in row["failures"]
+    assert row["foot_skate_frames"] == [0, N - 1] and row["foot_skate_part"] in ("left_foot", "right_foot")
     assert row["end_speed_m_s"] == pytest.approx(6.0, abs=0.01) and "end_speed_m_s" in row["failures"]
 
 
@@ -234,6 +239,10 @@ def test_rifle_in_the_ground_and_in_the_body(figset: FigureSet, holding) -> None
     rifle[:, 1, 3] -= 120.0  # the whole rifle well into the ground
     row = check_clip(_clip("dig.chset", figset, poses, body, rifle), figset)
     assert row["rifle_penetration_cm"] > 20.0 and "rifle_penetration_cm" in row["failures"]
+    rifle[:, 0, 3] += np.linspace(0.0, 20.0, N)  # dragged 20 cm through the dirt: recorded, not judged
+    row = check_clip(_clip("drag.chset", figset, poses, body, rifle), figset)
+    assert row["rifle_slide_cm"] == pytest.approx(20.0, abs=0.05) and row["rifle_slide_frames"] == [0, N - 1]
+    assert "rifle_slide_cm" not in row["failures"]
     poses, body, rifle = _standing(figset, holding)
     kin = figset.kin["DI.fig"]
     chest = kin.site_globals(poses[:1], body[:1])[0, kin.site_names.index("upper_torso.sternum"), :3, 3]
@@ -289,6 +298,7 @@ def test_joint_limit_violations_and_pops(figset: FigureSet, holding) -> None:
     assert row["joint_limit_violations"] == 5
     assert row["violating_joints"] == ["left_knee"]
     assert row["max_frame_jump_deg"] == pytest.approx(30.0, abs=1e-3)
+    assert row["max_frame_jump_where"] == "neck[19-20]"
     assert set(row["failures"]) >= {"joint_limit_violations", "max_frame_jump_deg"}
 
 
@@ -335,6 +345,17 @@ def test_check_library_continuity_and_cli(tmp_path: Path, figset: FigureSet, hol
     assert main(["author", "check", "--graphs", str(bad)]) == 1
     text = capsys.readouterr().out
     assert "FAIL" in text and "continuity_deg" in text
+    assert main(["author", "check", "--graphs", str(good), "--only", "a2b", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [c["name"] for c in out["clips"]] == ["a2b.chset"] and {
+        r["posture"] for r in out["continuity"]
+    } == {
+        "A",
+        "B",
+    }
+    assert main(["author", "check", "--graphs", str(bad), "--only", "a2b"]) == 1  # a2b arrives at B
+    capsys.readouterr()
+    assert main(["author", "check", "--graphs", str(good), "--only", "zz*"]) == 2
     assert main(["author", "check", "--graphs"]) == 2  # nothing to check
     assert main(["author", "check", "--graphs", str(tmp_path / "missing.graph")]) == 2
 
@@ -409,7 +430,7 @@ def test_resting_postures_rest(tmp_path: Path, figset: FigureSet, holding, capsy
     assert feet_up["rest_foot_cm"] > 30.0 and "rest_foot_cm" in feet_up["failures"]
     assert feet_up["rest_foot_where"].startswith(f"tilted.chset[{N - 1}]")  # a backward arc leaves there
     kneel, prone = rows["KNEEL_STOWED"], rows["PRONE_FIRE"]  # standing is neither
-    assert kneel["rest_contact_cm"] > 30.0 and kneel["rest_where"].endswith("right_kneecap")
+    assert kneel["rest_contact_cm"] > 30.0 and kneel["rest_contact_where"].endswith("right_kneecap")
     assert prone["rest_contact_cm"] > 30.0 and "rest_contact_cm" in prone["failures"]
     assert "rest_contact_cm" not in rows["STAND_STOWED"]  # not a resting posture
     summary = result["summary"]["thresholds"]["rest_contact_cm"]
@@ -477,3 +498,27 @@ def test_contact_sheet_views_and_clip_pattern(tmp_path: Path, figset: FigureSet,
     info = json.loads(capsys.readouterr().out)
     assert info["clips"] == ["a2b.chset.env"] and info["views"] == ["side", "front"]
     assert main(["author", "contact-sheet", "--graphs", str(graph), "--out", str(out), "--clips", "zz*"]) == 2
+
+
+def test_locomotion_graphs_check_speeds_only_at_the_base_posture(
+    tmp_path: Path, figset: FigureSet, holding
+) -> None:
+    poses, body, rifle = _standing(figset, holding)
+    t = np.linspace(0.0, 1.0, N)
+    start_b, start_r, cycle_b, cycle_r = body.copy(), rifle.copy(), body.copy(), rifle.copy()
+    start_b[:, 0, 3] += 40.0 * t * t  # eases out of STAND_STOWED, leaves for WALK_L at 1.6 m/s
+    start_r[:, 0, 3] += 40.0 * t * t
+    cycle_b[:, 0, 3] += 40.0 * t  # 0.8 m/s at both ends: WALK_L is not a static posture
+    cycle_r[:, 0, 3] += 40.0 * t
+    clips = {"walk_start_l": _clip("walk_start_l.chset", figset, poses, start_b, start_r),
+             "walk_cycle_l": _clip("walk_cycle_l.chset", figset, poses, cycle_b, cycle_r)}  # fmt: skip
+    for cs in clips.values():
+        cs.stride_length, cs.ground_speed = 0.0, 0.0
+    arcs = [("STAND_STOWED", "WALK_L", "walk_start_l", True), ("WALK_L", "WALK_L", "walk_cycle_l", True)]
+    graph = _graph(tmp_path, figset, clips, arcs)
+    loco = graph.rename(tmp_path / "soldier_loco.graph")
+    rows = {c["name"]: c for c in check_library([loco], FIGURES)["clips"]}
+    start, cycle = rows["walk_start_l.chset"], rows["walk_cycle_l.chset"]
+    assert start["locomotion"] and start["end_speed_m_s"] < 0.2 and start["end_speeds_m_s"]["last"] > 1.4
+    assert start["end_speed_where"].endswith("(first frames)") and "end_speed_m_s" not in start["failures"]
+    assert cycle["end_speed_m_s"] is None and cycle["end_speeds_m_s"]["first"] > 0.7

@@ -54,21 +54,44 @@ def part_of(segment: str) -> str:
     return segment
 
 
-def contact_slides(points: np.ndarray, height: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per node of ``points`` ``(n, k, 3)`` (world, cm, +Y up): the largest horizontal slide (cm) over one
-    run of frames below ``height``, and the number of such runs. Contact is judged by height alone, so a
-    fast skim just above the ground counts as sliding."""
-    n, k, _ = points.shape
-    slide = np.zeros(k)
-    runs = np.zeros(k, dtype=int)
+@dataclass
+class ContactRuns:
+    """Every run of frames a node spends below the contact height: its node, first and last frame, and the
+    horizontal extent (cm) of the node's positions over the run."""
+
+    node: np.ndarray
+    first: np.ndarray
+    last: np.ndarray
+    slide: np.ndarray
+
+    def per_node(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per node of ``k``: the largest slide over one run and the number of runs."""
+        slide = np.zeros(k)
+        runs = np.zeros(k, dtype=int)
+        np.maximum.at(slide, self.node, self.slide)
+        np.add.at(runs, self.node, 1)
+        return slide, runs
+
+    def worst(self, mask: np.ndarray) -> int | None:
+        """Index of the run that slides furthest among the nodes in ``mask`` (None without a run)."""
+        pick = np.flatnonzero(mask[self.node])
+        return None if not len(pick) else int(pick[np.argmax(self.slide[pick])])
+
+
+def contact_runs(points: np.ndarray, height: float) -> ContactRuns:
+    """The contact runs of the nodes of ``points`` ``(n, k, 3)`` (world, cm, +Y up). Contact is judged by
+    height alone, so a fast skim just above the ground counts as sliding."""
+    n, _, _ = points.shape
     contact = points[..., 1] <= height
     touching = np.flatnonzero(contact.any(axis=0))
     if not len(touching):
-        return slide, runs
+        empty = np.zeros(0, dtype=int)
+        return ContactRuns(empty, empty, empty, np.zeros(0))
     c = np.zeros((len(touching), n + 1), dtype=bool)  # a separator frame between nodes
     c[:, :n] = contact[:, touching].T
     flat = c.ravel()
     starts = np.flatnonzero(flat & ~np.r_[False, flat[:-1]])
+    stops = np.flatnonzero(flat & ~np.r_[flat[1:], False])
     ang = np.arange(DIRECTIONS) * np.pi / DIRECTIONS
     dirs = np.stack([np.cos(ang), np.sin(ang)])  # (2, D)
     proj = np.zeros((len(touching), n + 1, DIRECTIONS))
@@ -76,11 +99,13 @@ def contact_slides(points: np.ndarray, height: float) -> tuple[np.ndarray, np.nd
     proj = proj.reshape(-1, DIRECTIONS)
     hi = np.maximum.reduceat(np.where(flat[:, None], proj, -np.inf), starts, axis=0)
     lo = np.minimum.reduceat(np.where(flat[:, None], proj, np.inf), starts, axis=0)
-    extent = (hi - lo).max(axis=1)
-    node = touching[starts // (n + 1)]
-    np.maximum.at(slide, node, extent)
-    np.add.at(runs, node, 1)
-    return slide, runs
+    return ContactRuns(touching[starts // (n + 1)], starts % (n + 1), stops % (n + 1), (hi - lo).max(axis=1))
+
+
+def contact_slides(points: np.ndarray, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per node of ``points`` ``(n, k, 3)``: the largest horizontal slide (cm) over one run of frames below
+    ``height``, and the number of such runs (see :func:`contact_runs`)."""
+    return contact_runs(points, height).per_node(points.shape[1])
 
 
 @dataclass

@@ -4,14 +4,15 @@ Offscreen OpenGL through pyrender (headless EGL: ``PYOPENGL_PLATFORM=egl``, Mesa
 soldier and the rifle are drawn from their psurfs (one pyrender node per segment, placed by batched FK of
 the recorded poses and figure channels), on a checkered ground plane (50 cm squares, so sliding feet and
 strides can be judged), with the same camera orientation and distance in every tile, aimed at the middle of
-what the tile shows: a three-quarter view from the soldier's front left (``quarter``), a ``side`` view from
-his left (feet sliding, bodies hovering) or a ``front`` view; several views give each posture one tile per
-view and each clip one row per view. Labels are drawn with Pillow.
+what the tile shows: a three-quarter view from the soldier's front left (``quarter``: strides and sliding
+against the checkerboard), or a ``side`` view from his left or a ``front`` view with the eye just above the
+ground (``EYE_HEIGHT``), so that a hovering body shows daylight under it and what touches the ground sits on
+the horizon; several views give each posture one tile per view and each clip one row per view. The camera
+backs off until the body fits. Labels are drawn with Pillow.
 """
 
 from __future__ import annotations
 
-import fnmatch
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -20,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from server.authoring.quality import BACKWARD_WORDS
+from server.authoring.quality import BACKWARD_WORDS, clip_matches
 from server.motion.channelset import Channelset
 from server.peabody.fk import FigureKinematics
 from server.peabody.model import Figure
@@ -29,9 +30,14 @@ CAMERA_DIRECTION = np.array([-0.55, 0.38, -0.74])  # from the target towards the
 # per view, from the target towards the camera; the soldier faces -Z, his left is -X
 VIEWS: dict[str, np.ndarray] = {
     "quarter": CAMERA_DIRECTION,
-    "side": np.array([-1.0, 0.08, 0.0]),
-    "front": np.array([0.0, 0.08, -1.0]),
+    "side": np.array([-1.0, 0.0, 0.0]),
+    "front": np.array([0.0, 0.0, -1.0]),
 }
+GROUND_LEVEL_VIEWS = (
+    "side",
+    "front",
+)  # the eye just above the ground: a body hovering shows daylight under it
+EYE_HEIGHT = 2.0  # cm
 CAMERA_DISTANCE = 340.0  # cm
 CAMERA_YFOV = np.radians(38.0)
 GROUND_SQUARE = 50.0  # cm
@@ -210,12 +216,16 @@ def render_contact_sheet(
     ):
         images = []
         target, corners = aim
+        if view in GROUND_LEVEL_VIEWS:  # aim at the middle of the body, however low it lies
+            target = np.r_[target[0], corners[:, 1].mean(), target[2]]
         toward = VIEWS[view] / np.linalg.norm(VIEWS[view])
         rel = corners - target  # back off until what the tile shows fits (a body lying towards the camera)
         along = rel @ toward
         across = np.linalg.norm(rel - along[:, None] * toward, axis=1)
         fit = (along + 1.1 * across / np.tan(CAMERA_YFOV / 2.0)).max()
         eye = target + toward * max(CAMERA_DISTANCE, float(fit))
+        if view in GROUND_LEVEL_VIEWS:
+            eye[1] = EYE_HEIGHT
         pose = _look_at(eye, target)
         scene.set_pose(cam_node, pose)
         scene.set_pose(key_node, _look_at(eye + np.array([0.0, 200.0, 0.0]), target))
@@ -318,16 +328,6 @@ def render_contact_sheet(
         "views": list(views),
         "tiles": len(views) * (len(postures) + sum(min(frames_per_clip, r.channelset.nframes) for r in rows)),
     }
-
-
-def clip_matches(filename: str, pattern: str | None) -> bool:
-    """Whether a clip file (``stfire2dead_low.chset.env``) matches a shell pattern on clip names
-    (``stfire2dead``, ``*2dead``; a DI clip's ``_low`` suffix may be left out)."""
-    if not pattern:
-        return True
-    name = Path(filename).name.split(".", 1)[0]
-    names = (name, name.removesuffix("_low"), Path(filename).name)
-    return any(fnmatch.fnmatchcase(n, pattern) for n in names)
 
 
 def library_sheet_inputs(

@@ -15,6 +15,7 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``rifle_in_body_cm``: how deep rifle mesh nodes go into the body, measured against the convex hull (Qhull)
   of each body segment's mesh in the segment's frame — the hands and fingers that hold it excepted — with
   bounding spheres to pick the candidate (frame, segment, node) triples first.
+* ``rifle_slide_cm`` (information, no limit): the rifle's slide on the ground, e.g. once a death drops it.
 * ``palm_rifle_cm`` — right palm centre to the rifle's ``grip``, left palm centre to its ``handguard``, only
   while the rifle is held (before the channelset's ``release_frame``).
 * ``end_speed_m_s`` — at each end of the clip that is a static posture (both ends of a static-graph clip, the
@@ -22,9 +23,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``END_FRAMES`` frames: things ease in and out, deaths end at rest.
 * ``joint_limit_violations`` (float32 slack allowed) and ``max_frame_jump_deg`` (pops, IK flips).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
-  recorded (``locomotion_recorded``); cycle clips are judged for realism, ``gait_speed_m_s`` and
-  ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a walk or run cycle clip holds one step, cut at footfalls;
-  the crawl cycle both legs' moves).
+  recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
+  cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
+  walk or run cycle clip holds one step, cut at footfalls; the crawl cycle both legs' moves).
 
 Across clips, along every posture graph, at each posture node:
 
@@ -45,13 +46,14 @@ body parts, contact runs and segment hulls in :mod:`~server.authoring.body_parts
 
 from __future__ import annotations
 
+import fnmatch
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from server.authoring.body_parts import FOOT_PARTS, contact_slides
+from server.authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
 from server.authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from server.authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from server.motion.channelset import Channelset
@@ -64,6 +66,8 @@ __all__ = [
     "check_clip",
     "check_continuity",
     "check_library",
+    "clip_matches",
+    "only_clips",
     "play",
     "summarise",
 ]
@@ -195,23 +199,26 @@ def check_clip(
     parts = figures.node_parts(body_type)
     segg = kin.segment_globals(q, loc)  # (n, nseg, 4, 4)
     pts = np.einsum("fkij,kj->fki", segg[:, segs, :3, :], nodes) + shift[:, None, :]
-    slide, _ = contact_slides(pts, CONTACT_HEIGHT_CM)
+    runs = contact_runs(pts, CONTACT_HEIGHT_CM)
+    slide, _ = runs.per_node(len(parts))
     feet = np.isin(parts, FOOT_PARTS)
-    per_part: dict[str, float] = {}
-    for p in np.unique(parts[slide > 0]):
-        per_part[str(p)] = round(float(slide[parts == p].max()), 3)
-    out["contact_slides"] = per_part
+    shown = np.char.replace(parts.astype(str), "_kneecap", "_knee")  # a kneecap slides as the knee
+    out["contact_slides"] = {
+        str(p): round(float(slide[shown == p].max()), 3) for p in np.unique(shown[slide > 0])
+    }
     for key, mask in (("foot_skate", feet), ("contact_slide", ~feet)):
-        i = int(np.argmax(np.where(mask, slide, -1.0)))
-        val = float(slide[i]) if mask[i] else 0.0
+        r = runs.worst(mask)
+        val = 0.0 if r is None else float(runs.slide[r])
         out[f"{key}_cm"] = round(val, 3)
-        out[f"{key}_part"] = str(parts[i]).replace("_kneecap", "_knee") if val > 0 else None
+        out[f"{key}_part"] = str(shown[runs.node[r]]) if val > 0 else None
+        out[f"{key}_frames"] = [int(runs.first[r]), int(runs.last[r])] if val > 0 else None
     foot_down = [(pts[:, parts == f, 1] <= CONTACT_HEIGHT_CM).any(axis=1) for f in FOOT_PARTS]
     out["stance_phases"] = sum(1 for row in foot_down for a, b in _runs(row) if b - a >= 3)
     ys = pts[..., 1]
     low = np.unravel_index(int(np.argmin(ys)), ys.shape)
     out["ground_penetration_cm"] = round(max(0.0, -float(ys[low])), 3)
     out["lowest_segment"] = kin.segment_names[int(segs[low[1]])]
+    out["ground_penetration_where"] = f"{out['lowest_segment']}[{int(low[0])}]"
     site_pos = sites[..., :3, 3] + shift[:, None, :]
     site_names = list(kin.site_names)
     if rifle_type is not None:
@@ -228,12 +235,20 @@ def check_clip(
                     sites[:held, kin.site_names.index(palm), :3, 3] - rs[:held, rnames[rsite], :3, 3], axis=-1
                 )
                 out[f"{palm.split('.')[0]}_rifle_cm"] = round(float(d.max()), 3)
-                worst = max(worst, float(d.max()))
+                if d.max() >= worst:
+                    worst = float(d.max())
+                    out["palm_rifle_where"] = f"{palm.split('.')[0]}[{int(np.argmax(d))}]"
         out["palm_rifle_cm"] = round(worst, 3)
         rnodes, rsegs = figures.nodes(rifle_type)
         rg = rk.segment_globals(rq, rloc)
         rpts = np.einsum("fkij,kj->fki", rg[:, rsegs, :3, :], rnodes)
         out["rifle_penetration_cm"] = round(max(0.0, -float(rpts[..., 1].min(initial=np.inf))), 3)
+        if out["rifle_penetration_cm"] > 0:
+            out["rifle_penetration_where"] = f"frame {int(np.argmin(rpts[..., 1].min(axis=1)))}"
+        rruns = contact_runs(rpts + shift[:, None, :], CONTACT_HEIGHT_CM)  # information: a dropped rifle
+        r = rruns.worst(np.ones(len(rnodes), dtype=bool))
+        out["rifle_slide_cm"] = 0.0 if r is None else round(float(rruns.slide[r]), 3)
+        out["rifle_slide_frames"] = None if r is None else [int(rruns.first[r]), int(rruns.last[r])]
         depth, frame, seg = figures.hulls(body_type).depth(rpts, segg)
         out["rifle_in_body_cm"] = round(depth, 3)
         out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None
@@ -259,19 +274,25 @@ def check_clip(
         names = [j for j, sl in kin.dof_slices.items() if np.any((bad >= sl.start) & (bad < sl.stop))]
         out["violating_joints"] = names
     rot = np.array([d.kind == "R" for j in figures.figures[body_type].joints.values() for d in j.dofs])
-    jump = np.abs(np.diff(q[:, rot], axis=0)).max(initial=0.0)
-    out["max_frame_jump_deg"] = round(float(np.degrees(jump)), 3)
+    steps = np.abs(np.diff(q[:, rot], axis=0))
+    out["max_frame_jump_deg"] = round(float(np.degrees(steps.max(initial=0.0))), 3)
+    if steps.size:
+        frame, col = np.unravel_index(int(np.argmax(steps)), steps.shape)
+        dof = int(np.flatnonzero(rot)[col])
+        joint = next(j for j, sl in kin.dof_slices.items() if sl.start <= dof < sl.stop)
+        out["max_frame_jump_where"] = f"{joint}[{int(frame)}-{int(frame) + 1}]"
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
     if locomotion:
         speed, stride = cs.ground_speed, cs.stride_length
         out["stride_length"] = stride
         out["ground_speed"] = speed
         out["cadence"] = round(speed / stride, 4) if speed and stride else None
-        out["locomotion_recorded"] = speed is not None and stride is not None
+        # an in-place clip must say how fast it goes; one with an end_offset (a turn, a side-step) moves
+        out["locomotion_recorded"] = (speed is not None and stride is not None) or cs.end_offset is not None
         if not out["locomotion_recorded"]:
             failures.append("locomotion_recorded")
         family = gait_family(name)
-        if family is not None and out["locomotion_recorded"] and cs.duration > 0:
+        if family is not None and speed is not None and stride is not None and cs.duration > 0:
             out["gait"] = family
             out["gait_speed_m_s"] = round(float(speed) / 100.0, 4)
             out["gait_steps_per_s"] = round(STEPS_PER_CYCLE_CLIP.get(family, 1) / cs.duration, 4)
@@ -368,17 +389,26 @@ def check_library(
     return {"clips": clip_rows, "continuity": continuity, "summary": summarise(clip_rows, continuity)}
 
 
+def _part_frames(row: Mapping[str, Any], key: str) -> str | None:
+    """``left_foot, frames 5-8`` for a slide metric of a clip row."""
+    part, frames = row.get(f"{key}_part"), row.get(f"{key}_frames")
+    return f"{part}, frames {frames[0]}-{frames[1]}" if part and frames else part
+
+
+def where_detail(row: Mapping[str, Any], key: str) -> str | None:
+    """Where in a clip (part, segment, site, frames) or at which posture endpoint a metric's value was
+    measured, for the reports."""
+    if key in ("foot_skate_cm", "contact_slide_cm"):
+        return _part_frames(row, key.removesuffix("_cm"))
+    if key.startswith("rest_"):
+        return row.get(f"{key.removesuffix('_cm')}_where")
+    base = key.removesuffix("_cm").removesuffix("_m_s").removesuffix("_deg")
+    return row.get(f"{base}_where")
+
+
 def _where(row: Mapping[str, Any], key: str) -> str:
     name = row.get("name") or f"{row.get('graph')}:{row.get('posture')}"
-    detail = {
-        "foot_skate_cm": row.get("foot_skate_part"),
-        "contact_slide_cm": row.get("contact_slide_part"),
-        "rifle_in_body_cm": row.get("rifle_in_body_where"),
-        "end_speed_m_s": row.get("end_speed_where"),
-        "ground_penetration_cm": row.get("lowest_segment"),
-        "rest_contact_cm": row.get("rest_where"),
-        "rest_foot_cm": row.get("rest_foot_where"),
-    }.get(key)
+    detail = where_detail(row, key)
     return f"{name} ({detail})" if detail else name
 
 
@@ -397,6 +427,7 @@ def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[s
                      "pass": failing == 0}  # fmt: skip
     for key in ("gait_speed_m_s", "gait_steps_per_s"):
         judged = [(c, GAIT_LIMITS[c["gait"]][key]) for c in clips if c.get(key) is not None]
+        judged = [(c, lim) for c, lim in judged if lim is not None]  # recorded-only families are not judged
         limit = {f: v[key] for f, v in GAIT_LIMITS.items() if v[key] is not None}
         bad = [(c, lim) for c, lim in judged if _range_failure(c[key], lim)]
 
@@ -427,3 +458,22 @@ def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[s
         "thresholds": rows,
         "pass": ok,
     }
+
+
+def clip_matches(filename: str, pattern: str | None) -> bool:
+    """Whether a clip file (``stfire2dead_low.chset.env``) matches a shell pattern on clip names
+    (``stfire2dead``, ``*2dead``; a DI clip's ``_low`` suffix may be left out)."""
+    if not pattern:
+        return True
+    name = Path(filename).name.split(".", 1)[0]
+    names = (name, name.removesuffix("_low"), Path(filename).name)
+    return any(fnmatch.fnmatchcase(n, pattern) for n in names)
+
+
+def only_clips(result: Mapping[str, Any], pattern: str) -> dict[str, Any]:
+    """A :func:`check_library` result cut down to the clips matching ``pattern`` (see :func:`clip_matches`)
+    and the posture nodes where one of them arrives or leaves, with its own summary."""
+    clips = [c for c in result["clips"] if clip_matches(c["file"] or c["name"], pattern)]
+    names = {c["name"] for c in clips}
+    nodes = [r for r in result["continuity"] if names & set(r.get("clips", ()))]
+    return {"clips": clips, "continuity": nodes, "summary": summarise(clips, nodes), "only": pattern}

@@ -82,25 +82,28 @@ def part_lows(cf: ClipFrames, frame: int, figures: FigureSet) -> dict[str, float
 
 
 def rest_endpoint(cf: ClipFrames, frame: int, figures: FigureSet, kind: str) -> dict[str, Any]:
-    """The weight-bearing parts of a resting posture at one endpoint: their heights and the worst."""
-    lows = part_lows(cf, frame, figures)
-    parts = {p: round(lows.get(p, np.inf), 3) for p in REST_PARTS[kind]}
-    worst = max(parts, key=lambda p: parts[p])
+    """The weight-bearing parts of a resting posture at one endpoint: their heights and the worst (parts the
+    figure lacks are listed under ``missing_parts`` and not judged)."""
+    lows = {p: v for p, v in part_lows(cf, frame, figures).items() if np.isfinite(v)}
+    parts = {p: round(lows[p], 3) for p in REST_PARTS[kind] if p in lows}
+    worst = max(parts, key=lambda p: parts[p]) if parts else None
     row: dict[str, Any] = {
         "clip": cf.channelset.name,
         "frame": frame,
         "parts_cm": parts,
-        "rest_contact_cm": parts[worst],
+        "rest_contact_cm": None if worst is None else parts[worst],
         "rest_part": worst,
+        "missing_parts": [p for p in REST_PARTS[kind] if p not in lows],
     }
     if kind == "DEAD":
         feet = {
-            side: max(lows.get(f"{side}_foot", -np.inf), lows.get(f"{side}_heel", -np.inf))
+            side: max(lows[k] for k in (f"{side}_foot", f"{side}_heel") if k in lows)
             for side in ("left", "right")
+            if f"{side}_foot" in lows or f"{side}_heel" in lows
         }
-        side = max(feet, key=lambda s: feet[s])
-        row["rest_foot_cm"] = round(feet[side], 3)
-        row["rest_foot"] = f"{side}_foot"
+        side = max(feet, key=lambda s: feet[s]) if feet else None
+        row["rest_foot_cm"] = None if side is None else round(feet[side], 3)
+        row["rest_foot"] = None if side is None else f"{side}_foot"
     return row
 
 
@@ -137,6 +140,7 @@ def check_continuity(
             "graph": loaded.name,
             "posture": node,
             "endpoints": len(ends),
+            "clips": sorted({e["clip"] for e in ends}),
             "continuity_deg": round(worst["deg"], 4),
             "continuity_root_cm": round(worst["root_cm"], 4),
             "continuity_root_deg": round(worst["root_deg"], 4),
@@ -150,13 +154,13 @@ def check_continuity(
                 if (e["clip"], e["frame"]) not in seen:
                     seen[(e["clip"], e["frame"])] = rest_endpoint(e["cf"], e["frame"], figures, kind)
             rest = list(seen.values())
-            w = max(rest, key=lambda r: r["rest_contact_cm"])
-            row.update(rest=rest, rest_kind=kind, rest_contact_cm=w["rest_contact_cm"])
-            row["rest_where"] = f"{w['clip']}[{w['frame']}] {w['rest_part']}"
-            if kind == "DEAD":
-                wf = max(rest, key=lambda r: r["rest_foot_cm"])
-                row["rest_foot_cm"] = wf["rest_foot_cm"]
-                row["rest_foot_where"] = f"{wf['clip']}[{wf['frame']}] {wf['rest_foot']}"
+            row.update(rest=rest, rest_kind=kind)
+            for key, part in (("rest_contact", "rest_part"), ("rest_foot", "rest_foot")):
+                judged = [r for r in rest if r.get(f"{key}_cm") is not None]
+                if judged:
+                    w = max(judged, key=lambda r, k=key: r[f"{k}_cm"])
+                    row[f"{key}_cm"] = w[f"{key}_cm"]
+                    row[f"{key}_where"] = f"{w['clip']}[{w['frame']}] {w[part]}"
         out.append(row)
     for row in out:
         fails = [k for k in POSTURE_LIMITS if row.get(k) is not None and row[k] > POSTURE_LIMITS[k]]

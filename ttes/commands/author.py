@@ -97,13 +97,20 @@ def _register_check(sub: argparse._SubParsersAction) -> None:
         help="posture graph files (default: every posture_graphs/*.graph)",
     )
     p.add_argument("--clips", type=Path, nargs="*", default=[], help="extra channelset files to check")
+    p.add_argument(
+        "--only",
+        metavar="PATTERN",
+        default=None,
+        help="report (and pass or fail on) only the clips whose name matches this shell pattern and the "
+        "posture nodes they reach; a DI clip's _low suffix may be left out",
+    )
     p.add_argument("--figures", type=Path, default=None, help="figure folder (default: figures/)")
     p.add_argument("--json", action="store_true", help="one JSON object: clips, continuity, summary")
     p.set_defaults(func=run_check)
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from server.authoring.quality import QualityError, check_library
+    from server.authoring.quality import QualityError, check_library, only_clips
     from server.motion.errors import ChannelsetError, PostureGraphError
     from server.peabody.language import PeabodyError
     from ttes.output import print_json
@@ -118,6 +125,11 @@ def run_check(args: argparse.Namespace) -> int:
     except (QualityError, ChannelsetError, PostureGraphError, PeabodyError) as exc:
         print(f"ttes author check: {exc}", file=sys.stderr)
         return 2
+    if args.only:
+        result = only_clips(result, args.only)
+        if not result["clips"]:
+            print(f"ttes author check: no clip matches {args.only!r}", file=sys.stderr)
+            return 2
     summary = result["summary"]
     if args.json:
         print_json(result)
@@ -145,7 +157,7 @@ def _cell(value: object, width: int, fmt: str) -> str:
 def print_check_table(result: dict) -> None:
     """The check as a table: one line per clip (cm, m/s, degrees), the failing values named with their
     limits, the failing posture nodes, then the summary per threshold."""
-    from server.authoring.quality import GAIT_LIMITS, THRESHOLDS
+    from server.authoring.quality import GAIT_LIMITS, THRESHOLDS, where_detail
 
     summary = result["summary"]
     head = " ".join(f"{h:>{w}}" for _, h, w, _ in CHECK_COLUMNS)
@@ -155,18 +167,12 @@ def print_check_table(result: dict) -> None:
         print(f"{'ok  ' if c['pass'] else 'FAIL'} {c['name']:<28} {cells}")
         for k in c["failures"]:
             limit = GAIT_LIMITS[c["gait"]][k] if k.startswith("gait_") else THRESHOLDS.get(k)
-            where = {
-                "foot_skate_cm": c.get("foot_skate_part"),
-                "contact_slide_cm": c.get("contact_slide_part"),
-                "rifle_in_body_cm": c.get("rifle_in_body_where"),
-                "end_speed_m_s": c.get("end_speed_where"),
-                "ground_penetration_cm": c.get("lowest_segment"),
-            }.get(k)
+            where = where_detail(c, k)
             print(f"       {k} = {c.get(k)} (limit {limit}){' at ' + where if where else ''}")
     for r in result["continuity"]:
         if not r["pass"]:
             for k in r["failures"]:
-                where = r.get("rest_where") if k == "rest_contact_cm" else r.get("rest_foot_where")
+                where = r.get("rest_contact_where") if k == "rest_contact_cm" else r.get("rest_foot_where")
                 if k.startswith("continuity"):
                     where = ", ".join(r["worst_pair"])
                 print(f"FAIL {r['graph']}:{r['posture']} {k} = {r[k]} (limit {THRESHOLDS[k]}) at {where}")
@@ -193,7 +199,12 @@ def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("--out", type=Path, required=True, help="PNG file to write")
-    p.add_argument("--figure", choices=("DI", "soldier"), default="DI", help="which soldier figure's clips")
+    p.add_argument(
+        "--figure",
+        choices=("DI", "soldier", "M16"),
+        default="DI",
+        help="which figure's clips (M16: the DI.fig clips holding an M16)",
+    )
     p.add_argument(
         "--graphs",
         type=Path,
@@ -208,8 +219,9 @@ def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
         "--view",
         choices=("quarter", "side", "front", "both"),
         default="quarter",
-        help="camera: three-quarter from the front left (default), from his left side, from the front, or "
-        "both side and front (one row each)",
+        help="camera: three-quarter from the front left (default; sliding against the checkerboard), from "
+        "his left side or from the front at ground level (daylight under a hovering body), or both side and "
+        "front (one row each)",
     )
     p.add_argument("--frames", type=int, default=6, help="frames per clip (default 6)")
     p.add_argument("--tile", type=int, default=200, help="tile size in pixels (default 200)")
@@ -225,6 +237,8 @@ def run_contact_sheet(args: argparse.Namespace) -> int:
     from ttes.paths import FIGURES, POSTURE_GRAPHS
 
     graphs = sorted(POSTURE_GRAPHS.glob("*.graph")) if args.graphs is None else list(args.graphs)
+    if args.graphs is None and args.figure == "DI":  # the DI.fig clips holding the AK (--figure M16: the M16)
+        graphs = [g for g in graphs if not g.stem.endswith("_m16")]
     if args.frames < 1 or args.tile < 32:
         print("ttes author contact-sheet: --frames must be >= 1 and --tile >= 32", file=sys.stderr)
         return 2
@@ -266,7 +280,8 @@ def _register_build(sub: argparse._SubParsersAction) -> None:
         help="record the motion library (channelsets, posture graphs, start-up files)",
         description=(
             "Solve the key postures, record every clip on soldier.fig into channelsets/*.chset.env, slave "
-            "them onto DI.fig into channelsets/*_low.chset.env, and write the posture graphs and the "
+            "them onto DI.fig into channelsets/*_low.chset.env (AK-47) and *_m16_low.chset.env (M16), "
+            "and write the posture graphs and the "
             "jack-ttes-soldier_low.jcl/.env start-up files into posture_graphs/. Deterministic."
         ),
     )
@@ -275,9 +290,12 @@ def _register_build(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--figure",
-        choices=("soldier", "DI", "all"),
+        choices=("soldier", "DI", "M16", "all"),
         default="all",
-        help="soldier: record soldier.fig clips; DI: re-slave the committed soldier.fig clips; all: both",
+        help=(
+            "soldier: record soldier.fig clips; DI / M16: re-slave the committed soldier.fig clips for "
+            "DI.fig with the AK-47 (*_low) / the M16 (*_m16_low); all: everything"
+        ),
     )
     p.add_argument("--out", type=Path, default=None, help="output root (default: the repository)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
