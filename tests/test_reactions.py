@@ -24,7 +24,12 @@ def keys(figset: FigureSet):
 
 
 def test_reaction_graphs_are_self_loops():
-    for name, suffix in (("soldier_react_hi.graph", ""), ("soldier_react.graph", "_low")):
+    graphs = (
+        ("soldier_react_hi.graph", ""),
+        ("soldier_react.graph", "_low"),
+        ("soldier_react_m16.graph", "_m16_low"),
+    )
+    for name, suffix in graphs:
         graph = load_posture_graph(POSTURE_GRAPHS / name).graph
         assert "DEAD" not in graph.postures
         loops = {(a.start, graph.files[a.channelset]) for a in graph.arcs if a.start == a.end and a.forward}
@@ -57,8 +62,8 @@ def test_reaction_leaves_and_returns_to_its_posture_and_keeps_its_contacts(r, fi
     if r.kind == "recoil":  # the muzzle climbs a few degrees (less prone, on the elbows) and comes back
         assert 1.5 <= pitch.max() - pitch[0] <= 10.0
         assert 0.3 <= cs.duration <= 0.35
-    else:  # the head ducks
-        assert nose[:, 1].min() <= nose[0, 1] - 3.0
+    else:  # the head ducks (or, over a cradled rifle, turns away)
+        assert np.linalg.norm(nose - nose[0], axis=1).max() >= 3.0
         assert 0.5 <= cs.duration <= 0.8
 
 

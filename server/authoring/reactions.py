@@ -81,12 +81,14 @@ REACTIONS: tuple[Reaction, ...] = (
     Reaction("prfire_recoil", "PRONE_FIRE", "recoil", joints=_RECOIL, kick=(0.0, 2.0)),
     Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
     Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),
-    Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 8.0, -10.0), _DUCK, kick=(0.0, -5.0)),
+    Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 8.0, -10.0), _HEAD_DOWN, kick=(0.0, -5.0)),
     Reaction("kfire_flinch", "KNEEL_FIRE", "flinch", (0.0, 8.0, 0.0), _DUCK),
     # on the forearms: the head goes down behind the rifle, which stays where it lies
     Reaction("prstow_flinch", "PRONE_STOWED", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
     Reaction("prfire_flinch", "PRONE_FIRE", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
-    Reaction("crawl_flinch", "CRAWL", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
+    # the rifle cradled under the face: the head ducks a little and turns away (ducking 20 degrees put the
+    # M16's stock 3.6 cm into it)
+    Reaction("crawl_flinch", "CRAWL", "flinch", joints={"neck": (0.0, 5.0, 25.0)}, rifle_stays=True),
 )
 REACT_NODES: tuple[str, ...] = tuple(p for p in POSTURES if any(r.posture == p for r in REACTIONS))
 
