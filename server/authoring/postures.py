@@ -465,7 +465,7 @@ SPECS: dict[str, PostureSpec] = {
         "CRAWL",
         root=Placement((0.0, 38.0, 0.0), (-107.0, 0.0, 0.0)),
         # cradled across the hands in front of the forearms, on its side: muzzle to the left, magazine forward
-        rifle=Placement((6.1, 12.8, -75.8), (0.0, 76.0, -90.0)),
+        rifle=Placement((11.1, 12.8, -78.3), (0.0, 76.0, -90.0)),
         joints={
             "left_hip": (10.0, 90.0, 0.0),
             "right_hip": (10.0, 90.0, 0.0),
@@ -486,7 +486,7 @@ SPECS: dict[str, PostureSpec] = {
         contacts=(
             KneeDown("left", (-16.0, 32.0), (-16.0, 82.0), knee_height=3.0, ball_height=7.0),
             KneeDown("right", (16.0, 32.0), (16.0, 82.0), knee_height=3.0, ball_height=7.0),
-            ElbowDown("left", (-20.0, -55.0), 3.0),
+            ElbowDown("left", (-20.0, -55.0), 1.5),
             ElbowDown("right", (20.0, -55.0), 3.0),
         ),
         look=True,
