@@ -42,6 +42,7 @@ STRIDE = 13.2  # cm the body glides per half cycle: 0.33 m/s
 START = 0.4  # seconds of the start clip
 SWING = 0.36  # seconds a limb takes to move forwards
 LIFT = {"knee": 3.5, "toes": 4.5, "elbow": 5.0}  # cm a contact rises while it moves
+ELBOW_CLEAR = 1.5  # cm the planted elbows sit higher in the cyclic state than in the posture
 ROLL = 3.0  # degrees the chest rolls towards the planted side
 SWAY = 1.0  # cm the chest sways sideways
 PELVIS_DOFS = ("ty", "rx", "ry", "rz")  # the pelvis rises, pitches, yaws and roll over the planted knees
@@ -49,9 +50,9 @@ PELVIS_HOLD = 0.4  # weight of the pull back towards the pelvis's glide (more: t
 CHEST_HOLD = 0.1  # weight of the chest's glide (more: the spine's bend gets jerky, and DI's slaving with it)
 RIFLE_ON_FOREARMS = 1.0  # how much the rifle follows the elbows' steps rather than the chest's glide
 # the arms follow their goals frame by frame in at most ARM_ITERATIONS steps of ARM_DOF_STEP rad: no joint
-# turns more than ~7 degrees from one frame to the next (near the shoulder's gimbal the solver would swap
+# turns more than ~11 degrees from one frame to the next (near the shoulder's gimbal the solver would swap
 # large, opposite changes of two angles for a small move of the arm)
-ARM_ITERATIONS = 6
+ARM_ITERATIONS = 10
 ARM_DOF_STEP = 0.02
 CYCLE_PASSES = 2  # times the cycle's arms are tracked round again from where they ended
 # contact sites of one leg: the kneecap and the tip of the toes (dug into the ground behind)
@@ -258,7 +259,8 @@ def solve_arms(
     fwd = _track(kin, body, goals, roots, np.arange(n_start + 1), body[0])
     bwd = _track(kin, body, goals, roots, np.arange(n_start, -1, -1), cyc[0])[::-1]
     w = _smooth(np.linspace(0.0, 1.0, n_start + 1))[:, None]
-    return np.concatenate([fwd + w * (bwd - fwd), cyc[1:]])
+    blend = fwd + w * (bwd - fwd)
+    return np.concatenate([blend, cyc[1:]])
 
 
 def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture) -> tuple[np.ndarray, ...]:
@@ -317,6 +319,7 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
         site = ELBOW_SITE.format(s=side)
         moves = swings(PAIR["elbow", side], float(t[-1]))
         elbows[side] = contact_track(g0[kin.site_names.index(site), :3, 3], t, moves, LIFT["elbow"])
+        elbows[side][:, 1] += ELBOW_CLEAR * w  # (the forearm pivots about the elbow: off the ground)
         arm_goals.append(ik.Goal(site, elbows[side], None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
     chest_now = kin.segment_globals(poses, roots)[:, kin.segment_names.index(CARRIER)]
     rifles = carried_rifle(rifle0, chest0, chest_now, elbows)

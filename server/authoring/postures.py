@@ -465,7 +465,7 @@ SPECS: dict[str, PostureSpec] = {
         "CRAWL",
         root=Placement((0.0, 38.0, 0.0), (-107.0, 0.0, 0.0)),
         # cradled across the hands in front of the forearms, on its side: muzzle to the left, magazine forward
-        rifle=Placement((11.1, 12.8, -78.3), (0.0, 76.0, -90.0)),
+        rifle=Placement((15.0, 12.8, -80.2), (0.0, 76.0, -90.0)),
         joints={
             "left_hip": (10.0, 90.0, 0.0),
             "right_hip": (10.0, 90.0, 0.0),
