@@ -13,12 +13,15 @@ knee's half a cycle after the left knee's) rises clear of the ground (``LIFT``),
 gets going and moves the other the part stride that puts every limb where the cycle starts with it.
 
 The pelvis follows the planted knees (it may rise, pitch, yaw and roll: ``PELVIS_DOFS``, held back towards
-its glide by ``PELVIS_HOLD``) and the spine keeps the chest on its own smooth glide. The rifle is carried
-by the forearms: its placement is the chest's carry blended (``RIFLE_ON_FOREARMS``) with the rigid move that
-follows both elbows, so it advances and yaws a little with each arm's step and the hands, which never leave
-it, stay within reach of the planted elbows. Every frame is one batched IK solve from the posture (palms on
-the rifle first, then every contact). Like the gait clips the clips are local motion (the body's glide
-removed as a ramp, ``stride_length`` / ``ground_speed`` recorded).
+its glide by ``PELVIS_HOLD``) and the spine keeps the chest on its own smooth glide: one batched IK solve of
+the body from the posture. The rifle is carried by the forearms: it makes the ground-plane move that best
+follows both elbows (``RIFLE_ON_FOREARMS`` of it, the rest the chest's carry), so it advances and yaws a
+little with each arm's step and the hands stay within reach of the planted elbows. Then the arms are solved
+on that body frame after frame in small steps (palms on the rifle first, then the elbows on their tracks):
+a batched solve flipped the shoulders between Euler branches near their pole. The cycle's arms are tracked
+round until they close the loop; the start clip blends a track out of the posture with one back from the
+cycle's first frame. Like the gait clips the clips are local motion (the body's glide removed as a ramp,
+``stride_length`` / ``ground_speed`` recorded).
 """
 
 from __future__ import annotations
@@ -45,10 +48,11 @@ LIFT = {"knee": 3.5, "toes": 4.5, "elbow": 5.0}  # cm a contact rises while it m
 ELBOW_CLEAR = 1.5  # cm the planted elbows sit higher in the cyclic state than in the posture
 ROLL = 3.0  # degrees the chest rolls towards the planted side
 SWAY = 1.0  # cm the chest sways sideways
-PELVIS_DOFS = ("ty", "rx", "ry", "rz")  # the pelvis rises, pitches, yaws and roll over the planted knees
+PELVIS_DOFS = ("ty", "rx", "ry", "rz")  # the pelvis rises, pitches, yaws and rolls over the planted knees
 PELVIS_HOLD = 0.4  # weight of the pull back towards the pelvis's glide (more: the knees slide instead)
 CHEST_HOLD = 0.1  # weight of the chest's glide (more: the spine's bend gets jerky, and DI's slaving with it)
 RIFLE_ON_FOREARMS = 1.0  # how much the rifle follows the elbows' steps rather than the chest's glide
+# (less than 1 moved the hands out of the reach of a planted elbow)
 # the arms follow their goals frame by frame in at most ARM_ITERATIONS steps of ARM_DOF_STEP rad: no joint
 # turns more than ~11 degrees from one frame to the next (near the shoulder's gimbal the solver would swap
 # large, opposite changes of two angles for a small move of the arm)
