@@ -46,6 +46,7 @@ START = 0.4  # seconds of the start clip
 SWING = 0.36  # seconds a limb takes to move forwards
 LIFT = {"knee": 3.5, "toes": 4.5, "elbow": 5.0}  # cm a contact rises while it moves
 ELBOW_CLEAR = 1.5  # cm the planted elbows sit higher in the cyclic state than in the posture
+ELBOW_DELAY = 0.1  # s the start clip's first elbow move waits (the arm leaves the posture gently)
 ROLL = 3.0  # degrees the chest rolls towards the planted side
 SWAY = 1.0  # cm the chest sways sideways
 PELVIS_DOFS = ("ty", "rx", "ry", "rz")  # the pelvis rises, pitches, yaws and rolls over the planted knees
@@ -151,11 +152,15 @@ def _rise(s: np.ndarray) -> np.ndarray:
     return np.where(inside, np.minimum(_smooth(s / 0.3), _smooth((1.0 - s) / 0.3)), 0.0)
 
 
-def contact_track(p0: np.ndarray, t: np.ndarray, moves: list[tuple[float, float]], lift: float) -> np.ndarray:
-    """World track ``(n, 3)`` of a contact that starts at ``p0``: planted, except during its moves."""
+def contact_track(
+    p0: np.ndarray, t: np.ndarray, moves: list[tuple[float, float]], lift: float, delay: float = 0.0
+) -> np.ndarray:
+    """World track ``(n, 3)`` of a contact that starts at ``p0``: planted, except during its moves. A move
+    that starts within ``delay`` s of the clip's start starts ``delay`` later and lands on time (quicker)."""
     track = np.tile(p0, (len(t), 1))
     for t0, dist in moves:
-        s = (t - t0) / SWING
+        late = delay if t0 < delay else 0.0
+        s = (t - t0 - late) / (SWING - late)
         track[:, 2] -= dist * _progress(s)
         track[:, 1] += lift * _rise(s)
     return track
@@ -264,6 +269,17 @@ def solve_arms(
     bwd = _track(kin, body, goals, roots, np.arange(n_start, -1, -1), cyc[0])[::-1]
     w = _smooth(np.linspace(0.0, 1.0, n_start + 1))[:, None]
     blend = fwd + w * (bwd - fwd)
+    rows = slice(0, n_start + 1)  # and the blend's hands put back on the rifle, in a few very small steps
+    blend, _ = ik.solve(
+        kin,
+        blend,
+        [g.rows(rows) for g in goals],
+        roots[rows],
+        iterations=4,
+        rest_pose=blend,
+        rest_gain=0.1,
+        max_dof_step=0.5 * ARM_DOF_STEP,
+    )
     return np.concatenate([blend, cyc[1:]])
 
 
@@ -322,7 +338,9 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
     for side in ("left", "right"):
         site = ELBOW_SITE.format(s=side)
         moves = swings(PAIR["elbow", side], float(t[-1]))
-        elbows[side] = contact_track(g0[kin.site_names.index(site), :3, 3], t, moves, LIFT["elbow"])
+        elbows[side] = contact_track(
+            g0[kin.site_names.index(site), :3, 3], t, moves, LIFT["elbow"], delay=ELBOW_DELAY
+        )
         elbows[side][:, 1] += ELBOW_CLEAR * w  # (the forearm pivots about the elbow: off the ground)
         arm_goals.append(ik.Goal(site, elbows[side], None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
     chest_now = kin.segment_globals(poses, roots)[:, kin.segment_names.index(CARRIER)]
