@@ -1,22 +1,26 @@
-"""Crawling (seed 002, 3.3): the crawl on forearms and knees, a start clip and one full cycle.
+"""Crawling (seed 002, 3.3): the high crawl of the US Army's infantry manual, a start clip and one full cycle.
 
 The seed's crawl was made by hand from two animations: one from the base (prone) posture into the cyclic
 state, and one complete cycle; ending a crawl plays the start backwards. The base here is the graph's
-``CRAWL`` posture (on forearms and knees, toes dug into the ground behind, rifle cradled in both hands).
+``CRAWL`` posture: on forearms and knees, the body off the ground, the rifle cradled across the hands.
 
-Each leg touches the ground at the kneecap (``lower_leg.knee``) and the tip of the toes (``toes.distal``).
-Both stay planted in the world while the body glides forwards over them; once per cycle of ``CYCLE``
-seconds each leg (the right half a cycle after the left) rises clear of the ground (``LIFT``), is drawn
-forwards ``2 * STRIDE`` cm and put down again, so nothing drags. The start clip keeps the left leg planted
-while the body gets going and moves the right leg the half stride that puts both where the cycle starts
-with them. With both knees planted the pelvis has to follow them (the thigh cannot stretch), so it may
-rise, pitch, yaw and roll (``PELVIS_DOFS``, held back towards its glide by ``PELVIS_HOLD``), and the spine
-keeps the chest on its own smooth glide. The ankles keep the posture's angles (they sit at their limits
-there; letting the solver move them flipped the foot between the two limits): the hips, knees and toes
-place the toe tips. The upper body keeps the ``CRAWL`` posture with the rifle cradled in both hands (so the
-palms never leave it); the forearms slide with the chest rather than step — a simplification: IK on the
-arms with the hands held on a rigid rifle flipped between elbow solutions. Every frame is one batched IK
-solve from the posture. Like the gait clips the clips are local motion (the body's glide removed as a ramp,
+The high crawl moves the right elbow with the left knee, then the left elbow with the right knee (a trot of
+diagonal pairs). Each limb touches the ground at the elbow (``upper_arm.distal``, the forearm lying behind
+it), the kneecap (``lower_leg.knee``) and the tip of the toes (``toes.distal``); a planted limb stays where
+it is in the world while the body glides over it; once per cycle of ``CYCLE`` seconds each pair (the right
+knee's half a cycle after the left knee's) rises clear of the ground (``LIFT``), is carried forwards
+``2 * STRIDE`` cm and put down again, so nothing drags. The start clip keeps one pair planted while the body
+gets going and moves the other the part stride that puts every limb where the cycle starts with it.
+
+The pelvis follows the planted knees (it may rise, pitch, yaw and roll: ``PELVIS_DOFS``, held back towards
+its glide by ``PELVIS_HOLD``) and the spine keeps the chest on its own smooth glide: one batched IK solve of
+the body from the posture. The rifle is carried by the forearms: it makes the ground-plane move that best
+follows both elbows (``RIFLE_ON_FOREARMS`` of it, the rest the chest's carry), so it advances and yaws a
+little with each arm's step and the hands stay within reach of the planted elbows. Then the arms are solved
+on that body frame after frame in small steps (palms on the rifle first, then the elbows on their tracks):
+a batched solve flipped the shoulders between Euler branches near their pole. The cycle's arms are tracked
+round until they close the loop; the start clip blends a track out of the posture with one back from the
+cycle's first frame. Like the gait clips the clips are local motion (the body's glide removed as a ramp,
 ``stride_length`` / ``ground_speed`` recorded).
 """
 
@@ -30,24 +34,42 @@ import numpy as np
 from server.authoring import ik
 from server.authoring.motion import KeyPosture
 from server.authoring.postures import RIFLE, SOLDIER, SPINE, leg
-from server.authoring.transitions import CARRIER, ClipFrames, carrier_globals, carry_of, lift_off_ground
+from server.authoring.transitions import CARRIER, ClipFrames, lift_off_ground
 from server.peabody import values as V
-from server.peabody.fk import FigureKinematics
+from server.peabody.fk import FigureKinematics, rigid_inverse
 
 FPS = 60
 BASE = "CRAWL"
-CYCLE = 1.2  # seconds per full cycle
-STRIDE = 6.0  # cm the body glides per half cycle
-START = 0.6  # seconds of the start clip
-SWING = 0.45  # seconds a leg takes to move forwards
-LIFT = {"knee": 3.5, "toes": 4.5}  # cm a contact rises while it moves (clear of the 2.5 cm contact band)
-ROLL = 2.0  # degrees the chest rolls towards the planted side
+CYCLE = 0.8  # seconds per full cycle (each diagonal pair moves once)
+STRIDE = 13.2  # cm the body glides per half cycle: 0.33 m/s
+START = 0.4  # seconds of the start clip
+SWING = 0.36  # seconds a limb takes to move forwards
+LIFT = {"knee": 3.5, "toes": 4.5, "elbow": 5.0}  # cm a contact rises while it moves
+ELBOW_CLEAR = 1.5  # cm the planted elbows sit higher in the cyclic state than in the posture
+ELBOW_DELAY = 0.1  # s the start clip's first elbow move waits (the arm leaves the posture gently)
+ROLL = 3.0  # degrees the chest rolls towards the planted side
 SWAY = 1.0  # cm the chest sways sideways
 PELVIS_DOFS = ("ty", "rx", "ry", "rz")  # the pelvis rises, pitches, yaws and rolls over the planted knees
 PELVIS_HOLD = 0.4  # weight of the pull back towards the pelvis's glide (more: the knees slide instead)
 CHEST_HOLD = 0.1  # weight of the chest's glide (more: the spine's bend gets jerky, and DI's slaving with it)
+RIFLE_ON_FOREARMS = 1.0  # how much the rifle follows the elbows' steps rather than the chest's glide
+# (less than 1 moved the hands out of the reach of a planted elbow)
+# the arms follow their goals frame by frame in at most ARM_ITERATIONS steps of ARM_DOF_STEP rad: no joint
+# turns more than ~11 degrees from one frame to the next (near the shoulder's gimbal the solver would swap
+# large, opposite changes of two angles for a small move of the arm)
+ARM_ITERATIONS = 10
+ARM_DOF_STEP = 0.02
+CYCLE_PASSES = 2  # times the cycle's arms are tracked round again from where they ended
 # contact sites of one leg: the kneecap and the tip of the toes (dug into the ground behind)
 LEG_SITES = {"knee": "{s}_lower_leg.knee", "toes": "{s}_toes.distal"}
+ELBOW_SITE = "{s}_upper_arm.distal"
+# the diagonal pairs: a limb moves with the knee on this side (the right elbow with the left knee)
+PAIR = {
+    ("knee", "left"): "left",
+    ("knee", "right"): "right",
+    ("elbow", "right"): "left",
+    ("elbow", "left"): "right",
+}
 CRAWL_NODES: tuple[str, ...] = ("CRAWL", "CRAWLING")
 
 
@@ -87,18 +109,19 @@ def _first_swing() -> float:
 
 
 def swings(side: str, t_end: float) -> list[tuple[float, float]]:
-    """(start time, cm forwards) of every move of one leg up to ``t_end``.
+    """(start time, cm forwards) of every move of one diagonal pair (named by its knee) up to ``t_end``.
 
-    In the cycle each leg moves ``2 * STRIDE`` once, the left at :func:`_first_swing`, the right half a
-    cycle later; between its moves a leg stays planted while the body glides over it. In the start clip the
-    body glides ``-body_travel(START)`` cm while the left leg stays planted (its cycle timing is chosen so
-    that this is exactly where the cycle wants it), and the right leg makes the one shorter move that puts it
-    where the cycle starts with it: every contact of the start clip's last frame is the cycle's first.
+    In the cycle each pair moves ``2 * STRIDE`` once, the left knee's at :func:`_first_swing`, the right
+    knee's half a cycle later; between its moves a limb stays planted while the body glides over it. In the
+    start clip the body glides ``-body_travel(START)`` cm while the left knee's pair stays planted (its cycle
+    timing is chosen so that this is exactly where the cycle wants it), and the other pair makes the one
+    shorter move that puts it where the cycle starts with it: every contact of the start clip's last frame is
+    the cycle's first.
     """
     v = _speed()
     a = _first_swing() + (0.0 if side == "left" else 0.5 * CYCLE)
-    if a < 0.0 or a + SWING > CYCLE:
-        raise ValueError("a leg's move must fit in the cycle")
+    if a < 0.0 or a + SWING > CYCLE + 1e-9:
+        raise ValueError("a limb's move must fit in the cycle")
     # where the contact is relative to the body (0 = where the CRAWL posture has it) at the cycle's start:
     # in stance since (a + SWING - CYCLE), from half a stance's glide ahead of the posture's place
     half = 0.5 * v * (CYCLE - SWING)
@@ -107,7 +130,7 @@ def swings(side: str, t_end: float) -> list[tuple[float, float]]:
     first = -(float(body_travel(np.array(START))) + rel)  # how far the start clip must move it
     if abs(first) > 1e-6:
         t0 = START + a - CYCLE  # so that it lands when its stance of the cycle begins
-        if t0 < 0.0 or first < 0.0:
+        if t0 < -1e-9 or first < 0.0:
             raise ValueError("the start clip cannot put this leg where the cycle starts")
         out.append((t0, first))
     k = 0
@@ -129,18 +152,141 @@ def _rise(s: np.ndarray) -> np.ndarray:
     return np.where(inside, np.minimum(_smooth(s / 0.3), _smooth((1.0 - s) / 0.3)), 0.0)
 
 
-def contact_track(p0: np.ndarray, t: np.ndarray, moves: list[tuple[float, float]], lift: float) -> np.ndarray:
-    """World track ``(n, 3)`` of a contact that starts at ``p0``: planted, except during its moves."""
+def contact_track(
+    p0: np.ndarray, t: np.ndarray, moves: list[tuple[float, float]], lift: float, delay: float = 0.0
+) -> np.ndarray:
+    """World track ``(n, 3)`` of a contact that starts at ``p0``: planted, except during its moves. A move
+    that starts within ``delay`` s of the clip's start starts ``delay`` later and lands on time (quicker)."""
     track = np.tile(p0, (len(t), 1))
     for t0, dist in moves:
-        s = (t - t0) / SWING
+        late = delay if t0 < delay else 0.0
+        s = (t - t0 - late) / (SWING - late)
         track[:, 2] -= dist * _progress(s)
         track[:, 1] += lift * _rise(s)
     return track
 
 
+def _rigid_xz(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(n, 4, 4)``: per frame the move in the ground plane (a turn about +Y and a shift) that best takes the
+    points ``a`` ``(k, 3)`` to ``b`` ``(n, k, 3)`` (2-D Procrustes; heights follow the mean)."""
+    ca = a.mean(axis=0)
+    cb = b.mean(axis=1)
+    pa = (a - ca)[:, [0, 2]]
+    pb = (b - cb[:, None, :])[..., [0, 2]]
+    cross = (pa[None, :, 0] * pb[..., 1] - pa[None, :, 1] * pb[..., 0]).sum(axis=1)
+    dot = (pa[None] * pb).sum(axis=(1, 2))
+    ang = np.arctan2(cross, dot)  # turn in the x-z plane, x towards z
+    c, s = np.cos(ang), np.sin(ang)
+    out = np.broadcast_to(np.eye(4), (len(b), 4, 4)).copy()
+    out[:, 0, 0], out[:, 0, 2], out[:, 2, 0], out[:, 2, 2] = c, -s, s, c
+    out[:, :3, 3] = cb - np.einsum("nij,j->ni", out[:, :3, :3], ca)
+    return out
+
+
+def carried_rifle(
+    rifle0: np.ndarray, chest0: np.ndarray, chest: np.ndarray, elbows: dict[str, np.ndarray]
+) -> np.ndarray:
+    """Rifle placements ``(n, 4, 4)``: carried by the chest (``chest0`` -> ``chest``), blended
+    (:data:`RIFLE_ON_FOREARMS`) with the ground-plane move that follows the elbows (``elbows[side]``: world
+    tracks ``(n, 3)``, the posture's places first) so each hand goes forwards with its forearm's step."""
+    from server.authoring.transitions import slerp_frames
+
+    by_chest = chest @ rigid_inverse(chest0) @ rifle0
+    a = np.stack([elbows["left"][0], elbows["right"][0]])
+    b = np.stack([elbows["left"], elbows["right"]], axis=1)
+    by_arms = _rigid_xz(a, b) @ rifle0
+    by_arms[:, 1, 3] = by_chest[:, 1, 3]
+    out = np.empty_like(by_chest)
+    for i in range(len(out)):  # blend each frame: positions lerp, rotations slerp
+        out[i] = slerp_frames(by_chest[i], by_arms[i], np.array([RIFLE_ON_FOREARMS]))[0]
+    return out
+
+
+def _hand_goals(
+    kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture, rifles: np.ndarray
+) -> list[ik.Goal]:
+    """Palm centres on the rifle (first priority) and turned to hold it, each exactly as in the posture."""
+    from server.authoring.postures import arm, palm_targets
+    from server.authoring.transitions import palm_offsets
+
+    off = palm_offsets(kin, rkin, key)
+    goals = []
+    for side in ("right", "left"):
+        tgt = palm_targets(rkin, rifles, side) @ off[side]
+        site = f"{side}_palm.palmcenter"
+        goals.append(ik.Goal(site, tgt[:, :3, 3], None, 1.0, 3, arm(side)))
+        goals.append(ik.Goal(site, None, tgt[:, :3, :3], 1.0, 0, arm(side), orientation_weight=2.0))
+    return goals
+
+
+def _track(
+    kin: FigureKinematics,
+    body: np.ndarray,
+    goals: list[ik.Goal],
+    roots: np.ndarray,
+    order: np.ndarray,
+    first: np.ndarray,
+) -> np.ndarray:
+    """Solve the arms frame after frame in ``order``, from the arms of ``first`` and then each from (and
+    pulled towards) the previous frame's arms on this frame's body, in small steps, so they cannot jump
+    between IK branches from one frame to the next. Returns the poses of the frames in ``order``."""
+    arms = np.zeros(kin.ndof, dtype=bool)
+    for side in ("left", "right"):
+        for j in (f"{side}_clavicle", f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist"):
+            arms[kin.dof_slices[j]] = True
+    out = np.empty((len(order), kin.ndof))
+    prev = first
+    for k, i in enumerate(order):
+        start = np.where(arms, prev, body[i])
+        sub = [g.rows(slice(i, i + 1)) for g in goals]
+        sol, _ = ik.solve(
+            kin,
+            start[None],
+            sub,
+            roots[i : i + 1],
+            iterations=ARM_ITERATIONS,
+            rest_pose=start[None],
+            rest_gain=0.1,
+            max_dof_step=ARM_DOF_STEP,
+        )
+        out[k] = prev = sol[0]
+    return out
+
+
+def solve_arms(
+    kin: FigureKinematics, body: np.ndarray, goals: list[ik.Goal], roots: np.ndarray, n_start: int
+) -> np.ndarray:
+    """The arms over the start clip and the cycle (frames ``n_start`` to the last, which is the first one
+    cycle on): the cycle is tracked from where it ends until its arms come round to where they started (a
+    loop without a jump), the start clip forwards from the posture and backwards from the cycle's first
+    frame, the two blended (ease in/out) so it leaves the posture and meets the cycle exactly."""
+    n = len(body)
+    cycle = np.arange(n_start, n)
+    cyc = _track(kin, body, goals, roots, np.arange(n), body[0])[n_start:]
+    for _ in range(CYCLE_PASSES):
+        cyc = _track(kin, body, goals, roots, cycle, cyc[-1])
+    fwd = _track(kin, body, goals, roots, np.arange(n_start + 1), body[0])
+    bwd = _track(kin, body, goals, roots, np.arange(n_start, -1, -1), cyc[0])[::-1]
+    w = _smooth(np.linspace(0.0, 1.0, n_start + 1))[:, None]
+    blend = fwd + w * (bwd - fwd)
+    rows = slice(0, n_start + 1)  # and the blend's hands put back on the rifle, in a few very small steps
+    blend, _ = ik.solve(
+        kin,
+        blend,
+        [g.rows(rows) for g in goals],
+        roots[rows],
+        iterations=4,
+        rest_pose=blend,
+        rest_gain=0.1,
+        max_dof_step=0.5 * ARM_DOF_STEP,
+    )
+    return np.concatenate([blend, cyc[1:]])
+
+
 def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture) -> tuple[np.ndarray, ...]:
     """Frames of the start clip followed by one cycle: (t, poses, roots, rifles, progression z)."""
+    from server.authoring.postures import arm
+
     n_start = round(START * FPS)
     n_cycle = round(CYCLE * FPS)
     n = n_start + n_cycle + 1
@@ -152,7 +298,7 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
     g0 = kin.site_globals(q0, root0)
     roots = np.broadcast_to(root0, (n, 4, 4)).copy()
     roots[:, 2, 3] += z
-    # the chest glides with the body, rolling a little with the alternating legs
+    # the chest glides with the body, rolling a little towards the planted elbow
     chest0 = kin.segment_globals(q0, root0)[kin.segment_names.index(CARRIER)]
     phase = 2.0 * np.pi * (tc - _first_swing() - 0.5 * SWING) / CYCLE
     roll = w * ROLL * np.sin(phase) * np.pi / 180.0
@@ -175,7 +321,7 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
     # cheap for the solver, and a pelvis that rolls to lift the moving leg twists the planted one)
     goals.append(ik.Goal(kin.root_name, roots[:, :3, 3], roots[:, :3, :3], PELVIS_HOLD, 1, ()))
     for side in ("left", "right"):
-        moves = swings(side, float(t[-1]))
+        moves = swings(PAIR["knee", side], float(t[-1]))
         for part, fmt in LEG_SITES.items():
             site = fmt.format(s=side)
             track = contact_track(g0[kin.site_names.index(site), :3, 3], t, moves, LIFT[part])
@@ -186,8 +332,21 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
         kin, rest, goals, roots, iterations=80, rest_pose=rest, rest_gain=0.1, root_dofs=PELVIS_DOFS
     )
     roots = report.root_location
-    # the upper body keeps the CRAWL posture, the rifle cradled in it (arms and rifle move with the chest)
-    rifles = carrier_globals(kin, poses, roots) @ carry_of(kin, key)
+    # then the arms on the body: elbows on their tracks, the palms on the rifle the forearms carry
+    elbows: dict[str, np.ndarray] = {}
+    arm_goals: list[ik.Goal] = []
+    for side in ("left", "right"):
+        site = ELBOW_SITE.format(s=side)
+        moves = swings(PAIR["elbow", side], float(t[-1]))
+        elbows[side] = contact_track(
+            g0[kin.site_names.index(site), :3, 3], t, moves, LIFT["elbow"], delay=ELBOW_DELAY
+        )
+        elbows[side][:, 1] += ELBOW_CLEAR * w  # (the forearm pivots about the elbow: off the ground)
+        arm_goals.append(ik.Goal(site, elbows[side], None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
+    chest_now = kin.segment_globals(poses, roots)[:, kin.segment_names.index(CARRIER)]
+    rifles = carried_rifle(rifle0, chest0, chest_now, elbows)
+    arm_goals = _hand_goals(kin, rkin, key, rifles) + arm_goals  # the palms on the rifle come first
+    poses = solve_arms(kin, poses, arm_goals, roots, n_start)
     poses[0], roots[0], rifles[0] = q0, root0, rifle0
     lift_off_ground(kin, poses, roots, rifles)
     # the cycle's last frame is its first, one cycle further on (pose, pelvis and rifle)

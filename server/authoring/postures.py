@@ -146,7 +146,8 @@ class PostureSpec:
     (lateral bend, flexion, twist) in degrees spread over the 17 vertebral joints in proportion to their
     ranges; ``aim``: the right eye goes onto the line of sight; ``elbow_hints``: where the elbows should go
     (clip frame, a weak goal that picks the arm's swivel); ``ground``: lower the figure and rifle so that the
-    lowest point of the body touches the ground (lying postures).
+    lowest point of the body touches the ground (lying postures); ``head_offset``: degrees added to the solved
+    neck/head joints (a head lifted off the stock of a body solved as if aiming, so both keep the same arms).
     """
 
     name: str
@@ -160,6 +161,7 @@ class PostureSpec:
     ground: bool = False
     shouldered: bool = False
     look: bool = False
+    head_offset: Mapping[str, Sequence[float]] = field(default_factory=dict)
 
 
 def _hand(side: str, trigger: bool = False) -> dict[str, tuple[float, ...]]:
@@ -288,6 +290,11 @@ def solve_posture(
         for side, p in spec.elbow_hints.items():
             goals.append(ik.Goal(f"{side}_upper_arm.distal", p, None, 0.3, 0, arm(side)[:1]))
         q, report = ik.solve(kin, q0, goals, root, iterations=200, rest_pose=q0, rest_gain=0.05)
+    if spec.head_offset:
+        q = q.copy()
+        for name, deg in spec.head_offset.items():
+            q[kin.dof_slices[name]] += np.asarray(deg, float) * DEG
+        q = kin.clamp(q)
     if spec.ground:
         drop = lowest_point(kin, q, root)
         root = root.copy()
@@ -371,8 +378,12 @@ _KNEELING = {
     "left_clavicle": (0.0, 25.0),
 }
 
-# Prone: face down along +Z (head towards -Z), chest raised on the elbows, legs apart, toes turned out.
-_PRONE_ROOT = Placement((0.0, 12.0, 0.0), (-90.0, 0.0, -35.0))
+# Prone: face down, the body turned 55 degrees off the line of fire (left shoulder forward, legs apart, toes
+# turned out), belly and thighs on the ground, the chest raised on both elbows: the forearms lie on the ground
+# (the left under the handguard, the right out to the side), as a rifleman lies in the prone position. The
+# chest is as high as the spine allows, so the shouldered rifle's magazine clears the ground; the rifle is
+# canted (magazine out to the right) a little when firing, more when stowed (cheek off the stock, head up).
+_PRONE_ROOT = Placement((0.0, 12.0, 0.0), (-90.0, 0.0, -55.0))
 _PRONE = {
     "left_hip": (20.0, 0.0, -25.0),
     "right_hip": (20.0, 0.0, -25.0),
@@ -380,14 +391,15 @@ _PRONE = {
     "right_ankle": (-40.0, 0.0),
     "neck": (0.0, -40.0, 0.0),
     "head": (0.0, -15.0, 0.0),
-    "right_clavicle": (10.0, 10.0),
-    "left_clavicle": (10.0, 10.0),
+    "right_clavicle": (10.0, -25.0),
+    "left_clavicle": (10.0, -25.0),
     "right_shoulder": (30.0, 150.0, 0.0),
     "left_shoulder": (20.0, 160.0, 0.0),
     "right_elbow": (90.0, 0.0),
     "left_elbow": (60.0, 0.0),
 }
-_PRONE_ELBOWS = {"left": (-20.0, 3.0, -82.0), "right": (22.0, 3.0, -50.0)}
+_PRONE_SPINE = (10.0, -54.0, 0.0)  # chest raised to the limit of the spine, bent a little towards the rifle
+_PRONE_ELBOWS = (ElbowDown("left", (40.0, -64.0), 1.0), ElbowDown("right", (58.0, -24.0), 0.0))
 
 SPECS: dict[str, PostureSpec] = {
     "STAND_STOWED": PostureSpec(
@@ -433,21 +445,22 @@ SPECS: dict[str, PostureSpec] = {
     "PRONE_STOWED": PostureSpec(
         "PRONE_STOWED",
         root=_PRONE_ROOT,
-        rifle=Placement((0.0, 0.0, 0.0), (-12.0, 5.0, 0.0)),
-        joints=_PRONE,
-        spine=(0.0, -40.0, 0.0),
-        elbow_hints=_PRONE_ELBOWS,
-        look=True,
+        rifle=Placement((0.0, 0.0, 0.0), (0.0, 0.0, -30.0)),
+        joints={**_PRONE, "neck": (-10.0, -35.0, 10.0)},
+        spine=_PRONE_SPINE,
+        contacts=_PRONE_ELBOWS,
+        aim=True,  # the arms as when firing; then the head lifts off the stock
+        head_offset={"neck": (10.0, -30.0, 0.0), "head": (0.0, -10.0, 0.0)},
         shouldered=True,
         ground=True,
     ),
     "PRONE_FIRE": PostureSpec(
         "PRONE_FIRE",
         root=_PRONE_ROOT,
-        rifle=_AIMED,
+        rifle=Placement((0.0, 0.0, 0.0), (0.0, 0.0, -25.0)),  # aimed along -Z, canted
         joints={**_PRONE, "neck": (-10.0, -35.0, 10.0)},
-        spine=(0.0, -40.0, 0.0),
-        elbow_hints=_PRONE_ELBOWS,
+        spine=_PRONE_SPINE,
+        contacts=_PRONE_ELBOWS,
         aim=True,
         shouldered=True,
         ground=True,
@@ -455,7 +468,8 @@ SPECS: dict[str, PostureSpec] = {
     "CRAWL": PostureSpec(
         "CRAWL",
         root=Placement((0.0, 38.0, 0.0), (-107.0, 0.0, 0.0)),
-        rifle=Placement((2.0, 13.0, -72.0), (0.0, 35.0, 0.0)),
+        # cradled across the hands in front of the forearms, on its side: muzzle to the left, magazine forward
+        rifle=Placement((15.0, 12.8, -80.2), (0.0, 76.0, -90.0)),
         joints={
             "left_hip": (10.0, 90.0, 0.0),
             "right_hip": (10.0, 90.0, 0.0),
@@ -476,10 +490,11 @@ SPECS: dict[str, PostureSpec] = {
         contacts=(
             KneeDown("left", (-16.0, 32.0), (-16.0, 82.0), knee_height=3.0, ball_height=7.0),
             KneeDown("right", (16.0, 32.0), (16.0, 82.0), knee_height=3.0, ball_height=7.0),
-            ElbowDown("left", (-20.0, -42.0)),
-            ElbowDown("right", (20.0, -42.0)),
+            ElbowDown("left", (-20.0, -55.0), 1.5),
+            ElbowDown("right", (20.0, -55.0), 3.0),
         ),
         look=True,
+        ground=True,
     ),
     "DEAD": PostureSpec(
         "DEAD",

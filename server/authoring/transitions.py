@@ -872,6 +872,8 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         (
             Step("left_foot", "PRONE_STOWED", 0.0, 0.6, lift=8.0),
             Step("right_foot", "PRONE_STOWED", 0.1, 0.6, lift=8.0),
+            Step("left_knee", "PRONE_STOWED", 0.0, 0.6, lift=6.0),
+            Step("right_knee", "PRONE_STOWED", 0.1, 0.6, lift=6.0),
             Step("root", "PRONE_STOWED", 0.0, 0.8),
             Step("legs", "PRONE_STOWED", 0.0, 0.7),
             Step("spine", "PRONE_STOWED", 0.1, 0.7),
