@@ -245,20 +245,21 @@ def track_solve(
     and the backward one comes back to the start key's).
     """
     n = len(poses)
+    w = (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, n))) / 2.0
     bwd = _track(kin, poses, goals, roots, np.arange(n)[::-1], iterations, max_dof_step)
     if backward_only:
         blend = bwd
     else:
         fwd = _track(kin, poses, goals, roots, np.arange(n), iterations, max_dof_step)
-        w = (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, n))) / 2.0
         blend = fwd + w[:, None] * (bwd - fwd)
-    fix = min(0.1, max_dof_step)  # (backward only: the track is on the rifle already, a few steps)
+    fix_step = 0.1  # rad
+    fix = min(fix_step, max_dof_step)  # (small steps: the tracks are on the rifle already, a few steps)
     q, _ = ik.solve(
         kin,
         blend,
         goals,
         roots,
-        iterations=4 if backward_only else 40,
+        iterations=4 if max_dof_step < fix_step else 40,
         rest_pose=blend,
         rest_gain=0.1,
         max_dof_step=fix,
@@ -597,6 +598,13 @@ def _in_right_hand(
 SMALL_STEPS: dict[str, Any] = {"iterations": 10, "max_dof_step": 0.02, "backward_only": True}
 
 
+def _tracking(spec: TransitionSpec) -> dict[str, Any]:
+    """How :func:`track_solve` tracks ``spec``'s arms (default: its defaults)."""
+    if spec.guide_elbow:
+        return SMALL_STEPS
+    return {}
+
+
 def _turn_weight(spec: TransitionSpec, times: np.ndarray) -> np.ndarray:
     """1 outside the hand turn, down to 0 in its middle: while the rifle turns in the right hand the left
     palm keeps hold of the handguard but may turn on it (held to its grip there, the wrist ran into its
@@ -684,7 +692,7 @@ def record_transition(
             pos = _knee_track(kin, side, steps, keys, first, times)
             w = _goal_weight(steps, times)
             goals.append(ik.Goal(f"{side}_lower_leg.knee", pos, None, w, 2, leg(side)))
-    q = track_solve(kin, poses, goals, roots, **(SMALL_STEPS if spec.guide_elbow else {}))
+    q = track_solve(kin, poses, goals, roots, **_tracking(spec))
     # the ends are the graph's postures exactly
     q[0], q[-1] = first.poses[SOLDIER], last.poses[SOLDIER]
     rifles[0], rifles[-1] = first.locations[RIFLE], last.locations[RIFLE]
@@ -969,12 +977,13 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
 )
 # Big changes of carry (down onto the forearms, falling dead): the rifle stays in the right hand, whose arm
 # swings by interpolation, and only the left hand is solved onto it (IK on both arms jumped between
-# elbow solutions on the way).
+# elbow solutions on the way). Not crawl -> prone: from the crawl's cradle the left arm, solved onto the
+# rifle in the right hand, could not get round to the prone grip (its elbow kept the wrong side of its
+# swivel at either end, joint limits in between); both palms solved on the carried rifle move smoothly.
 IN_HAND = frozenset(
     {
         "ststow2crawl",
         "kstow2crawl",
-        "crawl2prstow",
         "ststow2dead",
         "stfire2dead",
         "kstow2dead",
@@ -985,7 +994,12 @@ IN_HAND = frozenset(
 # the left arm swings from its stowed grip round to the crawl's cradle: its elbow is guided (see _elbow_guide)
 GUIDED_ELBOW = frozenset({"ststow2crawl", "kstow2crawl"})
 TRANSITIONS = tuple(
-    dataclasses.replace(t, in_hand=t.name in IN_HAND, guide_elbow=t.name in GUIDED_ELBOW) for t in TRANSITIONS
+    dataclasses.replace(
+        t,
+        in_hand=t.name in IN_HAND,
+        guide_elbow=t.name in GUIDED_ELBOW,
+    )
+    for t in TRANSITIONS
 )
 DEAD_TO_STAND_SECONDS = 10.0  # DEAD -> STAND_STOWED: ststow2dead played backwards (seed 002 Figure 7)
 
