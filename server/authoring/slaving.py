@@ -253,12 +253,13 @@ class MasterSlavePair:
                 continue
             target = master_sites[..., mk.site_names.index(c.master_site), :3, 3]
             priority = 2 if (c.group == "palm" and p.palm_priority) else 1
+            w: Any = weight[c.group]
             out.append(
                 ik.Goal(
                     c.slave_site,
                     target,
                     None,
-                    weight[c.group],
+                    w,
                     priority,
                     c.joints,
                     radius=GOAL_RADIUS[c.group],
@@ -267,7 +268,10 @@ class MasterSlavePair:
         return out
 
     def slave_pose(
-        self, master_pose: np.ndarray, master_location: np.ndarray | None = None
+        self,
+        master_pose: np.ndarray,
+        master_location: np.ndarray | None = None,
+        release_frame: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(slave_pose, slave_location)`` for master poses ``(ndof,)`` or ``(..., ndof)`` and the master's
         root site globals (default: the master figure's location). The slave's root site is put where the
@@ -288,10 +292,10 @@ class MasterSlavePair:
         opts: dict[str, Any] = {"iterations": 80, "rest_gain": 0.1, "tolerance": 0.02}
         opts.update(self.ik_options)
         pose, self.last_report = ik.solve(sk, start, goals, slave_loc, rest_pose=start, **opts)
-        return pose, slave_loc
+        return _let_go(pose, start, release_frame), slave_loc
 
     def slave_clip(
-        self, master_poses: np.ndarray, master_locations: np.ndarray
+        self, master_poses: np.ndarray, master_locations: np.ndarray, release_frame: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`slave_pose` over the frames ``(n, ndof)`` of a clip, made temporally coherent.
 
@@ -305,7 +309,7 @@ class MasterSlavePair:
         mk, sk = self.master_kin, self.slave_kin
         q = np.asarray(master_poses, dtype=np.float64)
         loc = np.asarray(master_locations, dtype=np.float64)
-        pose, slave_loc = self.slave_pose(q, loc)
+        pose, slave_loc = self.slave_pose(q, loc, release_frame)
         n = len(pose)
         goals = self.goals(mk.site_globals(q, loc))
         if n < 3 or not goals:
@@ -325,6 +329,7 @@ class MasterSlavePair:
         opts.update(self.ik_options)
         opts["max_dof_step"] = SMOOTH_MAX_DOF_STEP
         out, self.last_report = ik.solve(sk, blend, goals, slave_loc, rest_pose=blend, **opts)
+        out = _let_go(out, start, release_frame)
         out[[0, -1]] = pose[[0, -1]]
         return out, slave_loc
 
@@ -335,6 +340,23 @@ class MasterSlavePair:
         pose, loc = self.slave_pose(self.master_kin.neutral_pose(), self.master.location)
         self.slave_kin.set_pose(pose)
         self.slave.location = loc
+
+
+RELEASE_FADE_FRAMES = 12  # after the hands let go, the arm goals fade out over this many frames
+
+
+def _let_go(solved: np.ndarray, copied: np.ndarray, release_frame: int | None) -> np.ndarray:
+    """Slave poses ``(n, ndof)`` of a clip whose hands let go of the rifle at ``release_frame`` (a death):
+    the solved poses while the rifle is held, blending (smoothstep over :data:`RELEASE_FADE_FRAMES`) into
+    the copied angles and blended spine. Solving a flung body onto the master's palms, elbows and torso
+    sites flipped the DI's shoulders and spine between branches (up to 160 degrees in one frame), the DI's
+    torso being shaped differently; fading the goals' weights still snapped at the end (IK meets a goal of
+    any weight), so the poses themselves are blended."""
+    if release_frame is None or solved.ndim != 2:
+        return solved
+    u = np.clip((np.arange(len(solved)) - release_frame) / RELEASE_FADE_FRAMES, 0.0, 1.0)
+    w = (u * u * (3.0 - 2.0 * u))[:, None]
+    return solved + w * (copied - solved)
 
 
 def create_master_slave_pair(master: Figure, slave: Figure, rifle: Figure | None = None) -> MasterSlavePair:
@@ -415,7 +437,7 @@ def reslave_channelset(channelset: Channelset, pair: MasterSlavePair, name: str 
     n = rec.nframes
     q = np.asarray(rec.poses[pair.master.name], dtype=np.float64)
     loc = np.asarray(rec.locations[pair.master.name], dtype=np.float64)
-    pose, slave_loc = pair.slave_clip(q, loc)
+    pose, slave_loc = pair.slave_clip(q, loc, channelset.release_frame)
     out = Recording([pair.slave])
     out.poses[pair.slave.name].extend(pose)
     out.roots[pair.slave.name].extend([pair._slave_root] * n)
