@@ -33,20 +33,7 @@ def _max_jump_deg(kin, poses: np.ndarray) -> float:
 # crawl2prstow: prone, neck at its extension limit (the sight goal's saddle: the neck used to flip between
 # two twisted solutions); kfire2dead: the arms are flung while falling (after the hands let go of the rifle
 # the arm goals fade out, so the slave keeps the master's arm angles instead of flipping between branches)
-@pytest.mark.parametrize(
-    "clip",
-    [
-        "crawl2prstow",
-        pytest.param(
-            "kfire2dead",
-            marks=pytest.mark.xfail(
-                reason="physics death: the DI's right wrist still jumps 21 deg at frame 11 while the hands "
-                "hold the rifle (the palm IK changes branch as the master sags); known, open",
-                strict=False,
-            ),
-        ),
-    ],
-)
+@pytest.mark.parametrize("clip", ["crawl2prstow", "kfire2dead"])
 def test_slaved_clip_has_no_pops_the_master_lacks(pair: MasterSlavePair, clip: str) -> None:
     q, loc, release = _master(pair, clip)
     pose, slave_loc = pair.slave_clip(q, loc, release)

@@ -37,6 +37,7 @@ DEAD = "DEAD"
 REST_SPEED = 0.03  # m/s: a body's centre of mass slower than this is still
 REST_SECONDS = 0.35  # every body still this long: the death is over
 MAX_SECONDS = 6.0
+GROUND_RISE = 0.4  # s: a ground lowered under a posture dipping into it rises to 0
 GET_UP_SECONDS = 10.0  # DEAD@x -> its start posture: the death played backwards (seed 002 Figure 7: 10 s)
 
 
@@ -60,8 +61,8 @@ class DeathSpec:
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0)),
     DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0)),
-    DeathSpec("kstow2dead", "KNEEL_STOWED", 100.0, (0.0, -0.5, -1.0), "upper", release=0.3),
-    DeathSpec("kfire2dead", "KNEEL_FIRE", 100.0, (0.0, -0.5, -1.0), "upper", release=0.3),
+    DeathSpec("kstow2dead", "KNEEL_STOWED", 150.0, (1.0, -0.3, -0.5), "upper", release=0.3),
+    DeathSpec("kfire2dead", "KNEEL_FIRE", 150.0, (1.0, -0.3, -0.5), "upper", release=0.3),
     DeathSpec(
         "prstow2dead", "PRONE_STOWED", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
     ),
@@ -115,8 +116,8 @@ SPINE_GAIN = 1500.0  # vertebrae: stiff throughout (a dead back bends, mostly at
 SPINE_TONE = 0.25  # the fraction of the vertebrae's gain kept when dead
 LOOSE = ("clavicle", "shoulder", "elbow", "wrist", "neck", "head")  # no tone left: gravity lays them down
 TONE = 0.10  # the fraction of the muscles' gain kept when dead (toward the DEAD key's shape)
-DAMPING = 0.06  # joint damping = DAMPING * gain (s), at least MIN_DAMPING
-MIN_DAMPING = 2.0
+DAMPING = 0.1  # joint damping = DAMPING * gain (s), at least MIN_DAMPING
+MIN_DAMPING = 4.0
 
 
 def _gain(joint: str) -> float:
@@ -217,20 +218,20 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     com = data.xipos.copy()
     still = 0
     release_frame = None
-    rifle_on_ground = False
+    ground0 = min(0.0, doll.lowest())  # a posture dipping into the ground starts on a ground that low
     t = 0.0
     while t < MAX_SECONDS:
         for _ in range(steps):
             ts = data.time
             set_muscles(ts)
             data.xfrc_applied[torso, :3] = spec.force * hit(ts) * d_mj
+            doll.set_ground(ground0 * (1.0 - _smoothstep(ts / GROUND_RISE)))
             if release_frame is None and ts >= spec.release:
                 doll.release()
                 release_frame = len(poses)
-            if release_frame is not None and not rifle_on_ground:
-                # a rifle posed into the ground (a posture's fault) is eased out by a soft contact first
-                doll.rifle_ground_contact(True, soft=doll.rifle_lowest() < -0.3)
-                rifle_on_ground = doll.rifle_lowest() >= -0.3
+                # a rifle the posture dipped into the ground lies on a ground that low (raising it would
+                # lever the body up off it)
+                doll.set_rifle_ground(min(0.0, doll.rifle_lowest()))
             doll.step()
         t += dt
         poses.append(doll.pose())

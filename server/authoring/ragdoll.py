@@ -39,7 +39,7 @@ CM = 0.01  # figure units (cm) -> MuJoCo (m)
 DENSITY = 1000.0  # kg/m^3, of the hulls; then scaled so the body weighs BODY_MASS
 BODY_MASS = 80.0  # kg: the hulls of neighbouring slices overlap, so their volumes add up to too much
 RIFLE_MASS = 3.5  # kg, an AK-47 with a magazine
-TIMESTEP = 1.0 / 600.0  # s: ten steps per 60 fps frame
+TIMESTEP = 1.0 / 1200.0  # s: twenty steps per 60 fps frame
 FROZEN_PREFIXES = (
     "left_thumb",
     "left_index",
@@ -54,12 +54,13 @@ FROZEN_PREFIXES = (
     "left_eye",
     "right_eye",
 )
-GROUND_FRICTION = "2.0 0.05 0.01"  # sliding, torsional, rolling
-CONTACT_SOLREF = "0.004 1"
+GROUND_FRICTION = "3.0 0.1 0.01"  # sliding, torsional, rolling
+CONTACT_SOLREF = "0.002 1"
 CONTACT_SOLIMP = "0.95 0.99 0.001"
-LIMIT_SOLREF = "0.004 1"  # stiff joint limits (MuJoCo's are soft constraints)
+LIMIT_SOLREF = "0.002 1"  # stiff joint limits (MuJoCo's are soft constraints)
 NOSLIP_ITERATIONS = 8  # MuJoCo's no-slip pass: soft friction would let a resting part creep
 PALMS = ("right_palm", "left_palm")
+PARKED = -100.0  # m: where the rifle's ground plane waits while the rifle is held
 
 
 def frozen(joint: str) -> bool:
@@ -190,7 +191,7 @@ class Ragdoll:
   <size memory="64M"/>
   <default>
     <geom condim="6" friction="{GROUND_FRICTION}" solref="{CONTACT_SOLREF}" solimp="{CONTACT_SOLIMP}"/>
-    <default class="body"><geom density="{DENSITY}" contype="3" conaffinity="3"/></default>
+    <default class="body"><geom density="{DENSITY}" contype="5" conaffinity="5"/></default>
     <joint damping="0" armature="0.002" solreflimit="{LIMIT_SOLREF}"
            solimplimit="{CONTACT_SOLIMP}"/>
   </default>
@@ -198,11 +199,16 @@ class Ragdoll:
     {"".join(assets)}
   </asset>
   <worldbody>
-    <geom name="ground" type="plane" size="0 0 1" contype="1" conaffinity="1"/>
+    <body name="ground" mocap="true">
+      <geom name="ground" type="plane" size="0 0 1" contype="1" conaffinity="1"/>
+    </body>
+    <body name="rifle_ground" mocap="true" pos="0 0 {PARKED}">
+      <geom name="rifle_ground" type="plane" size="0 0 1" contype="2" conaffinity="2"/>
+    </body>
 {tree}
     <body name="rifle">
       <freejoint name="rifle"/>
-      <geom name="rifle" type="mesh" mesh="{rifle_mesh}" mass="{RIFLE_MASS}" contype="2" conaffinity="2"/>
+      <geom name="rifle" type="mesh" mesh="{rifle_mesh}" mass="{RIFLE_MASS}" contype="6" conaffinity="6"/>
     </body>
   </worldbody>
   <contact>
@@ -258,7 +264,7 @@ class Ragdoll:
         mj.mj_forward(model, data)
         for c in data.contact[: data.ncon]:
             b1, b2 = model.geom_bodyid[c.geom1], model.geom_bodyid[c.geom2]
-            if b1 == 0 or b2 == 0:
+            if {model.body(b1).name, model.body(b2).name} & {"world", "ground", "rifle_ground"}:
                 continue
             a, b = sorted((model.body(b1).name, model.body(b2).name))
             pairs.add((a, b))
@@ -295,17 +301,23 @@ class Ragdoll:
         nodes = self.rifle.segments["rifle"].psurf.nodes  # type: ignore[union-attr]
         return float((nodes @ g[1, :3] + g[1, 3]).min())
 
-    def rifle_ground_contact(self, on: bool, soft: bool = False) -> None:
-        """The rifle meets the ground (it does not while held: the posture places it, the hands hold it);
-        ``soft``: a slow contact that eases a rifle out of the ground instead of shooting it out."""
-        r = self.model.geom("rifle").id
-        self.model.geom_solref[r] = (0.15, 1.0) if soft else [float(x) for x in CONTACT_SOLREF.split()]
-        self.model.geom_solimp[r, :2] = (0.0, 0.95) if soft else (0.95, 0.99)
-        self.model.geom_solmix[r] = 1e6 if soft else 1.0
-        g = self.model.geom("ground").id
-        bits = 3 if on else 1
-        self.model.geom_conaffinity[g] = self.model.geom_contype[g] = bits
-        self.model.body_conaffinity[0] = self.model.body_contype[0] = bits  # the broadphase's filter
+    def lowest(self) -> float:
+        """Height (cm) of the body's lowest psurf node."""
+        from server.authoring.postures import lowest_point
+
+        return float(lowest_point(self.kin, self.pose(), self.root_location()))
+
+    def set_ground(self, height: float) -> None:
+        """Put the body's ground plane at ``height`` cm (a posture that dips into the ground starts on a
+        ground that far down, which rises to 0 while the body settles: no pop out of it)."""
+        self.data.mocap_pos[self.model.body("ground").mocapid[0], 2] = height * CM
+
+    def set_rifle_ground(self, height: float | None) -> None:
+        """The rifle's own ground plane at ``height`` cm, or (None) parked out of reach: the rifle meets no
+        ground while the hands hold it (the posture places it, a posture may dip it into the ground), and
+        a rifle let go inside the ground is raised out of it by this plane rising to 0."""
+        z = PARKED if height is None else height * CM
+        self.data.mocap_pos[self.model.body("rifle_ground").mocapid[0], 2] = z
 
     # --- reading back ---------------------------------------------------------------------------------------
 
