@@ -118,8 +118,9 @@ def parse_jcl(text: str, filename: str = "<jcl>") -> list[JclCall]:
         else:
             while True:
                 if i >= len(toks):
-                    raise JclError("unterminated argument list", file=filename, line=name_tok[2],
-                                   column=name_tok[3])
+                    raise JclError(
+                        "unterminated argument list", file=filename, line=name_tok[2], column=name_tok[3]
+                    )
                 kind, value, line, col = toks[i]
                 if kind == "number":
                     args.append(float(value))
@@ -128,8 +129,9 @@ def parse_jcl(text: str, filename: str = "<jcl>") -> list[JclCall]:
                 elif kind == "ident":  # Jack accepted bare words where strings were expected
                     args.append(value)
                 else:
-                    raise JclError(f"expected an argument, found {value!r}", file=filename, line=line,
-                                   column=col)
+                    raise JclError(
+                        f"expected an argument, found {value!r}", file=filename, line=line, column=col
+                    )
                 i += 1
                 if len(args) > MAX_ARGS:
                     raise JclError(f"more than {MAX_ARGS} arguments", file=filename, line=line, column=col)
@@ -137,8 +139,9 @@ def parse_jcl(text: str, filename: str = "<jcl>") -> list[JclCall]:
                 if sep[1] == ")":
                     break
                 if sep[1] != ",":
-                    raise JclError(f"expected ',' or ')', found {sep[1]!r}", file=filename, line=sep[2],
-                                   column=sep[3])
+                    raise JclError(
+                        f"expected ',' or ')', found {sep[1]!r}", file=filename, line=sep[2], column=sep[3]
+                    )
         if i < len(toks) and toks[i][1] == ";":
             i += 1
         elif i < len(toks):

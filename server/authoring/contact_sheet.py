@@ -3,8 +3,12 @@
 Offscreen OpenGL through pyrender (headless EGL: ``PYOPENGL_PLATFORM=egl``, Mesa's llvmpipe is enough). The
 soldier and the rifle are drawn from their psurfs (one pyrender node per segment, placed by batched FK of
 the recorded poses and figure channels), on a checkered ground plane (50 cm squares, so sliding feet and
-strides can be judged), with the same camera orientation and distance in every tile: a three-quarter view
-from the soldier's front left, aimed at the middle of what the tile shows. Labels are drawn with Pillow.
+strides can be judged), with the same camera orientation and distance in every tile, aimed at the middle of
+what the tile shows: a three-quarter view from the soldier's front left (``quarter``: strides and sliding
+against the checkerboard), or a ``side`` view from his left or a ``front`` view with the eye just above the
+ground (``EYE_HEIGHT``), so that a hovering body shows daylight under it and what touches the ground sits on
+the horizon; several views give each posture one tile per view and each clip one row per view. The camera
+backs off until the body fits. Labels are drawn with Pillow.
 """
 
 from __future__ import annotations
@@ -17,12 +21,23 @@ from typing import Any
 
 import numpy as np
 
-from server.authoring.quality import BACKWARD_WORDS
+from server.authoring.quality import BACKWARD_WORDS, clip_matches
 from server.motion.channelset import Channelset
 from server.peabody.fk import FigureKinematics
 from server.peabody.model import Figure
 
 CAMERA_DIRECTION = np.array([-0.55, 0.38, -0.74])  # from the target towards the camera (front left, above)
+# per view, from the target towards the camera; the soldier faces -Z, his left is -X
+VIEWS: dict[str, np.ndarray] = {
+    "quarter": CAMERA_DIRECTION,
+    "side": np.array([-1.0, 0.0, 0.0]),
+    "front": np.array([0.0, 0.0, -1.0]),
+}
+GROUND_LEVEL_VIEWS = (
+    "side",
+    "front",
+)  # the eye just above the ground: a body hovering shows daylight under it
+EYE_HEIGHT = 2.0  # cm
 CAMERA_DISTANCE = 340.0  # cm
 CAMERA_YFOV = np.radians(38.0)
 GROUND_SQUARE = 50.0  # cm
@@ -154,12 +169,18 @@ def render_contact_sheet(
     tile: int = 200,
     title: str | None = None,
     ground_motion: bool = True,
+    views: Sequence[str] = ("quarter",),
 ) -> dict[str, Any]:
-    """Render ``postures`` (one tile each) and ``frames_per_clip`` evenly spaced frames of every clip (one
-    row each, first to last frame) into ``out_png``. ``figure_files``: the soldier figure and its rifle
-    (paths or loaded figures with psurfs). With ``ground_motion`` a clip that records a ``ground_speed`` is
-    drawn travelling (along -Z, +Z for backward clips) as the entity would. Returns a summary (size, rows,
-    tiles)."""
+    """Render ``postures`` (one tile each per view) and ``frames_per_clip`` evenly spaced frames of every clip
+    (one row each per view, first to last frame) into ``out_png``. ``figure_files``: the soldier figure and
+    its rifle (paths or loaded figures with psurfs). With ``ground_motion`` a clip that records a
+    ``ground_speed`` is drawn travelling (along -Z, +Z for backward clips) as the entity would. ``views``:
+    names from ``VIEWS``. Returns a summary (size, rows, tiles)."""
+    unknown = [v for v in views if v not in VIEWS]
+    if unknown or not views:
+        raise ContactSheetError(
+            f"unknown view {unknown[0] if unknown else None!r}; views: {', '.join(VIEWS)}"
+        )
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     try:
         import pyrender
@@ -187,9 +208,24 @@ def render_contact_sheet(
     except Exception as exc:  # pragma: no cover - depends on the machine's OpenGL
         raise ContactSheetError(f"no offscreen OpenGL context ({exc}); set PYOPENGL_PLATFORM=egl") from exc
 
-    def draw(states: Mapping[str, tuple[np.ndarray, np.ndarray]], frames: Sequence[int], target: np.ndarray):
+    def draw(
+        states: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        frames: Sequence[int],
+        aim: tuple[np.ndarray, np.ndarray],
+        view: str,
+    ):
         images = []
-        eye = target + CAMERA_DIRECTION / np.linalg.norm(CAMERA_DIRECTION) * CAMERA_DISTANCE
+        target, corners = aim
+        if view in GROUND_LEVEL_VIEWS:  # aim at the middle of the body, however low it lies
+            target = np.r_[target[0], corners[:, 1].mean(), target[2]]
+        toward = VIEWS[view] / np.linalg.norm(VIEWS[view])
+        rel = corners - target  # back off until what the tile shows fits (a body lying towards the camera)
+        along = rel @ toward
+        across = np.linalg.norm(rel - along[:, None] * toward, axis=1)
+        fit = (along + 1.1 * across / np.tan(CAMERA_YFOV / 2.0)).max()
+        eye = target + toward * max(CAMERA_DISTANCE, float(fit))
+        if view in GROUND_LEVEL_VIEWS:
+            eye[1] = EYE_HEIGHT
         pose = _look_at(eye, target)
         scene.set_pose(cam_node, pose)
         scene.set_pose(key_node, _look_at(eye + np.array([0.0, 200.0, 0.0]), target))
@@ -213,24 +249,29 @@ def render_contact_sheet(
                 loc[:, 2, 3] += travel
         return {n: placed[n].globals(q, loc) for n, (q, loc) in played.items() if n in placed}
 
-    def centre(states: Mapping[str, np.ndarray], frames: Sequence[int]) -> np.ndarray:
+    def centre(states: Mapping[str, np.ndarray], frames: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+        """The camera's target and the corners of the box the body sweeps over ``frames``."""
         body = max(states, key=lambda n: placed[n].kin.ndof)
         pts = np.concatenate([placed[body].points(states[body][k]) for k in frames])
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         c = (lo + hi) / 2.0
         c[1] = max(c[1], 45.0)
-        return c
+        corners = np.array(
+            [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        )
+        return c, corners
 
     font = _font(13)
     small = _font(11)
     label_w = 170
-    ncols = max(frames_per_clip, min(len(postures), 8) if postures else 0)
+    tiles = [(p, v) for p in postures for v in views]
+    ncols = max(frames_per_clip, min(len(tiles), 8) if tiles else 0)
     width = label_w + ncols * tile
-    posture_rows = (len(postures) + ncols - 1) // ncols if postures else 0
+    posture_rows = (len(tiles) + ncols - 1) // ncols if tiles else 0
     title_h = 30 if title else 0
     section_h = LABEL_HEIGHT
     height = title_h + (section_h + posture_rows * (tile + LABEL_HEIGHT) if postures else 0)
-    height += (section_h if rows else 0) + len(rows) * (tile + LABEL_HEIGHT)
+    height += (section_h if rows else 0) + len(rows) * len(views) * (tile + LABEL_HEIGHT)
     sheet = Image.new("RGB", (width, height), BACKGROUND)
     pen = ImageDraw.Draw(sheet)
     y = 0
@@ -240,14 +281,15 @@ def render_contact_sheet(
     if postures:
         pen.text((8, y + 4), "postures", fill=(60, 60, 60), font=font)
         y += section_h
-        for i, p in enumerate(postures):
+        for i, (p, view) in enumerate(tiles):
             states = segment_states(p.channelset)
             frame = min(max(p.frame, 0), p.channelset.nframes - 1)
-            img = draw(states, [frame], centre(states, [frame]))[0]
+            img = draw(states, [frame], centre(states, [frame]), view)[0]
             r, c = divmod(i, ncols)
             x0, y0 = label_w + c * tile, y + r * (tile + LABEL_HEIGHT)
             sheet.paste(img, (x0, y0 + LABEL_HEIGHT))
-            pen.text((x0 + 4, y0 + 4), p.label, fill=(20, 20, 20), font=font)
+            label = p.label if len(views) == 1 else f"{p.label} ({view})"
+            pen.text((x0 + 4, y0 + 4), label, fill=(20, 20, 20), font=font)
         y += posture_rows * (tile + LABEL_HEIGHT)
     if rows:
         pen.text((8, y + 4), "clips (first to last frame)", fill=(60, 60, 60), font=font)
@@ -256,19 +298,23 @@ def render_contact_sheet(
         cs = row.channelset
         states = segment_states(cs)
         frames = np.unique(np.linspace(0, cs.nframes - 1, frames_per_clip).round().astype(int)).tolist()
-        images = draw(states, frames, centre(states, frames))
-        pen.text((8, y + LABEL_HEIGHT + 6), row.label, fill=(20, 20, 20), font=font)
-        pen.text(
-            (8, y + LABEL_HEIGHT + 24),
-            f"{cs.duration:.2f} s, {cs.nframes} frames",
-            fill=(90, 90, 90),
-            font=small,
-        )
-        for c, (k, img) in enumerate(zip(frames, images, strict=True)):
-            x0 = label_w + c * tile
-            sheet.paste(img, (x0, y + LABEL_HEIGHT))
-            pen.text((x0 + 4, y + 5), f"t = {k / cs.fps:.2f} s", fill=(60, 60, 60), font=small)
-        y += tile + LABEL_HEIGHT
+        aim = centre(states, frames)
+        for view in views:
+            images = draw(states, frames, aim, view)
+            pen.text((8, y + LABEL_HEIGHT + 6), row.label, fill=(20, 20, 20), font=font)
+            pen.text(
+                (8, y + LABEL_HEIGHT + 24),
+                f"{cs.duration:.2f} s, {cs.nframes} frames",
+                fill=(90, 90, 90),
+                font=small,
+            )
+            if len(views) > 1:
+                pen.text((8, y + LABEL_HEIGHT + 40), f"{view} view", fill=(90, 90, 90), font=small)
+            for c, (k, img) in enumerate(zip(frames, images, strict=True)):
+                x0 = label_w + c * tile
+                sheet.paste(img, (x0, y + LABEL_HEIGHT))
+                pen.text((x0 + 4, y + 5), f"t = {k / cs.fps:.2f} s", fill=(60, 60, 60), font=small)
+            y += tile + LABEL_HEIGHT
     renderer.delete()
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -279,15 +325,17 @@ def render_contact_sheet(
         "height": height,
         "postures": [p.label for p in postures],
         "clips": [r.label for r in rows],
-        "tiles": len(postures) + sum(min(frames_per_clip, r.channelset.nframes) for r in rows),
+        "views": list(views),
+        "tiles": len(views) * (len(postures) + sum(min(frames_per_clip, r.channelset.nframes) for r in rows)),
     }
 
 
 def library_sheet_inputs(
-    graphs: Sequence[str | os.PathLike[str]], figure_type: str
+    graphs: Sequence[str | os.PathLike[str]], figure_type: str, clips_pattern: str | None = None
 ) -> tuple[list[SheetPosture], list[SheetClip], list[str]]:
-    """From posture graph files: the clips that drive ``figure_type`` (e.g. ``"DI.fig"``), one posture tile
-    per graph node (the frame where an arc leaves it, else where one arrives), and every figure type used."""
+    """From posture graph files: the clips that drive ``figure_type`` (e.g. ``"DI.fig"``) and match
+    ``clips_pattern`` (see :func:`clip_matches`), one posture tile per graph node those clips reach (the
+    frame where an arc leaves it, else where one arrives), and every figure type used."""
     from server.motion.posture_change import load_posture_graph
 
     postures: dict[str, SheetPosture] = {}
@@ -295,7 +343,10 @@ def library_sheet_inputs(
     types: set[str] = set()
     for g in map(Path, graphs):
         loaded = load_posture_graph(g)
-        used = [figure_type in {c.protofiletype for c in cs.channels} for cs in loaded.channelsets]
+        used = [
+            figure_type in {c.protofiletype for c in cs.channels} and clip_matches(f, clips_pattern)
+            for cs, f in zip(loaded.channelsets, loaded.graph.files, strict=True)
+        ]
         if not any(used):
             continue
         for cs, fname, ok in zip(loaded.channelsets, loaded.graph.files, used, strict=True):

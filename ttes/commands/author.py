@@ -79,12 +79,14 @@ def run_figures(args: argparse.Namespace) -> int:
 def _register_check(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "check",
-        help="measure the motion library's quality (foot skate, ground, palms on rifle, limits, continuity)",
+        help="measure the motion library's quality (contacts, ground, rifle, speeds, rest, gait, continuity)",
         description=(
-            "Check every clip of the posture graphs: foot skate in stance (world frame, ground motion added "
-            "back for locomotion), ground penetration, palm centres to the rifle's grip/handguard, "
-            "joint-limit violations, frame-to-frame jumps, locomotion stride data; and continuity at every "
-            "posture node of every graph. Exit status 1 when a threshold fails, 2 when nothing was checked."
+            "Check every clip of the posture graphs: every body part's slide while on the ground (judged by "
+            "height; world frame, ground motion added back for locomotion), body and rifle below the ground, "
+            "rifle inside the body, palm centres on the rifle's grip/handguard while held, site speeds at "
+            "static ends, joint-limit violations, frame-to-frame jumps, gait speed and cadence; and at every "
+            "posture node of every graph continuity (end_offset taken out) and resting postures on the "
+            "ground. Exit status 1 when a threshold fails, 2 when nothing was checked."
         ),
     )
     p.add_argument(
@@ -95,13 +97,20 @@ def _register_check(sub: argparse._SubParsersAction) -> None:
         help="posture graph files (default: every posture_graphs/*.graph)",
     )
     p.add_argument("--clips", type=Path, nargs="*", default=[], help="extra channelset files to check")
+    p.add_argument(
+        "--only",
+        metavar="PATTERN",
+        default=None,
+        help="report (and pass or fail on) only the clips whose name matches this shell pattern and the "
+        "posture nodes they reach; a DI clip's _low suffix may be left out",
+    )
     p.add_argument("--figures", type=Path, default=None, help="figure folder (default: figures/)")
     p.add_argument("--json", action="store_true", help="one JSON object: clips, continuity, summary")
     p.set_defaults(func=run_check)
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from server.authoring.quality import QualityError, check_library
+    from server.authoring.quality import QualityError, check_library, only_clips
     from server.motion.errors import ChannelsetError, PostureGraphError
     from server.peabody.language import PeabodyError
     from ttes.output import print_json
@@ -116,35 +125,67 @@ def run_check(args: argparse.Namespace) -> int:
     except (QualityError, ChannelsetError, PostureGraphError, PeabodyError) as exc:
         print(f"ttes author check: {exc}", file=sys.stderr)
         return 2
+    if args.only:
+        result = only_clips(result, args.only)
+        if not result["clips"]:
+            print(f"ttes author check: no clip matches {args.only!r}", file=sys.stderr)
+            return 2
     summary = result["summary"]
     if args.json:
         print_json(result)
     else:
-        for c in result["clips"]:
-            verdict = "ok  " if c["pass"] else "FAIL"
-            extra = f" ({', '.join(c['failures'])})" if c["failures"] else ""
-            print(
-                f"{verdict} {c['name']:<34} skate {c['foot_skate_cm']:6.2f} cm  ground "
-                f"{c['ground_penetration_cm']:5.2f} cm  "
-                f"palms {c.get('palm_rifle_cm', float('nan')):5.2f} cm  "
-                f"limits {c['joint_limit_violations']}  jump {c['max_frame_jump_deg']:5.1f} deg{extra}"
-            )
-        for r in result["continuity"]:
-            if not r["pass"]:
-                print(
-                    f"FAIL {r['graph']}:{r['posture']} continuity {r['continuity_deg']:.3f} deg "
-                    f"root {r['continuity_root_cm']:.2f} cm ({', '.join(r['worst_pair'])})"
-                )
-        print(
-            f"{summary['clips']} clips, {summary['clips_failing']} failing; "
-            f"{summary['postures_checked']} posture nodes checked"
-        )
-        for key, row in summary["thresholds"].items():
-            print(
-                f"  {'pass' if row['pass'] else 'FAIL'}  {key}: worst {row['worst']} (limit {row['limit']})"
-                f"{' at ' + str(row['where']) if row['where'] else ''}"
-            )
+        print_check_table(result)
     return 0 if summary["pass"] else 1
+
+
+CHECK_COLUMNS = (  # (metric, header, width, format)
+    ("foot_skate_cm", "skate", 6, ".1f"),
+    ("contact_slide_cm", "slide", 6, ".1f"),
+    ("ground_penetration_cm", "ground", 6, ".1f"),
+    ("rifle_penetration_cm", "r.gnd", 6, ".1f"),
+    ("rifle_in_body_cm", "r.body", 6, ".1f"),
+    ("palm_rifle_cm", "palms", 6, ".2f"),
+    ("end_speed_m_s", "v.end", 6, ".2f"),
+    ("max_frame_jump_deg", "jump", 6, ".1f"),
+)
+
+
+def _cell(value: object, width: int, fmt: str) -> str:
+    return f"{'-':>{width}}" if value is None else f"{value:>{width}{fmt}}"
+
+
+def print_check_table(result: dict) -> None:
+    """The check as a table: one line per clip (cm, m/s, degrees), the failing values named with their
+    limits, the failing posture nodes, then the summary per threshold."""
+    from server.authoring.quality import GAIT_LIMITS, THRESHOLDS, where_detail
+
+    summary = result["summary"]
+    head = " ".join(f"{h:>{w}}" for _, h, w, _ in CHECK_COLUMNS)
+    print(f"     {'clip':<28} {head}")
+    for c in result["clips"]:
+        cells = " ".join(_cell(c.get(k), w, f) for k, _, w, f in CHECK_COLUMNS)
+        print(f"{'ok  ' if c['pass'] else 'FAIL'} {c['name']:<28} {cells}")
+        for k in c["failures"]:
+            limit = GAIT_LIMITS[c["gait"]][k] if k.startswith("gait_") else THRESHOLDS.get(k)
+            where = where_detail(c, k)
+            print(f"       {k} = {c.get(k)} (limit {limit}){' at ' + where if where else ''}")
+    for r in result["continuity"]:
+        if not r["pass"]:
+            for k in r["failures"]:
+                where = r.get("rest_contact_where") if k == "rest_contact_cm" else r.get("rest_foot_where")
+                if k.startswith("continuity"):
+                    where = ", ".join(r["worst_pair"])
+                print(f"FAIL {r['graph']}:{r['posture']} {k} = {r[k]} (limit {THRESHOLDS[k]}) at {where}")
+    print(
+        f"{summary['clips']} clips, {summary['clips_failing']} failing; "
+        f"{summary['postures_checked']} posture nodes checked, {summary.get('postures_failing', 0)} failing"
+    )
+    for key, row in summary["thresholds"].items():
+        failing = f", {row['failing']} failing" if row["failing"] else ""
+        print(
+            f"  {'pass' if row['pass'] else 'FAIL'}  {key}: worst {row['worst']} (limit {row['limit']})"
+            f"{' at ' + str(row['where']) if row['where'] else ''}{failing}"
+        )
 
 
 def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
@@ -166,6 +207,17 @@ def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="posture graph files (default: every posture_graphs/*.graph)",
     )
+    p.add_argument(
+        "--clips", metavar="PATTERN", default=None, help="only clips whose name matches (shell pattern)"
+    )
+    p.add_argument(
+        "--view",
+        choices=("quarter", "side", "front", "both"),
+        default="quarter",
+        help="camera: three-quarter from the front left (default; sliding against the checkerboard), from "
+        "his left side or from the front at ground level (daylight under a hovering body), or both side and "
+        "front (one row each)",
+    )
     p.add_argument("--frames", type=int, default=6, help="frames per clip (default 6)")
     p.add_argument("--tile", type=int, default=200, help="tile size in pixels (default 200)")
     p.add_argument("--json", action="store_true", help="machine-readable summary")
@@ -184,9 +236,10 @@ def run_contact_sheet(args: argparse.Namespace) -> int:
         print("ttes author contact-sheet: --frames must be >= 1 and --tile >= 32", file=sys.stderr)
         return 2
     try:
-        postures, clips, types = library_sheet_inputs(graphs, f"{args.figure}.fig")
+        postures, clips, types = library_sheet_inputs(graphs, f"{args.figure}.fig", args.clips)
         if not clips:
-            print(f"ttes author contact-sheet: no clips drive {args.figure}.fig", file=sys.stderr)
+            which = f" match {args.clips!r} and" if args.clips else ""
+            print(f"ttes author contact-sheet: no clips{which} drive {args.figure}.fig", file=sys.stderr)
             return 2
         info = render_contact_sheet(
             [FIGURES / t for t in types],
@@ -196,6 +249,7 @@ def run_contact_sheet(args: argparse.Namespace) -> int:
             frames_per_clip=args.frames,
             tile=args.tile,
             title=f"{args.figure}.fig motion library",
+            views=("side", "front") if args.view == "both" else (args.view,),
         )
     except (ContactSheetError, ChannelsetError, PostureGraphError, PeabodyError) as exc:
         print(f"ttes author contact-sheet: {exc}", file=sys.stderr)

@@ -44,8 +44,17 @@ def run(args: argparse.Namespace) -> int:
 
     video = args.out_dir / "demo.mp4"
     print(f"Starting the server and rendering {args.seconds:g} s of the stub to {video} ...", file=sys.stderr)
-    stub_args = ["stub", "--headless", "--spawn-server", "--seconds", str(args.seconds), "--fps", "10",
-                 "--out", str(video)]
+    stub_args = [
+        "stub",
+        "--headless",
+        "--spawn-server",
+        "--seconds",
+        str(args.seconds),
+        "--fps",
+        "10",
+        "--out",
+        str(video),
+    ]
     if args.json:
         stub_args.append("--json")
     rc = ttes_main(stub_args)
