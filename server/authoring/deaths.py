@@ -37,6 +37,7 @@ DEAD = "DEAD"
 REST_SPEED = 0.03  # m/s: a body's centre of mass slower than this is still
 REST_SECONDS = 0.35  # every body still this long: the death is over
 MAX_SECONDS = 6.0
+TOSS, TOSS_SECONDS = 40.0, 0.1  # N, s: the hands fling the rifle they let go of (clear of the falling body)
 GROUND_RISE = 0.4  # s: a ground lowered under a posture dipping into it rises to 0
 GET_UP_SECONDS = 10.0  # DEAD@x -> its start posture: the death played backwards (seed 002 Figure 7: 10 s)
 
@@ -61,8 +62,8 @@ class DeathSpec:
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0)),
     DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0)),
-    DeathSpec("kstow2dead", "KNEEL_STOWED", 150.0, (1.0, -0.3, -0.5), "upper", release=0.3),
-    DeathSpec("kfire2dead", "KNEEL_FIRE", 150.0, (1.0, -0.3, -0.5), "upper", release=0.3),
+    DeathSpec("kstow2dead", "KNEEL_STOWED", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15),
+    DeathSpec("kfire2dead", "KNEEL_FIRE", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15),
     DeathSpec(
         "prstow2dead", "PRONE_STOWED", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
     ),
@@ -107,10 +108,10 @@ GAINS: dict[str, float] = {
     "waist": 900.0,
     "neck": 120.0,
     "head": 60.0,
-    "clavicle": 200.0,
-    "shoulder": 150.0,
-    "elbow": 80.0,
-    "wrist": 20.0,
+    "clavicle": 400.0,
+    "shoulder": 400.0,
+    "elbow": 250.0,
+    "wrist": 100.0,
 }
 SPINE_GAIN = 1500.0  # vertebrae: stiff throughout (a dead back bends, mostly at the hips and waist)
 SPINE_TONE = 0.25  # the fraction of the vertebrae's gain kept when dead
@@ -192,6 +193,11 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     d_fig /= np.linalg.norm(d_fig)
     d_mj = np.array([d_fig[0], -d_fig[2], d_fig[1]])  # figure (x, y, z) -> MuJoCo (x, -z, y)
     torso = model.body("upper_torso").id
+    gun = model.body("rifle").id
+    away = -right - 0.3 * d_fig  # the let-go rifle is tossed to the soldier's left, away from his fall
+    away[1] = 0.0
+    away /= np.linalg.norm(away) or 1.0
+    toss_mj = TOSS * np.array([away[0], -away[2], away[1]])
 
     def set_muscles(t: float) -> None:
         if t < spec.slump_time:  # holding -> slumping
@@ -225,6 +231,8 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             ts = data.time
             set_muscles(ts)
             data.xfrc_applied[torso, :3] = spec.force * hit(ts) * d_mj
+            tossing = release_frame is not None and ts < spec.release + TOSS_SECONDS
+            data.xfrc_applied[gun, :3] = toss_mj if tossing else 0.0
             doll.set_ground(ground0 * (1.0 - _smoothstep(ts / GROUND_RISE)))
             if release_frame is None and ts >= spec.release:
                 doll.release()

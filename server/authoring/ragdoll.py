@@ -60,6 +60,7 @@ CONTACT_SOLIMP = "0.95 0.99 0.001"
 LIMIT_SOLREF = "0.002 1"  # stiff joint limits (MuJoCo's are soft constraints)
 NOSLIP_ITERATIONS = 8  # MuJoCo's no-slip pass: soft friction would let a resting part creep
 PALMS = ("right_palm", "left_palm")
+WELD_SOLREF = 0.002  # s: the hands' grip on the rifle, as stiff as the step allows
 PARKED = -100.0  # m: where the rifle's ground plane waits while the rifle is held
 
 
@@ -287,7 +288,7 @@ class Ragdoll:
             eq.data[6:10] = quat
             eq.data[10] = 1.0
             d.eq_active[eq.id] = 1
-        eq_solref = np.array([0.01, 1.0])
+        eq_solref = np.array([WELD_SOLREF, 1.0])
         m.eq_solref[:] = eq_solref
 
     def release(self) -> None:
