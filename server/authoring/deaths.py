@@ -23,7 +23,7 @@ bytes on the same machine.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -159,6 +159,22 @@ def slump_pose(kin, spec: DeathSpec, keys: Mapping[str, KeyPosture]) -> np.ndarr
     return start
 
 
+def _carried_dofs(doll, key: KeyPosture) -> np.ndarray:
+    """``qvel`` addresses of the hinges whose limb (the child segment and everything beyond it) has no
+    segment within 1 cm of the ground in the posture ``key``: the ones muscles hold up against gravity."""
+    from server.authoring.postures import segment_heights
+
+    m = doll.model
+    heights = segment_heights(doll.kin, key.poses[SOLDIER], key.locations[SOLDIER])
+    grounded = {m.body(name).id for name, h in heights.items() if float(h) < 1.0}
+    beyond: dict[int, set[int]] = {b: {b} for b in range(m.nbody)}
+    for b in range(m.nbody - 1, 0, -1):  # children come after their parents
+        beyond[int(m.body_parentid[b])] |= beyond[b]
+    return np.array(
+        [int(d) for d in doll.map.qvel if not beyond[int(m.dof_bodyid[d])] & grounded], dtype=np.intp
+    )
+
+
 def _smoothstep(u: float) -> float:
     u = min(1.0, max(0.0, u))
     return u * u * (3.0 - 2.0 * u)
@@ -212,6 +228,15 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         model.qpos_spring[jm.qpos] = ref
         model.dof_damping[jm.qvel] = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
 
+    # the living soldier's muscles carry his limbs and the rifle: gravity fed forward on every joint whose
+    # limb does not rest on the ground (and an upward pull on the held rifle), fading as he slumps, so the
+    # first frames start from rest instead of sagging into the joint springs
+    carried = _carried_dofs(doll, first)
+    rifle_weight = model.body_mass[gun] * -model.opt.gravity
+
+    def carry(t: float) -> float:
+        return 1.0 - _smoothstep(t / spec.slump_time)
+
     def hit(t: float) -> float:
         if t < spec.ramp:
             return _smoothstep(t / spec.ramp)
@@ -230,9 +255,12 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         for _ in range(steps):
             ts = data.time
             set_muscles(ts)
+            c = carry(ts)
+            data.qfrc_applied[carried] = c * data.qfrc_bias[carried]
+            held = release_frame is None
             data.xfrc_applied[torso, :3] = spec.force * hit(ts) * d_mj
             tossing = release_frame is not None and ts < spec.release + TOSS_SECONDS
-            data.xfrc_applied[gun, :3] = toss_mj if tossing else 0.0
+            data.xfrc_applied[gun, :3] = toss_mj if tossing else (c * rifle_weight if held else 0.0)
             doll.set_ground(ground0 * (1.0 - _smoothstep(ts / GROUND_RISE)))
             if release_frame is None and ts >= spec.release:
                 doll.release()
@@ -252,8 +280,3 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             break
     frames = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
     return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))
-
-
-def death_clips() -> dict[str, Callable]:
-    """``{clip name: make(ctx) -> (frames,)}`` for build.py's clip jobs."""
-    return {d.name: (lambda ctx, d=d: simulate(d, ctx.keys, (ctx.soldier, ctx.rifle))) for d in DEATHS}
