@@ -117,6 +117,7 @@ SPINE_GAIN = 1500.0  # vertebrae: stiff throughout (a dead back bends, mostly at
 SPINE_TONE = 0.25  # the fraction of the vertebrae's gain kept when dead
 LOOSE = ("clavicle", "shoulder", "elbow", "wrist", "neck", "head")  # no tone left: gravity lays them down
 TONE = 0.10  # the fraction of the muscles' gain kept when dead (toward the DEAD key's shape)
+KNEES_GIVE_WAY = 0.15  # s: after the slump the knees go limp this fast
 DAMPING = 0.1  # joint damping = DAMPING * gain (s), at least MIN_DAMPING
 MIN_DAMPING = 4.0
 
@@ -196,6 +197,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     lo, hi = doll.kin.lower[jm.dof], doll.kin.upper[jm.dof]
     dead_ref = np.clip(limp_pose(doll.kin, dead.poses[SOLDIER])[jm.dof], lo, hi)
     slump_ref = np.clip(slump_pose(doll.kin, spec, keys)[jm.dof], lo, hi)
+    knees = np.array([n.endswith("knee") for n in names])
     tone = np.where(spine, SPINE_TONE, np.where([n.endswith(LOOSE) for n in names], 0.0, TONE))
 
     # the hit's direction in the world (MuJoCo frame): the pelvis' heading, horizontal
@@ -220,10 +222,11 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             u = _smoothstep(t / spec.slump_time)
             ref = hold_ref + u * (slump_ref - hold_ref)
             g = 1.0 + u * (spec.slump_gain - 1.0)
-        else:  # slumped -> limp
+        else:  # slumped -> limp; the knees give way at once (held, they swing the shins up as he pitches)
             u = _smoothstep((t - spec.slump_time) / (spec.fade - spec.slump_time))
+            uk = _smoothstep((t - spec.slump_time) / KNEES_GIVE_WAY)
             ref = slump_ref + u * (dead_ref - slump_ref)
-            g = spec.slump_gain + u * (tone - spec.slump_gain)
+            g = spec.slump_gain + np.where(knees, uk, u) * (tone - spec.slump_gain)
         model.jnt_stiffness[jm.jnt] = gain * g
         model.qpos_spring[jm.qpos] = ref
         model.dof_damping[jm.qvel] = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
