@@ -22,6 +22,7 @@ from ttes.cli import main
 from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
 
 GRAPHS = [g for fs in B.GRAPH_FILES.values() for g in fs.values()]
+CLIP_NAMES = {j.name for j in B.clip_jobs()}
 
 
 def test_stride_length_and_ground_speed_round_trip(tmp_path: Path):
@@ -48,12 +49,18 @@ def test_graphs_load_and_every_arc_has_its_channelset(name: str):
     loaded = load_posture_graph(POSTURE_GRAPHS / name)
     graph = loaded.graph
     assert len(loaded.channelsets) == len(graph.files)
-    want = (
-        "DI.fig" if "low" in name or name in ("soldier_loco.graph", "soldier_crawl.graph") else "soldier.fig"
-    )
-    for cs in loaded.channelsets:
+    figure_set = next(fs for fs, files in B.GRAPH_FILES.items() if name in files.values())
+    want = {
+        "soldier": {"soldier.fig", "AK_47.fig"},
+        "DI": {"DI.fig", "AK_47.fig"},
+        "M16": {"DI.fig", "M16.fig"},
+    }
+    suffix = B.SUFFIXES[figure_set]
+    for cs, fname in zip(loaded.channelsets, graph.files, strict=True):
         types = {c.protofiletype for c in cs.figure_channels()}
-        assert types == {want, "AK_47.fig"}, cs.name
+        assert types == want[figure_set], cs.name
+        stem = Path(fname).name.removesuffix(".chset.env")  # a clip of this figure set only
+        assert stem.endswith(suffix) and stem[: len(stem) - len(suffix)] in CLIP_NAMES, fname
         assert cs.fps == 60
     for arc in graph.arcs:
         assert 0 <= arc.channelset < len(graph.files)
@@ -142,7 +149,7 @@ def test_build_rejects_unknown_clips_and_figure_sets(tmp_path: Path, capsys):
     assert main(["author", "build", "--only", "no_such_clip", "--out", str(tmp_path), "--no-progress"]) == 2
     assert "no clip matches" in capsys.readouterr().err
     with pytest.raises(ValueError):
-        B.build(tmp_path, FIGURES, figure="M16")
+        B.build(tmp_path, FIGURES, figure="G3")
 
 
 def test_di_only_build_reslaves_committed_clips(tmp_path: Path):
@@ -153,3 +160,57 @@ def test_di_only_build_reslaves_committed_clips(tmp_path: Path):
     assert (tmp_path / "channelsets" / "ststow2stfire_low.chset.env").read_bytes() == (
         CHANNELSETS / "ststow2stfire_low.chset.env"
     ).read_bytes()
+
+
+def test_m16_library_holds_the_m16_by_its_own_grip_and_handguard():
+    """An ``_m16_low`` clip binds to DI.fig + M16.fig; the palms are on the M16's grip and handguard, its
+    butt where the AK's is in the master clip, its barrel along the AK's line, and it is out of the ground."""
+    from server.authoring.quality import FigureSet, check_clip, play
+    from server.authoring.rifle_swap import lowest_point
+    from server.motion.binding import bind_channelset
+    from server.motion.cache import load_channelset
+
+    figs = FigureSet.from_dir(FIGURES, ["DI.fig", "M16.fig", "AK_47.fig", "soldier.fig"])
+    for name in ("kstow2kfire", "prstow2prfire", "walk_cycle_l"):
+        cs = load_channelset(CHANNELSETS / f"{name}_m16_low.chset.env")
+        bound = bind_channelset(cs, [figs.figures["DI.fig"], figs.figures["M16.fig"]])
+        assert {bf.protofiletype for bf in bound.figures} == {"DI.fig", "M16.fig"}
+        assert {c.protofiletype for c in cs.channels} == {"DI.fig", "M16.fig"}  # no AK-47 left in it
+        row = check_clip(cs, figs)
+        assert (
+            row["rifle"] == "M16.fig"
+            and row["right_palm_rifle_cm"] <= 1.0
+            and row["left_palm_rifle_cm"] <= 1.0
+        )
+        assert row["rifle_penetration_cm"] <= 1.0 and row["rifle_in_body_cm"] <= 1.0
+        m16 = play(cs, figs).locations["M16.fig"]
+        assert lowest_point(figs, "M16.fig", m16).min() >= -1.0
+        ak = play(load_channelset(CHANNELSETS / f"{name}.chset.env"), figs).locations["AK_47.fig"]
+        sites = {t: figs.kin[t].site_globals(np.zeros(0)) for t in ("AK_47.fig", "M16.fig")}
+        butt = {t: sites[t][figs.kin[t].site_names.index("rifle.butt")] for t in sites}
+        if name == "kstow2kfire":  # nothing near the ground: the M16 is the AK's placement, butt on butt
+            np.testing.assert_allclose(
+                (m16 @ butt["M16.fig"])[:, :3, 3], (ak @ butt["AK_47.fig"])[:, :3, 3], atol=1e-3
+            )
+            np.testing.assert_allclose(m16[:, :3, :3], ak[:, :3, :3], atol=1e-5)
+            fire = m16[-1, :3, :3] @ np.array([0.0, 0.0, -1.0])  # KNEEL_FIRE aims along -Z as the AK does
+            np.testing.assert_allclose(fire, ak[-1, :3, :3] @ np.array([0.0, 0.0, -1.0]), atol=1e-5)
+
+
+def test_m16_graphs_list_only_m16_clips_and_a_build_reproduces_them(tmp_path: Path):
+    for kind, fname in B.GRAPH_FILES["M16"].items():
+        graph = load_posture_graph(POSTURE_GRAPHS / fname).graph
+        assert graph.files and all(f.endswith("_m16_low.chset.env") for f in graph.files), fname
+        # the AK graph's clips in the same order, and the same arcs: a clip id means the same clip in both
+        ak = load_posture_graph(POSTURE_GRAPHS / B.GRAPH_FILES["DI"][kind]).graph
+        assert [f.replace("_m16_low.", "_low.") for f in graph.files] == ak.files
+        assert graph.arcs == ak.arcs and graph.postures == ak.postures
+    (tmp_path / "channelsets").mkdir()
+    shutil.copy(CHANNELSETS / "ststow2stfire.chset.env", tmp_path / "channelsets")
+    written = B.build(tmp_path, FIGURES, only="ststow2stfire", figure="M16", progress=False)
+    assert {p.name for p in written if p.parent.name == "channelsets"} == {"ststow2stfire_m16_low.chset.env"}
+    assert (tmp_path / "channelsets" / "ststow2stfire_m16_low.chset.env").read_bytes() == (
+        CHANNELSETS / "ststow2stfire_m16_low.chset.env"
+    ).read_bytes()
+    for fname in B.GRAPH_FILES["M16"].values():
+        assert (tmp_path / "posture_graphs" / fname).read_bytes() == (POSTURE_GRAPHS / fname).read_bytes()

@@ -115,3 +115,25 @@ def test_placement_is_jack_xyz_then_translation():
     m = P.Placement((1.0, 2.0, 3.0), (0.0, 90.0, 0.0)).matrix()
     np.testing.assert_allclose(m[:3, 3], [1.0, 2.0, 3.0])
     np.testing.assert_allclose(m[:3, :3] @ [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_kneeling_kneecap_rests_and_the_rifle_clears_the_body(solved):
+    """The kneeling knee carries weight (its kneecap mesh is the body's lowest point, within a centimetre)
+    and the rifle at the ready or aimed stays out of the raised left thigh and every other segment."""
+    pytest.importorskip("scipy")
+    from server.authoring.quality_frames import FigureSet
+
+    kin, rkin, keys = solved
+    figs = FigureSet({"soldier.fig": kin.figure, "AK_47.fig": rkin.figure})
+    nodes, segs = figs.nodes("soldier.fig")
+    kneecap = figs.node_parts("soldier.fig") == "right_kneecap"
+    rnodes, rsegs = figs.nodes("AK_47.fig")
+    for name in ("KNEEL_STOWED", "KNEEL_FIRE"):
+        key = keys[name]
+        g = kin.segment_globals(key.poses[P.SOLDIER][None], key.locations[P.SOLDIER][None])
+        y = np.einsum("kj,kj->k", g[0, segs, 1, :], nodes)
+        assert y[kneecap].min() - y.min() < 1.0, name
+        rg = rkin.segment_globals(np.zeros((1, 0)), key.locations[P.RIFLE][None])
+        rpts = np.einsum("fkij,kj->fki", rg[:, rsegs, :3, :], rnodes)
+        depth, _, _ = figs.hulls("soldier.fig").depth(rpts, g)
+        assert depth == 0.0, name

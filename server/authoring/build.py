@@ -4,15 +4,19 @@
 2. Record every clip on soldier.fig at 60 fps — the 17 static transitions
    (:mod:`~server.authoring.transitions`), walking / backward walking / running
    (:mod:`~server.authoring.gait`)
-   and crawling (:mod:`~server.authoring.crawl`) — into ``channelsets/NAME.chset.env``.
-3. Slave a ``DI.fig`` to a soldier.fig master (:mod:`~server.authoring.slaving`) and re-record each clip into
-   ``channelsets/NAME_low.chset.env``.
+   and crawling (:mod:`~server.authoring.crawl`), turns in place and side-steps
+   (:mod:`~server.authoring.turns`) — into ``channelsets/NAME.chset.env``.
+3. Slave a ``DI.fig`` to a soldier.fig master (:mod:`~server.authoring.slaving`), put it on its kneeling
+   knees where the master kneels (:mod:`~server.authoring.slave_contacts`) and re-record each clip into
+   ``channelsets/NAME_low.chset.env``; slave it again with ``M16.fig`` in the hands instead of the AK
+   (:mod:`~server.authoring.rifle_swap`, the M16 library) into ``channelsets/NAME_m16_low.chset.env``.
 4. Write the posture graph files of both figure types and the TTES start-up script and environment into
    ``posture_graphs/``.
 
 Everything is deterministic (no randomness, fixed iteration counts), so a rebuild gives the same bytes.
 ``only`` (a shell pattern on clip names) limits steps 2-3; ``figure`` picks the figure sets written
-(``"DI"`` re-slaves the committed soldier.fig channelsets without recording them again).
+(``"DI"`` / ``"M16"`` re-slave the committed soldier.fig channelsets for DI.fig with the AK / the M16
+without recording them again).
 """
 
 from __future__ import annotations
@@ -24,10 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from server.authoring import crawl, deaths, gait, postures, transitions
+from server.authoring import crawl, deaths, gait, postures, transitions, turns
 from server.authoring.motion import KeyPosture
+from server.authoring.quality_frames import FigureSet
+from server.authoring.slave_contacts import rest_slave_knees
 from server.authoring.slaving import MasterSlavePair
 from server.authoring.transitions import ClipFrames, clip_to_channelset
+from server.motion.binding import protofiletype
 from server.motion.cache import load_channelset
 from server.motion.channelset import Channelset
 from server.motion.channelset_file import format_channelset, parse_channelsets, save_channelset
@@ -36,7 +43,9 @@ from server.peabody.fk import FigureKinematics
 from server.peabody.loader import read_figure
 from server.peabody.model import Figure
 
-FIGURE_SETS = ("soldier", "DI", "all")
+FIGURE_SETS = ("soldier", "DI", "M16", "all")
+SUFFIXES = {"soldier": "", "DI": "_low", "M16": "_m16_low"}  # channelset file name suffix per figure set
+HOLDS = {"soldier": "soldier.fig + AK_47.fig", "DI": "DI.fig + AK_47.fig", "M16": "DI.fig + M16.fig"}
 SLAVE_PARAMETERS = ("yes", "yes", "yes", "yes", 0.50, "yes", 0.50, "yes", "yes")  # seed 002, 3.4.4
 SOLDIERS = 10  # soldier/rifle pairs in the start-up environment (seed 002, 3.6)
 
@@ -48,7 +57,9 @@ class BuildContext:
     soldier: Figure
     rifle: Figure
     di: Figure
+    m16: Figure
     _keys: dict[str, KeyPosture] = field(default_factory=dict)
+    _figure_set: FigureSet | None = None
 
     @classmethod
     def load(cls, figures_dir: Path) -> BuildContext:
@@ -56,7 +67,16 @@ class BuildContext:
             read_figure(figures_dir / "soldier.fig"),
             read_figure(figures_dir / "AK_47.fig"),
             read_figure(figures_dir / "DI.fig"),
+            read_figure(figures_dir / "M16.fig"),
         )
+
+    @property
+    def figure_set(self) -> FigureSet:
+        """Every figure of the build by file type, with cached kinematics (for playing clips back)."""
+        if self._figure_set is None:
+            figs = (self.soldier, self.di, self.rifle, self.m16)
+            self._figure_set = FigureSet({protofiletype(f): f for f in figs})
+        return self._figure_set
 
     @property
     def keys(self) -> dict[str, KeyPosture]:
@@ -67,11 +87,13 @@ class BuildContext:
 
 @dataclass(frozen=True)
 class Clip:
-    """A recorded clip: its frames and, for locomotion, stride length (cm) and ground speed (cm/s)."""
+    """A recorded clip: its frames and, for locomotion, stride length (cm) and ground speed (cm/s); for a
+    clip that moves the soldier (turns, side-steps) its ``end_offset`` (x cm, z cm, yaw deg)."""
 
     frames: ClipFrames
     stride_length: float | None = None
     ground_speed: float | None = None
+    end_offset: tuple[float, float, float] | None = None
     release_frame: int | None = None  # deaths: the frame the hands let go of the rifle
 
 
@@ -80,7 +102,7 @@ class ClipJob:
     """One channelset of the library: file stem, the graph that lists it, and how to record it."""
 
     name: str
-    graph: str  # "static", "loco" or "crawl"
+    graph: str  # "static", "loco", "crawl" or "turn"
     make: Callable[[BuildContext], Clip]
 
 
@@ -101,7 +123,13 @@ def clip_jobs() -> list[ClipJob]:
         jobs.append(ClipJob(name, "loco", lambda ctx, make=make: Clip(*make(ctx))))
     for name, make in crawl.crawl_clips().items():
         jobs.append(ClipJob(name, "crawl", lambda ctx, make=make: Clip(*make(ctx))))
+    for name, make in turns.turn_clips().items():
+        jobs.append(ClipJob(name, "turn", lambda ctx, make=make: _moved(*make(ctx))))
     return jobs
+
+
+def _moved(frames: ClipFrames, end_offset: tuple[float, float, float]) -> Clip:
+    return Clip(frames, end_offset=end_offset)
 
 
 def _death(spec: deaths.DeathSpec, ctx: BuildContext) -> Clip:
@@ -119,6 +147,8 @@ def record(job: ClipJob, ctx: BuildContext) -> Channelset:
             stride_length=None if clip.stride_length is None else round(clip.stride_length, 2),
             ground_speed=None if clip.ground_speed is None else round(clip.ground_speed, 2),
         )
+    if clip.end_offset is not None:
+        chset = replace(chset, end_offset=tuple(round(v, 4) for v in clip.end_offset))
     if clip.release_frame is not None:
         chset = replace(chset, release_frame=clip.release_frame)
     return chset
@@ -144,6 +174,22 @@ def lift_off_ground(chset: Channelset, body: Figure) -> None:
         lifted = np.where(held[:, None], lift[:, None], 0.0)
         lifted[:, chan.column] = lift
         chset.fig_pos[:, :, 1] += lifted.astype(np.float32)
+
+
+def slave_one(
+    chset: Channelset, pair: MasterSlavePair, ctx: BuildContext, figure: str, name: str
+) -> Channelset:
+    """One soldier.fig channelset re-recorded for DI.fig holding the AK (``figure="DI"``) or the M16."""
+    from server.authoring.rifle_swap import reslave_holding
+    from server.authoring.slaving import reslave_channelset
+
+    if figure == "M16":
+        out = reslave_holding(chset, pair, ctx.m16, name)
+    else:
+        out = reslave_channelset(chset, pair, name)
+    rest_slave_knees(chset, out, ctx.figure_set)  # DI's kneecaps sit higher than the master's
+    lift_off_ground(out, ctx.di)
+    return out
 
 
 def slave_pair(ctx: BuildContext) -> MasterSlavePair:
@@ -202,26 +248,38 @@ def crawl_graph(suffix: str) -> PostureGraph:
     return _container_graph(crawl.CRAWL_NODES, crawl.crawl_arcs(), suffix)
 
 
+def turn_graph(suffix: str) -> PostureGraph:
+    return _container_graph(turns.TURN_NODES, turns.turn_arcs(), suffix)
+
+
 GRAPH_FILES: dict[str, dict[str, str]] = {
-    "DI": {"static": "soldier_low.graph", "loco": "soldier_loco.graph", "crawl": "soldier_crawl.graph"},
+    "DI": {
+        "static": "soldier_low.graph",
+        "loco": "soldier_loco.graph",
+        "crawl": "soldier_crawl.graph",
+        "turn": "soldier_turn.graph",
+    },
     "soldier": {
         "static": "soldier_hi.graph",
         "loco": "soldier_loco_hi.graph",
         "crawl": "soldier_crawl_hi.graph",
+        "turn": "soldier_turn_hi.graph",
     },
 }
+# the M16 library's graphs: the DI.fig ones with "_m16" before ".graph" (soldier_low_m16.graph, ...)
+GRAPH_FILES["M16"] = {kind: name.replace(".graph", "_m16.graph") for kind, name in GRAPH_FILES["DI"].items()}
 _GRAPH_HEADERS = {
     "static": "static posture transitions (seed 002, Figures 3 and 7)",
     "loco": "walking, backward walking and running (seed 002, 3.3 and Figure 5): a container of channelsets",
     "crawl": "crawling (seed 002, 3.3): a container of channelsets; crawl_start backwards ends a crawl",
+    "turn": "turns in place and side-steps: a container of channelsets, each moving the soldier (end_offset)",
 }
 
 
 def graph_text(kind: str, figure_set: str) -> str:
-    suffix = "_low" if figure_set == "DI" else ""
-    graph = {"static": static_graph, "loco": loco_graph, "crawl": crawl_graph}[kind](suffix)
-    fig = "DI.fig + AK_47.fig" if figure_set == "DI" else "soldier.fig + AK_47.fig"
-    head = f"// {_GRAPH_HEADERS[kind]}; {fig}. Generated by `ttes author build`.\n"
+    make = {"static": static_graph, "loco": loco_graph, "crawl": crawl_graph, "turn": turn_graph}[kind]
+    graph = make(SUFFIXES[figure_set])
+    head = f"// {_GRAPH_HEADERS[kind]}; {HOLDS[figure_set]}. Generated by `ttes author build`.\n"
     return head + format_posture_graph(graph)
 
 
@@ -265,7 +323,7 @@ def write_graphs(root: Path, figure: str = "all") -> list[Path]:
     out_dir = root / "posture_graphs"
     out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
-    sets = ("soldier", "DI") if figure == "all" else (figure,)
+    sets = ("soldier", "DI", "M16") if figure == "all" else (figure,)
     for fs in sets:
         for kind, fname in GRAPH_FILES[fs].items():
             p = out_dir / fname
@@ -297,6 +355,8 @@ def _graph_endpoints(kind: str) -> dict[str, list[tuple[str, int]]]:
         arcs = [(t.start, _end_node(t), t.name, True) for t in transitions.TRANSITIONS]
     elif kind == "loco":
         arcs = gait.loco_arcs()
+    elif kind == "turn":
+        arcs = turns.turn_arcs()
     else:
         arcs = crawl.crawl_arcs()
     out: dict[str, list[tuple[str, int]]] = {}
@@ -312,7 +372,7 @@ def snap_endpoints(chsets: dict[str, Channelset]) -> None:
     Recorded soldier clips already meet exactly; re-slaved DI clips can differ by the slave solver's
     tolerance, so the first clip's pose at each node is copied to the others' endpoints."""
     nodes: dict[str, list[tuple[str, int]]] = {}
-    for kind in ("static", "loco", "crawl"):  # a node of several graphs (STAND_STOWED, CRAWL) is one pose
+    for kind in GRAPH_FILES["DI"]:  # a node of several graphs (STAND_STOWED, CRAWL) is one pose
         for node, ends in _graph_endpoints(kind).items():
             nodes.setdefault(node, []).extend(ends)
     for ends in nodes.values():
@@ -341,32 +401,32 @@ def build(
     chdir = root / "channelsets"
     chdir.mkdir(parents=True, exist_ok=True)
     hi: dict[str, Channelset] = {}
-    low: dict[str, Channelset] = {}
-    pair = slave_pair(ctx) if figure in ("DI", "all") else None
+    slaved: dict[str, dict[str, Channelset]] = {fs: {} for fs in ("DI", "M16") if figure in (fs, "all")}
+    pair = slave_pair(ctx) if slaved else None
     bar = _progress(jobs, progress)
     for job in bar:
         if hasattr(bar, "set_postfix_str"):
             bar.set_postfix_str(job.name)
-        if figure == "DI":
+        if figure in slaved and figure != "all":
             hi[job.name] = load_channelset(chdir / f"{job.name}.chset.env", use_cache=False)
         else:  # slave what the file will hold, so a DI-only rebuild from the files gives the same bytes
             hi[job.name] = parse_channelsets(
                 format_channelset(record(job, ctx)), str(chdir / f"{job.name}.chset.env")
             )[0]
         if pair is not None:
-            from server.authoring.slaving import reslave_channelset
-
-            low[job.name] = reslave_channelset(hi[job.name], pair, f"{job.name}_low.chset")
-            lift_off_ground(low[job.name], ctx.di)
-    snap_endpoints(low)
+            for fs, out in slaved.items():
+                out[job.name] = slave_one(hi[job.name], pair, ctx, fs, f"{job.name}{SUFFIXES[fs]}.chset")
+    for out in slaved.values():
+        snap_endpoints(out)
     written: list[Path] = []
     for name in (j.name for j in jobs):
-        if figure != "DI":
+        if figure in ("soldier", "all"):
             save_channelset(hi[name], chdir / f"{name}.chset.env")
             written.append(chdir / f"{name}.chset.env")
-        if name in low:
-            save_channelset(low[name], chdir / f"{name}_low.chset.env")
-            written.append(chdir / f"{name}_low.chset.env")
+        for fs, out in slaved.items():
+            path = chdir / f"{name}{SUFFIXES[fs]}.chset.env"
+            save_channelset(out[name], path)
+            written.append(path)
     written += write_graphs(root, figure)
     return written
 

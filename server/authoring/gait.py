@@ -100,6 +100,11 @@ class Gait:
     turn: float = 5.0  # pelvis turn amplitude
     lean: float = 3.0  # pelvis pitch forwards
     lift: float = 9.0  # swing clearance
+    # a swinging foot goes up before it goes along and comes down after it: over these first and last
+    # fractions of a swing it moves (nearly) only vertically, so a sole or toe tip still within a centimetre
+    # of the ground does not skim along it
+    swing_rise: float = 0.06
+    swing_drop: float = 0.06
     strike: float = 15.0  # foot pitch at landing (+: toes up, rocking about the heel; -: toes first)
     flat: float = 0.18  # fraction of a step to rock flat after landing
     heel_off: float = 0.62  # the heel rises at this fraction of the step the foot supports
@@ -151,6 +156,8 @@ RUN = Gait(
     heel_off=0.28,
     toe_off=0.55,
     toe_off_pitch=25.0,
+    swing_rise=0.0,
+    swing_drop=0.0,
     low_at=0.3,
     start_time=0.7,
     end_time=0.9,
@@ -182,6 +189,9 @@ class Footfall:
     # (from, join): the heel starts rising early at ``from``, meeting the regular rise at ``join`` (the pelvis
     # of a start step pulls away from the standing foot sooner than in the cycle it joins)
     early: tuple[float, float] | None = None
+    # fractions of the swing that leaves this footfall at its start / end where the foot only goes up / down
+    rise: float = 0.0
+    drop: float = 0.0
 
 
 def _smooth(s: np.ndarray) -> np.ndarray:
@@ -203,13 +213,19 @@ def _frame(pos: np.ndarray, yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
 
 
 def foot_track(
-    ball: np.ndarray, falls: list[Footfall], t: np.ndarray, lift: float
+    ball: np.ndarray,
+    falls: list[Footfall],
+    t: np.ndarray,
+    lift: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Heel frames ``(n, 4, 4)`` and toe-joint angles (radians) of one foot at times ``t``.
 
     ``ball``: the ball relative to the heel on the flat foot (foot frame). The foot rocks about a point
     ``ROCK_UP`` above the ball (the rounded ball of the foot, between the ball site on the sole and the toe
-    joint above it), so neither the ball nor the flat toes' tip slides more than ``ROCK_UP * sin(pitch)``."""
+    joint above it), so neither the ball nor the flat toes' tip slides more than ``ROCK_UP * sin(pitch)``.
+    A swing goes up before it goes along and comes down after it (the footfall's ``rise`` / ``drop``,
+    :attr:`Gait.swing_rise`). Landing toes first, the toes bend up ahead of touching down as the rocking
+    foot holds them, so they do not snap up at the footfall."""
     ball = np.asarray(ball, dtype=float) + np.array([0.0, ROCK_UP, 0.0])
     n = len(t)
     heel = np.zeros((n, 3))
@@ -254,7 +270,7 @@ def foot_track(
         swing = tt >= f.t_off
         if nxt is not None and swing.any():
             s = (tt[swing] - f.t_off) / max(nxt.t_on - f.t_off, 1e-9)
-            u = _smooth(s)
+            u = _smooth((s - f.rise) / (1.0 - f.rise - f.drop))
             a = flat_ball - _frame(np.zeros((1, 3)), [yaw_off], [-f.toe_off_pitch])[0, :3, :3] @ ball
             b = np.array([nxt.heel[0], 0.0, nxt.heel[1]])
             if nxt.strike < 0:  # landing toes first: aim the heel so the ball touches down at its place
@@ -276,6 +292,8 @@ def foot_track(
         if sw.any() and np.isfinite(f.t_off):
             s = (t[sw] - f.t_off) / max(nxt.t_on - f.t_off, 1e-9)
             toes[sw] = f.toe_off_pitch * (1.0 - _smooth(s / 0.35))
+            if nxt.strike < 0:
+                toes[sw] += -nxt.strike * _smooth((s - 0.6) / 0.4)
     return frames, toes.clip(0.0, 60.0) * DEG
 
 
@@ -356,7 +374,13 @@ def _steady(g: Gait, side: str, t_on: float, heel: tuple[float, float]) -> Footf
         t_on + g.toe_off * T,
         g.strike,
         g.toe_off_pitch,
+        **_swing(g),
     )
+
+
+def _swing(g: Gait) -> dict[str, float]:
+    """A footfall's swing shape (``rise``, ``drop``) in gait ``g``."""
+    return {"rise": g.swing_rise, "drop": g.swing_drop}
 
 
 def _pelvis_z(g: Gait, heel_z: float) -> float:
@@ -397,6 +421,7 @@ def plan_session(gait: Gait, first: str, cycles: int, base: BaseStance) -> Sessi
             0.0,
             ADJUST_PITCH,
             lift=ADJUST_LIFT,
+            **_swing(g),
         )
     )
     falls[other].append(
@@ -411,6 +436,7 @@ def plan_session(gait: Gait, first: str, cycles: int, base: BaseStance) -> Sessi
             0.0,
             g.toe_off_pitch,
             early=(t_early, min(t_start, t_start + (g.toe_off - 1.0) * T)),
+            **_swing(g),
         )
     )
     # the first foot rises at its base yaw and turns straight in the air
@@ -425,6 +451,7 @@ def plan_session(gait: Gait, first: str, cycles: int, base: BaseStance) -> Sessi
             t_heel + 0.3 * g.start_time,
             0.0,
             g.toe_off_pitch,
+            **_swing(g),
         )
     )
     z = float(track[other][1]) - d * L
@@ -450,7 +477,17 @@ def plan_session(gait: Gait, first: str, cycles: int, base: BaseStance) -> Sessi
     e_land = _frames(e_off + ADJUST_SWING)
     t_end = _frames(e_land + ADJUST_SETTLE)
     falls[last][-1] = Footfall(
-        last, lf.t_on, lf.heel, 0.0, lf.t_flat, e_heel, e_off, lf.strike, ADJUST_PITCH, lift=ADJUST_LIFT
+        last,
+        lf.t_on,
+        lf.heel,
+        0.0,
+        lf.t_flat,
+        e_heel,
+        e_off,
+        lf.strike,
+        ADJUST_PITCH,
+        lift=ADJUST_LIFT,
+        **_swing(g),
     )
     lh = np.array(base.heel[last]) + shift
     falls[last].append(
@@ -522,6 +559,7 @@ def plan_change(a: Gait, b: Gait, base: BaseStance, name: str) -> Session:
         tb + b.toe_off * b.step_time,
         a.strike,
         b.toe_off_pitch,
+        **_swing(b),
     )
     falls["left"] += [left, _steady(b, "left", dur + b.step_time, (xl, z1 - b.direction * b.step_length))]
     falls["right"].append(_steady(b, "right", dur, (xr, z1)))
@@ -614,6 +652,22 @@ class Recorded:
 _LAST_REPORT: dict[str, ik.SolveReport] = {}
 
 
+def carried_rifle_goals(
+    rkin: FigureKinematics, rifles: np.ndarray, heels: dict[str, np.ndarray]
+) -> list[ik.Goal]:
+    """IK goals of a standing soldier on his feet with the rifle in his hands: palm centres on the rifle
+    (position first, then the hold's orientation) and each heel frame on its track."""
+    goals: list[ik.Goal] = []
+    for s in ("right", "left"):
+        tg = palm_targets(rkin, rifles, s)
+        goals.append(ik.Goal(f"{s}_palm.palmcenter", tg[:, :3, 3], None, 1.0, 3, arm(s)))
+        goals.append(
+            ik.Goal(f"{s}_palm.palmcenter", None, tg[:, :3, :3], 1.0, 1, arm(s), orientation_weight=8.0)
+        )
+        goals.append(ik.Goal(f"{s}_foot.heel", heels[s][:, :3, 3], heels[s][:, :3, :3], 1.0, 2, leg(s)))
+    return goals
+
+
 def record_session(
     session: Session,
     kin: FigureKinematics,
@@ -678,14 +732,7 @@ def record_session(
         rest[:, k] = np.maximum(rest[:, k], 12.0 * DEG)
     # IK: palms on the rifle (carried by the rest pose's upper torso), heels on their tracks, eyes ahead
     rifles = carrier_globals(kin, rest, roots) @ carries
-    goals: list[ik.Goal] = []
-    for s in ("right", "left"):
-        tg = palm_targets(rkin, rifles, s)
-        goals.append(ik.Goal(f"{s}_palm.palmcenter", tg[:, :3, 3], None, 1.0, 3, arm(s)))
-        goals.append(
-            ik.Goal(f"{s}_palm.palmcenter", None, tg[:, :3, :3], 1.0, 1, arm(s), orientation_weight=8.0)
-        )
-        goals.append(ik.Goal(f"{s}_foot.heel", heels[s][:, :3, 3], heels[s][:, :3, :3], 1.0, 2, leg(s)))
+    goals = carried_rifle_goals(rkin, rifles, heels)
     goals.append(ik.Goal("bottom_head.sight", None, np.eye(3), 1.0, 1, ("neck", "head")))
     poses, report = ik.solve(kin, rest, goals, roots, iterations=60, rest_pose=rest, rest_gain=0.1)
     _LAST_REPORT[tag] = report

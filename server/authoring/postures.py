@@ -340,6 +340,9 @@ _STAND_ARMS = {
 
 _AIMED = Placement((0.0, 0.0, 0.0))  # the rifle's orientation when firing (position: shouldered)
 _LOW_READY = Placement((0.0, 0.0, 0.0), (-35.0, 10.0, 0.0))  # muzzle lowered and turned in
+# kneeling, the left thigh rises across where a low-ready muzzle turned in points: muzzle straight ahead and
+# a little higher, so the rifle is carried clear of the thigh
+_KNEEL_READY = Placement((0.0, 0.0, 0.0), (-30.0, 0.0, 0.0))
 
 _STANDING = {
     **_STAND_LEGS,
@@ -349,11 +352,12 @@ _STANDING = {
     "left_clavicle": (0.0, 25.0),
 }
 
-# Both kneeling postures: right knee and toes down, left foot forward, seated high over the right heel.
-_KNEEL_ROOT = Placement((2.0, 56.0, 2.0), (0.0, -30.0, 0.0))
+# Both kneeling postures: right knee and toes down, left foot forward, seated high over the right heel. The
+# pelvis is low enough that the right kneecap rests on the ground (the leg cannot reach it from higher).
+_KNEEL_ROOT = Placement((2.0, 53.8, 2.0), (0.0, -30.0, 0.0))
 _KNEEL_LEGS = (
     FootFlat("left", (12.0, -36.0), -35.0),
-    KneeDown("right", (16.0, 14.0), (20.0, 64.0), ball_height=5.0),
+    KneeDown("right", (16.0, 14.0), (20.0, 64.0), knee_height=-0.5, ball_height=5.5),
 )
 _KNEELING = {
     **_STAND_ARMS,
@@ -409,7 +413,7 @@ SPECS: dict[str, PostureSpec] = {
     "KNEEL_STOWED": PostureSpec(
         "KNEEL_STOWED",
         root=_KNEEL_ROOT,
-        rifle=_LOW_READY,
+        rifle=_KNEEL_READY,
         joints={**_KNEELING, "neck": (0.0, 5.0, 25.0)},
         spine=(-3.0, 10.0, -5.0),
         contacts=_KNEEL_LEGS,
@@ -545,7 +549,8 @@ IN_BETWEEN: dict[str, PostureSpec] = {
     "RUN_READY": PostureSpec(
         "RUN_READY",
         root=Placement((0.0, 92.0, 0.0), (-10.0, 0.0, 0.0)),
-        rifle=Placement((0.0, 0.0, 0.0), (-45.0, 15.0, 0.0)),
+        # muzzle across the body, not so low that the right thigh swings into the rifle
+        rifle=Placement((0.0, 0.0, 0.0), (-35.0, 20.0, 0.0)),
         joints={**_STANDING, "neck": (0.0, -5.0, 20.0)},
         spine=(-2.0, 8.0, -25.0),
         contacts=(FootFlat("left", (-11.0, 0.0), 0.0), FootFlat("right", (11.0, 0.0), 0.0)),

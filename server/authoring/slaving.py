@@ -31,13 +31,16 @@ keep the master's values.
 its meaning; our reading, in order: copy joint angles, blend the spine, match the torso (DI_belly, DI_torso),
 match the sight, torso/sight goal weight, match the palms, elbow goal weight, match the elbows, palms at the
 highest priority. :func:`reslave_channelset` is the re-recording: play a soldier channelset on the master
-(:func:`create_channelset_motion`), slave every frame, record ``DI`` plus the untouched rifle channel.
+(:func:`create_channelset_motion`), slave every frame, record ``DI`` plus the untouched rifle channel — or,
+given a rifle figure of the slave's own and its placements (the M16 library,
+:mod:`~server.authoring.rifle_swap`), the palms on that rifle's grip and handguard (:data:`RIFLE_HOLDS`, the
+elbows following half their move) and its channel in place of the master's rifle.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -116,6 +119,12 @@ NAME_MAP: dict[str, str] = {"eyes": "left_eye"}  # slave joint -> master joint w
 # sight and elbows are secondary: chasing their last centimetre twists the neck round a saddle (prone, neck
 # at its extension limit) or swings the shoulder's Euler angles round their pole (arm raised 90 degrees).
 GOAL_RADIUS: dict[str, float] = {"torso": 0.0, "sight": 0.9, "palm": 0.0, "elbow": 0.9}
+# slave palm -> the rifle site it holds, when the slave holds a rifle of its own (the M16 library)
+RIFLE_HOLDS: dict[str, str] = {
+    "right_palm.palmcenter": "rifle.grip",
+    "left_palm.palmcenter": "rifle.handguard",
+}
+ELBOW_FOLLOW = 0.5  # an elbow goal moves by this much of its palm's move onto another rifle's site
 SMOOTH_SIGMA_FRAMES = 3.0  # Gaussian smoothing of the slave's offset from the copied angles over a clip
 SMOOTH_MAX_DOF_STEP = 0.05  # rad per iteration of the re-solve after smoothing: stays on its branch
 
@@ -241,8 +250,11 @@ class MasterSlavePair:
                 out[..., sk.dof_slices["spine_compression"]] = 0.0
         return np.clip(out, sk.lower, sk.upper)
 
-    def goals(self, master_sites: np.ndarray) -> list[ik.Goal]:
-        """Step 3's goals from the master's site globals ``(..., nsite, 4, 4)``."""
+    def goals(
+        self, master_sites: np.ndarray, *, targets: Mapping[str, np.ndarray] | None = None
+    ) -> list[ik.Goal]:
+        """Step 3's goals from the master's site globals ``(..., nsite, 4, 4)``; ``targets`` (slave site ->
+        positions ``(..., 3)``) sends those sites there instead of to the master's sites."""
         p = self.parameters
         mk = self.master_kin
         on = {"torso": p.match_torso, "sight": p.match_sight, "palm": p.match_palms, "elbow": p.match_elbows}
@@ -252,14 +264,15 @@ class MasterSlavePair:
             if not on[c.group]:
                 continue
             target = master_sites[..., mk.site_names.index(c.master_site), :3, 3]
+            if targets is not None and c.slave_site in targets:
+                target = np.asarray(targets[c.slave_site], np.float64)
             priority = 2 if (c.group == "palm" and p.palm_priority) else 1
-            w: Any = weight[c.group]
             out.append(
                 ik.Goal(
                     c.slave_site,
                     target,
                     None,
-                    w,
+                    weight[c.group],
                     priority,
                     c.joints,
                     radius=GOAL_RADIUS[c.group],
@@ -272,6 +285,8 @@ class MasterSlavePair:
         master_pose: np.ndarray,
         master_location: np.ndarray | None = None,
         release_frame: int | None = None,
+        *,
+        targets: Mapping[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(slave_pose, slave_location)`` for master poses ``(ndof,)`` or ``(..., ndof)`` and the master's
         root site globals (default: the master figure's location). The slave's root site is put where the
@@ -286,7 +301,7 @@ class MasterSlavePair:
         sites = mk.site_globals(q, loc)
         slave_loc = sites[..., mk.site_names.index(self._slave_root), :, :].copy()
         start = self.copy_pose(q, segs)
-        goals = self.goals(sites)
+        goals = self.goals(sites, targets=targets)
         if not goals:
             return start, slave_loc
         opts: dict[str, Any] = {"iterations": 80, "rest_gain": 0.1, "tolerance": 0.02}
@@ -295,7 +310,12 @@ class MasterSlavePair:
         return _let_go(pose, start, release_frame), slave_loc
 
     def slave_clip(
-        self, master_poses: np.ndarray, master_locations: np.ndarray, release_frame: int | None = None
+        self,
+        master_poses: np.ndarray,
+        master_locations: np.ndarray,
+        release_frame: int | None = None,
+        *,
+        targets: Mapping[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`slave_pose` over the frames ``(n, ndof)`` of a clip, made temporally coherent.
 
@@ -309,9 +329,9 @@ class MasterSlavePair:
         mk, sk = self.master_kin, self.slave_kin
         q = np.asarray(master_poses, dtype=np.float64)
         loc = np.asarray(master_locations, dtype=np.float64)
-        pose, slave_loc = self.slave_pose(q, loc, release_frame)
+        pose, slave_loc = self.slave_pose(q, loc, release_frame, targets=targets)
         n = len(pose)
-        goals = self.goals(mk.site_globals(q, loc))
+        goals = self.goals(mk.site_globals(q, loc), targets=targets)
         if n < 3 or not goals:
             return pose, slave_loc
         start = self.copy_pose(q, mk.segment_globals(q, loc))
@@ -429,22 +449,77 @@ def low_name(name: str) -> str:
     return name + "_low"
 
 
-def reslave_channelset(channelset: Channelset, pair: MasterSlavePair, name: str | None = None) -> Channelset:
+def held_rifle_targets(
+    pair: MasterSlavePair,
+    master_poses: np.ndarray,
+    master_locations: np.ndarray,
+    rifle: Figure,
+    rifle_locations: np.ndarray,
+    release_frame: int | None = None,
+) -> dict[str, np.ndarray]:
+    """Slave site -> positions ``(n, 3)`` for a slave holding ``rifle`` (at root-site globals
+    ``rifle_locations``) where the master holds its own: each palm on its rifle site (:data:`RIFLE_HOLDS`)
+    until ``release_frame`` (then the master's palm again), and the elbow goal moved by ``ELBOW_FOLLOW`` of
+    the palm's move, so that elbow and palm goals do not pull the arm against its limits."""
+    mk = pair.master_kin
+    master = mk.site_globals(master_poses, master_locations)[..., :3, 3]
+    kin = FigureKinematics(rifle)
+    sites = kin.site_globals(np.zeros(0), np.asarray(rifle_locations, np.float64))
+    out: dict[str, np.ndarray] = {}
+    for palm, site in RIFLE_HOLDS.items():
+        target = sites[:, kin.site_names.index(site), :3, 3].copy()
+        own = master[:, mk.site_names.index(palm)]
+        if release_frame is not None:
+            target[release_frame:] = own[release_frame:]
+        out[palm] = target
+        side = palm.split("_", 1)[0]
+        for c in SLAVE_CONSTRAINTS:
+            if c.group == "elbow" and c.slave_site.startswith(side):
+                out[c.slave_site] = master[:, mk.site_names.index(c.master_site)] + ELBOW_FOLLOW * (
+                    target - own
+                )
+    return out
+
+
+def reslave_channelset(
+    channelset: Channelset,
+    pair: MasterSlavePair,
+    name: str | None = None,
+    rifle: Figure | None = None,
+    rifle_locations: np.ndarray | None = None,
+) -> Channelset:
     """Re-record a master channelset for the slave: slave channels (figure + joints) replace the master's,
     every other sharedchannel (the rifle) is copied unchanged, and optional fields (``ground_speed``,
-    ``stride_length``, ...) are carried over."""
+    ``stride_length``, ...) are carried over.
+
+    With ``rifle`` (another rifle figure, e.g. ``M16.fig``) and its root-site globals ``rifle_locations``
+    ``(n, 4, 4)``, the slave holds that rifle instead: its palms go on the rifle's grip and handguard (until
+    the channelset's ``release_frame``) and its figure channel replaces the master's rifle channel."""
     rec = create_channelset_motion(channelset, [pair.master])
     n = rec.nframes
     q = np.asarray(rec.poses[pair.master.name], dtype=np.float64)
     loc = np.asarray(rec.locations[pair.master.name], dtype=np.float64)
-    pose, slave_loc = pair.slave_clip(q, loc, channelset.release_frame)
-    out = Recording([pair.slave])
+    figures = [pair.slave]
+    targets = None
+    if rifle is not None:
+        if rifle_locations is None or np.shape(rifle_locations) != (n, 4, 4):
+            raise ValueError(f"{channelset.name}: rifle_locations must be ({n}, 4, 4)")
+        figures.append(rifle)
+        targets = held_rifle_targets(pair, q, loc, rifle, rifle_locations, channelset.release_frame)
+    pose, slave_loc = pair.slave_clip(q, loc, channelset.release_frame, targets=targets)
+    out = Recording(figures)
     out.poses[pair.slave.name].extend(pose)
     out.roots[pair.slave.name].extend([pair._slave_root] * n)
     out.locations[pair.slave.name].extend(slave_loc)
+    if rifle is not None:
+        out.poses[rifle.name].extend(np.zeros((n, 0)))
+        out.roots[rifle.name].extend([site_name(rifle.root)] * n)  # type: ignore[arg-type]
+        out.locations[rifle.name].extend(np.asarray(rifle_locations, np.float64))
     slave_cs = recording_to_channelset(channelset.name, out, 0, n - 1, channelset.fps)
-    master_type = protofiletype(pair.master)
-    kept: list[JointTrack | FigureTrack] = [t for t in channelset.tracks() if t.protofiletype != master_type]
+    dropped = {protofiletype(pair.master)}
+    if rifle is not None and pair.rifle is not None:
+        dropped.add(protofiletype(pair.rifle))
+    kept: list[JointTrack | FigureTrack] = [t for t in channelset.tracks() if t.protofiletype not in dropped]
     result = make_channelset(
         name or low_name(channelset.name), channelset.fps, [*slave_cs.tracks(), *kept], channelset.source
     )

@@ -199,7 +199,12 @@ def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("--out", type=Path, required=True, help="PNG file to write")
-    p.add_argument("--figure", choices=("DI", "soldier"), default="DI", help="which soldier figure's clips")
+    p.add_argument(
+        "--figure",
+        choices=("DI", "soldier", "M16"),
+        default="DI",
+        help="which figure's clips (M16: the DI.fig clips holding an M16)",
+    )
     p.add_argument(
         "--graphs",
         type=Path,
@@ -232,6 +237,8 @@ def run_contact_sheet(args: argparse.Namespace) -> int:
     from ttes.paths import FIGURES, POSTURE_GRAPHS
 
     graphs = sorted(POSTURE_GRAPHS.glob("*.graph")) if args.graphs is None else list(args.graphs)
+    if args.graphs is None and args.figure == "DI":  # the DI.fig clips holding the AK (--figure M16: the M16)
+        graphs = [g for g in graphs if not g.stem.endswith("_m16")]
     if args.frames < 1 or args.tile < 32:
         print("ttes author contact-sheet: --frames must be >= 1 and --tile >= 32", file=sys.stderr)
         return 2
@@ -273,7 +280,8 @@ def _register_build(sub: argparse._SubParsersAction) -> None:
         help="record the motion library (channelsets, posture graphs, start-up files)",
         description=(
             "Solve the key postures, record every clip on soldier.fig into channelsets/*.chset.env, slave "
-            "them onto DI.fig into channelsets/*_low.chset.env, and write the posture graphs and the "
+            "them onto DI.fig into channelsets/*_low.chset.env (AK-47) and *_m16_low.chset.env (M16), "
+            "and write the posture graphs and the "
             "jack-ttes-soldier_low.jcl/.env start-up files into posture_graphs/. Deterministic."
         ),
     )
@@ -282,9 +290,12 @@ def _register_build(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--figure",
-        choices=("soldier", "DI", "all"),
+        choices=("soldier", "DI", "M16", "all"),
         default="all",
-        help="soldier: record soldier.fig clips; DI: re-slave the committed soldier.fig clips; all: both",
+        help=(
+            "soldier: record soldier.fig clips; DI / M16: re-slave the committed soldier.fig clips for "
+            "DI.fig with the AK-47 (*_low) / the M16 (*_m16_low); all: everything"
+        ),
     )
     p.add_argument("--out", type=Path, default=None, help="output root (default: the repository)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -1,0 +1,186 @@
+"""Turns in place and side-steps (committed soldier.fig and DI.fig clips): each reaches its yaw or its
+sideways displacement, ends in STAND_STOWED moved by its ``end_offset``, turns a foot only while it is in
+the air (stepping round the inside foot's ball), and never slides a foot that touches the ground."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from server.authoring import turns
+from server.authoring.gait import BaseStance
+from server.authoring.quality import FigureSet, play
+from server.motion.cache import load_channelset
+from server.motion.posture_change import load_posture_graph
+from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
+
+CONTACT = 2.5  # cm: a foot point this low is touching the ground, whatever its speed (the check: 1.25)
+SUFFIXES = {"": "soldier.fig", "_low": "DI.fig"}
+TURNS = [(f"turn_{d[0]}{a}", d, a) for d in ("left", "right") for a in turns.TURN_ANGLES]
+FOOT_POINTS = ("foot.heel", "foot.ball", "toes.distal")
+
+
+@pytest.fixture(scope="module")
+def figures() -> FigureSet:
+    return FigureSet.from_dir(FIGURES, ["soldier.fig", "DI.fig", "AK_47.fig"])
+
+
+def _played(name: str, suffix: str, figures: FigureSet):
+    cs = load_channelset(CHANNELSETS / f"{name}{suffix}.chset.env")
+    cf = play(cs, figures)
+    body = SUFFIXES[suffix]
+    kin = figures.kin[body]
+    sites = kin.site_globals(cf.poses[body], cf.locations[body])
+    return cs, cf, body, kin, sites
+
+
+def _point(kin, sites, side: str, point: str) -> np.ndarray:
+    return sites[:, kin.site_names.index(f"{side}_{point}"), :3, 3]
+
+
+def _yaw(m: np.ndarray) -> float:
+    """Degrees about +Y that turn -Z (the facing direction) to ``m``'s -Z (+ = to the left)."""
+    f = -m[:3, 2]
+    return math.degrees(math.atan2(-f[0], -f[2]))
+
+
+@pytest.mark.parametrize("suffix", SUFFIXES)
+def test_turn_graph_lists_every_clip_as_a_stand_stowed_self_loop(suffix: str):
+    name = "soldier_turn.graph" if suffix else "soldier_turn_hi.graph"
+    loaded = load_posture_graph(POSTURE_GRAPHS / name)
+    assert loaded.graph.postures == ["STAND_STOWED"]
+    stems = [f.rsplit("/", 1)[-1].removesuffix(f"{suffix}.chset.env") for f in loaded.graph.files]
+    assert stems == list(turns.TURN_CLIPS)
+    loops = {(a.start, a.end, a.forward) for a in loaded.graph.arcs}
+    assert loops == {("STAND_STOWED", "STAND_STOWED", True)}
+    assert sorted(a.channelset for a in loaded.graph.arcs) == list(range(len(stems)))
+
+
+@pytest.mark.parametrize("suffix", SUFFIXES)
+@pytest.mark.parametrize("name", turns.TURN_CLIPS)
+def test_clip_ends_in_stand_stowed_moved_by_its_end_offset(name: str, suffix: str, figures: FigureSet):
+    cs, cf, body, kin, sites = _played(name, suffix, figures)
+    assert cs.end_offset is not None
+    x, z, yaw = cs.end_offset
+    if name.startswith("turn_"):
+        angle = float(name[6:]) * (1.0 if name[5] == "l" else -1.0)
+        assert yaw == angle
+    else:
+        assert (abs(x), z, yaw) == (turns.SIDESTEP, 0.0, 0.0)
+        assert x < 0 if name.endswith("_l") else x > 0  # left is -x
+    np.testing.assert_allclose(cs.joint_data[-1], cs.joint_data[0], atol=1e-5)
+    move = turns.ground_move(x, z, yaw)
+    for ptype in cf.locations:
+        a, b = cf.locations[ptype][0], cf.locations[ptype][-1]
+        np.testing.assert_allclose(b[:3, 3], (move @ a)[:3, 3], atol=0.02, err_msg=ptype)
+        np.testing.assert_allclose(b[:3, :3], (move @ a)[:3, :3], atol=1e-4, err_msg=ptype)
+    turned = _yaw(cf.locations[body][-1]) - _yaw(cf.locations[body][0]) - yaw
+    assert (turned + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=0.01)
+    for side in ("left", "right"):  # both feet end flat on the ground in the moved stance
+        for p in FOOT_POINTS:
+            pts = _point(kin, sites, side, p)
+            end = move[:3, :3] @ pts[0] + move[:3, 3]
+            np.testing.assert_allclose(pts[-1], end, atol=0.05, err_msg=f"{side}_{p}")
+
+
+@pytest.mark.parametrize("suffix", SUFFIXES)
+@pytest.mark.parametrize("name", turns.TURN_CLIPS)
+def test_feet_never_slide_on_or_sink_into_the_ground(name: str, suffix: str, figures: FigureSet):
+    _, _, _, kin, sites = _played(name, suffix, figures)
+    for side in ("left", "right"):
+        for p in FOOT_POINTS:
+            pts = _point(kin, sites, side, p)
+            assert pts[:, 1].min() > -1.0, f"{side}_{p} in the ground"
+            touching = np.r_[False, pts[:, 1] <= CONTACT, False]
+            starts = np.flatnonzero(~touching[:-1] & touching[1:])
+            stops = np.flatnonzero(touching[:-1] & ~touching[1:])
+            for a, b in zip(starts, stops, strict=True):
+                xz = pts[a:b][:, [0, 2]]
+                slide = np.sqrt(((xz[:, None] - xz[None]) ** 2).sum(-1)).max()
+                assert slide <= 2.0, f"{name}{suffix} {side}_{p} slides {slide:.2f} cm in frames {a}..{b}"
+
+
+def _foot_yaw(kin, sites, side: str) -> np.ndarray:
+    """Degrees about +Y of the heel-to-ball direction of a foot, per frame (unwrapped)."""
+    d = _point(kin, sites, side, "foot.ball") - _point(kin, sites, side, "foot.heel")
+    return np.degrees(np.unwrap(np.arctan2(-d[:, 0], -d[:, 2])))
+
+
+def test_turn_steps_alternate_feet_never_more_than_45_degrees_apart():
+    assert turns.turn_steps(45) == [("inside", 45.0), ("outer", 45.0)]
+    assert turns.turn_steps(90) == [("inside", 45.0), ("outer", 90.0), ("inside", 90.0)]
+    assert [y for _, y in turns.turn_steps(180)] == [45.0, 90.0, 135.0, 180.0, 180.0]
+
+
+@pytest.mark.parametrize("suffix", SUFFIXES)
+@pytest.mark.parametrize(("name", "side", "angle"), TURNS)
+def test_turn_steps_round_the_inside_ball_and_turns_feet_only_in_the_air(
+    name: str, side: str, angle: int, suffix: str, figures: FigureSet
+):
+    _, cf, body, kin, sites = _played(name, suffix, figures)
+    sign = 1.0 if side == "left" else -1.0
+    ball = _point(kin, sites, side, "foot.ball")
+    np.testing.assert_allclose(ball[-1], ball[0], atol=0.5)  # the inside foot ends where it began, turned
+    down = {}
+    for s in ("left", "right"):
+        low = np.min([_point(kin, sites, s, p)[:, 1] for p in FOOT_POINTS], axis=0) <= CONTACT
+        down[s] = low
+        yaw = _foot_yaw(kin, sites, s)
+        edges = np.flatnonzero(np.diff(np.r_[0, low.astype(int), 0]))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):  # a foot touching the ground does not turn
+            assert np.ptp(yaw[a:b]) < 1.0, f"{name}{suffix} {s} foot turns on the ground in frames {a}..{b}"
+        lifts = len(edges) // 2 - 1
+        want = sum(1 for role, _ in turns.turn_steps(angle) if (role == "inside") == (s == side))
+        assert lifts == want, s
+    assert (down["left"] | down["right"]).all()  # a step, never a hop
+    body_yaw = np.array([_yaw(m) for m in cf.locations[body]])
+    progress = sign * np.degrees(np.unwrap(np.radians(body_yaw - body_yaw[0])))
+    assert progress.min() > -0.5 and progress.max() < angle + 0.5
+    assert np.diff(progress).min() > -0.2  # the body never turns back
+
+
+@pytest.mark.parametrize("suffix", SUFFIXES)
+@pytest.mark.parametrize("name", turns.TURN_CLIPS)
+def test_clips_ease_in_and_out(name: str, suffix: str, figures: FigureSet):
+    cs, _, _, _, sites = _played(name, suffix, figures)
+    speed = np.linalg.norm(np.diff(sites[:, :, :3, 3], axis=0), axis=-1) * cs.fps  # cm/s per site
+    assert speed[0].max() <= 50.0 and speed[-1].max() <= 50.0
+
+
+@pytest.mark.parametrize("direction", ["left", "right"])
+def test_sidestep_leads_with_the_foot_on_its_side_and_never_crosses_the_feet(direction: str, figures):
+    _, _, _, kin, sites = _played(f"sidestep_{direction[0]}", "", figures)
+    trail = "right" if direction == "left" else "left"
+    lead_up = np.flatnonzero(_point(kin, sites, direction, "foot.ball")[:, 1] > CONTACT)
+    trail_up = np.flatnonzero(_point(kin, sites, trail, "foot.ball")[:, 1] > CONTACT)
+    assert lead_up.max() < trail_up.min()  # the leading foot has landed before the trailing foot lifts
+    gap = _point(kin, sites, "right", "foot.heel")[:, 0] - _point(kin, sites, "left", "foot.heel")[:, 0]
+    assert gap.min() > 10.0  # the left heel stays well to the left (-x) of the right one
+
+
+def test_turn_plan_moves_the_stance_about_the_pivot_ball():
+    base = BaseStance(
+        {"left": (-15.0, -12.0), "right": (2.0, 14.0)},
+        {"left": -10.0, "right": -25.0},
+        {"left": np.array([-0.7, 0.0, -21.5]), "right": np.array([0.7, 0.0, -21.5])},
+        np.zeros(2),
+    )
+    for side in ("left", "right"):
+        for angle in turns.TURN_ANGLES:
+            plan = turns.plan_turn(base, side, angle)
+            assert plan.end_move[2] == (angle if side == "left" else -angle)
+            bx, bz = base.ball_at(side)
+            ball = np.array([bx, 0.0, bz, 1.0])
+            np.testing.assert_allclose(turns.ground_move(*plan.end_move) @ ball, ball, atol=1e-9)
+
+
+def test_rebuilding_a_turn_reproduces_the_committed_bytes(tmp_path):
+    from server.authoring import build as B
+
+    B.build(tmp_path, FIGURES, only="turn_r45", figure="soldier", progress=False)
+    rel = "channelsets/turn_r45.chset.env"
+    assert (tmp_path / rel).read_bytes() == (CHANNELSETS / "turn_r45.chset.env").read_bytes()
+    graph = "posture_graphs/soldier_turn_hi.graph"
+    assert (tmp_path / graph).read_bytes() == (POSTURE_GRAPHS / "soldier_turn_hi.graph").read_bytes()
