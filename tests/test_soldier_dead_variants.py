@@ -141,3 +141,14 @@ def test_getting_up_replays_that_death_backwards_slowly(lib: MotionLibrary) -> N
     )
     info = m.soldier_info(i)
     assert (info["mode"], info["posture"], info["node"]) == ("IDLE", "KNEEL_FIRE", "KNEEL_FIRE")
+
+
+def test_a_soldier_dies_where_he_is_even_if_another_death_ends_sooner() -> None:
+    """Physics deaths last as long as the body takes to settle: a kneeling death of 4 s must still win over
+    standing up (1.2 s) and dying standing (1.5 s)."""
+    loaded = variant_static_graph()
+    g = loaded.graph
+    slow = [4.0 if f.startswith("kfire2dead") else d for f, d in zip(g.files, loaded.durations, strict=True)]
+    assert g.nearest("KNEEL_FIRE", "DEAD", slow) == "DEAD@kfire"
+    path = g.shortest_path("KNEEL_FIRE", "DEAD", slow)
+    assert [(a.start, a.end) for a in path] == [("KNEEL_FIRE", "DEAD@kfire")]

@@ -1,16 +1,25 @@
 """The seven deaths, simulated: a MuJoCo ragdoll (:mod:`server.authoring.ragdoll`) falls from its posture.
 
 Each death starts exactly in its posture (frame 0 is the graph's key posture, at rest) with the muscles
-holding that pose (joint springs toward it). Then:
+holding that pose: joint springs toward it, and gravity fed forward on the joints of the limbs off the ground
+and on the held rifle (:func:`_carried_dofs`), so nothing sags in the first frames. A posture that dips into
+the ground (by a few millimetres) starts on a ground lowered that far, which rises to 0 as the body settles
+(:data:`GROUND_RISE`). Then:
 
 1. **the hit**: a force on the upper torso, ramped up over :attr:`DeathSpec.ramp` and down again (so every
-   part starts moving slowly), pushing the body the way it falls (forward for standing and kneeling);
-2. **the slump**: the muscle gains fade from holding the posture to a faint tone toward the ``DEAD`` key's
-   shape over :attr:`DeathSpec.fade` — the knees buckle, the head drops, the arms go loose;
+   part starts moving slowly), pushing the body the way it falls (forward standing, to the side kneeling,
+   down lying);
+2. **the slump**: PD control (the springs) toward a slumped shape — the ``SLUMP`` key standing (the knees
+   buckle), the spine and head of ``SLUMP`` kneeling (the legs stay as they are: no kick), the ``DEAD`` key's
+   head lying — at half strength by :attr:`DeathSpec.slump_time`, then toward a limp shape (the ``DEAD``
+   key's, legs straight and feet pointed, :func:`limp_pose`) fading to a faint tone by
+   :attr:`DeathSpec.fade`; the knees give way at once (:data:`KNEES_GIVE_WAY`: held, they swung the shins up
+   as the body pitched forward), arms, neck and head keep no tone (:data:`LOOSE`); dead joints stay damped;
 3. **the rifle is let go** at :attr:`DeathSpec.release` (the welds to the palms are switched off; the frame
-   is the channelset's ``release_frame``) and falls on its own;
+   is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`);
 4. **the body settles**: recording (60 fps) stops once every body has been still (:data:`REST_SPEED`) for
-   :data:`REST_SECONDS`; the clip keeps those still frames, so the last frame is at rest.
+   :data:`REST_SECONDS` (or after :data:`MAX_SECONDS`); the clip keeps those still frames, so the last frame
+   is at rest.
 
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph

@@ -12,13 +12,18 @@ The model mirrors the figure exactly, so a simulated state maps back onto the po
   keeps their start angles;
 * the geometry of a segment is the **convex hull of its psurf nodes** (a MuJoCo mesh geom): more faithful than
   a fitted capsule, and the lowest hull point is the lowest psurf node, so MuJoCo's ground contact keeps
-  exactly the points the quality check measures out of the ground; mass from the hull volume at
-  :data:`DENSITY` (the figure is in centimetres, MuJoCo in metres);
-* ground contact is stiff (``solref`` 4 ms) with high sliding, torsional and rolling friction, so a part on
-  the ground stays where it landed; the body collides with itself except for pairs that already touch in the
-  start pose (neighbouring torso slices, the shoulder blob and the upper arm, ...);
+  exactly the points the quality check measures out of the ground; masses from the hull volumes, scaled to
+  :data:`BODY_MASS` (the figure is in centimetres, MuJoCo in metres);
+* the ground is a plane on a mocap body (so it can be lowered under a posture that dips into it and rise
+  while the body settles); contact is stiff (2 ms ``solref`` at a 1/1200 s step: a fall's impact stays
+  within about a centimetre) with high sliding, torsional and rolling friction and MuJoCo's no-slip pass;
+  the body collides with itself except for pairs that already touch in the start pose (neighbouring torso
+  slices, the shoulder blob and the upper arm, ...);
 * the rifle (``AK_47.fig``, one segment) is its own free body, held by weld constraints to both palms until
-  :meth:`Ragdoll.release`; it collides with the ground and the body except the parts that hold it.
+  :meth:`Ragdoll.release`; it collides with the body except the parts that touch it in the start pose (the
+  hands that hold it, a cheek on the stock), and with a ground of its own only once let go (contact bits:
+  ground 1, rifle's ground 2, body 1|4, rifle 2|4), so a posture that dips the rifle into the ground does
+  not shoot it out.
 
 Muscles are joint springs (``jnt_stiffness`` toward ``qpos_spring``) with joint damping, both changeable
 while simulating: :mod:`server.authoring.deaths` holds the posture, then fades the gains to a limp body.

@@ -81,8 +81,10 @@ class PostureGraph:
         return [p for p in self.postures if posture_of(p) == posture_of(posture)]
 
     def nearest(self, start: str, posture: str, durations: Sequence[float] | None = None) -> str:
-        """The node of ``posture`` (any variant) reached quickest from ``start``: ``start`` itself when it is
-        one; an exact node name is returned as it is."""
+        """The node of ``posture`` (any variant) to head for from ``start``: ``start`` itself when it is one;
+        else the quickest variant one arc away (a kneeling soldier dies his kneeling death, even when
+        standing up first and dying standing would end sooner); else the variant reached quickest. An exact
+        node name is returned as it is."""
         self.token(start)
         if posture in self._tokens:
             return posture
@@ -91,6 +93,10 @@ class PostureGraph:
         options = self.variants(posture)
         if not options:
             raise PostureGraphError(f"unknown posture {posture!r}", self.filename)
+        direct = [(self.arc_time(a, durations), self._tokens[a.end], a.end) for a in self.arcs_from(start)]
+        direct = [d for d in direct if d[2] in options]
+        if direct:
+            return min(direct)[2]
         best, _ = self._dijkstra(start, durations)
         reached = [p for p in options if p in best]
         if not reached:
