@@ -322,7 +322,9 @@ class MasterSlavePair:
         Each frame solved alone resolves the chains' redundancy (clavicle against shoulder, the arm's twist)
         wherever its iterations happen to stop, so neighbouring frames can differ by tens of degrees. So the
         slave's offset from the copied angles is smoothed over the clip (Gaussian, ``SMOOTH_SIGMA_FRAMES``),
-        tapered to none at the first and last frame, and the goals solved again from there in small steps
+        tapered towards the first and the last frame's offset near each end (not to each frame's own: near
+        an end it could sit on another branch than the end's and pop as the clip leaves or reaches its
+        posture), and the goals solved again from there in small steps
         (``SMOOTH_MAX_DOF_STEP``) pulled towards the smoothed pose. DOFs no goal moves keep the master's
         angles; the first and last frames stay exactly :meth:`slave_pose`'s (a frame's solution alone), so
         every clip meeting at a posture node is slaved to the same pose there."""
@@ -344,7 +346,8 @@ class MasterSlavePair:
         smooth = np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(sk.ndof)], axis=1)
         frames = np.arange(n)
         taper = np.minimum(1.0, np.minimum(frames, frames[::-1]) / half)[:, None]
-        blend = sk.clamp(pose + taper * (start + smooth - pose))
+        ends = np.where(frames[:, None] < n / 2, offset[:1], offset[-1:])  # each half leans on its end
+        blend = sk.clamp(start + ends + taper * (smooth - ends))
         opts: dict[str, Any] = {"iterations": 60, "rest_gain": 0.1, "tolerance": 0.02}
         opts.update(self.ik_options)
         opts["max_dof_step"] = SMOOTH_MAX_DOF_STEP

@@ -15,7 +15,9 @@ bring the rifle up"). Targets are the graph's postures (:mod:`server.authoring.p
    along an arc with ``lift``; stepping back into a kneel the ball of the foot follows the arc and the foot
    turns ahead of it, so it peels off and lands on its toes), pulling towards the interpolated joints in the
    null space. Kneeling transitions also put the kneecaps on tracks (planted, or lifted and put down), and a
-   ``free`` step leaves a foot or knee to the interpolated joints until it lands.
+   ``free`` step leaves a foot or knee to the interpolated joints until it lands;
+4. the clip is retimed (:func:`server.authoring.easing.ease_ends`) so that it leaves its start posture and
+   reaches its end posture at rest, as a soldier does (played backwards too); deaths are not.
 
 In-between keys may be derived from the postures (:data:`DERIVED_KEYS`: moved along the ground, some joints
 turned, the pelvis hiked, the legs solved onto other keys' contacts). Getting down to crawl, the soldier
@@ -35,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from server.authoring import ik
+from server.authoring import easing, ik
 from server.authoring.motion import (
     JointTarget,
     KeyPosture,
@@ -620,7 +622,10 @@ def record_transition(
     rifles[0], rifles[-1] = first.locations[RIFLE], last.locations[RIFLE]
     roots[0], roots[-1] = first.locations[SOLDIER], last.locations[SOLDIER]
     lift_off_ground(kin, q, roots, rifles)
-    return ClipFrames(q, roots, rifles, fps)
+    clip = ClipFrames(q, roots, rifles, fps)
+    if spec.end == "DEAD":  # deaths are left as they are (recorded by physics, not by these steps)
+        return clip
+    return easing.ease_ends(kin, rkin, clip)
 
 
 # --- the seventeen transitions ------------------------------------------------------------------------------

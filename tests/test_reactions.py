@@ -1,0 +1,77 @@
+"""The committed reaction clips (firing recoil, flinch): self-loops of their postures that keep contacts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from server.authoring import postures, reactions
+from server.authoring.quality import FigureSet, play
+from server.motion.cache import load_channelset
+from server.motion.posture_change import load_posture_graph
+from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
+
+
+@pytest.fixture(scope="module")
+def figset() -> FigureSet:
+    return FigureSet.from_dir(FIGURES, ["soldier.fig", "AK_47.fig"])
+
+
+@pytest.fixture(scope="module")
+def keys(figset: FigureSet):
+    names = sorted({r.posture for r in reactions.REACTIONS})
+    return postures.build_postures(figset.figures["soldier.fig"], figset.figures["AK_47.fig"], names)
+
+
+def test_reaction_graphs_are_self_loops():
+    graphs = (
+        ("soldier_react_hi.graph", ""),
+        ("soldier_react.graph", "_low"),
+        ("soldier_react_m16.graph", "_m16_low"),
+    )
+    for name, suffix in graphs:
+        graph = load_posture_graph(POSTURE_GRAPHS / name).graph
+        assert "DEAD" not in graph.postures
+        loops = {(a.start, graph.files[a.channelset]) for a in graph.arcs if a.start == a.end and a.forward}
+        assert len(loops) == len(graph.arcs) == len(reactions.REACTIONS)
+        for r in reactions.REACTIONS:
+            assert (r.posture, f"../channelsets/{r.name}{suffix}.chset.env") in loops
+
+
+@pytest.mark.parametrize("r", reactions.REACTIONS, ids=lambda r: r.name)
+def test_reaction_leaves_and_returns_to_its_posture_and_keeps_its_contacts(r, figset: FigureSet, keys):
+    cs = load_channelset(CHANNELSETS / f"{r.name}.chset.env")
+    frames = play(cs, figset)
+    kin = figset.kin["soldier.fig"]
+    q, loc = frames.poses["soldier.fig"], frames.locations["soldier.fig"]
+    key = keys[r.posture]
+    for f in (0, -1):  # exactly the posture at both ends (raised as every clip is where it sinks in)
+        np.testing.assert_allclose(q[f], key.poses[postures.SOLDIER], atol=1e-5)
+        np.testing.assert_allclose(loc[f], key.locations[postures.SOLDIER], atol=1.0)
+    np.testing.assert_allclose(loc[0], loc[-1], atol=1e-4)
+    sites = kin.site_globals(q, loc)[..., :3, 3]
+    legs, arms = reactions.ground_contacts(kin, key)
+    for s in legs + arms:  # what touches the ground stays there
+        p = sites[:, kin.site_names.index(s)]
+        assert np.linalg.norm(p - p[0], axis=1).max() < 1.5, s
+    nose = sites[:, kin.site_names.index("bottom_head.nose")]
+    rk = figset.kin["AK_47.fig"]
+    gun = rk.site_globals(frames.poses["AK_47.fig"], frames.locations["AK_47.fig"])[..., :3, 3]
+    axis = gun[:, rk.site_names.index("rifle.muzzle")] - gun[:, rk.site_names.index("rifle.butt")]
+    pitch = np.degrees(np.arctan2(axis[:, 1], np.linalg.norm(axis[:, [0, 2]], axis=1)))
+    if r.kind == "recoil":  # the muzzle climbs a few degrees (less prone, on the elbows) and comes back
+        assert 1.5 <= pitch.max() - pitch[0] <= 10.0
+        assert 0.3 <= cs.duration <= 0.35
+    else:  # the head ducks (or, over a cradled rifle, turns away)
+        assert np.linalg.norm(nose - nose[0], axis=1).max() >= 3.0
+        assert 0.5 <= cs.duration <= 0.8
+
+
+def test_build_of_a_reaction_reproduces_the_committed_bytes(tmp_path):
+    from server.authoring import build
+
+    build.build(tmp_path, FIGURES, only="stfire_recoil", figure="soldier", progress=False)
+    rel = "channelsets/stfire_recoil.chset.env"
+    assert (tmp_path / rel).read_bytes() == (CHANNELSETS.parent / rel).read_bytes()
+    name = "posture_graphs/soldier_react_hi.graph"
+    assert (tmp_path / name).read_bytes() == (POSTURE_GRAPHS.parent / name).read_bytes()
