@@ -302,7 +302,7 @@ class DerivedKey:
     hike_side: str = "left"
 
 
-KNEES_AT_CRAWL = "KNEEL_BOTH@CRAWL"  # on both knees, knees and toes where the crawl has them
+KNEES_AT_CRAWL = "KNEEL_BOTH@CRAWL"  # on both knees, knees and toes exactly where the crawl has them
 KNEEL_AT_CRAWL = "KNEEL_STOWED@CRAWL"  # on the right knee, that knee and its toes where the crawl has them
 SHUFFLED = "KNEEL_STOWED@SHUFFLED"  # right knee and toes as there, hips most of the way, left foot stays
 SHUFFLING = "KNEEL_STOWED@SHUFFLING"  # on the way there, the right hip hiked so the right knee can lift
@@ -311,7 +311,14 @@ TUCK = "TUCK@CRAWL"  # on both knees at the crawl's places, the left shin still 
 # Knees and toes already where the crawl has them, the soldier only pivots forward about them onto his
 # forearms. Fold and tuck bring the front leg back onto its knee without the foot touching the ground.
 DERIVED_KEYS: dict[str, DerivedKey] = {
-    KNEES_AT_CRAWL: DerivedKey("KNEEL_BOTH", "CRAWL", ("left_toes.distal", "right_toes.distal")),
+    KNEES_AT_CRAWL: DerivedKey(
+        "KNEEL_BOTH",
+        "CRAWL",
+        ("left_toes.distal", "right_toes.distal"),
+        hold=tuple(
+            (f"{s}_{site}", "CRAWL") for s in ("left", "right") for site in ("lower_leg.knee", "toes.distal")
+        ),
+    ),
     KNEEL_AT_CRAWL: DerivedKey("KNEEL_STOWED", KNEES_AT_CRAWL, ("right_toes.distal",)),
     SHUFFLED: DerivedKey(
         "KNEEL_STOWED",
@@ -319,8 +326,8 @@ DERIVED_KEYS: dict[str, DerivedKey] = {
         ("right_toes.distal",),
         fraction=0.85,
         hold=(
-            ("right_foot.heel", KNEEL_AT_CRAWL),
-            ("right_lower_leg.knee", KNEEL_AT_CRAWL),
+            ("right_foot.heel", KNEES_AT_CRAWL),
+            ("right_lower_leg.knee", KNEES_AT_CRAWL),
             ("left_foot.heel", "KNEEL_STOWED"),
         ),
     ),
