@@ -766,12 +766,14 @@ def _carry(dst: str, start: float, duration: float) -> tuple[Step, ...]:
 
 def _left_knee_down(t0: float, t1: float) -> tuple[Step, ...]:
     """On the right knee (knees where the crawl has them), bring the left leg back onto its knee beside the
-    right one by ``t1``: the left heel comes up behind the thigh (:data:`FOLD`, the foot leaves the
-    ground), the thigh swings down until the knee is on its place (:data:`TUCK`), then the shin
-    comes down behind onto the toes; knee and toes stay from then on."""
+    right one by ``t1``: the left heel comes up behind the thigh (:data:`FOLD`, the foot peels off the
+    ground along an arc: left to the folding leg it slid back 2 cm first), the thigh swings down until the
+    knee is on its place (:data:`TUCK`), then the shin comes down behind onto the toes; knee and toes stay
+    from then on."""
     d = t1 - t0
     return (
-        Step("left_foot", KNEES_AT_CRAWL, t0, d, free=True),
+        Step("left_foot", FOLD, t0, 0.25 * d, lift=6.0, arc_site="ball"),  # peeled off, not dragged back
+        Step("left_foot", KNEES_AT_CRAWL, t0 + 0.25 * d, 0.75 * d, free=True),
         Step("left_knee", KNEES_AT_CRAWL, 0.0, t1, free=True),
         Step("right_foot", KNEES_AT_CRAWL, t0, d),
         Step("right_knee", KNEES_AT_CRAWL, t0, d),
