@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from server.authoring import build as B
-from server.authoring import gait, postures, transitions
+from server.authoring import deaths, gait, postures, transitions
 from server.jcl import parse_jcl
 from server.motion.cache import load_npz, save_npz
 from server.motion.channelset_file import format_channelset, parse_channelsets
 from server.motion.posture_change import load_posture_graph
+from server.motion.posture_graph import posture_of
 from server.motion.synthetic import synthetic_channelset, toy_rifle, toy_soldier
 from server.peabody.loader import read_environment, read_figure
 from ttes.cli import main
@@ -66,23 +67,27 @@ def test_graphs_load_and_every_arc_has_its_channelset(name: str):
 
 
 def test_static_graph_is_figure_7():
-    graph = load_posture_graph(POSTURE_GRAPHS / "soldier_low.graph").graph
-    assert graph.postures == list(postures.POSTURES)
+    loaded = load_posture_graph(POSTURE_GRAPHS / "soldier_low.graph")
+    graph = loaded.graph
+    variants = [f"DEAD@{d.name.removesuffix('2dead')}" for d in deaths.DEATHS]
+    assert graph.postures == [p for p in postures.POSTURES if p != "DEAD"] + variants
     assert len(graph.files) == 17
     assert graph.files[0].endswith("ststow2stfire_low.chset.env")
     assert graph.files[16].endswith("stfire2kstow_low.chset.env")
     arcs = {(a.start, a.end): a for a in graph.arcs}
-    dead = arcs[("DEAD", "STAND_STOWED")]
-    assert (
-        not dead.forward
-        and dead.time == 10.0
-        and graph.files[dead.channelset].endswith("ststow2dead_low.chset.env")
-    )
+    for d in deaths.DEATHS:  # each death ends in its own DEAD variant; getting up replays it backwards
+        node = deaths.dead_node(d.name)
+        die, get_up = arcs[(d.start, node)], arcs[(node, d.start)]
+        assert die.forward and die.time == -1.0
+        assert not get_up.forward and get_up.time == deaths.GET_UP_SECONDS
+        assert graph.files[die.channelset].endswith(f"{d.name}_low.chset.env")
+        assert die.channelset == get_up.channelset
+    assert sorted(a.start for a in graph.arcs if posture_of(a.start) == "DEAD") == sorted(variants)
     assert (
         arcs[("STAND_STOWED", "STAND_FIRE")].time == 0.8
         and arcs[("STAND_STOWED", "KNEEL_STOWED")].time == 1.6
     )
-    path = [a.end for a in graph.shortest_path("STAND_STOWED", "PRONE_FIRE")]
+    path = [a.end for a in loaded.shortest_path("STAND_STOWED", "PRONE_FIRE")]
     assert path == ["CRAWL", "PRONE_STOWED", "PRONE_FIRE"]
 
 
@@ -119,7 +124,8 @@ def test_transitions_start_and_end_in_their_graph_postures():
     keys = postures.build_postures(soldier, rifle, list(postures.POSTURES))
     for t in transitions.TRANSITIONS:
         cs = load_channelset(CHANNELSETS / f"{t.name}.chset.env")
-        for frame, posture in ((0, t.start), (-1, t.end)):
+        ends = ((0, t.start),) if t.name in deaths.death_specs() else ((0, t.start), (-1, t.end))
+        for frame, posture in ends:  # a death ends where the physics laid it (its own DEAD variant)
             q = keys[posture].poses[postures.SOLDIER]
             got = np.concatenate(
                 [cs.angles(cs.channel(j))[frame] for j, jt in soldier.joints.items() if jt.ndofs]
@@ -179,7 +185,8 @@ def test_m16_library_holds_the_m16_by_its_own_grip_and_handguard():
         assert row["rifle_penetration_cm"] <= 1.0 and row["rifle_in_body_cm"] <= 1.0
         m16 = play(cs, figs).locations["M16.fig"]
         assert lowest_point(figs, "M16.fig", m16).min() >= -1.0
-        ak = play(load_channelset(CHANNELSETS / f"{name}.chset.env"), figs).locations["AK_47.fig"]
+        # the AK of the DI.fig clip: both slaves are put down on their kneecaps alike (slave_contacts)
+        ak = play(load_channelset(CHANNELSETS / f"{name}_low.chset.env"), figs).locations["AK_47.fig"]
         sites = {t: figs.kin[t].site_globals(np.zeros(0)) for t in ("AK_47.fig", "M16.fig")}
         butt = {t: sites[t][figs.kin[t].site_names.index("rifle.butt")] for t in sites}
         if name == "kstow2kfire":  # nothing near the ground: the M16 is the AK's placement, butt on butt

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from server.authoring import crawl, gait, postures, reactions, transitions, turns
+from server.authoring import crawl, deaths, gait, postures, reactions, transitions, turns
 from server.authoring.motion import KeyPosture
 from server.authoring.quality_frames import FigureSet
 from server.authoring.slave_contacts import rest_slave_forearms, rest_slave_knees
@@ -95,6 +95,7 @@ class Clip:
     stride_length: float | None = None
     ground_speed: float | None = None
     end_offset: tuple[float, float, float] | None = None
+    release_frame: int | None = None  # deaths: the frame the hands let go of the rifle
 
 
 @dataclass(frozen=True)
@@ -108,12 +109,15 @@ class ClipJob:
 
 def clip_jobs() -> list[ClipJob]:
     """Every clip of the library, in build order."""
+    dying = deaths.death_specs()
     jobs = [
         ClipJob(
             t.name,
             "static",
             lambda ctx, t=t: Clip(transitions.record_transition(t, ctx.keys, (ctx.soldier, ctx.rifle))),
         )
+        if t.name not in dying
+        else ClipJob(t.name, "static", lambda ctx, d=dying[t.name]: _death(d, ctx))
         for t in transitions.TRANSITIONS
     ]
     for name, make in gait.locomotion_clips().items():
@@ -131,6 +135,11 @@ def _moved(frames: ClipFrames, end_offset: tuple[float, float, float]) -> Clip:
     return Clip(frames, end_offset=end_offset)
 
 
+def _death(spec: deaths.DeathSpec, ctx: BuildContext) -> Clip:
+    clip = deaths.simulate(spec, ctx.keys, (ctx.soldier, ctx.rifle))
+    return Clip(clip.frames, release_frame=clip.release_frame)
+
+
 def record(job: ClipJob, ctx: BuildContext) -> Channelset:
     """The soldier.fig channelset of one clip."""
     clip = job.make(ctx)
@@ -143,6 +152,8 @@ def record(job: ClipJob, ctx: BuildContext) -> Channelset:
         )
     if clip.end_offset is not None:
         chset = replace(chset, end_offset=tuple(round(v, 4) for v in clip.end_offset))
+    if clip.release_frame is not None:
+        chset = replace(chset, release_frame=clip.release_frame)
     return chset
 
 
@@ -160,7 +171,12 @@ def lift_off_ground(chset: Channelset, body: Figure) -> None:
     chan = next(c for c in chset.figure_channels() if c.column == bf.figure_channel)
     lift = np.maximum(0.0, -lowest_point(FigureKinematics(body), poses, chset.transforms(chan)))
     if lift.any():
-        chset.fig_pos[:, :, 1] += lift[:, None].astype(np.float32)
+        held = np.ones(chset.nframes, bool)  # the rifle rises with the hands only while they hold it
+        if chset.release_frame is not None:
+            held[chset.release_frame :] = False
+        lifted = np.where(held[:, None], lift[:, None], 0.0)
+        lifted[:, chan.column] = lift
+        chset.fig_pos[:, :, 1] += lifted.astype(np.float32)
 
 
 def slave_one(
@@ -190,17 +206,30 @@ def slave_pair(ctx: BuildContext) -> MasterSlavePair:
 # --- graphs and start-up files ------------------------------------------------------------------------------
 
 
+def _end_node(t: transitions.TransitionSpec) -> str:
+    """The graph node a transition ends in: a death's own DEAD variant (``DEAD@ststow``), else its posture."""
+    return deaths.dead_node(t.name) if t.name in deaths.death_specs() else t.end
+
+
 def static_graph(suffix: str) -> PostureGraph:
-    """Figure 7: the eight postures, the 17 transition files and their arcs (reverse arcs play backwards)."""
+    """Figure 7: the postures, the 17 transition files and their arcs (reverse arcs play backwards).
+
+    Each simulated death ends in its own DEAD variant node (``DEAD@<start>``, :mod:`server.authoring.deaths`)
+    and plays at its recorded length (``-1``); getting up from it replays that death backwards, slowly
+    (:data:`server.authoring.deaths.GET_UP_SECONDS`)."""
     files = [f"../channelsets/{t.name}{suffix}.chset.env" for t in transitions.TRANSITIONS]
     arcs: list[Arc] = []
+    dying = deaths.death_specs()
     for i, t in enumerate(transitions.TRANSITIONS):
+        if t.name in dying:
+            arcs.append(Arc(t.start, _end_node(t), i, True, -1.0))
+            arcs.append(Arc(_end_node(t), t.start, i, False, deaths.GET_UP_SECONDS))
+            continue
         arcs.append(Arc(t.start, t.end, i, True, t.duration))
-        if t.end != "DEAD":
-            arcs.append(Arc(t.end, t.start, i, False, t.duration))
-    back = next(i for i, t in enumerate(transitions.TRANSITIONS) if t.name == "ststow2dead")
-    arcs.append(Arc("DEAD", "STAND_STOWED", back, False, transitions.DEAD_TO_STAND_SECONDS))
-    return PostureGraph(list(postures.POSTURES), files, arcs)
+        arcs.append(Arc(t.end, t.start, i, False, t.duration))
+    nodes = [p for p in postures.POSTURES if p != deaths.DEAD]
+    nodes += [deaths.dead_node(d.name) for d in deaths.DEATHS]
+    return PostureGraph(nodes, files, arcs)
 
 
 def _container_graph(
@@ -341,7 +370,7 @@ def select(jobs: Sequence[ClipJob], only: str | None) -> list[ClipJob]:
 def _graph_endpoints(kind: str) -> dict[str, list[tuple[str, int]]]:
     """Per posture node of a graph kind: the (clip, frame) where its arcs arrive or leave (-1 = last)."""
     if kind == "static":
-        arcs = [(t.start, t.end, t.name, True) for t in transitions.TRANSITIONS]
+        arcs = [(t.start, _end_node(t), t.name, True) for t in transitions.TRANSITIONS]
     elif kind == "loco":
         arcs = gait.loco_arcs()
     elif kind == "turn":

@@ -284,6 +284,7 @@ class MasterSlavePair:
         self,
         master_pose: np.ndarray,
         master_location: np.ndarray | None = None,
+        release_frame: int | None = None,
         *,
         targets: Mapping[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -306,12 +307,13 @@ class MasterSlavePair:
         opts: dict[str, Any] = {"iterations": 80, "rest_gain": 0.1, "tolerance": 0.02}
         opts.update(self.ik_options)
         pose, self.last_report = ik.solve(sk, start, goals, slave_loc, rest_pose=start, **opts)
-        return pose, slave_loc
+        return _let_go(pose, start, release_frame), slave_loc
 
     def slave_clip(
         self,
         master_poses: np.ndarray,
         master_locations: np.ndarray,
+        release_frame: int | None = None,
         *,
         targets: Mapping[str, np.ndarray] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -329,7 +331,7 @@ class MasterSlavePair:
         mk, sk = self.master_kin, self.slave_kin
         q = np.asarray(master_poses, dtype=np.float64)
         loc = np.asarray(master_locations, dtype=np.float64)
-        pose, slave_loc = self.slave_pose(q, loc, targets=targets)
+        pose, slave_loc = self.slave_pose(q, loc, release_frame, targets=targets)
         n = len(pose)
         goals = self.goals(mk.site_globals(q, loc), targets=targets)
         if n < 3 or not goals:
@@ -350,6 +352,7 @@ class MasterSlavePair:
         opts.update(self.ik_options)
         opts["max_dof_step"] = SMOOTH_MAX_DOF_STEP
         out, self.last_report = ik.solve(sk, blend, goals, slave_loc, rest_pose=blend, **opts)
+        out = _let_go(out, start, release_frame)
         out[[0, -1]] = pose[[0, -1]]
         return out, slave_loc
 
@@ -360,6 +363,23 @@ class MasterSlavePair:
         pose, loc = self.slave_pose(self.master_kin.neutral_pose(), self.master.location)
         self.slave_kin.set_pose(pose)
         self.slave.location = loc
+
+
+RELEASE_FADE_FRAMES = 12  # after the hands let go, the arm goals fade out over this many frames
+
+
+def _let_go(solved: np.ndarray, copied: np.ndarray, release_frame: int | None) -> np.ndarray:
+    """Slave poses ``(n, ndof)`` of a clip whose hands let go of the rifle at ``release_frame`` (a death):
+    the solved poses while the rifle is held, blending (smoothstep over :data:`RELEASE_FADE_FRAMES`) into
+    the copied angles and blended spine. Solving a flung body onto the master's palms, elbows and torso
+    sites flipped the DI's shoulders and spine between branches (up to 160 degrees in one frame), the DI's
+    torso being shaped differently; fading the goals' weights still snapped at the end (IK meets a goal of
+    any weight), so the poses themselves are blended."""
+    if release_frame is None or solved.ndim != 2:
+        return solved
+    u = np.clip((np.arange(len(solved)) - release_frame) / RELEASE_FADE_FRAMES, 0.0, 1.0)
+    w = (u * u * (3.0 - 2.0 * u))[:, None]
+    return solved + w * (copied - solved)
 
 
 def create_master_slave_pair(master: Figure, slave: Figure, rifle: Figure | None = None) -> MasterSlavePair:
@@ -489,7 +509,7 @@ def reslave_channelset(
             raise ValueError(f"{channelset.name}: rifle_locations must be ({n}, 4, 4)")
         figures.append(rifle)
         targets = held_rifle_targets(pair, q, loc, rifle, rifle_locations, channelset.release_frame)
-    pose, slave_loc = pair.slave_clip(q, loc, targets=targets)
+    pose, slave_loc = pair.slave_clip(q, loc, channelset.release_frame, targets=targets)
     out = Recording(figures)
     out.poses[pair.slave.name].extend(pose)
     out.roots[pair.slave.name].extend([pair._slave_root] * n)

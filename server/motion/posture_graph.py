@@ -18,6 +18,10 @@ anywhere and blank lines are ignored::
 Arc times are seconds (> 0), or -1 for the channelset's stored duration. Nodes are static postures; an arc
 plays a channelset forwards or backwards (reverse transitions reuse the forward recording). Every malformed
 file raises :class:`PostureGraphError` naming the file and line.
+
+**Variant nodes.** A node ``NAME@variant`` (e.g. ``DEAD@ststow``: dead the way a standing soldier falls) is
+a variant of posture ``NAME`` (:func:`posture_of`): asked for posture ``NAME``, a path goes to the variant it
+reaches first (:meth:`PostureGraph.nearest`), and a soldier already in one stays.
 """
 
 from __future__ import annotations
@@ -34,6 +38,11 @@ from server.motion.errors import PostureGraphError
 _INT = re.compile(r"[+-]?[0-9]+", re.ASCII)
 _FLOAT = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?", re.ASCII)
 _DIRECTIONS = {"forward": True, "forwards": True, "backward": False, "backwards": False}
+
+
+def posture_of(node: str) -> str:
+    """The posture a node shows: ``DEAD@ststow`` -> ``DEAD``; a plain node is its own posture."""
+    return node.partition("@")[0]
 
 
 @dataclass(frozen=True)
@@ -67,6 +76,33 @@ class PostureGraph:
             self.file_lines = [None] * len(self.files)
         self._tokens = {p: i for i, p in enumerate(self.postures)}
 
+    def variants(self, posture: str) -> list[str]:
+        """The nodes that show ``posture`` (the node itself, or its ``posture@...`` variants)."""
+        return [p for p in self.postures if posture_of(p) == posture_of(posture)]
+
+    def nearest(self, start: str, posture: str, durations: Sequence[float] | None = None) -> str:
+        """The node of ``posture`` (any variant) to head for from ``start``: ``start`` itself when it is one;
+        else the quickest variant one arc away (a kneeling soldier dies his kneeling death, even when
+        standing up first and dying standing would end sooner); else the variant reached quickest. An exact
+        node name is returned as it is."""
+        self.token(start)
+        if posture in self._tokens:
+            return posture
+        if posture_of(start) == posture:
+            return start
+        options = self.variants(posture)
+        if not options:
+            raise PostureGraphError(f"unknown posture {posture!r}", self.filename)
+        direct = [(self.arc_time(a, durations), self._tokens[a.end], a.end) for a in self.arcs_from(start)]
+        direct = [d for d in direct if d[2] in options]
+        if direct:
+            return min(direct)[2]
+        best, _ = self._dijkstra(start, durations)
+        reached = [p for p in options if p in best]
+        if not reached:
+            raise PostureGraphError(f"posture {posture!r} cannot be reached from {start!r}", self.filename)
+        return min(reached, key=lambda p: (best[p], self._tokens[p]))
+
     def token(self, posture: str) -> int:
         try:
             return self._tokens[posture]
@@ -89,11 +125,30 @@ class PostureGraph:
         return float(durations[arc.channelset])
 
     def shortest_path(self, start: str, goal: str, durations: Sequence[float] | None = None) -> list[Arc]:
-        """The arcs of the quickest route from ``start`` to ``goal`` (Dijkstra over arc times; [] if same)."""
+        """The arcs of the quickest route from ``start`` to ``goal`` (Dijkstra over arc times; [] if same).
+        A ``goal`` that names a posture with variant nodes goes to the nearest variant."""
         self.token(start)
+        if goal not in self._tokens and self.variants(goal):
+            goal = self.nearest(start, goal, durations)
         self.token(goal)
         if start == goal:
             return []
+        _, via = self._dijkstra(start, durations, goal)
+        if goal not in via:
+            raise PostureGraphError(f"posture {goal!r} cannot be reached from {start!r}", self.filename)
+        path: list[Arc] = []
+        node = goal
+        while node != start:
+            arc = via[node]
+            path.append(arc)
+            node = arc.start
+        path.reverse()
+        return path
+
+    def _dijkstra(
+        self, start: str, durations: Sequence[float] | None, goal: str | None = None
+    ) -> tuple[dict[str, float], dict[str, Arc]]:
+        """Quickest times from ``start`` (to every node, or until ``goal`` is settled), the arc into each."""
         adjacency: dict[str, list[tuple[float, Arc]]] = {p: [] for p in self.postures}
         for arc in self.arcs:
             adjacency[arc.start].append((self.arc_time(arc, durations), arc))
@@ -116,16 +171,7 @@ class PostureGraph:
                     via[arc.end] = arc
                     heapq.heappush(heap, (nd, counter, arc.end))
                     counter += 1
-        if goal not in done:
-            raise PostureGraphError(f"posture {goal!r} cannot be reached from {start!r}", self.filename)
-        path: list[Arc] = []
-        node = goal
-        while node != start:
-            arc = via[node]
-            path.append(arc)
-            node = arc.start
-        path.reverse()
-        return path
+        return {p: d for p, d in best.items() if p in done}, {p: a for p, a in via.items() if p in done}
 
     def path_time(self, path: Sequence[Arc], durations: Sequence[float] | None = None) -> float:
         return float(sum(self.arc_time(a, durations) for a in path))

@@ -38,6 +38,7 @@ from server.motion.binding import protofiletype
 from server.motion.channelset import Channelset
 from server.motion.errors import PostureGraphError
 from server.motion.posture_change import LoadedPostureGraph
+from server.motion.posture_graph import posture_of
 from server.motion.sampling import ClipLibrary
 from server.peabody.model import Figure
 from server.soldier.locomotion import CLIP_OF, NSTATES
@@ -120,8 +121,11 @@ class MotionLibrary:
         if not figure_sets:
             raise ValueError("a motion library needs at least one figure set")
         self.static, self.loco, self.crawl = static, loco, crawl
-        self.postures: list[str] = list(static.graph.postures)
+        self.postures: list[str] = list(static.graph.postures)  # node names (``DEAD@ststow``: a variant)
+        self.posture_names: list[str] = [posture_of(p) for p in self.postures]  # what each node shows
         self._node = {p: i for i, p in enumerate(self.postures)}
+        for i, p in enumerate(self.posture_names):  # a posture known only by variants: its first one
+            self._node.setdefault(p, i)
         entries: list[tuple[str, int, Channelset, str]] = []  # (clip name, graph, channelset, stem)
         for gi, loaded in ((GRAPH_STATIC, static), (GRAPH_LOCO, loco), (GRAPH_CRAWL, crawl)):
             if loaded is None:
@@ -166,6 +170,7 @@ class MotionLibrary:
         self._loco_table(entries)
         self._rest_poses()
         self._paths: dict[tuple[int, int], tuple[PathStep, ...] | None] = {}
+        self._variant_goals()
 
     # -- construction helpers ----------------------------------------------------------------------------
     def _loco_table(self, entries: list[tuple[str, int, Channelset, str]]) -> None:
@@ -230,6 +235,23 @@ class MotionLibrary:
             arc = next((a for a in g.arcs if a.start == p), None)
             if arc is not None:  # starts there: forwards → first frame, backwards → last frame
                 self.rest_clip[node], self.rest_dir[node] = arc.channelset, -1 if arc.forward else 1
+
+    def _variant_goals(self) -> None:
+        """``goal_node[current, goal]``: the node to head for when asked for ``goal``'s posture while resting
+        in ``current`` — ``goal`` itself, except for a posture with variant nodes (``DEAD@...``): the variant
+        reached quickest (``current`` itself when it is one). Precomputed, so a request costs one lookup."""
+        n = len(self.postures)
+        g = self.static.graph
+        self.goal_node = np.tile(np.arange(n, dtype=np.int16), (n, 1))
+        for goal, posture in enumerate(self.posture_names):
+            if len(g.variants(posture)) < 2:
+                continue
+            for cur in range(n):
+                try:
+                    best = g.nearest(self.postures[cur], posture, self.static.durations)
+                except PostureGraphError:
+                    continue
+                self.goal_node[cur, goal] = self._node[best]
 
     # -- queries -----------------------------------------------------------------------------------------
     @property

@@ -365,7 +365,9 @@ class SoldierManager:
         kind = int(self._move[app]) if tb.speed[i] > MOVING_EPS else 0
         if kind:
             return int(self._base[kind])
-        return int(self._goal[app, int(tb.weapon[i] == _FIRING)])
+        goal = int(self._goal[app, int(tb.weapon[i] == _FIRING)])
+        # a posture with variant nodes (DEAD@...): the variant nearest from here (table lookup)
+        return int(self.library.goal_node[int(tb.node[i]), goal]) if goal >= 0 else goal
 
     def _on_event(
         self, i: int, t: float, immediate: bool, captured: tuple[np.ndarray, np.ndarray] | None
@@ -697,19 +699,29 @@ class SoldierManager:
             "name": self.names.get(i, ""),
             "mode": mode.name,
             "state": LocoState(int(tb.loco[i])).name,
-            "posture": self.library.postures[int(tb.node[i])],
+            "posture": self.library.posture_names[int(tb.node[i])],
+            "node": self.library.postures[int(tb.node[i])],
             "clip": self.library.clip_names[int(tb.clip[i])],
             "forward": bool(tb.direc[i] > 0),
             "clip_start": float(tb.start[i]),
             "clip_duration": float(tb.dur[i]),
-            "goal": self.library.postures[d] if (d := self._desired(i)) >= 0 else None,
-            "path": [self.library.postures[s.end] for s in self._paths[i][0]] if i in self._paths else [],
+            "goal": self.library.posture_names[d] if (d := self._desired(i)) >= 0 else None,
+            "path": [self.library.posture_names[s.end] for s in self._paths.get(i, [()])[0]],
             "speed": float(tb.speed[i]),
             "backward": bool(tb.backward[i]),
             "heading": float(tb.heading[i]),
             "foot": "left" if tb.foot[i] == 0 else "right",
             "blending": bool(tb.blend_len[i] > 0),
         }
+
+    def _posture_counts(self, per_node: np.ndarray) -> dict[str, int]:
+        """Resting soldiers per posture name (the variants of a posture counted together)."""
+        out: dict[str, int] = {}
+        for k, v in enumerate(per_node.tolist()):
+            if v:
+                name = self.library.posture_names[k]
+                out[name] = out.get(name, 0) + int(v)
+        return out
 
     def status(self) -> dict[str, Any]:
         """Counts per mode, gait state and resting posture, tick statistics: the periodic status report."""
@@ -727,7 +739,7 @@ class SoldierManager:
             "capacity": int(tb.capacity),
             "modes": modes,
             "gaits": {LocoState(k).name.lower(): int(v) for k, v in enumerate(states) if v},
-            "postures": {self.library.postures[k]: int(v) for k, v in enumerate(nodes) if v},
+            "postures": self._posture_counts(nodes),
             "transitions": len(self._paths),
             "ticks": self.ticks,
             "mean_tick_us": 1e6 * self.stats["tick_seconds"] / ticks,

@@ -1,0 +1,85 @@
+"""Physics deaths: the MuJoCo ragdoll mirrors soldier.fig; a rebuilt death reproduces the committed clip."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from server.authoring import deaths, postures
+from server.authoring.build import BuildContext
+from server.authoring.postures import RIFLE, SOLDIER
+from server.authoring.slaving import create_channelset_motion
+from server.motion.cache import load_channelset
+from server.peabody.fk import FigureKinematics
+from ttes.paths import CHANNELSETS, FIGURES
+
+REPRODUCED = "prfire2dead"  # the shortest simulation
+
+
+@pytest.fixture(scope="module")
+def ctx() -> BuildContext:
+    c = BuildContext.load(FIGURES)
+    start = deaths.death_specs()[REPRODUCED].start
+    names = [start, "STAND_FIRE", deaths.DEAD, deaths.SLUMP]
+    c._keys.update(postures.build_postures(c.soldier, c.rifle, names))
+    return c
+
+
+def _played(ctx: BuildContext, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, int | None]:
+    cs = load_channelset(CHANNELSETS / f"{name}.chset.env", use_cache=False)
+    rec = create_channelset_motion(cs, [ctx.soldier, ctx.rifle])
+    return (
+        np.asarray(rec.poses[ctx.soldier.name]),
+        np.asarray(rec.locations[ctx.soldier.name]),
+        np.asarray(rec.locations[ctx.rifle.name]),
+        cs.release_frame,
+    )
+
+
+def test_the_ragdoll_mirrors_the_figure(ctx: BuildContext) -> None:
+    pytest.importorskip("mujoco")
+    from server.authoring.ragdoll import BODY_MASS, Ragdoll
+
+    key = ctx.keys["STAND_FIRE"]
+    doll = Ragdoll(ctx.soldier, ctx.rifle, key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE])
+    kin = FigureKinematics(ctx.soldier)
+    g = kin.segment_globals(key.poses[SOLDIER], key.locations[SOLDIER])
+    for i, name in enumerate(kin.segment_names):  # every MuJoCo body is its segment, frame for frame
+        np.testing.assert_allclose(doll.body_global(name), g[i], atol=1e-6, err_msg=name)
+    np.testing.assert_allclose(doll.pose(), key.poses[SOLDIER], atol=1e-12)
+    np.testing.assert_allclose(doll.root_location(), key.locations[SOLDIER], atol=1e-9)
+    np.testing.assert_allclose(doll.rifle_location(), key.locations[RIFLE], atol=1e-9)
+    body = [b for b in range(1, doll.model.nbody) if doll.model.body(b).name != "rifle"]
+    assert doll.model.body_mass[body].sum() == pytest.approx(BODY_MASS)
+    # held: both palms keep their grip while the body moves; released, the rifle falls on its own
+    grip = np.linalg.inv(doll.body_global("right_palm")) @ doll.body_global("rifle")
+    doll.step(60)
+    held = np.linalg.inv(doll.body_global("right_palm")) @ doll.body_global("rifle")
+    assert np.linalg.norm(held[:3, 3] - grip[:3, 3]) < 0.5  # cm
+    doll.release()
+    before = doll.rifle_location()[1, 3]
+    doll.step(120)
+    assert doll.rifle_location()[1, 3] < before - 5.0
+
+
+def test_rebuilding_a_death_reproduces_the_committed_clip(ctx: BuildContext) -> None:
+    pytest.importorskip("mujoco")
+    clip = deaths.simulate(deaths.death_specs()[REPRODUCED], ctx.keys, (ctx.soldier, ctx.rifle))
+    poses, roots, rifles, release = _played(ctx, REPRODUCED)
+    assert clip.frames.nframes == len(poses) and clip.release_frame == release
+    np.testing.assert_allclose(clip.frames.poses, poses, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(clip.frames.roots[:, :3, 3], roots[:, :3, 3], rtol=0, atol=1e-2)  # cm
+    np.testing.assert_allclose(clip.frames.rifles[:, :3, 3], rifles[:, :3, 3], rtol=0, atol=1e-2)
+
+
+@pytest.mark.parametrize("name", [d.name for d in deaths.DEATHS])
+def test_every_death_lets_go_of_the_rifle_and_ends_at_rest(ctx: BuildContext, name: str) -> None:
+    poses, roots, rifles, release = _played(ctx, name)
+    assert release is not None and 0 < release < len(poses) - 1
+    kin = FigureKinematics(ctx.soldier)
+    sites = kin.site_globals(poses[-3:], roots[-3:])[..., :3, 3]
+    speed = np.linalg.norm(np.diff(sites, axis=0), axis=-1) * 60.0 / 100.0  # m/s
+    assert speed.max() <= 0.5
+    rifle_speed = np.linalg.norm(np.diff(rifles[-3:, :3, 3], axis=0), axis=-1) * 60.0 / 100.0
+    assert rifle_speed.max() <= 0.5
+    assert postures.lowest_point(kin, poses[-1], roots[-1]) <= 2.0  # lying on the ground
