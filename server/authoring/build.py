@@ -32,7 +32,7 @@ import numpy as np
 from server.authoring import crawl, deaths, gait, postures, reactions, transitions, turns
 from server.authoring.motion import KeyPosture
 from server.authoring.quality_frames import FigureSet
-from server.authoring.slave_contacts import rest_slave_forearms, rest_slave_knees
+from server.authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees
 from server.authoring.slaving import MasterSlavePair
 from server.authoring.transitions import ClipFrames, clip_to_channelset
 from server.motion.binding import bind_channelset, protofiletype
@@ -427,13 +427,7 @@ def _snap_end(data: np.ndarray, frame: int, ref: np.ndarray) -> None:
     """Set ``data[frame]`` (0 or -1) to ``ref`` and carry the change into the clip, fading out smoothly, so
     an endpoint that the slave solve put a little elsewhere in this clip does not jump at its first or last
     frame."""
-    n = min(SNAP_FADE_FRAMES, len(data) // 2)
-    delta = ref - data[frame]
-    t = np.arange(n) / n
-    fade = 1.0 - t * t * (3.0 - 2.0 * t)  # 1 at the endpoint, easing to 0
-    rows = np.arange(n) if frame == 0 else len(data) - 1 - np.arange(n)
-    data[rows] += (fade[:, None] * delta[None, :]).astype(data.dtype)
-    data[frame] = ref
+    pin_end(data, frame, ref, SNAP_FADE_FRAMES)
 
 
 def build(

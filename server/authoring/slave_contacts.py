@@ -169,8 +169,12 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
             tolerance=0.02, max_dof_step=0.03,
         )  # fmt: skip
     # frames solved alone land a few degrees apart where the neck is at its limit: smooth the change over
-    # the clip, then put the palms and the eye back exactly (a small, smooth correction)
-    pose = q + _smooth(pose - q)
+    # the clip (its ends kept), then put the palms and the eye back exactly (a small, smooth correction)
+    change = pose - q
+    smooth = _smooth(change)
+    for end in (0, -1):  # the ends as solved (so clips meeting at a posture agree), the smoothing faded in
+        pin_end(smooth, end, change[end], SMOOTH_FRAMES * 2)
+    pose = q + smooth
     pose, _ = ik.solve(
         kin, pose, [g for g in goals if g.priority == 2], loc, iterations=60, damping=2.0, rest_pose=pose,
         rest_gain=0.05, tolerance=0.02, max_dof_step=0.03,
@@ -209,3 +213,15 @@ def _smooth(offset: np.ndarray) -> np.ndarray:
         [np.repeat(offset[:1], SMOOTH_FRAMES, 0), offset, np.repeat(offset[-1:], SMOOTH_FRAMES, 0)]
     )
     return np.stack([np.convolve(pad[:, j], k, mode="valid") for j in range(offset.shape[1])], axis=1)
+
+
+def pin_end(data: np.ndarray, frame: int, value: np.ndarray, frames: int) -> None:
+    """Set ``data[frame]`` (0 or -1) to ``value`` and carry the change into the clip over ``frames`` frames,
+    fading out smoothly (in place), so the end does not jump away from its neighbours."""
+    n = min(frames, len(data) // 2)
+    delta = value - data[frame]
+    t = np.arange(n) / n
+    fade = 1.0 - t * t * (3.0 - 2.0 * t)  # 1 at the end, easing to 0
+    rows = np.arange(n) if frame == 0 else len(data) - 1 - np.arange(n)
+    data[rows] += (fade[:, None] * delta[None, :]).astype(data.dtype)
+    data[frame] = value
