@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from server.authoring import postures, reactions
-from server.authoring.quality import FigureSet, play
+from server.authoring.quality import FigureSet, check_clip, play
 from server.motion.cache import load_channelset
 from server.motion.posture_change import load_posture_graph
 from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
@@ -51,9 +51,11 @@ def test_reaction_leaves_and_returns_to_its_posture_and_keeps_its_contacts(r, fi
     np.testing.assert_allclose(loc[0], loc[-1], atol=1e-4)
     sites = kin.site_globals(q, loc)[..., :3, 3]
     legs, arms = reactions.ground_contacts(kin, key)
-    for s in legs + arms:  # what touches the ground stays there
-        p = sites[:, kin.site_names.index(s)]
-        assert np.linalg.norm(p - p[0], axis=1).max() < 1.5, s
+    for s in legs + arms:  # what touches the ground stays there (an elbow's centre rolls a little about the
+        p = sites[:, kin.site_names.index(s)]  # forearm lying on the ground: the check judges the contact)
+        assert np.linalg.norm(p - p[0], axis=1).max() < (1.5 if s in legs else 2.0), s
+    row = check_clip(cs, figset)
+    assert row["foot_skate_cm"] <= 2.0 and row["contact_slide_cm"] <= 3.0, row["contact_slide_part"]
     nose = sites[:, kin.site_names.index("bottom_head.nose")]
     rk = figset.kin["AK_47.fig"]
     gun = rk.site_globals(frames.poses["AK_47.fig"], frames.locations["AK_47.fig"])[..., :3, 3]
