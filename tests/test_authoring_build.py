@@ -200,7 +200,7 @@ def test_m16_library_holds_the_m16_by_its_own_grip_and_handguard():
             np.testing.assert_allclose(fire, ak[-1, :3, :3] @ np.array([0.0, 0.0, -1.0]), atol=1e-5)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 14 open: prone, the M16's butt goes 1.4-4 cm into DI's upper arm")
+@pytest.mark.xfail(strict=True, reason="issue 14 open: prone, the M16's butt is 1.4-4 cm in DI's arm")
 def test_the_prone_m16_stays_out_of_the_body():
     from server.authoring.quality import FigureSet, check_clip
     from server.motion.cache import load_channelset
