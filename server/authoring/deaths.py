@@ -15,6 +15,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    key's, legs straight and feet pointed, :func:`limp_pose`) fading to a faint tone by
    :attr:`DeathSpec.fade`; the knees give way at once (:data:`KNEES_GIVE_WAY`: held, they swung the shins up
    as the body pitched forward), arms, neck and head keep no tone (:data:`LOOSE`); dead joints stay damped;
+   once he is down (after :attr:`DeathSpec.fade`, over :data:`KNEE_STRAIGHTEN`) the legs roll outward at
+   the hips and the feet evert (:data:`ROLLED_LEGS`, :data:`HIP_ROLL`, at :data:`LEG_TONE`: the feet lie on
+   their inner sides, heels low), and a standing death's knees straighten (:data:`KNEE_TONE`: bent, they
+   left him bottom-up on his knees);
 3. **the rifle is let go** at :attr:`DeathSpec.release` (the welds to the palms are switched off; the frame
    is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`);
 4. **the body settles**: recording (60 fps) stops once every body has been still (:data:`REST_SPEED`) for
