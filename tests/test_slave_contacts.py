@@ -1,5 +1,6 @@
-"""Kneeling contacts carried over to the DI.fig slave (server/authoring/slave_contacts.py): where the master
-kneels on his kneecap, the slave does too, his feet stay where they were and the rifle stays in his hands."""
+"""Kneeling and prone contacts carried over to the DI.fig slave (server/authoring/slave_contacts.py): where
+the master kneels on his kneecap, the slave does too, his feet stay where they were and the rifle stays in his
+hands; where the master's prone forearms lie on the ground, so do the slave's."""
 
 from __future__ import annotations
 
@@ -10,9 +11,9 @@ import pytest
 
 pytest.importorskip("scipy")
 
-from server.authoring.build import BuildContext, slave_pair
+from server.authoring.build import SNAP_FADE_FRAMES, BuildContext, _snap_end, lift_off_ground, slave_pair
 from server.authoring.quality_frames import FigureSet, play
-from server.authoring.slave_contacts import part_heights, rest_slave_knees
+from server.authoring.slave_contacts import part_heights, rest_slave_forearms, rest_slave_knees
 from server.authoring.slaving import reslave_channelset
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
@@ -69,3 +70,36 @@ def test_a_standing_clip_is_left_alone(kneeling) -> None:
     data = slave.joint_data.copy()
     assert not rest_slave_knees(master, slave, figs).any()
     np.testing.assert_array_equal(slave.joint_data, data)
+
+
+@pytest.fixture(scope="module")
+def prone():
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
+    master = load_channelset(CHANNELSETS / "prfire_recoil.chset.env", use_cache=False)
+    slave = reslave_channelset(master, slave_pair(ctx), "prfire_recoil_low.chset")
+    lift_off_ground(slave, ctx.di)
+    return figs, master, slave
+
+
+def test_the_prone_slave_lays_his_forearms_on_the_ground_with_the_rifle_in_his_hands(prone) -> None:
+    figs, master, slave = prone
+    rested = copy.deepcopy(slave)
+    rest_slave_forearms(master, rested, figs)
+    before = _knees(figs, slave, "forearm")
+    after, m = _knees(figs, rested, "forearm"), _knees(figs, master, "forearm")
+    assert np.all(before - m > 2.0)  # DI.fig's prone shoulders sit higher: its forearm floats
+    assert np.all(after < 2.0)  # resting (the quality check's 2 cm)
+    palms, eye = ("right_palm.palmcenter", "left_palm.palmcenter"), ("bottom_head.sight",)
+    np.testing.assert_allclose(_sites(figs, rested, palms), _sites(figs, slave, palms), atol=0.1)
+    assert np.linalg.norm(_sites(figs, rested, eye) - _sites(figs, slave, eye), axis=-1).max() < 2.1
+    q = play(rested, figs).poses["DI.fig"]
+    assert np.degrees(np.abs(np.diff(q, axis=0))).max() < 10.0  # smooth over the clip
+
+
+def test_a_snapped_endpoint_fades_into_the_clip() -> None:
+    data = np.zeros((30, 2), np.float32)
+    _snap_end(data, -1, np.array([1.0, -2.0]))
+    np.testing.assert_allclose(data[-1], [1.0, -2.0])
+    assert np.abs(np.diff(data, axis=0)).max() < 0.25  # no jump at the end: spread over SNAP_FADE_FRAMES
+    assert not data[: 30 - SNAP_FADE_FRAMES].any()

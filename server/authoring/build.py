@@ -32,10 +32,10 @@ import numpy as np
 from server.authoring import crawl, deaths, gait, postures, reactions, transitions, turns
 from server.authoring.motion import KeyPosture
 from server.authoring.quality_frames import FigureSet
-from server.authoring.slave_contacts import rest_slave_knees
+from server.authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees
 from server.authoring.slaving import MasterSlavePair
 from server.authoring.transitions import ClipFrames, clip_to_channelset
-from server.motion.binding import protofiletype
+from server.motion.binding import bind_channelset, protofiletype
 from server.motion.cache import load_channelset
 from server.motion.channelset import Channelset
 from server.motion.channelset_file import format_channelset, parse_channelsets, save_channelset
@@ -191,6 +191,8 @@ def slave_one(
     else:
         out = reslave_channelset(chset, pair, name)
     rest_slave_knees(chset, out, ctx.figure_set)  # DI's kneecaps sit higher than the master's
+    lift_off_ground(out, ctx.di)
+    rest_slave_forearms(chset, out, ctx.figure_set)  # ... and its prone forearms float
     lift_off_ground(out, ctx.di)
     return out
 
@@ -390,8 +392,9 @@ def snap_endpoints(
     """Make the clips meeting at a posture node agree exactly there (joint channels, in place).
 
     Recorded soldier clips already meet exactly; re-slaved DI clips can differ by the slave solver's
-    tolerance, so the first clip's pose at each node is copied to the others' endpoints. When that clip is
-    not among ``chsets`` (a partial build), ``committed(name)`` gives its file's version as the reference."""
+    tolerance, so the first clip's pose at each node is copied to the others' endpoints (faded into them).
+    When that clip is not among ``chsets`` (a partial build), ``committed(name)`` gives its file's version as
+    the reference."""
     nodes: dict[str, list[tuple[str, int]]] = {}
     for kind in GRAPH_FILES["DI"]:  # a node of several graphs (STAND_STOWED, CRAWL) is one pose
         for node, ends in _graph_endpoints(kind).items():
@@ -406,7 +409,25 @@ def snap_endpoints(
         ref_clip, ref_frame = (first, ends[0][1]) if first is not None else (chsets[have[0][0]], have[0][1])
         ref = ref_clip.joint_data[ref_frame].copy()
         for c, f in have:
-            chsets[c].joint_data[f] = ref
+            _snap_end(chsets[c].joint_data, f, ref)
+
+
+def clamp_to_limits(chset: Channelset, body: Figure) -> None:
+    """Keep ``body``'s joint channels of ``chset`` within the figure's joint limits (in place)."""
+    bf = bind_channelset(chset, [body]).figures[0]
+    kin = FigureKinematics(body)
+    q = np.clip(chset.joint_data[:, bf.src], kin.lower[bf.dst], kin.upper[bf.dst])
+    chset.joint_data[:, bf.src] = q.astype(chset.joint_data.dtype)
+
+
+SNAP_FADE_FRAMES = 12  # a snapped endpoint's change fades out over this many frames (0.2 s at 60 fps)
+
+
+def _snap_end(data: np.ndarray, frame: int, ref: np.ndarray) -> None:
+    """Set ``data[frame]`` (0 or -1) to ``ref`` and carry the change into the clip, fading out smoothly, so
+    an endpoint that the slave solve put a little elsewhere in this clip does not jump at its first or last
+    frame."""
+    pin_end(data, frame, ref, SNAP_FADE_FRAMES)
 
 
 def build(
@@ -448,6 +469,8 @@ def build(
             return load_channelset(path, use_cache=False) if path.is_file() else None
 
         snap_endpoints(out, committed)
+        for chset in out.values():  # a snapped end faded into a joint at its limit can pass it by a hair
+            clamp_to_limits(chset, ctx.di)
     written: list[Path] = []
     for name in (j.name for j in jobs):
         if figure in ("soldier", "all"):

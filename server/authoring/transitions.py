@@ -34,6 +34,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -118,6 +119,9 @@ class TransitionSpec:
     in_hand: bool = False  # the right hand carries the rifle (its arm interpolated), not the upper torso
     # in_hand: when (s) the rifle turns in the right hand from its start to its end grip (default: the clip)
     hand_turn: tuple[float, float] | None = None
+    # in_hand: the left elbow is guided (lowest priority) from its start key's place to its end key's,
+    # relative to the chest, so the solved arm swings round the rifle on the end key's side of its swivel
+    guide_elbow: bool = False
 
 
 # --- clip frames --------------------------------------------------------------------------------------------
@@ -195,9 +199,11 @@ def _track(
     roots: np.ndarray,
     order: np.ndarray,
     iterations: int,
+    max_dof_step: float = 0.35,
 ) -> np.ndarray:
     """Solve frame after frame in ``order``, each frame starting from the previous solution moved by the
-    interpolated motion and pulled towards that start (not towards the interpolated pose)."""
+    interpolated motion and pulled towards that start (not towards the interpolated pose); ``max_dof_step``
+    (rad per iteration) small, no joint can leap to another solution between frames."""
     out = np.array(poses, dtype=np.float64)
     prev_in = poses[order[0]]
     prev_out = poses[order[0]]
@@ -212,6 +218,7 @@ def _track(
             iterations=iterations,
             rest_pose=start[None],
             rest_gain=0.1,
+            max_dof_step=max_dof_step,
         )
         prev_in, prev_out = poses[i], q[0]
         out[i] = q[0]
@@ -224,6 +231,8 @@ def track_solve(
     goals: Sequence[ik.Goal],
     roots: np.ndarray,
     iterations: int = 40,
+    max_dof_step: float = 0.35,
+    backward_only: bool = False,
 ) -> np.ndarray:
     """IK over a clip without jumps between solutions.
 
@@ -231,14 +240,30 @@ def track_solve(
     and a clip must also end exactly in its end key. So the goals are tracked forwards from the first frame
     and backwards from the last (each frame warm-started from its neighbour), the two tracks are blended
     with an ease-in/ease-out weight, and a short final solve from the blend puts the hands back on the
-    rifle with small steps (``max_dof_step``), so it cannot leave the blend's branch.
+    rifle with small steps (``max_dof_step``), so it cannot leave the blend's branch. ``backward_only``:
+    the track back from the end alone (where the forward one ends on another branch than the end key's,
+    and the backward one comes back to the start key's).
     """
     n = len(poses)
-    fwd = _track(kin, poses, goals, roots, np.arange(n), iterations)
-    bwd = _track(kin, poses, goals, roots, np.arange(n)[::-1], iterations)
     w = (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, n))) / 2.0
-    blend = fwd + w[:, None] * (bwd - fwd)
-    q, _ = ik.solve(kin, blend, goals, roots, iterations=40, rest_pose=blend, rest_gain=0.1, max_dof_step=0.1)
+    bwd = _track(kin, poses, goals, roots, np.arange(n)[::-1], iterations, max_dof_step)
+    if backward_only:
+        blend = bwd
+    else:
+        fwd = _track(kin, poses, goals, roots, np.arange(n), iterations, max_dof_step)
+        blend = fwd + w[:, None] * (bwd - fwd)
+    fix_step = 0.1  # rad
+    fix = min(fix_step, max_dof_step)  # (small steps: the tracks are on the rifle already, a few steps)
+    q, _ = ik.solve(
+        kin,
+        blend,
+        goals,
+        roots,
+        iterations=4 if max_dof_step < fix_step else 40,
+        rest_pose=blend,
+        rest_gain=0.1,
+        max_dof_step=fix,
+    )
     return q
 
 
@@ -277,7 +302,7 @@ class DerivedKey:
     hike_side: str = "left"
 
 
-KNEES_AT_CRAWL = "KNEEL_BOTH@CRAWL"  # on both knees, knees and toes where the crawl has them
+KNEES_AT_CRAWL = "KNEEL_BOTH@CRAWL"  # on both knees, knees and toes exactly where the crawl has them
 KNEEL_AT_CRAWL = "KNEEL_STOWED@CRAWL"  # on the right knee, that knee and its toes where the crawl has them
 SHUFFLED = "KNEEL_STOWED@SHUFFLED"  # right knee and toes as there, hips most of the way, left foot stays
 SHUFFLING = "KNEEL_STOWED@SHUFFLING"  # on the way there, the right hip hiked so the right knee can lift
@@ -286,7 +311,14 @@ TUCK = "TUCK@CRAWL"  # on both knees at the crawl's places, the left shin still 
 # Knees and toes already where the crawl has them, the soldier only pivots forward about them onto his
 # forearms. Fold and tuck bring the front leg back onto its knee without the foot touching the ground.
 DERIVED_KEYS: dict[str, DerivedKey] = {
-    KNEES_AT_CRAWL: DerivedKey("KNEEL_BOTH", "CRAWL", ("left_toes.distal", "right_toes.distal")),
+    KNEES_AT_CRAWL: DerivedKey(
+        "KNEEL_BOTH",
+        "CRAWL",
+        ("left_toes.distal", "right_toes.distal"),
+        hold=tuple(
+            (f"{s}_{site}", "CRAWL") for s in ("left", "right") for site in ("lower_leg.knee", "toes.distal")
+        ),
+    ),
     KNEEL_AT_CRAWL: DerivedKey("KNEEL_STOWED", KNEES_AT_CRAWL, ("right_toes.distal",)),
     SHUFFLED: DerivedKey(
         "KNEEL_STOWED",
@@ -294,8 +326,8 @@ DERIVED_KEYS: dict[str, DerivedKey] = {
         ("right_toes.distal",),
         fraction=0.85,
         hold=(
-            ("right_foot.heel", KNEEL_AT_CRAWL),
-            ("right_lower_leg.knee", KNEEL_AT_CRAWL),
+            ("right_foot.heel", KNEES_AT_CRAWL),
+            ("right_lower_leg.knee", KNEES_AT_CRAWL),
             ("left_foot.heel", "KNEEL_STOWED"),
         ),
     ),
@@ -568,6 +600,54 @@ def _in_right_hand(
     return palm @ held @ rigid_inverse(grip)
 
 
+# tracked back from the end key with at most 10 steps of 0.02 rad a frame (~11 degrees), as the crawl's
+# arms are
+SMALL_STEPS: dict[str, Any] = {"iterations": 10, "max_dof_step": 0.02, "backward_only": True}
+
+
+def _tracking(spec: TransitionSpec) -> dict[str, Any]:
+    """How :func:`track_solve` tracks ``spec``'s arms (default: its defaults)."""
+    if spec.guide_elbow:
+        return SMALL_STEPS
+    return {}
+
+
+def _turn_weight(spec: TransitionSpec, times: np.ndarray) -> np.ndarray:
+    """1 outside the hand turn, down to 0 in its middle: while the rifle turns in the right hand the left
+    palm keeps hold of the handguard but may turn on it (held to its grip there, the wrist ran into its
+    limits and the arm jumped between solutions)."""
+    a, b = spec.hand_turn or (0.0, spec.duration)
+    s = np.clip((times - a) / (b - a), 0.0, 1.0)
+    return 1.0 - np.sin(np.pi * s) ** 2
+
+
+def _elbow_guide(
+    kin: FigureKinematics,
+    first: KeyPosture,
+    last: KeyPosture,
+    poses: np.ndarray,
+    roots: np.ndarray,
+    times: np.ndarray,
+    spec: TransitionSpec,
+) -> ik.Goal:
+    """A low-priority goal for the left elbow: its place relative to the chest blends from the start key's
+    to the end key's over the hand turn. Without it the solved arm (palm on the rifle) kept whichever side
+    of its swivel it began on, and the clip had to jump to the end key's elbow on the ground."""
+    i = kin.site_names.index("left_upper_arm.distal")
+
+    def rel(key: KeyPosture) -> np.ndarray:
+        g = kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])
+        c = carrier_globals(kin, key.poses[SOLDIER], key.locations[SOLDIER])
+        return (rigid_inverse(c) @ g[i])[:3, 3]
+
+    a, b = spec.hand_turn or (0.0, spec.duration)
+    u = np.asarray(EASE(np.clip((times - a) / (b - a), 0.0, 1.0)), np.float64)
+    local = rel(first)[None] + u[:, None] * (rel(last) - rel(first))[None]
+    c = carrier_globals(kin, poses, roots)
+    pos = np.einsum("nij,nj->ni", c[:, :3, :3], local) + c[:, :3, 3]
+    return ik.Goal("left_upper_arm.distal", pos, None, 1.0 - _turn_weight(spec, times), 1, arm("left"))
+
+
 def record_transition(
     spec: TransitionSpec, keys: Mapping[str, KeyPosture], figures: Sequence[Figure], fps: float = FPS
 ) -> ClipFrames:
@@ -591,15 +671,18 @@ def record_transition(
         u_rifle = np.where(times >= st.start, _progress(st, times), u_rifle)
     off_a, off_b = palm_offsets(kin, rkin, first), palm_offsets(kin, rkin, last)
     goals: list[ik.Goal] = []
+    turn_w = _turn_weight(spec, times) if spec.guide_elbow else 1.0
     for side in ("left",) if spec.in_hand else ("right", "left"):
         tgt = palm_targets(rkin, rifles, side) @ slerp_frames(off_a[side], off_b[side], u_rifle)
         chain = arm(side)
         goals.append(ik.Goal(f"{side}_palm.palmcenter", tgt[:, :3, 3], None, 1.0, 3, chain))
         goals.append(
             ik.Goal(
-                f"{side}_palm.palmcenter", None, tgt[:, :3, :3], 1.0, 1, arm(side), orientation_weight=8.0
+                f"{side}_palm.palmcenter", None, tgt[:, :3, :3], turn_w, 1, arm(side), orientation_weight=8.0
             )
         )
+    if spec.guide_elbow:
+        goals.append(_elbow_guide(kin, first, last, poses, roots, times, spec))
     for foot in FEET:
         side = foot.split("_")[0]
         steps = [s for s in spec.steps if s.part == foot]
@@ -616,7 +699,7 @@ def record_transition(
             pos = _knee_track(kin, side, steps, keys, first, times)
             w = _goal_weight(steps, times)
             goals.append(ik.Goal(f"{side}_lower_leg.knee", pos, None, w, 2, leg(side)))
-    q = track_solve(kin, poses, goals, roots)
+    q = track_solve(kin, poses, goals, roots, **_tracking(spec))
     # the ends are the graph's postures exactly
     q[0], q[-1] = first.poses[SOLDIER], last.poses[SOLDIER]
     rifles[0], rifles[-1] = first.locations[RIFLE], last.locations[RIFLE]
@@ -683,12 +766,14 @@ def _carry(dst: str, start: float, duration: float) -> tuple[Step, ...]:
 
 def _left_knee_down(t0: float, t1: float) -> tuple[Step, ...]:
     """On the right knee (knees where the crawl has them), bring the left leg back onto its knee beside the
-    right one by ``t1``: the left heel comes up behind the thigh (:data:`FOLD`, the foot leaves the
-    ground), the thigh swings down until the knee is on its place (:data:`TUCK`), then the shin
-    comes down behind onto the toes; knee and toes stay from then on."""
+    right one by ``t1``: the left heel comes up behind the thigh (:data:`FOLD`, the foot peels off the
+    ground along an arc: left to the folding leg it slid back 2 cm first), the thigh swings down until the
+    knee is on its place (:data:`TUCK`), then the shin comes down behind onto the toes; knee and toes stay
+    from then on."""
     d = t1 - t0
     return (
-        Step("left_foot", KNEES_AT_CRAWL, t0, d, free=True),
+        Step("left_foot", FOLD, t0, 0.25 * d, lift=6.0, arc_site="ball"),  # peeled off, not dragged back
+        Step("left_foot", KNEES_AT_CRAWL, t0 + 0.25 * d, 0.75 * d, free=True),
         Step("left_knee", KNEES_AT_CRAWL, 0.0, t1, free=True),
         Step("right_foot", KNEES_AT_CRAWL, t0, d),
         Step("right_knee", KNEES_AT_CRAWL, t0, d),
@@ -901,12 +986,13 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
 )
 # Big changes of carry (down onto the forearms, falling dead): the rifle stays in the right hand, whose arm
 # swings by interpolation, and only the left hand is solved onto it (IK on both arms jumped between
-# elbow solutions on the way).
+# elbow solutions on the way). Not crawl -> prone: from the crawl's cradle the left arm, solved onto the
+# rifle in the right hand, could not get round to the prone grip (its elbow kept the wrong side of its
+# swivel at either end, joint limits in between); both palms solved on the carried rifle move smoothly.
 IN_HAND = frozenset(
     {
         "ststow2crawl",
         "kstow2crawl",
-        "crawl2prstow",
         "ststow2dead",
         "stfire2dead",
         "kstow2dead",
@@ -914,7 +1000,16 @@ IN_HAND = frozenset(
         "crawl2dead",
     }
 )
-TRANSITIONS = tuple(dataclasses.replace(t, in_hand=t.name in IN_HAND) for t in TRANSITIONS)
+# the left arm swings from its stowed grip round to the crawl's cradle: its elbow is guided (see _elbow_guide)
+GUIDED_ELBOW = frozenset({"ststow2crawl", "kstow2crawl"})
+TRANSITIONS = tuple(
+    dataclasses.replace(
+        t,
+        in_hand=t.name in IN_HAND,
+        guide_elbow=t.name in GUIDED_ELBOW,
+    )
+    for t in TRANSITIONS
+)
 DEAD_TO_STAND_SECONDS = 10.0  # DEAD -> STAND_STOWED: ststow2dead played backwards (seed 002 Figure 7)
 
 
