@@ -15,6 +15,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    key's, legs straight and feet pointed, :func:`limp_pose`) fading to a faint tone by
    :attr:`DeathSpec.fade`; the knees give way at once (:data:`KNEES_GIVE_WAY`: held, they swung the shins up
    as the body pitched forward), arms, neck and head keep no tone (:data:`LOOSE`); dead joints stay damped;
+   once he is down (after :attr:`DeathSpec.fade`, over :data:`KNEE_STRAIGHTEN`) the legs roll outward at
+   the hips and the feet evert (:data:`ROLLED_LEGS`, :data:`HIP_ROLL`, at :data:`LEG_TONE`: the feet lie on
+   their inner sides, heels low), and a standing death's knees straighten (:data:`KNEE_TONE`: bent, they
+   left him bottom-up on his knees);
 3. **the rifle is let go** at :attr:`DeathSpec.release` (the welds to the palms are switched off; the frame
    is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`);
 4. **the body settles**: recording (60 fps) stops once every body has been still (:data:`REST_SPEED`) for
@@ -126,6 +130,10 @@ SPINE_GAIN = 1500.0  # vertebrae: stiff throughout (a dead back bends, mostly at
 SPINE_TONE = 0.25  # the fraction of the vertebrae's gain kept when dead
 LOOSE = ("clavicle", "shoulder", "elbow", "wrist", "neck", "head")  # no tone left: gravity lays them down
 TONE = 0.10  # the fraction of the muscles' gain kept when dead (toward the DEAD key's shape)
+LEG_TONE = 0.3  # hips, ankles: enough to roll the legs outward and lay the feet on their inner sides
+LEGS = ("hip", "ankle")
+KNEE_TONE = 0.3  # a standing death's knees straighten with this once he is down (bent, they held him
+KNEE_STRAIGHTEN = 1.0  # s: bottom-up on his knees), slowly after DeathSpec.fade (quickly, the shins kick up)
 KNEES_GIVE_WAY = 0.15  # s: after the slump the knees go limp this fast
 DAMPING = 0.1  # joint damping = DAMPING * gain (s), at least MIN_DAMPING
 MIN_DAMPING = 4.0
@@ -142,15 +150,21 @@ def _gain(joint: str) -> float:
 
 # degrees: the legs' tone pulls them straight and the feet pointed (heels low on the ground)
 LIMP_LEGS = {"knee": (0.0,), "ankle": (-50.0, 0.0)}
+# degrees: once he is down, the legs roll outward at the hips (external rotation) and the feet evert, so a
+# body on its front lies with its feet on their inner sides and its heels low, as real bodies lie
+ROLLED_LEGS = {"knee": (5.0,), "ankle": (-50.0, 30.0)}
+HIP_ROLL = -45.0  # the hips' third DOF (about the thigh); negative turns the toes out
 
 
-def limp_pose(kin, dead: np.ndarray) -> np.ndarray:
+def limp_pose(kin, dead: np.ndarray, rolled: bool = False) -> np.ndarray:
     """The shape the faint tone of a dead body pulls toward: the DEAD key's, legs straight and feet pointed
-    (so a body on its front lies with its heels low)."""
+    (so a body on its front lies with its heels low); ``rolled``: the legs rolled outward too."""
     q = np.array(dead, dtype=np.float64)
     for side in ("left", "right"):
-        for j, deg in LIMP_LEGS.items():
+        for j, deg in (ROLLED_LEGS if rolled else LIMP_LEGS).items():
             q[kin.dof_slices[f"{side}_{j}"]] = np.radians(deg)
+        if rolled:
+            q[kin.dof_slices[f"{side}_hip"].stop - 1] = np.radians(HIP_ROLL)
     return q
 
 
@@ -205,9 +219,15 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     hold_ref = first.poses[SOLDIER][jm.dof]
     lo, hi = doll.kin.lower[jm.dof], doll.kin.upper[jm.dof]
     dead_ref = np.clip(limp_pose(doll.kin, dead.poses[SOLDIER])[jm.dof], lo, hi)
+    rolled_ref = np.clip(limp_pose(doll.kin, dead.poses[SOLDIER], rolled=True)[jm.dof], lo, hi)
     slump_ref = np.clip(slump_pose(doll.kin, spec, keys)[jm.dof], lo, hi)
     knees = np.array([n.endswith("knee") for n in names])
-    tone = np.where(spine, SPINE_TONE, np.where([n.endswith(LOOSE) for n in names], 0.0, TONE))
+    loose = [n.endswith(LOOSE) for n in names]
+    legs = [n.endswith(LEGS) for n in names]
+    tone = np.where(spine, SPINE_TONE, np.where(loose, 0.0, TONE))
+    # once he is down the legs roll outward (hips, ankles) and, standing deaths only, the knees straighten
+    # (straightened, a fallen kneeling soldier's knees drag his feet along the ground)
+    settle = np.where(legs, LEG_TONE - TONE, 0.0) + (KNEE_TONE - TONE) * knees * (spec.slump == "all")
 
     # the hit's direction in the world (MuJoCo frame): the pelvis' heading, horizontal
     pelvis = doll.body_global("lower_torso")
@@ -236,6 +256,9 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             uk = _smoothstep((t - spec.slump_time) / KNEES_GIVE_WAY)
             ref = slump_ref + u * (dead_ref - slump_ref)
             g = spec.slump_gain + np.where(knees, uk, u) * (tone - spec.slump_gain)
+            us = _smoothstep((t - spec.fade) / KNEE_STRAIGHTEN)
+            ref = ref + us * (rolled_ref - dead_ref)
+            g = g + settle * us
         model.jnt_stiffness[jm.jnt] = gain * g
         model.qpos_spring[jm.qpos] = ref
         model.dof_damping[jm.qvel] = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
