@@ -4,7 +4,8 @@ Each transition is what the 1994 animators typed into Jack: 10-15 primitive moti
 part (legs, hips, spine, head, arms, fingers, the rifle, one foot) from where it is to its place in a target
 key posture, with its own start, duration and velocity control ("step the left foot forward, lower the hips,
 bring the rifle up"). Targets are the graph's postures (:mod:`server.authoring.postures`) or in-between keys
-(both knees down, falling). Recording a transition:
+(both knees down). The seven deaths are simulated, not scripted (:mod:`server.authoring.deaths`). Recording
+a transition:
 
 1. :class:`~server.authoring.motion.MotionScript` interpolates the joint groups and the pelvis placement
    (``soldier``) and the rifle's placement *relative to the upper torso* (``AK_47``: the soldier carries it,
@@ -834,59 +835,8 @@ def _down_to_crawl(src_end: float, t: float) -> tuple[Step, ...]:
     )
 
 
-def _fall(src: str, t: float, knees: bool = True, kneeling: bool = False) -> tuple[Step, ...]:
-    """Killed: the knees buckle onto the ground (``SLUMP``, the first ~40 %), then the body falls forward.
-
-    No foot slides along the ground: a foot on it is planted (IK) until it moves, and it moves along an arc
-    clear of the ground. Standing, both feet kick back off the ground as the knees hit it (the kneeling
-    ``SLUMP`` has the feet behind the knees); ``kneeling`` (on the right knee), the shin on the ground stays
-    where it is and the front foot lifts as its knee goes down beside the other. Then the legs flop up
-    into ``DEAD`` as the body lands."""
-    out: tuple[Step, ...] = ()
-    t1 = 0.4 * t if knees else 0.0
-    if knees:
-        out += (
-            Step("root", "SLUMP", 0.0, t1, VelocityControl.ACCELERATE),
-            Step("legs", "SLUMP", 0.0, t1, EASE if kneeling else VelocityControl.ACCELERATE),
-            Step("spine", "SLUMP", 0.0, t1),
-            Step("head", "SLUMP", 0.05 * t, t1),
-            *_carry("SLUMP", 0.0, t1),
-        )
-        if kneeling:
-            out += (Step("left_foot", "SLUMP", 0.0, t1, lift=6.0, follow=True),)
-        else:
-            out += (
-                Step("left_foot", "SLUMP", 0.05 * t, t1 - 0.08 * t, lift=8.0),
-                Step("right_foot", "SLUMP", 0.08 * t, t1 - 0.1 * t, lift=8.0),
-            )
-    fall = t - t1
-    d = 0.05 * t if knees else 0.0  # from the knees the feet leave just after the body starts to fall
-    out += (
-        Step("left_foot", "DEAD", t1 + d, fall - d, lift=12.0),
-        Step("right_foot", "DEAD", t1 + d + 0.05 * t, fall - d - 0.05 * t, lift=12.0),
-    )
-    return (
-        *out,
-        Step("root", "DEAD", t1, fall, VelocityControl.ACCELERATE),
-        Step("legs", "DEAD", t1, fall),
-        Step("spine", "DEAD", t1, fall),
-        Step("head", "DEAD", t1 + 0.1 * fall, 0.9 * fall),
-        Step("arms", "DEAD", t1, fall),
-        Step("rifle", "DEAD", t1, fall, VelocityControl.ACCELERATE),
-        Step("hands", "DEAD", t1, 0.7 * fall),
-    )
-
-
-def _whole_to(dst: str, t: float, velocity: VelocityControl = EASE, lift: float = 0.0) -> tuple[Step, ...]:
-    """Every body part to ``dst`` together; with ``lift`` the feet leave the ground along arcs that high
-    (IK) rather than drag their toes to their new places."""
-    feet = tuple(Step(f, dst, 0.0, t, velocity, lift) for f in FEET) if lift else ()
-    return feet + tuple(
-        Step(p, dst, 0.0, t, velocity) for p in ("root", "legs", "spine", "head", "arms", "hands", "rifle")
-    )
-
-
-# name, start, end, seconds (the arc times of seed 002 Figure 7; the elided ones invented), primitive motions
+# name, start, end, seconds (the arc times of seed 002 Figure 7; the elided ones invented), primitive motions.
+# The seven deaths (`*2dead`) have no steps: they are simulated (server.authoring.deaths), not scripted.
 TRANSITIONS: tuple[TransitionSpec, ...] = (
     TransitionSpec(
         "ststow2stfire",
@@ -923,7 +873,7 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
             Step("head", "KNEEL_FIRE", 1.2, 0.6),
         ),
     ),
-    TransitionSpec("ststow2dead", "STAND_STOWED", "DEAD", 1.5, _fall("STAND_STOWED", 1.5)),
+    TransitionSpec("ststow2dead", "STAND_STOWED", "DEAD", 1.5),
     TransitionSpec(
         "stfire2kfire",
         "STAND_FIRE",
@@ -931,7 +881,7 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         1.2,
         _kneel_down("KNEEL_FIRE", 1.2) + _carry("KNEEL_FIRE", 0.0, 1.15),
     ),
-    TransitionSpec("stfire2dead", "STAND_FIRE", "DEAD", 1.2, _fall("STAND_FIRE", 1.2)),
+    TransitionSpec("stfire2dead", "STAND_FIRE", "DEAD", 1.2),
     TransitionSpec(
         "kstow2kfire",
         "KNEEL_STOWED",
@@ -947,8 +897,8 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         _kneel_to_crawl(0.3, 0.85, 1.4),
         hand_turn=(0.85, 1.35),
     ),
-    TransitionSpec("kstow2dead", "KNEEL_STOWED", "DEAD", 1.0, _fall("KNEEL_STOWED", 1.0, kneeling=True)),
-    TransitionSpec("kfire2dead", "KNEEL_FIRE", "DEAD", 1.0, _fall("KNEEL_FIRE", 1.0, kneeling=True)),
+    TransitionSpec("kstow2dead", "KNEEL_STOWED", "DEAD", 1.0),
+    TransitionSpec("kfire2dead", "KNEEL_FIRE", "DEAD", 1.0),
     TransitionSpec(
         "crawl2prstow",
         "CRAWL",
@@ -973,9 +923,9 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         0.8,
         _raise_rifle("PRONE_STOWED", "PRONE_FIRE", 0.8),
     ),
-    TransitionSpec("crawl2dead", "CRAWL", "DEAD", 1.0, _fall("CRAWL", 1.0, knees=False)),
-    TransitionSpec("prstow2dead", "PRONE_STOWED", "DEAD", 1.0, _whole_to("DEAD", 1.0, lift=10.0)),
-    TransitionSpec("prfire2dead", "PRONE_FIRE", "DEAD", 0.8, _whole_to("DEAD", 0.8, lift=10.0)),
+    TransitionSpec("crawl2dead", "CRAWL", "DEAD", 1.0),
+    TransitionSpec("prstow2dead", "PRONE_STOWED", "DEAD", 1.0),
+    TransitionSpec("prfire2dead", "PRONE_FIRE", "DEAD", 0.8),
     TransitionSpec(
         "stfire2kstow",
         "STAND_FIRE",
@@ -984,7 +934,7 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         _kneel_down("KNEEL_STOWED", 1.6) + _carry("KNEEL_STOWED", 0.0, 0.9),
     ),
 )
-# Big changes of carry (down onto the forearms, falling dead): the rifle stays in the right hand, whose arm
+# Big changes of carry (down onto the forearms): the rifle stays in the right hand, whose arm
 # swings by interpolation, and only the left hand is solved onto it (IK on both arms jumped between
 # elbow solutions on the way). Not crawl -> prone: from the crawl's cradle the left arm, solved onto the
 # rifle in the right hand, could not get round to the prone grip (its elbow kept the wrong side of its
@@ -993,11 +943,6 @@ IN_HAND = frozenset(
     {
         "ststow2crawl",
         "kstow2crawl",
-        "ststow2dead",
-        "stfire2dead",
-        "kstow2dead",
-        "kfire2dead",
-        "crawl2dead",
     }
 )
 # the left arm swings from its stowed grip round to the crawl's cradle: its elbow is guided (see _elbow_guide)
@@ -1010,7 +955,6 @@ TRANSITIONS = tuple(
     )
     for t in TRANSITIONS
 )
-DEAD_TO_STAND_SECONDS = 10.0  # DEAD -> STAND_STOWED: ststow2dead played backwards (seed 002 Figure 7)
 
 
 def transition_specs() -> dict[str, TransitionSpec]:
