@@ -101,11 +101,6 @@ def dead_node(name: str) -> str:
     return f"{DEAD}@{name.removesuffix('2dead')}"
 
 
-def posture_of(node: str) -> str:
-    """``DEAD@ststow`` -> ``DEAD``: a variant node is its posture."""
-    return node.partition("@")[0]
-
-
 @dataclass(frozen=True)
 class DeathClip:
     frames: ClipFrames

@@ -11,6 +11,7 @@ import numpy as np
 
 from server.authoring.quality_frames import ClipFrames, FigureSet
 from server.motion.posture_change import LoadedPostureGraph
+from server.motion.posture_graph import posture_of
 
 POSTURE_LIMITS: dict[str, float] = {
     "continuity_deg": 0.5,
@@ -52,7 +53,7 @@ def posture_location(cf: ClipFrames, frame: int, ptype: str) -> np.ndarray:
 
 def rest_kind(node: str) -> str | None:
     """``PRONE``, ``KNEEL``, ``CRAWL`` or ``DEAD`` for a resting posture node (``NAME@variant`` too)."""
-    base = node.split("@", 1)[0]
+    base = posture_of(node)
     if base in ("CRAWL", "DEAD"):
         return base
     m = re.match(r"(PRONE|KNEEL)_", base)
