@@ -190,10 +190,10 @@ def slave_one(
         out = reslave_holding(chset, pair, ctx.m16, name)
     else:
         out = reslave_channelset(chset, pair, name)
-    rest_slave_knees(chset, out, ctx.figure_set)  # DI's kneecaps sit higher than the master's
-    lift_off_ground(out, ctx.di)
-    rest_slave_forearms(chset, out, ctx.figure_set)  # ... and its prone forearms float
-    lift_off_ground(out, ctx.di)
+    # DI's kneecaps sit higher than the master's and its prone forearms float: put them down where his are
+    for rest in (rest_slave_knees, rest_slave_forearms):
+        rest(chset, out, ctx.figure_set)
+        lift_off_ground(out, ctx.di)
     return out
 
 

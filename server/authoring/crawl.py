@@ -238,18 +238,7 @@ def _track(
     prev = first
     for k, i in enumerate(order):
         start = np.where(arms, prev, body[i])
-        sub = [g.rows(slice(i, i + 1)) for g in goals]
-        sol, _ = ik.solve(
-            kin,
-            start[None],
-            sub,
-            roots[i : i + 1],
-            iterations=ARM_ITERATIONS,
-            rest_pose=start[None],
-            rest_gain=0.1,
-            max_dof_step=ARM_DOF_STEP,
-        )
-        out[k] = prev = sol[0]
+        out[k] = prev = ik.solve_frame(kin, start, goals, roots, i, ARM_ITERATIONS, ARM_DOF_STEP)
     return out
 
 

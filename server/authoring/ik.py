@@ -498,6 +498,32 @@ def solve(
     return out, report
 
 
+def solve_frame(
+    kin: FigureKinematics,
+    start: np.ndarray,
+    goals: Sequence[Goal],
+    roots: np.ndarray,
+    frame: int,
+    iterations: int,
+    max_dof_step: float,
+) -> np.ndarray:
+    """Frame ``frame`` of ``goals`` solved from the pose ``start`` and pulled towards it, in steps of at most
+    ``max_dof_step`` rad: the building block of tracking a clip frame after frame, each frame warm-started
+    from its neighbour's solution so no joint leaps to another IK branch."""
+    sub = [g.rows(slice(frame, frame + 1)) for g in goals]
+    q, _ = solve(
+        kin,
+        start[None],
+        sub,
+        roots[frame : frame + 1],
+        iterations=iterations,
+        rest_pose=start[None],
+        rest_gain=0.1,
+        max_dof_step=max_dof_step,
+    )
+    return q[0]
+
+
 def _solve(
     kin: FigureKinematics,
     pose: np.ndarray,

@@ -210,19 +210,8 @@ def _track(
     prev_out = poses[order[0]]
     for i in order:
         start = kin.clamp(prev_out + (poses[i] - prev_in))
-        sub = [g.rows(slice(i, i + 1)) for g in goals]
-        q, _ = ik.solve(
-            kin,
-            start[None],
-            sub,
-            roots[i : i + 1],
-            iterations=iterations,
-            rest_pose=start[None],
-            rest_gain=0.1,
-            max_dof_step=max_dof_step,
-        )
-        prev_in, prev_out = poses[i], q[0]
-        out[i] = q[0]
+        prev_in, prev_out = poses[i], ik.solve_frame(kin, start, goals, roots, i, iterations, max_dof_step)
+        out[i] = prev_out
     return out
 
 
