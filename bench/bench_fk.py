@@ -19,11 +19,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from server.peabody import values as V
-from server.peabody.fk import FigureKinematics
-from server.peabody.language import parse
-from server.peabody.loader import read_figure
-from server.peabody.model import Dof, Figure, Joint, Segment, Site
+from peabody import values as V
+from peabody.fk import FigureKinematics
+from peabody.language import parse
+from peabody.loader import read_figure
+from peabody.model import Dof, Figure, Joint, Segment, Site
 
 ROOT = Path(__file__).resolve().parents[1]
 AXES = [np.array(a, dtype=float) for a in ((0, 0, 1), (1, 0, 0), (0, 1, 0))]

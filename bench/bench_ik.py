@@ -20,10 +20,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from server.authoring.ik import Goal, solve
-from server.authoring.slaving import create_master_slave_pair
-from server.peabody.fk import FigureKinematics
-from server.peabody.loader import read_figure
+from authoring.ik import Goal, solve
+from authoring.slaving import create_master_slave_pair
+from peabody.fk import FigureKinematics
+from peabody.loader import read_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -4,7 +4,7 @@ Reads both the 7.1 format (polygons over a node table) and the 7.3 alternate (ge
 colour, normal and texture bindings), told apart at the first line after a segment's attributes
 (``geoset`` starts the alternate). The file is line-oriented: a ``[COMMENT]`` is the rest of a line, vectors
 and matrices are whole lines. Our readings of what the seed leaves open are those of the spitter
-(``server/peabody/tips.py``, documented there): Jack units and axes (cm, +Y up), matrices in the row-vector
+(``peabody/tips.py``, documented there): Jack units and axes (cm, +Y up), matrices in the row-vector
 layout (translation in the fourth row; transposed here to column-vector), ``R|T ax ay az lower upper`` DOF
 lines, ``JOINT #k`` naming a joint's place in the pose vector, qualified ``segment.site`` other-site names.
 

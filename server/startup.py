@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from peabody.model import Environment, Figure
 from protocol.update_table import UpdateTable
 from server.jcl import JclError, JclInterpreter
 from server.logging import get_logger
@@ -37,7 +38,6 @@ from server.motion.posture_change import (
     bind_posture_graph,
     load_posture_graph,
 )
-from server.peabody.model import Environment, Figure
 from server.soldier.library import MotionLibrary
 from server.soldier.manager import SoldierManager
 from server.soldier.wire import WireConverter, update_table_for
@@ -163,8 +163,8 @@ class ServerWorld:
         if path in self.env_files:  # the start-up script run again: the figures are there already
             log.debug("env_already_read", file=str(path))
             return None
-        from server.peabody.language import PeabodyError
-        from server.peabody.loader import read_environment
+        from peabody.language import PeabodyError
+        from peabody.loader import read_environment
 
         try:
             read_environment(path, self.environment, load_psurfs=False, search_path=self.jcl.search_dirs)
@@ -497,7 +497,7 @@ def write_synthetic_data_dir(
     ``figures/DI.fig`` (a chain soldier) and ``figures/AK_47.fig``, ``posture_graphs/*.graph`` with their
     channelsets, ``jack-ttes-soldier_low.env`` (``soldiers`` soldier/gun pairs) and the seed's start-up script
     ``jack-ttes-soldier_low.jcl``."""
-    from server.peabody.writer import write_figure
+    from peabody.writer import write_figure
     from server.soldier.synthetic import synthetic_figures, write_synthetic_library
 
     out = Path(directory)

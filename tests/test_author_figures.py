@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.authoring.anthropometry import LUMBAR_FRACTION, VERTEBRAE, vertebra_bounds
-from server.authoring.figure_segmentation import bone_part
-from server.authoring.figure_skeleton import mirror
+from authoring.anthropometry import LUMBAR_FRACTION, VERTEBRAE, vertebra_bounds
+from authoring.figure_segmentation import bone_part
+from authoring.figure_skeleton import mirror
 from ttes.cli import main
 from ttes.paths import FIGURES
 
@@ -31,7 +31,7 @@ def _tree(root: Path) -> dict[str, bytes]:
 
 @needs_anny
 def test_building_twice_gives_identical_bytes(tmp_path):
-    from server.authoring.figures import write_figures
+    from authoring.figures import write_figures
 
     a, b = tmp_path / "a", tmp_path / "b"
     write_figures(a)
@@ -111,7 +111,7 @@ def test_cut_ends_get_outward_caps():
     """An open-topped box: one border loop, capped by one polygon whose normal points out (+Y)."""
     import trimesh
 
-    from server.authoring.figure_segmentation import boundary_loops, cap
+    from authoring.figure_segmentation import boundary_loops, cap
 
     box = trimesh.creation.box()
     centres = box.triangles_center
@@ -127,7 +127,7 @@ def test_cut_ends_get_outward_caps():
 
 
 def test_caps_start_where_a_fan_stays_inside():
-    from server.authoring.figure_segmentation import cap
+    from authoring.figure_segmentation import cap
 
     # an L-shaped loop listed from corner (2, 1), which a fan cannot start from; the reflex corner can
     pts = np.array([[2, 1, 0], [1, 1, 0], [1, 2, 0], [0, 2, 0], [0, 0, 0], [2, 0, 0]], dtype=float)

@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.authoring import build as B
-from server.authoring import deaths, gait, postures, transitions
+from authoring import build as B
+from authoring import deaths, gait, postures, transitions
+from peabody.loader import read_environment, read_figure
 from server.jcl import parse_jcl
 from server.motion.cache import load_npz, save_npz
 from server.motion.channelset_file import format_channelset, parse_channelsets
 from server.motion.posture_change import load_posture_graph
 from server.motion.posture_graph import posture_of
 from server.motion.synthetic import synthetic_channelset, toy_rifle, toy_soldier
-from server.peabody.loader import read_environment, read_figure
 from ttes.cli import main
 from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
 
@@ -165,8 +165,8 @@ def test_di_only_build_reslaves_committed_clips(tmp_path: Path):
 def test_m16_library_holds_the_m16_by_its_own_grip_and_handguard():
     """An ``_m16_low`` clip binds to DI.fig + M16.fig; the palms are on the M16's grip and handguard, its
     butt where the AK's is in the master clip, its barrel along the AK's line, and it is out of the ground."""
-    from server.authoring.quality import FigureSet, check_clip, play
-    from server.authoring.rifle_swap import lowest_point
+    from authoring.quality import FigureSet, check_clip, play
+    from authoring.rifle_swap import lowest_point
     from server.motion.binding import bind_channelset
     from server.motion.cache import load_channelset
 
@@ -202,7 +202,7 @@ def test_m16_library_holds_the_m16_by_its_own_grip_and_handguard():
 
 @pytest.mark.xfail(strict=True, reason="issue 14 open: prone, the M16's butt is 1.4-4 cm in DI's arm")
 def test_the_prone_m16_stays_out_of_the_body():
-    from server.authoring.quality import FigureSet, check_clip
+    from authoring.quality import FigureSet, check_clip
     from server.motion.cache import load_channelset
 
     figs = FigureSet.from_dir(FIGURES, ["DI.fig", "M16.fig"])

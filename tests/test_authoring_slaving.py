@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.authoring import ik
-from server.authoring.build import BuildContext, slave_pair
-from server.authoring.slaving import RELEASE_FADE_FRAMES, MasterSlavePair, create_channelset_motion
+from authoring import ik
+from authoring.build import BuildContext, slave_pair
+from authoring.slaving import RELEASE_FADE_FRAMES, MasterSlavePair, create_channelset_motion
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
 

@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from peabody.fk import FigureKinematics
+from peabody.loader import load_text
 from server.motion import quaternion
 from server.motion.binding import bind_channelset, pose_layout
 from server.motion.cache import cache_path, load_channelset, load_npz, save_npz
@@ -23,8 +25,6 @@ from server.motion.errors import BindingError, ChannelsetError
 from server.motion.info import channelset_info, print_channelset_info
 from server.motion.recording import Recording, reroot_figure_channel, write_channelset
 from server.motion.synthetic import make_figure, make_soldier, synthetic_channelset, toy_rifle, toy_soldier
-from server.peabody.fk import FigureKinematics
-from server.peabody.loader import load_text
 from ttes.cli import main
 
 DATA = Path(__file__).resolve().parent / "data" / "motion"
@@ -166,7 +166,7 @@ def test_data_files_round_trip(path: Path) -> None:
 
 
 def test_writer_output_uses_the_parser_fast_paths() -> None:
-    import server.peabody.language as lang
+    import peabody.language as lang
 
     cs = synthetic_channelset("c", [make_soldier(ndof=6)], nframes=5)
     text = format_channelset(cs)
@@ -374,7 +374,7 @@ def test_pose_layout_is_the_project_wide_fk_layout() -> None:
 
 
 def test_environment_with_channelsets_writes_back() -> None:
-    from server.peabody.writer import format_environment
+    from peabody.writer import format_environment
 
     env = load_text(FIGURE6, filename="fig6.env")
     text = format_environment(env)
@@ -405,8 +405,8 @@ FIGURES = Path(__file__).resolve().parents[1] / "figures"
 
 @pytest.mark.skipif(not (FIGURES / "DI.fig").is_file(), reason="shipped DI.fig not present")
 def test_record_bind_sample_and_reroot_on_the_shipped_di_figure(tmp_path: Path) -> None:
+    from peabody.loader import read_figure
     from server.motion.sampling import ClipLibrary
-    from server.peabody.loader import read_figure
 
     di = read_figure(FIGURES / "DI.fig", "Di2_0", load_psurfs=False)
     gun = read_figure(FIGURES / "AK_47.fig", "AK_47_0", load_psurfs=False)

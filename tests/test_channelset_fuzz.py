@@ -8,10 +8,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from peabody.language import PeabodyError
 from server.motion.channelset import channelsets_close
 from server.motion.channelset_file import format_channelset, parse_channelsets
 from server.motion.errors import ChannelsetError
-from server.peabody.language import PeabodyError
 
 DATA = Path(__file__).resolve().parent / "data" / "motion"
 SEED = (DATA / "ststow2kfire_low.chset.env").read_text()

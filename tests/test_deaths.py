@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.authoring import deaths, postures
-from server.authoring.build import BuildContext
-from server.authoring.postures import RIFLE, SOLDIER
-from server.authoring.slaving import create_channelset_motion
+from authoring import deaths, postures
+from authoring.build import BuildContext
+from authoring.postures import RIFLE, SOLDIER
+from authoring.slaving import create_channelset_motion
+from peabody.fk import FigureKinematics
 from server.motion.cache import load_channelset
-from server.peabody.fk import FigureKinematics
 from ttes.paths import CHANNELSETS, FIGURES
 
 REPRODUCED = "prfire2dead"  # the shortest simulation
@@ -38,7 +38,7 @@ def _played(ctx: BuildContext, name: str) -> tuple[np.ndarray, np.ndarray, np.nd
 
 def test_the_ragdoll_mirrors_the_figure(ctx: BuildContext) -> None:
     pytest.importorskip("mujoco")
-    from server.authoring.ragdoll import BODY_MASS, Ragdoll
+    from authoring.ragdoll import BODY_MASS, Ragdoll
 
     key = ctx.keys["STAND_FIRE"]
     doll = Ragdoll(ctx.soldier, ctx.rifle, key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE])

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.authoring import easing
-from server.authoring.transitions import ClipFrames
-from server.peabody.fk import FigureKinematics
-from server.peabody.loader import read_figure
+from authoring import easing
+from authoring.transitions import ClipFrames
+from peabody.fk import FigureKinematics
+from peabody.loader import read_figure
 from ttes.paths import FIGURES
 
 

@@ -7,8 +7,8 @@ import pytest
 
 from ttes.paths import FIGURES
 
-loader = pytest.importorskip("server.peabody.loader")
-fk = pytest.importorskip("server.peabody.fk")
+loader = pytest.importorskip("peabody.loader")
+fk = pytest.importorskip("peabody.fk")
 
 # seed 002, 3.4.3: soldier.fig vs DI.fig
 SEED = {
@@ -180,7 +180,7 @@ def test_height_is_the_95th_percentile_male_and_feet_touch_the_ground(figures, k
 
 def test_psurfs_face_outward(figures, kin):
     """Faces run counter-clockwise seen from outside: the body's signed volume is positive and plausible."""
-    from server.peabody.psurf import fan_triangles
+    from peabody.psurf import fan_triangles
 
     for name in ("soldier", "DI"):
         fig, k = figures[name], kin[name]

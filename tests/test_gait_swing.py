@@ -1,11 +1,11 @@
-"""A swinging foot (server/authoring/gait.py): it goes up before it goes along and comes down after it, and
+"""A swinging foot (authoring/gait.py): it goes up before it goes along and comes down after it, and
 landing toes first its toes bend up ahead of the footfall."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from server.authoring import gait
+from authoring import gait
 
 BALL = np.array([0.8, 0.0, -21.6])  # ball relative to heel on the flat foot (soldier.fig)
 FPS = 60

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.authoring.ik import Goal, _rodrigues, decompose_rotation, rotation_log, solve, two_link
-from server.peabody.fk import FigureKinematics
-from server.peabody.loader import read_figure
+from authoring.ik import Goal, _rodrigues, decompose_rotation, rotation_log, solve, two_link
+from peabody.fk import FigureKinematics
+from peabody.loader import read_figure
 
 FIGURES = Path(__file__).resolve().parents[1] / "figures"
 PALM = "right_palm.palmcenter"

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.authoring.motion import (
+from authoring.motion import (
     VC_ACCELERATE,
     VC_CONSTANT,
     VC_DECELERATE,
@@ -28,11 +28,11 @@ from server.authoring.motion import (
     velocity_control,
     weight_function,
 )
+from peabody.fk import FigureKinematics
+from peabody.loader import read_figure
 from server.motion.cache import load_channelset
 from server.motion.channelset import channelsets_close
 from server.motion.channelset_file import save_channelset
-from server.peabody.fk import FigureKinematics
-from server.peabody.loader import read_figure
 
 FIGURES = Path(__file__).resolve().parents[1] / "figures"
 

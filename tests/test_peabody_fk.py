@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.peabody import values as V
-from server.peabody.fk import FigureKinematics, rigid_inverse
-from server.peabody.loader import load_text, read_figure
-from server.peabody.model import Figure
+from peabody import values as V
+from peabody.fk import FigureKinematics, rigid_inverse
+from peabody.loader import load_text, read_figure
+from peabody.model import Figure
 
 DATA = Path(__file__).parent / "data" / "peabody"
 

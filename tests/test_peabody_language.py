@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-import server.peabody.language as lang
-from server.peabody.language import (
+import peabody.language as lang
+from peabody.language import (
     MAX_DEPTH,
     Assign,
     BinOp,

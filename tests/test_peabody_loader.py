@@ -11,10 +11,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from server.peabody import values as V
-from server.peabody.fk import FigureKinematics
-from server.peabody.language import Block, PeabodyError
-from server.peabody.loader import (
+from peabody import values as V
+from peabody.fk import FigureKinematics
+from peabody.language import Block, PeabodyError
+from peabody.loader import (
     LoadContext,
     load_text,
     read_environment,
@@ -22,8 +22,8 @@ from server.peabody.loader import (
     register_block,
     unregister_block,
 )
-from server.peabody.model import Environment
-from server.peabody.writer import (
+from peabody.model import Environment
+from peabody.writer import (
     environment_differences,
     figure_differences,
     format_environment,

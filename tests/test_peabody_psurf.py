@@ -10,8 +10,8 @@ import trimesh
 from hypothesis import given
 from hypothesis import strategies as st
 
-from server.peabody.language import PeabodyError
-from server.peabody.psurf import (
+from peabody.language import PeabodyError
+from peabody.psurf import (
     PsurfError,
     fan_triangles,
     format_psurf,

@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from server.peabody import values as V
-from server.peabody.language import PeabodyError, parse_value
-from server.peabody.writer import format_dofs, format_transform
+from peabody import values as V
+from peabody.language import PeabodyError, parse_value
+from peabody.writer import format_dofs, format_transform
 
 
 def num(text: str) -> float:

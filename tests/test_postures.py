@@ -1,13 +1,13 @@
-"""The key postures of seed 002 Figure 7 (server/authoring/postures.py), checked by forward kinematics."""
+"""The key postures of seed 002 Figure 7 (authoring/postures.py), checked by forward kinematics."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from server.authoring import postures as P
-from server.peabody.fk import FigureKinematics
-from server.peabody.loader import read_figure
+from authoring import postures as P
+from peabody.fk import FigureKinematics
+from peabody.loader import read_figure
 from ttes.paths import FIGURES
 
 
@@ -121,7 +121,7 @@ def test_kneeling_kneecap_rests_and_the_rifle_clears_the_body(solved):
     """The kneeling knee carries weight (its kneecap mesh is the body's lowest point, within a centimetre)
     and the rifle at the ready or aimed stays out of the raised left thigh and every other segment."""
     pytest.importorskip("scipy")
-    from server.authoring.quality_frames import FigureSet
+    from authoring.quality_frames import FigureSet
 
     kin, rkin, keys = solved
     figs = FigureSet({"soldier.fig": kin.figure, "AK_47.fig": rkin.figure})

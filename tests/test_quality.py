@@ -9,21 +9,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.authoring import ik
-from server.authoring.body_parts import contact_slides, part_of
-from server.authoring.quality import (
+from authoring import ik
+from authoring.body_parts import contact_slides, part_of
+from authoring.quality import (
     CONTACT_HEIGHT_CM,
     FigureSet,
     check_clip,
     check_library,
     foot_skate,
 )
-from server.authoring.quality_postures import offset_transform
+from authoring.quality_postures import offset_transform
+from peabody.loader import read_figure
 from server.motion.channelset import Channelset
 from server.motion.channelset_file import save_channelset
 from server.motion.posture_graph import Arc, PostureGraph, write_posture_graph
 from server.motion.recording import Recording, recording_to_channelset
-from server.peabody.loader import read_figure
 from ttes.cli import main
 
 FIGURES = Path(__file__).resolve().parents[1] / "figures"
@@ -363,7 +363,7 @@ def test_check_library_continuity_and_cli(tmp_path: Path, figset: FigureSet, hol
 def test_contact_sheet(tmp_path: Path, figset: FigureSet, holding, capsys) -> None:
     from PIL import Image
 
-    from server.authoring.contact_sheet import ContactSheetError, library_sheet_inputs, render_contact_sheet
+    from authoring.contact_sheet import ContactSheetError, library_sheet_inputs, render_contact_sheet
 
     graph = _library(tmp_path, figset, holding, 0.0)
     postures, clips, types = library_sheet_inputs([graph], "DI.fig")
@@ -464,7 +464,7 @@ def test_end_offset_is_taken_out_of_continuity(tmp_path: Path, figset: FigureSet
 def test_contact_sheet_views_and_clip_pattern(tmp_path: Path, figset: FigureSet, holding, capsys) -> None:
     from PIL import Image
 
-    from server.authoring.contact_sheet import (
+    from authoring.contact_sheet import (
         ContactSheetError,
         clip_matches,
         library_sheet_inputs,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.authoring import postures, reactions
-from server.authoring.quality import FigureSet, check_clip, play
+from authoring import postures, reactions
+from authoring.quality import FigureSet, check_clip, play
 from server.motion.cache import load_channelset
 from server.motion.posture_change import load_posture_graph
 from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
@@ -70,7 +70,7 @@ def test_reaction_leaves_and_returns_to_its_posture_and_keeps_its_contacts(r, fi
 
 
 def test_build_of_a_reaction_reproduces_the_committed_bytes(tmp_path):
-    from server.authoring import build
+    from authoring import build
 
     build.build(tmp_path, FIGURES, only="stfire_recoil", figure="soldier", progress=False)
     rel = "channelsets/stfire_recoil.chset.env"

@@ -1,4 +1,4 @@
-"""Putting the M16 where the master's AK is (server.authoring.rifle_swap): butt on butt, aimed the same,
+"""Putting the M16 where the master's AK is (authoring.rifle_swap): butt on butt, aimed the same,
 lifted out of the ground by a muzzle-up pitch about the butt, lowered with a released AK onto the ground."""
 
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.authoring import rifle_swap as R
-from server.authoring.quality import FigureSet
+from authoring import rifle_swap as R
+from authoring.quality import FigureSet
 from ttes.paths import FIGURES
 
 

@@ -47,7 +47,7 @@ _GENERATORS = (
     "server/motion/channelset_file.py",
     "server/motion/posture_graph.py",
     "server/motion/cache.py",
-    "server/peabody/writer.py",
+    "peabody/writer.py",
 )
 
 

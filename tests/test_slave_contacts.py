@@ -1,4 +1,4 @@
-"""Kneeling and prone contacts carried over to the DI.fig slave (server/authoring/slave_contacts.py): where
+"""Kneeling and prone contacts carried over to the DI.fig slave (authoring/slave_contacts.py): where
 the master kneels on his kneecap, the slave does too, his feet stay where they were and the rifle stays in his
 hands; where the master's prone forearms lie on the ground, so do the slave's."""
 
@@ -11,10 +11,10 @@ import pytest
 
 pytest.importorskip("scipy")
 
-from server.authoring.build import SNAP_FADE_FRAMES, BuildContext, _snap_end, lift_off_ground, slave_pair
-from server.authoring.quality_frames import FigureSet, play
-from server.authoring.slave_contacts import part_heights, rest_slave_forearms, rest_slave_knees
-from server.authoring.slaving import reslave_channelset
+from authoring.build import SNAP_FADE_FRAMES, BuildContext, _snap_end, lift_off_ground, slave_pair
+from authoring.quality_frames import FigureSet, play
+from authoring.slave_contacts import part_heights, rest_slave_forearms, rest_slave_knees
+from authoring.slaving import reslave_channelset
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
 

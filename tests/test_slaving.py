@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from server.authoring.motion import KeyPosture, MotionScript, SiteConstraint
-from server.authoring.slaving import (
+from authoring.motion import KeyPosture, MotionScript, SiteConstraint
+from authoring.slaving import (
     SLAVE_CONSTRAINTS,
     MasterSlavePair,
     SlaveParameters,
@@ -20,8 +20,8 @@ from server.authoring.slaving import (
     turn_slave_off,
     turn_slave_on,
 )
+from peabody.loader import read_figure
 from server.motion.channelset import channelsets_close, make_channelset
-from server.peabody.loader import read_figure
 
 FIGURES = Path(__file__).resolve().parents[1] / "figures"
 LEGS = (

@@ -20,7 +20,7 @@ FIGURES = Path(__file__).resolve().parents[1] / "figures"
 
 @pytest.fixture(scope="module")
 def real_lib():
-    from server.peabody.loader import read_figure
+    from peabody.loader import read_figure
 
     if not (FIGURES / "DI.fig").is_file():
         pytest.skip("figures/DI.fig not present")

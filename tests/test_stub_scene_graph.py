@@ -12,11 +12,11 @@ from hypothesis.extra.numpy import arrays
 
 from client_stub.scene_graph import ENTITY_NODE, Crowd, EntityLayout, FigureGraph
 from client_stub.tips import parse_tips
+from peabody.fk import FigureKinematics
+from peabody.loader import read_figure
+from peabody.model import Environment, Figure
+from peabody.tips import format_tips
 from protocol import coords
-from server.peabody.fk import FigureKinematics
-from server.peabody.loader import read_figure
-from server.peabody.model import Environment, Figure
-from server.peabody.tips import format_tips
 
 FIGURES = Path(__file__).resolve().parent.parent / "figures"
 

@@ -20,9 +20,9 @@ from client_stub.artic import (
     update_table_for,
 )
 from client_stub.tips import TipsError, load_tips, parse_tips
-from server.peabody.loader import read_figure
-from server.peabody.model import Environment, Figure, Psurf, Segment, Site
-from server.peabody.tips import format_tips, spit
+from peabody.loader import read_figure
+from peabody.model import Environment, Figure, Psurf, Segment, Site
+from peabody.tips import format_tips, spit
 
 REPO = Path(__file__).resolve().parent.parent
 FIGURES = REPO / "figures"
@@ -345,7 +345,7 @@ def test_unreadable_file_is_a_tips_error(tmp_path: Path) -> None:
 
 def jointed_text() -> str:
     """The cube with a lid on a two-DOF hinge: joints, DOF lines and a second segment to corrupt."""
-    from server.peabody.model import Dof, Joint
+    from peabody.model import Dof, Joint
 
     env = cube_environment()
     fig = env.figures["cube"]

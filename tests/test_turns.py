@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from server.authoring import turns
-from server.authoring.gait import BaseStance
-from server.authoring.quality import FigureSet, play
+from authoring import turns
+from authoring.gait import BaseStance
+from authoring.quality import FigureSet, play
 from server.motion.cache import load_channelset
 from server.motion.posture_change import load_posture_graph
 from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
@@ -177,7 +177,7 @@ def test_turn_plan_moves_the_stance_about_the_pivot_ball():
 
 
 def test_rebuilding_a_turn_reproduces_the_committed_bytes(tmp_path):
-    from server.authoring import build as B
+    from authoring import build as B
 
     B.build(tmp_path, FIGURES, only="turn_r45", figure="soldier", progress=False)
     rel = "channelsets/turn_r45.chset.env"

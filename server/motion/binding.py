@@ -5,7 +5,7 @@ A sharedchannel binds to every object of its type whose figure was read from the
 bound channelset holds only small index maps (channelset column → the figure's pose-vector index) and shares
 the channelset's frame arrays, so binding one clip to ten soldiers costs bytes, not megabytes.
 
-Pose vector (project-wide layout, same as ``server.peabody.fk.FigureKinematics.dof_slices``): the figure's
+Pose vector (project-wide layout, same as ``peabody.fk.FigureKinematics.dof_slices``): the figure's
 joints in ``figure.joints`` order, each joint's DOFs in order.
 """
 
@@ -18,10 +18,10 @@ from pathlib import PurePath
 
 import numpy as np
 
+from peabody.model import Figure
 from server.motion import quaternion
 from server.motion.channelset import Channelset, SharedChannel
 from server.motion.errors import BindingError
-from server.peabody.model import Figure
 
 
 def protofiletype(figure: Figure) -> str:

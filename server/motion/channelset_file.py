@@ -21,7 +21,7 @@
       }
     }
 
-Figure frames are ``(root site, transform)`` evaluated by :mod:`server.peabody.values` (``xyz(a,b,c) *
+Figure frames are ``(root site, transform)`` evaluated by :mod:`peabody.values` (``xyz(a,b,c) *
 trans(x,y,z)`` is the frame rotated by ``Rx(a) Ry(b) Rz(c)`` placed at ``(x,y,z)``). Importing this module
 registers the ``channelset`` block with the Peabody loader, so channelsets inside any environment file land
 in ``env.extensions["channelset"][name]``.
@@ -40,6 +40,10 @@ from pathlib import Path
 
 import numpy as np
 
+from peabody import values as V
+from peabody.language import Assign, Block, Loc, Number, PeabodyError, Value, Vector, parse
+from peabody.loader import LoadContext, register_block
+from peabody.model import Environment
 from server.motion import quaternion
 from server.motion.channelset import (
     CHANNEL_TYPES,
@@ -49,10 +53,6 @@ from server.motion.channelset import (
     make_channelset,
 )
 from server.motion.errors import ChannelsetError
-from server.peabody import values as V
-from server.peabody.language import Assign, Block, Loc, Number, PeabodyError, Value, Vector, parse
-from server.peabody.loader import LoadContext, register_block
-from server.peabody.model import Environment
 
 _OPTIONAL_FIELDS = ("stride_length", "ground_speed")
 _PLAIN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z0-9_]+)*")

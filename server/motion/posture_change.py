@@ -14,12 +14,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from peabody.model import Figure
 from server.motion.binding import BoundChannelset, BoundSample, bind_channelset, protofiletype
 from server.motion.channelset import Channelset
 from server.motion.errors import BindingError, PostureGraphError
 from server.motion.playback import frame_position, nearest_frame
 from server.motion.posture_graph import Arc, PostureGraph, read_posture_graph
-from server.peabody.model import Figure
 
 
 @dataclass

@@ -1,7 +1,7 @@
 """Vectorised unit quaternions for figure channels.
 
 Layout ``(..., 4) = (w, x, y, z)``; rotation matrices act on column vectors like every transform in the
-project (:mod:`server.peabody.model`). Figure locations are stored as position + quaternion rather than 4x4
+project (:mod:`peabody.model`). Figure locations are stored as position + quaternion rather than 4x4
 matrices because that is what gets interpolated (lerp + slerp) and what the update packet carries (7 floats).
 """
 

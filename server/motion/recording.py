@@ -15,10 +15,10 @@ from typing import Protocol
 
 import numpy as np
 
+from peabody.model import Figure, Site
 from server.motion.binding import bind_channelset, neutral_pose, protofiletype
 from server.motion.channelset import Channelset, FigureTrack, JointTrack, make_channelset
 from server.motion.errors import ChannelsetError
-from server.peabody.model import Figure, Site
 
 
 def site_name(site: Site) -> str:
@@ -114,7 +114,7 @@ def write_channelset(
 
 
 class SiteKinematics(Protocol):
-    """What re-rooting needs from ``server.peabody.fk.FigureKinematics``."""
+    """What re-rooting needs from ``peabody.fk.FigureKinematics``."""
 
     site_names: list[str]
 

@@ -22,10 +22,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from peabody.model import Figure
 from server.motion.binding import bind_channelset, neutral_pose, protofiletype
 from server.motion.channelset import Channelset
 from server.motion.errors import BindingError
-from server.peabody.model import Figure
 
 _IDENTITY7 = np.array([0, 0, 0, 1, 0, 0, 0], dtype=np.float32)
 

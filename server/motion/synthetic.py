@@ -10,8 +10,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from peabody.model import Dof, Figure, Joint, Segment, Site
 from server.motion.channelset import Channelset, FigureTrack, JointTrack, make_channelset
-from server.peabody.model import Dof, Figure, Joint, Segment, Site
 
 _AXES = (np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0]))
 

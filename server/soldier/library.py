@@ -34,13 +34,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from peabody.model import Figure
 from server.motion.binding import protofiletype
 from server.motion.channelset import Channelset
 from server.motion.errors import PostureGraphError
 from server.motion.posture_change import LoadedPostureGraph
 from server.motion.posture_graph import posture_of
 from server.motion.sampling import ClipLibrary
-from server.peabody.model import Figure
 from server.soldier.locomotion import CLIP_OF, NSTATES
 from server.soldier.state import CRAWL_NODE, STAND_STOWED, LocoState
 

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from peabody.model import Figure
 from server.motion.channelset import Channelset, FigureTrack, JointTrack, make_channelset
 from server.motion.posture_change import LoadedPostureGraph
 from server.motion.posture_graph import Arc, PostureGraph
 from server.motion.synthetic import make_figure, make_soldier
-from server.peabody.model import Figure
 from server.soldier.library import MotionLibrary
 
 FPS = 60.0

@@ -48,8 +48,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_figures(args: argparse.Namespace) -> int:
-    from server.authoring.figures import check_figures, write_figures
-    from server.authoring.makehuman_mesh import MakeHumanDataError
+    from authoring.figures import check_figures, write_figures
+    from authoring.makehuman_mesh import MakeHumanDataError
     from ttes.output import print_json
     from ttes.paths import FIGURES
 
@@ -110,9 +110,9 @@ def _register_check(sub: argparse._SubParsersAction) -> None:
 
 
 def run_check(args: argparse.Namespace) -> int:
-    from server.authoring.quality import QualityError, check_library, only_clips
+    from authoring.quality import QualityError, check_library, only_clips
+    from peabody.language import PeabodyError
     from server.motion.errors import ChannelsetError, PostureGraphError
-    from server.peabody.language import PeabodyError
     from ttes.output import print_json
     from ttes.paths import FIGURES, POSTURE_GRAPHS
 
@@ -157,7 +157,7 @@ def _cell(value: object, width: int, fmt: str) -> str:
 def print_check_table(result: dict) -> None:
     """The check as a table: one line per clip (cm, m/s, degrees), the failing values named with their
     limits, the failing posture nodes, then the summary per threshold."""
-    from server.authoring.quality import GAIT_LIMITS, THRESHOLDS, where_detail
+    from authoring.quality import GAIT_LIMITS, THRESHOLDS, where_detail
 
     summary = result["summary"]
     head = " ".join(f"{h:>{w}}" for _, h, w, _ in CHECK_COLUMNS)
@@ -230,9 +230,9 @@ def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
 
 
 def run_contact_sheet(args: argparse.Namespace) -> int:
-    from server.authoring.contact_sheet import ContactSheetError, library_sheet_inputs, render_contact_sheet
+    from authoring.contact_sheet import ContactSheetError, library_sheet_inputs, render_contact_sheet
+    from peabody.language import PeabodyError
     from server.motion.errors import ChannelsetError, PostureGraphError
-    from server.peabody.language import PeabodyError
     from ttes.output import print_json
     from ttes.paths import FIGURES, POSTURE_GRAPHS
 
@@ -304,7 +304,7 @@ def _register_build(sub: argparse._SubParsersAction) -> None:
 
 
 def run_build(args: argparse.Namespace) -> int:
-    from server.authoring.build import build
+    from authoring.build import build
     from ttes.output import print_json
     from ttes.paths import FIGURES, ROOT
 

@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
 
 def near_tips_text() -> str:
     """figures/soldier.fig spat as TIPS (the CLI may read Peabody files; the renderer may not)."""
-    from server.peabody.tips import format_tips, load_for_spit
+    from peabody.tips import format_tips, load_for_spit
     from ttes.paths import FIGURES
 
     return format_tips(load_for_spit([FIGURES / "soldier.fig"]))

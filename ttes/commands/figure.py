@@ -56,8 +56,8 @@ def _info(args: argparse.Namespace) -> int:
 def _spit(args: argparse.Namespace) -> int:
     import sys
 
-    from server.peabody.language import PeabodyError
-    from server.peabody.tips import spit
+    from peabody.language import PeabodyError
+    from peabody.tips import spit
     from ttes.output import print_json
 
     try:
@@ -78,9 +78,9 @@ def figure_summary(path: str | Path) -> dict[str, Any]:
     one-segment figure such as a rifle, its largest extent: the length)."""
     import numpy as np
 
-    from server.peabody.fk import FigureKinematics
-    from server.peabody.loader import read_figure
-    from server.peabody.psurf import psurf_edges
+    from peabody.fk import FigureKinematics
+    from peabody.loader import read_figure
+    from peabody.psurf import psurf_edges
 
     figure = read_figure(path)
     fk = FigureKinematics(figure)

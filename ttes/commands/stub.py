@@ -179,7 +179,7 @@ def stand_in_data_dir(directory: Path, soldiers: int = 10) -> Path:
     import shutil
 
     import ttes.paths
-    from server.peabody.loader import read_figure
+    from peabody.loader import read_figure
     from server.soldier.synthetic import write_synthetic_library
 
     figures = directory / "figures"

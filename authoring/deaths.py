@@ -1,0 +1,312 @@
+"""The seven deaths, simulated: a MuJoCo ragdoll (:mod:`authoring.ragdoll`) falls from its posture.
+
+Each death starts exactly in its posture (frame 0 is the graph's key posture, at rest) with the muscles
+holding that pose: joint springs toward it, and gravity fed forward on the joints of the limbs off the ground
+and on the held rifle (:func:`_carried_dofs`), so nothing sags in the first frames. A posture that dips into
+the ground (by a few millimetres) starts on a ground lowered that far, which rises to 0 as the body settles
+(:data:`GROUND_RISE`). Then:
+
+1. **the hit**: a force on the upper torso, ramped up over :attr:`DeathSpec.ramp` and down again (so every
+   part starts moving slowly), pushing the body the way it falls (forward standing, to the side kneeling,
+   down lying);
+2. **the slump**: PD control (the springs) toward a slumped shape — the ``SLUMP`` key standing (the knees
+   buckle), the spine and head of ``SLUMP`` kneeling (the legs stay as they are: no kick), the ``DEAD`` key's
+   head lying — at half strength by :attr:`DeathSpec.slump_time`, then toward a limp shape (the ``DEAD``
+   key's, legs straight and feet pointed, :func:`limp_pose`) fading to a faint tone by
+   :attr:`DeathSpec.fade`; the knees give way at once (:data:`KNEES_GIVE_WAY`: held, they swung the shins up
+   as the body pitched forward), arms, neck and head keep no tone (:data:`LOOSE`); dead joints stay damped;
+   once he is down (after :attr:`DeathSpec.fade`, over :data:`KNEE_STRAIGHTEN`) the legs roll outward at
+   the hips and the feet evert (:data:`ROLLED_LEGS`, :data:`HIP_ROLL`, at :data:`LEG_TONE`: the feet lie on
+   their inner sides, heels low), and a standing death's knees straighten (:data:`KNEE_TONE`: bent, they
+   left him bottom-up on his knees);
+3. **the rifle is let go** at :attr:`DeathSpec.release` (the welds to the palms are switched off; the frame
+   is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`);
+4. **the body settles**: recording (60 fps) stops once every body has been still (:data:`REST_SPEED`) for
+   :data:`REST_SECONDS` (or after :data:`MAX_SECONDS`); the clip keeps those still frames, so the last frame
+   is at rest.
+
+**No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
+death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph
+(:func:`dead_node`), and getting up from it replays that very death backwards (:data:`GET_UP_SECONDS`).
+The server treats ``NAME@variant`` as posture ``NAME``.
+
+MuJoCo is deterministic for one build (no randomness anywhere, fixed step), so a rebuild gives the same
+bytes on the same machine.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from authoring.motion import KeyPosture
+from authoring.postures import RIFLE, SOLDIER
+from authoring.transitions import FPS, ClipFrames
+from peabody.model import Figure
+
+DEAD = "DEAD"
+REST_SPEED = 0.03  # m/s: a body's centre of mass slower than this is still
+REST_SECONDS = 0.35  # every body still this long: the death is over
+MAX_SECONDS = 6.0
+TOSS, TOSS_SECONDS = 40.0, 0.1  # N, s: the hands fling the rifle they let go of (clear of the falling body)
+GROUND_RISE = 0.4  # s: a ground lowered under a posture dipping into it rises to 0
+GET_UP_SECONDS = 10.0  # DEAD@x -> its start posture: the death played backwards (seed 002 Figure 7: 10 s)
+
+
+@dataclass(frozen=True)
+class DeathSpec:
+    """How one death goes: the posture it starts from and the hit and slump that fell the soldier."""
+
+    name: str  # the transition file, e.g. "ststow2dead"
+    start: str  # its posture
+    force: float  # N, peak of the hit on the upper torso
+    direction: tuple[float, float, float]  # the hit's direction, pelvis heading frame (x right, z back)
+    slump: str = "all"  # what slumps: "all" (the SLUMP key: knees buckle), "upper" (spine and head), "head"
+    ramp: float = 0.15  # s, the hit ramps up (and down) this long
+    hold: float = 0.25  # s, the hit is at its peak this long
+    slump_time: float = 0.4  # s, the muscles reach the slumped shape (at slump_gain of their strength)
+    slump_gain: float = 0.5
+    fade: float = 1.0  # s, by then only a faint tone toward the limp shape is left
+    release: float = 0.35  # s, the hands let go of the rifle
+
+
+DEATHS: tuple[DeathSpec, ...] = (
+    DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0)),
+    DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0)),
+    DeathSpec("kstow2dead", "KNEEL_STOWED", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15),
+    DeathSpec("kfire2dead", "KNEEL_FIRE", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15),
+    DeathSpec(
+        "prstow2dead", "PRONE_STOWED", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
+    ),
+    DeathSpec(
+        "prfire2dead", "PRONE_FIRE", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
+    ),
+    DeathSpec(
+        "crawl2dead", "CRAWL", 120.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
+    ),
+)
+SLUMP = "SLUMP"  # the in-between key of a body crumpling onto its knees (authoring.postures)
+UPPER = ("waist", "neck", "head")  # with the vertebrae: what slumps of a kneeling soldier
+HEAD = ("neck", "head")
+
+
+def death_specs() -> dict[str, DeathSpec]:
+    return {d.name: d for d in DEATHS}
+
+
+def dead_node(name: str) -> str:
+    """The DEAD variant a death ends in: ``ststow2dead`` -> ``DEAD@ststow``."""
+    return f"{DEAD}@{name.removesuffix('2dead')}"
+
+
+@dataclass(frozen=True)
+class DeathClip:
+    frames: ClipFrames
+    release_frame: int
+
+
+# muscle strength (N m / rad) of holding the posture, by joint; the rest gets DEFAULT_GAIN
+GAINS: dict[str, float] = {
+    "hip": 900.0,
+    "knee": 700.0,
+    "ankle": 300.0,
+    "toes": 40.0,
+    "waist": 900.0,
+    "neck": 120.0,
+    "head": 60.0,
+    "clavicle": 400.0,
+    "shoulder": 400.0,
+    "elbow": 250.0,
+    "wrist": 100.0,
+}
+SPINE_GAIN = 1500.0  # vertebrae: stiff throughout (a dead back bends, mostly at the hips and waist)
+SPINE_TONE = 0.25  # the fraction of the vertebrae's gain kept when dead
+LOOSE = ("clavicle", "shoulder", "elbow", "wrist", "neck", "head")  # no tone left: gravity lays them down
+TONE = 0.10  # the fraction of the muscles' gain kept when dead (toward the DEAD key's shape)
+LEG_TONE = 0.3  # hips, ankles: enough to roll the legs outward and lay the feet on their inner sides
+LEGS = ("hip", "ankle")
+KNEE_TONE = 0.3  # a standing death's knees straighten with this once he is down (bent, they held him
+KNEE_STRAIGHTEN = 1.0  # s: bottom-up on his knees), slowly after DeathSpec.fade (quickly, the shins kick up)
+KNEES_GIVE_WAY = 0.15  # s: after the slump the knees go limp this fast
+DAMPING = 0.1  # joint damping = DAMPING * gain (s), at least MIN_DAMPING
+MIN_DAMPING = 4.0
+
+
+def _gain(joint: str) -> float:
+    if joint.startswith(("v", "vl", "vt")) and joint[1:2] in ("l", "t"):
+        return SPINE_GAIN
+    for key, g in GAINS.items():
+        if joint.endswith(key):
+            return g
+    return 60.0
+
+
+# degrees: the legs' tone pulls them straight and the feet pointed (heels low on the ground)
+LIMP_LEGS = {"knee": (0.0,), "ankle": (-50.0, 0.0)}
+# degrees: once he is down, the legs roll outward at the hips (external rotation) and the feet evert, so a
+# body on its front lies with its feet on their inner sides and its heels low, as real bodies lie
+ROLLED_LEGS = {"knee": (5.0,), "ankle": (-50.0, 30.0)}
+HIP_ROLL = -45.0  # the hips' third DOF (about the thigh); negative turns the toes out
+
+
+def limp_pose(kin, dead: np.ndarray, rolled: bool = False) -> np.ndarray:
+    """The shape the faint tone of a dead body pulls toward: the DEAD key's, legs straight and feet pointed
+    (so a body on its front lies with its heels low); ``rolled``: the legs rolled outward too."""
+    q = np.array(dead, dtype=np.float64)
+    for side in ("left", "right"):
+        for j, deg in (ROLLED_LEGS if rolled else LIMP_LEGS).items():
+            q[kin.dof_slices[f"{side}_{j}"]] = np.radians(deg)
+        if rolled:
+            q[kin.dof_slices[f"{side}_hip"].stop - 1] = np.radians(HIP_ROLL)
+    return q
+
+
+def slump_pose(kin, spec: DeathSpec, keys: Mapping[str, KeyPosture]) -> np.ndarray:
+    """The shape the slump's muscles pull toward: the SLUMP key (standing), or the start posture with the
+    spine and head slumped (kneeling: the legs stay as they are, so nothing kicks) or the head dropped
+    (lying)."""
+    start = np.array(keys[spec.start].poses[SOLDIER], dtype=np.float64)
+    if spec.slump == "all":
+        return np.array(keys[SLUMP].poses[SOLDIER], dtype=np.float64)
+    src = keys[SLUMP if spec.slump == "upper" else DEAD].poses[SOLDIER]
+    parts = UPPER if spec.slump == "upper" else HEAD
+    for name, sl in kin.dof_slices.items():
+        if name in parts or (spec.slump == "upper" and _gain(name) == SPINE_GAIN):
+            start[sl] = src[sl]
+    return start
+
+
+def _carried_dofs(doll, key: KeyPosture) -> np.ndarray:
+    """``qvel`` addresses of the hinges whose limb (the child segment and everything beyond it) has no
+    segment within 1 cm of the ground in the posture ``key``: the ones muscles hold up against gravity."""
+    from authoring.postures import segment_heights
+
+    m = doll.model
+    heights = segment_heights(doll.kin, key.poses[SOLDIER], key.locations[SOLDIER])
+    grounded = {m.body(name).id for name, h in heights.items() if float(h) < 1.0}
+    beyond: dict[int, set[int]] = {b: {b} for b in range(m.nbody)}
+    for b in range(m.nbody - 1, 0, -1):  # children come after their parents
+        beyond[int(m.body_parentid[b])] |= beyond[b]
+    return np.array(
+        [int(d) for d in doll.map.qvel if not beyond[int(m.dof_bodyid[d])] & grounded], dtype=np.intp
+    )
+
+
+def _smoothstep(u: float) -> float:
+    u = min(1.0, max(0.0, u))
+    return u * u * (3.0 - 2.0 * u)
+
+
+def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Figure, Figure]) -> DeathClip:
+    """Record one death (see the module docstring)."""
+    from authoring.ragdoll import Ragdoll
+
+    soldier, rifle = figures
+    first, dead = keys[spec.start], keys[DEAD]
+    doll = Ragdoll(soldier, rifle, first.poses[SOLDIER], first.locations[SOLDIER], first.locations[RIFLE])
+    model, data, jm = doll.model, doll.data, doll.map
+    joint_of = {i: name for name, sl in doll.kin.dof_slices.items() for i in range(sl.start, sl.stop)}
+    names = [joint_of[int(i)] for i in jm.dof]
+    gain = np.array([_gain(n) for n in names])
+    spine = np.array([_gain(n) == SPINE_GAIN for n in names])
+    hold_ref = first.poses[SOLDIER][jm.dof]
+    lo, hi = doll.kin.lower[jm.dof], doll.kin.upper[jm.dof]
+    dead_ref = np.clip(limp_pose(doll.kin, dead.poses[SOLDIER])[jm.dof], lo, hi)
+    rolled_ref = np.clip(limp_pose(doll.kin, dead.poses[SOLDIER], rolled=True)[jm.dof], lo, hi)
+    slump_ref = np.clip(slump_pose(doll.kin, spec, keys)[jm.dof], lo, hi)
+    knees = np.array([n.endswith("knee") for n in names])
+    loose = [n.endswith(LOOSE) for n in names]
+    legs = [n.endswith(LEGS) for n in names]
+    tone = np.where(spine, SPINE_TONE, np.where(loose, 0.0, TONE))
+    # once he is down the legs roll outward (hips, ankles) and, standing deaths only, the knees straighten
+    # (straightened, a fallen kneeling soldier's knees drag his feet along the ground)
+    settle = np.where(legs, LEG_TONE - TONE, 0.0) + (KNEE_TONE - TONE) * knees * (spec.slump == "all")
+
+    # the hit's direction in the world (MuJoCo frame): the pelvis' heading, horizontal
+    pelvis = doll.body_global("lower_torso")
+    fwd = -pelvis[:3, 2].copy()
+    fwd[1] = 0.0
+    fwd /= np.linalg.norm(fwd) or 1.0
+    right = np.cross(fwd, [0.0, 1.0, 0.0])
+    dx, dy, dz = spec.direction
+    d_fig = dx * right + dy * np.array([0.0, 1.0, 0.0]) - dz * fwd
+    d_fig /= np.linalg.norm(d_fig)
+    d_mj = np.array([d_fig[0], -d_fig[2], d_fig[1]])  # figure (x, y, z) -> MuJoCo (x, -z, y)
+    torso = model.body("upper_torso").id
+    gun = model.body("rifle").id
+    away = -right - 0.3 * d_fig  # the let-go rifle is tossed to the soldier's left, away from his fall
+    away[1] = 0.0
+    away /= np.linalg.norm(away) or 1.0
+    toss_mj = TOSS * np.array([away[0], -away[2], away[1]])
+
+    def set_muscles(t: float) -> None:
+        if t < spec.slump_time:  # holding -> slumping
+            u = _smoothstep(t / spec.slump_time)
+            ref = hold_ref + u * (slump_ref - hold_ref)
+            g = 1.0 + u * (spec.slump_gain - 1.0)
+        else:  # slumped -> limp; the knees give way at once (held, they swing the shins up as he pitches)
+            u = _smoothstep((t - spec.slump_time) / (spec.fade - spec.slump_time))
+            uk = _smoothstep((t - spec.slump_time) / KNEES_GIVE_WAY)
+            ref = slump_ref + u * (dead_ref - slump_ref)
+            g = spec.slump_gain + np.where(knees, uk, u) * (tone - spec.slump_gain)
+            us = _smoothstep((t - spec.fade) / KNEE_STRAIGHTEN)
+            ref = ref + us * (rolled_ref - dead_ref)
+            g = g + settle * us
+        model.jnt_stiffness[jm.jnt] = gain * g
+        model.qpos_spring[jm.qpos] = ref
+        model.dof_damping[jm.qvel] = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
+
+    # the living soldier's muscles carry his limbs and the rifle: gravity fed forward on every joint whose
+    # limb does not rest on the ground (and an upward pull on the held rifle), fading as he slumps, so the
+    # first frames start from rest instead of sagging into the joint springs
+    carried = _carried_dofs(doll, first)
+    rifle_weight = model.body_mass[gun] * -model.opt.gravity
+
+    def carry(t: float) -> float:
+        return 1.0 - _smoothstep(t / spec.slump_time)
+
+    def hit(t: float) -> float:
+        if t < spec.ramp:
+            return _smoothstep(t / spec.ramp)
+        t -= spec.ramp + spec.hold
+        return 1.0 - _smoothstep(t / spec.ramp) if t > 0 else 1.0
+
+    steps = round(1.0 / (FPS * model.opt.timestep))
+    dt = steps * model.opt.timestep
+    poses, roots, rifles = [doll.pose()], [doll.root_location()], [doll.rifle_location()]
+    com = data.xipos.copy()
+    still = 0
+    release_frame = None
+    ground0 = min(0.0, doll.lowest())  # a posture dipping into the ground starts on a ground that low
+    t = 0.0
+    while t < MAX_SECONDS:
+        for _ in range(steps):
+            ts = data.time
+            set_muscles(ts)
+            c = carry(ts)
+            data.qfrc_applied[carried] = c * data.qfrc_bias[carried]
+            held = release_frame is None
+            data.xfrc_applied[torso, :3] = spec.force * hit(ts) * d_mj
+            tossing = release_frame is not None and ts < spec.release + TOSS_SECONDS
+            data.xfrc_applied[gun, :3] = toss_mj if tossing else (c * rifle_weight if held else 0.0)
+            doll.set_ground(ground0 * (1.0 - _smoothstep(ts / GROUND_RISE)))
+            if release_frame is None and ts >= spec.release:
+                doll.release()
+                release_frame = len(poses)
+                # a rifle the posture dipped into the ground lies on a ground that low (raising it would
+                # lever the body up off it)
+                doll.set_rifle_ground(min(0.0, doll.rifle_lowest()))
+            doll.step()
+        t += dt
+        poses.append(doll.pose())
+        roots.append(doll.root_location())
+        rifles.append(doll.rifle_location())
+        speed = np.linalg.norm(data.xipos[1:] - com[1:], axis=1).max() / dt
+        com = data.xipos.copy()
+        still = still + 1 if speed < REST_SPEED and t > spec.fade + spec.release else 0
+        if still * dt >= REST_SECONDS:
+            break
+    frames = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
+    return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))

@@ -1,0 +1,479 @@
+"""Quality checks of the motion library: does it look like soldiers moving? (``ttes author check``).
+
+Everything is measured on every frame, vectorised, in the *world* frame: locomotion clips are recorded in
+place, so the entity's ground motion at the recorded ``ground_speed`` is added back (along -Z, the facing
+direction; +Z for backward clips; the crawl too); clips with an ``end_offset`` really move and need nothing.
+
+Per clip (a channelset bound to its soldier figure and rifle):
+
+* contacts, by **height alone** (a fast skim just above the ground is sliding, not swinging): every mesh node
+  (psurf node) below ``CONTACT_HEIGHT_CM`` is on the ground, and its slide is the horizontal extent of its
+  positions over one such run of frames (:mod:`authoring.body_parts`). ``foot_skate_cm`` is the worst
+  over the feet (heels, balls, toes), ``contact_slide_cm`` over every other part (knees, hands, forearms,
+  upper arms, chest, belly, pelvis, head), ``contact_slide_part`` names it, ``contact_slides`` has each part.
+* ``ground_penetration_cm`` (body mesh below y = 0), ``rifle_penetration_cm`` (rifle mesh below y = 0) and
+  ``rifle_in_body_cm``: how deep rifle mesh nodes go into the body, measured against the convex hull (Qhull)
+  of each body segment's mesh in the segment's frame — the hands and fingers that hold it excepted — with
+  bounding spheres to pick the candidate (frame, segment, node) triples first.
+* ``rifle_slide_cm`` (information, no limit): the rifle's slide on the ground, e.g. once a death drops it.
+* ``palm_rifle_cm`` — right palm centre to the rifle's ``grip``, left palm centre to its ``handguard``, only
+  while the rifle is held (before the channelset's ``release_frame``).
+* ``end_speed_m_s`` — at each end of the clip that is a static posture (both ends of a static-graph clip, the
+  base-posture ends of locomotion clips), the fastest site (body and rifle) over the first/last
+  ``END_FRAMES`` frames: things ease in and out, deaths end at rest.
+* ``joint_limit_violations`` (float32 slack allowed) and ``max_frame_jump_deg`` (pops, IK flips).
+* locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
+  recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
+  cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
+  walk or run cycle clip holds one step, cut at footfalls; the crawl cycle both legs' moves).
+
+Across clips, along every posture graph, at each posture node:
+
+* continuity: the poses where arcs arrive (forward: last frame, backward: first frame) and leave must agree —
+  ``continuity_deg`` (joint angles), ``continuity_root_cm`` / ``continuity_root_deg`` (the figure channel)
+  and ``continuity_rifle_cm``. A clip's last frame is taken back by its ``end_offset`` (the ground-plane
+  move ``x, z, yaw about +Y``) before it is compared, so a turn arrives at its posture.
+* resting postures rest (``REST_PARTS``; ``NAME@variant`` is a variant of ``NAME``): at every endpoint the
+  weight-bearing parts' lowest nodes are on the ground, ``rest_contact_cm`` (prone: chest or belly and both
+  forearms; kneeling: the right kneecap; crawl: both kneecaps and forearms; DEAD: the lowest point, the
+  pelvis and the chest or belly) and, DEAD only, ``rest_foot_cm`` (each foot's heel and lowest node).
+
+:func:`check_library` returns one object per clip, one per posture node and a ``summary`` with, per threshold,
+the limit, the worst value, where it happened and pass/fail. Playing clips on figures lives in
+:mod:`~authoring.quality_frames`, the posture-node checks in :mod:`~authoring.quality_postures`,
+body parts, contact runs and segment hulls in :mod:`~authoring.body_parts`.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
+from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
+from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
+from server.motion.channelset import Channelset
+from server.motion.posture_change import load_posture_graph
+
+__all__ = [
+    "ClipFrames",
+    "FigureSet",
+    "QualityError",
+    "check_clip",
+    "check_continuity",
+    "check_library",
+    "clip_matches",
+    "only_clips",
+    "play",
+    "summarise",
+]
+
+THRESHOLDS: dict[str, float] = {
+    "foot_skate_cm": 2.0,
+    "contact_slide_cm": 3.0,
+    "ground_penetration_cm": 1.0,
+    "rifle_penetration_cm": 1.0,
+    "rifle_in_body_cm": 1.0,
+    "palm_rifle_cm": 1.0,
+    "end_speed_m_s": 0.5,
+    "joint_limit_violations": 0.0,
+    "max_frame_jump_deg": 20.0,
+    **POSTURE_LIMITS,
+}
+POSTURE_KEYS = tuple(POSTURE_LIMITS)
+# (low, high) per gait family of cycle clips; None: recorded only
+GAIT_LIMITS: dict[str, dict[str, tuple[float, float] | None]] = {
+    "walk": {"gait_speed_m_s": (1.2, 1.6), "gait_steps_per_s": (1.7, 2.1)},
+    "run": {"gait_speed_m_s": (3.0, 5.0), "gait_steps_per_s": None},
+    "crawl": {"gait_speed_m_s": (0.3, 0.6), "gait_steps_per_s": None},
+    "bwalk": {"gait_speed_m_s": None, "gait_steps_per_s": None},
+}
+STEPS_PER_CYCLE_CLIP = {"crawl": 2}  # gait.py cuts one step per cycle clip; crawl.py one full cycle
+CONTACT_HEIGHT_CM = 1.25  # a 1 cm skim is contact; a toe leaving the ground at 2 cm is not
+END_FRAMES = 3  # frames over which an end's speed is measured
+LIMIT_SLACK = 1e-4  # rad / cm: float32 rounding of recorded angles
+PALM_PAIRS = (("right_palm.palmcenter", "grip"), ("left_palm.palmcenter", "handguard"))
+LOCOMOTION_GRAPH_WORDS = ("loco", "crawl")
+BACKWARD_WORDS = ("bwalk", "backward", "back_walk", "walkback")
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[start, stop)`` of the runs of True."""
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
+
+
+def foot_skate(points: np.ndarray, fps: float) -> tuple[float, int]:
+    """Largest horizontal slide (cm) of contact points ``(n, k, 3)`` (world) while below the contact height
+    (judged by height alone), and the number of contact runs of three frames or more."""
+    del fps  # contact no longer depends on speed: a fast skim at ground level is a slide
+    if points.shape[0] < 2:
+        return 0.0, 0
+    slide, _ = contact_slides(points, CONTACT_HEIGHT_CM)
+    phases = sum(1 for k in range(points.shape[1]) for a, b in _runs(points[:, k, 1] <= CONTACT_HEIGHT_CM)
+                 if b - a >= 3)  # fmt: skip
+    return float(slide.max(initial=0.0)), phases
+
+
+def ground_shift(cs: Channelset, locomotion: bool, direction: float | None = None) -> np.ndarray:
+    """``(n, 3)`` world travel to add to an in-place locomotion clip (zeros for every other clip)."""
+    n = cs.nframes
+    shift = np.zeros((n, 3))
+    if locomotion and cs.ground_speed is not None:
+        if direction is None:
+            direction = 1.0 if any(w in cs.name.lower() for w in BACKWARD_WORDS) else -1.0
+        shift[:, 2] = direction * cs.ground_speed * np.arange(n) / cs.fps
+    return shift
+
+
+def gait_family(name: str) -> str | None:
+    """``walk``, ``bwalk``, ``run`` or ``crawl`` for a locomotion cycle clip's name, else None."""
+    low = name.lower()
+    if "cycle" not in low:
+        return None
+    return next((f for f in ("bwalk", "walk", "run", "crawl") if low.startswith(f)), None)
+
+
+def end_speeds(pos: np.ndarray, names: Sequence[str], fps: float) -> dict[str, tuple[float, str]]:
+    """Fastest site (m/s, name) of ``pos`` ``(n, k, 3)`` over the first and the last ``END_FRAMES``."""
+    n = pos.shape[0]
+    out: dict[str, tuple[float, str]] = {}
+    if n < 2:
+        return {"first": (0.0, ""), "last": (0.0, "")}
+    k = min(END_FRAMES, n - 1)
+    for end, part in (("first", pos[: k + 1]), ("last", pos[n - 1 - k :])):
+        v = np.linalg.norm(np.diff(part, axis=0), axis=-1).max(axis=0) * fps / 100.0
+        i = int(np.argmax(v))
+        out[end] = (float(v[i]), names[i])
+    return out
+
+
+def _range_distance(value: float, limits: tuple[float, float] | None) -> float:
+    """How far ``value`` lies outside ``limits`` (negative inside, ``-inf`` without limits)."""
+    return -np.inf if limits is None else max(limits[0] - value, value - limits[1])
+
+
+def _range_failure(value: float | None, limits: tuple[float, float] | None) -> bool:
+    return value is not None and limits is not None and not (limits[0] <= value <= limits[1])
+
+
+def check_clip(
+    clip: ClipFrames | Channelset,
+    figures: FigureSet,
+    *,
+    locomotion: bool = False,
+    direction: float | None = None,
+    file: str | None = None,
+    static_ends: tuple[bool, bool] | None = None,
+) -> dict[str, Any]:
+    """All per-clip metrics of one channelset (see the module docstring) and its pass/fail.
+
+    ``static_ends``: whether the first and the last frame are static postures (speeds are checked there);
+    default: both for a static clip, neither for a locomotion clip."""
+    frames = clip if isinstance(clip, ClipFrames) else play(clip, figures)
+    cs = frames.channelset
+    n = cs.nframes
+    name = cs.name
+    body_type = max(frames.poses, key=lambda k: figures.kin[k].ndof)
+    rifle_type = next((k for k in frames.poses if k != body_type), None)
+    kin = figures.kin[body_type]
+    q, loc = frames.poses[body_type], frames.locations[body_type]
+    out: dict[str, Any] = {
+        "name": name,
+        "file": file or cs.source,
+        "figure": body_type,
+        "rifle": rifle_type,
+        "frames": n,
+        "fps": cs.fps,
+        "duration_s": round(cs.duration, 4),
+        "locomotion": locomotion,
+    }
+    shift = ground_shift(cs, locomotion, direction)
+    sites = kin.site_globals(q, loc)
+    # every mesh node in the world: contacts and ground penetration
+    nodes, segs = figures.nodes(body_type)
+    parts = figures.node_parts(body_type)
+    segg = kin.segment_globals(q, loc)  # (n, nseg, 4, 4)
+    pts = np.einsum("fkij,kj->fki", segg[:, segs, :3, :], nodes) + shift[:, None, :]
+    runs = contact_runs(pts, CONTACT_HEIGHT_CM)
+    slide, _ = runs.per_node(len(parts))
+    feet = np.isin(parts, FOOT_PARTS)
+    shown = np.char.replace(parts.astype(str), "_kneecap", "_knee")  # a kneecap slides as the knee
+    out["contact_slides"] = {
+        str(p): round(float(slide[shown == p].max()), 3) for p in np.unique(shown[slide > 0])
+    }
+    for key, mask in (("foot_skate", feet), ("contact_slide", ~feet)):
+        r = runs.worst(mask)
+        val = 0.0 if r is None else float(runs.slide[r])
+        out[f"{key}_cm"] = round(val, 3)
+        out[f"{key}_part"] = str(shown[runs.node[r]]) if val > 0 else None
+        out[f"{key}_frames"] = [int(runs.first[r]), int(runs.last[r])] if val > 0 else None
+    foot_down = [(pts[:, parts == f, 1] <= CONTACT_HEIGHT_CM).any(axis=1) for f in FOOT_PARTS]
+    out["stance_phases"] = sum(1 for row in foot_down for a, b in _runs(row) if b - a >= 3)
+    ys = pts[..., 1]
+    low = np.unravel_index(int(np.argmin(ys)), ys.shape)
+    out["ground_penetration_cm"] = round(max(0.0, -float(ys[low])), 3)
+    out["lowest_segment"] = kin.segment_names[int(segs[low[1]])]
+    out["ground_penetration_where"] = f"{out['lowest_segment']}[{int(low[0])}]"
+    site_pos = sites[..., :3, 3] + shift[:, None, :]
+    site_names = list(kin.site_names)
+    if rifle_type is not None:
+        rk = figures.kin[rifle_type]
+        rq, rloc = frames.poses[rifle_type], frames.locations[rifle_type]
+        rs = rk.site_globals(rq, rloc)
+        rnames = {s.split(".", 1)[1]: i for i, s in enumerate(rk.site_names)}
+        held = n if cs.release_frame is None else cs.release_frame
+        out["release_frame"] = cs.release_frame
+        worst = 0.0
+        for palm, rsite in PALM_PAIRS:
+            if palm in kin.site_names and rsite in rnames and held > 0:
+                d = np.linalg.norm(
+                    sites[:held, kin.site_names.index(palm), :3, 3] - rs[:held, rnames[rsite], :3, 3], axis=-1
+                )
+                out[f"{palm.split('.')[0]}_rifle_cm"] = round(float(d.max()), 3)
+                if d.max() >= worst:
+                    worst = float(d.max())
+                    out["palm_rifle_where"] = f"{palm.split('.')[0]}[{int(np.argmax(d))}]"
+        out["palm_rifle_cm"] = round(worst, 3)
+        rnodes, rsegs = figures.nodes(rifle_type)
+        rg = rk.segment_globals(rq, rloc)
+        rpts = np.einsum("fkij,kj->fki", rg[:, rsegs, :3, :], rnodes)
+        out["rifle_penetration_cm"] = round(max(0.0, -float(rpts[..., 1].min(initial=np.inf))), 3)
+        if out["rifle_penetration_cm"] > 0:
+            out["rifle_penetration_where"] = f"frame {int(np.argmin(rpts[..., 1].min(axis=1)))}"
+        rruns = contact_runs(rpts + shift[:, None, :], CONTACT_HEIGHT_CM)  # information: a dropped rifle
+        r = rruns.worst(np.ones(len(rnodes), dtype=bool))
+        out["rifle_slide_cm"] = 0.0 if r is None else round(float(rruns.slide[r]), 3)
+        out["rifle_slide_frames"] = None if r is None else [int(rruns.first[r]), int(rruns.last[r])]
+        depth, frame, seg = figures.hulls(body_type).depth(rpts, segg)
+        out["rifle_in_body_cm"] = round(depth, 3)
+        out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None
+        site_pos = np.concatenate([site_pos, rs[..., :3, 3] + shift[:, None, :]], axis=1)
+        site_names += list(rk.site_names)
+    # speeds at the ends that are static postures
+    if static_ends is None:
+        static_ends = (not locomotion, not locomotion)
+    speeds = end_speeds(site_pos, site_names, cs.fps)
+    checked = [(end, *speeds[end]) for end, ok in zip(("first", "last"), static_ends, strict=True) if ok]
+    out["end_speeds_m_s"] = {end: round(v, 3) for end, (v, _) in speeds.items()}
+    if checked:
+        end, v, site = max(checked, key=lambda c: c[1])
+        out["end_speed_m_s"] = round(v, 3)
+        out["end_speed_where"] = f"{site} ({end} frames)"
+    else:
+        out["end_speed_m_s"] = None
+    # joint limits and pops
+    viol = (q < kin.lower - LIMIT_SLACK) | (q > kin.upper + LIMIT_SLACK)
+    out["joint_limit_violations"] = int(viol.sum())
+    if viol.any():
+        bad = np.flatnonzero(viol.any(axis=0))
+        names = [j for j, sl in kin.dof_slices.items() if np.any((bad >= sl.start) & (bad < sl.stop))]
+        out["violating_joints"] = names
+    rot = np.array([d.kind == "R" for j in figures.figures[body_type].joints.values() for d in j.dofs])
+    steps = np.abs(np.diff(q[:, rot], axis=0))
+    out["max_frame_jump_deg"] = round(float(np.degrees(steps.max(initial=0.0))), 3)
+    if steps.size:
+        frame, col = np.unravel_index(int(np.argmax(steps)), steps.shape)
+        dof = int(np.flatnonzero(rot)[col])
+        joint = next(j for j, sl in kin.dof_slices.items() if sl.start <= dof < sl.stop)
+        out["max_frame_jump_where"] = f"{joint}[{int(frame)}-{int(frame) + 1}]"
+    failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
+    if locomotion:
+        speed, stride = cs.ground_speed, cs.stride_length
+        out["stride_length"] = stride
+        out["ground_speed"] = speed
+        out["cadence"] = round(speed / stride, 4) if speed and stride else None
+        # an in-place clip must say how fast it goes; one with an end_offset (a turn, a side-step) moves
+        out["locomotion_recorded"] = (speed is not None and stride is not None) or cs.end_offset is not None
+        if not out["locomotion_recorded"]:
+            failures.append("locomotion_recorded")
+        family = gait_family(name)
+        if family is not None and speed is not None and stride is not None and cs.duration > 0:
+            out["gait"] = family
+            out["gait_speed_m_s"] = round(float(speed) / 100.0, 4)
+            out["gait_steps_per_s"] = round(STEPS_PER_CYCLE_CLIP.get(family, 1) / cs.duration, 4)
+            for key, limits in GAIT_LIMITS[family].items():
+                if _range_failure(out[key], limits):
+                    failures.append(key)
+    out["failures"] = failures
+    out["pass"] = not failures
+    return out
+
+
+# --- the library ------------------------------------------------------------------------------------------
+
+
+def _is_locomotion(graph_path: Path) -> bool:
+    stem = graph_path.stem.lower()
+    return any(w in stem for w in LOCOMOTION_GRAPH_WORDS)
+
+
+def check_library(
+    graphs: Sequence[str | Path],
+    figures_dir: str | Path,
+    *,
+    clips: Sequence[str | Path] = (),
+    figures: FigureSet | None = None,
+) -> dict[str, Any]:
+    """Check every clip of the posture graphs (and any extra channelset files) and every graph's posture
+    nodes.
+
+    Figures are read from ``figures_dir`` by the channelsets' protofiletypes. Returns ``{"clips": [...],
+    "continuity": [...], "summary": {...}}``; ``summary["pass"]`` is False when any threshold fails.
+    """
+    from server.motion.cache import load_channelset
+
+    figset = figures or FigureSet({})
+
+    def figures_for(cs: Channelset) -> None:
+        need = sorted({c.protofiletype for c in cs.channels} - set(figset.figures))
+        if need:
+            extra = FigureSet.from_dir(Path(figures_dir), need)
+            figset.figures.update(extra.figures)
+            figset.kin.update(extra.kin)
+
+    # first every graph: which clips are locomotion, which of their ends are static postures
+    info: dict[str, dict[str, Any]] = {}
+    loaded_graphs = []
+    for gpath in map(Path, graphs):
+        loaded = load_posture_graph(gpath)
+        loco = _is_locomotion(gpath)
+        still = static_nodes(loaded, loco)
+        tokens: dict[int, str] = {}
+        for token, (cs, fname) in enumerate(zip(loaded.channelsets, loaded.graph.files, strict=True)):
+            key = str((gpath.parent / fname).resolve())
+            tokens[token] = key
+            row = info.setdefault(
+                key,
+                {
+                    "cs": cs,
+                    "file": str(gpath.parent / fname),
+                    "loco": loco,
+                    "graphs": [],
+                    "ends": [False] * 2,
+                },
+            )
+            if gpath.name not in row["graphs"]:
+                row["graphs"].append(gpath.name)
+        for arc in loaded.graph.arcs:
+            first, last = (arc.start, arc.end) if arc.forward else (arc.end, arc.start)
+            ends = info[tokens[arc.channelset]]["ends"]
+            ends[0] |= first in still
+            ends[1] |= last in still
+        loaded_graphs.append((loaded, tokens))
+    played: dict[str, ClipFrames] = {}
+    seen: dict[str, dict[str, Any]] = {}
+    for key, row in info.items():
+        figures_for(row["cs"])
+        played[key] = play(row["cs"], figset)
+        seen[key] = check_clip(
+            played[key], figset, locomotion=row["loco"], file=row["file"], static_ends=tuple(row["ends"])
+        )
+        seen[key]["graphs"] = row["graphs"]
+    continuity: list[dict] = []
+    for loaded, tokens in loaded_graphs:
+        continuity.extend(check_continuity(loaded, {t: played[k] for t, k in tokens.items()}, figset))
+    for path in map(Path, clips):
+        key = str(path.resolve())
+        if key in seen:
+            continue
+        cs = load_channelset(path)
+        figures_for(cs)
+        seen[key] = check_clip(play(cs, figset), figset, file=str(path))
+        seen[key]["graphs"] = []
+    clip_rows = list(seen.values())
+    return {"clips": clip_rows, "continuity": continuity, "summary": summarise(clip_rows, continuity)}
+
+
+def _part_frames(row: Mapping[str, Any], key: str) -> str | None:
+    """``left_foot, frames 5-8`` for a slide metric of a clip row."""
+    part, frames = row.get(f"{key}_part"), row.get(f"{key}_frames")
+    return f"{part}, frames {frames[0]}-{frames[1]}" if part and frames else part
+
+
+def where_detail(row: Mapping[str, Any], key: str) -> str | None:
+    """Where in a clip (part, segment, site, frames) or at which posture endpoint a metric's value was
+    measured, for the reports."""
+    if key in ("foot_skate_cm", "contact_slide_cm"):
+        return _part_frames(row, key.removesuffix("_cm"))
+    if key.startswith("rest_"):
+        return row.get(f"{key.removesuffix('_cm')}_where")
+    base = key.removesuffix("_cm").removesuffix("_m_s").removesuffix("_deg")
+    return row.get(f"{base}_where")
+
+
+def _where(row: Mapping[str, Any], key: str) -> str:
+    name = row.get("name") or f"{row.get('graph')}:{row.get('posture')}"
+    detail = where_detail(row, key)
+    return f"{name} ({detail})" if detail else name
+
+
+def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Per threshold: limit, worst value, where, pass; plus counts and the overall verdict."""
+    rows: dict[str, Any] = {}
+    for key, limit in THRESHOLDS.items():
+        source = continuity if key in POSTURE_KEYS else clips
+        vals = [(r[key], r) for r in source if r.get(key) is not None]
+        if not vals:
+            rows[key] = {"limit": limit, "worst": None, "where": None, "failing": 0, "pass": True}
+            continue
+        worst, row = max(vals, key=lambda x: x[0])
+        failing = sum(1 for v, _ in vals if v > limit)
+        rows[key] = {"limit": limit, "worst": worst, "where": _where(row, key), "failing": failing,
+                     "pass": failing == 0}  # fmt: skip
+    for key in ("gait_speed_m_s", "gait_steps_per_s"):
+        judged = [(c, GAIT_LIMITS[c["gait"]][key]) for c in clips if c.get(key) is not None]
+        judged = [(c, lim) for c, lim in judged if lim is not None]  # recorded-only families are not judged
+        limit = {f: v[key] for f, v in GAIT_LIMITS.items() if v[key] is not None}
+        bad = [(c, lim) for c, lim in judged if _range_failure(c[key], lim)]
+
+        # the worst: furthest outside its range, else the value closest to an edge
+        pick = max(judged, key=lambda cl: _range_distance(cl[0][key], cl[1])) if judged else None
+        rows[key] = {
+            "limit": limit,
+            "worst": None if pick is None else pick[0][key],
+            "where": None if pick is None else pick[0]["name"],
+            "failing": len(bad),
+            "pass": not bad,
+        }
+    loco = [c for c in clips if c.get("locomotion")]
+    missing = [c["name"] for c in loco if not c.get("locomotion_recorded")]
+    rows["locomotion_recorded"] = {
+        "limit": "stride_length and ground_speed on every locomotion clip",
+        "worst": None if not missing else f"{len(missing)} missing",
+        "where": missing[0] if missing else None,
+        "failing": len(missing),
+        "pass": not missing,
+    }
+    ok = all(r["pass"] for r in rows.values())
+    return {
+        "clips": len(clips),
+        "clips_failing": sum(1 for c in clips if not c.get("pass", True)),
+        "postures_checked": len(continuity),
+        "postures_failing": sum(1 for r in continuity if not r.get("pass", True)),
+        "thresholds": rows,
+        "pass": ok,
+    }
+
+
+def clip_matches(filename: str, pattern: str | None) -> bool:
+    """Whether a clip file (``stfire2dead_low.chset.env``) matches a shell pattern on clip names
+    (``stfire2dead``, ``*2dead``; a DI clip's ``_low`` suffix may be left out)."""
+    if not pattern:
+        return True
+    name = Path(filename).name.split(".", 1)[0]
+    names = (name, name.removesuffix("_low"), Path(filename).name)
+    return any(fnmatch.fnmatchcase(n, pattern) for n in names)
+
+
+def only_clips(result: Mapping[str, Any], pattern: str) -> dict[str, Any]:
+    """A :func:`check_library` result cut down to the clips matching ``pattern`` (see :func:`clip_matches`)
+    and the posture nodes where one of them arrives or leaves, with its own summary."""
+    clips = [c for c in result["clips"] if clip_matches(c["file"] or c["name"], pattern)]
+    names = {c["name"] for c in clips}
+    nodes = [r for r in result["continuity"] if names & set(r.get("clips", ()))]
+    return {"clips": clips, "continuity": nodes, "summary": summarise(clips, nodes), "only": pattern}

@@ -1,0 +1,198 @@
+"""Reactions a soldier shows without changing posture: a firing recoil and a flinch (hit or near blast).
+
+Each is a self-loop of its posture in the reaction graph (``POSTURE -> POSTURE``, the clip forwards): the
+soldier leaves the posture, reaches a reaction key and comes back, so the clip begins and ends exactly in
+the posture. A reaction key is the posture with some joints turned further (:class:`Reaction`: the
+spine, the neck, the clavicles), the pelvis sunk a little, and the rifle kicked in its carry (back into the
+shoulder, muzzle up) or left where it lies; it is solved so that the palms stay on the rifle and every part
+of the body that touches the ground in the posture (heels, balls, toe tips, kneecaps, elbows, forearms)
+stays where it is. The clip is recorded like a transition (:func:`authoring.transitions.
+record_transition`: the body parts move to the key and back, feet and knees planted, then eased in and out
+of the posture).
+
+* **recoil** (standing, kneeling and prone fire, 0.3 s): the rifle kicks back, the shoulders and head
+  rocking back with it (the butt stays in the shoulder pocket: kicked further, it went into the arm), and
+  its muzzle climbs a few degrees; then it all settles back.
+* **flinch** (every posture but dead, 0.65 s): a duck in 0.2 s — head down, shoulders up, back hunched,
+  knees giving a little — held a moment, then back.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from authoring import ik
+from authoring.motion import KeyPosture
+from authoring.postures import DEG, POSTURES, RIFLE, SOLDIER, SPINE, arm, leg, spine_angles
+from authoring.transitions import (
+    ClipFrames,
+    Step,
+    TransitionSpec,
+    carrier_globals,
+    carry_of,
+    record_transition,
+)
+from peabody.fk import FigureKinematics, rigid_inverse
+from peabody.model import Figure
+
+SIDES = ("left", "right")
+CONTACT_CM = 6.0  # a site this close to the ground in the posture touches it (elbow centres sit ~4 cm up)
+LEG_CONTACTS = ("foot.heel", "foot.ball", "toes.distal", "lower_leg.knee")
+ARM_CONTACTS = ("upper_arm.distal", "lower_arm.distal")  # elbow and wrist: a forearm on the ground
+
+
+@dataclass(frozen=True)
+class Reaction:
+    """One reaction clip ``name`` of ``posture``: the reaction key is the posture plus ``spine`` (degrees of
+    lateral bend, flexion, twist spread over the vertebrae) and ``joints`` (degrees added), the pelvis sunk
+    ``drop`` cm, the rifle kicked ``kick`` (cm back along the barrel, degrees muzzle up, about the butt)
+    in its carry, or left where it lies (``rifle_stays``)."""
+
+    name: str
+    posture: str
+    kind: str  # "recoil" or "flinch"
+    spine: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    joints: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
+    drop: float = 0.0
+    kick: tuple[float, float] = (0.0, 0.0)
+    rifle_stays: bool = False
+
+    @property
+    def key(self) -> str:
+        return f"{self.kind.upper()}@{self.posture}"
+
+
+# timing (s): to the key, held, back; the kick is fast, the settling slower
+TIMING: dict[str, tuple[float, float, float]] = {"recoil": (0.07, 0.0, 0.23), "flinch": (0.2, 0.1, 0.35)}
+
+_SHRUG = {"left_clavicle": (6.0, 0.0), "right_clavicle": (6.0, 0.0)}
+_HEAD_DOWN = {"neck": (0.0, 20.0, 0.0), "head": (0.0, 6.0, 0.0)}
+_DUCK = {**_HEAD_DOWN, **_SHRUG}
+_RECOIL = {"neck": (0.0, -3.0, 0.0), "head": (0.0, -2.0, 0.0)}
+
+REACTIONS: tuple[Reaction, ...] = (
+    Reaction("stfire_recoil", "STAND_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
+    Reaction("kfire_recoil", "KNEEL_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
+    # prone, on the elbows: a smaller climb (more kick moved the elbows 2-3 cm with the hands)
+    Reaction("prfire_recoil", "PRONE_FIRE", "recoil", joints=_RECOIL, kick=(0.0, 2.0)),
+    Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
+    Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),
+    Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 8.0, -10.0), _HEAD_DOWN, kick=(0.0, -5.0)),
+    Reaction("kfire_flinch", "KNEEL_FIRE", "flinch", (0.0, 8.0, 0.0), _DUCK),
+    # on the forearms: the head goes down behind the rifle, which stays where it lies
+    Reaction("prstow_flinch", "PRONE_STOWED", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
+    Reaction("prfire_flinch", "PRONE_FIRE", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
+    # the rifle cradled under the face: the head ducks a little and turns away (ducking 20 degrees put the
+    # M16's stock 3.6 cm into it)
+    Reaction("crawl_flinch", "CRAWL", "flinch", joints={"neck": (0.0, 5.0, 25.0)}, rifle_stays=True),
+)
+REACT_NODES: tuple[str, ...] = tuple(p for p in POSTURES if any(r.posture == p for r in REACTIONS))
+
+
+def react_arcs() -> list[tuple[str, str, str, bool]]:
+    """(from, to, clip, forward) of the reaction graph: one self-loop per clip."""
+    return [(r.posture, r.posture, r.name, True) for r in REACTIONS]
+
+
+def ground_contacts(kin: FigureKinematics, key: KeyPosture) -> tuple[list[str], list[str]]:
+    """The limbs' sites that touch the ground in ``key``: ``(leg sites, arm sites)``."""
+    g = kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])
+
+    def low(names: tuple[str, ...]) -> list[str]:
+        sites = [f"{s}_{n}" for s in SIDES for n in names]
+        return [s for s in sites if g[kin.site_names.index(s), 1, 3] <= CONTACT_CM]
+
+    return low(LEG_CONTACTS), low(ARM_CONTACTS)
+
+
+def _kick(back: float, up: float, butt: np.ndarray) -> np.ndarray:
+    """The rifle's own frame moved ``back`` cm towards the butt (+Z, the barrel points along -Z) and turned
+    ``up`` degrees muzzle up about its lateral axis through the butt."""
+    a = up * DEG
+    rot = np.eye(4)
+    rot[1:3, 1:3] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    about = np.eye(4)
+    about[:3, 3] = butt
+    shift = np.eye(4)
+    shift[2, 3] = back
+    return shift @ about @ rot @ np.linalg.inv(about)
+
+
+def reaction_key(kin: FigureKinematics, rkin: FigureKinematics, base: KeyPosture, r: Reaction) -> KeyPosture:
+    """The key of ``r`` (see the module docstring) solved on the posture ``base``."""
+    q0 = np.array(base.poses[SOLDIER], dtype=np.float64)
+    sp = spine_angles(kin, *r.spine)
+    for k, j in enumerate(SPINE):
+        q0[kin.dof_slices[j]] += sp[k]
+    for j, deg in r.joints.items():
+        q0[kin.dof_slices[j]] += np.asarray(deg, np.float64) * DEG
+    q0 = kin.clamp(q0)
+    root = np.array(base.locations[SOLDIER], dtype=np.float64)
+    root[1, 3] -= r.drop
+    if r.rifle_stays:
+        rifle = np.array(base.locations[RIFLE], dtype=np.float64)
+    else:
+        rifle = carrier_globals(kin, q0, root) @ carry_of(kin, base)
+    butt = rkin.site_globals(np.zeros(0))[rkin.site_names.index("rifle.butt"), :3, 3]
+    rifle = rifle @ _kick(*r.kick, butt)
+    g = kin.site_globals(base.poses[SOLDIER], base.locations[SOLDIER])
+    legs, arms = ground_contacts(kin, base)
+    goals = []
+    for side in SIDES:  # each palm where it holds the rifle in the posture (so no change solves it exactly)
+        i = kin.site_names.index(f"{side}_palm.palmcenter")
+        t = rifle @ rigid_inverse(base.locations[RIFLE]) @ g[i]
+        goals.append(ik.Goal(f"{side}_palm.palmcenter", t[:3, 3], None, 1.0, 3, arm(side)))
+        goals.append(ik.Goal(f"{side}_palm.palmcenter", None, t[:3, :3], 1.0, 1, arm(side), 8.0))
+    for site in legs:
+        i = kin.site_names.index(site)
+        rot = g[i, :3, :3] if site.endswith("heel") else None
+        goals.append(ik.Goal(site, g[i, :3, 3], rot, 1.0, 2, leg(site.split("_")[0])))
+    for site in arms:
+        side = site.split("_")[0]
+        i = kin.site_names.index(site)
+        goals.append(ik.Goal(site, g[i, :3, 3], None, 1.0, 2, (f"{side}_clavicle", f"{side}_shoulder")))
+    q, _ = ik.solve(kin, q0, goals, root, iterations=200, rest_pose=q0, rest_gain=0.5)
+    return KeyPosture(r.key, {SOLDIER: q, RIFLE: np.zeros(0)}, {SOLDIER: root, RIFLE: rifle})
+
+
+def reaction_spec(r: Reaction, legs: list[str]) -> TransitionSpec:
+    """The primitive motions: every body part and the rifle to the key and back; the feet and kneecaps on
+    the ground planted. The forearms on the ground stay by interpolation between two poses that have them
+    in the same place (IK holding them too over-constrained the arms: the wrists shook)."""
+    go, hold, back = TIMING[r.kind]
+    t = go + hold + back
+    steps: list[Step] = []
+    for part in ("root", "legs", "spine", "arms", "rifle"):
+        steps += [Step(part, r.key, 0.0, go), Step(part, r.posture, go + hold, back)]
+    lag = 0.3 * go  # the head follows the shoulders
+    steps += [Step("head", r.key, lag, go), Step("head", r.posture, go + hold + lag, back - lag)]
+    for side in SIDES:
+        if any(s.startswith(f"{side}_foot") or s.startswith(f"{side}_toes") for s in legs):
+            steps.append(Step(f"{side}_foot", r.posture, 0.0, t))
+        if f"{side}_lower_leg.knee" in legs:
+            steps.append(Step(f"{side}_knee", r.posture, 0.0, t))
+    return TransitionSpec(r.name, r.posture, r.posture, round(t, 6), tuple(steps))
+
+
+def record_reaction(
+    r: Reaction, keys: Mapping[str, KeyPosture], figures: tuple[Figure, Figure]
+) -> ClipFrames:
+    """Solve the reaction key on its posture and record the clip."""
+    kin, rkin = FigureKinematics(figures[0]), FigureKinematics(figures[1])
+    base = keys[r.posture]
+    legs, _ = ground_contacts(kin, base)
+    key = reaction_key(kin, rkin, base, r)
+    return record_transition(reaction_spec(r, legs), {**keys, r.key: key}, figures)
+
+
+def reaction_clips() -> dict[str, Callable[[Any], tuple[ClipFrames, None, None]]]:
+    """Build jobs: clip name -> recorder taking the build context."""
+
+    def make(r: Reaction) -> Callable[[Any], tuple[ClipFrames, None, None]]:
+        return lambda ctx: (record_reaction(r, ctx.keys, (ctx.soldier, ctx.rifle)), None, None)
+
+    return {r.name: make(r) for r in REACTIONS}

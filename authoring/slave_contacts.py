@@ -1,0 +1,227 @@
+"""Kneeling contacts carried over to the slave: where the master's kneecap rests on the ground, so does the
+slave's.
+
+Slaving copies the legs' joint angles, and DI.fig and soldier.fig share the leg skeleton, but DI.fig's
+kneecap mesh sits about 1.4 cm higher on its knee site than soldier.fig's (and its toes 0.7 cm): a DI
+soldier kneeling with the master's angles floats on his knee and toes. A kneeling thigh hangs straight down
+from the hip, so the knee cannot go lower by the leg alone: in the frames where the master's kneecap (the
+lower-leg mesh nodes near the ``knee`` site, as the quality check counts them) is on or near the ground, the
+slave figure and its rifle are lowered by how far the slave's kneecap is above the master's (never taking the
+rest of the body below the ground), and the legs are solved so that every foot stays where it was (a
+kneeling leg's toes come down to where the master's are) and a kneeling knee goes down with the body. The
+lowering fades in as the master's kneecap comes down (from ``REACH_CM`` to ``REST_CM`` above the ground),
+so a knee going down or coming up does not jump. The build's ``lift_off_ground`` then raises any frame
+where something else would sink.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from authoring import ik
+from authoring.postures import leg, segment_heights
+from authoring.quality_frames import FigureSet, play
+from server.motion.binding import bind_channelset
+from server.motion.channelset import Channelset
+
+REST_CM = 2.0  # the master's kneecap this close to the ground: the slave's goes as low (full weight)
+REACH_CM = 6.0  # ... this far up: no goal
+SIDES = ("left", "right")
+LEG_SEGMENTS = ("upper_leg", "lower_leg", "foot", "toes")
+
+
+def part_heights(
+    poses: np.ndarray,
+    locations: np.ndarray,
+    figures: FigureSet,
+    ptype: str,
+    part: str = "kneecap",
+    sides: tuple[str, ...] = SIDES,
+) -> dict[str, np.ndarray]:
+    """Per side, the height (cm) of the lowest node of ``{side}_{part}`` (as the quality check names body
+    parts: ``kneecap``, ``foot``; ``sides=("",)``: a part with no side, ``belly``) in every frame ``(n,)``."""
+    kin = figures.kin[ptype]
+    nodes, segs = figures.nodes(ptype)
+    parts = figures.node_parts(ptype)
+    out = {}
+    g = kin.segment_globals(poses, locations)[..., 1, :]  # (n, nseg, 4): the rows giving world y
+    for side in sides:
+        sel = parts == (f"{side}_{part}" if side else part)
+        if sel.any():
+            out[side] = np.einsum("fkj,kj->fk", g[:, segs[sel]], nodes[sel]).min(axis=1)
+    return out
+
+
+def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
+    """Lower the slave onto its kneeling knees where the master rests on them (``slave``'s figure and joint
+    channels, in place); returns the lowering per frame (cm)."""
+    mf, sf = play(master, figures), play(slave, figures)
+    mtype = max(mf.poses, key=lambda k: figures.kin[k].ndof)
+    stype = max(sf.poses, key=lambda k: figures.kin[k].ndof)
+    kin = figures.kin[stype]
+    q, loc = sf.poses[stype], sf.locations[stype]
+    m_h = part_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype)
+    s_h = part_heights(q, loc, figures, stype)
+    m_foot = part_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype, "foot")
+    s_foot = part_heights(q, loc, figures, stype, "foot")
+    weight: dict[str, np.ndarray] = {}
+    drop = np.zeros(len(q))
+    for side in SIDES:
+        if side not in m_h or side not in s_h:
+            continue
+        w = np.clip((REACH_CM - m_h[side]) / (REACH_CM - REST_CM), 0.0, 1.0)
+        weight[side] = w * w * (3.0 - 2.0 * w)
+        drop = np.maximum(drop, weight[side] * np.maximum(0.0, s_h[side] - np.maximum(m_h[side], 0.0)))
+    # never lower the rest of the body into the ground (lying on the forearms, the knees are not what the
+    # slave rests on); the legs are solved again, so they do not count
+    rest = [h for seg, h in segment_heights(kin, q, loc).items() if not seg.endswith(LEG_SEGMENTS)]
+    drop = np.minimum(drop, np.maximum(0.0, np.min(rest, axis=0)))
+    if not drop.any():
+        return drop
+    lowered = loc.copy()
+    lowered[:, 1, 3] -= drop
+    sites = kin.site_globals(q, loc)
+    goals: list[ik.Goal] = []
+    for side in SIDES:  # every foot stays where it is; a kneeling knee goes down with the body
+        heel = sites[:, kin.site_names.index(f"{side}_foot.heel")].copy()
+        if side in weight:  # and a kneeling leg's toes, if they float above the master's, go down to them
+            heel[:, 1, 3] -= weight[side] * np.maximum(0.0, s_foot[side] - np.maximum(m_foot[side], 0.0))
+        goals.append(ik.Goal(f"{side}_foot.heel", heel[:, :3, 3], heel[:, :3, :3], 1.0, 2, leg(side)))
+        if side in weight:
+            knee = sites[:, kin.site_names.index(f"{side}_lower_leg.knee"), :3, 3].copy()
+            knee[:, 1] -= drop
+            goals.append(ik.Goal(f"{side}_lower_leg.knee", knee, None, weight[side], 1, leg(side)))
+    # heavily damped small steps: a kneeling front thigh is near its hip's gimbal (flexion ~90 degrees), where
+    # an undamped solve swaps abduction for twist and the hip's angles jump by tens of degrees between frames
+    pose, _ = ik.solve(
+        kin, q, goals, lowered, iterations=60, damping=6.0, rest_pose=q, rest_gain=0.05, tolerance=0.02,
+        max_dof_step=0.02,
+    )  # fmt: skip
+    bound = bind_channelset(slave, [figures.figures[stype]])
+    bf = bound.figures[0]
+    slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
+    slave.fig_pos[:, :, 1] -= drop[:, None].astype(slave.fig_pos.dtype)  # the figure and its rifle
+    return drop
+
+
+ARM_CHAIN = ("clavicle", "shoulder", "elbow", "wrist")
+SPINE = ("upper_spine",)  # DI's shoulders sit higher prone than soldier.fig's: the chest turns to lower them
+HEAD = ("neck",)  # the head is at its limits prone: turning it there jumps between them
+FOREARM_PASSES = 6  # the forearm's lowest node is near, not at, the elbow: solve again for what is left
+AIM_BELOW_CM = 0.5  # the solve stops short of its goal: aim this much below the master's forearm ...
+CONTACT_CM = 1.3  # ... but not into contact (the quality check's 1.25 cm) where the master's is not
+EYE_BALL_CM = 2.0  # the eye stays this close to where the slaving put it (a ball: GOAL_RADIUS is 0.9)
+
+
+def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
+    """Lay the slave's forearms on the ground where the master's lie there (prone).
+
+    DI.fig's shoulders sit about 5 cm higher than soldier.fig's when prone, and with the palms on the rifle
+    its elbow is already as low as the arm alone can take it, so its forearms float. The upper spine and
+    both arms are solved together to bring each elbow down by how far the slave's forearm is above the
+    master's (faded in as the master's forearm comes down) while the palms stay where they are on the rifle
+    and the eye where it is (higher-priority goals over the spine, the arms and the neck; the
+    gaze turns a little, the head and neck being at their limits prone); ``slave``'s
+    joint channels change in place. Returns the worst remaining lift per frame (cm)."""
+    mf, sf = play(master, figures), play(slave, figures)
+    mtype = max(mf.poses, key=lambda k: figures.kin[k].ndof)
+    stype = max(sf.poses, key=lambda k: figures.kin[k].ndof)
+    kin = figures.kin[stype]
+    q, loc = sf.poses[stype], sf.locations[stype]
+    m_h = part_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype, "forearm")
+    # prone only: lying on the belly (or chest); crawling, the forearms' slaving is the crawl's own
+    mq, mloc = mf.poses[mtype], mf.locations[mtype]
+    trunk = [h for p in ("belly", "chest") for h in part_heights(mq, mloc, figures, mtype, p, ("",)).values()]
+    if not trunk:
+        return np.zeros(len(q))
+    prone = _fade(np.min(trunk, axis=0))
+    weight = {side: _fade(m_h[side]) * prone for side in SIDES if side in m_h}
+    if not weight or not any(w.any() for w in weight.values()):
+        return np.zeros(len(q))
+    sites = kin.site_globals(q, loc)
+    planted = {side: _planted_tracks(sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3],
+                                     m_h[side] <= CONTACT_CM) for side in weight}  # fmt: skip
+    held = {s: sites[:, kin.site_names.index(s)] for s in [f"{side}_palm.palmcenter" for side in weight]}
+    held["bottom_head.sight"] = sites[:, kin.site_names.index("bottom_head.sight")]
+    pose = q
+    for _ in range(FOREARM_PASSES):
+        s_h = part_heights(pose, loc, figures, stype, "forearm")
+        now = kin.site_globals(pose, loc)
+        goals: list[ik.Goal] = []
+        for site, at in held.items():  # the palms on the rifle, the eye where it was (the gaze kept by
+            side = site.split("_", 1)[0]  # the pull towards the slaved pose: the head is at its limits)
+            chain = SPINE + (HEAD if side == "bottom" else tuple(f"{side}_{j}" for j in ARM_CHAIN))
+            gaze = None if side == "bottom" else at[:, :3, :3]
+            ball = EYE_BALL_CM if side == "bottom" else 0.0
+            goals.append(ik.Goal(site, at[:, :3, 3], gaze, 1.0, 2, chain, radius=ball))
+        for side, w in weight.items():
+            aim = m_h[side] - AIM_BELOW_CM
+            aim = np.where(m_h[side] <= CONTACT_CM, aim, np.maximum(aim, CONTACT_CM))
+            need = w * np.maximum(0.0, s_h[side] - np.maximum(aim, 0.0))
+            elbow = now[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3].copy()
+            elbow[:, 1] -= need
+            track, down = planted[side]
+            elbow[down, 0], elbow[down, 2] = track[down, 0], track[down, 2]  # a planted elbow does not slide
+            chain = SPINE + tuple(f"{side}_{j}" for j in ARM_CHAIN)
+            goals.append(ik.Goal(f"{side}_upper_arm.distal", elbow, None, w, 1, chain))  # or held there
+        pose, _ = ik.solve(
+            kin, pose, goals, loc, iterations=100, damping=2.0, rest_pose=pose, rest_gain=0.05,
+            tolerance=0.02, max_dof_step=0.03,
+        )  # fmt: skip
+    # frames solved alone land a few degrees apart where the neck is at its limit: smooth the change over
+    # the clip (its ends kept), then put the palms and the eye back exactly (a small, smooth correction)
+    change = pose - q
+    smooth = _smooth(change)
+    for end in (0, -1):  # the ends as solved (so clips meeting at a posture agree), the smoothing faded in
+        pin_end(smooth, end, change[end], SMOOTH_FRAMES * 2)
+    pose = q + smooth
+    pose, _ = ik.solve(
+        kin, pose, [g for g in goals if g.priority == 2], loc, iterations=60, damping=2.0, rest_pose=pose,
+        rest_gain=0.05, tolerance=0.02, max_dof_step=0.03,
+    )  # fmt: skip
+    s_h = part_heights(pose, loc, figures, stype, "forearm")
+    bound = bind_channelset(slave, [figures.figures[stype]])
+    bf = bound.figures[0]
+    slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
+    return np.max([w * np.maximum(0.0, s_h[s] - m_h[s]) for s, w in weight.items()], axis=0)
+
+
+def _planted_tracks(points: np.ndarray, down: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame, where a planted site should stay: over each run of ``down`` frames, its mean position
+    (``points`` ``(n, 3)``); returns that and the mask."""
+    track = points.copy()
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], down.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        track[a:b] = points[a:b].mean(axis=0)
+    return track, down
+
+
+def _fade(height: np.ndarray) -> np.ndarray:
+    """1 for a master's part resting on the ground (``REST_CM``), easing to 0 at ``REACH_CM`` up."""
+    w = np.clip((REACH_CM - height) / (REACH_CM - REST_CM), 0.0, 1.0)
+    return w * w * (3.0 - 2.0 * w)
+
+
+SMOOTH_FRAMES = 6  # half-width of the window smoothing the forearm solve's change over a clip (0.1 s)
+
+
+def _smooth(offset: np.ndarray) -> np.ndarray:
+    """``offset`` ``(n, ndof)`` smoothed along the frames (a Hann window, the ends held)."""
+    k = np.hanning(2 * SMOOTH_FRAMES + 3)[1:-1]
+    k /= k.sum()
+    pad = np.concatenate(
+        [np.repeat(offset[:1], SMOOTH_FRAMES, 0), offset, np.repeat(offset[-1:], SMOOTH_FRAMES, 0)]
+    )
+    return np.stack([np.convolve(pad[:, j], k, mode="valid") for j in range(offset.shape[1])], axis=1)
+
+
+def pin_end(data: np.ndarray, frame: int, value: np.ndarray, frames: int) -> None:
+    """Set ``data[frame]`` (0 or -1) to ``value`` and carry the change into the clip over ``frames`` frames,
+    fading out smoothly (in place), so the end does not jump away from its neighbours."""
+    n = min(frames, len(data) // 2)
+    delta = value - data[frame]
+    t = np.arange(n) / n
+    fade = 1.0 - t * t * (3.0 - 2.0 * t)  # 1 at the end, easing to 0
+    rows = np.arange(n) if frame == 0 else len(data) - 1 - np.arange(n)
+    data[rows] += (fade[:, None] * delta[None, :]).astype(data.dtype)
+    data[frame] = value
