@@ -164,7 +164,7 @@ class JclCommand:
     func: Callable[..., object]
     types: tuple[type, ...]
     optional: int = 0
-    variadic: type | None = None  # extra trailing arguments of this type
+    variadic: type | None = None  # extra trailing arguments of this type (``object``: any)
 
 
 class JclInterpreter:
@@ -242,6 +242,8 @@ class JclInterpreter:
             raise JclError(f"{c.name} takes {want} arguments, got {len(c.args)}", **where)
         for k, arg in enumerate(c.args):
             want_t = cmd.types[k] if k < len(cmd.types) else cmd.variadic
+            if want_t is object:  # any argument (a refused command answers whatever it is given)
+                continue
             if want_t is float and isinstance(arg, float):
                 continue
             if want_t is str and isinstance(arg, str):

@@ -145,6 +145,7 @@ class MotionLibrary:
             infos.append(ClipInfo(name, gi, cs.duration, cs.nframes, cs.fps, gs, travel))
             prepared.append(dataclasses.replace(cs, name=name))
         self.clips = infos
+        self.sources: list[Channelset] = [cs for _, _, cs, _ in entries]  # as loaded, by clip id
         self.clip_names = [c.name for c in infos]
         self.sets: list[ClipLibrary] = []
         self.set_keys: list[tuple[str, str]] = []
@@ -275,6 +276,21 @@ class MotionLibrary:
         if len(hits) == 1:
             return hits[0]
         raise KeyError(f"no clip {name!r}" if not hits else f"clip name {name!r} is ambiguous")
+
+    def clip_end_node(self, clip: int, forward: bool, node: int) -> int:
+        """The posture node a soldier resting in ``node`` is in after playing ``clip``: a static arc's end
+        (its start when played against the arc), any other clip leaves it where it was."""
+        for arc in self.static.graph.arcs:
+            if arc.channelset == clip and clip in self.static_clip:
+                return self._node[arc.end if forward == arc.forward else arc.start]
+        return node
+
+    def clip_of(self, channelset: Channelset) -> int:
+        """The clip id of a channelset the library was built from (the same loaded object); KeyError."""
+        for cid, source in enumerate(self.sources):
+            if source is channelset:
+                return cid
+        raise KeyError(f"channelset {channelset.name!r} is not a clip of the motion library")
 
     def set_index(self, figure: str, weapon: str) -> int:
         """The figure set of ``figure`` + ``weapon`` file names (base names compared)."""

@@ -22,8 +22,9 @@ only the heading changed: resend last update   ``TickUpdate.heading_only``
 
 Times: every method takes ``now`` (seconds, non-decreasing) — the manager reads no clock. Clip changes chain
 at the exact end time of the previous clip, not at the tick that notices it, so nothing drifts with the tick
-rate. ``set_every_frame(True)`` (``set_channelset_parameters("yes")``) replaces real time by one stored frame
-per tick.
+rate. Settings are one frozen :class:`~server.soldier.settings.SoldierSettings`, replaced whole by
+:meth:`SoldierManager.configure`; ``every_frame`` (``set_channelset_parameters("yes")``) replaces real time by
+one stored frame per tick.
 """
 
 from __future__ import annotations
@@ -37,11 +38,21 @@ from typing import Any
 import numpy as np
 
 from protocol import coords
-from protocol.entity import Appearance, WeaponState
+from protocol.entity import Appearance, WeaponState, make_entity_requests
 from server.soldier.blend import blend_into, smoothstep, yaw_rotate
 from server.soldier.library import MotionLibrary, PathStep
 from server.soldier.locomotion import GAIT_STAY, SCALED, conditions, next_states, start_state
-from server.soldier.state import BASE_POSTURE, STAND_STOWED, LocoState, Mode, Movement, goal_posture, movement
+from server.soldier.settings import SoldierSettings
+from server.soldier.state import (
+    BASE_POSTURE,
+    STAND_STOWED,
+    LocoState,
+    Mode,
+    Movement,
+    goal_posture,
+    movement,
+    request_for,
+)
 from server.soldier.table import SoldierTable
 
 REQUEST_OK = 0
@@ -110,33 +121,19 @@ class SoldierManager:
     def __init__(
         self,
         library: MotionLibrary,
+        settings: SoldierSettings | None = None,
         *,
-        throttle: float = 1 / 30,
-        walk_run_threshold: float = 3.0,
-        heading_offsets: tuple[float, float, float] = (0.0, 0.0, 0.0),
-        blend_time: float = 0.2,
-        every_frame: bool = False,
-        interpolate: bool = True,
         max_soldiers: int = 16384,
-        record_clips: bool = False,
         record_limit: int = 100_000,
+        **changes: Any,
     ) -> None:
+        """``changes`` are :class:`SoldierSettings` fields (``throttle=0.0``) applied over ``settings``."""
         self.library = library
         self.table = SoldierTable(library.ndof, library.nfig, 16, max_soldiers)
-        self.throttle = 0.0
-        self.set_throttle(throttle)
-        self.walk_run_threshold = 3.0
-        self.set_walk_run_threshold(walk_run_threshold)
-        self._offsets = np.zeros(3, np.float64)
-        self.set_heading_offsets(*heading_offsets)
-        self.blend_time = 0.0
-        self.set_blend_time(blend_time)
-        self.every_frame = bool(every_frame)
-        self.interpolate = bool(interpolate)
+        self.settings = (settings or SoldierSettings()).replace(**changes)
         self.names: dict[int, str] = {}
         self._by_name: dict[str, int] = {}
         self._paths: dict[int, list[Any]] = {}  # soldier -> [steps, arc index] while in TRANSITION
-        self.record_clips = record_clips
         self.clip_log: deque[ClipStart] = deque(maxlen=record_limit)
         self._build_lookups()
         self.ticks = 0
@@ -152,43 +149,51 @@ class SoldierManager:
             "unreachable": 0,
         }
 
-    # -- configuration (the JCL commands) ----------------------------------------------------------------
-    def set_throttle(self, seconds: float) -> None:
-        """``set_ttes_soldier_throttle``: no soldier is updated more often than once per ``seconds``."""
-        s = float(seconds)
-        if not (math.isfinite(s) and s >= 0):
-            raise ValueError(f"throttle must be >= 0 seconds, not {seconds}")
-        self.throttle = s
+    # -- settings (one frozen value; the JCL commands replace it) ----------------------------------------
+    @property
+    def settings(self) -> SoldierSettings:
+        return self._settings
 
-    def set_heading_offsets(self, static: float, loco: float, crawl: float) -> None:
-        """``set_ttes_heading_offset(static, loco, crawl)``: compass degrees per graph (see :mod:`.blend`)."""
-        v = np.array([static, loco, crawl], np.float64)
-        if not np.isfinite(v).all():
-            raise ValueError("heading offsets must be finite")
-        self._offsets = v
+    @settings.setter
+    def settings(self, value: SoldierSettings) -> None:
+        if not isinstance(value, SoldierSettings):
+            raise TypeError(f"settings must be SoldierSettings, not {type(value).__name__}")
+        self._settings = value
+        self._offsets = np.array(value.heading_offsets, np.float64)  # what the vectorised pose path reads
+
+    def configure(self, **changes: Any) -> SoldierSettings:
+        """Replace the settings by a validated copy with ``changes`` (ValueError: nothing changes)."""
+        self.settings = self._settings.replace(**changes)
+        return self._settings
+
+    # read-only views of the settings, for the hot paths and reports
+    @property
+    def throttle(self) -> float:
+        return self._settings.throttle
+
+    @property
+    def walk_run_threshold(self) -> float:
+        return self._settings.walk_run_threshold
 
     @property
     def heading_offsets(self) -> tuple[float, float, float]:
-        return tuple(float(x) for x in self._offsets)  # type: ignore[return-value]
+        return self._settings.heading_offsets
 
-    def set_every_frame(self, every_frame: bool) -> None:
-        """``set_channelset_parameters("yes"|"no")``: every stored frame once per tick, or real time."""
-        self.every_frame = bool(every_frame)
+    @property
+    def blend_time(self) -> float:
+        return self._settings.blend_time
 
-    def set_walk_run_threshold(self, metres_per_second: float) -> None:
-        v = float(metres_per_second)
-        if not (math.isfinite(v) and v > 0):
-            raise ValueError("walk/run threshold must be > 0 m/s")
-        self.walk_run_threshold = v
+    @property
+    def every_frame(self) -> bool:
+        return self._settings.every_frame
 
-    def set_blend_time(self, seconds: float) -> None:
-        v = float(seconds)
-        if not (math.isfinite(v) and v >= 0):
-            raise ValueError("blend time must be >= 0 seconds")
-        self.blend_time = v
+    @property
+    def interpolate(self) -> bool:
+        return self._settings.interpolate
 
-    def set_interpolate(self, interpolate: bool) -> None:
-        self.interpolate = bool(interpolate)
+    @property
+    def record_clips(self) -> bool:
+        return self._settings.record_clips
 
     def _build_lookups(self) -> None:
         lib = self.library
@@ -357,6 +362,57 @@ class SoldierManager:
                 c = captured.get(s)
                 self._on_event(s, float(t[k]), bool(imm[k]), None if c is None else (cj[c], cf[c]))
         return status
+
+    # -- the JCL debugging commands (seed 3.4.1-3.4.2), on one soldier -----------------------------------
+    def posture_change(self, index: int, posture: str, now: float) -> list[str]:
+        """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing
+        still request for that posture would take it (heading and position kept). Returns the path's
+        postures; KeyError for an unknown soldier or posture."""
+        if not self.table.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        appearance, weapon = request_for(posture)
+        tb = self.table
+        row = make_entity_requests(
+            index,
+            appearance,
+            weapon,
+            heading=float(tb.heading[index]),
+            position=coords.points_jack_to_performer(tb.position[index].astype(np.float64)),
+        )
+        if self.apply_requests(row, now)[0] != REQUEST_OK:
+            raise KeyError(f"soldier {index} refused posture {posture!r}")
+        return [self.library.posture_names[s.end] for s in self._paths.get(index, [()])[0]]
+
+    def play_clip(
+        self, index: int, clip: int, forward: bool = True, duration: float = -1.0, now: float = 0.0
+    ) -> float:
+        """``play_bound_channelset``: the soldier plays ``clip`` once (over ``duration`` s, <= 0: the stored
+        time), then takes up its last request again from the posture the clip ends in (a static arc's end,
+        else where it was). Returns the play time; KeyError / ValueError for a bad soldier or clip."""
+        tb, lib = self.table, self.library
+        if not tb.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        if not 0 <= clip < lib.nclips:
+            raise ValueError(f"no clip {clip}")
+        if not math.isfinite(duration):
+            raise ValueError(f"play time must be finite, not {duration}")
+        i = int(index)
+        if not self.every_frame:
+            tb.clock[i] = now
+        self._advance(np.array([i], np.int64))
+        t = float(tb.clock[i])
+        node = int(tb.node[i])
+        end = lib.clip_end_node(clip, forward, node)
+        step = PathStep(
+            clip, forward, float(duration) if duration > 0 else float(lib.clip_duration[clip]), node, end
+        )
+        tb.blend_len[i] = 0.0
+        tb.loco[i] = _NONE
+        tb.mode[i] = _TRANSITION
+        self._paths[i] = [(step,), 0]
+        self._play_step(i, step, t)
+        tb.dirty[i] = True
+        return step.duration
 
     def _desired(self, i: int) -> int:
         """Figure 12's goal posture node: the gait's base posture while moving, else the requested posture."""
