@@ -128,7 +128,8 @@ def instrument(server: object) -> dict[str, list[float]]:
     ``publish`` (PoseBoard.publish: wire conversion + quantisation + change detection), ``encode`` (every
     session's joint-update encoding, summed over clients); the rest of the process's CPU (socket writes,
     reading requests, trio's scheduling) is reported as ``other``."""
-    from server.session import PoseBoard, Session
+    from server.pose_board import PoseBoard
+    from server.session import Session
 
     cost: dict[str, list[float]] = {k: [0.0, 0] for k in ("advance", "publish", "encode")}
 

@@ -3,7 +3,7 @@
 Structure (one trio nursery):
 
 * the **tick loop** advances every soldier at ``tick_hz`` on trio's clock (``SoldierManager.tick``: one
-  vectorised advance + sample), writes the poses once into the shared :class:`~server.session.PoseBoard`
+  vectorised advance + sample), writes the poses once into the shared :class:`~server.pose_board.PoseBoard`
   and wakes the writers — it never waits for a client;
 * per client a **reader** (bytes → protocol events → the world) and a **writer** (control queue + the
   latest poses, encoded against what that client last received) — see :mod:`server.session` for why memory
@@ -36,7 +36,8 @@ import trio
 from protocol.connection import State
 from server.config import ServerConfig
 from server.logging import get_logger
-from server.session import BoardRef, PoseBoard, Session
+from server.pose_board import BoardRef, PoseBoard
+from server.session import Session
 from server.startup import ServerWorld
 
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes

@@ -39,6 +39,7 @@ import numpy as np
 
 from protocol import coords
 from protocol.entity import Appearance, WeaponState, make_entity_requests
+from server.soldier import report
 from server.soldier.blend import blend_into, smoothstep, yaw_rotate
 from server.soldier.library import MotionLibrary, PathStep
 from server.soldier.locomotion import GAIT_STAY, SCALED, conditions, next_states, start_state
@@ -166,35 +167,6 @@ class SoldierManager:
         self.settings = self._settings.replace(**changes)
         return self._settings
 
-    # read-only views of the settings, for the hot paths and reports
-    @property
-    def throttle(self) -> float:
-        return self._settings.throttle
-
-    @property
-    def walk_run_threshold(self) -> float:
-        return self._settings.walk_run_threshold
-
-    @property
-    def heading_offsets(self) -> tuple[float, float, float]:
-        return self._settings.heading_offsets
-
-    @property
-    def blend_time(self) -> float:
-        return self._settings.blend_time
-
-    @property
-    def every_frame(self) -> bool:
-        return self._settings.every_frame
-
-    @property
-    def interpolate(self) -> bool:
-        return self._settings.interpolate
-
-    @property
-    def record_clips(self) -> bool:
-        return self._settings.record_clips
-
     def _build_lookups(self) -> None:
         lib = self.library
         # GOAL[appearance, firing] -> posture node (-1: not in this graph)
@@ -310,7 +282,7 @@ class SoldierManager:
             ok = np.sort(rev[first])
         i = idx[ok]
         app, wpn, imm, vel, hdg, pos = app[ok], wpn[ok], imm[ok].astype(bool), vel[ok], hdg[ok], pos[ok]
-        if not self.every_frame:
+        if not self._settings.every_frame:
             tb.clock[i] = now
         self._advance(i)  # clips that ended before the request end first (the next tick would do it later)
         t = tb.clock[i]
@@ -351,7 +323,7 @@ class SoldierManager:
         ev = np.flatnonzero(event)
         if len(ev):
             self.stats["events"] += len(ev)
-            cap = ev[stepping[ev] & ~imm[ev]] if self.blend_time > 0 else ev[:0]
+            cap = ev[stepping[ev] & ~imm[ev]] if self._settings.blend_time > 0 else ev[:0]
             captured: dict[int, int] = {}
             cj = cf = np.zeros(0, np.float32)
             if len(cap):
@@ -397,7 +369,7 @@ class SoldierManager:
         if not math.isfinite(duration):
             raise ValueError(f"play time must be finite, not {duration}")
         i = int(index)
-        if not self.every_frame:
+        if not self._settings.every_frame:
             tb.clock[i] = now
         self._advance(np.array([i], np.int64))
         t = float(tb.clock[i])
@@ -441,7 +413,7 @@ class SoldierManager:
             if captured is not None:
                 tb.blend_joints[i], tb.blend_figs[i] = captured
                 tb.blend_t0[i] = t
-                tb.blend_len[i] = self.blend_time
+                tb.blend_len[i] = self._settings.blend_time
             tb.mode[i] = _IDLE
             tb.loco[i] = _NONE
             self._record(i, t, "cancel")
@@ -484,7 +456,7 @@ class SoldierManager:
             return
         kind = int(self._move[int(tb.appearance[i])]) if tb.speed[i] > MOVING_EPS else 0
         if kind:
-            fast = bool(tb.speed[i] > self.walk_run_threshold)
+            fast = bool(tb.speed[i] > self._settings.walk_run_threshold)
             state = start_state(Movement(kind), bool(tb.backward[i]), fast, self.library.can_run)
             tb.mode[i] = _CRAWL if kind == _MOVE_CRAWL else _LOCO
             self._enter_one(i, int(state), t)
@@ -539,7 +511,7 @@ class SoldierManager:
         tb.start[idx] = t
         tb.dur[idx] = dur
         tb.end[idx] = t + dur
-        if self.record_clips:
+        if self._settings.record_clips:
             for k in range(len(idx)):
                 self._record(int(idx[k]), float(t[k]))
 
@@ -573,7 +545,7 @@ class SoldierManager:
             tb.loco[idx],
             speed > MOVING_EPS,
             tb.backward[idx],
-            speed > self.walk_run_threshold,
+            speed > self._settings.walk_run_threshold,
             self.library.can_run,
         )
         nxt = next_states(tb.loco[idx], cond)
@@ -637,7 +609,7 @@ class SoldierManager:
         tb = self.table
         live = tb.live
         if len(live):
-            if self.every_frame:
+            if self._settings.every_frame:
                 nfr = self.library.clip_nframes[tb.clip[live]]
                 tb.clock[live] += tb.dur[live] / np.maximum(nfr - 1, 1)
             else:
@@ -649,7 +621,7 @@ class SoldierManager:
                 | tb.heading_pending[live]
                 | (tb.blend_len[live] > 0)
             )
-            due = live[active & (now - tb.last_sent[live] >= self.throttle - _EPS_T)]
+            due = live[active & (now - tb.last_sent[live] >= self._settings.throttle - _EPS_T)]
         else:
             due = live
         joints, figures, clips, frames = self._pose(due)
@@ -693,7 +665,7 @@ class SoldierManager:
         clock = tb.clock[idx]
         args = (clip, tb.start[idx], tb.direc[idx], tb.dur[idx], clock)
         if len(lib.sets) == 1 or n == 0:
-            s = lib.sets[0].sample(*args, interpolate=self.interpolate)
+            s = lib.sets[0].sample(*args, interpolate=self._settings.interpolate)
             joints, figures, frames = s.joints, s.figures, s.position
         else:
             joints = np.empty((n, lib.ndof), np.float32)
@@ -702,7 +674,7 @@ class SoldierManager:
             fset = tb.fset[idx]
             for k in np.unique(fset).tolist():
                 sel = np.flatnonzero(fset == k)
-                s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self.interpolate)
+                s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self._settings.interpolate)
                 joints[sel], figures[sel], frames[sel] = s.joints, s.figures, s.position
         if n and self._offsets.any():
             off = self._offsets[lib.clip_graph[clip]]
@@ -724,7 +696,7 @@ class SoldierManager:
 
     # -- reporting ---------------------------------------------------------------------------------------
     def _record(self, i: int, t: float, what: str | None = None) -> None:
-        if not self.record_clips:
+        if not self._settings.record_clips:
             return
         tb = self.table
         self.clip_log.append(
@@ -743,73 +715,19 @@ class SoldierManager:
         """The recorded clip starts of one soldier (``record_clips=True``), oldest first."""
         return [c for c in self.clip_log if c.index == index]
 
-    def soldier_info(self, index: int) -> dict[str, Any]:
-        """One soldier's state, for status reports and tests."""
-        tb = self.table
-        if not tb.is_live(index):
-            raise KeyError(f"no soldier {index}")
-        i = int(index)
-        mode = Mode(int(tb.mode[i]))
-        return {
-            "index": i,
-            "name": self.names.get(i, ""),
-            "mode": mode.name,
-            "state": LocoState(int(tb.loco[i])).name,
-            "posture": self.library.posture_names[int(tb.node[i])],
-            "node": self.library.postures[int(tb.node[i])],
-            "clip": self.library.clip_names[int(tb.clip[i])],
-            "forward": bool(tb.direc[i] > 0),
-            "clip_start": float(tb.start[i]),
-            "clip_duration": float(tb.dur[i]),
-            "goal": self.library.posture_names[d] if (d := self._desired(i)) >= 0 else None,
-            "path": [self.library.posture_names[s.end] for s in self._paths.get(i, [()])[0]],
-            "speed": float(tb.speed[i]),
-            "backward": bool(tb.backward[i]),
-            "heading": float(tb.heading[i]),
-            "foot": "left" if tb.foot[i] == 0 else "right",
-            "blending": bool(tb.blend_len[i] > 0),
-        }
+    def path_steps(self, index: int) -> tuple[PathStep, ...]:
+        """The posture-change path a soldier is playing (empty unless in TRANSITION)."""
+        entry = self._paths.get(index)
+        return tuple(entry[0]) if entry is not None else ()
 
-    def _posture_counts(self, per_node: np.ndarray) -> dict[str, int]:
-        """Resting soldiers per posture name (the variants of a posture counted together)."""
-        out: dict[str, int] = {}
-        for k, v in enumerate(per_node.tolist()):
-            if v:
-                name = self.library.posture_names[k]
-                out[name] = out.get(name, 0) + int(v)
-        return out
+    def goal_node(self, index: int) -> int:
+        """The posture node the soldier's last request asks for (-1: none in this graph)."""
+        return self._desired(index)
+
+    def soldier_info(self, index: int) -> dict[str, Any]:
+        """One soldier's state, for status reports and tests (:func:`server.soldier.report.soldier_info`)."""
+        return report.soldier_info(self, index)
 
     def status(self) -> dict[str, Any]:
-        """Counts per mode, gait state and resting posture, tick statistics: the periodic status report."""
-        tb = self.table
-        live = tb.live
-        mode = tb.mode[live]
-        modes = {m.name.lower(): int((mode == m).sum()) for m in Mode}
-        stepping = live[(mode == _LOCO) | (mode == _CRAWL)]
-        states = np.bincount(tb.loco[stepping].astype(np.int64), minlength=len(LocoState))
-        resting = live[mode == _IDLE]
-        nodes = np.bincount(tb.node[resting].astype(np.int64), minlength=len(self.library.postures))
-        ticks = max(self.ticks, 1)
-        return {
-            "soldiers": int(tb.count),
-            "capacity": int(tb.capacity),
-            "modes": modes,
-            "gaits": {LocoState(k).name.lower(): int(v) for k, v in enumerate(states) if v},
-            "postures": self._posture_counts(nodes),
-            "transitions": len(self._paths),
-            "ticks": self.ticks,
-            "mean_tick_us": 1e6 * self.stats["tick_seconds"] / ticks,
-            "last_tick_us": 1e6 * self.stats["last_tick_seconds"],
-            "updates": self.stats["updates"],
-            "requests": self.stats["requests"],
-            "requests_unknown": self.stats["requests_unknown"],
-            "requests_bad": self.stats["requests_bad"],
-            "events": self.stats["events"],
-            "clip_ends": self.stats["clip_ends"],
-            "unreachable": self.stats["unreachable"],
-            "throttle": self.throttle,
-            "every_frame": self.every_frame,
-            "heading_offsets": list(self.heading_offsets),
-            "walk_run_threshold": self.walk_run_threshold,
-            "blend_time": self.blend_time,
-        }
+        """The periodic status report (:func:`server.soldier.report.status`)."""
+        return report.status(self)
