@@ -252,3 +252,27 @@ def test_spit_writes_the_environment_as_tips(world) -> None:
     assert text.startswith("4 figures\nFIGURE #0\nDi2_0\n")
     with pytest.raises(JclError, match="exists"):
         w.run_jcl('spit("env.tips");')
+
+
+def test_over_the_wire_a_report_is_a_status_and_a_refusal_a_jcl_error() -> None:
+    from test_server_support import make_server
+
+    from protocol.connection import CLIENT, NEED_DATA, PAUSED, Connection
+    from protocol.errors import ErrorCode
+    from protocol.events import Error, Hello, Jcl, Status
+    from server.session import Session
+
+    server = make_server()
+    server.start_world()
+    session = Session(server.world, server.board_ref, server.config, "jcl")
+    client = Connection(CLIENT)
+    got: list[object] = []
+    for event in (Hello("jcl", "controller"), Jcl("help();", 1), Jcl("turn_slave_on();", 2)):
+        session.feed(client.send(event))
+        client.receive_data(session.take_output())
+        while (ev := client.next_event()) is not NEED_DATA and ev is not PAUSED:
+            got.append(ev)
+    assert any(isinstance(e, Status) and e.text == help_table() for e in got)
+    (err,) = [e for e in got if isinstance(e, Error)]
+    assert (err.code, err.ref) == (int(ErrorCode.JCL_ERROR), 2)
+    assert "slaving is off-line authoring" in err.message
