@@ -276,3 +276,12 @@ def test_over_the_wire_a_report_is_a_status_and_a_refusal_a_jcl_error() -> None:
     (err,) = [e for e in got if isinstance(e, Error)]
     assert (err.code, err.ref) == (int(ErrorCode.JCL_ERROR), 2)
     assert "slaving is off-line authoring" in err.message
+
+
+def test_print_channelset_info_and_load_posture_graph(world) -> None:
+    w, _, reports = world
+    w.run_jcl('load_posture_graph("soldier_crawl.graph", "crawl_copy");')
+    w.run_jcl('print_channelset_info("crawl_start.chset");')
+    assert "crawl_copy" in w.graphs and "crawl_start" in reports[-1]
+    with pytest.raises(JclError, match="no channelset 'nothing'"):
+        w.run_jcl('print_channelset_info("nothing");')

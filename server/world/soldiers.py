@@ -51,12 +51,10 @@ class Soldiers:
 
     def configure(self, **changes: Any) -> SoldierSettings:
         """Replace the settings with a validated copy (ValueError names the setting; nothing changes)."""
-        new = self.settings.replace(**changes)
         if self.manager is not None:
-            self.manager.settings = new
-        else:
-            self._pending = new
-        return new
+            return self.manager.configure(**changes)
+        self._pending = self._pending.replace(**changes)
+        return self._pending
 
     # -- the library -------------------------------------------------------------------------------------
     def adopt(self, library: MotionLibrary) -> None:
