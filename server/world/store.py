@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 from peabody.model import Environment, Figure
 from server.logging import get_logger
@@ -30,6 +31,7 @@ from server.motion.posture_change import (
 )
 
 log = get_logger("store")
+T = TypeVar("T")
 
 
 class StoreError(ValueError):
@@ -104,28 +106,16 @@ class MotionStore:
         return [self.environment.figures[n] for n in names]
 
     def channelset(self, name: str) -> Channelset:
-        cs = self.channelsets.get(name)
-        if cs is None:
-            raise StoreError(f"no channelset {name!r} loaded")
-        return cs
+        return _named(self.channelsets, name, "channelset", "loaded")
 
     def graph(self, name: str) -> LoadedPostureGraph:
-        loaded = self.graphs.get(name)
-        if loaded is None:
-            raise StoreError(f"no posture graph {name!r} loaded")
-        return loaded
+        return _named(self.graphs, name, "posture graph", "loaded")
 
     def bound_channelset(self, name: str) -> BoundChannelset:
-        bound = self.bound_channelsets.get(name)
-        if bound is None:
-            raise StoreError(f"no bound channelset {name!r} (bind_channelset first)")
-        return bound
+        return _named(self.bound_channelsets, name, "bound channelset", "(bind_channelset first)")
 
     def bound_graph(self, name: str) -> BoundPostureGraph:
-        bound = self.bound_graphs.get(name)
-        if bound is None:
-            raise StoreError(f"no bound posture graph {name!r} (bind_posture_graph first)")
-        return bound
+        return _named(self.bound_graphs, name, "bound posture graph", "(bind_posture_graph first)")
 
     # -- binding -----------------------------------------------------------------------------------------
     def bind_channelset(self, chset: str, name: str, figures: Sequence[str]) -> BoundChannelset:
@@ -161,3 +151,9 @@ class MotionStore:
             raise StoreError(str(exc)) from None
         self.bound_graphs[bound.name] = bound
         return bound
+
+
+def _named(table: dict[str, T], name: str, what: str, hint: str) -> T:
+    if name not in table:
+        raise StoreError(f"no {what} {name!r} {hint}")
+    return table[name]
