@@ -256,7 +256,7 @@ class JclInterpreter:
             if exc.line == 0:
                 raise JclError(exc.message, **where) from None
             raise
-        except (ValueError, KeyError, OSError) as exc:
+        except (ValueError, KeyError, OSError, ArithmeticError) as exc:  # bad values, files, numbers
             raise JclError(f"{c.name}: {exc}", **where) from None
 
     def _read_file(self, name: str) -> object:

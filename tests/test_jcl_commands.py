@@ -126,6 +126,11 @@ def test_step_bound_channelset_reports_one_stored_frame_at_a_time(world) -> None
     np.testing.assert_allclose(shown["poses"]["Di2_0"], bound.sample(0.0).poses["Di2_0"], atol=1e-6)
     w.run_jcl('step_bound_channelset("k/s0", 1000);')
     assert json.loads(reports[-1])["frame"] == cs.nframes - 1
+    for huge in ("1e999", "-1e999"):  # inf from the parser: a located error, never an escaping exception
+        with pytest.raises(JclError, match="not a number of frames"):
+            w.run_jcl(f'step_bound_channelset("k/s0", {huge});')
+        with pytest.raises(JclError, match="verbosity"):
+            w.run_jcl(f'print_channelset_info("ststow2kstow_low.chset", {huge});')
 
 
 def test_write_channelset_cuts_a_bound_channelset_into_a_new_file(world) -> None:

@@ -354,7 +354,9 @@ class JclCommands:
     def cmd_step_bound_channelset(self, bound: str, frames: float = 1.0) -> None:
         b = self.store.bound_channelset(bound)
         last = b.channelset.nframes - 1
-        k = min(max(self.cursors.get(bound, 0) + int(frames), 0), last)
+        if not math.isfinite(frames):
+            raise JclError(f"step_bound_channelset: {frames} is not a number of frames")
+        k = min(max(self.cursors.get(bound, 0) + round(frames), 0), last)
         self.cursors[bound] = k
         s = b.sample(float(k), interpolate=False)
         self._report(
@@ -385,9 +387,10 @@ class JclCommands:
         from server.motion.info import print_channelset_info
 
         names = [name] if name else sorted(self.store.channelsets)
+        level = _count("verbosity", verbosity)
         out = io.StringIO()
         for n in names:
-            print_channelset_info(self.store.channelset(n), verbosity=int(verbosity), file=out)
+            print_channelset_info(self.store.channelset(n), verbosity=level, file=out)
         text = out.getvalue()
         log.info("channelset_info", text=text.rstrip())
         self._report(text)
