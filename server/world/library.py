@@ -24,8 +24,10 @@ from server.motion.posture_change import LoadedPostureGraph
 from server.soldier.library import MotionLibrary
 from server.world.store import MotionStore, StoreError
 
-GRAPHS = (("soldier_low", "soldier_low.graph"), ("soldier_loco", "soldier_loco.graph"))
-GRAPHS += (("soldier_crawl", "soldier_crawl.graph"),)  # static, loco, crawl
+# (name, file) of the static, loco and crawl graphs
+GRAPHS: tuple[tuple[str, str], ...] = tuple(
+    (g, f"{g}.graph") for g in ("soldier_low", "soldier_loco", "soldier_crawl")
+)
 
 
 def _graph(
