@@ -20,6 +20,7 @@ an existing soldier with the same figures does nothing.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -150,7 +151,10 @@ class ServerWorld:
         self.soldiers.configure(throttle=seconds)
 
     def set_report_interval(self, seconds: float) -> None:
-        self.commands.cmd_set_ttes_report_interval(seconds)
+        """``set_ttes_report_interval``: the STATUS period."""
+        if not (math.isfinite(seconds) and seconds > 0):
+            raise ValueError(f"{seconds} is not a positive number of seconds")
+        self.report_interval = float(seconds)
 
     def soldier_report(self, names: Sequence[str] = ()) -> dict[str, Any]:
         return self.soldiers.report(self.clock, self.ready, names)

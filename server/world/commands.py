@@ -429,9 +429,7 @@ class JclCommands:
         self.world.create_soldier_state(name, figure, weapon)
 
     def cmd_set_ttes_report_interval(self, seconds: float) -> None:
-        if not (math.isfinite(seconds) and seconds > 0):
-            raise JclError(f"set_ttes_report_interval: {seconds} is not a positive number of seconds")
-        self.world.report_interval = float(seconds)
+        self.world.set_report_interval(seconds)
 
     def cmd_set_ttes_heading_offset(self, static: float, loco: float, crawl: float) -> None:
         self.soldiers.configure(heading_offsets=(static, loco, crawl))
