@@ -37,7 +37,16 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from protocol.dis.batch import EntityStateBatch
-from protocol.dis.decoders import DECODERS, Corrupt, EntityStates, PduRows, PduStatus, Skipped, Weapon
+from protocol.dis.decoders import (
+    DECODERS,
+    Corrupt,
+    Decoded,
+    EntityStates,
+    PduRows,
+    PduStatus,
+    Skipped,
+    Weapon,
+)
 from protocol.dis.errors import DisError
 from protocol.dis.pdu import DEFAULT_PORT, PduType, timestamp_seconds, unwrap_timestamps
 from protocol.dis.scan import scan_segments, scan_stream
@@ -439,36 +448,19 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
         seg.t0, seg.t_end = (float(t[0]), float(t.max())) if n else (0.0, 0.0)
     else:
         t = seg.time[index.segment]
-    status = np.full(n, PduStatus.OTHER_TYPE, np.uint8)
-    batch_index = np.full(n, -1, np.int64)
-    states = EntityStates.empty()  # a log without Entity State PDUs
-    weapons: list[Weapon] = []
-    corrupt: list[Corrupt] = []
+    found = _Found(n)
     for pdu_type, decoder in DECODERS.items():
         rows = np.flatnonzero(ptype == pdu_type)
-        if not len(rows):
-            continue
-        at = PduRows(
-            seg.data, u8, rows, index.offset[rows], index.length[rows], index.segment[rows], version[rows],
-            t[rows], lifeforms_only,
-        )  # fmt: skip
-        for decoded in decoder(at):
-            match decoded:
-                case EntityStates(rows=kept, skipped=skipped):
-                    states = decoded
-                    status[kept] = PduStatus.DECODED
-                    status[skipped] = PduStatus.NOT_LIFEFORM
-                    batch_index[kept] = np.arange(len(kept))
-                case Weapon(row=row):
-                    status[row] = PduStatus.EVENT
-                    weapons.append(decoded)
-                case Skipped(rows=skipped, status=why):
-                    status[skipped] = why
-                case Corrupt(row=row):
-                    status[row] = PduStatus.CORRUPT
-                    corrupt.append(decoded)
-    events = [w.event for w in sorted(weapons, key=lambda w: w.row)]  # file order
-    issues += [_relocate(c.error, seg) for c in sorted(corrupt, key=lambda c: c.row)]
+        if len(rows):
+            at = PduRows(
+                seg.data, u8, rows, index.offset[rows], index.length[rows], index.segment[rows],
+                version[rows], t[rows], lifeforms_only,
+            )  # fmt: skip
+            for decoded in decoder(at):
+                found.add(decoded)
+    states, status, batch_index = found.states, found.status, found.batch_index
+    events = [w.event for w in sorted(found.weapons, key=lambda w: w.row)]  # file order
+    issues += [_relocate(c.error, seg) for c in sorted(found.corrupt, key=lambda c: c.row)]
     pdus = np.zeros(n, PDU_INDEX_DTYPE)
     pdus["t"] = t
     pdus["record"] = seg.record[index.segment] if not seg.stream else 0
@@ -499,6 +491,33 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
         t_end=seg.t_end,
     )
 
+
+
+class _Found:
+    """What the decoders of one log yielded, and each PDU's status: the ``match`` over the typed events."""
+
+    def __init__(self, n: int) -> None:
+        self.status = np.full(n, PduStatus.OTHER_TYPE, np.uint8)  # a type without a decoder stays OTHER_TYPE
+        self.batch_index = np.full(n, -1, np.int64)
+        self.states = EntityStates.empty()  # a log without Entity State PDUs
+        self.weapons: list[Weapon] = []
+        self.corrupt: list[Corrupt] = []
+
+    def add(self, decoded: Decoded) -> None:
+        match decoded:
+            case EntityStates(rows=kept, skipped=skipped):
+                self.states = decoded
+                self.status[kept] = PduStatus.DECODED
+                self.status[skipped] = PduStatus.NOT_LIFEFORM
+                self.batch_index[kept] = np.arange(len(kept))
+            case Weapon(row=row):
+                self.status[row] = PduStatus.EVENT
+                self.weapons.append(decoded)
+            case Skipped(rows=rows, status=why):
+                self.status[rows] = why
+            case Corrupt(row=row):
+                self.status[row] = PduStatus.CORRUPT
+                self.corrupt.append(decoded)
 
 
 def _counters(
