@@ -184,7 +184,11 @@ def test_posture_change_drives_the_soldier_of_the_bound_graph(world) -> None:
     assert w.store.bound_graphs["s1/ptrans"].graph is w.graphs["soldier_low"].graph
     w.run_jcl('posture_change("s1/ptrans", "PRONE_FIRE");')
     said = json.loads(reports[-1])
-    assert said["soldier"] == "s1" and said["path"][-1] == "PRONE_FIRE"
+    assert said["soldier"] == "s1" and said["path"][-1] == "PRONE_FIRE" and said["goal"] == "PRONE_FIRE"
+    w.run_jcl('posture_change("s1/ptrans", "KNEEL_FIRE");')  # mid-transition: the path plays on first
+    said = json.loads(reports[-1])
+    assert said["path"][-1] == "PRONE_FIRE" and said["goal"] == "KNEEL_FIRE"
+    w.run_jcl('posture_change("s1/ptrans", "PRONE_FIRE");')
     m = w.manager
     assert m is not None
     clock.now = 60.0

@@ -338,8 +338,9 @@ class SoldierManager:
     # -- the JCL debugging commands (seed 3.4.1-3.4.2), on one soldier -----------------------------------
     def posture_change(self, index: int, posture: str, now: float) -> list[str]:
         """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing
-        still request for that posture would take it (heading and position kept). Returns the path's
-        postures; KeyError for an unknown soldier or posture."""
+        still request for that posture would take it (heading and position kept; a soldier in a transition
+        finishes it first). Returns the postures of the path playing now; KeyError for an unknown soldier or
+        posture."""
         if not self.table.is_live(index):
             raise KeyError(f"no soldier {index}")
         appearance, weapon = request_for(posture)

@@ -147,8 +147,8 @@ COMMANDS: tuple[Command, ...] = (
         "bound_graph, posture",
         "3.4.2",
         "the soldier created from the bound graph's figures goes to `posture` along the quickest path, as "
-        "a standing-still request for it would (a DEAD variant is picked as for a request); reports the "
-        "path to the caller",
+        "a standing-still request for it would (a DEAD variant is picked as for a request; a soldier in a "
+        "transition finishes it first); reports the goal and the path playing to the caller",
         (S, S),
     ),
     # -- 3.4.4 slaving
@@ -419,7 +419,8 @@ class JclCommands:
         if not any(posture in (p, p.partition("@")[0]) for p in g.graph.postures):
             raise JclError(f"posture_change: posture graph {bound!r} has no posture {posture!r}")
         path = m.posture_change(i, posture, self.world.clock())
-        self._report(json.dumps({"soldier": m.names[i], "posture": posture, "path": path}))
+        goal = m.soldier_info(i)["goal"]
+        self._report(json.dumps({"soldier": m.names[i], "posture": posture, "goal": goal, "path": path}))
 
     # -- 3.6 start-up ------------------------------------------------------------------------------------
     def cmd_open_ttes_sockets(self, host: str) -> None:
