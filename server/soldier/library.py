@@ -201,7 +201,7 @@ class MotionLibrary:
             base = CLIP_OF[state][0]
             if (GRAPH_LOCO, base + "_l") not in by_key and (GRAPH_LOCO, base + "_r") not in by_key:
                 self.transition_foot[state] = 1
-        have: np.ndarray = np.asarray((self.loco_clip >= 0).all(axis=1))
+        have = np.asarray((self.loco_clip >= 0).all(axis=1))
         self.can_walk = bool(have[[s.WALK_START, s.WALK_CYCLE, s.WALK_END]].all()) and (
             STAND_STOWED in self._node
         )
