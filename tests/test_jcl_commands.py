@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
+import os
 import re
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from server.jcl import JclError
 from server.startup import ServerWorld, SyntheticDataDir, write_synthetic_data_dir
@@ -294,3 +298,40 @@ def test_print_channelset_info_and_load_posture_graph(world) -> None:
     assert "crawl_copy" in w.graphs and "crawl_start" in reports[-1]
     with pytest.raises(JclError, match="no channelset 'nothing'"):
         w.run_jcl('print_channelset_info("nothing");')
+
+
+_WORDS = [
+    "k/s0", "s0", "s1", "Di2_0", "AK_47_0", "soldier_low", "s1/ptrans", "PRONE_FIRE", "DEAD", "forwards",
+    "backwards", "yes", "no", "ststow2kstow_low.chset", "walk_cycle_l.chset", "x.chset.env", "y.tips",
+    "../up.tips", "", "s0.proximal", "nothing",
+]  # fmt: skip
+_NUMBERS = [0.0, 1.0, -1.0, 2.5, 1e999, -1e999, 1e9, 0.5, 3.0]
+# a world per example costs ~0.3 s: a short run in `make test`, the profile's count in `make fuzz`
+_FUZZING = os.environ.get("HYPOTHESIS_PROFILE", "ci") != "ci"
+_SHORT_UNLESS_FUZZING = settings() if _FUZZING else settings(max_examples=25)
+
+
+@pytest.mark.fuzz
+@_SHORT_UNLESS_FUZZING
+@given(st.data())
+def test_fuzz_every_command_with_plausible_arguments_only_raises_jcl_error(
+    template: SyntheticDataDir, tmp_path_factory: pytest.TempPathFactory, data: st.DataObject
+) -> None:
+    """A client's JCL never gets anything but a JCL error (ERROR 105) out of a command: no exception that
+    would take its session down, whatever the arguments."""
+    d = data_dir(template, tmp_path_factory.mktemp("fuzz"))
+    clock = Clock()
+    w = ServerWorld(d.path, clock=clock)
+    w.run_startup(d.startup_script)
+    w.run_jcl('bind_channelset("ststow2kstow_low.chset", "k/s0", "Di2_0", "AK_47_0");')
+    w.run_jcl('bind_posture_graph("soldier_low", "s1/ptrans", "Di2_1", "AK_47_1");')
+    arg = st.one_of(st.sampled_from(_WORDS), st.sampled_from(_NUMBERS))
+    for _ in range(data.draw(st.integers(1, 6))):
+        name = data.draw(st.sampled_from([c.name for c in COMMANDS if c.name != "read_file"]))
+        args = data.draw(st.lists(arg, max_size=8))
+        text = f"{name}({', '.join(json.dumps(a) if isinstance(a, str) else repr(a) for a in args)});"
+        clock.now += data.draw(st.sampled_from([0.0, 0.1, 5.0]))
+        with contextlib.suppress(JclError):
+            w.run_jcl(text.replace("inf", "1e999"))
+        if w.manager is not None:
+            w.manager.tick(clock.now)
