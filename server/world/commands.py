@@ -315,6 +315,7 @@ class JclCommands:
     def cmd_write_channelset(
         self, file: str, name: str, begin: float, end: float, fps: float, stride: float, bound: str
     ) -> None:
+        from server.motion.channelset_file import save_channelset
         from server.motion.recording import Recording, write_channelset
 
         b = self.store.bound_channelset(bound)
@@ -324,10 +325,10 @@ class JclCommands:
         for k in range(b.channelset.nframes):  # the "channels": the bound channelset played frame by frame
             b.apply(float(k), by_name, interpolate=False)
             rec.capture()
+        frames = (_count("begin", begin), _count("end", end), fps, _count("stride", stride, 1))
+        cs = write_channelset(None, name, rec, *frames)  # checked before anything is written
         path = self._new_file(file, ".chset.env")
-        cs = write_channelset(
-            path, name, rec, _count("begin", begin), _count("end", end), fps, _count("stride", stride, 1)
-        )
+        save_channelset(cs, path)
         self.store.channelsets[name] = cs
         log.info("channelset_written", file=str(path), frames=cs.nframes)
 
