@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from client_stub.scene_graph import FigureGraph
+from peabody.rotations import skew
 
 F32 = np.float32
 
@@ -73,9 +74,7 @@ class FastFigure:
         where[-1] = self.ndof  # -1 (no DOF) -> the identity appended after the DOFs
         self.slots_ordered = np.where(self.slots < 0, self.ndof, where[self.slots])
         ar = self.axis[self.order[: self.nrot]]
-        k = np.zeros((len(ar), 3, 3), F32)
-        k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -ar[:, 2], ar[:, 1], -ar[:, 0]
-        k[:, 1, 0], k[:, 2, 0], k[:, 2, 1] = ar[:, 2], -ar[:, 1], ar[:, 0]
+        k = skew(ar)  # float32 like the axes
         self._k = k
         self._kk = np.matmul(k, k)  # K² (Rodrigues: R = I + sin K + (1 - cos) K²)
         self._taxis = self.axis[self.order[self.nrot :]]

@@ -40,11 +40,11 @@ from pathlib import Path
 
 import numpy as np
 
+from peabody import quaternion
 from peabody import values as V
 from peabody.language import Assign, Block, Loc, Number, PeabodyError, Value, Vector, parse
 from peabody.loader import LoadContext, register_block
 from peabody.model import Environment
-from server.motion import quaternion
 from server.motion.channelset import (
     CHANNEL_TYPES,
     Channelset,

@@ -1,5 +1,6 @@
-"""Vectorised unit quaternions for figure channels.
+"""Vectorised unit quaternions: figure channels, the wire's figure entries, the stubs' placements.
 
+The one quaternion <-> matrix conversion of the project (server, clients, codecs and authoring call it).
 Layout ``(..., 4) = (w, x, y, z)``; rotation matrices act on column vectors like every transform in the
 project (:mod:`peabody.model`). Figure locations are stored as position + quaternion rather than 4x4
 matrices because that is what gets interpolated (lerp + slerp) and what the update packet carries (7 floats).
@@ -107,6 +108,13 @@ def to_transform(pos: np.ndarray, q: np.ndarray) -> np.ndarray:
     out[..., :3, 3] = pos
     out[..., 3, 3] = 1.0
     return out
+
+
+def from_transform(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(..., 4, 4)`` rigid transforms → position ``(..., 3)`` + quaternion ``(..., 4)``: a figure's 7
+    values."""
+    t = np.asarray(t, dtype=np.float64)
+    return t[..., :3, 3].copy(), from_matrix(t)
 
 
 def make_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
