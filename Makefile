@@ -17,8 +17,8 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/ttes demo
 
-test: $(STAMP)
-	$(VENV)/bin/ruff check .
+# The habits first (each a few seconds): ruff (style, complexity), mypy (types), import-linter (layers).
+test: lint
 	$(PY) -m pytest -q
 
 fuzz: $(STAMP)
@@ -31,6 +31,8 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
 
 clean:
 	rm -rf $(VENV) build *.egg-info

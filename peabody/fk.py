@@ -159,6 +159,10 @@ class FigureKinematics:
         if len(placed) != len(self.segment_names):
             missing = [self.segment_names[i] for i in range(len(self.segment_names)) if i not in placed]
             raise ValueError(f"figure {fig.name!r}: segment {missing[0]!r} is not connected to the root")
+        self._dof_tables()
+
+    def _dof_tables(self) -> None:
+        """Per DOF: the sign of its value and the code of :meth:`_apply_dof`'s fast path."""
         # reversed joints use the negated DOF values (inverse rotation / translation)
         sign = np.ones(self.ndof)
         for step in self._steps:

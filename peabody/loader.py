@@ -541,11 +541,11 @@ def _joint_block(block: Block, figure: Figure, name: str) -> None:
             for d, v in zip(joint.dofs, vals, strict=True):
                 setattr(d, attr, v)
     if "displacement" in fields:
-        a = fields["displacement"]
+        disp = fields["displacement"]
         if n == 0:
-            joint.displacement = V.transform(a.value)
+            joint.displacement = V.transform(disp.value)
         else:
-            vals = V.numbers(a.value, n, "displacement values (one per DOF)")
+            vals = V.numbers(disp.value, n, "displacement values (one per DOF)")
             for d, v in zip(joint.dofs, vals, strict=True):
                 d.value = v
 

@@ -62,7 +62,7 @@ class _Reader:
         toks: list[tuple[str, str, int]] = []
         for m in _TOKEN.finditer(text):
             kind = m.lastgroup
-            if kind == "ws" or kind == "comment":
+            if kind in {"ws", "comment"}:
                 continue
             if kind == "bad":
                 ch = m.group()
@@ -379,7 +379,9 @@ def psurf_to_trimesh(psurf: Psurf) -> trimesh.Trimesh:
             if diffuse is not None and len(diffuse) >= 3:
                 colours[i, :3] = np.clip(np.asarray(diffuse[:3], dtype=np.float64) * 255.0, 0, 255)
         attr = np.clip(np.asarray(psurf.face_attributes)[face_of], 0, len(colours) - 1)
-        mesh.visual.face_colors = colours[attr]
+        visual = mesh.visual
+        assert isinstance(visual, trimesh.visual.ColorVisuals)  # a new mesh without texture
+        visual.face_colors = colours[attr]
     return mesh
 
 
