@@ -20,6 +20,7 @@ import numpy as np
 
 from client_stub.scene_graph import FigureGraph
 from peabody.rotations import skew
+from protocol import coords
 
 F32 = np.float32
 
@@ -129,12 +130,4 @@ class FastFigure:
 
 def entity_transforms(heading_deg: np.ndarray, position: np.ndarray) -> np.ndarray:
     """(n, 3, 4) float32 world placement of each soldier's local frame (compass heading, feet position)."""
-    h = np.radians(np.asarray(heading_deg, np.float64))
-    p = np.asarray(position, np.float64).reshape(-1, 3)
-    c, s = np.cos(h), np.sin(h)
-    out = np.zeros((len(p), 3, 4), F32)
-    out[:, 0, 0], out[:, 0, 1] = c, s  # local +Y (forward) goes to (sin h, cos h): protocol.coords
-    out[:, 1, 0], out[:, 1, 1] = -s, c
-    out[:, 2, 2] = 1.0
-    out[:, :, 3] = p
-    return out
+    return to34(coords.heading_transform(heading_deg, np.asarray(position, np.float64).reshape(-1, 3)))
