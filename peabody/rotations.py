@@ -5,8 +5,9 @@ about unit axes; they share these two functions so the formula (and its rounding
 on column vectors. Unit quaternions live beside this in :mod:`peabody.quaternion`.
 
 Pure numpy on purpose: the per-tick FK of server and clients calls it, and the server installs without
-scipy. Off-line code that wants more (rotation vectors of arbitrary matrices, fitting) may use
-``scipy.spatial.transform.Rotation``.
+scipy. ``scipy.spatial.transform.Rotation`` suits new off-line code, but not the motion library's build
+path: the committed channelsets print float32 round-off (``0.00000000000005684342cm``), so other rounding
+rewrites them (``as_rotvec`` in place of :func:`authoring.ik.rotation_log` changed all six walk_cycle files).
 """
 
 from __future__ import annotations
