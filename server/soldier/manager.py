@@ -39,6 +39,7 @@ import numpy as np
 
 from protocol import coords
 from protocol.entity import Appearance, WeaponState, make_entity_requests
+from protocol.events import DEFAULT_MAX_SOLDIERS
 from server.soldier import report
 from server.soldier.blend import blend_into, smoothstep, yaw_rotate
 from server.soldier.library import MotionLibrary, PathStep
@@ -124,7 +125,7 @@ class SoldierManager:
         library: MotionLibrary,
         settings: SoldierSettings | None = None,
         *,
-        max_soldiers: int = 16384,
+        max_soldiers: int = DEFAULT_MAX_SOLDIERS,
         record_limit: int = 100_000,
         **changes: Any,
     ) -> None:
