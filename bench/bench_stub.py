@@ -22,11 +22,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np
 
-from client_stub.app import StubApp
-from client_stub.camera import look_at
-from client_stub.render import StubRenderer
-from client_stub.simsoldier import Behaviour, Force
-from client_stub.terrain import load_terrain
+from client_stub.stub.app import StubApp
+from client_stub.stub.camera import look_at
+from client_stub.stub.render import StubRenderer
+from client_stub.stub.simsoldier import Behaviour, Force
+from client_stub.stub.terrain import load_terrain
 from protocol.entity import Appearance, WeaponState
 
 

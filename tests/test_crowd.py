@@ -7,14 +7,14 @@ import json
 import numpy as np
 import pytest
 
-from client_stub.artic import articulation, update_table_for
 from client_stub.crowd.app import CrowdConfig, CrowdRenderer, Figures, run_crowd
 from client_stub.crowd.camera import FreeCamera
 from client_stub.crowd.fk import FastFigure, entity_transforms, mul, to34, to44
 from client_stub.crowd.gl import SKY, boxes_visible
 from client_stub.crowd.lod import FAR, MID, NEAR, choose_levels, dof_map, visible
 from client_stub.crowd.sources import CrowdState, WireBuffer
-from client_stub.scene_graph import Crowd, EntityLayout
+from client_stub.stub.artic import articulation, update_table_for
+from client_stub.stub.scene_graph import Crowd, EntityLayout
 from protocol import coords
 from protocol.events import JointUpdates
 

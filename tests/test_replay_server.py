@@ -21,10 +21,10 @@ from test_replay_support import (
 from test_replay_translator import FRAME, make_log, pdu
 from test_server_support import running_server
 
-from client_stub.replay import Replayer
-from client_stub.replay.drive import ProgressLine, replay_to_server
-from client_stub.replay.link import ServerLink
-from client_stub.replay.sink import ServerSink
+from client_stub.dis import Replayer
+from client_stub.dis.drive import ProgressLine, replay_to_server
+from client_stub.dis.sink import ServerSink
+from client_stub.link.client import ServerLink
 from protocol.dis import read_log
 from protocol.dis.appearance import LifeformState
 from ttes.cli import main

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from test_replay_translator import FRAME, make_log, pdu
 
-from client_stub.jack import UpdateBatch
-from client_stub.render import FORCE_UNIFORMS
-from client_stub.replay import Replayer
-from client_stub.replay.stubapp import LOOK_BASE, ReplayApp, look_colour, look_of
-from client_stub.simsoldier import Force
-from client_stub.terrain import DEFAULT_TERRAIN, Terrain, load_terrain
+from client_stub.dis import Replayer
+from client_stub.dis.stubapp import LOOK_BASE, ReplayApp, look_colour, look_of
+from client_stub.stub.jack import UpdateBatch
+from client_stub.stub.render import FORCE_UNIFORMS
+from client_stub.stub.simsoldier import Force
+from client_stub.stub.terrain import DEFAULT_TERRAIN, Terrain, load_terrain
 from protocol.dis.appearance import LifeformState
 from protocol.entity import Appearance, WeaponState
 from protocol.update_table import UpdateTable

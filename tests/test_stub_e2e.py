@@ -10,10 +10,10 @@ import pytest
 import trimesh
 import trio
 
-from client_stub.app import StubApp
-from client_stub.jack import JackProc
-from client_stub.simsoldier import Behaviour, Force
-from client_stub.terrain import terrain_from_mesh
+from client_stub.stub.app import StubApp
+from client_stub.stub.jack import JackProc
+from client_stub.stub.simsoldier import Behaviour, Force
+from client_stub.stub.terrain import terrain_from_mesh
 from protocol.entity import Appearance
 
 server_app = pytest.importorskip("server.app")

@@ -13,12 +13,12 @@ import pytest
 import trimesh
 import trio
 
-from client_stub.app import StubApp
-from client_stub.artic import articulation, update_table_for
-from client_stub.jack import JackError, JackProc, UpdateBuffer, free_port
-from client_stub.simsoldier import Behaviour, Force
-from client_stub.terrain import terrain_from_mesh
-from client_stub.tips import load_tips
+from client_stub.stub.app import StubApp
+from client_stub.stub.artic import articulation, update_table_for
+from client_stub.stub.jack import JackError, JackProc, UpdateBuffer, free_port
+from client_stub.stub.simsoldier import Behaviour, Force
+from client_stub.stub.terrain import terrain_from_mesh
+from client_stub.stub.tips import load_tips
 from protocol import coords
 from protocol.connection import NEED_DATA, PAUSED, SERVER, Connection
 from protocol.entity import Appearance

@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from client_stub.app import StubApp
-from client_stub.camera import look_at
-from client_stub.headless import TOUR, Tour, run_headless
-from client_stub.render import FORCE_UNIFORMS, StubRenderer, uniform_colour
-from client_stub.simsoldier import Force
-from client_stub.terrain import terrain_from_mesh
+from client_stub.stub.app import StubApp
+from client_stub.stub.camera import look_at
+from client_stub.stub.headless import TOUR, Tour, run_headless
+from client_stub.stub.render import FORCE_UNIFORMS, StubRenderer, uniform_colour
+from client_stub.stub.simsoldier import Force
+from client_stub.stub.terrain import terrain_from_mesh
 from protocol.entity import Appearance, WeaponState
 
 W, H = 200, 150

@@ -20,10 +20,10 @@ SCRIPT = textwrap.dedent(
     import pyglet
     pyglet.options["headless"] = True
     from pyglet.window import key
-    from client_stub.app import StubApp, populate_demo
-    from client_stub.render import StubRenderer
-    from client_stub.terrain import load_terrain
-    from client_stub.viewer import make_window
+    from client_stub.stub.app import StubApp, populate_demo
+    from client_stub.stub.render import StubRenderer
+    from client_stub.stub.terrain import load_terrain
+    from client_stub.stub.viewer import make_window
 
     terrain = load_terrain()
     app = StubApp(terrain, artic_dir=sys.argv[1])

@@ -37,8 +37,8 @@ from client_stub.crowd.lod import (
     visible,
 )
 from client_stub.crowd.sources import CrowdState
-from client_stub.scene_graph import FigureGraph
-from client_stub.tips import TipsFigure, load_tips
+from client_stub.stub.scene_graph import FigureGraph
+from client_stub.stub.tips import TipsFigure, load_tips
 
 log = logging.getLogger("ttes.crowd")
 STUB_DATA = Path(__file__).resolve().parent.parent / "data"
@@ -242,7 +242,7 @@ def run_crowd(cfg: CrowdConfig) -> dict[str, Any]:
     figures = Figures.load()
     terrain = None
     if cfg.terrain != "none":
-        from client_stub.terrain import DEFAULT_TERRAIN, load_terrain
+        from client_stub.stub.terrain import DEFAULT_TERRAIN, load_terrain
 
         terrain = load_terrain(cfg.terrain or DEFAULT_TERRAIN)
     n = cfg.soldiers
@@ -253,7 +253,7 @@ def run_crowd(cfg: CrowdConfig) -> dict[str, Any]:
     if cfg.source == "server":
         host, port = cfg.host, cfg.port
         if cfg.spawn_server:
-            from client_stub.loadtest_server import SpawnedServer
+            from client_stub.loadtest.server import SpawnedServer
 
             server = SpawnedServer(tick_hz=30.0, throttle=0.0, data=cfg.server_data)
             host, port = server.wait_ready()

@@ -1,7 +1,7 @@
 """Where the crowd's poses come from: the server's update stream, or an offline stand-in.
 
 Both keep a :class:`CrowdState` (struct of arrays, one row per soldier): feet position and compass heading
-(owned by the client, dead-reckoned by the :class:`~client_stub.loadtest_mix.MixDriver`, feet put on the
+(owned by the client, dead-reckoned by the :class:`~client_stub.loadtest.mix.MixDriver`, feet put on the
 terrain), DI.fig joint angles and the figure placements of the soldier root and the rifle in the soldier's
 frame (from the wire: docs/PROTOCOL.md 8.3), and a ``dirty`` flag per soldier whose pose changed.
 
@@ -9,9 +9,9 @@ frame (from the wire: docs/PROTOCOL.md 8.3), and a ``dirty`` flag per soldier wh
 the soldiers, drives them with the realistic mix (the same requests as the load test) and writes each
 decoded JOINT_UPDATES into a back buffer; :meth:`NetworkSource.update` swaps it into the state under a lock
 (the render thread never waits for the network). The wire table is bound to DI.fig's by entry name
-(:func:`client_stub.artic.bind_table`); when it names too few of DI.fig's joints (the synthetic test server's
-chain figure) the soldiers whose updates arrived are posed by :class:`client_stub.offline.OfflinePoser`
-instead, and ``posing`` says so.
+(:func:`~client_stub.stub.artic.bind_table`); when it names too few of DI.fig's joints (the synthetic test
+server's chain figure) the soldiers whose updates arrived are posed by
+:class:`~client_stub.stub.offline.OfflinePoser` instead, and ``posing`` says so.
 
 :class:`OfflineSource` needs no server: the same mix, posed by the OfflinePoser (for render benchmarks).
 """
@@ -26,15 +26,15 @@ from dataclasses import dataclass
 import numpy as np
 import trio
 
-from client_stub.artic import TableBinding, articulation, bind_table, update_table_for
 from client_stub.crowd.fk import to34
-from client_stub.ground import GroundQuery
-from client_stub.loadtest import LoadSession, LoadTestConfig
-from client_stub.loadtest_mix import APPEARANCE, SPEED, WEAPON, MixDriver
-from client_stub.offline import OfflinePoser
-from client_stub.scene_graph import Crowd, EntityLayout, FigureGraph
-from client_stub.terrain import Terrain
-from client_stub.tips import TipsFigure
+from client_stub.loadtest.mix import APPEARANCE, SPEED, WEAPON, MixDriver
+from client_stub.loadtest.session import LoadSession, LoadTestConfig
+from client_stub.stub.artic import TableBinding, articulation, bind_table, update_table_for
+from client_stub.stub.ground import GroundQuery
+from client_stub.stub.offline import OfflinePoser
+from client_stub.stub.scene_graph import Crowd, EntityLayout, FigureGraph
+from client_stub.stub.terrain import Terrain
+from client_stub.stub.tips import TipsFigure
 from protocol import coords
 from protocol.events import JointUpdates
 from protocol.update_table import UpdateTable

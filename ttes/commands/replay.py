@@ -146,7 +146,7 @@ async def private_server(data_dir: Path | None, synthetic: bool, quiet: bool = T
 
 
 def run(args: argparse.Namespace) -> int:
-    from client_stub.replay import EntityFilter, FilterError, Replayer
+    from client_stub.dis import EntityFilter, FilterError, Replayer
     from protocol.dis import DisError, read_log
 
     try:
@@ -215,10 +215,10 @@ async def stop_on_signal(scope: Any) -> None:
 def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
     import trio
 
-    from client_stub.jack import JackError
-    from client_stub.replay.drive import ProgressLine, replay_to_server
-    from client_stub.replay.link import ServerLink
-    from client_stub.replay.sink import ServerSink
+    from client_stub.dis.drive import ProgressLine, replay_to_server
+    from client_stub.dis.sink import ServerSink
+    from client_stub.link.client import ServerLink
+    from client_stub.stub.jack import JackError
 
     async def main() -> dict:
         async with contextlib.AsyncExitStack() as stack:
@@ -255,7 +255,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
     import trio
     import trio.testing
 
-    from client_stub.jack import JackError
+    from client_stub.stub.jack import JackError
 
     seconds = args.seconds
     if seconds is None:
@@ -274,7 +274,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
         async with contextlib.AsyncExitStack() as stack:
             link = None
             if not args.offline:
-                from client_stub.replay.link import ServerLink
+                from client_stub.link.client import ServerLink
 
                 host, port = args.host, args.port
                 if host is None:
@@ -310,10 +310,10 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
 
 
 def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
-    from client_stub.camera import View
-    from client_stub.replay.drive import ProgressLine
-    from client_stub.replay.stubapp import ReplayApp
-    from client_stub.terrain import DEFAULT_TERRAIN, load_terrain
+    from client_stub.dis.drive import ProgressLine
+    from client_stub.dis.stubapp import ReplayApp
+    from client_stub.stub.camera import View
+    from client_stub.stub.terrain import DEFAULT_TERRAIN, load_terrain
 
     terrain = load_terrain(args.terrain or DEFAULT_TERRAIN)
     app = ReplayApp(
@@ -335,7 +335,7 @@ async def _render(
     import numpy as np
     import trio
 
-    from client_stub.render import StubRenderer
+    from client_stub.stub.render import StubRenderer
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -381,10 +381,10 @@ async def _render(
 
 # -- the window ----------------------------------------------------------------------------------
 def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) -> dict | None:
-    from client_stub.jack import JackError, JackProc, ServerProcess
-    from client_stub.render import StubRenderer
-    from client_stub.replay.sink import JackProcLink
-    from client_stub.viewer import run_viewer
+    from client_stub.dis.sink import JackProcLink
+    from client_stub.stub.jack import JackError, JackProc, ServerProcess
+    from client_stub.stub.render import StubRenderer
+    from client_stub.stub.viewer import run_viewer
 
     server = jack = None
     try:

@@ -79,9 +79,9 @@ def run(args: argparse.Namespace) -> int:
     ):
         print("ttes stub: no display; use --headless", file=sys.stderr)
         return 2
-    from client_stub.app import StubApp, populate_demo
-    from client_stub.jack import JackError, JackProc, ServerProcess
-    from client_stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
+    from client_stub.stub.app import StubApp, populate_demo
+    from client_stub.stub.jack import JackError, JackProc, ServerProcess
+    from client_stub.stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
 
     try:
         terrain = load_terrain(args.terrain or DEFAULT_TERRAIN, args.terrain_up)
@@ -111,16 +111,16 @@ def run(args: argparse.Namespace) -> int:
                     f"ttes stub: server not ready ({jack.failure or 'timeout'}); posing offline",
                     file=sys.stderr,
                 )
-        from client_stub.render import StubRenderer
+        from client_stub.stub.render import StubRenderer
 
         app.renderer = StubRenderer(width, height, offscreen=args.headless)
         app.renderer.add_terrain(terrain.meshes)
         if not args.headless:
-            from client_stub.viewer import run_viewer
+            from client_stub.stub.viewer import run_viewer
 
             run_viewer(app, width, height, args.fps)
             return 0
-        from client_stub.headless import run_headless
+        from client_stub.stub.headless import run_headless
 
         summary = run_headless(
             app, args.seconds, args.out, fps=args.fps, realtime=app.jack is not None, tour=not args.no_tour
@@ -143,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _make_terrain(args: argparse.Namespace) -> int:
-    from client_stub.terrain_gen import DEFAULT_OUT, write_village
+    from client_stub.stub.terrain_gen import DEFAULT_OUT, write_village
     from ttes.output import print_json
 
     summary = write_village(args.terrain_out or DEFAULT_OUT)

@@ -7,8 +7,8 @@ never collides with a soldier someone else drives. The weapon figure comes from 
 say which it has) the first weapon it does have stands in, counted in ``stats["weapon_substituted"]``.
 
 Works with any link that has ``create``, ``remove``, ``send_requests``, ``subscribe``, ``tables``,
-``ready_soldiers`` and ``max_soldiers``: :class:`~client_stub.replay.link.ServerLink` (trio) or
-:class:`JackProcLink` (the stub's threaded :class:`~client_stub.jack.JackProc`).
+``ready_soldiers`` and ``max_soldiers``: :class:`~client_stub.link.client.ServerLink` (trio) or
+:class:`JackProcLink` (the stub's threaded :class:`~client_stub.stub.jack.JackProc`).
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from typing import Protocol
 
 import numpy as np
 
-from client_stub.jack import JackProc, UpdateBatch
-from client_stub.replay.translator import Translation
+from client_stub.dis.translator import Translation
+from client_stub.stub.jack import JackProc, UpdateBatch
 from protocol.dis import RIFLE_FIGURES
 from protocol.events import CreateSoldier, RemoveSoldier
 from protocol.update_table import UpdateTable

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from client_stub.tips import TipsFigure, TipsGeometry
+from client_stub.stub.tips import TipsFigure, TipsGeometry
 from protocol import coords
 
 ENTITY_NODE = 0  # the Entity Position DCS is node 0 of every entity

@@ -1,10 +1,10 @@
 """ServerLink: a controller connection to the Jack/TTES server inside the caller's own trio run.
 
-:class:`client_stub.jack.JackProc` runs its network in a thread of its own (the stub's render loop is not
+:class:`client_stub.stub.jack.JackProc` runs its network in a thread of its own (the stub's render loop is not
 async). Replay drivers and the gateway are trio programs, and their tests run the server in the same trio run
 under the autojump clock, so they need the same conversation without a thread: this class. Sending is
 synchronous (encode, queue for the writer task); a reader task answers PINGs, keeps the update tables,
-STATUS and errors, and puts joint updates into :class:`client_stub.jack.UpdateBuffer` double buffers, so
+STATUS and errors, and puts joint updates into :class:`client_stub.stub.jack.UpdateBuffer` double buffers, so
 :meth:`swap` hands them out exactly as ``JackProc.swap`` does.
 """
 
@@ -16,7 +16,7 @@ import logging
 import numpy as np
 import trio
 
-from client_stub.jack import STARTUP_JCL, JackError, ServerView, UpdateBatch
+from client_stub.stub.jack import STARTUP_JCL, JackError, ServerView, UpdateBatch
 from protocol.connection import CLIENT, NEED_DATA, Connection
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from protocol.errors import LocalProtocolError

@@ -1,10 +1,10 @@
 """``ttes loadtest``: N soldiers over C connections, a realistic DIS-rate mix, and what the server delivers.
 
-One trio loop runs C :class:`~client_stub.loadtest_client.LoadClient` connections (each creates, subscribes
+One trio loop runs C :class:`~client_stub.loadtest.client.LoadClient` connections (each creates, subscribes
 to and drives its share of the soldiers) and the *driver*, which steps the :class:`MixDriver` at
 ``step_hz`` (a DIS gateway's granularity), sends the requests it decides, marks latency probes and samples
-CPU. :class:`~client_stub.loadtest_stats.Tracker` turns what arrives into a recording; the figures of the
-steady-state window (after ``warmup_s``) come from :func:`~client_stub.loadtest_stats.summarise`.
+CPU. :class:`~client_stub.loadtest.stats.Tracker` turns what arrives into a recording; the figures of the
+steady-state window (after ``warmup_s``) come from :func:`~client_stub.loadtest.stats.summarise`.
 
 ``run_ramp`` keeps the connections and grows N stage by stage (×``ramp_factor``) until a stage misses the
 criteria (delivered ≥ ``min_delivered_pct`` of expected and p99 latency ≤ ``max_p99_ms``), and reports the
@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 import trio
 
-from client_stub.loadtest_client import LoadClient, LoadError, split_rows
-from client_stub.loadtest_mix import MOVING, MixDriver
-from client_stub.loadtest_server import SpawnedServer, cpu_seconds, self_cpu_seconds
-from client_stub.loadtest_stats import Tracker, series, summarise
+from client_stub.loadtest.client import LoadClient, LoadError, split_rows
+from client_stub.loadtest.mix import MOVING, MixDriver
+from client_stub.loadtest.server import SpawnedServer, cpu_seconds, self_cpu_seconds
+from client_stub.loadtest.stats import Tracker, series, summarise
 
 MAX_STAGES = 40
 

@@ -15,8 +15,8 @@ from typing import TextIO
 
 import trio
 
-from client_stub.replay.replayer import Replayer
-from client_stub.replay.sink import ServerSink
+from client_stub.dis.replayer import Replayer
+from client_stub.dis.sink import ServerSink
 
 HOUSEKEEPING = 0.1  # s between steps when no PDU is due (timeouts, Fire reactions)
 

@@ -21,16 +21,16 @@ from typing import Protocol
 
 import numpy as np
 
-from client_stub.app import DEFAULT_FIGURE, StubApp
-from client_stub.artic import bind_table
-from client_stub.camera import look_at
-from client_stub.jack import JackError, UpdateBatch
-from client_stub.render import FORCE_UNIFORMS
-from client_stub.replay.drive import ProgressLine
-from client_stub.replay.sink import Link, ServerSink
-from client_stub.replay.translator import DisTranslator, Translation
-from client_stub.simsoldier import RAY_START, Force
-from client_stub.terrain import Terrain
+from client_stub.dis.drive import ProgressLine
+from client_stub.dis.sink import Link, ServerSink
+from client_stub.dis.translator import DisTranslator, Translation
+from client_stub.stub.app import DEFAULT_FIGURE, StubApp
+from client_stub.stub.artic import bind_table
+from client_stub.stub.camera import look_at
+from client_stub.stub.jack import JackError, UpdateBatch
+from client_stub.stub.render import FORCE_UNIFORMS
+from client_stub.stub.simsoldier import RAY_START, Force
+from client_stub.stub.terrain import Terrain
 from protocol import coords
 from protocol.dis import RIFLE_FIGURES
 
@@ -70,7 +70,7 @@ for _look in range(15):  # register the looks with the renderer's colour table
 
 
 class TranslationSource(Protocol):
-    """Where a ReplayApp's soldiers come from (a :class:`~client_stub.replay.replayer.Replayer`)."""
+    """Where a ReplayApp's soldiers come from (a :class:`~client_stub.dis.replayer.Replayer`)."""
 
     translator: DisTranslator
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from client_stub.app import StubApp
+from client_stub.stub.app import StubApp
 
 # (seconds into a 40 s tour, keys pressed then)
 TOUR: tuple[tuple[float, tuple[str, ...]], ...] = (

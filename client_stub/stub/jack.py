@@ -129,7 +129,7 @@ class ServerView:
     """What a client knows of the server, kept from its events: the handshake, update tables and their
     double buffers, READY's soldiers, created and refused soldiers, STATUS, errors, the reason it failed.
 
-    Shared by :class:`JackProc` (its own network thread) and :class:`client_stub.replay.link.ServerLink`
+    Shared by :class:`JackProc` (its own network thread) and :class:`client_stub.link.client.ServerLink`
     (inside the caller's trio run); each adds only what its concurrency needs (events, locks, replies)."""
 
     def __init__(self) -> None:
@@ -504,7 +504,7 @@ class ServerProcess:
             str(self.port),
             *(extra or []),
         ]
-        root = Path(__file__).resolve().parent.parent
+        root = Path(__file__).resolve().parents[2]
         env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]))
         # the server's log goes to a file: a pipe nobody reads would fill up and stall the server
         self.log = tempfile.TemporaryFile(mode="w+", encoding="utf-8", errors="replace")  # noqa: SIM115 (closed in stop)

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from client_stub.artic import (
+from client_stub.stub.artic import (
     TableBinding,
     articulation,
     bind_table,
@@ -32,20 +32,20 @@ from client_stub.artic import (
     update_table_for,
     write_artic,
 )
-from client_stub.camera import CameraState, camera_pose
-from client_stub.jack import JackError, JackProc, UpdateBatch
-from client_stub.keys import StubController
-from client_stub.offline import OfflinePoser
-from client_stub.scene_graph import Crowd, EntityLayout, FigureGraph
-from client_stub.simsoldier import Behaviour, Force, SimSoldiers
-from client_stub.terrain import Terrain
-from client_stub.tips import TipsFigure, load_tips
+from client_stub.stub.camera import CameraState, camera_pose
+from client_stub.stub.jack import JackError, JackProc, UpdateBatch
+from client_stub.stub.keys import StubController
+from client_stub.stub.offline import OfflinePoser
+from client_stub.stub.scene_graph import Crowd, EntityLayout, FigureGraph
+from client_stub.stub.simsoldier import Behaviour, Force, SimSoldiers
+from client_stub.stub.terrain import Terrain
+from client_stub.stub.tips import TipsFigure, load_tips
 from protocol import coords
 from protocol.entity import Appearance, WeaponState
 from protocol.update_table import UpdateTable
 
 log = logging.getLogger("ttes.stub")
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parent.parent / "data"
 DEFAULT_FIGURE = "DI.fig"
 WEAPONS = {Force.FRIENDLY: "M16.fig", Force.OPPOSING: "AK_47.fig"}
 

@@ -6,9 +6,9 @@
 headless renderer driven by DIS).
 """
 
-from client_stub.replay.cursor import EntityFilter, FilterError, LogCursor
-from client_stub.replay.replayer import Replayer
-from client_stub.replay.translator import SOLDIER_DTYPE, DisTranslator, RemoveReason, Translation
+from client_stub.dis.cursor import EntityFilter, FilterError, LogCursor
+from client_stub.dis.replayer import Replayer
+from client_stub.dis.translator import SOLDIER_DTYPE, DisTranslator, RemoveReason, Translation
 
 __all__ = [
     "SOLDIER_DTYPE",

@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 STARTUP_SCRIPT = "jack-ttes-soldier_low.jcl"
 SEARCH_DIRS = ("", "figures", "channelsets", "posture_graphs")  # the server's JCL search path
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100

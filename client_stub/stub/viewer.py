@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from client_stub.app import StubApp
+from client_stub.stub.app import StubApp
 
 ARROWS = {"LEFT": "LEFT", "RIGHT": "RIGHT", "UP": "UP", "DOWN": "DOWN"}
 

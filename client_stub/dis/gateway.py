@@ -2,7 +2,7 @@
 
 What the 1994 TTES did on the exercise network: listen to DIS, keep one soldier per lifeform entity, and
 send Jack the posture and command tokens (seed 002, section 2). The translation is the replay's
-(:class:`~client_stub.replay.translator.DisTranslator`, :class:`~client_stub.replay.sink.ServerSink`); only
+(:class:`~client_stub.dis.translator.DisTranslator`, :class:`~client_stub.dis.sink.ServerSink`); only
 the source differs. Datagrams are read in bursts: after each wake-up every datagram already queued in the
 socket is taken without waiting (up to ``max_burst``) and the burst is decoded at once by the DIS library's
 vectorised decoder, so a flood costs one decode per burst, not one per datagram. Nothing a sender puts in a
@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 
 import trio
 
-from client_stub.replay.cursor import EntityFilter
-from client_stub.replay.sink import ServerSink
-from client_stub.replay.translator import DIS_TIMEOUT, DisTranslator, Translation
+from client_stub.dis.cursor import EntityFilter
+from client_stub.dis.sink import ServerSink
+from client_stub.dis.translator import DIS_TIMEOUT, DisTranslator, Translation
 from protocol.dis import DEFAULT_PORT, DisError, DisLog, LocalFrame, read_datagrams
 
 log = logging.getLogger("ttes.gateway")
