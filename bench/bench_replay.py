@@ -62,12 +62,12 @@ def bench_server(log: DisLog) -> tuple[float, dict]:
 
     from client_stub.dis.drive import replay_to_server
     from client_stub.dis.sink import ServerSink
-    from client_stub.link.client import ServerLink
+    from client_stub.link.client import Client
     from ttes.commands.replay import private_server
 
     async def main() -> tuple[float, dict]:
         async with private_server(None, synthetic=True) as server, trio.open_nursery() as nursery:
-            link = ServerLink("bench-replay")
+            link = Client("bench-replay")
             await link.open(nursery, *server.addresses[0])
             sink = ServerSink(link)
             replayer = Replayer(log, speed=math.inf)

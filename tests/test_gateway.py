@@ -17,7 +17,7 @@ from test_server_support import running_server
 from client_stub.dis.cursor import EntityFilter
 from client_stub.dis.gateway import DisGateway, GatewayConfig
 from client_stub.dis.sink import ServerSink
-from client_stub.link.client import ServerLink
+from client_stub.link.client import Client
 from protocol.dis import read_bytes
 from protocol.dis.pdu import HEADER
 from protocol.dis.synth import write_pcap
@@ -39,7 +39,7 @@ async def test_gateway_over_loopback_udp_drives_the_server_like_a_replay(
     async with running_server(throttle=0.0) as server, trio.open_nursery() as nursery:
         monitor = Monitor(server)
         nursery.start_soon(monitor.run)
-        link = ServerLink("ttes-gateway")
+        link = Client("ttes-gateway")
         await link.open(nursery, "127.0.0.1", server.addresses[0][1])
         sink = ServerSink(link)
         gateway = DisGateway(GatewayConfig(port=0, interface="127.0.0.1"))

@@ -147,10 +147,10 @@ def test_steady_movers_start_after_the_grace_ticks() -> None:
 # -- a tiny real run ----------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def server():
-    from client_stub.loadtest.server import SpawnedServer
+    from client_stub.link.spawn import spawn_server
+    from client_stub.loadtest.session import server_args
 
-    with SpawnedServer(tick_hz=RATE, throttle=0.0) as srv:
-        srv.wait_ready()
+    with spawn_server(server_args(RATE, 0.0)) as srv:
         yield srv
 
 

@@ -12,7 +12,7 @@ from test_replay_translator import FRAME, make_log, pdu
 
 from client_stub.dis import Replayer
 from client_stub.dis.stubapp import LOOK_BASE, ReplayApp, look_colour, look_of
-from client_stub.stub.jack import UpdateBatch
+from client_stub.link.client import UpdateBatch
 from client_stub.stub.render import FORCE_UNIFORMS
 from client_stub.stub.simsoldier import Force
 from client_stub.stub.terrain import DEFAULT_TERRAIN, Terrain, load_terrain

@@ -253,10 +253,11 @@ def run_crowd(cfg: CrowdConfig) -> dict[str, Any]:
     if cfg.source == "server":
         host, port = cfg.host, cfg.port
         if cfg.spawn_server:
-            from client_stub.loadtest.server import SpawnedServer
+            from client_stub.link.spawn import spawn_server
+            from client_stub.loadtest.session import server_args
 
-            server = SpawnedServer(tick_hz=30.0, throttle=0.0, data=cfg.server_data)
-            host, port = server.wait_ready()
+            server = spawn_server(server_args(30.0, 0.0), data=cfg.server_data)
+            host, port = server.host, server.port
         try:
             source = NetworkSource(
                 n, figures.mid, figures.rifle, figures.mid_tips, figures.rifle_tips, host=host, port=port,

@@ -156,7 +156,7 @@ class _CrowdSession(LoadSession):
         if isinstance(ev, JointUpdates):
             slots = self.slot_of[idx]
             keep = slots >= 0
-            self.sink.receive(self.clients[conn].conn.tables[ev.table].table, ev, slots[keep], keep)
+            self.sink.receive(self.clients[conn].tables[ev.table], ev, slots[keep], keep)
 
 
 class WireBuffer:
@@ -264,11 +264,7 @@ class NetworkSource:
     async def _main(self, host: str, port: int) -> None:
         s = self.session
         async with trio.open_nursery() as nursery:
-            await s.connect(host, port)
-            for c in s.clients:
-                nursery.start_soon(c.reader)
-            for c in s.clients:
-                await c.wait_ready(s.cfg.timeout_s)
+            await s.connect(nursery, host, port)
             await s.grow(self.n)
             self.ready.set()
             while not self.stop.is_set():

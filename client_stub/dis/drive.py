@@ -57,7 +57,7 @@ async def replay_to_server(
 ) -> dict[str, object]:
     """Run the replay to its end (forever with ``loop``); returns the replay's status.
 
-    ``drain`` (e.g. ``ServerLink.drain``) is awaited after each unlimited-speed chunk for back-pressure.
+    ``drain`` (e.g. ``Client.drain``) is awaited after each unlimited-speed chunk for back-pressure.
     ``finish`` removes every soldier at the end.
     """
     t0 = trio.current_time()

@@ -22,12 +22,13 @@ from typing import Protocol
 import numpy as np
 
 from client_stub.dis.drive import ProgressLine
-from client_stub.dis.sink import Link, ServerSink
+from client_stub.dis.sink import ServerSink
 from client_stub.dis.translator import DisTranslator, Translation
+from client_stub.link.api import Link
+from client_stub.link.client import LinkError
 from client_stub.stub.app import DEFAULT_FIGURE, StubApp
 from client_stub.stub.artic import bind_table
 from client_stub.stub.camera import look_at
-from client_stub.stub.jack import JackError, UpdateBatch
 from client_stub.stub.render import FORCE_UNIFORMS
 from client_stub.stub.simsoldier import RAY_START, Force
 from client_stub.stub.terrain import Terrain
@@ -77,10 +78,6 @@ class TranslationSource(Protocol):
     def advance(self, elapsed: float) -> Translation: ...
 
 
-class SwapLink(Link, Protocol):
-    def swap(self) -> list[UpdateBatch]: ...
-
-
 class ReplayApp(StubApp):
     """The stub fed by DIS (see the module docstring)."""
 
@@ -89,7 +86,7 @@ class ReplayApp(StubApp):
         terrain: Terrain,
         source: TranslationSource,
         *,
-        link: SwapLink | None = None,
+        link: Link | None = None,
         artic_dir: str | os.PathLike[str] | None = None,
         progress: ProgressLine | None = None,
     ) -> None:
@@ -145,7 +142,7 @@ class ReplayApp(StubApp):
         if self.sink is not None:
             try:
                 self.sink.apply(tr)  # first: the stub binds new soldiers to the server soldiers made here
-            except JackError as exc:
+            except LinkError as exc:
                 self._lose_server(exc)
         self._take(tr)
         self._place_soldiers(dt)
@@ -292,6 +289,6 @@ class ReplayApp(StubApp):
         if self.sink is not None:
             try:
                 self.sink.apply(reset)
-            except JackError as exc:
+            except LinkError as exc:
                 self._lose_server(exc)
         self._take(reset)

@@ -1,25 +1,34 @@
-"""ServerLink: a controller connection to the Jack/TTES server inside the caller's own trio run.
+"""The one client of a Jack/TTES server: a trio-native conversation over a protocol ``Connection``.
 
-:class:`client_stub.stub.jack.JackProc` runs its network in a thread of its own (the stub's render loop is not
-async). Replay drivers and the gateway are trio programs, and their tests run the server in the same trio run
-under the autojump clock, so they need the same conversation without a thread: this class. Sending is
-synchronous (encode, queue for the writer task); a reader task answers PINGs, keeps the update tables,
-STATUS and errors, and puts joint updates into :class:`client_stub.stub.jack.UpdateBuffer` double buffers, so
-:meth:`swap` hands them out exactly as ``JackProc.swap`` does.
+Every client application speaks through this class: the stub (through :mod:`client_stub.link.threaded`, its
+network in a thread of its own), the DIS replay and gateway (inside their own trio run, where tests run the
+server too under the autojump clock), the load generator and the crowd (many of them in one run).
+
+Sending is synchronous: encode with the connection, append to an outgoing buffer that a writer task hands to
+the socket in as few writes as it can (:meth:`Client.drain` waits until it has). A reader task answers PINGs,
+keeps what the server says (handshake, update tables, READY's soldiers, answers to CREATE_SOLDIER, STATUS,
+errors, why the link failed) and hands joint updates on: into per-table double buffers that :meth:`swap`
+empties (a renderer's newest pose of each soldier), and/or to an ``on_updates`` hook with their arrival time
+and wire size (the load generator's measurements). With ``decode_updates=False`` the connection yields only
+the update frames' headers (:class:`~protocol.events.UpdateHeaders`): no pose is decoded. There is no
+reconnect policy: a lost link stays lost (``failure`` says why) and each application falls back as it
+sees fit.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+from collections.abc import Callable
+from contextlib import AbstractContextManager
+from dataclasses import dataclass
 
 import numpy as np
 import trio
 
-from client_stub.stub.jack import STARTUP_JCL, JackError, ServerView, UpdateBatch
 from protocol.connection import CLIENT, NEED_DATA, Connection
 from protocol.entity import ENTITY_REQUEST_DTYPE
-from protocol.errors import LocalProtocolError
+from protocol.errors import LocalProtocolError, is_fatal
 from protocol.events import (
     Accept,
     ConnectionClosed,
@@ -30,35 +39,161 @@ from protocol.events import (
     Goodbye,
     Hello,
     Jcl,
+    JointUpdates,
     Ping,
     Pong,
     ProtocolError,
     Ready,
     RemoveSoldier,
+    RequestFullUpdate,
+    SoldierCreated,
+    Status,
     Subscribe,
+    Unsubscribe,
+    UpdateHeaders,
+    UpdateTableMsg,
 )
+from protocol.update_table import UpdateTable
 
-log = logging.getLogger("ttes.replay.link")
+log = logging.getLogger("ttes.link")
+STARTUP_JCL = 'read_file("jack-ttes-{prefix}.jcl");'
+RECEIVE_BYTES = 1 << 18
+MAX_INDICES_PER_MESSAGE = 8192  # soldiers per SUBSCRIBE / UNSUBSCRIBE (keeps each control frame small)
+
+# on_updates(arrival time, tick, server indices, frame bytes, decoded event or None when only tapped)
+UpdateHook = Callable[[float, int, np.ndarray, int, JointUpdates | None], None]
 
 
-class ServerLink(ServerView):
-    """One TCP connection to the server; open it with :meth:`open` inside a nursery."""
+class LinkError(RuntimeError):
+    """The connection to the server failed, was refused, or cannot send this."""
 
-    def __init__(self, name: str = "ttes-replay", role: str = "controller") -> None:
-        super().__init__()
+
+@dataclass
+class UpdateBatch:
+    """Fresh poses of one update table since the last swap (server indices, protocol units)."""
+
+    table: int
+    indices: np.ndarray
+    dofs: np.ndarray
+    positions: np.ndarray
+    orientations: np.ndarray
+
+
+class UpdateBuffer:
+    """Figure 10's double buffer (``buf[2]``, ``sflag``, ``buffer``) for every soldier of one update table:
+    the reader writes the newest pose of each soldier into the *back* buffer and flags it; a flip makes it the
+    front, whose flagged rows the consumer takes while the reader fills the other one."""
+
+    def __init__(self, table: UpdateTable) -> None:
+        self.table = table
+        self.capacity = 0
+        d, g = table.ndofs, table.nfigures
+        self.dofs = np.zeros((2, 0, d))
+        self.positions = np.zeros((2, 0, g, 3))
+        self.orientations = np.zeros((2, 0, g, 4))
+        self.fresh = np.zeros((2, 0), bool)
+        self.back = 0
+
+    def _grow(self, needed: int) -> None:
+        """Bigger arrays; only the back buffer's flags carry over (the front's rows were handed out)."""
+        cap = max(needed, 2 * self.capacity, 16)
+        pad = cap - self.capacity
+        self.dofs = np.concatenate([self.dofs, np.zeros((2, pad, *self.dofs.shape[2:]))], axis=1)
+        self.positions = np.concatenate(
+            [self.positions, np.zeros((2, pad, *self.positions.shape[2:]))], axis=1
+        )
+        self.orientations = np.concatenate(
+            [self.orientations, np.zeros((2, pad, *self.orientations.shape[2:]))], axis=1
+        )
+        fresh = np.zeros((2, cap), bool)
+        fresh[self.back, : self.capacity] = self.fresh[self.back]
+        self.fresh = fresh
+        self.capacity = cap
+
+    def write(self, ev: JointUpdates) -> None:
+        """Reader side: newest pose of each soldier into the back buffer."""
+        idx = np.asarray(ev.indices, np.int64)
+        if not len(idx):
+            return
+        if idx.max() >= self.capacity:
+            self._grow(int(idx.max()) + 1)
+        b = self.back
+        self.dofs[b, idx] = ev.dofs
+        self.positions[b, idx] = ev.positions
+        self.orientations[b, idx] = ev.orientations
+        self.fresh[b, idx] = True
+
+    def flip(self) -> UpdateBatch | None:
+        """Consumer side: make the back buffer the front and take its fresh rows (None if there are none)."""
+        front = self.back
+        self.back ^= 1
+        rows = np.flatnonzero(self.fresh[front])
+        if not len(rows):
+            return None
+        self.fresh[front, rows] = False
+        return UpdateBatch(
+            self.table.table_id,
+            rows,
+            self.dofs[front, rows],
+            self.positions[front, rows],
+            self.orientations[front, rows],
+        )
+
+
+class Client:
+    """One TCP connection to the server (see the module docstring); open it with :meth:`open` in a nursery.
+
+    ``lock`` guards the double buffers when another thread swaps them (:mod:`client_stub.link.threaded`);
+    ``notify`` is called in the reader with every event after it has been taken in."""
+
+    def __init__(
+        self,
+        name: str = "ttes-client",
+        role: str = "controller",
+        *,
+        buffer_updates: bool = True,
+        decode_updates: bool = True,
+        on_updates: UpdateHook | None = None,
+        lock: AbstractContextManager[object] | None = None,
+        notify: Callable[[Event], None] | None = None,
+    ) -> None:
         self.name = name
         self.role = role
+        self.buffer_updates = buffer_updates
+        self.on_updates = on_updates
+        self.conn = Connection(CLIENT, decode_updates=decode_updates)
+        self.accept: Accept | None = None
+        self.tables: dict[int, UpdateTable] = {}
+        self.ready_soldiers: dict[int, int] = {}  # server index -> update table, from READY
+        self.created: dict[int, int] = {}  # server index -> update table, from SOLDIER_CREATED
+        self.answers: dict[int, SoldierCreated | Error] = {}  # awaited CREATE_SOLDIER id -> its answer
+        self.refused: dict[int, Error] = {}  # request id -> its error
+        self.errors: list[Error | ProtocolError] = []
+        self.status: Status | None = None
+        self.failure: str | None = None
+        self.last_tick = 0
         self.bytes_sent = 0
-        self._conn = Connection(CLIENT)
+        self.bytes_in = 0
+        self.update_bytes = 0
+        self._lock = lock if lock is not None else contextlib.nullcontext()
+        self._notify = notify
+        self._buffers: dict[int, UpdateBuffer] = {}
+        self._awaited: set[int] = set()  # CREATE_SOLDIER ids whose answers are kept for answer()
         self._next_id = 1
+        self._nonce = 0
+        self._pongs: dict[int, trio.Event] = {}
+        self._answered_pings: set[int] = set()
         self._accepted = trio.Event()
         self._ready = trio.Event()
         self._closed = trio.Event()
-        self._outbox: trio.MemorySendChannel[bytes] | None = None
+        self._answer = trio.Event()  # set (and replaced) whenever a CREATE_SOLDIER answer arrives
+        self._out = bytearray()
+        self._wake = trio.Event()
+        self._progress = trio.Event()  # set (and replaced) whenever the writer handed bytes to the socket
+        self._queued = 0
+        self._written = 0
+        self._outbox_open = False
         self._cancel: trio.CancelScope | None = None
-        self._nonce = 0
-        self._pongs: dict[int, trio.Event] = {}
-        self._answered: set[int] = set()
 
     # -- connecting -------------------------------------------------------------------------------
     async def open(
@@ -68,81 +203,153 @@ class ServerLink(ServerView):
         port: int,
         *,
         soldierprefix: str | None = "soldier_low",
+        wait_ready: bool = True,
         timeout: float = 30.0,
     ) -> None:
-        """Connect, shake hands, send the start-up JCL and wait for READY; JackError on failure."""
-        try:
-            stream = await trio.open_tcp_stream(host, port)
-        except OSError as exc:
-            raise JackError(f"cannot connect to {host}:{port}: {exc.strerror or exc}") from None
-        send, receive = trio.open_memory_channel[bytes](float("inf"))
-        self._outbox = send
-        nursery.start_soon(self._run, stream, receive)
+        """Connect and shake hands; then send the start-up JCL (unless ``soldierprefix`` is None) and wait
+        for READY (if ``wait_ready``). LinkError (and the link closed) on failure."""
+        with trio.move_on_after(timeout) as cs:
+            try:
+                stream = await trio.open_tcp_stream(host, port)
+            except OSError as exc:
+                raise LinkError(f"cannot connect to {host}:{port}: {exc.strerror or exc}") from None
+        if cs.cancelled_caught:
+            raise LinkError(f"cannot connect to {host}:{port} within {timeout} s")
+        self._outbox_open = True
+        nursery.start_soon(self._run, stream)
         self.send(Hello(self.name, self.role))
         with trio.move_on_after(timeout):
             await self._accepted.wait()
-            if soldierprefix is not None:
-                self.send(Jcl(STARTUP_JCL.format(prefix=soldierprefix), self._new_id()))
-            await self._ready.wait()
-        if self.failure or not self._ready.is_set() or self._closed.is_set():
+            if soldierprefix is not None and self.accepted:
+                self.jcl(STARTUP_JCL.format(prefix=soldierprefix))
+            if wait_ready:
+                await self._ready.wait()
+        if self.failure or not self.accepted or (wait_ready and not self.ready):
             await self.aclose()
-            raise JackError(self.failure or f"server {host}:{port} not ready within {timeout} s")
+            what = "ready" if self.accepted else "answering the handshake"
+            raise LinkError(self.failure or f"server {host}:{port} not {what} within {timeout} s")
+
+    @property
+    def accepted(self) -> bool:
+        """The handshake is done and the link is open."""
+        return self.accept is not None and not self._closed.is_set()
 
     @property
     def ready(self) -> bool:
+        """READY has arrived and the link is open."""
         return self._ready.is_set() and not self._closed.is_set()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed.is_set()
 
     @property
     def max_soldiers(self) -> int:
         return self.accept.max_soldiers if self.accept is not None else 0
 
+    async def wait_ready(self, timeout: float) -> bool:
+        """Wait for READY (or the link closing); True when ready."""
+        with trio.move_on_after(timeout):
+            await self._ready.wait()
+        return self.ready
+
+    async def wait_closed(self) -> None:
+        await self._closed.wait()
+
     # -- sending (synchronous: encode and queue) --------------------------------------------------
     def send(self, event: Event) -> None:
-        if self._outbox is None or self._closed.is_set():
-            raise JackError(self.failure or "not connected")
+        """Encode ``event`` and queue its bytes for the writer; LinkError if closed or not sendable."""
+        if not self._outbox_open or self._closed.is_set():
+            raise LinkError(self.failure or "not connected")
         try:
-            data = self._conn.send(event)
+            data = self.conn.send(event)
         except LocalProtocolError as exc:
-            raise JackError(f"cannot send {type(event).__name__}: {exc}") from None
+            raise LinkError(f"cannot send {type(event).__name__}: {exc}") from None
+        self._queue(data)
+
+    def _queue(self, data: bytes) -> None:
         if data:
             self.bytes_sent += len(data)
-            try:
-                self._outbox.send_nowait(data)
-            except (trio.ClosedResourceError, trio.BrokenResourceError):
-                raise JackError(self.failure or "connection closing") from None
+            self._queued += len(data)
+            self._out += data
+            self._wake.set()
 
-    def _new_id(self) -> int:
+    def new_id(self) -> int:
+        """A fresh request id (JCL, CREATE_SOLDIER)."""
         rid = self._next_id
         self._next_id += 1
         return rid
 
-    def create(self, index: int, figure: str, weapon: str) -> int:
-        """CREATE_SOLDIER at ``index``, pipelined (requests sent after it find him); returns its id."""
-        rid = self._new_id()
-        self.send(CreateSoldier(rid, figure, weapon, int(index)))
+    def jcl(self, text: str) -> int:
+        rid = self.new_id()
+        self.send(Jcl(text, rid))
         return rid
+
+    def create(self, index: int | None, figure: str, weapon: str, *, await_answer: bool = False) -> int:
+        """CREATE_SOLDIER, pipelined (requests sent after it find him); returns its id. With
+        ``await_answer`` the answer is kept for :meth:`answer`."""
+        rid = self.new_id()
+        if await_answer:
+            self._awaited.add(rid)
+        self.send(CreateSoldier(rid, figure, weapon, None if index is None else int(index)))
+        return rid
+
+    async def answer(self, rid: int) -> SoldierCreated | Error | None:
+        """Wait for the answer to CREATE_SOLDIER ``rid`` and take it (None if the link closed first)."""
+        try:
+            while rid not in self.answers and not self._closed.is_set():
+                await self._answer.wait()
+        finally:
+            self._awaited.discard(rid)
+        return self.answers.pop(rid, None)
+
+    async def create_soldier(
+        self, figure: str, weapon: str, index: int | None = None, timeout: float = 10.0
+    ) -> SoldierCreated:
+        """CREATE_SOLDIER and wait for the answer; LinkError if the server refuses or stays silent."""
+        rid = self.create(index, figure, weapon, await_answer=True)
+        result = None
+        with trio.move_on_after(timeout):
+            result = await self.answer(rid)
+        if result is None:
+            raise LinkError(self.failure or f"no answer to CREATE_SOLDIER {rid} within {timeout} s")
+        if isinstance(result, Error):
+            raise LinkError(f"server refused soldier: {result.message}")
+        return result
 
     def remove(self, index: int) -> None:
         self.send(RemoveSoldier(int(index)))
 
     def subscribe(self, indices: list[int] | np.ndarray) -> None:
-        if len(indices):
-            self.send(Subscribe(tuple(int(i) for i in indices)))
+        idx = np.asarray(indices, np.int64)
+        for k in range(0, len(idx), MAX_INDICES_PER_MESSAGE):
+            self.send(Subscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+
+    def unsubscribe(self, indices: list[int] | np.ndarray) -> None:
+        idx = np.asarray(indices, np.int64)
+        for k in range(0, len(idx), MAX_INDICES_PER_MESSAGE):
+            self.send(Unsubscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+
+    def request_full_update(self, indices: list[int] | None = None) -> None:
+        self.send(RequestFullUpdate(tuple(int(i) for i in indices or ())))
 
     def send_requests(self, rows: np.ndarray) -> None:
+        """ENTITY_REQUESTS rows (``ENTITY_REQUEST_DTYPE``, server indices); the connection splits frames."""
         rows = np.asarray(rows, ENTITY_REQUEST_DTYPE)
         if len(rows):
             self.send(EntityRequests(rows))
 
     def swap(self) -> list[UpdateBatch]:
-        """Every pose that arrived since the last call (as ``JackProc.swap``)."""
-        return self._fresh(self._flip())
+        """Every pose that arrived since the last call (the consumer side of the double buffers)."""
+        with self._lock:
+            batches = [buf.flip() for buf in self._buffers.values()]
+        return [b for b in batches if b is not None]
 
     async def drain(self) -> None:
-        """Wait until everything queued so far has been handed to the socket."""
-        if self._outbox is not None and not self._closed.is_set():
-            while self._outbox.statistics().current_buffer_used:
-                await trio.sleep(0.001)
+        """Wait until everything queued so far has been handed to the socket (or the link closed)."""
+        target = self._queued
+        while self._written < target and not self._closed.is_set():
+            await self._progress.wait()
 
     async def roundtrip(self, timeout: float = 30.0) -> bool:
         """PING and wait for its PONG: the server has then taken everything sent before (it reads a
@@ -154,81 +361,141 @@ class ServerLink(ServerView):
         with trio.move_on_after(timeout):
             await done.wait()  # set by the PONG, or by the link closing
         self._pongs.pop(nonce, None)
-        return nonce in self._answered
+        return nonce in self._answered_pings
 
     async def aclose(self, reason: str = "done") -> None:
-        """GOODBYE (if still open), then close."""
-        if self._outbox is not None and not self._closed.is_set():
-            with contextlib.suppress(JackError):
+        """GOODBYE (if still open), let the writer finish (2 s at most), then close."""
+        if self._outbox_open and not self._closed.is_set():
+            with contextlib.suppress(LinkError):
                 self.send(Goodbye(reason))
-            self._outbox.close()
+            self._outbox_open = False
+            self._wake.set()
             with trio.move_on_after(2.0):
                 await self._closed.wait()
+        self._outbox_open = False
         if self._cancel is not None:
             self._cancel.cancel()
 
     # -- the tasks --------------------------------------------------------------------------------
-    async def _run(self, stream: trio.SocketStream, receive: trio.MemoryReceiveChannel[bytes]) -> None:
+    async def _run(self, stream: trio.SocketStream) -> None:
         try:
             with trio.CancelScope() as scope:
                 self._cancel = scope
                 async with stream, trio.open_nursery() as nursery:
-                    nursery.start_soon(self._writer, stream, receive)
+                    nursery.start_soon(self._writer, stream)
                     await self._reader(stream)
+                    self._outbox_open = False
+                    self._wake.set()
                     nursery.cancel_scope.deadline = trio.current_time() + 2.0  # let the writer finish
         finally:
             self._closed.set()
-            self._accepted.set()
-            self._ready.set()
-            for pong in self._pongs.values():
-                pong.set()
+            self._outbox_open = False
+            for ev in (self._accepted, self._ready, self._answer, self._progress, *self._pongs.values()):
+                ev.set()
 
-    async def _writer(self, stream: trio.SocketStream, receive: trio.MemoryReceiveChannel[bytes]) -> None:
-        async with receive:
-            async for data in receive:
-                try:
-                    await stream.send_all(data)
-                except (trio.BrokenResourceError, trio.ClosedResourceError):
-                    self.failure = self.failure or "connection lost while sending"
+    async def _writer(self, stream: trio.SocketStream) -> None:
+        while True:
+            if not self._out:
+                if not self._outbox_open:
                     return
+                await self._wake.wait()
+                self._wake = trio.Event()
+                continue
+            data = bytes(self._out)
+            self._out.clear()
+            try:
+                await stream.send_all(data)
+            except (trio.BrokenResourceError, trio.ClosedResourceError):
+                self.failure = self.failure or "connection lost while sending"
+                return
+            self._written += len(data)
+            self._progress.set()
+            self._progress = trio.Event()
 
     async def _reader(self, stream: trio.SocketStream) -> None:
-        conn = self._conn
+        conn = self.conn
+        arrival = 0.0
         while True:
             event = conn.next_event()
             if event is NEED_DATA:
                 try:
-                    data = await stream.receive_some(1 << 16)
+                    data = await stream.receive_some(RECEIVE_BYTES)
                 except (trio.BrokenResourceError, trio.ClosedResourceError):
                     data = b""
+                arrival = trio.current_time()
+                self.bytes_in += len(data)
                 conn.receive_data(bytes(data))
                 continue
-            if isinstance(event, ConnectionClosed):
-                self.failure = self.failure or "server closed the connection"
+            assert isinstance(event, Event)
+            if not self._take(event, arrival):
                 return
-            if isinstance(event, ProtocolError):
-                self.errors.append(event)
-                self.failure = f"protocol error {event.code}: {event.location}: {event.message}"
-                log.warning("%s", self.failure)
-                out = conn.data_to_send()
-                if out and self._outbox is not None:
-                    with contextlib.suppress(trio.ClosedResourceError, trio.BrokenResourceError):
-                        self._outbox.send_nowait(out)
-                return
-            self._handle(event)
+            if self._notify is not None:
+                self._notify(event)
 
-    def _handle(self, event: object) -> None:
-        self._absorb(event)
-        if isinstance(event, Accept):
-            self._accepted.set()
-        elif isinstance(event, Ready):
-            self._ready.set()
-        elif isinstance(event, Ping):
-            self.send(Pong(event.nonce))
-        elif isinstance(event, Pong):
-            pong = self._pongs.get(event.nonce)
-            if pong is not None:
-                self._answered.add(event.nonce)
-                pong.set()
-        elif isinstance(event, Error):
-            log.debug("server error %d: %s", event.code, event.message)
+    def _take(self, event: Event, arrival: float) -> bool:
+        """Keep what one event says, answer what needs an answer; False when the link has ended."""
+        match event:
+            case JointUpdates(table=table, tick=tick, indices=indices):
+                self._updates(arrival, table, tick, indices, event)
+            case UpdateHeaders(table=table, tick=tick, indices=indices):
+                self._updates(arrival, table, tick, indices, None)
+            case Accept():
+                self.accept = event
+                self._accepted.set()
+            case UpdateTableMsg(table=table):
+                self.tables[table.table_id] = table
+                with self._lock:
+                    self._buffers[table.table_id] = UpdateBuffer(table)
+            case Ready(soldiers=soldiers):
+                self.ready_soldiers = dict(soldiers)
+                self._ready.set()
+            case SoldierCreated(id=rid, index=index, table=table):
+                self.created[index] = table
+                self._resolve(rid, event)
+            case Ping(nonce=nonce):
+                self.send(Pong(nonce))
+            case Pong(nonce=nonce) if nonce in self._pongs:
+                self._answered_pings.add(nonce)
+                self._pongs[nonce].set()
+            case Status():
+                self.status = event
+            case Error(code=code, message=message, ref=ref):
+                log.debug("server error %d: %s", code, message)
+                self.errors.append(event)
+                if ref is not None:
+                    self.refused[ref] = event
+                    self._resolve(ref, event)
+                if is_fatal(code):
+                    self.failure = self.failure or f"server error {code}: {message}"
+            case Goodbye(reason=reason):
+                self.failure = self.failure or f"server said goodbye: {reason}"
+            case ProtocolError(code=code, message=message, location=location):
+                self.errors.append(event)
+                self.failure = f"protocol error {code}: {location}: {message}"
+                log.warning("%s", self.failure)
+                self._queue(self.conn.data_to_send())  # the Error frame for the server
+                return False
+            case ConnectionClosed():
+                self.failure = self.failure or "server closed the connection"
+                return False
+        return True
+
+    def _updates(
+        self, arrival: float, table: int, tick: int, indices: np.ndarray, event: JointUpdates | None
+    ) -> None:
+        self.last_tick = tick
+        self.update_bytes += self.conn.frame_bytes
+        if event is not None and self.buffer_updates:
+            buf = self._buffers.get(table)
+            if buf is not None:
+                with self._lock:
+                    buf.write(event)
+        if self.on_updates is not None:
+            self.on_updates(arrival, tick, np.asarray(indices, np.int64), self.conn.frame_bytes, event)
+
+    def _resolve(self, rid: int, answer: SoldierCreated | Error) -> None:
+        if rid not in self._awaited:
+            return
+        self.answers[rid] = answer
+        self._answer.set()
+        self._answer = trio.Event()

@@ -1,54 +1,30 @@
-"""One load-test connection: handshake, soldiers, subscriptions, requests, and a frame tap on the updates.
+"""One load-test connection: a link :class:`~client_stub.link.client.Client` that creates its soldiers in
+windows, subscribes, sends requests and measures the updates.
 
 A load generator that shares the machine with the server must not spend more than the server: decoding a
 joint update costs about 12 µs per soldier in :class:`protocol.updates.UpdateDecoder`, as much as the
-server's encoding. So by default the client *taps* the byte stream: it cuts frames itself
-(:class:`protocol.framing.FrameReader`) and reads only the 8-byte header and the soldier indices of each
-JOINT_UPDATES frame (docs/PROTOCOL.md 8); every other frame goes to a :class:`protocol.connection.Connection`
-as usual, which therefore stays a correct client (it never needs the update frames: they change no protocol
-state). With ``decode=True`` every frame goes through the Connection and ``on_updates`` receives the full
-:class:`~protocol.events.JointUpdates` with the poses (the crowd renderer).
+server's encoding. So by default the link's connection only *taps* the update frames
+(``decode_updates=False``: their header and soldier indices, docs/PROTOCOL.md 8). With ``decode=True`` every
+update is decoded and ``on_updates`` receives the full :class:`~protocol.events.JointUpdates` with the poses
+(the crowd renderer). Sends wait until the socket took the bytes (back-pressure on the mix driver).
 """
 
 from __future__ import annotations
 
-import struct
+import functools
 from collections.abc import Callable
 
 import numpy as np
 import trio
 
-from protocol.connection import CLIENT, NEED_DATA, Connection, State
-from protocol.entity import MAX_ROWS_PER_FRAME
-from protocol.errors import WireError, is_fatal
-from protocol.events import (
-    ConnectionClosed,
-    CreateSoldier,
-    EntityRequests,
-    Error,
-    Event,
-    Goodbye,
-    Hello,
-    JointUpdates,
-    Ping,
-    Pong,
-    ProtocolError,
-    Ready,
-    RemoveSoldier,
-    SoldierCreated,
-    Status,
-    Subscribe,
-)
-from protocol.framing import FrameReader, encode_frame
-from protocol.messages import MessageType
+from client_stub.link.client import Client, LinkError
+from protocol.events import JointUpdates, SoldierCreated
+from protocol.update_table import UpdateTable
 
-UPDATE_HEADER = struct.Struct(">HIH")  # table, tick, count (docs/PROTOCOL.md 8)
-RECEIVE_BYTES = 1 << 18
-MAX_INDICES_PER_MESSAGE = 8192  # soldiers per SUBSCRIBE (keeps each control frame small)
 CREATE_WINDOW = 64  # CREATE_SOLDIER requests in flight (the server's control queue holds 256 answers)
 
 
-class LoadError(RuntimeError):
+class LoadError(LinkError):
     """The server refused something or the connection failed."""
 
 
@@ -61,52 +37,33 @@ class LoadClient:
 
     def __init__(self, number: int, on_updates: UpdateHook, *, decode: bool = False, name: str = "") -> None:
         self.number = number
-        self.on_updates = on_updates
-        self.decode = decode
         self.name = name or f"ttes-loadtest-{number}"
-        self.conn = Connection(CLIENT)
-        self.frames = FrameReader()
-        self.stream: trio.SocketStream | None = None
-        self.send_lock = trio.StrictFIFOLock()
-        self.ready = trio.Event()
-        self.closed = trio.Event()
-        self.tables: dict[int, object] = {}
-        self.created: dict[int, SoldierCreated | Error] = {}
-        self.created_event = trio.Event()
-        self.errors: list[str] = []
-        self.failure: str | None = None
-        self.status: Status | None = None
-        self.bytes_in = 0
-        self.update_bytes = 0
-        self._next_id = 1
+        self.link = Client(
+            self.name,
+            "controller",
+            buffer_updates=False,
+            decode_updates=decode,
+            on_updates=functools.partial(on_updates, number),
+        )
 
-    # -- connecting ----------------------------------------------------------------------------------------
-    async def connect(self, host: str, port: int, timeout: float = 30.0) -> None:
-        """Open the stream and shake hands; returns once READY has arrived (LoadError otherwise)."""
-        with trio.move_on_after(timeout) as cs:
-            self.stream = await trio.open_tcp_stream(host, port)
-        if cs.cancelled_caught or self.stream is None:
-            raise LoadError(f"cannot connect to {host}:{port} within {timeout} s")
-        await self.send(Hello(self.name, "controller"))
+    @property
+    def failure(self) -> str | None:
+        return self.link.failure
+
+    @property
+    def tables(self) -> dict[int, UpdateTable]:
+        return self.link.tables
+
+    async def connect(self, nursery: trio.Nursery, host: str, port: int, timeout: float = 30.0) -> None:
+        """Open the link in ``nursery`` and shake hands (READY is waited for by :meth:`wait_ready`)."""
+        try:
+            await self.link.open(nursery, host, port, soldierprefix=None, wait_ready=False, timeout=timeout)
+        except LinkError as exc:
+            raise LoadError(str(exc)) from None
 
     async def wait_ready(self, timeout: float) -> None:
-        with trio.move_on_after(timeout):
-            await self.ready.wait()
-        if not self.ready.is_set():
+        if not await self.link.wait_ready(timeout):
             raise LoadError(self.failure or f"{self.name}: no READY within {timeout} s")
-
-    async def send(self, event: Event) -> None:
-        data = self.conn.send(event)
-        await self.send_bytes(data)
-
-    async def send_bytes(self, data: bytes) -> None:
-        if not data or self.stream is None or self.closed.is_set():
-            return
-        async with self.send_lock:
-            try:
-                await self.stream.send_all(data)
-            except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
-                self._fail(f"send failed: {exc!r}")
 
     # -- soldiers ------------------------------------------------------------------------------------------
     async def create_soldiers(
@@ -128,137 +85,43 @@ class LoadClient:
         return np.array(indices, np.int64), np.array(tables, np.int64)
 
     async def _create_window(self, count: int, figure: str, weapon: str) -> list[SoldierCreated]:
-        ids = list(range(self._next_id, self._next_id + count))
-        self._next_id += count
-        data = b"".join(self.conn.send(CreateSoldier(i, figure, weapon, None)) for i in ids)
-        await self.send_bytes(data)
-        while any(i not in self.created for i in ids) and not self.closed.is_set():
-            await self.created_event.wait()
-            self.created_event = trio.Event()
-        answers = [self.created.pop(i, None) for i in ids]
-        bad = [a for a in answers if not isinstance(a, SoldierCreated)]
-        if bad:
-            first = bad[0]
-            why = first.message if isinstance(first, Error) else (self.failure or "no answer")
-            raise LoadError(f"{self.name}: {len(bad)} of {count} soldiers not created: {why}")
-        return [a for a in answers if isinstance(a, SoldierCreated)]
+        try:
+            ids = [self.link.create(None, figure, weapon, await_answer=True) for _ in range(count)]
+        except LinkError as exc:
+            raise LoadError(f"{self.name}: {exc}") from None
+        answers = [await self.link.answer(i) for i in ids]
+        made = [a for a in answers if isinstance(a, SoldierCreated)]
+        if len(made) < count:
+            first = next(a for a in answers if not isinstance(a, SoldierCreated))
+            why = first.message if first is not None else (self.failure or "no answer")
+            raise LoadError(f"{self.name}: {count - len(made)} of {count} soldiers not created: {why}")
+        return made
 
     async def subscribe(self, indices: np.ndarray) -> None:
-        idx = np.asarray(indices, np.int64)
-        for k in range(0, len(idx), MAX_INDICES_PER_MESSAGE):
-            await self.send(Subscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+        await self._sent(self.link.subscribe, indices)
 
     async def requests(self, rows: np.ndarray) -> None:
-        """ENTITY_REQUESTS rows (server indices), split into frames as needed."""
-        data = b"".join(
-            self.conn.send(EntityRequests(rows[k : k + MAX_ROWS_PER_FRAME]))
-            for k in range(0, len(rows), MAX_ROWS_PER_FRAME)
-        )
-        await self.send_bytes(data)
+        """ENTITY_REQUESTS rows (server indices)."""
+        await self._sent(self.link.send_requests, rows)
 
     async def remove(self, indices: np.ndarray) -> None:
-        data = b"".join(self.conn.send(RemoveSoldier(int(i))) for i in np.asarray(indices).tolist())
-        await self.send_bytes(data)
+        for i in np.asarray(indices).tolist():
+            if not await self._sent(self.link.remove, i, drain=False):
+                return
+        await self.link.drain()
 
     async def goodbye(self, reason: str = "load test done") -> None:
-        if self.conn.state is State.OPEN:
-            await self.send(Goodbye(reason))
-        if self.stream is not None:
-            with trio.move_on_after(2.0):
-                await self.closed.wait()
-            await trio.aclose_forcefully(self.stream)
+        await self.link.aclose(reason)
 
-    # -- reading -------------------------------------------------------------------------------------------
-    async def reader(self) -> None:
-        """Read until the stream ends; run as a task for the life of the connection."""
-        assert self.stream is not None
+    async def _sent(self, call: Callable[..., None], *args: object, drain: bool = True) -> bool:
+        """Queue one call's messages (a closed link is reported by ``failure``), then wait for the socket."""
         try:
-            while not self.closed.is_set():
-                try:
-                    data = await self.stream.receive_some(RECEIVE_BYTES)
-                except (trio.BrokenResourceError, trio.ClosedResourceError):
-                    data = b""
-                t = trio.current_time()
-                if not data:
-                    self._fail(self.failure or "server closed the connection")
-                    return
-                self.bytes_in += len(data)
-                await self._feed(bytes(data), t)
-        finally:
-            self.closed.set()
-            self.ready.set()
-            self.created_event.set()
-
-    async def _feed(self, data: bytes, t: float) -> None:
-        """Cut frames ourselves (so each update frame's size is known); tap or decode the update frames,
-        hand every other frame to the Connection."""
-        self.frames.feed(data)
-        while not self.closed.is_set():
-            try:
-                frame = self.frames.next_frame(self.conn.max_frame)
-            except WireError as exc:
-                self._fail(f"bad frame from server: {exc}")
-                return
-            if frame is None:
-                return
-            msg_type, payload = frame
-            if msg_type == MessageType.JOINT_UPDATES and self.conn.state is State.OPEN and not self.decode:
-                self._tap(payload, t)
-            else:
-                self.conn.receive_data(encode_frame(msg_type, payload))
-                await self._events(t, len(payload) + 5)
-
-    def _tap(self, payload: bytes, t: float) -> None:
-        """Header and indices of one JOINT_UPDATES payload (no pose decoding)."""
-        if len(payload) < UPDATE_HEADER.size:
-            self._fail("joint updates shorter than their header")
-            return
-        table, tick, count = UPDATE_HEADER.unpack_from(payload)
-        if len(payload) < UPDATE_HEADER.size + 2 * count or table not in self.conn.tables:
-            self._fail(f"malformed joint updates (table {table}, {count} soldiers, {len(payload)} bytes)")
-            return
-        idx = np.frombuffer(payload, ">u2", count, UPDATE_HEADER.size).astype(np.int64)
-        nbytes = len(payload) + 5
-        self.update_bytes += nbytes
-        self.on_updates(self.number, t, tick, idx, nbytes, None)
-
-    async def _events(self, t: float, nbytes: int) -> None:
-        while True:
-            ev = self.conn.next_event()
-            if ev is NEED_DATA:
-                return
-            if isinstance(ev, JointUpdates):
-                self.update_bytes += nbytes
-                self.on_updates(self.number, t, ev.tick, np.asarray(ev.indices, np.int64), nbytes, ev)
-            elif isinstance(ev, SoldierCreated):
-                self.created[ev.id] = ev
-                self.created_event.set()
-            elif isinstance(ev, Ready):
-                self.ready.set()
-            elif isinstance(ev, Ping):
-                await self.send(Pong(ev.nonce))
-            elif isinstance(ev, Status):
-                self.status = ev
-            elif isinstance(ev, Error):
-                self.errors.append(f"{ev.code}: {ev.message}")
-                if ev.ref is not None:
-                    self.created[ev.ref] = ev
-                    self.created_event.set()
-                if is_fatal(ev.code):
-                    self._fail(f"server error {ev.code}: {ev.message}")
-            elif isinstance(ev, ProtocolError):
-                self._fail(f"protocol error {ev.code}: {ev.location}: {ev.message}")
-                await self.send_bytes(self.conn.data_to_send())
-                return
-            elif isinstance(ev, Goodbye):
-                self._fail(self.failure or f"server said goodbye: {ev.reason}")
-            elif isinstance(ev, ConnectionClosed):
-                return
-
-    def _fail(self, why: str) -> None:
-        if self.failure is None:
-            self.failure = why
-        self.closed.set()
+            call(*args)
+        except LinkError:
+            return False
+        if drain:
+            await self.link.drain()
+        return True
 
 
 def split_rows(rows: np.ndarray, owner: np.ndarray, nconn: int) -> list[np.ndarray]:

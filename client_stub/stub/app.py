@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from client_stub.link.client import LinkError, UpdateBatch
 from client_stub.stub.artic import (
     TableBinding,
     articulation,
@@ -33,7 +34,7 @@ from client_stub.stub.artic import (
     write_artic,
 )
 from client_stub.stub.camera import CameraState, camera_pose
-from client_stub.stub.jack import JackError, JackProc, UpdateBatch
+from client_stub.stub.jack import JackProc
 from client_stub.stub.keys import StubController
 from client_stub.stub.offline import OfflinePoser
 from client_stub.stub.scene_graph import Crowd, EntityLayout, FigureGraph
@@ -193,10 +194,10 @@ class StubApp:
                 js = jack.soldier(index, jack.ready_soldiers[index])
             else:
                 try:
-                    js = jack.create_soldier(DEFAULT_FIGURE, weapon, timeout=5.0)
-                except JackError:
-                    js = jack.create_soldier(DEFAULT_FIGURE, "AK_47.fig", timeout=5.0)
-        except JackError as exc:
+                    js = jack.new_soldier(DEFAULT_FIGURE, weapon, timeout=5.0)
+                except LinkError:
+                    js = jack.new_soldier(DEFAULT_FIGURE, "AK_47.fig", timeout=5.0)
+        except LinkError as exc:
             log.warning("soldier %d stays offline: %s", slot, exc)
             return
         wire = jack.tables.get(js.updatetable)
@@ -267,7 +268,7 @@ class StubApp:
             try:
                 jack.send_requests(out)
                 self._apply_updates(jack.swap())
-            except JackError as exc:
+            except LinkError as exc:
                 log.warning("server connection lost: %s; soldiers continue offline", exc)
                 self.server_of[:] = -1
                 self.slot_of_server.clear()

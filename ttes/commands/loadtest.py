@@ -60,8 +60,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from client_stub.link.spawn import SpawnError
     from client_stub.loadtest.client import LoadError
-    from client_stub.loadtest.server import SpawnError
     from client_stub.loadtest.session import LoadTestConfig, run_loadtest
     from ttes.output import print_json
 

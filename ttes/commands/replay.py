@@ -217,8 +217,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
 
     from client_stub.dis.drive import ProgressLine, replay_to_server
     from client_stub.dis.sink import ServerSink
-    from client_stub.link.client import ServerLink
-    from client_stub.stub.jack import JackError
+    from client_stub.link.client import Client, LinkError
 
     async def main() -> dict:
         async with contextlib.AsyncExitStack() as stack:
@@ -227,7 +226,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
                 server = await stack.enter_async_context(private_server(args.data_dir, args.synthetic_server))
                 host, port = server.addresses[0]
             async with trio.open_nursery() as nursery:
-                link = ServerLink()
+                link = Client()
                 await link.open(nursery, host, port)
                 sink = ServerSink(link)
                 progress = ProgressLine(out=None if args.json else sys.stderr)
@@ -243,7 +242,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
 
     try:
         return trio.run(main)
-    except JackError as exc:
+    except LinkError as exc:
         print(f"ttes replay: {exc}", file=sys.stderr)
         return None
 
@@ -255,7 +254,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
     import trio
     import trio.testing
 
-    from client_stub.stub.jack import JackError
+    from client_stub.link.client import LinkError
 
     seconds = args.seconds
     if seconds is None:
@@ -274,7 +273,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
         async with contextlib.AsyncExitStack() as stack:
             link = None
             if not args.offline:
-                from client_stub.link.client import ServerLink
+                from client_stub.link.client import Client
 
                 host, port = args.host, args.port
                 if host is None:
@@ -283,7 +282,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
                     )
                     host, port = server.addresses[0]
                 nursery = await stack.enter_async_context(trio.open_nursery())
-                link = ServerLink()
+                link = Client()
                 await link.open(nursery, host, port)
             app = _make_app(args, replayer, link)
             try:
@@ -302,7 +301,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
             summary = trio.run(main)
         else:
             summary = trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
-    except JackError as exc:
+    except LinkError as exc:
         print(f"ttes replay: {exc}", file=sys.stderr)
         return None
     summary["wall_s"] = round(time.perf_counter() - t, 2)
@@ -381,8 +380,9 @@ async def _render(
 
 # -- the window ----------------------------------------------------------------------------------
 def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) -> dict | None:
-    from client_stub.dis.sink import JackProcLink
-    from client_stub.stub.jack import JackError, JackProc, ServerProcess
+    from client_stub.link.client import LinkError
+    from client_stub.link.spawn import spawn_server
+    from client_stub.stub.jack import JackProc
     from client_stub.stub.render import StubRenderer
     from client_stub.stub.viewer import run_viewer
 
@@ -393,28 +393,18 @@ def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) 
             host, port = args.host, args.port
             try:
                 if host is None:
-                    extra = ["--synthetic"] if args.synthetic_server else []
-                    if args.data_dir:
-                        extra += ["--data-dir", str(args.data_dir)]
-                    server = ServerProcess(extra=extra)
-                    try:
-                        server.wait_listening()
-                    except JackError:
-                        server.stop()
-                        server = ServerProcess(
-                            extra=["--synthetic"]
-                        )  # no motion library here: the synthetic one
-                        server.wait_listening()
+                    extra = ["--data-dir", str(args.data_dir)] if args.data_dir else []
+                    server = spawn_server(extra, data="synthetic" if args.synthetic_server else "auto")
                     host, port = server.host, server.port
                 jack = JackProc("ttes-replay")
                 jack.initsocketconnection(host, port)
                 jack.start()
                 if not jack.wait_ready(30.0):
-                    raise JackError(jack.failure or "server not ready")
-            except JackError as exc:
+                    raise LinkError(jack.failure or "server not ready")
+            except LinkError as exc:
                 print(f"ttes replay: {exc}", file=sys.stderr)
                 return None
-            link = JackProcLink(jack)
+            link = jack
         app = _make_app(args, replayer, link)
         app.renderer = StubRenderer(*size, offscreen=False)
         app.renderer.add_terrain(app.terrain.meshes)
@@ -428,4 +418,4 @@ def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) 
         if jack is not None:
             jack.quit()
         if server is not None:
-            server.stop()
+            server.close()

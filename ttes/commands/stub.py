@@ -79,8 +79,10 @@ def run(args: argparse.Namespace) -> int:
     ):
         print("ttes stub: no display; use --headless", file=sys.stderr)
         return 2
+    from client_stub.link.client import LinkError
+    from client_stub.link.spawn import spawn_server
     from client_stub.stub.app import StubApp, populate_demo
-    from client_stub.stub.jack import JackError, JackProc, ServerProcess
+    from client_stub.stub.jack import JackProc
     from client_stub.stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
 
     try:
@@ -98,12 +100,11 @@ def run(args: argparse.Namespace) -> int:
             try:
                 if args.spawn_server:
                     data_dir = args.server_data_dir or _server_data_dir(stack)
-                    server = ServerProcess(extra=["--data-dir", str(data_dir)])
-                    server.wait_listening()
+                    server = spawn_server(["--data-dir", str(data_dir)], data="default")
                     host, port = server.host, server.port
                 jack = JackProc()
                 jack.initsocketconnection(host, port)
-            except JackError as exc:
+            except LinkError as exc:
                 print(f"ttes stub: {exc}", file=sys.stderr)
                 return 1
             if not app.connect(jack, args.ready_timeout):
@@ -130,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
         app.close()
         if server is not None:
             code = server.stop()
+            server.close()
             print(f"ttes server stopped (exit {code})", file=sys.stderr)
         stack.close()
     if args.json:
