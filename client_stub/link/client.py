@@ -175,6 +175,7 @@ class Client:
         self.bytes_sent = 0
         self.bytes_in = 0
         self.update_bytes = 0
+        self.soldier_updates = 0  # soldier rows of all joint updates received
         self._lock = lock if lock is not None else contextlib.nullcontext()
         self._notify = notify
         self._buffers: dict[int, UpdateBuffer] = {}
@@ -485,6 +486,7 @@ class Client:
     ) -> None:
         self.last_tick = tick
         self.update_bytes += self.conn.frame_bytes
+        self.soldier_updates += len(indices)
         if event is not None and self.buffer_updates:
             buf = self._buffers.get(table)
             if buf is not None:

@@ -12,6 +12,7 @@ update is decoded and ``on_updates`` receives the full :class:`~protocol.events.
 from __future__ import annotations
 
 import functools
+import threading
 from collections.abc import Callable
 
 import numpy as np
@@ -35,15 +36,21 @@ UpdateHook = Callable[[int, float, int, np.ndarray, int, JointUpdates | None], N
 class LoadClient:
     """One TCP connection of the load generator (a controller: it creates and drives its soldiers)."""
 
-    def __init__(self, number: int, on_updates: UpdateHook, *, decode: bool = False, name: str = "") -> None:
+    def __init__(
+        self, number: int, on_updates: UpdateHook, *, decode: bool = False, buffer_updates: bool = False,
+        name: str = "",
+    ) -> None:  # fmt: skip
+        """``buffer_updates`` (with ``decode``): keep the poses in the link's double buffers, swapped from
+        another thread (the crowd's render loop)."""
         self.number = number
         self.name = name or f"ttes-loadtest-{number}"
         self.link = Client(
             self.name,
             "controller",
-            buffer_updates=False,
-            decode_updates=decode,
+            buffer_updates=buffer_updates,
+            decode_updates=decode or buffer_updates,
             on_updates=functools.partial(on_updates, number),
+            lock=threading.Lock() if buffer_updates else None,
         )
 
     @property

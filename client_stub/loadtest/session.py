@@ -86,9 +86,13 @@ class LoadTestResult:
 class LoadSession:
     """The connections, the mix driver and the tracker of one run (or one ramp)."""
 
-    def __init__(self, cfg: LoadTestConfig, server_cpu: Any = None) -> None:
+    def __init__(self, cfg: LoadTestConfig, server_cpu: Any = None, *, buffer_updates: bool = False) -> None:
+        """``buffer_updates``: the clients keep decoded poses for a renderer (see :class:`LoadClient`)."""
         self.cfg = cfg
-        self.clients = [LoadClient(k, self._on_updates, decode=cfg.decode) for k in range(cfg.clients)]
+        self.clients = [
+            LoadClient(k, self._on_updates, decode=cfg.decode, buffer_updates=buffer_updates)
+            for k in range(cfg.clients)
+        ]
         self.driver = MixDriver(0, mix=cfg.mix, seed=cfg.seed, now=0.0)
         nsub = cfg.clients
         self.tracker = Tracker(cfg.rate_hz, nsub)
