@@ -139,10 +139,10 @@ def test_render_shows_soldiers_at_every_level(figures: Figures) -> None:
     cam = FreeCamera(position=np.array([0.0, 0.0, 1.6]), heading=0.0, pitch=-2.0)
     r = CrowdRenderer(figures, 3, W, H, 10.0, 40.0)
     try:
-        st = _line_of_soldiers(figures, [6.0, 20.0, 70.0])
-        r.frame(st, cam)
+        r.show(_line_of_soldiers(figures, [6.0, 20.0, 70.0]))
+        r.set_camera(cam.pose())
+        img = r.render()
         assert r.counts == [1, 1, 1]  # one soldier drawn at each level
-        img = r.read()
         assert img.shape == (H, W, 3)
         soldier = _non_sky(img)
         assert soldier.mean() > 0.01  # the near soldier alone covers a good part of the image
@@ -150,11 +150,12 @@ def test_render_shows_soldiers_at_every_level(figures: Figures) -> None:
         rows = np.flatnonzero(soldier.any(axis=1))
         assert rows.max() - rows.min() >= 40  # the near soldier stands about 60 pixels tall
         # turn the camera round: nothing drawn, nothing culled wrongly
-        r.frame(st, FreeCamera(position=np.array([0.0, 0.0, 1.6]), heading=180.0, pitch=-2.0))
+        r.set_camera(FreeCamera(position=np.array([0.0, 0.0, 1.6]), heading=180.0, pitch=-2.0).pose())
+        img = r.render()
         assert r.counts == [0, 0, 0]
-        assert not _non_sky(r.read()).any()
+        assert not _non_sky(img).any()
     finally:
-        r.release()
+        r.close()
 
 
 def test_cli_renders_a_crowd_png(tmp_path, capsys) -> None:

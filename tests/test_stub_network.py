@@ -18,6 +18,7 @@ from client_stub.link.spawn import free_port
 from client_stub.stub.app import StubApp
 from client_stub.stub.artic import articulation, update_table_for
 from client_stub.stub.jack import JackProc
+from client_stub.stub.live import LiveSoldiers
 from client_stub.stub.simsoldier import Behaviour, Force
 from client_stub.stub.terrain import terrain_from_mesh
 from client_stub.stub.tips import load_tips
@@ -135,7 +136,8 @@ async def _serve(nursery: trio.Nursery, server: FakeServer) -> int:
 async def test_stub_runs_against_a_fake_server(nursery: trio.Nursery, tmp_path: Path) -> None:
     server = FakeServer()
     port = await _serve(nursery, server)
-    app = StubApp(flat_terrain(), artic_dir=tmp_path)
+    live = LiveSoldiers()
+    app = StubApp(flat_terrain(), live, artic_dir=tmp_path)
     app.add_soldier((0.0, 0.0), 0.0)
     app.add_soldier((5.0, 0.0), 0.0, speed=1.0, behaviour=Behaviour.SQUARE)
     app.add_soldier((-5.0, 0.0), 90.0, force=Force.OPPOSING)
@@ -143,7 +145,7 @@ async def test_stub_runs_against_a_fake_server(nursery: trio.Nursery, tmp_path: 
     with trio.fail_after(20):
         await trio.to_thread.run_sync(jack.initsocketconnection, "127.0.0.1", port)
         assert jack.connected and jack.accept is not None and jack.accept.name == "fake-jack"
-        assert await trio.to_thread.run_sync(app.connect, jack, 10.0)
+        assert await trio.to_thread.run_sync(live.connect, app, jack, 10.0)
     try:
         assert server.jcl == ['read_file("jack-ttes-soldier_low.jcl");']
         assert jack.jackready and jack.ready_soldiers == {0: TABLE_ID, 1: TABLE_ID}

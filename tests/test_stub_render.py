@@ -43,7 +43,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory):
     app.add_soldier((1.5, 0.0), 180.0, force=Force.OPPOSING, weapon=WeaponState.FIRING)
     app.frame(0.0)
     app.renderer = StubRenderer(W, H, yfov_deg=YFOV)
-    app.renderer.add_terrain(terrain.meshes)
+    app.renderer.set_terrain(terrain.meshes)
     yield app
     app.renderer.close()
 

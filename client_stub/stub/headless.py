@@ -138,6 +138,6 @@ def run_headless(
         "wall_s": round(wall, 3),
         "render_fps": round(rendered / render_time, 2) if render_time > 0 else None,
         "soldiers": int(app.soldiers.count),
-        "server": app.jack is not None,
+        "server": app.link is not None,
         "last_frame_mean": None if frame is None else float(np.asarray(frame).mean()),
     }

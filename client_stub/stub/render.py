@@ -158,7 +158,8 @@ def terrain_nodes(scene: pyrender.Scene, meshes: dict[str, trimesh.Trimesh]) -> 
 
 
 class StubRenderer:
-    """The pyrender scene: terrain, sun, camera and the soldiers' instanced meshes."""
+    """The pyrender scene: terrain, sun, camera and the soldiers' instanced meshes (a
+    :class:`client_stub.renderer.Renderer`)."""
 
     def __init__(
         self, width: int = 640, height: int = 480, offscreen: bool = True, yfov_deg: float = 50.0
@@ -176,7 +177,7 @@ class StubRenderer:
         self.soldiers: dict[tuple[int, int], SoldierMeshes] = {}
         self._offscreen = pyrender.OffscreenRenderer(width, height) if offscreen else None
 
-    def add_terrain(self, meshes: dict[str, trimesh.Trimesh]) -> None:
+    def set_terrain(self, meshes: dict[str, trimesh.Trimesh]) -> None:
         terrain_nodes(self.scene, meshes)
 
     def soldier_meshes(self, kind: int, layout: EntityLayout, force: int) -> SoldierMeshes:

@@ -288,7 +288,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
             try:
                 summary = await _render(app, seconds, fps, size, args)
             finally:
-                app.finish()  # the soldiers leave the server
+                app.source.finish(app)  # the soldiers leave the server
                 if link is not None:
                     await link.aclose()
             if link is not None:
@@ -310,16 +310,16 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
 
 def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
     from client_stub.dis.drive import ProgressLine
-    from client_stub.dis.stubapp import ReplayApp
+    from client_stub.dis.soldiers import replay_app
     from client_stub.stub.camera import View
     from client_stub.stub.terrain import DEFAULT_TERRAIN, load_terrain
 
     terrain = load_terrain(args.terrain or DEFAULT_TERRAIN)
-    app = ReplayApp(
+    app = replay_app(
         terrain, replayer, link=link, progress=ProgressLine(out=None if args.json else sys.stderr)
     )
     camera = getattr(args, "camera", "squad")
-    app.squad_view = camera == "squad"
+    app.source.squad_view = camera == "squad"
     if camera == "overhead":
         app.camera.overhead()
     elif camera != "squad":
@@ -339,7 +339,7 @@ async def _render(
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     app.renderer = StubRenderer(*size, offscreen=True)
-    app.renderer.add_terrain(app.terrain.meshes)
+    app.renderer.set_terrain(app.terrain.meshes)
     video = out.suffix.lower() in (".mp4", ".mov", ".mkv", ".avi", ".gif")
     writer = None
     if video:
@@ -365,11 +365,12 @@ async def _render(
         app.renderer.close()
     if not video and frame is not None:
         imageio.imwrite(out, frame)
-    if app.progress is not None:
-        app.progress.update(app.elapsed, app.source.replay_time, app.translator.alive, app.source.pdus, True)
+    dis = app.source
+    if dis.progress is not None:
+        dis.progress.update(dis.elapsed, dis.replay.replay_time, dis.translator.alive, dis.replay.pdus, True)
     return {
-        **app.source.status(),
-        **({f"sink_{k}": v for k, v in app.sink.stats.items()} if app.sink is not None else {}),
+        **dis.replay.status(),
+        **({f"sink_{k}": v for k, v in dis.sink.stats.items()} if dis.sink is not None else {}),
         "out": str(out),
         "frames": nframes,
         "fps": fps,
@@ -407,12 +408,12 @@ def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) 
             link = jack
         app = _make_app(args, replayer, link)
         app.renderer = StubRenderer(*size, offscreen=False)
-        app.renderer.add_terrain(app.terrain.meshes)
+        app.renderer.set_terrain(app.terrain.meshes)
         run_viewer(app, *size, args.fps)
-        app.finish()
+        app.source.finish(app)
         summary = {**replayer.status()}
-        if app.sink is not None:
-            summary.update({f"sink_{k}": v for k, v in app.sink.stats.items()})
+        if app.source.sink is not None:
+            summary.update({f"sink_{k}": v for k, v in app.source.sink.stats.items()})
         return summary
     finally:
         if jack is not None:

@@ -81,8 +81,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     from client_stub.link.client import LinkError
     from client_stub.link.spawn import spawn_server
-    from client_stub.stub.app import StubApp, populate_demo
+    from client_stub.stub.app import StubApp
     from client_stub.stub.jack import JackProc
+    from client_stub.stub.live import LiveSoldiers, populate_demo
     from client_stub.stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
 
     try:
@@ -90,7 +91,8 @@ def run(args: argparse.Namespace) -> int:
     except TerrainError as exc:
         print(f"ttes stub: {exc}", file=sys.stderr)
         return 1
-    app = StubApp(terrain, artic_dir=args.artic_dir)
+    live = LiveSoldiers()
+    app = StubApp(terrain, live, artic_dir=args.artic_dir)
     populate_demo(app)
     server = None
     stack = contextlib.ExitStack()
@@ -107,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
             except LinkError as exc:
                 print(f"ttes stub: {exc}", file=sys.stderr)
                 return 1
-            if not app.connect(jack, args.ready_timeout):
+            if not live.connect(app, jack, args.ready_timeout):
                 print(
                     f"ttes stub: server not ready ({jack.failure or 'timeout'}); posing offline",
                     file=sys.stderr,
@@ -115,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
         from client_stub.stub.render import StubRenderer
 
         app.renderer = StubRenderer(width, height, offscreen=args.headless)
-        app.renderer.add_terrain(terrain.meshes)
+        app.renderer.set_terrain(terrain.meshes)
         if not args.headless:
             from client_stub.stub.viewer import run_viewer
 
@@ -124,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         from client_stub.stub.headless import run_headless
 
         summary = run_headless(
-            app, args.seconds, args.out, fps=args.fps, realtime=app.jack is not None, tour=not args.no_tour
+            app, args.seconds, args.out, fps=args.fps, realtime=app.link is not None, tour=not args.no_tour
         )
         app.renderer.close()
     finally:
