@@ -1,9 +1,9 @@
 """DIS logfile replay and the DIS -> Jack/TTES translation shared with the live gateway (issue 9).
 
 ``translator`` (pure: PDUs in, soldiers and entity requests out), ``cursor`` (pacing, entity filter),
-``replayer`` (a paced log through the translator), ``link`` (a trio-native server connection), ``sink``
-(translations -> protocol messages), ``drive`` (the async replay loop), ``stubapp`` (the stub window and
-headless renderer driven by DIS).
+``replayer`` (a paced log through the translator), ``sink`` (translations -> protocol messages on any
+:class:`~client_stub.link.api.Link`), ``drive`` (the async replay loop), ``soldiers`` (the stub's soldiers
+driven by DIS), ``gateway`` (live DIS over UDP).
 """
 
 from client_stub.dis.cursor import EntityFilter, FilterError, LogCursor
