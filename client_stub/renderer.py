@@ -5,12 +5,13 @@
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import trimesh
 
 
+@runtime_checkable
 class Renderer(Protocol):
     width: int
     height: int

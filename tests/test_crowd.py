@@ -14,6 +14,7 @@ from client_stub.crowd.gl import SKY, boxes_visible
 from client_stub.crowd.lod import FAR, MID, NEAR, choose_levels, dof_map, visible
 from client_stub.crowd.sources import CrowdState, WireBinding
 from client_stub.link.client import UpdateBatch
+from client_stub.renderer import Renderer
 from client_stub.stub.artic import articulation, update_table_for
 from client_stub.stub.scene_graph import Crowd, EntityLayout
 from protocol import coords
@@ -143,6 +144,7 @@ def test_render_shows_soldiers_at_every_level(figures: Figures) -> None:
         r.set_camera(cam.pose())
         img = r.render()
         assert r.counts == [1, 1, 1]  # one soldier drawn at each level
+        assert isinstance(r, Renderer)
         assert img.shape == (H, W, 3)
         soldier = _non_sky(img)
         assert soldier.mean() > 0.01  # the near soldier alone covers a good part of the image

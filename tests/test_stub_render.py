@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from client_stub.renderer import Renderer
 from client_stub.stub.app import StubApp
 from client_stub.stub.camera import look_at
 from client_stub.stub.headless import TOUR, Tour, run_headless
@@ -146,6 +147,7 @@ def test_instancing_keeps_draw_calls_constant(tmp_path: Path) -> None:
         assert meshes.count == 61
         assert all(p.poses.shape == (61, 4, 4) for p in meshes.primitives())
         app.renderer.render()
+        assert isinstance(app.renderer, Renderer)
     finally:
         app.renderer.close()
 
