@@ -13,7 +13,7 @@ from client_stub.crowd.fk import FastFigure, entity_transforms, mul, to34, to44
 from client_stub.crowd.gl import SKY, boxes_visible
 from client_stub.crowd.lod import FAR, MID, NEAR, choose_levels, dof_map, visible
 from client_stub.crowd.sources import CrowdState, WireBinding
-from client_stub.link.client import UpdateBatch
+from client_stub.link.buffer import UpdateBatch
 from client_stub.renderer import Renderer
 from client_stub.stub.artic import articulation, update_table_for
 from client_stub.stub.scene_graph import Crowd, EntityLayout

@@ -13,7 +13,7 @@ from test_replay_translator import FRAME, make_log, pdu
 
 from client_stub.dis import Replayer
 from client_stub.dis.soldiers import LOOK_BASE, look_colour, look_of, replay_app
-from client_stub.link.client import UpdateBatch
+from client_stub.link.buffer import UpdateBatch
 from client_stub.stub.render import FORCE_UNIFORMS
 from client_stub.stub.simsoldier import Force
 from client_stub.stub.terrain import DEFAULT_TERRAIN, Terrain, load_terrain

@@ -13,7 +13,8 @@ import pytest
 import trimesh
 import trio
 
-from client_stub.link.client import LinkError, UpdateBuffer
+from client_stub.link.buffer import UpdateBuffer
+from client_stub.link.client import LinkError
 from client_stub.link.spawn import free_port
 from client_stub.stub.app import StubApp
 from client_stub.stub.artic import articulation, update_table_for

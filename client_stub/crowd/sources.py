@@ -27,7 +27,7 @@ import numpy as np
 import trio
 
 from client_stub.crowd.fk import to34
-from client_stub.link.client import UpdateBatch
+from client_stub.link.buffer import UpdateBatch
 from client_stub.loadtest.mix import APPEARANCE, SPEED, WEAPON, MixDriver
 from client_stub.loadtest.session import LoadSession, LoadTestConfig
 from client_stub.stub.artic import TableBinding, articulation, bind_table, update_table_for

@@ -8,7 +8,7 @@ from typing import Protocol
 
 import numpy as np
 
-from client_stub.link.client import UpdateBatch
+from client_stub.link.buffer import UpdateBatch
 from protocol.update_table import UpdateTable
 
 

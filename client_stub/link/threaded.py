@@ -18,7 +18,8 @@ from typing import ParamSpec, TypeVar
 import numpy as np
 import trio
 
-from client_stub.link.client import STARTUP_JCL, Client, LinkError, UpdateBatch
+from client_stub.link.buffer import UpdateBatch
+from client_stub.link.client import STARTUP_JCL, Client, LinkError
 from protocol.events import (
     Accept,
     Error,

@@ -26,7 +26,8 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from client_stub.link.client import LinkError, UpdateBatch
+from client_stub.link.buffer import UpdateBatch
+from client_stub.link.client import LinkError
 from client_stub.stub.artic import (
     TableBinding,
     articulation,
