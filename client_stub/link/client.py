@@ -26,33 +26,10 @@ import numpy as np
 import trio
 
 from client_stub.link.buffer import UpdateBatch, UpdateBuffer
+from protocol import events as ev
 from protocol.connection import CLIENT, NEED_DATA, Connection
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from protocol.errors import LocalProtocolError, is_fatal
-from protocol.events import (
-    Accept,
-    ConnectionClosed,
-    CreateSoldier,
-    EntityRequests,
-    Error,
-    Event,
-    Goodbye,
-    Hello,
-    Jcl,
-    JointUpdates,
-    Ping,
-    Pong,
-    ProtocolError,
-    Ready,
-    RemoveSoldier,
-    RequestFullUpdate,
-    SoldierCreated,
-    Status,
-    Subscribe,
-    Unsubscribe,
-    UpdateHeaders,
-    UpdateTableMsg,
-)
 from protocol.update_table import UpdateTable
 
 log = logging.getLogger("ttes.link")
@@ -61,7 +38,7 @@ RECEIVE_BYTES = 1 << 18
 MAX_INDICES_PER_MESSAGE = 8192  # soldiers per SUBSCRIBE / UNSUBSCRIBE (keeps each control frame small)
 
 # on_updates(arrival time, tick, server indices, frame bytes, decoded event or None when only tapped)
-UpdateHook = Callable[[float, int, np.ndarray, int, JointUpdates | None], None]
+UpdateHook = Callable[[float, int, np.ndarray, int, ev.JointUpdates | None], None]
 
 
 class LinkError(RuntimeError):
@@ -83,21 +60,21 @@ class Client:
         decode_updates: bool = True,
         on_updates: UpdateHook | None = None,
         lock: AbstractContextManager[object] | None = None,
-        notify: Callable[[Event], None] | None = None,
+        notify: Callable[[ev.Event], None] | None = None,
     ) -> None:
         self.name = name
         self.role = role
         self.buffer_updates = buffer_updates
         self.on_updates = on_updates
         self.conn = Connection(CLIENT, decode_updates=decode_updates)
-        self.accept: Accept | None = None
+        self.accept: ev.Accept | None = None
         self.tables: dict[int, UpdateTable] = {}
         self.ready_soldiers: dict[int, int] = {}  # server index -> update table, from READY
         self.created: dict[int, int] = {}  # server index -> update table, from SOLDIER_CREATED
-        self.answers: dict[int, SoldierCreated | Error] = {}  # awaited CREATE_SOLDIER id -> its answer
-        self.refused: dict[int, Error] = {}  # request id -> its error
-        self.errors: list[Error | ProtocolError] = []
-        self.status: Status | None = None
+        self.answers: dict[int, ev.SoldierCreated | ev.Error] = {}  # awaited CREATE_SOLDIER id -> its answer
+        self.refused: dict[int, ev.Error] = {}  # request id -> its error
+        self.errors: list[ev.Error | ev.ProtocolError] = []
+        self.status: ev.Status | None = None
         self.failure: str | None = None
         self.last_tick = 0
         self.bytes_sent = 0
@@ -146,7 +123,7 @@ class Client:
             raise LinkError(f"cannot connect to {host}:{port} within {timeout} s")
         self._outbox_open = True
         nursery.start_soon(self._run, stream)
-        self.send(Hello(self.name, self.role))
+        self.send(ev.Hello(self.name, self.role))
         with trio.move_on_after(timeout):
             await self._accepted.wait()
             if soldierprefix is not None and self.accepted:
@@ -186,7 +163,7 @@ class Client:
         await self._closed.wait()
 
     # -- sending (synchronous: encode and queue) --------------------------------------------------
-    def send(self, event: Event) -> None:
+    def send(self, event: ev.Event) -> None:
         """Encode ``event`` and queue its bytes for the writer; LinkError if closed or not sendable."""
         if not self._outbox_open or self._closed.is_set():
             raise LinkError(self.failure or "not connected")
@@ -211,7 +188,7 @@ class Client:
 
     def jcl(self, text: str) -> int:
         rid = self.new_id()
-        self.send(Jcl(text, rid))
+        self.send(ev.Jcl(text, rid))
         return rid
 
     def create(self, index: int | None, figure: str, weapon: str, *, await_answer: bool = False) -> int:
@@ -220,10 +197,10 @@ class Client:
         rid = self.new_id()
         if await_answer:
             self._awaited.add(rid)
-        self.send(CreateSoldier(rid, figure, weapon, None if index is None else int(index)))
+        self.send(ev.CreateSoldier(rid, figure, weapon, None if index is None else int(index)))
         return rid
 
-    async def answer(self, rid: int) -> SoldierCreated | Error | None:
+    async def answer(self, rid: int) -> ev.SoldierCreated | ev.Error | None:
         """Wait for the answer to CREATE_SOLDIER ``rid`` and take it (None if the link closed first)."""
         try:
             while rid not in self.answers and not self._closed.is_set():
@@ -234,7 +211,7 @@ class Client:
 
     async def create_soldier(
         self, figure: str, weapon: str, index: int | None = None, timeout: float = 10.0
-    ) -> SoldierCreated:
+    ) -> ev.SoldierCreated:
         """CREATE_SOLDIER and wait for the answer; LinkError if the server refuses or stays silent."""
         rid = self.create(index, figure, weapon, await_answer=True)
         result = None
@@ -242,31 +219,31 @@ class Client:
             result = await self.answer(rid)
         if result is None:
             raise LinkError(self.failure or f"no answer to CREATE_SOLDIER {rid} within {timeout} s")
-        if isinstance(result, Error):
+        if isinstance(result, ev.Error):
             raise LinkError(f"server refused soldier: {result.message}")
         return result
 
     def remove(self, index: int) -> None:
-        self.send(RemoveSoldier(int(index)))
+        self.send(ev.RemoveSoldier(int(index)))
 
     def subscribe(self, indices: list[int] | np.ndarray) -> None:
         idx = np.asarray(indices, np.int64)
         for k in range(0, len(idx), MAX_INDICES_PER_MESSAGE):
-            self.send(Subscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+            self.send(ev.Subscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
 
     def unsubscribe(self, indices: list[int] | np.ndarray) -> None:
         idx = np.asarray(indices, np.int64)
         for k in range(0, len(idx), MAX_INDICES_PER_MESSAGE):
-            self.send(Unsubscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+            self.send(ev.Unsubscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
 
     def request_full_update(self, indices: list[int] | None = None) -> None:
-        self.send(RequestFullUpdate(tuple(int(i) for i in indices or ())))
+        self.send(ev.RequestFullUpdate(tuple(int(i) for i in indices or ())))
 
     def send_requests(self, rows: np.ndarray) -> None:
         """ENTITY_REQUESTS rows (``ENTITY_REQUEST_DTYPE``, server indices); the connection splits frames."""
         rows = np.asarray(rows, ENTITY_REQUEST_DTYPE)
         if len(rows):
-            self.send(EntityRequests(rows))
+            self.send(ev.EntityRequests(rows))
 
     def swap(self) -> list[UpdateBatch]:
         """Every pose that arrived since the last call (the consumer side of the double buffers)."""
@@ -286,7 +263,7 @@ class Client:
         self._nonce += 1
         nonce = self._nonce
         done = self._pongs[nonce] = trio.Event()
-        self.send(Ping(nonce))
+        self.send(ev.Ping(nonce))
         with trio.move_on_after(timeout):
             await done.wait()  # set by the PONG, or by the link closing
         self._pongs.pop(nonce, None)
@@ -296,7 +273,7 @@ class Client:
         """GOODBYE (if still open), let the writer finish (2 s at most), then close."""
         if self._outbox_open and not self._closed.is_set():
             with contextlib.suppress(LinkError):
-                self.send(Goodbye(reason))
+                self.send(ev.Goodbye(reason))
             self._outbox_open = False
             self._wake.set()
             with trio.move_on_after(2.0):
@@ -355,40 +332,40 @@ class Client:
                 self.bytes_in += len(data)
                 conn.receive_data(bytes(data))
                 continue
-            assert isinstance(event, Event)
+            assert isinstance(event, ev.Event)
             if not self._take(event, arrival):
                 return
             if self._notify is not None:
                 self._notify(event)
 
-    def _take(self, event: Event, arrival: float) -> bool:
+    def _take(self, event: ev.Event, arrival: float) -> bool:
         """Keep what one event says, answer what needs an answer; False when the link has ended."""
         match event:
-            case JointUpdates(table=table, tick=tick, indices=indices):
+            case ev.JointUpdates(table=table, tick=tick, indices=indices):
                 self._updates(arrival, table, tick, indices, event)
-            case UpdateHeaders(table=table, tick=tick, indices=indices):
+            case ev.UpdateHeaders(table=table, tick=tick, indices=indices):
                 self._updates(arrival, table, tick, indices, None)
-            case Accept():
+            case ev.Accept():
                 self.accept = event
                 self._accepted.set()
-            case UpdateTableMsg(table=table):
+            case ev.UpdateTableMsg(table=table):
                 self.tables[table.table_id] = table
                 with self._lock:
                     self._buffers[table.table_id] = UpdateBuffer(table)
-            case Ready(soldiers=soldiers):
+            case ev.Ready(soldiers=soldiers):
                 self.ready_soldiers = dict(soldiers)
                 self._ready.set()
-            case SoldierCreated(id=rid, index=index, table=table):
+            case ev.SoldierCreated(id=rid, index=index, table=table):
                 self.created[index] = table
                 self._resolve(rid, event)
-            case Ping(nonce=nonce):
-                self.send(Pong(nonce))
-            case Pong(nonce=nonce) if nonce in self._pongs:
+            case ev.Ping(nonce=nonce):
+                self.send(ev.Pong(nonce))
+            case ev.Pong(nonce=nonce) if nonce in self._pongs:
                 self._answered_pings.add(nonce)
                 self._pongs[nonce].set()
-            case Status():
+            case ev.Status():
                 self.status = event
-            case Error(code=code, message=message, ref=ref):
+            case ev.Error(code=code, message=message, ref=ref):
                 log.debug("server error %d: %s", code, message)
                 self.errors.append(event)
                 if ref is not None:
@@ -396,21 +373,21 @@ class Client:
                     self._resolve(ref, event)
                 if is_fatal(code):
                     self.failure = self.failure or f"server error {code}: {message}"
-            case Goodbye(reason=reason):
+            case ev.Goodbye(reason=reason):
                 self.failure = self.failure or f"server said goodbye: {reason}"
-            case ProtocolError(code=code, message=message, location=location):
+            case ev.ProtocolError(code=code, message=message, location=location):
                 self.errors.append(event)
                 self.failure = f"protocol error {code}: {location}: {message}"
                 log.warning("%s", self.failure)
                 self._queue(self.conn.data_to_send())  # the Error frame for the server
                 return False
-            case ConnectionClosed():
+            case ev.ConnectionClosed():
                 self.failure = self.failure or "server closed the connection"
                 return False
         return True
 
     def _updates(
-        self, arrival: float, table: int, tick: int, indices: np.ndarray, event: JointUpdates | None
+        self, arrival: float, table: int, tick: int, indices: np.ndarray, event: ev.JointUpdates | None
     ) -> None:
         self.last_tick = tick
         self.update_bytes += self.conn.frame_bytes
@@ -423,7 +400,7 @@ class Client:
         if self.on_updates is not None:
             self.on_updates(arrival, tick, np.asarray(indices, np.int64), self.conn.frame_bytes, event)
 
-    def _resolve(self, rid: int, answer: SoldierCreated | Error) -> None:
+    def _resolve(self, rid: int, answer: ev.SoldierCreated | ev.Error) -> None:
         if rid not in self._awaited:
             return
         self.answers[rid] = answer
