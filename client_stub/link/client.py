@@ -45,6 +45,13 @@ class LinkError(RuntimeError):
     """The connection to the server failed, was refused, or cannot send this."""
 
 
+def _why(exc: OSError) -> str:
+    """The operating system's reason (trio wraps each address's error in a group behind its own)."""
+    cause = exc.__cause__
+    inner = [e for e in getattr(cause, "exceptions", ()) if isinstance(e, OSError) and e.strerror]
+    return str((inner[0] if inner else exc).strerror or exc)
+
+
 class Client:
     """One TCP connection to the server (see the module docstring); open it with :meth:`open` in a nursery.
 
@@ -118,7 +125,7 @@ class Client:
             try:
                 stream = await trio.open_tcp_stream(host, port)
             except OSError as exc:
-                raise LinkError(f"cannot connect to {host}:{port}: {exc.strerror or exc}") from None
+                raise LinkError(f"cannot connect to {host}:{port}: {_why(exc)}") from None
         if cs.cancelled_caught:
             raise LinkError(f"cannot connect to {host}:{port} within {timeout} s")
         self._outbox_open = True
