@@ -106,6 +106,7 @@ class Client:
         self._queued = 0
         self._written = 0
         self._outbox_open = False
+        self._leaving = False  # we said GOODBYE: the server closing is no failure
         self._cancel: trio.CancelScope | None = None
 
     # -- connecting -------------------------------------------------------------------------------
@@ -281,6 +282,7 @@ class Client:
         if self._outbox_open and not self._closed.is_set():
             with contextlib.suppress(LinkError):
                 self.send(ev.Goodbye(reason))
+            self._leaving = True
             self._outbox_open = False
             self._wake.set()
             with trio.move_on_after(2.0):
@@ -389,7 +391,8 @@ class Client:
                 self._queue(self.conn.data_to_send())  # the Error frame for the server
                 return False
             case ev.ConnectionClosed():
-                self.failure = self.failure or "server closed the connection"
+                if not self._leaving:
+                    self.failure = self.failure or "server closed the connection"
                 return False
         return True
 
