@@ -127,7 +127,7 @@ def run_headless(
             kwargs.update(codec="libx264", quality=7, macro_block_size=8, pixelformat="yuv420p")
         with imageio.get_writer(out, **kwargs) as writer:
             for f in frames:
-                writer.append_data(f)
+                writer.append_data(f)  # type: ignore[attr-defined]  # (imageio's stubs lack the v2 writer)
     if not video and frame is not None:
         imageio.imwrite(out, frame)
     return {
