@@ -149,7 +149,7 @@ class TtesServer:
         self._t0 = trio.current_time()
         self.start_world()
         listeners = await trio.open_tcp_listeners(self.config.port, host=self.config.host)
-        self.addresses = [tuple(ln.socket.getsockname()[:2]) for ln in listeners]  # type: ignore[misc]
+        self.addresses = [tuple(ln.socket.getsockname()[:2]) for ln in listeners]
         async with trio.open_nursery() as nursery:
             self._cancel = nursery.cancel_scope
             nursery.start_soon(self._tick_loop)

@@ -16,6 +16,7 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 JclArg = str | float
 
@@ -232,7 +233,7 @@ class JclInterpreter:
 
     def call(self, c: JclCall) -> object:
         cmd = self._commands.get(c.name)
-        where = {"file": c.file, "line": c.line, "column": c.column}
+        where: dict[str, Any] = {"file": c.file, "line": c.line, "column": c.column}
         if cmd is None:
             raise JclError(f"unknown command {c.name!r}", **where)
         lo = len(cmd.types) - cmd.optional

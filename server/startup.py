@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from peabody.model import Environment, Figure
+from protocol.events import DEFAULT_MAX_SOLDIERS
 from protocol.update_table import UpdateTable
 from server.jcl import JclError, JclInterpreter
 from server.logging import get_logger
@@ -86,7 +87,7 @@ class ServerWorld:
         self,
         data_dir: str | Path,
         *,
-        max_soldiers: int = 16384,
+        max_soldiers: int = DEFAULT_MAX_SOLDIERS,
         clock: Callable[[], float] = lambda: 0.0,
         record_clips: bool = False,
         library: MotionLibrary | None = None,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.motion import quaternion
+from peabody import quaternion
 from server.motion.binding import bind_channelset
 from server.motion.channelset import FigureTrack, JointTrack, make_channelset
 from server.motion.playback import (

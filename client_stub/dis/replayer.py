@@ -16,6 +16,7 @@ import numpy as np
 from client_stub.dis.cursor import LOOP_GAP, EntityFilter, LogCursor
 from client_stub.dis.translator import DIS_TIMEOUT, DisTranslator, Translation, sane_records
 from protocol.dis import DisLog, EntityStateBatch, LocalFrame, WeaponEvent
+from protocol.events import DEFAULT_MAX_SOLDIERS
 
 UNLIMITED_CHUNK = 0.1  # s of log time per step when --speed is unlimited ...
 UNLIMITED_PDUS = 2048  # ... or this many Entity State PDUs, whichever is more
@@ -34,7 +35,7 @@ class Replayer:
         entity_filter: EntityFilter | None = None,
         origin: LocalFrame | None = None,
         timeout: float = DIS_TIMEOUT,
-        capacity: int = 16384,
+        capacity: int = DEFAULT_MAX_SOLDIERS,
     ) -> None:
         if not (speed > 0):
             raise ValueError("speed must be positive (inf: unlimited)")

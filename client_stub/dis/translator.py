@@ -37,6 +37,7 @@ from protocol.dis import (
     ttes_weapon,
 )
 from protocol.entity import ENTITY_REQUEST_DTYPE
+from protocol.events import DEFAULT_MAX_SOLDIERS
 
 DIS_TIMEOUT = 12.0  # s without a PDU before an entity is dropped (IEEE 1278.1 default)
 FIRE_HOLD = 1.0  # s a Fire PDU holds a standing-still shooter at FIRING
@@ -187,7 +188,7 @@ class DisTranslator:
         frame: LocalFrame | None = None,
         *,
         timeout: float = DIS_TIMEOUT,
-        capacity: int = 16384,
+        capacity: int = DEFAULT_MAX_SOLDIERS,
         fire_hold: float = FIRE_HOLD,
         flinch_radius: float = FLINCH_RADIUS,
     ) -> None:

@@ -374,27 +374,33 @@ class Client:
                 self._pongs[nonce].set()
             case ev.Status():
                 self.status = event
-            case ev.Error(code=code, message=message, ref=ref):
-                log.debug("server error %d: %s", code, message)
-                self.errors.append(event)
-                if ref is not None:
-                    self.refused[ref] = event
-                    self._resolve(ref, event)
-                if is_fatal(code):
-                    self.failure = self.failure or f"server error {code}: {message}"
+            case ev.Error():
+                self._error(event)
             case ev.Goodbye(reason=reason):
                 self.failure = self.failure or f"server said goodbye: {reason}"
-            case ev.ProtocolError(code=code, message=message, location=location):
-                self.errors.append(event)
-                self.failure = f"protocol error {code}: {location}: {message}"
-                log.warning("%s", self.failure)
-                self._queue(self.conn.data_to_send())  # the Error frame for the server
-                return False
-            case ev.ConnectionClosed():
-                if not self._leaving:
-                    self.failure = self.failure or "server closed the connection"
+            case ev.ProtocolError() | ev.ConnectionClosed():
+                self._end(event)
                 return False
         return True
+
+    def _error(self, event: ev.Error) -> None:
+        log.debug("server error %d: %s", event.code, event.message)
+        self.errors.append(event)
+        if event.ref is not None:
+            self.refused[event.ref] = event
+            self._resolve(event.ref, event)
+        if is_fatal(event.code):
+            self.failure = self.failure or f"server error {event.code}: {event.message}"
+
+    def _end(self, event: ev.ProtocolError | ev.ConnectionClosed) -> None:
+        """The connection is over: the server broke the protocol (it gets our Error frame) or closed."""
+        if isinstance(event, ev.ProtocolError):
+            self.errors.append(event)
+            self.failure = f"protocol error {event.code}: {event.location}: {event.message}"
+            log.warning("%s", self.failure)
+            self._queue(self.conn.data_to_send())  # the Error frame for the server
+        elif not self._leaving:
+            self.failure = self.failure or "server closed the connection"
 
     def _updates(
         self, arrival: float, table: int, tick: int, indices: np.ndarray, event: ev.JointUpdates | None

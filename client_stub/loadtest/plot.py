@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from typing import Any
 
@@ -36,7 +37,7 @@ def plot_result(result: dict[str, Any], path: str | os.PathLike[str]) -> None:
     bottom.grid(alpha=0.3)
     bottom.legend(loc="upper left", fontsize="small")
     cpu = s.get("server_cpu_pct")
-    if cpu and any(c == c for c in cpu):  # not all nan
+    if cpu and not all(math.isnan(c) for c in cpu):
         twin = top.twinx()
         twin.plot(x, cpu, color="tab:orange", alpha=0.6, lw=1, marker=marker)
         twin.set_ylabel("server CPU % (orange)", color="tab:orange")

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from client_stub.stub.scene_graph import Crowd, FigureGraph
+from peabody.values import rot_x
 from protocol import coords
 from protocol.entity import Appearance, WeaponState
 
@@ -58,13 +59,6 @@ _POSTURES: dict[int, dict[str, tuple[float, ...]]] = {
            "right_elbow": (0.2, 0.0), "left_hip": (0.2, 0.1, 0.0), "right_hip": (0.15, 0.3, 0.0),
            "right_knee": (0.5,), "head": (0.3, 0.0, 0.0)},
 }  # fmt: skip
-
-
-def _rot_x(deg: float) -> np.ndarray:
-    a = np.radians(deg)
-    m = np.eye(4)
-    m[1, 1], m[1, 2], m[2, 1], m[2, 2] = np.cos(a), -np.sin(a), np.sin(a), np.cos(a)
-    return m
 
 
 # body pitch per posture: prone lies face down along the heading, dead on his back
@@ -113,7 +107,7 @@ class OfflinePoser:
         self._gait_cols = {name: self.body.dof_slices.get(name) for name in
                            ("left_hip", "right_hip", "left_knee", "right_knee", "waist", "left_shoulder",
                             "right_shoulder")}  # fmt: skip
-        self.pitch = np.stack([_rot_x(_PITCH[p]) for p in range(len(_POSTURES))])
+        self.pitch = np.stack([rot_x(np.radians(_PITCH[p])) for p in range(len(_POSTURES))])
         self.lift = self._lifts()
         self._q = np.zeros((crowd.capacity, ndof))
         self._root = np.broadcast_to(self.body.location, (crowd.capacity, 4, 4)).copy()

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from client_stub.stub.tips import TipsFigure, TipsGeometry
+from peabody.fk import dof_transforms
 from protocol import coords
 
 ENTITY_NODE = 0  # the Entity Position DCS is node 0 of every entity
@@ -137,27 +138,7 @@ class FigureGraph:
 
     def dof_matrices(self, q: np.ndarray) -> np.ndarray:
         """``(S, ndof, 4, 4)``: each DOF's transform at ``sign * q`` (Rodrigues / translation), batched."""
-        q = np.asarray(q, np.float64) * self.sign
-        s = q.shape[0]
-        out = np.zeros((s, self.ndof, 4, 4))
-        out[..., 3, 3] = 1.0
-        a = self.dof_axis
-        rot = self.dof_rot
-        if rot.any():
-            ar = a[rot]
-            c = np.cos(q[:, rot])[..., None, None]
-            sn = np.sin(q[:, rot])[..., None, None]
-            k = np.zeros((len(ar), 3, 3))
-            k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -ar[:, 2], ar[:, 1], -ar[:, 0]
-            k[:, 1, 0], k[:, 2, 0], k[:, 2, 1] = ar[:, 2], -ar[:, 1], ar[:, 0]
-            outer = ar[:, :, None] * ar[:, None, :]
-            out[:, rot, :3, :3] = c * np.eye(3) + sn * k + (1.0 - c) * outer
-        if not rot.all():
-            tr = ~rot
-            out[:, tr, 0, 0] = out[:, tr, 1, 1] = out[:, tr, 2, 2] = 1.0
-            column = out[..., 3]  # a view, so the advanced index stays next to its axis
-            column[:, tr, :3] = q[:, tr, None] * a[tr]
-        return out
+        return dof_transforms(self.dof_axis, self.dof_rot, np.asarray(q, np.float64) * self.sign)
 
     def joint_matrices(self, q: np.ndarray) -> np.ndarray:
         """``(S, J, 4, 4)`` Joint DCS matrices ``pre · J(q) · post`` for S pose vectors (rad, m)."""

@@ -185,13 +185,13 @@ class MotionLibrary:
         for state, (base, footed, direction) in CLIP_OF.items():
             gi = GRAPH_CRAWL if base.startswith("crawl") else GRAPH_LOCO
             for foot, suffix in ((0, "_l"), (1, "_r")):
-                cid = by_key.get((gi, base + suffix)) if footed else None
-                if cid is None:
-                    cid = by_key.get((gi, base))
-                if cid is None and footed:  # only one foot recorded: use it for both
-                    cid = by_key.get((gi, base + ("_r" if foot == 0 else "_l")))
-                if cid is not None:
-                    self.loco_clip[state, foot] = cid
+                clip = by_key.get((gi, base + suffix)) if footed else None
+                if clip is None:
+                    clip = by_key.get((gi, base))
+                if clip is None and footed:  # only one foot recorded: use it for both
+                    clip = by_key.get((gi, base + ("_r" if foot == 0 else "_l")))
+                if clip is not None:
+                    self.loco_clip[state, foot] = clip
             self.loco_dir[state] = direction
         s = LocoState
         # a gait transition recorded once (no _l/_r variants) swings the right foot: see locomotion.GAIT_STAY
@@ -200,7 +200,7 @@ class MotionLibrary:
             base = CLIP_OF[state][0]
             if (GRAPH_LOCO, base + "_l") not in by_key and (GRAPH_LOCO, base + "_r") not in by_key:
                 self.transition_foot[state] = 1
-        have = (self.loco_clip >= 0).all(axis=1)
+        have = np.asarray((self.loco_clip >= 0).all(axis=1))
         self.can_walk = bool(have[[s.WALK_START, s.WALK_CYCLE, s.WALK_END]].all()) and (
             STAND_STOWED in self._node
         )

@@ -38,6 +38,7 @@ import numpy as np
 
 from protocol import coords
 from protocol.entity import Appearance, WeaponState
+from protocol.events import DEFAULT_MAX_SOLDIERS
 from server.soldier.blend import blend_into, smoothstep, yaw_rotate
 from server.soldier.library import MotionLibrary, PathStep
 from server.soldier.locomotion import GAIT_STAY, SCALED, conditions, next_states, start_state
@@ -117,7 +118,7 @@ class SoldierManager:
         blend_time: float = 0.2,
         every_frame: bool = False,
         interpolate: bool = True,
-        max_soldiers: int = 16384,
+        max_soldiers: int = DEFAULT_MAX_SOLDIERS,
         record_clips: bool = False,
         record_limit: int = 100_000,
     ) -> None:

@@ -1,5 +1,6 @@
-"""Vectorised unit quaternions for figure channels.
+"""Vectorised unit quaternions: figure channels, the wire's figure entries, the stubs' placements.
 
+The one quaternion <-> matrix conversion of the project (server, clients, codecs and authoring call it).
 Layout ``(..., 4) = (w, x, y, z)``; rotation matrices act on column vectors like every transform in the
 project (:mod:`peabody.model`). Figure locations are stored as position + quaternion rather than 4x4
 matrices because that is what gets interpolated (lerp + slerp) and what the update packet carries (7 floats).
@@ -8,6 +9,7 @@ matrices because that is what gets interpolated (lerp + slerp) and what the upda
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
@@ -109,6 +111,13 @@ def to_transform(pos: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out
 
 
+def from_transform(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(..., 4, 4)`` rigid transforms → position ``(..., 3)`` + quaternion ``(..., 4)``: a figure's 7
+    values."""
+    t = np.asarray(t, dtype=np.float64)
+    return t[..., :3, 3].copy(), from_matrix(t)
+
+
 def make_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
     """Flip signs along ``axis`` so neighbours lie in the same hemisphere (q and -q are one rotation).
 
@@ -123,7 +132,9 @@ def make_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.moveaxis(q, 0, axis)
 
 
-def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+def slerp(
+    a: np.ndarray, b: np.ndarray, t: ArrayLike, out: np.ndarray | None = None
+) -> np.ndarray:
     """Spherical interpolation of ``(..., 4)`` unit quaternions with weights ``t`` broadcast to ``(...)``.
 
     Takes the short arc; nearly equal rotations fall back to normalised lerp (sin θ → 0).
