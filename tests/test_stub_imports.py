@@ -30,8 +30,8 @@ def test_importing_the_stub_loads_no_server_module() -> None:
     """The same, tried: import every client_stub module in a fresh interpreter and list what got loaded."""
     code = (
         "import importlib, pkgutil, sys, client_stub\n"
-        "for m in pkgutil.iter_modules(client_stub.__path__):\n"
-        "    importlib.import_module('client_stub.' + m.name)\n"
+        "for m in pkgutil.walk_packages(client_stub.__path__, 'client_stub.'):\n"
+        "    importlib.import_module(m.name)\n"
         "print(sorted(n for n in sys.modules if n.split('.')[0] in ('server', 'ttes')))\n"
     )
     env = {"PYOPENGL_PLATFORM": "egl", "PATH": ""}

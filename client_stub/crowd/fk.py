@@ -1,12 +1,12 @@
 """Forward kinematics for thousands of soldiers: Figure 14's Joint DCS chain as float32 3×4 array algebra.
 
-:class:`client_stub.scene_graph.Crowd` (the stub's reference scene graph) composes ``(n, nodes, 4, 4)``
+:class:`client_stub.stub.scene_graph.Crowd` (the stub's reference scene graph) composes ``(n, nodes, 4, 4)``
 float64 matrices and builds each DOF matrix in full: about 140 ms for 1,000 DI.fig soldiers on this
 machine. Here a rigid transform is its top 3×4 rows, a product is numpy's float32 matmul of the 3×3 part
 plus the translation (:func:`mul`), the rotational DOFs come from precomputed cross-product matrices
 (Rodrigues) and the DOF columns are reordered so each kind is one slice: about 16 ms for the same 1,000.
 The static data (near-site locations, far-site inverses, DOF axes and slots, tree levels) is
-:class:`~client_stub.scene_graph.FigureGraph`'s, so both give the same matrices (a test compares them).
+:class:`~client_stub.stub.scene_graph.FigureGraph`'s, so both give the same matrices (a test compares them).
 
 :meth:`FastFigure.local_nodes` returns every node of a figure in the *soldier's local frame* (feet at the
 origin, facing +Y): the figure DCS (placement · root inverse) and each joint DCS. The renderer caches these
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from client_stub.scene_graph import FigureGraph
+from client_stub.stub.scene_graph import FigureGraph
 from peabody.rotations import skew
 from protocol import coords
 

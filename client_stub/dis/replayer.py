@@ -2,7 +2,7 @@
 
 Sync and clock-free: the caller says how many replay seconds have passed (:meth:`Replayer.advance`) or asks
 for the next chunk as fast as it can go (:meth:`Replayer.advance_chunk`, ``--speed`` unlimited) and gets the
-:class:`~client_stub.replay.translator.Translation` to apply. The async server driver, the gateway's tests,
+:class:`~client_stub.dis.translator.Translation` to apply. The async server driver, the gateway's tests,
 the stub window and the headless renderer all share it.
 """
 
@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from client_stub.replay.cursor import LOOP_GAP, EntityFilter, LogCursor
-from client_stub.replay.translator import DIS_TIMEOUT, DisTranslator, Translation, sane_records
+from client_stub.dis.cursor import LOOP_GAP, EntityFilter, LogCursor
+from client_stub.dis.translator import DIS_TIMEOUT, DisTranslator, Translation, sane_records
 from protocol.dis import DisLog, EntityStateBatch, LocalFrame, WeaponEvent
 from protocol.events import DEFAULT_MAX_SOLDIERS
 

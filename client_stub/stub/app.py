@@ -1,15 +1,16 @@
-"""The stub application: soldiers, their scene graphs, the server connection and the frame loop.
+"""The stub application: kinds of soldier, their scene graphs, the frame loop; a source moves the soldiers.
 
-One :class:`StubApp` ties the pieces of ``ttes stub`` together, window or not:
+One :class:`StubApp` ties the pieces of an image generator together, window or not:
 
 * kinds of soldier (figure + weapon), each loaded from TIPS files (``LoadTIPSFile``), with its articulation
   file written and read back to build the update table (section 3.7), its :class:`EntityLayout` and
   :class:`Crowd` (the per-soldier scene graphs) and an offline poser;
-* the :class:`SimSoldiers` (slots 0, 1, 2 ...) and the keyboard controller;
-* optionally a :class:`JackProc`: each slot is bound to a server soldier (those the start-up JCL created,
-  then CREATE_SOLDIER), the slot's changed requests go out once a frame as one batch, and the joint updates
-  that arrived are copied into the crowds through each wire table's binding. Slots without a server soldier
-  are posed offline.
+* the soldier slots (:class:`SimSoldiers`), their kind and look, and the keyboard controller;
+* a :class:`SoldierSource` that moves the soldiers each frame and talks to the server about them: the
+  stub's own soldiers (:class:`client_stub.stub.live.LiveSoldiers`: behaviours, keys, a ``JackProc``) or a
+  DIS replay (:class:`client_stub.dis.soldiers.DisSoldiers`). Through the source's link the joint updates
+  that arrived are copied into the crowds by each wire table's binding; slots without a server soldier are
+  posed offline.
 
 :meth:`StubApp.frame` advances everything by ``dt``; :meth:`StubApp.draw` updates the renderer.
 """
@@ -21,10 +22,13 @@ import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from client_stub.artic import (
+from client_stub.link.buffer import UpdateBatch
+from client_stub.link.client import LinkError
+from client_stub.stub.artic import (
     TableBinding,
     articulation,
     bind_table,
@@ -32,20 +36,22 @@ from client_stub.artic import (
     update_table_for,
     write_artic,
 )
-from client_stub.camera import CameraState, camera_pose
-from client_stub.jack import JackError, JackProc, UpdateBatch
-from client_stub.keys import StubController
-from client_stub.offline import OfflinePoser
-from client_stub.scene_graph import Crowd, EntityLayout, FigureGraph
-from client_stub.simsoldier import Behaviour, Force, SimSoldiers
-from client_stub.terrain import Terrain
-from client_stub.tips import TipsFigure, load_tips
+from client_stub.stub.camera import CameraState, camera_pose
+from client_stub.stub.keys import StubController
+from client_stub.stub.offline import OfflinePoser
+from client_stub.stub.scene_graph import Crowd, EntityLayout, FigureGraph
+from client_stub.stub.simsoldier import Force, SimSoldiers
+from client_stub.stub.terrain import Terrain
+from client_stub.stub.tips import TipsFigure, load_tips
 from protocol import coords
-from protocol.entity import Appearance, WeaponState
 from protocol.update_table import UpdateTable
 
+if TYPE_CHECKING:
+    from client_stub.link.api import Link
+    from client_stub.stub.render import StubRenderer
+
 log = logging.getLogger("ttes.stub")
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parent.parent / "data"
 DEFAULT_FIGURE = "DI.fig"
 WEAPONS = {Force.FRIENDLY: "M16.fig", Force.OPPOSING: "AK_47.fig"}
 
@@ -63,19 +69,57 @@ class Kind:
     bindings: dict[int, TableBinding] = field(default_factory=dict)  # wire table id -> binding
 
 
+class SoldierSource(Protocol):
+    """Where a :class:`StubApp`'s soldiers come from, frame by frame."""
+
+    @property
+    def link(self) -> Link | None:
+        """The server link whose joint updates pose the soldiers bound to server soldiers (None: offline)."""
+        ...
+
+    def step(self, app: StubApp, dt: float) -> None:
+        """Move ``app.soldiers`` by ``dt``, add or hide soldiers, tell the server (LinkError: link lost)."""
+        ...
+
+    def added(self, app: StubApp, slot: int) -> None:
+        """A soldier the keys added in ``slot``."""
+        ...
+
+    def refuse_key(self, key: str) -> str | None:
+        """A message when this source does not let ``key`` through to the keyboard controller."""
+        ...
+
+    def camera_pose(self, app: StubApp) -> np.ndarray | None:
+        """The camera this source wants (None: the keyboard's camera)."""
+        ...
+
+    def lose_server(self) -> None:
+        """The link is gone: go on without it."""
+        ...
+
+    def close(self) -> None: ...
+
+
 class StubApp:
-    """The stub's state and per-frame work (see the module docstring)."""
+    """The stub's state and per-frame work (see the module docstring); ``source`` defaults to the stub's own
+    soldiers without a server."""
 
     def __init__(
         self,
         terrain: Terrain,
+        source: SoldierSource | None = None,
         *,
         data_dir: str | os.PathLike[str] = DATA,
         artic_dir: str | os.PathLike[str] | None = None,
         capacity: int = 16,
         max_soldiers: int = 64,
     ) -> None:
+        if source is None:
+            from client_stub.stub.live import LiveSoldiers
+
+            source = LiveSoldiers()
         self.terrain = terrain
+        self.source = source
         self.data_dir = Path(data_dir)
         self.artic_dir = Path(artic_dir) if artic_dir else Path(tempfile.gettempdir()) / "ttes-stub"
         self.soldiers = SimSoldiers(terrain, capacity)
@@ -85,12 +129,16 @@ class StubApp:
         self._kind_of_files: dict[tuple[str, str], int] = {}
         self._tips: dict[str, TipsFigure] = {}
         self.slot_kind = np.full(capacity, -1, np.int64)
+        self.look = np.zeros(capacity, np.int64)  # slot -> the renderer's colour key (a force, or a DIS look)
         self.server_of = np.full(capacity, -1, np.int64)  # slot -> server soldier index
         self.slot_of_server: dict[int, int] = {}
         self._slot_by_server = np.full(0, -1, np.int64)  # the same map as an array, for whole batches
-        self.jack: JackProc | None = None
-        self.renderer = None
+        self.renderer: StubRenderer | None = None
         self.time = 0.0
+
+    @property
+    def link(self) -> Link | None:
+        return self.source.link
 
     # -- kinds -----------------------------------------------------------------------------------------------
 
@@ -122,18 +170,34 @@ class StubApp:
         self._kind_of_files[key] = len(self.kinds) - 1
         return len(self.kinds) - 1
 
-    def _grow(self) -> None:
+    def binding(self, kind: int, wire: UpdateTable) -> TableBinding:
+        """The binding of a server update table to our kind's table (by entry name; made on first use)."""
+        k = self.kinds[kind]
+        if wire.table_id not in k.bindings:
+            binding = bind_table(k.table, wire)
+            if not len(binding.dof_dst):
+                log.warning("update table %d shares no joint with %s: the stub poses these soldiers itself",
+                            wire.table_id, k.figure)  # fmt: skip
+            elif not binding.agrees:
+                log.warning("update table %d differs from ours (missing %s)", wire.table_id, binding.missing)
+            k.bindings[wire.table_id] = binding
+        return k.bindings[wire.table_id]
+
+    def grow(self) -> None:
+        """Per-slot arrays as long as the soldiers' capacity."""
         cap = self.soldiers.capacity
         if len(self.slot_kind) < cap:
             extra = cap - len(self.slot_kind)
             self.slot_kind = np.concatenate([self.slot_kind, np.full(extra, -1, np.int64)])
+            self.look = np.concatenate([self.look, np.zeros(extra, np.int64)])
             self.server_of = np.concatenate([self.server_of, np.full(extra, -1, np.int64)])
         for k in self.kinds:
             k.crowd.grow(cap)
 
-    def _set_kind(self, slot: int, kind: int) -> None:
+    def set_kind(self, slot: int, kind: int, *, reactivate: bool = False) -> None:
+        """``slot`` shows a soldier of ``kind`` (``reactivate``: also when it already was, but hidden)."""
         old = int(self.slot_kind[slot])
-        if old == kind:
+        if old == kind and not reactivate:
             return
         if old >= 0:
             self.kinds[old].crowd.active[slot] = False
@@ -141,23 +205,32 @@ class StubApp:
         self.kinds[kind].crowd.grow(self.soldiers.capacity)
         self.kinds[kind].crowd.active[slot] = True
 
+    def hide(self, slot: int) -> None:
+        """The soldier of ``slot`` is gone (its slot may come back)."""
+        self.soldiers.alive[slot] = False
+        kind = int(self.slot_kind[slot])
+        if kind >= 0:
+            self.kinds[kind].crowd.active[slot] = False
+
     # -- soldiers --------------------------------------------------------------------------------------------
 
     def add_soldier(self, xy: np.ndarray | tuple[float, float], heading: float = 0.0, **kw: object) -> int:
-        """A SimSoldier (keywords of :meth:`SimSoldiers.add`), its kind by force, its server soldier."""
+        """A SimSoldier (keywords of :meth:`SimSoldiers.add`), its kind by force; the source hears of it."""
         slot = self.soldiers.add(xy, heading, **kw)  # type: ignore[arg-type]
         self._place(slot)
         return slot
 
     def _place(self, slot: int) -> None:
-        self._grow()
+        self.grow()
         force = Force(int(self.soldiers.force[slot]))
-        weapon = WEAPONS[force]
-        self._set_kind(slot, self.kind(DEFAULT_FIGURE, weapon))
-        if self.jack is not None and self.jack.jackready:
-            self._bind_server(slot, weapon)
+        self.look[slot] = int(force)
+        self.set_kind(slot, self.kind(DEFAULT_FIGURE, WEAPONS[force]))
+        self.source.added(self, slot)
 
     def handle_key(self, key: str) -> str | None:
+        refused = self.source.refuse_key(key)
+        if refused is not None:
+            return refused
         before = self.soldiers.count
         message = self.controller.handle(key)
         for slot in range(before, self.soldiers.count):  # key 'a' added soldiers
@@ -166,60 +239,23 @@ class StubApp:
 
     # -- the server ------------------------------------------------------------------------------------------
 
-    def connect(
-        self, jack: JackProc, ready_timeout: float = 30.0, soldierprefix: str = "soldier_low"
-    ) -> bool:
-        """Start Jack (the start-up JCL), wait for READY, bind every slot to a server soldier, subscribe."""
-        self.jack = jack
-        jack.start(soldierprefix)
-        if not jack.wait_ready(ready_timeout):
-            log.warning(
-                "server not ready after %.0f s: soldiers stay offline (%s)", ready_timeout, jack.failure
-            )
-            return False
-        for slot in range(self.soldiers.count):
-            self._bind_server(slot, WEAPONS[Force(int(self.soldiers.force[slot]))])
-        return True
-
-    def _bind_server(self, slot: int, weapon: str) -> None:
-        """Give ``slot`` a server soldier: a free one from READY, else CREATE_SOLDIER."""
-        jack = self.jack
-        if jack is None or self.server_of[slot] >= 0:
-            return
-        free = sorted(set(jack.ready_soldiers) - set(self.slot_of_server))
-        try:
-            if free:
-                index = free[0]
-                js = jack.soldier(index, jack.ready_soldiers[index])
-            else:
-                try:
-                    js = jack.create_soldier(DEFAULT_FIGURE, weapon, timeout=5.0)
-                except JackError:
-                    js = jack.create_soldier(DEFAULT_FIGURE, "AK_47.fig", timeout=5.0)
-        except JackError as exc:
-            log.warning("soldier %d stays offline: %s", slot, exc)
-            return
-        wire = jack.tables.get(js.updatetable)
-        if wire is None:
-            log.warning("soldier %d: update table %d unknown; offline", slot, js.updatetable)
-            return
-        kind = self.kind(wire.figure, wire.weapon)
-        k = self.kinds[kind]
-        if wire.table_id not in k.bindings:
-            binding = bind_table(k.table, wire)
-            if not binding.agrees:
-                log.warning("update table %d differs from ours (missing %s)", wire.table_id, binding.missing)
-            k.bindings[wire.table_id] = binding
-        self._set_kind(slot, kind)
-        self.server_of[slot] = js.soldiernum
-        self.slot_of_server[js.soldiernum] = slot
-        if js.soldiernum >= len(self._slot_by_server):
-            grown = np.full(max(js.soldiernum + 1, 2 * len(self._slot_by_server), 16), -1, np.int64)
+    def map_server(self, slot: int, index: int) -> None:
+        """Slot ``slot`` shows server soldier ``index``: its joint updates pose it from now on."""
+        self.server_of[slot] = index
+        self.slot_of_server[index] = slot
+        if index >= len(self._slot_by_server):
+            grown = np.full(max(index + 1, 2 * len(self._slot_by_server), 16), -1, np.int64)
             grown[: len(self._slot_by_server)] = self._slot_by_server
             self._slot_by_server = grown
-        self._slot_by_server[js.soldiernum] = slot
-        self.soldiers.dirty[slot] = True
-        jack.subscribe([js.soldiernum])
+        self._slot_by_server[index] = slot
+
+    def lose_server(self, exc: Exception) -> None:
+        """The server went away: the soldiers go on, posed by the stub."""
+        log.warning("server connection lost: %s; the stub poses the soldiers from now on", exc)
+        self.source.lose_server()
+        self.server_of[:] = -1
+        self.slot_of_server.clear()
+        self._slot_by_server[:] = -1
 
     def _apply_updates(self, batches: list[UpdateBatch]) -> None:
         for batch in batches:
@@ -251,30 +287,22 @@ class StubApp:
     # -- per frame -------------------------------------------------------------------------------------------
 
     def frame(self, dt: float) -> None:
-        """Advance the soldiers, talk to the server, update every soldier's scene graph."""
+        """The source moves the soldiers and talks to the server; the server's poses and the offline poser's
+        go into every live soldier's scene graph."""
         self.time += dt
+        try:
+            self.source.step(self, dt)
+            self.grow()
+            link = self.source.link
+            if link is not None:
+                self._apply_updates(link.swap())
+        except LinkError as exc:
+            self.lose_server(exc)
         s = self.soldiers
-        s.step(dt)
-        self._grow()
         n = s.count
-        slots = np.arange(n)
-        requests = s.requests()
-        jack = self.jack
-        if jack is not None and jack.connected:
-            on_server = self.server_of[requests["index"]] >= 0
-            out = requests[on_server]
-            out["index"] = self.server_of[out["index"]]
-            try:
-                jack.send_requests(out)
-                self._apply_updates(jack.swap())
-            except JackError as exc:
-                log.warning("server connection lost: %s; soldiers continue offline", exc)
-                self.server_of[:] = -1
-                self.slot_of_server.clear()
-                self._slot_by_server[:] = -1
-                self.jack = None
+        slots = np.flatnonzero(s.alive[:n])
         for kind_id, k in enumerate(self.kinds):
-            rows = slots[self.slot_kind[:n] == kind_id]
+            rows = slots[self.slot_kind[slots] == kind_id]
             if not len(rows):
                 continue
             k.crowd.set_entity(rows, s.entity_matrices(rows))
@@ -285,52 +313,29 @@ class StubApp:
                 )
 
     def draw(self) -> None:
-        """Hand the soldiers' world matrices and the camera to the renderer."""
+        """Hand the live soldiers' world matrices (by kind and look) and the camera to the renderer."""
         r = self.renderer
         if r is None:
             return
         n = self.soldiers.count
-        slots = np.arange(n)
+        slots = np.flatnonzero(self.soldiers.alive[:n])
         for kind_id, k in enumerate(self.kinds):
-            for force in (Force.FRIENDLY, Force.OPPOSING):
-                rows = slots[(self.slot_kind[:n] == kind_id) & (self.soldiers.force[:n] == force)]
-                if not len(rows) and (kind_id, int(force)) not in r.soldiers:
-                    continue
-                meshes = r.soldier_meshes(kind_id, k.layout, force)
+            mine = slots[self.slot_kind[slots] == kind_id]
+            looks = set(self.look[mine].tolist()) | {key for kid, key in r.soldiers if kid == kind_id}
+            for look in sorted(looks):
+                rows = mine[self.look[mine] == look]
+                meshes = r.soldier_meshes(kind_id, k.layout, look)
                 meshes.update(k.crowd.world(rows) if len(rows) else np.zeros((0, k.layout.nnodes, 4, 4)))
         r.set_camera(self.camera_pose())
 
     def camera_pose(self) -> np.ndarray:
+        wanted = self.source.camera_pose(self)
+        if wanted is not None:
+            return wanted
         s = self.soldiers
         cur = self.controller.current
         feet, heading = (s.position[cur], float(s.heading[cur])) if cur < s.count else (np.zeros(3), 0.0)
         return camera_pose(self.camera, feet, heading, self.terrain.bounds)
 
     def close(self) -> None:
-        if self.jack is not None:
-            self.jack.quit()
-            self.jack = None
-
-
-def populate_demo(app: StubApp) -> None:
-    """The seed's start (4.1): soldier 0 standing in the middle of the village, soldier 1 walking a square,
-    soldier 2 a circle; then friendly soldiers kneeling and prone, and an opposing group (Figure 8)."""
-    t = app.terrain
-    centre = t.landmark("centre")
-    square = t.landmarks["square"]
-    circle = t.landmarks["circle"]
-    groups = t.landmarks["groups"]
-    fr, op = np.asarray(groups["friendly"]), np.asarray(groups["opposing"])
-    app.add_soldier(centre, 0.0)
-    app.add_soldier(square["centre"], 0.0, speed=1.3, behaviour=Behaviour.SQUARE, size=square["side"])
-    app.add_soldier(circle["centre"], 90.0, speed=1.2, behaviour=Behaviour.CIRCLE, size=circle["radius"])
-    app.add_soldier(fr + np.array([-3.0, 0.0]), 20.0, appearance=Appearance.KNEEL, weapon=WeaponState.FIRING)
-    app.add_soldier(fr + np.array([3.0, -2.0]), 10.0, appearance=Appearance.PRONE, weapon=WeaponState.FIRING)
-    opposing = dict(force=Force.OPPOSING)
-    app.add_soldier(op + np.array([-4.0, 0.0]), 200.0, weapon=WeaponState.FIRING, **opposing)
-    app.add_soldier(op + np.array([0.0, 2.0]), 180.0, appearance=Appearance.KNEEL, **opposing)
-    app.add_soldier(op + np.array([4.0, 0.0]), 170.0, appearance=Appearance.PRONE, **opposing)
-    app.add_soldier(
-        op + np.array([0.0, -8.0]), 180.0, speed=3.6, behaviour=Behaviour.SQUARE, size=12.0, **opposing
-    )
-    app.add_soldier(op + np.array([7.0, -3.0]), 0.0, appearance=Appearance.DEAD, **opposing)
+        self.source.close()

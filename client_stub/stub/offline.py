@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from client_stub.scene_graph import Crowd, FigureGraph
+from client_stub.stub.scene_graph import Crowd, FigureGraph
 from peabody.values import rot_x
 from protocol import coords
 from protocol.entity import Appearance, WeaponState

@@ -1,10 +1,10 @@
 """``ttes loadtest``: N soldiers over C connections, a realistic DIS-rate mix, and what the server delivers.
 
-One trio loop runs C :class:`~client_stub.loadtest_client.LoadClient` connections (each creates, subscribes
+One trio loop runs C :class:`~client_stub.loadtest.client.LoadClient` connections (each creates, subscribes
 to and drives its share of the soldiers) and the *driver*, which steps the :class:`MixDriver` at
 ``step_hz`` (a DIS gateway's granularity), sends the requests it decides, marks latency probes and samples
-CPU. :class:`~client_stub.loadtest_stats.Tracker` turns what arrives into a recording; the figures of the
-steady-state window (after ``warmup_s``) come from :func:`~client_stub.loadtest_stats.summarise`.
+CPU. :class:`~client_stub.loadtest.stats.Tracker` turns what arrives into a recording; the figures of the
+steady-state window (after ``warmup_s``) come from :func:`~client_stub.loadtest.stats.summarise`.
 
 ``run_ramp`` keeps the connections and grows N stage by stage (×``ramp_factor``) until a stage misses the
 criteria (delivered ≥ ``min_delivered_pct`` of expected and p99 latency ≤ ``max_p99_ms``), and reports the
@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 import trio
 
-from client_stub.loadtest_client import LoadClient, LoadError, split_rows
-from client_stub.loadtest_mix import MOVING, MixDriver
-from client_stub.loadtest_server import SpawnedServer, cpu_seconds, self_cpu_seconds
-from client_stub.loadtest_stats import Tracker, series, summarise
+from client_stub.link.spawn import ServerProcess, cpu_seconds, self_cpu_seconds, spawn_server
+from client_stub.loadtest.client import LoadClient, LoadError, split_rows
+from client_stub.loadtest.mix import MOVING, MixDriver
+from client_stub.loadtest.stats import Tracker, series, summarise
 
 MAX_STAGES = 40
 
@@ -86,9 +86,13 @@ class LoadTestResult:
 class LoadSession:
     """The connections, the mix driver and the tracker of one run (or one ramp)."""
 
-    def __init__(self, cfg: LoadTestConfig, server_cpu: Any = None) -> None:
+    def __init__(self, cfg: LoadTestConfig, server_cpu: Any = None, *, buffer_updates: bool = False) -> None:
+        """``buffer_updates``: the clients keep decoded poses for a renderer (see :class:`LoadClient`)."""
         self.cfg = cfg
-        self.clients = [LoadClient(k, self._on_updates, decode=cfg.decode) for k in range(cfg.clients)]
+        self.clients = [
+            LoadClient(k, self._on_updates, decode=cfg.decode, buffer_updates=buffer_updates)
+            for k in range(cfg.clients)
+        ]
         self.driver = MixDriver(0, mix=cfg.mix, seed=cfg.seed, now=0.0)
         nsub = cfg.clients
         self.tracker = Tracker(cfg.rate_hz, nsub)
@@ -106,10 +110,13 @@ class LoadSession:
         slots = self.slot_of[idx]
         self.tracker.batch(t - self.t0, conn, tick, slots[slots >= 0], nbytes)
 
-    async def connect(self, host: str, port: int) -> None:
+    async def connect(self, nursery: trio.Nursery, host: str, port: int) -> None:
+        """Open every connection (their links run in ``nursery``) and wait for READY on each."""
         self.t0 = trio.current_time()
         for c in self.clients:
-            await c.connect(host, port, self.cfg.timeout_s)
+            await c.connect(nursery, host, port, self.cfg.timeout_s)
+        for c in self.clients:
+            await c.wait_ready(self.cfg.timeout_s)
 
     async def grow(self, n: int) -> None:
         """Create soldiers up to ``n`` (spread over the connections), subscribe, send the first requests."""
@@ -229,11 +236,7 @@ async def _run(cfg: LoadTestConfig, host: str, port: int, server_cpu: Any, remov
     session = LoadSession(cfg, server_cpu)
     out: dict[str, Any] = {}
     async with trio.open_nursery() as nursery:
-        await session.connect(host, port)
-        for c in session.clients:
-            nursery.start_soon(c.reader)
-        for c in session.clients:
-            await c.wait_ready(cfg.timeout_s)
+        await session.connect(nursery, host, port)
         try:
             if cfg.ramp:
                 out = await _ramp(cfg, session)
@@ -312,14 +315,19 @@ async def _ramp(cfg: LoadTestConfig, session: LoadSession) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def server_args(tick_hz: float, throttle: float | None) -> list[str]:
+    """The spawned server's command line for a load test: its tick rate and throttle."""
+    return ["--tick-hz", f"{tick_hz:g}", *(["--throttle", f"{throttle:g}"] if throttle is not None else [])]
+
+
 def run_loadtest(cfg: LoadTestConfig) -> dict[str, Any]:
     """Run a load test (or a ramp) as configured; returns the JSON-ready result."""
     cfg.check()
-    server: SpawnedServer | None = None
+    server: ServerProcess | None = None
     try:
         if cfg.spawn_server:
-            server = SpawnedServer(tick_hz=cfg.rate_hz, throttle=cfg.throttle, data=cfg.server_data)
-            host, port = server.wait_ready()
+            server = spawn_server(server_args(cfg.rate_hz, cfg.throttle), data=cfg.server_data)
+            host, port = server.host, server.port
             server_cpu = server.cpu_seconds
         else:
             host, port = cfg.host, cfg.port

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from client_stub.tips import TipsFigure
+from client_stub.stub.tips import TipsFigure
 from protocol.update_table import DEFAULT_DOF_BITS, DofRange, FigureEntry, JointEntry, UpdateTable
 
 MAGIC = "ttes-artic 1"

@@ -18,7 +18,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from client_stub.terrain import Terrain
+from client_stub.stub.terrain import Terrain
 from protocol import coords
 from protocol.entity import ENTITY_REQUEST_DTYPE, Appearance, WeaponState
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from client_stub.tips import TipsFigure, TipsGeometry
+from client_stub.stub.tips import TipsFigure, TipsGeometry
 from peabody.fk import dof_transforms
 from protocol import coords
 

@@ -1,9 +1,9 @@
 """The stub's keyboard (seed 002, 4.2), as a pure mapping from keys to soldier and camera changes.
 
 No window is needed: :meth:`StubController.handle` takes a key name (``"1"``, ``"n"``, ``"UP"``, ...) and
-changes the :class:`~client_stub.simsoldier.SimSoldiers` (whose next entity requests carry the change) and
-the :class:`~client_stub.camera.CameraState`; it returns the line to show, if any. The seed's keys come
-first; the View menu of 1994's ``pickfly`` is keys ``b`` / ``c`` / ``f`` / ``v`` here, and fly mode moves
+changes the :class:`~client_stub.stub.simsoldier.SimSoldiers` (whose next entity requests carry the change)
+and the :class:`~client_stub.stub.camera.CameraState`; it returns the line to show, if any. The seed's keys
+come first; the View menu of 1994's ``pickfly`` is keys ``b`` / ``c`` / ``f`` / ``v`` here, and fly mode moves
 with ``w`` ``s`` ``q`` ``e`` ``r`` ``g`` (our additions, listed by ``?`` too).
 """
 
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from client_stub.camera import CameraState, View
-from client_stub.simsoldier import Force, SimSoldiers
+from client_stub.stub.camera import CameraState, View
+from client_stub.stub.simsoldier import Force, SimSoldiers
 from protocol.entity import Appearance, WeaponState
 
 HEADING_STEP = 10.0

@@ -3,7 +3,7 @@
 Performer drew each soldier's joint DCS tree; here every body part (segment) of a kind of soldier is one
 pyrender mesh drawn once per visible soldier with per-instance poses (``Primitive.poses``, a GL instance
 buffer), so the draw calls do not grow with the number of soldiers. The poses come from the scene graph's
-world matrices (:class:`~client_stub.scene_graph.Crowd`) every frame and are uploaded into the instance
+world matrices (:class:`~client_stub.stub.scene_graph.Crowd`) every frame and are uploaded into the instance
 buffers just before drawing (pyrender uploads them only once by itself).
 
 Friendly and opposing forces differ by uniform colour: the figure's dominant surface colour (its uniform) is
@@ -21,8 +21,8 @@ import numpy as np
 import pyrender
 import trimesh
 
-from client_stub.scene_graph import EntityLayout, SegmentGeometry
-from client_stub.simsoldier import Force
+from client_stub.stub.scene_graph import EntityLayout, SegmentGeometry
+from client_stub.stub.simsoldier import Force
 
 FORCE_UNIFORMS: dict[int, tuple[float, float, float] | None] = {
     Force.FRIENDLY: None,  # the figure's own olive drab
@@ -158,7 +158,8 @@ def terrain_nodes(scene: pyrender.Scene, meshes: dict[str, trimesh.Trimesh]) -> 
 
 
 class StubRenderer:
-    """The pyrender scene: terrain, sun, camera and the soldiers' instanced meshes."""
+    """The pyrender scene: terrain, sun, camera and the soldiers' instanced meshes (a
+    :class:`client_stub.renderer.Renderer`)."""
 
     def __init__(
         self, width: int = 640, height: int = 480, offscreen: bool = True, yfov_deg: float = 50.0
@@ -176,7 +177,7 @@ class StubRenderer:
         self.soldiers: dict[tuple[int, int], SoldierMeshes] = {}
         self._offscreen = pyrender.OffscreenRenderer(width, height) if offscreen else None
 
-    def add_terrain(self, meshes: dict[str, trimesh.Trimesh]) -> None:
+    def set_terrain(self, meshes: dict[str, trimesh.Trimesh]) -> None:
         terrain_nodes(self.scene, meshes)
 
     def soldier_meshes(self, kind: int, layout: EntityLayout, force: int) -> SoldierMeshes:

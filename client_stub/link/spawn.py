@@ -1,9 +1,10 @@
-"""``ttes loadtest --spawn-server``: a ``ttes server`` child on loopback, and CPU accounting from ``/proc``.
+"""The one server spawner: ``ttes server`` as a child process on loopback, and CPU accounting from ``/proc``.
 
-The child runs ``python -m ttes server --host 127.0.0.1 --port 0 --json`` and we read its JSON ready line
-(``{"event": "ready", "host": ..., "port": ...}``) for the address, so no port is ever guessed. Its log
-(stderr) goes to a temporary file whose tail explains a failed start. CPU time comes from
-``/proc/PID/stat`` (utime + stime), so no extra dependency is needed; off Linux it is unknown (nan).
+The child runs ``python -m ttes server --host 127.0.0.1 --port 0 --json ARGS`` and we read its JSON ready
+line (``{"event": "ready", "host": ..., "port": ...}``) for the address, so no port is ever guessed. What the
+server needs (``--data-dir``, ``--synthetic``, ``--tick-hz`` ...) goes through its command line: the spawner
+knows nothing of the server's data layout. Its log (stderr) goes to a temporary file whose tail explains a
+failed start. CPU time comes from ``/proc/PID/stat`` (utime + stime); off Linux it is unknown (nan).
 """
 
 from __future__ import annotations
@@ -13,20 +14,29 @@ import math
 import os
 import selectors
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-STARTUP_SCRIPT = "jack-ttes-soldier_low.jcl"
-SEARCH_DIRS = ("", "figures", "channelsets", "posture_graphs")  # the server's JCL search path
+from client_stub.link.client import LinkError
+
+ROOT = Path(__file__).resolve().parents[2]  # where ``python -m ttes`` is importable from
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
 
-class SpawnError(RuntimeError):
+class SpawnError(LinkError):
     """The server child did not start (its log's tail is in the message)."""
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port free on ``host`` right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
 
 
 def cpu_seconds(pid: int) -> float:
@@ -47,43 +57,22 @@ def self_cpu_seconds() -> float:
     return t.user + t.system
 
 
-def has_real_data(root: Path = ROOT) -> bool:
-    """Does the default data dir hold the start-up script (the real motion library)?"""
-    return any((root / d / STARTUP_SCRIPT).is_file() for d in SEARCH_DIRS)
+class ServerProcess:
+    """A ``ttes server`` child process (see the module docstring); use as a context manager."""
 
-
-class SpawnedServer:
-    """A ``ttes server`` child process; use as a context manager."""
-
-    def __init__(
-        self,
-        *,
-        tick_hz: float = 30.0,
-        throttle: float | None = 0.0,
-        data: str = "auto",
-        extra: list[str] | None = None,
-        timeout: float = 90.0,
-    ) -> None:
-        if data not in ("auto", "synthetic", "default"):
-            raise ValueError(f"data must be auto, synthetic or default, not {data!r}")
-        self.synthetic = data == "synthetic" or (data == "auto" and not has_real_data())
-        cmd = [sys.executable, "-m", "ttes", "server", "--host", "127.0.0.1", "--port", "0", "--json"]
-        cmd += ["--tick-hz", f"{tick_hz:g}"]
-        if throttle is not None:
-            cmd += ["--throttle", f"{throttle:g}"]
-        if self.synthetic:
-            cmd.append("--synthetic")
-        cmd += list(extra or [])
-        self.cmd = cmd
+    def __init__(self, args: Sequence[str] = (), *, timeout: float = 90.0) -> None:
+        self.cmd = [sys.executable, "-m", "ttes", "server", "--host", "127.0.0.1", "--port", "0", "--json"]
+        self.cmd += list(args)
+        self.synthetic = "--synthetic" in args
         self.timeout = timeout
         self.host = "127.0.0.1"
         self.port = 0
         self.ready: dict = {}
-        self._log = tempfile.TemporaryFile(mode="w+b", prefix="ttes-loadtest-server-")  # noqa: SIM115
+        self._log = tempfile.TemporaryFile(mode="w+b", prefix="ttes-server-")  # noqa: SIM115 (closed in close)
         env = dict(
             os.environ, PYTHONPATH=os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)
         )
-        self.proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=self._log)
+        self.proc = subprocess.Popen(self.cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=self._log)
         self.pid = self.proc.pid
 
     def wait_ready(self) -> tuple[str, int]:
@@ -122,6 +111,7 @@ class SpawnedServer:
         return cpu_seconds(self.pid)
 
     def log_tail(self, chars: int = 1500) -> str:
+        """The end of what the server wrote to stderr."""
         try:
             self._log.seek(0, os.SEEK_END)
             size = self._log.tell()
@@ -131,7 +121,7 @@ class SpawnedServer:
             return ""
 
     def stop(self, timeout: float = 10.0) -> int | None:
-        """SIGTERM (the server says GOODBYE and stops), then SIGKILL if it lingers."""
+        """SIGTERM (the server says GOODBYE and stops), then SIGKILL if it lingers; returns the exit code."""
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
             try:
@@ -147,8 +137,30 @@ class SpawnedServer:
         self.stop()
         self._log.close()
 
-    def __enter__(self) -> SpawnedServer:
+    def __enter__(self) -> ServerProcess:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def spawn_server(args: Sequence[str] = (), *, data: str = "auto", timeout: float = 90.0) -> ServerProcess:
+    """A ready ``ttes server`` child. ``data``: ``default`` (what ``args`` say), ``synthetic`` (its generated
+    motion library), ``auto`` (the default, else the synthetic library when the default does not start)."""
+    if data not in ("auto", "synthetic", "default"):
+        raise ValueError(f"data must be auto, synthetic or default, not {data!r}")
+    args = [*args, "--synthetic"] if data == "synthetic" else list(args)
+    server = ServerProcess(args, timeout=timeout)
+    try:
+        server.wait_ready()
+    except SpawnError:
+        server.close()
+        if data != "auto":
+            raise
+        server = ServerProcess([*args, "--synthetic"], timeout=timeout)
+        try:
+            server.wait_ready()
+        except SpawnError:
+            server.close()
+            raise
+    return server

@@ -15,8 +15,8 @@ from typing import TextIO
 
 import trio
 
-from client_stub.replay.replayer import Replayer
-from client_stub.replay.sink import ServerSink
+from client_stub.dis.replayer import Replayer
+from client_stub.dis.sink import ServerSink
 
 HOUSEKEEPING = 0.1  # s between steps when no PDU is due (timeouts, Fire reactions)
 
@@ -57,7 +57,7 @@ async def replay_to_server(
 ) -> dict[str, object]:
     """Run the replay to its end (forever with ``loop``); returns the replay's status.
 
-    ``drain`` (e.g. ``ServerLink.drain``) is awaited after each unlimited-speed chunk for back-pressure.
+    ``drain`` (e.g. ``Client.drain``) is awaited after each unlimited-speed chunk for back-pressure.
     ``finish`` removes every soldier at the end.
     """
     t0 = trio.current_time()

@@ -6,76 +6,19 @@ never collides with a soldier someone else drives. The weapon figure comes from 
 (``protocol.dis.RIFLE_FIGURES``); when the server's motion library has no figure set for it (its update tables
 say which it has) the first weapon it does have stands in, counted in ``stats["weapon_substituted"]``.
 
-Works with any link that has ``create``, ``remove``, ``send_requests``, ``subscribe``, ``tables``,
-``ready_soldiers`` and ``max_soldiers``: :class:`~client_stub.replay.link.ServerLink` (trio) or
-:class:`JackProcLink` (the stub's threaded :class:`~client_stub.jack.JackProc`).
+Works with any :class:`~client_stub.link.api.Link`: the trio-native client (replay, gateway) or the
+stub's threaded one.
 """
 
 from __future__ import annotations
 
-from typing import Protocol
-
 import numpy as np
 
-from client_stub.jack import JackProc, UpdateBatch
-from client_stub.replay.translator import Translation
+from client_stub.dis.translator import Translation
+from client_stub.link.api import Link
 from protocol.dis import RIFLE_FIGURES
-from protocol.events import CreateSoldier, RemoveSoldier
-from protocol.update_table import UpdateTable
 
 FIGURE = "DI.fig"
-
-
-class Link(Protocol):
-    tables: dict[int, UpdateTable]
-    ready_soldiers: dict[int, int]
-
-    @property
-    def max_soldiers(self) -> int: ...
-
-    def create(self, index: int, figure: str, weapon: str) -> int: ...
-
-    def remove(self, index: int) -> None: ...
-
-    def subscribe(self, indices: list[int] | np.ndarray) -> None: ...
-
-    def send_requests(self, rows: np.ndarray) -> None: ...
-
-
-class JackProcLink:
-    """The :class:`Link` calls on a connected :class:`JackProc` (pipelined creates: no waiting)."""
-
-    def __init__(self, jack: JackProc) -> None:
-        self.jack = jack
-
-    @property
-    def tables(self) -> dict[int, UpdateTable]:
-        return self.jack.tables
-
-    @property
-    def ready_soldiers(self) -> dict[int, int]:
-        return self.jack.ready_soldiers
-
-    @property
-    def max_soldiers(self) -> int:
-        return self.jack.accept.max_soldiers if self.jack.accept is not None else 0
-
-    def create(self, index: int, figure: str, weapon: str) -> int:
-        rid = self.jack._new_id()
-        self.jack.send(CreateSoldier(rid, figure, weapon, int(index)))
-        return rid
-
-    def remove(self, index: int) -> None:
-        self.jack.send(RemoveSoldier(int(index)))
-
-    def subscribe(self, indices: list[int] | np.ndarray) -> None:
-        self.jack.subscribe([int(i) for i in indices])
-
-    def send_requests(self, rows: np.ndarray) -> None:
-        self.jack.send_requests(rows)
-
-    def swap(self) -> list[UpdateBatch]:
-        return self.jack.swap()
 
 
 class ServerSink:

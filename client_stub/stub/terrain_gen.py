@@ -8,8 +8,8 @@ building** east of the square (where key ``a`` adds soldiers), walls, trees, and
 
 Everything is built in Performer axes (metres, +Z up, +Y north, the village centre at the origin) and
 written as binary glTF in glTF's own axes (+Y up, so ``(x, y, z)_glTF = (x, z, -y)_Performer``, which are
-Jack's axes); ``client_stub.terrain`` converts back. Landmarks (centre, office, walking paths, cameras) go
-to a JSON sidecar next to the mesh.
+Jack's axes); ``client_stub.stub.terrain`` converts back. Landmarks (centre, office, walking paths, cameras)
+go to a JSON sidecar next to the mesh.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ SEED = 1994
 HALF = 150.0  # the terrain spans [-HALF, HALF]^2 metres
 GRID = 3.0  # ground mesh spacing, metres
 STOREY = 3.0
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parent.parent / "data"
 DEFAULT_OUT = DATA / "village.glb"
 
 GRASS = (0.36, 0.47, 0.23)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from client_stub.app import StubApp
+from client_stub.stub.app import StubApp
 
 # (seconds into a 40 s tour, keys pressed then)
 TOUR: tuple[tuple[float, tuple[str, ...]], ...] = (
@@ -127,7 +127,7 @@ def run_headless(
             kwargs.update(codec="libx264", quality=7, macro_block_size=8, pixelformat="yuv420p")
         with imageio.get_writer(out, **kwargs) as writer:
             for f in frames:
-                writer.append_data(f)
+                writer.append_data(f)  # type: ignore[attr-defined]  # (imageio's stubs lack the v2 writer)
     if not video and frame is not None:
         imageio.imwrite(out, frame)
     return {
@@ -138,6 +138,6 @@ def run_headless(
         "wall_s": round(wall, 3),
         "render_fps": round(rendered / render_time, 2) if render_time > 0 else None,
         "soldiers": int(app.soldiers.count),
-        "server": app.jack is not None,
+        "server": app.link is not None,
         "last_frame_mean": None if frame is None else float(np.asarray(frame).mean()),
     }

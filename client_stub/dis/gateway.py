@@ -2,11 +2,12 @@
 
 What the 1994 TTES did on the exercise network: listen to DIS, keep one soldier per lifeform entity, and
 send Jack the posture and command tokens (seed 002, section 2). The translation is the replay's
-(:class:`~client_stub.replay.translator.DisTranslator`, :class:`~client_stub.replay.sink.ServerSink`); only
+(:class:`~client_stub.dis.translator.DisTranslator`, :class:`~client_stub.dis.sink.ServerSink`); only
 the source differs. Datagrams are read in bursts: after each wake-up every datagram already queued in the
 socket is taken without waiting (up to ``max_burst``) and the burst is decoded at once by the DIS library's
 vectorised decoder, so a flood costs one decode per burst, not one per datagram. Nothing a sender puts in a
-datagram stops the gateway: malformed, truncated, foreign and unknown PDUs are counted in :attr:`status`.
+datagram stops the gateway: malformed, truncated, foreign and unknown PDUs are counted in :attr:`status`
+(the decoder's own counters, added up burst after burst, and the gateway's).
 
 The socket is bound to one interface, loopback by default: ``0.0.0.0`` hears broadcasts on every interface;
 with ``group`` it joins that multicast group on ``interface``.
@@ -18,37 +19,20 @@ import contextlib
 import errno
 import logging
 import socket
+from collections import Counter
 from dataclasses import dataclass, field
 
 import trio
 
-from client_stub.replay.cursor import EntityFilter
-from client_stub.replay.sink import ServerSink
-from client_stub.replay.translator import DIS_TIMEOUT, DisTranslator, Translation
+from client_stub.dis.cursor import EntityFilter
+from client_stub.dis.sink import ServerSink
+from client_stub.dis.translator import DIS_TIMEOUT, DisTranslator, Translation
 from protocol.dis import DEFAULT_PORT, DisError, DisLog, LocalFrame, read_datagrams
 
 log = logging.getLogger("ttes.gateway")
 MAX_DATAGRAM = 65535
 HOUSEKEEPING = 0.1  # s between timeout / Fire-reaction checks when no datagram arrives
-_COUNTERS = (
-    "datagrams",
-    "bytes",
-    "bursts",
-    "max_burst",
-    "non_dis",
-    "pdus",
-    "entity_states",
-    "lifeforms",
-    "non_lifeforms",
-    "fire",
-    "detonation",
-    "other_pdus",
-    "unsupported_version",
-    "corrupt",
-    "filtered",
-    "decode_failures",
-    "receive_errors",
-)
+OWN_COUNTERS = ("bytes", "bursts", "max_burst", "filtered", "decode_failures", "receive_errors")
 
 
 @dataclass
@@ -92,12 +76,14 @@ class DisGateway:
 
     config: GatewayConfig = field(default_factory=GatewayConfig)
     translator: DisTranslator = field(init=False)
-    status: dict[str, int] = field(init=False)
+    status: Counter[str] = field(init=False)
     address: tuple[str, int] | None = None
 
     def __post_init__(self) -> None:
         self.translator = DisTranslator(self.config.origin, timeout=self.config.timeout)
-        self.status = dict.fromkeys(_COUNTERS, 0)
+        # the decoder's counters (datagrams, PDUs by type, problems) as it names them, then the gateway's own
+        self.status = Counter(read_datagrams([], 0.0).counters)
+        self.status.update(dict.fromkeys(OWN_COUNTERS, 0))
 
     # -- pure: a burst of datagrams ---------------------------------------------------------------
     def decode(self, datagrams: list[bytes], now: float) -> DisLog | None:
@@ -106,19 +92,16 @@ class DisGateway:
         if n == 0:
             return None
         st = self.status
-        st["datagrams"] += n
         st["bursts"] += 1
         st["max_burst"] = max(st["max_burst"], n)
         st["bytes"] += sum(len(d) for d in datagrams)
         try:
             got = read_datagrams(datagrams, now)
         except (DisError, ValueError, IndexError) as exc:  # never expected: the decoder reports issues itself
-            st["decode_failures"] += 1
+            st.update(datagrams=n, decode_failures=1)
             log.warning("burst of %d datagrams not decoded: %s", n, exc)
             return None
-        for k in ("non_dis", "pdus", "entity_states", "lifeforms", "non_lifeforms", "fire", "detonation",
-                  "other_pdus", "unsupported_version", "corrupt"):  # fmt: skip
-            st[k] += int(got.counters.get(k, 0))
+        st.update(got.counters)
         for issue in got.issues[:3]:
             log.debug("datagram %s: %s", issue.record, issue)
         return got

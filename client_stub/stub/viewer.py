@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from client_stub.app import StubApp
+from client_stub.stub.app import StubApp
 
 ARROWS = {"LEFT": "LEFT", "RIGHT": "RIGHT", "UP": "UP", "DOWN": "DOWN"}
 
@@ -21,7 +21,8 @@ def make_window(app: StubApp, width: int = 800, height: int = 600, fps: float = 
     import pyrender
     from pyglet.window import key as keys
 
-    if app.renderer is None:
+    stub_renderer = app.renderer
+    if stub_renderer is None:
         raise RuntimeError("StubApp has no renderer")
     configs = [
         pyglet.gl.Config(sample_buffers=1, samples=4, depth_size=24, double_buffer=True,
@@ -41,18 +42,18 @@ def make_window(app: StubApp, width: int = 800, height: int = 600, fps: float = 
     if window is None:
         raise RuntimeError("no OpenGL 4.1 window available")
     renderer = pyrender.Renderer(width, height)
-    scene = app.renderer.scene
+    scene = stub_renderer.scene
 
     @window.event
     def on_resize(w: int, h: int) -> None:
         fw, fh = window.get_framebuffer_size()
         renderer.viewport_width, renderer.viewport_height = fw, fh
-        app.renderer.camera.aspectRatio = fw / max(fh, 1)
+        stub_renderer.camera.aspectRatio = fw / max(fh, 1)
 
     @window.event
     def on_draw() -> None:
         window.clear()
-        app.renderer.upload()
+        stub_renderer.upload()
         renderer.render(scene, pyrender.RenderFlags.NONE)
 
     @window.event
