@@ -30,7 +30,7 @@ from authoring import ik
 from authoring.postures import leg, segment_heights
 from authoring.quality_frames import FigureSet, play
 from authoring.rifle_swap import _smooth_above
-from server.motion import quaternion
+from peabody import quaternion
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
