@@ -512,8 +512,9 @@ def held_rifle_targets(
 ) -> dict[str, np.ndarray]:
     """Slave site -> positions ``(n, 3)`` for a slave holding ``rifle`` (at root-site globals
     ``rifle_locations``) where the master holds its own: each palm on its rifle site (:data:`RIFLE_HOLDS`)
-    until ``release_frame`` (then the master's palm again), and the elbow goal moved by ``ELBOW_FOLLOW`` of
-    the palm's move, so that elbow and palm goals do not pull the arm against its limits."""
+    until ``release_frame`` (then easing onto the master's palm over ``RELEASE_FADE_FRAMES``: a step there
+    made the tracked wrist jump), and the elbow goal moved by ``ELBOW_FOLLOW`` of the palm's move, so that
+    elbow and palm goals do not pull the arm against its limits."""
     mk = pair.master_kin
     master = mk.site_globals(master_poses, master_locations)[..., :3, 3]
     kin = FigureKinematics(rifle)
@@ -522,8 +523,9 @@ def held_rifle_targets(
     for palm, site in RIFLE_HOLDS.items():
         target = sites[:, kin.site_names.index(site), :3, 3].copy()
         own = master[:, mk.site_names.index(palm)]
-        if release_frame is not None:
-            target[release_frame:] = own[release_frame:]
+        if release_frame is not None:  # eased over the fade of the arm goals, so the hand does not jump
+            u = np.clip((np.arange(len(target)) - release_frame) / RELEASE_FADE_FRAMES, 0.0, 1.0)[:, None]
+            target += u * u * (3.0 - 2.0 * u) * (own - target)
         out[palm] = target
         side = palm.split("_", 1)[0]
         for c in SLAVE_CONSTRAINTS:
