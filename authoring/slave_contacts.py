@@ -36,6 +36,7 @@ from server.motion.channelset import Channelset
 
 REST_CM = 2.0  # the master's kneecap this close to the ground: the slave's goes as low (full weight)
 REACH_CM = 6.0  # ... this far up: no goal
+DROP_FADE_CM = 0.3  # the legs' solve fades in as the body's lowering grows to this
 SIDES = ("left", "right")
 LEG_SEGMENTS = ("upper_leg", "lower_leg", "foot", "toes")
 
@@ -90,7 +91,7 @@ def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) 
     # slave rests on); the legs are solved again, so they do not count
     rest = [h for seg, h in segment_heights(kin, q, loc).items() if not seg.endswith(LEG_SEGMENTS)]
     drop = np.minimum(drop, np.maximum(0.0, np.min(rest, axis=0)))
-    if not any(w.any() for w in weight.values()):  # (blocked, a kneeling leg's toes still come down)
+    if not drop.any():
         return drop
     lowered = loc.copy()
     lowered[:, 1, 3] -= drop
@@ -111,6 +112,9 @@ def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) 
         kin, q, goals, lowered, iterations=60, damping=6.0, rest_pose=q, rest_gain=0.05, tolerance=0.02,
         max_dof_step=0.02,
     )  # fmt: skip
+    # frames not lowered keep their legs (so every clip through a posture where the body cannot go lower,
+    # CRAWL on its forearms, has the same legs there), the solve faded in as the lowering grows
+    pose = q + np.clip(drop / DROP_FADE_CM, 0.0, 1.0)[:, None] * (pose - q)
     bound = bind_channelset(slave, [figures.figures[stype]])
     bf = bound.figures[0]
     slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
