@@ -56,6 +56,7 @@ class TtesServer:
             config.data_dir, max_soldiers=config.max_soldiers, record_clips=config.record_clips
         )
         self.world.clock = self.request_time
+        self.world.soldiers.configure(tick_period=1.0 / config.tick_hz)  # the throttle caps a rate on it
         self._last_stamp = 0.0
         self.world.events.ready = self._on_ready
         self.world.events.soldier_created = self._on_created

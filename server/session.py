@@ -291,7 +291,7 @@ class Session:
             fset = m.table.fset[live]
             ids = np.array([s.table.table_id for s in self.world.sets], np.int64)[fset]
             soldiers = tuple(zip(live.tolist(), ids.tolist(), strict=True))
-        self.send(Ready(soldiers))
+        self.send(Ready(soldiers, self.config.tick_hz, self.world.settings.throttle))
         self.ready_sent = True
 
     def _permitted(self, ref: int | None, what: str) -> bool:

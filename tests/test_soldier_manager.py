@@ -293,7 +293,7 @@ def test_every_frame_mode_shows_each_frame_once(lib) -> None:
 
 
 def test_throttle_limits_updates_per_soldier(lib) -> None:
-    m, i = manager(lib, throttle=0.1)
+    m, i = manager(lib, throttle=0.1, tick_period=1 / 60)
     j = m.create_soldier(now=0.0)
     request(m, i, 0.0, speed=1.4)
     request(m, j, 0.05, KNEEL)
@@ -304,6 +304,17 @@ def test_throttle_limits_updates_per_soldier(lib) -> None:
     for s in (i, j):
         gaps = np.diff(sent[s])
         assert len(gaps) > 10 and gaps.min() >= 0.1 - 1e-9 and gaps.max() <= 0.1 + 1 / 60 + 1e-9
+
+
+@pytest.mark.parametrize(("throttle", "every"), [(0.04, 1), (1 / 30, 1), (0.0, 1), (0.06, 2), (0.1, 3)])
+def test_throttle_is_a_rate_cap_on_the_tick_grid(lib, throttle: float, every: int) -> None:
+    """Seed 002 3.6: 0.04 s means "at most 30 updates/s", so a 30 Hz server updates a walker every tick."""
+    m, i = manager(lib, throttle=throttle, tick_period=1 / 30)
+    request(m, i, 0.0, speed=1.4)
+    n = 90
+    counts = [len(u) for u in run(m, 0.0, (n - 1) / 30)]
+    assert len(counts) == n
+    assert counts == [1 if k % every == 0 else 0 for k in range(n)]
 
 
 def test_idle_soldiers_are_omitted_and_heading_only_resends_the_pose(lib) -> None:

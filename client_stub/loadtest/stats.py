@@ -254,9 +254,13 @@ def _round(x: float, nd: int = 3) -> float | None:
     return None if x is None or not math.isfinite(x) else round(float(x), nd)
 
 
-def summarise(arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nconn: int) -> dict:
+def summarise(
+    arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nconn: int, every: int = 1
+) -> dict:
     """The steady-state figures of the window ``[t0, t1)`` (see the module docstring). Counts are per
-    subscription: with every connection subscribed to every soldier, a mover counts once per connection."""
+    subscription: with every connection subscribed to every soldier, a mover counts once per connection.
+    ``every``: the server's ticks per update of one soldier (``protocol.events.ticks_per_update`` of READY's
+    ``tick_hz`` and ``throttle``): a steady mover is expected in one tick of ``every``."""
     dur = t1 - t0
     a = grid_offset(arr["row_time"], arr["row_tick"], rate, t0, t1)
     if math.isfinite(a):
@@ -270,7 +274,7 @@ def summarise(arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nco
         rows_in = int(sel.sum())
         lo = np.maximum(arr["ep_start"], t0)
         hi = np.minimum(arr["ep_end"], t1)
-        expected = int(grid_ticks(lo, hi, a, rate).sum())
+        expected = round(grid_ticks(lo, hi, a, rate).sum() / every)
         ticks = arr["row_tick"][sel]
         tick_span = int(ticks.max() - ticks.min() + 1) if len(ticks) else 0
     else:
@@ -314,7 +318,13 @@ def summarise(arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nco
 
 
 def series(
-    arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nconn: int, bin_s: float = 1.0
+    arr: dict[str, np.ndarray],
+    rate: float,
+    t0: float,
+    t1: float,
+    nconn: int,
+    bin_s: float = 1.0,
+    every: int = 1,
 ) -> dict:
     """Per-bin throughput (received vs expected steady-mover updates per second), probe latency p50/p99 and
     server CPU, for plotting. Times are seconds from ``t0``."""
@@ -333,7 +343,7 @@ def series(
         for k in range(nb):
             lo = np.maximum(arr["ep_start"], edges[k])
             hi = np.minimum(arr["ep_end"], edges[k + 1])
-            exp[k] = grid_ticks(lo, hi, a, rate).sum()
+            exp[k] = grid_ticks(lo, hi, a, rate).sum() / every
     width = np.diff(edges)
     p50 = np.full(nb, np.nan)
     p99 = np.full(nb, np.nan)

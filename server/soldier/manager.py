@@ -603,8 +603,9 @@ class SoldierManager:
     def tick(self, now: float) -> TickUpdate:
         """Advance every soldier to ``now`` and return the poses of those due for an update.
 
-        A soldier is due when ``throttle`` seconds have passed since its last update and its pose may have
-        changed (playing a clip, cross-fading, a new resting pose, or a pending heading-only change).
+        A soldier is due when its last update is at least ``settings.min_interval`` old (the throttle as a
+        rate cap on the tick grid) and its pose may have changed (playing a clip, cross-fading, a new resting
+        pose, or a pending heading-only change).
         """
         t0 = time.perf_counter()
         self.ticks += 1
@@ -623,7 +624,7 @@ class SoldierManager:
                 | tb.heading_pending[live]
                 | (tb.blend_len[live] > 0)
             )
-            due = live[active & (now - tb.last_sent[live] >= self._settings.throttle - _EPS_T)]
+            due = live[active & (now - tb.last_sent[live] >= self._settings.min_interval - _EPS_T)]
         else:
             due = live
         joints, figures, clips, frames = self._pose(due)
