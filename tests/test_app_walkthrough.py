@@ -235,6 +235,26 @@ async def test_throttle_limits_each_soldiers_update_rate(autojump_clock: trio.ab
         assert set(np.diff(got[0]).tolist()) == {1}
 
 
+async def test_throttle_004_gives_30_updates_a_second_and_ready_says_so(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Issue 16: the shipped ``set_ttes_soldier_throttle(0.04)`` is a rate cap of 30/s, not two ticks."""
+    async with running_server(throttle=0.04) as server:
+        c = await Client.open(port_of(server))
+        ready = await c.expect(Ready)
+        assert (ready.tick_hz, ready.throttle) == (30.0, 0.04)
+        await c.requests(index=0, velocity=vel(1.4, 0.0), heading=0.0)
+        await c.send(Subscribe((0,)))
+        await c.drain(0.5)
+        ticks: list[int] = []
+        with trio.move_on_after(2.0):
+            while True:
+                ev = await c.next_event()
+                if isinstance(ev, JointUpdates):
+                    ticks.extend([ev.tick] * len(ev.indices))
+        assert len(ticks) >= 59 and set(np.diff(ticks).tolist()) == {1}
+
+
 async def largest_jump_on_interrupt(blend_time: float) -> float:
     """Walk, then kneel mid-step: the largest per-tick change of any DOF the client sees (radians)."""
     async with running_server(throttle=0.0) as server:

@@ -9,8 +9,9 @@ coalesces them (its writers are latest-wins) delivers fewer.
 
 Everything is counted on the server's **tick grid**. Every JOINT_UPDATES frame carries the server's tick
 ``T``; a tick's grid time is ``a + T / rate``, ``a`` being the smallest ``arrival − T / rate`` seen in the
-window (the fastest delivery); ``arrival − grid time`` is a row's *delivery* time (how long after its tick
-it arrived, beyond the fastest). Expected updates = for every grid tick in the window, the steady movers at
+window (the fastest delivery; a tick's arrival is its last row's, see :func:`grid_offset`); ``arrival − grid
+time`` is a row's *delivery* time (how long after its tick it arrived, beyond the fastest; negative for an
+answer sent before its tick). Expected updates = for every grid tick in the window, the steady movers at
 that tick's grid time; received = rows of steady movers whose tick's grid time is in the window. A row
 arriving more than one period after its grid time is *late* (the server fell behind real time).
 
@@ -200,12 +201,17 @@ class Tracker:
 
 
 def grid_offset(row_time: np.ndarray, row_tick: np.ndarray, rate: float, t0: float, t1: float) -> float:
-    """``a`` of the tick grid ``a + T / rate``: the smallest arrival − T/rate among rows that arrived in
-    ``[t0, t1)`` (nan if none)."""
+    """``a`` of the tick grid ``a + T / rate``: the smallest ``arrival(T) − T/rate`` over the ticks whose rows
+    arrived in ``[t0, t1)`` (nan if none), ``arrival(T)`` the *last* arrival of a row of tick ``T``: the
+    server may send a tick's update of a soldier with a new request before the tick (an answer, labelled
+    with the tick it anticipates), so only a tick's last rows say when the tick itself went out."""
     sel = (row_time >= t0) & (row_time < t1)
     if not sel.any():
         return math.nan
-    return float(np.min(row_time[sel] - row_tick[sel] / rate))
+    ticks, inv = np.unique(row_tick[sel], return_inverse=True)
+    last = np.full(len(ticks), -np.inf)
+    np.maximum.at(last, inv, row_time[sel])
+    return float(np.min(last - ticks / rate))
 
 
 def grid_ticks(lo: np.ndarray, hi: np.ndarray, a: float, rate: float) -> np.ndarray:
