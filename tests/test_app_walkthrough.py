@@ -255,6 +255,28 @@ async def test_throttle_004_gives_30_updates_a_second_and_ready_says_so(
         assert len(ticks) >= 59 and set(np.diff(ticks).tolist()) == {1}
 
 
+async def test_a_request_between_ticks_is_reflected_before_the_next_tick(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Issue 16, one-tick latency: the server answers at once with the pose the next tick would send."""
+    async with running_server(throttle=0.04) as server:
+        c = await Client.open(port_of(server))
+        await c.expect(Ready)
+        await c.send(Subscribe((0,)))
+        await c.expect(JointUpdates)
+        await trio.sleep_until(server._t0 + 1.01)
+        rest = c.pose(1, 0)[0].copy()
+        nxt = server.next_tick
+        assert 1.01 < nxt <= 1.01 + 1 / 30
+        await c.requests(index=0, appearance=A.KNEEL, weapon=W.DEPLOYED)
+        ev = await c.expect(JointUpdates)
+        assert server.now() < nxt and ev.indices.tolist() == [0]  # before the tick...
+        assert np.abs(ev.dofs[0] - rest).max() > STEP  # ...already kneeling
+        assert server.answers == 1 and ev.tick == server.ticks + 1  # labelled with the tick it anticipates
+        await trio.sleep_until(server._t0 + nxt + 0.001)
+        assert server.world.manager.stats["answers"] == 1
+
+
 async def largest_jump_on_interrupt(blend_time: float) -> float:
     """Walk, then kneel mid-step: the largest per-tick change of any DOF the client sees (radians)."""
     async with running_server(throttle=0.0) as server:
