@@ -161,14 +161,20 @@ def expected_pose(server, clip: str, frames: np.ndarray) -> np.ndarray:  # type:
     return server.world.sets[0].converter.convert(tu).dofs
 
 
+async def watching(server) -> Client:  # type: ignore[no-untyped-def]
+    """A client subscribed to soldier 0 that has its first (full) update."""
+    c = await Client.open(port_of(server))
+    await c.expect(Ready)
+    await c.send(Subscribe((0,)))
+    await c.expect(JointUpdates)
+    return c
+
+
 async def kneel_frames(tick_hz: float, throttle: float) -> tuple[list[float], list[np.ndarray], object]:
     """Kneel at t = 1 s; the (server time, pose) of every update the client gets in the next 2 s. The first
     entry is the resting pose the client had before (frame 0 of the clip: the same pose, so never resent)."""
     async with running_server(tick_hz=tick_hz, throttle=throttle) as server:
-        c = await Client.open(port_of(server))
-        await c.expect(Ready)
-        await c.send(Subscribe((0,)))
-        await c.expect(JointUpdates)
+        c = await watching(server)
         await trio.sleep_until(server._t0 + 1.0)
         await c.requests(index=0, appearance=A.KNEEL, weapon=W.DEPLOYED)
         times, poses = [1.0], [c.pose(1, 0)[0].copy()]
@@ -260,10 +266,7 @@ async def test_a_request_between_ticks_is_reflected_before_the_next_tick(
 ) -> None:
     """Issue 16, one-tick latency: the server answers at once with the pose the next tick would send."""
     async with running_server(throttle=0.04) as server:
-        c = await Client.open(port_of(server))
-        await c.expect(Ready)
-        await c.send(Subscribe((0,)))
-        await c.expect(JointUpdates)
+        c = await watching(server)
         await trio.sleep_until(server._t0 + 1.01)
         rest = c.pose(1, 0)[0].copy()
         nxt = server.next_tick
