@@ -141,6 +141,7 @@ def test_expected_follows_the_servers_throttle() -> None:
     thinned = _perfect_run(drop_ticks=frozenset(t for t in range(90) if t % 3))
     s = summarise(thinned, RATE, 1.0, 2.0, 1, every=ticks_per_update(RATE, 0.1))
     assert s["expected_updates_per_s"] == 10.0 and s["delivered_pct"] == 100.0
+    assert s["steady_movers_mean"] == 1.0
     assert summarise(thinned, RATE, 1.0, 2.0, 1)["delivered_pct"] == pytest.approx(100 / 3, abs=0.01)
 
 

@@ -294,7 +294,7 @@ def summarise(
     psel = (arr["probe_sent"] >= t0) & (arr["probe_sent"] < t1 - 2 * SETTLE_S)
     req = arr["requests"]
     rsel = (req[:, 0] >= t0) & (req[:, 0] < t1) if len(req) else np.zeros(0, bool)
-    mover_ticks = expected / max(1, round(dur * rate))
+    mover_ticks = expected * every / max(1, round(dur * rate))
     return {
         "updates_per_s": _round(received / dur, 1),
         "expected_updates_per_s": _round(expected / dur, 1),
