@@ -325,7 +325,7 @@ class TtesServer:
     def _requests_arrived(self) -> None:
         m = self.world.manager
         if m is not None and m.stats["requests"] != self._requests_seen:
-            self._requests_seen = m.stats["requests"]
+            self._requests_seen = int(m.stats["requests"])
             self._answer_wanted.set()
 
     async def _answer_loop(self) -> None:
