@@ -222,11 +222,7 @@ class LoadSession:
     def summary(self, t0: float, t1: float) -> dict[str, Any]:
         arr = self.tracker.arrays(self.now())
         out = summarise(arr, self.rate, t0, t1, self.cfg.clients, self.every)
-        out["ready_tick_hz"], out["ready_throttle"], out["ticks_per_update"] = (
-            self.rate,
-            self.throttle,
-            self.every,
-        )
+        out.update(ready_tick_hz=self.rate, ready_throttle=self.throttle, ticks_per_update=self.every)
         out["probes_pending"] = int((~np.isnan(self.tracker.probe_at)).sum())
         return out
 
