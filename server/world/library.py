@@ -25,11 +25,14 @@ from pathlib import Path
 
 from peabody.model import Figure
 from protocol.dis import RIFLE_FIGURES
+from server.logging import get_logger
 from server.motion.binding import protofiletype
 from server.motion.errors import BindingError, PostureGraphError
 from server.motion.posture_change import LoadedPostureGraph
 from server.soldier.library import GraphTriple, MotionLibrary, weapon_suffix
 from server.world.store import MotionStore, StoreError
+
+log = get_logger("library")
 
 # (name, file) of the static, loco and crawl graphs
 GRAPHS: tuple[tuple[str, str], ...] = tuple(
@@ -98,20 +101,35 @@ def build_library(
     if not sets:
         raise StoreError(f"no soldier figure of a type the posture graphs drive ({sorted(types)}) is loaded")
     variants = weapon_variants(store, resolve, types)
-    soldiers = {protofiletype(s[0]): s[0] for s in sets}
-    for weapon, (_, figure) in variants.items():
-        for soldier in soldiers.values():
-            if not any(
-                protofiletype(s[0]) == protofiletype(soldier) and len(s) > 1 and protofiletype(s[1]) == weapon
-                for s in sets
-            ):
-                sets.append([soldier, figure])
+    if variants:
+        try:
+            return MotionLibrary(
+                static,
+                _with_weapons(sets, variants),
+                loco,
+                crawl,
+                weapon_graphs={w: g for w, (g, _) in variants.items()},
+            )
+        except (BindingError, PostureGraphError, ValueError) as exc:  # serve the base weapon rather than none
+            log.warning("weapon_variants_skipped", weapons=sorted(variants), error=str(exc))
     try:
-        return MotionLibrary(
-            static, sets, loco, crawl, weapon_graphs={w: g for w, (g, _) in variants.items()}
-        )
+        return MotionLibrary(static, sets, loco, crawl)
     except (BindingError, PostureGraphError, ValueError) as exc:
         raise StoreError(f"binding the posture graphs: {exc}") from None
+
+
+def _with_weapons(
+    sets: list[list[Figure]], variants: dict[str, tuple[GraphTriple, Figure]]
+) -> list[list[Figure]]:
+    """``sets`` plus each soldier figure type in them with each variant weapon, last (table ids stay)."""
+    out = list(sets)
+    have = {tuple(protofiletype(f) for f in s) for s in sets}
+    soldiers = {protofiletype(s[0]): s[0] for s in sets}
+    for weapon, (_, figure) in variants.items():
+        for stype, soldier in soldiers.items():
+            if (stype, weapon) not in have:
+                out.append([soldier, figure])
+    return out
 
 
 def weapon_variants(
