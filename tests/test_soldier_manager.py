@@ -11,6 +11,8 @@ import pytest
 from protocol.entity import ENTITY_REQUEST_DTYPE, Appearance, WeaponState, make_entity_requests
 from server.motion.sampling import ClipLibrary
 from server.soldier.manager import (
+    MAX_RATE,
+    MIN_RATE,
     REQUEST_BAD_VALUE,
     REQUEST_OK,
     REQUEST_UNKNOWN_SOLDIER,
@@ -255,20 +257,23 @@ def test_playback_rate_follows_ground_speed_and_keeps_the_phase(lib) -> None:
     cycle = lib.clip_id("walk_cycle_r")
     stored, gs = lib.clip_duration[cycle], lib.clip_ground_speed[cycle]
     assert gs == pytest.approx(1.4)  # 70 cm stride / 0.5 s, measured from the clip's travel
-    request(m, i, 0.0, speed=0.7)
-    run(m, 0.0, 1.0)
+    request(m, i, 0.0, speed=1.1)
+    run(m, 0.0, 0.5)
     cyc = [c for c in m.clips_of(i) if "cycle" in c.clip]
-    assert cyc[0].duration == pytest.approx(stored * gs / 0.7)
+    assert cyc[0].duration == pytest.approx(stored * gs / 1.1)
     t = round((cyc[0].time + 0.3) * 30) / 30  # a tick time, so the snapshot shows that instant
-    run(m, 1.0, t)
+    run(m, 0.5, t)
     before = m.snapshot([i])
-    request(m, i, t, speed=2.1)
+    request(m, i, t, speed=1.8)
     after = m.snapshot([i])
     assert after.frames[0] == pytest.approx(before.frames[0])  # same phase, faster rate
     np.testing.assert_allclose(after.joints, before.joints, atol=1e-5)
-    assert m.soldier_info(i)["clip_duration"] == pytest.approx(stored * gs / 2.1)
-    request(m, i, t, speed=0.05)  # rate clamps at MIN_RATE
-    assert m.soldier_info(i)["clip_duration"] == pytest.approx(stored / 0.25)
+    assert m.soldier_info(i)["clip_duration"] == pytest.approx(stored * gs / 1.8)
+    # human cadence limits: beyond them the stride length takes the rest
+    request(m, i, t, speed=0.05)
+    assert m.soldier_info(i)["clip_duration"] == pytest.approx(stored / MIN_RATE)
+    request(m, i, t, speed=2.3)
+    assert m.soldier_info(i)["clip_duration"] == pytest.approx(stored / MAX_RATE)
 
 
 # -- output: frame choice, throttle, heading-only, blending --------------------------------------------------

@@ -2,6 +2,8 @@
 
 Seed 002, 3.4.2 and 3.6: Jack loads ``soldier_low.graph`` (static posture transitions), ``soldier_loco.graph``
 (walking and running) and ``soldier_crawl.graph`` (crawling); the last two are only containers of channelsets.
+Issue 11 added two more containers, loaded when present: ``soldier_turn.graph`` (turns in place and
+side-steps, clips that move the soldier: ``end_offset``) and ``soldier_react.graph`` (recoil and flinch).
 :class:`MotionLibrary` puts every channelset of the three into one
 :class:`~server.motion.sampling.ClipLibrary` per *figure set* (soldier figure + weapon, e.g. ``DI.fig`` +
 ``AK_47.fig``), always in the same order so a clip id means the same clip in every set, and precomputes what
@@ -44,8 +46,8 @@ from server.motion.sampling import ClipLibrary
 from server.soldier.locomotion import CLIP_OF, NSTATES
 from server.soldier.state import CRAWL_NODE, STAND_STOWED, LocoState
 
-GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL = 0, 1, 2
-GRAPH_NAMES = ("static", "loco", "crawl")
+GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL, GRAPH_TURN, GRAPH_REACT = 0, 1, 2, 3, 4
+GRAPH_NAMES = ("static", "loco", "crawl", "turn", "react")
 
 # m/s per clip family, used when a locomotion clip has no stride/ground-speed data and no measurable travel
 DEFAULT_GROUND_SPEED: dict[str, float] = {
@@ -116,18 +118,21 @@ class MotionLibrary:
         loco: LoadedPostureGraph | None = None,
         crawl: LoadedPostureGraph | None = None,
         *,
+        turn: LoadedPostureGraph | None = None,
+        react: LoadedPostureGraph | None = None,
         in_place: bool = True,
     ) -> None:
         if not figure_sets:
             raise ValueError("a motion library needs at least one figure set")
-        self.static, self.loco, self.crawl = static, loco, crawl
+        self.static, self.loco, self.crawl, self.turn, self.react = static, loco, crawl, turn, react
         self.postures: list[str] = list(static.graph.postures)  # node names (``DEAD@ststow``: a variant)
         self.posture_names: list[str] = [posture_of(p) for p in self.postures]  # what each node shows
         self._node = {p: i for i, p in enumerate(self.postures)}
         for i, p in enumerate(self.posture_names):  # a posture known only by variants: its first one
             self._node.setdefault(p, i)
         entries: list[tuple[str, int, Channelset, str]] = []  # (clip name, graph, channelset, stem)
-        for gi, loaded in ((GRAPH_STATIC, static), (GRAPH_LOCO, loco), (GRAPH_CRAWL, crawl)):
+        graphs = ((GRAPH_STATIC, static), (GRAPH_LOCO, loco), (GRAPH_CRAWL, crawl), (GRAPH_TURN, turn))
+        for gi, loaded in (*graphs, (GRAPH_REACT, react)):
             if loaded is None:
                 continue
             for fname, cs in zip(loaded.graph.files, loaded.channelsets, strict=True):
@@ -138,7 +143,7 @@ class MotionLibrary:
         ref_type = protofiletype(figure_sets[0][0])
         for name, gi, cs, stem in entries:
             travel, gs = 0.0, 0.0
-            if gi != GRAPH_STATIC:
+            if gi not in (GRAPH_STATIC, GRAPH_REACT):
                 gs_travel = _travel(cs, ref_type)
                 gs = _ground_speed(cs, gs_travel, _family(_lookup_keys(stem)[-1]))
                 cs, travel = _strip_travel(cs, ref_type) if in_place else (cs, 0.0)
@@ -167,6 +172,11 @@ class MotionLibrary:
         self.clip_nframes = np.array([c.nframes for c in infos], np.int64)
         self.clip_ground_speed = np.array([c.ground_speed for c in infos], np.float64)
         self.clip_frame_time = self.clip_duration / np.maximum(self.clip_nframes - 1, 1)
+        # end_offset (x cm, z cm, yaw degrees) of clips that move the soldier (turns, side-steps), else 0
+        self.clip_end_offset = np.array(
+            [tuple(cs.end_offset) if cs.end_offset is not None else (0.0, 0.0, 0.0) for cs in self.sources],
+            np.float64,
+        ).reshape(-1, 3)
         self.static_clip = list(range(len(static.graph.files)))  # static clips come first, by token
         self._loco_table(entries)
         self._rest_poses()
@@ -177,14 +187,20 @@ class MotionLibrary:
     def _loco_table(self, entries: list[tuple[str, int, Channelset, str]]) -> None:
         by_key: dict[tuple[int, str], int] = {}
         for cid, (_, gi, _, stem) in enumerate(entries):
-            if gi == GRAPH_STATIC:
+            if gi in (GRAPH_STATIC, GRAPH_REACT):
                 continue
             for k in _lookup_keys(stem):
                 by_key.setdefault((gi, k), cid)
         self.loco_clip = np.full((NSTATES, 2), -1, np.int32)
         self.loco_dir = np.ones(NSTATES, np.int8)
         for state, (base, footed, direction) in CLIP_OF.items():
-            gi = GRAPH_CRAWL if base.startswith("crawl") else GRAPH_LOCO
+            gi = (
+                GRAPH_CRAWL
+                if base.startswith("crawl")
+                else GRAPH_TURN
+                if base.startswith("side")
+                else GRAPH_LOCO
+            )
             for foot, suffix in ((0, "_l"), (1, "_r")):
                 clip = by_key.get((gi, base + suffix)) if footed else None
                 if clip is None:
@@ -218,6 +234,7 @@ class MotionLibrary:
             ):
                 self.loco_clip[b] = self.loco_clip[f]
                 self.loco_dir[b] = -1
+        self.can_side = self.can_walk and bool(have[[s.SIDESTEP_L, s.SIDESTEP_R]].all())
         self.can_crawl = bool(have[[s.CRAWL_START, s.CRAWL_CYCLE, s.CRAWL_END]].all()) and (
             CRAWL_NODE in self._node
         )

@@ -43,7 +43,16 @@ from protocol.events import DEFAULT_MAX_SOLDIERS
 from server.soldier import report
 from server.soldier.blend import blend_into, smoothstep, yaw_rotate
 from server.soldier.library import MotionLibrary, PathStep
-from server.soldier.locomotion import GAIT_STAY, SCALED, conditions, next_states, start_state
+from server.soldier.locomotion import (
+    GAIT_STAY,
+    SCALED,
+    Side,
+    conditions,
+    direction,
+    is_fast,
+    next_states,
+    start_state,
+)
 from server.soldier.settings import SoldierSettings
 from server.soldier.state import (
     BASE_POSTURE,
@@ -63,7 +72,9 @@ REQUEST_BAD_VALUE = 2
 
 MOVING_EPS = 1e-3  # m/s: slower than this is standing still
 MAX_SPEED = 100.0  # m/s: faster is a bad value
-MIN_RATE, MAX_RATE = 0.25, 4.0  # playback rate limits of a locomotion clip (speed / ground speed)
+# playback rate limits of a locomotion clip (speed / ground speed): human cadence stays within about
+# 0.7-1.35 times the recorded one (walk 1.3-2.5 steps/s, run 2-3.9); beyond, the stride length takes the rest
+MIN_RATE, MAX_RATE = 0.7, 1.35
 MAX_CHAIN = 64  # clip ends handled per soldier per tick (a longer backlog is taken up next tick)
 MIN_CLIP_SECONDS = 1e-3  # a one-frame clip still takes this long, so clip ends cannot chain forever
 _EPS_T = 1e-9
@@ -161,7 +172,9 @@ class SoldierManager:
         if not isinstance(value, SoldierSettings):
             raise TypeError(f"settings must be SoldierSettings, not {type(value).__name__}")
         self._settings = value
-        self._offsets = np.array(value.heading_offsets, np.float64)  # what the vectorised pose path reads
+        # what the vectorised pose path reads, per clip graph (turn and react clips: the static offset)
+        o = value.heading_offsets
+        self._offsets = np.array((*o, o[0], o[0]), np.float64)
 
     def configure(self, **changes: Any) -> SoldierSettings:
         """Replace the settings by a validated copy with ``changes`` (ValueError: nothing changes)."""
@@ -290,7 +303,11 @@ class SoldierManager:
         speed = np.hypot(vel[:, 0], vel[:, 1])  # Performer: Z up
         moving = speed > MOVING_EPS
         fwd = coords.compass_to_direction(hdg)
-        backward = moving & (np.einsum("ij,ij->i", vel[:, :2], fwd[:, :2]) < 0.0)
+        ahead = np.einsum("ij,ij->i", vel[:, :2], fwd[:, :2])
+        left = vel[:, 1] * fwd[:, 0] - vel[:, 0] * fwd[:, 1]  # Performer Z up: (fwd x vel).z
+        backward, side = direction(ahead, left, self.library.can_side)
+        backward &= moving
+        side = np.where(moving, side, Side.AHEAD)
         mode = tb.mode[i]
         changed_pw = (app != tb.appearance[i]) | (wpn != tb.weapon[i])
         heading_changed = hdg != tb.heading[i]
@@ -308,6 +325,7 @@ class SoldierManager:
         tb.yaw[i] = coords.compass_to_jack_yaw(hdg)
         tb.speed[i] = speed
         tb.backward[i] = backward
+        tb.side[i] = side
         # a speed change within a gait: keep the phase, change the playback rate
         stepping = (mode == _LOCO) | (mode == _CRAWL)
         rescale = ~event & stepping & moving & speed_changed & SCALED[tb.loco[i]]
@@ -459,7 +477,9 @@ class SoldierManager:
         kind = int(self._move[int(tb.appearance[i])]) if tb.speed[i] > MOVING_EPS else 0
         if kind:
             fast = bool(tb.speed[i] > self._settings.walk_run_threshold)
-            state = start_state(Movement(kind), bool(tb.backward[i]), fast, self.library.can_run)
+            state = start_state(
+                Movement(kind), bool(tb.backward[i]), fast, self.library.can_run, int(tb.side[i])
+            )
             tb.mode[i] = _CRAWL if kind == _MOVE_CRAWL else _LOCO
             self._enter_one(i, int(state), t)
 
@@ -543,12 +563,15 @@ class SoldierManager:
         tb = self.table
         t = tb.end[idx].copy()
         speed = tb.speed[idx]
+        st = self._settings
+        hysteresis = min(st.walk_run_hysteresis, 0.5 * st.walk_run_threshold)
         cond = conditions(
             tb.loco[idx],
             speed > MOVING_EPS,
             tb.backward[idx],
-            speed > self._settings.walk_run_threshold,
+            is_fast(tb.loco[idx], speed, st.walk_run_threshold, hysteresis),
             self.library.can_run,
+            tb.side[idx],
         )
         nxt = next_states(tb.loco[idx], cond)
         # a one-footed gait transition waits for its foot: one more stride of the current gait first

@@ -39,6 +39,7 @@ _COLUMNS: dict[str, tuple[type | str, tuple[int, ...], float]] = {
     "yaw": (np.float64, (), 0.0),  # Jack yaw, radians
     "speed": (np.float64, (), 0.0),  # horizontal m/s
     "backward": (np.bool_, (), False),
+    "side": (np.int8, (), 0),  # locomotion.Side: moving across the heading (side-steps)
     # output bookkeeping
     "last_sent": (np.float64, (), -math.inf),
     "dirty": (np.bool_, (), False),  # pose changed while resting: send it once
@@ -91,6 +92,7 @@ class SoldierTable:
     yaw: np.ndarray
     speed: np.ndarray
     backward: np.ndarray
+    side: np.ndarray
     last_sent: np.ndarray
     dirty: np.ndarray
     heading_pending: np.ndarray

@@ -3,7 +3,8 @@
 "The first soldier state create triggers the loading of all the posture graph files and associated
 channelset files. Also, the channels are bound to the soldiers at this point." The three graphs are the
 ones loaded under the names ``soldier_low`` (static postures), ``soldier_loco`` and ``soldier_crawl``
-(loaded from the files of those names on the search path if a script did not load them first).
+(loaded from the files of those names on the search path if a script did not load them first), and, when
+present, ``soldier_turn`` (turns in place, side-steps) and ``soldier_react`` (recoil, flinch).
 
 The *figure sets* (soldier figure type + weapon type) the library is bound to are, in order of preference:
 the figures of every posture graph bound from ``soldier_low`` (``bind_posture_graph``), else one figure of
@@ -24,9 +25,10 @@ from server.motion.posture_change import LoadedPostureGraph
 from server.soldier.library import MotionLibrary
 from server.world.store import MotionStore, StoreError
 
-# (name, file) of the static, loco and crawl graphs
+# (name, file) of the static, loco, crawl, turn and react graphs
 GRAPHS: tuple[tuple[str, str], ...] = tuple(
-    (g, f"{g}.graph") for g in ("soldier_low", "soldier_loco", "soldier_crawl")
+    (g, f"{g}.graph")
+    for g in ("soldier_low", "soldier_loco", "soldier_crawl", "soldier_turn", "soldier_react")
 )
 
 
@@ -83,14 +85,16 @@ def build_library(
         )
     loco = _graph(store, resolve, *GRAPHS[1])
     crawl = _graph(store, resolve, *GRAPHS[2])
+    turn = _graph(store, resolve, *GRAPHS[3])
+    react = _graph(store, resolve, *GRAPHS[4])
     types = set(static.protofiletypes)
-    for g in (loco, crawl):
+    for g in (loco, crawl, turn, react):
         if g is not None:
             types.update(g.protofiletypes)
     sets = figure_sets(store, types, wanted)
     if not sets:
         raise StoreError(f"no soldier figure of a type the posture graphs drive ({sorted(types)}) is loaded")
     try:
-        return MotionLibrary(static, sets, loco, crawl)
+        return MotionLibrary(static, sets, loco, crawl, turn=turn, react=react)
     except (BindingError, PostureGraphError, ValueError) as exc:
         raise StoreError(f"binding the posture graphs: {exc}") from None
