@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from peabody.fk import FigureKinematics
 from peabody.model import Figure
 from server.motion.binding import protofiletype
 from server.motion.channelset import Channelset
@@ -44,6 +45,7 @@ from server.motion.posture_change import LoadedPostureGraph
 from server.motion.posture_graph import posture_of
 from server.motion.sampling import ClipLibrary
 from server.soldier.locomotion import CLIP_OF, NSTATES
+from server.soldier.root_motion import TravelTable, feet_points, has_feet, linear_travel, stance_travel
 from server.soldier.state import CRAWL_NODE, STAND_STOWED, LocoState
 
 GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL, GRAPH_TURN, GRAPH_REACT = 0, 1, 2, 3, 4
@@ -179,6 +181,7 @@ class MotionLibrary:
         ).reshape(-1, 3)
         self.static_clip = list(range(len(static.graph.files)))  # static clips come first, by token
         self._loco_table(entries)
+        self.travel = self._travel_table(figure_sets[0][0])
         self._rest_poses()
         self._paths: dict[tuple[int, int], tuple[PathStep, ...] | None] = {}
         self._variant_goals()
@@ -238,6 +241,50 @@ class MotionLibrary:
         self.can_crawl = bool(have[[s.CRAWL_START, s.CRAWL_CYCLE, s.CRAWL_END]].all()) and (
             CRAWL_NODE in self._node
         )
+
+    def _travel_table(self, figure: Figure) -> TravelTable:
+        """Each clip's own travel (:mod:`~server.soldier.root_motion`): measured from the planted feet for
+        walking, running and side-steps, the stride spread evenly for crawling (hands and knees carry it) or
+        a figure without sole sites, none for posture changes, turns (their yaw is the entity's) and
+        reactions."""
+        kin = FigureKinematics(figure)
+        feet = has_feet(kin)
+        first = self.sets[0]
+        sl = first.figure_slice(protofiletype(figure))
+        stepping = {int(c) for c in self.loco_clip.ravel() if c >= 0}
+        curves: list[np.ndarray] = []
+        for cid, info in enumerate(self.clips):
+            n = info.nframes
+            if cid not in stepping or n < 2:
+                curves.append(np.zeros((n, 2)))
+                continue
+            if info.graph == GRAPH_CRAWL or not feet:
+                curves.append(linear_travel(n, self._travel_vector(cid)))
+                continue
+            t = np.arange(n) * self.clip_frame_time[cid]
+            s = first.sample(
+                np.full(n, cid), np.zeros(n), np.ones(n), np.full(n, info.duration), t, interpolate=False
+            )
+            points = feet_points(kin, s.joints[:, sl], s.figures[:, 0])
+            curves.append(stance_travel(points, self.sources[cid].stride_length))
+        return TravelTable(curves)
+
+    def _travel_vector(self, cid: int) -> np.ndarray:
+        """(X, Z cm) a clip carries the soldier: its recorded root travel, else its ground speed times its
+        duration along its family's direction (forwards -Z, backwards +Z, left -X, right +X)."""
+        cs = self.sources[cid]
+        d = (
+            (cs.fig_pos[-1, 0] - cs.fig_pos[0, 0]).astype(np.float64)[[0, 2]]
+            if cs.nframes > 1
+            else np.zeros(2)
+        )
+        if math.hypot(*d) >= MIN_TRAVEL_CM:
+            return d
+        stem = self.clip_names[cid].rsplit("/", 1)[-1]
+        direction = {"bwalk": (0.0, 1.0), "sidestep_l": (-1.0, 0.0), "sidestep_r": (1.0, 0.0)}
+        key = next((k for k in direction if stem.startswith(k)), None)
+        unit = np.array(direction[key] if key else (0.0, -1.0))
+        return unit * self.clips[cid].ground_speed * 100.0 * self.clips[cid].duration
 
     def _rest_poses(self) -> None:
         """Per posture node a clip held at the frame that shows the posture (``rest_dir`` +1: last frame)."""

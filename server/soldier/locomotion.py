@@ -68,6 +68,7 @@ RUN_STATES = frozenset({S.RUN_START, S.RUN_CYCLE, S.WALK2RUN})
 IS_BACKWARD = np.array([s in BACKWARD_STATES for s in S], bool)
 IS_CRAWL = np.array([s in CRAWL_STATES for s in S], bool)
 IS_RUN = np.array([s in RUN_STATES for s in S], bool)
+IS_WALK = np.array([s in (S.WALK_START, S.WALK_CYCLE, S.RUN2WALK) for s in S], bool)
 
 
 class Side(IntEnum):
@@ -81,8 +82,11 @@ class Side(IntEnum):
 SIDE_OF = np.array(
     [Side.LEFT if s == S.SIDESTEP_L else Side.RIGHT if s == S.SIDESTEP_R else Side.AHEAD for s in S], np.int8
 )
-# end steps slow to a stop: they play at their recorded rate, every other step follows the ground speed
-SCALED = np.array([s not in END_STATES and s != S.NONE for s in S], bool)
+START_STATES = frozenset({S.WALK_START, S.RUN_START, S.BWALK_START, S.CRAWL_START})
+GAIT_CHANGES = frozenset({S.WALK2RUN, S.RUN2WALK})
+# start and end steps and the gait changes play at their recorded rate (natural timing: the root offset
+# keeps their feet planted while the entity moves at another speed), the cycles follow the ground speed
+SCALED = np.array([s not in END_STATES | START_STATES | GAIT_CHANGES and s != S.NONE for s in S], bool)
 
 # (clip base name, footed, direction) per state; CRAWL_END plays crawl_start backwards
 CLIP_OF: dict[S, tuple[str, bool, int]] = {

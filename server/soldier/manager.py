@@ -40,12 +40,16 @@ import numpy as np
 from protocol import coords
 from protocol.entity import Appearance, WeaponState, make_entity_requests
 from protocol.events import DEFAULT_MAX_SOLDIERS
-from server.soldier import report
+from server.soldier import report, root_motion
 from server.soldier.blend import blend_into, smoothstep, yaw_rotate
 from server.soldier.library import MotionLibrary, PathStep
 from server.soldier.locomotion import (
     GAIT_STAY,
+    IS_RUN,
+    IS_WALK,
+    NEXT,
     SCALED,
+    Cond,
     Side,
     conditions,
     direction,
@@ -75,6 +79,8 @@ MAX_SPEED = 100.0  # m/s: faster is a bad value
 # playback rate limits of a locomotion clip (speed / ground speed): human cadence stays within about
 # 0.7-1.35 times the recorded one (walk 1.3-2.5 steps/s, run 2-3.9); beyond, the stride length takes the rest
 MIN_RATE, MAX_RATE = 0.7, 1.35
+MIN_STRIDE, MAX_STRIDE = 0.5, 2.0  # stride scale limits (a scaled stride slides the feet by the difference)
+CATCH_UP_SECONDS = 1.5  # a stepping soldier's figure closes its root offset over about this long
 MAX_CHAIN = 64  # clip ends handled per soldier per tick (a longer backlog is taken up next tick)
 MIN_CLIP_SECONDS = 1e-3  # a one-frame clip still takes this long, so clip ends cannot chain forever
 _EPS_T = 1e-9
@@ -200,6 +206,16 @@ class SoldierManager:
             if lib.has_node(name):
                 self._base[kind] = lib.node(name)
         self._home = lib.node(STAND_STOWED) if lib.has_node(STAND_STOWED) else 0
+        # per Figure-5 state, how far behind the entity its figure walks (cm): what it still travels when the
+        # entity stops, on average (half a step and the end step), so a stop ends near the entity
+        travel = np.hypot(*lib.travel.total.T)
+        self._stop_lag = np.zeros(len(LocoState))
+        for state in LocoState:
+            clip, end = lib.loco_clip[state, 0], lib.loco_clip[NEXT[state, Cond.STOP], 0]
+            if clip >= 0:
+                self._stop_lag[state] = 0.5 * travel[clip] + (
+                    travel[end] if end >= 0 and NEXT[state, Cond.STOP] else 0.0
+                )
 
     # -- soldiers ----------------------------------------------------------------------------------------
     def create_soldier(
@@ -225,6 +241,7 @@ class SoldierManager:
         t.appearance[i] = Appearance.UPRIGHT
         t.weapon[i] = WeaponState.DEPLOYED
         t.foot[i] = 1
+        t.root_t[i] = now
         self._rest(i, self._home, float(now))
         nm = name if name is not None else f"s{i}"
         if nm in self._by_name:  # a generated name clashing with a user's: make it unique
@@ -316,6 +333,9 @@ class SoldierManager:
         event = (
             imm | (changed_pw & (mode != _TRANSITION)) | ((mode == _IDLE) & moving & (kind != Movement.NONE))
         )
+        # the root offset up to now under the old velocity; a turned entity turns a world-fixed offset
+        root_motion.fold(tb, self.library, i, t)
+        root_motion.turn_offsets(tb, i, hdg - tb.heading[i])
         # store the request (Jack coordinates)
         tb.appearance[i] = app
         tb.weapon[i] = wpn
@@ -326,13 +346,14 @@ class SoldierManager:
         tb.speed[i] = speed
         tb.backward[i] = backward
         tb.side[i] = side
+        tb.vlocal[i] = np.stack([-left, -ahead], axis=1) * 100.0  # soldier frame: forwards -Z, left -X
         # a speed change within a gait: keep the phase, change the playback rate
         stepping = (mode == _LOCO) | (mode == _CRAWL)
         rescale = ~event & stepping & moving & speed_changed & SCALED[tb.loco[i]]
         if rescale.any():
             r = i[rescale]
             tr = t[rescale]
-            new_dur = self._step_duration(tb.clip[r], tb.speed[r], np.ones(len(r), bool))
+            new_dur, tb.stride[r] = self._step_duration(r, tb.clip[r], tb.loco[r])
             u = np.clip((tr - tb.start[r]) / np.maximum(tb.dur[r], _EPS_T), 0.0, 1.0)
             tb.start[r] = tr - u * new_dur
             tb.dur[r] = new_dur
@@ -485,18 +506,25 @@ class SoldierManager:
 
     def _play_step(self, i: int, step: PathStep, t: float) -> None:
         tb = self.table
+        one = np.array([i], np.int64)
+        root_motion.fold(tb, self.library, one, t)
+        tb.stride[i] = 1.0
         tb.clip[i] = step.clip
         tb.direc[i] = 1 if step.forward else -1
         tb.start[i] = t
         dur = max(step.duration, MIN_CLIP_SECONDS)
         tb.dur[i] = dur
         tb.end[i] = t + dur
+        root_motion.rebase(tb, self.library, one)
         self._record(i, t)
 
     def _rest(self, i: int, node: int, t: float) -> None:
         """Show posture ``node``'s pose: its clip held at the frame that is that posture."""
         tb = self.table
         lib = self.library
+        one = np.array([i], np.int64)
+        root_motion.fold(tb, lib, one, t)  # the offset stays where the last step left it (feet planted)
+        tb.stride[i] = 1.0
         clip = int(lib.rest_clip[node])
         tb.node[i] = node
         tb.clip[i] = clip
@@ -505,15 +533,41 @@ class SoldierManager:
         tb.start[i] = t - tb.dur[i]
         tb.end[i] = t
         tb.dirty[i] = True
+        root_motion.rebase(tb, lib, one)
 
     # -- locomotion (Figure 5, vectorised) ---------------------------------------------------------------
-    def _step_duration(self, clip: np.ndarray, speed: np.ndarray, scaled: np.ndarray) -> np.ndarray:
-        lib = self.library
+    def _step_duration(
+        self, idx: np.ndarray, clip: np.ndarray, states: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Play time and stride scale of ``clip`` in Figure-5 ``states`` for soldiers ``idx`` (root offsets
+        folded to now).
+
+        A cycle aims at the entity's speed plus what brings the root offset along the velocity to its stop lag
+        (the figure trails the entity by what it would still travel if the entity stopped) in about
+        CATCH_UP_SECONDS, within human cadence (MIN_RATE..MAX_RATE). When the entity's speed alone is beyond
+        that cadence the stride length takes the rest (the feet slide by the difference), except in a gait
+        the speed is about to leave (a walk step before walk→run): there the root offset takes it. Start and
+        end steps and gait changes play at their recorded rate."""
+        tb, lib = self.table, self.library
+        st = np.asarray(states, np.int64)
+        speed = tb.speed[idx]
         stored = lib.clip_duration[clip]
         gs = lib.clip_ground_speed[clip]
-        ok = scaled & (speed > MOVING_EPS) & (gs > 0)
-        rate = np.where(ok, np.clip(speed / np.where(gs > 0, gs, 1.0), MIN_RATE, MAX_RATE), 1.0)
-        return np.maximum(stored / rate, MIN_CLIP_SECONDS)
+        ok = SCALED[st] & (speed > MOVING_EPS) & (gs > 0)
+        v = tb.vlocal[idx]
+        along = np.einsum("ij,ij->i", tb.root_off[idx], v) / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
+        gs = np.where(gs > 0, gs, 1.0)
+        cfg = self._settings
+        hysteresis = min(cfg.walk_run_hysteresis, 0.5 * cfg.walk_run_threshold)
+        fast = is_fast(st, speed, cfg.walk_run_threshold, hysteresis)
+        leaving = (IS_RUN[st] & ~fast) | (IS_WALK[st] & fast & lib.can_run)
+        ideal = speed / gs  # the entity's speed alone
+        scale = np.clip(ideal / np.clip(ideal, MIN_RATE, MAX_RATE), MIN_STRIDE, MAX_STRIDE)
+        stride = np.where(ok & ~leaving, scale, 1.0)
+        error = along + self._stop_lag[st]  # cm ahead of where the figure should be
+        want = speed + np.clip(-error / 100.0 / CATCH_UP_SECONDS, -0.5 * speed, 0.5 * speed)
+        rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, MAX_RATE), 1.0)
+        return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
 
     def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray) -> None:
         """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot)."""
@@ -525,7 +579,8 @@ class SoldierManager:
         clip = lib.loco_clip[st, foot]
         direc = lib.loco_dir[st].astype(np.int8)
         direc = np.where((st == _CRAWL_CYCLE) & tb.backward[idx], -direc, direc)
-        dur = self._step_duration(clip, tb.speed[idx], SCALED[st])
+        root_motion.fold(tb, lib, idx, t)
+        dur, tb.stride[idx] = self._step_duration(idx, clip, st)
         tb.loco[idx] = st
         tb.foot[idx] = foot
         tb.clip[idx] = clip
@@ -533,6 +588,7 @@ class SoldierManager:
         tb.start[idx] = t
         tb.dur[idx] = dur
         tb.end[idx] = t + dur
+        root_motion.rebase(tb, lib, idx)
         if self._settings.record_clips:
             for k in range(len(idx)):
                 self._record(int(idx[k]), float(t[k]))
@@ -545,11 +601,10 @@ class SoldierManager:
         direc = int(lib.loco_dir[state])
         if state == _CRAWL_CYCLE and tb.backward[i]:
             direc = -direc
-        dur = float(lib.clip_duration[clip])
-        speed, gs = float(tb.speed[i]), float(lib.clip_ground_speed[clip])
-        if _SCALED[state] and speed > MOVING_EPS and gs > 0:
-            dur /= min(max(speed / gs, MIN_RATE), MAX_RATE)
-        dur = max(dur, MIN_CLIP_SECONDS)
+        one = np.array([i], np.int64)
+        root_motion.fold(tb, lib, one, t)
+        durs, strides = self._step_duration(one, np.array([clip]), np.array([state]))
+        dur, tb.stride[i] = float(durs[0]), strides[0]
         tb.loco[i] = state
         tb.foot[i] = foot
         tb.clip[i] = clip
@@ -557,6 +612,7 @@ class SoldierManager:
         tb.start[i] = t
         tb.dur[i] = dur
         tb.end[i] = t + dur
+        root_motion.rebase(tb, lib, one)
         self._record(i, t)
 
     def _loco_ended(self, idx: np.ndarray) -> None:
@@ -701,6 +757,10 @@ class SoldierManager:
                 sel = np.flatnonzero(fset == k)
                 s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self._settings.interpolate)
                 joints[sel], figures[sel], frames[sel] = s.joints, s.figures, s.position
+        if n:  # the root offset: every figure of the soldier moves with it (docs/PROTOCOL.md)
+            off = root_motion.offset_at(tb, lib, idx, clock, frames).astype(np.float32)
+            figures[:, :, 0] += off[:, None, 0]
+            figures[:, :, 2] += off[:, None, 1]
         if n and self._offsets.any():
             off = self._offsets[lib.clip_graph[clip]]
             turn = np.flatnonzero(off != 0.0)

@@ -40,6 +40,13 @@ _COLUMNS: dict[str, tuple[type | str, tuple[int, ...], float]] = {
     "speed": (np.float64, (), 0.0),  # horizontal m/s
     "backward": (np.bool_, (), False),
     "side": (np.int8, (), 0),  # locomotion.Side: moving across the heading (side-steps)
+    "vlocal": (np.float64, (2,), 0.0),  # velocity in the soldier's frame (Jack X, Z cm/s: forwards is -Z)
+    # root offset (root_motion): the figure's offset from the entity (X, Z cm, soldier frame) at root_t,
+    # when the clip's own travel was root_ref; the clip's travel counts stride times
+    "root_off": (np.float64, (2,), 0.0),
+    "root_t": (np.float64, (), 0.0),
+    "root_ref": (np.float64, (2,), 0.0),
+    "stride": (np.float64, (), 1.0),
     # output bookkeeping
     "last_sent": (np.float64, (), -math.inf),
     "dirty": (np.bool_, (), False),  # pose changed while resting: send it once
@@ -93,6 +100,11 @@ class SoldierTable:
     speed: np.ndarray
     backward: np.ndarray
     side: np.ndarray
+    vlocal: np.ndarray
+    root_off: np.ndarray
+    root_t: np.ndarray
+    root_ref: np.ndarray
+    stride: np.ndarray
     last_sent: np.ndarray
     dirty: np.ndarray
     heading_pending: np.ndarray

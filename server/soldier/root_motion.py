@@ -1,0 +1,172 @@
+"""Root motion: how far a locomotion clip carries the soldier, measured from its planted feet (issue 16).
+
+The library plays locomotion clips in place (``library._strip_travel``); the entity moves by its own dead
+reckoned velocity. For the planted foot to stay still *in the world*, the figure must be placed relative to
+the entity by a *root offset* = (the clip's own travel so far) − (the entity's travel so far). The clip's own
+travel is measured once per clip here: frame after frame, the horizontal move of the foot in stance (the
+lower one) taken backwards — the treadmill the in-place clip walks on. :class:`TravelTable` holds these
+curves for all clips (zero for static clips and reactions), flat and interpolated like the sampler.
+
+Axes: Jack, in the soldier's (entity's) frame: the clips walk forwards along -Z and step left along -X; only
+X and Z (horizontal, centimetres) are kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from peabody.fk import FigureKinematics
+from peabody.model import Figure
+from peabody.quaternion import to_transform
+
+if TYPE_CHECKING:
+    from server.soldier.library import MotionLibrary
+    from server.soldier.table import SoldierTable
+
+FLIGHT_CM = 3.0  # a foot whose lowest sole point is this far above the clip's lowest carries no weight
+# per foot, the sole points whose lower one carries the weight (heel strike, then the ball at push-off)
+FOOT_SITES: tuple[tuple[str, ...], ...] = (
+    ("left_foot.heel", "left_foot.ball"),
+    ("right_foot.heel", "right_foot.ball"),
+)
+
+
+def feet_points(kin: FigureKinematics, joints: np.ndarray, placement: np.ndarray) -> np.ndarray:
+    """``(n, 2, k, 3)`` world positions (cm) of each foot's sole points for poses ``joints`` placed by
+    ``placement`` (``(n, 7)``: root site position + quaternion w, x, y, z)."""
+    q = np.asarray(placement, np.float64)
+    roots = np.stack([to_transform(p[:3], p[3:7]) for p in q])
+    sites = kin.site_globals(np.asarray(joints, np.float64), roots)
+    pts = np.array([[sites[:, kin.site_names.index(s), :3, 3] for s in foot] for foot in FOOT_SITES])
+    return pts.transpose(2, 0, 1, 3)  # (feet, points, n, 3) -> (n, feet, points, 3)
+
+
+def has_feet(kin: FigureKinematics) -> bool:
+    """Whether the figure has the sole sites :func:`feet_points` measures."""
+    return all(s in kin.site_names for foot in FOOT_SITES for s in foot)
+
+
+def linear_travel(n: int, total: np.ndarray) -> np.ndarray:
+    """``(n, 2)``: ``total`` (X, Z cm) spread evenly over the frames (no feet to measure, or a crawl)."""
+    return np.linspace(0.0, 1.0, n)[:, None] * np.asarray(total, np.float64)[None, :2]
+
+
+def contact_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Between frames k and k+1 the sole point that is lowest over both carries the weight: ``(n-1, 2)``
+    its horizontal move (X, Z cm) and ``(n-1,)`` its height above the lowest sole point of all frames."""
+    n = len(points)
+    flat = points.reshape(n, -1, 3)  # (n, feet * points, 3)
+    pair = np.maximum(flat[:-1, :, 1], flat[1:, :, 1])
+    which = np.argmin(pair, axis=1)
+    k = np.arange(n - 1)
+    move = flat[k + 1, which][:, [0, 2]] - flat[k, which][:, [0, 2]]
+    return move, pair[k, which] - flat[..., 1].min()
+
+
+def stance_travel(points: np.ndarray, stride: float | None = None) -> np.ndarray:
+    """``(n, 2)`` cumulative horizontal travel (X, Z cm) that keeps the point carrying the weight still
+    (:func:`contact_points` of :func:`feet_points`): the body travels by minus its move. Frames with both feet
+    off the ground (a run's flight) share what the stance frames leave of ``stride`` (cm, the clip's recorded
+    travel), evenly."""
+    n = len(points)
+    out = np.zeros((n, 2))
+    if n < 2:
+        return out
+    move, height = contact_points(points)
+    step = -move
+    flight = height > FLIGHT_CM
+    step[flight] = 0.0
+    measured = step.sum(axis=0)
+    length = float(np.hypot(*measured))
+    if stride and flight.any() and length > 1e-6 and stride > length:
+        step[flight] = measured / length * (stride - length) / int(flight.sum())
+    out[1:] = np.cumsum(step, axis=0)
+    return out
+
+
+class TravelTable:
+    """Per clip its stance travel curve, flat like ``ClipLibrary`` data; interpolated at fractional frames."""
+
+    def __init__(self, curves: Sequence[np.ndarray]) -> None:
+        sizes = np.array([len(c) for c in curves], np.int64)
+        self.start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        self.nframes = sizes
+        self.data = (
+            np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in curves])
+            if len(curves)
+            else np.zeros((0, 2))
+        )
+        self.total = np.array([c[-1] - c[0] if len(c) else (0.0, 0.0) for c in curves], np.float64).reshape(
+            -1, 2
+        )
+
+    def at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """``(n, 2)`` travel of ``clip`` at fractional ``frame`` (clamped to the clip)."""
+        clip = np.asarray(clip, np.int64)
+        last = np.maximum(self.nframes[clip] - 1, 0)
+        f = np.clip(np.asarray(frame, np.float64), 0.0, last)
+        f0 = np.floor(f).astype(np.int64)
+        f1 = np.minimum(f0 + 1, last)
+        w = (f - f0)[:, None]
+        base = self.start[clip]
+        return self.data[base + f0] * (1.0 - w) + self.data[base + f1] * w
+
+
+def measure(figure: Figure, joints: np.ndarray, placements: np.ndarray) -> np.ndarray:
+    """The stance travel curve of one clip's frames (soldier pose vectors and root placements)."""
+    kin = FigureKinematics(figure)
+    return stance_travel(feet_points(kin, joints, placements))
+
+
+# -- the per-soldier root offset over a SoldierTable (vectorised; the manager calls these) -----------------
+def frame_at(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> np.ndarray:
+    """The fractional frame each soldier's clip shows at ``t`` (as ``ClipLibrary.sample`` computes it)."""
+    clip = tb.clip[idx]
+    u = np.clip((t - tb.start[idx]) / np.maximum(tb.dur[idx], 1e-9), 0.0, 1.0)
+    u = np.where(tb.direc[idx] > 0, u, 1.0 - u)
+    return u * np.maximum(lib.clip_nframes[clip] - 1, 0)
+
+
+def offset_at(
+    tb: SoldierTable,
+    lib: MotionLibrary,
+    idx: np.ndarray,
+    t: np.ndarray | float,
+    frames: np.ndarray | None = None,
+) -> np.ndarray:
+    """``(n, 2)`` root offsets at ``t``: the offset at ``root_t`` plus the clip's own travel since (times the
+    stride scale) minus the entity's dead-reckoned travel since."""
+    if frames is None:
+        frames = frame_at(tb, lib, idx, t)
+    travel = lib.travel.at(tb.clip[idx], frames) - tb.root_ref[idx]
+    dt = np.asarray(t, np.float64) - tb.root_t[idx]
+    return tb.root_off[idx] + travel * tb.stride[idx][:, None] - tb.vlocal[idx] * np.reshape(dt, (-1, 1))
+
+
+def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
+    """Bring the offsets up to ``t``: before a clip, the velocity or the stride scale changes."""
+    if len(idx) == 0:
+        return
+    frames = frame_at(tb, lib, idx, t)
+    tb.root_off[idx] = offset_at(tb, lib, idx, t, frames)
+    tb.root_t[idx] = t
+    tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
+
+
+def rebase(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
+    """After a new clip starts (at ``root_t``): its travel counts from the frame it shows then."""
+    if len(idx):
+        tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx]))
+
+
+def turn_offsets(tb: SoldierTable, idx: np.ndarray, compass_change: np.ndarray) -> None:
+    """The entity turned by ``compass_change`` degrees (clockwise): a world-fixed offset turns the other way
+    in the soldier's frame."""
+    a = np.radians(compass_change)
+    c, s = np.cos(a), np.sin(a)
+    x, z = tb.root_off[idx, 0].copy(), tb.root_off[idx, 1].copy()
+    tb.root_off[idx, 0] = x * c + z * s
+    tb.root_off[idx, 1] = -x * s + z * c

@@ -1,0 +1,135 @@
+"""Root motion that matches the entity (issue 16): the figure's root offset relative to the dead-reckoned
+entity keeps every planted foot still in the world at starts, stops, walk <-> run and side-steps.
+
+The measure is independent of the server's own bookkeeping: forward kinematics of the poses it sends (root
+placement included), placed at the entity's dead-reckoned position and heading as an image generator would;
+a sole point (heel or ball) touching the ground must not move more than 2 cm while it stays down."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from peabody.fk import FigureKinematics
+from protocol.entity import Appearance, WeaponState, make_entity_requests
+from server.soldier.manager import REQUEST_OK, SoldierManager
+from server.soldier.root_motion import feet_points
+from tests.test_gait_selection import shipped_library
+
+HZ = 60.0
+CONTACT_CM = 1.0  # a sole point this near the ground touches it
+SKATE_CM = 2.0
+
+
+@pytest.fixture(scope="module")
+def lib():
+    return shipped_library()
+
+
+def drive(
+    lib, script: list[tuple[float, float, float]], heading: float, until: float
+) -> dict[str, np.ndarray]:
+    """Play ``(time, speed m/s, compass degrees of the velocity from the heading)`` requests; return per tick
+    the world positions of the sole points ``(n, feet, points, 2)`` (Performer X east, Y north, cm), their
+    heights ``(n, feet, points)`` and the clip each tick shows."""
+    m = SoldierManager(lib, throttle=0.0, record_clips=True)
+    i = m.create_soldier(figure="DI.fig", weapon="AK_47.fig", now=0.0)
+    kin = FigureKinematics(lib.sets[0].prototypes[0])
+    sl = lib.sets[0].figure_slice("DI.fig")
+    h = math.radians(heading)
+    forward, right = np.array([math.sin(h), math.cos(h)]), np.array([math.cos(h), -math.sin(h)])
+    pos, vel, last = np.zeros(2), np.zeros(2), 0.0  # the entity, dead-reckoned (m, m/s)
+    pending = sorted(script)
+    joints, figures, entity, clips = [], [], [], []
+    for k in range(int(until * HZ) + 1):
+        now = k / HZ
+        pos = pos + vel * (now - last)
+        last = now
+        while pending and pending[0][0] <= now + 1e-9:
+            _, speed, angle = pending.pop(0)
+            a = math.radians(heading + angle)
+            vel = speed * np.array([math.sin(a), math.cos(a)])
+            rows = make_entity_requests(
+                i, Appearance.UPRIGHT, WeaponState.DEPLOYED, (*vel, 0.0), heading, (*pos, 0.0)
+            )
+            assert m.apply_requests(rows, now).tolist() == [REQUEST_OK]
+        m.tick(now)
+        up = m.snapshot([i])  # what the client shows now (a resting soldier's last update included)
+        joints.append(up.joints[0, sl])
+        figures.append(up.figures[0, 0])
+        entity.append(pos.copy())
+        clips.append(lib.clip_names[int(up.clips[0])])
+    local = feet_points(kin, np.array(joints), np.array(figures))  # Jack, soldier frame: X right, -Z ahead
+    world = (
+        np.array(entity)[:, None, None, :] * 100.0
+        + local[..., 0:1] * right
+        - local[..., 2:3] * forward
+    )
+    root = np.array(figures)[:, [0, 2]]  # the figure's offset from the entity (soldier frame)
+    gap = root[:, 0:1] * right - root[:, 1:2] * forward  # ... in the world
+    return {"world": world, "height": local[..., 1], "clips": np.array(clips), "gap": gap}
+
+
+def skates(run: dict[str, np.ndarray]) -> list[tuple[float, str]]:
+    """Per touchdown of a sole point: how far it moved (cm) while it stayed down, and the clip it began in."""
+    world, height = run["world"], run["height"]
+    ground = height.min()
+    down = height < ground + CONTACT_CM
+    out = []
+    for f in range(down.shape[1]):
+        for p in range(down.shape[2]):
+            k = 0
+            while k < len(down):
+                if not down[k, f, p]:
+                    k += 1
+                    continue
+                j = k
+                while j + 1 < len(down) and down[j + 1, f, p]:
+                    j += 1
+                track = world[k : j + 1, f, p]
+                out.append((float(np.linalg.norm(track - track[0], axis=1).max()), str(run["clips"][k])))
+                k = j + 1
+    return out
+
+
+def worst(run: dict[str, np.ndarray], family: str) -> float:
+    hits = [s for s, clip in skates(run) if family in clip]
+    assert hits, f"no stance in a {family} clip"
+    return max(hits)
+
+
+SCENARIO = [(0.5, 1.4, 0.0), (5.0, 3.0, 0.0), (9.0, 1.4, 0.0), (13.0, 0.0, 0.0)]
+
+
+@pytest.fixture(scope="module")
+def walk_run_walk(lib) -> dict[str, np.ndarray]:
+    return drive(lib, SCENARIO, heading=30.0, until=16.0)
+
+
+@pytest.mark.parametrize(
+    "family", ["walk_start", "walk_cycle", "walk2run", "run_cycle", "run2walk", "walk_end", "STAND_STOWED"]
+)
+def test_planted_feet_stay_still_in_the_world(walk_run_walk, family: str) -> None:
+    clips = set(walk_run_walk["clips"].tolist())
+    if family == "STAND_STOWED":  # standing before and after: no clip name to match, any static clip
+        family = "soldier_low/"
+    assert any(family in c for c in clips)
+    assert worst(walk_run_walk, family) <= SKATE_CM
+
+
+def test_side_steps_and_backward_steps_keep_their_feet(lib) -> None:
+    run = drive(lib, [(0.2, 0.3, 90.0), (4.0, 0.0, 0.0), (6.0, 0.6, 180.0), (9.0, 0.0, 0.0)], 200.0, 12.0)
+    for family in ("sidestep_r", "bwalk_start", "bwalk_cycle", "bwalk_end"):
+        assert worst(run, family) <= SKATE_CM, family
+
+
+def test_the_figure_trails_the_entity_and_a_stop_ends_near_it(walk_run_walk) -> None:
+    """While moving the figure trails the entity by about what it would still travel on a stop (half a step
+    and the end step), so the stop leaves it within half a step of the entity; it never drifts away."""
+    gap = np.linalg.norm(walk_run_walk["gap"], axis=1)
+    assert gap.max() < 200.0
+    t = np.arange(len(gap)) / HZ
+    assert 60.0 < gap[(t > 4.0) & (t < 5.0)].mean() < 110.0  # walking: 37 + 53 cm
+    assert gap[t > 15.0].max() < 37.0  # standing again: within half a walking step (74 cm)
