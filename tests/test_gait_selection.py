@@ -133,4 +133,4 @@ def test_cadence_stays_human_and_the_stride_takes_the_rest(lib) -> None:
     stored = lib.clip_duration[lib.clip_id(cycles[-1].clip)]
     steps_per_s = 1.0 / cycles[-1].duration
     assert cycles[-1].duration == pytest.approx(stored / MAX_RATE)
-    assert 1.3 <= steps_per_s <= 2.6
+    assert 1.1 <= steps_per_s <= 3.0

@@ -28,27 +28,24 @@ def lib():
     return shipped_library()
 
 
-def drive(
-    lib, script: list[tuple[float, float, float]], heading: float, until: float
-) -> dict[str, np.ndarray]:
-    """Play ``(time, speed m/s, compass degrees of the velocity from the heading)`` requests; return per tick
-    the world positions of the sole points ``(n, feet, points, 2)`` (Performer X east, Y north, cm), their
-    heights ``(n, feet, points)`` and the clip each tick shows."""
+def drive(lib, script: list[tuple[float, ...]], heading: float, until: float) -> dict[str, np.ndarray]:
+    """Play ``(time, speed m/s, compass degrees of the velocity from the heading[, new heading])`` requests;
+    return per tick the world positions of the sole points ``(n, feet, points, 2)`` (Performer X east, Y
+    north, cm), their heights ``(n, feet, points)`` and the clip each tick shows."""
     m = SoldierManager(lib, throttle=0.0, record_clips=True)
     i = m.create_soldier(figure="DI.fig", weapon="AK_47.fig", now=0.0)
     kin = FigureKinematics(lib.sets[0].prototypes[0])
     sl = lib.sets[0].figure_slice("DI.fig")
-    h = math.radians(heading)
-    forward, right = np.array([math.sin(h), math.cos(h)]), np.array([math.cos(h), -math.sin(h)])
     pos, vel, last = np.zeros(2), np.zeros(2), 0.0  # the entity, dead-reckoned (m, m/s)
     pending = sorted(script)
-    joints, figures, entity, clips = [], [], [], []
+    joints, figures, entity, clips, headings = [], [], [], [], []
     for k in range(int(until * HZ) + 1):
         now = k / HZ
         pos = pos + vel * (now - last)
         last = now
         while pending and pending[0][0] <= now + 1e-9:
-            _, speed, angle = pending.pop(0)
+            _, speed, angle, *turn = pending.pop(0)
+            heading = turn[0] if turn else heading
             a = math.radians(heading + angle)
             vel = speed * np.array([math.sin(a), math.cos(a)])
             rows = make_entity_requests(
@@ -60,15 +57,15 @@ def drive(
         joints.append(up.joints[0, sl])
         figures.append(up.figures[0, 0])
         entity.append(pos.copy())
+        headings.append(math.radians(heading))
         clips.append(lib.clip_names[int(up.clips[0])])
     local = feet_points(kin, np.array(joints), np.array(figures))  # Jack, soldier frame: X right, -Z ahead
-    world = (
-        np.array(entity)[:, None, None, :] * 100.0
-        + local[..., 0:1] * right
-        - local[..., 2:3] * forward
-    )
+    h = np.array(headings)[:, None]
+    forward = np.concatenate([np.sin(h), np.cos(h)], axis=1)[:, None, None, :]
+    right = np.concatenate([np.cos(h), -np.sin(h)], axis=1)[:, None, None, :]
+    world = np.array(entity)[:, None, None, :] * 100.0 + local[..., 0:1] * right - local[..., 2:3] * forward
     root = np.array(figures)[:, [0, 2]]  # the figure's offset from the entity (soldier frame)
-    gap = root[:, 0:1] * right - root[:, 1:2] * forward  # ... in the world
+    gap = root[:, 0:1] * right[:, 0, 0] - root[:, 1:2] * forward[:, 0, 0]  # ... in the world
     return {"world": world, "height": local[..., 1], "clips": np.array(clips), "gap": gap}
 
 
@@ -133,3 +130,19 @@ def test_the_figure_trails_the_entity_and_a_stop_ends_near_it(walk_run_walk) -> 
     t = np.arange(len(gap)) / HZ
     assert 60.0 < gap[(t > 4.0) & (t < 5.0)].mean() < 110.0  # walking: 37 + 53 cm
     assert gap[t > 15.0].max() < 37.0  # standing again: within half a walking step (74 cm)
+
+
+@pytest.mark.parametrize(("turn", "clip"), [(90.0, "turn_r90"), (-45.0, "turn_l45"), (170.0, "turn_r180")])
+def test_a_heading_change_while_standing_turns_in_place_on_planted_feet(lib, turn: float, clip: str) -> None:
+    run = drive(lib, [(0.0, 0.0, 0.0), (0.5, 0.0, 0.0, 10.0 + turn)], heading=10.0, until=5.0)
+    assert any(clip in c for c in run["clips"].tolist())
+    assert worst(run, clip) <= SKATE_CM
+    # the figure faced the old heading when the entity turned: no snap in the world
+    k = int(0.5 * HZ)
+    assert np.abs(run["world"][k] - run["world"][k - 1]).max() < 0.5  # cm, over the tick of the request
+
+
+def test_small_heading_changes_do_not_turn_and_the_figure_stays_put(lib) -> None:
+    run = drive(lib, [(0.0, 0.0, 0.0), (0.5, 0.0, 0.0, 20.0), (1.0, 0.0, 0.0, 0.0)], heading=0.0, until=2.0)
+    assert not any("turn_" in c for c in run["clips"].tolist())
+    assert np.abs(run["world"] - run["world"][0]).max() < 0.5

@@ -168,9 +168,9 @@ def test_walk_to_run_and_back_over_the_threshold(lib) -> None:
     request(m, i, 1.0, speed=4.0)
     run(m, 1.0, 3.0)
     request(m, i, 3.0, speed=2.0)
-    run(m, 3.0, 4.5)
-    request(m, i, 4.5, speed=0.0)
-    run(m, 4.5, 6.5)
+    run(m, 3.0, 5.5)
+    request(m, i, 5.5, speed=0.0)
+    run(m, 5.5, 7.5)
     n = [x.rstrip("_lr") if x[-2] == "_" else x for x in names(m, i)]
     collapsed = [x for k, x in enumerate(n) if k == 0 or x != n[k - 1]]
     assert collapsed == [

@@ -148,7 +148,8 @@ class MotionLibrary:
             if gi not in (GRAPH_STATIC, GRAPH_REACT):
                 gs_travel = _travel(cs, ref_type)
                 gs = _ground_speed(cs, gs_travel, _family(_lookup_keys(stem)[-1]))
-                cs, travel = _strip_travel(cs, ref_type) if in_place else (cs, 0.0)
+                turns = cs.end_offset is not None and cs.end_offset[2] != 0.0  # its move is the entity's
+                cs, travel = _strip_travel(cs, ref_type) if in_place and not turns else (cs, 0.0)
             infos.append(ClipInfo(name, gi, cs.duration, cs.nframes, cs.fps, gs, travel))
             prepared.append(dataclasses.replace(cs, name=name))
         self.clips = infos
@@ -179,6 +180,12 @@ class MotionLibrary:
             [tuple(cs.end_offset) if cs.end_offset is not None else (0.0, 0.0, 0.0) for cs in self.sources],
             np.float64,
         ).reshape(-1, 3)
+        # turns in place from STAND_STOWED: (clip id, compass degrees it turns, clockwise positive)
+        self.turn_clips: list[tuple[int, float]] = [
+            (cid, -float(self.clip_end_offset[cid, 2]))
+            for cid, c in enumerate(infos)
+            if c.graph == GRAPH_TURN and self.clip_end_offset[cid, 2] != 0.0
+        ]
         self.static_clip = list(range(len(static.graph.files)))  # static clips come first, by token
         self._loco_table(entries)
         self.travel = self._travel_table(figure_sets[0][0])

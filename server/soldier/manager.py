@@ -77,10 +77,11 @@ REQUEST_BAD_VALUE = 2
 MOVING_EPS = 1e-3  # m/s: slower than this is standing still
 MAX_SPEED = 100.0  # m/s: faster is a bad value
 # playback rate limits of a locomotion clip (speed / ground speed): human cadence stays within about
-# 0.7-1.35 times the recorded one (walk 1.3-2.5 steps/s, run 2-3.9); beyond, the stride length takes the rest
-MIN_RATE, MAX_RATE = 0.7, 1.35
+# 0.6-1.6 times the recorded one (walk 1.1-2.9 steps/s, run 1.7-4.6); beyond, the stride length takes the rest
+MIN_RATE, MAX_RATE = 0.6, 1.6
 MIN_STRIDE, MAX_STRIDE = 0.5, 2.0  # stride scale limits (a scaled stride slides the feet by the difference)
 CATCH_UP_SECONDS = 1.5  # a stepping soldier's figure closes its root offset over about this long
+MIN_TURN_DEG = 22.5  # a standing soldier whose figure is this far from its heading turns in place
 MAX_CHAIN = 64  # clip ends handled per soldier per tick (a longer backlog is taken up next tick)
 MIN_CLIP_SECONDS = 1e-3  # a one-frame clip still takes this long, so clip ends cannot chain forever
 _EPS_T = 1e-9
@@ -335,7 +336,14 @@ class SoldierManager:
         )
         # the root offset up to now under the old velocity; a turned entity turns a world-fixed offset
         root_motion.fold(tb, self.library, i, t)
-        root_motion.turn_offsets(tb, i, hdg - tb.heading[i])
+        turned = np.where(tb.has_heading[i], hdg - tb.heading[i], 0.0)
+        tb.has_heading[i] = True
+        root_motion.turn_offsets(tb, i, turned)
+        # a standing figure keeps its orientation in the world (it turns in place, below); a moving one
+        # turns with the entity at once
+        standing = ~moving & (tb.speed[i] <= MOVING_EPS) & (mode != _LOCO) & (mode != _CRAWL)
+        standing &= tb.node[i] == self._home
+        tb.root_yaw[i] = np.where(standing, (tb.root_yaw[i] - turned + 180.0) % 360.0 - 180.0, 0.0)
         # store the request (Jack coordinates)
         tb.appearance[i] = app
         tb.weapon[i] = wpn
@@ -360,6 +368,8 @@ class SoldierManager:
             tb.end[r] = tb.start[r] + new_dur
         hp = ~event & (mode == _IDLE) & ~moving & heading_changed
         tb.heading_pending[i[hp]] = True
+        for k in np.flatnonzero(hp & (np.abs(tb.root_yaw[i]) >= MIN_TURN_DEG)).tolist():
+            self._turn(int(i[k]), float(t[k]))
         ev = np.flatnonzero(event)
         if len(ev):
             self.stats["events"] += len(ev)
@@ -487,6 +497,7 @@ class SoldierManager:
         if desired < 0:
             return
         if desired != node:
+            tb.root_yaw[i] = 0.0  # a posture change faces the heading (no turn clips off STAND_STOWED)
             steps = self.library.path(node, desired)
             if not steps:
                 self.stats["unreachable"] += 1
@@ -496,6 +507,10 @@ class SoldierManager:
             self._play_step(i, steps[0], t)
             return
         kind = int(self._move[int(tb.appearance[i])]) if tb.speed[i] > MOVING_EPS else 0
+        if not kind and abs(tb.root_yaw[i]) >= MIN_TURN_DEG and self._turn(i, t):
+            return
+        if kind or node != self._home:  # moving, or no turn clip here: the figure faces the heading again
+            tb.root_yaw[i] = 0.0
         if kind:
             fast = bool(tb.speed[i] > self._settings.walk_run_threshold)
             state = start_state(
@@ -503,6 +518,39 @@ class SoldierManager:
             )
             tb.mode[i] = _CRAWL if kind == _MOVE_CRAWL else _LOCO
             self._enter_one(i, int(state), t)
+
+    # -- turns in place (issue 16) ------------------------------------------------------------------------
+    def _turning(self, clip: int) -> bool:
+        return self.library.clip_end_offset[clip, 2] != 0.0 and self.library.clip_graph[clip] != 0
+
+    def _turn(self, i: int, t: float) -> bool:
+        """A standing soldier whose figure faces away from its heading plays the turn in place that fits."""
+        tb, lib = self.table, self.library
+        if not lib.turn_clips or int(tb.node[i]) != self._home or int(tb.mode[i]) != _IDLE:
+            return False
+        want = -float(tb.root_yaw[i])  # compass degrees to turn
+        clip, turn = min(  # the nearest turn; of two as near (180 both ways) the one turning the asked way
+            lib.turn_clips, key=lambda c: (abs((c[1] - want + 180.0) % 360.0 - 180.0), c[1] * want < 0)
+        )
+        if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
+            return False
+        step = PathStep(clip, True, float(lib.clip_duration[clip]), self._home, self._home)
+        tb.blend_len[i] = 0.0
+        tb.mode[i] = _TRANSITION
+        self._paths[i] = [(step,), 0]
+        self._play_step(i, step, t)
+        tb.dirty[i] = True
+        return True
+
+    def _turn_end(self, i: int, t: float) -> None:
+        """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading."""
+        tb, lib = self.table, self.library
+        x, z, yaw = lib.clip_end_offset[int(tb.clip[i])]
+        a = -math.radians(float(tb.root_yaw[i]))  # as blend.yaw_rotate turns the clip's placements
+        self._rest(i, self._home, t)
+        tb.root_off[i, 0] += math.cos(a) * x + math.sin(a) * z
+        tb.root_off[i, 1] += math.cos(a) * z - math.sin(a) * x
+        tb.root_yaw[i] = (float(tb.root_yaw[i]) - yaw + 180.0) % 360.0 - 180.0
 
     def _play_step(self, i: int, step: PathStep, t: float) -> None:
         tb = self.table
@@ -660,6 +708,8 @@ class SoldierManager:
             return
         del self._paths[i]
         tb.mode[i] = _IDLE
+        if self._turning(int(tb.clip[i])):
+            self._turn_end(i, t)
         self._decide(i, t)
 
     def _advance(self, cand: np.ndarray) -> None:
@@ -757,7 +807,12 @@ class SoldierManager:
                 sel = np.flatnonzero(fset == k)
                 s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self._settings.interpolate)
                 joints[sel], figures[sel], frames[sel] = s.joints, s.figures, s.position
-        if n:  # the root offset: every figure of the soldier moves with it (docs/PROTOCOL.md)
+        if n:  # the root offset and yaw: every figure of the soldier moves with it (docs/PROTOCOL.md)
+            yawed = np.flatnonzero(tb.root_yaw[idx] != 0.0)
+            if len(yawed):
+                f = figures[yawed]
+                yaw_rotate(f, tb.root_yaw[idx[yawed]])
+                figures[yawed] = f
             off = root_motion.offset_at(tb, lib, idx, clock, frames).astype(np.float32)
             figures[:, :, 0] += off[:, None, 0]
             figures[:, :, 2] += off[:, None, 1]

@@ -47,6 +47,8 @@ _COLUMNS: dict[str, tuple[type | str, tuple[int, ...], float]] = {
     "root_t": (np.float64, (), 0.0),
     "root_ref": (np.float64, (2,), 0.0),
     "stride": (np.float64, (), 1.0),
+    "root_yaw": (np.float64, (), 0.0),  # the figure's yaw from the entity's heading (compass degrees)
+    "has_heading": (np.bool_, (), False),  # a request gave the heading (the first one turns nothing)
     # output bookkeeping
     "last_sent": (np.float64, (), -math.inf),
     "dirty": (np.bool_, (), False),  # pose changed while resting: send it once
@@ -105,6 +107,8 @@ class SoldierTable:
     root_t: np.ndarray
     root_ref: np.ndarray
     stride: np.ndarray
+    root_yaw: np.ndarray
+    has_heading: np.ndarray
     last_sent: np.ndarray
     dirty: np.ndarray
     heading_pending: np.ndarray
