@@ -15,12 +15,15 @@ import pytest
 from peabody.fk import FigureKinematics
 from protocol.entity import Appearance, WeaponState, make_entity_requests
 from server.soldier.manager import REQUEST_OK, SoldierManager
-from server.soldier.root_motion import feet_points
+from server.soldier.root_motion import TURN_RATE, feet_points
 from tests.test_gait_selection import shipped_library
 
 HZ = 60.0
 CONTACT_CM = 1.0  # a sole point this near the ground touches it
 SKATE_CM = 2.0
+PIVOT_TWIST_CM = (
+    8.0  # turning while walking: a flat foot pivots on its weight-bearing point, its other end twists
+)
 
 
 @pytest.fixture(scope="module")
@@ -69,8 +72,9 @@ def drive(lib, script: list[tuple[float, ...]], heading: float, until: float) ->
     return {"world": world, "height": local[..., 1], "clips": np.array(clips), "gap": gap}
 
 
-def skates(run: dict[str, np.ndarray]) -> list[tuple[float, str]]:
-    """Per touchdown of a sole point: how far it moved (cm) while it stayed down, and the clip it began in."""
+def skates(run: dict[str, np.ndarray], t0: float = 0.0, t1: float = math.inf) -> list[tuple[float, str]]:
+    """Per touchdown of a sole point beginning between ``t0`` and ``t1`` s: how far it moved (cm) while it
+    stayed down, and the clip it began in."""
     world, height = run["world"], run["height"]
     ground = height.min()
     down = height < ground + CONTACT_CM
@@ -86,7 +90,8 @@ def skates(run: dict[str, np.ndarray]) -> list[tuple[float, str]]:
                 while j + 1 < len(down) and down[j + 1, f, p]:
                     j += 1
                 track = world[k : j + 1, f, p]
-                out.append((float(np.linalg.norm(track - track[0], axis=1).max()), str(run["clips"][k])))
+                if t0 <= k / HZ < t1:
+                    out.append((float(np.linalg.norm(track - track[0], axis=1).max()), str(run["clips"][k])))
                 k = j + 1
     return out
 
@@ -146,3 +151,23 @@ def test_small_heading_changes_do_not_turn_and_the_figure_stays_put(lib) -> None
     run = drive(lib, [(0.0, 0.0, 0.0), (0.5, 0.0, 0.0, 20.0), (1.0, 0.0, 0.0, 0.0)], heading=0.0, until=2.0)
     assert not any("turn_" in c for c in run["clips"].tolist())
     assert np.abs(run["world"] - run["world"][0]).max() < 0.5
+
+
+@pytest.mark.parametrize(("speed", "turn"), [(1.4, 90.0), (3.0, -60.0), (1.4, -90.0)])
+def test_a_heading_change_while_moving_turns_the_body_over_a_few_steps(
+    lib, speed: float, turn: float
+) -> None:
+    """The entity turns at once (heading and velocity); the figure keeps its orientation in the world and
+    turns towards the heading at root_motion.TURN_RATE about the sole point carrying its weight, while it
+    keeps stepping: the foot pivots on that point (the other end of a flat foot twists a few cm), the body
+    never snaps, and the stop still ends near the entity."""
+    script = [(0.0, 0.0, 0.0), (0.5, speed, 0.0), (4.0, speed, 0.0, 40.0 + turn), (8.0, 0.0, 0.0)]
+    run = drive(lib, script, heading=40.0, until=11.0)
+    k = int(4.0 * HZ)
+    assert np.abs(run["world"][k] - run["world"][k - 1]).max() < 12.0  # one tick of stepping, no snap
+    turn_s = abs(turn) / TURN_RATE
+    turning = [s for s, c in skates(run, 4.0, 4.0 + turn_s + 0.4) if "cycle" in c]
+    assert turning and max(turning) <= PIVOT_TWIST_CM
+    assert max(s for s, _ in skates(run, 4.0 + turn_s + 0.4, 11.0)) <= SKATE_CM
+    assert not any("turn_" in c for c in run["clips"].tolist()[: int(8.0 * HZ)])
+    assert np.linalg.norm(run["gap"][-1]) < 37.0 + 10.0

@@ -45,7 +45,14 @@ from server.motion.posture_change import LoadedPostureGraph
 from server.motion.posture_graph import posture_of
 from server.motion.sampling import ClipLibrary
 from server.soldier.locomotion import CLIP_OF, NSTATES
-from server.soldier.root_motion import TravelTable, feet_points, has_feet, linear_travel, stance_travel
+from server.soldier.root_motion import (
+    TravelTable,
+    feet_points,
+    has_feet,
+    linear_travel,
+    stance_contact,
+    stance_travel,
+)
 from server.soldier.state import CRAWL_NODE, STAND_STOWED, LocoState
 
 GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL, GRAPH_TURN, GRAPH_REACT = 0, 1, 2, 3, 4
@@ -260,8 +267,10 @@ class MotionLibrary:
         sl = first.figure_slice(protofiletype(figure))
         stepping = {int(c) for c in self.loco_clip.ravel() if c >= 0}
         curves: list[np.ndarray] = []
+        contacts: list[np.ndarray] = []
         for cid, info in enumerate(self.clips):
             n = info.nframes
+            contacts.append(np.zeros((n, 2)))
             if cid not in stepping or n < 2:
                 curves.append(np.zeros((n, 2)))
                 continue
@@ -274,7 +283,8 @@ class MotionLibrary:
             )
             points = feet_points(kin, s.joints[:, sl], s.figures[:, 0])
             curves.append(stance_travel(points, self.sources[cid].stride_length))
-        return TravelTable(curves)
+            contacts[-1] = stance_contact(points)
+        return TravelTable(curves, contacts)
 
     def _travel_vector(self, cid: int) -> np.ndarray:
         """(X, Z cm) a clip carries the soldier: its recorded root travel, else its ground speed times its

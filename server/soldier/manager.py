@@ -341,9 +341,8 @@ class SoldierManager:
         root_motion.turn_offsets(tb, i, turned)
         # a standing figure keeps its orientation in the world (it turns in place, below); a moving one
         # turns with the entity at once
-        standing = ~moving & (tb.speed[i] <= MOVING_EPS) & (mode != _LOCO) & (mode != _CRAWL)
-        standing &= tb.node[i] == self._home
-        tb.root_yaw[i] = np.where(standing, (tb.root_yaw[i] - turned + 180.0) % 360.0 - 180.0, 0.0)
+        keeps = (mode == _LOCO) | (mode == _CRAWL) | (tb.node[i] == self._home) | moving
+        tb.root_yaw[i] = np.where(keeps, (tb.root_yaw[i] - turned + 180.0) % 360.0 - 180.0, 0.0)
         # store the request (Jack coordinates)
         tb.appearance[i] = app
         tb.weapon[i] = wpn
@@ -509,7 +508,7 @@ class SoldierManager:
         kind = int(self._move[int(tb.appearance[i])]) if tb.speed[i] > MOVING_EPS else 0
         if not kind and abs(tb.root_yaw[i]) >= MIN_TURN_DEG and self._turn(i, t):
             return
-        if kind or node != self._home:  # moving, or no turn clip here: the figure faces the heading again
+        if not kind and node != self._home:  # no turn clip here: the figure faces the heading again
             tb.root_yaw[i] = 0.0
         if kind:
             fast = bool(tb.speed[i] > self._settings.walk_run_threshold)
@@ -808,6 +807,9 @@ class SoldierManager:
                 s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self._settings.interpolate)
                 joints[sel], figures[sel], frames[sel] = s.joints, s.figures, s.position
         if n:  # the root offset and yaw: every figure of the soldier moves with it (docs/PROTOCOL.md)
+            mode = tb.mode[idx]
+            turning = (tb.root_yaw[idx] != 0.0) & ((mode == _LOCO) | (mode == _CRAWL))
+            root_motion.fold(tb, lib, idx[turning], clock[turning])
             yawed = np.flatnonzero(tb.root_yaw[idx] != 0.0)
             if len(yawed):
                 f = figures[yawed]

@@ -26,6 +26,8 @@ if TYPE_CHECKING:
     from server.soldier.library import MotionLibrary
     from server.soldier.table import SoldierTable
 
+TURN_RATE = 90.0  # degrees/s a walking, running or crawling figure turns towards its heading (faster > 90)
+STEPPING = (2, 3)  # state.Mode.LOCO, Mode.CRAWL (plain ints: this module does not import the manager's enums)
 FLIGHT_CM = 3.0  # a foot whose lowest sole point is this far above the clip's lowest carries no weight
 # per foot, the sole points whose lower one carries the weight (heel strike, then the ball at push-off)
 FOOT_SITES: tuple[tuple[str, ...], ...] = (
@@ -66,6 +68,19 @@ def contact_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return move, pair[k, which] - flat[..., 1].min()
 
 
+def stance_contact(points: np.ndarray) -> np.ndarray:
+    """``(n, 2)`` per frame the horizontal position (X, Z cm) of the sole point carrying the weight: the pivot
+    a moving soldier's figure turns about, so the turn does not slide the planted foot."""
+    n = len(points)
+    if n < 2:
+        return np.zeros((n, 2))
+    flat = points.reshape(n, -1, 3)
+    pair = np.maximum(flat[:-1, :, 1], flat[1:, :, 1])
+    which = np.argmin(pair, axis=1)
+    which = np.append(which, which[-1])
+    return flat[np.arange(n), which][:, [0, 2]]
+
+
 def stance_travel(points: np.ndarray, stride: float | None = None) -> np.ndarray:
     """``(n, 2)`` cumulative horizontal travel (X, Z cm) that keeps the point carrying the weight still
     (:func:`contact_points` of :func:`feet_points`): the body travels by minus its move. Frames with both feet
@@ -90,7 +105,7 @@ def stance_travel(points: np.ndarray, stride: float | None = None) -> np.ndarray
 class TravelTable:
     """Per clip its stance travel curve, flat like ``ClipLibrary`` data; interpolated at fractional frames."""
 
-    def __init__(self, curves: Sequence[np.ndarray]) -> None:
+    def __init__(self, curves: Sequence[np.ndarray], contacts: Sequence[np.ndarray] | None = None) -> None:
         sizes = np.array([len(c) for c in curves], np.int64)
         self.start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
         self.nframes = sizes
@@ -98,6 +113,11 @@ class TravelTable:
             np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in curves])
             if len(curves)
             else np.zeros((0, 2))
+        )
+        self.contact = (
+            np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in contacts])
+            if contacts is not None and len(contacts)
+            else np.zeros_like(self.data)
         )
         self.total = np.array([c[-1] - c[0] if len(c) else (0.0, 0.0) for c in curves], np.float64).reshape(
             -1, 2
@@ -113,6 +133,13 @@ class TravelTable:
         w = (f - f0)[:, None]
         base = self.start[clip]
         return self.data[base + f0] * (1.0 - w) + self.data[base + f1] * w
+
+    def contact_at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """``(n, 2)`` the weight-bearing sole point of ``clip`` at the frame nearest ``frame``."""
+        clip = np.asarray(clip, np.int64)
+        last = np.maximum(self.nframes[clip] - 1, 0)
+        f = np.clip(np.floor(np.asarray(frame, np.float64) + 0.5).astype(np.int64), 0, last)
+        return self.contact[self.start[clip] + f]
 
 
 def measure(figure: Figure, joints: np.ndarray, placements: np.ndarray) -> np.ndarray:
@@ -141,17 +168,38 @@ def offset_at(
     stride scale) minus the entity's dead-reckoned travel since."""
     if frames is None:
         frames = frame_at(tb, lib, idx, t)
-    travel = lib.travel.at(tb.clip[idx], frames) - tb.root_ref[idx]
+    travel = (lib.travel.at(tb.clip[idx], frames) - tb.root_ref[idx]) * tb.stride[idx][:, None]
     dt = np.asarray(t, np.float64) - tb.root_t[idx]
-    return tb.root_off[idx] + travel * tb.stride[idx][:, None] - tb.vlocal[idx] * np.reshape(dt, (-1, 1))
+    return tb.root_off[idx] + yawed(travel, tb.root_yaw[idx]) - tb.vlocal[idx] * np.reshape(dt, (-1, 1))
+
+
+def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
+    """``(n, 2)`` horizontal vectors of the soldier frame turned by compass degrees (as blend.yaw_rotate)."""
+    a = -np.radians(np.asarray(compass_deg, np.float64))
+    c, s = np.cos(a), np.sin(a)
+    x, z = xz[:, 0], xz[:, 1]
+    return np.stack([c * x + s * z, c * z - s * x], axis=1)
 
 
 def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
-    """Bring the offsets up to ``t``: before a clip, the velocity or the stride scale changes."""
+    """Bring the offsets up to ``t``: before a clip, the velocity or the stride scale changes, and while a
+    stepping figure turns towards the heading (TURN_RATE, about the sole point carrying its weight)."""
     if len(idx) == 0:
         return
     frames = frame_at(tb, lib, idx, t)
-    tb.root_off[idx] = offset_at(tb, lib, idx, t, frames)
+    off = offset_at(tb, lib, idx, t, frames)
+    yaw = tb.root_yaw[idx]
+    turning = (yaw != 0.0) & ((tb.mode[idx] == STEPPING[0]) | (tb.mode[idx] == STEPPING[1]))
+    if turning.any():
+        dt = np.maximum(np.asarray(t, np.float64) - tb.root_t[idx], 0.0)
+        rate = TURN_RATE * np.maximum(1.0, np.abs(yaw) / 90.0)  # a reversal turns faster (it walks away)
+        new = yaw - np.clip(yaw, -rate * dt, rate * dt)
+        new = np.where(turning, new, yaw)
+        contact = lib.travel.contact_at(tb.clip[idx], frames)
+        pivot = off + yawed(contact, yaw)
+        off = pivot - yawed(contact, new)
+        tb.root_yaw[idx] = new
+    tb.root_off[idx] = off
     tb.root_t[idx] = t
     tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
 
