@@ -134,3 +134,45 @@ def test_cadence_stays_human_and_the_stride_takes_the_rest(lib) -> None:
     steps_per_s = 1.0 / cycles[-1].duration
     assert cycles[-1].duration == pytest.approx(stored / MAX_RATE)
     assert 1.1 <= steps_per_s <= 3.0
+
+
+def rest(m: SoldierManager, i: int, now: float, app: int, weapon: int) -> None:
+    rows = make_entity_requests(i, app, weapon, (0.0, 0.0, 0.0), 0.0, (0, 0, 0))
+    assert m.apply_requests(rows, now).tolist() == [REQUEST_OK]
+
+
+@pytest.mark.parametrize(
+    ("app", "weapon", "recoil", "flinch"),
+    [
+        (Appearance.UPRIGHT, WeaponState.FIRING, "stfire_recoil", "stfire_flinch"),
+        (Appearance.KNEEL, WeaponState.FIRING, "kfire_recoil", "kfire_flinch"),
+        (Appearance.PRONE, WeaponState.FIRING, "prfire_recoil", "prfire_flinch"),
+        (Appearance.UPRIGHT, WeaponState.DEPLOYED, None, "ststow_flinch"),
+        (Appearance.CRAWL, WeaponState.DEPLOYED, None, "crawl_flinch"),
+    ],
+)
+def test_fire_recoils_and_a_near_detonation_flinches_in_the_posture_held(
+    lib, app: int, weapon: int, recoil: str | None, flinch: str
+) -> None:
+    m, i = soldier(lib)
+    rest(m, i, 0.0, app, weapon)
+    run(m, 0.0, 8.0)  # there
+    posture = m.soldier_info(i)["posture"]
+    got = m.react(i, "recoil", 8.0)
+    assert (got.rsplit("/", 1)[-1].removesuffix("_low") if got else None) == recoil
+    if got:
+        run(m, 8.0, 8.0 + lib.clip_duration[lib.clip_id(got)] + 0.1)
+        assert m.soldier_info(i)["posture"] == posture and m.soldier_info(i)["mode"] == "IDLE"
+    t = 12.0
+    run(m, 8.0, t)
+    got = m.react(i, "flinch", t)
+    assert got is not None and got.rsplit("/", 1)[-1].removesuffix("_low") == flinch
+    run(m, t, t + 3.0)
+    assert m.soldier_info(i)["posture"] == posture
+
+
+def test_a_stepping_soldier_does_not_react(lib) -> None:
+    m, i = soldier(lib)
+    move(m, i, 0.0, 1.4)
+    run(m, 0.0, 2.0)
+    assert m.react(i, "flinch", 2.0) is None and m.soldier_info(i)["mode"] == "LOCO"

@@ -195,6 +195,15 @@ class MotionLibrary:
         ]
         self.static_clip = list(range(len(static.graph.files)))  # static clips come first, by token
         self._loco_table(entries)
+        # reactions without a posture change: (posture, "recoil" | "flinch") -> clip id (soldier_react.graph)
+        self.reaction: dict[tuple[str, str], int] = {}
+        if react is not None:
+            base = next(k for k, e in enumerate(entries) if e[1] == GRAPH_REACT)
+            for arc in react.graph.arcs:
+                stem = _lookup_keys(clip_stem(react.graph.files[arc.channelset]))[-1]
+                self.reaction.setdefault(
+                    (posture_of(arc.start), stem.rsplit("_", 1)[-1]), base + arc.channelset
+                )
         self.travel = self._travel_table(figure_sets[0][0])
         self._rest_poses()
         self._paths: dict[tuple[int, int], tuple[PathStep, ...] | None] = {}
