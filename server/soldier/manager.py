@@ -578,8 +578,7 @@ class SoldierManager:
 
     def _play_step(self, i: int, step: PathStep, t: float) -> None:
         tb = self.table
-        one = np.array([i], np.int64)
-        root_motion.fold(tb, self.library, one, t)
+        root_motion.fold1(tb, self.library, i, t)
         tb.stride[i] = 1.0
         tb.clip[i] = step.clip
         tb.direc[i] = 1 if step.forward else -1
@@ -587,15 +586,14 @@ class SoldierManager:
         dur = max(step.duration, MIN_CLIP_SECONDS)
         tb.dur[i] = dur
         tb.end[i] = t + dur
-        root_motion.rebase(tb, self.library, one)
+        root_motion.rebase1(tb, self.library, i)
         self._record(i, t)
 
     def _rest(self, i: int, node: int, t: float) -> None:
         """Show posture ``node``'s pose: its clip held at the frame that is that posture."""
         tb = self.table
         lib = self.library
-        one = np.array([i], np.int64)
-        root_motion.fold(tb, lib, one, t)  # the offset stays where the last step left it (feet planted)
+        root_motion.fold1(tb, lib, i, t)  # the offset stays where the last step left it (feet planted)
         tb.stride[i] = 1.0
         clip = int(lib.rest_clip[node])
         tb.node[i] = node
@@ -605,7 +603,7 @@ class SoldierManager:
         tb.start[i] = t - tb.dur[i]
         tb.end[i] = t
         tb.dirty[i] = True
-        root_motion.rebase(tb, lib, one)
+        root_motion.rebase1(tb, lib, i)
 
     # -- locomotion (Figure 5, vectorised) ---------------------------------------------------------------
     def _step_duration(
@@ -673,10 +671,12 @@ class SoldierManager:
         direc = int(lib.loco_dir[state])
         if state == _CRAWL_CYCLE and tb.backward[i]:
             direc = -direc
-        one = np.array([i], np.int64)
-        root_motion.fold(tb, lib, one, t)
-        durs, strides = self._step_duration(one, np.array([clip]), np.array([state]))
-        dur, tb.stride[i] = float(durs[0]), strides[0]
+        root_motion.fold1(tb, lib, i, t)
+        if _SCALED[state]:  # a side-step: the vectorised pacing
+            durs, strides = self._step_duration(np.array([i], np.int64), np.array([clip]), np.array([state]))
+            dur, tb.stride[i] = float(durs[0]), strides[0]
+        else:  # a start step: its recorded pace
+            dur, tb.stride[i] = max(float(lib.clip_duration[clip]), MIN_CLIP_SECONDS), 1.0
         tb.loco[i] = state
         tb.foot[i] = foot
         tb.clip[i] = clip
@@ -684,7 +684,7 @@ class SoldierManager:
         tb.start[i] = t
         tb.dur[i] = dur
         tb.end[i] = t + dur
-        root_motion.rebase(tb, lib, one)
+        root_motion.rebase1(tb, lib, i)
         self._record(i, t)
 
     def _loco_ended(self, idx: np.ndarray) -> None:

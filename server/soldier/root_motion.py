@@ -134,6 +134,19 @@ class TravelTable:
         base = self.start[clip]
         return self.data[base + f0] * (1.0 - w) + self.data[base + f1] * w
 
+    def at1(self, clip: int, frame: float) -> tuple[float, float]:
+        """:meth:`at` for one clip and frame in scalar Python (the per-event paths)."""
+        last = max(int(self.nframes[clip]) - 1, 0)
+        f = min(max(frame, 0.0), float(last))
+        f0 = int(f)
+        w = f - f0
+        base = int(self.start[clip])
+        x0, z0 = self.data[base + f0].tolist()
+        if w == 0.0 or f0 >= last:
+            return x0, z0
+        x1, z1 = self.data[base + f0 + 1].tolist()
+        return x0 + (x1 - x0) * w, z0 + (z1 - z0) * w
+
     def contact_at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """``(n, 2)`` the weight-bearing sole point of ``clip`` at the frame nearest ``frame``."""
         clip = np.asarray(clip, np.int64)
@@ -202,6 +215,36 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
     tb.root_off[idx] = off
     tb.root_t[idx] = t
     tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
+
+
+def frame_at1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> float:
+    """:func:`frame_at` for one soldier in scalar Python."""
+    u = min(max((t - float(tb.start[i])) / max(float(tb.dur[i]), 1e-9), 0.0), 1.0)
+    if tb.direc[i] <= 0:
+        u = 1.0 - u
+    return u * max(int(lib.clip_nframes[tb.clip[i]]) - 1, 0)
+
+
+def fold1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> None:
+    """:func:`fold` for one soldier in scalar Python (a request or a clip change of one soldier)."""
+    yaw = float(tb.root_yaw[i])
+    if yaw != 0.0:  # turning about a contact point: the vectorised path
+        fold(tb, lib, np.array([i], np.int64), t)
+        return
+    tx, tz = lib.travel.at1(int(tb.clip[i]), frame_at1(tb, lib, i, t))
+    rx, rz = tb.root_ref[i].tolist()
+    vx, vz = tb.vlocal[i].tolist()
+    ox, oz = tb.root_off[i].tolist()
+    s = float(tb.stride[i])
+    dt = t - float(tb.root_t[i])
+    tb.root_off[i] = (ox + (tx - rx) * s - vx * dt, oz + (tz - rz) * s - vz * dt)
+    tb.root_t[i] = t
+    tb.root_ref[i] = (tx, tz)
+
+
+def rebase1(tb: SoldierTable, lib: MotionLibrary, i: int) -> None:
+    """:func:`rebase` for one soldier in scalar Python."""
+    tb.root_ref[i] = lib.travel.at1(int(tb.clip[i]), frame_at1(tb, lib, i, float(tb.root_t[i])))
 
 
 def rebase(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
