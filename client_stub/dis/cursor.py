@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -164,7 +165,7 @@ class LogCursor:
         self, t: float, inclusive: bool = True
     ) -> tuple[EntityStateBatch, NDArray[np.float64], list[WeaponEvent], int]:
         """Entity states, their times, weapon events and the number of DIS PDUs (all types) due by ``t``."""
-        side = "right" if inclusive else "left"
+        side: Literal["left", "right"] = "right" if inclusive else "left"
         es_end = max(int(np.searchsorted(self.times, t, side=side)), self._es)
         ev_end = max(int(np.searchsorted(self.event_times, t, side=side)), self._ev)
         pdu_end = max(int(np.searchsorted(self.pdu_times, t, side=side)), self._pdu)

@@ -73,11 +73,10 @@ SOLDIER_DTYPE = np.dtype(
 
 def entity_keys(entity_id: NDArray[np.void]) -> NDArray[np.uint64]:
     """One u64 per DIS entity id (site, application, entity)."""
-    return (
-        (entity_id["site"].astype(np.uint64) << np.uint64(32))
-        | (entity_id["application"].astype(np.uint64) << np.uint64(16))
-        | entity_id["entity"].astype(np.uint64)
-    )
+    site: NDArray[np.uint64] = entity_id["site"].astype(np.uint64)
+    application: NDArray[np.uint64] = entity_id["application"].astype(np.uint64)
+    entity: NDArray[np.uint64] = entity_id["entity"].astype(np.uint64)
+    return (site << np.uint64(32)) | (application << np.uint64(16)) | entity
 
 
 @dataclass

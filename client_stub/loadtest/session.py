@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -125,7 +126,7 @@ class LoadSession:
         if n <= old:
             return
         share = np.diff(np.linspace(0, n - old, cfg.clients + 1).round().astype(np.int64))
-        results = [None] * cfg.clients
+        results: list[tuple[np.ndarray, np.ndarray] | None] = [None] * cfg.clients
 
         async def create(k: int) -> None:
             results[k] = await self.clients[k].create_soldiers(
@@ -136,7 +137,8 @@ class LoadSession:
             for k in range(cfg.clients):
                 if share[k]:
                     nursery.start_soon(create, k)
-        idx, owner = [], []
+        idx: list[np.ndarray] = []
+        owner: list[np.ndarray] = []
         for k, r in enumerate(results):
             if r is not None:
                 idx.append(r[0])
@@ -324,6 +326,7 @@ def run_loadtest(cfg: LoadTestConfig) -> dict[str, Any]:
     """Run a load test (or a ramp) as configured; returns the JSON-ready result."""
     cfg.check()
     server: ServerProcess | None = None
+    server_cpu: Callable[[], float] | None
     try:
         if cfg.spawn_server:
             server = spawn_server(server_args(cfg.rate_hz, cfg.throttle), data=cfg.server_data)

@@ -58,7 +58,7 @@ class Recording:
     latency: list[np.ndarray] = field(default_factory=list)
     # CPU samples: time, server CPU seconds (nan if unknown), load generator CPU seconds
     cpu: list[tuple[float, float, float]] = field(default_factory=list)
-    requests_sent: list[tuple[float, int]] = field(default_factory=list)
+    requests_sent: list[tuple[float, float]] = field(default_factory=list)
 
     def arrays(self) -> dict[str, np.ndarray]:
         def cat(parts: list[np.ndarray], dtype: type) -> np.ndarray:

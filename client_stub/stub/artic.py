@@ -220,7 +220,9 @@ def bind_table(ours: UpdateTable, wire: UpdateTable) -> TableBinding:
 
     mine, my_figs = columns(ours)
     theirs, their_figs = columns(wire)
-    src, dst, missing = [], [], []
+    src: list[int] = []
+    dst: list[int] = []
+    missing: list[str] = []
     for name, (col, n, kinds) in mine.items():
         other = theirs.get(name)
         if other is None or other[1] != n or other[2] != kinds:

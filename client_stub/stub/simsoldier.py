@@ -17,6 +17,7 @@ from __future__ import annotations
 from enum import IntEnum
 
 import numpy as np
+from numpy.typing import DTypeLike
 
 from client_stub.stub.terrain import Terrain
 from protocol import coords
@@ -37,7 +38,7 @@ class Force(IntEnum):
     OPPOSING = 1
 
 
-_COLUMNS: dict[str, tuple[object, tuple[int, ...]]] = {
+_COLUMNS: dict[str, tuple[DTypeLike, tuple[int, ...]]] = {
     "alive": (bool, ()),
     "position": (np.float64, (3,)),
     "heading": (np.float64, ()),  # compass degrees
@@ -64,7 +65,7 @@ class SimSoldiers:
         self.capacity = 0
         self.time = 0.0
         for name, (dtype, shape) in _COLUMNS.items():
-            setattr(self, name, np.zeros((0, *shape), dtype))  # type: ignore[call-overload]
+            setattr(self, name, np.zeros((0, *shape), dtype))
         self._sent = np.zeros(0, ENTITY_REQUEST_DTYPE)
         self._grow(capacity)
 
@@ -89,7 +90,7 @@ class SimSoldiers:
         extra = capacity - self.capacity
         for name, (dtype, shape) in _COLUMNS.items():
             old = getattr(self, name)
-            setattr(self, name, np.concatenate([old, np.zeros((extra, *shape), dtype)]))  # type: ignore[call-overload]
+            setattr(self, name, np.concatenate([old, np.zeros((extra, *shape), dtype)]))
         self._sent = np.concatenate([self._sent, np.zeros(extra, ENTITY_REQUEST_DTYPE)])
         self.capacity = capacity
 

@@ -85,6 +85,7 @@ def load_terrain(path: str | os.PathLike[str] = DEFAULT_TERRAIN, up: str | None 
         scene = trimesh.load(p, force="scene")
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise TerrainError(f"{p}: cannot load terrain: {exc}") from None
+    assert isinstance(scene, trimesh.Scene)  # force="scene"; load() is typed as any Geometry
     meshes: dict[str, trimesh.Trimesh] = {}
     for node in scene.graph.nodes_geometry:
         transform, geom_name = scene.graph[node]

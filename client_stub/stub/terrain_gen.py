@@ -195,7 +195,7 @@ def _building_meshes(
 ) -> tuple[list[trimesh.Trimesh], list[trimesh.Trimesh], list[trimesh.Trimesh]]:
     xs = np.array([b.x - b.w / 2, b.x + b.w / 2])
     ys = np.array([b.y - b.d / 2, b.y + b.d / 2])
-    gx, gy = np.meshgrid(np.linspace(*xs, 5), np.linspace(*ys, 5))
+    gx, gy = np.meshgrid(np.linspace(xs[0], xs[1], 5), np.linspace(ys[0], ys[1], 5))
     ground = relief(gx, gy)
     base, top = float(ground.min()) - 0.3, float(ground.max()) + b.storeys * STOREY + 0.5
     lo, hi = np.array([xs[0], ys[0], base]), np.array([xs[1], ys[1], top])
@@ -271,6 +271,13 @@ def landmarks() -> dict:
     }
 
 
+def _merge(meshes: list[trimesh.Trimesh]) -> trimesh.Trimesh:
+    """One mesh of several (``trimesh.util.concatenate`` is typed as any Geometry; meshes give a mesh)."""
+    merged = trimesh.util.concatenate(meshes)
+    assert isinstance(merged, trimesh.Trimesh)
+    return merged
+
+
 def village_scene() -> dict[str, trimesh.Trimesh]:
     """The village's meshes by layer, Performer axes."""
     rng = np.random.default_rng(SEED + 2)
@@ -293,11 +300,11 @@ def village_scene() -> dict[str, trimesh.Trimesh]:
         windows += win
     return {
         "ground": _ground(),
-        "streets": trimesh.util.concatenate(roads),
-        "buildings": trimesh.util.concatenate(walls + _walls()),
-        "roofs": trimesh.util.concatenate(roofs),
-        "windows": trimesh.util.concatenate(windows),
-        "trees": trimesh.util.concatenate(_trees(rng, 40)),
+        "streets": _merge(roads),
+        "buildings": _merge(walls + _walls()),
+        "roofs": _merge(roofs),
+        "windows": _merge(windows),
+        "trees": _merge(_trees(rng, 40)),
     }
 
 

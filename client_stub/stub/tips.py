@@ -119,7 +119,10 @@ class TipsFigure:
         """Every joint in traversal (depth-first) order with the site it hangs from and its parent joint
         (``None``: the root segment)."""
         out: list[tuple[TipsJoint, TipsSite, TipsJoint | None]] = []
-        stack = [(j, s, None) for s in self.root.sites for j in s.joints][::-1]
+        stack: list[tuple[TipsJoint, TipsSite, TipsJoint | None]] = [
+            (j, s, None) for s in self.root.sites for j in s.joints
+        ]
+        stack.reverse()
         while stack:
             joint, site, parent = stack.pop()
             out.append((joint, site, parent))

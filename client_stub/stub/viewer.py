@@ -24,10 +24,12 @@ def make_window(app: StubApp, width: int = 800, height: int = 600, fps: float = 
     stub_renderer = app.renderer
     if stub_renderer is None:
         raise RuntimeError("StubApp has no renderer")
+    # pyglet.gl.Config is the platform's concrete class at run time; mypy sees the abstract base that
+    # pyglet's first (documentation-build) import branch names.
     configs = [
-        pyglet.gl.Config(sample_buffers=1, samples=4, depth_size=24, double_buffer=True,
+        pyglet.gl.Config(sample_buffers=1, samples=4, depth_size=24, double_buffer=True,  # type: ignore[abstract]
                          major_version=4, minor_version=1, forward_compatible=True),
-        pyglet.gl.Config(depth_size=24, double_buffer=True, major_version=4, minor_version=1,
+        pyglet.gl.Config(depth_size=24, double_buffer=True, major_version=4, minor_version=1,  # type: ignore[abstract]
                          forward_compatible=True),
     ]  # fmt: skip
     window = None

@@ -310,7 +310,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
 
 def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
     from client_stub.dis.drive import ProgressLine
-    from client_stub.dis.soldiers import replay_app
+    from client_stub.dis.soldiers import DisSoldiers, replay_app
     from client_stub.stub.camera import View
     from client_stub.stub.terrain import DEFAULT_TERRAIN, load_terrain
 
@@ -319,6 +319,7 @@ def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
         terrain, replayer, link=link, progress=ProgressLine(out=None if args.json else sys.stderr)
     )
     camera = getattr(args, "camera", "squad")
+    assert isinstance(app.source, DisSoldiers)
     app.source.squad_view = camera == "squad"
     if camera == "overhead":
         app.camera.overhead()
