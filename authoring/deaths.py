@@ -16,11 +16,15 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    :attr:`DeathSpec.fade`; the knees give way at once (:data:`KNEES_GIVE_WAY`: held, they swung the shins up
    as the body pitched forward), arms, neck and head keep no tone (:data:`LOOSE`); dead joints stay damped;
    once he is down (after :attr:`DeathSpec.fade`, over :data:`KNEE_STRAIGHTEN`) the legs roll outward at
-   the hips and the feet evert (:data:`ROLLED_LEGS`, :data:`HIP_ROLL`, at :data:`LEG_TONE`: the feet lie on
-   their inner sides, heels low), and a standing death's knees straighten (:data:`KNEE_TONE`: bent, they
-   left him bottom-up on his knees);
+   the hips and the feet turn (:data:`ROLLED_LEGS`, :data:`HIP_ROLL`, at :data:`LEG_TONE`: the feet lie on
+   their inner sides, heels low) — a soldier who may come to rest on his side (:attr:`DeathSpec.sideways`,
+   the kneeling deaths) only as far as he lies on his front (:func:`_face_down`; on his side, the toned
+   hip held the upper leg up in the air) — and a standing death's knees straighten (:data:`KNEE_TONE`:
+   bent, they left him bottom-up on his knees);
 3. **the rifle is let go** at :attr:`DeathSpec.release` (the welds to the palms are switched off; the frame
-   is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`);
+   is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`); it collides
+   with the arms and head it touched in the start pose too (:class:`~authoring.ragdoll.Ragdoll`), and a
+   rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`);
 4. **the body settles**: recording (60 fps) stops once every body has been still (:data:`REST_SPEED`) for
    :data:`REST_SECONDS` (or after :data:`MAX_SECONDS`); the clip keeps those still frames, so the last frame
    is at rest.
@@ -70,13 +74,14 @@ class DeathSpec:
     slump_gain: float = 0.5
     fade: float = 1.0  # s, by then only a faint tone toward the limp shape is left
     release: float = 0.35  # s, the hands let go of the rifle
+    sideways: bool = False  # he may come to rest on his side: the legs roll outward only if on his front
 
 
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0)),
     DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0)),
-    DeathSpec("kstow2dead", "KNEEL_STOWED", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15),
-    DeathSpec("kfire2dead", "KNEEL_FIRE", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15),
+    DeathSpec("kstow2dead", "KNEEL_STOWED", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15, sideways=True),
+    DeathSpec("kfire2dead", "KNEEL_FIRE", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15, sideways=True),
     DeathSpec(
         "prstow2dead", "PRONE_STOWED", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
     ),
@@ -149,6 +154,7 @@ LIMP_LEGS = {"knee": (0.0,), "ankle": (-50.0, 0.0)}
 # body on its front lies with its feet on their inner sides and its heels low, as real bodies lie
 ROLLED_LEGS = {"knee": (5.0,), "ankle": (-50.0, 30.0)}
 HIP_ROLL = -45.0  # the hips' third DOF (about the thigh); negative turns the toes out
+FACE_DOWN = (0.2, 0.6)  # the pelvis' front pointing down this much (cosine): from on his side to on his front
 
 
 def limp_pose(kin, dead: np.ndarray, rolled: bool = False) -> np.ndarray:
@@ -192,6 +198,13 @@ def _carried_dofs(doll, key: KeyPosture) -> np.ndarray:
     return np.array(
         [int(d) for d in doll.map.qvel if not beyond[int(m.dof_bodyid[d])] & grounded], dtype=np.intp
     )
+
+
+def _face_down(doll) -> float:
+    """How much the ragdoll lies on its front: 1 when the pelvis' front (its -Z) points down more than
+    :data:`FACE_DOWN` (cosine), 0 on his side or back, smooth in between."""
+    down = float(doll.body_global("lower_torso")[1, 2])  # the front's downward component
+    return _smoothstep((down - FACE_DOWN[0]) / (FACE_DOWN[1] - FACE_DOWN[0]))
 
 
 def _smoothstep(u: float) -> float:
@@ -252,8 +265,11 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             ref = slump_ref + u * (dead_ref - slump_ref)
             g = spec.slump_gain + np.where(knees, uk, u) * (tone - spec.slump_gain)
             us = _smoothstep((t - spec.fade) / KNEE_STRAIGHTEN)
-            ref = ref + us * (rolled_ref - dead_ref)
-            g = g + settle * us
+            if us > 0.0 and spec.sideways:  # only on his front (on his side, the upper leg would rise)
+                us *= _face_down(doll)
+            if us > 0.0:
+                ref = ref + us * (rolled_ref - dead_ref)
+                g = g + settle * us
         model.jnt_stiffness[jm.jnt] = gain * g
         model.qpos_spring[jm.qpos] = ref
         model.dof_damping[jm.qvel] = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
@@ -279,6 +295,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     com = data.xipos.copy()
     still = 0
     release_frame = None
+    rifle_ground0 = 0.0
     ground0 = min(0.0, doll.lowest())  # a posture dipping into the ground starts on a ground that low
     t = 0.0
     while t < MAX_SECONDS:
@@ -295,9 +312,9 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             if release_frame is None and ts >= spec.release:
                 doll.release()
                 release_frame = len(poses)
-                # a rifle the posture dipped into the ground lies on a ground that low (raising it would
-                # lever the body up off it)
-                doll.set_rifle_ground(min(0.0, doll.rifle_lowest()))
+                rifle_ground0 = min(0.0, doll.rifle_lowest())
+            if release_frame is not None:  # a rifle the posture dipped into the ground is raised out of it
+                doll.set_rifle_ground(rifle_ground0 * (1.0 - _smoothstep((ts - spec.release) / GROUND_RISE)))
             doll.step()
         t += dt
         poses.append(doll.pose())
