@@ -14,7 +14,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    head lying — at half strength by :attr:`DeathSpec.slump_time`, then toward a limp shape (the ``DEAD``
    key's, legs straight and feet pointed, :func:`limp_pose`) fading to a faint tone by
    :attr:`DeathSpec.fade`; the knees give way at once (:data:`KNEES_GIVE_WAY`: held, they swung the shins up
-   as the body pitched forward), arms, neck and head keep no tone (:data:`LOOSE`); dead joints stay damped;
+   as the body pitched forward) but stay damped harder until he is down (:attr:`DeathSpec.knee_damping`:
+   limp, they flung the shins up as he hit the ground and dragged the feet), arms, neck and head keep no
+   tone (:data:`LOOSE`; :attr:`DeathSpec.arm_tone`: a faint one, so a soldier on his side lays his arm
+   down instead of leaving it up in the air); dead joints stay damped;
    once he is down (after :attr:`DeathSpec.fade`, over :data:`KNEE_STRAIGHTEN`) the legs roll outward at
    the hips and the feet turn (:data:`ROLLED_LEGS`, :data:`HIP_ROLL`, at :data:`LEG_TONE`: the feet lie on
    their inner sides, heels low) — a soldier who may come to rest on his side (:attr:`DeathSpec.sideways`,
@@ -75,13 +78,33 @@ class DeathSpec:
     fade: float = 1.0  # s, by then only a faint tone toward the limp shape is left
     release: float = 0.35  # s, the hands let go of the rifle
     sideways: bool = False  # he may come to rest on his side: the legs roll outward only if on his front
+    knee_damping: float = 1.0  # the knees' damping is this many times stronger until he is down
+    arm_tone: float = 0.0  # the fraction of the arms' gain kept when dead (toward the DEAD key's arms)
 
 
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0)),
-    DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0)),
-    DeathSpec("kstow2dead", "KNEEL_STOWED", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15, sideways=True),
-    DeathSpec("kfire2dead", "KNEEL_FIRE", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15, sideways=True),
+    DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0), knee_damping=4.0),
+    DeathSpec(
+        "kstow2dead",
+        "KNEEL_STOWED",
+        150.0,
+        (1.0, -0.3, -0.5),
+        "upper",
+        release=0.15,
+        sideways=True,
+        arm_tone=0.05,
+    ),
+    DeathSpec(
+        "kfire2dead",
+        "KNEEL_FIRE",
+        150.0,
+        (1.0, -0.3, -0.5),
+        "upper",
+        release=0.15,
+        sideways=True,
+        knee_damping=4.0,
+    ),
     DeathSpec(
         "prstow2dead", "PRONE_STOWED", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
     ),
@@ -89,7 +112,15 @@ DEATHS: tuple[DeathSpec, ...] = (
         "prfire2dead", "PRONE_FIRE", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
     ),
     DeathSpec(
-        "crawl2dead", "CRAWL", 120.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
+        "crawl2dead",
+        "CRAWL",
+        120.0,
+        (0.0, -1.0, 0.0),
+        "head",
+        slump_time=0.25,
+        fade=0.6,
+        release=0.15,
+        knee_damping=4.0,
     ),
 )
 SLUMP = "SLUMP"  # the in-between key of a body crumpling onto its knees (authoring.postures)
@@ -134,6 +165,7 @@ LEG_TONE = 0.3  # hips, ankles: enough to roll the legs outward and lay the feet
 LEGS = ("hip", "ankle")
 KNEE_TONE = 0.3  # a standing death's knees straighten with this once he is down (bent, they held him
 KNEE_STRAIGHTEN = 1.0  # s: bottom-up on his knees), slowly after DeathSpec.fade (quickly, the shins kick up)
+KNEE_DAMPING_FADE = 0.3  # s: after DeathSpec.fade the knees' extra damping fades this fast
 KNEES_GIVE_WAY = 0.15  # s: after the slump the knees go limp this fast
 DAMPING = 0.1  # joint damping = DAMPING * gain (s), at least MIN_DAMPING
 MIN_DAMPING = 4.0
@@ -232,7 +264,8 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     knees = np.array([n.endswith("knee") for n in names])
     loose = [n.endswith(LOOSE) for n in names]
     legs = [n.endswith(LEGS) for n in names]
-    tone = np.where(spine, SPINE_TONE, np.where(loose, 0.0, TONE))
+    arms = np.array([n.endswith(("clavicle", "shoulder", "elbow")) for n in names])
+    tone = np.where(spine, SPINE_TONE, np.where(loose, np.where(arms, spec.arm_tone, 0.0), TONE))
     # once he is down the legs roll outward (hips, ankles) and, standing deaths only, the knees straighten
     # (straightened, a fallen kneeling soldier's knees drag his feet along the ground)
     settle = np.where(legs, LEG_TONE - TONE, 0.0) + (KNEE_TONE - TONE) * knees * (spec.slump == "all")
@@ -272,7 +305,10 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
                 g = g + settle * us
         model.jnt_stiffness[jm.jnt] = gain * g
         model.qpos_spring[jm.qpos] = ref
-        model.dof_damping[jm.qvel] = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
+        damping = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
+        # until he is down the knees are damped harder (limp, they flung the shins up as he hit the ground)
+        fall = 1.0 - _smoothstep((t - spec.fade) / KNEE_DAMPING_FADE)
+        model.dof_damping[jm.qvel] = damping * np.where(knees, 1.0 + (spec.knee_damping - 1.0) * fall, 1.0)
 
     # the living soldier's muscles carry his limbs and the rifle: gravity fed forward on every joint whose
     # limb does not rest on the ground (and an upward pull on the held rifle), fading as he slumps, so the
