@@ -80,11 +80,12 @@ class DeathSpec:
     sideways: bool = False  # he may come to rest on his side: the legs roll outward only if on his front
     knee_damping: float = 1.0  # the knees' damping is this many times stronger until he is down
     arm_tone: float = 0.0  # the fraction of the arms' gain kept when dead (toward the DEAD key's arms)
+    toss: float = TOSS  # N, the hands fling the rifle they let go of this hard (he must not land on it)
 
 
 DEATHS: tuple[DeathSpec, ...] = (
-    DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0)),
-    DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0), knee_damping=4.0),
+    DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0),
+    DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0), knee_damping=4.0, toss=120.0),
     DeathSpec(
         "kstow2dead",
         "KNEEL_STOWED",
@@ -285,7 +286,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     away = -right - 0.3 * d_fig  # the let-go rifle is tossed to the soldier's left, away from his fall
     away[1] = 0.0
     away /= np.linalg.norm(away) or 1.0
-    toss_mj = TOSS * np.array([away[0], -away[2], away[1]])
+    toss_mj = spec.toss * np.array([away[0], -away[2], away[1]])
 
     def set_muscles(t: float) -> None:
         if t < spec.slump_time:  # holding -> slumping
