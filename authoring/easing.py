@@ -20,8 +20,8 @@ from typing import Protocol
 
 import numpy as np
 
+from peabody import quaternion
 from peabody.fk import FigureKinematics
-from server.motion import quaternion
 
 END_SPEED = 0.4  # m/s: the target at the ends (the check's limit is 0.5; margin for the slaved DI clip)
 END_FRAMES = 3  # frame steps measured at each end

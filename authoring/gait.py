@@ -57,9 +57,9 @@ from authoring.transitions import (
     carry_of,
     slerp_frames,
 )
+from peabody import quaternion
 from peabody import values as V
 from peabody.fk import FigureKinematics, rigid_inverse
-from server.motion import quaternion
 
 FPS = 60
 DEG = math.pi / 180.0

@@ -47,6 +47,7 @@ import numpy as np
 
 from peabody.fk import FigureKinematics
 from peabody.model import Dof, Figure, Joint, Segment, Site
+from peabody.rotations import axis_angle
 
 ROOT_DOFS: tuple[str, ...] = ("tx", "ty", "tz", "rx", "ry", "rz")
 _CLAMP_PASSES = 6  # clamping-loop passes per step; DOFs still violating afterwards are clipped
@@ -114,17 +115,6 @@ class SolveReport:
 # --- small vector helpers -----------------------------------------------------------------------------------
 
 
-def _rodrigues(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """``(..., 3, 3)`` rotations about unit ``axis`` (..., 3) by ``angle`` (...)."""
-    a = np.asarray(axis, dtype=np.float64)
-    t = np.asarray(angle, dtype=np.float64)[..., None, None]
-    k = np.zeros((*a.shape[:-1], 3, 3))
-    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
-    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = a[..., 2], -a[..., 1], a[..., 0]
-    outer = a[..., :, None] * a[..., None, :]
-    return np.cos(t) * np.eye(3) + np.sin(t) * k + (1.0 - np.cos(t)) * outer
-
-
 def rotation_log(r: np.ndarray) -> np.ndarray:
     """Axis-angle vectors ``(..., 3)`` of rotations ``(..., 3, 3)`` (robust near 0 and pi)."""
     r = np.asarray(r, dtype=np.float64)
@@ -189,10 +179,10 @@ def decompose_rotation(
     candidates = []
     for t2 in (phi + delta, phi - delta):
         t2 = _wrap(h[..., 1] + _wrap(t2 - h[..., 1]))
-        v = _rodrigues(np.broadcast_to(a2, (*batch, 3)), t2) @ a3
+        v = axis_angle(np.broadcast_to(a2, (*batch, 3)), t2) @ a3
         u = m @ a3
         t1 = _signed_angle(a1, v, u)
-        w = np.einsum("...ji,j->...i", _rodrigues(np.broadcast_to(a2, (*batch, 3)), t2), a1)
+        w = np.einsum("...ji,j->...i", axis_angle(np.broadcast_to(a2, (*batch, 3)), t2), a1)
         u3 = np.einsum("...ji,j->...i", m, a1)
         t3 = -_signed_angle(a3, w, u3)
         t1 = h[..., 0] + _wrap(t1 - h[..., 0])
@@ -422,7 +412,7 @@ def _root_update(loc: np.ndarray, d: np.ndarray, root_cols: Sequence[int]) -> np
         (t if c < 3 else rv)[:, c % 3] = d[:, k]
     ang = np.linalg.norm(rv, axis=-1)
     ax = rv / np.where(ang > 1e-12, ang, 1.0)[:, None]
-    r = _rodrigues(ax, ang)
+    r = axis_angle(ax, ang)
     out = loc.copy()
     out[:, :3, :3] = r @ loc[:, :3, :3]
     out[:, :3, 3] = loc[:, :3, 3] + t
@@ -909,7 +899,7 @@ def two_link(
     sn = np.linalg.norm(axis, axis=-1)
     ang = np.arctan2(sn, np.sum(pu * tu, -1))
     axis = np.where(sn[:, None] > 1e-12, axis / np.maximum(sn, 1e-12)[:, None], np.array([1.0, 0.0, 0.0]))
-    rmin = _rodrigues(axis, ang)
+    rmin = axis_angle(axis, ang)
     dm = kin.dof_matrices(q)
     d_up = dm[:, up.dofs[0], :3, :3] @ dm[:, up.dofs[1], :3, :3] @ dm[:, up.dofs[2], :3, :3]
     angles = decompose_rotation(

@@ -35,9 +35,9 @@ from typing import Any
 import numpy as np
 
 from authoring import ik
+from peabody import quaternion
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
-from server.motion import quaternion
 from server.motion.channelset import Channelset
 from server.motion.recording import Recording, recording_to_channelset, site_name
 

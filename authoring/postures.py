@@ -147,7 +147,9 @@ class PostureSpec:
     ranges; ``aim``: the right eye goes onto the line of sight; ``elbow_hints``: where the elbows should go
     (clip frame, a weak goal that picks the arm's swivel); ``ground``: lower the figure and rifle so that the
     lowest point of the body touches the ground (lying postures); ``head_offset``: degrees added to the solved
-    neck/head joints (a head lifted off the stock of a body solved as if aiming, so both keep the same arms).
+    neck/head joints (a head lifted off the stock of a body solved as if aiming, so both keep the same arms);
+    ``pocket``: cm added to :data:`SHOULDER_POCKET` (right clavicle frame) where the butt goes — prone, the
+    raised right arm's deltoid swings over the standing pocket, so the butt sits a little higher and inwards.
     """
 
     name: str
@@ -162,6 +164,7 @@ class PostureSpec:
     shouldered: bool = False
     look: bool = False
     head_offset: Mapping[str, Sequence[float]] = field(default_factory=dict)
+    pocket: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 def _hand(side: str, trigger: bool = False) -> dict[str, tuple[float, ...]]:
@@ -206,10 +209,12 @@ def style_pose(kin: FigureKinematics, spec: PostureSpec) -> np.ndarray:
     return kin.clamp(q)
 
 
-def shoulder_pocket(kin: FigureKinematics, pose: np.ndarray, root: np.ndarray) -> np.ndarray:
-    """Where the butt goes (clip frame) for a pose."""
+def shoulder_pocket(
+    kin: FigureKinematics, pose: np.ndarray, root: np.ndarray, offset: Sequence[float] = (0.0, 0.0, 0.0)
+) -> np.ndarray:
+    """Where the butt goes (clip frame) for a pose; ``offset``: a posture's :attr:`PostureSpec.pocket`."""
     g = kin.segment_globals(pose, root)[..., kin.segment_names.index("right_clavicle"), :, :]
-    return g[..., :3, :3] @ SHOULDER_POCKET + g[..., :3, 3]
+    return g[..., :3, :3] @ (SHOULDER_POCKET + np.asarray(offset, float)) + g[..., :3, 3]
 
 
 def palm_targets(rifle_kin: FigureKinematics, rifle: np.ndarray, side: str) -> np.ndarray:
@@ -281,7 +286,7 @@ def solve_posture(
     q = q0
     for _ in range(4 if spec.shouldered else 1):
         if spec.shouldered:  # slide the rifle so the butt meets the pocket of the current pose
-            rifle[:3, 3] += shoulder_pocket(kin, q, root) - (rifle @ butt)[:3]
+            rifle[:3, 3] += shoulder_pocket(kin, q, root, spec.pocket) - (rifle @ butt)[:3]
         goals = hand_goals(rifle_kin, rifle) + contact_goals(spec.contacts)
         if spec.aim:
             goals.append(_aim_goal(kin, rifle_kin, rifle))
@@ -383,7 +388,7 @@ _KNEELING = {
 # (the left under the handguard, the right out to the side), as a rifleman lies in the prone position. The
 # chest is as high as the spine allows, so the shouldered rifle's magazine clears the ground; the rifle is
 # canted (magazine out to the right) a little when firing, more when stowed (cheek off the stock, head up).
-_PRONE_ROOT = Placement((0.0, 12.0, 0.0), (-90.0, 0.0, -55.0))
+_PRONE_ROOT = Placement((0.0, 12.0, 0.0), (-90.0, -0.3, -55.0))
 _PRONE = {
     "left_hip": (20.0, 0.0, -25.0),
     "right_hip": (20.0, 0.0, -25.0),
@@ -398,8 +403,10 @@ _PRONE = {
     "right_elbow": (90.0, 0.0),
     "left_elbow": (60.0, 0.0),
 }
-_PRONE_SPINE = (10.0, -54.0, 0.0)  # chest raised to the limit of the spine, bent a little towards the rifle
-_PRONE_ELBOWS = (ElbowDown("left", (40.0, -64.0), 1.0), ElbowDown("right", (58.0, -24.0), 0.0))
+_PRONE_SPINE = (-15.0, -55.1, -9.0)  # chest raised to the limit of the spine, bent a little towards the rifle
+_PRONE_ELBOWS = (ElbowDown("left", (41.2, -60.8), 1.0), ElbowDown("right", (56.0, -19.0), 0.0))
+_PRONE_POCKET = (1.1, 5.3, -2.5)
+_PRONE_CANT = -15.3
 
 SPECS: dict[str, PostureSpec] = {
     "STAND_STOWED": PostureSpec(
@@ -445,10 +452,11 @@ SPECS: dict[str, PostureSpec] = {
     "PRONE_STOWED": PostureSpec(
         "PRONE_STOWED",
         root=_PRONE_ROOT,
-        rifle=Placement((0.0, 0.0, 0.0), (0.0, 0.0, -30.0)),
+        rifle=Placement((0.0, 0.0, 0.0), (0.0, 0.0, _PRONE_CANT)),
         joints={**_PRONE, "neck": (-10.0, -35.0, 10.0)},
         spine=_PRONE_SPINE,
         contacts=_PRONE_ELBOWS,
+        pocket=_PRONE_POCKET,
         aim=True,  # the arms as when firing; then the head lifts off the stock
         head_offset={"neck": (10.0, -30.0, 0.0), "head": (0.0, -10.0, 0.0)},
         shouldered=True,
@@ -457,10 +465,11 @@ SPECS: dict[str, PostureSpec] = {
     "PRONE_FIRE": PostureSpec(
         "PRONE_FIRE",
         root=_PRONE_ROOT,
-        rifle=Placement((0.0, 0.0, 0.0), (0.0, 0.0, -25.0)),  # aimed along -Z, canted
+        rifle=Placement((0.0, 0.0, 0.0), (0.0, 0.0, _PRONE_CANT)),  # aimed along -Z, canted
         joints={**_PRONE, "neck": (-10.0, -35.0, 10.0)},
         spine=_PRONE_SPINE,
         contacts=_PRONE_ELBOWS,
+        pocket=_PRONE_POCKET,
         aim=True,
         shouldered=True,
         ground=True,

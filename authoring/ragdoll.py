@@ -39,9 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from peabody import quaternion
 from peabody.fk import FigureKinematics, rigid_inverse
 from peabody.model import Figure
-from server.motion import quaternion
 
 CM = 0.01  # figure units (cm) -> MuJoCo (m)
 DENSITY = 1000.0  # kg/m^3, of the hulls; then scaled so the body weighs BODY_MASS

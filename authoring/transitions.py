@@ -49,9 +49,9 @@ from authoring.motion import (
     VelocityControl,
 )
 from authoring.postures import RIFLE, SOLDIER, SPINE, arm, leg, palm_targets
+from peabody import quaternion
 from peabody.fk import FigureKinematics, rigid_inverse
 from peabody.model import Figure
-from server.motion import quaternion
 from server.motion.channelset import Channelset
 from server.motion.recording import Recording, recording_to_channelset
 

@@ -35,7 +35,7 @@ def main() -> int:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
 
-    from client_stub.loadtest import LoadTestConfig, run_loadtest
+    from client_stub.loadtest.session import LoadTestConfig, run_loadtest
 
     load_before = os.getloadavg()
     t0 = time.perf_counter()

@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from client_stub.replay import Replayer
+from client_stub.dis import Replayer
 from protocol.dis import DisLog, read_log
 from protocol.dis.synth import synthesize, write_pcap
 
@@ -60,14 +60,14 @@ def bench_translate(log: DisLog, repeats: int = 3) -> tuple[float, dict]:
 def bench_server(log: DisLog) -> tuple[float, dict]:
     import trio
 
-    from client_stub.replay.drive import replay_to_server
-    from client_stub.replay.link import ServerLink
-    from client_stub.replay.sink import ServerSink
+    from client_stub.dis.drive import replay_to_server
+    from client_stub.dis.sink import ServerSink
+    from client_stub.link.client import Client
     from ttes.commands.replay import private_server
 
     async def main() -> tuple[float, dict]:
         async with private_server(None, synthetic=True) as server, trio.open_nursery() as nursery:
-            link = ServerLink("bench-replay")
+            link = Client("bench-replay")
             await link.open(nursery, *server.addresses[0])
             sink = ServerSink(link)
             replayer = Replayer(log, speed=math.inf)

@@ -128,7 +128,8 @@ def instrument(server: object) -> dict[str, list[float]]:
     ``publish`` (PoseBoard.publish: wire conversion + quantisation + change detection), ``encode`` (every
     session's joint-update encoding, summed over clients); the rest of the process's CPU (socket writes,
     reading requests, trio's scheduling) is reported as ``other``."""
-    from server.session import PoseBoard, Session
+    from server.pose_board import PoseBoard
+    from server.session import Session
 
     cost: dict[str, list[float]] = {k: [0.0, 0] for k in ("advance", "publish", "encode")}
 
@@ -155,6 +156,7 @@ def instrument(server: object) -> dict[str, list[float]]:
 def run(soldiers: int, clients: int, seconds: float, tick_hz: float, decode: bool) -> dict[str, object]:
     import trio
 
+    from protocol.events import DEFAULT_MAX_SOLDIERS
     from server.app import TtesServer
     from server.config import ServerConfig
     from server.startup import ServerWorld, write_synthetic_data_dir
@@ -167,7 +169,7 @@ def run(soldiers: int, clients: int, seconds: float, tick_hz: float, decode: boo
         startup_script=synth.startup_script,
         tick_hz=tick_hz,
         throttle=1 / 30,
-        max_soldiers=max(16384, soldiers),
+        max_soldiers=max(DEFAULT_MAX_SOLDIERS, soldiers),
         max_requests_per_s=1e7,
     )
     t0 = time.perf_counter()

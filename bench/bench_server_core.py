@@ -24,6 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from protocol.entity import Appearance, WeaponState, make_entity_requests
+from protocol.events import DEFAULT_MAX_SOLDIERS
 from server.soldier.manager import SoldierManager
 from server.soldier.synthetic import synthetic_motion_library
 
@@ -44,7 +45,7 @@ CHANGE_SHARE = 0.02  # soldiers with a new request per tick
 
 def build(n: int, seed: int = 1) -> tuple[SoldierManager, np.ndarray, np.random.Generator]:
     lib = synthetic_motion_library()
-    mgr = SoldierManager(lib, throttle=1 / 30, max_soldiers=max(n, 16384))
+    mgr = SoldierManager(lib, throttle=1 / 30, max_soldiers=max(n, DEFAULT_MAX_SOLDIERS))
     for _ in range(n):
         mgr.create_soldier()
     rng = np.random.default_rng(seed)

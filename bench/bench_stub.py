@@ -22,11 +22,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np
 
-from client_stub.app import StubApp
-from client_stub.camera import look_at
-from client_stub.render import StubRenderer
-from client_stub.simsoldier import Behaviour, Force
-from client_stub.terrain import load_terrain
+from client_stub.stub.app import StubApp
+from client_stub.stub.camera import look_at
+from client_stub.stub.render import StubRenderer
+from client_stub.stub.simsoldier import Behaviour, Force
+from client_stub.stub.terrain import load_terrain
 from protocol.entity import Appearance, WeaponState
 
 
@@ -57,7 +57,7 @@ def run(n: int, width: int, height: int, budget: float) -> dict:
     app = StubApp(terrain, capacity=max(n, 16), max_soldiers=n + 1)
     crowd(app, n, np.random.default_rng(n))
     app.renderer = StubRenderer(width, height)
-    app.renderer.add_terrain(terrain.meshes)
+    app.renderer.set_terrain(terrain.meshes)
     side = np.ceil(np.sqrt(n)) * 2.5
     target = np.array([0.0, -20.0 - side / 2, 0.0])
     eye = target + np.array([0.0, -max(12.0, 0.9 * side), max(6.0, 0.45 * side)])

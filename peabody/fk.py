@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from peabody import values as V
 from peabody.model import Figure, Site
+from peabody.rotations import axis_angle, skew
 
 
 @dataclass(frozen=True)
@@ -41,9 +41,21 @@ class _Step:
 _PLANES = ((1, 2), (2, 0), (0, 1))  # the columns a rotation about x, y, z mixes
 
 
-def _skew(axis: np.ndarray) -> np.ndarray:
-    x, y, z = axis
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+def dof_transforms(axes: np.ndarray, rotational: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``(..., ndof, 4, 4)``: each DOF's transform at ``values`` ``(..., ndof)``: a rotation about its unit
+    axis (radians) where ``rotational``, else a translation along it. Shared by Peabody's figures and the
+    stub's scene graph, which hold the same DOF tables in different units."""
+    q = np.asarray(values, dtype=np.float64)
+    out = np.zeros((*q.shape, 4, 4))
+    out[..., 3, 3] = 1.0
+    if rotational.any():
+        out[..., rotational, :3, :3] = axis_angle(axes[rotational], q[..., rotational])
+    if not rotational.all():
+        tr = ~rotational
+        out[..., tr, 0, 0] = out[..., tr, 1, 1] = out[..., tr, 2, 2] = 1.0
+        column = out[..., 3]  # a view: (..., ndof, 4); keeps the advanced index next to its axis
+        column[..., tr, :3] = q[..., tr, None] * axes[tr]
+    return out
 
 
 def rigid_inverse(m: np.ndarray) -> np.ndarray:
@@ -147,6 +159,10 @@ class FigureKinematics:
         if len(placed) != len(self.segment_names):
             missing = [self.segment_names[i] for i in range(len(self.segment_names)) if i not in placed]
             raise ValueError(f"figure {fig.name!r}: segment {missing[0]!r} is not connected to the root")
+        self._dof_tables()
+
+    def _dof_tables(self) -> None:
+        """Per DOF: the sign of its value and the code of :meth:`_apply_dof`'s fast path."""
         # reversed joints use the negated DOF values (inverse rotation / translation)
         sign = np.ones(self.ndof)
         for step in self._steps:
@@ -163,6 +179,11 @@ class FigureKinematics:
                     codes[i] = k
                     sign[i] *= np.sign(self._axes[i, k])
         self._dof_code = codes
+        # the skew and outer-product matrices of Rodrigues (peabody.rotations.axis_angle) per arbitrary axis
+        self._axis_terms = {
+            int(i): (skew(self._axes[i]), self._axes[i][:, None] * self._axes[i][None, :])
+            for i in np.flatnonzero(codes == 3)
+        }
         self._sign = sign
 
     # --- poses ----------------------------------------------------------------------------------------------
@@ -186,28 +207,7 @@ class FigureKinematics:
 
     def dof_matrices(self, angles: np.ndarray) -> np.ndarray:
         """``(..., ndof, 4, 4)``: each DOF's transform at the given values (vectorised Rodrigues)."""
-        q = np.asarray(angles, dtype=np.float64)
-        shape = q.shape[:-1]
-        out = np.zeros((*shape, self.ndof, 4, 4))
-        out[..., 3, 3] = 1.0
-        axes = self._axes
-        rot = self._is_rot
-        if rot.any():
-            a = axes[rot]  # (r, 3)
-            qr = q[..., rot]
-            c = np.cos(qr)[..., None, None]
-            s = np.sin(qr)[..., None, None]
-            k = np.zeros((len(a), 3, 3))
-            k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -a[:, 2], a[:, 1], -a[:, 0]
-            k[:, 1, 0], k[:, 2, 0], k[:, 2, 1] = a[:, 2], -a[:, 1], a[:, 0]
-            outer = a[:, :, None] * a[:, None, :]
-            out[..., rot, :3, :3] = c * np.eye(3) + s * k + (1.0 - c) * outer
-        if not rot.all():
-            tr = ~rot
-            out[..., tr, 0, 0] = out[..., tr, 1, 1] = out[..., tr, 2, 2] = 1.0
-            column = out[..., 3]  # a view: (..., ndof, 4); keeps the advanced index next to its axis
-            column[..., tr, :3] = q[..., tr, None] * axes[tr]
-        return out
+        return dof_transforms(self._axes, self._is_rot, angles)
 
     def _check(self, angles: np.ndarray) -> np.ndarray:
         q = np.asarray(angles, dtype=np.float64)
@@ -267,16 +267,15 @@ class FigureKinematics:
             cb = m[:, b]
             m[:, a] = c * ca + s * cb
             m[:, b] = c * cb - s * ca
-        elif code == 3:  # rotation about an arbitrary unit axis (Rodrigues), column by column
-            axis = self._axes[i]
-            k = _skew(axis)
+        elif code == 3:  # rotation about an arbitrary unit axis: axis_angle's terms, element by element
+            k, outer = self._axis_terms[i]
             c = np.cos(value)
             s = np.sin(value)
             cols = [m[:, j].copy() for j in range(3)]
             for col in range(3):
                 acc = np.zeros_like(cols[0])
                 for j in range(3):
-                    r = c * (j == col) + s * k[j, col] + (1.0 - c) * (axis[j] * axis[col])
+                    r = c * (j == col) + s * k[j, col] + (1.0 - c) * outer[j, col]
                     acc += cols[j] * r
                 m[:, col] = acc
         else:  # translation along the axis
@@ -327,7 +326,7 @@ class FigureKinematics:
             out[b, a] = s
             out[a, b] = -s
         elif code == 3:
-            out[:3, :3] = V.axis_angle_matrix(self._axes[i], value)[:3, :3]
+            out[:3, :3] = axis_angle(self._axes[i], value)
         else:
             out[:3, 3] = self._axes[i] * value
         return out

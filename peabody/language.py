@@ -46,7 +46,7 @@ from __future__ import annotations
 import gc
 import re
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import NamedTuple, NoReturn
 
 MAX_DEPTH = 64
 
@@ -261,7 +261,7 @@ class _Parser:
             self.tok_start = m.start(kind)
         self.tok_end = self.pos = m.end()
 
-    def _lex_error(self) -> None:
+    def _lex_error(self) -> NoReturn:
         text = self.text
         p = _SKIP_RE.match(text, self.pos).end()  # type: ignore[union-attr]
         if text.startswith("/*", p):
@@ -395,9 +395,9 @@ class _Parser:
             if nxt == "->" and kind == "name":
                 self._advance()
                 field = self.expect("name", "a field name after '->'")[1]
-                index = self._index() if self.tok[0] == "[" else None
+                field_index = self._index() if self.tok[0] == "[" else None
                 self.expect("=", "'='")
-                return self._finish_assign(field, index, start, (keyword, name), depth)
+                return self._finish_assign(field, field_index, start, (keyword, name), depth)
             # a keyword statement whose first argument we already consumed: rewind to it
             self.pos = name_start
             self._advance()

@@ -497,6 +497,17 @@ def _load_psurf(file: str, transform: np.ndarray | None, loc: Loc, ctx: LoadCont
 
 
 def _joint_block(block: Block, figure: Figure, name: str) -> None:
+    fields, connect = _joint_statements(block, name)
+    joint = figure.joints.get(name)
+    if connect is not None:
+        joint = _connect(figure, name, connect, joint)
+    if joint is None:
+        raise PeabodyError.at(block.loc, f"joint {name!r} has no 'connect SITE to SITE;'")
+    _joint_fields(joint, fields, name)
+
+
+def _joint_statements(block: Block, name: str) -> tuple[dict[str, Assign], Statement | None]:
+    """A joint block's fields (each at most once) and its ``connect`` statement."""
     fields: dict[str, Assign] = {}
     connect: Statement | None = None
     for stmt in block.body:
@@ -512,19 +523,24 @@ def _joint_block(block: Block, figure: Figure, name: str) -> None:
         else:
             what = stmt.keyword if isinstance(stmt, Block | Statement) else stmt.target
             raise PeabodyError.at(stmt.loc, f"unexpected {what!r} in a joint")
-    joint = figure.joints.get(name)
-    if connect is not None:
-        a, b = _connect_args(connect)
-        s1 = _find_site(figure, a, connect.args[0].loc)
-        s2 = _find_site(figure, b, connect.args[2].loc)
-        if s1.segment is s2.segment:
-            raise PeabodyError.at(connect.loc, "a joint connects sites on two different segments")
-        if joint is None:
-            joint = figure.add_joint(Joint(name, s1, s2))
-        else:
-            joint.site1, joint.site2 = s1, s2
+    return fields, connect
+
+
+def _connect(figure: Figure, name: str, connect: Statement, joint: Joint | None) -> Joint:
+    """``connect SITE to SITE;``: a new joint, or an existing one connected anew."""
+    a, b = _connect_args(connect)
+    s1 = _find_site(figure, a, connect.args[0].loc)
+    s2 = _find_site(figure, b, connect.args[2].loc)
+    if s1.segment is s2.segment:
+        raise PeabodyError.at(connect.loc, "a joint connects sites on two different segments")
     if joint is None:
-        raise PeabodyError.at(block.loc, f"joint {name!r} has no 'connect SITE to SITE;'")
+        return figure.add_joint(Joint(name, s1, s2))
+    joint.site1, joint.site2 = s1, s2
+    return joint
+
+
+def _joint_fields(joint: Joint, fields: dict[str, Assign], name: str) -> None:
+    """The joint's ``type`` (its DOFs), then limits and displacement, which depend on the DOF count."""
     if "type" in fields:
         try:
             joint.dofs = V.dofs(fields["type"].value)
@@ -541,11 +557,11 @@ def _joint_block(block: Block, figure: Figure, name: str) -> None:
             for d, v in zip(joint.dofs, vals, strict=True):
                 setattr(d, attr, v)
     if "displacement" in fields:
-        a = fields["displacement"]
+        disp = fields["displacement"]
         if n == 0:
-            joint.displacement = V.transform(a.value)
+            joint.displacement = V.transform(disp.value)
         else:
-            vals = V.numbers(a.value, n, "displacement values (one per DOF)")
+            vals = V.numbers(disp.value, n, "displacement values (one per DOF)")
             for d, v in zip(joint.dofs, vals, strict=True):
                 d.value = v
 

@@ -62,7 +62,7 @@ class _Reader:
         toks: list[tuple[str, str, int]] = []
         for m in _TOKEN.finditer(text):
             kind = m.lastgroup
-            if kind == "ws" or kind == "comment":
+            if kind in {"ws", "comment"}:
                 continue
             if kind == "bad":
                 ch = m.group()
@@ -100,6 +100,94 @@ class _Reader:
         return int(text)
 
 
+def _skip_commas_until(r: _Reader, stop: tuple[str, ...]) -> bool:
+    """Skip separating commas; True while the next token is not one of ``stop``."""
+    while r.peek() == ",":
+        r.i += 1
+    return r.peek() not in stop
+
+
+def _read_nodes(r: _Reader, nodes: list[float]) -> int:
+    """A component's node coordinates up to ';' (appended to ``nodes``); returns its node count."""
+    start = len(nodes)
+    while _skip_commas_until(r, (";",)):
+        off = r.offset()
+        text = r.take("num", "a node coordinate or ';'")
+        v = float(text)
+        if not np.isfinite(v):
+            raise r.error(off, f"node coordinate {text!r} is not finite")
+        nodes.append(v)
+        if len(nodes) > MAX_ITEMS:
+            raise r.error(off, "too many nodes")
+    if (len(nodes) - start) % 3:
+        raise r.error(r.offset(), f"node coordinates come in triplets; found {len(nodes) - start} numbers")
+    r.i += 1
+    return (len(nodes) - start) // 3
+
+
+def _node_index(r: _Reader, what: str, base: int, count: int) -> int:
+    """A 1-based node index of this component (``what``: "edge" or "face") as a 0-based index of the psurf."""
+    off = r.offset()
+    k = r.index(f"node index in {'an' if what == 'edge' else 'a'} {what}")
+    if not 1 <= k <= count:
+        raise r.error(off, f"{what} node {k} is outside 1..{count}")
+    return base + k - 1
+
+
+def _read_edges(r: _Reader, edges: list[int], base: int, count: int) -> None:
+    """A component's edges (node index pairs) up to ';', appended to ``edges``."""
+    while _skip_commas_until(r, (";",)):
+        edges.append(_node_index(r, "edge", base, count))
+    if (len(edges) // 2 * 2) != len(edges):
+        raise r.error(r.offset(), "edge node indices come in pairs")
+    r.i += 1
+
+
+def _face_attribute(r: _Reader, has_verts: bool) -> int:
+    """``[attribute n]`` after a face's vertices (just before its ';'): the attribute of this face and the
+    faces after it."""
+    off = r.offset()
+    r.i += 1
+    word = r.take("name", "'attribute'")
+    if word != "attribute":
+        raise r.error(off, f"expected [attribute n], found {word!r}")
+    attribute = r.index("attribute index")
+    r.take("]", "']'")
+    if r.peek() != ";":
+        raise r.error(r.offset(), "expected ';' after the face's [attribute n]")
+    if not has_verts:
+        raise r.error(off, "an attribute needs a face")
+    return attribute
+
+
+def _read_faces(
+    r: _Reader, faces: list[np.ndarray], face_attr: list[int], base: int, count: int, attribute: int
+) -> int:
+    """A component's faces, each ending in ';', up to an empty face (';') or the end of the text; returns
+    the attribute in force after them."""
+    while True:
+        verts: list[int] = []
+        while _skip_commas_until(r, (";", "eof")):
+            if r.peek() == "[":
+                attribute = _face_attribute(r, bool(verts))
+            else:
+                verts.append(_node_index(r, "face", base, count))
+        if r.peek() == "eof":
+            if verts:
+                raise r.error(r.offset(), "expected ';' to end the face")
+            return attribute
+        off = r.offset()
+        r.i += 1
+        if not verts:
+            return attribute
+        if len(verts) < 3:
+            raise r.error(off, f"a face needs at least 3 vertices, found {len(verts)}")
+        faces.append(np.array(verts, dtype=np.int64))
+        face_attr.append(attribute)
+        if len(faces) > MAX_ITEMS:
+            raise r.error(off, "too many faces")
+
+
 def parse_psurf(text: str, filename: str = "<string>") -> Psurf:
     """Parse ``.pss`` text (see the module docstring) into a :class:`Psurf` with 0-based indices."""
     r = _Reader(text, filename)
@@ -110,84 +198,14 @@ def parse_psurf(text: str, filename: str = "<string>") -> Psurf:
     attributes: list[dict] = []
     csurfs: list[tuple[int, int, int]] = []
     attribute = 0
-    while r.peek() != "eof":
+    while r.peek() != "eof":  # one component surface: [attribute definitions] nodes; edges; faces;
         base = len(nodes) // 3
         n_edges0, n_faces0 = len(edges) // 2, len(faces)
-        # attribute definitions (our extension)
-        while r.peek() == "[":
+        while r.peek() == "[":  # attribute definitions (our extension)
             _attribute_definition(r, attributes)
-        # nodes
-        start = len(nodes)
-        while r.peek() != ";":
-            if r.peek() == ",":
-                r.i += 1
-                continue
-            off = r.offset()
-            text = r.take("num", "a node coordinate or ';'")
-            v = float(text)
-            if not np.isfinite(v):
-                raise r.error(off, f"node coordinate {text!r} is not finite")
-            nodes.append(v)
-            if len(nodes) > MAX_ITEMS:
-                raise r.error(off, "too many nodes")
-        if (len(nodes) - start) % 3:
-            raise r.error(
-                r.offset(), f"node coordinates come in triplets; found {len(nodes) - start} numbers"
-            )
-        r.i += 1
-        count = (len(nodes) - start) // 3
-        # edges
-        while r.peek() != ";":
-            if r.peek() == ",":
-                r.i += 1
-                continue
-            off = r.offset()
-            k = r.index("node index in an edge")
-            if not 1 <= k <= count:
-                raise r.error(off, f"edge node {k} is outside 1..{count}")
-            edges.append(base + k - 1)
-        if (len(edges) // 2 * 2) != len(edges):
-            raise r.error(r.offset(), "edge node indices come in pairs")
-        r.i += 1
-        # faces
-        while True:
-            verts: list[int] = []
-            while r.peek() not in (";", "eof"):
-                if r.peek() == ",":
-                    r.i += 1
-                    continue
-                if r.peek() == "[":
-                    off = r.offset()
-                    r.i += 1
-                    word = r.take("name", "'attribute'")
-                    if word != "attribute":
-                        raise r.error(off, f"expected [attribute n], found {word!r}")
-                    attribute = r.index("attribute index")
-                    r.take("]", "']'")
-                    if r.peek() != ";":
-                        raise r.error(r.offset(), "expected ';' after the face's [attribute n]")
-                    if not verts:
-                        raise r.error(off, "an attribute needs a face")
-                    continue
-                off = r.offset()
-                k = r.index("node index in a face")
-                if not 1 <= k <= count:
-                    raise r.error(off, f"face node {k} is outside 1..{count}")
-                verts.append(base + k - 1)
-            if r.peek() == "eof":
-                if verts:
-                    raise r.error(r.offset(), "expected ';' to end the face")
-                break
-            off = r.offset()
-            r.i += 1
-            if not verts:
-                break
-            if len(verts) < 3:
-                raise r.error(off, f"a face needs at least 3 vertices, found {len(verts)}")
-            faces.append(np.array(verts, dtype=np.int64))
-            face_attr.append(attribute)
-            if len(faces) > MAX_ITEMS:
-                raise r.error(off, "too many faces")
+        count = _read_nodes(r, nodes)
+        _read_edges(r, edges, base, count)
+        attribute = _read_faces(r, faces, face_attr, base, count, attribute)
         csurfs.append((count, len(edges) // 2 - n_edges0, len(faces) - n_faces0))
     if not csurfs:
         raise r.error(0, "empty psurf")
@@ -379,7 +397,9 @@ def psurf_to_trimesh(psurf: Psurf) -> trimesh.Trimesh:
             if diffuse is not None and len(diffuse) >= 3:
                 colours[i, :3] = np.clip(np.asarray(diffuse[:3], dtype=np.float64) * 255.0, 0, 255)
         attr = np.clip(np.asarray(psurf.face_attributes)[face_of], 0, len(colours) - 1)
-        mesh.visual.face_colors = colours[attr]
+        visual = mesh.visual
+        assert isinstance(visual, trimesh.visual.ColorVisuals)  # a new mesh without texture
+        visual.face_colors = colours[attr]
     return mesh
 
 

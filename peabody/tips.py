@@ -4,7 +4,7 @@ A ``.tips`` file records a depth-first traversal of every figure, starting at it
 joint connections, so an image generator can build its run-time scene graph without a Peabody parser.
 The layout is section 7.1's, line for line; the seed's cube example (7.2) reproduces byte for byte.
 
-Where the seed is silent we chose (and ``client_stub/tips.py`` reads):
+Where the seed is silent we chose (and ``client_stub/stub/tips.py`` reads):
 
 * Numbers are ``%f`` (six decimals); units are Jack's (cm, radians) and axes Jack's (+Y up, facing -Z):
   the file is a dump of the Peabody environment, the loader converts to Performer.

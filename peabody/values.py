@@ -41,6 +41,7 @@ from peabody.language import (
     Vector,
 )
 from peabody.model import Dof
+from peabody.rotations import axis_angle
 
 LENGTH_UNITS = {"cm": 1.0, "mm": 0.1, "m": 100.0, "in": 2.54}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
@@ -178,16 +179,9 @@ def matrix_to_xyz(m: np.ndarray) -> tuple[float, float, float]:
 
 
 def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation about the unit ``axis`` by ``angle`` (``axisangletomatrix``)."""
-    x, y, z = axis
-    c, s = math.cos(angle), math.sin(angle)
-    t = 1.0 - c
+    """Rotation about the unit ``axis`` by ``angle`` (``axisangletomatrix``), as a 4x4 transform."""
     m = np.eye(4)
-    m[:3, :3] = [
-        [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
-        [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
-        [t * x * z - s * y, t * y * z + s * x, t * z * z + c],
-    ]
+    m[:3, :3] = axis_angle(axis, angle)
     return m
 
 

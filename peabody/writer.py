@@ -305,8 +305,6 @@ def _limit_equal(a: float, b: float, atol: float) -> bool:
 
 def figure_differences(a: Figure, b: Figure, atol: float = 1e-5, *, psurfs: bool = True) -> list[str]:
     """Human-readable differences between two figures (empty when equal within ``atol``)."""
-    from peabody.psurf import psurfs_equal
-
     diffs: list[str] = []
     if a.name != b.name:
         diffs.append(f"name {a.name!r} != {b.name!r}")
@@ -316,56 +314,69 @@ def figure_differences(a: Figure, b: Figure, atol: float = 1e-5, *, psurfs: bool
         diffs.append(f"segments {list(a.segments)} != {list(b.segments)}")
         return diffs
     for name, sa in a.segments.items():
-        sb = b.segments[name]
-        if list(sa.sites) != list(sb.sites):
-            diffs.append(f"segment {name}: sites {list(sa.sites)} != {list(sb.sites)}")
-            continue
-        for site_name, site in sa.sites.items():
-            if not _close(site.location, sb.sites[site_name].location, atol):
-                diffs.append(f"site {name}.{site_name}: location differs")
-        fa = sa.psurf.filename if sa.psurf is not None else None
-        fb = sb.psurf.filename if sb.psurf is not None else None
-        if fa and fb and os.path.isabs(fa) and os.path.isabs(fb):
-            if Path(fa).resolve() != Path(fb).resolve():  # references may be relative to different folders
-                diffs.append(f"segment {name}: psurf file {fa!r} != {fb!r}")
-        elif sa.psurf_file != sb.psurf_file:
-            diffs.append(f"segment {name}: psurf {sa.psurf_file!r} != {sb.psurf_file!r}")
-        ta, tb = sa.psurf_transform, sb.psurf_transform
-        if (ta is None) != (tb is None) or (ta is not None and not _close(ta, tb, atol)):
-            diffs.append(f"segment {name}: psurf transform differs")
-        if psurfs and (sa.psurf is None) != (sb.psurf is None):
-            diffs.append(f"segment {name}: psurf loaded on one side only")
-        elif psurfs and sa.psurf is not None and not psurfs_equal(sa.psurf, sb.psurf, atol):  # type: ignore[arg-type]
-            diffs.append(f"segment {name}: psurf geometry differs")
-        if set(sa.attributes) != set(sb.attributes):
-            diffs.append(f"segment {name}: attributes {sorted(sa.attributes)} != {sorted(sb.attributes)}")
-        else:
-            for key, va in sa.attributes.items():
-                if not _values_equal(va, sb.attributes[key], atol):
-                    diffs.append(f"segment {name}: attribute {key} differs")
+        diffs += _segment_differences(name, sa, b.segments[name], atol, psurfs)
     if list(a.joints) != list(b.joints):
         diffs.append(f"joints {list(a.joints)} != {list(b.joints)}")
         return diffs
     for name, ja in a.joints.items():
-        jb = b.joints[name]
-        if (_site_ref(ja.site1), _site_ref(ja.site2)) != (_site_ref(jb.site1), _site_ref(jb.site2)):
-            diffs.append(f"joint {name}: connects different sites")
-        if ja.ndofs != jb.ndofs:
-            diffs.append(f"joint {name}: {ja.ndofs} DOFs != {jb.ndofs}")
-            continue
-        for k, (da, db) in enumerate(zip(ja.dofs, jb.dofs, strict=True)):
-            if da.kind != db.kind or not _close(da.axis, db.axis, atol):
-                diffs.append(f"joint {name}: DOF {k} axis/kind differs")
-            if not (_limit_equal(da.lower, db.lower, atol) and _limit_equal(da.upper, db.upper, atol)):
-                diffs.append(f"joint {name}: DOF {k} limits differ")
-            if abs(da.value - db.value) > atol:
-                diffs.append(f"joint {name}: DOF {k} value {da.value} != {db.value}")
-        if not ja.dofs and not _close(ja.displacement, jb.displacement, atol):
-            diffs.append(f"joint {name}: displacement differs")
+        diffs += _joint_differences(name, ja, b.joints[name], atol)
     if _root_ref(a) != _root_ref(b):
         diffs.append(f"root {_root_ref(a)} != {_root_ref(b)}")
     if not _close(a.location, b.location, atol):
         diffs.append("location differs")
+    return diffs
+
+
+def _segment_differences(name: str, sa: Segment, sb: Segment, atol: float, psurfs: bool) -> list[str]:
+    from peabody.psurf import psurfs_equal
+
+    if list(sa.sites) != list(sb.sites):
+        return [f"segment {name}: sites {list(sa.sites)} != {list(sb.sites)}"]
+    diffs = [
+        f"site {name}.{site_name}: location differs"
+        for site_name, site in sa.sites.items()
+        if not _close(site.location, sb.sites[site_name].location, atol)
+    ]
+    fa = sa.psurf.filename if sa.psurf is not None else None
+    fb = sb.psurf.filename if sb.psurf is not None else None
+    if fa and fb and os.path.isabs(fa) and os.path.isabs(fb):
+        if Path(fa).resolve() != Path(fb).resolve():  # references may be relative to different folders
+            diffs.append(f"segment {name}: psurf file {fa!r} != {fb!r}")
+    elif sa.psurf_file != sb.psurf_file:
+        diffs.append(f"segment {name}: psurf {sa.psurf_file!r} != {sb.psurf_file!r}")
+    ta, tb = sa.psurf_transform, sb.psurf_transform
+    if (ta is None) != (tb is None) or (ta is not None and not _close(ta, tb, atol)):
+        diffs.append(f"segment {name}: psurf transform differs")
+    if psurfs and (sa.psurf is None) != (sb.psurf is None):
+        diffs.append(f"segment {name}: psurf loaded on one side only")
+    elif psurfs and sa.psurf is not None and not psurfs_equal(sa.psurf, sb.psurf, atol):  # type: ignore[arg-type]
+        diffs.append(f"segment {name}: psurf geometry differs")
+    if set(sa.attributes) != set(sb.attributes):
+        diffs.append(f"segment {name}: attributes {sorted(sa.attributes)} != {sorted(sb.attributes)}")
+    else:
+        diffs += [
+            f"segment {name}: attribute {key} differs"
+            for key, va in sa.attributes.items()
+            if not _values_equal(va, sb.attributes[key], atol)
+        ]
+    return diffs
+
+
+def _joint_differences(name: str, ja: Joint, jb: Joint, atol: float) -> list[str]:
+    diffs = []
+    if (_site_ref(ja.site1), _site_ref(ja.site2)) != (_site_ref(jb.site1), _site_ref(jb.site2)):
+        diffs.append(f"joint {name}: connects different sites")
+    if ja.ndofs != jb.ndofs:
+        return [*diffs, f"joint {name}: {ja.ndofs} DOFs != {jb.ndofs}"]
+    for k, (da, db) in enumerate(zip(ja.dofs, jb.dofs, strict=True)):
+        if da.kind != db.kind or not _close(da.axis, db.axis, atol):
+            diffs.append(f"joint {name}: DOF {k} axis/kind differs")
+        if not (_limit_equal(da.lower, db.lower, atol) and _limit_equal(da.upper, db.upper, atol)):
+            diffs.append(f"joint {name}: DOF {k} limits differ")
+        if abs(da.value - db.value) > atol:
+            diffs.append(f"joint {name}: DOF {k} value {da.value} != {db.value}")
+    if not ja.dofs and not _close(ja.displacement, jb.displacement, atol):
+        diffs.append(f"joint {name}: displacement differs")
     return diffs
 
 

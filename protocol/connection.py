@@ -34,6 +34,7 @@ from protocol.events import (
     SoldierCreated,
     Subscribe,
     Unsubscribe,
+    UpdateHeaders,
     UpdateTableMsg,
 )
 from protocol.framing import DEFAULT_MAX_FRAME, HANDSHAKE_MAX_FRAME, MIN_MAX_FRAME, FrameReader, encode_frame
@@ -86,7 +87,9 @@ class Connection:
 
     ``max_frame`` is the largest frame length this side accepts (announced in Hello/Accept; the value in the
     Hello or Accept we send wins). ``max_soldiers`` bounds soldier indices (server: announced in Accept;
-    client: taken from the server's Accept).
+    client: taken from the server's Accept). A client made with ``decode_updates=False`` yields
+    :class:`UpdateHeaders` instead of decoded :class:`JointUpdates`. ``frame_bytes`` is the size on the wire
+    of the frame behind the last event.
     """
 
     def __init__(
@@ -94,6 +97,8 @@ class Connection:
         role: Role,
         max_frame: int = DEFAULT_MAX_FRAME,
         max_soldiers: int = DEFAULT_MAX_SOLDIERS,
+        *,
+        decode_updates: bool = True,
     ) -> None:
         if max_frame < MIN_MAX_FRAME:
             raise ValueError(f"max_frame must be >= {MIN_MAX_FRAME}")
@@ -107,6 +112,8 @@ class Connection:
         self.peer: Hello | Accept | None = None  # the peer's handshake, once received
         self.version: int | None = None
         self.tables: dict[int, UpdateTableMsg] = {}
+        self.decode_updates = decode_updates
+        self.frame_bytes = 0
         self._reader = FrameReader()
         self._outbox = bytearray()
         self._eof = False
@@ -156,6 +163,7 @@ class Connection:
             return ConnectionClosed()
         self._frames_in += 1
         msg_type, payload = frame
+        self.frame_bytes = 5 + len(payload)
         name = _type_name(msg_type)
         try:
             return self._receive(msg_type, payload)
@@ -230,18 +238,27 @@ class Connection:
             if tid not in self.tables:
                 raise WireError(ErrorCode.UNKNOWN_TABLE, f"update table {tid} was never sent")
 
-    def _receive_updates(self, payload: bytes) -> JointUpdates:
+    def _receive_updates(self, payload: bytes) -> JointUpdates | UpdateHeaders:
         if len(payload) < UPDATE_HEADER.size:
             raise WireError(
                 ErrorCode.MALFORMED_FRAME, "joint updates: payload shorter than its 8-byte header"
             )
-        tid = UPDATE_HEADER.unpack_from(payload)[0]
+        tid, tick, count = UPDATE_HEADER.unpack_from(payload)
         decoder = self._decoders.get(tid)
         if decoder is None:
             raise WireError(
                 ErrorCode.UNKNOWN_TABLE, f"joint updates reference update table {tid}, never sent"
             )
-        return decoder.decode(payload)
+        if self.decode_updates:
+            return decoder.decode(payload)
+        if len(payload) < UPDATE_HEADER.size + 2 * count:
+            raise WireError(
+                ErrorCode.MALFORMED_FRAME,
+                f"joint updates: {count} soldier indices need more than {len(payload)} bytes",
+            )
+        return UpdateHeaders(
+            tid, tick, np.frombuffer(payload, ">u2", count, UPDATE_HEADER.size).astype(np.int64)
+        )
 
     def _track_subscription(self, event: Subscribe | Unsubscribe | RequestFullUpdate) -> None:
         idx = np.asarray(event.indices, np.int64)

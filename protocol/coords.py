@@ -22,6 +22,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from peabody import quaternion
+
+# The quaternion conversions are peabody's (one implementation for server, clients and codecs); these are
+# their names on the protocol side.
+quat_to_matrix = quaternion.to_matrix
+matrix_to_quat = quaternion.from_matrix
+transform_to_pose7 = quaternion.from_transform
+pose7_to_transform = quaternion.to_transform
+
 CM_PER_M = 100.0
 JACK_TO_PERFORMER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 PERFORMER_TO_JACK = JACK_TO_PERFORMER.T
@@ -118,73 +127,5 @@ def heading_transform(compass_deg: np.ndarray | float, position_m: np.ndarray) -
     t[..., 1, 0], t[..., 1, 1] = -s, c
     t[..., 2, 2] = 1.0
     t[..., :3, 3] = p
-    t[..., 3, 3] = 1.0
-    return t
-
-
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) (w, x, y, z) → rotation matrices (..., 3, 3)."""
-    q = np.asarray(q, np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    m = np.empty((*q.shape[:-1], 3, 3))
-    m[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    m[..., 0, 1] = 2 * (x * y - w * z)
-    m[..., 0, 2] = 2 * (x * z + w * y)
-    m[..., 1, 0] = 2 * (x * y + w * z)
-    m[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    m[..., 1, 2] = 2 * (y * z - w * x)
-    m[..., 2, 0] = 2 * (x * z - w * y)
-    m[..., 2, 1] = 2 * (y * z + w * x)
-    m[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return m
-
-
-def matrix_to_quat(m: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) → unit quaternions (..., 4) (w, x, y, z) with w >= 0.
-
-    Uses the largest of the four diagonal combinations for each matrix, so it is stable for every rotation.
-    """
-    m = np.asarray(m, np.float64)
-    t = np.stack(
-        [
-            1 + m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2],
-            1 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2],
-            1 - m[..., 0, 0] + m[..., 1, 1] - m[..., 2, 2],
-            1 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2],
-        ],
-        axis=-1,
-    )
-    k = np.argmax(t, axis=-1)
-    r = np.sqrt(np.maximum(np.take_along_axis(t, k[..., None], -1)[..., 0], 1e-300))
-    s = 0.5 / r
-    d21, d02, d10 = m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]
-    s21, s02, s10 = m[..., 2, 1] + m[..., 1, 2], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 0] + m[..., 0, 1]
-    cands = np.stack(
-        [
-            np.stack([0.5 * r, d21 * s, d02 * s, d10 * s], -1),
-            np.stack([d21 * s, 0.5 * r, s10 * s, s02 * s], -1),
-            np.stack([d02 * s, s10 * s, 0.5 * r, s21 * s], -1),
-            np.stack([d10 * s, s02 * s, s21 * s, 0.5 * r], -1),
-        ],
-        axis=-2,
-    )
-    q = np.take_along_axis(cands, k[..., None, None], -2)[..., 0, :]
-    q = np.where(q[..., :1] < 0, -q, q)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
-def transform_to_pose7(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """4x4 rigid transforms (..., 4, 4) → (position (..., 3), quaternion (..., 4)): a figure's 7 values."""
-    t = np.asarray(t, np.float64)
-    return t[..., :3, 3].copy(), matrix_to_quat(t[..., :3, :3])
-
-
-def pose7_to_transform(position: np.ndarray, quat: np.ndarray) -> np.ndarray:
-    position = np.asarray(position, np.float64)
-    r = quat_to_matrix(quat)
-    t = np.zeros((*r.shape[:-2], 4, 4))
-    t[..., :3, :3] = r
-    t[..., :3, 3] = position
     t[..., 3, 3] = 1.0
     return t

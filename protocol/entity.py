@@ -16,17 +16,21 @@ from protocol.errors import ErrorCode, WireError
 
 
 class Appearance(IntEnum):
-    """Posture values; 1..4 are the 1994 ``JACKTTES_*`` defines, CRAWL is new (1994: PRONE + velocity)."""
+    """The TTES posture tokens (Figure 2: standing, kneeling, prone, destroyed; plus crawling), one enum for
+    the entity requests, the server and the DIS gateway. 1..4 are the 1994 ``JACKTTES_*`` defines, CRAWL is
+    new (1994: PRONE + velocity)."""
 
     DEAD = 1
-    UPRIGHT = 2
+    STAND = 2  # the DIS tokens' name (``ttes dis dump``)
+    UPRIGHT = 2  # JACKTTES_UPRIGHT: an alias of STAND
     KNEEL = 3
     PRONE = 4
     CRAWL = 5
 
 
 class WeaponState(IntEnum):
-    """Weapon values; 0 and 1 are the 1994 ``JACKTTES_WEAPON_*`` defines, FIRING is new."""
+    """The TTES weapon tokens; 0 and 1 are the 1994 ``JACKTTES_WEAPON_*`` defines, FIRING is new. (DIS's own
+    weapon field is :class:`protocol.dis.appearance.WeaponState`; DIS 'none' maps to STOWED.)"""
 
     STOWED = 0
     DEPLOYED = 1

@@ -179,6 +179,17 @@ class ProtocolError(Event):
     location: str = ""
 
 
+@dataclass(frozen=True, eq=False)
+class UpdateHeaders(Event):
+    """Local event of a client ``Connection(decode_updates=False)``: one JOINT_UPDATES frame's table, tick and
+    soldier indices, its poses not decoded (a load generator's cheap tap: decoding costs as much as the
+    server's encoding)."""
+
+    table: int
+    tick: int
+    indices: np.ndarray
+
+
 @dataclass(frozen=True)
 class ConnectionClosed(Event):
     """Local event: the stream ended cleanly (EOF on a frame boundary) or the connection is CLOSED/ERROR."""

@@ -1,4 +1,7 @@
-"""The 1994 layouts (Figure 11 and the update packet of section 3.7), so a 1994-style client can be served.
+"""The 1994 layouts (Figure 11 and the update packet of section 3.7): codecs only.
+
+A library, not a server path: no listener speaks the 1994 protocol yet (issue 17), so a 1994 client cannot
+connect today; these codecs are what such a listener or a gateway would use (docs/PROTOCOL.md §12).
 
 ``JackPackIn`` (TTES → Jack) is eleven big-endian 32-bit words, 44 bytes::
 

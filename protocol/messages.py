@@ -7,6 +7,7 @@ Unknown keys are ignored, so later minor versions can add optional fields.
 
 from __future__ import annotations
 
+import builtins  # Body names methods str/int/float: its later annotations spell the types out
 import math
 import struct
 from collections.abc import Callable, Mapping
@@ -129,7 +130,7 @@ class Body:
             raise self._range(key, "must not be empty")
         return v
 
-    def int(self, key: str, lo: int, hi: int, *, nullable: bool = False) -> Any:
+    def int(self, key: builtins.str, lo: int, hi: int, *, nullable: bool = False) -> Any:
         v = self._get(key)
         if v is None and nullable:
             return None
@@ -139,7 +140,7 @@ class Body:
             raise self._range(key, f"= {v} not in {lo}..{hi}")
         return v
 
-    def float(self, key: str, lo: float = -math.inf) -> float:
+    def float(self, key: builtins.str, lo: builtins.float = -math.inf) -> builtins.float:
         v = self._get(key)
         if not isinstance(v, int | float) or isinstance(v, bool):
             raise self._type(key, v, "a number")
@@ -148,7 +149,9 @@ class Body:
             raise self._range(key, f"= {v} must be finite and >= {lo}")
         return v
 
-    def ints(self, key: str, lo: int, hi: int, *, width: int = 0) -> np.ndarray:
+    def ints(
+        self, key: builtins.str, lo: builtins.int, hi: builtins.int, *, width: builtins.int = 0
+    ) -> np.ndarray:
         """A list of ints (``width`` > 0: a list of ``width``-int lists), checked in one numpy pass."""
         v = self._get(key)
         if not isinstance(v, list):

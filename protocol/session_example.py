@@ -13,7 +13,7 @@ import struct
 import msgpack
 import numpy as np
 
-from protocol.connection import CLIENT, NEED_DATA, PAUSED, SERVER, Connection
+from protocol.connection import CLIENT, SERVER, Connection
 from protocol.entity import Appearance, WeaponState, decode_entity_requests, make_entity_requests
 from protocol.events import (
     Accept,
@@ -66,11 +66,9 @@ def _quat_z(deg: float) -> list[float]:
 
 def _pump(dst: Connection, data: bytes) -> list[Event]:
     dst.receive_data(data)
-    out = []
-    while (
-        not isinstance(ev := dst.next_event(), ConnectionClosed) and ev is not NEED_DATA and ev is not PAUSED
-    ):
-        out.append(ev)
+    out: list[Event] = []
+    while isinstance(ev := dst.next_event(), Event) and not isinstance(ev, ConnectionClosed):
+        out.append(ev)  # NEED_DATA and PAUSED, the sentinels, are not events
     return out
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any, Literal
+from typing import Any, Literal, TypeGuard
 
 import numpy as np
 
@@ -259,7 +259,7 @@ def table_to_wire(table: UpdateTable) -> dict[str, Any]:
     return {"table": table.table_id, "figure": table.figure, "weapon": table.weapon, "entries": entries}
 
 
-def _is_int(v: object) -> bool:
+def _is_int(v: object) -> TypeGuard[int]:
     return isinstance(v, int) and not isinstance(v, bool)
 
 

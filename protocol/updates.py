@@ -204,8 +204,8 @@ class UpdateEncoder:
         Lets a server quantise a tick's poses once and share the codes between every client's encoder.
         """
         plan, lay = self._plan, self.table.layout
-        idx = np.asarray(indices, np.int64).reshape(-1)
-        q = np.asarray(codes, np.int32)
+        idx: np.ndarray = np.asarray(indices, np.int64).reshape(-1)
+        q: np.ndarray = np.asarray(codes, np.int32)
         if q.shape != (len(idx), lay.nfields):
             raise ValueError(f"codes of shape {q.shape} for {len(idx)} indices and {lay.nfields} fields")
         if len(idx) and (idx.min() < 0 or idx.max() >= self.max_soldiers):

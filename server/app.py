@@ -3,7 +3,7 @@
 Structure (one trio nursery):
 
 * the **tick loop** advances every soldier at ``tick_hz`` on trio's clock (``SoldierManager.tick``: one
-  vectorised advance + sample), writes the poses once into the shared :class:`~server.session.PoseBoard`
+  vectorised advance + sample), writes the poses once into the shared :class:`~server.pose_board.PoseBoard`
   and wakes the writers — it never waits for a client;
 * per client a **reader** (bytes → protocol events → the world) and a **writer** (control queue + the
   latest poses, encoded against what that client last received) — see :mod:`server.session` for why memory
@@ -36,7 +36,8 @@ import trio
 from protocol.connection import State
 from server.config import ServerConfig
 from server.logging import get_logger
-from server.session import BoardRef, PoseBoard, Session
+from server.pose_board import BoardRef, PoseBoard
+from server.session import Session
 from server.startup import ServerWorld
 
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
@@ -149,7 +150,7 @@ class TtesServer:
         self._t0 = trio.current_time()
         self.start_world()
         listeners = await trio.open_tcp_listeners(self.config.port, host=self.config.host)
-        self.addresses = [tuple(ln.socket.getsockname()[:2]) for ln in listeners]  # type: ignore[misc]
+        self.addresses = [tuple(ln.socket.getsockname()[:2]) for ln in listeners]
         async with trio.open_nursery() as nursery:
             self._cancel = nursery.cancel_scope
             nursery.start_soon(self._tick_loop)

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from protocol.events import DEFAULT_MAX_SOLDIERS
+
 # the repository root (or an installed checkout): where figures/, channelsets/, posture_graphs/ live
 DEFAULT_DATA_DIR = Path(__file__).resolve().parent.parent
 DEFAULT_STARTUP_SCRIPT = "jack-ttes-soldier_low.jcl"
@@ -41,7 +43,7 @@ class ServerConfig:
     throttle: float | None = None  # None: what the start-up script sets (set_ttes_soldier_throttle)
     report_interval: float | None = None  # None: what the script sets (set_ttes_report_interval), else 30
     max_clients: int = 256
-    max_soldiers: int = 16384  # soldier indices 0 .. max_soldiers-1 (announced in ACCEPT)
+    max_soldiers: int = DEFAULT_MAX_SOLDIERS  # soldier indices 0 .. max_soldiers-1 (announced in ACCEPT)
     max_soldiers_per_client: int = 4096  # soldiers one client may create (CREATE_SOLDIER)
     max_frame: int = 1 << 20  # largest frame we accept (announced in ACCEPT)
     max_requests_per_s: float = 1e6  # entity rows + other messages per client and second; more: slower reads

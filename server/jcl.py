@@ -16,6 +16,7 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 JclArg = str | float
 
@@ -164,7 +165,7 @@ class JclCommand:
     func: Callable[..., object]
     types: tuple[type, ...]
     optional: int = 0
-    variadic: type | None = None  # extra trailing arguments of this type
+    variadic: type | None = None  # extra trailing arguments of this type (``object``: any)
 
 
 class JclInterpreter:
@@ -232,7 +233,7 @@ class JclInterpreter:
 
     def call(self, c: JclCall) -> object:
         cmd = self._commands.get(c.name)
-        where = {"file": c.file, "line": c.line, "column": c.column}
+        where: dict[str, Any] = {"file": c.file, "line": c.line, "column": c.column}
         if cmd is None:
             raise JclError(f"unknown command {c.name!r}", **where)
         lo = len(cmd.types) - cmd.optional
@@ -242,6 +243,8 @@ class JclInterpreter:
             raise JclError(f"{c.name} takes {want} arguments, got {len(c.args)}", **where)
         for k, arg in enumerate(c.args):
             want_t = cmd.types[k] if k < len(cmd.types) else cmd.variadic
+            if want_t is object:  # any argument (a refused command answers whatever it is given)
+                continue
             if want_t is float and isinstance(arg, float):
                 continue
             if want_t is str and isinstance(arg, str):
@@ -254,7 +257,7 @@ class JclInterpreter:
             if exc.line == 0:
                 raise JclError(exc.message, **where) from None
             raise
-        except (ValueError, KeyError, OSError) as exc:
+        except (ValueError, KeyError, OSError, ArithmeticError) as exc:  # bad values, files, numbers
             raise JclError(f"{c.name}: {exc}", **where) from None
 
     def _read_file(self, name: str) -> object:

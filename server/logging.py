@@ -57,7 +57,7 @@ class _CurrentStderrHandler(logging.StreamHandler):
     """Writes to whatever ``sys.stderr`` is at emit time, so a replaced (and later closed) stderr — an
     embedding program's or a test runner's capture — never leaves the server logging into a closed file."""
 
-    @property  # type: ignore[override]
+    @property
     def stream(self) -> TextIO:
         return sys.stderr
 
@@ -74,7 +74,7 @@ def configure(*, json_logs: bool = False, level: int = logging.INFO, stream: Tex
             logger.removeHandler(h)
     handler = logging.StreamHandler(stream) if stream is not None else _CurrentStderrHandler()
     handler.setFormatter(JsonFormatter() if json_logs else KeyValueFormatter())
-    handler._ttes = True  # type: ignore[attr-defined]
+    handler._ttes = True  # type: ignore[union-attr]  # marks our handlers (a plain attribute)
     logger.addHandler(handler)
     logger.setLevel(level)
     logger.propagate = False

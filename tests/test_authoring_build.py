@@ -183,8 +183,7 @@ def test_m16_library_holds_the_m16_by_its_own_grip_and_handguard():
             and row["left_palm_rifle_cm"] <= 1.0
         )
         assert row["rifle_penetration_cm"] <= 1.0
-        if name != "prstow2prfire":  # prone: see the xfail below
-            assert row["rifle_in_body_cm"] <= 1.0
+        assert row["rifle_in_body_cm"] <= 1.0
         m16 = play(cs, figs).locations["M16.fig"]
         assert lowest_point(figs, "M16.fig", m16).min() >= -1.0
         # the AK of the DI.fig clip: both slaves are put down on their kneecaps alike (slave_contacts)
@@ -200,7 +199,6 @@ def test_m16_library_holds_the_m16_by_its_own_grip_and_handguard():
             np.testing.assert_allclose(fire, ak[-1, :3, :3] @ np.array([0.0, 0.0, -1.0]), atol=1e-5)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 14 open: prone, the M16's butt is 1.4-4 cm in DI's arm")
 def test_the_prone_m16_stays_out_of_the_body():
     from authoring.quality import FigureSet, check_clip
     from server.motion.cache import load_channelset

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from peabody import quaternion
 from peabody.fk import FigureKinematics
 from peabody.loader import load_text
-from server.motion import quaternion
 from server.motion.binding import bind_channelset, pose_layout
 from server.motion.cache import cache_path, load_channelset, load_npz, save_npz
 from server.motion.channelset import JointTrack, channelsets_close, make_channelset

@@ -7,16 +7,17 @@ import json
 import numpy as np
 import pytest
 
-from client_stub.artic import articulation, update_table_for
 from client_stub.crowd.app import CrowdConfig, CrowdRenderer, Figures, run_crowd
 from client_stub.crowd.camera import FreeCamera
 from client_stub.crowd.fk import FastFigure, entity_transforms, mul, to34, to44
 from client_stub.crowd.gl import SKY, boxes_visible
 from client_stub.crowd.lod import FAR, MID, NEAR, choose_levels, dof_map, visible
-from client_stub.crowd.sources import CrowdState, WireBuffer
-from client_stub.scene_graph import Crowd, EntityLayout
+from client_stub.crowd.sources import CrowdState, WireBinding
+from client_stub.link.buffer import UpdateBatch
+from client_stub.renderer import Renderer
+from client_stub.stub.artic import articulation, update_table_for
+from client_stub.stub.scene_graph import Crowd, EntityLayout
 from protocol import coords
-from protocol.events import JointUpdates
 
 W, H = 320, 180
 SKY_RGB = np.round(np.array(SKY) * 255)
@@ -94,38 +95,35 @@ def test_levels_and_culling() -> None:
 
 
 # -- the update stream into the state -----------------------------------------------------------------------
-def test_wire_buffer_binds_by_name_and_fills_the_state(figures: Figures) -> None:
+def test_wire_binding_binds_by_name_and_fills_the_state(figures: Figures) -> None:
     ours = update_table_for(articulation(figures.mid_tips), articulation(figures.rifle_tips))
     n = 6
     state = CrowdState.empty(n, figures.mid, figures.rifle)
     state.dirty[:] = False
-    buf = WireBuffer(n, ours, state)
+    wb = WireBinding(ours)
     rng = np.random.default_rng(2)
     dofs = rng.uniform(-0.5, 0.5, (2, ours.ndofs))
     pos = rng.normal(0, 0.5, (2, ours.nfigures, 3))
     quat = rng.normal(size=(2, ours.nfigures, 4))
     quat /= np.linalg.norm(quat, axis=2, keepdims=True)
-    ev = JointUpdates(ours.table_id, np.array([40, 41]), dofs, pos, quat, 7)
-    buf.receive(ours, ev, np.array([1, 4]), np.array([True, True]))
-    assert buf.take(state).tolist() == []  # nothing to pose offline: the table binds
+    batch = UpdateBatch(ours.table_id, np.array([40, 41]), dofs, pos, quat)
+    assert wb.apply(state, ours, batch, np.array([1, 4])).tolist() == []  # nothing to pose offline
     assert state.dirty.tolist() == [False, True, False, False, True, False]
     assert np.allclose(state.dofs[[1, 4]], dofs[:, : figures.mid.ndof], atol=1e-6)
     assert np.allclose(state.placement[[1, 4], :, :, 3], pos[:, :2], atol=1e-6)
     want = coords.quat_to_matrix(quat[:, 0])
     assert np.allclose(state.placement[[1, 4], 0, :, :3], want, atol=1e-5)
     assert not state.rifle_from_palm[[1, 4]].any()
-    assert buf.take(state).tolist() == [] and buf.updates == 2
     # a table of other joint names (the synthetic server's chain figure) is posed offline instead
     from protocol.update_table import DofRange, FigureEntry, JointEntry, UpdateTable
 
     chain = UpdateTable(
         2, "DI.fig", "", (JointEntry("j0", (DofRange("R", -3.2, 3.2),)), FigureEntry("soldier"))
     )
-    ev2 = JointUpdates(
-        2, np.array([3]), np.zeros((1, 1)), np.zeros((1, 1, 3)), np.array([[[1.0, 0, 0, 0]]]), 8
+    batch2 = UpdateBatch(
+        2, np.array([3]), np.zeros((1, 1)), np.zeros((1, 1, 3)), np.array([[[1.0, 0, 0, 0]]])
     )
-    buf.receive(chain, ev2, np.array([3]), np.array([True]))
-    assert buf.take(state).tolist() == [3] and "offline" in buf.posing
+    assert wb.apply(state, chain, batch2, np.array([3])).tolist() == [3] and "offline" in wb.posing
 
 
 # -- images -------------------------------------------------------------------------------------------------
@@ -142,10 +140,11 @@ def test_render_shows_soldiers_at_every_level(figures: Figures) -> None:
     cam = FreeCamera(position=np.array([0.0, 0.0, 1.6]), heading=0.0, pitch=-2.0)
     r = CrowdRenderer(figures, 3, W, H, 10.0, 40.0)
     try:
-        st = _line_of_soldiers(figures, [6.0, 20.0, 70.0])
-        r.frame(st, cam)
+        r.show(_line_of_soldiers(figures, [6.0, 20.0, 70.0]))
+        r.set_camera(cam.pose())
+        img = r.render()
         assert r.counts == [1, 1, 1]  # one soldier drawn at each level
-        img = r.read()
+        assert isinstance(r, Renderer)
         assert img.shape == (H, W, 3)
         soldier = _non_sky(img)
         assert soldier.mean() > 0.01  # the near soldier alone covers a good part of the image
@@ -153,11 +152,12 @@ def test_render_shows_soldiers_at_every_level(figures: Figures) -> None:
         rows = np.flatnonzero(soldier.any(axis=1))
         assert rows.max() - rows.min() >= 40  # the near soldier stands about 60 pixels tall
         # turn the camera round: nothing drawn, nothing culled wrongly
-        r.frame(st, FreeCamera(position=np.array([0.0, 0.0, 1.6]), heading=180.0, pitch=-2.0))
+        r.set_camera(FreeCamera(position=np.array([0.0, 0.0, 1.6]), heading=180.0, pitch=-2.0).pose())
+        img = r.render()
         assert r.counts == [0, 0, 0]
-        assert not _non_sky(r.read()).any()
+        assert not _non_sky(img).any()
     finally:
-        r.release()
+        r.close()
 
 
 def test_cli_renders_a_crowd_png(tmp_path, capsys) -> None:

@@ -342,3 +342,33 @@ def test_real_samples_as_a_raw_stream_and_a_capture() -> None:
             ("detonation", (50, 126, 5), (50, 126, 27)),
         ]
         assert log.batch.params["parameter_type"].tolist()[:2] == [0x114D, 0x114E]
+
+
+def test_pdu_decoders_are_a_read_only_registry_yielding_typed_events() -> None:
+    from protocol.dis.decoders import DECODERS, Corrupt, EntityStates, PduRows, Weapon
+    from protocol.dis.pdu import PduType
+
+    assert set(DECODERS) == {PduType.ENTITY_STATE, PduType.FIRE, PduType.DETONATION}
+    with pytest.raises(TypeError):
+        DECODERS[99] = DECODERS[PduType.FIRE]  # type: ignore[index]
+    data = espdu(1) + espdu(2, TANK) + espdu(3)[:100]
+    u8 = np.frombuffer(data, np.uint8)
+    offsets = np.array([0, 144, 288], np.int64)
+    rows = PduRows(
+        data, u8, np.arange(3), offsets, np.array([144, 144, 100]), np.zeros(3, np.int64),
+        u8[offsets], np.zeros(3), True,
+    )  # fmt: skip
+    out = list(DECODERS[PduType.ENTITY_STATE](rows))
+    corrupt = [e for e in out if isinstance(e, Corrupt)]
+    (states,) = [e for e in out if isinstance(e, EntityStates)]
+    assert [c.row for c in corrupt] == [2]
+    assert states.rows.tolist() == [0] and states.skipped.tolist() == [1]
+    assert (states.lifeforms, states.non_lifeforms, len(states.batch)) == (1, 1, 1)
+    one = np.zeros(1, np.int64)
+    fire = DECODERS[PduType.FIRE](
+        PduRows(FIRE, np.frombuffer(FIRE, np.uint8), np.array([7]), one, np.array([len(FIRE)]), one,
+                np.array([FIRE[0]], np.uint8), np.array([3.0]), True)
+    )  # fmt: skip
+    (event,) = fire
+    assert isinstance(event, Weapon) and event.row == 7
+    assert event.event.kind == "fire" and event.event.t == 3.0

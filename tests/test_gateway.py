@@ -14,10 +14,10 @@ from hypothesis import strategies as st
 from test_replay_support import MAX_LAG, Monitor, entity_key, exercise, expected_activities, match_in_order
 from test_server_support import running_server
 
-from client_stub.gateway import DisGateway, GatewayConfig
-from client_stub.replay.cursor import EntityFilter
-from client_stub.replay.link import ServerLink
-from client_stub.replay.sink import ServerSink
+from client_stub.dis.cursor import EntityFilter
+from client_stub.dis.gateway import DisGateway, GatewayConfig
+from client_stub.dis.sink import ServerSink
+from client_stub.link.client import Client
 from protocol.dis import read_bytes
 from protocol.dis.pdu import HEADER
 from protocol.dis.synth import write_pcap
@@ -39,7 +39,7 @@ async def test_gateway_over_loopback_udp_drives_the_server_like_a_replay(
     async with running_server(throttle=0.0) as server, trio.open_nursery() as nursery:
         monitor = Monitor(server)
         nursery.start_soon(monitor.run)
-        link = ServerLink("ttes-gateway")
+        link = Client("ttes-gateway")
         await link.open(nursery, "127.0.0.1", server.addresses[0][1])
         sink = ServerSink(link)
         gateway = DisGateway(GatewayConfig(port=0, interface="127.0.0.1"))
@@ -112,7 +112,7 @@ def test_any_datagrams_are_counted_never_raised(datagrams: list[bytes], n_good: 
 
 
 def test_socket_binds_the_interface_asked_for() -> None:
-    from client_stub.gateway import open_dis_socket
+    from client_stub.dis.gateway import open_dis_socket
 
     s = open_dis_socket(GatewayConfig(port=0, interface="127.0.0.1"))
     try:

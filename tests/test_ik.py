@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from authoring.ik import Goal, _rodrigues, decompose_rotation, rotation_log, solve, two_link
+from authoring.ik import Goal, decompose_rotation, rotation_log, solve, two_link
 from peabody.fk import FigureKinematics
 from peabody.loader import read_figure
+from peabody.rotations import axis_angle
 
 FIGURES = Path(__file__).resolve().parents[1] / "figures"
 PALM = "right_palm.palmcenter"
@@ -109,7 +110,7 @@ def test_unreachable_goal_gives_a_finite_best_effort_and_reports_the_residual(ki
 def test_orientation_goal_and_orientation_only_goal(kin: FigureKinematics) -> None:
     q0 = kin.neutral_pose()
     g0 = kin.site_global(PALM, q0)
-    rot = _rodrigues(np.array([0.0, 1.0, 0.0]), np.array(0.5)) @ g0[:3, :3]
+    rot = axis_angle(np.array([0.0, 1.0, 0.0]), np.array(0.5)) @ g0[:3, :3]
     target = g0[:3, 3] + np.array([0.0, 20.0, -20.0])
     q, _report = solve(kin, q0, [Goal(PALM, target, rot)])
     g = kin.site_global(PALM, q)
@@ -117,7 +118,7 @@ def test_orientation_goal_and_orientation_only_goal(kin: FigureKinematics) -> No
     assert np.linalg.norm(rotation_log(rot @ g[:3, :3].T)) < 2e-3
     head = "bottom_head.sight"
     h0 = kin.site_global(head, q0)
-    turn = _rodrigues(np.array([0.0, 1.0, 0.0]), np.array(0.4)) @ h0[:3, :3]
+    turn = axis_angle(np.array([0.0, 1.0, 0.0]), np.array(0.4)) @ h0[:3, :3]
     q2, r2 = solve(kin, q0, [Goal(head, None, turn, joints=["neck", "head"])])
     assert r2.orientation_error[0] < 2e-3
     assert r2.position_error[0] == 0.0
@@ -186,9 +187,9 @@ def test_decompose_rotation_inverts_three_dof_joints(kin: FigureKinematics) -> N
         angles = rng.uniform(kin.lower[sl] * 0.9, kin.upper[sl] * 0.9, (200, 3))
         angles = np.clip(angles, -1.4, 1.4)  # away from gimbal lock of the middle axis
         m = (
-            _rodrigues(np.broadcast_to(axes[0], (200, 3)), angles[:, 0])
-            @ _rodrigues(np.broadcast_to(axes[1], (200, 3)), angles[:, 1])
-            @ _rodrigues(np.broadcast_to(axes[2], (200, 3)), angles[:, 2])
+            axis_angle(np.broadcast_to(axes[0], (200, 3)), angles[:, 0])
+            @ axis_angle(np.broadcast_to(axes[1], (200, 3)), angles[:, 1])
+            @ axis_angle(np.broadcast_to(axes[2], (200, 3)), angles[:, 2])
         )
         back = decompose_rotation(m, axes, hint=angles + 0.05)
         np.testing.assert_allclose(back, angles, atol=1e-9)

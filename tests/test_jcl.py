@@ -30,9 +30,16 @@ disable_graphics();
 def test_seed_startup_script_parses() -> None:
     calls = parse_jcl(SEED_SCRIPT, "jack-ttes-soldier_low.jcl")
     assert [c.name for c in calls] == [
-        "read_file", "create_soldier_state", "create_soldier_state", "set_channelset_parameters",
-        "set_ttes_report_interval", "set_ttes_heading_offset", "set_ttes_soldier_throttle",
-        "set_ttes_report_interval", "start_ttes_socket_simulation", "disable_graphics",
+        "read_file",
+        "create_soldier_state",
+        "create_soldier_state",
+        "set_channelset_parameters",
+        "set_ttes_report_interval",
+        "set_ttes_heading_offset",
+        "set_ttes_soldier_throttle",
+        "set_ttes_report_interval",
+        "start_ttes_socket_simulation",
+        "disable_graphics",
     ]
     assert calls[1].args == ("s0", "Di2_0", "AK_47_0")
     assert calls[5].args == (256.0, 0.0, 256.0)

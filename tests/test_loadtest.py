@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from client_stub.loadtest_mix import MOVING, SPEED, Activity, MixDriver
-from client_stub.loadtest_stats import (
+from client_stub.loadtest.mix import MOVING, SPEED, Activity, MixDriver
+from client_stub.loadtest.stats import (
     GRACE_TICKS,
     Tracker,
     grid_ticks,
@@ -147,16 +147,16 @@ def test_steady_movers_start_after_the_grace_ticks() -> None:
 # -- a tiny real run ----------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def server():
-    from client_stub.loadtest_server import SpawnedServer
+    from client_stub.link.spawn import spawn_server
+    from client_stub.loadtest.session import server_args
 
-    with SpawnedServer(tick_hz=RATE, throttle=0.0) as srv:
-        srv.wait_ready()
+    with spawn_server(server_args(RATE, 0.0)) as srv:
         yield srv
 
 
 @pytest.fixture(scope="module")
 def tiny_run(server) -> dict:
-    from client_stub.loadtest import LoadTestConfig, run_loadtest
+    from client_stub.loadtest.session import LoadTestConfig, run_loadtest
 
     cfg = LoadTestConfig(
         soldiers=16, clients=2, seconds=1.5, warmup_s=1.0, host=server.host, port=server.port,
@@ -224,7 +224,7 @@ def test_cli_refuses_bad_arguments(capsys) -> None:
 
 
 def test_ramp_grows_until_its_bound(server) -> None:
-    from client_stub.loadtest import LoadTestConfig, run_loadtest
+    from client_stub.loadtest.session import LoadTestConfig, run_loadtest
 
     cfg = LoadTestConfig(
         soldiers=4, clients=2, seconds=0.8, warmup_s=0.3, host=server.host, port=server.port, ramp=True,

@@ -8,7 +8,6 @@ import math
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from server.motion.errors import BindingError, PostureGraphError
@@ -214,50 +213,20 @@ def test_load_and_bind_the_seed_graph(seed_dir: Path) -> None:
     assert [c.nframes for c in again.channelsets] == [c.nframes for c in loaded.channelsets]
 
 
-def test_posture_change_executes_the_path_in_real_time(seed_dir: Path) -> None:
+def test_a_bound_graph_plans_the_quickest_path_from_where_it_rests(seed_dir: Path) -> None:
+    """Executing the path is the soldier manager's (test_soldier_manager.py, test_jcl_commands.py)."""
     loaded = load_posture_graph(seed_dir / "soldier_low.graph")
     bound = bind_posture_graph(loaded, [toy_soldier(), toy_rifle()])
-    change = bound.posture_change("PRONE_FIRE", now=100.0)
-    assert change.total_time == pytest.approx(3.6)
-    seen = []
-    poses = []
-    t = 100.0
-    while t <= 104.0:
-        tr = change.update(t)
-        assert tr is not None
-        seen.append((tr.arc.end, tr.start_time, tr.duration))
-        poses.append(change.sample(t).poses["soldier"])  # type: ignore[union-attr]
-        t = round(t + 0.05, 10)
-    assert [s for i, s in enumerate(seen) if i == 0 or s != seen[i - 1]] == [
-        ("CRAWL", 100.0, 2.0),
-        ("PRONE_STOWED", 102.0, 0.8),
-        ("PRONE_FIRE", pytest.approx(102.8), 0.8),
+    path = bound.shortest_path("PRONE_FIRE")
+    assert [(a.end, loaded.arc_time(a)) for a in path] == [
+        ("CRAWL", 2.0),
+        ("PRONE_STOWED", 0.8),
+        ("PRONE_FIRE", pytest.approx(0.8)),
     ]
-    assert change.done and bound.current == "PRONE_FIRE"
-    # the transitions join: no jump bigger than a normal 50 ms step anywhere along the way
-    steps = np.abs(np.diff(np.array(poses), axis=0)).max(axis=1)
-    assert steps.max() < 0.1
-    final = loaded.channelsets[12].joint_data[-1]  # prstow2prfire forwards ends in PRONE_FIRE
-    np.testing.assert_allclose(poses[-1], final, atol=1e-6)
-
-
-def test_backward_arcs_time_scaling_and_long_ticks(seed_dir: Path) -> None:
-    loaded = load_posture_graph(seed_dir / "soldier_low.graph")
-    bound = bind_posture_graph(loaded, [toy_soldier(), toy_rifle()], initial="DEAD")
-    change = bound.posture_change("STAND_STOWED", now=0.0)
-    tr = change.update(0.0)
-    assert tr is not None and not tr.forward and tr.duration == 10.0
-    stored = loaded.channelsets[4]
-    assert stored.duration == pytest.approx(1.5)
-    assert tr.position(0.0) == stored.nframes - 1  # backwards starts at the last frame
-    assert tr.position(5.0) == pytest.approx((stored.nframes - 1) / 2)  # 1.5 s stretched over 10 s
-    assert bound.current == "DEAD"
-    # one long tick completes several arcs at once
-    bound.current = "STAND_STOWED"
-    change = bound.posture_change("PRONE_FIRE", now=0.0)
-    tr = change.update(50.0)
-    assert change.done and bound.current == "PRONE_FIRE" and tr is not None and tr.arc.end == "PRONE_FIRE"
-    assert bound.posture_change("PRONE_FIRE", now=51.0).update(51.0) is None  # already there
+    dead = bind_posture_graph(loaded, [toy_soldier(), toy_rifle()], initial="DEAD")
+    back = dead.shortest_path("STAND_STOWED")
+    assert not back[0].forward and loaded.arc_time(back[0]) == 10.0  # backwards, stretched to 10 s
+    assert bound.shortest_path("STAND_STOWED") == []  # already there
 
 
 # --- the CLI -----------------------------------------------------------------------------------------------

@@ -324,3 +324,24 @@ def test_connection_sends_full_updates_on_subscribe_and_request_and_nothing_when
     np.testing.assert_array_equal(
         client.decoder(1).codes([1, 3]), quantise(DI, d[[1, 3]], p[[1, 3]], q[[1, 3]])
     )
+
+
+def test_a_client_that_does_not_decode_updates_gets_their_headers_and_frame_sizes() -> None:
+    """``Connection(CLIENT, decode_updates=False)``: the load generator's tap, inside the protocol."""
+    from protocol.connection import CLIENT, SERVER, Connection
+    from protocol.events import Accept, Hello, Subscribe, UpdateHeaders, UpdateTableMsg
+
+    client, server = Connection(CLIENT, decode_updates=False), Connection(SERVER, max_soldiers=8)
+    server.receive_data(client.send(Hello("ig")))
+    server.next_event()
+    for ev in (Accept("jack", max_soldiers=8), UpdateTableMsg(DI)):
+        client.receive_data(server.send(ev))
+        client.next_event()
+    server.receive_data(client.send(Subscribe((1, 3))))
+    server.next_event()
+    d, p, q = poses(DI, 4)
+    data = server.send(upd(DI, range(4), d, p, q, 7))
+    client.receive_data(data)
+    ev = client.next_event()
+    assert isinstance(ev, UpdateHeaders) and (ev.table, ev.tick) == (DI.table_id, 7)
+    assert ev.indices.tolist() == [1, 3] and client.frame_bytes == len(data)

@@ -21,10 +21,10 @@ from test_replay_support import (
 from test_replay_translator import FRAME, make_log, pdu
 from test_server_support import running_server
 
-from client_stub.replay import Replayer
-from client_stub.replay.drive import ProgressLine, replay_to_server
-from client_stub.replay.link import ServerLink
-from client_stub.replay.sink import ServerSink
+from client_stub.dis import Replayer
+from client_stub.dis.drive import ProgressLine, replay_to_server
+from client_stub.dis.sink import ServerSink
+from client_stub.link.client import Client
 from protocol.dis import read_log
 from protocol.dis.appearance import LifeformState
 from ttes.cli import main
@@ -49,7 +49,7 @@ async def test_synthetic_pcap_replay_soldiers_follow_their_pdus_in_order(
     async with running_server(throttle=0.0) as server, trio.open_nursery() as nursery:
         monitor = Monitor(server)
         nursery.start_soon(monitor.run)
-        link = ServerLink()
+        link = Client()
         await link.open(nursery, "127.0.0.1", server.addresses[0][1])
         sink = ServerSink(link)
         assert sink.base == 10  # after the start-up script's s0..s9
@@ -94,7 +94,7 @@ async def test_timeout_removes_the_soldier_and_reappearance_reuses_its_server_in
     entries.sort(key=lambda e: e[0])
     log = make_log(entries)
     async with running_server(throttle=0.0) as server, trio.open_nursery() as nursery:
-        link = ServerLink()
+        link = Client()
         await link.open(nursery, "127.0.0.1", server.addresses[0][1])
         sink = ServerSink(link)
         replayer = Replayer(log, speed=4.0, origin=FRAME)
@@ -133,7 +133,7 @@ async def test_unlimited_speed_replays_everything_with_back_pressure(
 ) -> None:
     log = read_log(synth_pcap(tmp_path, capsys, soldiers=6, seconds=20.0))
     async with running_server(throttle=0.0) as server, trio.open_nursery() as nursery:
-        link = ServerLink()
+        link = Client()
         await link.open(nursery, "127.0.0.1", server.addresses[0][1])
         sink = ServerSink(link)
         replayer = Replayer(log, speed=math.inf)

@@ -1,5 +1,6 @@
-"""ReplayApp without a window: DIS soldiers placed in the stub on the terrain, looked after by force and
-camouflage, hidden when they time out and back in their slot when they return (offline posing)."""
+"""The stub fed by DIS (DisSoldiers) without a window: DIS soldiers placed in the stub on the terrain, looked
+after by force and camouflage, hidden when they time out and back in their slot when they return (offline
+posing)."""
 
 from __future__ import annotations
 
@@ -10,12 +11,12 @@ import numpy as np
 import pytest
 from test_replay_translator import FRAME, make_log, pdu
 
-from client_stub.jack import UpdateBatch
-from client_stub.render import FORCE_UNIFORMS
-from client_stub.replay import Replayer
-from client_stub.replay.stubapp import LOOK_BASE, ReplayApp, look_colour, look_of
-from client_stub.simsoldier import Force
-from client_stub.terrain import DEFAULT_TERRAIN, Terrain, load_terrain
+from client_stub.dis import Replayer
+from client_stub.dis.soldiers import LOOK_BASE, look_colour, look_of, replay_app
+from client_stub.link.buffer import UpdateBatch
+from client_stub.stub.render import FORCE_UNIFORMS
+from client_stub.stub.simsoldier import Force
+from client_stub.stub.terrain import DEFAULT_TERRAIN, Terrain, load_terrain
 from protocol.dis.appearance import LifeformState
 from protocol.entity import Appearance, WeaponState
 from protocol.update_table import UpdateTable
@@ -32,7 +33,8 @@ def test_dis_soldiers_in_the_stub(tmp_path: pytest.TempPathFactory) -> None:
                (1.0, pdu(2, (-30.0, 5.0), force=2, paint=1, state=LifeformState.KNEELING)),
                (30.0, pdu(1, (40.0, 20.0), state=LifeformState.PRONE))]  # fmt: skip
     replayer = Replayer(make_log(entries), origin=FRAME, timeout=12.0)
-    app = ReplayApp(village(), replayer, artic_dir=tmp_path)
+    app = replay_app(village(), replayer, artic_dir=tmp_path)
+    dis = app.source
     app.frame(0.0)
     s = app.soldiers
     assert s.count == 2 and s.alive[:2].all()
@@ -47,8 +49,8 @@ def test_dis_soldiers_in_the_stub(tmp_path: pytest.TempPathFactory) -> None:
     assert s.weapon[1] == WeaponState.DEPLOYED
     # forces and looks: friendly uniform vs opposing forest camouflage; the rifle from the entity type
     assert (s.force[0], s.force[1]) == (Force.FRIENDLY, Force.OPPOSING)
-    assert app.look[0] != app.look[1]
-    assert FORCE_UNIFORMS[LOOK_BASE + int(app.look[1])] == look_colour(int(app.look[1]))
+    assert app.look[0] != app.look[1] and app.look[1] >= LOOK_BASE
+    assert FORCE_UNIFORMS[int(app.look[1])] == look_colour(int(app.look[1]) - LOOK_BASE)
     assert [app.kinds[int(app.slot_kind[i])].weapon for i in (0, 1)] == ["M16.fig", "AK_47.fig"]
     # both time out (last PDUs at 0 s and 1 s), soldier 0 comes back at 30 s in his old slot, prone
     for _ in range(140):
@@ -61,12 +63,12 @@ def test_dis_soldiers_in_the_stub(tmp_path: pytest.TempPathFactory) -> None:
     assert s.appearance[0] == Appearance.PRONE and s.position[0, :2] == pytest.approx([40.0, 20.0], abs=0.05)
     # the squad camera frames the live soldiers; keys that would drive a soldier are refused
     assert "DIS PDUs drive" in (app.handle_key("3") or "")
-    app.squad_view = True
+    dis.squad_view = True
     pose = app.camera_pose()
     to_soldier = s.position[0] - pose[:3, 3]
     assert np.dot(to_soldier / np.linalg.norm(to_soldier), -pose[:3, 2]) > 0.95  # looking at him
     app.handle_key("b")
-    assert not app.squad_view
+    assert not dis.squad_view
 
 
 def test_looks_tell_forces_and_camouflage_apart() -> None:
@@ -113,11 +115,11 @@ def test_server_soldiers_pose_the_stub_through_the_wire_table(tmp_path: pytest.T
     prone = LifeformState.PRONE
     entries = [(0.0, pdu(1, (5.0, 5.0), force=2)), (0.5, pdu(1, (5.0, 5.0), force=2, state=prone))]
     replayer = Replayer(make_log(entries), origin=FRAME)
-    app = ReplayApp(village(), replayer, artic_dir=tmp_path)
+    app = replay_app(village(), replayer, artic_dir=tmp_path)
     kind = app.kinds[app.kind("DI.fig", "AK_47.fig")]
     wire = dataclasses.replace(kind.table, table_id=7)  # a server whose table matches the stub's figure
     link = FakeLink(wire)
-    app = ReplayApp(village(), replayer, link=link, artic_dir=tmp_path)
+    app = replay_app(village(), replayer, link=link, artic_dir=tmp_path)
     app.frame(0.0)
     assert link.sent[:3] == [("create", 2, "DI.fig", "AK_47.fig"), ("subscribe", 2), ("requests", [2], [2])]
     assert app.server_of[0] == 2 and app.slot_of_server[2] == 0  # bound: the server poses him
@@ -128,5 +130,5 @@ def test_server_soldiers_pose_the_stub_through_the_wire_table(tmp_path: pytest.T
     app.frame(0.6)
     assert link.sent[-1] == ("requests", [2], [Appearance.PRONE])
     assert k.crowd.dofs[0] == pytest.approx(np.full(k.crowd.dofs.shape[1], 0.25))
-    app.finish()
+    app.source.finish(app)
     assert link.sent[-1] == ("remove", 2) and not app.soldiers.alive[0]

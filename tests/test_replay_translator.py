@@ -11,7 +11,7 @@ from conftest import SHARED
 from hypothesis import given
 from hypothesis import strategies as st
 
-from client_stub.replay import DisTranslator, EntityFilter, FilterError, RemoveReason, Replayer, Translation
+from client_stub.dis import DisTranslator, EntityFilter, FilterError, RemoveReason, Replayer, Translation
 from protocol.dis import (
     RIFLE_FIGURES,
     DisLog,

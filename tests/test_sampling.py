@@ -5,15 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.motion import quaternion
+from peabody import quaternion
 from server.motion.binding import bind_channelset
 from server.motion.channelset import FigureTrack, JointTrack, make_channelset
-from server.motion.playback import (
-    PARAMETERS,
-    ChannelsetPlayer,
-    frame_position,
-    set_channelset_parameters,
-)
+from server.motion.playback import frame_position, nearest_frame
 from server.motion.sampling import ClipLibrary
 from server.motion.synthetic import make_figure, make_soldier, synthetic_channelset, toy_rifle, toy_soldier
 
@@ -26,102 +21,85 @@ def ramp_clip(nframes: int = 121, fps: float = 60.0):
     return fig, cs
 
 
-def shown(player: ChannelsetPlayer, now: float) -> float:
-    return float(player.sample(now).poses["f"][0])
+class RampPlay:
+    """One soldier playing the ramp clip through the vectorised sampler the soldier manager uses."""
+
+    def __init__(self, cs, forward: bool = True, duration: float = -1.0, interpolate: bool = False) -> None:
+        self.lib = ClipLibrary([make_figure("f", "ramp.fig", [("j", 1)])])
+        self.lib.add(cs)
+        self.forward, self.duration, self.interpolate = forward, duration, interpolate
+        self.start_time = 0.0
+        self.done = False
+
+    def start(self, now: float) -> None:
+        self.start_time = now
+
+    def shown(self, now: float) -> float:
+        out = self.lib.sample(
+            np.zeros(1, np.int64),
+            np.array([self.start_time]),
+            np.array([1 if self.forward else -1], np.int8),
+            np.array([self.duration]),
+            now,
+            interpolate=self.interpolate,
+        )
+        self.done = bool(out.ended[0])
+        return float(out.joints[0, 0])
 
 
 # --- frame choice ------------------------------------------------------------------------------------------
 
 
 def test_two_second_clip_at_60fps_sampled_at_20hz_plays_every_third_frame() -> None:
-    fig, cs = ramp_clip()
+    _, cs = ramp_clip()
     assert cs.nframes == 121 and cs.size == 120 and cs.duration == pytest.approx(2.0)
-    player = ChannelsetPlayer(bind_channelset(cs, [fig]), every_frame=False, interpolate=False)
+    player = RampPlay(cs)
     player.start(10.0)
-    frames = [shown(player, 10.0 + k / 20.0) for k in range(41)]
+    frames = [player.shown(10.0 + k / 20.0) for k in range(41)]
     assert frames == [3.0 * k for k in range(41)]
     assert player.done
-    assert shown(player, 13.0) == 120.0  # held at the end
+    assert player.shown(13.0) == 120.0  # held at the end
 
 
 def test_backwards_play_mirrors_the_frames() -> None:
-    fig, cs = ramp_clip()
-    player = ChannelsetPlayer(bind_channelset(cs, [fig]), forward=False, every_frame=False, interpolate=False)
-    player.start(0.0)
-    assert [shown(player, k / 20.0) for k in range(41)] == [120.0 - 3.0 * k for k in range(41)]
+    _, cs = ramp_clip()
+    player = RampPlay(cs, forward=False)
+    assert [player.shown(k / 20.0) for k in range(41)] == [120.0 - 3.0 * k for k in range(41)]
 
 
 def test_time_scaling_stretches_the_clip() -> None:
-    fig, cs = ramp_clip()
-    player = ChannelsetPlayer(bind_channelset(cs, [fig]), duration=4.0, every_frame=False, interpolate=False)
-    player.start(0.0)
+    _, cs = ramp_clip()
+    player = RampPlay(cs, duration=4.0)
     # twice the stored time: 20 Hz now advances 1.5 frames per tick, shown as the nearest frame
-    got = [shown(player, k / 20.0) for k in range(81)]
+    got = [player.shown(k / 20.0) for k in range(81)]
     assert got[::2] == [3.0 * k for k in range(41)]
     assert got[1] == 2.0 and got[3] == 5.0  # 1.5 -> 2, 4.5 -> 5 (round half up)
-    assert not ChannelsetPlayer(bind_channelset(cs, [fig]), duration=4.0).done
-    fast = ChannelsetPlayer(bind_channelset(cs, [fig]), duration=1.0, every_frame=False, interpolate=False)
-    fast.start(0.0)
-    assert [shown(fast, k / 20.0) for k in range(21)] == [6.0 * k for k in range(21)]
+    fast = RampPlay(cs, duration=1.0)
+    assert [fast.shown(k / 20.0) for k in range(21)] == [6.0 * k for k in range(21)]
     assert fast.done
 
 
 def test_minus_one_means_stored_time() -> None:
-    fig, cs = ramp_clip()
-    p = ChannelsetPlayer(bind_channelset(cs, [fig]), duration=-1)
-    assert p.duration == pytest.approx(2.0)
+    _, cs = ramp_clip()
+    p = RampPlay(cs, duration=-1)
+    assert p.shown(1.0) == 60.0 and not p.done
+    assert p.shown(2.0) == 120.0 and p.done
 
 
 def test_non_uniform_ticks_recompute_elapsed_time() -> None:
-    fig, cs = ramp_clip()
-    player = ChannelsetPlayer(bind_channelset(cs, [fig]), every_frame=False, interpolate=False)
+    _, cs = ramp_clip()
+    player = RampPlay(cs)
     player.start(5.0)
     ticks = [0.0, 0.01, 0.3, 0.31, 0.95, 1.5, 1.999, 2.0, 2.5]
-    got = [shown(player, 5.0 + t) for t in ticks]
+    got = [player.shown(5.0 + t) for t in ticks]
     assert got == [0.0, 1.0, 18.0, 19.0, 57.0, 90.0, 120.0, 120.0, 120.0]
 
 
 def test_interpolation_lerps_between_frames() -> None:
-    fig, cs = ramp_clip()
-    player = ChannelsetPlayer(bind_channelset(cs, [fig]), every_frame=False, interpolate=True)
-    player.start(0.0)
-    assert shown(player, 0.5 / 60.0) == pytest.approx(0.5, abs=1e-5)
-    assert shown(player, 1.0 + 0.25 / 60.0) == pytest.approx(60.25, abs=1e-4)
-
-
-def test_every_frame_mode_shows_frame_k_at_call_k_whatever_the_clock() -> None:
-    fig, cs = ramp_clip(nframes=7)
-    player = ChannelsetPlayer(bind_channelset(cs, [fig]), every_frame=True)
-    player.start(0.0)
-    got = [shown(player, 100.0 * k) for k in range(9)]
-    assert got == [0, 1, 2, 3, 4, 5, 6, 6, 6]
-    back = ChannelsetPlayer(bind_channelset(cs, [fig]), forward=False, every_frame=True)
-    back.start(0.0)
-    assert [shown(back, 0.0) for _ in range(7)] == [6, 5, 4, 3, 2, 1, 0]
-    assert back.done
-
-
-def test_set_channelset_parameters_is_the_global_default() -> None:
-    fig, cs = ramp_clip(nframes=5)
-    old = PARAMETERS.every_frame
-    try:
-        set_channelset_parameters("yes")
-        assert ChannelsetPlayer(bind_channelset(cs, [fig])).every_frame
-        set_channelset_parameters("no")
-        assert not ChannelsetPlayer(bind_channelset(cs, [fig])).every_frame
-        with pytest.raises(ValueError):
-            set_channelset_parameters("maybe")
-    finally:
-        PARAMETERS.every_frame = old
-
-
-def test_step_single_frames() -> None:
-    fig, cs = ramp_clip(nframes=4)
-    player = ChannelsetPlayer(bind_channelset(cs, [fig]))
-    player.start(0.0)
-    got = [float(player.step().poses["f"][0]) for _ in range(5)]
-    assert got == [1, 2, 3, 3, 3] and player.done
-    assert float(player.step(-2).poses["f"][0]) == 1
+    _, cs = ramp_clip()
+    player = RampPlay(cs, interpolate=True)
+    assert player.shown(0.5 / 60.0) == pytest.approx(0.5, abs=1e-5)
+    assert player.shown(1.0 + 0.25 / 60.0) == pytest.approx(60.25, abs=1e-4)
 
 
 def test_frame_position_reference() -> None:
@@ -176,7 +154,7 @@ def library_and_clips(nclips: int = 6):
 
 
 @pytest.mark.parametrize("interpolate", [True, False])
-def test_vectorised_sampling_equals_per_soldier_playback(interpolate: bool) -> None:
+def test_vectorised_sampling_equals_the_scalar_reference(interpolate: bool) -> None:
     lib, clips, soldier, rifle = library_and_clips()
     rng = np.random.default_rng(7)
     n = 300
@@ -189,17 +167,15 @@ def test_vectorised_sampling_equals_per_soldier_playback(interpolate: bool) -> N
     sl = lib.figure_slice("toy_soldier.fig")
     for i in range(n):
         bound = bind_channelset(clips[clip_id[i]], [soldier, rifle])
-        player = ChannelsetPlayer(
-            bound,
-            forward=bool(direction[i] > 0),
-            duration=float(duration[i]),
-            every_frame=False,
-            interpolate=interpolate,
+        cs = clips[clip_id[i]]
+        pos, done = frame_position(
+            cs.nframes, cs.fps, bool(direction[i] > 0), float(duration[i]), now - float(start[i])
         )
-        player.start(float(start[i]))
-        ref = player.sample(now)
+        if not interpolate:
+            pos = float(nearest_frame(pos, cs.nframes))
+        ref = bound.sample(pos, interpolate)  # the scalar reference: one bound channelset at one frame
         np.testing.assert_allclose(out.joints[i, sl], ref.poses["soldier"], atol=1e-6)
-        assert bool(out.ended[i]) == player.done
+        assert bool(out.ended[i]) == done
         for k, name in enumerate(["soldier", "rifle"]):
             pl = ref.placements[name]
             assert pl is not None

@@ -209,7 +209,7 @@ def test_startup_script_over_the_data_dir_makes_the_world_ready() -> None:
     assert sorted(world.manager.names.values()) == sorted(d.soldiers)
     assert [(s.figure, s.weapon, s.table.table_id) for s in world.sets] == [("DI.fig", "AK_47.fig", 1)]
     assert set(world.graphs) == {"soldier_low", "soldier_loco", "soldier_crawl"}
-    assert world.manager.throttle == pytest.approx(0.04)
+    assert world.manager.settings.throttle == pytest.approx(0.04)
     assert world.report_interval == 30.0 and not world.graphics
     lib = world.library
     assert lib is not None and lib.can_walk and lib.can_run and lib.can_crawl
@@ -241,8 +241,9 @@ def test_jcl_settings_reach_the_manager_and_bad_commands_are_located() -> None:
         "set_ttes_heading_offset(256.00,0.00,256.00); set_ttes_soldier_throttle(0.065); "
         'set_channelset_parameters("yes"); set_ttes_report_interval(5);'
     )
-    assert m.heading_offsets == (256.0, 0.0, 256.0)
-    assert m.throttle == pytest.approx(0.065) and m.every_frame and world.report_interval == 5.0
+    assert m.settings.heading_offsets == (256.0, 0.0, 256.0)
+    assert m.settings.throttle == pytest.approx(0.065) and m.settings.every_frame
+    assert world.report_interval == 5.0
     with pytest.raises(JclError, match=r"<jcl>:1:1: unknown command 'system'"):
         world.run_jcl('system("rm -rf /");')
     with pytest.raises(JclError, match='expected "yes" or "no"'):

@@ -73,9 +73,7 @@ def test_the_graph_goes_to_the_nearest_variant_and_stays_in_one() -> None:
 def test_a_bound_posture_change_to_dead_takes_the_nearest_variant() -> None:
     loaded = variant_static_graph()
     bound = bind_posture_graph(loaded, synthetic_figures(), initial="PRONE_STOWED")
-    change = bound.posture_change("DEAD", 0.0)
-    change.update(100.0)
-    assert bound.current == "DEAD@prstow"
+    assert bound.shortest_path("DEAD")[-1].end == "DEAD@prstow"
 
 
 def test_the_library_precomputes_the_variant_to_head_for(lib: MotionLibrary) -> None:

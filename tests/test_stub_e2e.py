@@ -10,10 +10,11 @@ import pytest
 import trimesh
 import trio
 
-from client_stub.app import StubApp
-from client_stub.jack import JackProc
-from client_stub.simsoldier import Behaviour, Force
-from client_stub.terrain import terrain_from_mesh
+from client_stub.stub.app import StubApp
+from client_stub.stub.jack import JackProc
+from client_stub.stub.live import LiveSoldiers
+from client_stub.stub.simsoldier import Behaviour, Force
+from client_stub.stub.terrain import terrain_from_mesh
 from protocol.entity import Appearance
 
 server_app = pytest.importorskip("server.app")
@@ -33,7 +34,8 @@ async def test_stub_and_real_server(nursery: trio.Nursery, data_dir: Path, tmp_p
     addresses = await nursery.start(functools.partial(server.serve))
     host, port = addresses[0]
     terrain = terrain_from_mesh(trimesh.creation.box(extents=(200, 200, 2)), {"office": [30.0, -20.0]})
-    app = StubApp(terrain, artic_dir=tmp_path)
+    live = LiveSoldiers()
+    app = StubApp(terrain, live, artic_dir=tmp_path)
     app.add_soldier((0.0, 0.0), 0.0)
     app.add_soldier((8.0, 0.0), 0.0, speed=1.4, behaviour=Behaviour.SQUARE, size=6.0)
     app.add_soldier((-8.0, 0.0), 90.0, force=Force.OPPOSING)
@@ -41,7 +43,7 @@ async def test_stub_and_real_server(nursery: trio.Nursery, data_dir: Path, tmp_p
     try:
         with trio.fail_after(30):
             await trio.to_thread.run_sync(jack.initsocketconnection, host, port)
-            assert await trio.to_thread.run_sync(app.connect, jack, 20.0)
+            assert await trio.to_thread.run_sync(live.connect, app, jack, 20.0)
         assert len(jack.ready_soldiers) >= 3
         assert (app.server_of[:3] >= 0).all() and len(set(app.server_of[:3].tolist())) == 3
         kinds = {app.kinds[k].figure + "+" + app.kinds[k].weapon for k in app.slot_kind[:3]}

@@ -6,10 +6,17 @@ import numpy as np
 import pytest
 import trimesh
 
-from client_stub.camera import OVERHEAD_ELEVATION, TETHER_ELEVATION, CameraState, View, camera_pose, look_at
-from client_stub.keys import KEY_HELP, StubController, help_text
-from client_stub.simsoldier import Behaviour, SimSoldiers
-from client_stub.terrain import terrain_from_mesh
+from client_stub.stub.camera import (
+    OVERHEAD_ELEVATION,
+    TETHER_ELEVATION,
+    CameraState,
+    View,
+    camera_pose,
+    look_at,
+)
+from client_stub.stub.keys import KEY_HELP, StubController, help_text
+from client_stub.stub.simsoldier import Behaviour, SimSoldiers
+from client_stub.stub.terrain import terrain_from_mesh
 from protocol.entity import Appearance, WeaponState
 
 

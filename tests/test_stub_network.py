@@ -13,12 +13,16 @@ import pytest
 import trimesh
 import trio
 
-from client_stub.app import StubApp
-from client_stub.artic import articulation, update_table_for
-from client_stub.jack import JackError, JackProc, UpdateBuffer, free_port
-from client_stub.simsoldier import Behaviour, Force
-from client_stub.terrain import terrain_from_mesh
-from client_stub.tips import load_tips
+from client_stub.link.buffer import UpdateBuffer
+from client_stub.link.client import LinkError
+from client_stub.link.spawn import free_port
+from client_stub.stub.app import StubApp
+from client_stub.stub.artic import articulation, update_table_for
+from client_stub.stub.jack import JackProc
+from client_stub.stub.live import LiveSoldiers
+from client_stub.stub.simsoldier import Behaviour, Force
+from client_stub.stub.terrain import terrain_from_mesh
+from client_stub.stub.tips import load_tips
 from protocol import coords
 from protocol.connection import NEED_DATA, PAUSED, SERVER, Connection
 from protocol.entity import Appearance
@@ -133,7 +137,8 @@ async def _serve(nursery: trio.Nursery, server: FakeServer) -> int:
 async def test_stub_runs_against_a_fake_server(nursery: trio.Nursery, tmp_path: Path) -> None:
     server = FakeServer()
     port = await _serve(nursery, server)
-    app = StubApp(flat_terrain(), artic_dir=tmp_path)
+    live = LiveSoldiers()
+    app = StubApp(flat_terrain(), live, artic_dir=tmp_path)
     app.add_soldier((0.0, 0.0), 0.0)
     app.add_soldier((5.0, 0.0), 0.0, speed=1.0, behaviour=Behaviour.SQUARE)
     app.add_soldier((-5.0, 0.0), 90.0, force=Force.OPPOSING)
@@ -141,7 +146,7 @@ async def test_stub_runs_against_a_fake_server(nursery: trio.Nursery, tmp_path: 
     with trio.fail_after(20):
         await trio.to_thread.run_sync(jack.initsocketconnection, "127.0.0.1", port)
         assert jack.connected and jack.accept is not None and jack.accept.name == "fake-jack"
-        assert await trio.to_thread.run_sync(app.connect, jack, 10.0)
+        assert await trio.to_thread.run_sync(live.connect, app, jack, 10.0)
     try:
         assert server.jcl == ['read_file("jack-ttes-soldier_low.jcl");']
         assert jack.jackready and jack.ready_soldiers == {0: TABLE_ID, 1: TABLE_ID}
@@ -198,10 +203,10 @@ async def test_stub_runs_against_a_fake_server(nursery: trio.Nursery, tmp_path: 
 async def test_connecting_to_nothing_fails_cleanly() -> None:
     jack = JackProc()
     port = free_port()
-    with pytest.raises(JackError, match="cannot connect"):
+    with pytest.raises(LinkError, match="cannot connect"):
         await trio.to_thread.run_sync(jack.initsocketconnection, "127.0.0.1", port, 5.0)
     assert jack.closed.is_set() and not jack.connected
-    with pytest.raises(JackError):
+    with pytest.raises(LinkError):
         await trio.to_thread.run_sync(jack.send, Ping(1))
 
 
@@ -216,7 +221,7 @@ async def test_a_server_speaking_garbage_is_a_protocol_error(nursery: trio.Nurse
     listeners = await nursery.start(functools.partial(trio.serve_tcp, garbage, 0, host="127.0.0.1"))
     port = listeners[0].socket.getsockname()[1]
     jack = JackProc()
-    with pytest.raises(JackError, match="protocol error 3"):
+    with pytest.raises(LinkError, match="protocol error 3"):
         await trio.to_thread.run_sync(jack.initsocketconnection, "127.0.0.1", port, 10.0)
     assert isinstance(jack.errors[0], ProtocolError)
 
@@ -235,12 +240,11 @@ def test_update_buffer_is_a_double_buffer() -> None:
 
     buf.write(ev([1, 3], 0.5))
     buf.write(ev([3], 0.7))  # the newest pose of a soldier wins
-    front, fresh, dofs, _, _ = buf.flip()
-    assert np.flatnonzero(fresh[front]).tolist() == [1, 3] and dofs[front, 3, 0] == 0.7
-    buf.write(ev([2], 0.1))  # goes to the other buffer: the front one is not touched
-    assert np.flatnonzero(fresh[front]).tolist() == [1, 3] and buf.back != front
-    fresh[front, [1, 3]] = False  # consumed
-    buf.write(ev([40], 0.9))  # growth keeps the back buffer's flags only
-    front2, fresh2, dofs2, _, _ = buf.flip()
-    assert np.flatnonzero(fresh2[front2]).tolist() == [2, 40] and dofs2[front2, 40, 0] == 0.9
-    assert not fresh2[1 - front2].any()
+    front = buf.flip()
+    assert front is not None and front.indices.tolist() == [1, 3] and front.dofs[1, 0] == 0.7
+    assert buf.flip() is None  # taken: nothing fresh in the other buffer yet
+    buf.write(ev([2], 0.1))  # the reader writes the back buffer
+    buf.write(ev([40], 0.9))  # growth keeps the back buffer's flags
+    back = buf.flip()
+    assert back is not None and back.indices.tolist() == [2, 40] and back.dofs[1, 0] == 0.9
+    assert buf.flip() is None and buf.flip() is None

@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from client_stub.app import StubApp
-from client_stub.camera import look_at
-from client_stub.headless import TOUR, Tour, run_headless
-from client_stub.render import FORCE_UNIFORMS, StubRenderer, uniform_colour
-from client_stub.simsoldier import Force
-from client_stub.terrain import terrain_from_mesh
+from client_stub.renderer import Renderer
+from client_stub.stub.app import StubApp
+from client_stub.stub.camera import look_at
+from client_stub.stub.headless import TOUR, Tour, run_headless
+from client_stub.stub.render import FORCE_UNIFORMS, StubRenderer, uniform_colour
+from client_stub.stub.simsoldier import Force
+from client_stub.stub.terrain import terrain_from_mesh
 from protocol.entity import Appearance, WeaponState
 
 W, H = 200, 150
@@ -43,7 +44,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory):
     app.add_soldier((1.5, 0.0), 180.0, force=Force.OPPOSING, weapon=WeaponState.FIRING)
     app.frame(0.0)
     app.renderer = StubRenderer(W, H, yfov_deg=YFOV)
-    app.renderer.add_terrain(terrain.meshes)
+    app.renderer.set_terrain(terrain.meshes)
     yield app
     app.renderer.close()
 
@@ -146,6 +147,7 @@ def test_instancing_keeps_draw_calls_constant(tmp_path: Path) -> None:
         assert meshes.count == 61
         assert all(p.poses.shape == (61, 4, 4) for p in meshes.primitives())
         app.renderer.render()
+        assert isinstance(app.renderer, Renderer)
     finally:
         app.renderer.close()
 

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from client_stub.scene_graph import ENTITY_NODE, Crowd, EntityLayout, FigureGraph
-from client_stub.tips import parse_tips
+from client_stub.stub.scene_graph import ENTITY_NODE, Crowd, EntityLayout, FigureGraph
+from client_stub.stub.tips import parse_tips
 from peabody.fk import FigureKinematics
 from peabody.loader import read_figure
 from peabody.model import Environment, Figure

@@ -21,5 +21,7 @@ def test_spawn_server_runs_a_real_server_process_and_stops_it(
     captured = capsys.readouterr()
     assert code == 0, captured.err
     summary = json.loads(captured.out.strip().splitlines()[-1])
-    assert summary["server"] and summary["frames"] == 5 and out.is_file()
+    # With a server the frames follow the wall clock (headless.py), so a loaded machine renders fewer:
+    # assert the run rendered and stopped at its budget, never an exact count (no timed assertions).
+    assert summary["server"] and 1 <= summary["frames"] <= 5 and out.is_file()
     assert "ttes server stopped (exit 0)" in captured.err  # SIGTERM: a clean shutdown

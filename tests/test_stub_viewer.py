@@ -20,16 +20,17 @@ SCRIPT = textwrap.dedent(
     import pyglet
     pyglet.options["headless"] = True
     from pyglet.window import key
-    from client_stub.app import StubApp, populate_demo
-    from client_stub.render import StubRenderer
-    from client_stub.terrain import load_terrain
-    from client_stub.viewer import make_window
+    from client_stub.stub.app import StubApp
+    from client_stub.stub.live import populate_demo
+    from client_stub.stub.render import StubRenderer
+    from client_stub.stub.terrain import load_terrain
+    from client_stub.stub.viewer import make_window
 
     terrain = load_terrain()
     app = StubApp(terrain, artic_dir=sys.argv[1])
     populate_demo(app)
     app.renderer = StubRenderer(160, 120, offscreen=False)
-    app.renderer.add_terrain(terrain.meshes)
+    app.renderer.set_terrain(terrain.meshes)
     win = make_window(app, 160, 120, visible=False)
     for ch in "c3":
         win.dispatch_event("on_text", ch)

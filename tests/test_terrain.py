@@ -11,10 +11,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from client_stub.ground import GroundQuery
-from client_stub.simsoldier import Behaviour, SimSoldiers
-from client_stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain, terrain_from_mesh
-from client_stub.terrain_gen import buildings, landmarks, relief, village_scene
+from client_stub.stub.ground import GroundQuery
+from client_stub.stub.simsoldier import Behaviour, SimSoldiers
+from client_stub.stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain, terrain_from_mesh
+from client_stub.stub.terrain_gen import buildings, landmarks, relief, village_scene
 from protocol.entity import Appearance
 
 

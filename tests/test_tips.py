@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from client_stub.artic import (
+from client_stub.stub.artic import (
     ArticError,
     articulation,
     bind_table,
@@ -19,7 +19,7 @@ from client_stub.artic import (
     parse_artic,
     update_table_for,
 )
-from client_stub.tips import TipsError, load_tips, parse_tips
+from client_stub.stub.tips import TipsError, load_tips, parse_tips
 from peabody.loader import read_figure
 from peabody.model import Environment, Figure, Psurf, Segment, Site
 from peabody.tips import format_tips, spit

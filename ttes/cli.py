@@ -16,6 +16,7 @@ import sys
 from collections.abc import Sequence
 
 import ttes.commands
+from ttes.extras import missing_extra_message
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -45,6 +46,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except BrokenPipeError:
         return 0
+    except ModuleNotFoundError as exc:
+        message = missing_extra_message(args.command, exc)
+        if message is None:
+            raise
+        print(message, file=sys.stderr)
+        return 2
     except (OSError, ValueError) as exc:
         print(f"ttes {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -37,8 +37,8 @@ from client_stub.crowd.lod import (
     visible,
 )
 from client_stub.crowd.sources import CrowdState
-from client_stub.scene_graph import FigureGraph
-from client_stub.tips import TipsFigure, load_tips
+from client_stub.stub.scene_graph import FigureGraph
+from client_stub.stub.tips import TipsFigure, load_tips
 
 log = logging.getLogger("ttes.crowd")
 STUB_DATA = Path(__file__).resolve().parent.parent / "data"
@@ -154,7 +154,8 @@ class _Level:
 
 
 class CrowdRenderer:
-    """CPU side of the crowd: culling, levels of detail, cached FK, instance matrices; owns a CrowdGL."""
+    """CPU side of the crowd: culling, levels of detail, cached FK, instance matrices; owns a CrowdGL. A
+    :class:`client_stub.renderer.Renderer`: it draws the :class:`CrowdState` given to :meth:`show`."""
 
     def __init__(
         self, figures: Figures, n: int, width: int, height: int, near_m: float, mid_m: float
@@ -162,6 +163,9 @@ class CrowdRenderer:
         from client_stub.crowd.gl import CrowdGL
 
         self.n = n
+        self.width, self.height = width, height
+        self.camera = FreeCamera()
+        self.state: CrowdState | None = None
         self.near_m, self.mid_m = near_m, mid_m
         self.rifle = FastFigure(figures.rifle)
         self.levels = [
@@ -181,8 +185,24 @@ class CrowdRenderer:
 
         self.gl.set_terrain(terrain_mesh(meshes))
 
-    def frame(self, st: CrowdState, camera: FreeCamera) -> None:
-        """Draw one frame of the state from the camera."""
+    def show(self, state: CrowdState) -> None:
+        """The crowd to draw from now on (its rows change in place)."""
+        self.state = state
+
+    def set_camera(self, pose: np.ndarray) -> None:
+        self.camera.set_pose(pose)
+
+    def render(self) -> np.ndarray:
+        self.draw()
+        return self.read()
+
+    def close(self) -> None:
+        self.gl.release()
+
+    def draw(self) -> None:
+        """Draw one frame of the state from the camera (:meth:`read` fetches it)."""
+        assert self.state is not None, "show() a crowd first"
+        st, camera = self.state, self.camera
         gl = self.gl
         aspect = gl.width / gl.height
         vp = camera.viewproj(aspect)
@@ -214,9 +234,6 @@ class CrowdRenderer:
     def read(self) -> np.ndarray:
         return self.gl.read()
 
-    def release(self) -> None:
-        self.gl.release()
-
 
 def default_centre(terrain: Any, side: float) -> tuple[float, float]:
     """The terrain's ``fields`` landmark, moved so that a crowd ``side`` metres wide stays on the terrain."""
@@ -242,7 +259,7 @@ def run_crowd(cfg: CrowdConfig) -> dict[str, Any]:
     figures = Figures.load()
     terrain = None
     if cfg.terrain != "none":
-        from client_stub.terrain import DEFAULT_TERRAIN, load_terrain
+        from client_stub.stub.terrain import DEFAULT_TERRAIN, load_terrain
 
         terrain = load_terrain(cfg.terrain or DEFAULT_TERRAIN)
     n = cfg.soldiers
@@ -253,10 +270,11 @@ def run_crowd(cfg: CrowdConfig) -> dict[str, Any]:
     if cfg.source == "server":
         host, port = cfg.host, cfg.port
         if cfg.spawn_server:
-            from client_stub.loadtest_server import SpawnedServer
+            from client_stub.link.spawn import spawn_server
+            from client_stub.loadtest.session import server_args
 
-            server = SpawnedServer(tick_hz=30.0, throttle=0.0, data=cfg.server_data)
-            host, port = server.wait_ready()
+            server = spawn_server(server_args(30.0, 0.0), data=cfg.server_data)
+            host, port = server.host, server.port
         try:
             source = NetworkSource(
                 n, figures.mid, figures.rifle, figures.mid_tips, figures.rifle_tips, host=host, port=port,
@@ -276,6 +294,7 @@ def run_crowd(cfg: CrowdConfig) -> dict[str, Any]:
     writer = None
     try:
         renderer = CrowdRenderer(figures, n, cfg.width, cfg.height, cfg.near_m, cfg.mid_m)
+        renderer.show(source.state)
         if terrain is not None:
             renderer.set_terrain(terrain.meshes)
         camera = FreeCamera()
@@ -311,7 +330,8 @@ def run_crowd(cfg: CrowdConfig) -> dict[str, Any]:
                 orbit(camera, c3, radius, height, t, period)
             elif cfg.camera_pose is None and frames == 0:
                 orbit(camera, c3, radius, height, 0.0, period)
-            renderer.frame(source.state, camera)
+            renderer.set_camera(camera.pose())
+            renderer.draw()
             if frames >= cfg.warmup_frames:
                 times.append(time.perf_counter() - f0)
                 c1 = os.times()
@@ -360,7 +380,7 @@ def run_crowd(cfg: CrowdConfig) -> dict[str, Any]:
         if writer is not None:
             writer.close()
         if renderer is not None:
-            renderer.release()
+            renderer.close()
         source.close()
         if server is not None:
             server.close()

@@ -53,6 +53,18 @@ class FreeCamera:
         m[:3, 3] = -m[:3, :3] @ self.position
         return m
 
+    def pose(self) -> np.ndarray:
+        """4×4 camera → world (the inverse of :meth:`view`)."""
+        return np.linalg.inv(self.view())
+
+    def set_pose(self, pose: np.ndarray) -> None:
+        """Position, heading and pitch from a camera → world pose (a free camera has no roll)."""
+        pose = np.asarray(pose, np.float64)
+        f = -pose[:3, 2] / np.linalg.norm(pose[:3, 2])
+        self.position = pose[:3, 3].copy()
+        self.heading = math.degrees(math.atan2(f[0], f[1])) % 360.0
+        self.pitch = math.degrees(math.asin(float(np.clip(f[2], -1.0, 1.0))))
+
     def projection(self, aspect: float) -> np.ndarray:
         t = 1.0 / math.tan(math.radians(self.fovy) / 2)
         n, f = self.near, self.far

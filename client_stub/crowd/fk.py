@@ -1,12 +1,12 @@
 """Forward kinematics for thousands of soldiers: Figure 14's Joint DCS chain as float32 3×4 array algebra.
 
-:class:`client_stub.scene_graph.Crowd` (the stub's reference scene graph) composes ``(n, nodes, 4, 4)``
+:class:`client_stub.stub.scene_graph.Crowd` (the stub's reference scene graph) composes ``(n, nodes, 4, 4)``
 float64 matrices and builds each DOF matrix in full: about 140 ms for 1,000 DI.fig soldiers on this
 machine. Here a rigid transform is its top 3×4 rows, a product is numpy's float32 matmul of the 3×3 part
 plus the translation (:func:`mul`), the rotational DOFs come from precomputed cross-product matrices
 (Rodrigues) and the DOF columns are reordered so each kind is one slice: about 16 ms for the same 1,000.
 The static data (near-site locations, far-site inverses, DOF axes and slots, tree levels) is
-:class:`~client_stub.scene_graph.FigureGraph`'s, so both give the same matrices (a test compares them).
+:class:`~client_stub.stub.scene_graph.FigureGraph`'s, so both give the same matrices (a test compares them).
 
 :meth:`FastFigure.local_nodes` returns every node of a figure in the *soldier's local frame* (feet at the
 origin, facing +Y): the figure DCS (placement · root inverse) and each joint DCS. The renderer caches these
@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from client_stub.scene_graph import FigureGraph
+from client_stub.stub.scene_graph import FigureGraph
+from peabody.rotations import skew
+from protocol import coords
 
 F32 = np.float32
 
@@ -73,9 +75,7 @@ class FastFigure:
         where[-1] = self.ndof  # -1 (no DOF) -> the identity appended after the DOFs
         self.slots_ordered = np.where(self.slots < 0, self.ndof, where[self.slots])
         ar = self.axis[self.order[: self.nrot]]
-        k = np.zeros((len(ar), 3, 3), F32)
-        k[:, 0, 1], k[:, 0, 2], k[:, 1, 2] = -ar[:, 2], ar[:, 1], -ar[:, 0]
-        k[:, 1, 0], k[:, 2, 0], k[:, 2, 1] = ar[:, 2], -ar[:, 1], ar[:, 0]
+        k = skew(ar)  # float32 like the axes
         self._k = k
         self._kk = np.matmul(k, k)  # K² (Rodrigues: R = I + sin K + (1 - cos) K²)
         self._taxis = self.axis[self.order[self.nrot :]]
@@ -130,12 +130,4 @@ class FastFigure:
 
 def entity_transforms(heading_deg: np.ndarray, position: np.ndarray) -> np.ndarray:
     """(n, 3, 4) float32 world placement of each soldier's local frame (compass heading, feet position)."""
-    h = np.radians(np.asarray(heading_deg, np.float64))
-    p = np.asarray(position, np.float64).reshape(-1, 3)
-    c, s = np.cos(h), np.sin(h)
-    out = np.zeros((len(p), 3, 4), F32)
-    out[:, 0, 0], out[:, 0, 1] = c, s  # local +Y (forward) goes to (sin h, cos h): protocol.coords
-    out[:, 1, 0], out[:, 1, 1] = -s, c
-    out[:, 2, 2] = 1.0
-    out[:, :, 3] = p
-    return out
+    return to34(coords.heading_transform(heading_deg, np.asarray(position, np.float64).reshape(-1, 3)))

@@ -13,10 +13,14 @@ it on the CPU.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from client_stub.crowd.lod import IMPOSTOR_COLOUR, SKIN_COLOUR, Impostor, LodModel
+
+if TYPE_CHECKING:
+    import moderngl
 
 SKY = (0.62, 0.74, 0.88)
 SUN = np.array([0.45, 0.35, 0.82])  # towards the sun (Performer: +Z up)
@@ -165,9 +169,10 @@ def terrain_mesh(meshes: dict, tile_m: float = 40.0) -> TerrainMesh:
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         col = None
         visual = getattr(mesh, "visual", None)
-        if getattr(visual, "kind", None) == "vertex":
+        kind = getattr(visual, "kind", None)
+        if visual is not None and kind == "vertex":
             col = np.asarray(visual.vertex_colors, np.float64)[tri][..., :3] / 255.0
-        elif getattr(visual, "kind", None) == "face":
+        elif visual is not None and kind == "face":
             col = np.repeat(np.asarray(visual.face_colors, np.float64)[:, None, :3] / 255.0, 3, axis=1)
         if col is None:
             col = np.full((len(tri), 3, 3), 0.5)
@@ -201,6 +206,15 @@ def boxes_visible(lo: np.ndarray, hi: np.ndarray, viewproj: np.ndarray) -> np.nd
     return ~np.any([o.all(axis=1) for o in outside], axis=0)
 
 
+def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:
+    """A program's uniform by name, for ``write``: ``Program[name]`` may be any kind of member."""
+    import moderngl
+
+    member = prog[name]
+    assert isinstance(member, moderngl.Uniform), name
+    return member
+
+
 class CrowdGL:
     """Offscreen EGL context, programs, the terrain, and one vertex array + matrix texture per level."""
 
@@ -210,15 +224,16 @@ class CrowdGL:
         import moderngl
 
         self.width, self.height = width, height
-        self.ctx = moderngl.create_standalone_context(backend="egl")
+        # moderngl's stub types each **settings value as a dict; the backend name is a str at run time.
+        self.ctx = moderngl.create_standalone_context(backend="egl")  # type: ignore[arg-type]
         ctx = self.ctx
         self.renderer = str(ctx.info.get("GL_RENDERER", "?"))
         self.soldier_prog = ctx.program(vertex_shader=SOLDIER_VS, fragment_shader=FS)
         self.terrain_prog = ctx.program(vertex_shader=TERRAIN_VS, fragment_shader=FS)
         for prog in (self.soldier_prog, self.terrain_prog):
-            prog["sun"].value = tuple((SUN / np.linalg.norm(SUN)).tolist())
-            prog["sky"].value = SKY
-            prog["fog"].value = FOG_M
+            prog["sun"] = tuple((SUN / np.linalg.norm(SUN)).tolist())
+            prog["sky"] = SKY
+            prog["fog"] = FOG_M
         self.max_instances = int(max_instances)
         self.levels = []
         for model in models:
@@ -231,17 +246,17 @@ class CrowdGL:
             self.levels.append((model, vbo, vao, tex))
         self.impostor = impostor
         self.impostor_prog = prog = ctx.program(vertex_shader=IMPOSTOR_VS, fragment_shader=IMPOSTOR_FS)
-        prog["zrange"].value = (float(impostor.feet), float(impostor.head))
-        prog["halfwidth"].value = float(impostor.halfwidth)
-        prog["fog"].value = FOG_M
-        prog["sky"].value = SKY
-        prog["skin"].value = SKIN_COLOUR
-        prog["uniform_colour"].value = IMPOSTOR_COLOUR
+        prog["zrange"] = (float(impostor.feet), float(impostor.head))
+        prog["halfwidth"] = float(impostor.halfwidth)
+        prog["fog"] = FOG_M
+        prog["sky"] = SKY
+        prog["skin"] = SKIN_COLOUR
+        prog["uniform_colour"] = IMPOSTOR_COLOUR
         quad = np.array([[-1.0, 0.0], [1.0, 0.0], [-1.0, 1.0], [1.0, 1.0]], np.float32)
         self.impostor_vao = ctx.vertex_array(prog, [(ctx.buffer(quad.tobytes()), "2f", "in_uv")])
         self.impostor_tex = ctx.texture((3, max(1, self.max_instances)), 4, dtype="f4")
         self.impostor_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.terrain_vao = None
+        self.terrain_vao: moderngl.VertexArray | None = None
         self.terrain: TerrainMesh | None = None
         colour = ctx.renderbuffer((width, height))
         depth = ctx.depth_renderbuffer((width, height))
@@ -272,9 +287,9 @@ class CrowdGL:
         eye_t = tuple(float(v) for v in eye)
         self.triangles_drawn = 0
         ctx.disable(moderngl.CULL_FACE)  # TIPS windings are not consistent
-        self.soldier_prog["viewproj"].write(vp)
-        self.soldier_prog["eye"].value = eye_t
-        self.soldier_prog["mats"].value = 0
+        _uniform(self.soldier_prog, "viewproj").write(vp)
+        self.soldier_prog["eye"] = eye_t
+        self.soldier_prog["mats"] = 0
         for (model, _, vao, tex), mats in zip(self.levels, instances[: len(self.levels)], strict=True):
             n = min(len(mats), self.max_instances)
             if not n:
@@ -289,9 +304,9 @@ class CrowdGL:
         n = min(len(far), self.max_instances)
         if n:
             prog = self.impostor_prog
-            prog["viewproj"].write(vp)
-            prog["eye"].value = eye_t
-            prog["mats"].value = 0
+            _uniform(prog, "viewproj").write(vp)
+            prog["eye"] = eye_t
+            prog["mats"] = 0
             self.impostor_tex.write(
                 np.ascontiguousarray(far[:n], np.float32).tobytes(), viewport=(0, 0, 3, n)
             )
@@ -299,8 +314,8 @@ class CrowdGL:
             self.impostor_vao.render(moderngl.TRIANGLE_STRIP, instances=n)
             self.triangles_drawn += 2 * n
         if self.terrain_vao is not None and self.terrain is not None:
-            self.terrain_prog["viewproj"].write(vp)
-            self.terrain_prog["eye"].value = eye_t
+            _uniform(self.terrain_prog, "viewproj").write(vp)
+            self.terrain_prog["eye"] = eye_t
             mesh = self.terrain
             for k in np.flatnonzero(boxes_visible(mesh.lo, mesh.hi, viewproj)).tolist():
                 self.terrain_vao.render(

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from client_stub.crowd.fk import FastFigure
-from client_stub.scene_graph import FigureGraph, SegmentGeometry
+from client_stub.stub.scene_graph import FigureGraph, SegmentGeometry
 
 NEAR, MID, FAR = 0, 1, 2
 LEVEL_NAMES = ("near", "mid", "far")

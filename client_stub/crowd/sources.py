@@ -1,17 +1,17 @@
 """Where the crowd's poses come from: the server's update stream, or an offline stand-in.
 
 Both keep a :class:`CrowdState` (struct of arrays, one row per soldier): feet position and compass heading
-(owned by the client, dead-reckoned by the :class:`~client_stub.loadtest_mix.MixDriver`, feet put on the
+(owned by the client, dead-reckoned by the :class:`~client_stub.loadtest.mix.MixDriver`, feet put on the
 terrain), DI.fig joint angles and the figure placements of the soldier root and the rifle in the soldier's
 frame (from the wire: docs/PROTOCOL.md 8.3), and a ``dirty`` flag per soldier whose pose changed.
 
 :class:`NetworkSource` is ``ttes loadtest``'s session in decode mode, run by trio in a thread: it creates
-the soldiers, drives them with the realistic mix (the same requests as the load test) and writes each
-decoded JOINT_UPDATES into a back buffer; :meth:`NetworkSource.update` swaps it into the state under a lock
+the soldiers and drives them with the realistic mix (the same requests as the load test); its link clients
+keep the decoded poses in their double buffers, which :meth:`NetworkSource.update` swaps into the state
 (the render thread never waits for the network). The wire table is bound to DI.fig's by entry name
-(:func:`client_stub.artic.bind_table`); when it names too few of DI.fig's joints (the synthetic test server's
-chain figure) the soldiers whose updates arrived are posed by :class:`client_stub.offline.OfflinePoser`
-instead, and ``posing`` says so.
+(:func:`~client_stub.stub.artic.bind_table`); when it names too few of DI.fig's joints (the synthetic test
+server's chain figure) the soldiers whose updates arrived are posed by
+:class:`~client_stub.stub.offline.OfflinePoser` instead, and ``posing`` says so.
 
 :class:`OfflineSource` needs no server: the same mix, posed by the OfflinePoser (for render benchmarks).
 """
@@ -26,17 +26,17 @@ from dataclasses import dataclass
 import numpy as np
 import trio
 
-from client_stub.artic import TableBinding, articulation, bind_table, update_table_for
 from client_stub.crowd.fk import to34
-from client_stub.ground import GroundQuery
-from client_stub.loadtest import LoadSession, LoadTestConfig
-from client_stub.loadtest_mix import APPEARANCE, SPEED, WEAPON, MixDriver
-from client_stub.offline import OfflinePoser
-from client_stub.scene_graph import Crowd, EntityLayout, FigureGraph
-from client_stub.terrain import Terrain
-from client_stub.tips import TipsFigure
+from client_stub.link.buffer import UpdateBatch
+from client_stub.loadtest.mix import APPEARANCE, SPEED, WEAPON, MixDriver
+from client_stub.loadtest.session import LoadSession, LoadTestConfig
+from client_stub.stub.artic import TableBinding, articulation, bind_table, update_table_for
+from client_stub.stub.ground import GroundQuery
+from client_stub.stub.offline import OfflinePoser
+from client_stub.stub.scene_graph import Crowd, EntityLayout, FigureGraph
+from client_stub.stub.terrain import Terrain
+from client_stub.stub.tips import TipsFigure
 from protocol import coords
-from protocol.events import JointUpdates
 from protocol.update_table import UpdateTable
 
 log = logging.getLogger("ttes.crowd")
@@ -144,36 +144,13 @@ class OfflineSource:
         return
 
 
-class _CrowdSession(LoadSession):
-    """The load-test session, keeping every decoded pose (latest wins) for the renderer."""
+class WireBinding:
+    """Fresh wire poses into the state: wire tables are bound to ours by entry name; a table that names too
+    few of DI.fig's DOFs marks its soldiers for offline posing instead."""
 
-    def __init__(self, cfg: LoadTestConfig, sink: NetworkSource) -> None:
-        super().__init__(cfg)
-        self.sink = sink
-
-    def _on_updates(self, conn: int, t: float, tick: int, idx: np.ndarray, nbytes: int, ev: object) -> None:
-        super()._on_updates(conn, t, tick, idx, nbytes, ev)
-        if isinstance(ev, JointUpdates):
-            slots = self.slot_of[idx]
-            keep = slots >= 0
-            self.sink.receive(self.clients[conn].conn.tables[ev.table].table, ev, slots[keep], keep)
-
-
-class WireBuffer:
-    """The back buffer of decoded poses: the network thread writes (:meth:`receive`), the render thread
-    takes what is fresh (:meth:`take`), under one lock. Wire tables are bound to ours by entry name; a table
-    that names too few of DI.fig's DOFs marks its soldiers for offline posing instead."""
-
-    def __init__(self, n: int, ours: UpdateTable, state: CrowdState) -> None:
+    def __init__(self, ours: UpdateTable) -> None:
         self.ours = ours
-        self.lock = threading.Lock()
         self.bindings: dict[int, TableBinding] = {}
-        self.dofs = np.zeros_like(state.dofs)
-        self.place = state.placement.copy()
-        self.has_rifle = np.zeros(n, bool)
-        self.fresh = np.zeros(n, bool)
-        self.offline = np.zeros(n, bool)
-        self.updates = 0
         self.posing = "server"
 
     def binding(self, wire: UpdateTable) -> tuple[TableBinding, bool]:
@@ -186,38 +163,24 @@ class WireBuffer:
                             len(b.dof_dst), self.ours.ndofs)  # fmt: skip
         return b, len(b.dof_dst) >= MIN_BOUND_FRACTION * self.ours.ndofs
 
-    def receive(self, wire: UpdateTable, ev: JointUpdates, slots: np.ndarray, keep: np.ndarray) -> None:
-        """One decoded batch (``keep`` selects the rows of ``ev`` whose soldiers are ``slots``)."""
+    def apply(
+        self, state: CrowdState, wire: UpdateTable, batch: UpdateBatch, slots: np.ndarray
+    ) -> np.ndarray:
+        """One swapped batch (its rows are the soldiers ``slots``) into ``state``, marked dirty; returns the
+        slots that need offline posing instead."""
         b, bound = self.binding(wire)
-        with self.lock:
-            self.updates += len(slots)
-            self.fresh[slots] = True
-            if not bound:
-                self.offline[slots] = True
-                return
-            body = b.dof_dst < self.dofs.shape[1]
-            q = np.asarray(ev.dofs, np.float32)[keep]
-            self.dofs[np.ix_(slots, b.dof_dst[body])] = q[:, b.dof_src[body]]
-            pos = np.asarray(ev.positions)[keep]
-            quat = np.asarray(ev.orientations)[keep]
-            for f, src in enumerate(b.figure_src[:2].tolist()):
-                if src >= 0:
-                    self.place[slots, f] = to34(coords.pose7_to_transform(pos[:, src], quat[:, src]))
-            self.has_rifle[slots] = len(b.figure_src) > 1 and b.figure_src[1] >= 0
-
-    def take(self, state: CrowdState) -> np.ndarray:
-        """Copy the fresh wire poses into ``state`` (marking them dirty); returns the fresh soldiers that
-        need offline posing."""
-        with self.lock:
-            rows = np.flatnonzero(self.fresh)
-            self.fresh[rows] = False
-            offline = rows[self.offline[rows]]
-            wire = rows[~self.offline[rows]]
-            state.dofs[wire] = self.dofs[wire]
-            state.placement[wire] = self.place[wire]
-            state.rifle_from_palm[wire] = ~self.has_rifle[wire]
-        state.dirty[wire] = True
-        return offline
+        if not bound:
+            return slots
+        body = b.dof_dst < state.dofs.shape[1]
+        q = np.asarray(batch.dofs, np.float32)
+        state.dofs[np.ix_(slots, b.dof_dst[body])] = q[:, b.dof_src[body]]
+        for f, src in enumerate(b.figure_src[:2].tolist()):
+            if src >= 0:
+                place = coords.pose7_to_transform(batch.positions[:, src], batch.orientations[:, src])
+                state.placement[slots, f] = to34(place)
+        state.rifle_from_palm[slots] = not (len(b.figure_src) > 1 and b.figure_src[1] >= 0)
+        state.dirty[slots] = True
+        return slots[:0]
 
 
 class NetworkSource:
@@ -233,12 +196,12 @@ class NetworkSource:
         self.heights = ground_heights(terrain)
         self.state = CrowdState.empty(n, body, rifle)
         ours = update_table_for(articulation(body_tips), articulation(rifle_tips) if rifle_tips else None)
-        self.wire = WireBuffer(n, ours, self.state)
+        self.wire = WireBinding(ours)
         self.poser = _Poser(body, n)
         cfg = LoadTestConfig(
             soldiers=n, clients=clients, decode=True, mix=mix, seed=seed, timeout_s=timeout_s
         )
-        self.session = _CrowdSession(cfg, self)
+        self.session = LoadSession(cfg, buffer_updates=True)
         self.session.driver = MixDriver(0, mix=mix, seed=seed, centre=centre, spacing=spacing)
         self.ready = threading.Event()
         self.stop = threading.Event()
@@ -264,11 +227,7 @@ class NetworkSource:
     async def _main(self, host: str, port: int) -> None:
         s = self.session
         async with trio.open_nursery() as nursery:
-            await s.connect(host, port)
-            for c in s.clients:
-                nursery.start_soon(c.reader)
-            for c in s.clients:
-                await c.wait_ready(s.cfg.timeout_s)
+            await s.connect(nursery, host, port)
             await s.grow(self.n)
             self.ready.set()
             while not self.stop.is_set():
@@ -277,9 +236,6 @@ class NetworkSource:
                 await s.close(remove=True)
             nursery.cancel_scope.cancel()
 
-    def receive(self, wire: UpdateTable, ev: JointUpdates, slots: np.ndarray, keep: np.ndarray) -> None:
-        self.wire.receive(wire, ev, slots, keep)
-
     # -- the render thread ----------------------------------------------------------------------------------
     def update(self, t: float) -> None:
         if self.failure:
@@ -287,7 +243,7 @@ class NetworkSource:
         dt = max(0.0, t - self.time)
         self.time = t
         st = self.state
-        offline = self.wire.take(st)
+        offline = self._take_updates()
         d = self.session.driver
         position, heading = d.position[: self.n].copy(), d.heading[: self.n].copy()  # racy but harmless
         if len(offline):
@@ -298,8 +254,25 @@ class NetworkSource:
         if self.heights is not None and len(moved):
             st.position[moved, 2] = self.heights(position[moved, :2])
 
+    def _take_updates(self) -> np.ndarray:
+        """Swap every link's double buffers into the state; returns the soldiers to pose offline."""
+        offline = []
+        slot_of = self.session.slot_of
+        for c in self.session.clients:
+            for batch in c.link.swap():
+                slots = slot_of[batch.indices]
+                keep = slots >= 0
+                if keep.all():
+                    part = batch
+                else:
+                    part = UpdateBatch(batch.table, batch.indices[keep], batch.dofs[keep],
+                                       batch.positions[keep], batch.orientations[keep])  # fmt: skip
+                offline.append(self.wire.apply(self.state, c.tables[batch.table], part, slots[keep]))
+        return np.concatenate(offline) if offline else np.zeros(0, np.int64)
+
     def stats(self) -> dict:
-        return {"source": "server", "posing": self.wire.posing, "soldier_updates_received": self.wire.updates}
+        received = sum(c.link.soldier_updates for c in self.session.clients)
+        return {"source": "server", "posing": self.wire.posing, "soldier_updates_received": received}
 
     def close(self) -> None:
         self.stop.set()

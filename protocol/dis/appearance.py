@@ -34,6 +34,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from protocol.dis.errors import DisError
 
+# The TTES tokens a DIS lifeform maps onto are the entity requests' (one enum each, in protocol.entity);
+# DIS 'none' (no weapon) is shown as STOWED: the rifle model stays slung.
+from protocol.entity import Appearance as TtesPosture
+from protocol.entity import WeaponState as TtesWeapon
+
 
 class Health(IntEnum):
     NO_INJURY = 0
@@ -73,29 +78,6 @@ class Camouflage(IntEnum):
     WINTER = 1
     FOREST = 2
     OTHER = 3
-
-
-class TtesPosture(IntEnum):
-    """The TTES posture tokens (Figure 2: standing, kneeling, prone, destroyed; plus crawling).
-
-    The numbers are the 1994 ``JACKTTES_*`` appearance defines (DEAD 1, upright 2, kneel 3, prone 4) with
-    CRAWL 5 added, the same values as the entity-request wire format (``protocol.entity.Appearance``).
-    """
-
-    DEAD = 1
-    STAND = 2
-    KNEEL = 3
-    PRONE = 4
-    CRAWL = 5
-
-
-class TtesWeapon(IntEnum):
-    """The TTES weapon tokens (1994 ``JACKTTES_WEAPON_*`` values, FIRING added). DIS 'none' (no weapon)
-    is shown as STOWED: the rifle model stays slung."""
-
-    STOWED = 0
-    DEPLOYED = 1
-    FIRING = 2
 
 
 # Names printed by `ttes dis dump` (index = lifeform state value).

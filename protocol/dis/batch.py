@@ -150,7 +150,7 @@ _REASON_FIELD = {ES_TRUNCATED: 8, ES_VERSION: 0, ES_TYPE: 2, ES_SHORT: 8, ES_COU
 
 
 def validate_entity_states(
-    u8: NDArray[np.uint8], offsets: NDArray[np.int64], available: NDArray[np.int64] | None = None
+    u8: NDArray[np.uint8], offsets: NDArray[np.integer], available: NDArray[np.int64] | None = None
 ) -> tuple[NDArray[np.uint8], NDArray[np.int64]]:
     """Vectorised header checks for ESPDUs at ``offsets``: (reason code per PDU, field offset per PDU).
 
@@ -323,6 +323,11 @@ def batch_from_pdus(pdus: Sequence[EntityStatePdu]) -> EntityStateBatch:
     return EntityStateBatch(recs, np.array(params, VARIABLE_PARAMETER_DTYPE), start)
 
 
+def _vec3(v: np.ndarray) -> tuple[float, float, float]:
+    x, y, z = (float(c) for c in v)
+    return x, y, z
+
+
 def pdu_from_row(batch: EntityStateBatch, i: int) -> EntityStatePdu:
     r = batch.records[i]
     vps = tuple(
@@ -334,14 +339,14 @@ def pdu_from_row(batch: EntityStateBatch, i: int) -> EntityStatePdu:
         force_id=int(r["force_id"]),
         entity_type=EntityType(*r["entity_type"].tolist()),
         alt_entity_type=EntityType(*r["alt_entity_type"].tolist()),
-        velocity=tuple(float(v) for v in r["velocity"]),
-        location=tuple(float(v) for v in r["location"]),
-        orientation=tuple(float(v) for v in r["orientation"]),
+        velocity=_vec3(r["velocity"]),
+        location=_vec3(r["location"]),
+        orientation=_vec3(r["orientation"]),
         appearance=int(r["appearance"]),
         dr_algorithm=int(r["dr_algorithm"]),
         dr_other=r["dr_other"].tobytes(),
-        acceleration=tuple(float(v) for v in r["acceleration"]),
-        angular_velocity=tuple(float(v) for v in r["angular_velocity"]),
+        acceleration=_vec3(r["acceleration"]),
+        angular_velocity=_vec3(r["angular_velocity"]),
         marking_charset=int(r["marking_charset"]),
         marking=bytes(r["marking"]).ljust(11, b"\0"),
         capabilities=int(r["capabilities"]),

@@ -40,6 +40,7 @@ from enum import IntEnum
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from peabody.rotations import skew
 from protocol.dis.geo import euler_from_matrix, world_to_body
 
 F64 = NDArray[np.float64]
@@ -69,14 +70,6 @@ _MOVING = np.zeros(256, bool)
 _MOVING[2:10] = True
 
 
-def _skew(w: F64) -> F64:
-    s = np.zeros((*w.shape[:-1], 3, 3))
-    s[..., 0, 1], s[..., 0, 2] = -w[..., 2], w[..., 1]
-    s[..., 1, 0], s[..., 1, 2] = w[..., 2], -w[..., 0]
-    s[..., 2, 0], s[..., 2, 1] = -w[..., 1], w[..., 0]
-    return s
-
-
 def _coefficients(omega: F64, dt: F64) -> tuple[F64, ...]:
     """(a1, b1, c1, a2, b2, c2): R1 = a1 ww^T + b1 I + c1 W, R2 = a2 ww^T + b2 I + c2 W."""
     x = omega * dt
@@ -103,9 +96,9 @@ def r1_r2(angular_velocity: ArrayLike, dt: ArrayLike) -> tuple[F64, F64]:
     a1, b1, c1, a2, b2, c2 = _coefficients(omega, dt)
     wwt = w[..., :, None] * w[..., None, :]
     eye = np.eye(3)
-    skew = _skew(w)
-    r1 = a1[..., None, None] * wwt + b1[..., None, None] * eye + c1[..., None, None] * skew
-    r2 = a2[..., None, None] * wwt + b2[..., None, None] * eye + c2[..., None, None] * skew
+    k = skew(w)
+    r1 = a1[..., None, None] * wwt + b1[..., None, None] * eye + c1[..., None, None] * k
+    r2 = a2[..., None, None] * wwt + b2[..., None, None] * eye + c2[..., None, None] * k
     return r1, r2
 
 
@@ -122,7 +115,7 @@ def dr_rotation(angular_velocity: ArrayLike, dt: ArrayLike) -> F64:
     k2 = np.cos(x)
     k3 = np.where(small, dt * (1 - x * x / 6 + x**4 / 120), np.sin(xs) / ws)
     wwt = w[..., :, None] * w[..., None, :]
-    return k1[..., None, None] * wwt + k2[..., None, None] * np.eye(3) - k3[..., None, None] * _skew(w)
+    return k1[..., None, None] * wwt + k2[..., None, None] * np.eye(3) - k3[..., None, None] * skew(w)
 
 
 def dead_reckon(

@@ -30,39 +30,32 @@ import io
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from enum import IntEnum
 from pathlib import Path
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
-from protocol.dis.batch import (
-    ES_REASONS,
-    ES_VERSION,
-    EntityStateBatch,
-    decode_entity_states,
-    validate_entity_states,
+from protocol.dis.batch import EntityStateBatch
+from protocol.dis.decoders import (
+    DECODERS,
+    Corrupt,
+    Decoded,
+    EntityStates,
+    PduRows,
+    PduStatus,
+    Skipped,
+    Weapon,
 )
-from protocol.dis.entity_type import is_lifeform
 from protocol.dis.errors import DisError
 from protocol.dis.pdu import DEFAULT_PORT, PduType, timestamp_seconds, unwrap_timestamps
 from protocol.dis.scan import scan_segments, scan_stream
-from protocol.dis.warfare import WeaponEvent, weapon_event
+from protocol.dis.warfare import WeaponEvent
 
 FORMATS = ("pcap", "pcapng", "dislog", "raw")
 I64 = NDArray[np.int64]
 F64 = NDArray[np.float64]
 Progress = Callable[[int], None]  # called with the number of records read so far
-
-
-class PduStatus(IntEnum):
-    DECODED = 0  # in the batch
-    NOT_LIFEFORM = 1  # an Entity State PDU of a non-lifeform (skipped unless lifeforms_only=False)
-    OTHER_TYPE = 2  # a PDU type TTES does not read
-    EVENT = 3  # Fire / Detonation, in events
-    CORRUPT = 4  # reported in issues
-    UNSUPPORTED_VERSION = 5  # Entity State / Fire / Detonation of a DIS version other than 5, 6, 7
 
 
 PDU_INDEX_DTYPE = np.dtype(
@@ -437,14 +430,13 @@ def _base64_line(s: str) -> bytes:
 
 
 def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog:
-    counters = dict(seg.counters)
+    """Scan the segments into a PDU index, run each type's decoder (:data:`DECODERS`), collect its events."""
     issues = list(seg.issues)
     if seg.stream:
         index, scan_issues = scan_stream(seg.data)
-        non_dis = np.zeros(1, bool)
+        non_dis = np.zeros(0, bool)
     else:
         index, non_dis, scan_issues = scan_segments(seg.data, seg.start, seg.end)
-    counters["non_dis"] = int(non_dis.sum()) if not seg.stream else 0
     issues.extend(_relocate(e, seg) for e in scan_issues)
     u8 = np.frombuffer(seg.data, dtype=np.uint8)
     n = len(index)
@@ -456,48 +448,19 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
         seg.t0, seg.t_end = (float(t[0]), float(t.max())) if n else (0.0, 0.0)
     else:
         t = seg.time[index.segment]
-    status = np.full(n, PduStatus.OTHER_TYPE, np.uint8)
-    batch_index = np.full(n, -1, np.int64)
-
-    # Entity State PDUs: vectorised checks, one batch decode
-    es = np.flatnonzero(ptype == PduType.ENTITY_STATE)
-    reason, field_off = validate_entity_states(u8, index.offset[es], index.length[es])
-    status[es[reason == ES_VERSION]] = PduStatus.UNSUPPORTED_VERSION
-    for k in np.flatnonzero((reason != 0) & (reason != ES_VERSION)).tolist():
-        i = es[k]
-        status[i] = PduStatus.CORRUPT
-        issues.append(
-            _relocate(
-                DisError(
-                    ES_REASONS[int(reason[k])], int(index.offset[i] + field_off[k]), int(index.segment[i])
-                ),
-                seg,
-            )
-        )
-    good = es[reason == 0]
-    batch = decode_entity_states(u8, index.offset[good], validate=False)
-    life = is_lifeform(batch.records["entity_type"]["kind"], batch.records["entity_type"]["domain"])
-    keep = life if lifeforms_only else np.ones(len(batch), bool)
-    status[good] = PduStatus.DECODED
-    status[good[~keep]] = PduStatus.NOT_LIFEFORM
-    kept = good[keep]
-    batch_index[kept] = np.arange(kept.shape[0])
-    batch = batch.select(keep) if not keep.all() else batch
-
-    # Fire / Detonation: rare, decoded one by one into events
-    events: list[WeaponEvent] = []
-    for i in np.flatnonzero((ptype == PduType.FIRE) | (ptype == PduType.DETONATION)).tolist():
-        o, ln = int(index.offset[i]), int(index.length[i])
-        if int(version[i]) not in (5, 6, 7):
-            status[i] = PduStatus.UNSUPPORTED_VERSION
-            continue
-        try:
-            events.append(weapon_event(seg.data[o : o + ln], float(t[i])))
-            status[i] = PduStatus.EVENT
-        except DisError as exc:
-            status[i] = PduStatus.CORRUPT
-            issues.append(_relocate(DisError(exc.message, o + exc.offset, int(index.segment[i])), seg))
-
+    found = _Found(n)
+    for pdu_type, decoder in DECODERS.items():
+        rows = np.flatnonzero(ptype == pdu_type)
+        if len(rows):
+            at = PduRows(
+                seg.data, u8, rows, index.offset[rows], index.length[rows], index.segment[rows],
+                version[rows], t[rows], lifeforms_only,
+            )  # fmt: skip
+            for decoded in decoder(at):
+                found.add(decoded)
+    states, status, batch_index = found.states, found.status, found.batch_index
+    events = [w.event for w in sorted(found.weapons, key=lambda w: w.row)]  # file order
+    issues += [_relocate(c.error, seg) for c in sorted(found.corrupt, key=lambda c: c.row)]
     pdus = np.zeros(n, PDU_INDEX_DTYPE)
     pdus["t"] = t
     pdus["record"] = seg.record[index.segment] if not seg.stream else 0
@@ -509,35 +472,74 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
     pdus["batch_index"] = batch_index
     type_counts = np.bincount(ptype, minlength=256)
     types = np.flatnonzero(type_counts)
-    counts = type_counts[types]
-    counters.update(
-        {
-            "pdus": n,
-            "entity_states": int(es.shape[0]),
-            "lifeforms": int(life.sum()),
-            "non_lifeforms": int((~life).sum()),
-            "decoded": len(batch),
-            "fire": sum(e.kind == "fire" for e in events),
-            "detonation": sum(e.kind == "detonation" for e in events),
-            "other_pdus": int((status == PduStatus.OTHER_TYPE).sum()),
-            "unsupported_version": int((status == PduStatus.UNSUPPORTED_VERSION).sum()),
-            "corrupt": len(issues),
-        }
-    )
-    times = t[kept] if n else np.zeros(0)
+    counters = {
+        **seg.counters,
+        "non_dis": int(non_dis.sum()),
+        **_counters(ptype, status, states, events, len(issues)),
+    }
     return DisLog(
         source=name,
         format=fmt,
-        batch=batch,
-        times=np.asarray(times, np.float64),
+        batch=states.batch,
+        times=np.asarray(t[states.rows], np.float64),
         events=events,
         pdus=pdus,
         counters=counters,
-        pdu_types=dict(zip(types.tolist(), counts.tolist(), strict=True)),
+        pdu_types=dict(zip(types.tolist(), type_counts[types].tolist(), strict=True)),
         issues=issues,
         t0=seg.t0,
         t_end=seg.t_end,
     )
+
+
+
+class _Found:
+    """What the decoders of one log yielded, and each PDU's status: the ``match`` over the typed events."""
+
+    def __init__(self, n: int) -> None:
+        self.status = np.full(n, PduStatus.OTHER_TYPE, np.uint8)  # a type without a decoder stays OTHER_TYPE
+        self.batch_index = np.full(n, -1, np.int64)
+        self.states = EntityStates.empty()  # a log without Entity State PDUs
+        self.weapons: list[Weapon] = []
+        self.corrupt: list[Corrupt] = []
+
+    def add(self, decoded: Decoded) -> None:
+        match decoded:
+            case EntityStates(rows=kept, skipped=skipped):
+                self.states = decoded
+                self.status[kept] = PduStatus.DECODED
+                self.status[skipped] = PduStatus.NOT_LIFEFORM
+                self.batch_index[kept] = np.arange(len(kept))
+            case Weapon(row=row):
+                self.status[row] = PduStatus.EVENT
+                self.weapons.append(decoded)
+            case Skipped(rows=rows, status=why):
+                self.status[rows] = why
+            case Corrupt(row=row):
+                self.status[row] = PduStatus.CORRUPT
+                self.corrupt.append(decoded)
+
+
+def _counters(
+    ptype: NDArray[np.uint8],
+    status: NDArray[np.uint8],
+    states: EntityStates,
+    events: list[WeaponEvent],
+    corrupt: int,
+) -> dict[str, int]:
+    """Every counter of a log, derived from the PDU types, their statuses and the decoders' events."""
+    return {
+        "pdus": len(ptype),
+        "entity_states": int((ptype == PduType.ENTITY_STATE).sum()),
+        "lifeforms": states.lifeforms,
+        "non_lifeforms": states.non_lifeforms,
+        "decoded": len(states.batch),
+        "fire": sum(e.kind == "fire" for e in events),
+        "detonation": sum(e.kind == "detonation" for e in events),
+        "other_pdus": int((status == PduStatus.OTHER_TYPE).sum()),
+        "unsupported_version": int((status == PduStatus.UNSUPPORTED_VERSION).sum()),
+        "corrupt": corrupt,
+    }
 
 
 def _u32(u8: NDArray[np.uint8], at: I64) -> NDArray[np.uint32]:

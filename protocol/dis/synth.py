@@ -253,6 +253,7 @@ def synthesize(
             alive[victim] = False  # the next step sends health fatal
 
         if vehicles and step % round(HEARTBEAT / DT) == 0:
+            assert veh_pos is not None  # made when there are vehicles
             for k in range(vehicles):
                 rx, ts = stamp(t)
                 pdu = EntityStatePdu(

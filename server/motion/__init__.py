@@ -7,11 +7,11 @@ Seed 002, sections 3.4.1-3.4.2. Modules, bottom up:
   (importing this package registers the ``channelset`` block with the Peabody loader);
 * :mod:`~server.motion.cache` — ``X.chset.npz`` binary caches and :func:`load_channelset`;
 * :mod:`~server.motion.binding` — bound channelsets (index maps onto figures' pose vectors);
-* :mod:`~server.motion.playback` — playing one bound channelset (real time or every frame);
+* :mod:`~server.motion.playback` — the frame arithmetic of a play (the scalar reference of sampling);
 * :mod:`~server.motion.sampling` — :class:`ClipLibrary`, sampling thousands of soldiers per call;
 * :mod:`~server.motion.recording` — ``write_channelset`` from recorded channels, ``reroot_figure_channel``;
 * :mod:`~server.motion.posture_graph` / :mod:`~server.motion.posture_change` — ``.graph`` files, shortest
-  paths in time, bound posture graphs and executing a posture change.
+  paths in time and bound posture graphs (the soldier manager executes posture changes).
 """
 
 from __future__ import annotations
@@ -21,10 +21,8 @@ from server.motion.binding import BoundChannelset, bind_channelset
 from server.motion.cache import load_channelset
 from server.motion.channelset import Channelset, SharedChannel, make_channelset
 from server.motion.errors import BindingError, ChannelsetError, PostureGraphError
-from server.motion.playback import ChannelsetPlayer, set_channelset_parameters
 from server.motion.posture_change import (
     BoundPostureGraph,
-    PostureChange,
     bind_posture_graph,
     load_posture_graph,
 )
@@ -38,10 +36,8 @@ __all__ = [
     "BoundPostureGraph",
     "Channelset",
     "ChannelsetError",
-    "ChannelsetPlayer",
     "ClipLibrary",
     "LibrarySample",
-    "PostureChange",
     "PostureGraph",
     "PostureGraphError",
     "Recording",
@@ -54,6 +50,5 @@ __all__ = [
     "parse_posture_graph",
     "read_posture_graph",
     "reroot_figure_channel",
-    "set_channelset_parameters",
     "write_channelset",
 ]

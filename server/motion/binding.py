@@ -18,8 +18,8 @@ from pathlib import PurePath
 
 import numpy as np
 
+from peabody import quaternion
 from peabody.model import Figure
-from server.motion import quaternion
 from server.motion.channelset import Channelset, SharedChannel
 from server.motion.errors import BindingError
 

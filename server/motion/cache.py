@@ -14,6 +14,7 @@ import os
 import tempfile
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -39,7 +40,7 @@ def save_npz(chset: Channelset, target: str | Path, source_stat: os.stat_result 
     """Write ``chset`` to ``target`` atomically (temp file + rename)."""
     target = Path(target)
     chans = chset.channels
-    arrays = {
+    arrays: dict[str, Any] = {
         "format_version": np.array(FORMAT_VERSION),
         "name": np.array(chset.name),
         "fps": np.array(chset.fps, dtype=np.float64),

@@ -28,7 +28,7 @@ from typing import Literal
 
 import numpy as np
 
-from server.motion import quaternion
+from peabody import quaternion
 from server.motion.errors import ChannelsetError
 
 ChannelType = Literal["sharedfigure", "sharedjoint"]

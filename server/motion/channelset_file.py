@@ -37,14 +37,15 @@ import dataclasses
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from peabody import quaternion
 from peabody import values as V
 from peabody.language import Assign, Block, Loc, Number, PeabodyError, Value, Vector, parse
 from peabody.loader import LoadContext, register_block
 from peabody.model import Environment
-from server.motion import quaternion
 from server.motion.channelset import (
     CHANNEL_TYPES,
     Channelset,
@@ -176,7 +177,7 @@ def channelset_from_block(block: Block) -> Channelset:
         size = _int_field(header["size"], "size")
         if size not in (n - 1, n):  # intervals (what we write) or, tolerated, a frame count
             raise _err(f"size = {size} but the sharedchannels have frames 0..{n - 1}", header["size"].loc)
-    extra: dict[str, object] = {}
+    extra: dict[str, Any] = {}
     for what in _OPTIONAL_FIELDS:
         if what in header:
             v = V.number(header[what].value)
@@ -295,8 +296,8 @@ def format_channelset(chset: Channelset) -> str:
                 p = chset.fig_pos[i, k]
                 tr = f"trans({_num(p[0])}cm,{_num(p[1])}cm,{_num(p[2])}cm)"
                 if chset.fig_quat[i, k, 1:].any():
-                    a, b, g = (math.degrees(x) for x in V.matrix_to_xyz(mats[i]))
-                    tr = f"xyz({a:.6f}deg,{b:.6f}deg,{g:.6f}deg) * {tr}"
+                    rx, ry, rz = (math.degrees(x) for x in V.matrix_to_xyz(mats[i]))
+                    tr = f"xyz({rx:.6f}deg,{ry:.6f}deg,{rz:.6f}deg) * {tr}"
                 out.append(f"    frame[{i}] = ({site}, {tr});")
         out.append("  }")
     out.append("}")

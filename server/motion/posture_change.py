@@ -1,11 +1,10 @@
-"""Loaded and bound posture graphs and executing a posture change (seed 002, 3.4.2).
+"""Loaded and bound posture graphs (seed 002, 3.4.2).
 
 ``load_posture_graph`` reads a ``.graph`` file and every channelset it lists (relative to the graph file,
 through the ``.npz`` cache); ``bind_posture_graph`` binds each channelset to one soldier's figures (one figure
-per protofiletype), naming the bound channelsets ``"<bound graph>/<channelset>"``. A :class:`PostureChange`
-walks the quickest path to a goal posture: given the clock it says which bound channelset plays now, in which
-direction and over what time, and moves on to the next arc exactly when one ends (the next arc starts at the
-previous arc's end time, not at the tick that noticed it, so long paths do not drift).
+per protofiletype), naming the bound channelsets ``"<bound graph>/<channelset>"``. Executing a posture change
+is the soldier manager's (:meth:`~server.soldier.manager.SoldierManager.posture_change`): it plays the
+quickest path for thousands of soldiers at once.
 """
 
 from __future__ import annotations
@@ -15,10 +14,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from peabody.model import Figure
-from server.motion.binding import BoundChannelset, BoundSample, bind_channelset, protofiletype
+from server.motion.binding import BoundChannelset, bind_channelset, protofiletype
 from server.motion.channelset import Channelset
 from server.motion.errors import BindingError, PostureGraphError
-from server.motion.playback import frame_position, nearest_frame
 from server.motion.posture_graph import Arc, PostureGraph, read_posture_graph
 
 
@@ -78,9 +76,9 @@ class BoundPostureGraph:
     def graph(self) -> PostureGraph:
         return self.loaded.graph
 
-    def posture_change(self, goal: str, now: float) -> PostureChange:
-        """Start moving from the current posture to ``goal`` along the quickest path."""
-        return PostureChange(self, goal, now)
+    def shortest_path(self, goal: str) -> list[Arc]:
+        """The quickest path (in time) from the posture this bound graph rests in to ``goal``."""
+        return self.loaded.shortest_path(self.current, goal)
 
     @property
     def nbytes(self) -> int:
@@ -100,68 +98,3 @@ def bind_posture_graph(
     start = initial if initial is not None else loaded.graph.postures[0]
     loaded.graph.token(start)
     return BoundPostureGraph(gname, loaded, bound, start)
-
-
-@dataclass(frozen=True)
-class Transition:
-    """What plays now: one arc of a posture change."""
-
-    arc: Arc
-    bound: BoundChannelset
-    forward: bool
-    duration: float
-    start_time: float
-
-    @property
-    def end_time(self) -> float:
-        return self.start_time + self.duration
-
-    def position(self, now: float, interpolate: bool = True) -> float:
-        cs = self.bound.channelset
-        pos, _ = frame_position(cs.nframes, cs.fps, self.forward, self.duration, now - self.start_time)
-        return pos if interpolate else float(nearest_frame(pos, cs.nframes))
-
-
-class PostureChange:
-    """Executes the quickest path from the bound graph's current posture to ``goal`` in real time."""
-
-    def __init__(self, graph: BoundPostureGraph, goal: str, now: float) -> None:
-        self.graph = graph
-        self.goal = goal
-        self.path = graph.loaded.shortest_path(graph.current, goal)
-        self.index = 0
-        self._transition = self._make(0, float(now)) if self.path else None
-
-    def _make(self, i: int, start: float) -> Transition:
-        arc = self.path[i]
-        return Transition(
-            arc, self.graph.bound[arc.channelset], arc.forward, self.graph.loaded.arc_time(arc), start
-        )
-
-    @property
-    def done(self) -> bool:
-        return self.index >= len(self.path)
-
-    @property
-    def total_time(self) -> float:
-        return float(sum(self.graph.loaded.arc_time(a) for a in self.path))
-
-    def update(self, now: float) -> Transition | None:
-        """The transition playing at ``now`` (the last one, held at its end, once done; None if no path).
-
-        Arcs whose end time has passed complete, moving the bound graph's ``current`` posture along.
-        """
-        t = self._transition
-        while t is not None and not self.done and now >= t.end_time:
-            self.graph.current = t.arc.end
-            self.index += 1
-            if not self.done:
-                t = self._transition = self._make(self.index, t.end_time)
-        return t
-
-    def sample(self, now: float, interpolate: bool = True) -> BoundSample | None:
-        """Poses and placements at ``now`` (None for an empty path)."""
-        t = self.update(now)
-        if t is None:
-            return None
-        return t.bound.sample(t.position(now, interpolate), interpolate)

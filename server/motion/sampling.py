@@ -39,10 +39,10 @@ class LibrarySample:
     roots: np.ndarray  # (N, nfig) int16 root site indices into ClipLibrary.root_names, -1 = none
     ended: np.ndarray  # (N,) bool: the clip has played to its end (its last frame is shown)
     position: np.ndarray  # (N,) float64 fractional frame within the clip
-    _scratch_j: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
-    _scratch_f: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
-    _weights_a: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
-    _weights_b: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+    _scratch_j: np.ndarray = field(repr=False, default=None)  # type: ignore[arg-type]
+    _scratch_f: np.ndarray = field(repr=False, default=None)  # type: ignore[arg-type]
+    _weights_a: np.ndarray = field(repr=False, default=None)  # type: ignore[arg-type]
+    _weights_b: np.ndarray = field(repr=False, default=None)  # type: ignore[arg-type]
 
     @classmethod
     def empty(cls, n: int, ndof: int, nfig: int) -> LibrarySample:

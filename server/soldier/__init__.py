@@ -5,6 +5,7 @@
 * :mod:`~server.soldier.library` — :class:`MotionLibrary`: the three graphs bound into ClipLibraries;
 * :mod:`~server.soldier.locomotion` — Figure 5 as a table, vectorised;
 * :mod:`~server.soldier.blend` — cross-fades and heading offsets;
+* :mod:`~server.soldier.settings` — :class:`SoldierSettings`: the manager's one frozen, validated settings;
 * :mod:`~server.soldier.manager` — :class:`SoldierManager` (Figure 12) and :class:`TickUpdate`;
 * :mod:`~server.soldier.wire` — TickUpdate → protocol ``JointUpdates`` and the update table;
 * :mod:`~server.soldier.synthetic` — a small library with the real names, for tests and benches.
@@ -21,6 +22,7 @@ from server.soldier.manager import (
     SoldierManager,
     TickUpdate,
 )
+from server.soldier.settings import SoldierSettings
 from server.soldier.state import LocoState, Mode
 from server.soldier.table import SoldierTable
 
@@ -33,6 +35,7 @@ __all__ = [
     "Mode",
     "MotionLibrary",
     "SoldierManager",
+    "SoldierSettings",
     "SoldierTable",
     "TickUpdate",
 ]

@@ -145,6 +145,7 @@ class MotionLibrary:
             infos.append(ClipInfo(name, gi, cs.duration, cs.nframes, cs.fps, gs, travel))
             prepared.append(dataclasses.replace(cs, name=name))
         self.clips = infos
+        self.sources: list[Channelset] = [cs for _, _, cs, _ in entries]  # as loaded, by clip id
         self.clip_names = [c.name for c in infos]
         self.sets: list[ClipLibrary] = []
         self.set_keys: list[tuple[str, str]] = []
@@ -185,13 +186,13 @@ class MotionLibrary:
         for state, (base, footed, direction) in CLIP_OF.items():
             gi = GRAPH_CRAWL if base.startswith("crawl") else GRAPH_LOCO
             for foot, suffix in ((0, "_l"), (1, "_r")):
-                cid = by_key.get((gi, base + suffix)) if footed else None
-                if cid is None:
-                    cid = by_key.get((gi, base))
-                if cid is None and footed:  # only one foot recorded: use it for both
-                    cid = by_key.get((gi, base + ("_r" if foot == 0 else "_l")))
-                if cid is not None:
-                    self.loco_clip[state, foot] = cid
+                clip = by_key.get((gi, base + suffix)) if footed else None
+                if clip is None:
+                    clip = by_key.get((gi, base))
+                if clip is None and footed:  # only one foot recorded: use it for both
+                    clip = by_key.get((gi, base + ("_r" if foot == 0 else "_l")))
+                if clip is not None:
+                    self.loco_clip[state, foot] = clip
             self.loco_dir[state] = direction
         s = LocoState
         # a gait transition recorded once (no _l/_r variants) swings the right foot: see locomotion.GAIT_STAY
@@ -200,7 +201,7 @@ class MotionLibrary:
             base = CLIP_OF[state][0]
             if (GRAPH_LOCO, base + "_l") not in by_key and (GRAPH_LOCO, base + "_r") not in by_key:
                 self.transition_foot[state] = 1
-        have = (self.loco_clip >= 0).all(axis=1)
+        have = np.asarray((self.loco_clip >= 0).all(axis=1))
         self.can_walk = bool(have[[s.WALK_START, s.WALK_CYCLE, s.WALK_END]].all()) and (
             STAND_STOWED in self._node
         )
@@ -275,6 +276,21 @@ class MotionLibrary:
         if len(hits) == 1:
             return hits[0]
         raise KeyError(f"no clip {name!r}" if not hits else f"clip name {name!r} is ambiguous")
+
+    def clip_end_node(self, clip: int, forward: bool, node: int) -> int:
+        """The posture node a soldier resting in ``node`` is in after playing ``clip``: a static arc's end
+        (its start when played against the arc), any other clip leaves it where it was."""
+        for arc in self.static.graph.arcs:
+            if arc.channelset == clip and clip in self.static_clip:
+                return self._node[arc.end if forward == arc.forward else arc.start]
+        return node
+
+    def clip_of(self, channelset: Channelset) -> int:
+        """The clip id of a channelset the library was built from (the same loaded object); KeyError."""
+        for cid, source in enumerate(self.sources):
+            if source is channelset:
+                return cid
+        raise KeyError(f"channelset {channelset.name!r} is not a clip of the motion library")
 
     def set_index(self, figure: str, weapon: str) -> int:
         """The figure set of ``figure`` + ``weapon`` file names (base names compared)."""

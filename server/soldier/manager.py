@@ -22,8 +22,9 @@ only the heading changed: resend last update   ``TickUpdate.heading_only``
 
 Times: every method takes ``now`` (seconds, non-decreasing) — the manager reads no clock. Clip changes chain
 at the exact end time of the previous clip, not at the tick that notices it, so nothing drifts with the tick
-rate. ``set_every_frame(True)`` (``set_channelset_parameters("yes")``) replaces real time by one stored frame
-per tick.
+rate. Settings are one frozen :class:`~server.soldier.settings.SoldierSettings`, replaced whole by
+:meth:`SoldierManager.configure`; ``every_frame`` (``set_channelset_parameters("yes")``) replaces real time by
+one stored frame per tick.
 """
 
 from __future__ import annotations
@@ -37,11 +38,23 @@ from typing import Any
 import numpy as np
 
 from protocol import coords
-from protocol.entity import Appearance, WeaponState
+from protocol.entity import Appearance, WeaponState, make_entity_requests
+from protocol.events import DEFAULT_MAX_SOLDIERS
+from server.soldier import report
 from server.soldier.blend import blend_into, smoothstep, yaw_rotate
 from server.soldier.library import MotionLibrary, PathStep
 from server.soldier.locomotion import GAIT_STAY, SCALED, conditions, next_states, start_state
-from server.soldier.state import BASE_POSTURE, STAND_STOWED, LocoState, Mode, Movement, goal_posture, movement
+from server.soldier.settings import SoldierSettings
+from server.soldier.state import (
+    BASE_POSTURE,
+    STAND_STOWED,
+    LocoState,
+    Mode,
+    Movement,
+    goal_posture,
+    movement,
+    request_for,
+)
 from server.soldier.table import SoldierTable
 
 REQUEST_OK = 0
@@ -110,33 +123,19 @@ class SoldierManager:
     def __init__(
         self,
         library: MotionLibrary,
+        settings: SoldierSettings | None = None,
         *,
-        throttle: float = 1 / 30,
-        walk_run_threshold: float = 3.0,
-        heading_offsets: tuple[float, float, float] = (0.0, 0.0, 0.0),
-        blend_time: float = 0.2,
-        every_frame: bool = False,
-        interpolate: bool = True,
-        max_soldiers: int = 16384,
-        record_clips: bool = False,
+        max_soldiers: int = DEFAULT_MAX_SOLDIERS,
         record_limit: int = 100_000,
+        **changes: Any,
     ) -> None:
+        """``changes`` are :class:`SoldierSettings` fields (``throttle=0.0``) applied over ``settings``."""
         self.library = library
         self.table = SoldierTable(library.ndof, library.nfig, 16, max_soldiers)
-        self.throttle = 0.0
-        self.set_throttle(throttle)
-        self.walk_run_threshold = 3.0
-        self.set_walk_run_threshold(walk_run_threshold)
-        self._offsets = np.zeros(3, np.float64)
-        self.set_heading_offsets(*heading_offsets)
-        self.blend_time = 0.0
-        self.set_blend_time(blend_time)
-        self.every_frame = bool(every_frame)
-        self.interpolate = bool(interpolate)
+        self.settings = (settings or SoldierSettings()).replace(**changes)
         self.names: dict[int, str] = {}
         self._by_name: dict[str, int] = {}
         self._paths: dict[int, list[Any]] = {}  # soldier -> [steps, arc index] while in TRANSITION
-        self.record_clips = record_clips
         self.clip_log: deque[ClipStart] = deque(maxlen=record_limit)
         self._build_lookups()
         self.ticks = 0
@@ -152,43 +151,22 @@ class SoldierManager:
             "unreachable": 0,
         }
 
-    # -- configuration (the JCL commands) ----------------------------------------------------------------
-    def set_throttle(self, seconds: float) -> None:
-        """``set_ttes_soldier_throttle``: no soldier is updated more often than once per ``seconds``."""
-        s = float(seconds)
-        if not (math.isfinite(s) and s >= 0):
-            raise ValueError(f"throttle must be >= 0 seconds, not {seconds}")
-        self.throttle = s
-
-    def set_heading_offsets(self, static: float, loco: float, crawl: float) -> None:
-        """``set_ttes_heading_offset(static, loco, crawl)``: compass degrees per graph (see :mod:`.blend`)."""
-        v = np.array([static, loco, crawl], np.float64)
-        if not np.isfinite(v).all():
-            raise ValueError("heading offsets must be finite")
-        self._offsets = v
-
+    # -- settings (one frozen value; the JCL commands replace it) ----------------------------------------
     @property
-    def heading_offsets(self) -> tuple[float, float, float]:
-        return tuple(float(x) for x in self._offsets)  # type: ignore[return-value]
+    def settings(self) -> SoldierSettings:
+        return self._settings
 
-    def set_every_frame(self, every_frame: bool) -> None:
-        """``set_channelset_parameters("yes"|"no")``: every stored frame once per tick, or real time."""
-        self.every_frame = bool(every_frame)
+    @settings.setter
+    def settings(self, value: SoldierSettings) -> None:
+        if not isinstance(value, SoldierSettings):
+            raise TypeError(f"settings must be SoldierSettings, not {type(value).__name__}")
+        self._settings = value
+        self._offsets = np.array(value.heading_offsets, np.float64)  # what the vectorised pose path reads
 
-    def set_walk_run_threshold(self, metres_per_second: float) -> None:
-        v = float(metres_per_second)
-        if not (math.isfinite(v) and v > 0):
-            raise ValueError("walk/run threshold must be > 0 m/s")
-        self.walk_run_threshold = v
-
-    def set_blend_time(self, seconds: float) -> None:
-        v = float(seconds)
-        if not (math.isfinite(v) and v >= 0):
-            raise ValueError("blend time must be >= 0 seconds")
-        self.blend_time = v
-
-    def set_interpolate(self, interpolate: bool) -> None:
-        self.interpolate = bool(interpolate)
+    def configure(self, **changes: Any) -> SoldierSettings:
+        """Replace the settings by a validated copy with ``changes`` (ValueError: nothing changes)."""
+        self.settings = self._settings.replace(**changes)
+        return self._settings
 
     def _build_lookups(self) -> None:
         lib = self.library
@@ -305,7 +283,7 @@ class SoldierManager:
             ok = np.sort(rev[first])
         i = idx[ok]
         app, wpn, imm, vel, hdg, pos = app[ok], wpn[ok], imm[ok].astype(bool), vel[ok], hdg[ok], pos[ok]
-        if not self.every_frame:
+        if not self._settings.every_frame:
             tb.clock[i] = now
         self._advance(i)  # clips that ended before the request end first (the next tick would do it later)
         t = tb.clock[i]
@@ -346,7 +324,7 @@ class SoldierManager:
         ev = np.flatnonzero(event)
         if len(ev):
             self.stats["events"] += len(ev)
-            cap = ev[stepping[ev] & ~imm[ev]] if self.blend_time > 0 else ev[:0]
+            cap = ev[stepping[ev] & ~imm[ev]] if self._settings.blend_time > 0 else ev[:0]
             captured: dict[int, int] = {}
             cj = cf = np.zeros(0, np.float32)
             if len(cap):
@@ -357,6 +335,58 @@ class SoldierManager:
                 c = captured.get(s)
                 self._on_event(s, float(t[k]), bool(imm[k]), None if c is None else (cj[c], cf[c]))
         return status
+
+    # -- the JCL debugging commands (seed 3.4.1-3.4.2), on one soldier -----------------------------------
+    def posture_change(self, index: int, posture: str, now: float) -> list[str]:
+        """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing
+        still request for that posture would take it (heading and position kept; a soldier in a transition
+        finishes it first). Returns the postures of the path playing now; KeyError for an unknown soldier or
+        posture."""
+        if not self.table.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        appearance, weapon = request_for(posture)
+        tb = self.table
+        row = make_entity_requests(
+            index,
+            appearance,
+            weapon,
+            heading=float(tb.heading[index]),
+            position=coords.points_jack_to_performer(tb.position[index].astype(np.float64)),
+        )
+        if self.apply_requests(row, now)[0] != REQUEST_OK:
+            raise KeyError(f"soldier {index} refused posture {posture!r}")
+        return [self.library.posture_names[s.end] for s in self._paths.get(index, [()])[0]]
+
+    def play_clip(
+        self, index: int, clip: int, forward: bool = True, duration: float = -1.0, now: float = 0.0
+    ) -> float:
+        """``play_bound_channelset``: the soldier plays ``clip`` once (over ``duration`` s, <= 0: the stored
+        time), then takes up its last request again from the posture the clip ends in (a static arc's end,
+        else where it was). Returns the play time; KeyError / ValueError for a bad soldier or clip."""
+        tb, lib = self.table, self.library
+        if not tb.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        if not 0 <= clip < lib.nclips:
+            raise ValueError(f"no clip {clip}")
+        if not math.isfinite(duration):
+            raise ValueError(f"play time must be finite, not {duration}")
+        i = int(index)
+        if not self._settings.every_frame:
+            tb.clock[i] = now
+        self._advance(np.array([i], np.int64))
+        t = float(tb.clock[i])
+        node = int(tb.node[i])
+        end = lib.clip_end_node(clip, forward, node)
+        step = PathStep(
+            clip, forward, float(duration) if duration > 0 else float(lib.clip_duration[clip]), node, end
+        )
+        tb.blend_len[i] = 0.0
+        tb.loco[i] = _NONE
+        tb.mode[i] = _TRANSITION
+        self._paths[i] = [(step,), 0]
+        self._play_step(i, step, t)
+        tb.dirty[i] = True
+        return step.duration
 
     def _desired(self, i: int) -> int:
         """Figure 12's goal posture node: the gait's base posture while moving, else the requested posture."""
@@ -385,7 +415,7 @@ class SoldierManager:
             if captured is not None:
                 tb.blend_joints[i], tb.blend_figs[i] = captured
                 tb.blend_t0[i] = t
-                tb.blend_len[i] = self.blend_time
+                tb.blend_len[i] = self._settings.blend_time
             tb.mode[i] = _IDLE
             tb.loco[i] = _NONE
             self._record(i, t, "cancel")
@@ -428,7 +458,7 @@ class SoldierManager:
             return
         kind = int(self._move[int(tb.appearance[i])]) if tb.speed[i] > MOVING_EPS else 0
         if kind:
-            fast = bool(tb.speed[i] > self.walk_run_threshold)
+            fast = bool(tb.speed[i] > self._settings.walk_run_threshold)
             state = start_state(Movement(kind), bool(tb.backward[i]), fast, self.library.can_run)
             tb.mode[i] = _CRAWL if kind == _MOVE_CRAWL else _LOCO
             self._enter_one(i, int(state), t)
@@ -483,7 +513,7 @@ class SoldierManager:
         tb.start[idx] = t
         tb.dur[idx] = dur
         tb.end[idx] = t + dur
-        if self.record_clips:
+        if self._settings.record_clips:
             for k in range(len(idx)):
                 self._record(int(idx[k]), float(t[k]))
 
@@ -517,7 +547,7 @@ class SoldierManager:
             tb.loco[idx],
             speed > MOVING_EPS,
             tb.backward[idx],
-            speed > self.walk_run_threshold,
+            speed > self._settings.walk_run_threshold,
             self.library.can_run,
         )
         nxt = next_states(tb.loco[idx], cond)
@@ -581,7 +611,7 @@ class SoldierManager:
         tb = self.table
         live = tb.live
         if len(live):
-            if self.every_frame:
+            if self._settings.every_frame:
                 nfr = self.library.clip_nframes[tb.clip[live]]
                 tb.clock[live] += tb.dur[live] / np.maximum(nfr - 1, 1)
             else:
@@ -593,7 +623,7 @@ class SoldierManager:
                 | tb.heading_pending[live]
                 | (tb.blend_len[live] > 0)
             )
-            due = live[active & (now - tb.last_sent[live] >= self.throttle - _EPS_T)]
+            due = live[active & (now - tb.last_sent[live] >= self._settings.throttle - _EPS_T)]
         else:
             due = live
         joints, figures, clips, frames = self._pose(due)
@@ -637,7 +667,7 @@ class SoldierManager:
         clock = tb.clock[idx]
         args = (clip, tb.start[idx], tb.direc[idx], tb.dur[idx], clock)
         if len(lib.sets) == 1 or n == 0:
-            s = lib.sets[0].sample(*args, interpolate=self.interpolate)
+            s = lib.sets[0].sample(*args, interpolate=self._settings.interpolate)
             joints, figures, frames = s.joints, s.figures, s.position
         else:
             joints = np.empty((n, lib.ndof), np.float32)
@@ -646,7 +676,7 @@ class SoldierManager:
             fset = tb.fset[idx]
             for k in np.unique(fset).tolist():
                 sel = np.flatnonzero(fset == k)
-                s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self.interpolate)
+                s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self._settings.interpolate)
                 joints[sel], figures[sel], frames[sel] = s.joints, s.figures, s.position
         if n and self._offsets.any():
             off = self._offsets[lib.clip_graph[clip]]
@@ -668,7 +698,7 @@ class SoldierManager:
 
     # -- reporting ---------------------------------------------------------------------------------------
     def _record(self, i: int, t: float, what: str | None = None) -> None:
-        if not self.record_clips:
+        if not self._settings.record_clips:
             return
         tb = self.table
         self.clip_log.append(
@@ -687,73 +717,19 @@ class SoldierManager:
         """The recorded clip starts of one soldier (``record_clips=True``), oldest first."""
         return [c for c in self.clip_log if c.index == index]
 
-    def soldier_info(self, index: int) -> dict[str, Any]:
-        """One soldier's state, for status reports and tests."""
-        tb = self.table
-        if not tb.is_live(index):
-            raise KeyError(f"no soldier {index}")
-        i = int(index)
-        mode = Mode(int(tb.mode[i]))
-        return {
-            "index": i,
-            "name": self.names.get(i, ""),
-            "mode": mode.name,
-            "state": LocoState(int(tb.loco[i])).name,
-            "posture": self.library.posture_names[int(tb.node[i])],
-            "node": self.library.postures[int(tb.node[i])],
-            "clip": self.library.clip_names[int(tb.clip[i])],
-            "forward": bool(tb.direc[i] > 0),
-            "clip_start": float(tb.start[i]),
-            "clip_duration": float(tb.dur[i]),
-            "goal": self.library.posture_names[d] if (d := self._desired(i)) >= 0 else None,
-            "path": [self.library.posture_names[s.end] for s in self._paths.get(i, [()])[0]],
-            "speed": float(tb.speed[i]),
-            "backward": bool(tb.backward[i]),
-            "heading": float(tb.heading[i]),
-            "foot": "left" if tb.foot[i] == 0 else "right",
-            "blending": bool(tb.blend_len[i] > 0),
-        }
+    def path_steps(self, index: int) -> tuple[PathStep, ...]:
+        """The posture-change path a soldier is playing (empty unless in TRANSITION)."""
+        entry = self._paths.get(index)
+        return tuple(entry[0]) if entry is not None else ()
 
-    def _posture_counts(self, per_node: np.ndarray) -> dict[str, int]:
-        """Resting soldiers per posture name (the variants of a posture counted together)."""
-        out: dict[str, int] = {}
-        for k, v in enumerate(per_node.tolist()):
-            if v:
-                name = self.library.posture_names[k]
-                out[name] = out.get(name, 0) + int(v)
-        return out
+    def goal_node(self, index: int) -> int:
+        """The posture node the soldier's last request asks for (-1: none in this graph)."""
+        return self._desired(index)
+
+    def soldier_info(self, index: int) -> dict[str, Any]:
+        """One soldier's state, for status reports and tests (:func:`server.soldier.report.soldier_info`)."""
+        return report.soldier_info(self, index)
 
     def status(self) -> dict[str, Any]:
-        """Counts per mode, gait state and resting posture, tick statistics: the periodic status report."""
-        tb = self.table
-        live = tb.live
-        mode = tb.mode[live]
-        modes = {m.name.lower(): int((mode == m).sum()) for m in Mode}
-        stepping = live[(mode == _LOCO) | (mode == _CRAWL)]
-        states = np.bincount(tb.loco[stepping].astype(np.int64), minlength=len(LocoState))
-        resting = live[mode == _IDLE]
-        nodes = np.bincount(tb.node[resting].astype(np.int64), minlength=len(self.library.postures))
-        ticks = max(self.ticks, 1)
-        return {
-            "soldiers": int(tb.count),
-            "capacity": int(tb.capacity),
-            "modes": modes,
-            "gaits": {LocoState(k).name.lower(): int(v) for k, v in enumerate(states) if v},
-            "postures": self._posture_counts(nodes),
-            "transitions": len(self._paths),
-            "ticks": self.ticks,
-            "mean_tick_us": 1e6 * self.stats["tick_seconds"] / ticks,
-            "last_tick_us": 1e6 * self.stats["last_tick_seconds"],
-            "updates": self.stats["updates"],
-            "requests": self.stats["requests"],
-            "requests_unknown": self.stats["requests_unknown"],
-            "requests_bad": self.stats["requests_bad"],
-            "events": self.stats["events"],
-            "clip_ends": self.stats["clip_ends"],
-            "unreachable": self.stats["unreachable"],
-            "throttle": self.throttle,
-            "every_frame": self.every_frame,
-            "heading_offsets": list(self.heading_offsets),
-            "walk_run_threshold": self.walk_run_threshold,
-            "blend_time": self.blend_time,
-        }
+        """The periodic status report (:func:`server.soldier.report.status`)."""
+        return report.status(self)

@@ -97,3 +97,13 @@ def goal_posture(appearance: int, weapon: int) -> str:
 
 def movement(appearance: int) -> Movement:
     return MOVEMENT.get(int(appearance), Movement.NONE)
+
+
+def request_for(posture: str) -> tuple[int, int]:
+    """The (appearance, weapon state) of a request that rests in ``posture`` (``DEAD@kstow`` → DEAD): the
+    inverse of :func:`goal_posture`, for ``posture_change`` over JCL; KeyError if no request rests there."""
+    name = posture.partition("@")[0]
+    for (appearance, firing), goal in _GOALS.items():
+        if goal == name:
+            return int(appearance), int(WeaponState.FIRING if firing else WeaponState.DEPLOYED)
+    raise KeyError(f"no request rests in posture {posture!r} (known: {sorted(set(_GOALS.values()))})")

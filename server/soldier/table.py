@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 
+from protocol.events import DEFAULT_MAX_SOLDIERS
+
 # name: (dtype, trailing shape, initial value)
 _COLUMNS: dict[str, tuple[type | str, tuple[int, ...], float]] = {
     "alive": (np.bool_, (), False),
@@ -50,7 +52,9 @@ _COLUMNS: dict[str, tuple[type | str, tuple[int, ...], float]] = {
 class SoldierTable:
     """Struct-of-arrays soldier states with capacity growth and free-list reuse of indices."""
 
-    def __init__(self, ndof: int, nfig: int, capacity: int = 16, max_soldiers: int = 16384) -> None:
+    def __init__(
+        self, ndof: int, nfig: int, capacity: int = 16, max_soldiers: int = DEFAULT_MAX_SOLDIERS
+    ) -> None:
         if max_soldiers < 1:
             raise ValueError("max_soldiers must be >= 1")
         self.ndof, self.nfig = int(ndof), int(nfig)

@@ -10,6 +10,12 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
+
+    import numpy as np
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -64,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
 
     last = None
     with imageio.get_reader(video) as reader:
-        for last in reader:  # noqa: B007 - we want the final frame
+        # imageio's stub types the Reader's __iter__ as returning one Array; it yields the frames.
+        for last in cast("Iterable[np.ndarray]", reader):  # noqa: B007 - we want the final frame
             pass
     if last is not None:
         png = args.out_dir / "demo.png"

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from client_stub.gateway import DisGateway
+    from client_stub.dis.gateway import DisGateway
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,8 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from client_stub.gateway import DisGateway, GatewayConfig
-    from client_stub.replay import EntityFilter, FilterError
+    from client_stub.dis import EntityFilter, FilterError
+    from client_stub.dis.gateway import DisGateway, GatewayConfig
     from ttes.commands.replay import parse_origin
 
     try:
@@ -88,9 +88,8 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
 
     import trio
 
-    from client_stub.jack import JackError
-    from client_stub.replay.link import ServerLink
-    from client_stub.replay.sink import ServerSink
+    from client_stub.dis.sink import ServerSink
+    from client_stub.link.client import Client, LinkError
     from ttes.commands.replay import private_server, stop_on_signal
 
     async def main() -> dict:
@@ -100,7 +99,7 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
                 server = await stack.enter_async_context(private_server(data_dir, args.synthetic_server))
                 host, port = server.addresses[0]
             nursery = await stack.enter_async_context(trio.open_nursery())
-            link = ServerLink("ttes-gateway")
+            link = Client("ttes-gateway")
             await link.open(nursery, host, port)
             sink = ServerSink(link)
             with trio.CancelScope() as scope:
@@ -125,7 +124,7 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
 
     try:
         return trio.run(main)
-    except JackError as exc:
+    except LinkError as exc:
         print(f"ttes gateway: {exc}", file=sys.stderr)
         return None
 

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from server.motion.posture_graph import PostureGraph
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,7 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     info.set_defaults(func=run_info)
 
 
-def _durations(graph_path: str, graph) -> list[float] | None:  # type: ignore[no-untyped-def]
+def _durations(graph_path: str, graph: PostureGraph) -> list[float] | None:
     """Stored channelset durations, loaded only when some arc needs them (time -1)."""
     if all(a.time > 0 for a in graph.arcs):
         return None
@@ -44,7 +48,7 @@ def run_path(args: argparse.Namespace) -> int:
     graph = read_posture_graph(args.graph)
     durations = _durations(args.graph, graph)
     arcs = graph.shortest_path(args.start, args.goal, durations)
-    result = {
+    result: dict[str, Any] = {
         "path": [args.start, *(a.end for a in arcs)],
         "arcs": [
             {

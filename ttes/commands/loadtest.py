@@ -60,9 +60,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from client_stub.loadtest import LoadTestConfig, run_loadtest
-    from client_stub.loadtest_client import LoadError
-    from client_stub.loadtest_server import SpawnError
+    from client_stub.link.spawn import SpawnError
+    from client_stub.loadtest.client import LoadError
+    from client_stub.loadtest.session import LoadTestConfig, run_loadtest
     from ttes.output import print_json
 
     throttle: float | None = None if args.throttle == "script" else float(args.throttle)
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"ttes loadtest: error: {exc}", file=sys.stderr)
         return 1
     if args.plot:
-        from client_stub.loadtest_plot import plot_result
+        from client_stub.loadtest.plot import plot_result
 
         plot_result(result, args.plot)
     if args.json:

@@ -6,7 +6,6 @@ Used by the Docker healthcheck. Connects as an observer, so it never changes the
 from __future__ import annotations
 
 import argparse
-import socket
 import sys
 import time
 
@@ -25,62 +24,43 @@ class PingFailed(Exception):
 
 
 def ping(host: str, port: int, timeout: float = 3.0) -> dict[str, object]:
-    """Handshake + PING; the server's ACCEPT fields and the round-trip time. PingFailed on any problem."""
-    from protocol.connection import CLIENT, NEED_DATA, Connection
-    from protocol.events import Accept, ConnectionClosed, Error, Goodbye, Hello, Ping, Pong, ProtocolError
+    """Handshake + PING over the client link; the server's ACCEPT fields and the round-trip time. PingFailed
+    on any problem."""
+    import trio
 
-    conn = Connection(CLIENT)
-    t0 = time.perf_counter()
-    try:
-        sock = socket.create_connection((host, port), timeout=timeout)
-    except OSError as exc:
-        raise PingFailed(f"cannot connect to {host}:{port}: {exc.strerror or exc}") from None
-    with sock:
-        sock.settimeout(timeout)
+    from client_stub.link.client import Client, LinkError
 
-        def wait_for(kind: type) -> object:
-            while True:
-                ev = conn.next_event()
-                if ev is NEED_DATA:
-                    try:
-                        conn.receive_data(sock.recv(65536))
-                    except TimeoutError:
-                        raise PingFailed(f"no {kind.__name__} within {timeout:g} s") from None
-                    except OSError as exc:
-                        raise PingFailed(f"connection failed: {exc.strerror or exc}") from None
-                    continue
-                if isinstance(ev, kind):
-                    return ev
-                if (isinstance(ev, Error) and ev.code < 100) or isinstance(ev, Goodbye):
-                    raise PingFailed(f"server refused: {ev}")
-                if isinstance(ev, ProtocolError | ConnectionClosed):
-                    raise PingFailed(f"connection ended: {ev}")
+    async def main() -> dict[str, object]:
+        t0 = time.perf_counter()
+        client = Client("ttes-ping", "observer", buffer_updates=False)
+        failed, answered, rtt = None, False, 0.0
+        async with trio.open_nursery() as nursery:
+            try:
+                await client.open(nursery, host, port, soldierprefix=None, wait_ready=False, timeout=timeout)
+            except LinkError as exc:
+                failed = str(exc)
+            else:
+                t1 = time.perf_counter()
+                answered = await client.roundtrip(timeout)
+                rtt = time.perf_counter() - t1
+                await client.aclose("ping done")
+        if failed is not None:
+            raise PingFailed(failed)
+        accept = client.accept
+        if not answered or accept is None:
+            raise PingFailed(client.failure or f"no PONG within {timeout:g} s")
+        return {
+            "host": host,
+            "port": port,
+            "server": accept.name,
+            "version": accept.version,
+            "max_soldiers": accept.max_soldiers,
+            "max_frame": accept.max_frame,
+            "rtt_ms": round(rtt * 1000, 3),
+            "total_ms": round((time.perf_counter() - t0) * 1000, 3),
+        }
 
-        try:
-            sock.sendall(conn.send(Hello("ttes-ping", "observer")))
-            accept = wait_for(Accept)
-            nonce = int(time.time_ns() & 0xFFFFFFFF)
-            t1 = time.perf_counter()
-            sock.sendall(conn.send(Ping(nonce)))
-            while True:
-                pong = wait_for(Pong)
-                if pong.nonce == nonce:  # type: ignore[attr-defined]
-                    break
-            rtt = time.perf_counter() - t1
-            sock.sendall(conn.send(Goodbye("ping done")))
-        except OSError as exc:
-            raise PingFailed(f"connection failed: {exc.strerror or exc}") from None
-    assert isinstance(accept, Accept)
-    return {
-        "host": host,
-        "port": port,
-        "server": accept.name,
-        "version": accept.version,
-        "max_soldiers": accept.max_soldiers,
-        "max_frame": accept.max_frame,
-        "rtt_ms": round(rtt * 1000, 3),
-        "total_ms": round((time.perf_counter() - t0) * 1000, 3),
-    }
+    return trio.run(main)
 
 
 def run(args: argparse.Namespace) -> int:

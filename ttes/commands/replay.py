@@ -146,7 +146,7 @@ async def private_server(data_dir: Path | None, synthetic: bool, quiet: bool = T
 
 
 def run(args: argparse.Namespace) -> int:
-    from client_stub.replay import EntityFilter, FilterError, Replayer
+    from client_stub.dis import EntityFilter, FilterError, Replayer
     from protocol.dis import DisError, read_log
 
     try:
@@ -215,10 +215,9 @@ async def stop_on_signal(scope: Any) -> None:
 def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
     import trio
 
-    from client_stub.jack import JackError
-    from client_stub.replay.drive import ProgressLine, replay_to_server
-    from client_stub.replay.link import ServerLink
-    from client_stub.replay.sink import ServerSink
+    from client_stub.dis.drive import ProgressLine, replay_to_server
+    from client_stub.dis.sink import ServerSink
+    from client_stub.link.client import Client, LinkError
 
     async def main() -> dict:
         async with contextlib.AsyncExitStack() as stack:
@@ -227,7 +226,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
                 server = await stack.enter_async_context(private_server(args.data_dir, args.synthetic_server))
                 host, port = server.addresses[0]
             async with trio.open_nursery() as nursery:
-                link = ServerLink()
+                link = Client()
                 await link.open(nursery, host, port)
                 sink = ServerSink(link)
                 progress = ProgressLine(out=None if args.json else sys.stderr)
@@ -243,7 +242,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
 
     try:
         return trio.run(main)
-    except JackError as exc:
+    except LinkError as exc:
         print(f"ttes replay: {exc}", file=sys.stderr)
         return None
 
@@ -255,7 +254,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
     import trio
     import trio.testing
 
-    from client_stub.jack import JackError
+    from client_stub.link.client import LinkError
 
     seconds = args.seconds
     if seconds is None:
@@ -274,7 +273,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
         async with contextlib.AsyncExitStack() as stack:
             link = None
             if not args.offline:
-                from client_stub.replay.link import ServerLink
+                from client_stub.link.client import Client
 
                 host, port = args.host, args.port
                 if host is None:
@@ -283,13 +282,13 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
                     )
                     host, port = server.addresses[0]
                 nursery = await stack.enter_async_context(trio.open_nursery())
-                link = ServerLink()
+                link = Client()
                 await link.open(nursery, host, port)
             app = _make_app(args, replayer, link)
             try:
                 summary = await _render(app, seconds, fps, size, args)
             finally:
-                app.finish()  # the soldiers leave the server
+                app.source.finish(app)  # the soldiers leave the server
                 if link is not None:
                     await link.aclose()
             if link is not None:
@@ -302,7 +301,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
             summary = trio.run(main)
         else:
             summary = trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
-    except JackError as exc:
+    except LinkError as exc:
         print(f"ttes replay: {exc}", file=sys.stderr)
         return None
     summary["wall_s"] = round(time.perf_counter() - t, 2)
@@ -310,17 +309,18 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
 
 
 def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
-    from client_stub.camera import View
-    from client_stub.replay.drive import ProgressLine
-    from client_stub.replay.stubapp import ReplayApp
-    from client_stub.terrain import DEFAULT_TERRAIN, load_terrain
+    from client_stub.dis.drive import ProgressLine
+    from client_stub.dis.soldiers import DisSoldiers, replay_app
+    from client_stub.stub.camera import View
+    from client_stub.stub.terrain import DEFAULT_TERRAIN, load_terrain
 
     terrain = load_terrain(args.terrain or DEFAULT_TERRAIN)
-    app = ReplayApp(
+    app = replay_app(
         terrain, replayer, link=link, progress=ProgressLine(out=None if args.json else sys.stderr)
     )
     camera = getattr(args, "camera", "squad")
-    app.squad_view = camera == "squad"
+    assert isinstance(app.source, DisSoldiers)
+    app.source.squad_view = camera == "squad"
     if camera == "overhead":
         app.camera.overhead()
     elif camera != "squad":
@@ -335,12 +335,12 @@ async def _render(
     import numpy as np
     import trio
 
-    from client_stub.render import StubRenderer
+    from client_stub.stub.render import StubRenderer
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     app.renderer = StubRenderer(*size, offscreen=True)
-    app.renderer.add_terrain(app.terrain.meshes)
+    app.renderer.set_terrain(app.terrain.meshes)
     video = out.suffix.lower() in (".mp4", ".mov", ".mkv", ".avi", ".gif")
     writer = None
     if video:
@@ -366,11 +366,12 @@ async def _render(
         app.renderer.close()
     if not video and frame is not None:
         imageio.imwrite(out, frame)
-    if app.progress is not None:
-        app.progress.update(app.elapsed, app.source.replay_time, app.translator.alive, app.source.pdus, True)
+    dis = app.source
+    if dis.progress is not None:
+        dis.progress.update(dis.elapsed, dis.replay.replay_time, dis.translator.alive, dis.replay.pdus, True)
     return {
-        **app.source.status(),
-        **({f"sink_{k}": v for k, v in app.sink.stats.items()} if app.sink is not None else {}),
+        **dis.replay.status(),
+        **({f"sink_{k}": v for k, v in dis.sink.stats.items()} if dis.sink is not None else {}),
         "out": str(out),
         "frames": nframes,
         "fps": fps,
@@ -381,10 +382,11 @@ async def _render(
 
 # -- the window ----------------------------------------------------------------------------------
 def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) -> dict | None:
-    from client_stub.jack import JackError, JackProc, ServerProcess
-    from client_stub.render import StubRenderer
-    from client_stub.replay.sink import JackProcLink
-    from client_stub.viewer import run_viewer
+    from client_stub.link.client import LinkError
+    from client_stub.link.spawn import spawn_server
+    from client_stub.stub.jack import JackProc
+    from client_stub.stub.render import StubRenderer
+    from client_stub.stub.viewer import run_viewer
 
     server = jack = None
     try:
@@ -393,39 +395,29 @@ def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) 
             host, port = args.host, args.port
             try:
                 if host is None:
-                    extra = ["--synthetic"] if args.synthetic_server else []
-                    if args.data_dir:
-                        extra += ["--data-dir", str(args.data_dir)]
-                    server = ServerProcess(extra=extra)
-                    try:
-                        server.wait_listening()
-                    except JackError:
-                        server.stop()
-                        server = ServerProcess(
-                            extra=["--synthetic"]
-                        )  # no motion library here: the synthetic one
-                        server.wait_listening()
+                    extra = ["--data-dir", str(args.data_dir)] if args.data_dir else []
+                    server = spawn_server(extra, data="synthetic" if args.synthetic_server else "auto")
                     host, port = server.host, server.port
                 jack = JackProc("ttes-replay")
                 jack.initsocketconnection(host, port)
                 jack.start()
                 if not jack.wait_ready(30.0):
-                    raise JackError(jack.failure or "server not ready")
-            except JackError as exc:
+                    raise LinkError(jack.failure or "server not ready")
+            except LinkError as exc:
                 print(f"ttes replay: {exc}", file=sys.stderr)
                 return None
-            link = JackProcLink(jack)
+            link = jack
         app = _make_app(args, replayer, link)
         app.renderer = StubRenderer(*size, offscreen=False)
-        app.renderer.add_terrain(app.terrain.meshes)
+        app.renderer.set_terrain(app.terrain.meshes)
         run_viewer(app, *size, args.fps)
-        app.finish()
+        app.source.finish(app)
         summary = {**replayer.status()}
-        if app.sink is not None:
-            summary.update({f"sink_{k}": v for k, v in app.sink.stats.items()})
+        if app.source.sink is not None:
+            summary.update({f"sink_{k}": v for k, v in app.source.sink.stats.items()})
         return summary
     finally:
         if jack is not None:
             jack.quit()
         if server is not None:
-            server.stop()
+            server.close()

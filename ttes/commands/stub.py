@@ -79,16 +79,20 @@ def run(args: argparse.Namespace) -> int:
     ):
         print("ttes stub: no display; use --headless", file=sys.stderr)
         return 2
-    from client_stub.app import StubApp, populate_demo
-    from client_stub.jack import JackError, JackProc, ServerProcess
-    from client_stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
+    from client_stub.link.client import LinkError
+    from client_stub.link.spawn import spawn_server
+    from client_stub.stub.app import StubApp
+    from client_stub.stub.jack import JackProc
+    from client_stub.stub.live import LiveSoldiers, populate_demo
+    from client_stub.stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
 
     try:
         terrain = load_terrain(args.terrain or DEFAULT_TERRAIN, args.terrain_up)
     except TerrainError as exc:
         print(f"ttes stub: {exc}", file=sys.stderr)
         return 1
-    app = StubApp(terrain, artic_dir=args.artic_dir)
+    live = LiveSoldiers()
+    app = StubApp(terrain, live, artic_dir=args.artic_dir)
     populate_demo(app)
     server = None
     stack = contextlib.ExitStack()
@@ -98,38 +102,38 @@ def run(args: argparse.Namespace) -> int:
             try:
                 if args.spawn_server:
                     data_dir = args.server_data_dir or _server_data_dir(stack)
-                    server = ServerProcess(extra=["--data-dir", str(data_dir)])
-                    server.wait_listening()
+                    server = spawn_server(["--data-dir", str(data_dir)], data="default")
                     host, port = server.host, server.port
                 jack = JackProc()
                 jack.initsocketconnection(host, port)
-            except JackError as exc:
+            except LinkError as exc:
                 print(f"ttes stub: {exc}", file=sys.stderr)
                 return 1
-            if not app.connect(jack, args.ready_timeout):
+            if not live.connect(app, jack, args.ready_timeout):
                 print(
                     f"ttes stub: server not ready ({jack.failure or 'timeout'}); posing offline",
                     file=sys.stderr,
                 )
-        from client_stub.render import StubRenderer
+        from client_stub.stub.render import StubRenderer
 
         app.renderer = StubRenderer(width, height, offscreen=args.headless)
-        app.renderer.add_terrain(terrain.meshes)
+        app.renderer.set_terrain(terrain.meshes)
         if not args.headless:
-            from client_stub.viewer import run_viewer
+            from client_stub.stub.viewer import run_viewer
 
             run_viewer(app, width, height, args.fps)
             return 0
-        from client_stub.headless import run_headless
+        from client_stub.stub.headless import run_headless
 
         summary = run_headless(
-            app, args.seconds, args.out, fps=args.fps, realtime=app.jack is not None, tour=not args.no_tour
+            app, args.seconds, args.out, fps=args.fps, realtime=app.link is not None, tour=not args.no_tour
         )
         app.renderer.close()
     finally:
         app.close()
         if server is not None:
             code = server.stop()
+            server.close()
             print(f"ttes server stopped (exit {code})", file=sys.stderr)
         stack.close()
     if args.json:
@@ -143,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _make_terrain(args: argparse.Namespace) -> int:
-    from client_stub.terrain_gen import DEFAULT_OUT, write_village
+    from client_stub.stub.terrain_gen import DEFAULT_OUT, write_village
     from ttes.output import print_json
 
     summary = write_village(args.terrain_out or DEFAULT_OUT)

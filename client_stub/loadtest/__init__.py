@@ -1,0 +1,1 @@
+"""The load generator (`ttes loadtest`): sessions of link clients, the realistic mix, statistics, plots."""

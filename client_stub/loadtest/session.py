@@ -1,0 +1,360 @@
+"""``ttes loadtest``: N soldiers over C connections, a realistic DIS-rate mix, and what the server delivers.
+
+One trio loop runs C :class:`~client_stub.loadtest.client.LoadClient` connections (each creates, subscribes
+to and drives its share of the soldiers) and the *driver*, which steps the :class:`MixDriver` at
+``step_hz`` (a DIS gateway's granularity), sends the requests it decides, marks latency probes and samples
+CPU. :class:`~client_stub.loadtest.stats.Tracker` turns what arrives into a recording; the figures of the
+steady-state window (after ``warmup_s``) come from :func:`~client_stub.loadtest.stats.summarise`.
+
+``run_ramp`` keeps the connections and grows N stage by stage (×``ramp_factor``) until a stage misses the
+criteria (delivered ≥ ``min_delivered_pct`` of expected and p99 latency ≤ ``max_p99_ms``), and reports the
+largest N that met them. Every loop is bounded: stages, seconds, and a wall-clock limit.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import trio
+
+from client_stub.link.spawn import ServerProcess, cpu_seconds, self_cpu_seconds, spawn_server
+from client_stub.loadtest.client import LoadClient, LoadError, split_rows
+from client_stub.loadtest.mix import MOVING, MixDriver
+from client_stub.loadtest.stats import Tracker, series, summarise
+
+MAX_STAGES = 40
+
+
+@dataclass
+class LoadTestConfig:
+    soldiers: int = 100
+    clients: int = 2
+    rate_hz: float = 30.0
+    seconds: float = 10.0
+    warmup_s: float = 3.0
+    host: str = "127.0.0.1"
+    port: int = 7000
+    spawn_server: bool = False
+    server_data: str = "auto"  # auto | synthetic | default (the spawned server's motion library)
+    server_pid: int | None = None  # CPU of an external server on this machine
+    throttle: float | None = 0.0  # spawned server: --throttle (0: every tick); None: the script's
+    mix: str = "realistic"
+    seed: int = 1
+    figure: str = "DI.fig"
+    weapon: str = "AK_47.fig"
+    subscribe_all: bool = False
+    decode: bool = False
+    step_hz: float = 10.0
+    timeout_s: float = 60.0
+    keep_recording: bool = False  # tests: put the raw recording (numpy arrays) under "_recording"
+    # ramp
+    ramp: bool = False
+    ramp_factor: float = 1.3
+    ramp_max_soldiers: int = 8000
+    ramp_max_s: float = 600.0
+    min_delivered_pct: float = 99.0
+    max_p99_ms: float = 33.0
+    latency_metric: str = "request"  # request: request -> update (p99); delivery: server tick -> arrival
+
+    def check(self) -> None:
+        if self.soldiers < 1 or self.clients < 1:
+            raise ValueError("--soldiers and --clients must be at least 1")
+        if self.clients > self.soldiers:
+            raise ValueError("more clients than soldiers")
+        for name in ("rate_hz", "seconds", "step_hz", "timeout_s", "ramp_max_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be > 0")
+        if not (math.isfinite(self.warmup_s) and self.warmup_s >= 0):
+            raise ValueError("warmup must be >= 0")
+        if self.latency_metric not in ("request", "delivery"):
+            raise ValueError("latency metric must be request or delivery")
+        if self.ramp and not self.ramp_factor > 1.0:
+            raise ValueError("--ramp-factor must be > 1")
+
+
+@dataclass
+class LoadTestResult:
+    summary: dict[str, Any]
+    series: dict[str, list[float]] = field(default_factory=dict)
+
+
+class LoadSession:
+    """The connections, the mix driver and the tracker of one run (or one ramp)."""
+
+    def __init__(self, cfg: LoadTestConfig, server_cpu: Any = None, *, buffer_updates: bool = False) -> None:
+        """``buffer_updates``: the clients keep decoded poses for a renderer (see :class:`LoadClient`)."""
+        self.cfg = cfg
+        self.clients = [
+            LoadClient(k, self._on_updates, decode=cfg.decode, buffer_updates=buffer_updates)
+            for k in range(cfg.clients)
+        ]
+        self.driver = MixDriver(0, mix=cfg.mix, seed=cfg.seed, now=0.0)
+        nsub = cfg.clients
+        self.tracker = Tracker(cfg.rate_hz, nsub)
+        self.server_cpu = server_cpu or (lambda: math.nan)
+        self.index = np.zeros(0, np.int64)  # slot -> server index
+        self.owner = np.zeros(0, np.int64)  # slot -> connection
+        self.slot_of = np.full(1 << 16, -1, np.int64)  # server index -> slot
+        self.t0 = 0.0
+        self.tables: set[int] = set()
+
+    def now(self) -> float:
+        return trio.current_time() - self.t0
+
+    def _on_updates(self, conn: int, t: float, tick: int, idx: np.ndarray, nbytes: int, ev: object) -> None:
+        slots = self.slot_of[idx]
+        self.tracker.batch(t - self.t0, conn, tick, slots[slots >= 0], nbytes)
+
+    async def connect(self, nursery: trio.Nursery, host: str, port: int) -> None:
+        """Open every connection (their links run in ``nursery``) and wait for READY on each."""
+        self.t0 = trio.current_time()
+        for c in self.clients:
+            await c.connect(nursery, host, port, self.cfg.timeout_s)
+        for c in self.clients:
+            await c.wait_ready(self.cfg.timeout_s)
+
+    async def grow(self, n: int) -> None:
+        """Create soldiers up to ``n`` (spread over the connections), subscribe, send the first requests."""
+        cfg = self.cfg
+        old = self.driver.n
+        if n <= old:
+            return
+        share = np.diff(np.linspace(0, n - old, cfg.clients + 1).round().astype(np.int64))
+        results: list[tuple[np.ndarray, np.ndarray] | None] = [None] * cfg.clients
+
+        async def create(k: int) -> None:
+            results[k] = await self.clients[k].create_soldiers(
+                int(share[k]), cfg.figure, cfg.weapon, cfg.timeout_s
+            )
+
+        async with trio.open_nursery() as nursery:
+            for k in range(cfg.clients):
+                if share[k]:
+                    nursery.start_soon(create, k)
+        idx: list[np.ndarray] = []
+        owner: list[np.ndarray] = []
+        for k, r in enumerate(results):
+            if r is not None:
+                idx.append(r[0])
+                owner.append(np.full(len(r[0]), k))
+                self.tables.update(int(t) for t in np.unique(r[1]))
+        new_idx = np.concatenate(idx)
+        new_owner = np.concatenate(owner)
+        self.index = np.concatenate([self.index, new_idx])
+        self.owner = np.concatenate([self.owner, new_owner])
+        slots = np.arange(old, n)
+        self.slot_of[new_idx] = slots
+        self.driver.time = self.now()
+        self.driver.grow(n)
+        self.tracker.grow(n, -np.ones(len(slots), np.int64) if cfg.subscribe_all else new_owner)
+        for k, c in enumerate(self.clients):
+            mine = new_idx if cfg.subscribe_all else new_idx[new_owner == k]
+            if len(mine):
+                await c.subscribe(mine)
+        rows = self.driver.initial(slots)
+        t = self.now()
+        self.tracker.activity(t, slots, MOVING[self.driver.activity[slots]], np.zeros(len(slots), bool))
+        await self._send(rows)
+
+    async def _send(self, rows: np.ndarray) -> None:
+        if not len(rows):
+            return
+        parts = split_rows(rows, self.owner, self.cfg.clients)
+        for k, part in enumerate(parts):
+            if len(part):
+                part = part.copy()
+                part["index"] = self.index[part["index"].astype(np.int64)]
+                await self.clients[k].requests(part)
+        self.tracker.rec.requests_sent.append((self.now(), float(len(rows))))
+
+    def sample_cpu(self) -> None:
+        self.tracker.rec.cpu.append((self.now(), self.server_cpu(), self_cpu_seconds()))
+
+    async def drive(self, until: float) -> None:
+        """Step the mix until session time ``until``: requests, probes, CPU samples."""
+        period = 1.0 / self.cfg.step_hz
+        next_t = trio.current_time()
+        while self.now() < until:
+            self.failed()
+            t = self.now()
+            step = self.driver.step(t)
+            ch = step.changed
+            if len(ch):
+                was_static = ~MOVING[step.previous]
+                probe = was_static & self.tracker.settled(t, ch)
+                self.tracker.activity(t, ch, MOVING[self.driver.activity[ch]], probe)
+            await self._send(step.rows)
+            self.sample_cpu()
+            next_t += period
+            await trio.sleep_until(max(next_t, trio.current_time()))
+
+    def failed(self) -> None:
+        for c in self.clients:
+            if c.failure is not None:
+                raise LoadError(f"connection {c.number}: {c.failure}")
+
+    async def close(self, remove: bool) -> None:
+        for c in self.clients:
+            if remove and c.failure is None:
+                await c.remove(self.index[self.owner == c.number])
+            await c.goodbye()
+
+    def summary(self, t0: float, t1: float) -> dict[str, Any]:
+        arr = self.tracker.arrays(self.now())
+        out = summarise(arr, self.cfg.rate_hz, t0, t1, self.cfg.clients)
+        out["probes_pending"] = int((~np.isnan(self.tracker.probe_at)).sum())
+        return out
+
+    def series(self, t0: float, t1: float) -> dict[str, list[float]]:
+        return series(self.tracker.arrays(self.now()), self.cfg.rate_hz, t0, t1, self.cfg.clients)
+
+
+def _header(cfg: LoadTestConfig, n: int) -> dict[str, Any]:
+    return {
+        "soldiers": n,
+        "clients": cfg.clients,
+        "rate_hz": cfg.rate_hz,
+        "seconds": cfg.seconds,
+        "nominal_updates_per_s": round(n * cfg.rate_hz * (cfg.clients if cfg.subscribe_all else 1), 1),
+    }
+
+
+def _passes(cfg: LoadTestConfig, s: dict[str, Any]) -> bool:
+    """The ramp criteria. Request latency needs probes (soldiers changing from rest: none in the moving
+    mix); a stage without any is judged on throughput alone and says so in ``latency_checked``."""
+    pct = s.get("delivered_pct")
+    p99 = s.get("latency_ms_p99" if cfg.latency_metric == "request" else "delivery_ms_p99")
+    s["latency_checked"] = p99 is not None
+    return pct is not None and pct >= cfg.min_delivered_pct and (p99 is None or p99 <= cfg.max_p99_ms)
+
+
+async def _run(cfg: LoadTestConfig, host: str, port: int, server_cpu: Any, remove: bool) -> dict[str, Any]:
+    session = LoadSession(cfg, server_cpu)
+    out: dict[str, Any] = {}
+    async with trio.open_nursery() as nursery:
+        await session.connect(nursery, host, port)
+        try:
+            if cfg.ramp:
+                out = await _ramp(cfg, session)
+            else:
+                await session.grow(cfg.soldiers)
+                start = session.now() + cfg.warmup_s
+                await session.drive(start + cfg.seconds)
+                end = session.now()
+                session.tracker.finish(end)
+                t0, t1 = start, min(end, start + cfg.seconds)
+                out = {
+                    **_header(cfg, cfg.soldiers),
+                    **session.summary(t0, t1),
+                    "activities": session.driver.counts(),
+                    "series": session.series(t0, t1),
+                    "window": [t0, t1],
+                }
+                if cfg.keep_recording:
+                    out["_recording"] = session.tracker.rec.arrays()
+        finally:
+            with trio.CancelScope(shield=True), trio.move_on_after(5.0):
+                await session.close(remove)
+            nursery.cancel_scope.cancel()
+    out["server_tables"] = sorted(session.tables)
+    out["mode"] = "decode" if cfg.decode else "tap"
+    return out
+
+
+async def _ramp(cfg: LoadTestConfig, session: LoadSession) -> dict[str, Any]:
+    stages: list[dict[str, Any]] = []
+    n = cfg.soldiers
+    best: int | None = None
+    first_fail: int | None = None
+    wall0 = time.monotonic()
+    for _ in range(MAX_STAGES):
+        await session.grow(n)
+        start = session.now() + cfg.warmup_s
+        await session.drive(start + cfg.seconds)
+        s = {**_header(cfg, n), **session.summary(start, start + cfg.seconds)}
+        s["passed"] = _passes(cfg, s)
+        stages.append(s)
+        if not s["passed"]:
+            first_fail = n
+            break
+        best = n
+        nxt = max(n + cfg.clients, round(n * cfg.ramp_factor))
+        if nxt > cfg.ramp_max_soldiers or time.monotonic() - wall0 > cfg.ramp_max_s:
+            break
+        n = nxt
+    session.tracker.finish(session.now())
+    last = stages[-1]
+    return {
+        "ramp": True,
+        "largest_sustained_soldiers": best,
+        "first_failed_soldiers": first_fail,
+        "criteria": {"min_delivered_pct": cfg.min_delivered_pct, "max_p99_ms": cfg.max_p99_ms,
+                     "latency_metric": cfg.latency_metric},
+        "clients": cfg.clients,
+        "rate_hz": cfg.rate_hz,
+        "seconds": cfg.seconds,
+        "soldiers": last["soldiers"],
+        **{k: last.get(k) for k in ("updates_per_s", "expected_updates_per_s", "latency_ms_p50",
+                                   "latency_ms_p99", "delivery_ms_p99", "bytes_per_update",
+                                   "server_cpu_pct")},
+        "stages": stages,
+        "series": {
+            "t": [float(i) for i in range(len(stages))],
+            "soldiers": [float(s["soldiers"]) for s in stages],
+            "updates_per_s": [s["updates_per_s"] or 0.0 for s in stages],
+            "expected_updates_per_s": [s["expected_updates_per_s"] or 0.0 for s in stages],
+            "latency_ms_p50": [s["latency_ms_p50"] or math.nan for s in stages],
+            "latency_ms_p99": [s["latency_ms_p99"] or math.nan for s in stages],
+            "delivery_ms_p99": [s["delivery_ms_p99"] or math.nan for s in stages],
+            "server_cpu_pct": [s["server_cpu_pct"] or math.nan for s in stages],
+        },
+    }  # fmt: skip
+
+
+def server_args(tick_hz: float, throttle: float | None) -> list[str]:
+    """The spawned server's command line for a load test: its tick rate and throttle."""
+    return ["--tick-hz", f"{tick_hz:g}", *(["--throttle", f"{throttle:g}"] if throttle is not None else [])]
+
+
+def run_loadtest(cfg: LoadTestConfig) -> dict[str, Any]:
+    """Run a load test (or a ramp) as configured; returns the JSON-ready result."""
+    cfg.check()
+    server: ServerProcess | None = None
+    server_cpu: Callable[[], float] | None
+    try:
+        if cfg.spawn_server:
+            server = spawn_server(server_args(cfg.rate_hz, cfg.throttle), data=cfg.server_data)
+            host, port = server.host, server.port
+            server_cpu = server.cpu_seconds
+        else:
+            host, port = cfg.host, cfg.port
+            pid = cfg.server_pid
+            server_cpu = (lambda: cpu_seconds(pid)) if pid else None
+        try:
+            out = trio.run(_run, cfg, host, port, server_cpu, server is None)
+        except BaseExceptionGroup as group:  # errors inside nurseries arrive grouped
+            leaf = _first_leaf(group)
+            if isinstance(leaf, LoadError | OSError):
+                raise LoadError(str(leaf)) from None
+            raise
+        if server is not None:
+            out["server"] = {"spawned": True, "synthetic": server.synthetic, "pid": server.pid}
+        else:
+            out["server"] = {"spawned": False, "address": f"{host}:{port}"}
+        out["config"] = {k: v for k, v in asdict(cfg).items() if k not in ("host", "port", "keep_recording")}
+        return out
+    finally:
+        if server is not None:
+            server.close()
+
+
+def _first_leaf(exc: BaseException) -> BaseException:
+    while isinstance(exc, BaseExceptionGroup) and exc.exceptions:
+        exc = exc.exceptions[0]
+    return exc

@@ -1,0 +1,169 @@
+"""The pose board: every soldier's newest wire-ready pose, written and quantised once per tick.
+
+The tick loop publishes each tick's poses here once; every session's writer encodes from it whenever its
+socket can take bytes (latest-wins, see :mod:`server.session`), so no client repeats the quantising and a
+stalled client never holds more than one batch.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from protocol.update_table import UpdateTable
+from protocol.updates import quantise
+from server.logging import get_logger
+from server.soldier.manager import TickUpdate
+
+if TYPE_CHECKING:
+    from server.startup import ServerWorld
+
+log = get_logger("pose_board")
+
+
+class PoseBoard:
+    """The newest wire-ready pose of every soldier (Performer units, table order), written once per tick.
+
+    The tick also quantises each pose once (``codes``, the update table's field values) so that no client
+    repeats that work: a session's encoder only diffs and packs the shared codes. ``version[i]`` is the board
+    tick at which soldier ``i``'s *codes* last changed (a pose that moved less than one quantisation step
+    keeps its version), so sessions send — and encode — only what changed on the wire since the board tick
+    of their last write; an idle soldier costs a client nothing. All figure sets of one library share the
+    pose shape, so one set of arrays serves every update table (``table_of`` says which).
+    """
+
+    def __init__(self, ndofs: int, nfigs: int, capacity: int = 64) -> None:
+        self.ndofs, self.nfigs = ndofs, nfigs
+        self.tick = 0
+        self.capacity = 0
+        self.dofs = np.zeros((0, ndofs))
+        self.positions = np.zeros((0, nfigs, 3))
+        self.orientations = np.zeros((0, nfigs, 4))
+        self.codes = np.zeros((0, 0), np.int32)  # quantised fields; width set by the first table quantised
+        self.version = np.zeros(0, np.int64)
+        self.valid = np.zeros(0, bool)
+        self.table_of = np.zeros(0, np.int32)
+        self.rows_published = 0  # soldiers the ticks handed in
+        self.rows_changed = 0  # of which had new codes (what clients are sent)
+        self._grow(capacity)
+
+    def _grow(self, n: int) -> None:
+        old = self.capacity
+        if n <= old:
+            return
+
+        def pad(a: np.ndarray, fill: float = 0) -> np.ndarray:
+            out = np.full((n, *a.shape[1:]), fill, a.dtype)
+            out[:old] = a
+            return out
+
+        self.dofs, self.positions, self.orientations, self.codes = (
+            pad(self.dofs),
+            pad(self.positions),
+            pad(self.orientations),
+            pad(self.codes),
+        )
+        self.version, self.valid, self.table_of = pad(self.version), pad(self.valid), pad(self.table_of, -1)
+        self.capacity = n
+
+    def _code_width(self, nfields: int) -> None:
+        if self.codes.shape[1] != nfields:
+            if self.valid.any():
+                raise ValueError(f"update tables of {self.codes.shape[1]} and {nfields} fields on one board")
+            self.codes = np.zeros((self.capacity, nfields), np.int32)
+
+    def ensure(self, index: int) -> None:
+        if index >= self.capacity:
+            self._grow(max(index + 1, 2 * self.capacity))
+
+    def add(self, index: int, table: int) -> None:
+        """A soldier (possibly a reused index): no pose until its first tick."""
+        self.ensure(index)
+        self.valid[index] = False
+        self.table_of[index] = table
+
+    def remove(self, index: int) -> None:
+        if index < self.capacity:
+            self.valid[index] = False
+            self.table_of[index] = -1
+
+    def publish(self, update: TickUpdate, world: ServerWorld) -> int:
+        """Take one tick's poses (converted and quantised per figure set); returns the number of soldiers
+        whose codes changed (0: nothing for any client to send)."""
+        self.tick += 1
+        n = len(update)
+        if n == 0:
+            return 0
+        assert world.manager is not None
+        idx = np.asarray(update.indices, np.int64)
+        self.ensure(int(idx.max()))
+        fset = world.manager.table.fset[idx]
+        sets = world.sets
+        groups = [np.arange(n)] if len(sets) == 1 else [np.flatnonzero(fset == k) for k in range(len(sets))]
+        changed = 0
+        for k, sel in enumerate(groups):
+            if len(sel) == 0:
+                continue
+            part = update if len(sel) == n else _select(update, sel)
+            ju = sets[k].converter.convert(part)
+            table = sets[k].table
+            rows = idx[sel]
+            dofs, positions, orientations = ju.dofs, ju.positions, ju.orientations
+            q, ok = _quantise_rows(table, dofs, positions, orientations)
+            self._code_width(q.shape[1])
+            if not ok.all():  # a bug upstream (non-finite pose): never let it reach a client or stop the tick
+                log.error("bad_pose", soldiers=rows[~ok][:8].tolist(), count=int((~ok).sum()))
+                self.valid[rows[~ok]] = False
+                rows, q, dofs, positions, orientations = (
+                    a[ok] for a in (rows, q, dofs, positions, orientations)
+                )
+            new = ~self.valid[rows] | (self.table_of[rows] != table.table_id)
+            new |= (self.codes[rows] != q).any(axis=1)
+            self.dofs[rows] = dofs
+            self.positions[rows] = positions
+            self.orientations[rows] = orientations
+            self.codes[rows] = q
+            self.table_of[rows] = table.table_id
+            self.valid[rows] = True
+            moved = rows[new] if not new.all() else rows
+            self.version[moved] = self.tick
+            changed += len(moved)
+        self.rows_published += n
+        self.rows_changed += changed
+        return changed
+
+
+def _quantise_rows(
+    table: UpdateTable, dofs: np.ndarray, positions: np.ndarray, orientations: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(codes, ok)``: the poses quantised for ``table``; ``ok`` is False for rows that cannot be
+    (non-finite values, zero quaternion), whose codes are 0. The row check runs only when quantising fails."""
+    try:
+        return quantise(table, dofs, positions, orientations), np.ones(len(dofs), bool)
+    except ValueError:
+        norm = np.linalg.norm(orientations, axis=-1)
+        ok = np.isfinite(dofs).all(axis=1) & np.isfinite(positions).all(axis=(1, 2))
+        ok &= np.isfinite(norm).all(axis=1) & (norm >= 1e-9).all(axis=1)
+        q = quantise(table, dofs[ok], positions[ok], orientations[ok])
+        full = np.zeros((len(dofs), q.shape[1]), np.int32)
+        full[ok] = q
+        return full, ok
+
+
+def _select(update: TickUpdate, sel: np.ndarray) -> TickUpdate:
+    return TickUpdate(
+        update.indices[sel],
+        update.joints[sel],
+        update.figures[sel],
+        update.heading_only[sel],
+        now=update.now,
+        tick=update.tick,
+    )
+
+
+class BoardRef:
+    """Where sessions find the board (it exists once the motion library does)."""
+
+    def __init__(self) -> None:
+        self.board: PoseBoard | None = None

@@ -1,0 +1,159 @@
+"""The loaded data of one server: the Peabody environment, channelsets, posture graphs and what is bound.
+
+Seed 002, 3.4.1-3.4.2 and 3.6: ``read_file`` of an ``.env`` adds figures; ``load_channelset`` and
+``load_posture_graph`` (which loads the graph's channelsets too) fill the named tables; ``bind_channelset``
+and ``bind_posture_graph`` bind them to figures of the environment. The bound tables are read: the motion
+library takes its figure sets from the bound posture graphs (:mod:`server.world.library`), and the JCL
+commands ``play_bound_channelset``, ``step_bound_channelset``, ``write_channelset`` and ``posture_change`` act
+on what is bound. Loading the same file again (the start-up script run twice) is a no-op.
+
+Errors are :class:`StoreError` (a ``ValueError``); the JCL adapter turns them into located JCL errors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TypeVar
+
+from peabody.model import Environment, Figure
+from server.logging import get_logger
+from server.motion.binding import BoundChannelset, bind_channelset
+from server.motion.cache import load_channelset
+from server.motion.channelset import Channelset
+from server.motion.errors import BindingError, ChannelsetError, PostureGraphError
+from server.motion.posture_change import (
+    BoundPostureGraph,
+    LoadedPostureGraph,
+    bind_posture_graph,
+    load_posture_graph,
+)
+
+log = get_logger("store")
+T = TypeVar("T")
+
+
+class StoreError(ValueError):
+    """A file that cannot be read, a name that is not loaded, figures that do not fit."""
+
+
+@dataclass
+class MotionStore:
+    """Figures, channelsets and posture graphs by name, loaded and bound."""
+
+    environment: Environment = field(default_factory=Environment)
+    env_files: set[Path] = field(default_factory=set)
+    channelsets: dict[str, Channelset] = field(default_factory=dict)
+    graphs: dict[str, LoadedPostureGraph] = field(default_factory=dict)
+    graph_paths: dict[str, Path] = field(default_factory=dict)
+    bound_channelsets: dict[str, BoundChannelset] = field(default_factory=dict)
+    bound_graphs: dict[str, BoundPostureGraph] = field(default_factory=dict)
+
+    # -- loading -----------------------------------------------------------------------------------------
+    def read_env(self, path: Path, search_path: Sequence[Path] = ()) -> None:
+        """The figures of an ``.env`` file (once per file; a ``.chset.env`` is a channelset)."""
+        if path.name.endswith(".chset.env"):
+            self.load_channelset(path)
+            return
+        if path in self.env_files:  # the start-up script run again: the figures are there already
+            log.debug("env_already_read", file=str(path))
+            return
+        from peabody.language import PeabodyError
+        from peabody.loader import read_environment
+
+        try:
+            read_environment(path, self.environment, load_psurfs=False, search_path=list(search_path))
+        except PeabodyError as exc:
+            raise StoreError(str(exc)) from None
+        self.env_files.add(path)
+        log.info("environment_read", file=path.name, figures=len(self.environment.figures))
+
+    def load_channelset(self, path: Path, name: str | None = None) -> Channelset:
+        try:
+            cs = load_channelset(path)
+        except (ChannelsetError, OSError) as exc:
+            raise StoreError(str(exc)) from None
+        self.channelsets[name or cs.name] = cs
+        return cs
+
+    def load_graph(self, path: Path, name: str | None = None) -> LoadedPostureGraph:
+        """A posture graph and its channelsets (registered by their names too, as Jack did)."""
+        key = name or path.stem
+        if key in self.graphs and self.graph_paths.get(key) == path:
+            return self.graphs[key]  # the start-up script run again
+        try:
+            loaded = load_posture_graph(path, key)
+        except (PostureGraphError, ChannelsetError, OSError) as exc:
+            raise StoreError(str(exc)) from None
+        self.graphs[key] = loaded
+        self.graph_paths[key] = path
+        for cs in loaded.channelsets:
+            self.channelsets.setdefault(cs.name, cs)
+        log.info(
+            "posture_graph_loaded",
+            graph=key,
+            postures=len(loaded.graph.postures),
+            channelsets=len(loaded.channelsets),
+        )
+        return loaded
+
+    # -- lookups -----------------------------------------------------------------------------------------
+    def figures(self, names: Sequence[str]) -> list[Figure]:
+        missing = [n for n in names if n not in self.environment.figures]
+        if missing:
+            raise StoreError(f"no figure(s) {missing} in the environment")
+        return [self.environment.figures[n] for n in names]
+
+    def channelset(self, name: str) -> Channelset:
+        return _named(self.channelsets, name, "channelset", "loaded")
+
+    def graph(self, name: str) -> LoadedPostureGraph:
+        return _named(self.graphs, name, "posture graph", "loaded")
+
+    def bound_channelset(self, name: str) -> BoundChannelset:
+        return _named(self.bound_channelsets, name, "bound channelset", "(bind_channelset first)")
+
+    def bound_graph(self, name: str) -> BoundPostureGraph:
+        return _named(self.bound_graphs, name, "bound posture graph", "(bind_posture_graph first)")
+
+    # -- binding -----------------------------------------------------------------------------------------
+    def bind_channelset(self, chset: str, name: str, figures: Sequence[str]) -> BoundChannelset:
+        """Bind a loaded channelset to figures (all of the environment's if none are named)."""
+        cs = self.channelset(chset)
+        figs = self.figures(figures) if figures else list(self.environment.figures.values())
+        try:
+            bound = bind_channelset(cs, figs, name or f"{chset}/bound")
+        except BindingError as exc:
+            raise StoreError(str(exc)) from None
+        self.bound_channelsets[bound.name] = bound
+        return bound
+
+    def bind_posture_graph(self, graph: str, name: str, figures: Sequence[str]) -> BoundPostureGraph:
+        """Bind a loaded posture graph to figures, one of each type its channelsets drive (seed 3.4.2: "it
+        prompts you to pick a figure of each kind"); without figures, the first of each type loaded."""
+        loaded = self.graph(graph)
+        if figures:
+            figs = self.figures(figures)
+        else:
+            from server.motion.binding import protofiletype
+
+            by_type: dict[str, Figure] = {}
+            for fig in self.environment.figures.values():
+                by_type.setdefault(protofiletype(fig), fig)
+            figs = [by_type[t] for t in loaded.protofiletypes if t in by_type]
+            figs.sort(key=lambda f: f.dof_count == 0)  # the soldier first, then its weapon
+        if not figs:
+            raise StoreError(f"no figures of type {loaded.protofiletypes} in the environment")
+        try:
+            bound = bind_posture_graph(loaded, figs, name or None)
+        except BindingError as exc:
+            raise StoreError(str(exc)) from None
+        self.bound_graphs[bound.name] = bound
+        return bound
+
+
+def _named(table: dict[str, T], name: str, what: str, hint: str) -> T:
+    if name not in table:
+        raise StoreError(f"no {what} {name!r} {hint}")
+    return table[name]
