@@ -7,8 +7,8 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 (:data:`GROUND_RISE`). Then:
 
 1. **the hit**: a force on the upper torso, ramped up over :attr:`DeathSpec.ramp` and down again (so every
-   part starts moving slowly), pushing the body the way it falls (forward standing, to the side kneeling,
-   down lying);
+   part starts moving slowly), pushing the body the way it falls (forward standing, straight to the side
+   kneeling — at 100 N: harder or forward, he rolled over his back with his legs up — down lying);
 2. **the slump**: PD control (the springs) toward a slumped shape — the ``SLUMP`` key standing (the knees
    buckle), the spine and head of ``SLUMP`` kneeling (the legs stay as they are: no kick), the ``DEAD`` key's
    head lying — at half strength by :attr:`DeathSpec.slump_time`, then toward a limp shape (the ``DEAD``
@@ -89,8 +89,8 @@ DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "kstow2dead",
         "KNEEL_STOWED",
-        150.0,
-        (1.0, -0.3, -0.5),
+        100.0,
+        (1.0, -0.3, 0.0),
         "upper",
         release=0.15,
         sideways=True,
@@ -99,8 +99,8 @@ DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "kfire2dead",
         "KNEEL_FIRE",
-        150.0,
-        (1.0, -0.3, -0.5),
+        100.0,
+        (1.0, -0.3, 0.0),
         "upper",
         release=0.15,
         sideways=True,
