@@ -32,7 +32,7 @@ import numpy as np
 from authoring import crawl, deaths, gait, postures, reactions, transitions, turns
 from authoring.motion import KeyPosture
 from authoring.quality_frames import FigureSet
-from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees
+from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slaving import MasterSlavePair
 from authoring.transitions import ClipFrames, clip_to_channelset
 from peabody.fk import FigureKinematics
@@ -191,7 +191,7 @@ def slave_one(
     else:
         out = reslave_channelset(chset, pair, name)
     # DI's kneecaps sit higher than the master's and its prone forearms float: put them down where his are
-    for rest in (rest_slave_knees, rest_slave_forearms):
+    for rest in (rest_slave_knees, rest_slave_forearms, tilt_onto_knees):
         rest(chset, out, ctx.figure_set)
         lift_off_ground(out, ctx.di)
     return out

@@ -1,5 +1,5 @@
-"""Kneeling contacts carried over to the slave: where the master's kneecap rests on the ground, so does the
-slave's.
+"""Kneeling, prone and crawling contacts carried over to the slave: where the master's kneecap or forearm
+rests on the ground, so does the slave's.
 
 Slaving copies the legs' joint angles, and DI.fig and soldier.fig share the leg skeleton, but DI.fig's
 kneecap mesh sits about 1.4 cm higher on its knee site than soldier.fig's (and its toes 0.7 cm): a DI
@@ -12,20 +12,31 @@ kneeling leg's toes come down to where the master's are) and a kneeling knee goe
 lowering fades in as the master's kneecap comes down (from ``REACH_CM`` to ``REST_CM`` above the ground),
 so a knee going down or coming up does not jump. The build's ``lift_off_ground`` then raises any frame
 where something else would sink.
+
+Prone, the slave's forearms are laid on the ground (:func:`rest_slave_forearms`); crawling on forearms and
+knees they are put at the master's height (a DI forearm that sank set the whole body on it, lifted off its
+knees), planted elbows held in place, and where DI's arm cannot lift a forearm that far (the master holds
+the rifle with his arm at its joint limits) the rifle rises with the hands. Lowering the body onto the
+knees would then sink the forearms, so :func:`tilt_onto_knees` turns the slave about the ground below its
+elbows instead.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from authoring import ik
 from authoring.postures import leg, segment_heights
 from authoring.quality_frames import FigureSet, play
+from authoring.rifle_swap import _smooth_above
+from peabody import quaternion
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
 REST_CM = 2.0  # the master's kneecap this close to the ground: the slave's goes as low (full weight)
 REACH_CM = 6.0  # ... this far up: no goal
+DROP_FADE_CM = 0.3  # the legs' solve fades in as the body's lowering grows to this
 SIDES = ("left", "right")
 LEG_SEGMENTS = ("upper_leg", "lower_leg", "foot", "toes")
 
@@ -52,17 +63,21 @@ def part_heights(
     return out
 
 
+def _played(cs: Channelset, figures: FigureSet) -> tuple[np.ndarray, np.ndarray, str]:
+    """A clip's body figure played: poses, root globals and its file type (the figure with most DOFs)."""
+    f = play(cs, figures)
+    ptype = max(f.poses, key=lambda k: figures.kin[k].ndof)
+    return f.poses[ptype], f.locations[ptype], ptype
+
+
 def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
     """Lower the slave onto its kneeling knees where the master rests on them (``slave``'s figure and joint
     channels, in place); returns the lowering per frame (cm)."""
-    mf, sf = play(master, figures), play(slave, figures)
-    mtype = max(mf.poses, key=lambda k: figures.kin[k].ndof)
-    stype = max(sf.poses, key=lambda k: figures.kin[k].ndof)
+    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
     kin = figures.kin[stype]
-    q, loc = sf.poses[stype], sf.locations[stype]
-    m_h = part_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype)
+    m_h = part_heights(mq, mloc, figures, mtype)
     s_h = part_heights(q, loc, figures, stype)
-    m_foot = part_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype, "foot")
+    m_foot = part_heights(mq, mloc, figures, mtype, "foot")
     s_foot = part_heights(q, loc, figures, stype, "foot")
     weight: dict[str, np.ndarray] = {}
     drop = np.zeros(len(q))
@@ -97,6 +112,9 @@ def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) 
         kin, q, goals, lowered, iterations=60, damping=6.0, rest_pose=q, rest_gain=0.05, tolerance=0.02,
         max_dof_step=0.02,
     )  # fmt: skip
+    # frames not lowered keep their legs (so every clip through a posture where the body cannot go lower,
+    # CRAWL on its forearms, has the same legs there), the solve faded in as the lowering grows
+    pose = q + np.clip(drop / DROP_FADE_CM, 0.0, 1.0)[:, None] * (pose - q)
     bound = bind_channelset(slave, [figures.figures[stype]])
     bf = bound.figures[0]
     slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
@@ -121,53 +139,84 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     both arms are solved together to bring each elbow down by how far the slave's forearm is above the
     master's (faded in as the master's forearm comes down) while the palms stay where they are on the rifle
     and the eye where it is (higher-priority goals over the spine, the arms and the neck; the
-    gaze turns a little, the head and neck being at their limits prone); ``slave``'s
-    joint channels change in place. Returns the worst remaining lift per frame (cm)."""
-    mf, sf = play(master, figures), play(slave, figures)
-    mtype = max(mf.poses, key=lambda k: figures.kin[k].ndof)
-    stype = max(sf.poses, key=lambda k: figures.kin[k].ndof)
+    gaze turns a little, the head and neck being at their limits prone). Planted elbows are held in one
+    place (:func:`_planted_tracks`).
+
+    On forearms and knees (crawling: the master's trunk off the ground, a knee on it) each forearm is put
+    at the master's height instead, up or down, and where the arm cannot lift it there the rifle and the
+    palms on it rise by what is missing (smoothed, at least that much), and the arms are solved again.
+    ``slave``'s joint channels (and, crawling, its rifle's channel) change in place. Returns the worst
+    remaining lift per frame (cm)."""
+    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
     kin = figures.kin[stype]
-    q, loc = sf.poses[stype], sf.locations[stype]
-    m_h = part_heights(mf.poses[mtype], mf.locations[mtype], figures, mtype, "forearm")
-    # prone only: lying on the belly (or chest); crawling, the forearms' slaving is the crawl's own
-    mq, mloc = mf.poses[mtype], mf.locations[mtype]
+    m_h = part_heights(mq, mloc, figures, mtype, "forearm")
+    # lying on the belly (or chest), or on forearms and knees
     trunk = [h for p in ("belly", "chest") for h in part_heights(mq, mloc, figures, mtype, p, ("",)).values()]
     if not trunk:
         return np.zeros(len(q))
     prone = _fade(np.min(trunk, axis=0))
-    weight = {side: _fade(m_h[side]) * prone for side in SIDES if side in m_h}
+    # on forearms and knees (the crawl), the forearms carry the body: the slave's as high as the master's
+    knees = part_heights(mq, mloc, figures, mtype)
+    kneeling = _fade(np.min(list(knees.values()), axis=0)) if knees else np.zeros(len(q))
+    held_rifle = _holding(slave)
+    crawling = {
+        side: _fade(m_h[side]) * (1.0 - prone) * kneeling * held_rifle for side in SIDES if side in m_h
+    }
+    weight = {side: _fade(m_h[side]) * prone + crawling[side] for side in SIDES if side in m_h}
     if not weight or not any(w.any() for w in weight.values()):
         return np.zeros(len(q))
     sites = kin.site_globals(q, loc)
-    planted = {side: _planted_tracks(sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3],
-                                     m_h[side] <= CONTACT_CM) for side in weight}  # fmt: skip
+    elbows = {side: sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3] for side in weight}
+    planted = {
+        side: _planted_tracks(elbows[side], m_h[side] <= CONTACT_CM, crawling[side] > 0) for side in weight
+    }
     held = {s: sites[:, kin.site_names.index(s)] for s in [f"{side}_palm.palmcenter" for side in weight]}
     held["bottom_head.sight"] = sites[:, kin.site_names.index("bottom_head.sight")]
-    pose = q
-    for _ in range(FOREARM_PASSES):
+
+    def passes(pose: np.ndarray) -> tuple[np.ndarray, list[ik.Goal]]:
+        for _ in range(FOREARM_PASSES):
+            s_h = part_heights(pose, loc, figures, stype, "forearm")
+            now = kin.site_globals(pose, loc)
+            goals: list[ik.Goal] = []
+            for site, at in held.items():  # the palms on the rifle, the eye where it was (the gaze kept by
+                side = site.split("_", 1)[0]  # the pull towards the slaved pose: the head is at its limits)
+                chain = SPINE + (HEAD if side == "bottom" else tuple(f"{side}_{j}" for j in ARM_CHAIN))
+                gaze = None if side == "bottom" else at[:, :3, :3]
+                ball = EYE_BALL_CM if side == "bottom" else 0.0
+                goals.append(ik.Goal(site, at[:, :3, 3], gaze, 1.0, 2, chain, radius=ball))
+            for side, w in weight.items():
+                aim = m_h[side] - AIM_BELOW_CM
+                aim = np.where(m_h[side] <= CONTACT_CM, aim, np.maximum(aim, CONTACT_CM))
+                need = (w - crawling[side]) * np.maximum(0.0, s_h[side] - np.maximum(aim, 0.0))
+                need += crawling[side] * (s_h[side] - np.maximum(m_h[side], 0.0))  # up or down
+                elbow = now[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3].copy()
+                elbow[:, 1] -= need
+                track, down = planted[side]
+                elbow[down, 0], elbow[down, 2] = track[down, 0], track[down, 2]  # planted: it does not slide
+                chain = SPINE + tuple(f"{side}_{j}" for j in ARM_CHAIN)
+                goals.append(ik.Goal(f"{side}_upper_arm.distal", elbow, None, w, 1, chain))  # or held there
+            pose, _ = ik.solve(
+                kin, pose, goals, loc, iterations=100, damping=2.0, rest_pose=pose, rest_gain=0.05,
+                tolerance=0.02, max_dof_step=0.03,
+            )  # fmt: skip
+        return pose, goals
+
+    pose, goals = passes(q)
+    if any(w.any() for w in crawling.values()):
+        # crawling, a DI forearm that its arm cannot lift to the master's height (his arm holds the rifle at
+        # its joint limits) is lifted by the rifle: rifle and palms rise by what is missing, and again
         s_h = part_heights(pose, loc, figures, stype, "forearm")
-        now = kin.site_globals(pose, loc)
-        goals: list[ik.Goal] = []
-        for site, at in held.items():  # the palms on the rifle, the eye where it was (the gaze kept by
-            side = site.split("_", 1)[0]  # the pull towards the slaved pose: the head is at its limits)
-            chain = SPINE + (HEAD if side == "bottom" else tuple(f"{side}_{j}" for j in ARM_CHAIN))
-            gaze = None if side == "bottom" else at[:, :3, :3]
-            ball = EYE_BALL_CM if side == "bottom" else 0.0
-            goals.append(ik.Goal(site, at[:, :3, 3], gaze, 1.0, 2, chain, radius=ball))
-        for side, w in weight.items():
-            aim = m_h[side] - AIM_BELOW_CM
-            aim = np.where(m_h[side] <= CONTACT_CM, aim, np.maximum(aim, CONTACT_CM))
-            need = w * np.maximum(0.0, s_h[side] - np.maximum(aim, 0.0))
-            elbow = now[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3].copy()
-            elbow[:, 1] -= need
-            track, down = planted[side]
-            elbow[down, 0], elbow[down, 2] = track[down, 0], track[down, 2]  # a planted elbow does not slide
-            chain = SPINE + tuple(f"{side}_{j}" for j in ARM_CHAIN)
-            goals.append(ik.Goal(f"{side}_upper_arm.distal", elbow, None, w, 1, chain))  # or held there
-        pose, _ = ik.solve(
-            kin, pose, goals, loc, iterations=100, damping=2.0, rest_pose=pose, rest_gain=0.05,
-            tolerance=0.02, max_dof_step=0.03,
-        )  # fmt: skip
+        short = np.max([w * np.maximum(0.0, np.maximum(m_h[s], 0.0) - s_h[s]) for s, w in crawling.items()],
+                       axis=0)  # fmt: skip
+        lift = _smooth_above(short, RIFLE_LIFT_SIGMA_FRAMES)
+        for chan in slave.figure_channels():
+            if chan.protofiletype != stype:
+                slave.fig_pos[:, chan.column, 1] += lift.astype(slave.fig_pos.dtype)
+        for site in held:
+            if site.endswith("palmcenter"):
+                held[site] = held[site].copy()
+                held[site][:, 1, 3] += lift
+        pose, goals = passes(pose)  # (every clip alike, so clips meeting at a posture agree there)
     # frames solved alone land a few degrees apart where the neck is at its limit: smooth the change over
     # the clip (its ends kept), then put the palms and the eye back exactly (a small, smooth correction)
     change = pose - q
@@ -186,14 +235,45 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     return np.max([w * np.maximum(0.0, s_h[s] - m_h[s]) for s, w in weight.items()], axis=0)
 
 
-def _planted_tracks(points: np.ndarray, down: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per frame, where a planted site should stay: over each run of ``down`` frames, its mean position
-    (``points`` ``(n, 3)``); returns that and the mask."""
-    track = points.copy()
+def _planted_tracks(
+    points: np.ndarray, down: np.ndarray, crawling: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame, where a planted site should stay (``points`` ``(n, 3)``) and the frames that holds in.
+
+    Prone, over each run of ``down`` frames its mean position. Crawling (``crawling``, per frame), one place
+    per run too — where it is at the clip's first (last) frame for a run that starts (ends) the clip, so
+    the posture there is kept — eased in and out over ``PLANT_FADE_FRAMES`` either side, so the goal does
+    not jump as the contact starts or ends."""
+    n = len(points)
+    track, eased, hold = points.copy(), points.copy(), np.zeros(n)
+    frames = np.arange(n)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], down.astype(np.int8), [0]])))
     for a, b in zip(edges[::2], edges[1::2], strict=True):
         track[a:b] = points[a:b].mean(axis=0)
-    return track, down
+        place = points[0] if a == 0 else points[-1] if b == n else track[a]
+        gap = np.maximum(a - frames, frames - (b - 1)).clip(0)
+        u = np.clip(1.0 - gap / PLANT_FADE_FRAMES, 0.0, 1.0)
+        u = u * u * (3.0 - 2.0 * u)
+        near = u > hold
+        eased[near] = points[near] + u[near, None] * (place - points[near])
+        hold[near] = u[near]
+    return np.where(crawling[:, None], eased, track), np.where(crawling, hold > 0, down)
+
+
+def _holding(slave: Channelset) -> np.ndarray:
+    """Per frame, 1 while the hands hold the rifle, easing to 0 over the ``HOLD_FADE_FRAMES`` before the
+    clip's ``release_frame`` (a death lets go of it: the rifle is a free body from there)."""
+    n = slave.nframes
+    release = getattr(slave, "release_frame", None)
+    if release is None:
+        return np.ones(n)
+    u = np.clip((release - np.arange(n)) / HOLD_FADE_FRAMES, 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
+HOLD_FADE_FRAMES = 12  # the crawl's contact handling fades out over this many frames before a release
+RIFLE_LIFT_SIGMA_FRAMES = 4.0  # the crawling rifle's lift is smoothed over the clip (at or above the need)
+PLANT_FADE_FRAMES = 6  # a planted site's held place eases in and out over this many frames (0.1 s)
 
 
 def _fade(height: np.ndarray) -> np.ndarray:
@@ -225,3 +305,55 @@ def pin_end(data: np.ndarray, frame: int, value: np.ndarray, frames: int) -> Non
     rows = np.arange(n) if frame == 0 else len(data) - 1 - np.arange(n)
     data[rows] += (fade[:, None] * delta[None, :]).astype(data.dtype)
     data[frame] = value
+
+
+def tilt_onto_knees(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
+    """Put the slave's kneeling knees down where the master's rest on them while something in front of
+    them carries the body too (on forearms and knees: the crawl), where :func:`rest_slave_knees` could not
+    lower the body without sinking that part.
+
+    DI.fig's kneecap sits about 1.1 cm higher above its elbows, forearms lying on the ground, than
+    soldier.fig's. The slave figure and its rifle are tilted together (feet down, head up) about a level
+    axis through the ground below the elbows, by the angle that brings the kneecaps down to the master's,
+    or less where anything else (the toes) would reach the ground first; the forearms stay where they lie.
+    ``slave``'s figure channels change in place. Returns the tilt per frame (rad)."""
+    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    kin = figures.kin[stype]
+    m_h = part_heights(mq, mloc, figures, mtype)
+    s_h = part_heights(q, loc, figures, stype)
+    m_fore = part_heights(mq, mloc, figures, mtype, "forearm")
+    sides = [s for s in SIDES if s in m_h and s in s_h]
+    if not sides or not m_fore:
+        return np.zeros(len(q))
+    trunk = [h for p in ("belly", "chest") for h in part_heights(mq, mloc, figures, mtype, p, ("",)).values()]
+    off_trunk = 1.0 - _fade(np.min(trunk, axis=0)) if trunk else np.ones(len(q))
+    on_forearms = _fade(np.min(list(m_fore.values()), axis=0)) * off_trunk * _holding(slave)
+    extra = np.max([_fade(m_h[s]) * np.maximum(0.0, s_h[s] - np.maximum(m_h[s], 0.0)) for s in sides], axis=0)
+    extra *= on_forearms
+    if not (extra > TILT_MIN_CM).any():
+        return np.zeros(len(q))
+    sites = kin.site_globals(q, loc)[..., :3, 3]
+    pivot = np.mean([sites[:, kin.site_names.index(f"{s}_upper_arm.distal")] for s in SIDES], axis=0)
+    knee = np.mean([sites[:, kin.site_names.index(f"{s}_lower_leg.knee")] for s in sides], axis=0)
+    pivot[:, 1] = 0.0
+    back = knee - pivot
+    back[:, 1] = 0.0
+    reach = np.linalg.norm(back, axis=1)
+    u = back / reach[:, None]
+    nodes, segs = figures.nodes(stype)
+    pts = np.einsum("fkij,kj->fki", kin.segment_globals(q, loc)[:, segs, :3, :], nodes)
+    behind = np.einsum("fki,fi->fk", pts - pivot[:, None, :], u)  # how far behind the pivot each node lies
+    room = np.where(behind > 1.0, np.maximum(pts[..., 1], 0.0) / np.maximum(behind, 1.0), np.inf).min(axis=1)
+    angle = np.minimum(extra / reach, room)
+    turn = Rotation.from_rotvec(np.cross(np.array([0.0, 1.0, 0.0]), u) * angle[:, None]).as_matrix()
+    tilt = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
+    tilt[:, :3, :3] = turn
+    tilt[:, :3, 3] = pivot - np.einsum("fij,fj->fi", turn, pivot)
+    for chan in slave.figure_channels():
+        moved = tilt @ slave.transforms(chan)
+        slave.fig_pos[:, chan.column] = moved[:, :3, 3].astype(slave.fig_pos.dtype)
+        slave.fig_quat[:, chan.column] = quaternion.from_matrix(moved[:, :3, :3]).astype(slave.fig_quat.dtype)
+    return angle
+
+
+TILT_MIN_CM = 0.05  # knees floating less than this above the master's are left as they are

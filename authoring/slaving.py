@@ -13,8 +13,9 @@ Per frame (all frames of a clip at once):
    so that when not every site can match the hands stay on the gun.
 4. **Make the clip temporally coherent** (:meth:`MasterSlavePair.slave_clip`, used by the re-recording):
    a frame solved alone resolves the chains' redundancy wherever its iterations stop, so the slave's offset
-   from the copied angles is smoothed over the clip and the goals solved again from there in small steps;
-   the first and last frames stay the frames solved alone, so clips meeting at a posture node agree.
+   from the copied angles is smoothed over the clip (the copied arm angles a little too) and the goals are
+   tracked from there frame after frame, each frame warm-started from its neighbour's solution; the first
+   and last frames stay the frames solved alone, so clips meeting at a posture node agree.
 
 The sight and elbow goals are balls (:data:`GOAL_RADIUS`, ``ik.Goal.radius``): within 0.9 cm of the master's
 site they count as met. Chased to the millimetre they made the slave pop: prone with the neck at its
@@ -127,6 +128,9 @@ RIFLE_HOLDS: dict[str, str] = {
 ELBOW_FOLLOW = 0.5  # an elbow goal moves by this much of its palm's move onto another rifle's site
 SMOOTH_SIGMA_FRAMES = 3.0  # Gaussian smoothing of the slave's offset from the copied angles over a clip
 SMOOTH_MAX_DOF_STEP = 0.05  # rad per iteration of the re-solve after smoothing: stays on its branch
+COPY_SIGMA_FRAMES = 1.0  # Gaussian smoothing of the copied arm angles before the tracking
+TRACK_ITERATIONS = 12  # per frame of the frame-after-frame tracking of the smoothed clip
+TRACK_SETTLE_ITERATIONS = 20  # the forward and backward tracks' blend put back on the goals
 
 
 @dataclass
@@ -324,8 +328,11 @@ class MasterSlavePair:
         slave's offset from the copied angles is smoothed over the clip (Gaussian, ``SMOOTH_SIGMA_FRAMES``),
         tapered towards the first and the last frame's offset near each end (not to each frame's own: near
         an end it could sit on another branch than the end's and pop as the clip leaves or reaches its
-        posture), and the goals solved again from there in small steps
-        (``SMOOTH_MAX_DOF_STEP``) pulled towards the smoothed pose. DOFs no goal moves keep the master's
+        posture), the copied angles of the goals' chains smoothed a little (``COPY_SIGMA_FRAMES``: a master's
+        one-frame turn of a redundant DOF is not copied as a pop), and the goals tracked from there frame
+        after frame (:meth:`_track`, small steps of ``SMOOTH_MAX_DOF_STEP``: solved each frame alone the
+        shoulder's Euler angles jumped 20-28 degrees between frames near their pole while crawling), pulled
+        towards the smoothed pose. DOFs no goal moves keep the master's
         angles; the first and last frames stay exactly :meth:`slave_pose`'s (a frame's solution alone), so
         every clip meeting at a posture node is slaved to the same pose there."""
         mk, sk = self.master_kin, self.slave_kin
@@ -339,22 +346,55 @@ class MasterSlavePair:
         start = self.copy_pose(q, mk.segment_globals(q, loc))
         offset = pose - start
         half = int(np.ceil(3.0 * SMOOTH_SIGMA_FRAMES))
-        k = np.arange(-half, half + 1, dtype=np.float64)
-        kernel = np.exp(-0.5 * (k / SMOOTH_SIGMA_FRAMES) ** 2)
-        kernel /= kernel.sum()
-        padded = np.concatenate([np.repeat(offset[:1], half, 0), offset, np.repeat(offset[-1:], half, 0)])
-        smooth = np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(sk.ndof)], axis=1)
+        smooth = _gaussian(offset, SMOOTH_SIGMA_FRAMES)
         frames = np.arange(n)
         taper = np.minimum(1.0, np.minimum(frames, frames[::-1]) / half)[:, None]
         ends = np.where(frames[:, None] < n / 2, offset[:1], offset[-1:])  # each half leans on its end
-        blend = sk.clamp(start + ends + taper * (smooth - ends))
-        opts: dict[str, Any] = {"iterations": 60, "rest_gain": 0.1, "tolerance": 0.02}
-        opts.update(self.ik_options)
-        opts["max_dof_step"] = SMOOTH_MAX_DOF_STEP
-        out, self.last_report = ik.solve(sk, blend, goals, slave_loc, rest_pose=blend, **opts)
+        # a redundant arm DOF that the master turns by many degrees in one frame need not pop on the slave
+        # too: the copied angles of the goals' chains are smoothed a little (the palms are solved again)
+        arms = np.zeros(sk.ndof, dtype=bool)
+        for g in goals:
+            for j in g.joints or ():
+                arms[sk.dof_slices[j]] = True
+        base = start.copy()
+        base[:, arms] += taper * (_gaussian(start[:, arms], COPY_SIGMA_FRAMES) - start[:, arms])
+        blend = sk.clamp(base + ends + taper * (smooth - ends))
+        out = self._track(blend, goals, slave_loc, pose[0], pose[-1])
         out = _let_go(out, start, release_frame)
         out[[0, -1]] = pose[[0, -1]]
         return out, slave_loc
+
+    def _track(
+        self, blend: np.ndarray, goals: list[ik.Goal], roots: np.ndarray, first: np.ndarray, last: np.ndarray
+    ) -> np.ndarray:
+        """The goals solved frame after frame near ``blend`` ``(n, ndof)``, each frame warm-started from its
+        neighbour's correction of the blend (so no joint leaps to another IK branch between frames): tracked
+        forwards from ``first`` and backwards from ``last``, the two eased into each other over the clip and
+        put back on the goals in a few small steps."""
+        sk = self.slave_kin
+        n = len(blend)
+        opts: dict[str, Any] = {"rest_gain": 0.1, "tolerance": 0.02}
+        opts.update(self.ik_options)
+        opts.update(iterations=TRACK_ITERATIONS, max_dof_step=SMOOTH_MAX_DOF_STEP)
+        frame_goals = [[g.rows(slice(i, i + 1)) for g in goals] for i in range(n)]
+
+        def along(order: range, end: np.ndarray) -> np.ndarray:
+            out = np.empty_like(blend)
+            out[order[0]] = prev = end
+            for i in order[1:]:
+                start = sk.clamp(blend[i] + (prev - blend[i - 1 if order.step > 0 else i + 1]))
+                q, _ = ik.solve(
+                    sk, start[None], frame_goals[i], roots[i : i + 1], rest_pose=start[None], **opts
+                )
+                out[i] = prev = q[0]
+            return out
+
+        fwd, bwd = along(range(n), first), along(range(n - 1, -1, -1), last)
+        u = np.linspace(0.0, 1.0, n)[:, None]
+        mixed = fwd + u * u * (3.0 - 2.0 * u) * (bwd - fwd)
+        opts.update(iterations=TRACK_SETTLE_ITERATIONS, max_dof_step=0.2 * SMOOTH_MAX_DOF_STEP)
+        out, self.last_report = ik.solve(sk, mixed, goals, roots, rest_pose=mixed, **opts)
+        return out
 
     def update(self) -> None:
         """The SimulationFunction: when on, set the slave figure from the master figure's current state."""
@@ -363,6 +403,16 @@ class MasterSlavePair:
         pose, loc = self.slave_pose(self.master_kin.neutral_pose(), self.master.location)
         self.slave_kin.set_pose(pose)
         self.slave.location = loc
+
+
+def _gaussian(values: np.ndarray, sigma: float) -> np.ndarray:
+    """``values`` ``(n, k)`` smoothed along the frames by a Gaussian of ``sigma`` frames (ends held)."""
+    half = int(np.ceil(3.0 * sigma))
+    k = np.arange(-half, half + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 * (k / sigma) ** 2)
+    kernel /= kernel.sum()
+    padded = np.concatenate([np.repeat(values[:1], half, 0), values, np.repeat(values[-1:], half, 0)])
+    return np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(values.shape[1])], 1)
 
 
 RELEASE_FADE_FRAMES = 12  # after the hands let go, the arm goals fade out over this many frames
@@ -462,8 +512,9 @@ def held_rifle_targets(
 ) -> dict[str, np.ndarray]:
     """Slave site -> positions ``(n, 3)`` for a slave holding ``rifle`` (at root-site globals
     ``rifle_locations``) where the master holds its own: each palm on its rifle site (:data:`RIFLE_HOLDS`)
-    until ``release_frame`` (then the master's palm again), and the elbow goal moved by ``ELBOW_FOLLOW`` of
-    the palm's move, so that elbow and palm goals do not pull the arm against its limits."""
+    until ``release_frame`` (then easing onto the master's palm over ``RELEASE_FADE_FRAMES``: a step there
+    made the tracked wrist jump), and the elbow goal moved by ``ELBOW_FOLLOW`` of the palm's move, so that
+    elbow and palm goals do not pull the arm against its limits."""
     mk = pair.master_kin
     master = mk.site_globals(master_poses, master_locations)[..., :3, 3]
     kin = FigureKinematics(rifle)
@@ -472,8 +523,9 @@ def held_rifle_targets(
     for palm, site in RIFLE_HOLDS.items():
         target = sites[:, kin.site_names.index(site), :3, 3].copy()
         own = master[:, mk.site_names.index(palm)]
-        if release_frame is not None:
-            target[release_frame:] = own[release_frame:]
+        if release_frame is not None:  # eased over the fade of the arm goals, so the hand does not jump
+            u = np.clip((np.arange(len(target)) - release_frame) / RELEASE_FADE_FRAMES, 0.0, 1.0)[:, None]
+            target += u * u * (3.0 - 2.0 * u) * (own - target)
         out[palm] = target
         side = palm.split("_", 1)[0]
         for c in SLAVE_CONSTRAINTS:

@@ -6,6 +6,7 @@ compare by identity (``eq=False``): compare their arrays yourself.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,9 +78,16 @@ class Jcl(Event):
 
 @dataclass(frozen=True)
 class Ready(Event):
-    """Server → client: what ``start_ttes_socket_simulation()`` signals; soldiers as (index, table) pairs."""
+    """Server → client: what ``start_ttes_socket_simulation()`` signals; soldiers as (index, table) pairs.
+
+    ``tick_hz`` and ``throttle`` (seconds) tell a client what update rate to expect: a soldier that keeps
+    moving is updated every ``k``-th tick, ``k`` the smallest with ``k / tick_hz >= throttle - 1 / (2
+    tick_hz)`` (:func:`ticks_per_update`).
+    """
 
     soldiers: tuple[tuple[int, int], ...] = ()
+    tick_hz: float = 30.0
+    throttle: float = 1 / 30
 
 
 @dataclass(frozen=True)
@@ -193,3 +201,10 @@ class UpdateHeaders(Event):
 @dataclass(frozen=True)
 class ConnectionClosed(Event):
     """Local event: the stream ended cleanly (EOF on a frame boundary) or the connection is CLOSED/ERROR."""
+
+
+def ticks_per_update(tick_hz: float, throttle: float) -> int:
+    """Ticks between two updates of a soldier that keeps changing: the throttle is a rate cap on the tick
+    grid (a soldier is due when its last update is at least ``throttle - tick / 2`` old)."""
+    period = 1.0 / tick_hz
+    return max(1, math.ceil((throttle - period / 2) / period - 1e-9))

@@ -252,10 +252,19 @@ def _dec_jcl(p: bytes, n: int) -> Jcl:
 
 
 def _dec_ready(p: bytes, n: int) -> Ready:
-    pairs = unpack_body(p, "READY").ints("soldiers", 0, 0xFFFF, width=2)
+    b = unpack_body(p, "READY")
+    pairs = b.ints("soldiers", 0, 0xFFFF, width=2)
     if (pairs[:, 0] >= n).any():
         raise WireError(ErrorCode.BAD_VALUE, f"field 'soldiers': index >= max_soldiers {n}", "READY")
-    return Ready(tuple((int(i), int(t)) for i, t in pairs.tolist()))
+    tick_hz = b.float("tick_hz", 0.0)
+    if tick_hz <= 0.0:
+        raise WireError(ErrorCode.BAD_VALUE, f"field 'tick_hz' = {tick_hz} must be > 0", "READY")
+    return Ready(tuple((int(i), int(t)) for i, t in pairs.tolist()), tick_hz, b.float("throttle", 0.0))
+
+
+def _enc_ready(e: Ready) -> bytes:
+    soldiers = [list(s) for s in e.soldiers]
+    return pack_body({"soldiers": soldiers, "tick_hz": float(e.tick_hz), "throttle": float(e.throttle)})
 
 
 def _dec_status(p: bytes, n: int) -> Status:
@@ -322,7 +331,7 @@ _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
         lambda p, n: Pong(unpack_body(p, "PONG").int("nonce", 0, U64)),
     ),
     MessageType.JCL: (Jcl, lambda e: pack_body({"id": e.id, "text": e.text}), _dec_jcl),
-    MessageType.READY: (Ready, lambda e: pack_body({"soldiers": [list(s) for s in e.soldiers]}), _dec_ready),
+    MessageType.READY: (Ready, _enc_ready, _dec_ready),
     MessageType.STATUS: (Status, _enc_status, _dec_status),
     MessageType.CREATE_SOLDIER: (
         CreateSoldier,

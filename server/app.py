@@ -8,6 +8,9 @@ Structure (one trio nursery):
 * per client a **reader** (bytes → protocol events → the world) and a **writer** (control queue + the
   latest poses, encoded against what that client last received) — see :mod:`server.session` for why memory
   stays bounded and a stalled client cannot slow anyone else;
+* an **answer loop** gives soldiers with new requests an out-of-cycle update as soon as the readers have
+  handled what arrived (:meth:`TtesServer.answer_requests`, ``SoldierManager.answer``), so the update that
+  reflects a request does not wait for the next tick (issue 16: one-tick latency);
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
 * **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
   :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
@@ -56,6 +59,7 @@ class TtesServer:
             config.data_dir, max_soldiers=config.max_soldiers, record_clips=config.record_clips
         )
         self.world.clock = self.request_time
+        self.world.soldiers.configure(tick_period=1.0 / config.tick_hz)  # the throttle caps a rate on it
         self._last_stamp = 0.0
         self.world.events.ready = self._on_ready
         self.world.events.soldier_created = self._on_created
@@ -72,6 +76,10 @@ class TtesServer:
         self._batches_window = (0.0, 0)  # (time, ticks that published poses) at the last status report
         self._published_ticks = 0
         self._shutdown = trio.Event()
+        self._answer_wanted = trio.Event()
+        self._requests_seen = 0  # the manager's request count at the last answer
+        self.answers = 0  # out-of-cycle publishes
+        self.next_tick = 0.0  # server time of the next scheduled tick (what an answer samples at)
         self.stopped = trio.Event()
         self.started = False
         self._cancel: trio.CancelScope | None = None
@@ -154,6 +162,7 @@ class TtesServer:
         async with trio.open_nursery() as nursery:
             self._cancel = nursery.cancel_scope
             nursery.start_soon(self._tick_loop)
+            nursery.start_soon(self._answer_loop)
             nursery.start_soon(self._status_loop)
             nursery.start_soon(self._accept_all, listeners, nursery)
             log.info("listening", addresses=[f"{h}:{p}" for h, p in self.addresses], ready=self.world.ready)
@@ -240,9 +249,11 @@ class TtesServer:
         while not session.closing:
             data = await _receive(stream)
             wait = session.feed(data, self.now())
+            self._requests_arrived()
             while wait > 0 and not session.closing:  # over the request rate: stop reading (backpressure)
                 await trio.sleep(wait)
                 wait = session.resume(self.now())
+                self._requests_arrived()
             if not data:
                 session.drop(session.drop_reason or "closed")
                 return
@@ -280,6 +291,7 @@ class TtesServer:
         period = 1.0 / self.config.tick_hz
         next_t = trio.current_time()
         while True:
+            self.next_tick = next_t - self._t0
             await trio.sleep_until(next_t)
             self.tick(next_t - self._t0)
             next_t += period
@@ -306,6 +318,38 @@ class TtesServer:
             self.on_tick(update)
         if board.publish(update, self.world):
             self._published_ticks += 1
+            for s in self.sessions.values():
+                if s.tables_sent:
+                    s.notify()
+
+    def _requests_arrived(self) -> None:
+        m = self.world.manager
+        if m is not None and m.stats["requests"] != self._requests_seen:
+            self._requests_seen = int(m.stats["requests"])
+            self._answer_wanted.set()
+
+    async def _answer_loop(self) -> None:
+        while True:
+            await self._answer_wanted.wait()
+            self._answer_wanted = trio.Event()
+            await trio.sleep(0)  # let the other readers with bytes waiting hand theirs in first: one answer
+            self.answer_requests()
+
+    def answer_requests(self) -> None:
+        """Between ticks: publish the next tick's update early for the soldiers whose requests changed what
+        they show (``SoldierManager.answer``: sampled at the next tick's time, throttled as that tick) and
+        wake the writers. Its frames carry the next tick's number (``PoseBoard.publish(between=True)``)."""
+        m, board = self.world.manager, self._board()
+        if m is None or board is None or not self.world.ready:
+            return
+        now = self.request_time()
+        update = m.answer(now, max(now, self.next_tick))
+        if not len(update):
+            return
+        self.answers += 1
+        if self.on_tick is not None:
+            self.on_tick(update)
+        if board.publish(update, self.world, between=True):
             for s in self.sessions.values():
                 if s.tables_sent:
                     s.notify()

@@ -27,15 +27,23 @@ class PoseBoard:
 
     The tick also quantises each pose once (``codes``, the update table's field values) so that no client
     repeats that work: a session's encoder only diffs and packs the shared codes. ``version[i]`` is the board
-    tick at which soldier ``i``'s *codes* last changed (a pose that moved less than one quantisation step
-    keeps its version), so sessions send — and encode — only what changed on the wire since the board tick
-    of their last write; an idle soldier costs a client nothing. All figure sets of one library share the
-    pose shape, so one set of arrays serves every update table (``table_of`` says which).
+    publish (``serial``) at which soldier ``i``'s *codes* last changed (a pose that moved less than one
+    quantisation step keeps its version), so sessions send — and encode — only what changed on the wire
+    since the publish of their last write; an idle soldier costs a client nothing. All figure sets of one
+    library share the pose shape, so one set of arrays serves every update table (``table_of`` says which).
+
+    ``tick`` is the wire's tick number, the tick whose poses the board holds: it counts the tick loop's
+    publishes. An out-of-cycle publish (:meth:`TtesServer.answer_requests`: the next tick's update of the
+    soldiers with new requests, released early) bumps ``serial`` and labels its frames with that next tick,
+    so a client sees every tick once, in order, and the tick that follows sends those soldiers only if their
+    pose changed again.
     """
 
     def __init__(self, ndofs: int, nfigs: int, capacity: int = 64) -> None:
         self.ndofs, self.nfigs = ndofs, nfigs
         self.tick = 0
+        self.ticks = 0  # the tick loop's publishes
+        self.serial = 0  # publishes, in and out of cycle: what versions count
         self.capacity = 0
         self.dofs = np.zeros((0, ndofs))
         self.positions = np.zeros((0, nfigs, 3))
@@ -88,10 +96,14 @@ class PoseBoard:
             self.valid[index] = False
             self.table_of[index] = -1
 
-    def publish(self, update: TickUpdate, world: ServerWorld) -> int:
+    def publish(self, update: TickUpdate, world: ServerWorld, *, between: bool = False) -> int:
         """Take one tick's poses (converted and quantised per figure set); returns the number of soldiers
-        whose codes changed (0: nothing for any client to send)."""
-        self.tick += 1
+        whose codes changed (0: nothing for any client to send). ``between``: an out-of-cycle update, the
+        next tick's, released early."""
+        self.serial += 1
+        if not between:
+            self.ticks += 1
+        self.tick = self.ticks + 1 if between else self.ticks
         n = len(update)
         if n == 0:
             return 0
@@ -127,7 +139,7 @@ class PoseBoard:
             self.table_of[rows] = table.table_id
             self.valid[rows] = True
             moved = rows[new] if not new.all() else rows
-            self.version[moved] = self.tick
+            self.version[moved] = self.serial
             changed += len(moved)
         self.rows_published += n
         self.rows_changed += changed

@@ -87,7 +87,7 @@ class Session:
         self.closing = False  # no more reading; the writer flushes the control queue and closes
         self.tables_sent = False
         self.ready_sent = False
-        self.flushed_tick = 0
+        self.flushed_serial = 0  # the board publish this client's last write covered
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
         self.owned: set[int] = set()  # soldiers this client created (max_soldiers_per_client)
         self.tokens = float(config.max_requests_per_s)
@@ -150,8 +150,8 @@ class Session:
         if board is None:
             return b""
         sub = self.conn.subscribed
-        since = self.flushed_tick
-        self.flushed_tick = board.tick
+        since = self.flushed_serial
+        self.flushed_serial = board.serial
         if len(sub) == 0:
             return b""
         sub = sub[sub < board.capacity]
@@ -291,7 +291,7 @@ class Session:
             fset = m.table.fset[live]
             ids = np.array([s.table.table_id for s in self.world.sets], np.int64)[fset]
             soldiers = tuple(zip(live.tolist(), ids.tolist(), strict=True))
-        self.send(Ready(soldiers))
+        self.send(Ready(soldiers, self.config.tick_hz, self.world.settings.throttle))
         self.ready_sent = True
 
     def _permitted(self, ref: int | None, what: str) -> bool:

@@ -27,6 +27,8 @@ from protocol.events import (
     Unsubscribe,
     UpdateTableMsg,
 )
+from server.config import DEFAULT_DATA_DIR
+from server.soldier.manager import TickUpdate
 
 
 def port_of(server) -> int:  # type: ignore[no-untyped-def]
@@ -122,7 +124,7 @@ async def test_request_errors_leave_the_connection_open(autojump_clock: trio.abc
 
         assert (await err(CreateSoldier(1, "DI.fig", "AK_47.fig", 3))).code == ErrorCode.SOLDIER_EXISTS
         assert (await err(CreateSoldier(2, "Nobody.fig", "AK_47.fig", None))).code == ErrorCode.UNKNOWN_FIGURE
-        e = await err(CreateSoldier(3, "DI.fig", "M16.fig", None))
+        e = await err(CreateSoldier(3, "DI.fig", "M60.fig", None))
         assert (e.code, e.ref) == (ErrorCode.UNKNOWN_WEAPON, 3)
         assert (await err(RemoveSoldier(500))).code == ErrorCode.UNKNOWN_SOLDIER
         e = await err(__import__("protocol.events", fromlist=["Jcl"]).Jcl("frobnicate();", 9))
@@ -261,3 +263,50 @@ async def test_request_rate_limit_slows_reading_instead_of_queueing(autojump_clo
         assert trio.current_time() - t0 == pytest.approx((1000 + 1 - 100) / 100.0, abs=0.2)
         info = await c.report('report_ttes_status("s0");')
         assert info["soldiers"][0]["mode"] == "LOCO"
+
+
+async def test_an_m16_soldier_is_served_with_the_m16_library(autojump_clock: trio.abc.Clock) -> None:
+    """Issue 16: DI.fig + M16.fig soldiers play the ``*_m16`` graphs; their updates carry the M16's figure.
+    The shipped data dir (the synthetic one has no M16 graphs)."""
+    async with running_server(throttle=0.0, share_library=False, data_dir=str(DEFAULT_DATA_DIR)) as server:
+        c = await Client.open(port_of(server))
+        tables = {}
+        while True:
+            ev = await c.next_event()
+            if isinstance(ev, UpdateTableMsg):
+                tables[ev.table.table_id] = ev.table
+            if isinstance(ev, Ready):
+                break
+        assert {(t.figure, t.weapon) for t in tables.values()} == {
+            ("DI.fig", "AK_47.fig"),
+            ("DI.fig", "M16.fig"),
+        }
+        await c.send(CreateSoldier(1, "DI.fig", "M16.fig", None))
+        m16 = await c.expect(SoldierCreated)
+        assert tables[m16.table].weapon == "M16.fig"
+        ak = 0  # a start-up soldier: DI.fig + AK_47.fig
+        await c.send(Subscribe((ak, m16.index)))
+        await c.requests(index=[ak, m16.index], appearance=Appearance.KNEEL, velocity=(0.0, 0.0, 0.0))
+        await c.drain(3.0)  # both kneel (ststow2kstow: 1.6 s); the client decodes every update
+        lib = server.world.library
+        sets = {lib.set_keys[s.index][1]: s for s in server.world.sets}
+        assert [lib.set_keys[int(k)][1] for k in server.world.manager.table.fset[[ak, m16.index]]] == [
+            "AK_47.fig",
+            "M16.fig",
+        ]
+        # the pose each client decoded is that library's KNEEL_STOWED, weapon figure included
+        node = lib.node("KNEEL_STOWED")
+        clip, direc = int(lib.rest_clip[node]), int(lib.rest_dir[node])
+        assert lib.clip_names[clip].endswith("ststow2kstow_low")
+        got = {w: c.pose(sets[w].table.table_id, i) for w, i in (("AK_47.fig", ak), ("M16.fig", m16.index))}
+        want = {}
+        for w, fs in sets.items():
+            smp = lib.sets[fs.index].sample(
+                np.array([clip]), np.array([0.0]), np.array([direc]), np.array([1.0]), 1.0
+            )
+            tu = TickUpdate(np.zeros(1, np.int64), smp.joints, smp.figures, np.zeros(1, bool))
+            want[w] = fs.converter.convert(tu)
+        for w in sets:
+            np.testing.assert_allclose(got[w][1], want[w].positions[0], atol=0.002)  # figure placements (m)
+        rifle_m16, rifle_ak = got["M16.fig"][1][1], got["AK_47.fig"][1][1]
+        assert np.abs(rifle_m16 - rifle_ak).max() > 0.01  # held by its own grip: not the AK's placement

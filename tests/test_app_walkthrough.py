@@ -161,14 +161,20 @@ def expected_pose(server, clip: str, frames: np.ndarray) -> np.ndarray:  # type:
     return server.world.sets[0].converter.convert(tu).dofs
 
 
+async def watching(server) -> Client:  # type: ignore[no-untyped-def]
+    """A client subscribed to soldier 0 that has its first (full) update."""
+    c = await Client.open(port_of(server))
+    await c.expect(Ready)
+    await c.send(Subscribe((0,)))
+    await c.expect(JointUpdates)
+    return c
+
+
 async def kneel_frames(tick_hz: float, throttle: float) -> tuple[list[float], list[np.ndarray], object]:
     """Kneel at t = 1 s; the (server time, pose) of every update the client gets in the next 2 s. The first
     entry is the resting pose the client had before (frame 0 of the clip: the same pose, so never resent)."""
     async with running_server(tick_hz=tick_hz, throttle=throttle) as server:
-        c = await Client.open(port_of(server))
-        await c.expect(Ready)
-        await c.send(Subscribe((0,)))
-        await c.expect(JointUpdates)
+        c = await watching(server)
         await trio.sleep_until(server._t0 + 1.0)
         await c.requests(index=0, appearance=A.KNEEL, weapon=W.DEPLOYED)
         times, poses = [1.0], [c.pose(1, 0)[0].copy()]
@@ -233,6 +239,45 @@ async def test_throttle_limits_each_soldiers_update_rate(autojump_clock: trio.ab
         await c.drain(0.5)
         got = await stamps(1.0)
         assert set(np.diff(got[0]).tolist()) == {1}
+
+
+async def test_throttle_004_gives_30_updates_a_second_and_ready_says_so(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Issue 16: the shipped ``set_ttes_soldier_throttle(0.04)`` is a rate cap of 30/s, not two ticks."""
+    async with running_server(throttle=0.04) as server:
+        c = await Client.open(port_of(server))
+        ready = await c.expect(Ready)
+        assert (ready.tick_hz, ready.throttle) == (30.0, 0.04)
+        await c.requests(index=0, velocity=vel(1.4, 0.0), heading=0.0)
+        await c.send(Subscribe((0,)))
+        await c.drain(0.5)
+        ticks: list[int] = []
+        with trio.move_on_after(2.0):
+            while True:
+                ev = await c.next_event()
+                if isinstance(ev, JointUpdates):
+                    ticks.extend([ev.tick] * len(ev.indices))
+        assert len(ticks) >= 59 and set(np.diff(ticks).tolist()) == {1}
+
+
+async def test_a_request_between_ticks_is_reflected_before_the_next_tick(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Issue 16, one-tick latency: the server answers at once with the pose the next tick would send."""
+    async with running_server(throttle=0.04) as server:
+        c = await watching(server)
+        await trio.sleep_until(server._t0 + 1.01)
+        rest = c.pose(1, 0)[0].copy()
+        nxt = server.next_tick
+        assert 1.01 < nxt <= 1.01 + 1 / 30
+        await c.requests(index=0, appearance=A.KNEEL, weapon=W.DEPLOYED)
+        ev = await c.expect(JointUpdates)
+        assert server.now() < nxt and ev.indices.tolist() == [0]  # before the tick...
+        assert np.abs(ev.dofs[0] - rest).max() > STEP  # ...already kneeling
+        assert server.answers == 1 and ev.tick == server.ticks + 1  # labelled with the tick it anticipates
+        await trio.sleep_until(server._t0 + nxt + 0.001)
+        assert server.world.manager.stats["answers"] == 1
 
 
 async def largest_jump_on_interrupt(blend_time: float) -> float:

@@ -32,8 +32,10 @@ def _max_jump_deg(kin, poses: np.ndarray) -> float:
 
 # crawl2prstow: prone, neck at its extension limit (the sight goal's saddle: the neck used to flip between
 # two twisted solutions); kfire2dead: the arms are flung while falling (after the hands let go of the rifle
-# the arm goals fade out, so the slave keeps the master's arm angles instead of flipping between branches)
-@pytest.mark.parametrize("clip", ["crawl2prstow", "kfire2dead"])
+# the arm goals fade out, so the slave keeps the master's arm angles instead of flipping between branches);
+# crawl_cycle and crawl_start: the left shoulder near its twist limit (frames solved alone, then smoothed,
+# popped 23-28 degrees; tracked frame after frame they do not)
+@pytest.mark.parametrize("clip", ["crawl2prstow", "kfire2dead", "crawl_cycle", "crawl_start"])
 def test_slaved_clip_has_no_pops_the_master_lacks(pair: MasterSlavePair, clip: str) -> None:
     q, loc, release = _master(pair, clip)
     pose, slave_loc = pair.slave_clip(q, loc, release)

@@ -18,6 +18,7 @@ from client_stub.loadtest.stats import (
     summarise,
 )
 from protocol.entity import Appearance, first_bad_row
+from protocol.events import ticks_per_update
 
 RATE = 30.0
 
@@ -130,6 +131,18 @@ def test_summary_counts_dropped_and_late_updates() -> None:
     assert s["dropped_updates"] == 3 and s["delivered_pct"] == 90.0
     late = summarise(_perfect_run(late_s=0.1), RATE, 1.5, 2.5, 1)  # from 2.005 s every row is 100 ms late
     assert late["late_updates"] == 15 and late["delivered_pct"] == 100.0
+
+
+def test_expected_follows_the_servers_throttle() -> None:
+    """READY's tick rate and throttle set "expected": 0.04 s at 30 Hz is every tick, 0.1 s one in three."""
+    assert ticks_per_update(30.0, 0.04) == 1 and ticks_per_update(30.0, 1 / 30) == 1
+    assert ticks_per_update(30.0, 0.0) == 1 and ticks_per_update(30.0, 0.1) == 3
+    assert ticks_per_update(60.0, 0.1) == 6 and ticks_per_update(30.0, 0.06) == 2
+    thinned = _perfect_run(drop_ticks=frozenset(t for t in range(90) if t % 3))
+    s = summarise(thinned, RATE, 1.0, 2.0, 1, every=ticks_per_update(RATE, 0.1))
+    assert s["expected_updates_per_s"] == 10.0 and s["delivered_pct"] == 100.0
+    assert s["steady_movers_mean"] == 1.0
+    assert summarise(thinned, RATE, 1.0, 2.0, 1)["delivered_pct"] == pytest.approx(100 / 3, abs=0.01)
 
 
 def test_steady_movers_start_after_the_grace_ticks() -> None:

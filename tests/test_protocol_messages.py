@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from protocol.connection import CLIENT, NEED_DATA, PAUSED, SERVER, Connection, State
 from protocol.entity import ENTITY_REQUEST_DTYPE, make_entity_requests
-from protocol.errors import ErrorCode, LocalProtocolError
+from protocol.errors import ErrorCode, LocalProtocolError, WireError
 from protocol.events import (
     Accept,
     ConnectionClosed,
@@ -180,6 +180,42 @@ def test_update_table_round_trips_and_enables_references(
     ]
     pairs = tuple((i, tid) for i in ready)
     assert deliver(client, server.send(Ready(pairs))) == [Ready(pairs)]
+
+
+@given(
+    st.floats(1e-3, 1e3, allow_nan=False, allow_infinity=False),
+    st.floats(0.0, 60.0, allow_nan=False, allow_infinity=False),
+)
+def test_ready_carries_the_tick_rate_and_throttle(tick_hz: float, throttle: float) -> None:
+    client, server = open_pair()
+    assert deliver(client, server.send(Ready((), tick_hz, throttle))) == [Ready((), tick_hz, throttle)]
+
+
+_NOT_A_RATE = st.sampled_from([0, 0.0, -1.0, math.nan, math.inf, True, "30", None, [30.0]])
+
+
+@given(st.sampled_from(["tick_hz", "throttle"]), _NOT_A_RATE | st.floats(max_value=-1e-300) | st.just("gone"))
+def test_ready_decoder_rejects_bad_rates_with_a_wire_error(key: str, value: object) -> None:
+    """Any bad ``tick_hz``/``throttle`` (missing, wrong type, not finite, out of range) is a WireError (SCHEMA
+    or BAD_VALUE), never another exception; zero is a fine throttle but not a tick rate."""
+    body = {"soldiers": [[0, 1]], "tick_hz": 30.0, "throttle": 0.04}
+    if value == "gone":
+        del body[key]
+    else:
+        body[key] = value
+    decode = CODECS[MessageType.READY][2]
+    if key == "throttle" and value in (0, 0.0):
+        assert decode(msgpack.packb(body), 16).throttle == 0.0
+        return
+    with pytest.raises(WireError) as info:
+        decode(msgpack.packb(body), 16)
+    assert info.value.code in (ErrorCode.SCHEMA, ErrorCode.BAD_VALUE)
+
+
+def test_a_ready_with_no_tick_rate_is_never_sent() -> None:
+    _, server = open_pair()
+    with pytest.raises(LocalProtocolError):  # the codec table's self-check: encode, then decode our bytes
+        server.send(Ready((), 0.0, 0.04))
 
 
 @given(st.text(max_size=100), st.booleans())

@@ -27,6 +27,7 @@ from client_stub.dis.sink import ServerSink
 from client_stub.link.client import Client
 from protocol.dis import read_log
 from protocol.dis.appearance import LifeformState
+from server.config import DEFAULT_DATA_DIR
 from ttes.cli import main
 
 
@@ -148,3 +149,34 @@ async def test_unlimited_speed_replays_everything_with_back_pressure(
         ] == []  # finished: removed
         await link.aclose()
         nursery.cancel_scope.cancel()
+
+
+async def test_replay_hands_friendly_soldiers_m16s_and_opposing_ones_ak47s(
+    autojump_clock: trio.abc.Clock, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 16: with the shipped library (M16 graphs bound) nobody's rifle is substituted any more: the
+    entity type's rifle (US M16A2 → M16.fig, CIS AK → AK_47.fig) is the figure set the soldier plays."""
+    log = read_log(synth_pcap(tmp_path, capsys, soldiers=4, seconds=4.0))
+    data = str(DEFAULT_DATA_DIR)
+    async with (
+        running_server(throttle=0.0, share_library=False, data_dir=data) as server,
+        trio.open_nursery() as n,
+    ):
+        link = Client()
+        await link.open(n, "127.0.0.1", server.addresses[0][1])
+        sink = ServerSink(link)
+        replayer = Replayer(log)
+        status = await replay_to_server(replayer, sink, progress=ProgressLine(out=None), finish=False)
+        await trio.sleep(0.5)
+        assert status["sink_created"] == 4 and status["sink_weapon_substituted"] == 0
+        m, lib = server.world.manager, server.world.library
+        tr = replayer.translator
+        played = {}
+        for entity in expected_activities(log):
+            slot = int(tr.slots_of(np.array([entity_key(entity)]))[0])
+            index = sink.base + slot
+            assert sink.weapon_of[index] == lib.set_keys[int(m.table.fset[index])][1]  # asked for = played
+            played[int(tr.force[slot])] = played.get(int(tr.force[slot]), set()) | {sink.weapon_of[index]}
+        assert played == {1: {"M16.fig"}, 2: {"AK_47.fig"}}  # friendly: M16; opposing: AK-47
+        await link.aclose()
+        n.cancel_scope.cancel()

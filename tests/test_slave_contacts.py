@@ -1,6 +1,7 @@
-"""Kneeling and prone contacts carried over to the DI.fig slave (authoring/slave_contacts.py): where
+"""Kneeling, prone and crawling contacts carried over to the DI.fig slave (authoring/slave_contacts.py): where
 the master kneels on his kneecap, the slave does too, his feet stay where they were and the rifle stays in his
-hands; where the master's prone forearms lie on the ground, so do the slave's."""
+hands; where the master's prone forearms lie on the ground, so do the slave's; crawling, the slave rests on
+both knees and both forearms as the master does."""
 
 from __future__ import annotations
 
@@ -13,19 +14,29 @@ pytest.importorskip("scipy")
 
 from authoring.build import SNAP_FADE_FRAMES, BuildContext, _snap_end, lift_off_ground, slave_pair
 from authoring.quality_frames import FigureSet, play
-from authoring.slave_contacts import part_heights, rest_slave_forearms, rest_slave_knees
+from authoring.slave_contacts import (
+    _planted_tracks,
+    part_heights,
+    rest_slave_forearms,
+    rest_slave_knees,
+    tilt_onto_knees,
+)
 from authoring.slaving import reslave_channelset
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
 
 
-@pytest.fixture(scope="module")
-def kneeling():
+def _slaved(name: str):
+    """The committed soldier.fig clip ``name`` and the DI slaved to it (nothing put down yet)."""
     ctx = BuildContext.load(FIGURES)
     figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
-    master = load_channelset(CHANNELSETS / "kstow2kfire.chset.env", use_cache=False)
-    slave = reslave_channelset(master, slave_pair(ctx), "kstow2kfire_low.chset")
-    return figs, master, slave
+    master = load_channelset(CHANNELSETS / f"{name}.chset.env", use_cache=False)
+    return ctx, figs, master, reslave_channelset(master, slave_pair(ctx), f"{name}_low.chset")
+
+
+@pytest.fixture(scope="module")
+def kneeling():
+    return _slaved("kstow2kfire")[1:]
 
 
 def _knees(figs: FigureSet, cs, part: str = "kneecap") -> np.ndarray:
@@ -74,10 +85,7 @@ def test_a_standing_clip_is_left_alone(kneeling) -> None:
 
 @pytest.fixture(scope="module")
 def prone():
-    ctx = BuildContext.load(FIGURES)
-    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
-    master = load_channelset(CHANNELSETS / "prfire_recoil.chset.env", use_cache=False)
-    slave = reslave_channelset(master, slave_pair(ctx), "prfire_recoil_low.chset")
+    ctx, figs, master, slave = _slaved("prfire_recoil")
     lift_off_ground(slave, ctx.di)
     return figs, master, slave
 
@@ -103,3 +111,74 @@ def test_a_snapped_endpoint_fades_into_the_clip() -> None:
     np.testing.assert_allclose(data[-1], [1.0, -2.0])
     assert np.abs(np.diff(data, axis=0)).max() < 0.25  # no jump at the end: spread over SNAP_FADE_FRAMES
     assert not data[: 30 - SNAP_FADE_FRAMES].any()
+
+
+@pytest.fixture(scope="module")
+def crawling():
+    """crawl_start slaved up to the tilt: the knees and forearms put down as the build does."""
+    ctx, figs, master, slave = _slaved("crawl_start")
+    for rest in (rest_slave_knees, rest_slave_forearms):
+        rest(master, slave, figs)
+        lift_off_ground(slave, ctx.di)
+    return figs, master, slave
+
+
+def test_the_crawling_slave_tilts_onto_his_knees_about_his_forearms(crawling) -> None:
+    figs, master, slave = crawling
+    tilted = copy.deepcopy(slave)
+    angle = tilt_onto_knees(master, tilted, figs)
+    kneecaps = _knees(figs, slave), _knees(figs, tilted)
+    assert kneecaps[0][0] > 2.0  # DI.fig's kneecap sits higher above its forearms than soldier.fig's
+    assert kneecaps[1][0] < 1.5 and angle[0] > 0 and np.all(angle >= 0) and np.all(angle < np.radians(1.0))
+    assert np.all(kneecaps[1] <= kneecaps[0] + 1e-6)  # a knee the master lifts is not pushed down
+    # the forearms stay where they lie (the tilt's axis runs through the ground below the elbows), nothing
+    # goes into the ground, and the rifle turns with the body: the palms keep their hold
+    elbows = ("right_upper_arm.distal", "left_upper_arm.distal")
+    moved = _sites(figs, tilted, elbows) - _sites(figs, slave, elbows)
+    assert np.abs(moved[..., [0, 2]]).max() < 0.05 and np.abs(moved[..., 1]).max() < 0.2
+    for part in ("forearm", "foot", "kneecap"):
+        f = play(tilted, figs)
+        for h in part_heights(f.poses["DI.fig"], f.locations["DI.fig"], figs, "DI.fig", part).values():
+            assert h.min() > -0.05
+    palms = ("right_palm.palmcenter", "left_palm.palmcenter")
+    np.testing.assert_allclose(_in_rifle(figs, tilted, palms), _in_rifle(figs, slave, palms), atol=1e-3)
+
+
+def _in_rifle(figs: FigureSet, cs, names: tuple[str, ...]) -> np.ndarray:
+    """Sites of the DI ``(n, k, 3)`` in the rifle's frame."""
+    rifle = np.linalg.inv(play(cs, figs).locations["AK_47.fig"])
+    return np.einsum("nij,nkj->nki", rifle[:, :3, :3], _sites(figs, cs, names)) + rifle[:, None, :3, 3]
+
+
+def test_a_planted_place_eases_in_and_keeps_the_clip_ends() -> None:
+    points = np.zeros((40, 3))
+    points[:, 0] = np.arange(40) * 0.1  # a site drifting 1 mm a frame
+    down = np.zeros(40, dtype=bool)
+    down[:10] = down[20:30] = True
+    track, held = _planted_tracks(points, down, np.ones(40, dtype=bool))
+    np.testing.assert_allclose(track[:10, 0], 0.0)  # a run from the clip's first frame stays where it starts
+    np.testing.assert_allclose(track[20:30, 0], points[20:30, 0].mean())
+    # eased in and out: no jump as a contact starts or ends (held without easing: 1 cm in one frame)
+    assert np.abs(np.diff(track[:, 0])).max() < 0.4
+    assert held[:10].all() and held[20:30].all() and not held[36:].any()
+    track, held = _planted_tracks(points, down, np.zeros(40, dtype=bool))  # prone: each run's mean, no easing
+    np.testing.assert_allclose(track[:10, 0], points[:10, 0].mean())
+    np.testing.assert_array_equal(held, down)
+
+
+@pytest.mark.parametrize("figure", ["DI", "M16"])
+def test_the_slaved_crawl_start_passes_the_check_and_rests_at_crawl(figure: str) -> None:
+    from authoring.build import slave_one
+    from authoring.quality import THRESHOLDS, check_clip
+
+    ctx = BuildContext.load(FIGURES)
+    master = load_channelset(CHANNELSETS / "crawl_start.chset.env", use_cache=False)
+    slave = slave_one(master, slave_pair(ctx), ctx, figure, "crawl_start_low.chset")
+    figs = ctx.figure_set
+    got = check_clip(slave, figs, locomotion=True)
+    for key in ("contact_slide_cm", "foot_skate_cm", "max_frame_jump_deg", "palm_rifle_cm"):
+        assert got[key] <= THRESHOLDS[key], key
+    f = play(slave, figs)  # at CRAWL both kneecaps and both forearms are on the ground
+    for part in ("kneecap", "forearm"):
+        for h in part_heights(f.poses["DI.fig"], f.locations["DI.fig"], figs, "DI.fig", part).values():
+            assert -0.05 < h[0] <= 2.0

@@ -154,3 +154,24 @@ def test_written_library_loads_back(tmp_path, graphs) -> None:
     np.testing.assert_allclose(a.clip_duration, b.clip_duration)
     np.testing.assert_allclose(a.clip_ground_speed, b.clip_ground_speed, rtol=1e-5)
     np.testing.assert_allclose(a.sets[0].joint_data, b.sets[0].joint_data, atol=1e-6)
+
+
+def test_a_weapon_variant_plays_its_own_graphs_and_must_match_clip_for_clip() -> None:
+    """Issue 16: an M16 set samples the M16 graphs' channels under the base clip ids; mismatches fail."""
+    ak = synthetic_figures(12)
+    m16 = [ak[0], make_figure("rifle", "M16.fig", [])]
+    static, loco, crawl = synthetic_graphs(ak)
+    variant = synthetic_graphs(m16, seed=8)  # the same clips, other data
+    lib = MotionLibrary(static, [ak, m16], loco, crawl, weapon_graphs={"M16.fig": variant})
+    assert (
+        lib.set_keys == [("DI.fig", "AK_47.fig"), ("DI.fig", "M16.fig")]
+        and lib.set_index("DI.fig", "M16.fig") == 1
+    )
+    clip = lib.clip_id("ststow2kstow")
+    one = (np.array([clip]), np.array([0.0]), np.array([1]), np.array([1.0]), 0.5)
+    a, b = lib.sets[0].sample(*one), lib.sets[1].sample(*one)
+    assert np.abs(a.joints - b.joints).max() > 1e-3  # the M16 set plays the M16 graphs' data
+    with pytest.raises(ValueError, match="channelsets"):
+        MotionLibrary(
+            static, [ak, m16], loco, crawl, weapon_graphs={"M16.fig": (variant[0], variant[1], None)}
+        )

@@ -293,7 +293,7 @@ def test_every_frame_mode_shows_each_frame_once(lib) -> None:
 
 
 def test_throttle_limits_updates_per_soldier(lib) -> None:
-    m, i = manager(lib, throttle=0.1)
+    m, i = manager(lib, throttle=0.1, tick_period=1 / 60)
     j = m.create_soldier(now=0.0)
     request(m, i, 0.0, speed=1.4)
     request(m, j, 0.05, KNEEL)
@@ -304,6 +304,52 @@ def test_throttle_limits_updates_per_soldier(lib) -> None:
     for s in (i, j):
         gaps = np.diff(sent[s])
         assert len(gaps) > 10 and gaps.min() >= 0.1 - 1e-9 and gaps.max() <= 0.1 + 1 / 60 + 1e-9
+
+
+@pytest.mark.parametrize(("throttle", "every"), [(0.04, 1), (1 / 30, 1), (0.0, 1), (0.06, 2), (0.1, 3)])
+def test_throttle_is_a_rate_cap_on_the_tick_grid(lib, throttle: float, every: int) -> None:
+    """Seed 002 3.6: 0.04 s means "at most 30 updates/s", so a 30 Hz server updates a walker every tick."""
+    m, i = manager(lib, throttle=throttle, tick_period=1 / 30)
+    request(m, i, 0.0, speed=1.4)
+    n = 90
+    counts = [len(u) for u in run(m, 0.0, (n - 1) / 30)]
+    assert len(counts) == n
+    assert counts == [1 if k % every == 0 else 0 for k in range(n)]
+
+
+def test_a_request_between_ticks_is_answered_by_the_next_ticks_update_at_once(lib) -> None:
+    """Issue 16: the first update after a request reflects it, and it need not wait for the tick."""
+    m, i = manager(lib, throttle=0.04, tick_period=1 / 30)
+    j = m.create_soldier(now=0.0)
+    run(m, 0.0, 1.0)  # both at rest, sent
+    assert len(m.answer(1.01, 1 + 1 / 30)) == 0  # nothing asked: nothing to answer
+    request(m, i, 1.01, KNEEL)
+    request(m, j, 1.01)  # the same request again: nothing changes, nothing to answer
+    a = m.answer(1.01, 1 + 1 / 30)
+    assert a.indices.tolist() == [i] and a.now == pytest.approx(1 + 1 / 30)
+    assert lib.clip_names[int(a.clips[0])].endswith("ststow2kstow_low")  # the new clip...
+    assert a.frames[0] == pytest.approx((1 / 30 - 0.01) * 60, abs=1e-6)  # ...as the next tick shows it
+    t = m.tick(1 + 1 / 30)  # the tick samples the same pose again (the board sends nothing new)
+    np.testing.assert_array_equal(t.joints[t.indices.tolist().index(i)], a.joints[0])
+    assert len(m.answer(1.04, 1 + 2 / 30)) == 0  # answered once per request
+
+
+def test_an_answer_is_throttled_as_the_tick_it_anticipates(lib) -> None:
+    m, i = manager(lib, throttle=0.1, tick_period=1 / 30)
+    request(m, i, 0.0, speed=1.4)
+    run(m, 0.0, 0.1)  # updates at ticks 0 and 3 (0.1 s)
+    request(m, i, 0.11, speed=2.0)
+    assert len(m.answer(0.11, 4 / 30)) == 0  # tick 4 is not due (0.033 s after tick 3)
+    assert [len(m.tick(k / 30)) for k in (4, 5)] == [0, 0]
+    request(m, i, 0.17, speed=1.0)
+    assert m.answer(0.17, 6 / 30).indices.tolist() == [i]  # tick 6 is due: released at once
+    assert m.tick(6 / 30).indices.tolist() == [i] and len(m.tick(7 / 30)) == 0
+
+
+def test_every_frame_mode_never_answers(lib) -> None:
+    m, i = manager(lib, throttle=0.0, every_frame=True)
+    request(m, i, 0.01, KNEEL)
+    assert len(m.answer(0.01, 1 / 30)) == 0 and m.tick(1 / 30).indices.tolist() == [i]
 
 
 def test_idle_soldiers_are_omitted_and_heading_only_resends_the_pose(lib) -> None:

@@ -77,6 +77,7 @@ class Client:
         self.accept: ev.Accept | None = None
         self.tables: dict[int, UpdateTable] = {}
         self.ready_soldiers: dict[int, int] = {}  # server index -> update table, from READY
+        self.ready_event: ev.Ready | None = None  # the READY itself: the server's tick rate and throttle
         self.created: dict[int, int] = {}  # server index -> update table, from SOLDIER_CREATED
         self.answers: dict[int, ev.SoldierCreated | ev.Error] = {}  # awaited CREATE_SOLDIER id -> its answer
         self.refused: dict[int, ev.Error] = {}  # request id -> its error
@@ -363,6 +364,7 @@ class Client:
                     self._buffers[table.table_id] = UpdateBuffer(table)
             case ev.Ready(soldiers=soldiers):
                 self.ready_soldiers = dict(soldiers)
+                self.ready_event = event
                 self._ready.set()
             case ev.SoldierCreated(id=rid, index=index, table=table):
                 self.created[index] = table

@@ -25,7 +25,8 @@ import trio
 from client_stub.link.spawn import ServerProcess, cpu_seconds, self_cpu_seconds, spawn_server
 from client_stub.loadtest.client import LoadClient, LoadError, split_rows
 from client_stub.loadtest.mix import MOVING, MixDriver
-from client_stub.loadtest.stats import Tracker, series, summarise
+from client_stub.loadtest.stats import GRACE_TICKS, Tracker, series, summarise
+from protocol.events import Ready, ticks_per_update
 
 MAX_STAGES = 40
 
@@ -103,6 +104,9 @@ class LoadSession:
         self.slot_of = np.full(1 << 16, -1, np.int64)  # server index -> slot
         self.t0 = 0.0
         self.tables: set[int] = set()
+        self.rate = cfg.rate_hz  # the server's tick rate, from READY once connected
+        self.throttle: float | None = None  # the server's throttle, from READY
+        self.every = 1  # server ticks per update of a soldier that keeps moving (its throttle)
 
     def now(self) -> float:
         return trio.current_time() - self.t0
@@ -118,6 +122,16 @@ class LoadSession:
             await c.connect(nursery, host, port, self.cfg.timeout_s)
         for c in self.clients:
             await c.wait_ready(self.cfg.timeout_s)
+        self._server_rate(self.clients[0].link.ready_event)
+
+    def _server_rate(self, ready: Ready | None) -> None:
+        """Count "expected" on the server's own tick rate and throttle (READY), not on what was asked for."""
+        if ready is None:
+            return
+        self.rate, self.throttle = ready.tick_hz, ready.throttle
+        self.every = ticks_per_update(ready.tick_hz, ready.throttle)
+        self.tracker.rate = self.rate
+        self.tracker.grace = GRACE_TICKS * self.every / self.rate
 
     async def grow(self, n: int) -> None:
         """Create soldiers up to ``n`` (spread over the connections), subscribe, send the first requests."""
@@ -207,12 +221,13 @@ class LoadSession:
 
     def summary(self, t0: float, t1: float) -> dict[str, Any]:
         arr = self.tracker.arrays(self.now())
-        out = summarise(arr, self.cfg.rate_hz, t0, t1, self.cfg.clients)
+        out = summarise(arr, self.rate, t0, t1, self.cfg.clients, self.every)
+        out.update(ready_tick_hz=self.rate, ready_throttle=self.throttle, ticks_per_update=self.every)
         out["probes_pending"] = int((~np.isnan(self.tracker.probe_at)).sum())
         return out
 
     def series(self, t0: float, t1: float) -> dict[str, list[float]]:
-        return series(self.tracker.arrays(self.now()), self.cfg.rate_hz, t0, t1, self.cfg.clients)
+        return series(self.tracker.arrays(self.now()), self.rate, t0, t1, self.cfg.clients, every=self.every)
 
 
 def _header(cfg: LoadTestConfig, n: int) -> dict[str, Any]:

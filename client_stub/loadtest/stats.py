@@ -9,8 +9,9 @@ coalesces them (its writers are latest-wins) delivers fewer.
 
 Everything is counted on the server's **tick grid**. Every JOINT_UPDATES frame carries the server's tick
 ``T``; a tick's grid time is ``a + T / rate``, ``a`` being the smallest ``arrival − T / rate`` seen in the
-window (the fastest delivery); ``arrival − grid time`` is a row's *delivery* time (how long after its tick
-it arrived, beyond the fastest). Expected updates = for every grid tick in the window, the steady movers at
+window (the fastest delivery; a tick's arrival is its last row's, see :func:`grid_offset`); ``arrival − grid
+time`` is a row's *delivery* time (how long after its tick it arrived, beyond the fastest; negative for an
+answer sent before its tick). Expected updates = for every grid tick in the window, the steady movers at
 that tick's grid time; received = rows of steady movers whose tick's grid time is in the window. A row
 arriving more than one period after its grid time is *late* (the server fell behind real time).
 
@@ -200,12 +201,17 @@ class Tracker:
 
 
 def grid_offset(row_time: np.ndarray, row_tick: np.ndarray, rate: float, t0: float, t1: float) -> float:
-    """``a`` of the tick grid ``a + T / rate``: the smallest arrival − T/rate among rows that arrived in
-    ``[t0, t1)`` (nan if none)."""
+    """``a`` of the tick grid ``a + T / rate``: the smallest ``arrival(T) − T/rate`` over the ticks whose rows
+    arrived in ``[t0, t1)`` (nan if none), ``arrival(T)`` the *last* arrival of a row of tick ``T``: the
+    server may send a tick's update of a soldier with a new request before the tick (an answer, labelled
+    with the tick it anticipates), so only a tick's last rows say when the tick itself went out."""
     sel = (row_time >= t0) & (row_time < t1)
     if not sel.any():
         return math.nan
-    return float(np.min(row_time[sel] - row_tick[sel] / rate))
+    ticks, inv = np.unique(row_tick[sel], return_inverse=True)
+    last = np.full(len(ticks), -np.inf)
+    np.maximum.at(last, inv, row_time[sel])
+    return float(np.min(last - ticks / rate))
 
 
 def grid_ticks(lo: np.ndarray, hi: np.ndarray, a: float, rate: float) -> np.ndarray:
@@ -254,9 +260,13 @@ def _round(x: float, nd: int = 3) -> float | None:
     return None if x is None or not math.isfinite(x) else round(float(x), nd)
 
 
-def summarise(arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nconn: int) -> dict:
+def summarise(
+    arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nconn: int, every: int = 1
+) -> dict:
     """The steady-state figures of the window ``[t0, t1)`` (see the module docstring). Counts are per
-    subscription: with every connection subscribed to every soldier, a mover counts once per connection."""
+    subscription: with every connection subscribed to every soldier, a mover counts once per connection.
+    ``every``: the server's ticks per update of one soldier (``protocol.events.ticks_per_update`` of READY's
+    ``tick_hz`` and ``throttle``): a steady mover is expected in one tick of ``every``."""
     dur = t1 - t0
     a = grid_offset(arr["row_time"], arr["row_tick"], rate, t0, t1)
     if math.isfinite(a):
@@ -270,7 +280,7 @@ def summarise(arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nco
         rows_in = int(sel.sum())
         lo = np.maximum(arr["ep_start"], t0)
         hi = np.minimum(arr["ep_end"], t1)
-        expected = int(grid_ticks(lo, hi, a, rate).sum())
+        expected = round(grid_ticks(lo, hi, a, rate).sum() / every)
         ticks = arr["row_tick"][sel]
         tick_span = int(ticks.max() - ticks.min() + 1) if len(ticks) else 0
     else:
@@ -284,7 +294,7 @@ def summarise(arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nco
     psel = (arr["probe_sent"] >= t0) & (arr["probe_sent"] < t1 - 2 * SETTLE_S)
     req = arr["requests"]
     rsel = (req[:, 0] >= t0) & (req[:, 0] < t1) if len(req) else np.zeros(0, bool)
-    mover_ticks = expected / max(1, round(dur * rate))
+    mover_ticks = expected * every / max(1, round(dur * rate))
     return {
         "updates_per_s": _round(received / dur, 1),
         "expected_updates_per_s": _round(expected / dur, 1),
@@ -314,7 +324,13 @@ def summarise(arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nco
 
 
 def series(
-    arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nconn: int, bin_s: float = 1.0
+    arr: dict[str, np.ndarray],
+    rate: float,
+    t0: float,
+    t1: float,
+    nconn: int,
+    bin_s: float = 1.0,
+    every: int = 1,
 ) -> dict:
     """Per-bin throughput (received vs expected steady-mover updates per second), probe latency p50/p99 and
     server CPU, for plotting. Times are seconds from ``t0``."""
@@ -333,7 +349,7 @@ def series(
         for k in range(nb):
             lo = np.maximum(arr["ep_start"], edges[k])
             hi = np.minimum(arr["ep_end"], edges[k + 1])
-            exp[k] = grid_ticks(lo, hi, a, rate).sum()
+            exp[k] = grid_ticks(lo, hi, a, rate).sum() / every
     width = np.diff(edges)
     p50 = np.full(nb, np.nan)
     p99 = np.full(nb, np.nan)

@@ -20,6 +20,12 @@ no ``run_*`` clips → no running; no ``bwalk_*`` → backward walking plays the
 clip has the horizontal travel of its figure channels removed (a linear ramp from the first to the last frame,
 only where the root site never changes) — every step then starts and ends over the same spot.
 
+**Weapon variants** (issue 16): a weapon whose figure the three graphs do not drive (``M16.fig`` beside graphs
+made for ``AK_47.fig``) is played from its own three graphs (``soldier_low_m16.graph`` …), which must have
+the same postures, arcs and channelset files in the same order (the file names may differ by the weapon's
+suffix, the frame counts must not): clip ids, durations, ground speeds and paths stay shared, only the
+channels each set samples differ. ``weapon_graphs`` maps the weapon type to its graphs.
+
 **Ground speed** (playback rate = speed / ground speed): the channelset's ``ground_speed`` field (cm/s) if
 present, else ``stride_length`` (cm) / duration, else the travel measured above / duration, else
 :data:`DEFAULT_GROUND_SPEED` for the clip's family (m/s).
@@ -29,7 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,6 +123,7 @@ class MotionLibrary:
         crawl: LoadedPostureGraph | None = None,
         *,
         in_place: bool = True,
+        weapon_graphs: Mapping[str, GraphTriple] | None = None,
     ) -> None:
         if not figure_sets:
             raise ValueError("a motion library needs at least one figure set")
@@ -126,13 +133,7 @@ class MotionLibrary:
         self._node = {p: i for i, p in enumerate(self.postures)}
         for i, p in enumerate(self.posture_names):  # a posture known only by variants: its first one
             self._node.setdefault(p, i)
-        entries: list[tuple[str, int, Channelset, str]] = []  # (clip name, graph, channelset, stem)
-        for gi, loaded in ((GRAPH_STATIC, static), (GRAPH_LOCO, loco), (GRAPH_CRAWL, crawl)):
-            if loaded is None:
-                continue
-            for fname, cs in zip(loaded.graph.files, loaded.channelsets, strict=True):
-                stem = clip_stem(fname)
-                entries.append((f"{loaded.name}/{stem}", gi, cs, stem))
+        entries = _entries((static, loco, crawl))
         infos: list[ClipInfo] = []
         prepared: list[Channelset] = []
         ref_type = protofiletype(figure_sets[0][0])
@@ -149,9 +150,14 @@ class MotionLibrary:
         self.clip_names = [c.name for c in infos]
         self.sets: list[ClipLibrary] = []
         self.set_keys: list[tuple[str, str]] = []
+        variants = {
+            w: _variant_channelsets(entries, _entries(g), w, ref_type, in_place)
+            for w, g in (weapon_graphs or {}).items()
+        }
         for figs in figure_sets:
             lib = ClipLibrary(list(figs))
-            lib.extend(prepared)
+            weapon = protofiletype(figs[1]) if len(figs) > 1 else ""
+            lib.extend(variants.get(weapon, prepared))
             if self.sets and (lib.ndof, lib.nfig) != (self.sets[0].ndof, self.sets[0].nfig):
                 raise ValueError(
                     f"figure set {lib.name!r} has {lib.ndof} DOFs / {lib.nfig} figures, "
@@ -324,6 +330,50 @@ class MotionLibrary:
     @property
     def nbytes(self) -> int:
         return sum(s.nbytes for s in self.sets)
+
+
+GraphTriple = tuple[LoadedPostureGraph, LoadedPostureGraph | None, LoadedPostureGraph | None]
+
+
+def _entries(graphs: GraphTriple) -> list[tuple[str, int, Channelset, str]]:
+    """(clip name, graph, channelset, file stem) of every channelset of the three graphs, in clip-id order."""
+    out: list[tuple[str, int, Channelset, str]] = []
+    for gi, loaded in zip((GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL), graphs, strict=True):
+        if loaded is None:
+            continue
+        for fname, cs in zip(loaded.graph.files, loaded.channelsets, strict=True):
+            stem = clip_stem(fname)
+            out.append((f"{loaded.name}/{stem}", gi, cs, stem))
+    return out
+
+
+def _variant_channelsets(
+    base: list[tuple[str, int, Channelset, str]],
+    variant: list[tuple[str, int, Channelset, str]],
+    weapon: str,
+    ref_type: str,
+    in_place: bool,
+) -> list[Channelset]:
+    """A weapon variant's channelsets in the base clip order, named as the base clips (ValueError unless the
+    graphs match clip for clip: same graph, same stem but for the weapon's suffix, same frames and rate)."""
+    if len(variant) != len(base):
+        raise ValueError(f"the {weapon} graphs have {len(variant)} channelsets, the base graphs {len(base)}")
+    suffix = weapon_suffix(weapon)
+    out: list[Channelset] = []
+    for (name, gi, cs0, stem0), (_, gv, cs, stem) in zip(base, variant, strict=True):
+        same_stem = stem.replace(suffix, "", 1) == stem0
+        if gv != gi or not same_stem or (cs.nframes, cs.fps) != (cs0.nframes, cs0.fps):
+            raise ValueError(f"the {weapon} clip {stem!r} does not match the base clip {stem0!r}")
+        if gi != GRAPH_STATIC and in_place:
+            cs, _ = _strip_travel(cs, ref_type)
+        out.append(dataclasses.replace(cs, name=name))
+    return out
+
+
+def weapon_suffix(weapon: str) -> str:
+    """What a weapon's graph and channelset names carry: ``"M16.fig"`` → ``"_m16"``."""
+    stem = weapon.replace("\\", "/").rsplit("/", 1)[-1].removesuffix(".fig")
+    return "_" + "".join(c if c.isalnum() else "_" for c in stem.lower())
 
 
 def _soldier_channel(cs: Channelset, ref_type: str) -> int:

@@ -149,6 +149,7 @@ class SoldierManager:
             "events": 0,
             "clip_ends": 0,
             "unreachable": 0,
+            "answers": 0,  # out-of-cycle updates (answer)
         }
 
     # -- settings (one frozen value; the JCL commands replace it) ----------------------------------------
@@ -321,6 +322,7 @@ class SoldierManager:
             tb.end[r] = tb.start[r] + new_dur
         hp = ~event & (mode == _IDLE) & ~moving & heading_changed
         tb.heading_pending[i[hp]] = True
+        tb.requested[i[event | hp | rescale]] = True  # what :meth:`answer` answers between ticks
         ev = np.flatnonzero(event)
         if len(ev):
             self.stats["events"] += len(ev)
@@ -603,8 +605,10 @@ class SoldierManager:
     def tick(self, now: float) -> TickUpdate:
         """Advance every soldier to ``now`` and return the poses of those due for an update.
 
-        A soldier is due when ``throttle`` seconds have passed since its last update and its pose may have
-        changed (playing a clip, cross-fading, a new resting pose, or a pending heading-only change).
+        A soldier is due when its last update by a tick is at least ``settings.min_interval`` old (the
+        throttle as a rate cap on the tick grid; an :meth:`answer` between ticks does not move the soldier
+        off that grid) and its pose may have changed (playing a clip, cross-fading, a new resting
+        pose, or a pending heading-only change).
         """
         t0 = time.perf_counter()
         self.ticks += 1
@@ -623,10 +627,48 @@ class SoldierManager:
                 | tb.heading_pending[live]
                 | (tb.blend_len[live] > 0)
             )
-            due = live[active & (now - tb.last_sent[live] >= self._settings.throttle - _EPS_T)]
+            due = live[active & self._due(tb.tick_sent[live], now)]
         else:
             due = live
-        joints, figures, clips, frames = self._pose(due)
+        out = self._emit(due, now)
+        tb.tick_sent[due] = now
+        dt = time.perf_counter() - t0
+        self.stats["tick_seconds"] += dt
+        self.stats["last_tick_seconds"] = dt
+        return out
+
+    def answer(self, now: float, at: float | None = None) -> TickUpdate:
+        """An out-of-cycle update, between ticks, for just the soldiers whose requests changed what they show.
+
+        Requests are applied when they arrive (:meth:`apply_requests`: a new clip, rate or heading), so the
+        pose the next tick would send is known now: this releases that update early. The soldiers are
+        sampled at ``at`` (the next tick's time; never before ``now``), so the update that reflects a request
+        shows its motion already (a posture change eases in: at the request instant the pose is still the old
+        one on the wire) and the tick at ``at`` finds nothing new to send. It is the next tick's update, so
+        the throttle is the tick's: a soldier not due at ``at`` waits for its tick. Nothing in every-frame
+        mode (its clock steps one frame per tick).
+        """
+        tb = self.table
+        at = now if at is None else max(now, at)
+        idx = np.flatnonzero(tb.requested).astype(np.int64)
+        if self._settings.every_frame or len(idx) == 0:
+            return self._emit(idx[:0], now)
+        tb.clock[idx] = np.maximum(tb.clock[idx], now)
+        self._advance(idx)
+        due = idx[self._due(tb.tick_sent[idx], at)]
+        self.stats["answers"] += len(due)
+        out = self._emit(due, at)
+        tb.tick_sent[due] = at
+        return out
+
+    def _due(self, tick_sent: np.ndarray, at: float) -> np.ndarray:
+        """The throttle: a tick's update ``min_interval`` after the last one, or that same tick's again."""
+        return (at - tick_sent >= self._settings.min_interval - _EPS_T) | (tick_sent >= at - _EPS_T)
+
+    def _emit(self, due: np.ndarray, now: float) -> TickUpdate:
+        """The poses of ``due`` at ``now`` as a :class:`TickUpdate`; clears the flags that asked for it."""
+        tb = self.table
+        joints, figures, clips, frames = self._pose(due, now)
         heading_only = tb.heading_pending[due] & ~tb.dirty[due] & (tb.mode[due] == _IDLE)
         heading_only &= tb.blend_len[due] <= 0
         out = TickUpdate(
@@ -635,9 +677,7 @@ class SoldierManager:
         tb.last_sent[due] = now
         tb.dirty[due] = False
         tb.heading_pending[due] = False
-        dt = time.perf_counter() - t0
-        self.stats["tick_seconds"] += dt
-        self.stats["last_tick_seconds"] = dt
+        tb.requested[due] = False
         self.stats["updates"] += len(due)
         return out
 
@@ -659,12 +699,15 @@ class SoldierManager:
             self.ticks,
         )
 
-    def _pose(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Poses shown now by soldiers ``idx``: one sample per figure set, heading offsets, cross-fades."""
+    def _pose(
+        self, idx: np.ndarray, at: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Poses shown by soldiers ``idx`` at their clocks (or at ``at``, if later: an :meth:`answer`): one
+        sample per figure set, heading offsets, cross-fades."""
         tb, lib = self.table, self.library
         n = len(idx)
         clip = tb.clip[idx]
-        clock = tb.clock[idx]
+        clock = tb.clock[idx] if at is None or self._settings.every_frame else np.maximum(tb.clock[idx], at)
         args = (clip, tb.start[idx], tb.direc[idx], tb.dur[idx], clock)
         if len(lib.sets) == 1 or n == 0:
             s = lib.sets[0].sample(*args, interpolate=self._settings.interpolate)

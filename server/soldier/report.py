@@ -83,6 +83,7 @@ def status(m: SoldierManager) -> dict[str, Any]:
         "events": m.stats["events"],
         "clip_ends": m.stats["clip_ends"],
         "unreachable": m.stats["unreachable"],
+        "answers": m.stats["answers"],  # updates sent between ticks (SoldierManager.answer)
         "throttle": m.settings.throttle,
         "every_frame": m.settings.every_frame,
         "heading_offsets": list(m.settings.heading_offsets),

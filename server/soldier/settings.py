@@ -26,6 +26,7 @@ class SoldierSettings:
     """What ``set_ttes_*`` and ``set_channelset_parameters`` set; times in seconds, speeds in m/s."""
 
     throttle: float = 1 / 30  # set_ttes_soldier_throttle: at most one update per soldier per throttle
+    tick_period: float = 1 / 30  # the server's tick (1 / tick_hz): the throttle is a rate cap on this grid
     walk_run_threshold: float = 3.0  # set_ttes_walk_run_threshold: faster than this runs
     heading_offsets: tuple[float, float, float] = (0.0, 0.0, 0.0)  # set_ttes_heading_offset: compass degrees
     blend_time: float = 0.2  # set_ttes_blend_time: cross-fade when a step is cancelled
@@ -35,6 +36,7 @@ class SoldierSettings:
 
     def __post_init__(self) -> None:
         _seconds("throttle", self.throttle)
+        _seconds("tick period", self.tick_period, positive=True)
         _seconds("walk/run threshold", self.walk_run_threshold, positive=True)
         _seconds("blend time", self.blend_time)
         offsets = tuple(self.heading_offsets)
@@ -43,7 +45,7 @@ class SoldierSettings:
         ):
             raise ValueError(f"heading offsets must be three finite numbers, not {self.heading_offsets!r}")
         object.__setattr__(self, "heading_offsets", tuple(float(v) for v in offsets))
-        for name in ("throttle", "walk_run_threshold", "blend_time"):
+        for name in ("throttle", "tick_period", "walk_run_threshold", "blend_time"):
             object.__setattr__(self, name, float(getattr(self, name)))
         for flag in ("every_frame", "interpolate", "record_clips"):
             if not isinstance(getattr(self, flag), bool):
@@ -52,3 +54,13 @@ class SoldierSettings:
     def replace(self, **changes: Any) -> SoldierSettings:
         """A validated copy with ``changes`` (ValueError names the bad setting; ``self`` is unchanged)."""
         return dataclasses.replace(self, **changes)
+
+    @property
+    def min_interval(self) -> float:
+        """The shortest gap between two updates of one soldier: ``throttle - tick_period / 2``.
+
+        The throttle is a *rate cap*, not a tick count: ticks land on a grid, so a soldier is due when its
+        last update is at least this old. 0.04 s on a 30 Hz tick gives every tick (30 updates/s, seed 002
+        3.6 "don't send more than 30 updates per second"), 0.1 s gives one tick in three.
+        """
+        return self.throttle - self.tick_period / 2

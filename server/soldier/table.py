@@ -40,9 +40,11 @@ _COLUMNS: dict[str, tuple[type | str, tuple[int, ...], float]] = {
     "speed": (np.float64, (), 0.0),  # horizontal m/s
     "backward": (np.bool_, (), False),
     # output bookkeeping
-    "last_sent": (np.float64, (), -math.inf),
+    "last_sent": (np.float64, (), -math.inf),  # last update of either kind (tick or answer)
+    "tick_sent": (np.float64, (), -math.inf),  # last update by a tick: what the tick's throttle counts from
     "dirty": (np.bool_, (), False),  # pose changed while resting: send it once
     "heading_pending": (np.bool_, (), False),
+    "requested": (np.bool_, (), False),  # a request changed what it shows since its last update
     "blend_t0": (np.float64, (), 0.0),
     "blend_len": (np.float64, (), 0.0),  # 0 = not cross-fading
     "created": (np.float64, (), 0.0),
@@ -92,8 +94,10 @@ class SoldierTable:
     speed: np.ndarray
     backward: np.ndarray
     last_sent: np.ndarray
+    tick_sent: np.ndarray
     dirty: np.ndarray
     heading_pending: np.ndarray
+    requested: np.ndarray
     blend_t0: np.ndarray
     blend_len: np.ndarray
     created: np.ndarray

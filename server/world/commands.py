@@ -205,7 +205,8 @@ COMMANDS: tuple[Command, ...] = (
         "set_ttes_soldier_throttle",
         "seconds",
         "3.6",
-        "the soldier manager setting throttle: at most one update per soldier per `seconds`",
+        "the soldier manager setting throttle: a rate cap, at most one update per soldier per `seconds` (due"
+        " at a tick when its last update is at least `seconds` − ½ tick old: 0.04 at 30 Hz is every tick)",
         (F,),
     ),
     Command(

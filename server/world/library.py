@@ -9,6 +9,12 @@ The *figure sets* (soldier figure type + weapon type) the library is bound to ar
 the figures of every posture graph bound from ``soldier_low`` (``bind_posture_graph``), else one figure of
 each type the graphs drive found in the environment (every soldier type × every weapon type), plus the
 figures of the ``create_soldier_state`` that asked for the library.
+
+**Weapon variants** (issue 16): a rifle model the three graphs do not drive (``M16.fig``; the models are
+``protocol.dis.RIFLE_FIGURES``) whose own graphs are on the search path (``soldier_low_m16.graph``,
+``soldier_loco_m16.graph``, ``soldier_crawl_m16.graph``) is bound too: every soldier figure type of the sets
+above with that weapon (its figure from the environment, else its ``.fig`` file) plays those graphs, so a
+client may create soldiers with either rifle.
 """
 
 from __future__ import annotations
@@ -18,11 +24,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 from peabody.model import Figure
+from protocol.dis import RIFLE_FIGURES
+from server.logging import get_logger
 from server.motion.binding import protofiletype
 from server.motion.errors import BindingError, PostureGraphError
 from server.motion.posture_change import LoadedPostureGraph
-from server.soldier.library import MotionLibrary
+from server.soldier.library import GraphTriple, MotionLibrary, weapon_suffix
 from server.world.store import MotionStore, StoreError
+
+log = get_logger("library")
 
 # (name, file) of the static, loco and crawl graphs
 GRAPHS: tuple[tuple[str, str], ...] = tuple(
@@ -90,7 +100,61 @@ def build_library(
     sets = figure_sets(store, types, wanted)
     if not sets:
         raise StoreError(f"no soldier figure of a type the posture graphs drive ({sorted(types)}) is loaded")
+    variants = weapon_variants(store, resolve, types)
+    if variants:
+        try:
+            return MotionLibrary(
+                static,
+                _with_weapons(sets, variants),
+                loco,
+                crawl,
+                weapon_graphs={w: g for w, (g, _) in variants.items()},
+            )
+        except (BindingError, PostureGraphError, ValueError) as exc:  # serve the base weapon rather than none
+            log.warning("weapon_variants_skipped", weapons=sorted(variants), error=str(exc))
     try:
         return MotionLibrary(static, sets, loco, crawl)
     except (BindingError, PostureGraphError, ValueError) as exc:
         raise StoreError(f"binding the posture graphs: {exc}") from None
+
+
+def _with_weapons(
+    sets: list[list[Figure]], variants: dict[str, tuple[GraphTriple, Figure]]
+) -> list[list[Figure]]:
+    """``sets`` plus each soldier figure type in them with each variant weapon, last (table ids stay)."""
+    out = list(sets)
+    have = {tuple(protofiletype(f) for f in s) for s in sets}
+    soldiers = {protofiletype(s[0]): s[0] for s in sets}
+    for weapon, (_, figure) in variants.items():
+        for stype, soldier in soldiers.items():
+            if (stype, weapon) not in have:
+                out.append([soldier, figure])
+    return out
+
+
+def weapon_variants(
+    store: MotionStore, resolve: Callable[[str], Path], driven: set[str]
+) -> dict[str, tuple[GraphTriple, Figure]]:
+    """Per rifle model the base graphs do not drive but whose own graphs exist: its graphs and a figure."""
+    out: dict[str, tuple[GraphTriple, Figure]] = {}
+    for weapon in RIFLE_FIGURES:
+        if weapon in driven:
+            continue
+        suffix = weapon_suffix(weapon)
+        static, loco, crawl = (_graph(store, resolve, g + suffix, f"{g}{suffix}.graph") for g, _ in GRAPHS)
+        if static is None:
+            continue
+        figure = next((f for f in store.environment.figures.values() if protofiletype(f) == weapon), None)
+        if figure is None:
+            path = resolve(weapon)
+            if not path.is_file():
+                continue
+            from peabody.language import PeabodyError
+            from peabody.loader import read_figure
+
+            try:
+                figure = read_figure(path, load_psurfs=False)
+            except (PeabodyError, OSError) as exc:
+                raise StoreError(f"weapon figure {weapon}: {exc}") from None
+        out[weapon] = ((static, loco, crawl), figure)
+    return out

@@ -1,7 +1,8 @@
 """`ttes loadtest`: drive N soldiers over C connections with a realistic DIS-rate mix and measure the server.
 
 Measures over the steady state: steady-mover updates received per second against those expected (every
-walking, running or crawling soldier in every tick), request -> first reflecting update latency (p50, p99,
+walking, running or crawling soldier in every tick the server's throttle lets it have: READY's tick rate
+and throttle), request -> first reflecting update latency (p50, p99,
 max), bytes per soldier update, dropped and late updates, and the server's CPU (when it was spawned, or
 given by --server-pid). --ramp grows N until the server falls behind and reports the largest N it
 sustained. Loopback by default; every loop is bounded in count and time.
@@ -133,7 +134,9 @@ def format_result(r: dict) -> str:
             f"ttes loadtest: {r['soldiers']} soldiers, {r['clients']} clients, {r['rate_hz']:g} Hz, "
             f"{r['seconds']:g} s steady state ({r.get('mode')} mode)",
             f"  steady-mover updates/s  {f('updates_per_s')} of {f('expected_updates_per_s')} expected "
-            f"({f('delivered_pct', '%')}; {f('steady_movers_mean')} movers on average)",
+            f"({f('delivered_pct', '%')}; {f('steady_movers_mean')} movers on average; server "
+            f"{f('ready_tick_hz', ' Hz')}, throttle {f('ready_throttle', ' s')}: one update per "
+            f"{f('ticks_per_update')} tick(s))",
             f"  all soldier updates/s   {f('all_updates_per_s')} "
             f"(nominal N x rate = {f('nominal_updates_per_s')})",
             f"  latency request->update p50 {f('latency_ms_p50', ' ms')}, p99 {f('latency_ms_p99', ' ms')}, "
