@@ -58,3 +58,40 @@ def test_table_is_vectorised_and_closed() -> None:
         out = next_states(states, np.full(len(S), cond))
         assert out.shape == states.shape and set(out.tolist()) <= {int(s) for s in S}
     assert (NEXT[S.NONE] == S.NONE).all()
+
+
+def test_side_steps_repeat_and_any_other_direction_stops_them() -> None:
+    from server.soldier.locomotion import Side, direction
+
+    back, side = direction(np.array([1.0, -1.0, 0.2, 0.2, -0.5]), np.array([0.2, 0.1, 1.0, -1.0, 0.0]))
+    assert back.tolist() == [False, True, False, False, True]
+    assert side.tolist() == [Side.AHEAD, Side.AHEAD, Side.LEFT, Side.RIGHT, Side.AHEAD]
+    _, no_side = direction(np.array([0.2]), np.array([1.0]), can_side=False)
+    assert no_side.tolist() == [Side.AHEAD]
+    assert start_state(Movement.WALK, False, False, side=Side.LEFT) == S.SIDESTEP_L
+    assert start_state(Movement.CRAWL, False, False, side=Side.LEFT) == S.CRAWL_START
+
+    def step(state: S, side: int, moving: bool = True) -> S:
+        c = conditions(
+            np.array([state]),
+            np.array([moving]),
+            np.array([False]),
+            np.array([False]),
+            True,
+            np.array([side], np.int8),
+        )
+        return S(int(next_states(np.array([state]), c)[0]))
+
+    assert step(S.SIDESTEP_L, Side.LEFT) == S.SIDESTEP_L
+    assert step(S.SIDESTEP_L, Side.RIGHT) == S.NONE  # back to the base posture, then the other way
+    assert step(S.SIDESTEP_R, Side.AHEAD) == S.NONE
+    assert step(S.SIDESTEP_R, Side.RIGHT, moving=False) == S.NONE
+    assert step(S.WALK_CYCLE, Side.LEFT) == S.WALK_END
+
+
+def test_walk_run_hysteresis() -> None:
+    from server.soldier.locomotion import is_fast
+
+    states = np.array([S.WALK_CYCLE, S.RUN_CYCLE, S.WALK_CYCLE, S.RUN_CYCLE, S.WALK2RUN])
+    speeds = np.array([2.2, 2.2, 2.6, 1.8, 2.1])
+    assert is_fast(states, speeds, 2.4, 0.4).tolist() == [False, True, True, False, True]

@@ -1,8 +1,10 @@
-"""The motion library a soldier manager plays from: three posture graphs bound into one ClipLibrary per set.
+"""The motion library a soldier manager plays from: the posture graphs bound into one ClipLibrary per set.
 
 Seed 002, 3.4.2 and 3.6: Jack loads ``soldier_low.graph`` (static posture transitions), ``soldier_loco.graph``
 (walking and running) and ``soldier_crawl.graph`` (crawling); the last two are only containers of channelsets.
-:class:`MotionLibrary` puts every channelset of the three into one
+Issue 11 added two more containers, loaded when present: ``soldier_turn.graph`` (turns in place and
+side-steps, clips that move the soldier: ``end_offset``) and ``soldier_react.graph`` (recoil and flinch).
+:class:`MotionLibrary` puts every channelset of the five into one
 :class:`~server.motion.sampling.ClipLibrary` per *figure set* (soldier figure + weapon, e.g. ``DI.fig`` +
 ``AK_47.fig``), always in the same order so a clip id means the same clip in every set, and precomputes what
 the manager needs per clip: which graph it came from (for the heading offsets), its stored duration, its
@@ -20,8 +22,8 @@ no ``run_*`` clips → no running; no ``bwalk_*`` → backward walking plays the
 clip has the horizontal travel of its figure channels removed (a linear ramp from the first to the last frame,
 only where the root site never changes) — every step then starts and ends over the same spot.
 
-**Weapon variants** (issue 16): a weapon whose figure the three graphs do not drive (``M16.fig`` beside graphs
-made for ``AK_47.fig``) is played from its own three graphs (``soldier_low_m16.graph`` …), which must have
+**Weapon variants** (issue 16): a weapon whose figure the graphs do not drive (``M16.fig`` beside graphs
+made for ``AK_47.fig``) is played from its own graphs (``soldier_low_m16.graph`` …), which must have
 the same postures, arcs and channelset files in the same order (the file names may differ by the weapon's
 suffix, the frame counts must not): clip ids, durations, ground speeds and paths stay shared, only the
 channels each set samples differ. ``weapon_graphs`` maps the weapon type to its graphs.
@@ -40,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from peabody.fk import FigureKinematics
 from peabody.model import Figure
 from server.motion.binding import protofiletype
 from server.motion.channelset import Channelset
@@ -48,10 +51,18 @@ from server.motion.posture_change import LoadedPostureGraph
 from server.motion.posture_graph import posture_of
 from server.motion.sampling import ClipLibrary
 from server.soldier.locomotion import CLIP_OF, NSTATES
+from server.soldier.root_motion import (
+    TravelTable,
+    feet_points,
+    has_feet,
+    linear_travel,
+    stance_contact,
+    stance_travel,
+)
 from server.soldier.state import CRAWL_NODE, STAND_STOWED, LocoState
 
-GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL = 0, 1, 2
-GRAPH_NAMES = ("static", "loco", "crawl")
+GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL, GRAPH_TURN, GRAPH_REACT = 0, 1, 2, 3, 4
+GRAPH_NAMES = ("static", "loco", "crawl", "turn", "react")
 
 # m/s per clip family, used when a locomotion clip has no stride/ground-speed data and no measurable travel
 DEFAULT_GROUND_SPEED: dict[str, float] = {
@@ -113,7 +124,7 @@ class ClipInfo:
 
 
 class MotionLibrary:
-    """Three posture graphs bound to one or more figure sets as ClipLibraries with shared clip ids."""
+    """The posture graphs bound to one or more figure sets as ClipLibraries with shared clip ids."""
 
     def __init__(
         self,
@@ -122,27 +133,30 @@ class MotionLibrary:
         loco: LoadedPostureGraph | None = None,
         crawl: LoadedPostureGraph | None = None,
         *,
+        turn: LoadedPostureGraph | None = None,
+        react: LoadedPostureGraph | None = None,
         in_place: bool = True,
-        weapon_graphs: Mapping[str, GraphTriple] | None = None,
+        weapon_graphs: Mapping[str, GraphSet] | None = None,
     ) -> None:
         if not figure_sets:
             raise ValueError("a motion library needs at least one figure set")
-        self.static, self.loco, self.crawl = static, loco, crawl
+        self.static, self.loco, self.crawl, self.turn, self.react = static, loco, crawl, turn, react
         self.postures: list[str] = list(static.graph.postures)  # node names (``DEAD@ststow``: a variant)
         self.posture_names: list[str] = [posture_of(p) for p in self.postures]  # what each node shows
         self._node = {p: i for i, p in enumerate(self.postures)}
         for i, p in enumerate(self.posture_names):  # a posture known only by variants: its first one
             self._node.setdefault(p, i)
-        entries = _entries((static, loco, crawl))
+        entries = _entries((static, loco, crawl, turn, react))
         infos: list[ClipInfo] = []
         prepared: list[Channelset] = []
         ref_type = protofiletype(figure_sets[0][0])
         for name, gi, cs, stem in entries:
             travel, gs = 0.0, 0.0
-            if gi != GRAPH_STATIC:
+            if gi not in (GRAPH_STATIC, GRAPH_REACT):
                 gs_travel = _travel(cs, ref_type)
                 gs = _ground_speed(cs, gs_travel, _family(_lookup_keys(stem)[-1]))
-                cs, travel = _strip_travel(cs, ref_type) if in_place else (cs, 0.0)
+                turns = cs.end_offset is not None and cs.end_offset[2] != 0.0  # its move is the entity's
+                cs, travel = _strip_travel(cs, ref_type) if in_place and not turns else (cs, 0.0)
             infos.append(ClipInfo(name, gi, cs.duration, cs.nframes, cs.fps, gs, travel))
             prepared.append(dataclasses.replace(cs, name=name))
         self.clips = infos
@@ -173,8 +187,29 @@ class MotionLibrary:
         self.clip_nframes = np.array([c.nframes for c in infos], np.int64)
         self.clip_ground_speed = np.array([c.ground_speed for c in infos], np.float64)
         self.clip_frame_time = self.clip_duration / np.maximum(self.clip_nframes - 1, 1)
+        # end_offset (x cm, z cm, yaw degrees) of clips that move the soldier (turns, side-steps), else 0
+        self.clip_end_offset = np.array(
+            [tuple(cs.end_offset) if cs.end_offset is not None else (0.0, 0.0, 0.0) for cs in self.sources],
+            np.float64,
+        ).reshape(-1, 3)
+        # turns in place from STAND_STOWED: (clip id, compass degrees it turns, clockwise positive)
+        self.turn_clips: list[tuple[int, float]] = [
+            (cid, -float(self.clip_end_offset[cid, 2]))
+            for cid, c in enumerate(infos)
+            if c.graph == GRAPH_TURN and self.clip_end_offset[cid, 2] != 0.0
+        ]
         self.static_clip = list(range(len(static.graph.files)))  # static clips come first, by token
         self._loco_table(entries)
+        # reactions without a posture change: (posture, "recoil" | "flinch") -> clip id (soldier_react.graph)
+        self.reaction: dict[tuple[str, str], int] = {}
+        if react is not None:
+            base = next(k for k, e in enumerate(entries) if e[1] == GRAPH_REACT)
+            for arc in react.graph.arcs:
+                stem = _lookup_keys(clip_stem(react.graph.files[arc.channelset]))[-1]
+                self.reaction.setdefault(
+                    (posture_of(arc.start), stem.rsplit("_", 1)[-1]), base + arc.channelset
+                )
+        self.travel = self._travel_table(figure_sets[0][0])
         self._rest_poses()
         self._paths: dict[tuple[int, int], tuple[PathStep, ...] | None] = {}
         self._variant_goals()
@@ -183,14 +218,20 @@ class MotionLibrary:
     def _loco_table(self, entries: list[tuple[str, int, Channelset, str]]) -> None:
         by_key: dict[tuple[int, str], int] = {}
         for cid, (_, gi, _, stem) in enumerate(entries):
-            if gi == GRAPH_STATIC:
+            if gi in (GRAPH_STATIC, GRAPH_REACT):
                 continue
             for k in _lookup_keys(stem):
                 by_key.setdefault((gi, k), cid)
         self.loco_clip = np.full((NSTATES, 2), -1, np.int32)
         self.loco_dir = np.ones(NSTATES, np.int8)
         for state, (base, footed, direction) in CLIP_OF.items():
-            gi = GRAPH_CRAWL if base.startswith("crawl") else GRAPH_LOCO
+            gi = (
+                GRAPH_CRAWL
+                if base.startswith("crawl")
+                else GRAPH_TURN
+                if base.startswith("side")
+                else GRAPH_LOCO
+            )
             for foot, suffix in ((0, "_l"), (1, "_r")):
                 clip = by_key.get((gi, base + suffix)) if footed else None
                 if clip is None:
@@ -224,9 +265,57 @@ class MotionLibrary:
             ):
                 self.loco_clip[b] = self.loco_clip[f]
                 self.loco_dir[b] = -1
+        self.can_side = self.can_walk and bool(have[[s.SIDESTEP_L, s.SIDESTEP_R]].all())
         self.can_crawl = bool(have[[s.CRAWL_START, s.CRAWL_CYCLE, s.CRAWL_END]].all()) and (
             CRAWL_NODE in self._node
         )
+
+    def _travel_table(self, figure: Figure) -> TravelTable:
+        """Each clip's own travel (:mod:`~server.soldier.root_motion`): measured from the planted feet for
+        walking, running and side-steps, the stride spread evenly for crawling (hands and knees carry it) or
+        a figure without sole sites, none for posture changes, turns (their yaw is the entity's) and
+        reactions."""
+        kin = FigureKinematics(figure)
+        feet = has_feet(kin)
+        first = self.sets[0]
+        sl = first.figure_slice(protofiletype(figure))
+        stepping = {int(c) for c in self.loco_clip.ravel() if c >= 0}
+        curves: list[np.ndarray] = []
+        contacts: list[np.ndarray] = []
+        for cid, info in enumerate(self.clips):
+            n = info.nframes
+            contacts.append(np.zeros((n, 2)))
+            if cid not in stepping or n < 2:
+                curves.append(np.zeros((n, 2)))
+                continue
+            if info.graph == GRAPH_CRAWL or not feet:
+                curves.append(linear_travel(n, self._travel_vector(cid)))
+                continue
+            t = np.arange(n) * self.clip_frame_time[cid]
+            s = first.sample(
+                np.full(n, cid), np.zeros(n), np.ones(n), np.full(n, info.duration), t, interpolate=False
+            )
+            points = feet_points(kin, s.joints[:, sl], s.figures[:, 0])
+            curves.append(stance_travel(points, self.sources[cid].stride_length))
+            contacts[-1] = stance_contact(points)
+        return TravelTable(curves, contacts)
+
+    def _travel_vector(self, cid: int) -> np.ndarray:
+        """(X, Z cm) a clip carries the soldier: its recorded root travel, else its ground speed times its
+        duration along its family's direction (forwards -Z, backwards +Z, left -X, right +X)."""
+        cs = self.sources[cid]
+        d = (
+            (cs.fig_pos[-1, 0] - cs.fig_pos[0, 0]).astype(np.float64)[[0, 2]]
+            if cs.nframes > 1
+            else np.zeros(2)
+        )
+        if math.hypot(*d) >= MIN_TRAVEL_CM:
+            return d
+        stem = self.clip_names[cid].rsplit("/", 1)[-1]
+        direction = {"bwalk": (0.0, 1.0), "sidestep_l": (-1.0, 0.0), "sidestep_r": (1.0, 0.0)}
+        key = next((k for k in direction if stem.startswith(k)), None)
+        unit = np.array(direction[key] if key else (0.0, -1.0))
+        return unit * self.clips[cid].ground_speed * 100.0 * self.clips[cid].duration
 
     def _rest_poses(self) -> None:
         """Per posture node a clip held at the frame that shows the posture (``rest_dir`` +1: last frame)."""
@@ -332,13 +421,21 @@ class MotionLibrary:
         return sum(s.nbytes for s in self.sets)
 
 
-GraphTriple = tuple[LoadedPostureGraph, LoadedPostureGraph | None, LoadedPostureGraph | None]
+# (static, loco, crawl, turn, react): the static graph is required, the others are loaded when present
+GraphSet = tuple[
+    LoadedPostureGraph,
+    LoadedPostureGraph | None,
+    LoadedPostureGraph | None,
+    LoadedPostureGraph | None,
+    LoadedPostureGraph | None,
+]
 
 
-def _entries(graphs: GraphTriple) -> list[tuple[str, int, Channelset, str]]:
-    """(clip name, graph, channelset, file stem) of every channelset of the three graphs, in clip-id order."""
+def _entries(graphs: GraphSet) -> list[tuple[str, int, Channelset, str]]:
+    """(clip name, graph, channelset, file stem) of every channelset of the five graphs, in clip-id order."""
     out: list[tuple[str, int, Channelset, str]] = []
-    for gi, loaded in zip((GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL), graphs, strict=True):
+    order = (GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL, GRAPH_TURN, GRAPH_REACT)
+    for gi, loaded in zip(order, graphs, strict=True):
         if loaded is None:
             continue
         for fname, cs in zip(loaded.graph.files, loaded.channelsets, strict=True):
@@ -364,7 +461,8 @@ def _variant_channelsets(
         same_stem = stem.replace(suffix, "", 1) == stem0
         if gv != gi or not same_stem or (cs.nframes, cs.fps) != (cs0.nframes, cs0.fps):
             raise ValueError(f"the {weapon} clip {stem!r} does not match the base clip {stem0!r}")
-        if gi != GRAPH_STATIC and in_place:
+        turns = cs0.end_offset is not None and cs0.end_offset[2] != 0.0  # stripped exactly as the base clip
+        if gi not in (GRAPH_STATIC, GRAPH_REACT) and in_place and not turns:
             cs, _ = _strip_travel(cs, ref_type)
         out.append(dataclasses.replace(cs, name=name))
     return out

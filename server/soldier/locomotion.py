@@ -3,8 +3,9 @@
 Nodes are clips that play once (:class:`~server.soldier.state.LocoState`); arcs are *conditions* checked when
 a clip ends (seed 002, 3.3 and footnote 1). The condition of a soldier at a clip end is one of
 
-* ``STOP``   — speed back to zero, or the direction (forwards/backwards, from the angle between heading and
-  velocity) no longer matches the gait: play the end step back to the base posture;
+* ``STOP``   — speed back to zero, or the direction (forwards, backwards, left or right: :func:`direction`
+  from the angle between heading and velocity) no longer matches the gait: play the end step back to the
+  base posture;
 * ``FAST``   — speed above the walk/run threshold (forward gaits only: there is no backward running);
 * ``NORMAL`` — keep the gait.
 
@@ -12,7 +13,12 @@ Walking starts with a start step (left or right: the foot after the one that ste
 alternate), then cycles one step per clip (feet alternating) until STOP plays the end step; FAST takes the
 walk→run step into running, and back below the threshold run→walk returns to walking. Starting at a run from
 rest uses ``run_start``, stopping from a run ``run_end``. Crawling has a start, a cycle and an end that is the
-start played backwards. ``NEXT[state, condition]`` and ``START[movement, condition]`` are the whole machine.
+start played backwards. Side-steps (velocity sideways to the heading) repeat one side-step clip, which
+starts and ends in the base posture. ``NEXT[state, condition]`` and :func:`start_state` are the whole machine.
+
+Walk → run has hysteresis (:func:`is_fast`): a walking soldier runs above the walk/run threshold, a running
+one walks again only below the threshold minus the hysteresis, so a speed near the threshold does not flip
+gaits.
 """
 
 from __future__ import annotations
@@ -46,6 +52,8 @@ _TABLE: dict[S, tuple[S, S, S]] = {  # state: (next on STOP, on FAST, on NORMAL)
     S.CRAWL_START: (S.CRAWL_END, S.CRAWL_CYCLE, S.CRAWL_CYCLE),
     S.CRAWL_CYCLE: (S.CRAWL_END, S.CRAWL_CYCLE, S.CRAWL_CYCLE),
     S.CRAWL_END: (S.NONE, S.NONE, S.NONE),
+    S.SIDESTEP_L: (S.NONE, S.SIDESTEP_L, S.SIDESTEP_L),
+    S.SIDESTEP_R: (S.NONE, S.SIDESTEP_R, S.SIDESTEP_R),
     S.NONE: (S.NONE, S.NONE, S.NONE),
 }
 NSTATES = len(S)
@@ -56,10 +64,29 @@ for _s, _row in _TABLE.items():
 BACKWARD_STATES = frozenset({S.BWALK_START, S.BWALK_CYCLE, S.BWALK_END})
 CRAWL_STATES = frozenset({S.CRAWL_START, S.CRAWL_CYCLE, S.CRAWL_END})
 END_STATES = frozenset({S.WALK_END, S.RUN_END, S.BWALK_END, S.CRAWL_END})
+RUN_STATES = frozenset({S.RUN_START, S.RUN_CYCLE, S.WALK2RUN})
 IS_BACKWARD = np.array([s in BACKWARD_STATES for s in S], bool)
 IS_CRAWL = np.array([s in CRAWL_STATES for s in S], bool)
-# end steps slow to a stop: they play at their recorded rate, every other step follows the ground speed
-SCALED = np.array([s not in END_STATES and s != S.NONE for s in S], bool)
+IS_RUN = np.array([s in RUN_STATES for s in S], bool)
+IS_WALK = np.array([s in (S.WALK_START, S.WALK_CYCLE, S.RUN2WALK) for s in S], bool)
+
+
+class Side(IntEnum):
+    """Which way a standing soldier moves relative to its heading (crawling knows only forwards/backwards)."""
+
+    AHEAD = 0  # forwards or backwards (see ``backward``)
+    LEFT = 1
+    RIGHT = 2
+
+
+SIDE_OF = np.array(
+    [Side.LEFT if s == S.SIDESTEP_L else Side.RIGHT if s == S.SIDESTEP_R else Side.AHEAD for s in S], np.int8
+)
+START_STATES = frozenset({S.WALK_START, S.RUN_START, S.BWALK_START, S.CRAWL_START})
+GAIT_CHANGES = frozenset({S.WALK2RUN, S.RUN2WALK})
+# start and end steps and the gait changes play at their recorded rate (natural timing: the root offset
+# keeps their feet planted while the entity moves at another speed), the cycles follow the ground speed
+SCALED = np.array([s not in END_STATES | START_STATES | GAIT_CHANGES and s != S.NONE for s in S], bool)
 
 # (clip base name, footed, direction) per state; CRAWL_END plays crawl_start backwards
 CLIP_OF: dict[S, tuple[str, bool, int]] = {
@@ -77,6 +104,8 @@ CLIP_OF: dict[S, tuple[str, bool, int]] = {
     S.CRAWL_START: ("crawl_start", False, 1),
     S.CRAWL_CYCLE: ("crawl_cycle", False, 1),
     S.CRAWL_END: ("crawl_start", False, -1),
+    S.SIDESTEP_L: ("sidestep_l", False, 1),
+    S.SIDESTEP_R: ("sidestep_r", False, 1),
 }
 
 
@@ -86,15 +115,42 @@ CLIP_OF: dict[S, tuple[str, bool, int]] = {
 GAIT_STAY: dict[S, S] = {S.WALK2RUN: S.WALK_CYCLE, S.RUN2WALK: S.RUN_CYCLE}
 
 
+def direction(forward: np.ndarray, left: np.ndarray, can_side: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """``(backward, side)`` of velocities with ``forward`` / ``left`` components along the heading.
+
+    Sideways means more across the heading than along it (45-135 degrees either side); without side-step
+    clips (``can_side`` False) the soldier walks forwards or backwards whatever the angle.
+    """
+    forward, left = np.asarray(forward, np.float64), np.asarray(left, np.float64)
+    sideways = (np.abs(left) > np.abs(forward)) & can_side
+    side = np.where(sideways, np.where(left > 0, Side.LEFT, Side.RIGHT), Side.AHEAD).astype(np.int8)
+    return forward < 0.0, side
+
+
+def is_fast(state: np.ndarray, speed: np.ndarray, threshold: float, hysteresis: float) -> np.ndarray:
+    """FAST with hysteresis: running states stay fast down to ``threshold - hysteresis`` m/s."""
+    state = np.asarray(state, np.int64)
+    return np.asarray(speed) > np.where(IS_RUN[state], threshold - hysteresis, threshold)
+
+
 def conditions(
-    state: np.ndarray, moving: np.ndarray, backward: np.ndarray, fast: np.ndarray, can_run: bool = True
+    state: np.ndarray,
+    moving: np.ndarray,
+    backward: np.ndarray,
+    fast: np.ndarray,
+    can_run: bool = True,
+    side: np.ndarray | None = None,
 ) -> np.ndarray:
     """Figure 5's arc conditions (:class:`Cond`) for soldiers in ``state`` with this velocity.
 
-    Crawling has no direction condition: a backward crawler plays the crawl cycle backwards instead.
+    Crawling has no direction condition: a backward crawler plays the crawl cycle backwards instead. A
+    sideways soldier (``side`` not AHEAD) has no forwards/backwards direction.
     """
     state = np.asarray(state, np.int64)
-    reversed_ = (np.asarray(backward, bool) != IS_BACKWARD[state]) & ~IS_CRAWL[state]
+    side_ = np.zeros(state.shape, np.int8) if side is None else np.asarray(side, np.int8)
+    ahead = side_ == Side.AHEAD
+    wrong_way = ahead & (np.asarray(backward, bool) != IS_BACKWARD[state])
+    reversed_ = ((side_ != SIDE_OF[state]) | wrong_way) & ~IS_CRAWL[state]
     stop = ~np.asarray(moving, bool) | reversed_
     fast = np.asarray(fast, bool) & can_run
     return np.where(stop, Cond.STOP, np.where(fast, Cond.FAST, Cond.NORMAL)).astype(np.int8)
@@ -105,10 +161,14 @@ def next_states(state: np.ndarray, cond: np.ndarray) -> np.ndarray:
     return NEXT[np.asarray(state, np.int64), np.asarray(cond, np.int64)]
 
 
-def start_state(kind: Movement, backward: bool, fast: bool, can_run: bool = True) -> S:
+def start_state(
+    kind: Movement, backward: bool, fast: bool, can_run: bool = True, side: int = Side.AHEAD
+) -> S:
     """The first state when a resting soldier starts moving (velocity zero → non-zero)."""
     if kind == Movement.CRAWL:
         return S.CRAWL_START
+    if side != Side.AHEAD:
+        return S.SIDESTEP_L if side == Side.LEFT else S.SIDESTEP_R
     if backward:
         return S.BWALK_START
     return S.RUN_START if fast and can_run else S.WALK_START

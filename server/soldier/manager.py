@@ -40,10 +40,23 @@ import numpy as np
 from protocol import coords
 from protocol.entity import Appearance, WeaponState, make_entity_requests
 from protocol.events import DEFAULT_MAX_SOLDIERS
-from server.soldier import report
+from server.soldier import report, root_motion
 from server.soldier.blend import blend_into, smoothstep, yaw_rotate
 from server.soldier.library import MotionLibrary, PathStep
-from server.soldier.locomotion import GAIT_STAY, SCALED, conditions, next_states, start_state
+from server.soldier.locomotion import (
+    GAIT_STAY,
+    IS_RUN,
+    IS_WALK,
+    NEXT,
+    SCALED,
+    Cond,
+    Side,
+    conditions,
+    direction,
+    is_fast,
+    next_states,
+    start_state,
+)
 from server.soldier.settings import SoldierSettings
 from server.soldier.state import (
     BASE_POSTURE,
@@ -63,7 +76,12 @@ REQUEST_BAD_VALUE = 2
 
 MOVING_EPS = 1e-3  # m/s: slower than this is standing still
 MAX_SPEED = 100.0  # m/s: faster is a bad value
-MIN_RATE, MAX_RATE = 0.25, 4.0  # playback rate limits of a locomotion clip (speed / ground speed)
+# playback rate limits of a locomotion clip (speed / ground speed): human cadence stays within about
+# 0.6-1.6 times the recorded one (walk 1.1-2.9 steps/s, run 1.7-4.6); beyond, the stride length takes the rest
+MIN_RATE, MAX_RATE = 0.6, 1.6
+MIN_STRIDE, MAX_STRIDE = 0.5, 2.0  # stride scale limits (a scaled stride slides the feet by the difference)
+CATCH_UP_SECONDS = 1.5  # a stepping soldier's figure closes its root offset over about this long
+MIN_TURN_DEG = 22.5  # a standing soldier whose figure is this far from its heading turns in place
 MAX_CHAIN = 64  # clip ends handled per soldier per tick (a longer backlog is taken up next tick)
 MIN_CLIP_SECONDS = 1e-3  # a one-frame clip still takes this long, so clip ends cannot chain forever
 _EPS_T = 1e-9
@@ -162,7 +180,9 @@ class SoldierManager:
         if not isinstance(value, SoldierSettings):
             raise TypeError(f"settings must be SoldierSettings, not {type(value).__name__}")
         self._settings = value
-        self._offsets = np.array(value.heading_offsets, np.float64)  # what the vectorised pose path reads
+        # what the vectorised pose path reads, per clip graph (turn and react clips: the static offset)
+        o = value.heading_offsets
+        self._offsets = np.array((*o, o[0], o[0]), np.float64)
 
     def configure(self, **changes: Any) -> SoldierSettings:
         """Replace the settings by a validated copy with ``changes`` (ValueError: nothing changes)."""
@@ -188,6 +208,16 @@ class SoldierManager:
             if lib.has_node(name):
                 self._base[kind] = lib.node(name)
         self._home = lib.node(STAND_STOWED) if lib.has_node(STAND_STOWED) else 0
+        # per Figure-5 state, how far behind the entity its figure walks (cm): what it still travels when the
+        # entity stops, on average (half a step and the end step), so a stop ends near the entity
+        travel = np.hypot(*lib.travel.total.T)
+        self._stop_lag = np.zeros(len(LocoState))
+        for state in LocoState:
+            clip, end = lib.loco_clip[state, 0], lib.loco_clip[NEXT[state, Cond.STOP], 0]
+            if clip >= 0:
+                self._stop_lag[state] = 0.5 * travel[clip] + (
+                    travel[end] if end >= 0 and NEXT[state, Cond.STOP] else 0.0
+                )
 
     # -- soldiers ----------------------------------------------------------------------------------------
     def create_soldier(
@@ -213,6 +243,7 @@ class SoldierManager:
         t.appearance[i] = Appearance.UPRIGHT
         t.weapon[i] = WeaponState.DEPLOYED
         t.foot[i] = 1
+        t.root_t[i] = now
         self._rest(i, self._home, float(now))
         nm = name if name is not None else f"s{i}"
         if nm in self._by_name:  # a generated name clashing with a user's: make it unique
@@ -291,7 +322,11 @@ class SoldierManager:
         speed = np.hypot(vel[:, 0], vel[:, 1])  # Performer: Z up
         moving = speed > MOVING_EPS
         fwd = coords.compass_to_direction(hdg)
-        backward = moving & (np.einsum("ij,ij->i", vel[:, :2], fwd[:, :2]) < 0.0)
+        ahead = np.einsum("ij,ij->i", vel[:, :2], fwd[:, :2])
+        left = vel[:, 1] * fwd[:, 0] - vel[:, 0] * fwd[:, 1]  # Performer Z up: (fwd x vel).z
+        backward, side = direction(ahead, left, self.library.can_side)
+        backward &= moving
+        side = np.where(moving, side, Side.AHEAD)
         mode = tb.mode[i]
         changed_pw = (app != tb.appearance[i]) | (wpn != tb.weapon[i])
         heading_changed = hdg != tb.heading[i]
@@ -300,6 +335,15 @@ class SoldierManager:
         event = (
             imm | (changed_pw & (mode != _TRANSITION)) | ((mode == _IDLE) & moving & (kind != Movement.NONE))
         )
+        # the root offset up to now under the old velocity; a turned entity turns a world-fixed offset
+        root_motion.fold(tb, self.library, i, t)
+        turned = np.where(tb.has_heading[i], hdg - tb.heading[i], 0.0)
+        tb.has_heading[i] = True
+        root_motion.turn_offsets(tb, i, turned)
+        # a standing figure keeps its orientation in the world (it turns in place, below); a moving one
+        # turns with the entity at once
+        keeps = (mode == _LOCO) | (mode == _CRAWL) | (tb.node[i] == self._home) | moving
+        tb.root_yaw[i] = np.where(keeps, (tb.root_yaw[i] - turned + 180.0) % 360.0 - 180.0, 0.0)
         # store the request (Jack coordinates)
         tb.appearance[i] = app
         tb.weapon[i] = wpn
@@ -309,19 +353,23 @@ class SoldierManager:
         tb.yaw[i] = coords.compass_to_jack_yaw(hdg)
         tb.speed[i] = speed
         tb.backward[i] = backward
+        tb.side[i] = side
+        tb.vlocal[i] = np.stack([-left, -ahead], axis=1) * 100.0  # soldier frame: forwards -Z, left -X
         # a speed change within a gait: keep the phase, change the playback rate
         stepping = (mode == _LOCO) | (mode == _CRAWL)
         rescale = ~event & stepping & moving & speed_changed & SCALED[tb.loco[i]]
         if rescale.any():
             r = i[rescale]
             tr = t[rescale]
-            new_dur = self._step_duration(tb.clip[r], tb.speed[r], np.ones(len(r), bool))
+            new_dur, tb.stride[r] = self._step_duration(r, tb.clip[r], tb.loco[r])
             u = np.clip((tr - tb.start[r]) / np.maximum(tb.dur[r], _EPS_T), 0.0, 1.0)
             tb.start[r] = tr - u * new_dur
             tb.dur[r] = new_dur
             tb.end[r] = tb.start[r] + new_dur
         hp = ~event & (mode == _IDLE) & ~moving & heading_changed
         tb.heading_pending[i[hp]] = True
+        for k in np.flatnonzero(hp & (np.abs(tb.root_yaw[i]) >= MIN_TURN_DEG)).tolist():
+            self._turn(int(i[k]), float(t[k]))
         tb.requested[i[event | hp | rescale]] = True  # what :meth:`answer` answers between ticks
         ev = np.flatnonzero(event)
         if len(ev):
@@ -450,6 +498,7 @@ class SoldierManager:
         if desired < 0:
             return
         if desired != node:
+            tb.root_yaw[i] = 0.0  # a posture change faces the heading (no turn clips off STAND_STOWED)
             steps = self.library.path(node, desired)
             if not steps:
                 self.stats["unreachable"] += 1
@@ -459,26 +508,95 @@ class SoldierManager:
             self._play_step(i, steps[0], t)
             return
         kind = int(self._move[int(tb.appearance[i])]) if tb.speed[i] > MOVING_EPS else 0
+        if not kind and abs(tb.root_yaw[i]) >= MIN_TURN_DEG and self._turn(i, t):
+            return
+        if not kind and node != self._home:  # no turn clip here: the figure faces the heading again
+            tb.root_yaw[i] = 0.0
         if kind:
             fast = bool(tb.speed[i] > self._settings.walk_run_threshold)
-            state = start_state(Movement(kind), bool(tb.backward[i]), fast, self.library.can_run)
+            state = start_state(
+                Movement(kind), bool(tb.backward[i]), fast, self.library.can_run, int(tb.side[i])
+            )
             tb.mode[i] = _CRAWL if kind == _MOVE_CRAWL else _LOCO
             self._enter_one(i, int(state), t)
 
+    # -- reactions (issue 16) ----------------------------------------------------------------------------
+    def react(self, index: int, kind: str, now: float) -> str | None:
+        """A Fire PDU's ``"recoil"`` or a near detonation's ``"flinch"``: a soldier resting in a posture
+        with that reaction plays it once (soldier_react.graph) and rests there again. A soldier stepping or
+        changing posture, or with no such clip for its posture, does not react (None); else the clip."""
+        tb, lib = self.table, self.library
+        if not tb.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        if not self._settings.every_frame:
+            tb.clock[index] = now
+        self._advance(np.array([index], np.int64))
+        if int(tb.mode[index]) != _IDLE:
+            return None
+        clip = lib.reaction.get((lib.posture_names[int(tb.node[index])], kind))
+        if clip is None:
+            return None
+        node = int(tb.node[index])
+        step = PathStep(clip, True, float(lib.clip_duration[clip]), node, node)
+        tb.blend_len[index] = 0.0
+        tb.mode[index] = _TRANSITION
+        self._paths[index] = [(step,), 0]
+        self._play_step(index, step, float(tb.clock[index]))
+        tb.dirty[index] = True
+        return lib.clip_names[clip]
+
+    # -- turns in place (issue 16) ------------------------------------------------------------------------
+    def _turning(self, clip: int) -> bool:
+        return self.library.clip_end_offset[clip, 2] != 0.0 and self.library.clip_graph[clip] != 0
+
+    def _turn(self, i: int, t: float) -> bool:
+        """A standing soldier whose figure faces away from its heading plays the turn in place that fits."""
+        tb, lib = self.table, self.library
+        if not lib.turn_clips or int(tb.node[i]) != self._home or int(tb.mode[i]) != _IDLE:
+            return False
+        want = -float(tb.root_yaw[i])  # compass degrees to turn
+        clip, turn = min(  # the nearest turn; of two as near (180 both ways) the one turning the asked way
+            lib.turn_clips, key=lambda c: (abs((c[1] - want + 180.0) % 360.0 - 180.0), c[1] * want < 0)
+        )
+        if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
+            return False
+        step = PathStep(clip, True, float(lib.clip_duration[clip]), self._home, self._home)
+        tb.blend_len[i] = 0.0
+        tb.mode[i] = _TRANSITION
+        self._paths[i] = [(step,), 0]
+        self._play_step(i, step, t)
+        tb.dirty[i] = True
+        return True
+
+    def _turn_end(self, i: int, t: float) -> None:
+        """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading."""
+        tb, lib = self.table, self.library
+        x, z, yaw = lib.clip_end_offset[int(tb.clip[i])]
+        a = -math.radians(float(tb.root_yaw[i]))  # as blend.yaw_rotate turns the clip's placements
+        self._rest(i, self._home, t)
+        tb.root_off[i, 0] += math.cos(a) * x + math.sin(a) * z
+        tb.root_off[i, 1] += math.cos(a) * z - math.sin(a) * x
+        tb.root_yaw[i] = (float(tb.root_yaw[i]) - yaw + 180.0) % 360.0 - 180.0
+
     def _play_step(self, i: int, step: PathStep, t: float) -> None:
         tb = self.table
+        root_motion.fold1(tb, self.library, i, t)
+        tb.stride[i] = 1.0
         tb.clip[i] = step.clip
         tb.direc[i] = 1 if step.forward else -1
         tb.start[i] = t
         dur = max(step.duration, MIN_CLIP_SECONDS)
         tb.dur[i] = dur
         tb.end[i] = t + dur
+        root_motion.rebase1(tb, self.library, i)
         self._record(i, t)
 
     def _rest(self, i: int, node: int, t: float) -> None:
         """Show posture ``node``'s pose: its clip held at the frame that is that posture."""
         tb = self.table
         lib = self.library
+        root_motion.fold1(tb, lib, i, t)  # the offset stays where the last step left it (feet planted)
+        tb.stride[i] = 1.0
         clip = int(lib.rest_clip[node])
         tb.node[i] = node
         tb.clip[i] = clip
@@ -487,15 +605,41 @@ class SoldierManager:
         tb.start[i] = t - tb.dur[i]
         tb.end[i] = t
         tb.dirty[i] = True
+        root_motion.rebase1(tb, lib, i)
 
     # -- locomotion (Figure 5, vectorised) ---------------------------------------------------------------
-    def _step_duration(self, clip: np.ndarray, speed: np.ndarray, scaled: np.ndarray) -> np.ndarray:
-        lib = self.library
+    def _step_duration(
+        self, idx: np.ndarray, clip: np.ndarray, states: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Play time and stride scale of ``clip`` in Figure-5 ``states`` for soldiers ``idx`` (root offsets
+        folded to now).
+
+        A cycle aims at the entity's speed plus what brings the root offset along the velocity to its stop lag
+        (the figure trails the entity by what it would still travel if the entity stopped) in about
+        CATCH_UP_SECONDS, within human cadence (MIN_RATE..MAX_RATE). When the entity's speed alone is beyond
+        that cadence the stride length takes the rest (the feet slide by the difference), except in a gait
+        the speed is about to leave (a walk step before walk→run): there the root offset takes it. Start and
+        end steps and gait changes play at their recorded rate."""
+        tb, lib = self.table, self.library
+        st = np.asarray(states, np.int64)
+        speed = tb.speed[idx]
         stored = lib.clip_duration[clip]
         gs = lib.clip_ground_speed[clip]
-        ok = scaled & (speed > MOVING_EPS) & (gs > 0)
-        rate = np.where(ok, np.clip(speed / np.where(gs > 0, gs, 1.0), MIN_RATE, MAX_RATE), 1.0)
-        return np.maximum(stored / rate, MIN_CLIP_SECONDS)
+        ok = SCALED[st] & (speed > MOVING_EPS) & (gs > 0)
+        v = tb.vlocal[idx]
+        along = np.einsum("ij,ij->i", tb.root_off[idx], v) / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
+        gs = np.where(gs > 0, gs, 1.0)
+        cfg = self._settings
+        hysteresis = min(cfg.walk_run_hysteresis, 0.5 * cfg.walk_run_threshold)
+        fast = is_fast(st, speed, cfg.walk_run_threshold, hysteresis)
+        leaving = (IS_RUN[st] & ~fast) | (IS_WALK[st] & fast & lib.can_run)
+        ideal = speed / gs  # the entity's speed alone
+        scale = np.clip(ideal / np.clip(ideal, MIN_RATE, MAX_RATE), MIN_STRIDE, MAX_STRIDE)
+        stride = np.where(ok & ~leaving, scale, 1.0)
+        error = along + self._stop_lag[st]  # cm ahead of where the figure should be
+        want = speed + np.clip(-error / 100.0 / CATCH_UP_SECONDS, -0.5 * speed, 0.5 * speed)
+        rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, MAX_RATE), 1.0)
+        return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
 
     def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray) -> None:
         """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot)."""
@@ -507,7 +651,8 @@ class SoldierManager:
         clip = lib.loco_clip[st, foot]
         direc = lib.loco_dir[st].astype(np.int8)
         direc = np.where((st == _CRAWL_CYCLE) & tb.backward[idx], -direc, direc)
-        dur = self._step_duration(clip, tb.speed[idx], SCALED[st])
+        root_motion.fold(tb, lib, idx, t)
+        dur, tb.stride[idx] = self._step_duration(idx, clip, st)
         tb.loco[idx] = st
         tb.foot[idx] = foot
         tb.clip[idx] = clip
@@ -515,6 +660,7 @@ class SoldierManager:
         tb.start[idx] = t
         tb.dur[idx] = dur
         tb.end[idx] = t + dur
+        root_motion.rebase(tb, lib, idx)
         if self._settings.record_clips:
             for k in range(len(idx)):
                 self._record(int(idx[k]), float(t[k]))
@@ -527,11 +673,12 @@ class SoldierManager:
         direc = int(lib.loco_dir[state])
         if state == _CRAWL_CYCLE and tb.backward[i]:
             direc = -direc
-        dur = float(lib.clip_duration[clip])
-        speed, gs = float(tb.speed[i]), float(lib.clip_ground_speed[clip])
-        if _SCALED[state] and speed > MOVING_EPS and gs > 0:
-            dur /= min(max(speed / gs, MIN_RATE), MAX_RATE)
-        dur = max(dur, MIN_CLIP_SECONDS)
+        root_motion.fold1(tb, lib, i, t)
+        if _SCALED[state]:  # a side-step: the vectorised pacing
+            durs, strides = self._step_duration(np.array([i], np.int64), np.array([clip]), np.array([state]))
+            dur, tb.stride[i] = float(durs[0]), strides[0]
+        else:  # a start step: its recorded pace
+            dur, tb.stride[i] = max(float(lib.clip_duration[clip]), MIN_CLIP_SECONDS), 1.0
         tb.loco[i] = state
         tb.foot[i] = foot
         tb.clip[i] = clip
@@ -539,18 +686,22 @@ class SoldierManager:
         tb.start[i] = t
         tb.dur[i] = dur
         tb.end[i] = t + dur
+        root_motion.rebase1(tb, lib, i)
         self._record(i, t)
 
     def _loco_ended(self, idx: np.ndarray) -> None:
         tb = self.table
         t = tb.end[idx].copy()
         speed = tb.speed[idx]
+        st = self._settings
+        hysteresis = min(st.walk_run_hysteresis, 0.5 * st.walk_run_threshold)
         cond = conditions(
             tb.loco[idx],
             speed > MOVING_EPS,
             tb.backward[idx],
-            speed > self._settings.walk_run_threshold,
+            is_fast(tb.loco[idx], speed, st.walk_run_threshold, hysteresis),
             self.library.can_run,
+            tb.side[idx],
         )
         nxt = next_states(tb.loco[idx], cond)
         # a one-footed gait transition waits for its foot: one more stride of the current gait first
@@ -583,6 +734,8 @@ class SoldierManager:
             return
         del self._paths[i]
         tb.mode[i] = _IDLE
+        if self._turning(int(tb.clip[i])):
+            self._turn_end(i, t)
         self._decide(i, t)
 
     def _advance(self, cand: np.ndarray) -> None:
@@ -721,6 +874,18 @@ class SoldierManager:
                 sel = np.flatnonzero(fset == k)
                 s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self._settings.interpolate)
                 joints[sel], figures[sel], frames[sel] = s.joints, s.figures, s.position
+        if n:  # the root offset and yaw: every figure of the soldier moves with it (docs/PROTOCOL.md)
+            mode = tb.mode[idx]
+            turning = (tb.root_yaw[idx] != 0.0) & ((mode == _LOCO) | (mode == _CRAWL))
+            root_motion.fold(tb, lib, idx[turning], clock[turning])
+            yawed = np.flatnonzero(tb.root_yaw[idx] != 0.0)
+            if len(yawed):
+                f = figures[yawed]
+                yaw_rotate(f, tb.root_yaw[idx[yawed]])
+                figures[yawed] = f
+            off = root_motion.offset_at(tb, lib, idx, clock, frames).astype(np.float32)
+            figures[:, :, 0] += off[:, None, 0]
+            figures[:, :, 2] += off[:, None, 1]
         if n and self._offsets.any():
             off = self._offsets[lib.clip_graph[clip]]
             turn = np.flatnonzero(off != 0.0)

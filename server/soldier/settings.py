@@ -27,7 +27,8 @@ class SoldierSettings:
 
     throttle: float = 1 / 30  # set_ttes_soldier_throttle: at most one update per soldier per throttle
     tick_period: float = 1 / 30  # the server's tick (1 / tick_hz): the throttle is a rate cap on this grid
-    walk_run_threshold: float = 3.0  # set_ttes_walk_run_threshold: faster than this runs
+    walk_run_threshold: float = 2.4  # set_ttes_walk_run_threshold: a walking soldier faster than this runs
+    walk_run_hysteresis: float = 0.4  # a running soldier walks below threshold - hysteresis (at most half)
     heading_offsets: tuple[float, float, float] = (0.0, 0.0, 0.0)  # set_ttes_heading_offset: compass degrees
     blend_time: float = 0.2  # set_ttes_blend_time: cross-fade when a step is cancelled
     every_frame: bool = False  # set_channelset_parameters("yes"): one stored frame per tick, not real time
@@ -39,13 +40,14 @@ class SoldierSettings:
         _seconds("tick period", self.tick_period, positive=True)
         _seconds("walk/run threshold", self.walk_run_threshold, positive=True)
         _seconds("blend time", self.blend_time)
+        _seconds("walk/run hysteresis", self.walk_run_hysteresis)
         offsets = tuple(self.heading_offsets)
         if len(offsets) != 3 or not all(
             isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in offsets
         ):
             raise ValueError(f"heading offsets must be three finite numbers, not {self.heading_offsets!r}")
         object.__setattr__(self, "heading_offsets", tuple(float(v) for v in offsets))
-        for name in ("throttle", "tick_period", "walk_run_threshold", "blend_time"):
+        for name in ("throttle", "tick_period", "walk_run_threshold", "walk_run_hysteresis", "blend_time"):
             object.__setattr__(self, name, float(getattr(self, name)))
         for flag in ("every_frame", "interpolate", "record_clips"):
             if not isinstance(getattr(self, flag), bool):

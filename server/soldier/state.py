@@ -50,6 +50,8 @@ class LocoState(IntEnum):
     CRAWL_START = 12
     CRAWL_CYCLE = 13
     CRAWL_END = 14
+    SIDESTEP_L = 15  # velocity to the left of the heading: a side-step per clip (no start or end step)
+    SIDESTEP_R = 16
 
 
 class Foot(IntEnum):

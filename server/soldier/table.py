@@ -39,6 +39,16 @@ _COLUMNS: dict[str, tuple[type | str, tuple[int, ...], float]] = {
     "yaw": (np.float64, (), 0.0),  # Jack yaw, radians
     "speed": (np.float64, (), 0.0),  # horizontal m/s
     "backward": (np.bool_, (), False),
+    "side": (np.int8, (), 0),  # locomotion.Side: moving across the heading (side-steps)
+    "vlocal": (np.float64, (2,), 0.0),  # velocity in the soldier's frame (Jack X, Z cm/s: forwards is -Z)
+    # root offset (root_motion): the figure's offset from the entity (X, Z cm, soldier frame) at root_t,
+    # when the clip's own travel was root_ref; the clip's travel counts stride times
+    "root_off": (np.float64, (2,), 0.0),
+    "root_t": (np.float64, (), 0.0),
+    "root_ref": (np.float64, (2,), 0.0),
+    "stride": (np.float64, (), 1.0),
+    "root_yaw": (np.float64, (), 0.0),  # the figure's yaw from the entity's heading (compass degrees)
+    "has_heading": (np.bool_, (), False),  # a request gave the heading (the first one turns nothing)
     # output bookkeeping
     "last_sent": (np.float64, (), -math.inf),  # last update of either kind (tick or answer)
     "tick_sent": (np.float64, (), -math.inf),  # last update by a tick: what the tick's throttle counts from
@@ -93,6 +103,14 @@ class SoldierTable:
     yaw: np.ndarray
     speed: np.ndarray
     backward: np.ndarray
+    side: np.ndarray
+    vlocal: np.ndarray
+    root_off: np.ndarray
+    root_t: np.ndarray
+    root_ref: np.ndarray
+    stride: np.ndarray
+    root_yaw: np.ndarray
+    has_heading: np.ndarray
     last_sent: np.ndarray
     tick_sent: np.ndarray
     dirty: np.ndarray

@@ -229,6 +229,14 @@ COMMANDS: tuple[Command, ...] = (
     # -- this server's own
     Command("remove_soldier_state", "name", "", "removes a soldier (REMOVE_SOLDIER over the wire)", (S,)),
     Command(
+        "react_soldier_state",
+        'name, "recoil" or "flinch"',
+        "",
+        "a resting soldier plays its posture's recoil (a Fire PDU) or flinch (a near detonation) once; "
+        "reports the clip, or null when it cannot react now",
+        (S, S),
+    ),
+    Command(
         "set_ttes_walk_run_threshold",
         "m_per_s",
         "",
@@ -459,6 +467,16 @@ class JclCommands:
     # -- this server's own -------------------------------------------------------------------------------
     def cmd_remove_soldier_state(self, name: str) -> None:
         self.world.remove_soldier(self.soldiers.index_of(name))
+
+    def cmd_react_soldier_state(self, name: str, kind: str) -> None:
+        k = kind.strip().lower()
+        if k not in ("recoil", "flinch"):
+            raise JclError(f'react_soldier_state: the reaction must be "recoil" or "flinch", not {kind!r}')
+        m = self.soldiers.manager
+        if m is None:
+            raise JclError("react_soldier_state: no soldiers yet")
+        clip = m.react(self.soldiers.index_of(name), k, self.world.clock())
+        self._report(json.dumps({"soldier": name, "reaction": k, "clip": clip}))
 
     def cmd_set_ttes_walk_run_threshold(self, mps: float) -> None:
         self.soldiers.configure(walk_run_threshold=mps)

@@ -3,16 +3,17 @@
 "The first soldier state create triggers the loading of all the posture graph files and associated
 channelset files. Also, the channels are bound to the soldiers at this point." The three graphs are the
 ones loaded under the names ``soldier_low`` (static postures), ``soldier_loco`` and ``soldier_crawl``
-(loaded from the files of those names on the search path if a script did not load them first).
+(loaded from the files of those names on the search path if a script did not load them first), and, when
+present, ``soldier_turn`` (turns in place, side-steps) and ``soldier_react`` (recoil, flinch).
 
 The *figure sets* (soldier figure type + weapon type) the library is bound to are, in order of preference:
 the figures of every posture graph bound from ``soldier_low`` (``bind_posture_graph``), else one figure of
 each type the graphs drive found in the environment (every soldier type × every weapon type), plus the
 figures of the ``create_soldier_state`` that asked for the library.
 
-**Weapon variants** (issue 16): a rifle model the three graphs do not drive (``M16.fig``; the models are
+**Weapon variants** (issue 16): a rifle model the graphs do not drive (``M16.fig``; the models are
 ``protocol.dis.RIFLE_FIGURES``) whose own graphs are on the search path (``soldier_low_m16.graph``,
-``soldier_loco_m16.graph``, ``soldier_crawl_m16.graph``) is bound too: every soldier figure type of the sets
+``soldier_loco_m16.graph``, ...) is bound too: every soldier figure type of the sets
 above with that weapon (its figure from the environment, else its ``.fig`` file) plays those graphs, so a
 client may create soldiers with either rifle.
 """
@@ -29,14 +30,15 @@ from server.logging import get_logger
 from server.motion.binding import protofiletype
 from server.motion.errors import BindingError, PostureGraphError
 from server.motion.posture_change import LoadedPostureGraph
-from server.soldier.library import GraphTriple, MotionLibrary, weapon_suffix
+from server.soldier.library import GraphSet, MotionLibrary, weapon_suffix
 from server.world.store import MotionStore, StoreError
 
 log = get_logger("library")
 
-# (name, file) of the static, loco and crawl graphs
+# (name, file) of the static, loco, crawl, turn and react graphs
 GRAPHS: tuple[tuple[str, str], ...] = tuple(
-    (g, f"{g}.graph") for g in ("soldier_low", "soldier_loco", "soldier_crawl")
+    (g, f"{g}.graph")
+    for g in ("soldier_low", "soldier_loco", "soldier_crawl", "soldier_turn", "soldier_react")
 )
 
 
@@ -85,7 +87,7 @@ def figure_sets(
 def build_library(
     store: MotionStore, resolve: Callable[[str], Path], wanted: tuple[Figure, Figure | None] | None = None
 ) -> MotionLibrary:
-    """Load the three graphs (the static one is required) and bind them to the figure sets."""
+    """Load the five graphs (the static one is required) and bind them to the figure sets."""
     static = _graph(store, resolve, *GRAPHS[0])
     if static is None:
         raise StoreError(
@@ -93,8 +95,10 @@ def build_library(
         )
     loco = _graph(store, resolve, *GRAPHS[1])
     crawl = _graph(store, resolve, *GRAPHS[2])
+    turn = _graph(store, resolve, *GRAPHS[3])
+    react = _graph(store, resolve, *GRAPHS[4])
     types = set(static.protofiletypes)
-    for g in (loco, crawl):
+    for g in (loco, crawl, turn, react):
         if g is not None:
             types.update(g.protofiletypes)
     sets = figure_sets(store, types, wanted)
@@ -108,18 +112,20 @@ def build_library(
                 _with_weapons(sets, variants),
                 loco,
                 crawl,
+                turn=turn,
+                react=react,
                 weapon_graphs={w: g for w, (g, _) in variants.items()},
             )
         except (BindingError, PostureGraphError, ValueError) as exc:  # serve the base weapon rather than none
             log.warning("weapon_variants_skipped", weapons=sorted(variants), error=str(exc))
     try:
-        return MotionLibrary(static, sets, loco, crawl)
+        return MotionLibrary(static, sets, loco, crawl, turn=turn, react=react)
     except (BindingError, PostureGraphError, ValueError) as exc:
         raise StoreError(f"binding the posture graphs: {exc}") from None
 
 
 def _with_weapons(
-    sets: list[list[Figure]], variants: dict[str, tuple[GraphTriple, Figure]]
+    sets: list[list[Figure]], variants: dict[str, tuple[GraphSet, Figure]]
 ) -> list[list[Figure]]:
     """``sets`` plus each soldier figure type in them with each variant weapon, last (table ids stay)."""
     out = list(sets)
@@ -134,14 +140,16 @@ def _with_weapons(
 
 def weapon_variants(
     store: MotionStore, resolve: Callable[[str], Path], driven: set[str]
-) -> dict[str, tuple[GraphTriple, Figure]]:
+) -> dict[str, tuple[GraphSet, Figure]]:
     """Per rifle model the base graphs do not drive but whose own graphs exist: its graphs and a figure."""
-    out: dict[str, tuple[GraphTriple, Figure]] = {}
+    out: dict[str, tuple[GraphSet, Figure]] = {}
     for weapon in RIFLE_FIGURES:
         if weapon in driven:
             continue
         suffix = weapon_suffix(weapon)
-        static, loco, crawl = (_graph(store, resolve, g + suffix, f"{g}{suffix}.graph") for g, _ in GRAPHS)
+        static, loco, crawl, turn, react = (
+            _graph(store, resolve, g + suffix, f"{g}{suffix}.graph") for g, _ in GRAPHS
+        )
         if static is None:
             continue
         figure = next((f for f in store.environment.figures.values() if protofiletype(f) == weapon), None)
@@ -156,5 +164,5 @@ def weapon_variants(
                 figure = read_figure(path, load_psurfs=False)
             except (PeabodyError, OSError) as exc:
                 raise StoreError(f"weapon figure {weapon}: {exc}") from None
-        out[weapon] = ((static, loco, crawl), figure)
+        out[weapon] = ((static, loco, crawl, turn, react), figure)
     return out

@@ -1,0 +1,263 @@
+"""Root motion: how far a locomotion clip carries the soldier, measured from its planted feet (issue 16).
+
+The library plays locomotion clips in place (``library._strip_travel``); the entity moves by its own dead
+reckoned velocity. For the planted foot to stay still *in the world*, the figure must be placed relative to
+the entity by a *root offset* = (the clip's own travel so far) − (the entity's travel so far). The clip's own
+travel is measured once per clip here: frame after frame, the horizontal move of the foot in stance (the
+lower one) taken backwards — the treadmill the in-place clip walks on. :class:`TravelTable` holds these
+curves for all clips (zero for static clips and reactions), flat and interpolated like the sampler.
+
+Axes: Jack, in the soldier's (entity's) frame: the clips walk forwards along -Z and step left along -X; only
+X and Z (horizontal, centimetres) are kept.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from peabody.fk import FigureKinematics
+from peabody.model import Figure
+from peabody.quaternion import to_transform
+
+if TYPE_CHECKING:
+    from server.soldier.library import MotionLibrary
+    from server.soldier.table import SoldierTable
+
+TURN_RATE = 90.0  # degrees/s a walking, running or crawling figure turns towards its heading (faster > 90)
+STEPPING = (2, 3)  # state.Mode.LOCO, Mode.CRAWL (plain ints: this module does not import the manager's enums)
+FLIGHT_CM = 3.0  # a foot whose lowest sole point is this far above the clip's lowest carries no weight
+# per foot, the sole points whose lower one carries the weight (heel strike, then the ball at push-off)
+FOOT_SITES: tuple[tuple[str, ...], ...] = (
+    ("left_foot.heel", "left_foot.ball"),
+    ("right_foot.heel", "right_foot.ball"),
+)
+
+
+def feet_points(kin: FigureKinematics, joints: np.ndarray, placement: np.ndarray) -> np.ndarray:
+    """``(n, 2, k, 3)`` world positions (cm) of each foot's sole points for poses ``joints`` placed by
+    ``placement`` (``(n, 7)``: root site position + quaternion w, x, y, z)."""
+    q = np.asarray(placement, np.float64)
+    roots = np.stack([to_transform(p[:3], p[3:7]) for p in q])
+    sites = kin.site_globals(np.asarray(joints, np.float64), roots)
+    pts = np.array([[sites[:, kin.site_names.index(s), :3, 3] for s in foot] for foot in FOOT_SITES])
+    return pts.transpose(2, 0, 1, 3)  # (feet, points, n, 3) -> (n, feet, points, 3)
+
+
+def has_feet(kin: FigureKinematics) -> bool:
+    """Whether the figure has the sole sites :func:`feet_points` measures."""
+    return all(s in kin.site_names for foot in FOOT_SITES for s in foot)
+
+
+def linear_travel(n: int, total: np.ndarray) -> np.ndarray:
+    """``(n, 2)``: ``total`` (X, Z cm) spread evenly over the frames (no feet to measure, or a crawl)."""
+    return np.linspace(0.0, 1.0, n)[:, None] * np.asarray(total, np.float64)[None, :2]
+
+
+def contact_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Between frames k and k+1 the sole point that is lowest over both carries the weight: ``(n-1, 2)``
+    its horizontal move (X, Z cm) and ``(n-1,)`` its height above the lowest sole point of all frames."""
+    n = len(points)
+    flat = points.reshape(n, -1, 3)  # (n, feet * points, 3)
+    pair = np.maximum(flat[:-1, :, 1], flat[1:, :, 1])
+    which = np.argmin(pair, axis=1)
+    k = np.arange(n - 1)
+    move = flat[k + 1, which][:, [0, 2]] - flat[k, which][:, [0, 2]]
+    return move, pair[k, which] - flat[..., 1].min()
+
+
+def stance_contact(points: np.ndarray) -> np.ndarray:
+    """``(n, 2)`` per frame the horizontal position (X, Z cm) of the sole point carrying the weight: the pivot
+    a moving soldier's figure turns about, so the turn does not slide the planted foot."""
+    n = len(points)
+    if n < 2:
+        return np.zeros((n, 2))
+    flat = points.reshape(n, -1, 3)
+    pair = np.maximum(flat[:-1, :, 1], flat[1:, :, 1])
+    which = np.argmin(pair, axis=1)
+    which = np.append(which, which[-1])
+    return flat[np.arange(n), which][:, [0, 2]]
+
+
+def stance_travel(points: np.ndarray, stride: float | None = None) -> np.ndarray:
+    """``(n, 2)`` cumulative horizontal travel (X, Z cm) that keeps the point carrying the weight still
+    (:func:`contact_points` of :func:`feet_points`): the body travels by minus its move. Frames with both feet
+    off the ground (a run's flight) share what the stance frames leave of ``stride`` (cm, the clip's recorded
+    travel), evenly."""
+    n = len(points)
+    out = np.zeros((n, 2))
+    if n < 2:
+        return out
+    move, height = contact_points(points)
+    step = -move
+    flight = height > FLIGHT_CM
+    step[flight] = 0.0
+    measured = step.sum(axis=0)
+    length = float(np.hypot(*measured))
+    if stride and flight.any() and length > 1e-6 and stride > length:
+        step[flight] = measured / length * (stride - length) / int(flight.sum())
+    out[1:] = np.cumsum(step, axis=0)
+    return out
+
+
+class TravelTable:
+    """Per clip its stance travel curve, flat like ``ClipLibrary`` data; interpolated at fractional frames."""
+
+    def __init__(self, curves: Sequence[np.ndarray], contacts: Sequence[np.ndarray] | None = None) -> None:
+        sizes = np.array([len(c) for c in curves], np.int64)
+        self.start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        self.nframes = sizes
+        self.data = (
+            np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in curves])
+            if len(curves)
+            else np.zeros((0, 2))
+        )
+        self.contact = (
+            np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in contacts])
+            if contacts is not None and len(contacts)
+            else np.zeros_like(self.data)
+        )
+        self.total = np.array([c[-1] - c[0] if len(c) else (0.0, 0.0) for c in curves], np.float64).reshape(
+            -1, 2
+        )
+
+    def at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """``(n, 2)`` travel of ``clip`` at fractional ``frame`` (clamped to the clip)."""
+        clip = np.asarray(clip, np.int64)
+        last = np.maximum(self.nframes[clip] - 1, 0)
+        f = np.clip(np.asarray(frame, np.float64), 0.0, last)
+        f0 = np.floor(f).astype(np.int64)
+        f1 = np.minimum(f0 + 1, last)
+        w = (f - f0)[:, None]
+        base = self.start[clip]
+        return self.data[base + f0] * (1.0 - w) + self.data[base + f1] * w
+
+    def at1(self, clip: int, frame: float) -> tuple[float, float]:
+        """:meth:`at` for one clip and frame in scalar Python (the per-event paths)."""
+        last = max(int(self.nframes[clip]) - 1, 0)
+        f = min(max(frame, 0.0), float(last))
+        f0 = int(f)
+        w = f - f0
+        base = int(self.start[clip])
+        x0, z0 = self.data[base + f0].tolist()
+        if w == 0.0 or f0 >= last:
+            return x0, z0
+        x1, z1 = self.data[base + f0 + 1].tolist()
+        return x0 + (x1 - x0) * w, z0 + (z1 - z0) * w
+
+    def contact_at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """``(n, 2)`` the weight-bearing sole point of ``clip`` at the frame nearest ``frame``."""
+        clip = np.asarray(clip, np.int64)
+        last = np.maximum(self.nframes[clip] - 1, 0)
+        f = np.clip(np.floor(np.asarray(frame, np.float64) + 0.5).astype(np.int64), 0, last)
+        return self.contact[self.start[clip] + f]
+
+
+def measure(figure: Figure, joints: np.ndarray, placements: np.ndarray) -> np.ndarray:
+    """The stance travel curve of one clip's frames (soldier pose vectors and root placements)."""
+    kin = FigureKinematics(figure)
+    return stance_travel(feet_points(kin, joints, placements))
+
+
+# -- the per-soldier root offset over a SoldierTable (vectorised; the manager calls these) -----------------
+def frame_at(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> np.ndarray:
+    """The fractional frame each soldier's clip shows at ``t`` (as ``ClipLibrary.sample`` computes it)."""
+    clip = tb.clip[idx]
+    u = np.clip((t - tb.start[idx]) / np.maximum(tb.dur[idx], 1e-9), 0.0, 1.0)
+    u = np.where(tb.direc[idx] > 0, u, 1.0 - u)
+    return u * np.maximum(lib.clip_nframes[clip] - 1, 0)
+
+
+def offset_at(
+    tb: SoldierTable,
+    lib: MotionLibrary,
+    idx: np.ndarray,
+    t: np.ndarray | float,
+    frames: np.ndarray | None = None,
+) -> np.ndarray:
+    """``(n, 2)`` root offsets at ``t``: the offset at ``root_t`` plus the clip's own travel since (times the
+    stride scale) minus the entity's dead-reckoned travel since."""
+    if frames is None:
+        frames = frame_at(tb, lib, idx, t)
+    travel = (lib.travel.at(tb.clip[idx], frames) - tb.root_ref[idx]) * tb.stride[idx][:, None]
+    dt = np.asarray(t, np.float64) - tb.root_t[idx]
+    return tb.root_off[idx] + yawed(travel, tb.root_yaw[idx]) - tb.vlocal[idx] * np.reshape(dt, (-1, 1))
+
+
+def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
+    """``(n, 2)`` horizontal vectors of the soldier frame turned by compass degrees (as blend.yaw_rotate)."""
+    a = -np.radians(np.asarray(compass_deg, np.float64))
+    c, s = np.cos(a), np.sin(a)
+    x, z = xz[:, 0], xz[:, 1]
+    return np.stack([c * x + s * z, c * z - s * x], axis=1)
+
+
+def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
+    """Bring the offsets up to ``t``: before a clip, the velocity or the stride scale changes, and while a
+    stepping figure turns towards the heading (TURN_RATE, about the sole point carrying its weight)."""
+    if len(idx) == 0:
+        return
+    frames = frame_at(tb, lib, idx, t)
+    off = offset_at(tb, lib, idx, t, frames)
+    yaw = tb.root_yaw[idx]
+    turning = (yaw != 0.0) & ((tb.mode[idx] == STEPPING[0]) | (tb.mode[idx] == STEPPING[1]))
+    if turning.any():
+        dt = np.maximum(np.asarray(t, np.float64) - tb.root_t[idx], 0.0)
+        rate = TURN_RATE * np.maximum(1.0, np.abs(yaw) / 90.0)  # a reversal turns faster (it walks away)
+        new = yaw - np.clip(yaw, -rate * dt, rate * dt)
+        new = np.where(turning, new, yaw)
+        contact = lib.travel.contact_at(tb.clip[idx], frames)
+        pivot = off + yawed(contact, yaw)
+        off = pivot - yawed(contact, new)
+        tb.root_yaw[idx] = new
+    tb.root_off[idx] = off
+    tb.root_t[idx] = t
+    tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
+
+
+def frame_at1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> float:
+    """:func:`frame_at` for one soldier in scalar Python."""
+    u = min(max((t - float(tb.start[i])) / max(float(tb.dur[i]), 1e-9), 0.0), 1.0)
+    if tb.direc[i] <= 0:
+        u = 1.0 - u
+    return u * max(int(lib.clip_nframes[tb.clip[i]]) - 1, 0)
+
+
+def fold1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> None:
+    """:func:`fold` for one soldier in scalar Python (a request or a clip change of one soldier)."""
+    yaw = float(tb.root_yaw[i])
+    if yaw != 0.0:  # turning about a contact point: the vectorised path
+        fold(tb, lib, np.array([i], np.int64), t)
+        return
+    tx, tz = lib.travel.at1(int(tb.clip[i]), frame_at1(tb, lib, i, t))
+    rx, rz = tb.root_ref[i].tolist()
+    vx, vz = tb.vlocal[i].tolist()
+    ox, oz = tb.root_off[i].tolist()
+    s = float(tb.stride[i])
+    dt = t - float(tb.root_t[i])
+    tb.root_off[i] = (ox + (tx - rx) * s - vx * dt, oz + (tz - rz) * s - vz * dt)
+    tb.root_t[i] = t
+    tb.root_ref[i] = (tx, tz)
+
+
+def rebase1(tb: SoldierTable, lib: MotionLibrary, i: int) -> None:
+    """:func:`rebase` for one soldier in scalar Python."""
+    tb.root_ref[i] = lib.travel.at1(int(tb.clip[i]), frame_at1(tb, lib, i, float(tb.root_t[i])))
+
+
+def rebase(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
+    """After a new clip starts (at ``root_t``): its travel counts from the frame it shows then."""
+    if len(idx):
+        tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx]))
+
+
+def turn_offsets(tb: SoldierTable, idx: np.ndarray, compass_change: np.ndarray) -> None:
+    """The entity turned by ``compass_change`` degrees (clockwise): a world-fixed offset turns the other way
+    in the soldier's frame."""
+    a = np.radians(compass_change)
+    c, s = np.cos(a), np.sin(a)
+    x, z = tb.root_off[idx, 0].copy(), tb.root_off[idx, 1].copy()
+    tb.root_off[idx, 0] = x * c + z * s
+    tb.root_off[idx, 1] = -x * s + z * c
