@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from authoring import crawl, deaths, gait, postures, reactions, transitions, turns
+from authoring import crawl, crawl_prone, deaths, gait, postures, reactions, transitions, turns
 from authoring.motion import KeyPosture
 from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
@@ -116,7 +116,13 @@ def clip_jobs() -> list[ClipJob]:
             "static",
             lambda ctx, t=t: Clip(transitions.record_transition(t, ctx.keys, (ctx.soldier, ctx.rifle))),
         )
-        if t.name not in dying
+        if t.name not in dying and t.name != crawl_prone.NAME
+        else ClipJob(
+            t.name,
+            "static",
+            lambda ctx: Clip(crawl_prone.record_crawl_to_prone(ctx.keys, (ctx.soldier, ctx.rifle))),
+        )
+        if t.name == crawl_prone.NAME
         else ClipJob(t.name, "static", lambda ctx, d=dying[t.name]: _death(d, ctx))
         for t in transitions.TRANSITIONS
     ]
