@@ -38,7 +38,8 @@ NAME = "crawl2prstow"
 START, END = "CRAWL", "PRONE_STOWED"
 DURATION = 1.4  # s
 BODY = (0.0, 0.8)  # s: pelvis, spine, legs and head go down
-ARMS = (0.5, 1.35)  # s: the arms' joints (the IK pulls towards them) and the rifle's carry
+ARMS = (0.0, 1.35)  # s: the arms' joints (the IK pulls towards them) and the rifle's carry
+HOLD = (0.0, 0.6)  # s: the rifle, first left where the forearms hold it, goes over to the chest's carry
 # (start, duration) in s of each limb's move: the knees (with their toes) first, then the forearms
 MOVES = {
     ("knee", "left"): (0.0, 0.4),
@@ -116,7 +117,11 @@ def record_crawl_to_prone(keys: Mapping[str, KeyPosture], figures: Sequence[Figu
         a, d = MOVES["elbow", side]
         elbows[side] = move_track(_site(kin, first, site), _site(kin, last, site), t, a, d, LIFT["elbow"])
     carry = slerp_frames(carry_of(kin, first), carry_of(kin, last), u_arms)
-    rifles = carrier_globals(kin, poses, roots) @ carry
+    carried = carrier_globals(kin, poses, roots) @ carry
+    hold = _ramp(t, *HOLD)
+    rifles = np.stack(
+        [slerp_frames(first.locations[RIFLE], c, hold[i : i + 1])[0] for i, c in enumerate(carried)]
+    )
     off_a, off_b = palm_offsets(kin, rkin, first), palm_offsets(kin, rkin, last)
     arm_goals: list[ik.Goal] = []
     for side in ("right", "left"):
