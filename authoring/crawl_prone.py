@@ -36,20 +36,21 @@ from peabody.model import Figure
 FPS = 60
 NAME = "crawl2prstow"
 START, END = "CRAWL", "PRONE_STOWED"
-DURATION = 1.4  # s
-BODY = (0.0, 0.8)  # s: pelvis, spine, legs and head go down
-ARMS = (0.0, 1.35)  # s: the arms' joints (the IK pulls towards them) and the rifle's carry
-HOLD = (0.0, 0.6)  # s: the rifle, first left where the forearms hold it, goes over to the chest's carry
+DURATION = 1.6  # s
+BODY = (0.0, 0.9)  # s: pelvis, spine, legs and head go down
+ARMS = (0.0, 1.55)  # s: the arms' joints (the IK pulls towards them) and the rifle's carry
+HOLD = (0.0, 0.7)  # s: the rifle, first left where the forearms hold it, goes over to the chest's carry
 # (start, duration) in s of each limb's move: the knees (with their toes) first, then the forearms
 MOVES = {
-    ("knee", "left"): (0.0, 0.4),
-    ("knee", "right"): (0.25, 0.4),
-    ("elbow", "left"): (0.65, 0.35),
-    ("elbow", "right"): (0.95, 0.35),
+    ("knee", "left"): (0.0, 0.55),
+    ("knee", "right"): (0.4, 0.5),
+    ("elbow", "left"): (0.85, 0.35),
+    ("elbow", "right"): (1.15, 0.35),
 }
 LIFT = {"knee": 4.0, "toes": 6.0, "elbow": 5.0}  # cm a contact rises while it moves
 LEG_SITES = {"knee": "{s}_lower_leg.knee", "toes": "{s}_toes.distal"}
 ELBOW_SITE = "{s}_upper_arm.distal"
+LEG_TRACKING = {"iterations": 20, "max_dof_step": 0.03}
 ARM_TRACKING = {"iterations": 10, "max_dof_step": 0.02}
 
 
@@ -109,6 +110,8 @@ def record_crawl_to_prone(keys: Mapping[str, KeyPosture], figures: Sequence[Figu
         root_dofs=("ty", "rx", "ry", "rz"),
     )
     roots = report.root_location
+    # ... and the legs again on that pelvis, frame after frame, so no joint leaps between IK branches
+    poses = track_solve(kin, rest, goals[1:], roots, **LEG_TRACKING)
     poses = np.where(arm_dofs[None], rest, poses)
     # the elbows' tracks; the chest carries the rifle, its carry turning from the cradle to the prone one
     elbows = {}
