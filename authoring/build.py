@@ -23,13 +23,13 @@ without recording them again).
 from __future__ import annotations
 
 import fnmatch
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from authoring import crawl, deaths, gait, postures, reactions, transitions, turns
+from authoring import crawl, crawl_prone, deaths, gait, postures, reactions, transitions, turns
 from authoring.motion import KeyPosture
 from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
@@ -110,12 +110,7 @@ class ClipJob:
 def clip_jobs() -> list[ClipJob]:
     """Every clip of the library, in build order."""
     dying = deaths.death_specs()
-    jobs = [
-        ClipJob(t.name, "static", _transition_maker(t))
-        if t.name not in dying
-        else ClipJob(t.name, "static", _death_maker(dying[t.name]))
-        for t in transitions.TRANSITIONS
-    ]
+    jobs = [ClipJob(t.name, "static", _record_of(t, dying)) for t in transitions.TRANSITIONS]
     jobs += [ClipJob(name, "loco", _gait_maker(make)) for name, make in gait.locomotion_clips().items()]
     jobs += [ClipJob(name, "crawl", _gait_maker(make)) for name, make in crawl.crawl_clips().items()]
     jobs += [ClipJob(name, "turn", _moved_maker(make)) for name, make in turns.turn_clips().items()]
@@ -125,6 +120,16 @@ def clip_jobs() -> list[ClipJob]:
 
 # One closure per clip (a lambda in a loop would late-bind the loop variable).
 _Record = Callable[[BuildContext], Clip]
+
+
+def _record_of(spec: transitions.TransitionSpec, dying: Mapping[str, deaths.DeathSpec]) -> _Record:
+    """How a static transition is recorded: simulated (a death), planned limb by limb (crawl -> prone), or
+    keyframed (the rest)."""
+    if spec.name in dying:
+        return _death_maker(dying[spec.name])
+    if spec.name == crawl_prone.NAME:
+        return lambda ctx: Clip(crawl_prone.record_crawl_to_prone(ctx.keys, (ctx.soldier, ctx.rifle)))
+    return _transition_maker(spec)
 
 
 def _transition_maker(spec: transitions.TransitionSpec) -> _Record:

@@ -888,23 +888,8 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
     ),
     TransitionSpec("kstow2dead", "KNEEL_STOWED", "DEAD", 1.0),
     TransitionSpec("kfire2dead", "KNEEL_FIRE", "DEAD", 1.0),
-    TransitionSpec(
-        "crawl2prstow",
-        "CRAWL",
-        "PRONE_STOWED",
-        0.8,
-        (
-            Step("left_foot", "PRONE_STOWED", 0.0, 0.6, lift=8.0),
-            Step("right_foot", "PRONE_STOWED", 0.1, 0.6, lift=8.0),
-            Step("left_knee", "PRONE_STOWED", 0.0, 0.6, lift=6.0),
-            Step("right_knee", "PRONE_STOWED", 0.1, 0.6, lift=6.0),
-            Step("root", "PRONE_STOWED", 0.0, 0.8),
-            Step("legs", "PRONE_STOWED", 0.0, 0.7),
-            Step("spine", "PRONE_STOWED", 0.1, 0.7),
-            Step("head", "PRONE_STOWED", 0.2, 0.6),
-            *_carry("PRONE_STOWED", 0.05, 0.75),
-        ),
-    ),
+    # recorded limb by limb (authoring.crawl_prone), not by steps; its arc time is crawl_prone.DURATION
+    TransitionSpec("crawl2prstow", "CRAWL", "PRONE_STOWED", 1.6),
     TransitionSpec(
         "prstow2prfire",
         "PRONE_STOWED",

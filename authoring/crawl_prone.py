@@ -1,0 +1,143 @@
+"""``crawl2prstow``: from the crawl (forearms, knees) down to prone (belly, thighs, forearms), limb by limb.
+
+The two postures' contacts are far apart (the left elbow 60 cm, the knees 40 cm, the left toes a metre
+sideways), so interpolating the joints drags every limb along the ground. Instead, as in the crawl
+(:mod:`authoring.crawl`), each limb is lifted, carried and set down in turn while the others stay planted:
+the hips and legs go down first (each knee and its toes lifted back to where prone has them, the left leg
+then the right), then the left forearm moves to its prone place, then the right, the rifle carried by the
+chest from the crawl's cradle to the prone carry. The body (pelvis, spine, legs) is one batched IK solve
+from the interpolated joints with the knees and toes on their tracks; the arms are then tracked frame after
+frame (palms on the rifle first, then the elbows on their tracks) so no joint jumps between IK branches.
+The clip starts exactly in ``CRAWL``, ends exactly in ``PRONE_STOWED`` and is eased at both ends.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from authoring import easing, ik
+from authoring.crawl import _progress, _rise, _smooth
+from authoring.motion import KeyPosture
+from authoring.postures import RIFLE, SOLDIER, arm, leg, palm_targets
+from authoring.transitions import (
+    ClipFrames,
+    carrier_globals,
+    carry_of,
+    lift_off_ground,
+    palm_offsets,
+    slerp_frames,
+    track_solve,
+)
+from peabody.fk import FigureKinematics
+from peabody.model import Figure
+
+FPS = 60
+NAME = "crawl2prstow"
+START, END = "CRAWL", "PRONE_STOWED"
+DURATION = 1.6  # s
+BODY = (0.0, 0.9)  # s: pelvis, spine, legs and head go down
+ARMS = (0.0, 1.55)  # s: the arms' joints (the IK pulls towards them) and the rifle's carry
+HOLD = (0.0, 0.7)  # s: the rifle, first left where the forearms hold it, goes over to the chest's carry
+# (start, duration) in s of each limb's move: the knees (with their toes) first, then the forearms
+MOVES = {
+    ("knee", "left"): (0.0, 0.55),
+    ("knee", "right"): (0.4, 0.5),
+    ("elbow", "left"): (0.85, 0.35),
+    ("elbow", "right"): (1.15, 0.35),
+}
+LIFT = {"knee": 4.0, "toes": 6.0, "elbow": 5.0}  # cm a contact rises while it moves
+LEG_SITES = {"knee": "{s}_lower_leg.knee", "toes": "{s}_toes.distal"}
+ELBOW_SITE = "{s}_upper_arm.distal"
+LEG_TRACKING = {"iterations": 20, "max_dof_step": 0.03}
+ARM_TRACKING = {"iterations": 10, "max_dof_step": 0.02}
+
+
+def _ramp(t: np.ndarray, a: float, b: float) -> np.ndarray:
+    return _smooth((t - a) / (b - a))
+
+
+def move_track(
+    p0: np.ndarray, p1: np.ndarray, t: np.ndarray, start: float, duration: float, lift: float
+) -> np.ndarray:
+    """World track ``(n, 3)`` of a contact planted at ``p0`` that rises ``lift`` cm, travels to ``p1`` while
+    clear of the ground and is set down there over ``[start, start + duration]``."""
+    s = (t - start) / duration
+    track = p0[None] + _progress(s)[:, None] * (p1 - p0)[None]
+    track[:, 1] += lift * _rise(s)
+    return track
+
+
+def _site(kin: FigureKinematics, key: KeyPosture, site: str) -> np.ndarray:
+    g = kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])
+    return g[kin.site_names.index(site), :3, 3]
+
+
+def record_crawl_to_prone(keys: Mapping[str, KeyPosture], figures: Sequence[Figure]) -> ClipFrames:
+    """The frames of ``crawl2prstow`` (see the module docstring)."""
+    soldier, rifle = figures
+    kin, rkin = FigureKinematics(soldier), FigureKinematics(rifle)
+    first, last = keys[START], keys[END]
+    n = round(DURATION * FPS) + 1
+    t = np.arange(n) / FPS
+    q0, q1 = first.poses[SOLDIER], last.poses[SOLDIER]
+    u_body, u_arms = _ramp(t, *BODY), _ramp(t, *ARMS)
+    arm_dofs = np.zeros(kin.ndof, dtype=bool)
+    for side in ("left", "right"):
+        for j in (f"{side}_clavicle", *arm(side)):
+            arm_dofs[kin.dof_slices[j]] = True
+    u = np.where(arm_dofs[None], u_arms[:, None], u_body[:, None])
+    rest = q0[None] + u * (q1 - q0)[None]
+    roots = slerp_frames(first.locations[SOLDIER], last.locations[SOLDIER], u_body)
+    # the body: knees and toes on their tracks, the pelvis free to rise and turn over them
+    goals: list[ik.Goal] = [ik.Goal(kin.root_name, roots[:, :3, 3], roots[:, :3, :3], 0.4, 1, ())]
+    for side in ("left", "right"):
+        a, d = MOVES["knee", side]
+        for part, fmt in LEG_SITES.items():
+            site = fmt.format(s=side)
+            track = move_track(_site(kin, first, site), _site(kin, last, site), t, a, d, LIFT[part])
+            chain = leg(side) if part == "knee" else (f"{side}_hip", f"{side}_knee", f"{side}_toes")
+            goals.append(ik.Goal(site, track, None, 1.0, 1, chain))
+    poses, report = ik.solve(
+        kin,
+        rest,
+        goals,
+        roots,
+        iterations=80,
+        rest_pose=rest,
+        rest_gain=0.1,
+        root_dofs=("ty", "rx", "ry", "rz"),
+    )
+    roots = report.root_location
+    # ... and the legs again on that pelvis, frame after frame, so no joint leaps between IK branches
+    poses = track_solve(kin, rest, goals[1:], roots, **LEG_TRACKING)
+    poses = np.where(arm_dofs[None], rest, poses)
+    # the elbows' tracks; the chest carries the rifle, its carry turning from the cradle to the prone one
+    elbows = {}
+    for side in ("left", "right"):
+        site = ELBOW_SITE.format(s=side)
+        a, d = MOVES["elbow", side]
+        elbows[side] = move_track(_site(kin, first, site), _site(kin, last, site), t, a, d, LIFT["elbow"])
+    carry = slerp_frames(carry_of(kin, first), carry_of(kin, last), u_arms)
+    carried = carrier_globals(kin, poses, roots) @ carry
+    hold = _ramp(t, *HOLD)
+    rifles = np.stack(
+        [slerp_frames(first.locations[RIFLE], c, hold[i : i + 1])[0] for i, c in enumerate(carried)]
+    )
+    off_a, off_b = palm_offsets(kin, rkin, first), palm_offsets(kin, rkin, last)
+    arm_goals: list[ik.Goal] = []
+    for side in ("right", "left"):
+        tgt = palm_targets(rkin, rifles, side) @ slerp_frames(off_a[side], off_b[side], u_arms)
+        site = f"{side}_palm.palmcenter"
+        arm_goals.append(ik.Goal(site, tgt[:, :3, 3], None, 1.0, 3, arm(side)))
+        arm_goals.append(ik.Goal(site, None, tgt[:, :3, :3], 1.0, 2, arm(side), orientation_weight=8.0))
+    for side in ("left", "right"):
+        site = ELBOW_SITE.format(s=side)
+        arm_goals.append(ik.Goal(site, elbows[side], None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
+    poses = track_solve(kin, poses, arm_goals, roots, **ARM_TRACKING)
+    poses[0], poses[-1] = q0, q1
+    roots[0], roots[-1] = first.locations[SOLDIER], last.locations[SOLDIER]
+    rifles[0], rifles[-1] = first.locations[RIFLE], last.locations[RIFLE]
+    lift_off_ground(kin, poses, roots, rifles)
+    return easing.ease_ends(kin, rkin, ClipFrames(poses, roots, rifles, FPS))
