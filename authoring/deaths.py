@@ -66,6 +66,7 @@ GROUND_RISE = 0.4  # s: a ground lowered under a posture dipping into it rises t
 SLEEP_SPEED = 0.15  # m/s: once the muscles are done and the pelvis is this slow, the body goes to sleep
 SLEEP_DAMPING = 20.0  # asleep: the joints hold the shape they have, damped this many times harder
 SLEEP_RAMP = 0.2  # s, over which the damping rises
+SLEEP_FEET = 0.15  # m: and both feet (centres of mass) this low (asleep, shins up stayed up)
 GET_UP_SECONDS = 10.0  # DEAD@x -> its start posture: the death played backwards (seed 002 Figure 7: 10 s)
 
 
@@ -290,6 +291,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     d_mj = np.array([d_fig[0], -d_fig[2], d_fig[1]])  # figure (x, y, z) -> MuJoCo (x, -z, y)
     torso = model.body("upper_torso").id
     hips = model.body("lower_torso").id
+    feet = [model.body(f"{side}_foot").id for side in ("left", "right")]
     gun = model.body("rifle").id
     away = -right - 0.3 * d_fig  # the let-go rifle is tossed to the soldier's left, away from his fall
     away[1] = 0.0
@@ -376,7 +378,8 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         speed = np.linalg.norm(data.xipos[1:] - com[1:], axis=1).max() / dt
         com_before, com = com, data.xipos.copy()
         pelvis_speed = np.linalg.norm(data.xipos[hips] - com_before[hips]) / dt
-        if not asleep and SLEEP_DAMPING > 1.0 and t > spec.fade and pelvis_speed < SLEEP_SPEED:
+        down = data.xipos[feet, 2].max() < SLEEP_FEET
+        if not asleep and t > spec.fade and pelvis_speed < SLEEP_SPEED and down:
             asleep.append((data.time, model.dof_damping[jm.qvel].copy()))
             model.qpos_spring[jm.qpos] = data.qpos[jm.qpos]
         still = still + 1 if speed < REST_SPEED and t > spec.fade + spec.release else 0
