@@ -28,7 +28,11 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`); it collides
    with the arms and head it touched in the start pose too (:class:`~authoring.ragdoll.Ragdoll`), and a
    rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`);
-4. **the body settles**: recording (60 fps) stops once every body has been still (:data:`REST_SPEED`) for
+4. **the body settles and sleeps**: once the muscle program is over (:attr:`DeathSpec.fade`) and the pelvis
+   is slower than :data:`SLEEP_SPEED`, the joints hold the shape they have (the springs' references frozen
+   there) and are damped ever harder (:data:`SLEEP_DAMPING`): still-acting muscles (the legs rolling
+   outward) dragged a lying soldier's feet along the ground, and soft contacts let resting parts creep;
+   recording (60 fps) stops once every body has been still (:data:`REST_SPEED`) for
    :data:`REST_SECONDS` (or after :data:`MAX_SECONDS`); the clip keeps those still frames, so the last frame
    is at rest.
 
@@ -59,6 +63,10 @@ REST_SECONDS = 0.35  # every body still this long: the death is over
 MAX_SECONDS = 6.0
 TOSS, TOSS_SECONDS = 40.0, 0.1  # N, s: the hands fling the rifle they let go of (clear of the falling body)
 GROUND_RISE = 0.4  # s: a ground lowered under a posture dipping into it rises to 0
+SLEEP_SPEED = 0.15  # m/s: once the muscles are done and the pelvis is this slow, the body goes to sleep
+SLEEP_DAMPING = 20.0  # asleep: the joints hold the shape they have, damped this many times harder
+SLEEP_RAMP = 0.2  # s, over which the damping rises
+SLEEP_FEET = 0.15  # m: and both feet (centres of mass) this low (asleep, shins up stayed up)
 GET_UP_SECONDS = 10.0  # DEAD@x -> its start posture: the death played backwards (seed 002 Figure 7: 10 s)
 
 
@@ -282,13 +290,23 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     d_fig /= np.linalg.norm(d_fig)
     d_mj = np.array([d_fig[0], -d_fig[2], d_fig[1]])  # figure (x, y, z) -> MuJoCo (x, -z, y)
     torso = model.body("upper_torso").id
+    hips = model.body("lower_torso").id
+    feet = [model.body(f"{side}_foot").id for side in ("left", "right")]
     gun = model.body("rifle").id
     away = -right - 0.3 * d_fig  # the let-go rifle is tossed to the soldier's left, away from his fall
     away[1] = 0.0
     away /= np.linalg.norm(away) or 1.0
     toss_mj = spec.toss * np.array([away[0], -away[2], away[1]])
 
+    asleep: list[tuple[float, np.ndarray]] = []  # when he fell asleep, his damping then (:data:`SLEEP_SPEED`)
+
     def set_muscles(t: float) -> None:
+        if asleep:  # the shape he lies in is held, the joints damped ever harder: nothing creeps
+            since, damping = asleep[0]
+            model.dof_damping[jm.qvel] = damping * (
+                1.0 + (SLEEP_DAMPING - 1.0) * _smoothstep((t - since) / SLEEP_RAMP)
+            )
+            return
         if t < spec.slump_time:  # holding -> slumping
             u = _smoothstep(t / spec.slump_time)
             ref = hold_ref + u * (slump_ref - hold_ref)
@@ -358,7 +376,12 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         roots.append(doll.root_location())
         rifles.append(doll.rifle_location())
         speed = np.linalg.norm(data.xipos[1:] - com[1:], axis=1).max() / dt
-        com = data.xipos.copy()
+        com_before, com = com, data.xipos.copy()
+        pelvis_speed = np.linalg.norm(data.xipos[hips] - com_before[hips]) / dt
+        down = data.xipos[feet, 2].max() < SLEEP_FEET
+        if not asleep and t > spec.fade and pelvis_speed < SLEEP_SPEED and down:
+            asleep.append((data.time, model.dof_damping[jm.qvel].copy()))
+            model.qpos_spring[jm.qpos] = data.qpos[jm.qpos]
         still = still + 1 if speed < REST_SPEED and t > spec.fade + spec.release else 0
         if still * dt >= REST_SECONDS:
             break

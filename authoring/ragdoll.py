@@ -66,6 +66,7 @@ GROUND_FRICTION = "3.0 0.1 0.01"  # sliding, torsional, rolling
 CONTACT_SOLREF = "0.002 1"
 CONTACT_SOLIMP = "0.95 0.99 0.001"
 LIMIT_SOLREF = "0.002 1"  # stiff joint limits (MuJoCo's are soft constraints)
+CONE, IMPRATIO = "elliptic", 10.0  # elliptic friction cones, friction stiffer than the normal by this
 NOSLIP_ITERATIONS = 8  # MuJoCo's no-slip pass: soft friction would let a resting part creep
 PALMS = ("right_palm", "left_palm")
 WELD_SOLREF = 0.002  # s: the hands' grip on the rifle, as stiff as the step allows
@@ -217,7 +218,7 @@ class Ragdoll:
         )
         return f"""<mujoco model="soldier_ragdoll">
   <compiler angle="radian" boundmass="0.001" boundinertia="1e-7"/>
-  <option timestep="{TIMESTEP}" integrator="implicitfast" cone="elliptic" impratio="10"
+  <option timestep="{TIMESTEP}" integrator="implicitfast" cone="{CONE}" impratio="{IMPRATIO}"
           noslip_iterations="{NOSLIP_ITERATIONS}"/>
   <size memory="64M"/>
   <default>
