@@ -111,24 +111,37 @@ def clip_jobs() -> list[ClipJob]:
     """Every clip of the library, in build order."""
     dying = deaths.death_specs()
     jobs = [
-        ClipJob(
-            t.name,
-            "static",
-            lambda ctx, t=t: Clip(transitions.record_transition(t, ctx.keys, (ctx.soldier, ctx.rifle))),
-        )
+        ClipJob(t.name, "static", _transition_maker(t))
         if t.name not in dying
-        else ClipJob(t.name, "static", lambda ctx, d=dying[t.name]: _death(d, ctx))
+        else ClipJob(t.name, "static", _death_maker(dying[t.name]))
         for t in transitions.TRANSITIONS
     ]
-    for name, make in gait.locomotion_clips().items():
-        jobs.append(ClipJob(name, "loco", lambda ctx, make=make: Clip(*make(ctx))))
-    for name, make in crawl.crawl_clips().items():
-        jobs.append(ClipJob(name, "crawl", lambda ctx, make=make: Clip(*make(ctx))))
-    for name, make in turns.turn_clips().items():
-        jobs.append(ClipJob(name, "turn", lambda ctx, make=make: _moved(*make(ctx))))
-    for name, make in reactions.reaction_clips().items():
-        jobs.append(ClipJob(name, "react", lambda ctx, make=make: Clip(*make(ctx))))
+    jobs += [ClipJob(name, "loco", _gait_maker(make)) for name, make in gait.locomotion_clips().items()]
+    jobs += [ClipJob(name, "crawl", _gait_maker(make)) for name, make in crawl.crawl_clips().items()]
+    jobs += [ClipJob(name, "turn", _moved_maker(make)) for name, make in turns.turn_clips().items()]
+    jobs += [ClipJob(name, "react", _gait_maker(make)) for name, make in reactions.reaction_clips().items()]
     return jobs
+
+
+# One closure per clip (a lambda in a loop would late-bind the loop variable).
+_Record = Callable[[BuildContext], Clip]
+
+
+def _transition_maker(spec: transitions.TransitionSpec) -> _Record:
+    return lambda ctx: Clip(transitions.record_transition(spec, ctx.keys, (ctx.soldier, ctx.rifle)))
+
+
+def _death_maker(spec: deaths.DeathSpec) -> _Record:
+    return lambda ctx: _death(spec, ctx)
+
+
+def _gait_maker(make: Callable[[BuildContext], tuple[ClipFrames, float | None, float | None]]) -> _Record:
+    """(frames, stride length, ground speed) recorders: locomotion, crawl and reactions (no stride)."""
+    return lambda ctx: Clip(*make(ctx))
+
+
+def _moved_maker(make: Callable[[BuildContext], tuple[ClipFrames, tuple[float, float, float]]]) -> _Record:
+    return lambda ctx: _moved(*make(ctx))
 
 
 def _moved(frames: ClipFrames, end_offset: tuple[float, float, float]) -> Clip:
@@ -151,7 +164,8 @@ def record(job: ClipJob, ctx: BuildContext) -> Channelset:
             ground_speed=None if clip.ground_speed is None else round(clip.ground_speed, 2),
         )
     if clip.end_offset is not None:
-        chset = replace(chset, end_offset=tuple(round(v, 4) for v in clip.end_offset))
+        x, z, yaw = clip.end_offset
+        chset = replace(chset, end_offset=(round(x, 4), round(z, 4), round(yaw, 4)))
     if clip.release_frame is not None:
         chset = replace(chset, release_frame=clip.release_frame)
     return chset

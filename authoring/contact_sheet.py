@@ -209,7 +209,7 @@ def render_contact_sheet(
         raise ContactSheetError(f"no offscreen OpenGL context ({exc}); set PYOPENGL_PLATFORM=egl") from exc
 
     def draw(
-        states: Mapping[str, tuple[np.ndarray, np.ndarray]],
+        states: Mapping[str, np.ndarray],
         frames: Sequence[int],
         aim: tuple[np.ndarray, np.ndarray],
         view: str,

@@ -7,20 +7,27 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 (:data:`GROUND_RISE`). Then:
 
 1. **the hit**: a force on the upper torso, ramped up over :attr:`DeathSpec.ramp` and down again (so every
-   part starts moving slowly), pushing the body the way it falls (forward standing, to the side kneeling,
-   down lying);
+   part starts moving slowly), pushing the body the way it falls (forward standing, straight to the side
+   kneeling — at 100 N: harder or forward, he rolled over his back with his legs up — down lying);
 2. **the slump**: PD control (the springs) toward a slumped shape — the ``SLUMP`` key standing (the knees
    buckle), the spine and head of ``SLUMP`` kneeling (the legs stay as they are: no kick), the ``DEAD`` key's
    head lying — at half strength by :attr:`DeathSpec.slump_time`, then toward a limp shape (the ``DEAD``
    key's, legs straight and feet pointed, :func:`limp_pose`) fading to a faint tone by
    :attr:`DeathSpec.fade`; the knees give way at once (:data:`KNEES_GIVE_WAY`: held, they swung the shins up
-   as the body pitched forward), arms, neck and head keep no tone (:data:`LOOSE`); dead joints stay damped;
+   as the body pitched forward) but stay damped harder until he is down (:attr:`DeathSpec.knee_damping`:
+   limp, they flung the shins up as he hit the ground and dragged the feet), arms, neck and head keep no
+   tone (:data:`LOOSE`; :attr:`DeathSpec.arm_tone`: a faint one, so a soldier on his side lays his arm
+   down instead of leaving it up in the air); dead joints stay damped;
    once he is down (after :attr:`DeathSpec.fade`, over :data:`KNEE_STRAIGHTEN`) the legs roll outward at
-   the hips and the feet evert (:data:`ROLLED_LEGS`, :data:`HIP_ROLL`, at :data:`LEG_TONE`: the feet lie on
-   their inner sides, heels low), and a standing death's knees straighten (:data:`KNEE_TONE`: bent, they
-   left him bottom-up on his knees);
+   the hips and the feet turn (:data:`ROLLED_LEGS`, :data:`HIP_ROLL`, at :data:`LEG_TONE`: the feet lie on
+   their inner sides, heels low) — a soldier who may come to rest on his side (:attr:`DeathSpec.sideways`,
+   the kneeling deaths) only as far as he lies on his front (:func:`_face_down`; on his side, the toned
+   hip held the upper leg up in the air) — and a standing death's knees straighten (:data:`KNEE_TONE`:
+   bent, they left him bottom-up on his knees);
 3. **the rifle is let go** at :attr:`DeathSpec.release` (the welds to the palms are switched off; the frame
-   is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`);
+   is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`); it collides
+   with the arms and head it touched in the start pose too (:class:`~authoring.ragdoll.Ragdoll`), and a
+   rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`);
 4. **the body settles**: recording (60 fps) stops once every body has been still (:data:`REST_SPEED`) for
    :data:`REST_SECONDS` (or after :data:`MAX_SECONDS`); the clip keeps those still frames, so the last frame
    is at rest.
@@ -70,13 +77,35 @@ class DeathSpec:
     slump_gain: float = 0.5
     fade: float = 1.0  # s, by then only a faint tone toward the limp shape is left
     release: float = 0.35  # s, the hands let go of the rifle
+    sideways: bool = False  # he may come to rest on his side: the legs roll outward only if on his front
+    knee_damping: float = 1.0  # the knees' damping is this many times stronger until he is down
+    arm_tone: float = 0.0  # the fraction of the arms' gain kept when dead (toward the DEAD key's arms)
+    toss: float = TOSS  # N, the hands fling the rifle they let go of this hard (he must not land on it)
 
 
 DEATHS: tuple[DeathSpec, ...] = (
-    DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0)),
-    DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0)),
-    DeathSpec("kstow2dead", "KNEEL_STOWED", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15),
-    DeathSpec("kfire2dead", "KNEEL_FIRE", 150.0, (1.0, -0.3, -0.5), "upper", release=0.15),
+    DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0),
+    DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0), knee_damping=4.0, toss=120.0),
+    DeathSpec(
+        "kstow2dead",
+        "KNEEL_STOWED",
+        100.0,
+        (1.0, -0.3, 0.0),
+        "upper",
+        release=0.15,
+        sideways=True,
+        arm_tone=0.05,
+    ),
+    DeathSpec(
+        "kfire2dead",
+        "KNEEL_FIRE",
+        100.0,
+        (1.0, -0.3, 0.0),
+        "upper",
+        release=0.15,
+        sideways=True,
+        knee_damping=4.0,
+    ),
     DeathSpec(
         "prstow2dead", "PRONE_STOWED", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
     ),
@@ -84,7 +113,15 @@ DEATHS: tuple[DeathSpec, ...] = (
         "prfire2dead", "PRONE_FIRE", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
     ),
     DeathSpec(
-        "crawl2dead", "CRAWL", 120.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
+        "crawl2dead",
+        "CRAWL",
+        120.0,
+        (0.0, -1.0, 0.0),
+        "head",
+        slump_time=0.25,
+        fade=0.6,
+        release=0.15,
+        knee_damping=4.0,
     ),
 )
 SLUMP = "SLUMP"  # the in-between key of a body crumpling onto its knees (authoring.postures)
@@ -129,6 +166,7 @@ LEG_TONE = 0.3  # hips, ankles: enough to roll the legs outward and lay the feet
 LEGS = ("hip", "ankle")
 KNEE_TONE = 0.3  # a standing death's knees straighten with this once he is down (bent, they held him
 KNEE_STRAIGHTEN = 1.0  # s: bottom-up on his knees), slowly after DeathSpec.fade (quickly, the shins kick up)
+KNEE_DAMPING_FADE = 0.3  # s: after DeathSpec.fade the knees' extra damping fades this fast
 KNEES_GIVE_WAY = 0.15  # s: after the slump the knees go limp this fast
 DAMPING = 0.1  # joint damping = DAMPING * gain (s), at least MIN_DAMPING
 MIN_DAMPING = 4.0
@@ -149,6 +187,7 @@ LIMP_LEGS = {"knee": (0.0,), "ankle": (-50.0, 0.0)}
 # body on its front lies with its feet on their inner sides and its heels low, as real bodies lie
 ROLLED_LEGS = {"knee": (5.0,), "ankle": (-50.0, 30.0)}
 HIP_ROLL = -45.0  # the hips' third DOF (about the thigh); negative turns the toes out
+FACE_DOWN = (0.2, 0.6)  # the pelvis' front pointing down this much (cosine): from on his side to on his front
 
 
 def limp_pose(kin, dead: np.ndarray, rolled: bool = False) -> np.ndarray:
@@ -194,6 +233,13 @@ def _carried_dofs(doll, key: KeyPosture) -> np.ndarray:
     )
 
 
+def _face_down(doll) -> float:
+    """How much the ragdoll lies on its front: 1 when the pelvis' front (its -Z) points down more than
+    :data:`FACE_DOWN` (cosine), 0 on his side or back, smooth in between."""
+    down = float(doll.body_global("lower_torso")[1, 2])  # the front's downward component
+    return _smoothstep((down - FACE_DOWN[0]) / (FACE_DOWN[1] - FACE_DOWN[0]))
+
+
 def _smoothstep(u: float) -> float:
     u = min(1.0, max(0.0, u))
     return u * u * (3.0 - 2.0 * u)
@@ -219,7 +265,8 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     knees = np.array([n.endswith("knee") for n in names])
     loose = [n.endswith(LOOSE) for n in names]
     legs = [n.endswith(LEGS) for n in names]
-    tone = np.where(spine, SPINE_TONE, np.where(loose, 0.0, TONE))
+    arms = np.array([n.endswith(("clavicle", "shoulder", "elbow")) for n in names])
+    tone = np.where(spine, SPINE_TONE, np.where(loose, np.where(arms, spec.arm_tone, 0.0), TONE))
     # once he is down the legs roll outward (hips, ankles) and, standing deaths only, the knees straighten
     # (straightened, a fallen kneeling soldier's knees drag his feet along the ground)
     settle = np.where(legs, LEG_TONE - TONE, 0.0) + (KNEE_TONE - TONE) * knees * (spec.slump == "all")
@@ -239,7 +286,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     away = -right - 0.3 * d_fig  # the let-go rifle is tossed to the soldier's left, away from his fall
     away[1] = 0.0
     away /= np.linalg.norm(away) or 1.0
-    toss_mj = TOSS * np.array([away[0], -away[2], away[1]])
+    toss_mj = spec.toss * np.array([away[0], -away[2], away[1]])
 
     def set_muscles(t: float) -> None:
         if t < spec.slump_time:  # holding -> slumping
@@ -252,11 +299,17 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             ref = slump_ref + u * (dead_ref - slump_ref)
             g = spec.slump_gain + np.where(knees, uk, u) * (tone - spec.slump_gain)
             us = _smoothstep((t - spec.fade) / KNEE_STRAIGHTEN)
-            ref = ref + us * (rolled_ref - dead_ref)
-            g = g + settle * us
+            if us > 0.0 and spec.sideways:  # only on his front (on his side, the upper leg would rise)
+                us *= _face_down(doll)
+            if us > 0.0:
+                ref = ref + us * (rolled_ref - dead_ref)
+                g = g + settle * us
         model.jnt_stiffness[jm.jnt] = gain * g
         model.qpos_spring[jm.qpos] = ref
-        model.dof_damping[jm.qvel] = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
+        damping = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
+        # until he is down the knees are damped harder (limp, they flung the shins up as he hit the ground)
+        fall = 1.0 - _smoothstep((t - spec.fade) / KNEE_DAMPING_FADE)
+        model.dof_damping[jm.qvel] = damping * np.where(knees, 1.0 + (spec.knee_damping - 1.0) * fall, 1.0)
 
     # the living soldier's muscles carry his limbs and the rifle: gravity fed forward on every joint whose
     # limb does not rest on the ground (and an upward pull on the held rifle), fading as he slumps, so the
@@ -279,6 +332,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     com = data.xipos.copy()
     still = 0
     release_frame = None
+    rifle_ground0 = 0.0
     ground0 = min(0.0, doll.lowest())  # a posture dipping into the ground starts on a ground that low
     t = 0.0
     while t < MAX_SECONDS:
@@ -295,9 +349,9 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             if release_frame is None and ts >= spec.release:
                 doll.release()
                 release_frame = len(poses)
-                # a rifle the posture dipped into the ground lies on a ground that low (raising it would
-                # lever the body up off it)
-                doll.set_rifle_ground(min(0.0, doll.rifle_lowest()))
+                rifle_ground0 = min(0.0, doll.rifle_lowest())
+            if release_frame is not None:  # a rifle the posture dipped into the ground is raised out of it
+                doll.set_rifle_ground(rifle_ground0 * (1.0 - _smoothstep((ts - spec.release) / GROUND_RISE)))
             doll.step()
         t += dt
         poses.append(doll.pose())

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from authoring.anthropometry import VERTEBRAE
 from authoring.figure_landmarks import landmarks
@@ -73,7 +74,7 @@ def material_of(segment: str) -> str:
 # ------------------------------------------------------------------------------------------ face rules
 
 
-def _torso_bands(centroids: np.ndarray, bounds: Sequence[float], names: Sequence[str]) -> np.ndarray:
+def _torso_bands(centroids: np.ndarray, bounds: ArrayLike, names: Sequence[str]) -> np.ndarray:
     """``names[i]`` for faces whose centroid height lies in band i (``len(names) == len(bounds) + 1``)."""
     return np.asarray(names, dtype=object)[np.searchsorted(np.asarray(bounds), centroids[:, 1], side="right")]
 

@@ -8,6 +8,8 @@ outermost skin vertex near it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from authoring.anthropometry import THORACIC_TOP_RATIO, VERTEBRAE, WAIST_HEIGHT_RATIO, vertebra_bounds
@@ -20,7 +22,11 @@ SIDE_SIGN = {"left": -1.0, "right": 1.0}
 
 
 def surface_point(
-    vertices: np.ndarray, start: np.ndarray, direction: np.ndarray, radius: float = 1.5, reach: float = 40.0
+    vertices: np.ndarray,
+    start: np.ndarray,
+    direction: np.ndarray | Sequence[float],
+    radius: float = 1.5,
+    reach: float = 40.0,
 ) -> np.ndarray:
     """Where the ray ``start + t * direction`` leaves the skin (outermost vertex within ``radius``)."""
     d = np.asarray(direction, dtype=np.float64)

@@ -43,9 +43,10 @@ import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from authoring import ik
 from authoring.motion import KeyPosture
@@ -199,7 +200,7 @@ def _smooth(s: np.ndarray) -> np.ndarray:
     return s * s * (3.0 - 2.0 * s)
 
 
-def _frame(pos: np.ndarray, yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+def _frame(pos: np.ndarray, yaw: ArrayLike, pitch: ArrayLike) -> np.ndarray:
     """``(n, 4, 4)`` frames at ``pos`` turned ``Ry(yaw) Rx(pitch)`` (degrees)."""
     a, b = np.asarray(yaw) * DEG, np.asarray(pitch) * DEG
     ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
@@ -378,7 +379,14 @@ def _steady(g: Gait, side: str, t_on: float, heel: tuple[float, float]) -> Footf
     )
 
 
-def _swing(g: Gait) -> dict[str, float]:
+class _SwingShape(TypedDict):
+    """:class:`Footfall`'s swing-shape keywords, typed for ``**`` unpacking."""
+
+    rise: float
+    drop: float
+
+
+def _swing(g: Gait) -> _SwingShape:
     """A footfall's swing shape (``rise``, ``drop``) in gait ``g``."""
     return {"rise": g.swing_rise, "drop": g.swing_drop}
 
@@ -839,7 +847,12 @@ LOCO_CLIPS: tuple[str, ...] = (
 
 def locomotion_clips() -> dict[str, Callable[[Any], tuple[ClipFrames, float, float]]]:
     """Clip name -> generator taking the build context (all sessions are recorded on first use)."""
-    return {name: (lambda ctx, name=name: session_clips(ctx)[name]) for name in LOCO_CLIPS}
+    return {name: _session_clip(name) for name in LOCO_CLIPS}
+
+
+def _session_clip(name: str) -> Callable[[Any], tuple[ClipFrames, float, float]]:
+    """The generator of session clip ``name`` (a closure per name, not one late-bound loop variable)."""
+    return lambda ctx: session_clips(ctx)[name]
 
 
 __all__ = [

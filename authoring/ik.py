@@ -320,8 +320,8 @@ def _reduced(kin: FigureKinematics, sites: Sequence[str]) -> tuple[FigureKinemat
         return hit[1], hit[2]
     fig = kin.figure
     needed: dict[str, None] = {}
-    for site in sites:
-        for jname, _ in kin.joint_path(kin.root_name, site):
+    for goal in sites:
+        for jname, _ in kin.joint_path(kin.root_name, goal):
             needed[jname] = None
     if len(needed) == len(fig.joints):
         _REDUCED[key] = (kin, kin, None)

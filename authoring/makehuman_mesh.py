@@ -302,7 +302,7 @@ def _pose_joints(
             carrier.setdefault(tail["cube_name"], bone)
     out = {}
     for name, p in joints.items():
-        bone = carrier.get(name)
-        t = xf[index[bone]] if bone is not None else np.eye(4)
+        carried_by = carrier.get(name)
+        t = xf[index[carried_by]] if carried_by is not None else np.eye(4)
         out[name] = (t @ np.append(p, 1.0))[:3]
     return out

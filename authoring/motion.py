@@ -240,6 +240,7 @@ class Attach:
 
 
 Hook = SiteConstraint | PinSite | Attach
+_IkItem = SiteConstraint | PinSite | Motion  # what one IK batch solves (Attach moves a location, no IK)
 
 
 @dataclass
@@ -288,8 +289,7 @@ class MotionScript:
         if motion.figure not in self.figures:
             raise KeyError(f"motion on unknown figure {motion.figure!r}")
         tgt = motion.target
-        empty = isinstance(tgt, KeyPosture) and motion.figure not in {*tgt.poses, *tgt.locations}
-        if empty:
+        if isinstance(tgt, KeyPosture) and motion.figure not in {*tgt.poses, *tgt.locations}:
             raise KeyError(f"key posture {tgt.name!r} has nothing for {motion.figure!r}")
         self.motions.append(motion)
         return motion
@@ -338,7 +338,7 @@ class MotionScript:
         frames = ScriptFrames(fps, times, poses, locs)
         # site-target motions behave like hooks that come first, in start order
         pending: list[Hook | Motion] = [*site_motions, *self.hooks]
-        batch: list[Hook | Motion] = []
+        batch: list[_IkItem] = []
         for item in pending:
             if isinstance(item, Attach):
                 self._solve(frames, batch)
@@ -393,7 +393,7 @@ class MotionScript:
             offset = np.linalg.inv(g[0]) @ frames.locations[hook.figure][f0]
         frames.locations[hook.figure][f0 : f1 + 1] = g @ offset
 
-    def _solve(self, frames: ScriptFrames, batch: Sequence[Hook | Motion]) -> None:
+    def _solve(self, frames: ScriptFrames, batch: Sequence[_IkItem]) -> None:
         if not batch:
             return
         name = batch[0].figure
@@ -419,7 +419,7 @@ class MotionScript:
             frames.locations[name][rows] = report.root_location
         frames.reports.append(report)
 
-    def _goal(self, frames: ScriptFrames, item: Hook | Motion, n: int) -> ik.Goal | None:
+    def _goal(self, frames: ScriptFrames, item: _IkItem, n: int) -> ik.Goal | None:
         fps = frames.fps
         name = item.figure
         kin = self.kinematics[name]
@@ -532,7 +532,8 @@ class _State:
                 dofs = np.arange(kin.ndof)
             goal_loc = target.locations.get(name)
         elif isinstance(target, JointTarget):
-            idx, vals = [], []
+            idx: list[int] = []
+            vals: list[float] = []
             for jname, ang in target.angles.items():
                 if jname not in kin.dof_slices:
                     raise KeyError(f"figure {name!r} has no joint {jname!r}")

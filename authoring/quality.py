@@ -277,10 +277,10 @@ def check_clip(
     steps = np.abs(np.diff(q[:, rot], axis=0))
     out["max_frame_jump_deg"] = round(float(np.degrees(steps.max(initial=0.0))), 3)
     if steps.size:
-        frame, col = np.unravel_index(int(np.argmax(steps)), steps.shape)
+        at, col = (int(v) for v in np.unravel_index(int(np.argmax(steps)), steps.shape))
         dof = int(np.flatnonzero(rot)[col])
         joint = next(j for j, sl in kin.dof_slices.items() if sl.start <= dof < sl.stop)
-        out["max_frame_jump_where"] = f"{joint}[{int(frame)}-{int(frame) + 1}]"
+        out["max_frame_jump_where"] = f"{joint}[{at}-{at + 1}]"
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
     if locomotion:
         speed, stride = cs.ground_speed, cs.stride_length
@@ -428,13 +428,13 @@ def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[s
     for key in ("gait_speed_m_s", "gait_steps_per_s"):
         judged = [(c, GAIT_LIMITS[c["gait"]][key]) for c in clips if c.get(key) is not None]
         judged = [(c, lim) for c, lim in judged if lim is not None]  # recorded-only families are not judged
-        limit = {f: v[key] for f, v in GAIT_LIMITS.items() if v[key] is not None}
+        ranges = {f: v[key] for f, v in GAIT_LIMITS.items() if v[key] is not None}
         bad = [(c, lim) for c, lim in judged if _range_failure(c[key], lim)]
 
         # the worst: furthest outside its range, else the value closest to an edge
         pick = max(judged, key=lambda cl: _range_distance(cl[0][key], cl[1])) if judged else None
         rows[key] = {
-            "limit": limit,
+            "limit": ranges,
             "worst": None if pick is None else pick[0][key],
             "where": None if pick is None else pick[0]["name"],
             "failing": len(bad),

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Mapping
+from operator import itemgetter
 from typing import Any
 
 import numpy as np
@@ -159,7 +160,7 @@ def check_continuity(
             for key, part in (("rest_contact", "rest_part"), ("rest_foot", "rest_foot")):
                 judged = [r for r in rest if r.get(f"{key}_cm") is not None]
                 if judged:
-                    w = max(judged, key=lambda r, k=key: r[f"{k}_cm"])
+                    w = max(judged, key=itemgetter(f"{key}_cm"))
                     row[f"{key}_cm"] = w[f"{key}_cm"]
                     row[f"{key}_where"] = f"{w['clip']}[{w['frame']}] {w[part]}"
         out.append(row)

@@ -20,10 +20,13 @@ The model mirrors the figure exactly, so a simulated state maps back onto the po
   the body collides with itself except for pairs that already touch in the start pose (neighbouring torso
   slices, the shoulder blob and the upper arm, ...);
 * the rifle (``AK_47.fig``, one segment) is its own free body, held by weld constraints to both palms until
-  :meth:`Ragdoll.release`; it collides with the body except the parts that touch it in the start pose (the
-  hands that hold it, a cheek on the stock), and with a ground of its own only once let go (contact bits:
-  ground 1, rifle's ground 2, body 1|4, rifle 2|4), so a posture that dips the rifle into the ground does
-  not shoot it out.
+  :meth:`Ragdoll.release`; it collides with the body except the hands that hold it (the check measures the
+  rifle against the same segment hulls). The other parts that touch it in the start pose (a forearm under
+  it, the shoulder at the stock, a cheek) are explicit contact pairs, switched on (``pair_gap``) as soon as
+  the rifle is clear of each, and at release for those it is still inside of, pushed out softly
+  (:data:`SEPARATE_SOLREF`): no let-go rifle passes through a limb. It meets a ground of its own only once
+  let go (contact bits: ground 1, rifle's ground 2, body 1|4, rifle 2|4), so a posture that dips the rifle
+  into the ground does not shoot it out.
 
 Muscles are joint springs (``jnt_stiffness`` toward ``qpos_spring``) with joint damping, both changeable
 while simulating: :mod:`authoring.deaths` holds the posture, then fades the gains to a limp body.
@@ -66,7 +69,16 @@ LIMIT_SOLREF = "0.002 1"  # stiff joint limits (MuJoCo's are soft constraints)
 NOSLIP_ITERATIONS = 8  # MuJoCo's no-slip pass: soft friction would let a resting part creep
 PALMS = ("right_palm", "left_palm")
 WELD_SOLREF = 0.002  # s: the hands' grip on the rifle, as stiff as the step allows
+RIFLE_BODY_FRICTION = "0.8 0.005 0.0001"  # a let-go rifle on the body (condim 3: sliding only)
+SEPARATE_SOLREF = (0.02, 1.0)  # s: a let-go rifle still inside a neighbour is pushed out this softly
+INACTIVE_GAP = 1000.0  # m: a contact pair with this gap never acts (MuJoCo: active below margin - gap)
 PARKED = -100.0  # m: where the rifle's ground plane waits while the rifle is held
+
+
+def _hand(body: str) -> bool:
+    from authoring.body_parts import HAND_PARTS, part_of
+
+    return part_of(body) in HAND_PARTS
 
 
 def frozen(joint: str) -> bool:
@@ -119,16 +131,24 @@ class Ragdoll:
         rifle_location = np.asarray(rifle_location, dtype=np.float64)
         self._root_site = self.kin.figure.root.location  # type: ignore[union-attr]
         self._rifle_site = self.rkin.figure.root.location  # type: ignore[union-attr]
-        xml = self._mjcf(exclude=())
+        xml = self._mjcf(exclude=(), pairs=())
         model = mujoco.MjModel.from_xml_string(xml)
         data = mujoco.MjData(model)
         self._set_state(model, data, self.pose0, root, rifle_location)
         mujoco.mj_forward(model, data)
         touching = self._touching_pairs(model, data)
-        self.xml = self._mjcf(exclude=touching)
+        # the rifle's start-pose neighbours that are not the hands holding it (a forearm, a shoulder, the
+        # cheek on the stock): explicit contact pairs, each acting once the rifle is clear of it (held or
+        # not: an arm pressed onto a held rifle stops at it), the rest at release (:meth:`release`)
+        self.rifle_neighbours = sorted(
+            b for pair in touching if "rifle" in pair for b in pair if b != "rifle" and not _hand(b)
+        )
+        self.xml = self._mjcf(exclude=touching, pairs=self.rifle_neighbours)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(self.model)
         self.map = self._joint_map()
+        # the rifle's contact pairs with its neighbours act once it is clear of each (:meth:`step`)
+        self._pending: list[int] = list(range(self.model.npair))
         body = np.arange(1, self.model.nbody) != self.model.body("rifle").id
         scale = BODY_MASS / self.model.body_mass[1:][body].sum()
         self.model.body_mass[1:][body] *= scale
@@ -139,7 +159,7 @@ class Ragdoll:
 
     # --- MJCF -----------------------------------------------------------------------------------------------
 
-    def _mjcf(self, exclude: Iterable[tuple[str, str]]) -> str:
+    def _mjcf(self, exclude: Iterable[tuple[str, str]], pairs: Iterable[str]) -> str:
         kin = self.kin
         fig = self.soldier
         assets: list[str] = []
@@ -190,6 +210,11 @@ class Ragdoll:
         rnodes = self.rifle.segments["rifle"].psurf.nodes  # type: ignore[union-attr]
         rifle_mesh = hull("rifle", rnodes)
         ex = "\n".join(f'<exclude body1="{a}" body2="{b}"/>' for a, b in exclude)
+        ex += "".join(
+            f'\n<pair geom1="rifle" geom2="{b}" condim="3" friction="{RIFLE_BODY_FRICTION}" '
+            f'solref="{CONTACT_SOLREF}" solimp="{CONTACT_SOLIMP}" gap="{INACTIVE_GAP}"/>'
+            for b in pairs
+        )
         return f"""<mujoco model="soldier_ragdoll">
   <compiler angle="radian" boundmass="0.001" boundinertia="1e-7"/>
   <option timestep="{TIMESTEP}" integrator="implicitfast" cone="elliptic" impratio="10"
@@ -297,9 +322,24 @@ class Ragdoll:
         m.eq_solref[:] = eq_solref
 
     def release(self) -> None:
-        """The hands let go of the rifle."""
+        """The hands let go of the rifle; the start-pose neighbours it is still inside of push it out, gently
+        (:data:`SEPARATE_SOLREF`: at full stiffness they would fling it)."""
         for palm in PALMS:
             self.data.eq_active[self.model.equality(f"grip:{palm}").id] = 0
+        for p in self._pending:  # still inside a neighbour: pushed out of it gently
+            self.model.pair_solref[p] = SEPARATE_SOLREF
+            self.model.pair_gap[p] = 0.0
+        self._pending = []
+
+    def _arm_rifle_pairs(self) -> None:
+        m, d = self.model, self.data
+        still = []
+        for p in self._pending:
+            if self.mujoco.mj_geomDistance(m, d, m.pair_geom1[p], m.pair_geom2[p], 0.01, None) > 0.0:
+                m.pair_gap[p] = 0.0
+            else:
+                still.append(p)
+        self._pending = still
 
     def rifle_lowest(self) -> float:
         """Height (cm) of the rifle's lowest psurf node."""
@@ -346,7 +386,12 @@ class Ragdoll:
         return self.body_global("rifle") @ self._rifle_site
 
     def step(self, n: int = 1) -> None:
-        self.mujoco.mj_step(self.model, self.data, nstep=n)
+        if not self._pending:
+            self.mujoco.mj_step(self.model, self.data, nstep=n)
+            return
+        for _ in range(n):
+            self._arm_rifle_pairs()
+            self.mujoco.mj_step(self.model, self.data)
 
 
 # Figures are +Y up, MuJoCo's gravity is -Z: the MuJoCo world is the figure world turned +90 deg about X

@@ -177,7 +177,8 @@ def plan_turn(base: BaseStance, direction: str, angle: float) -> StepPlan:
     outer = "right" if inside == "left" else "left"
     role_side = {"inside": inside, "outer": outer}
     sign = 1.0 if direction == "left" else -1.0
-    ball = tuple(float(v) for v in base.ball_at(inside))
+    ball_x, ball_z = base.ball_at(inside)
+    ball = (float(ball_x), float(ball_z))
     steps: dict[str, list[tuple[float, float, float]]] = {inside: [], outer: []}
     keys: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
     lean: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
@@ -345,4 +346,9 @@ def _record(ctx: Any) -> dict[str, tuple[ClipFrames, tuple[float, float, float]]
 
 def turn_clips() -> dict[str, Callable[[Any], tuple[ClipFrames, tuple[float, float, float]]]]:
     """Clip name -> generator taking the build context: (frames, end_offset)."""
-    return {name: (lambda ctx, name=name: _record(ctx)[name]) for name in TURN_CLIPS}
+    return {name: _turn_clip(name) for name in TURN_CLIPS}
+
+
+def _turn_clip(name: str) -> Callable[[Any], tuple[ClipFrames, tuple[float, float, float]]]:
+    """The generator of turn clip ``name`` (a closure per name, not one late-bound loop variable)."""
+    return lambda ctx: _record(ctx)[name]

@@ -62,6 +62,30 @@ def test_the_ragdoll_mirrors_the_figure(ctx: BuildContext) -> None:
     assert doll.rifle_location()[1, 3] < before - 5.0
 
 
+def test_the_let_go_rifle_collides_with_the_limbs_it_touched(ctx: BuildContext) -> None:
+    """The parts touching the rifle in the start pose (not the hands) are contact pairs that act once the
+    rifle is clear of them, and all of them once it is let go: a dropped rifle never passes through an arm."""
+    pytest.importorskip("mujoco")
+    from authoring.body_parts import HAND_PARTS, part_of
+    from authoring.ragdoll import INACTIVE_GAP, Ragdoll
+
+    key = ctx.keys["STAND_FIRE"]
+    doll = Ragdoll(ctx.soldier, ctx.rifle, key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE])
+    m = doll.model
+    assert doll.rifle_neighbours and m.npair == len(doll.rifle_neighbours)
+    assert not any(part_of(b) in HAND_PARTS for b in doll.rifle_neighbours)
+    rifle = m.geom("rifle").id
+    assert all(rifle in (m.pair_geom1[p], m.pair_geom2[p]) for p in range(m.npair))
+    names = [m.body(b).name for b in range(m.nbody)]
+    excluded = {frozenset((names[int(s >> 16)], names[int(s & 0xFFFF)])) for s in m.exclude_signature}
+    assert all(frozenset((b, "rifle")) in excluded for b in doll.rifle_neighbours)  # no default contact
+    doll.step(12)
+    held = m.pair_gap.copy()
+    assert ((held == 0.0) | (held == INACTIVE_GAP)).all()
+    doll.release()
+    assert (m.pair_gap == 0.0).all()
+
+
 def test_rebuilding_a_death_reproduces_the_committed_clip(ctx: BuildContext) -> None:
     pytest.importorskip("mujoco")
     clip = deaths.simulate(deaths.death_specs()[REPRODUCED], ctx.keys, (ctx.soldier, ctx.rifle))

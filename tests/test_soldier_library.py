@@ -161,7 +161,7 @@ def test_a_weapon_variant_plays_its_own_graphs_and_must_match_clip_for_clip() ->
     ak = synthetic_figures(12)
     m16 = [ak[0], make_figure("rifle", "M16.fig", [])]
     static, loco, crawl = synthetic_graphs(ak)
-    variant = synthetic_graphs(m16, seed=8)  # the same clips, other data
+    variant = (*synthetic_graphs(m16, seed=8), None, None)  # the same clips, other data; no turn/react graphs
     lib = MotionLibrary(static, [ak, m16], loco, crawl, weapon_graphs={"M16.fig": variant})
     assert (
         lib.set_keys == [("DI.fig", "AK_47.fig"), ("DI.fig", "M16.fig")]
@@ -172,6 +172,5 @@ def test_a_weapon_variant_plays_its_own_graphs_and_must_match_clip_for_clip() ->
     a, b = lib.sets[0].sample(*one), lib.sets[1].sample(*one)
     assert np.abs(a.joints - b.joints).max() > 1e-3  # the M16 set plays the M16 graphs' data
     with pytest.raises(ValueError, match="channelsets"):
-        MotionLibrary(
-            static, [ak, m16], loco, crawl, weapon_graphs={"M16.fig": (variant[0], variant[1], None)}
-        )
+        no_crawl = (variant[0], variant[1], None, None, None)
+        MotionLibrary(static, [ak, m16], loco, crawl, weapon_graphs={"M16.fig": no_crawl})
