@@ -135,8 +135,10 @@ TRACK_ITERATIONS = 12  # per frame of the frame-after-frame tracking of the smoo
 TRACK_SETTLE_ITERATIONS = 20  # the forward and backward tracks' blend put back on the goals
 # passes of the tracking's own solve (TRACK_ITERATIONS small steps each) that polish a lone solve: stopped by
 # its 80 iterations with a palm still 3-4 mm off (an elbow goal out of reach pulling against it), a clip's end
-# frame left the tracks' first step to finish the job (prone: 11-20 degrees of wrist in one frame)
-POLISH_PASSES = 3
+# frame left the tracks' first step to finish the job (prone: 11-20 degrees of wrist in one frame). The out of
+# reach elbow goal keeps drifting the arm in the palms' null space, with a hop now and then (prone: 3.5 deg
+# at the 4th pass); after 8 passes a pass moves it < 0.2 degrees
+POLISH_PASSES = 8
 
 
 @dataclass

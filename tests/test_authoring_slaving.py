@@ -55,10 +55,11 @@ def test_slaved_clip_has_no_pops_the_master_lacks(pair: MasterSlavePair, clip: s
         err = np.linalg.norm(got - goal.target_position[held], axis=-1)
         assert err.max() < 0.1
     # endpoints are the frames slaved alone (as every clip meeting at that posture node has them), up to
-    # rounding that depends on the batch; a clip that lets go of the rifle ends with its arm goals off
+    # rounding that depends on the batch (carried on by the polish's passes: < 1e-5 rad, below the files'
+    # float32); a clip that lets go of the rifle ends with its arm goals off
     first, _ = pair.slave_pose(q[:1], loc[:1])
     last, _ = pair.slave_pose(q[-1:], loc[-1:], None if release is None else -RELEASE_FADE_FRAMES)
-    np.testing.assert_allclose(pose[[0, -1]], np.concatenate([first, last]), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(pose[[0, -1]], np.concatenate([first, last]), rtol=0, atol=1e-5)
 
 
 def test_goal_radius_stops_the_pull_inside_the_ball(pair: MasterSlavePair) -> None:
