@@ -15,7 +15,9 @@ Per frame (all frames of a clip at once):
    a frame solved alone resolves the chains' redundancy wherever its iterations stop, so the slave's offset
    from the copied angles is smoothed over the clip (the copied arm angles a little too) and the goals are
    tracked from there frame after frame, each frame warm-started from its neighbour's solution; the first
-   and last frames stay the frames solved alone, so clips meeting at a posture node agree.
+   and last frames stay the frames solved alone, so clips meeting at a posture node agree. A frame solved
+   alone is polished by the tracking's own small-step solve (:meth:`MasterSlavePair._polish`), so the
+   tracks leave their end frames on the same branch.
 
 The sight and elbow goals are balls (:data:`GOAL_RADIUS`, ``ik.Goal.radius``): within 0.9 cm of the master's
 site they count as met. Chased to the millimetre they made the slave pop: prone with the neck at its
@@ -131,6 +133,12 @@ SMOOTH_MAX_DOF_STEP = 0.05  # rad per iteration of the re-solve after smoothing:
 COPY_SIGMA_FRAMES = 1.0  # Gaussian smoothing of the copied arm angles before the tracking
 TRACK_ITERATIONS = 12  # per frame of the frame-after-frame tracking of the smoothed clip
 TRACK_SETTLE_ITERATIONS = 20  # the forward and backward tracks' blend put back on the goals
+# passes of the tracking's own solve (TRACK_ITERATIONS small steps each) that polish a lone solve: stopped by
+# its 80 iterations with a palm still 3-4 mm off (an elbow goal out of reach pulling against it), a clip's end
+# frame left the tracks' first step to finish the job (prone: 11-20 degrees of wrist in one frame). The out of
+# reach elbow goal keeps drifting the arm in the palms' null space, with a hop now and then (prone: 3.5 deg
+# at the 4th pass); after 8 passes a pass moves it < 0.2 degrees
+POLISH_PASSES = 8
 
 
 @dataclass
@@ -311,7 +319,7 @@ class MasterSlavePair:
         opts: dict[str, Any] = {"iterations": 80, "rest_gain": 0.1, "tolerance": 0.02}
         opts.update(self.ik_options)
         pose, self.last_report = ik.solve(sk, start, goals, slave_loc, rest_pose=start, **opts)
-        return _let_go(pose, start, release_frame), slave_loc
+        return _let_go(self._polish(pose, goals, slave_loc), start, release_frame), slave_loc
 
     def slave_clip(
         self,
@@ -363,6 +371,19 @@ class MasterSlavePair:
         out = _let_go(out, start, release_frame)
         out[[0, -1]] = pose[[0, -1]]
         return out, slave_loc
+
+    def _polish(self, poses: np.ndarray, goals: list[ik.Goal], roots: np.ndarray) -> np.ndarray:
+        """Lone solves ``poses`` ``(..., ndof)`` carried on by the tracking's own small-step solve until it
+        leaves them (nearly) where they are: a clip's tracks start from its end frames, and an end their first
+        step still had to finish put the frame next to it on another branch (a wrist 11-20 degrees away).
+        A frame's polished pose depends on that frame alone, so clips meeting at a posture node agree."""
+        opts: dict[str, Any] = {"rest_gain": 0.1, "tolerance": 0.02}
+        opts.update(self.ik_options)
+        opts.update(iterations=TRACK_ITERATIONS, max_dof_step=SMOOTH_MAX_DOF_STEP)
+        out = poses
+        for _ in range(POLISH_PASSES):
+            out, _ = ik.solve(self.slave_kin, out, goals, roots, rest_pose=out, **opts)
+        return out
 
     def _track(
         self, blend: np.ndarray, goals: list[ik.Goal], roots: np.ndarray, first: np.ndarray, last: np.ndarray

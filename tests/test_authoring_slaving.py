@@ -34,8 +34,12 @@ def _max_jump_deg(kin, poses: np.ndarray) -> float:
 # two twisted solutions); kfire2dead: the arms are flung while falling (after the hands let go of the rifle
 # the arm goals fade out, so the slave keeps the master's arm angles instead of flipping between branches);
 # crawl_cycle and crawl_start: the left shoulder near its twist limit (frames solved alone, then smoothed,
-# popped 23-28 degrees; tracked frame after frame they do not)
-@pytest.mark.parametrize("clip", ["crawl2prstow", "kfire2dead", "crawl_cycle", "crawl_start"])
+# popped 23-28 degrees; tracked frame after frame they do not); prfire_recoil: prone, the right elbow goal out
+# of reach, the end frames' lone solves stopped with the palm 3-4 mm off and the tracks' first step finished
+# the job with 11 degrees of wrist (polished, the ends are where the tracks keep them)
+@pytest.mark.parametrize(
+    "clip", ["crawl2prstow", "kfire2dead", "crawl_cycle", "crawl_start", "prfire_recoil"]
+)
 def test_slaved_clip_has_no_pops_the_master_lacks(pair: MasterSlavePair, clip: str) -> None:
     q, loc, release = _master(pair, clip)
     pose, slave_loc = pair.slave_clip(q, loc, release)
@@ -51,10 +55,11 @@ def test_slaved_clip_has_no_pops_the_master_lacks(pair: MasterSlavePair, clip: s
         err = np.linalg.norm(got - goal.target_position[held], axis=-1)
         assert err.max() < 0.1
     # endpoints are the frames slaved alone (as every clip meeting at that posture node has them), up to
-    # rounding that depends on the batch; a clip that lets go of the rifle ends with its arm goals off
+    # rounding that depends on the batch (carried on by the polish's passes: < 1e-5 rad, below the files'
+    # float32); a clip that lets go of the rifle ends with its arm goals off
     first, _ = pair.slave_pose(q[:1], loc[:1])
     last, _ = pair.slave_pose(q[-1:], loc[-1:], None if release is None else -RELEASE_FADE_FRAMES)
-    np.testing.assert_allclose(pose[[0, -1]], np.concatenate([first, last]), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(pose[[0, -1]], np.concatenate([first, last]), rtol=0, atol=1e-5)
 
 
 def test_goal_radius_stops_the_pull_inside_the_ball(pair: MasterSlavePair) -> None:
