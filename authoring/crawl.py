@@ -320,6 +320,7 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
     poses, report = ik.solve(
         kin, rest, goals, roots, iterations=80, rest_pose=rest, rest_gain=0.1, root_dofs=PELVIS_DOFS
     )
+    assert report.root_location is not None  # solved with root DOFs: the solve reports where the root went
     roots = report.root_location
     # then the arms on the body: elbows on their tracks, the palms on the rifle the forearms carry
     elbows: dict[str, np.ndarray] = {}
@@ -378,4 +379,9 @@ def _record(ctx: Any) -> dict[str, tuple[ClipFrames, float, float]]:
 
 def crawl_clips() -> dict[str, Callable[[Any], tuple[ClipFrames, float, float]]]:
     """Clip name -> generator taking the build context."""
-    return {name: (lambda ctx, name=name: _record(ctx)[name]) for name in ("crawl_start", "crawl_cycle")}
+    return {name: _clip_of(name) for name in ("crawl_start", "crawl_cycle")}
+
+
+def _clip_of(name: str) -> Callable[[Any], tuple[ClipFrames, float, float]]:
+    """One generator per clip (a lambda in a loop would late-bind the name)."""
+    return lambda ctx: _record(ctx)[name]

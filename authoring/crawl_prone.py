@@ -14,6 +14,7 @@ The clip starts exactly in ``CRAWL``, ends exactly in ``PRONE_STOWED`` and is ea
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import TypedDict
 
 import numpy as np
 
@@ -50,8 +51,13 @@ MOVES = {
 LIFT = {"knee": 4.0, "toes": 6.0, "elbow": 5.0}  # cm a contact rises while it moves
 LEG_SITES = {"knee": "{s}_lower_leg.knee", "toes": "{s}_toes.distal"}
 ELBOW_SITE = "{s}_upper_arm.distal"
-LEG_TRACKING = {"iterations": 20, "max_dof_step": 0.03}
-ARM_TRACKING = {"iterations": 10, "max_dof_step": 0.02}
+class _Tracking(TypedDict):
+    iterations: int
+    max_dof_step: float
+
+
+LEG_TRACKING: _Tracking = {"iterations": 20, "max_dof_step": 0.03}
+ARM_TRACKING: _Tracking = {"iterations": 10, "max_dof_step": 0.02}
 
 
 def _ramp(t: np.ndarray, a: float, b: float) -> np.ndarray:
@@ -109,6 +115,7 @@ def record_crawl_to_prone(keys: Mapping[str, KeyPosture], figures: Sequence[Figu
         rest_gain=0.1,
         root_dofs=("ty", "rx", "ry", "rz"),
     )
+    assert report.root_location is not None  # solved with root DOFs: the solve reports where the root went
     roots = report.root_location
     # ... and the legs again on that pelvis, frame after frame, so no joint leaps between IK branches
     poses = track_solve(kin, rest, goals[1:], roots, **LEG_TRACKING)

@@ -307,6 +307,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
                 1.0 + (SLEEP_DAMPING - 1.0) * _smoothstep((t - since) / SLEEP_RAMP)
             )
             return
+        g: float | np.ndarray  # one gain, or one per joint once the knees give way on their own
         if t < spec.slump_time:  # holding -> slumping
             u = _smoothstep(t / spec.slump_time)
             ref = hold_ref + u * (slump_ref - hold_ref)

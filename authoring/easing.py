@@ -16,7 +16,7 @@ left alone.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Protocol
+from typing import Protocol, TypeVar
 
 import numpy as np
 
@@ -37,6 +37,9 @@ class Frames(Protocol):
     roots: np.ndarray
     rifles: np.ndarray
     fps: float
+
+
+F = TypeVar("F", bound=Frames)  # the clip type passes through: a ClipFrames comes back as one
 
 
 def site_speeds(kin: FigureKinematics, rkin: FigureKinematics, clip: Frames) -> np.ndarray:
@@ -82,7 +85,7 @@ def _blend_frames(m: np.ndarray, i: np.ndarray, w: np.ndarray) -> np.ndarray:
     return quaternion.to_transform(pos, rot)
 
 
-def retime(clip: Frames, times: np.ndarray) -> Frames:
+def retime(clip: F, times: np.ndarray) -> F:
     """The clip sampled at ``times`` (s, within the clip): joint angles interpolated linearly between the
     two nearest recorded frames, placements blended; exact recorded frames stay exact."""
     n = len(clip.poses)
@@ -98,11 +101,11 @@ def retime(clip: Frames, times: np.ndarray) -> Frames:
 def ease_ends(
     kin: FigureKinematics,
     rkin: FigureKinematics,
-    clip: Frames,
+    clip: F,
     start: bool = True,
     end: bool = True,
     limit: float = END_SPEED,
-) -> Frames:
+) -> F:
     """``clip`` retimed so that it leaves its first frame (``start``) and reaches its last (``end``) at no
     more than ``limit`` m/s: each end gets the shortest ramp of :data:`RAMPS` that does it (the longest
     within :data:`RAMP_SHARE` of the clip if none does); unchanged if both ends already do."""
