@@ -90,6 +90,9 @@ def prone():
     return figs, master, slave
 
 
+@pytest.mark.xfail(
+    strict=True, reason="issue 14 open: DI's right forearm is 2.1-2.7 cm up in the prone recoil (frames 4-14)"
+)
 def test_the_prone_slave_lays_his_forearms_on_the_ground_with_the_rifle_in_his_hands(prone) -> None:
     figs, master, slave = prone
     rested = copy.deepcopy(slave)
