@@ -188,3 +188,22 @@ def test_cli_refuses_a_window_without_display_and_a_bad_terrain(
     assert main(["stub"]) == 2 and "--headless" in capsys.readouterr().err
     bad = ["stub", "--headless", "--terrain", str(tmp_path / "none.glb"), "--out", str(tmp_path / "x.png")]
     assert main(bad) == 1 and "cannot load terrain" in capsys.readouterr().err
+
+
+def test_the_tethered_camera_aims_at_the_figure_not_the_entity(tmp_path: Path) -> None:
+    """Issue 16: the server sends a root offset (the figure trails its entity through a step); a camera aimed
+    at the entity left the walking soldier at the frame's edge in `make demo`."""
+    app = StubApp(terrain_from_mesh(grey_ground()), artic_dir=tmp_path)
+    slot = app.add_soldier((0.0, 0.0))
+    app.controller.current = slot
+    app.camera.tether()
+    app.frame(0.0)
+    at_entity = app.camera_pose()
+    kind = app.kinds[int(app.slot_kind[slot])]
+    body = max(range(len(kind.layout.figures)), key=lambda f: kind.layout.figures[f].ndof)
+    place = kind.crowd.placements[[slot]].copy()
+    place[0, body, :3, 3] += app.soldiers.entity_matrices(np.array([slot]))[0, :3, :3].T @ [0.0, -1.0, 0.0]
+    kind.crowd.set_placements(np.array([slot]), place)
+    moved = app.camera_pose()
+    # the whole camera moved with the figure (1 m along the world's -y), not just its aim
+    np.testing.assert_allclose(moved[:3, 3] - at_entity[:3, 3], [0.0, -1.0, 0.0], atol=1e-6)

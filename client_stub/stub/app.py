@@ -335,7 +335,20 @@ class StubApp:
         s = self.soldiers
         cur = self.controller.current
         feet, heading = (s.position[cur], float(s.heading[cur])) if cur < s.count else (np.zeros(3), 0.0)
+        if cur < s.count and self.slot_kind[cur] >= 0:
+            feet = self._figure_feet(cur, feet)
         return camera_pose(self.camera, feet, heading, self.terrain.bounds)
+
+    def _figure_feet(self, slot: int, feet: np.ndarray) -> np.ndarray:
+        """Where the soldier's figure stands: the server sends a root offset (the figure trails or leads its
+        entity through a step, issue 16), so the camera aims at the figure's root, not at the entity."""
+        k = self.kinds[int(self.slot_kind[slot])]
+        figs = k.layout.figures
+        if not figs:
+            return feet
+        body = max(range(len(figs)), key=lambda f: figs[f].ndof)  # the soldier, not his rifle
+        root = self.soldiers.entity_matrices(np.array([slot]))[0] @ k.crowd.placements[slot, body]
+        return np.array([root[0, 3], root[1, 3], feet[2]])
 
     def close(self) -> None:
         self.source.close()
