@@ -43,6 +43,7 @@ from server.motion.cache import load_channelset
 from server.motion.channelset import Channelset
 from server.motion.channelset_file import format_channelset, parse_channelsets, save_channelset
 from server.motion.posture_graph import Arc, PostureGraph, format_posture_graph
+from server.world import synthetic
 
 FIGURE_SETS = ("soldier", "DI", "M16", "all")
 SUFFIXES = {"soldier": "", "DI": "_low", "M16": "_m16_low"}  # channelset file name suffix per figure set
@@ -340,20 +341,9 @@ def environment_text() -> str:
 
 
 def startup_jcl() -> str:
-    """``jack-ttes-soldier_low.jcl`` (seed 002, 3.6). Our channelsets are recorded facing -Z, so the three
-    heading offsets (posture, walking, crawling channelsets) are 0 where the seed's had 256."""
-    lines = ['read_file("jack-ttes-soldier_low.env");']
-    lines += [f'create_soldier_state("s{i}","Di2_{i}","AK_47_{i}");' for i in range(SOLDIERS)]
-    lines += [
-        'set_channelset_parameters("no");',
-        "set_ttes_report_interval(10.00);",
-        "set_ttes_heading_offset(0.00,0.00,0.00);",
-        "set_ttes_soldier_throttle(0.04);",
-        "set_ttes_report_interval(30.00);",
-        "start_ttes_socket_simulation();",
-        "disable_graphics();",
-    ]
-    return "\n".join(lines) + "\n"
+    """``jack-ttes-soldier_low.jcl`` for the shipped environment's soldiers (the server writes the same script
+    for its synthetic data dir: one definition, :func:`server.world.synthetic.startup_jcl`)."""
+    return synthetic.startup_jcl(SOLDIERS)
 
 
 def write_graphs(root: Path, figure: str = "all") -> list[Path]:

@@ -35,9 +35,18 @@ def write_synthetic_data_dir(
         for i in range(soldiers)
     ]
     (out / "jack-ttes-soldier_low.env").write_text("".join(env) or "\n", encoding="utf-8")
-    script = ['read_file("jack-ttes-soldier_low.env");']
-    script += [f'create_soldier_state("s{i}","Di2_{i}","AK_47_{i}");' for i in range(soldiers)]
-    script += [
+    (out / "jack-ttes-soldier_low.jcl").write_text(startup_jcl(soldiers), encoding="utf-8")
+    return SyntheticDataDir(out, "jack-ttes-soldier_low.jcl", names)
+
+
+def startup_jcl(soldiers: int) -> str:
+    """``jack-ttes-soldier_low.jcl`` (seed 002, 3.6) for ``soldiers`` soldiers ``Di2_i`` + ``AK_47_i`` of
+    ``jack-ttes-soldier_low.env``: the shipped library's script (written by ``ttes author build``) and the
+    synthetic data dir's. Our channelsets are recorded facing -Z, so the three heading offsets (posture,
+    walking, crawling channelsets) are 0 where the seed's had 256."""
+    lines = ['read_file("jack-ttes-soldier_low.env");']
+    lines += [f'create_soldier_state("s{i}","Di2_{i}","AK_47_{i}");' for i in range(soldiers)]
+    lines += [
         'set_channelset_parameters("no");',
         "set_ttes_report_interval(10.00);",
         "set_ttes_heading_offset(0.00,0.00,0.00);",
@@ -46,5 +55,4 @@ def write_synthetic_data_dir(
         "start_ttes_socket_simulation();",
         "disable_graphics();",
     ]
-    (out / "jack-ttes-soldier_low.jcl").write_text("\n".join(script) + "\n", encoding="utf-8")
-    return SyntheticDataDir(out, "jack-ttes-soldier_low.jcl", names)
+    return "\n".join(lines) + "\n"
