@@ -155,8 +155,7 @@ class MotionLibrary:
             if gi not in (GRAPH_STATIC, GRAPH_REACT):
                 gs_travel = _travel(cs, ref_type)
                 gs = _ground_speed(cs, gs_travel, _family(_lookup_keys(stem)[-1]))
-                turns = cs.end_offset is not None and cs.end_offset[2] != 0.0  # its move is the entity's
-                cs, travel = _strip_travel(cs, ref_type) if in_place and not turns else (cs, 0.0)
+                cs, travel = _strip_travel(cs, ref_type) if in_place and _strips(gi, cs) else (cs, 0.0)
             infos.append(ClipInfo(name, gi, cs.duration, cs.nframes, cs.fps, gs, travel))
             prepared.append(dataclasses.replace(cs, name=name))
         self.clips = infos
@@ -461,8 +460,7 @@ def _variant_channelsets(
         same_stem = stem.replace(suffix, "", 1) == stem0
         if gv != gi or not same_stem or (cs.nframes, cs.fps) != (cs0.nframes, cs0.fps):
             raise ValueError(f"the {weapon} clip {stem!r} does not match the base clip {stem0!r}")
-        turns = cs0.end_offset is not None and cs0.end_offset[2] != 0.0  # stripped exactly as the base clip
-        if gi not in (GRAPH_STATIC, GRAPH_REACT) and in_place and not turns:
+        if in_place and _strips(gi, cs0):  # exactly as the base clip
             cs, _ = _strip_travel(cs, ref_type)
         out.append(dataclasses.replace(cs, name=name))
     return out
@@ -488,6 +486,13 @@ def _travel(cs: Channelset, ref_type: str) -> float:
         return 0.0
     d = cs.fig_pos[-1, k].astype(np.float64) - cs.fig_pos[0, k]
     return float(math.hypot(d[0], d[2]))  # Jack: Y up, X/Z horizontal
+
+
+def _strips(graph: int, cs: Channelset) -> bool:
+    """Whether a clip loses its horizontal travel (local motion): locomotion and crawl clips do; static clips
+    and reactions have none, and a turn's move (``end_offset``) is the entity's to make."""
+    turns = cs.end_offset is not None and cs.end_offset[2] != 0.0
+    return graph not in (GRAPH_STATIC, GRAPH_REACT) and not turns
 
 
 def _strip_travel(cs: Channelset, ref_type: str) -> tuple[Channelset, float]:
