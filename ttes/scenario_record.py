@@ -25,6 +25,8 @@ from client_stub.stub.terrain import Terrain
 from server.app import TtesServer
 from server.config import ServerConfig
 
+CLOCK_SLACK_S = 1e-6  # the tick loop sums its period: tick k may fall a rounding error after k / hz
+
 
 @dataclass
 class ServerClock:
@@ -35,7 +37,7 @@ class ServerClock:
 
     async def to(self, t: float) -> None:
         await trio.testing.wait_all_tasks_blocked()  # what was sent before has been taken in
-        ahead = t - self.server.now()
+        ahead = t + CLOCK_SLACK_S - self.server.now()
         if ahead > 0:
             self.clock.jump(ahead)
         await trio.testing.wait_all_tasks_blocked()  # the ticks due by t ran and their bytes arrived
@@ -76,10 +78,13 @@ async def _record(rec: Recording, clock: trio.testing.MockClock) -> dict:
         app = StubApp(rec.terrain, soldier, artic_dir=rec.artic_dir)
         soldier.bind(app)
         app.renderer = StubRenderer(*rec.size)
+        ticks = ServerClock(clock, server)
+        origin = (math.floor(server.now() * rec.tick_hz) + 1) / rec.tick_hz  # the soldier's first tick
+        await ticks.to(origin)
         try:
             app.renderer.set_terrain(rec.terrain.meshes)
-            summary = await record_scenario(app, soldier, ServerClock(clock, server), rec.out, hz=rec.tick_hz,
-                                            sheet=rec.sheet)  # fmt: skip
+            summary = await record_scenario(app, soldier, ticks, rec.out, hz=rec.tick_hz, sheet=rec.sheet,
+                                            origin=origin)  # fmt: skip
             summary["soldier_updates"] = client.soldier_updates
             summary["last_tick"] = client.last_tick
             summary["entity_moved_m"] = round(float(math.hypot(*soldier.xy)), 4)

@@ -157,9 +157,12 @@ async def record_scenario(
     hz: float,
     sheet: str | Path | None = None,
     sheet_every: float = 0.5,
+    origin: float = 0.0,
 ) -> dict:
     """Render ``soldier.scenario`` at the server's rate ``hz`` into ``out`` (.mp4/.gif) and the contact
-    sheet ``sheet`` (PNG, a frame every ``sheet_every`` s); returns a summary."""
+    sheet ``sheet`` (PNG, a frame every ``sheet_every`` s); scenario time 0 is server time ``origin`` (a tick
+    by which the soldier has a pose: one created between ticks has none before the next). Returns a summary.
+    """
     import imageio.v2 as imageio
 
     renderer = app.renderer
@@ -179,9 +182,9 @@ async def record_scenario(
     with imageio.get_writer(out, **kwargs) as writer:
         for k in range(nframes):
             t = k / hz
-            await clock.to(t - BEFORE_TICK_S)
+            await clock.to(origin + t - BEFORE_TICK_S)
             soldier.prepare(app, t)
-            await clock.to(t)
+            await clock.to(origin + t)
             app.frame(1.0 / hz if k else 0.0)
             app.draw()
             frame = renderer.render()
