@@ -31,6 +31,7 @@ import numpy as np
 import trio
 
 from protocol.connection import NEED_DATA, PAUSED, SERVER, Connection, State
+from protocol.entity import Reaction
 from protocol.errors import ErrorCode, LocalProtocolError
 from protocol.events import (
     Accept,
@@ -45,6 +46,7 @@ from protocol.events import (
     Ping,
     Pong,
     ProtocolError,
+    React,
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
@@ -259,6 +261,8 @@ class Session:
             pass  # the connection forgets them; subscribing again starts with a full update
         elif isinstance(ev, EntityRequests):
             self._requests(ev)
+        elif isinstance(ev, React):
+            self._react(ev)
 
     def _hello(self, ev: Hello) -> None:
         self.name, self.role = ev.name, ev.role
@@ -390,6 +394,23 @@ class Session:
                     + (f" ({len(unknown)} rows)" if len(unknown) > 1 else ""),
                 )
             )
+
+    def _react(self, ev: React) -> None:
+        """REACT: each soldier plays the reaction now or when it comes to rest (``SoldierManager.react``);
+        one that cannot react is skipped silently, an unknown one answered by ERROR 100 (not fatal)."""
+        if not (self._permitted(None, "REACT") and self._is_ready(None, "REACT")):
+            return
+        m = self.world.manager
+        assert m is not None
+        kind = Reaction(ev.kind).name.lower()
+        now = self.world.clock()
+        unknown = [i for i in ev.indices if not m.table.is_live(i)]
+        for i in ev.indices:
+            if m.table.is_live(i):
+                m.react(i, kind, now)
+        if unknown:
+            more = f" ({len(unknown)} soldiers)" if len(unknown) > 1 else ""
+            self.send(Error(int(ErrorCode.UNKNOWN_SOLDIER), f"react: no soldier {unknown[0]}{more}"))
 
     # -- server → client ---------------------------------------------------------------------------------
     def status(self, now: float, soldiers: int, update_rate: float, text: str) -> None:

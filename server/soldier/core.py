@@ -116,6 +116,9 @@ class ManagerCore:
         self.names: dict[int, str] = {}
         self._by_name: dict[str, int] = {}
         self._paths: dict[int, list[Any]] = {}  # soldier -> [steps, arc index] while in TRANSITION
+        self._pending: dict[
+            int, tuple[str, float]
+        ] = {}  # soldier -> (reaction, time asked) kept in TRANSITION
         self.clip_log: deque[ClipStart] = deque(maxlen=record_limit)
         self._build_lookups()
         self.ticks = 0
@@ -129,6 +132,7 @@ class ManagerCore:
             "events": 0,
             "clip_ends": 0,
             "unreachable": 0,
+            "reactions": 0,  # reaction requests (react), played or kept
             "answers": 0,  # out-of-cycle updates (answer)
         }
 

@@ -23,6 +23,7 @@ from server.soldier.locomotion import (
     next_states,
     start_state,
 )
+from server.soldier.reactions import Reactions
 from server.soldier.state import (
     Movement,
 )
@@ -30,7 +31,7 @@ from server.soldier.stepping import Stepping
 from server.soldier.turning import Turning
 
 
-class Events(Stepping, Turning):
+class Events(Stepping, Turning, Reactions):
     """Per-soldier Python that runs only on events; :meth:`_advance` takes the clip ends up to each clock."""
 
     def _desired(self, i: int) -> int:
@@ -163,6 +164,8 @@ class Events(Stepping, Turning):
         if self._turning(int(tb.clip[i])):
             self._turn_end(i, t)
         self._decide(i, t)
+        if i in self._pending and int(tb.mode[i]) == _IDLE:
+            self._react_pending(i, t)
 
     def _advance(self, cand: np.ndarray) -> None:
         """Handle every clip end up to each soldier's clock, in time order per soldier."""

@@ -23,7 +23,8 @@ only the heading changed: resend last update   ``ticking``: ``TickUpdate.heading
 The class is assembled from mixins, one module of ``server/soldier/`` each, so every path reads on its own:
 ``core`` (table, settings, lookups, starting a clip or a rest), ``stepping`` (Figure 5's pacing), ``turning``
 (turns in place), ``events`` (the per-soldier event path and clip ends), ``ticking`` (tick, the between-tick
-answer, snapshots, poses), ``requests`` (entity requests and the JCL debugging commands), ``reactions``.
+answer, snapshots, poses), ``requests`` (entity requests, reactions and the JCL debugging commands),
+``reactions`` (the reaction path: play now or when the soldier comes to rest).
 
 Times: every method takes ``now`` (seconds, non-decreasing) — the manager reads no clock. Clip changes chain
 at the exact end time of the previous clip, not at the tick that notices it, so nothing drifts with the tick
@@ -48,7 +49,6 @@ from server.soldier.core import (
     TickUpdate,
 )
 from server.soldier.library import PathStep
-from server.soldier.reactions import Reactions
 from server.soldier.requests import Requests
 
 __all__ = [
@@ -63,7 +63,7 @@ __all__ = [
 ]
 
 
-class SoldierManager(Requests, Reactions):
+class SoldierManager(Requests):
     """All soldier states of one server: requests in, vectorised ticks out."""
 
     def create_soldier(
@@ -102,6 +102,7 @@ class SoldierManager(Requests, Reactions):
         """Forget a soldier (KeyError if there is none); its index is reused by later creates."""
         self.table.free(index)
         self._paths.pop(index, None)
+        self._pending.pop(index, None)
         nm = self.names.pop(index, None)
         if nm is not None:
             self._by_name.pop(nm, None)

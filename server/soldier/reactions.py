@@ -1,40 +1,46 @@
-"""Reactions (issue 16): a Fire PDU's recoil or a near detonation's flinch, played once in place."""
+"""Reactions (issue 16): a Fire PDU's recoil or a near detonation's flinch, played once in place.
+
+A soldier resting in a posture with that reaction (``soldier_react.graph``) plays it at once. One changing
+posture, turning or already reacting keeps the latest reaction asked for and plays it when that ends, if it
+is then resting in a posture that has it and the reaction is not older than MAX_REACTION_DELAY: the first
+shot of a standing soldier raises his rifle and recoils once it is up, and a burst recoils shot after shot.
+A stepping soldier does not react (a reaction would cut his step).
+"""
 
 from __future__ import annotations
 
-import numpy as np
-
-from server.soldier.core import (
-    _IDLE,
-    _TRANSITION,
-)
-from server.soldier.events import Events
+from server.soldier.core import _IDLE, _TRANSITION, ManagerCore
 from server.soldier.library import PathStep
 
+MAX_REACTION_DELAY = 1.5  # s: a reaction waiting for a posture change or turn longer than this is dropped
 
-class Reactions(Events):
-    """The reaction path: a resting soldier plays its posture's reaction clip and rests there again."""
 
-    def react(self, index: int, kind: str, now: float) -> str | None:
-        """A Fire PDU's ``"recoil"`` or a near detonation's ``"flinch"``: a soldier resting in a posture
-        with that reaction plays it once (soldier_react.graph) and rests there again. A soldier stepping or
-        changing posture, or with no such clip for its posture, does not react (None); else the clip."""
+class Reactions(ManagerCore):
+    """The reaction path: pick the posture's reaction clip, play it, or keep it for when the soldier rests."""
+
+    def _react_now(self, i: int, kind: str, t: float) -> str | None:
+        """Play reaction ``kind`` for a soldier at ``t`` (IDLE) or keep it (TRANSITION); the clip started."""
         tb, lib = self.table, self.library
-        if not tb.is_live(index):
-            raise KeyError(f"no soldier {index}")
-        if not self._settings.every_frame:
-            tb.clock[index] = now
-        self._advance(np.array([index], np.int64))
-        if int(tb.mode[index]) != _IDLE:
+        mode = int(tb.mode[i])
+        if mode == _TRANSITION:
+            self._pending[i] = (kind, t)
             return None
-        clip = lib.reaction.get((lib.posture_names[int(tb.node[index])], kind))
+        if mode != _IDLE:
+            return None
+        node = int(tb.node[i])
+        clip = lib.reaction.get((lib.posture_names[node], kind))
         if clip is None:
             return None
-        node = int(tb.node[index])
         step = PathStep(clip, True, float(lib.clip_duration[clip]), node, node)
-        tb.blend_len[index] = 0.0
-        tb.mode[index] = _TRANSITION
-        self._paths[index] = [(step,), 0]
-        self._play_step(index, step, float(tb.clock[index]))
-        tb.dirty[index] = True
+        tb.blend_len[i] = 0.0
+        tb.mode[i] = _TRANSITION
+        self._paths[i] = [(step,), 0]
+        self._play_step(i, step, t)
+        tb.dirty[i] = True
         return lib.clip_names[clip]
+
+    def _react_pending(self, i: int, t: float) -> None:
+        """A soldier that just came to rest at ``t``: the reaction it kept, if still fresh."""
+        kind, asked = self._pending.pop(i, ("", 0.0))
+        if kind and t - asked <= MAX_REACTION_DELAY:
+            self._react_now(i, kind, t)

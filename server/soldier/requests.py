@@ -207,3 +207,21 @@ class Requests(Ticking):
         self._play_step(i, step, t)
         tb.dirty[i] = True
         return step.duration
+
+    def react(self, index: int, kind: str, now: float) -> str | None:
+        """A Fire PDU's ``"recoil"`` or a near detonation's ``"flinch"`` (REACT, ``react_soldier_state``):
+        a soldier resting in a posture with that reaction plays it once (soldier_react.graph) and rests there
+        again; returns the clip. One changing posture, turning or reacting plays it when that ends
+        (:mod:`server.soldier.reactions`); a stepping one, or one whose posture has no such clip, does not
+        react. Both return None. KeyError for an unknown soldier."""
+        tb = self.table
+        if not tb.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        if not self._settings.every_frame:
+            tb.clock[index] = now
+        self._advance(np.array([index], np.int64))
+        self.stats["reactions"] += 1
+        clip = self._react_now(int(index), kind, float(tb.clock[index]))
+        if clip is not None:
+            tb.requested[index] = True  # what :meth:`answer` answers between ticks
+        return clip
