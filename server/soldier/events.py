@@ -28,7 +28,7 @@ from server.soldier.state import (
     Movement,
 )
 from server.soldier.stepping import Stepping
-from server.soldier.turning import Turning
+from server.soldier.turning import REVERSAL_TURN_SPEEDUP, Turning
 
 
 class Events(Stepping, Turning, Reactions):
@@ -104,6 +104,10 @@ class Events(Stepping, Turning, Reactions):
             self._play_step(i, steps[0], t)
             return
         kind = int(self._move[int(tb.appearance[i])]) if tb.speed[i] > MOVING_EPS else 0
+        reversing = bool(tb.reversing[i])
+        tb.reversing[i] = False
+        if kind and reversing and self._turn(i, t, REVERSAL_TURN_SPEEDUP):
+            return  # stopped: the pivot, then (its end decides again) the walk away
         if not kind and abs(tb.root_yaw[i]) >= MIN_TURN_DEG and self._turn(i, t):
             return
         if not kind and node != self._home:  # no turn clip here: the figure faces the heading again
@@ -124,7 +128,7 @@ class Events(Stepping, Turning, Reactions):
         hysteresis = min(st.walk_run_hysteresis, 0.5 * st.walk_run_threshold)
         cond = conditions(
             tb.loco[idx],
-            speed > MOVING_EPS,
+            (speed > MOVING_EPS) & ~tb.reversing[idx],  # a reversing soldier stops first
             tb.backward[idx],
             is_fast(tb.loco[idx], speed, st.walk_run_threshold, hysteresis),
             self.library.can_run,

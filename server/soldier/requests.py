@@ -128,7 +128,9 @@ class Requests(Ticking):
         tb.vlocal[i] = np.stack([-left, -ahead], axis=1) * 100.0  # soldier frame: forwards -Z, left -X
         # a speed change within a gait: keep the phase, change the playback rate
         stepping = (mode == _LOCO) | (mode == _CRAWL)
-        rescale = ~event & stepping & moving & speed_changed & SCALED[tb.loco[i]]
+        self._mark_reversals(i, mode, moving)
+        # (a reversing soldier's step ends at its pace: the new velocity is not his step's)
+        rescale = ~event & stepping & moving & speed_changed & SCALED[tb.loco[i]] & ~tb.reversing[i]
         if rescale.any():
             r = i[rescale]
             tr = t[rescale]

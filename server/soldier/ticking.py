@@ -144,6 +144,9 @@ class Ticking(Events):
             mode = tb.mode[idx]
             turning = (tb.root_yaw[idx] != 0.0) & ((mode == _LOCO) | (mode == _CRAWL))
             root_motion.fold(tb, lib, idx[turning], clock[turning])
+            p = np.flatnonzero(tb.pivot_rate[idx] != 0.0)
+            if len(p):
+                root_motion.pivot(tb, lib, idx[p], clock[p])
             yawed = np.flatnonzero(tb.root_yaw[idx] != 0.0)
             if len(yawed):
                 f = figures[yawed]
