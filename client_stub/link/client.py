@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import uuid
+from collections import deque
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 
@@ -71,6 +73,10 @@ class Client:
     ) -> None:
         self.name = name
         self.role = role
+        # who this link is across reconnects (the server keeps its soldiers for it, issue 17) and the role's
+        # token when the server has tokens: set them before open()
+        self.client_id = f"{name[:40]}-{uuid.uuid4().hex[:12]}"
+        self.token = ""
         self.buffer_updates = buffer_updates
         self.on_updates = on_updates
         self.conn = Connection(CLIENT, decode_updates=decode_updates)
@@ -83,6 +89,8 @@ class Client:
         self.refused: dict[int, ev.Error] = {}  # request id -> its error
         self.errors: list[ev.Error | ev.ProtocolError] = []
         self.status: ev.Status | None = None
+        self.settings: ev.Settings | None = None  # this connection's throttle and STATUS period
+        self.removed: deque[int] = deque(maxlen=1024)  # the latest soldiers the server said are gone
         self.failure: str | None = None
         self.last_tick = 0
         self.bytes_sent = 0
@@ -132,7 +140,7 @@ class Client:
             raise LinkError(f"cannot connect to {host}:{port} within {timeout} s")
         self._outbox_open = True
         nursery.start_soon(self._run, stream)
-        self.send(ev.Hello(self.name, self.role))
+        self.send(ev.Hello(self.name, self.role, client_id=self.client_id, token=self.token))
         with trio.move_on_after(timeout):
             await self._accepted.wait()
             if soldierprefix is not None and self.accepted:
@@ -376,6 +384,12 @@ class Client:
                 self._pongs[nonce].set()
             case ev.Status():
                 self.status = event
+            case ev.Settings():
+                self.settings = event
+            case ev.SoldierRemoved(index=index):
+                self.removed.append(index)
+                self.ready_soldiers.pop(index, None)
+                self.created.pop(index, None)
             case ev.Error():
                 self._error(event)
             case ev.Goodbye(reason=reason):
