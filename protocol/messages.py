@@ -244,15 +244,6 @@ def _dec_hello(payload: bytes, ctx: int) -> Hello:
     return Hello(name, role, max_frame, version, client_id, b.optional_str("token", 1024))
 
 
-def _enc_hello(e: Hello) -> bytes:
-    body: dict[str, Any] = {"name": e.name, "role": e.role, "max_frame": e.max_frame}
-    if e.client_id:
-        body["client_id"] = e.client_id
-    if e.token:
-        body["token"] = e.token
-    return _enc_handshake(e.version, body)
-
-
 def _dec_accept(payload: bytes, ctx: int) -> Accept:
     version, rest = _handshake(payload, "ACCEPT")
     b = unpack_body(rest, "ACCEPT")
@@ -266,16 +257,9 @@ def _dec_accept(payload: bytes, ctx: int) -> Accept:
     )
 
 
-def _enc_accept(e: Accept) -> bytes:
-    body: dict[str, Any] = {"name": e.name, "max_frame": e.max_frame, "max_soldiers": e.max_soldiers}
-    if e.client_id:
-        body["client_id"] = e.client_id
-    if e.role:
-        body["role"] = e.role
-    return _enc_handshake(e.version, body)
-
-
-def _enc_handshake(version: int, body: dict[str, Any]) -> bytes:
+def _enc_handshake(version: int, body: dict[str, Any], optional: Mapping[str, str] | None = None) -> bytes:
+    """Prefix + body; the ``optional`` string fields go in only when not empty (older peers omit them)."""
+    body = body | {k: v for k, v in (optional or {}).items() if v}
     return HANDSHAKE_PREFIX.pack(MAGIC, version) + pack_body(body)
 
 
@@ -350,8 +334,24 @@ Decoder = Callable[[bytes, int], Event]
 
 # type -> (event class, encode(event) -> payload, decode(payload, max_soldiers) -> event)
 _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
-    MessageType.HELLO: (Hello, _enc_hello, _dec_hello),
-    MessageType.ACCEPT: (Accept, _enc_accept, _dec_accept),
+    MessageType.HELLO: (
+        Hello,
+        lambda e: _enc_handshake(
+            e.version,
+            {"name": e.name, "role": e.role, "max_frame": e.max_frame},
+            {"client_id": e.client_id, "token": e.token},
+        ),
+        _dec_hello,
+    ),
+    MessageType.ACCEPT: (
+        Accept,
+        lambda e: _enc_handshake(
+            e.version,
+            {"name": e.name, "max_frame": e.max_frame, "max_soldiers": e.max_soldiers},
+            {"client_id": e.client_id, "role": e.role},
+        ),
+        _dec_accept,
+    ),
     MessageType.ERROR: (
         Error,
         lambda e: pack_body({"code": e.code, "message": e.message, "ref": e.ref}),

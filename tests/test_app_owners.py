@@ -41,6 +41,17 @@ async def owner_and_soldier(server, client_id: str = "alpha") -> tuple[Client, i
     return a, (await a.expect(SoldierCreated)).index
 
 
+async def jcl_errors(c: Client, texts: tuple[str, ...]) -> list[Error]:
+    """Send each JCL text; each must be answered by its own JCL_ERROR."""
+    errors = []
+    for k, text in enumerate(texts):
+        await c.jcl(text, 10 + k)
+        e = await c.expect(Error)
+        assert (e.code, e.ref) == (ErrorCode.JCL_ERROR, 10 + k)
+        errors.append(e)
+    return errors
+
+
 async def test_a_non_owner_cannot_drive_remove_recreate_or_watch(autojump_clock: trio.abc.Clock) -> None:
     async with running_server() as server:
         a, i = await owner_and_soldier(server)
@@ -90,17 +101,9 @@ async def test_soldier_jcl_is_for_the_owner_only(autojump_clock: trio.abc.Clock)
         assert server.world.owners.owner_of(mine) == "alpha"
         b = await Client.open(port_of(server), "b", client_id="bravo")
         await b.expect(Ready)
-        for k, text in enumerate(
-            (
-                'remove_soldier_state("mine");',
-                'react_soldier_state("mine", "recoil");',
-                'report_ttes_status("mine");',
-                'report_ttes_clips("mine");',
-            )
-        ):
-            await b.jcl(text, 10 + k)
-            e = await b.expect(Error)
-            assert (e.code, e.ref) == (ErrorCode.JCL_ERROR, 10 + k)
+        texts = ('remove_soldier_state("mine");', 'react_soldier_state("mine", "recoil");')
+        texts += ('report_ttes_status("mine");', 'report_ttes_clips("mine");')
+        for e in await jcl_errors(b, texts):
             assert "'mine'" in e.message and (
                 "another client" in e.message or "not this client's" in e.message
             )
@@ -130,19 +133,10 @@ async def test_a_controller_cannot_change_what_others_get(autojump_clock: trio.a
         await b.jcl("set_ttes_report_interval(7);", 3)
         assert (await b.expect(Settings)) == Settings(60.0, 7.0)
         # server-wide settings and loads are the operator's
-        for k, text in enumerate(
-            (
-                "set_ttes_blend_time(0.5);",
-                "set_ttes_heading_offset(10, 0, 0);",
-                'load_posture_graph("soldier_low.graph", "copy");',
-                'remove_soldier_state("s0");',
-            )
-        ):
-            await b.jcl(text, 10 + k)
-            e = await b.expect(Error)
-            assert e.ref == 10 + k and (
-                "needs the operator role" in e.message or "not this client" in e.message
-            ), e
+        texts = ("set_ttes_blend_time(0.5);", "set_ttes_heading_offset(10, 0, 0);")
+        texts += ('load_posture_graph("soldier_low.graph", "copy");', 'remove_soldier_state("s0");')
+        for e in await jcl_errors(b, texts):
+            assert "needs the operator role" in e.message or "not this client" in e.message, e
         assert server.world.settings.throttle == 0.0 and server.world.report_interval == 2.0
         assert "copy" not in server.world.graphs
         await a.drain(0.5)
