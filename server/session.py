@@ -159,7 +159,9 @@ class Session:
         if now is not None:
             due = self.last_updates_at + self.own_throttle() - 0.5 / self.config.tick_hz
             if now < due - 1e-9:
-                self.retry_at = due
+                # the tick at which they are due wakes the writer; this is for when no tick publishes:
+                # a quarter period after it, so a retry never writes ahead of that tick's poses
+                self.retry_at = due + 0.75 / self.config.tick_hz
                 return out
         data = self._joint_updates()
         if data and now is not None:
