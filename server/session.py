@@ -484,32 +484,34 @@ class Session:
             return
         m = self.world.manager
         assert m is not None
-        rows = self._own_rows(ev.rows)
-        if not len(rows):
+        kept = self._own_rows(ev.rows)  # row numbers of the batch, for the errors
+        if not len(kept):
             return
+        rows = ev.rows if len(kept) == len(ev.rows) else ev.rows[kept]
         status = m.apply_requests(rows, self.world.clock())
-        bad = np.flatnonzero(status == REQUEST_BAD_VALUE)
+        bad = kept[status == REQUEST_BAD_VALUE]
         if len(bad):
             self.fatal(
                 ErrorCode.BAD_VALUE, f"entity requests row {int(bad[0])}: speed above the server's limit"
             )
             return
-        unknown = np.flatnonzero(status == REQUEST_UNKNOWN_SOLDIER)
+        unknown = kept[status == REQUEST_UNKNOWN_SOLDIER]
         if len(unknown):
             row = int(unknown[0])
             self.send(
                 Error(
                     int(ErrorCode.UNKNOWN_SOLDIER),
-                    f"entity requests row {row}: no soldier {int(rows['index'][row])}"
+                    f"entity requests row {row}: no soldier {int(ev.rows['index'][row])}"
                     + (f" ({len(unknown)} rows)" if len(unknown) > 1 else ""),
                 )
             )
 
     def _own_rows(self, rows: np.ndarray) -> np.ndarray:
-        """The request rows for soldiers this client may drive; the others are refused with one ERROR."""
+        """The row numbers of the requests for soldiers this client may drive; the others are refused with
+        one ERROR."""
         ok = self.world.owners.drivable(rows["index"], self.client_id, self.role)
         if ok.all():
-            return rows
+            return np.arange(len(rows))
         bad = np.flatnonzero(~ok)
         self.send(
             Error(
@@ -518,7 +520,7 @@ class Session:
                 "client" + (f" ({len(bad)} rows)" if len(bad) > 1 else ""),
             )
         )
-        return rows[ok]
+        return np.flatnonzero(ok)
 
     # -- server → client ---------------------------------------------------------------------------------
     def status(self, now: float, soldiers: int, update_rate: float, text: str) -> None:

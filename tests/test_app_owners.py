@@ -67,9 +67,11 @@ async def test_a_non_owner_cannot_drive_remove_recreate_or_watch(autojump_clock:
         seen = [ev for ev in await b.drain(1.0) if isinstance(ev, JointUpdates)]
         assert seen and all(i not in ev.indices.tolist() for ev in seen)
         # drive: refused by name; the rows for the shared soldier in the same batch are applied
-        await b.requests(index=[0, i], velocity=[WALK, (0.0, 0.0, 0.0)])
+        await b.requests(index=[0, i, 600], velocity=[WALK, (0.0, 0.0, 0.0), WALK])
         e = await b.expect(Error)
         assert e.code == ErrorCode.NOT_PERMITTED and f"row 1: soldier {i} belongs" in e.message
+        e = await b.expect(Error)  # row numbers are the batch's, whatever was refused before
+        assert e.code == ErrorCode.UNKNOWN_SOLDIER and "row 2: no soldier 600" in e.message
         await trio.sleep(0.1)
         info = server.world.manager.soldier_info(i)
         assert info["mode"] != "static" or "walk" in str(info["clip"])  # still walking as its owner asked
