@@ -31,17 +31,34 @@ class Owners:
         self.code = np.full(max_soldiers, SHARED, np.int32)  # per index: its owner's code, or SHARED
         self._codes: dict[str, int] = {}
         self._ids: list[str] = []
+        self._free: list[int] = []  # codes of ids that own nothing and are not connected, for reuse
         self._soldiers: dict[str, set[int]] = {}
         self.connected: dict[str, int] = {}  # client id -> open connections
         self.deadline: dict[str, float] = {}  # gone client id -> when its soldiers are removed
 
     def code_of(self, client_id: str) -> int:
-        """A small integer per client id (stable for the server's life: ids are few and short)."""
+        """A small integer per client id that owns soldiers (given back when it owns none and is gone, so
+        clients that come and go with fresh ids do not grow the table)."""
         code = self._codes.get(client_id)
         if code is None:
-            code = self._codes[client_id] = len(self._ids)
-            self._ids.append(client_id)
+            if self._free:
+                code = self._free.pop()
+                self._ids[code] = client_id
+            else:
+                code = len(self._ids)
+                self._ids.append(client_id)
+            self._codes[client_id] = code
         return code
+
+    def _release(self, client_id: str) -> None:
+        """Forget an id that owns no soldier and has no connection (nothing refers to its code)."""
+        if self._soldiers.get(client_id) or client_id in self.connected or client_id in self.deadline:
+            return
+        self._soldiers.pop(client_id, None)
+        code = self._codes.pop(client_id, None)
+        if code is not None:
+            self._ids[code] = ""
+            self._free.append(code)
 
     # -- soldiers ------------------------------------------------------------------------------------------
     def check_cap(self, owner: str | None) -> None:
@@ -59,6 +76,7 @@ class Owners:
         self.code[index] = SHARED
         if owner is not None:
             self._soldiers.get(owner, set()).discard(index)
+            self._release(owner)
 
     def owner_of(self, index: int) -> str | None:
         code = int(self.code[index])
@@ -114,6 +132,7 @@ class Owners:
             return None
         self.connected.pop(client_id, None)
         if not self._soldiers.get(client_id):
+            self._release(client_id)
             return None
         self.deadline[client_id] = now + grace
         return self.deadline[client_id]
@@ -124,3 +143,8 @@ class Owners:
         for cid in gone:
             del self.deadline[cid]
         return gone
+
+    @property
+    def known(self) -> int:
+        """Client ids with a code now (bounded by the owners of live soldiers and the connected)."""
+        return len(self._codes)
