@@ -43,6 +43,7 @@ from server.logging import get_logger
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.startup import ServerWorld
+from server.tls import server_context
 
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
@@ -86,6 +87,7 @@ class TtesServer:
         self.started = False
         self._cancel: trio.CancelScope | None = None
         self._nursery: trio.Nursery | None = None
+        self._tls = server_context(config)  # None: plain TCP
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
 
     # -- clock -------------------------------------------------------------------------------------------
@@ -207,17 +209,20 @@ class TtesServer:
                 inner.start_soon(one, ln)
 
     # -- one client --------------------------------------------------------------------------------------
-    async def _client(self, stream: trio.SocketStream) -> None:
+    async def _client(self, socket: trio.SocketStream) -> None:
         try:
-            host, port = stream.socket.getpeername()[:2]
+            host, port = socket.socket.getpeername()[:2]
             peer = f"{host}:{port}"
         except OSError:
             peer = "?"
         self.clients_total += 1
         session = Session(self.world, self.board_ref, self.config, peer)
-        session.local = _is_loopback(stream)
+        session.local = _is_loopback(socket)
         session.full = len(self.sessions) >= self.config.max_clients
         self.sessions[session.id] = session
+        stream: trio.abc.Stream = (
+            socket if self._tls is None else trio.SSLStream(socket, self._tls, server_side=True)
+        )
         try:
             async with trio.open_nursery() as n:
                 n.start_soon(self._writer, session, stream, n.cancel_scope)
@@ -245,7 +250,7 @@ class TtesServer:
                 bytes_out=session.bytes_out,
             )
 
-    async def _reader(self, session: Session, stream: trio.SocketStream) -> None:
+    async def _reader(self, session: Session, stream: trio.abc.Stream) -> None:
         with trio.move_on_after(self.config.handshake_timeout):
             while session.conn.state is State.HANDSHAKE and not session.closing:
                 data = await _receive(stream)
@@ -266,7 +271,7 @@ class TtesServer:
                 session.drop(session.drop_reason or "closed")
                 return
 
-    async def _writer(self, session: Session, stream: trio.SocketStream, scope: trio.CancelScope) -> None:
+    async def _writer(self, session: Session, stream: trio.abc.Stream, scope: trio.CancelScope) -> None:
         """Write control bytes and the latest poses whenever woken; exits (cancelling the session) when the
         session is closing and flushed, the peer is gone, or one write stalls for ``write_timeout``."""
         timeout = self.config.write_timeout
@@ -473,9 +478,11 @@ def _is_loopback(stream: trio.SocketStream) -> bool:
         return False
 
 
-async def _linger(stream: trio.SocketStream, limit: int = 1 << 20) -> None:
+async def _linger(stream: trio.abc.Stream, limit: int = 1 << 20) -> None:
     """After a fatal error: half-close and discard what the peer still sends, so closing the socket does not
     reset the connection (and destroy our ERROR frame) while unread bytes wait in the receive buffer."""
+    if not isinstance(stream, trio.abc.HalfCloseableStream):  # TLS: no half-close; just close
+        return
     try:
         await stream.send_eof()
         got = 0
@@ -488,7 +495,7 @@ async def _linger(stream: trio.SocketStream, limit: int = 1 << 20) -> None:
         return
 
 
-async def _receive(stream: trio.SocketStream) -> bytes:
+async def _receive(stream: trio.abc.Stream) -> bytes:
     try:
         return bytes(await stream.receive_some(65536))
     except (trio.BrokenResourceError, trio.ClosedResourceError):

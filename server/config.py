@@ -59,6 +59,8 @@ class ServerConfig:
     observer_token: str = field(default="", repr=False)
     controller_token: str = field(default="", repr=False)
     operator_token: str = field(default="", repr=False)
+    tls_cert: str = ""  # PEM certificate (chain) file: serve TLS (server.tls); "" = plain TCP
+    tls_key: str = ""  # its PEM private key file ("" = in tls_cert)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -123,6 +125,11 @@ def validate(c: ServerConfig) -> None:
         token = getattr(c, f"{role}_token")
         if not isinstance(token, str) or (token and len(token) < 8):
             raise ConfigError("must be a string of at least 8 characters (or empty: none)", f"{role}_token")
+    for key in ("tls_cert", "tls_key"):
+        if not isinstance(getattr(c, key), str):
+            raise ConfigError("must be a path string", key)
+    if c.tls_key and not c.tls_cert:
+        raise ConfigError("a key without tls_cert", "tls_key")
     for flag in ("json_logs", "record_clips"):
         if not isinstance(getattr(c, flag), bool):
             raise ConfigError("must be true or false", flag)

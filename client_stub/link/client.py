@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import ssl
 import uuid
 from collections import deque
 from collections.abc import Callable
@@ -77,6 +78,7 @@ class Client:
         # token when the server has tokens: set them before open()
         self.client_id = f"{name[:40]}-{uuid.uuid4().hex[:12]}"
         self.token = ""
+        self.tls: ssl.SSLContext | None = None  # speak TLS (a server with tls_cert); checks its certificate
         self.buffer_updates = buffer_updates
         self.on_updates = on_updates
         self.conn = Connection(CLIENT, decode_updates=decode_updates)
@@ -133,7 +135,9 @@ class Client:
         for READY (if ``wait_ready``). LinkError (and the link closed) on failure."""
         with trio.move_on_after(timeout) as cs:
             try:
-                stream = await trio.open_tcp_stream(host, port)
+                stream: trio.abc.Stream = await trio.open_tcp_stream(host, port)
+                if self.tls is not None:
+                    stream = trio.SSLStream(stream, self.tls, server_hostname=host)
             except OSError as exc:
                 raise LinkError(f"cannot connect to {host}:{port}: {_why(exc)}") from None
         if cs.cancelled_caught:
@@ -301,7 +305,7 @@ class Client:
             self._cancel.cancel()
 
     # -- the tasks --------------------------------------------------------------------------------
-    async def _run(self, stream: trio.SocketStream) -> None:
+    async def _run(self, stream: trio.abc.Stream) -> None:
         try:
             with trio.CancelScope() as scope:
                 self._cancel = scope
@@ -317,7 +321,7 @@ class Client:
             for ev in (self._accepted, self._ready, self._answer, self._progress, *self._pongs.values()):
                 ev.set()
 
-    async def _writer(self, stream: trio.SocketStream) -> None:
+    async def _writer(self, stream: trio.abc.Stream) -> None:
         while True:
             if not self._out:
                 if not self._outbox_open:
@@ -336,7 +340,7 @@ class Client:
             self._progress.set()
             self._progress = trio.Event()
 
-    async def _reader(self, stream: trio.SocketStream) -> None:
+    async def _reader(self, stream: trio.abc.Stream) -> None:
         conn = self.conn
         arrival = 0.0
         while True:
