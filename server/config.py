@@ -53,9 +53,24 @@ class ServerConfig:
     name: str = "jack-ttes"
     json_logs: bool = False
     record_clips: bool = False  # keep every soldier's clip starts (debug; report_ttes_clips)
+    orphan_grace: float = 12.0  # seconds a gone client's soldiers wait for it to reconnect (the DIS timeout)
+    min_report_interval: float = 0.1  # the shortest STATUS period a client may ask for
+    # a credential per role (HELLO token); any set: roles come only from tokens. Never logged or printed.
+    observer_token: str = field(default="", repr=False)
+    controller_token: str = field(default="", repr=False)
+    operator_token: str = field(default="", repr=False)
+    tls_cert: str = ""  # PEM certificate (chain) file: serve TLS (server.tls); "" = plain TCP
+    tls_key: str = ""  # its PEM private key file ("" = in tls_cert)
 
     def __post_init__(self) -> None:
         validate(self)
+
+    @property
+    def tokens(self) -> dict[str, str]:
+        """The configured tokens by role (only those set)."""
+        given = {"observer": self.observer_token, "controller": self.controller_token}
+        given["operator"] = self.operator_token
+        return {role: t for role, t in given.items() if t}
 
     def with_overrides(self, **changes: Any) -> ServerConfig:
         """A copy with the given fields replaced (``None`` values are ignored: flag not given)."""
@@ -104,6 +119,17 @@ def validate(c: ServerConfig) -> None:
     _check_number("control_queue", c.control_queue, 8, 1_000_000, integer=True)
     if not isinstance(c.name, str) or not c.name:
         raise ConfigError("must be a non-empty string", "name")
+    _check_number("orphan_grace", c.orphan_grace, 0.0, 86400.0)
+    _check_number("min_report_interval", c.min_report_interval, 0.0, 3600.0, lo_open=True)
+    for role in ("observer", "controller", "operator"):
+        token = getattr(c, f"{role}_token")
+        if not isinstance(token, str) or (token and len(token) < 8):
+            raise ConfigError("must be a string of at least 8 characters (or empty: none)", f"{role}_token")
+    for key in ("tls_cert", "tls_key"):
+        if not isinstance(getattr(c, key), str):
+            raise ConfigError("must be a path string", key)
+    if c.tls_key and not c.tls_cert:
+        raise ConfigError("a key without tls_cert", "tls_key")
     for flag in ("json_logs", "record_clips"):
         if not isinstance(getattr(c, flag), bool):
             raise ConfigError("must be true or false", flag)
