@@ -262,8 +262,8 @@ def check_clip(
                     out["palm_rifle_where"] = f"{palm.split('.')[0]}[{int(np.argmax(d))}]"
         out["palm_rifle_cm"] = round(worst, 3)
         if "butt" in rnames and "muzzle" in rnames:
-            ends = rs[:held, [rnames["butt"], rnames["muzzle"]], :3, 3]
-            jump, a, b = rifle_pitch_jump(ends[:, 0], ends[:, 1], cs.fps)
+            butt, muzzle = (rs[:held, rnames[k], :3, 3] for k in ("butt", "muzzle"))
+            jump, a, b = rifle_pitch_jump(butt, muzzle, cs.fps)
             out["rifle_pitch_jump_deg"] = round(jump, 3)
             out["rifle_pitch_jump_where"] = f"frames {a}-{b}" if jump > 0 else None
         rnodes, rsegs = figures.nodes(rifle_type)
