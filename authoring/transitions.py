@@ -856,7 +856,7 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         "CRAWL",
         2.0,
         _stand_to_crawl(0.75, 1.35, 2.0),
-        hand_turn=(1.35, 1.95),
+        hand_turn=(1.4, 1.95),
     ),
     TransitionSpec(
         "ststow2kfire",
@@ -893,7 +893,7 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         "CRAWL",
         1.4,
         _kneel_to_crawl(0.3, 0.85, 1.4),
-        hand_turn=(0.85, 1.35),
+        hand_turn=(0.88, 1.4),
     ),
     TransitionSpec("kstow2dead", "KNEEL_STOWED", "DEAD", 1.0),
     TransitionSpec("kfire2dead", "KNEEL_FIRE", "DEAD", 1.0),

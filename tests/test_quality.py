@@ -568,14 +568,12 @@ def test_a_rifle_that_swings_muzzle_up_fails(figset: FigureSet, holding) -> None
 
 @pytest.mark.parametrize("clip", ["ststow2crawl", "kstow2crawl"])
 @pytest.mark.parametrize("suffix", ["", "_low", "_m16_low"])
-def test_the_rifle_turns_smoothly_getting_down_to_crawl(clip: str, suffix: str) -> None:
-    """The shipped clips: the rifle no longer whips muzzle-up past the shoulder (22-26 degrees in 0.1 s
-    before) nor 3.0-5.1 cm through the right upper arm while the soldier goes down onto his forearms
-    (issue 14: still up to 2.5 cm in the left forearm, 1.5 in the right upper arm; the limit is 1 cm)."""
+def test_the_shipped_clips_getting_down_to_crawl_pass(clip: str, suffix: str) -> None:
+    """The rifle no longer whips muzzle-up past the shoulder (22-26 degrees in 0.1 s before) nor goes
+    3.0-5.1 cm into the right upper arm while the soldier goes down onto his forearms: the clips pass."""
     from server.motion.cache import load_channelset
 
     cs = load_channelset(Path(__file__).resolve().parents[1] / "channelsets" / f"{clip}{suffix}.chset.env")
     types = sorted({c.protofiletype for c in cs.channels})
     row = check_clip(cs, FigureSet.from_dir(FIGURES, types))
-    assert row["rifle_pitch_jump_deg"] <= 18.0
-    assert row["rifle_in_body_cm"] < 2.5
+    assert row["pass"], {k: row[k] for k in row["failures"]}
