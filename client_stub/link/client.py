@@ -154,7 +154,8 @@ class Client:
         if self.failure or not self.accepted or (wait_ready and not self.ready):
             await self.aclose()
             what = "ready" if self.accepted else "answering the handshake"
-            raise LinkError(self.failure or f"server {host}:{port} not {what} within {timeout} s")
+            why = self.failure or f"not {what} within {timeout} s"  # a refusal: the server's reason
+            raise LinkError(f"server {host}:{port}: {why}")
 
     @property
     def accepted(self) -> bool:
