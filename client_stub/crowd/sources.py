@@ -29,8 +29,9 @@ import trio
 from client_stub.crowd.fk import to34
 from client_stub.link.auth import Credentials
 from client_stub.link.buffer import UpdateBatch
+from client_stub.loadtest.client import LoadError
 from client_stub.loadtest.mix import APPEARANCE, SPEED, WEAPON, MixDriver
-from client_stub.loadtest.session import LoadSession, LoadTestConfig
+from client_stub.loadtest.session import LoadSession, LoadTestConfig, first_leaf
 from client_stub.stub.artic import TableBinding, articulation, bind_table, update_table_for
 from client_stub.stub.ground import GroundQuery
 from client_stub.stub.offline import OfflinePoser
@@ -222,7 +223,9 @@ class NetworkSource:
         try:
             trio.run(self._main, host, port)
         except BaseException as exc:  # the thread must end and say why
-            self.failure = self.failure or f"network: {exc!r}"
+            leaf = first_leaf(exc)  # trio groups what a nursery's body raised
+            why = str(leaf) if isinstance(leaf, LoadError) else f"network: {leaf!r}"  # a refusal: as it is
+            self.failure = self.failure or why
         finally:
             self.ready.set()
 

@@ -360,7 +360,7 @@ def run_loadtest(cfg: LoadTestConfig) -> dict[str, Any]:
         try:
             out = trio.run(_run, cfg, host, port, server_cpu, server is None)
         except BaseExceptionGroup as group:  # errors inside nurseries arrive grouped
-            leaf = _first_leaf(group)
+            leaf = first_leaf(group)
             if isinstance(leaf, LoadError | OSError):
                 raise LoadError(str(leaf)) from None
             raise
@@ -377,7 +377,7 @@ def run_loadtest(cfg: LoadTestConfig) -> dict[str, Any]:
             server.close()
 
 
-def _first_leaf(exc: BaseException) -> BaseException:
+def first_leaf(exc: BaseException) -> BaseException:
     while isinstance(exc, BaseExceptionGroup) and exc.exceptions:
         exc = exc.exceptions[0]
     return exc
