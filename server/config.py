@@ -2,7 +2,10 @@
 
 A TOML file may hold the keys at the top level or in a ``[server]`` table. Unknown keys, wrong types and
 out-of-range values are :class:`ConfigError` naming the file and the key, so a typo never silently falls back
-to a default. Command-line flags override the file (:meth:`ServerConfig.with_overrides`).
+to a default. Command-line flags override the file (:meth:`ServerConfig.with_overrides`). The role tokens have
+no flags (a command line shows in ``ps``): they come from the file or, winning over it, from the environment
+(:func:`with_env_tokens`, ``TTES_OBSERVER_TOKEN`` / ``TTES_CONTROLLER_TOKEN`` / ``TTES_OPERATOR_TOKEN``), as a
+container or a service manager hands secrets over.
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +24,12 @@ from protocol.events import DEFAULT_MAX_SOLDIERS
 DEFAULT_DATA_DIR = Path(__file__).resolve().parent.parent
 DEFAULT_STARTUP_SCRIPT = "jack-ttes-soldier_low.jcl"
 MAX_SOLDIERS_LIMIT = 65536
+# the environment variable of each role's token (ttes server; the env wins over the config file)
+TOKEN_ENV = {
+    "observer": "TTES_OBSERVER_TOKEN",
+    "controller": "TTES_CONTROLLER_TOKEN",
+    "operator": "TTES_OPERATOR_TOKEN",
+}
 
 
 class ConfigError(ValueError):
@@ -169,3 +179,14 @@ def load_config(path: str | Path) -> ServerConfig:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"not valid TOML: {exc}", str(p)) from None
     return config_from_mapping(data, str(p), p.resolve().parent)
+
+
+def with_env_tokens(config: ServerConfig, environ: Mapping[str, str]) -> ServerConfig:
+    """``config`` with each role token that ``environ`` sets (:data:`TOKEN_ENV`; empty = not set) in place of
+    the file's. A bad one is a ConfigError naming the variable, never its value."""
+    given = {f"{role}_token": environ[var] for role, var in TOKEN_ENV.items() if environ.get(var)}
+    try:
+        return config.with_overrides(**given)
+    except ConfigError as exc:
+        var = {f"{role}_token": v for role, v in TOKEN_ENV.items()}.get(exc.where, exc.where)
+        raise ConfigError(exc.message, var) from None

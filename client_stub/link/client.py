@@ -55,6 +55,15 @@ def _why(exc: OSError) -> str:
     return str((inner[0] if inner else exc).strerror or exc)
 
 
+def _tls_failure(exc: Exception) -> str | None:
+    """Why the TLS handshake failed (say, the server's certificate is not trusted), when it did: the root
+    cause, so it wins over what the other task saw of the broken stream."""
+    cause = exc.__cause__
+    if isinstance(cause, ssl.SSLError):
+        return f"TLS: {getattr(cause, 'verify_message', None) or cause.reason or cause}"
+    return None
+
+
 class Client:
     """One TCP connection to the server (see the module docstring); open it with :meth:`open` in a nursery.
 
@@ -154,7 +163,8 @@ class Client:
         if self.failure or not self.accepted or (wait_ready and not self.ready):
             await self.aclose()
             what = "ready" if self.accepted else "answering the handshake"
-            raise LinkError(self.failure or f"server {host}:{port} not {what} within {timeout} s")
+            why = self.failure or f"not {what} within {timeout} s"  # a refusal: the server's reason
+            raise LinkError(f"server {host}:{port}: {why}")
 
     @property
     def accepted(self) -> bool:
@@ -341,8 +351,8 @@ class Client:
             self._out.clear()
             try:
                 await stream.send_all(data)
-            except (trio.BrokenResourceError, trio.ClosedResourceError):
-                self.failure = self.failure or "connection lost while sending"
+            except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                self.failure = _tls_failure(exc) or self.failure or "connection lost while sending"
                 return
             self._written += len(data)
             self._progress.set()
@@ -356,7 +366,8 @@ class Client:
             if event is NEED_DATA:
                 try:
                     data = await stream.receive_some(RECEIVE_BYTES)
-                except (trio.BrokenResourceError, trio.ClosedResourceError):
+                except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                    self.failure = _tls_failure(exc) or self.failure
                     data = b""
                 arrival = trio.current_time()
                 self.bytes_in += len(data)

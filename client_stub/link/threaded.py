@@ -101,7 +101,9 @@ class ThreadedClient:
         self._thread.start()
         if not self._accepted.wait(timeout) or not self.connected:
             self.quit()
-            raise LinkError(self.failure or f"no handshake with {host}:{port} within {timeout} s")
+            raise LinkError(
+                self._failure or self.failure or f"no handshake with {host}:{port} within {timeout} s"
+            )
 
     def start(self, soldierprefix: str = "soldier_low") -> int:
         """Send the start-up JCL, ``read_file("jack-ttes-<prefix>.jcl");``; returns its request id."""
