@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ttes.link_options import add_link_options, link_credentials
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -57,6 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", metavar="FILE.png", help="write throughput and latency over time")
+    add_link_options(p)
     p.set_defaults(func=run)
 
 
@@ -90,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
         min_delivered_pct=args.min_delivered_pct,
         max_p99_ms=args.max_p99_ms,
         latency_metric=args.latency_metric,
+        credentials=link_credentials(args),
     )
     try:
         result = run_loadtest(cfg)

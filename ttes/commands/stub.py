@@ -16,6 +16,8 @@ import os
 import sys
 from pathlib import Path
 
+from ttes.link_options import add_link_options, link_credentials
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("stub", help="the TTES stub image generator (pyrender)", description=__doc__)
@@ -45,6 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-tour", action="store_true", help="headless: no scripted key presses")
     p.add_argument("--ready-timeout", type=float, default=30.0, help="seconds to wait for the server's READY")
     p.add_argument("--json", action="store_true", help="machine-readable summary")
+    add_link_options(p)
     p.add_argument("--scenario", type=Path, help="a scenario file of timed requests for one soldier")
     p.add_argument("--record", type=Path, help="--scenario: the video (.mp4/.gif), one frame per server tick")
     p.add_argument("--sheet", type=Path, help="--scenario: contact sheet PNG (default: beside the video)")
@@ -113,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
                     server = spawn_server(["--data-dir", str(data_dir)], data="default")
                     host, port = server.host, server.port
                 jack = JackProc()
+                link_credentials(args).apply(jack.client)
                 jack.initsocketconnection(host, port)
             except LinkError as exc:
                 print(f"ttes stub: {exc}", file=sys.stderr)
