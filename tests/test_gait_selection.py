@@ -13,7 +13,7 @@ import pytest
 
 from protocol.entity import Appearance, WeaponState, make_entity_requests
 from server.soldier.library import MotionLibrary
-from server.soldier.manager import MAX_RATE, REQUEST_OK, SoldierManager
+from server.soldier.manager import MAX_RATE, REQUEST_OK, WALK_MAX_RATE, SoldierManager
 from server.startup import ServerWorld
 
 REPO = Path(__file__).resolve().parent.parent
@@ -127,13 +127,29 @@ def test_a_run_from_rest_at_2_6_and_a_walk_from_rest_at_1_8(lib) -> None:
 
 def test_cadence_stays_human_and_the_stride_takes_the_rest(lib) -> None:
     m, i = soldier(lib)
-    move(m, i, 0.0, 2.3)  # fast walk: 2.3 m/s on a 1.35 m/s recording
+    move(m, i, 0.0, 7.0)  # a sprint: 7 m/s on a 3.37 m/s recording
     run(m, 0.0, 4.0)
-    cycles = [c for c in m.clips_of(i) if "walk_cycle" in c.clip]
+    cycles = [c for c in m.clips_of(i) if "run_cycle" in c.clip]
     stored = lib.clip_duration[lib.clip_id(cycles[-1].clip)]
     steps_per_s = 1.0 / cycles[-1].duration
     assert cycles[-1].duration == pytest.approx(stored / MAX_RATE)
-    assert 1.1 <= steps_per_s <= 3.0
+    assert 1.7 <= steps_per_s <= 4.6
+
+
+def test_a_fast_walk_steps_at_race_walking_cadence(lib) -> None:
+    """A walker keeps walking up to the walk->run switch (2.4 m/s): up to 3.3 steps/s, no stride scaling."""
+    m, i = soldier(lib)
+    move(m, i, 0.0, 2.0)
+    run(m, 0.0, 3.0)
+    move(m, i, 3.0, 2.35)
+    run(m, 3.0, 7.0)
+    cycles = [c for c in m.clips_of(i) if "walk_cycle" in c.clip]
+    stored = lib.clip_duration[lib.clip_id(cycles[-1].clip)]
+    assert "run_cycle" not in gaits(m, i)
+    assert cycles[-1].duration == pytest.approx(
+        stored / (2.35 / lib.clip_ground_speed[lib.clip_id(cycles[-1].clip)]), rel=0.03
+    )
+    assert 1.0 / cycles[-1].duration <= 1.0 / (stored / WALK_MAX_RATE) <= 3.3
 
 
 def rest(m: SoldierManager, i: int, now: float, app: int, weapon: int) -> None:

@@ -40,7 +40,8 @@ MOVING_EPS = 1e-3  # m/s: slower than this is standing still
 MAX_SPEED = 100.0  # m/s: faster is a bad value
 # playback rate limits of a locomotion clip (speed / ground speed): human cadence stays within about
 # 0.6-1.6 times the recorded one (walk 1.1-2.9 steps/s, run 1.7-4.6); beyond, the stride length takes the rest
-MIN_RATE, MAX_RATE = 0.6, 1.6
+# (a walk up to 1.8, 3.3 steps/s, race walking: a walker keeps walking up to the walk->run switch, 2.4 m/s)
+MIN_RATE, MAX_RATE, WALK_MAX_RATE = 0.6, 1.6, 1.8
 MIN_STRIDE, MAX_STRIDE = 0.5, 2.0  # stride scale limits (a scaled stride slides the feet by the difference)
 CATCH_UP_SECONDS = 1.5  # a stepping soldier's figure closes its root offset over about this long
 MIN_TURN_DEG = 22.5  # a standing soldier whose figure is this far from its heading turns in place

@@ -45,6 +45,7 @@ from server.soldier.core import (
     REQUEST_BAD_VALUE,
     REQUEST_OK,
     REQUEST_UNKNOWN_SOLDIER,
+    WALK_MAX_RATE,
     ClipStart,
     TickUpdate,
 )
@@ -57,6 +58,7 @@ __all__ = [
     "REQUEST_BAD_VALUE",
     "REQUEST_OK",
     "REQUEST_UNKNOWN_SOLDIER",
+    "WALK_MAX_RATE",
     "ClipStart",
     "SoldierManager",
     "TickUpdate",

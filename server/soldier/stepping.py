@@ -15,6 +15,7 @@ from server.soldier.core import (
     MIN_RATE,
     MIN_STRIDE,
     MOVING_EPS,
+    WALK_MAX_RATE,
     ManagerCore,
 )
 from server.soldier.locomotion import (
@@ -54,11 +55,12 @@ class Stepping(ManagerCore):
         fast = is_fast(st, speed, cfg.walk_run_threshold, hysteresis)
         leaving = (IS_RUN[st] & ~fast) | (IS_WALK[st] & fast & lib.can_run)
         ideal = speed / gs  # the entity's speed alone
-        scale = np.clip(ideal / np.clip(ideal, MIN_RATE, MAX_RATE), MIN_STRIDE, MAX_STRIDE)
+        top = np.where(IS_WALK[st], WALK_MAX_RATE, MAX_RATE)
+        scale = np.clip(ideal / np.clip(ideal, MIN_RATE, top), MIN_STRIDE, MAX_STRIDE)
         stride = np.where(ok & ~leaving, scale, 1.0)
         error = along + self._stop_lag[st]  # cm ahead of where the figure should be
         want = speed + np.clip(-error / 100.0 / CATCH_UP_SECONDS, -0.5 * speed, 0.5 * speed)
-        rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, MAX_RATE), 1.0)
+        rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, top), 1.0)
         return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
 
     def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray) -> None:
