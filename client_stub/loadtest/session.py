@@ -97,8 +97,9 @@ class LoadSession:
             LoadClient(k, self._on_updates, decode=cfg.decode, buffer_updates=buffer_updates)
             for k in range(cfg.clients)
         ]
-        for c in self.clients[1:]:  # one client over C connections: each may see every soldier it made
-            c.link.client_id = self.clients[0].link.client_id
+        if cfg.subscribe_all:  # one client over C connections: each may see every soldier it made
+            for c in self.clients[1:]:  # (so all of them count against one client's soldier cap)
+                c.link.client_id = self.clients[0].link.client_id
         for c in self.clients:
             cfg.credentials.apply(c.link)
         self.driver = MixDriver(0, mix=cfg.mix, seed=cfg.seed, now=0.0)
