@@ -32,7 +32,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mix", choices=("realistic", "moving"), default="realistic", help="what the soldiers do")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument(
-        "--subscribe-all", action="store_true", help="every connection subscribes to every soldier (the connections are then one client: all soldiers count against its per-client cap, 4,096 by default)"
+        "--subscribe-all",
+        action="store_true",
+        help="every connection subscribes to every soldier (the connections are then one client: all its "
+        "soldiers count against the server's per-client cap, 4,096 by default)",
     )
     p.add_argument("--decode", action="store_true", help="decode every joint update (as an image generator)")
     p.add_argument(
