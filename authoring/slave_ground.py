@@ -22,7 +22,6 @@ import numpy as np
 
 from authoring import ik
 from authoring.quality_frames import FigureSet, play
-from authoring.rifle_swap import _smooth_above
 from authoring.slave_contacts import _fade, _played, _smooth, part_heights
 from peabody import quaternion
 from peabody.fk import FigureKinematics
@@ -264,7 +263,7 @@ def _write(slave: Channelset, figures: FigureSet, stype: str, pose: np.ndarray, 
 
 
 RIFLE_MARGIN_CM = 0.3  # a dropped rifle is put this far clear of the body's hulls and the ground
-RIFLE_PASSES = 8  # a push out of one hull can go into another: push again
+RIFLE_PASSES = 12  # a push out of one hull can go into another: push again
 RIFLE_SIGMA_FRAMES = 3.0  # the push is smoothed over the clip (at least as far as it has to go)
 RIFLE_FADE_FRAMES = 6  # ... and fades in over this many frames from the release
 
@@ -315,10 +314,17 @@ def clear_rifle(slave: Channelset, figures: FigureSet) -> np.ndarray:
 
 
 def _smooth_push(push: np.ndarray) -> np.ndarray:
-    """Each component of ``push`` ``(n, 3)`` smoothed over the clip, never shorter than where it points
-    (:func:`authoring.rifle_swap._smooth_above` on its positive and its negative part)."""
-    return np.stack(
-        [_smooth_above(np.maximum(c, 0.0), RIFLE_SIGMA_FRAMES) - _smooth_above(np.maximum(-c, 0.0),
-                                                                               RIFLE_SIGMA_FRAMES)
-         for c in push.T], axis=1,
-    )  # fmt: skip
+    """Each component of ``push`` ``(n, 3)`` smoothed over the clip, never shorter than where it points (a
+    running maximum of its positive and of its negative part, then Gaussian). Unlike the held rifle's pitch
+    (:func:`authoring.rifle_swap._smooth_above`) the ends are not pinned to the frame's own need: a dropped
+    rifle's last frame belongs to no other clip, and pinned it moved at 1.5 m/s over the last frames."""
+    half = int(np.ceil(3.0 * RIFLE_SIGMA_FRAMES))
+    k = np.arange(-half, half + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 * (k / RIFLE_SIGMA_FRAMES) ** 2)
+    kernel /= kernel.sum()
+
+    def above(c: np.ndarray) -> np.ndarray:
+        runmax = np.lib.stride_tricks.sliding_window_view(np.pad(c, half, mode="edge"), 2 * half + 1).max(-1)
+        return np.maximum(c, np.convolve(np.pad(runmax, half, mode="edge"), kernel, mode="valid"))
+
+    return np.stack([above(np.maximum(c, 0.0)) - above(np.maximum(-c, 0.0)) for c in push.T], axis=1)
