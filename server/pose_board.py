@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from protocol.shared_encode import SharedEncodes
 from protocol.update_table import UpdateTable
 from protocol.updates import quantise
 from server.logging import get_logger
@@ -175,7 +176,9 @@ def _select(update: TickUpdate, sel: np.ndarray) -> TickUpdate:
 
 
 class BoardRef:
-    """Where sessions find the board (it exists once the motion library does)."""
+    """Where sessions find the board (it exists once the motion library does), and the server's one memo of
+    joint-update encodes: clients in the same delta state share one encode per publish."""
 
     def __init__(self) -> None:
         self.board: PoseBoard | None = None
+        self.encodes = SharedEncodes()
