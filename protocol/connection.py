@@ -397,9 +397,7 @@ class Connection:
         if not keep.all():
             idx, codes = idx[keep], np.asarray(codes)[keep]
         try:
-            payloads = encoder.encode_codes(
-                idx, codes, tick & 0xFFFFFFFF, self.peer_max_frame - 1, version
-            )
+            payloads = encoder.encode_codes(idx, codes, tick & 0xFFFFFFFF, self.peer_max_frame - 1, version)
         except ValueError as exc:
             raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
         return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)

@@ -66,7 +66,7 @@ class SharedEncodes:
             self._groups.clear()
 
     def lookup(self, state: int, rows: tuple[object, ...], version: object) -> Encoded | None:
-        """The memoised encode of ``rows`` (table, digest, tick, max_payload) from ``state`` at ``version``."""
+        """The memoised encode of ``rows`` (table, digest, tick, max_payload) from ``state`` at ``version``"""
         self._at(version)
         hit = self._encodes.get((state, *rows))
         if hit is None:

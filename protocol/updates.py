@@ -164,7 +164,10 @@ class UpdateEncoder:
     """Server side, one per client and update table: what this client last received, and the packer."""
 
     def __init__(
-        self, table: UpdateTable, max_soldiers: int = DEFAULT_MAX_SOLDIERS, shared: SharedEncodes | None = None
+        self,
+        table: UpdateTable,
+        max_soldiers: int = DEFAULT_MAX_SOLDIERS,
+        shared: SharedEncodes | None = None,
     ) -> None:
         self.table = table
         self.max_soldiers = max_soldiers
@@ -214,7 +217,7 @@ class UpdateEncoder:
         a ``version`` (the caller's promise: equal versions and rows mean equal codes) and a ``shared`` memo,
         an encoder in the same state as one that already encoded these rows at this version takes its bytes.
         """
-        plan, lay = self._plan, self.table.layout
+        lay = self.table.layout
         idx: np.ndarray = np.asarray(indices, np.int64).reshape(-1)
         q: np.ndarray = np.asarray(codes, np.int32)
         if q.shape != (len(idx), lay.nfields):

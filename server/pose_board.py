@@ -7,6 +7,7 @@ stalled client never holds more than one batch.
 
 from __future__ import annotations
 
+import os
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -181,4 +182,5 @@ class BoardRef:
 
     def __init__(self) -> None:
         self.board: PoseBoard | None = None
-        self.encodes = SharedEncodes()
+        # TTES_SHARED_ENCODES=0: every client encodes on its own (the A/B switch of bench/bench_fanout.py)
+        self.encodes = None if os.environ.get("TTES_SHARED_ENCODES") == "0" else SharedEncodes()

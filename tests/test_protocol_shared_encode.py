@@ -36,7 +36,9 @@ def _codes(rng: np.random.Generator, codes: np.ndarray, moving: float) -> np.nda
     return np.clip(codes + step, 0, lay.max_code).astype(np.int32)
 
 
-def _step(rng: np.random.Generator, clients: list[Client], shared: SharedEncodes, groups: list[np.ndarray]) -> None:
+def _step(
+    rng: np.random.Generator, clients: list[Client], shared: SharedEncodes, groups: list[np.ndarray]
+) -> None:
     """One random event between publishes: a join, a (re)subscription, a reused index, a new row set."""
     ev = int(rng.integers(0, 8))
     if ev == 0:
@@ -59,7 +61,12 @@ def test_shared_encoding_is_byte_identical_to_per_client(seed: int, nclients: in
     rng = np.random.default_rng(seed)
     shared = SharedEncodes()
     # visibility / subscription mixes: everything, one owner's soldiers, the others', a random subset
-    groups = [np.arange(NMAX), np.arange(0, NMAX, 2), np.arange(1, NMAX, 2), np.sort(rng.choice(NMAX, 20, False))]
+    groups = [
+        np.arange(NMAX),
+        np.arange(0, NMAX, 2),
+        np.arange(1, NMAX, 2),
+        np.sort(rng.choice(NMAX, 20, False)),
+    ]
     clients = [Client(shared, groups[int(rng.integers(len(groups)))]) for _ in range(nclients)]
     codes = rng.integers(0, DI.layout.max_code + 1, (NMAX, DI.layout.nfields)).astype(np.int32)
     for version in range(1, 40):

@@ -181,4 +181,4 @@ def test_clients_share_encodes_and_each_gets_the_float_paths_bytes() -> None:
     encodes = server.board_ref.encodes
     assert encodes.hits > encodes.misses, (encodes.hits, encodes.misses)
     states = [p.session.conn._encoders[1].state for p in pairs]
-    assert states[0] == states[1] == states[3] != states[2]  # the late joiner joined the group after its keyframe
+    assert states[0] == states[1] == states[3] != states[2]  # the late joiner joined after its keyframe
