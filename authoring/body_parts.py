@@ -147,24 +147,49 @@ class SegmentHulls:
     def depth(self, points: np.ndarray, seg_globals: np.ndarray) -> tuple[float, int, int]:
         """Deepest penetration (cm) of ``points`` ``(n, k, 3)`` (world) into any hull, with its frame and
         segment index (``-1`` when nothing is inside). ``seg_globals``: ``(n, nseg, 4, 4)``."""
-        if not len(self.segments):
+        f, m, _, d, _ = self._inside(points, seg_globals)
+        if not len(f):
             return 0.0, -1, -1
+        best = int(np.argmax(d))
+        if d[best] <= 0:
+            return 0.0, -1, -1
+        return float(d[best]), int(f[best]), int(self.segments[m[best]])
+
+    def exits(self, points: np.ndarray, seg_globals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per frame, the deepest penetration (cm, 0 when nothing is inside) of ``points`` ``(n, k, 3)`` and
+        the way out of it: the world normal ``(n, 3)`` of the hull face nearest that point (zero where
+        nothing is inside), so that what is pushed along it leaves the body by the shortest way."""
+        n = len(points)
+        depth, normal = np.zeros(n), np.zeros((n, 3))
+        f, m, _, d, face = self._inside(points, seg_globals)
+        for i in np.unique(f[d > 0]):
+            c = np.flatnonzero(f == i)
+            best = c[np.argmax(d[c])]
+            depth[i] = d[best]
+            g = seg_globals[i, self.segments[m[best]], :3, :3]
+            normal[i] = g @ self.equations[m[best], face[best], :3]
+        return depth, normal
+
+    def _inside(
+        self, points: np.ndarray, seg_globals: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The candidates (points within a hull's bounding sphere): frame, hull, point indices, the depth
+        inside the hull (negative: outside) and the face nearest the point."""
+        empty = np.zeros(0, dtype=int)
+        if not len(self.segments):
+            return empty, empty, empty, np.zeros(0), empty
         g = seg_globals[:, self.segments]  # (n, m, 4, 4)
         centre = np.einsum("fmij,mj->fmi", g[..., :3, :3], self.centres) + g[..., :3, 3]
         near = (
             np.linalg.norm(points[:, None, :, :] - centre[:, :, None, :], axis=-1) < self.radii[None, :, None]
         )
         f, m, p = np.nonzero(near)
-        if not len(f):
-            return 0.0, -1, -1
-        d = np.empty(len(f))
+        d, face = np.empty(len(f)), np.empty(len(f), dtype=int)
         for a in range(0, len(f), CHUNK):  # bounded memory: candidates x hull faces
             b = slice(a, a + CHUNK)
             rot, org = g[f[b], m[b], :3, :3], g[f[b], m[b], :3, 3]
             local = np.einsum("cji,cj->ci", rot, points[f[b], p[b]] - org)  # world -> segment frame
             eq = self.equations[m[b]]
-            d[b] = (-(np.einsum("cfi,ci->cf", eq[..., :3], local) + eq[..., 3])).min(axis=1)
-        best = int(np.argmax(d))
-        if d[best] <= 0:
-            return 0.0, -1, -1
-        return float(d[best]), int(f[best]), int(self.segments[m[best]])
+            out = -(np.einsum("cfi,ci->cf", eq[..., :3], local) + eq[..., 3])
+            d[b], face[b] = out.min(axis=1), out.argmin(axis=1)
+        return f, m, p, d, face
