@@ -223,8 +223,11 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
         pose, goals = passes(pose)  # (every clip alike, so clips meeting at a posture agree there)
     for _ in range(RIFLE_PASSES):  # prone: the rifle out of the body, and down where a forearm cannot go
         s_h = part_heights(pose, loc, figures, stype, "forearm")
-        high = [(weight[s] - crawling[s]) * (s_h[s] - np.maximum(m_h[s], FOREARM_REST_CM)) for s in weight]
-        if not _settle_rifle(slave, figures, (pose, loc, stype), prone * held_rifle, np.max(high, axis=0), held):
+        high = np.max(
+            [(weight[s] - crawling[s]) * (s_h[s] - np.maximum(m_h[s], FOREARM_REST_CM)) for s in weight],
+            axis=0,
+        )
+        if not _settle_rifle(slave, figures, (pose, loc, stype), prone * held_rifle, high, held):
             break
         pose, goals = passes(pose)  # the palms after the rifle, the forearms kept down
     # frames solved alone land a few degrees apart where the neck is at its limit: smooth the change over
