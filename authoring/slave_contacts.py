@@ -129,8 +129,8 @@ HEAD = ("neck",)  # the head is at its limits prone: turning it there jumps betw
 FOREARM_PASSES = 6  # the forearm's lowest node is near, not at, the elbow: solve again for what is left
 AIM_BELOW_CM = 0.5  # the solve stops short of its goal: aim this much below the master's forearm ...
 CONTACT_CM = 1.3  # ... but not into contact (the quality check's 1.25 cm) where the master's is not
-RIFLE_PASSES = 2  # prone: the rifle settled, the arms solved after it, and once more for what is left
-FOREARM_REST_CM = 1.5  # a prone slave forearm higher than this and than the master's brings the rifle down
+RIFLE_PASSES = 3  # prone: the rifle settled, the arms solved after it, and again for what is left
+FOREARM_REST_CM = 1.0  # a prone slave forearm higher than this brings the rifle down (see _forearm_aim)
 RIFLE_ABOVE_GROUND_CM = 0.3  # ... but the rifle stays this far above the ground
 EYE_BALL_CM = 2.0  # the eye stays this close to where the slaving put it (a ball: GOAL_RADIUS is 0.9)
 
@@ -224,7 +224,7 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     for _ in range(RIFLE_PASSES):  # prone: the rifle out of the body, and down where a forearm cannot go
         s_h = part_heights(pose, loc, figures, stype, "forearm")
         high = np.max(
-            [(weight[s] - crawling[s]) * (s_h[s] - np.maximum(m_h[s], FOREARM_REST_CM)) for s in weight],
+            [(weight[s] - crawling[s]) * (s_h[s] - _forearm_aim(m_h[s])) for s in weight],
             axis=0,
         )
         if not _settle_rifle(slave, figures, (pose, loc, stype), prone * held_rifle, high, held):
@@ -246,6 +246,12 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     bf = bound.figures[0]
     slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
     return np.max([w * np.maximum(0.0, s_h[s] - m_h[s]) for s, w in weight.items()], axis=0)
+
+
+def _forearm_aim(master: np.ndarray) -> np.ndarray:
+    """How high a prone slave forearm may stay before the rifle comes down for it: ``FOREARM_REST_CM``
+    where the master's forearm rests (the check's 2 cm, ``REST_CM``), else as high as the master's."""
+    return np.where(master <= REST_CM, FOREARM_REST_CM, master)
 
 
 def _settle_rifle(

@@ -24,7 +24,8 @@ from server.motion.channelset import Channelset
 CLEAR_CM = 0.4  # the rifle slides out until it is at most this deep in the body (the check allows 1 cm)
 PUSH_PASSES = 3  # each pass slides it out of its deepest point; a slide can uncover the next one
 SIDEWAYS_MIN = 0.35  # a way out this far from across the barrel (cosine) is not taken: it would slide far
-PUSH_SIGMA_FRAMES = 3.0  # the slide's length is smoothed over the clip (at or above the need)
+PUSH_SIGMA_FRAMES = 3.0  # the slide's length is smoothed over the clip (at or above the need) ...
+PUSH_EASE_FRAMES = 15  # ... and eased in and out over this many frames at a clip's ends (0.25 s)
 
 
 def held_rifle(slave: Channelset, figures: FigureSet, body: str) -> tuple[str, np.ndarray, np.ndarray] | None:
@@ -81,7 +82,7 @@ def _smoothed(slide: np.ndarray) -> np.ndarray:
     mean += to_first[:, None] * (way[0] - mean[0]) + to_last[:, None] * (way[-1] - mean[-1])
     norm = np.linalg.norm(mean, axis=1)
     mean = np.divide(mean, norm[:, None], out=np.zeros_like(mean), where=norm[:, None] > 1e-9)
-    return mean * _smooth_above(size, PUSH_SIGMA_FRAMES)[:, None]
+    return mean * _smooth_above(size, PUSH_SIGMA_FRAMES, PUSH_EASE_FRAMES)[:, None]
 
 
 def slide_rifle(slave: Channelset, rtype: str, slide: np.ndarray) -> None:
