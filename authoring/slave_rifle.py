@@ -21,7 +21,7 @@ from authoring.rifle_swap import _smooth_above
 from authoring.slaving import _gaussian
 from server.motion.channelset import Channelset
 
-CLEAR_CM = 0.4  # the rifle slides out until it is at most this deep in the body (the check allows 1 cm)
+CLEAR_CM = 0.6  # the rifle slides out until it is at most this deep in the body (the check allows 1 cm)
 PUSH_PASSES = 3  # each pass slides it out of its deepest point; a slide can uncover the next one
 SIDEWAYS_MIN = 0.35  # a way out this far from across the barrel (cosine) is not taken: it would slide far
 PUSH_SIGMA_FRAMES = 3.0  # the slide's length is smoothed over the clip (at or above the need) ...
