@@ -34,7 +34,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    outward) dragged a lying soldier's feet along the ground, and soft contacts let resting parts creep;
    recording (60 fps) stops once every body has been still (:data:`REST_SPEED`) for
    :data:`REST_SECONDS` (or after :data:`MAX_SECONDS`); the clip keeps those still frames, so the last frame
-   is at rest.
+   is at rest;
+5. **the skid is taken out**: the ragdoll's parts slide over the ground as he falls, and the recorded frames
+   are moved back by their drift (:func:`authoring.planted.plant`).
 
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph
@@ -53,6 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from authoring.motion import KeyPosture
+from authoring.planted import plant
 from authoring.postures import RIFLE, SOLDIER
 from authoring.transitions import FPS, ClipFrames
 from peabody.model import Figure
@@ -386,5 +389,5 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         still = still + 1 if speed < REST_SPEED and t > spec.fade + spec.release else 0
         if still * dt >= REST_SECONDS:
             break
-    frames = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
+    frames = plant(ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS), soldier)
     return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))

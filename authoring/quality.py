@@ -16,6 +16,11 @@ Per clip (a channelset bound to its soldier figure and rifle):
   of each body segment's mesh in the segment's frame — the hands and fingers that hold it excepted — with
   bounding spheres to pick the candidate (frame, segment, node) triples first.
 * ``rifle_slide_cm`` (information, no limit): the rifle's slide on the ground, e.g. once a death drops it.
+* ``rifle_pitch_jump_deg`` — the largest change of the rifle's pitch (the butt-to-muzzle line's angle
+  above the horizontal) over any ``PITCH_WINDOW_S`` (0.1 s) while it is held: raising it to aim turns it
+  8-10 degrees per 0.1 s, a recoil 6, a rifle swung muzzle-up across the shoulder 22-34 (a pose may be
+  frame-to-frame smooth and still whip the rifle round); a clip whose rifle lacks ``butt`` or ``muzzle``
+  sites is not judged.
 * ``palm_rifle_cm`` — right palm centre to the rifle's ``grip``, left palm centre to its ``handguard``, only
   while the rifle is held (before the channelset's ``release_frame``).
 * ``end_speed_m_s`` — at each end of the clip that is a static posture (both ends of a static-graph clip, the
@@ -79,6 +84,7 @@ THRESHOLDS: dict[str, float] = {
     "rifle_penetration_cm": 1.0,
     "rifle_in_body_cm": 1.0,
     "palm_rifle_cm": 1.0,
+    "rifle_pitch_jump_deg": 18.0,
     "end_speed_m_s": 0.5,
     "joint_limit_violations": 0.0,
     "max_frame_jump_deg": 20.0,
@@ -96,6 +102,7 @@ STEPS_PER_CYCLE_CLIP = {"crawl": 2}  # gait.py cuts one step per cycle clip; cra
 CONTACT_HEIGHT_CM = 1.25  # a 1 cm skim is contact; a toe leaving the ground at 2 cm is not
 END_FRAMES = 3  # frames over which an end's speed is measured
 LIMIT_SLACK = 1e-4  # rad / cm: float32 rounding of recorded angles
+PITCH_WINDOW_S = 0.1  # s over which a rifle's change of pitch is measured
 PALM_PAIRS = (("right_palm.palmcenter", "grip"), ("left_palm.palmcenter", "handguard"))
 LOCOMOTION_GRAPH_WORDS = ("loco", "crawl")
 BACKWARD_WORDS = ("bwalk", "backward", "back_walk", "walkback")
@@ -117,6 +124,21 @@ def foot_skate(points: np.ndarray, fps: float) -> tuple[float, int]:
     phases = sum(1 for k in range(points.shape[1]) for a, b in _runs(points[:, k, 1] <= CONTACT_HEIGHT_CM)
                  if b - a >= 3)  # fmt: skip
     return float(slide.max(initial=0.0)), phases
+
+
+def rifle_pitch_jump(butt: np.ndarray, muzzle: np.ndarray, fps: float) -> tuple[float, int, int]:
+    """Largest change (degrees) of the pitch of the line from ``butt`` to ``muzzle`` (``(n, 3)``, +Y up)
+    over any window of ``PITCH_WINDOW_S``, with the window's first and last frame."""
+    axis = muzzle - butt
+    length = np.linalg.norm(axis, axis=1)
+    sine = np.divide(axis[:, 1], length, out=np.zeros_like(length), where=length > 0)
+    pitch = np.degrees(np.arcsin(np.clip(sine, -1.0, 1.0)))
+    w = min(max(1, round(PITCH_WINDOW_S * fps)), len(pitch) - 1)
+    if w < 1:
+        return 0.0, 0, 0
+    change = np.abs(pitch[w:] - pitch[:-w])
+    at = int(np.argmax(change))
+    return float(change[at]), at, at + w
 
 
 def ground_shift(cs: Channelset, locomotion: bool, direction: float | None = None) -> np.ndarray:
@@ -239,6 +261,11 @@ def check_clip(
                     worst = float(d.max())
                     out["palm_rifle_where"] = f"{palm.split('.')[0]}[{int(np.argmax(d))}]"
         out["palm_rifle_cm"] = round(worst, 3)
+        if "butt" in rnames and "muzzle" in rnames:
+            butt, muzzle = (rs[:held, rnames[k], :3, 3] for k in ("butt", "muzzle"))
+            jump, a, b = rifle_pitch_jump(butt, muzzle, cs.fps)
+            out["rifle_pitch_jump_deg"] = round(jump, 3)
+            out["rifle_pitch_jump_where"] = f"frames {a}-{b}" if jump > 0 else None
         rnodes, rsegs = figures.nodes(rifle_type)
         rg = rk.segment_globals(rq, rloc)
         rpts = np.einsum("fkij,kj->fki", rg[:, rsegs, :3, :], rnodes)

@@ -18,9 +18,10 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from protocol.entity import decode_entity_requests, encode_entity_requests
+from protocol.entity import Reaction, decode_entity_requests, encode_entity_requests
 from protocol.errors import ErrorCode, WireError
 from protocol.events import (
+    MAX_CLIENT_ID,
     ROLES,
     SUPPORTED_VERSIONS,
     Accept,
@@ -34,10 +35,13 @@ from protocol.events import (
     JointUpdates,
     Ping,
     Pong,
+    React,
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
+    Settings,
     SoldierCreated,
+    SoldierRemoved,
     Status,
     Subscribe,
     Unsubscribe,
@@ -65,12 +69,15 @@ class MessageType(IntEnum):
     JCL = 0x10
     READY = 0x11
     STATUS = 0x12
+    SETTINGS = 0x13
     CREATE_SOLDIER = 0x20
     SOLDIER_CREATED = 0x21
     REMOVE_SOLDIER = 0x22
     SUBSCRIBE = 0x23
     UNSUBSCRIBE = 0x24
     REQUEST_FULL_UPDATE = 0x25
+    SOLDIER_REMOVED = 0x26
+    REACT = 0x27
     ENTITY_REQUESTS = 0x30
     UPDATE_TABLE = 0x31
     JOINT_UPDATES = 0x32
@@ -85,13 +92,16 @@ CLIENT_SENDS = BOTH | {
     MessageType.SUBSCRIBE,
     MessageType.UNSUBSCRIBE,
     MessageType.REQUEST_FULL_UPDATE,
+    MessageType.REACT,
     MessageType.ENTITY_REQUESTS,
 }
 SERVER_SENDS = BOTH | {
     MessageType.ACCEPT,
     MessageType.READY,
     MessageType.STATUS,
+    MessageType.SETTINGS,
     MessageType.SOLDIER_CREATED,
+    MessageType.SOLDIER_REMOVED,
     MessageType.UPDATE_TABLE,
     MessageType.JOINT_UPDATES,
 }
@@ -128,6 +138,15 @@ class Body:
             raise self._type(key, v, "a string")
         if nonempty and not v:
             raise self._range(key, "must not be empty")
+        return v
+
+    def optional_str(self, key: builtins.str, max_len: builtins.int) -> builtins.str:
+        """A string field a later minor version added: "" when absent, at most ``max_len`` characters."""
+        if key not in self.raw:
+            return ""
+        v = self.str(key)
+        if len(v) > max_len:
+            raise self._range(key, f"is longer than {max_len} characters")
         return v
 
     def int(self, key: builtins.str, lo: int, hi: int, *, nullable: bool = False) -> Any:
@@ -219,7 +238,13 @@ def _dec_hello(payload: bytes, ctx: int) -> Hello:
     role = b.str("role")
     if role not in ROLES:
         raise WireError(ErrorCode.BAD_VALUE, f"role {role!r} not in {ROLES}", "HELLO")
-    return Hello(b.str("name", nonempty=True), role, b.int("max_frame", MIN_MAX_FRAME, U32), version)
+    client_id = b.optional_str("client_id", MAX_CLIENT_ID)
+    if client_id.startswith("~") or not client_id.isprintable():
+        raise WireError(
+            ErrorCode.BAD_VALUE, "field 'client_id' must be printable, not start with '~'", "HELLO"
+        )
+    name, max_frame = b.str("name", nonempty=True), b.int("max_frame", MIN_MAX_FRAME, U32)
+    return Hello(name, role, max_frame, version, client_id, b.optional_str("token", 1024))
 
 
 def _dec_accept(payload: bytes, ctx: int) -> Accept:
@@ -230,10 +255,14 @@ def _dec_accept(payload: bytes, ctx: int) -> Accept:
         b.int("max_frame", MIN_MAX_FRAME, U32),
         b.int("max_soldiers", 1, MAX_SOLDIERS_LIMIT),
         version,
+        b.optional_str("client_id", MAX_CLIENT_ID + 16),
+        b.optional_str("role", 16),
     )
 
 
-def _enc_handshake(version: int, body: dict[str, Any]) -> bytes:
+def _enc_handshake(version: int, body: dict[str, Any], optional: Mapping[str, str] | None = None) -> bytes:
+    """Prefix + body; the ``optional`` string fields go in only when not empty (older peers omit them)."""
+    body = body | {k: v for k, v in (optional or {}).items() if v}
     return HANDSHAKE_PREFIX.pack(MAGIC, version) + pack_body(body)
 
 
@@ -287,10 +316,25 @@ def _dec_created(p: bytes, n: int) -> SoldierCreated:
     return SoldierCreated(b.int("id", 0, U32), b.int("index", 0, n - 1), b.int("table", 0, 0xFFFF))
 
 
+def _dec_react(p: bytes, n: int) -> React:
+    b = unpack_body(p, "REACT")
+    return React(b.int("kind", min(Reaction), max(Reaction)), _indices(b, "indices", n))
+
+
 def _enc_status(e: Status) -> bytes:
     return pack_body(
         {"time": float(e.time), "soldiers": e.soldiers, "update_rate": float(e.update_rate), "text": e.text}
     )
+
+
+def _dec_settings(p: bytes, n: int) -> Settings:
+    b = unpack_body(p, "SETTINGS")
+    return Settings(b.float("throttle", 0.0), b.float("report_interval", 0.0))
+
+
+def _dec_removed(p: bytes, n: int) -> SoldierRemoved:
+    b = unpack_body(p, "SOLDIER_REMOVED")
+    return SoldierRemoved(b.int("index", 0, n - 1), b.str("reason"))
 
 
 Encoder = Callable[[Any], bytes]
@@ -300,13 +344,19 @@ Decoder = Callable[[bytes, int], Event]
 _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
     MessageType.HELLO: (
         Hello,
-        lambda e: _enc_handshake(e.version, {"name": e.name, "role": e.role, "max_frame": e.max_frame}),
+        lambda e: _enc_handshake(
+            e.version,
+            {"name": e.name, "role": e.role, "max_frame": e.max_frame},
+            {"client_id": e.client_id, "token": e.token},
+        ),
         _dec_hello,
     ),
     MessageType.ACCEPT: (
         Accept,
         lambda e: _enc_handshake(
-            e.version, {"name": e.name, "max_frame": e.max_frame, "max_soldiers": e.max_soldiers}
+            e.version,
+            {"name": e.name, "max_frame": e.max_frame, "max_soldiers": e.max_soldiers},
+            {"client_id": e.client_id, "role": e.role},
         ),
         _dec_accept,
     ),
@@ -333,6 +383,11 @@ _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
     MessageType.JCL: (Jcl, lambda e: pack_body({"id": e.id, "text": e.text}), _dec_jcl),
     MessageType.READY: (Ready, _enc_ready, _dec_ready),
     MessageType.STATUS: (Status, _enc_status, _dec_status),
+    MessageType.SETTINGS: (
+        Settings,
+        lambda e: pack_body({"throttle": float(e.throttle), "report_interval": float(e.report_interval)}),
+        _dec_settings,
+    ),
     MessageType.CREATE_SOLDIER: (
         CreateSoldier,
         lambda e: pack_body({"id": e.id, "figure": e.figure, "weapon": e.weapon, "index": e.index}),
@@ -353,6 +408,11 @@ _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
         lambda e: pack_body({"indices": list(e.indices)}),
         lambda p, n: Subscribe(_indices(unpack_body(p, "SUBSCRIBE"), "indices", n)),
     ),
+    MessageType.SOLDIER_REMOVED: (
+        SoldierRemoved,
+        lambda e: pack_body({"index": e.index, "reason": e.reason}),
+        _dec_removed,
+    ),
     MessageType.UNSUBSCRIBE: (
         Unsubscribe,
         lambda e: pack_body({"indices": list(e.indices)}),
@@ -362,6 +422,11 @@ _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
         RequestFullUpdate,
         lambda e: pack_body({"indices": list(e.indices)}),
         lambda p, n: RequestFullUpdate(_indices(unpack_body(p, "REQUEST_FULL_UPDATE"), "indices", n)),
+    ),
+    MessageType.REACT: (
+        React,
+        lambda e: pack_body({"kind": int(e.kind), "indices": list(e.indices)}),
+        _dec_react,
     ),
     MessageType.ENTITY_REQUESTS: (
         EntityRequests,

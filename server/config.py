@@ -2,7 +2,10 @@
 
 A TOML file may hold the keys at the top level or in a ``[server]`` table. Unknown keys, wrong types and
 out-of-range values are :class:`ConfigError` naming the file and the key, so a typo never silently falls back
-to a default. Command-line flags override the file (:meth:`ServerConfig.with_overrides`).
+to a default. Command-line flags override the file (:meth:`ServerConfig.with_overrides`). The role tokens have
+no flags (a command line shows in ``ps``): they come from the file or, winning over it, from the environment
+(:func:`with_env_tokens`, ``TTES_OBSERVER_TOKEN`` / ``TTES_CONTROLLER_TOKEN`` / ``TTES_OPERATOR_TOKEN``), as a
+container or a service manager hands secrets over.
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +24,12 @@ from protocol.events import DEFAULT_MAX_SOLDIERS
 DEFAULT_DATA_DIR = Path(__file__).resolve().parent.parent
 DEFAULT_STARTUP_SCRIPT = "jack-ttes-soldier_low.jcl"
 MAX_SOLDIERS_LIMIT = 65536
+# the environment variable of each role's token (ttes server; the env wins over the config file)
+TOKEN_ENV = {
+    "observer": "TTES_OBSERVER_TOKEN",
+    "controller": "TTES_CONTROLLER_TOKEN",
+    "operator": "TTES_OPERATOR_TOKEN",
+}
 
 
 class ConfigError(ValueError):
@@ -53,9 +63,24 @@ class ServerConfig:
     name: str = "jack-ttes"
     json_logs: bool = False
     record_clips: bool = False  # keep every soldier's clip starts (debug; report_ttes_clips)
+    orphan_grace: float = 12.0  # seconds a gone client's soldiers wait for it to reconnect (the DIS timeout)
+    min_report_interval: float = 0.1  # the shortest STATUS period a client may ask for
+    # a credential per role (HELLO token); any set: roles come only from tokens. Never logged or printed.
+    observer_token: str = field(default="", repr=False)
+    controller_token: str = field(default="", repr=False)
+    operator_token: str = field(default="", repr=False)
+    tls_cert: str = ""  # PEM certificate (chain) file: serve TLS (server.tls); "" = plain TCP
+    tls_key: str = ""  # its PEM private key file ("" = in tls_cert)
 
     def __post_init__(self) -> None:
         validate(self)
+
+    @property
+    def tokens(self) -> dict[str, str]:
+        """The configured tokens by role (only those set)."""
+        given = {"observer": self.observer_token, "controller": self.controller_token}
+        given["operator"] = self.operator_token
+        return {role: t for role, t in given.items() if t}
 
     def with_overrides(self, **changes: Any) -> ServerConfig:
         """A copy with the given fields replaced (``None`` values are ignored: flag not given)."""
@@ -104,6 +129,17 @@ def validate(c: ServerConfig) -> None:
     _check_number("control_queue", c.control_queue, 8, 1_000_000, integer=True)
     if not isinstance(c.name, str) or not c.name:
         raise ConfigError("must be a non-empty string", "name")
+    _check_number("orphan_grace", c.orphan_grace, 0.0, 86400.0)
+    _check_number("min_report_interval", c.min_report_interval, 0.0, 3600.0, lo_open=True)
+    for role in ("observer", "controller", "operator"):
+        token = getattr(c, f"{role}_token")
+        if not isinstance(token, str) or (token and len(token) < 8):
+            raise ConfigError("must be a string of at least 8 characters (or empty: none)", f"{role}_token")
+    for key in ("tls_cert", "tls_key"):
+        if not isinstance(getattr(c, key), str):
+            raise ConfigError("must be a path string", key)
+    if c.tls_key and not c.tls_cert:
+        raise ConfigError("a key without tls_cert", "tls_key")
     for flag in ("json_logs", "record_clips"):
         if not isinstance(getattr(c, flag), bool):
             raise ConfigError("must be true or false", flag)
@@ -143,3 +179,14 @@ def load_config(path: str | Path) -> ServerConfig:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"not valid TOML: {exc}", str(p)) from None
     return config_from_mapping(data, str(p), p.resolve().parent)
+
+
+def with_env_tokens(config: ServerConfig, environ: Mapping[str, str]) -> ServerConfig:
+    """``config`` with each role token that ``environ`` sets (:data:`TOKEN_ENV`; empty = not set) in place of
+    the file's. A bad one is a ConfigError naming the variable, never its value."""
+    given = {f"{role}_token": environ[var] for role, var in TOKEN_ENV.items() if environ.get(var)}
+    try:
+        return config.with_overrides(**given)
+    except ConfigError as exc:
+        var = {f"{role}_token": v for role, v in TOKEN_ENV.items()}.get(exc.where, exc.where)
+        raise ConfigError(exc.message, var) from None

@@ -23,6 +23,7 @@ here so it can be tested without sockets.
 
 from __future__ import annotations
 
+import hmac
 import math
 from collections import deque
 from typing import TYPE_CHECKING
@@ -31,8 +32,10 @@ import numpy as np
 import trio
 
 from protocol.connection import NEED_DATA, PAUSED, SERVER, Connection, State
+from protocol.entity import Reaction
 from protocol.errors import ErrorCode, LocalProtocolError
 from protocol.events import (
+    ROLES,
     Accept,
     ConnectionClosed,
     CreateSoldier,
@@ -45,10 +48,13 @@ from protocol.events import (
     Ping,
     Pong,
     ProtocolError,
+    React,
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
+    Settings,
     SoldierCreated,
+    SoldierRemoved,
     Status,
     Subscribe,
     Unsubscribe,
@@ -81,7 +87,16 @@ class Session:
         self.peer = peer
         self.conn = Connection(SERVER, max_frame=config.max_frame, max_soldiers=config.max_soldiers)
         self.name = ""
-        self.role = ""
+        self.role = ""  # granted at HELLO (server.world.access, server.world.owners say what it allows)
+        self.client_id = ""  # the HELLO's client_id, or a fresh anonymous one: owns this client's soldiers
+        self.local = True  # the peer is on this host (with no tokens configured, only local peers may join)
+        self.joined = False  # counted in world.owners.connected (left again when the session ends)
+        self.throttle: float | None = None  # this connection's own rate cap (None: the server's)
+        self.report_interval: float | None = None  # this connection's STATUS period (None: the server's)
+        self.settings_changed = trio.Event()  # set when report_interval changes: the status task restarts
+        self.last_updates_at = -math.inf  # server time of the last joint updates written (own throttle)
+        self.retry_at: float | None = None  # updates held back by the own throttle: write them then
+        self.status_window = (0.0, 0)  # (time, published ticks) at the last STATUS: its update_rate
         self.control: deque[bytes] = deque()
         self.wake = trio.Event()
         self.closing = False  # no more reading; the writer flushes the control queue and closes
@@ -89,7 +104,6 @@ class Session:
         self.ready_sent = False
         self.flushed_serial = 0  # the board publish this client's last write covered
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
-        self.owned: set[int] = set()  # soldiers this client created (max_soldiers_per_client)
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
         self.cost = 0.0  # request tokens used since the last charge
@@ -135,13 +149,38 @@ class Session:
             self.dropped = dropped
         self.wake.set()
 
-    def take_output(self) -> bytes:
-        """Everything to write now: queued control bytes, then the latest joint updates (latest-wins)."""
+    def take_output(self, now: float | None = None) -> bytes:
+        """Everything to write now: queued control bytes, then the latest joint updates (latest-wins), held
+        back while this connection's own throttle says so (``retry_at``: when they are due; ``now`` None:
+        never held)."""
         out = b"".join(self.control)
         self.control.clear()
+        self.retry_at = None
         if self.closing or self.conn.state is not State.OPEN or not self.tables_sent:
             return out
-        return out + self._joint_updates()
+        if now is not None:
+            due = self.last_updates_at + self.own_throttle() - 0.5 / self.config.tick_hz
+            if now < due - 1e-9:
+                # the tick at which they are due wakes the writer; this is for when no tick publishes:
+                # a quarter period after it, so a retry never writes ahead of that tick's poses
+                self.retry_at = due + 0.75 / self.config.tick_hz
+                return out
+        data = self._joint_updates()
+        if data and now is not None:
+            self.last_updates_at = now
+        return out + data
+
+    def own_throttle(self) -> float:
+        """This connection's rate cap: its own, never below the server's (a client only lowers its rate)."""
+        server = self.world.settings.throttle
+        return server if self.throttle is None else max(self.throttle, server)
+
+    def own_report_interval(self) -> float:
+        return self.world.report_interval if self.report_interval is None else self.report_interval
+
+    def may_see(self, indices: np.ndarray) -> np.ndarray:
+        """The soldiers of ``indices`` whose updates this client may receive (``Owners.visible``)."""
+        return self.world.owners.visible(indices, self.client_id, self.role)
 
     def _joint_updates(self) -> bytes:
         """The subscribed soldiers whose codes changed since the last write (or that are owed a full update),
@@ -154,7 +193,7 @@ class Session:
         self.flushed_serial = board.serial
         if len(sub) == 0:
             return b""
-        sub = sub[sub < board.capacity]
+        sub = self.may_see(sub[sub < board.capacity])
         due = board.valid[sub] & ((board.version[sub] > since) | self.force[sub])
         idx = sub[due]
         if len(idx) == 0:
@@ -249,8 +288,7 @@ class Session:
         elif isinstance(ev, RemoveSoldier):
             self._remove(ev)
         elif isinstance(ev, Subscribe):
-            self.force[np.asarray(ev.indices, np.int64)] = True
-            self.notify()
+            self._subscribe(np.asarray(ev.indices, np.int64))
         elif isinstance(ev, RequestFullUpdate):
             idx = np.asarray(ev.indices, np.int64) if ev.indices else self.conn.subscribed
             self.force[idx] = True
@@ -259,18 +297,50 @@ class Session:
             pass  # the connection forgets them; subscribing again starts with a full update
         elif isinstance(ev, EntityRequests):
             self._requests(ev)
+        elif isinstance(ev, React):
+            self._react(ev)
 
     def _hello(self, ev: Hello) -> None:
-        self.name, self.role = ev.name, ev.role
-        if self.full:
-            self.send(Error(int(ErrorCode.NOT_PERMITTED), f"server full ({self.config.max_clients} clients)"))
-            self.goodbye("server full")
+        self.name = ev.name
+        refused = f"server full ({self.config.max_clients} clients)" if self.full else self._grant(ev)
+        if refused:
+            self.send(Error(int(ErrorCode.NOT_PERMITTED), refused))
+            self.goodbye(refused)
             self.dropped = True
+            log.info("client_refused", session=self.id, peer=self.peer, name=ev.name, reason=refused)
             return
-        self.send(Accept(self.config.name, self.config.max_frame, self.config.max_soldiers))
-        log.info("client_accepted", session=self.id, peer=self.peer, name=ev.name, role=ev.role)
+        self.role = ev.role
+        self.client_id = ev.client_id or f"~anon-{self.id}"
+        reclaimed = self.world.owners.join(self.client_id)
+        self.joined = True
+        c = self.config
+        self.send(Accept(c.name, c.max_frame, c.max_soldiers, client_id=self.client_id, role=self.role))
+        log.info(
+            "client_accepted",
+            session=self.id,
+            peer=self.peer,
+            name=ev.name,
+            role=self.role,
+            client_id=self.client_id,
+            reclaimed=len(reclaimed),
+        )
         if self.world.ready:
             self.send_ready()
+
+    def _grant(self, ev: Hello) -> str:
+        """Why the role asked for is refused ("" = granted). With tokens configured a role comes only from a
+        token (its own or a higher role's); with none, any local client may claim any role."""
+        tokens = self.config.tokens
+        if not tokens:
+            return (
+                "" if self.local else "this server grants roles to local clients only (no tokens configured)"
+            )
+        held = [
+            ROLES.index(r) for r, t in tokens.items() if hmac.compare_digest(ev.token.encode(), t.encode())
+        ]
+        if max(held, default=-1) >= ROLES.index(ev.role):
+            return ""
+        return f"the {ev.role} role needs its token (or a higher role's)"
 
     def send_tables(self) -> None:
         if not self.tables_sent and self.conn.state is State.OPEN:
@@ -287,12 +357,41 @@ class Session:
         m = self.world.manager
         soldiers: tuple[tuple[int, int], ...] = ()
         if m is not None:
-            live = m.table.live
+            live = self.may_see(m.table.live)
             fset = m.table.fset[live]
             ids = np.array([s.table.table_id for s in self.world.sets], np.int64)[fset]
             soldiers = tuple(zip(live.tolist(), ids.tolist(), strict=True))
         self.send(Ready(soldiers, self.config.tick_hz, self.world.settings.throttle))
         self.ready_sent = True
+        self.send_settings()
+
+    # -- this connection's settings (JCL set_ttes_soldier_throttle / set_ttes_report_interval) ---------------
+    def send_settings(self) -> None:
+        if self.conn.state is State.OPEN and self.ready_sent:
+            self.send(Settings(self.own_throttle(), self.own_report_interval()))
+
+    def set_throttle(self, seconds: float) -> None:
+        """This connection's rate cap, at once; below the server's it is the server's (a client may only
+        lower its own rate). ValueError for a value out of 0 … 60 s."""
+        if not (math.isfinite(seconds) and 0.0 <= seconds <= 60.0):
+            raise ValueError(f"throttle {seconds} is not in 0 … 60 s")
+        self.throttle = float(seconds)
+        self.send_settings()
+        self.notify()
+
+    def set_report_interval(self, seconds: float) -> None:
+        """This connection's STATUS period, at once; ValueError below the server's floor."""
+        floor = self.config.min_report_interval
+        if not (math.isfinite(seconds) and floor <= seconds <= 86400.0):
+            raise ValueError(f"report interval {seconds} is not in {floor:g} … 86400 s")
+        self.report_interval = float(seconds)
+        self.settings_changed.set()
+        self.send_settings()
+
+    def soldier_removed(self, index: int, reason: str) -> None:
+        """Tell this client a soldier it could see is gone."""
+        if self.conn.state is State.OPEN and self.ready_sent and len(self.may_see(np.array([index]))):
+            self.send(SoldierRemoved(index, reason))
 
     def _permitted(self, ref: int | None, what: str) -> bool:
         if self.role == "observer":
@@ -306,9 +405,21 @@ class Session:
             return False
         return True
 
+    def _subscribe(self, indices: np.ndarray) -> None:
+        hidden = np.setdiff1d(indices, self.may_see(indices))
+        if len(hidden):  # the connection keeps them subscribed, but updates are filtered by may_see
+            self.send(
+                Error(
+                    int(ErrorCode.NOT_PERMITTED),
+                    f"soldier {int(hidden[0])} belongs to another client"
+                    + (f" ({len(hidden)} soldiers)" if len(hidden) > 1 else "")
+                    + ": a controller sees its own and the shared soldiers only",
+                )
+            )
+        self.force[indices] = True
+        self.notify()
+
     def _jcl(self, ev: Jcl) -> None:
-        if not self._permitted(ev.id, "JCL"):
-            return
         try:
             self.world.run_jcl(ev.text, self, f"<jcl {ev.id} from {self.name or self.peer}>")
         except JclError as exc:
@@ -323,11 +434,10 @@ class Session:
         code, msg = self._create_error(ev)
         if code is None:
             try:
-                i = self.world.create_soldier(ev.figure, ev.weapon, ev.index)
+                i = self.world.create_soldier(ev.figure, ev.weapon, ev.index, owner=self.client_id)
             except (ValueError, KeyError) as exc:
                 code, msg = ErrorCode.NO_FREE_SOLDIER, str(exc)
             else:
-                self.owned.add(i)
                 self.send(SoldierCreated(ev.id, i, self.world.table_of(i)))
                 log.info("soldier_created", session=self.id, index=i, figure=ev.figure, weapon=ev.weapon)
                 return
@@ -337,11 +447,10 @@ class Session:
         m = self.world.manager
         assert m is not None
         lib = m.library
-        if len(self.owned) >= self.config.max_soldiers_per_client:
-            return (
-                ErrorCode.NO_FREE_SOLDIER,
-                f"this client may create {self.config.max_soldiers_per_client} soldiers",
-            )
+        try:
+            self.world.owners.check_cap(self.client_id)
+        except ValueError as exc:
+            return ErrorCode.NO_FREE_SOLDIER, str(exc)
         fig = ev.figure.rsplit("/", 1)[-1]
         wpn = ev.weapon.rsplit("/", 1)[-1]
         if not any(f == fig for f, _ in lib.set_keys):
@@ -361,8 +470,14 @@ class Session:
     def _remove(self, ev: RemoveSoldier) -> None:
         if not (self._permitted(None, "REMOVE_SOLDIER") and self._is_ready(None, "REMOVE_SOLDIER")):
             return
+        live = self.world.manager is not None and self.world.manager.table.is_live(ev.index)
+        if live and not self.world.owners.may_remove(ev.index, self.client_id, self.role):
+            self.send(
+                Error(int(ErrorCode.NOT_PERMITTED), f"soldier {ev.index} is not this client's to remove")
+            )
+            return
         try:
-            self.world.remove_soldier(ev.index)
+            self.world.remove_soldier(ev.index, f"removed by {self.client_id}")
         except KeyError:
             self.send(Error(int(ErrorCode.UNKNOWN_SOLDIER), f"no soldier {ev.index}"))
             return
@@ -373,14 +488,18 @@ class Session:
             return
         m = self.world.manager
         assert m is not None
-        status = m.apply_requests(ev.rows, self.world.clock())
-        bad = np.flatnonzero(status == REQUEST_BAD_VALUE)
+        kept = self._own_rows(ev.rows)  # row numbers of the batch, for the errors
+        if not len(kept):
+            return
+        rows = ev.rows if len(kept) == len(ev.rows) else ev.rows[kept]
+        status = m.apply_requests(rows, self.world.clock())
+        bad = kept[status == REQUEST_BAD_VALUE]
         if len(bad):
             self.fatal(
                 ErrorCode.BAD_VALUE, f"entity requests row {int(bad[0])}: speed above the server's limit"
             )
             return
-        unknown = np.flatnonzero(status == REQUEST_UNKNOWN_SOLDIER)
+        unknown = kept[status == REQUEST_UNKNOWN_SOLDIER]
         if len(unknown):
             row = int(unknown[0])
             self.send(
@@ -390,6 +509,51 @@ class Session:
                     + (f" ({len(unknown)} rows)" if len(unknown) > 1 else ""),
                 )
             )
+
+    def _own_rows(self, rows: np.ndarray) -> np.ndarray:
+        """The row numbers of the requests for soldiers this client may drive; the others are refused with
+        one ERROR."""
+        ok = self.world.owners.drivable(rows["index"], self.client_id, self.role)
+        if ok.all():
+            return np.arange(len(rows))
+        bad = np.flatnonzero(~ok)
+        self.send(
+            Error(
+                int(ErrorCode.NOT_PERMITTED),
+                f"entity requests row {int(bad[0])}: soldier {int(rows['index'][bad[0]])} belongs to another "
+                "client" + (f" ({len(bad)} rows)" if len(bad) > 1 else ""),
+            )
+        )
+        return np.flatnonzero(ok)
+
+    def _react(self, ev: React) -> None:
+        """REACT: each soldier this client may drive plays the reaction now or when it comes to rest
+        (``SoldierManager.react``); one that cannot react is skipped silently, one of another client's is
+        refused with ERROR 107 and an unknown one answered by ERROR 100 (neither fatal)."""
+        if not (self._permitted(None, "REACT") and self._is_ready(None, "REACT")):
+            return
+        m = self.world.manager
+        assert m is not None
+        idx = np.asarray(ev.indices, np.int64)
+        ok = self.world.owners.drivable(idx, self.client_id, self.role)
+        if not ok.all():
+            bad = idx[~ok]
+            more = f" ({len(bad)} soldiers)" if len(bad) > 1 else ""
+            self.send(
+                Error(
+                    int(ErrorCode.NOT_PERMITTED),
+                    f"react: soldier {int(bad[0])} belongs to another client{more}",
+                )
+            )
+        kind = Reaction(ev.kind).name.lower()
+        now = self.world.clock()
+        unknown = [i for i in idx[ok].tolist() if not m.table.is_live(i)]
+        for i in idx[ok].tolist():
+            if m.table.is_live(i):
+                m.react(i, kind, now)
+        if unknown:
+            more = f" ({len(unknown)} soldiers)" if len(unknown) > 1 else ""
+            self.send(Error(int(ErrorCode.UNKNOWN_SOLDIER), f"react: no soldier {unknown[0]}{more}"))
 
     # -- server → client ---------------------------------------------------------------------------------
     def status(self, now: float, soldiers: int, update_rate: float, text: str) -> None:

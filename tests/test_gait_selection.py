@@ -13,7 +13,7 @@ import pytest
 
 from protocol.entity import Appearance, WeaponState, make_entity_requests
 from server.soldier.library import MotionLibrary
-from server.soldier.manager import MAX_RATE, REQUEST_OK, SoldierManager
+from server.soldier.manager import MAX_RATE, REQUEST_OK, WALK_MAX_RATE, SoldierManager
 from server.startup import ServerWorld
 
 REPO = Path(__file__).resolve().parent.parent
@@ -127,13 +127,29 @@ def test_a_run_from_rest_at_2_6_and_a_walk_from_rest_at_1_8(lib) -> None:
 
 def test_cadence_stays_human_and_the_stride_takes_the_rest(lib) -> None:
     m, i = soldier(lib)
-    move(m, i, 0.0, 2.3)  # fast walk: 2.3 m/s on a 1.35 m/s recording
+    move(m, i, 0.0, 7.0)  # a sprint: 7 m/s on a 3.37 m/s recording
     run(m, 0.0, 4.0)
-    cycles = [c for c in m.clips_of(i) if "walk_cycle" in c.clip]
+    cycles = [c for c in m.clips_of(i) if "run_cycle" in c.clip]
     stored = lib.clip_duration[lib.clip_id(cycles[-1].clip)]
     steps_per_s = 1.0 / cycles[-1].duration
     assert cycles[-1].duration == pytest.approx(stored / MAX_RATE)
-    assert 1.1 <= steps_per_s <= 3.0
+    assert 1.7 <= steps_per_s <= 4.6
+
+
+def test_a_fast_walk_steps_at_race_walking_cadence(lib) -> None:
+    """A walker keeps walking up to the walk->run switch (2.4 m/s): up to 3.3 steps/s, no stride scaling."""
+    m, i = soldier(lib)
+    move(m, i, 0.0, 2.0)
+    run(m, 0.0, 3.0)
+    move(m, i, 3.0, 2.35)
+    run(m, 3.0, 7.0)
+    cycles = [c for c in m.clips_of(i) if "walk_cycle" in c.clip]
+    stored = lib.clip_duration[lib.clip_id(cycles[-1].clip)]
+    assert "run_cycle" not in gaits(m, i)
+    assert cycles[-1].duration == pytest.approx(
+        stored / (2.35 / lib.clip_ground_speed[lib.clip_id(cycles[-1].clip)]), rel=0.03
+    )
+    assert 1.0 / cycles[-1].duration <= 1.0 / (stored / WALK_MAX_RATE) <= 3.3
 
 
 def rest(m: SoldierManager, i: int, now: float, app: int, weapon: int) -> None:
@@ -176,3 +192,31 @@ def test_a_stepping_soldier_does_not_react(lib) -> None:
     move(m, i, 0.0, 1.4)
     run(m, 0.0, 2.0)
     assert m.react(i, "flinch", 2.0) is None and m.soldier_info(i)["mode"] == "LOCO"
+
+
+def test_a_shot_asked_with_the_firing_posture_recoils_once_the_rifle_is_up(lib) -> None:
+    """A Fire PDU turns into weapon FIRING and RECOIL at one instant: the soldier raises his rifle (a posture
+    change) and the recoil he kept plays when that ends, in the firing posture."""
+    m, i = soldier(lib)
+    rest(m, i, 0.0, Appearance.UPRIGHT, WeaponState.FIRING)
+    assert m.soldier_info(i)["mode"] == "TRANSITION"
+    assert m.react(i, "recoil", 0.0) is None  # kept, not refused
+    run(m, 0.0, 4.0)
+    assert gaits(m, i)[-1] == "stfire_recoil"
+    assert m.soldier_info(i)["posture"] == "STAND_FIRE" and m.soldier_info(i)["mode"] == "IDLE"
+
+
+def test_a_burst_recoils_shot_after_shot_and_a_stale_reaction_is_dropped(lib) -> None:
+    m, i = soldier(lib)
+    rest(m, i, 0.0, Appearance.UPRIGHT, WeaponState.FIRING)
+    run(m, 0.0, 5.0)
+    for k in range(3):  # three shots 0.1 s apart: one plays, one waits, the third replaces the waiting one
+        m.react(i, "recoil", 5.0 + 0.1 * k)
+    run(m, 5.0, 7.0)
+    starts = [c for c in m.clips_of(i) if c.clip.endswith("stfire_recoil_low")]
+    assert len(starts) == 2 and starts[1].time == pytest.approx(starts[0].time + starts[0].duration)
+    # a flinch kept through a long posture change (stand -> prone) is too old when it ends
+    rest(m, i, 7.0, Appearance.PRONE, WeaponState.DEPLOYED)
+    m.react(i, "flinch", 7.0)
+    run(m, 7.0, 15.0)
+    assert "prstow_flinch" not in gaits(m, i, since=7.0) and m.soldier_info(i)["posture"] == "PRONE_STOWED"

@@ -248,3 +248,33 @@ def test_ramp_grows_until_its_bound(server) -> None:
     assert all(s["passed"] for s in r["stages"]) and r["largest_sustained_soldiers"] == 8
     assert not any(s["latency_checked"] for s in r["stages"])  # the moving mix has no probes
     assert r["first_failed_soldiers"] is None and r["series"]["soldiers"] == [4.0, 8.0]
+
+
+def test_subscribe_all_sees_every_connections_soldiers(server) -> None:
+    """Issue 17: a controller sees only its client's soldiers, so the load tester's connections are one
+    client (one client id): each connection still gets every soldier's updates."""
+    from client_stub.loadtest.session import LoadTestConfig, run_loadtest
+
+    cfg = LoadTestConfig(
+        soldiers=8, clients=2, seconds=1.0, warmup_s=0.5, host=server.host, port=server.port,
+        mix="moving", subscribe_all=True,
+    )  # fmt: skip
+    r = run_loadtest(cfg)
+    assert r["delivered_pct"] >= 95.0, r["delivered_pct"]
+
+
+def test_each_connection_is_its_own_client_so_the_per_client_cap_counts_per_connection(tmp_path) -> None:
+    """Issue 17 regression: with every connection one client id, 5,000 soldiers over 2 clients hit the 4,096
+    per-client cap ("owns 4096 soldiers"). Without --subscribe-all each connection creates only its own share
+    and is a client of its own; here a cap of 6 per client and 8 soldiers over 2 connections."""
+    from client_stub.link.spawn import spawn_server
+    from client_stub.loadtest.session import LoadTestConfig, run_loadtest, server_args
+
+    config = tmp_path / "server.toml"
+    config.write_text("[server]\nmax_soldiers_per_client = 6\n")
+    with spawn_server([*server_args(RATE, 0.0), "--config", str(config)]) as srv:
+        cfg = LoadTestConfig(
+            soldiers=8, clients=2, seconds=0.8, warmup_s=0.3, host=srv.host, port=srv.port, mix="moving",
+        )  # fmt: skip
+        r = run_loadtest(cfg)
+    assert r["soldiers"] == 8 and r["delivered_pct"] >= 95.0, r

@@ -12,9 +12,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from protocol.connection import CLIENT, NEED_DATA, PAUSED, SERVER, Connection, State
-from protocol.entity import ENTITY_REQUEST_DTYPE, make_entity_requests
+from protocol.entity import ENTITY_REQUEST_DTYPE, Reaction, make_entity_requests
 from protocol.errors import ErrorCode, LocalProtocolError, WireError
 from protocol.events import (
+    ROLES,
     Accept,
     ConnectionClosed,
     CreateSoldier,
@@ -28,17 +29,20 @@ from protocol.events import (
     Ping,
     Pong,
     ProtocolError,
+    React,
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
+    Settings,
     SoldierCreated,
+    SoldierRemoved,
     Status,
     Subscribe,
     Unsubscribe,
     UpdateTableMsg,
 )
 from protocol.framing import HANDSHAKE_MAX_FRAME, encode_frame
-from protocol.messages import CODECS, MAGIC, MessageType
+from protocol.messages import CODECS, HANDSHAKE_PREFIX, MAGIC, MessageType
 from protocol.update_table import DofRange, FigureEntry, JointEntry, UpdateTable, example_di_table
 
 MAX_SOLDIERS = 64
@@ -98,6 +102,7 @@ client_events = st.one_of(
     st.builds(Subscribe, indices),
     st.builds(Unsubscribe, indices),
     st.builds(RequestFullUpdate, indices),
+    st.builds(React, st.sampled_from([int(r) for r in Reaction]), indices),
 )
 both_events = st.one_of(
     st.builds(Ping, st.integers(0, 2**64 - 1)),
@@ -245,6 +250,35 @@ def test_handshake_round_trip(name: str, role: str, max_frame: int) -> None:
     assert client.max_soldiers == 10 and client.peer_max_frame == 4096
 
 
+@given(st.sampled_from(["", "stub-1", "x" * 64]), st.sampled_from(["", "tok"]), st.sampled_from(ROLES))
+def test_handshake_identity_round_trip(client_id: str, token: str, role: str) -> None:
+    """Issue 17: HELLO's optional client_id and token, ACCEPT's granted id and role."""
+    client, server = Connection(CLIENT), Connection(SERVER)
+    hello = Hello("ig", role, client_id=client_id, token=token)
+    assert deliver(server, client.send(hello)) == [hello]
+    accept = Accept("jack", client_id=client_id or "~anon-1", role=role)
+    assert deliver(client, server.send(accept)) == [accept]
+
+
+def test_hello_without_the_identity_fields_is_anonymous_and_bad_ids_are_refused() -> None:
+    old = HANDSHAKE_PREFIX.pack(MAGIC, 1) + msgpack.packb(
+        {"name": "1994", "role": "controller", "max_frame": 4096}
+    )
+    (ev,) = deliver(Connection(SERVER), encode_frame(MessageType.HELLO, old))
+    assert ev == Hello("1994", "controller", 4096)
+    for bad in ("~anon-1", "x" * 65, "tab\t"):
+        body = {"name": "n", "role": "controller", "max_frame": 4096, "client_id": bad}
+        frame = encode_frame(MessageType.HELLO, HANDSHAKE_PREFIX.pack(MAGIC, 1) + msgpack.packb(body))
+        (err,) = deliver(Connection(SERVER), frame)
+        assert isinstance(err, ProtocolError) and err.code == ErrorCode.BAD_VALUE
+
+
+def test_settings_and_soldier_removed_round_trip() -> None:
+    client, server = open_pair()
+    for ev in (Settings(0.04, 0.5), SoldierRemoved(7, "owner gone")):
+        assert deliver(client, server.send(ev)) == [ev]
+
+
 def test_entity_request_batches_split_to_the_peers_frame_limit() -> None:
     client, server = Connection(CLIENT), Connection(SERVER, max_frame=1024)
     deliver(server, client.send(Hello("stub")))
@@ -387,6 +421,45 @@ def test_request_errors_keep_the_connection_open_and_fatal_ones_do_not() -> None
 def test_server_rejects_bad_frames(frame: bytes, code: ErrorCode) -> None:
     _, server = open_pair()
     expect_protocol_error(server, frame, code)
+
+
+def _react_frame(body: object) -> bytes:
+    return encode_frame(MessageType.REACT, msgpack.packb(body))
+
+
+@pytest.mark.parametrize(
+    ("body", "code"),
+    [
+        ({"kind": 3, "indices": [1]}, ErrorCode.BAD_VALUE),
+        ({"kind": 0, "indices": [1]}, ErrorCode.BAD_VALUE),
+        ({"kind": 1, "indices": [MAX_SOLDIERS]}, ErrorCode.BAD_VALUE),
+        ({"kind": 1.0, "indices": [1]}, ErrorCode.SCHEMA),
+        ({"kind": True, "indices": [1]}, ErrorCode.SCHEMA),
+        ({"kind": 1}, ErrorCode.SCHEMA),
+        ({"kind": 2, "indices": 1}, ErrorCode.SCHEMA),
+        ([1, [1]], ErrorCode.SCHEMA),
+    ],
+)
+def test_react_decoder_checks_kind_and_indices(body: object, code: ErrorCode) -> None:
+    _, server = open_pair()
+    expect_protocol_error(server, _react_frame(body), code)
+
+
+@given(st.integers(-5, 5), st.lists(st.integers(-2, MAX_SOLDIERS + 2), max_size=8), st.booleans())
+def test_react_decoder_accepts_exactly_the_documented_bodies(kind: int, idx: list[int], extra: bool) -> None:
+    """docs/PROTOCOL.md §5: kind 1 (recoil) or 2 (flinch), indices < max_soldiers, unknown keys ignored."""
+    body: dict[str, object] = {"kind": kind, "indices": idx}
+    if extra:
+        body["later"] = "ignored"
+    _, server = open_pair()
+    server.receive_data(_react_frame(body))
+    got = server.next_event()
+    if kind in (1, 2) and all(0 <= i < MAX_SOLDIERS for i in idx):
+        assert got == React(kind, tuple(idx))
+        assert server.state is State.OPEN
+    else:
+        assert isinstance(got, ProtocolError)
+        assert got.code in (ErrorCode.BAD_VALUE, ErrorCode.SCHEMA)
 
 
 def _rows_frame(**bad: object) -> bytes:

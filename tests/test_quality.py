@@ -438,6 +438,17 @@ def test_resting_postures_rest(tmp_path: Path, figset: FigureSet, holding, capsy
     assert main(["author", "check", "--graphs", str(graph)]) == 1  # the table names the node, value and clip
     text = capsys.readouterr().out
     assert "FAIL soldier_low:DEAD@kneel rest_contact_cm = 6.4" in text and "hover.chset[" in text
+    # a filtered run judges the nodes its clips touch, resting rows included: the hovering death fails alone
+    for pattern in ("hover", "hov*"):
+        assert main(["author", "check", "--graphs", str(graph), "--only", pattern, "--json"]) == 1
+        out = json.loads(capsys.readouterr().out)
+        assert [c["name"] for c in out["clips"]] == ["hover.chset"]
+        nodes = {r["posture"]: r for r in out["continuity"]}
+        assert set(nodes) == {"STAND_STOWED", "DEAD@kneel"}
+        assert nodes["DEAD@kneel"]["failures"] == ["rest_contact_cm"]
+        assert out["summary"]["thresholds"]["rest_contact_cm"]["failing"] == 1
+    assert main(["author", "check", "--graphs", str(graph), "--only", "tilted"]) == 1  # heels up at DEAD@fall
+    assert "FAIL soldier_low:DEAD@fall rest_foot_cm" in capsys.readouterr().out
 
 
 def test_end_offset_is_taken_out_of_continuity(tmp_path: Path, figset: FigureSet, holding) -> None:
@@ -546,3 +557,47 @@ def test_a_point_inside_a_hull_leaves_it_by_the_nearest_face() -> None:
     np.testing.assert_allclose(shallow, [1.0, 0.5, 0.0])
     np.testing.assert_allclose(way[0], [1.0, 0.0, 0.0], atol=1e-9)  # out through x = 10
     np.testing.assert_allclose(way[1], [0.0, 1.0, 0.0], atol=1e-9)  # local +x turned onto world +y
+
+
+def _pitched(rifle: np.ndarray, degrees: np.ndarray) -> np.ndarray:
+    """The rifles ``(n, 4, 4)`` turned muzzle-up by ``degrees`` per frame (about their own +X axis)."""
+    out = rifle.copy()
+    for k, a in enumerate(np.radians(degrees)):
+        turn = np.eye(4)
+        turn[1:3, 1:3] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]  # -Z (the muzzle) towards +Y
+        out[k] = rifle[k] @ turn
+    return out
+
+
+def test_a_rifle_that_swings_muzzle_up_fails(figset: FigureSet, holding) -> None:
+    poses, body, rifle = _standing(figset, holding, n=61)
+    t = np.arange(61) / 60.0
+    cases = (  # (name, pitch per frame, fails)
+        ("raise", 40.0 * np.clip((t - 0.1) / 0.5, 0.0, 1.0), False),  # 40 degrees in 0.5 s: 8 per 0.1 s
+        ("swing", 45.0 * np.clip((t - 0.3) / 0.1, 0.0, 1.0), True),  # 45 degrees in 0.1 s (crawl2prstow)
+        ("flick", 30.0 * np.sin(np.pi * np.clip((t - 0.4) / 0.2, 0.0, 1.0)), True),  # up 30 and back in 0.2 s
+    )
+    for name, pitch, fails in cases:
+        cs = _clip(f"{name}.chset", figset, poses, body, _pitched(rifle, pitch))
+        row = check_clip(cs, figset, static_ends=(False, False))
+        jump = np.abs(pitch[6:] - pitch[:-6]).max()  # over 0.1 s at 60 fps
+        assert row["rifle_pitch_jump_deg"] == pytest.approx(jump, abs=0.5), name
+        assert ("rifle_pitch_jump_deg" in row["failures"]) is fails, (name, row["rifle_pitch_jump_deg"])
+    assert row["rifle_pitch_jump_where"] == "frames 24-30"  # the flick's steepest 0.1 s
+    cs.release_frame = 20  # let go of before it swings: not judged
+    assert check_clip(cs, figset, static_ends=(False, False))["rifle_pitch_jump_deg"] < 0.5
+    still = check_clip(_clip("stand.chset", figset, *_standing(figset, holding)), figset)
+    assert still["rifle_pitch_jump_deg"] == 0.0
+
+
+@pytest.mark.parametrize("clip", ["ststow2crawl", "kstow2crawl"])
+@pytest.mark.parametrize("suffix", ["", "_low", "_m16_low"])
+def test_the_shipped_clips_getting_down_to_crawl_pass(clip: str, suffix: str) -> None:
+    """The rifle no longer whips muzzle-up past the shoulder (22-26 degrees in 0.1 s before) nor goes
+    3.0-5.1 cm into the right upper arm while the soldier goes down onto his forearms: the clips pass."""
+    from server.motion.cache import load_channelset
+
+    cs = load_channelset(Path(__file__).resolve().parents[1] / "channelsets" / f"{clip}{suffix}.chset.env")
+    types = sorted({c.protofiletype for c in cs.channels})
+    row = check_clip(cs, FigureSet.from_dir(FIGURES, types))
+    assert row["pass"], {k: row[k] for k in row["failures"]}

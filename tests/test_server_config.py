@@ -112,3 +112,51 @@ def test_docker_files_match_the_cli() -> None:
             assert (args.command, args.port) == ("ping", c.port)
     compose = (repo / "docker" / "compose.yaml").read_text()
     assert '"127.0.0.1:7000:7000"' in compose
+
+
+def test_role_tokens_from_the_environment_win_over_the_file(tmp_path: Path) -> None:
+    from server.config import TOKEN_ENV, with_env_tokens
+
+    assert TOKEN_ENV == {
+        "observer": "TTES_OBSERVER_TOKEN",
+        "controller": "TTES_CONTROLLER_TOKEN",
+        "operator": "TTES_OPERATOR_TOKEN",
+    }
+    f = tmp_path / "ttes.toml"
+    f.write_text('observer_token = "file-observer"\ncontroller_token = "file-controller"\n')
+    c = with_env_tokens(
+        load_config(f), {"TTES_CONTROLLER_TOKEN": "env-controller", "TTES_OPERATOR_TOKEN": ""}
+    )
+    assert c.tokens == {"observer": "file-observer", "controller": "env-controller"}  # empty: not given
+    assert with_env_tokens(ServerConfig(), {}) == ServerConfig()
+    with pytest.raises(ConfigError, match="TTES_OPERATOR_TOKEN: must be a string of at least 8") as exc:
+        with_env_tokens(ServerConfig(), {"TTES_OPERATOR_TOKEN": "short"})
+    assert "short" not in str(exc.value)  # a secret is never echoed, not even a bad one
+
+
+def test_server_command_reads_tokens_from_the_environment(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Beyond loopback an env token lets `ttes server` past check_exposure (then it fails on the data)."""
+    from ttes.cli import main
+
+    monkeypatch.delenv("TTES_CONTROLLER_TOKEN", raising=False)
+    argv = ["server", "--host", "0.0.0.0", "--port", "0", "--data-dir", str(tmp_path)]
+    assert main(argv) == 2
+    assert "no role tokens are configured" in capsys.readouterr().err
+    monkeypatch.setenv("TTES_CONTROLLER_TOKEN", "env-controller")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "start-up script" in err and "env-controller" not in err
+
+
+def test_spawned_private_servers_ignore_role_tokens_in_the_environment(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A spawned `ttes server` is a private loopback server: the caller's TTES_*_TOKEN must not lock it."""
+    from client_stub.link.spawn import child_env
+
+    monkeypatch.setenv("TTES_CONTROLLER_TOKEN", "env-controller")
+    monkeypatch.setenv("TTES_TOKEN", "client-token")
+    env = child_env()
+    assert "TTES_CONTROLLER_TOKEN" not in env and env["TTES_TOKEN"] == "client-token"

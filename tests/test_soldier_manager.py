@@ -11,11 +11,11 @@ import pytest
 from protocol.entity import ENTITY_REQUEST_DTYPE, Appearance, WeaponState, make_entity_requests
 from server.motion.sampling import ClipLibrary
 from server.soldier.manager import (
-    MAX_RATE,
     MIN_RATE,
     REQUEST_BAD_VALUE,
     REQUEST_OK,
     REQUEST_UNKNOWN_SOLDIER,
+    WALK_MAX_RATE,
     SoldierManager,
     TickUpdate,
 )
@@ -276,9 +276,11 @@ def test_playback_rate_follows_ground_speed_and_keeps_the_phase(lib) -> None:
     # human cadence limits: beyond them the stride length takes the rest
     request(m, i, t, speed=0.05)
     assert m.soldier_info(i)["clip_duration"] == pytest.approx(stored / MIN_RATE)
-    request(m, i, t, speed=2.3)  # near the fastest cadence (the root offset's catch-up aside)
-    assert m.soldier_info(i)["clip_duration"] == pytest.approx(stored / MAX_RATE, rel=0.03)
-    assert m.table.stride[i] == pytest.approx(2.3 / gs / MAX_RATE)
+    request(m, i, t, speed=2.3)  # a fast walk: race-walking cadence, no stride scaling (a run's: below)
+    assert m.soldier_info(i)["clip_duration"] == pytest.approx(stored * gs / 2.3, rel=0.03)
+    assert stored / m.soldier_info(i)["clip_duration"] <= WALK_MAX_RATE and m.table.stride[i] == 1.0
+    request(m, i, t, speed=2.39)  # the fastest walk (a walker switches to a run at 2.4)
+    assert m.table.stride[i] == 1.0
 
 
 # -- output: frame choice, throttle, heading-only, blending --------------------------------------------------

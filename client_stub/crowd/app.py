@@ -15,7 +15,7 @@ import logging
 import math
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,7 @@ from client_stub.crowd.lod import (
     visible,
 )
 from client_stub.crowd.sources import CrowdState
+from client_stub.link.auth import Credentials
 from client_stub.stub.scene_graph import FigureGraph
 from client_stub.stub.tips import TipsFigure, load_tips
 
@@ -75,6 +76,7 @@ class CrowdConfig:
     max_frames: int = 100_000
     video_fps: float = 10.0
     warmup_frames: int = 2  # not counted in the frame-time statistics (first uploads, shader JIT)
+    credentials: Credentials = field(default_factory=Credentials)  # token / TLS for a server's connections
 
     def check(self) -> None:
         if self.soldiers < 1:
@@ -279,7 +281,7 @@ def run_crowd(cfg: CrowdConfig) -> dict[str, Any]:
             source = NetworkSource(
                 n, figures.mid, figures.rifle, figures.mid_tips, figures.rifle_tips, host=host, port=port,
                 clients=max(1, min(cfg.clients, n)), terrain=terrain, centre=centre, spacing=cfg.spacing,
-                mix=cfg.mix, seed=cfg.seed,
+                mix=cfg.mix, seed=cfg.seed, credentials=cfg.credentials,
             )  # fmt: skip
         except BaseException:
             if server is not None:

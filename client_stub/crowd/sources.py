@@ -27,9 +27,11 @@ import numpy as np
 import trio
 
 from client_stub.crowd.fk import to34
+from client_stub.link.auth import Credentials
 from client_stub.link.buffer import UpdateBatch
+from client_stub.loadtest.client import LoadError
 from client_stub.loadtest.mix import APPEARANCE, SPEED, WEAPON, MixDriver
-from client_stub.loadtest.session import LoadSession, LoadTestConfig
+from client_stub.loadtest.session import LoadSession, LoadTestConfig, first_leaf
 from client_stub.stub.artic import TableBinding, articulation, bind_table, update_table_for
 from client_stub.stub.ground import GroundQuery
 from client_stub.stub.offline import OfflinePoser
@@ -190,7 +192,7 @@ class NetworkSource:
         self, n: int, body: FigureGraph, rifle: FigureGraph | None, body_tips: TipsFigure,
         rifle_tips: TipsFigure | None, *, host: str, port: int, clients: int, terrain: Terrain | None,
         centre: tuple[float, float], spacing: float, mix: str = "realistic", seed: int = 1,
-        timeout_s: float = 120.0,
+        timeout_s: float = 120.0, credentials: Credentials | None = None,
     ) -> None:  # fmt: skip
         self.n = n
         self.heights = ground_heights(terrain)
@@ -199,8 +201,9 @@ class NetworkSource:
         self.wire = WireBinding(ours)
         self.poser = _Poser(body, n)
         cfg = LoadTestConfig(
-            soldiers=n, clients=clients, decode=True, mix=mix, seed=seed, timeout_s=timeout_s
-        )
+            soldiers=n, clients=clients, decode=True, mix=mix, seed=seed, timeout_s=timeout_s,
+            credentials=credentials or Credentials(),
+        )  # fmt: skip
         self.session = LoadSession(cfg, buffer_updates=True)
         self.session.driver = MixDriver(0, mix=mix, seed=seed, centre=centre, spacing=spacing)
         self.ready = threading.Event()
@@ -220,7 +223,9 @@ class NetworkSource:
         try:
             trio.run(self._main, host, port)
         except BaseException as exc:  # the thread must end and say why
-            self.failure = self.failure or f"network: {exc!r}"
+            leaf = first_leaf(exc)  # trio groups what a nursery's body raised
+            why = str(leaf) if isinstance(leaf, LoadError) else f"network: {leaf!r}"  # a refusal: as it is
+            self.failure = self.failure or why
         finally:
             self.ready.set()
 

@@ -1,4 +1,4 @@
-"""ServerSink: a Translation becomes CREATE_SOLDIER / REMOVE_SOLDIER / ENTITY_REQUESTS messages.
+"""ServerSink: a Translation becomes CREATE_SOLDIER / REMOVE_SOLDIER / ENTITY_REQUESTS / REACT messages.
 
 Server index = ``base + slot``: ``base`` is one past the soldiers the server's start-up script made (those of
 READY), so a DIS entity's soldier keeps one server index for the whole replay, across re-appearances, and
@@ -17,6 +17,7 @@ import numpy as np
 from client_stub.dis.translator import Translation
 from client_stub.link.api import Link
 from protocol.dis import RIFLE_FIGURES
+from protocol.entity import Reaction
 
 FIGURE = "DI.fig"
 
@@ -33,13 +34,22 @@ class ServerSink:
         have = [t.weapon for t in link.tables.values() if t.figure == figure]
         self.weapons = {w: w if w in have else (have[0] if have else w) for w in RIFLE_FIGURES}
         self.weapon_of: dict[int, str] = {}  # server index -> weapon figure it was created with
-        self.stats = {"created": 0, "removed": 0, "requests": 0, "weapon_substituted": 0, "dropped": 0}
+        self.stats = {
+            "created": 0,
+            "removed": 0,
+            "requests": 0,
+            "reactions": 0,  # soldiers asked to react (REACT indices)
+            "weapon_substituted": 0,
+            "dropped": 0,
+        }
 
     def server_index(self, slots: np.ndarray) -> np.ndarray:
         return np.asarray(slots, np.int64) + self.base
 
     def apply(self, tr: Translation) -> None:
-        """Removals, then creations, then requests (the server takes them in order on one stream)."""
+        """Removals, then creations, then requests, then reactions (the server takes them in order on one
+        stream: a shooter's FIRING request comes before his recoil, which the server plays once the rifle
+        is up)."""
         for s in tr.removed.tolist():
             if s < self.capacity:
                 self.link.remove(self.base + s)
@@ -65,3 +75,8 @@ class ServerSink:
             rows["index"] = rows["index"].astype(np.int64) + self.base
             self.link.send_requests(rows)
             self.stats["requests"] += len(rows)
+        for slots, kind in ((tr.recoils, Reaction.RECOIL), (tr.flinches, Reaction.FLINCH)):
+            keep = slots[slots < self.capacity]
+            if len(keep):
+                self.link.react(self.server_index(keep), kind)
+                self.stats["reactions"] += len(keep)

@@ -19,6 +19,9 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import ssl
+import uuid
+from collections import deque
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 
@@ -28,7 +31,7 @@ import trio
 from client_stub.link.buffer import UpdateBatch, UpdateBuffer
 from protocol import events as ev
 from protocol.connection import CLIENT, NEED_DATA, Connection
-from protocol.entity import ENTITY_REQUEST_DTYPE
+from protocol.entity import ENTITY_REQUEST_DTYPE, Reaction
 from protocol.errors import LocalProtocolError, is_fatal
 from protocol.update_table import UpdateTable
 
@@ -52,6 +55,15 @@ def _why(exc: OSError) -> str:
     return str((inner[0] if inner else exc).strerror or exc)
 
 
+def _tls_failure(exc: Exception) -> str | None:
+    """Why the TLS handshake failed (say, the server's certificate is not trusted), when it did: the root
+    cause, so it wins over what the other task saw of the broken stream."""
+    cause = exc.__cause__
+    if isinstance(cause, ssl.SSLError):
+        return f"TLS: {getattr(cause, 'verify_message', None) or cause.reason or cause}"
+    return None
+
+
 class Client:
     """One TCP connection to the server (see the module docstring); open it with :meth:`open` in a nursery.
 
@@ -71,6 +83,11 @@ class Client:
     ) -> None:
         self.name = name
         self.role = role
+        # who this link is across reconnects (the server keeps its soldiers for it, issue 17) and the role's
+        # token when the server has tokens: set them before open()
+        self.client_id = f"{name[:40]}-{uuid.uuid4().hex[:12]}"
+        self.token = ""
+        self.tls: ssl.SSLContext | None = None  # speak TLS (a server with tls_cert); checks its certificate
         self.buffer_updates = buffer_updates
         self.on_updates = on_updates
         self.conn = Connection(CLIENT, decode_updates=decode_updates)
@@ -83,6 +100,8 @@ class Client:
         self.refused: dict[int, ev.Error] = {}  # request id -> its error
         self.errors: list[ev.Error | ev.ProtocolError] = []
         self.status: ev.Status | None = None
+        self.settings: ev.Settings | None = None  # this connection's throttle and STATUS period
+        self.removed: deque[int] = deque(maxlen=1024)  # the latest soldiers the server said are gone
         self.failure: str | None = None
         self.last_tick = 0
         self.bytes_sent = 0
@@ -125,14 +144,16 @@ class Client:
         for READY (if ``wait_ready``). LinkError (and the link closed) on failure."""
         with trio.move_on_after(timeout) as cs:
             try:
-                stream = await trio.open_tcp_stream(host, port)
+                stream: trio.abc.Stream = await trio.open_tcp_stream(host, port)
+                if self.tls is not None:
+                    stream = trio.SSLStream(stream, self.tls, server_hostname=host)
             except OSError as exc:
                 raise LinkError(f"cannot connect to {host}:{port}: {_why(exc)}") from None
         if cs.cancelled_caught:
             raise LinkError(f"cannot connect to {host}:{port} within {timeout} s")
         self._outbox_open = True
         nursery.start_soon(self._run, stream)
-        self.send(ev.Hello(self.name, self.role))
+        self.send(ev.Hello(self.name, self.role, client_id=self.client_id, token=self.token))
         with trio.move_on_after(timeout):
             await self._accepted.wait()
             if soldierprefix is not None and self.accepted:
@@ -142,7 +163,8 @@ class Client:
         if self.failure or not self.accepted or (wait_ready and not self.ready):
             await self.aclose()
             what = "ready" if self.accepted else "answering the handshake"
-            raise LinkError(self.failure or f"server {host}:{port} not {what} within {timeout} s")
+            why = self.failure or f"not {what} within {timeout} s"  # a refusal: the server's reason
+            raise LinkError(f"server {host}:{port}: {why}")
 
     @property
     def accepted(self) -> bool:
@@ -235,15 +257,23 @@ class Client:
     def remove(self, index: int) -> None:
         self.send(ev.RemoveSoldier(int(index)))
 
-    def subscribe(self, indices: list[int] | np.ndarray) -> None:
+    def _send_indices(
+        self, make: Callable[[tuple[int, ...]], ev.Event], indices: list[int] | np.ndarray
+    ) -> None:
+        """One message per MAX_INDICES_PER_MESSAGE indices (a frame's size limit)."""
         idx = np.asarray(indices, np.int64)
         for k in range(0, len(idx), MAX_INDICES_PER_MESSAGE):
-            self.send(ev.Subscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+            self.send(make(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+
+    def subscribe(self, indices: list[int] | np.ndarray) -> None:
+        self._send_indices(ev.Subscribe, indices)
 
     def unsubscribe(self, indices: list[int] | np.ndarray) -> None:
-        idx = np.asarray(indices, np.int64)
-        for k in range(0, len(idx), MAX_INDICES_PER_MESSAGE):
-            self.send(ev.Unsubscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+        self._send_indices(ev.Unsubscribe, indices)
+
+    def react(self, indices: list[int] | np.ndarray, kind: Reaction) -> None:
+        """REACT: these soldiers play ``kind`` (recoil, flinch) once, now or when they come to rest."""
+        self._send_indices(lambda idx: ev.React(int(kind), idx), indices)
 
     def request_full_update(self, indices: list[int] | None = None) -> None:
         self.send(ev.RequestFullUpdate(tuple(int(i) for i in indices or ())))
@@ -293,7 +323,7 @@ class Client:
             self._cancel.cancel()
 
     # -- the tasks --------------------------------------------------------------------------------
-    async def _run(self, stream: trio.SocketStream) -> None:
+    async def _run(self, stream: trio.abc.Stream) -> None:
         try:
             with trio.CancelScope() as scope:
                 self._cancel = scope
@@ -309,7 +339,7 @@ class Client:
             for ev in (self._accepted, self._ready, self._answer, self._progress, *self._pongs.values()):
                 ev.set()
 
-    async def _writer(self, stream: trio.SocketStream) -> None:
+    async def _writer(self, stream: trio.abc.Stream) -> None:
         while True:
             if not self._out:
                 if not self._outbox_open:
@@ -321,14 +351,14 @@ class Client:
             self._out.clear()
             try:
                 await stream.send_all(data)
-            except (trio.BrokenResourceError, trio.ClosedResourceError):
-                self.failure = self.failure or "connection lost while sending"
+            except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                self.failure = _tls_failure(exc) or self.failure or "connection lost while sending"
                 return
             self._written += len(data)
             self._progress.set()
             self._progress = trio.Event()
 
-    async def _reader(self, stream: trio.SocketStream) -> None:
+    async def _reader(self, stream: trio.abc.Stream) -> None:
         conn = self.conn
         arrival = 0.0
         while True:
@@ -336,7 +366,8 @@ class Client:
             if event is NEED_DATA:
                 try:
                     data = await stream.receive_some(RECEIVE_BYTES)
-                except (trio.BrokenResourceError, trio.ClosedResourceError):
+                except (trio.BrokenResourceError, trio.ClosedResourceError) as exc:
+                    self.failure = _tls_failure(exc) or self.failure
                     data = b""
                 arrival = trio.current_time()
                 self.bytes_in += len(data)
@@ -376,6 +407,12 @@ class Client:
                 self._pongs[nonce].set()
             case ev.Status():
                 self.status = event
+            case ev.Settings():
+                self.settings = event
+            case ev.SoldierRemoved(index=index):
+                self.removed.append(index)
+                self.ready_soldiers.pop(index, None)
+                self.created.pop(index, None)
             case ev.Error():
                 self._error(event)
             case ev.Goodbye(reason=reason):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import selectors
 import signal
 import socket
@@ -25,6 +26,7 @@ from pathlib import Path
 from client_stub.link.client import LinkError
 
 ROOT = Path(__file__).resolve().parents[2]  # where ``python -m ttes`` is importable from
+_SERVER_TOKEN_VAR = re.compile(r"TTES_\w+_TOKEN")  # TTES_CONTROLLER_TOKEN ..., not a client's TTES_TOKEN
 _TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
 
@@ -57,6 +59,15 @@ def self_cpu_seconds() -> float:
     return t.user + t.system
 
 
+def child_env() -> dict[str, str]:
+    """The spawned server's environment: ours, with the repository importable and without the server's
+    role token variables (``TTES_*_TOKEN``, server.config.TOKEN_ENV): a spawned server is a private one on
+    loopback, which local clients join with no token, whatever the caller's shell holds for another server."""
+    env = {k: v for k, v in os.environ.items() if not _SERVER_TOKEN_VAR.fullmatch(k)}
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)
+    return env
+
+
 class ServerProcess:
     """A ``ttes server`` child process (see the module docstring); use as a context manager."""
 
@@ -69,9 +80,7 @@ class ServerProcess:
         self.port = 0
         self.ready: dict = {}
         self._log = tempfile.TemporaryFile(mode="w+b", prefix="ttes-server-")  # noqa: SIM115 (closed in close)
-        env = dict(
-            os.environ, PYTHONPATH=os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)
-        )
+        env = child_env()
         self.proc = subprocess.Popen(self.cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=self._log)
         self.pid = self.proc.pid
 

@@ -20,6 +20,7 @@ import trio
 
 from client_stub.link.buffer import UpdateBatch
 from client_stub.link.client import STARTUP_JCL, Client, LinkError
+from protocol.entity import Reaction
 from protocol.events import (
     Accept,
     Error,
@@ -100,7 +101,9 @@ class ThreadedClient:
         self._thread.start()
         if not self._accepted.wait(timeout) or not self.connected:
             self.quit()
-            raise LinkError(self.failure or f"no handshake with {host}:{port} within {timeout} s")
+            raise LinkError(
+                self._failure or self.failure or f"no handshake with {host}:{port} within {timeout} s"
+            )
 
     def start(self, soldierprefix: str = "soldier_low") -> int:
         """Send the start-up JCL, ``read_file("jack-ttes-<prefix>.jcl");``; returns its request id."""
@@ -154,6 +157,10 @@ class ThreadedClient:
     def unsubscribe(self, indices: list[int] | np.ndarray) -> None:
         if len(indices):
             self.call(self.client.unsubscribe, indices)
+
+    def react(self, indices: list[int] | np.ndarray, kind: Reaction) -> None:
+        if len(indices):
+            self.call(self.client.react, indices, kind)
 
     def request_full_update(self, indices: list[int] | None = None) -> None:
         self.call(self.client.request_full_update, indices)

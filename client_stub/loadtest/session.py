@@ -16,12 +16,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 import trio
 
+from client_stub.link.auth import Credentials
 from client_stub.link.spawn import ServerProcess, cpu_seconds, self_cpu_seconds, spawn_server
 from client_stub.loadtest.client import LoadClient, LoadError, split_rows
 from client_stub.loadtest.mix import MOVING, MixDriver
@@ -61,6 +62,7 @@ class LoadTestConfig:
     min_delivered_pct: float = 99.0
     max_p99_ms: float = 33.0
     latency_metric: str = "request"  # request: request -> update (p99); delivery: server tick -> arrival
+    credentials: Credentials = field(default_factory=Credentials)  # token / TLS for every connection
 
     def check(self) -> None:
         if self.soldiers < 1 or self.clients < 1:
@@ -95,6 +97,11 @@ class LoadSession:
             LoadClient(k, self._on_updates, decode=cfg.decode, buffer_updates=buffer_updates)
             for k in range(cfg.clients)
         ]
+        if cfg.subscribe_all:  # one client over C connections: each may see every soldier it made
+            for c in self.clients[1:]:  # (so all of them count against one client's soldier cap)
+                c.link.client_id = self.clients[0].link.client_id
+        for c in self.clients:
+            cfg.credentials.apply(c.link)
         self.driver = MixDriver(0, mix=cfg.mix, seed=cfg.seed, now=0.0)
         nsub = cfg.clients
         self.tracker = Tracker(cfg.rate_hz, nsub)
@@ -354,7 +361,7 @@ def run_loadtest(cfg: LoadTestConfig) -> dict[str, Any]:
         try:
             out = trio.run(_run, cfg, host, port, server_cpu, server is None)
         except BaseExceptionGroup as group:  # errors inside nurseries arrive grouped
-            leaf = _first_leaf(group)
+            leaf = first_leaf(group)
             if isinstance(leaf, LoadError | OSError):
                 raise LoadError(str(leaf)) from None
             raise
@@ -362,14 +369,16 @@ def run_loadtest(cfg: LoadTestConfig) -> dict[str, Any]:
             out["server"] = {"spawned": True, "synthetic": server.synthetic, "pid": server.pid}
         else:
             out["server"] = {"spawned": False, "address": f"{host}:{port}"}
-        out["config"] = {k: v for k, v in asdict(cfg).items() if k not in ("host", "port", "keep_recording")}
+        # credentials: a secret (and an SSL context), never in a report
+        hidden = ("host", "port", "keep_recording", "credentials")
+        out["config"] = {f.name: getattr(cfg, f.name) for f in fields(cfg) if f.name not in hidden}
         return out
     finally:
         if server is not None:
             server.close()
 
 
-def _first_leaf(exc: BaseException) -> BaseException:
+def first_leaf(exc: BaseException) -> BaseException:
     while isinstance(exc, BaseExceptionGroup) and exc.exceptions:
         exc = exc.exceptions[0]
     return exc

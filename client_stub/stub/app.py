@@ -336,10 +336,10 @@ class StubApp:
         cur = self.controller.current
         feet, heading = (s.position[cur], float(s.heading[cur])) if cur < s.count else (np.zeros(3), 0.0)
         if cur < s.count and self.slot_kind[cur] >= 0:
-            feet = self._figure_feet(cur, feet)
+            feet = self.figure_feet(cur, feet)
         return camera_pose(self.camera, feet, heading, self.terrain.bounds)
 
-    def _figure_feet(self, slot: int, feet: np.ndarray) -> np.ndarray:
+    def figure_feet(self, slot: int, feet: np.ndarray) -> np.ndarray:
         """Where the soldier's figure stands: the server sends a root offset (the figure trails or leads its
         entity through a step, issue 16), so the camera aims at the figure's root, not at the entity."""
         k = self.kinds[int(self.slot_kind[slot])]

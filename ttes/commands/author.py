@@ -83,10 +83,11 @@ def _register_check(sub: argparse._SubParsersAction) -> None:
         description=(
             "Check every clip of the posture graphs: every body part's slide while on the ground (judged by "
             "height; world frame, ground motion added back for locomotion), body and rifle below the ground, "
-            "rifle inside the body, palm centres on the rifle's grip/handguard while held, site speeds at "
-            "static ends, joint-limit violations, frame-to-frame jumps, gait speed and cadence; and at every "
-            "posture node of every graph continuity (end_offset taken out) and resting postures on the "
-            "ground. Exit status 1 when a threshold fails, 2 when nothing was checked."
+            "rifle inside the body, palm centres on the rifle's grip/handguard and the rifle's change of "
+            "pitch over 0.1 s while held, site speeds at static ends, joint-limit violations, frame-to-frame "
+            "jumps, gait speed and cadence; and at every posture node of every graph continuity (end_offset "
+            "taken out) and resting postures on the ground. Exit status 1 when a threshold fails, 2 when "
+            "nothing was checked."
         ),
     )
     p.add_argument(
@@ -145,6 +146,7 @@ CHECK_COLUMNS = (  # (metric, header, width, format)
     ("rifle_penetration_cm", "r.gnd", 6, ".1f"),
     ("rifle_in_body_cm", "r.body", 6, ".1f"),
     ("palm_rifle_cm", "palms", 6, ".2f"),
+    ("rifle_pitch_jump_deg", "r.ptch", 6, ".1f"),
     ("end_speed_m_s", "v.end", 6, ".2f"),
     ("max_frame_jump_deg", "jump", 6, ".1f"),
 )

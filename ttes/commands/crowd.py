@@ -13,6 +13,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from ttes.link_options import add_link_options, link_credentials
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -49,6 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--terrain", help="terrain mesh (default the village; 'none' for none)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_link_options(p)
     p.set_defaults(func=run, crowd_func=None)
 
 
@@ -98,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
         camera="fixed" if pose else "orbit",
         camera_pose=pose,
         terrain=args.terrain,
+        credentials=link_credentials(args),
     )
     try:
         stats = run_crowd(cfg)

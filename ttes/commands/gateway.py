@@ -16,6 +16,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ttes.link_options import add_link_options, link_credentials, link_error
+
 if TYPE_CHECKING:
     from client_stub.dis.gateway import DisGateway
 
@@ -42,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--status-every", type=float, default=5.0, help="seconds between status lines (0: none)")
     p.add_argument("--seconds", type=float, help="stop after this many seconds (default: run until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="status lines and the final summary as JSON")
+    add_link_options(p)
     p.set_defaults(func=run)
 
 
@@ -99,7 +102,7 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
                 server = await stack.enter_async_context(private_server(data_dir, args.synthetic_server))
                 host, port = server.addresses[0]
             nursery = await stack.enter_async_context(trio.open_nursery())
-            link = Client("ttes-gateway")
+            link = link_credentials(args).apply(Client("ttes-gateway"))
             await link.open(nursery, host, port)
             sink = ServerSink(link)
             with trio.CancelScope() as scope:
@@ -124,8 +127,10 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
 
     try:
         return trio.run(main)
-    except LinkError as exc:
-        print(f"ttes gateway: {exc}", file=sys.stderr)
+    except (LinkError, BaseExceptionGroup) as exc:
+        if (failure := link_error(exc)) is None:
+            raise
+        print(f"ttes gateway: {failure}", file=sys.stderr)
         return None
 
 

@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ttes.link_options import add_link_options, link_credentials
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -30,7 +32,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mix", choices=("realistic", "moving"), default="realistic", help="what the soldiers do")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument(
-        "--subscribe-all", action="store_true", help="every connection subscribes to every soldier"
+        "--subscribe-all",
+        action="store_true",
+        help="every connection subscribes to every soldier (the connections are then one client: all its "
+        "soldiers count against the server's per-client cap, 4,096 by default)",
     )
     p.add_argument("--decode", action="store_true", help="decode every joint update (as an image generator)")
     p.add_argument(
@@ -57,6 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", metavar="FILE.png", help="write throughput and latency over time")
+    add_link_options(p)
     p.set_defaults(func=run)
 
 
@@ -90,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
         min_delivered_pct=args.min_delivered_pct,
         max_p99_ms=args.max_p99_ms,
         latency_metric=args.latency_metric,
+        credentials=link_credentials(args),
     )
     try:
         result = run_loadtest(cfg)

@@ -1,6 +1,7 @@
 """`ttes ping`: connect to a Jack/TTES server, shake hands and ping it; exit 0 if it answers.
 
-Used by the Docker healthcheck. Connects as an observer, so it never changes the server's state.
+Used by the Docker healthcheck. Connects as an observer, so it never changes the server's state; a server
+with role tokens wants one (--token or $TTES_TOKEN: the observer's or a higher role's).
 """
 
 from __future__ import annotations
@@ -8,6 +9,12 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import TYPE_CHECKING
+
+from ttes.link_options import add_link_options, link_credentials
+
+if TYPE_CHECKING:
+    from client_stub.link.auth import Credentials
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -16,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
     p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for each answer (default 3)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
+    add_link_options(p)
     p.set_defaults(func=run)
 
 
@@ -23,7 +31,9 @@ class PingFailed(Exception):
     pass
 
 
-def ping(host: str, port: int, timeout: float = 3.0) -> dict[str, object]:
+def ping(
+    host: str, port: int, timeout: float = 3.0, credentials: Credentials | None = None
+) -> dict[str, object]:
     """Handshake + PING over the client link; the server's ACCEPT fields and the round-trip time. PingFailed
     on any problem."""
     import trio
@@ -33,6 +43,8 @@ def ping(host: str, port: int, timeout: float = 3.0) -> dict[str, object]:
     async def main() -> dict[str, object]:
         t0 = time.perf_counter()
         client = Client("ttes-ping", "observer", buffer_updates=False)
+        if credentials is not None:
+            credentials.apply(client)
         failed, answered, rtt = None, False, 0.0
         async with trio.open_nursery() as nursery:
             try:
@@ -67,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from ttes.output import print_json
 
     try:
-        info = ping(args.host, args.port, args.timeout)
+        info = ping(args.host, args.port, args.timeout, link_credentials(args))
     except PingFailed as exc:
         if args.json:
             print_json({"ok": False, "host": args.host, "port": args.port, "error": str(exc)})

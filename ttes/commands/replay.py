@@ -24,6 +24,8 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
+from ttes.link_options import add_link_options, link_credentials, link_error
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -68,6 +70,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="private server: serve the generated synthetic motion library")  # fmt: skip
     p.add_argument("--terrain", type=Path, help="terrain mesh (default: the village)")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
+    add_link_options(p)
     p.set_defaults(func=run)
 
 
@@ -226,7 +229,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
                 server = await stack.enter_async_context(private_server(args.data_dir, args.synthetic_server))
                 host, port = server.addresses[0]
             async with trio.open_nursery() as nursery:
-                link = Client()
+                link = link_credentials(args).apply(Client())
                 await link.open(nursery, host, port)
                 sink = ServerSink(link)
                 progress = ProgressLine(out=None if args.json else sys.stderr)
@@ -242,8 +245,10 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
 
     try:
         return trio.run(main)
-    except LinkError as exc:
-        print(f"ttes replay: {exc}", file=sys.stderr)
+    except (LinkError, BaseExceptionGroup) as exc:
+        if (failure := link_error(exc)) is None:
+            raise
+        print(f"ttes replay: {failure}", file=sys.stderr)
         return None
 
 
@@ -282,7 +287,7 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
                     )
                     host, port = server.addresses[0]
                 nursery = await stack.enter_async_context(trio.open_nursery())
-                link = Client()
+                link = link_credentials(args).apply(Client())
                 await link.open(nursery, host, port)
             app = _make_app(args, replayer, link)
             try:
@@ -301,8 +306,10 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
             summary = trio.run(main)
         else:
             summary = trio.run(main, clock=trio.testing.MockClock(autojump_threshold=0))
-    except LinkError as exc:
-        print(f"ttes replay: {exc}", file=sys.stderr)
+    except (LinkError, BaseExceptionGroup) as exc:
+        if (failure := link_error(exc)) is None:
+            raise
+        print(f"ttes replay: {failure}", file=sys.stderr)
         return None
     summary["wall_s"] = round(time.perf_counter() - t, 2)
     return summary
@@ -399,6 +406,7 @@ def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) 
                     server = spawn_server(extra, data="synthetic" if args.synthetic_server else "auto")
                     host, port = server.host, server.port
                 jack = JackProc("ttes-replay")
+                link_credentials(args).apply(jack.client)
                 jack.initsocketconnection(host, port)
                 jack.start()
                 if not jack.wait_ready(30.0):

@@ -2,6 +2,10 @@
 
 Runs the start-up script (`jack-ttes-soldier_low.jcl` in the data dir) and prints a line containing `ready`
 and the bound address once it accepts connections. Binds 127.0.0.1 unless told otherwise.
+
+Role tokens (observer_token, controller_token, operator_token in the --config file) may come from the
+environment instead: TTES_OBSERVER_TOKEN, TTES_CONTROLLER_TOKEN, TTES_OPERATOR_TOKEN win over the file.
+Without any token the server listens on loopback only. Tokens are never logged or printed.
 """
 
 from __future__ import annotations
@@ -11,7 +15,12 @@ import sys
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("server", help="run the Jack/TTES animation server", description=__doc__)
+    p = sub.add_parser(
+        "server",
+        help="run the Jack/TTES animation server",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--host", help="address to bind (default 127.0.0.1; 0.0.0.0 inside a container)")
     p.add_argument("--port", type=int, help="TCP port (default 7000; 0 = any free port)")
     p.add_argument(
@@ -37,17 +46,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import logging
+    import os
     import tempfile
 
     import trio
 
-    from server.app import TtesServer, run_server
-    from server.config import ServerConfig, load_config
+    from server.app import TtesServer, check_exposure, run_server
+    from server.config import ServerConfig, load_config, with_env_tokens
     from server.logging import configure
     from ttes.output import print_json
 
     cfg = load_config(args.config) if args.config else ServerConfig()
-    cfg = cfg.with_overrides(
+    cfg = with_env_tokens(cfg, os.environ).with_overrides(
         host=args.host,
         port=args.port,
         data_dir=args.data_dir,
@@ -65,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_overrides(data_dir=synth.path, startup_script=synth.startup_script)
     configure(json_logs=cfg.json_logs, level=logging.DEBUG if args.verbose > 1 else logging.INFO)
     try:
+        check_exposure(cfg)  # no tokens: loopback only
         server = TtesServer(cfg)
         server.start_world()  # a bad script or data dir fails here, before listening
 

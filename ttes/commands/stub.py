@@ -3,7 +3,9 @@
 With a display it opens a window (press ? for the keys); with --headless it renders offscreen (EGL) to a
 video or a PNG, touring every posture and locomotion mode. Soldiers are posed by a Jack/TTES server
 (--host/--port, or --spawn-server to start `ttes server` on a free loopback port), or offline without one.
-`ttes stub make-terrain` regenerates the village mesh.
+`ttes stub make-terrain` regenerates the village mesh. `ttes stub --scenario FILE --record OUT.mp4` records
+one soldier doing what a scenario file says (client_stub/stub/scenario.py), posed by an in-process server,
+one frame per server tick, with a contact sheet beside it.
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ import contextlib
 import os
 import sys
 from pathlib import Path
+
+from ttes.link_options import add_link_options, link_credentials
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,6 +47,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-tour", action="store_true", help="headless: no scripted key presses")
     p.add_argument("--ready-timeout", type=float, default=30.0, help="seconds to wait for the server's READY")
     p.add_argument("--json", action="store_true", help="machine-readable summary")
+    add_link_options(p)
+    p.add_argument("--scenario", type=Path, help="a scenario file of timed requests for one soldier")
+    p.add_argument("--record", type=Path, help="--scenario: the video (.mp4/.gif), one frame per server tick")
+    p.add_argument("--sheet", type=Path, help="--scenario: contact sheet PNG (default: beside the video)")
+    p.add_argument("--tick-hz", type=float, default=30.0, help="--scenario: the server's tick rate (30)")
     actions = p.add_subparsers(dest="stub_command", metavar="ACTION")
     terrain = actions.add_parser(
         "make-terrain",
@@ -69,6 +78,8 @@ def _size(text: str) -> tuple[int, int]:
 def run(args: argparse.Namespace) -> int:
     if args.stub_command == "make-terrain":
         return _make_terrain(args)
+    if args.scenario or args.record:
+        return _record_scenario(args)
     from ttes.output import print_json
 
     width, height = _size(args.size)
@@ -105,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
                     server = spawn_server(["--data-dir", str(data_dir)], data="default")
                     host, port = server.host, server.port
                 jack = JackProc()
+                link_credentials(args).apply(jack.client)
                 jack.initsocketconnection(host, port)
             except LinkError as exc:
                 print(f"ttes stub: {exc}", file=sys.stderr)
@@ -142,6 +154,38 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"wrote {summary['out']}: {summary['frames']} frames, {summary['soldiers']} soldiers, "
             f"render {summary['render_fps']} fps, server {'yes' if summary['server'] else 'no'}"
+        )
+    return 0
+
+
+def _record_scenario(args: argparse.Namespace) -> int:
+    if not (args.scenario and args.record):
+        print("ttes stub: --scenario and --record go together", file=sys.stderr)
+        return 2
+    if not 1.0 <= args.tick_hz <= 240.0:
+        print("ttes stub: --tick-hz must be within [1, 240]", file=sys.stderr)
+        return 2
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    from client_stub.stub.scenario import ScenarioError, load_scenario
+    from client_stub.stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
+    from ttes.output import print_json
+    from ttes.scenario_record import Recording, record
+
+    try:
+        scenario = load_scenario(args.scenario)
+        terrain = load_terrain(args.terrain or DEFAULT_TERRAIN, args.terrain_up)
+    except (OSError, ScenarioError, TerrainError) as exc:
+        print(f"ttes stub: {args.scenario}: {exc}", file=sys.stderr)
+        return 1
+    sheet = args.sheet or args.record.with_name(args.record.stem + "_sheet.png")
+    rec = Recording(scenario, terrain, args.record, sheet, _size(args.size), args.tick_hz,
+                    args.server_data_dir, args.artic_dir)  # fmt: skip
+    summary = record(rec)
+    if args.json:
+        print_json(summary)
+    else:
+        print(
+            f"wrote {summary['out']} ({summary['frames']} frames at {summary['hz']:g} Hz), {summary['sheet']}"
         )
     return 0
 

@@ -1,0 +1,54 @@
+"""A simulated death's skid along the ground is taken out of its root (authoring.planted)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from authoring.planted import ground_drift, plant
+from authoring.postures import lowest_point
+from authoring.transitions import ClipFrames
+from peabody.fk import FigureKinematics
+from peabody.loader import read_figure
+from ttes.paths import FIGURES
+
+
+@pytest.fixture(scope="module")
+def soldier():
+    return read_figure(FIGURES / "soldier.fig")
+
+
+def _standing(soldier, n: int, step: np.ndarray, height: float = 0.0) -> ClipFrames:
+    """The neutral pose standing ``height`` cm above the ground, moved by ``step`` (cm) every frame."""
+    kin = FigureKinematics(soldier)
+    pose = np.zeros(kin.ndof)
+    root = np.eye(4)
+    root[1, 3] -= float(lowest_point(kin, pose, root)) - height
+    roots = np.repeat(root[None], n, axis=0)
+    roots[:, :3, 3] += np.arange(n)[:, None] * step
+    return ClipFrames(np.repeat(pose[None], n, axis=0), roots, roots.copy(), 60.0)
+
+
+def test_a_body_skidding_on_the_ground_stays_put(soldier) -> None:
+    clip = _standing(soldier, 12, np.array([0.8, 0.0, -0.5]))
+    out = plant(clip, soldier)
+    np.testing.assert_allclose(out.roots[:, :3, 3], clip.roots[:1, :3, 3].repeat(12, axis=0), atol=1e-9)
+    np.testing.assert_allclose(out.rifles[:, :3, 3], out.roots[:, :3, 3], atol=1e-9)  # the rifle goes along
+    np.testing.assert_array_equal(out.poses, clip.poses)
+
+
+def test_a_body_off_the_ground_is_left_as_it_is(soldier) -> None:
+    clip = _standing(soldier, 6, np.array([2.0, 0.0, 0.0]), height=3.0)
+    np.testing.assert_array_equal(plant(clip, soldier).roots, clip.roots)
+
+
+def test_the_drift_is_shared_out_over_the_parts_not_the_nodes() -> None:
+    """One part with many nodes does not outweigh another with few; a part touching in one frame only, and
+    vertical motion, count for nothing."""
+    points = np.zeros((2, 5, 3))
+    points[1, :4] += [1.0, -0.5, 0.0]  # "a": four nodes slide 1 cm (and sink a little)
+    touching = np.array([[True] * 4 + [True], [True] * 4 + [True]])
+    parts = np.array(["a", "a", "a", "a", "b"])  # "b": one node stays
+    np.testing.assert_allclose(ground_drift(points, touching, parts), [[0, 0, 0], [0.5, 0, 0]])
+    touching[0, 4] = False
+    np.testing.assert_allclose(ground_drift(points, touching, parts)[1], [1.0, 0, 0])
