@@ -147,49 +147,46 @@ class SegmentHulls:
     def depth(self, points: np.ndarray, seg_globals: np.ndarray) -> tuple[float, int, int]:
         """Deepest penetration (cm) of ``points`` ``(n, k, 3)`` (world) into any hull, with its frame and
         segment index (``-1`` when nothing is inside). ``seg_globals``: ``(n, nseg, 4, 4)``."""
-        f, m, _, d, _ = self._inside(points, seg_globals)
-        if not len(f):
+        f, m, d, _ = self._inside(points, seg_globals)
+        if not len(f) or d.max() <= 0:
             return 0.0, -1, -1
         best = int(np.argmax(d))
-        if d[best] <= 0:
-            return 0.0, -1, -1
         return float(d[best]), int(f[best]), int(self.segments[m[best]])
 
     def exits(self, points: np.ndarray, seg_globals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per frame, the deepest penetration (cm, 0 when nothing is inside) of ``points`` ``(n, k, 3)`` and
-        the way out of it: the world normal ``(n, 3)`` of the hull face nearest that point (zero where
-        nothing is inside), so that what is pushed along it leaves the body by the shortest way."""
+        """Per frame of ``points`` ``(n, k, 3)``: the deepest point's depth in a hull (cm, 0 when nothing is
+        inside) and the world direction ``(n, 3)`` out of that hull through its nearest face."""
         n = len(points)
-        depth, normal = np.zeros(n), np.zeros((n, 3))
-        f, m, _, d, face = self._inside(points, seg_globals)
-        for i in np.unique(f[d > 0]):
-            c = np.flatnonzero(f == i)
-            best = c[np.argmax(d[c])]
-            depth[i] = d[best]
-            g = seg_globals[i, self.segments[m[best]], :3, :3]
-            normal[i] = g @ self.equations[m[best], face[best], :3]
-        return depth, normal
+        depth, out = np.zeros(n), np.zeros((n, 3))
+        f, m, d, normal = self._inside(points, seg_globals)
+        for i in np.argsort(d):  # the deepest of each frame last
+            if d[i] > depth[f[i]]:
+                depth[f[i]], out[f[i]] = d[i], seg_globals[f[i], self.segments[m[i]], :3, :3] @ normal[i]
+        return depth, out
 
     def _inside(
         self, points: np.ndarray, seg_globals: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The candidates (points within a hull's bounding sphere): frame, hull, point indices, the depth
-        inside the hull (negative: outside) and the face nearest the point."""
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The (frame, hull) of every point within a hull's bounding sphere, its depth inside the hull (cm,
+        negative outside) and the normal of the face it is nearest to (the hull's frame)."""
         empty = np.zeros(0, dtype=int)
         if not len(self.segments):
-            return empty, empty, empty, np.zeros(0), empty
+            return empty, empty, np.zeros(0), np.zeros((0, 3))
         g = seg_globals[:, self.segments]  # (n, m, 4, 4)
         centre = np.einsum("fmij,mj->fmi", g[..., :3, :3], self.centres) + g[..., :3, 3]
         near = (
             np.linalg.norm(points[:, None, :, :] - centre[:, :, None, :], axis=-1) < self.radii[None, :, None]
         )
         f, m, p = np.nonzero(near)
-        d, face = np.empty(len(f)), np.empty(len(f), dtype=int)
+        d = np.empty(len(f))
+        normal = np.empty((len(f), 3))
         for a in range(0, len(f), CHUNK):  # bounded memory: candidates x hull faces
             b = slice(a, a + CHUNK)
             rot, org = g[f[b], m[b], :3, :3], g[f[b], m[b], :3, 3]
             local = np.einsum("cji,cj->ci", rot, points[f[b], p[b]] - org)  # world -> segment frame
             eq = self.equations[m[b]]
-            out = -(np.einsum("cfi,ci->cf", eq[..., :3], local) + eq[..., 3])
-            d[b], face[b] = out.min(axis=1), out.argmin(axis=1)
-        return f, m, p, d, face
+            gap = -(np.einsum("cfi,ci->cf", eq[..., :3], local) + eq[..., 3])
+            face = np.argmin(gap, axis=1)
+            d[b] = gap[np.arange(len(face)), face]
+            normal[b] = eq[np.arange(len(face)), face, :3]
+        return f, m, d, normal

@@ -33,6 +33,7 @@ from authoring import crawl, crawl_prone, deaths, gait, postures, reactions, tra
 from authoring.motion import KeyPosture
 from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
+from authoring.slave_ground import clear_rifle, rest_limbs
 from authoring.slaving import MasterSlavePair
 from authoring.transitions import ClipFrames, clip_to_channelset
 from peabody.fk import FigureKinematics
@@ -177,11 +178,15 @@ def record(job: ClipJob, ctx: BuildContext) -> Channelset:
     return chset
 
 
+LIFT_SIGMA_FRAMES = 3.0  # a death's lift off the ground is smoothed over the clip (at or above the need)
+
+
 def lift_off_ground(chset: Channelset, body: Figure) -> None:
     """Raise every figure channel (soldier and rifle) in frames where the body's mesh would sink below the
     ground (the slave's torso is shaped differently from the master's, so a lying DI can dip where the
     soldier did not). In place."""
     from authoring.postures import lowest_point
+    from authoring.rifle_swap import _smooth_above
     from server.motion.binding import bind_channelset
 
     bound = bind_channelset(chset, [body])
@@ -190,11 +195,13 @@ def lift_off_ground(chset: Channelset, body: Figure) -> None:
     poses[:, bf.dst] = chset.joint_data[:, bf.src]
     chan = next(c for c in chset.figure_channels() if c.column == bf.figure_channel)
     lift = np.maximum(0.0, -lowest_point(FigureKinematics(body), poses, chset.transforms(chan)))
+    if chset.release_frame is not None:  # a death: lifted frame by frame, the prone body hopped 1.2 cm up
+        lift = _smooth_above(lift, LIFT_SIGMA_FRAMES)
     if lift.any():
         held = np.ones(chset.nframes, bool)  # the rifle rises with the hands only while they hold it
         if chset.release_frame is not None:
             held[chset.release_frame :] = False
-        lifted = np.where(held[:, None], lift[:, None], 0.0)
+        lifted = np.where(held[:, None], lift[:, None], 0.0).repeat(chset.fig_pos.shape[1], axis=1)
         lifted[:, chan.column] = lift
         chset.fig_pos[:, :, 1] += lifted.astype(np.float32)
 
@@ -211,9 +218,10 @@ def slave_one(
     else:
         out = reslave_channelset(chset, pair, name)
     # DI's kneecaps sit higher than the master's and its prone forearms float: put them down where his are
-    for rest in (rest_slave_knees, rest_slave_forearms, tilt_onto_knees):
+    for rest in (rest_slave_knees, rest_slave_forearms, tilt_onto_knees, rest_limbs):
         rest(chset, out, ctx.figure_set)
         lift_off_ground(out, ctx.di)
+    clear_rifle(out, ctx.figure_set)  # a dropped rifle: out of the body and the ground it now lies on
     return out
 
 

@@ -1,13 +1,17 @@
 """``crawl2prstow``: from the crawl (forearms, knees) down to prone (belly, thighs, forearms), limb by limb.
 
 The two postures' contacts are far apart (the left elbow 60 cm, the knees 40 cm, the left toes a metre
-sideways), so interpolating the joints drags every limb along the ground. Instead, as in the crawl
+sideways: prone lies turned about 60 degrees round the pelvis, its chest 36 cm right of and 26 cm behind
+the crawl's), so interpolating the joints drags every limb along the ground. Instead, as in the crawl
 (:mod:`authoring.crawl`), each limb is lifted, carried and set down in turn while the others stay planted:
 the hips and legs go down first (each knee and its toes lifted back to where prone has them, the left leg
 then the right), then the left forearm moves to its prone place, then the right, the rifle carried by the
 chest from the crawl's cradle to the prone carry. The body (pelvis, spine, legs) is one batched IK solve
-from the interpolated joints with the knees and toes on their tracks; the arms are then tracked frame after
-frame (palms on the rifle first, then the elbows on their tracks) so no joint jumps between IK branches.
+from the interpolated joints with the knees and toes on their tracks and the pelvis held firmly to its turn
+from the crawl to prone, kept at the crawl's height until the legs are back (a pelvis left free rolls over
+the moving leg and back, and the rifle on the chest with it; one lowered early drags the thigh); the arms
+are then tracked frame after frame (palms on the rifle first, then the elbows on their tracks) so no joint
+jumps between IK branches.
 The clip starts exactly in ``CRAWL``, ends exactly in ``PRONE_STOWED`` and is eased at both ends.
 """
 
@@ -38,17 +42,21 @@ FPS = 60
 NAME = "crawl2prstow"
 START, END = "CRAWL", "PRONE_STOWED"
 DURATION = 1.6  # s
-BODY = (0.0, 0.9)  # s: pelvis, spine, legs and head go down
+BODY = (0.0, 0.9)  # s: pelvis, spine, legs and head turn over to prone
+SETTLE = (0.5, 1.0)  # s: the pelvis comes down from the crawl's height (after the left leg is back)
 ARMS = (0.0, 1.55)  # s: the arms' joints (the IK pulls towards them) and the rifle's carry
 HOLD = (0.0, 0.7)  # s: the rifle, first left where the forearms hold it, goes over to the chest's carry
 # (start, duration) in s of each limb's move: the knees (with their toes) first, then the forearms
 MOVES = {
     ("knee", "left"): (0.0, 0.55),
-    ("knee", "right"): (0.4, 0.5),
+    ("knee", "right"): (0.3, 0.6),
     ("elbow", "left"): (0.85, 0.35),
     ("elbow", "right"): (1.15, 0.35),
 }
-LIFT = {"knee": 4.0, "toes": 6.0, "elbow": 5.0}  # cm a contact rises while it moves
+LIFT = {"knee": 12.0, "toes": 8.0, "elbow": 5.0}  # cm a contact rises while it moves (the thigh clears too)
+# how hard the pelvis keeps to its path (the turn from crawl to prone) against the legs' tracks: softer, and
+# it rolls 38 degrees over the moving leg and back, flicking the carried rifle 34 degrees in 0.1 s
+ROOT_WEIGHT = 1.5
 LEG_SITES = {"knee": "{s}_lower_leg.knee", "toes": "{s}_toes.distal"}
 ELBOW_SITE = "{s}_upper_arm.distal"
 class _Tracking(TypedDict):
@@ -56,7 +64,7 @@ class _Tracking(TypedDict):
     max_dof_step: float
 
 
-LEG_TRACKING: _Tracking = {"iterations": 20, "max_dof_step": 0.03}
+LEG_TRACKING: _Tracking = {"iterations": 30, "max_dof_step": 0.01}  # at most ~17 degrees a frame
 ARM_TRACKING: _Tracking = {"iterations": 10, "max_dof_step": 0.02}
 
 
@@ -96,8 +104,10 @@ def record_crawl_to_prone(keys: Mapping[str, KeyPosture], figures: Sequence[Figu
     u = np.where(arm_dofs[None], u_arms[:, None], u_body[:, None])
     rest = q0[None] + u * (q1 - q0)[None]
     roots = slerp_frames(first.locations[SOLDIER], last.locations[SOLDIER], u_body)
+    y0, y1 = first.locations[SOLDIER][1, 3], last.locations[SOLDIER][1, 3]
+    roots[:, 1, 3] = y0 + _ramp(t, *SETTLE) * (y1 - y0)  # the legs move under a pelvis still up
     # the body: knees and toes on their tracks, the pelvis free to rise and turn over them
-    goals: list[ik.Goal] = [ik.Goal(kin.root_name, roots[:, :3, 3], roots[:, :3, :3], 0.4, 1, ())]
+    goals: list[ik.Goal] = [ik.Goal(kin.root_name, roots[:, :3, 3], roots[:, :3, :3], ROOT_WEIGHT, 1, ())]
     for side in ("left", "right"):
         a, d = MOVES["knee", side]
         for part, fmt in LEG_SITES.items():
@@ -117,8 +127,9 @@ def record_crawl_to_prone(keys: Mapping[str, KeyPosture], figures: Sequence[Figu
     )
     assert report.root_location is not None  # solved with root DOFs: the solve reports where the root went
     roots = report.root_location
-    # ... and the legs again on that pelvis, frame after frame, so no joint leaps between IK branches
-    poses = track_solve(kin, rest, goals[1:], roots, **LEG_TRACKING)
+    # ... and the legs again on that pelvis, frame after frame, so no joint leaps between IK branches (tracked
+    # back from prone alone: the forward track puts the left toes on another branch, 25 degrees a frame)
+    poses = track_solve(kin, rest, goals[1:], roots, **LEG_TRACKING, backward_only=True)
     poses = np.where(arm_dofs[None], rest, poses)
     # the elbows' tracks; the chest carries the rifle, its carry turning from the cradle to the prone one
     elbows = {}

@@ -1,0 +1,330 @@
+"""A dying slave rests where its master rests: after the hands let go (a death's ``release_frame``), every
+part of the DI.fig slave lies on the ground where the master's lies there, nothing goes into the ground, and
+the dropped rifle lies clear of the slave's body.
+
+After the release the slaving copies the master's angles (:func:`authoring.slaving._let_go`), and DI.fig's
+shoulders, neck and torso are shaped differently from soldier.fig's: with the same angles a DI hand or
+forearm that the master lays on the ground went up to 10 cm into it, and lifting the whole body out of it
+(:func:`authoring.build.lift_off_ground`) left the DI hovering 10-12 cm over the ground, heels 30 cm up.
+So the parts are solved instead (:func:`rest_limbs`), frame by frame, following the master's contacts
+whatever the death: each part's sites move up or down by how far the slave's part is from the master's (his
+part on the ground: to his height; up in the air: only out of the ground). A limb part in contact moves
+horizontally as the master's site of the same name does (:func:`_plants`: it slides no more than his).
+Once the master lies still (:func:`_settled`) the trunk settles: the body goes down (:func:`_trunk_drop`)
+and rolls or pitches (root ``ty rx rz``) onto the trunk parts the master rests on. A last unplanted pass
+takes out of the ground what a plant held there. :func:`clear_rifle` then pushes the dropped rifle out of
+the slave's segment hulls and the ground.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from authoring import ik
+from authoring.quality_frames import FigureSet, play
+from authoring.slave_contacts import _fade, _played, _smooth, part_heights
+from peabody import quaternion
+from peabody.fk import FigureKinematics
+from server.motion.binding import bind_channelset
+from server.motion.channelset import Channelset
+
+SIDES = ("left", "right")
+# a body part (as the quality check names it) -> the slave sites that carry it up or down
+PART_SITES: dict[str, tuple[str, ...]] = {
+    **{f"{s}_hand": (f"{s}_lower_arm.distal", f"{s}_palm.distal") for s in SIDES},
+    **{f"{s}_forearm": (f"{s}_lower_arm.proximal", f"{s}_lower_arm.distal") for s in SIDES},
+    **{f"{s}_foot": (f"{s}_foot.heel", f"{s}_toes.distal") for s in SIDES},
+    **{f"{s}_knee": (f"{s}_lower_leg.knee",) for s in SIDES},
+    **{f"{s}_thigh": (f"{s}_upper_leg.trochanter", f"{s}_upper_leg.distal") for s in SIDES},
+    **{f"{s}_upper_arm": (f"{s}_upper_arm.deltoid", f"{s}_lower_arm.proximal") for s in SIDES},
+    "head": ("bottom_head.proximal", "bottom_head.distal"),
+    "pelvis": ("lower_torso.front", "lower_torso.back", "lower_torso.left_hip", "lower_torso.right_hip"),
+    "belly": ("middle_torso.navel", "middle_torso.vl2"),
+    "chest": (
+        "upper_torso.sternum",
+        "upper_torso.back",
+        "upper_torso.left_clavicle",
+        "upper_torso.right_clavicle",
+    ),
+}
+TRUNK = ("pelvis", "belly", "chest")
+HIPS = ("left_thigh", "right_thigh")  # turn with the pelvis: the body is not lowered through them either
+LIMB_PASSES = 4  # a part's lowest node moves along it as the limb turns: solve again for what is left
+ROOT = "lower_torso.proximal"  # a slave site without a master site of its name moves as this one does
+CONTACT_CM = 1.3  # the master's part this low is on the ground (the quality check's 1.25 cm)
+MARGIN_CM = 0.3  # a part the master holds up is kept this far above the ground at least
+ROOT_DOFS = ("tx", "ty", "tz", "rx", "rz")  # the body may go down and roll or pitch onto what it rests on
+SETTLE_SPEED_CM_S = 5.0  # the master lies still: his root moves slower than this for the rest of the clip
+SETTLE_FRAMES = 15  # ... the trunk is lowered onto the ground over this many frames from then
+FADE_FRAMES = 12  # after the release the goals fade in over this many frames (the slaving's own fade)
+
+
+def _chain(site: str) -> tuple[str, ...]:
+    """The joints that move ``site``: the whole arm or leg from the clavicle or hip, the neck for the head."""
+    seg = site.split(".", 1)[0]
+    side = seg.split("_", 1)[0]
+    if seg.endswith(("arm", "palm")):
+        return tuple(f"{side}_{j}" for j in ("clavicle", "shoulder", "elbow", "wrist"))
+    if seg.endswith(("leg", "foot", "toes")):
+        return tuple(f"{side}_{j}" for j in ("hip", "knee", "ankle", "toes"))
+    if seg == "lower_torso":
+        return ()  # the pelvis moves with the root alone
+    if seg.endswith("_torso"):
+        return ("waist", "belly", "upper_spine")[: 1 if seg == "middle_torso" else 3]
+    return ("neck", "head")
+
+
+def _heights(
+    poses: np.ndarray, locs: np.ndarray, figures: FigureSet, ptype: str, parts: tuple[str, ...]
+) -> dict[str, np.ndarray]:
+    """Per part of ``parts``, its lowest node's height (cm) in every frame."""
+    out: dict[str, np.ndarray] = {}
+    for part in parts:
+        side, _, rest = part.partition("_")
+        found = (
+            part_heights(poses, locs, figures, ptype, rest, (side,))
+            if side in SIDES
+            else part_heights(poses, locs, figures, ptype, part, ("",))
+        )
+        for h in found.values():
+            out[part] = h
+    return out
+
+
+def _need(master: np.ndarray, slave: np.ndarray) -> np.ndarray:
+    """How far (cm, up positive) a slave part should move: to the master's height where his part lies on
+    the ground, fading to just out of the ground (``MARGIN_CM``) where it is up in the air."""
+    on = _fade(master)
+    rest = np.maximum(master, 0.0) - slave
+    clear = np.maximum(0.0, MARGIN_CM - slave)
+    return on * rest + (1.0 - on) * clear
+
+
+def _fade_in(n: int, release: int, frames: int = FADE_FRAMES) -> np.ndarray:
+    """Per frame, 0 until ``release``, easing to 1 over ``frames``."""
+    u = np.clip((np.arange(n) - release) / frames, 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
+def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
+    """Lay the slave's limbs, head and trunk where the master's are after the release (``slave``'s joint and
+    body channels, in place); returns the largest remaining distance from the wanted height per frame (cm)."""
+    release = getattr(slave, "release_frame", None)
+    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    n = len(q)
+    if release is None or release >= n - 1:
+        return np.zeros(n)
+    kin = figures.kin[stype]
+    parts = tuple(PART_SITES)
+    m_h = _heights(mq, mloc, figures, mtype, parts)
+    w = _fade_in(n, release)
+    q_loc, loc = loc, loc.copy()
+    pose = q.copy()
+    frames = w > 0
+    sub = np.flatnonzero(frames)
+
+    def needs(pose: np.ndarray, loc: np.ndarray) -> dict[str, np.ndarray]:
+        s_h = _heights(pose, loc, figures, stype, parts)
+        return {p: w * _need(m_h[p], s_h[p]) for p in parts if p in s_h and p in m_h}
+
+    limbs = tuple(p for p in parts if p not in TRUNK)
+    planted = _plants(_positions(kin, q, loc), _positions(figures.kin[mtype], mq, mloc), m_h, release)
+    settle = w * _settled(mloc, float(master.fps))
+    # once the master lies still, the trunk (the body rolls or pitches onto what the master rests on); the
+    # limbs throughout; last, the limbs again unplanted: a part that its plant kept in the ground comes out
+    stages = [(TRUNK, ROOT_DOFS, planted), (limbs, (), planted)] * LIMB_PASSES + [(limbs, (), {})]
+    for k, (group, root_dofs, plants) in enumerate(stages):
+        if k % 2 == 0 and k < len(stages) - 1:
+            loc[:, 1, 3] += settle * _trunk_drop(m_h, _heights(pose, loc, figures, stype, TRUNK + HIPS))
+        scale = settle if group is TRUNK else 1.0
+        need = {p: v * scale for p, v in needs(pose, loc).items() if p in group}
+        solved, report = ik.solve(
+            kin, pose[sub], _goals(kin, pose[sub], loc[sub], need, sub, plants), loc[sub], iterations=40,
+            damping=2.0, rest_pose=pose[sub], rest_gain=0.05, tolerance=0.05, max_dof_step=0.05,
+            root_dofs=root_dofs,
+        )  # fmt: skip
+        pose[sub] = solved
+        if report.root_location is not None:
+            loc[sub] = report.root_location
+    # frames solved alone can land on different branches of a redundant arm: smooth the change over the clip
+    pose = q + _smooth(pose - q) * frames[:, None]
+    loc = _smooth_moves(q_loc, loc, frames)
+    _write(slave, figures, stype, pose, loc @ np.linalg.inv(q_loc))
+    left = needs(pose, loc)
+    return np.max(np.abs(np.stack(list(left.values()))), axis=0)
+
+
+def _settled(root: np.ndarray, fps: float) -> np.ndarray:
+    """Per frame, 0 while the master's body still moves (its root faster than ``SETTLE_SPEED_CM_S``), easing
+    to 1 over ``SETTLE_FRAMES`` once it lies still for the rest of the clip: lowering a falling or sliding
+    slave onto the ground kept its trunk on the ground while the master's body moved on (it skated)."""
+    speed = np.linalg.norm(np.diff(root[:, :3, 3], axis=0), axis=1) * fps
+    moving = np.flatnonzero(speed > SETTLE_SPEED_CM_S)
+    still = int(moving[-1]) + 1 if len(moving) else 0
+    return _fade_in(len(root), still, SETTLE_FRAMES)
+
+
+def _smooth_moves(before: np.ndarray, after: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """Root placements ``after`` ``(n, 4, 4)`` whose move from ``before`` (in the root's frame: a drop and a
+    small roll or pitch, solved frame by frame) is smoothed over the clip like the joints' change (only
+    in ``frames``), so the body does not tremble as it lies."""
+    local = np.linalg.inv(before) @ after
+    quat = quaternion.from_matrix(local[:, :3, :3])  # (w, x, y, z), w >= 0: small turns, no sign flips
+    parts = np.concatenate([local[:, :3, 3], quat], axis=1)
+    ident = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+    parts = ident + _smooth(parts - ident) * frames[:, None]
+    moved = quaternion.to_transform(
+        parts[:, :3], parts[:, 3:] / np.linalg.norm(parts[:, 3:], axis=1)[:, None]
+    )
+    return before @ moved
+
+
+def _trunk_drop(master: dict[str, np.ndarray], slave: dict[str, np.ndarray]) -> np.ndarray:
+    """Per frame, how far (cm, negative: down) to lower the body so that its trunk rests as low as the
+    master's: as far as the trunk part the master rests on that floats the most asks, but no trunk part into
+    the ground (the limbs are solved again after it); never a rise (lifting is the build's last step)."""
+    trunk = [p for p in TRUNK if p in master and p in slave]
+    if not trunk:
+        return np.zeros(len(next(iter(slave.values()))))
+    want = np.min([_fade(master[p]) * (np.maximum(master[p], 0.0) - slave[p]) for p in trunk], axis=0)
+    floor = -np.min([slave[p] for p in (*trunk, *HIPS) if p in slave], axis=0)
+    return np.minimum(0.0, np.maximum(want, floor))
+
+
+def _plants(
+    slave: dict[str, np.ndarray], master: dict[str, np.ndarray], heights: dict[str, np.ndarray], release: int
+) -> dict[str, np.ndarray]:
+    """Per site of :data:`PART_SITES`, where it goes (x, z; NaN where free) while the master's part is on
+    the ground (``CONTACT_CM``): from where it was as the contact began (or at the release) it moves as
+    the master's site of the same name moves (his root where he has none), so the slave's contacts slide
+    no more than his. ``slave``/``master``: ``(n, 3)`` positions per site name."""
+    out: dict[str, np.ndarray] = {}
+    n = len(heights[next(iter(heights))])
+    for part, names in PART_SITES.items():
+        if part not in heights or part in TRUNK:  # the trunk follows the root: it rolls, it is not planted
+            continue
+        down = np.concatenate([[False], heights[part] <= CONTACT_CM, [False]])
+        edges = np.flatnonzero(np.diff(down.astype(np.int8)))
+        for site in names:
+            track = np.full((n, 3), np.nan)
+            ref = master.get(site, master[ROOT])
+            for a, b in zip(edges[::2], edges[1::2], strict=True):
+                a = max(int(a), release)
+                if a < b:
+                    track[a:b] = slave[site][a] + ref[a:b] - ref[a]
+            out[site] = track
+    return out
+
+
+def _positions(kin: FigureKinematics, pose: np.ndarray, loc: np.ndarray) -> dict[str, np.ndarray]:
+    """Site name -> world positions ``(n, 3)`` of the sites of :data:`PART_SITES` (and the root) ``kin``
+    has."""
+    g = kin.site_globals(pose, loc)[..., :3, 3]
+    wanted = {s for names in PART_SITES.values() for s in names} | {ROOT}
+    return {s: g[:, kin.site_names.index(s)] for s in wanted if s in kin.site_names}
+
+
+def _goals(
+    kin: FigureKinematics,
+    pose: np.ndarray,
+    loc: np.ndarray,
+    need: dict[str, np.ndarray],
+    rows: np.ndarray,
+    planted: dict[str, np.ndarray],
+) -> list[ik.Goal]:
+    """One goal per site of :data:`PART_SITES` of the parts in ``need``: where it is in ``pose`` (the frames
+    ``rows`` of the clip), moved up or down by the largest need of the parts it carries (so a wrist lifts
+    both forearm and hand out of the ground)."""
+    sites = kin.site_globals(pose, loc)
+    moves: dict[str, np.ndarray] = {}
+    for part, move in need.items():
+        for site in PART_SITES[part]:
+            moves[site] = move[rows] if site not in moves else np.maximum(moves[site], move[rows])
+    goals = []
+    for site, move in moves.items():
+        at = sites[:, kin.site_names.index(site), :3, 3].copy()
+        at[:, 1] += move
+        hold = planted[site][rows] if site in planted else np.full((len(rows), 3), np.nan)
+        keep = ~np.isnan(hold[:, 0])
+        at[keep, 0], at[keep, 2] = hold[keep, 0], hold[keep, 2]
+        goals.append(ik.Goal(site, at, None, 1.0, 1, _chain(site)))
+    return goals
+
+
+def _write(slave: Channelset, figures: FigureSet, stype: str, pose: np.ndarray, moved: np.ndarray) -> None:
+    """``pose`` into ``slave``'s joint channels; its body's figure channel moved by ``moved`` ``(n, 4, 4)``
+    (world)."""
+    bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
+    slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
+    chan = next(c for c in slave.figure_channels() if c.column == bf.figure_channel)
+    placed = moved @ slave.transforms(chan)
+    slave.fig_pos[:, chan.column] = placed[:, :3, 3].astype(slave.fig_pos.dtype)
+    slave.fig_quat[:, chan.column] = quaternion.from_matrix(placed[:, :3, :3]).astype(slave.fig_quat.dtype)
+
+
+RIFLE_MARGIN_CM = 0.3  # a dropped rifle is put this far clear of the body's hulls and the ground
+RIFLE_PASSES = 12  # a push out of one hull can go into another: push again
+RIFLE_SIGMA_FRAMES = 3.0  # the push is smoothed over the clip (at least as far as it has to go)
+RIFLE_FADE_FRAMES = 6  # ... and fades in over this many frames from the release
+
+
+def clear_rifle(slave: Channelset, figures: FigureSet) -> np.ndarray:
+    """Move the dropped rifle (every figure channel but the body's, from the release on) out of the slave's
+    body and the ground: it lies where the master's rifle lies, but the DI's body is shaped differently
+    and may lie where the master's did not. Each frame is pushed out of the segment hull it is deepest in
+    through that hull's nearest face, and up out of the ground; the push is smoothed over the clip (rising
+    ahead of the need) and fades in from the release. In place; returns the push per frame (cm)."""
+    release = getattr(slave, "release_frame", None)
+    f = play(slave, figures)
+    stype = max(f.poses, key=lambda k: figures.kin[k].ndof)
+    n = slave.nframes
+    if release is None or release >= n - 1:
+        return np.zeros(n)
+    seg_globals = figures.kin[stype].segment_globals(f.poses[stype], f.locations[stype])
+    hulls = figures.hulls(stype)
+    total = np.zeros(n)
+    after = np.arange(n) >= release
+    fade = _fade_in(n, release - 1, RIFLE_FADE_FRAMES)  # nothing while the hands hold it
+    for chan in slave.figure_channels():
+        if chan.protofiletype == stype:
+            continue
+        nodes, _ = figures.nodes(chan.protofiletype)
+        locs = f.locations[chan.protofiletype]
+        push = np.zeros((n, 3))
+        for _ in range(RIFLE_PASSES):
+            moved = locs.copy()
+            moved[:, :3, 3] += push
+            pts = np.einsum("fij,kj->fki", moved[:, :3, :], nodes)
+            depth, out = hulls.exits(pts, seg_globals)
+            out[:, 1] = np.maximum(out[:, 1], 0.0)  # never down, into the ground: round the body instead
+            away = pts.mean(axis=1) - f.locations[stype][:, :3, 3]  # under a limb: out away from the body
+            away[:, 1] = 0.0
+            flat = np.linalg.norm(out, axis=1) < 0.3
+            out[flat] = away[flat]
+            out /= np.maximum(np.linalg.norm(out, axis=1), 1e-9)[:, None]
+            step = out * np.where(depth > 0, depth + RIFLE_MARGIN_CM, 0.0)[:, None]
+            step[:, 1] = np.maximum(step[:, 1], RIFLE_MARGIN_CM - pts[..., 1].min(axis=1))
+            step[~after] = 0.0
+            if not (np.abs(step) > 1e-3).any():
+                break
+            push = _smooth_push(push + step) * fade[:, None]
+        slave.fig_pos[:, chan.column] += push.astype(slave.fig_pos.dtype)
+        total = np.maximum(total, np.linalg.norm(push, axis=1))
+    return total
+
+
+def _smooth_push(push: np.ndarray) -> np.ndarray:
+    """Each component of ``push`` ``(n, 3)`` smoothed over the clip, never shorter than where it points (a
+    running maximum of its positive and of its negative part, then Gaussian). Unlike the held rifle's pitch
+    (:func:`authoring.rifle_swap._smooth_above`) the ends are not pinned to the frame's own need: a dropped
+    rifle's last frame belongs to no other clip, and pinned it moved at 1.5 m/s over the last frames."""
+    half = int(np.ceil(3.0 * RIFLE_SIGMA_FRAMES))
+    k = np.arange(-half, half + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 * (k / RIFLE_SIGMA_FRAMES) ** 2)
+    kernel /= kernel.sum()
+
+    def above(c: np.ndarray) -> np.ndarray:
+        runmax = np.lib.stride_tricks.sliding_window_view(np.pad(c, half, mode="edge"), 2 * half + 1).max(-1)
+        return np.maximum(c, np.convolve(np.pad(runmax, half, mode="edge"), kernel, mode="valid"))
+
+    return np.stack([above(np.maximum(c, 0.0)) - above(np.maximum(-c, 0.0)) for c in push.T], axis=1)
