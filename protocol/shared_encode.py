@@ -28,14 +28,39 @@ FRESH = 0  # the state id of an encoder that knows nothing (new, or reset for ev
 JOIN_RETRY = 32  # encodes before a client whose content differed from its group's compares again
 
 
+class Held:
+    """An encoder's state array, shared copy-on-write by the encoders (and memo entries) in one state: a
+    client that takes a memoised encode adopts its arrays instead of writing the sent rows into its own."""
+
+    __slots__ = ("array", "users")
+
+    def __init__(self, array: np.ndarray) -> None:
+        self.array = array
+        self.users = 1
+
+    def take(self) -> Held:
+        self.users += 1
+        return self
+
+    def drop(self) -> None:
+        self.users -= 1
+
+    def writable(self) -> Held:
+        """This holder if its one user is the caller, else the caller's own copy (the caller's use moves)."""
+        if self.users <= 1:
+            return self
+        self.users -= 1
+        return Held(self.array.copy())
+
+
 @dataclass(frozen=True)
 class Encoded:
-    """One memoised encode: its frames, the rows it sent (and their codes) and the state it led to."""
+    """One memoised encode: its frames, and the state it led to (id and arrays, held by the memo)."""
 
     payloads: tuple[bytes, ...]
-    sent: np.ndarray  # soldier indices whose codes were sent (the receiver now holds them)
-    codes: np.ndarray  # (len(sent), F) int32
     state: int
+    last: Held
+    known: Held
 
 
 def digest(indices: np.ndarray) -> bytes:
@@ -61,12 +86,15 @@ class SharedEncodes:
     def _at(self, version: object) -> None:
         if version != self._version:
             self._version = version
+            for e in self._encodes.values():
+                e.last.drop()
+                e.known.drop()
             self._encodes.clear()
             self._resets.clear()
             self._groups.clear()
 
     def lookup(self, state: int, rows: tuple[object, ...], version: object) -> Encoded | None:
-        """The memoised encode of ``rows`` (table, digest, tick, max_payload) from ``state`` at ``version``"""
+        """The encode of ``rows`` (table, digest, tick, max_payload) from ``state`` at ``version``, if memoised."""
         self._at(version)
         hit = self._encodes.get((state, *rows))
         if hit is None:
@@ -76,6 +104,9 @@ class SharedEncodes:
         return hit
 
     def store(self, state: int, rows: tuple[object, ...], encoded: Encoded) -> None:
+        """Memoise an encode; the memo holds its arrays (``take``) until the version changes."""
+        encoded.last.take()
+        encoded.known.take()
         self._encodes[(state, *rows)] = encoded
 
     def group(self, rows: tuple[object, ...], state: int, owner: object) -> tuple[int, object]:

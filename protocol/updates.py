@@ -30,7 +30,7 @@ from protocol.bitpack import (
 )
 from protocol.errors import ErrorCode, WireError
 from protocol.events import DEFAULT_MAX_SOLDIERS, JointUpdates
-from protocol.shared_encode import FRESH, JOIN_RETRY, Encoded, SharedEncodes, digest
+from protocol.shared_encode import FRESH, JOIN_RETRY, Encoded, Held, SharedEncodes, digest
 from protocol.update_table import UpdateTable
 
 UPDATE_HEADER = struct.Struct(">HIH")  # table, tick, count
@@ -171,16 +171,26 @@ class UpdateEncoder:
     ) -> None:
         self.table = table
         self.max_soldiers = max_soldiers
-        self._last = np.zeros((max_soldiers, table.layout.nfields), np.int32)
-        self._known = np.zeros(max_soldiers, bool)
+        self._hlast = Held(np.zeros((max_soldiers, table.layout.nfields), np.int32))
+        self._hknown = Held(np.zeros(max_soldiers, bool))
         self._plan = _Plan(table)
         self.shared = shared  # the server's memo: encoders in one state share one encode per version
         self.state = FRESH  # this encoder's state id in ``shared`` (equal ids: equal content)
         self._join_after = 0  # encodes before trying to join a group whose content may equal this one's
         self._sent = np.zeros(0, np.int64)  # the rows the last encode sent
 
+    @property
+    def _last(self) -> np.ndarray:
+        """(max_soldiers, F) the codes this client last received (rows not ``_known``: stale, unused)."""
+        return self._hlast.array
+
+    @property
+    def _known(self) -> np.ndarray:
+        return self._hknown.array
+
     def reset(self, indices: np.ndarray | list[int] | None = None) -> None:
         """Forget what these soldiers (all if None) last sent: their next update is full."""
+        self._hknown = self._hknown.writable()
         if indices is None:
             self._known[:] = False
         else:
@@ -246,15 +256,13 @@ class UpdateEncoder:
         assert shared is not None
         rows = (id(self.table), digest(idx), tick, max_payload)
         hit = shared.lookup(self.state, rows, version)
-        if hit is not None:  # same state, same rows, same codes: same bytes; only take on the new state
-            self._last[hit.sent] = hit.codes
-            self._known[hit.sent] = True
+        if hit is not None:  # same state, same rows, same codes: same bytes; adopt the state it led to
+            self._adopt(hit.last, hit.known)
             self.state = hit.state
             return list(hit.payloads)
         payloads = self._encode_sorted(idx, q, tick, max_payload)
-        sent = self._sent
         new = shared.new_id()
-        shared.store(self.state, rows, Encoded(tuple(payloads), sent, self._last[sent], new))
+        shared.store(self.state, rows, Encoded(tuple(payloads), new, self._hlast, self._hknown))
         self.state = new
         self._try_join(rows)
         return payloads
@@ -274,8 +282,15 @@ class UpdateEncoder:
             self._last[self._known], first._last[first._known]
         ):
             self.state = first_state
+            self._adopt(first._hlast, first._hknown)
         else:
             self._join_after = JOIN_RETRY
+
+    def _adopt(self, last: Held, known: Held) -> None:
+        """Share another encoder's state arrays (equal content) instead of keeping our own."""
+        self._hlast.drop()
+        self._hknown.drop()
+        self._hlast, self._hknown = last.take(), known.take()
 
     def _encode_sorted(self, idx: np.ndarray, q: np.ndarray, tick: int, max_payload: int) -> list[bytes]:
         """The frames for sorted, distinct, non-empty ``idx``; records what was sent in ``_sent``."""
@@ -305,6 +320,7 @@ class UpdateEncoder:
         widths = plan.widths(absolute, k, np.take(changed_i, plan.entry_of, axis=1))
         values = np.where(absolute[:, None], q, delta)  # deltas keep their sign bits: the packer drops them
         payloads = self._chunks(idx, mode, changed_i, row_bits, values, widths, tick, max_payload)
+        self._hlast, self._hknown = self._hlast.writable(), self._hknown.writable()
         self._last[idx] = q
         self._known[idx] = True
         self._sent = idx
