@@ -94,7 +94,7 @@ class SharedEncodes:
             self._groups.clear()
 
     def lookup(self, state: int, rows: tuple[object, ...], version: object) -> Encoded | None:
-        """The encode of ``rows`` (table, digest, tick, max_payload) from ``state`` at ``version``, if memoised."""
+        """The memoised encode of ``rows`` (table, digest, tick, max_payload) from ``state``, or None."""
         self._at(version)
         hit = self._encodes.get((state, *rows))
         if hit is None:
