@@ -9,8 +9,9 @@ States are named, not hashed: every state gets an id, equal ids mean equal conte
 is :data:`FRESH`; an encode or a reset from state ``s`` leads to the id memoised for ``(s, what was done)``,
 so clients that do the same thing from the same state stay together. Histories that differ but end in equal
 content (a late joiner after its first full update) are joined by comparing the content once
-(:meth:`SharedEncodes.join`); a client that fails the comparison retries only after :data:`JOIN_RETRY`
-encodes.
+(``UpdateEncoder._try_join``); a client that fails the comparison retries only after :data:`JOIN_RETRY`
+encodes. Encoders in one state share its arrays copy-on-write (:class:`Held`): taking a memoised encode
+costs a client no copy of the rows it sent.
 
 The caller vouches for ``version``: equal versions with equal rows mean equal codes (the server passes the
 pose board's publish serial). Entries live for one version: a new version clears the memo.
