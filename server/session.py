@@ -85,7 +85,12 @@ class Session:
         self.board_ref = board_ref
         self.config = config
         self.peer = peer
-        self.conn = Connection(SERVER, max_frame=config.max_frame, max_soldiers=config.max_soldiers)
+        self.conn = Connection(
+            SERVER,
+            max_frame=config.max_frame,
+            max_soldiers=config.max_soldiers,
+            shared_encodes=board_ref.encodes,
+        )
         self.name = ""
         self.role = ""  # granted at HELLO (server.world.access, server.world.owners say what it allows)
         self.client_id = ""  # the HELLO's client_id, or a fresh anonymous one: owns this client's soldiers
@@ -203,7 +208,7 @@ class Session:
         chunks = []
         for t in np.unique(tables).tolist():
             rows = idx if len(tables) == 1 or (tables == t).all() else idx[tables == t]
-            chunks.append(self.conn.send_update_codes(t, rows, board.codes[rows], board.tick))
+            chunks.append(self.conn.send_update_codes(t, rows, board.codes[rows], board.tick, board.serial))
         data = b"".join(chunks)
         if data:
             self.batches_out += 1
