@@ -56,7 +56,10 @@ class TtesServer:
         self.config = config
         self._t0 = 0.0
         self.world = world or ServerWorld(
-            config.data_dir, max_soldiers=config.max_soldiers, record_clips=config.record_clips
+            config.data_dir,
+            max_soldiers=config.max_soldiers,
+            record_clips=config.record_clips,
+            cache_dir=config.cache_dir,
         )
         self.world.clock = self.request_time
         self.world.soldiers.configure(tick_period=1.0 / config.tick_hz)  # the throttle caps a rate on it

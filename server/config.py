@@ -53,6 +53,7 @@ class ServerConfig:
     name: str = "jack-ttes"
     json_logs: bool = False
     record_clips: bool = False  # keep every soldier's clip starts (debug; report_ttes_clips)
+    cache_dir: Path | None = None  # channelset .npz caches (None: $TTES_CACHE_DIR or the XDG cache dir)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -60,8 +61,9 @@ class ServerConfig:
     def with_overrides(self, **changes: Any) -> ServerConfig:
         """A copy with the given fields replaced (``None`` values are ignored: flag not given)."""
         given = {k: v for k, v in changes.items() if v is not None}
-        if "data_dir" in given:
-            given["data_dir"] = Path(given["data_dir"])
+        for key in ("data_dir", "cache_dir"):
+            if key in given:
+                given[key] = Path(given[key])
         return dataclasses.replace(self, **given)
 
 
@@ -87,6 +89,8 @@ def validate(c: ServerConfig) -> None:
     _check_number("port", c.port, 0, 65535, integer=True)
     if not isinstance(c.data_dir, Path):
         raise ConfigError("must be a path", "data_dir")
+    if c.cache_dir is not None and not isinstance(c.cache_dir, Path):
+        raise ConfigError("must be a path", "cache_dir")
     if not isinstance(c.startup_script, str):
         raise ConfigError("must be a string", "startup_script")
     _check_number("tick_hz", c.tick_hz, 0.0, 1000.0, lo_open=True)
@@ -122,11 +126,12 @@ def config_from_mapping(
     if unknown:
         raise ConfigError(f"unknown key(s) {unknown}; known: {sorted(_FIELDS)}", source)
     kwargs = dict(values)
-    if "data_dir" in kwargs:
-        if not isinstance(kwargs["data_dir"], str) or not kwargs["data_dir"]:
-            raise ConfigError("must be a non-empty string", f"{source}: data_dir")
-        p = Path(kwargs["data_dir"]).expanduser()
-        kwargs["data_dir"] = p if p.is_absolute() or base_dir is None else base_dir / p
+    for key in ("data_dir", "cache_dir"):
+        if key in kwargs:
+            if not isinstance(kwargs[key], str) or not kwargs[key]:
+                raise ConfigError("must be a non-empty string", f"{source}: {key}")
+            p = Path(kwargs[key]).expanduser()
+            kwargs[key] = p if p.is_absolute() or base_dir is None else base_dir / p
     try:
         return ServerConfig(**kwargs)
     except ConfigError as exc:

@@ -71,12 +71,13 @@ class ServerWorld:
         clock: Callable[[], float] = lambda: 0.0,
         record_clips: bool = False,
         library: MotionLibrary | None = None,
+        cache_dir: str | Path | None = None,
     ) -> None:
         self.data_dir = Path(data_dir).resolve()
         self.clock = clock
         self.events = WorldEvents()
         self.jcl = JclInterpreter(self.data_dir, SEARCH_SUBDIRS)
-        self.store = MotionStore()
+        self.store = MotionStore(cache_dir=Path(cache_dir) if cache_dir is not None else None)
         self.soldiers = Soldiers(max_soldiers, SoldierSettings(record_clips=record_clips))
         self.commands = JclCommands(self)
         self.commands.register(self.jcl)

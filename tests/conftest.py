@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import pytest
 from hypothesis import HealthCheck, settings
 
 settings.register_profile(
@@ -21,3 +22,9 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED = REPO.parent / "shared"
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _channelset_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Channelset caches of the test run go to a temporary folder (spawned servers inherit it)."""
+    os.environ["TTES_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))

@@ -17,6 +17,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--data-dir", help="folder with the start-up script, figures/, channelsets/, posture_graphs/"
     )
+    p.add_argument(
+        "--cache-dir",
+        help="folder for channelset .npz caches (default $TTES_CACHE_DIR or ~/.cache/jack-ttes; never the data dir)",
+    )
     p.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
     p.add_argument("--tick-hz", type=float, help="simulation ticks per second (default 30)")
     p.add_argument(
@@ -51,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
         host=args.host,
         port=args.port,
         data_dir=args.data_dir,
+        cache_dir=args.cache_dir,
         tick_hz=args.tick_hz,
         startup_script=args.startup_script,
         throttle=args.throttle,
