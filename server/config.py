@@ -48,8 +48,12 @@ class ServerConfig:
     max_frame: int = 1 << 20  # largest frame we accept (announced in ACCEPT)
     max_requests_per_s: float = 1e6  # entity rows + other messages per client and second; more: slower reads
     handshake_timeout: float = 10.0  # a connection that sends no HELLO in time is closed
+    frame_timeout: float = (
+        10.0  # a frame begun after HELLO must be complete within this, or the client is closed
+    )
+    max_clients_per_host: int = 128  # connections from one peer address (it never holds every slot)
     write_timeout: float = 30.0  # a client that takes no bytes for this long is dropped
-    control_queue: int = 256  # control messages waiting for one client; overflow drops the client
+    control_queue: int = 256  # control messages waiting for one client; a full queue stops reading its socket
     name: str = "jack-ttes"
     json_logs: bool = False
     record_clips: bool = False  # keep every soldier's clip starts (debug; report_ttes_clips)
@@ -105,6 +109,8 @@ def validate(c: ServerConfig) -> None:
     _check_number("max_requests_per_s", c.max_requests_per_s, 0.0, 1e9, lo_open=True)
     _check_number("handshake_timeout", c.handshake_timeout, 0.0, 3600.0, lo_open=True)
     _check_number("write_timeout", c.write_timeout, 0.0, 3600.0, lo_open=True)
+    _check_number("frame_timeout", c.frame_timeout, 0.0, 3600.0, lo_open=True)
+    _check_number("max_clients_per_host", c.max_clients_per_host, 1, 100_000, integer=True)
     _check_number("control_queue", c.control_queue, 8, 1_000_000, integer=True)
     if not isinstance(c.name, str) or not c.name:
         raise ConfigError("must be a non-empty string", "name")

@@ -85,6 +85,9 @@ class ServerWorld:
         self.graphics = True
         self.report_interval = DEFAULT_REPORT_INTERVAL
         self.caller: object | None = None  # who runs the JCL now (a session; None: the server itself)
+        # how a JCL command that touches soldiers, settings or clients runs: directly, or (JCL run by the trio
+        # app in a worker thread) on the trio loop, so that only file loads run beside the tick
+        self.in_loop: Callable[[Callable[[], object]], object] = lambda func: func()
         if library is not None:
             self.soldiers.adopt(library)
 

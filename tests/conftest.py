@@ -7,6 +7,7 @@ Hypothesis profiles: ``ci`` (default, bounded so `make test` stays fast) and
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -25,6 +26,7 @@ SHARED = REPO.parent / "shared"
 
 
 @pytest.fixture(autouse=True, scope="session")
-def _channelset_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Channelset caches of the test run go to a temporary folder (spawned servers inherit it)."""
-    os.environ["TTES_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+def _channelset_cache_dir() -> None:
+    """Channelset caches of test runs go to one folder under the temp dir (warm between runs; spawned servers
+    inherit it), never into the user's cache."""
+    os.environ["TTES_CACHE_DIR"] = str(Path(tempfile.gettempdir()) / f"ttes-test-cache-{os.getuid()}")

@@ -5,9 +5,10 @@ to an ``.npz`` (no pickles). A cache is used only when it is readable, has this 
 text file's current size and modification time; otherwise the text is parsed again and the cache rewritten
 (atomically, and silently skipped when the folder cannot be written).
 
-The caches live in a cache directory (:func:`cache_dir`: ``$TTES_CACHE_DIR``, else ``$XDG_CACHE_HOME/jack-ttes``,
-else ``~/.cache/jack-ttes``; the server's ``cache_dir`` setting overrides it), named by the source's resolved
-path: a client's ``load_channelset`` must never write files into the data directory (issue 17).
+The caches live in a cache directory (:func:`cache_dir`: ``$TTES_CACHE_DIR``, else
+``$XDG_CACHE_HOME/jack-ttes`` or ``~/.cache/jack-ttes``; the server's ``cache_dir`` setting overrides it),
+named by the source's resolved path: a client's ``load_channelset`` must never write files into the data
+directory (issue 17).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ log = logging.getLogger(__name__)
 
 
 def cache_dir() -> Path:
-    """The default cache directory: ``$TTES_CACHE_DIR``, ``$XDG_CACHE_HOME/jack-ttes`` or ``~/.cache/jack-ttes``."""
+    """The default cache folder: ``$TTES_CACHE_DIR``, ``$XDG_CACHE_HOME/jack-ttes``, ``~/.cache/...``."""
     if os.environ.get(CACHE_DIR_ENV):
         return Path(os.environ[CACHE_DIR_ENV]).expanduser()
     xdg = os.environ.get("XDG_CACHE_HOME")

@@ -52,7 +52,7 @@ def load_posture_graph(
     cache_dir: str | Path | None = None,
     loader: Callable[[Path], Channelset] | None = None,
 ) -> LoadedPostureGraph:
-    """Read a ``.graph`` and its channelsets (through ``loader`` when given: the server's store shares files it
+    """Read a ``.graph`` and its channelsets (through ``loader`` when given: the server's store shares files
     has loaded); a missing channelset file is a located PostureGraphError."""
     from server.motion.cache import load_channelset
 

@@ -27,6 +27,11 @@ if TYPE_CHECKING:
     from server.startup import ServerWorld
 
 log = get_logger("jcl")
+# commands that only read files and fill the store: they run where the JCL runs (a worker thread under the
+# trio app); every other command runs on the trio loop (ServerWorld.in_loop), between ticks
+OFF_LOOP = frozenset(
+    {"load_channelset", "load_posture_graph", "write_channelset", "reroot_figure_channel", "spit"}
+)
 _ANY = object  # argument type of a refused command: whatever it is given
 
 
@@ -295,10 +300,18 @@ class JclCommands:
             if c.name == "read_file":  # the interpreter's own (it dispatches on the file suffix)
                 continue
             func = self._refuse(c) if c.refused else getattr(self, f"cmd_{c.name}")
+            if c.name not in OFF_LOOP:
+                func = self._in_loop(func)
             jcl.register(c.name, func, c.types, optional=c.optional, variadic=c.variadic)
         jcl.register_file_handler(".env", lambda p: self.store.read_env(p, jcl.search_dirs))
         jcl.register_file_handler(".graph", self.store.load_graph)
         jcl.register_file_handler(".chset", self.store.load_channelset)
+
+    def _in_loop(self, func: Any) -> Any:
+        def run(*args: object) -> object:
+            return self.world.in_loop(lambda: func(*args))
+
+        return run
 
     @staticmethod
     def _refuse(command: Command) -> Any:
@@ -308,7 +321,8 @@ class JclCommands:
         return refuse
 
     def _report(self, text: str) -> None:
-        self.world.events.report(self.world.caller, text)
+        caller = self.world.caller
+        self.world.in_loop(lambda: self.world.events.report(caller, text))
 
     def _new_file(self, name: str, suffix: str) -> Path:
         """A file a command writes: new, inside the data directory, with the expected suffix."""

@@ -194,7 +194,7 @@ class MotionStore:
 
 
 def _room(table: dict[str, T], name: str | None, count: int, limit: int, what: str) -> None:
-    """StoreError when adding ``count`` new names (``name`` replaced in place costs none) exceeds ``limit``."""
+    """StoreError when ``count`` new names (``name`` replaced in place costs none) would exceed ``limit``."""
     if name is not None and name in table:
         return
     if len(table) + count > limit:

@@ -19,7 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--cache-dir",
-        help="folder for channelset .npz caches (default $TTES_CACHE_DIR or ~/.cache/jack-ttes; never the data dir)",
+        help="channelset .npz caches (default $TTES_CACHE_DIR or ~/.cache/jack-ttes; never the data dir)",
     )
     p.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
     p.add_argument("--tick-hz", type=float, help="simulation ticks per second (default 30)")
