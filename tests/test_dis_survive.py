@@ -5,14 +5,18 @@ server restart (reconnect with backoff). In-process servers under trio's autojum
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
 import trio
+from test_replay_support import exercise_pcap
 from test_server_support import make_server, running_server
 
+from client_stub.dis.drive import ProgressLine, replay_to_server
 from client_stub.dis.gateway import DisGateway, GatewayConfig
-from client_stub.dis.reconnect import GaveUp, keep_linked
+from client_stub.dis.reconnect import GaveUp, keep_linked, keep_linked_or_stop
+from client_stub.dis.replayer import Replayer
 from client_stub.dis.sink import MAX_SOLDIERS_PER_CLIENT, ServerSink
 from client_stub.dis.translator import SOLDIER_DTYPE, Translation
 from client_stub.link.client import Client, LinkError
@@ -188,3 +192,43 @@ async def test_the_gateway_survives_a_burst_of_5000_new_entities(autojump_clock:
         await until(lambda: m.count == 10)
         await link.aclose()
         nursery.cancel_scope.cancel()
+
+
+async def test_a_replay_goes_on_through_a_server_restart(
+    autojump_clock: trio.abc.Clock, tmp_path: Path
+) -> None:
+    _, log = exercise_pcap(tmp_path)
+    first = make_server(report_interval=1000.0)
+    async with trio.open_nursery() as nursery:
+        await nursery.start(first.serve)
+        port = first.addresses[0][1]
+
+        async def connect() -> Client:
+            c = Client()
+            await c.open(nursery, "127.0.0.1", port, timeout=2.0)
+            return c
+
+        sink = ServerSink(await connect())
+        failures: list[str] = []
+        servers = [first]
+
+        async def restart() -> None:
+            await trio.sleep(10.0)
+            first.shutdown()
+            await first.stopped.wait()
+            await trio.sleep(4.0)
+            servers.append(make_server(report_interval=1000.0, port=port))
+            await nursery.start(servers[-1].serve)
+
+        async with trio.open_nursery() as inner:
+            inner.start_soon(keep_linked_or_stop, sink, connect, inner.cancel_scope, failures, 30.0)
+            inner.start_soon(restart)
+            status = await replay_to_server(
+                Replayer(log), sink, progress=ProgressLine(out=None), finish=False
+            )
+            m = servers[-1].world.manager
+            assert len(servers) == 2 and m is not None
+            assert m.count == 10 + status["alive"] and status["alive"] == 4  # the second server has them all
+            inner.cancel_scope.cancel()
+        assert not failures and sink.stats["relinked"] == 1 and sink.stats["while_lost"] > 0
+        servers[-1].shutdown()

@@ -60,3 +60,26 @@ async def reconnect(
         except LinkError as exc:
             why = str(exc)
     raise GaveUp(f"gave up after {trio.current_time() - t0:.0f} s without a server: {why}")
+
+
+async def keep_linked_or_stop(
+    sink: ServerSink,
+    connect: Callable[[], Awaitable[Client]],
+    stop: trio.CancelScope,
+    failures: list[str],
+    give_up_after: float = GIVE_UP_AFTER,
+) -> None:
+    """:func:`keep_linked` for a command: when it gives up, say why in ``failures`` and cancel ``stop`` (the
+    command then exits 1). ``give_up_after`` 0: no reconnecting, a lost server stops the command at once."""
+    if give_up_after <= 0:
+        link = sink.link
+        assert isinstance(link, Client)
+        await link.wait_closed()
+        failures.append(f"server lost: {link.failure or 'connection closed'}")
+        stop.cancel()
+        return
+    try:
+        await keep_linked(sink, connect, give_up_after=give_up_after)
+    except GaveUp as exc:
+        failures.append(str(exc))
+        stop.cancel()
