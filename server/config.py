@@ -73,6 +73,25 @@ class ServerConfig:
 
 _FIELDS = {f.name: f for f in dataclasses.fields(ServerConfig)}
 
+# what a peer may do and what it costs (docs/PROTOCOL.md §14; `ttes server --help` lists them with defaults)
+LIMITS = {
+    "max_clients": "connections; the next HELLO is refused",
+    "max_clients_per_host": "connections from one peer address; the next HELLO is refused",
+    "handshake_timeout": "seconds to send HELLO, else closed",
+    "frame_timeout": "seconds to finish a frame begun after HELLO, else dropped",
+    "write_timeout": "seconds one write to a client may stall, else dropped",
+    "control_queue": "answers waiting for a client; a full queue stops reading it (backpressure)",
+    "max_requests_per_s": "requests per client and second; more: its socket is read more slowly",
+    "max_frame": "bytes in one frame",
+    "max_soldiers_per_client": "soldiers one client may create",
+}
+
+
+def limits_help() -> str:
+    """The limits with their defaults, one per line (for ``--help``)."""
+    d = ServerConfig()
+    return "\n".join(f"  {k} = {getattr(d, k)!r}: {v}" for k, v in LIMITS.items())
+
 
 def _check_number(
     name: str, v: Any, lo: float, hi: float, *, integer: bool = False, lo_open: bool = False

@@ -112,3 +112,15 @@ def test_docker_files_match_the_cli() -> None:
             assert (args.command, args.port) == ("ping", c.port)
     compose = (repo / "docker" / "compose.yaml").read_text()
     assert '"127.0.0.1:7000:7000"' in compose
+
+
+def test_the_flow_limits_are_settings_and_listed_in_help() -> None:
+    from server.config import LIMITS, limits_help
+
+    c = config_from_mapping({"frame_timeout": 2.5, "max_clients_per_host": 4, "cache_dir": "/tmp/x"})
+    assert (c.frame_timeout, c.max_clients_per_host, c.cache_dir) == (2.5, 4, Path("/tmp/x"))
+    with pytest.raises(ConfigError, match="frame_timeout"):
+        ServerConfig(frame_timeout=0.0)
+    with pytest.raises(ConfigError, match="max_clients_per_host"):
+        ServerConfig(max_clients_per_host=0)
+    assert all(f"  {k} = " in limits_help() for k in LIMITS)

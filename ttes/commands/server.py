@@ -11,7 +11,16 @@ import sys
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("server", help="run the Jack/TTES animation server", description=__doc__)
+    from server.config import limits_help
+
+    p = sub.add_parser(
+        "server",
+        help="run the Jack/TTES animation server",
+        description=__doc__,
+        epilog="limits (config file keys; docs/PROTOCOL.md section 14 says what a peer may cost):\n"
+        + limits_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--host", help="address to bind (default 127.0.0.1; 0.0.0.0 inside a container)")
     p.add_argument("--port", type=int, help="TCP port (default 7000; 0 = any free port)")
     p.add_argument(
