@@ -4,7 +4,7 @@ server restart (reconnect with backoff). In-process servers under trio's autojum
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,7 @@ from client_stub.link.client import Client, LinkError
 from protocol.dis.synth import synthesize
 from protocol.entity import ENTITY_REQUEST_DTYPE, Appearance
 from protocol.update_table import UpdateTable
+from server.app import TtesServer
 
 
 async def until(condition: Callable[[], bool], timeout: float = 20.0) -> None:
@@ -31,6 +32,24 @@ async def until(condition: Callable[[], bool], timeout: float = 20.0) -> None:
     with trio.fail_after(timeout):
         while not condition():
             await trio.sleep(0.05)
+
+
+async def serving(nursery: trio.Nursery, port: int = 0) -> TtesServer:
+    """A server (the synthetic library) started in ``nursery``; ``port`` 0: any free one."""
+    server = make_server(report_interval=1000.0, port=port)
+    await nursery.start(server.serve)
+    return server
+
+
+def connector(nursery: trio.Nursery, port: int, timeout: float) -> Callable[[], Awaitable[Client]]:
+    """What keep_linked calls: a new client link to the server on ``port``."""
+
+    async def connect() -> Client:
+        c = Client("ttes-gateway")
+        await c.open(nursery, "127.0.0.1", port, timeout=timeout)
+        return c
+
+    return connect
 
 
 class FakeLink:
@@ -124,16 +143,10 @@ def test_a_lost_link_is_remembered_and_a_new_one_gets_the_soldiers_again() -> No
 
 
 async def test_the_sink_relinks_after_a_server_restart(autojump_clock: trio.abc.Clock) -> None:
-    first = make_server(report_interval=1000.0)
     async with trio.open_nursery() as nursery:
-        await nursery.start(first.serve)
+        first = await serving(nursery)
         port = first.addresses[0][1]
-
-        async def connect() -> Client:
-            c = Client("ttes-gateway")
-            await c.open(nursery, "127.0.0.1", port, timeout=2.0)
-            return c
-
+        connect = connector(nursery, port, 2.0)
         link = await connect()
         sink = ServerSink(link)
         sink.apply(born(range(3)))
@@ -144,8 +157,7 @@ async def test_the_sink_relinks_after_a_server_restart(autojump_clock: trio.abc.
         await trio.sleep(3.0)  # the server is away for a while: the sink keeps its soldiers' state
         sink.apply(Translation(removed=np.array([0])))
         assert sink.lost
-        second = make_server(report_interval=1000.0, port=port)
-        await nursery.start(second.serve)
+        second = await serving(nursery, port)
         await until(lambda: not sink.lost)
         await until(lambda: second.world.manager is not None and second.world.manager.count == 12)
         m = second.world.manager  # 10 start-up soldiers + the two still alive
@@ -157,16 +169,9 @@ async def test_the_sink_relinks_after_a_server_restart(autojump_clock: trio.abc.
 
 
 async def test_keep_linked_gives_up_after_its_time(autojump_clock: trio.abc.Clock) -> None:
-    server = make_server(report_interval=1000.0)
     async with trio.open_nursery() as nursery:
-        await nursery.start(server.serve)
-        port = server.addresses[0][1]
-
-        async def connect() -> Client:
-            c = Client("ttes-gateway")
-            await c.open(nursery, "127.0.0.1", port, timeout=1.0)
-            return c
-
+        server = await serving(nursery)
+        connect = connector(nursery, server.addresses[0][1], 1.0)
         sink = ServerSink(await connect())
         server.shutdown()
         await server.stopped.wait()
@@ -198,16 +203,10 @@ async def test_a_replay_goes_on_through_a_server_restart(
     autojump_clock: trio.abc.Clock, tmp_path: Path
 ) -> None:
     _, log = exercise_pcap(tmp_path)
-    first = make_server(report_interval=1000.0)
     async with trio.open_nursery() as nursery:
-        await nursery.start(first.serve)
+        first = await serving(nursery)
         port = first.addresses[0][1]
-
-        async def connect() -> Client:
-            c = Client()
-            await c.open(nursery, "127.0.0.1", port, timeout=2.0)
-            return c
-
+        connect = connector(nursery, port, 2.0)
         sink = ServerSink(await connect())
         failures: list[str] = []
         servers = [first]
@@ -217,8 +216,7 @@ async def test_a_replay_goes_on_through_a_server_restart(
             first.shutdown()
             await first.stopped.wait()
             await trio.sleep(4.0)
-            servers.append(make_server(report_interval=1000.0, port=port))
-            await nursery.start(servers[-1].serve)
+            servers.append(await serving(nursery, port))
 
         async with trio.open_nursery() as inner:
             inner.start_soon(keep_linked_or_stop, sink, connect, inner.cancel_scope, failures, 30.0)
