@@ -7,7 +7,7 @@ compare by identity (``eq=False``): compare their arrays yourself.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -17,7 +17,8 @@ from protocol.update_table import UpdateTable
 PROTOCOL_VERSION = 1
 SUPPORTED_VERSIONS = (1,)
 DEFAULT_MAX_SOLDIERS = 16384
-ROLES = ("controller", "observer")
+ROLES = ("observer", "controller", "operator")  # in order of rights: each may do what the one before may
+MAX_CLIENT_ID = 64  # characters of a HELLO client_id
 
 
 class Event:
@@ -26,12 +27,18 @@ class Event:
 
 @dataclass(frozen=True)
 class Hello(Event):
-    """Client → server, first frame: who I am and the largest frame I accept."""
+    """Client → server, first frame: who I am, the role I ask for and the largest frame I accept.
+
+    ``client_id`` names the client across connections (its soldiers are owned by it and reclaimed when it
+    reconnects; "" = anonymous: the server picks a fresh id). ``token`` is the credential of the role when
+    the server has tokens configured ("" = none). Both are optional on the wire (older clients omit them)."""
 
     name: str
     role: str = "controller"
     max_frame: int = DEFAULT_MAX_FRAME
     version: int = PROTOCOL_VERSION
+    client_id: str = ""
+    token: str = field(default="", repr=False)
 
 
 @dataclass(frozen=True)
@@ -42,6 +49,8 @@ class Accept(Event):
     max_frame: int = DEFAULT_MAX_FRAME
     max_soldiers: int = DEFAULT_MAX_SOLDIERS
     version: int = PROTOCOL_VERSION
+    client_id: str = ""  # the id the server knows this client by (the HELLO's, or a fresh anonymous one)
+    role: str = ""  # the role granted ("" from servers that grant none)
 
 
 @dataclass(frozen=True)
@@ -98,6 +107,27 @@ class Status(Event):
     soldiers: int
     update_rate: float
     text: str = ""
+
+
+@dataclass(frozen=True)
+class Settings(Event):
+    """Server → client: this connection's own settings, sent after READY and whenever one changes.
+
+    ``throttle`` (seconds, a rate cap as READY's, never below the server's) and ``report_interval`` (the
+    STATUS period in seconds) are per connection: ``set_ttes_soldier_throttle`` and
+    ``set_ttes_report_interval`` from a client change only its own."""
+
+    throttle: float
+    report_interval: float
+
+
+@dataclass(frozen=True)
+class SoldierRemoved(Event):
+    """Server → client: soldier ``index`` is gone (removed by its owner or an operator, or its owner left
+    and did not come back within the grace period); ``reason`` is free text."""
+
+    index: int
+    reason: str = ""
 
 
 @dataclass(frozen=True)

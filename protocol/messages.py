@@ -21,6 +21,7 @@ import numpy as np
 from protocol.entity import decode_entity_requests, encode_entity_requests
 from protocol.errors import ErrorCode, WireError
 from protocol.events import (
+    MAX_CLIENT_ID,
     ROLES,
     SUPPORTED_VERSIONS,
     Accept,
@@ -37,7 +38,9 @@ from protocol.events import (
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
+    Settings,
     SoldierCreated,
+    SoldierRemoved,
     Status,
     Subscribe,
     Unsubscribe,
@@ -65,12 +68,14 @@ class MessageType(IntEnum):
     JCL = 0x10
     READY = 0x11
     STATUS = 0x12
+    SETTINGS = 0x13
     CREATE_SOLDIER = 0x20
     SOLDIER_CREATED = 0x21
     REMOVE_SOLDIER = 0x22
     SUBSCRIBE = 0x23
     UNSUBSCRIBE = 0x24
     REQUEST_FULL_UPDATE = 0x25
+    SOLDIER_REMOVED = 0x26
     ENTITY_REQUESTS = 0x30
     UPDATE_TABLE = 0x31
     JOINT_UPDATES = 0x32
@@ -91,7 +96,9 @@ SERVER_SENDS = BOTH | {
     MessageType.ACCEPT,
     MessageType.READY,
     MessageType.STATUS,
+    MessageType.SETTINGS,
     MessageType.SOLDIER_CREATED,
+    MessageType.SOLDIER_REMOVED,
     MessageType.UPDATE_TABLE,
     MessageType.JOINT_UPDATES,
 }
@@ -128,6 +135,15 @@ class Body:
             raise self._type(key, v, "a string")
         if nonempty and not v:
             raise self._range(key, "must not be empty")
+        return v
+
+    def optional_str(self, key: builtins.str, max_len: builtins.int) -> builtins.str:
+        """A string field a later minor version added: "" when absent, at most ``max_len`` characters."""
+        if key not in self.raw:
+            return ""
+        v = self.str(key)
+        if len(v) > max_len:
+            raise self._range(key, f"is longer than {max_len} characters")
         return v
 
     def int(self, key: builtins.str, lo: int, hi: int, *, nullable: bool = False) -> Any:
@@ -219,7 +235,13 @@ def _dec_hello(payload: bytes, ctx: int) -> Hello:
     role = b.str("role")
     if role not in ROLES:
         raise WireError(ErrorCode.BAD_VALUE, f"role {role!r} not in {ROLES}", "HELLO")
-    return Hello(b.str("name", nonempty=True), role, b.int("max_frame", MIN_MAX_FRAME, U32), version)
+    client_id = b.optional_str("client_id", MAX_CLIENT_ID)
+    if client_id.startswith("~") or not client_id.isprintable():
+        raise WireError(
+            ErrorCode.BAD_VALUE, "field 'client_id' must be printable, not start with '~'", "HELLO"
+        )
+    name, max_frame = b.str("name", nonempty=True), b.int("max_frame", MIN_MAX_FRAME, U32)
+    return Hello(name, role, max_frame, version, client_id, b.optional_str("token", 1024))
 
 
 def _dec_accept(payload: bytes, ctx: int) -> Accept:
@@ -230,10 +252,14 @@ def _dec_accept(payload: bytes, ctx: int) -> Accept:
         b.int("max_frame", MIN_MAX_FRAME, U32),
         b.int("max_soldiers", 1, MAX_SOLDIERS_LIMIT),
         version,
+        b.optional_str("client_id", MAX_CLIENT_ID + 16),
+        b.optional_str("role", 16),
     )
 
 
-def _enc_handshake(version: int, body: dict[str, Any]) -> bytes:
+def _enc_handshake(version: int, body: dict[str, Any], optional: Mapping[str, str] | None = None) -> bytes:
+    """Prefix + body; the ``optional`` string fields go in only when not empty (older peers omit them)."""
+    body = body | {k: v for k, v in (optional or {}).items() if v}
     return HANDSHAKE_PREFIX.pack(MAGIC, version) + pack_body(body)
 
 
@@ -293,6 +319,16 @@ def _enc_status(e: Status) -> bytes:
     )
 
 
+def _dec_settings(p: bytes, n: int) -> Settings:
+    b = unpack_body(p, "SETTINGS")
+    return Settings(b.float("throttle", 0.0), b.float("report_interval", 0.0))
+
+
+def _dec_removed(p: bytes, n: int) -> SoldierRemoved:
+    b = unpack_body(p, "SOLDIER_REMOVED")
+    return SoldierRemoved(b.int("index", 0, n - 1), b.str("reason"))
+
+
 Encoder = Callable[[Any], bytes]
 Decoder = Callable[[bytes, int], Event]
 
@@ -300,13 +336,19 @@ Decoder = Callable[[bytes, int], Event]
 _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
     MessageType.HELLO: (
         Hello,
-        lambda e: _enc_handshake(e.version, {"name": e.name, "role": e.role, "max_frame": e.max_frame}),
+        lambda e: _enc_handshake(
+            e.version,
+            {"name": e.name, "role": e.role, "max_frame": e.max_frame},
+            {"client_id": e.client_id, "token": e.token},
+        ),
         _dec_hello,
     ),
     MessageType.ACCEPT: (
         Accept,
         lambda e: _enc_handshake(
-            e.version, {"name": e.name, "max_frame": e.max_frame, "max_soldiers": e.max_soldiers}
+            e.version,
+            {"name": e.name, "max_frame": e.max_frame, "max_soldiers": e.max_soldiers},
+            {"client_id": e.client_id, "role": e.role},
         ),
         _dec_accept,
     ),
@@ -333,6 +375,11 @@ _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
     MessageType.JCL: (Jcl, lambda e: pack_body({"id": e.id, "text": e.text}), _dec_jcl),
     MessageType.READY: (Ready, _enc_ready, _dec_ready),
     MessageType.STATUS: (Status, _enc_status, _dec_status),
+    MessageType.SETTINGS: (
+        Settings,
+        lambda e: pack_body({"throttle": float(e.throttle), "report_interval": float(e.report_interval)}),
+        _dec_settings,
+    ),
     MessageType.CREATE_SOLDIER: (
         CreateSoldier,
         lambda e: pack_body({"id": e.id, "figure": e.figure, "weapon": e.weapon, "index": e.index}),
@@ -352,6 +399,11 @@ _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
         Subscribe,
         lambda e: pack_body({"indices": list(e.indices)}),
         lambda p, n: Subscribe(_indices(unpack_body(p, "SUBSCRIBE"), "indices", n)),
+    ),
+    MessageType.SOLDIER_REMOVED: (
+        SoldierRemoved,
+        lambda e: pack_body({"index": e.index, "reason": e.reason}),
+        _dec_removed,
     ),
     MessageType.UNSUBSCRIBE: (
         Unsubscribe,

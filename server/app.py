@@ -28,6 +28,7 @@ its start and duration (``SoldierManager.soldier_info``), or the clips it starte
 from __future__ import annotations
 
 import errno
+import ipaddress
 import math
 import signal
 import threading
@@ -38,11 +39,12 @@ from typing import Any
 import trio
 
 from protocol.connection import State
-from server.config import ServerConfig
+from server.config import ConfigError, ServerConfig
 from server.logging import get_logger
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.startup import ServerWorld
+from server.tls import server_context
 
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
@@ -63,6 +65,7 @@ class TtesServer:
             cache_dir=config.cache_dir,
         )
         self.world.clock = self.request_time
+        self.world.owners.per_owner = config.max_soldiers_per_client
         self.world.soldiers.configure(tick_period=1.0 / config.tick_hz)  # the throttle caps a rate on it
         self._last_stamp = 0.0
         self.world.events.ready = self._on_ready
@@ -87,6 +90,8 @@ class TtesServer:
         self.stopped = trio.Event()
         self.started = False
         self._cancel: trio.CancelScope | None = None
+        self._nursery: trio.Nursery | None = None
+        self._tls = server_context(config)  # None: plain TCP
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
         self._loop_thread = threading.get_ident()
@@ -128,11 +133,11 @@ class TtesServer:
             s.conn.reset_soldiers([index])  # a reused index starts with a full update
             s.force[index] = True
 
-    def _on_removed(self, index: int) -> None:
+    def _on_removed(self, index: int, reason: str) -> None:
         if self.board_ref.board is not None:
             self.board_ref.board.remove(index)
         for s in self.sessions.values():
-            s.owned.discard(index)
+            s.soldier_removed(index, reason)
 
     def _on_report(self, caller: object | None, text: str) -> None:
         if isinstance(caller, Session):
@@ -183,11 +188,13 @@ class TtesServer:
         self._t0 = trio.current_time()
         self._loop_thread = threading.get_ident()
         self._trio_token = trio.lowlevel.current_trio_token()
+        check_exposure(self.config)
         self.start_world()
         listeners = await trio.open_tcp_listeners(self.config.port, host=self.config.host)
         self.addresses = [tuple(ln.socket.getsockname()[:2]) for ln in listeners]
         async with trio.open_nursery() as nursery:
             self._cancel = nursery.cancel_scope
+            self._nursery = nursery
             nursery.start_soon(self._tick_loop)
             nursery.start_soon(self._answer_loop)
             nursery.start_soon(self._status_loop)
@@ -229,24 +236,29 @@ class TtesServer:
                 inner.start_soon(one, ln)
 
     # -- one client --------------------------------------------------------------------------------------
-    async def _client(self, stream: trio.SocketStream) -> None:
+    async def _client(self, socket: trio.SocketStream) -> None:
         try:
-            host, port = stream.socket.getpeername()[:2]
+            host, port = socket.socket.getpeername()[:2]
             peer = f"{host}:{port}"
         except OSError:
             peer = "?"
         self.clients_total += 1
         session = Session(self.world, self.board_ref, self.config, peer)
         session.offload_jcl = True
+        session.local = _is_loopback(socket)
         session.full = len(self.sessions) >= self.config.max_clients
         same_host = (
             sum(s.peer.rpartition(":")[0] == host for s in self.sessions.values()) if peer != "?" else 0
         )
         session.crowded = same_host if same_host >= self.config.max_clients_per_host else 0
         self.sessions[session.id] = session
+        stream: trio.abc.Stream = (
+            socket if self._tls is None else trio.SSLStream(socket, self._tls, server_side=True)
+        )
         try:
             async with trio.open_nursery() as n:
                 n.start_soon(self._writer, session, stream, n.cancel_scope)
+                n.start_soon(self._status_task, session)
                 await self._reader(session, stream)
                 session.drop(session.drop_reason or "closed")
                 with trio.move_on_after(FLUSH_ON_CLOSE_S):
@@ -256,6 +268,7 @@ class TtesServer:
                 n.cancel_scope.cancel()
         finally:
             self.sessions.pop(session.id, None)
+            self._left(session)
             with trio.CancelScope(shield=True):
                 await trio.aclose_forcefully(stream)
             if session.dropped:
@@ -269,7 +282,7 @@ class TtesServer:
                 bytes_out=session.bytes_out,
             )
 
-    async def _reader(self, session: Session, stream: trio.SocketStream) -> None:
+    async def _reader(self, session: Session, stream: trio.abc.Stream) -> None:
         with trio.move_on_after(self.config.handshake_timeout):
             while session.conn.state is State.HANDSHAKE and not session.closing:
                 data = await _receive(stream)
@@ -314,15 +327,19 @@ class TtesServer:
             else:
                 return
 
-    async def _writer(self, session: Session, stream: trio.SocketStream, scope: trio.CancelScope) -> None:
+    async def _writer(self, session: Session, stream: trio.abc.Stream, scope: trio.CancelScope) -> None:
         """Write control bytes and the latest poses whenever woken; exits (cancelling the session) when the
         session is closing and flushed, the peer is gone, or one write stalls for ``write_timeout``."""
         timeout = self.config.write_timeout
         try:
             while True:
-                await session.wake.wait()
+                if session.retry_at is None:
+                    await session.wake.wait()
+                else:  # updates held back by the connection's own throttle: write them when due
+                    with trio.move_on_at(self._t0 + session.retry_at):
+                        await session.wake.wait()
                 session.wake = trio.Event()
-                data = session.take_output()
+                data = session.take_output(self.now())
                 session.drained.set()
                 if data:
                     with trio.move_on_after(timeout) as cs:
@@ -411,12 +428,65 @@ class TtesServer:
                 if s.tables_sent:
                     s.notify()
 
+    # -- owners that left ----------------------------------------------------------------------------------
+    def _left(self, session: Session) -> None:
+        """A session ended: when it was its client id's last, that id's soldiers wait ``orphan_grace``."""
+        if not session.joined:
+            return
+        session.joined = False
+        deadline = self.world.owners.leave(session.client_id, self.now(), self.config.orphan_grace)
+        if deadline is not None and self._nursery is not None and not self._shutdown.is_set():
+            log.info("owner_gone", client_id=session.client_id, grace=self.config.orphan_grace)
+            self._nursery.start_soon(self._expire_orphans, deadline)
+
+    async def _expire_orphans(self, deadline: float) -> None:
+        await trio.sleep_until(self._t0 + deadline)
+        self.remove_orphans()
+
+    def remove_orphans(self) -> None:
+        """Remove the soldiers of every client id whose grace is over (others get SOLDIER_REMOVED)."""
+        owners = self.world.owners
+        for cid in owners.expired(self.now()):
+            gone = owners.soldiers_of(cid)
+            for i in gone:
+                self.world.remove_soldier(i, f"owner {cid} gone for {self.config.orphan_grace:g} s")
+            log.info("orphans_removed", client_id=cid, soldiers=len(gone))
+
+    # -- status ------------------------------------------------------------------------------------------
     async def _status_loop(self) -> None:
         while True:
             await trio.sleep(self.world.report_interval)
             self.report_status()
 
+    async def _status_task(self, session: Session) -> None:
+        """STATUS to one client every its own report interval; a new interval takes effect at once."""
+        session.status_window = (self.now(), self._published_ticks)
+        while True:
+            changed = session.settings_changed
+            with trio.move_on_after(session.own_report_interval()):
+                await changed.wait()
+            if changed.is_set():
+                session.settings_changed = trio.Event()
+                continue
+            now, soldiers, text = self.status_text()
+            t_prev, n_prev = session.status_window
+            rate = (self._published_ticks - n_prev) / (now - t_prev) if now > t_prev else 0.0
+            session.status_window = (now, self._published_ticks)
+            session.status(now, soldiers, rate, text.format(rate=rate))
+
+    def status_text(self) -> tuple[float, int, str]:
+        """(now, soldiers, STATUS text with a ``{rate:.1f}`` field left to fill)."""
+        m = self.world.manager
+        st = m.status() if m is not None else {}
+        soldiers = int(st.get("soldiers", 0))
+        text = (
+            f"{soldiers} soldiers, {len(self.sessions)} clients, {{rate:.1f}} Hz, "
+            f"tick {st.get('mean_tick_us', 0.0):.0f} us mean"
+        )
+        return self.now(), soldiers, text
+
     def report_status(self) -> None:
+        """The server's own status line in the log, every server report interval."""
         now = self.now()
         t_prev, n_prev = self._batches_window
         rate = (self._published_ticks - n_prev) / (now - t_prev) if now > t_prev else 0.0
@@ -424,10 +494,6 @@ class TtesServer:
         m = self.world.manager
         st = m.status() if m is not None else {}
         soldiers = int(st.get("soldiers", 0))
-        text = (
-            f"{soldiers} soldiers, {len(self.sessions)} clients, {rate:.1f} Hz, "
-            f"tick {st.get('mean_tick_us', 0.0):.0f} us mean"
-        )
         log.info(
             "status",
             time=round(now, 3),
@@ -439,13 +505,41 @@ class TtesServer:
             mean_tick_us=round(st.get("mean_tick_us", 0.0), 1),
             modes=st.get("modes", {}),
         )
-        for s in self.sessions.values():
-            s.status(now, soldiers, rate, text)
 
 
-async def _linger(stream: trio.SocketStream, limit: int = 1 << 20) -> None:
+def check_exposure(config: ServerConfig) -> None:
+    """ConfigError when the server would listen beyond loopback with no role tokens: anyone on the network
+    could then claim any role."""
+    if config.tokens:
+        return
+    host = config.host
+    try:
+        loopback = host == "localhost" or ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a host name other than localhost
+        loopback = False
+    if not loopback:
+        raise ConfigError(
+            f"{host!r} is not a loopback address and no role tokens are configured (observer_token, "
+            "controller_token, operator_token): set them, or listen on 127.0.0.1",
+            "host",
+        )
+
+
+def _is_loopback(stream: trio.SocketStream) -> bool:
+    try:
+        ip = ipaddress.ip_address(stream.socket.getpeername()[0].split("%")[0])
+        if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+            return ip.ipv4_mapped.is_loopback
+        return ip.is_loopback
+    except (OSError, ValueError, IndexError):
+        return False
+
+
+async def _linger(stream: trio.abc.Stream, limit: int = 1 << 20) -> None:
     """After a fatal error: half-close and discard what the peer still sends, so closing the socket does not
     reset the connection (and destroy our ERROR frame) while unread bytes wait in the receive buffer."""
+    if not isinstance(stream, trio.abc.HalfCloseableStream):  # TLS: no half-close; just close
+        return
     try:
         await stream.send_eof()
         got = 0
@@ -458,7 +552,7 @@ async def _linger(stream: trio.SocketStream, limit: int = 1 << 20) -> None:
         return
 
 
-async def _receive(stream: trio.SocketStream) -> bytes:
+async def _receive(stream: trio.abc.Stream) -> bytes:
     try:
         return bytes(await stream.receive_some(65536))
     except (trio.BrokenResourceError, trio.ClosedResourceError):

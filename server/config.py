@@ -48,9 +48,7 @@ class ServerConfig:
     max_frame: int = 1 << 20  # largest frame we accept (announced in ACCEPT)
     max_requests_per_s: float = 1e6  # entity rows + other messages per client and second; more: slower reads
     handshake_timeout: float = 10.0  # a connection that sends no HELLO in time is closed
-    frame_timeout: float = (
-        10.0  # a frame begun after HELLO must be complete within this, or the client is closed
-    )
+    frame_timeout: float = 10.0  # a frame begun after HELLO must be whole this soon, else the client goes
     max_clients_per_host: int = 128  # connections from one peer address (it never holds every slot)
     write_timeout: float = 30.0  # a client that takes no bytes for this long is dropped
     control_queue: int = 256  # control messages waiting for one client; a full queue stops reading its socket
@@ -58,9 +56,24 @@ class ServerConfig:
     json_logs: bool = False
     record_clips: bool = False  # keep every soldier's clip starts (debug; report_ttes_clips)
     cache_dir: Path | None = None  # channelset .npz caches (None: $TTES_CACHE_DIR or the XDG cache dir)
+    orphan_grace: float = 12.0  # seconds a gone client's soldiers wait for it to reconnect (the DIS timeout)
+    min_report_interval: float = 0.1  # the shortest STATUS period a client may ask for
+    # a credential per role (HELLO token); any set: roles come only from tokens. Never logged or printed.
+    observer_token: str = field(default="", repr=False)
+    controller_token: str = field(default="", repr=False)
+    operator_token: str = field(default="", repr=False)
+    tls_cert: str = ""  # PEM certificate (chain) file: serve TLS (server.tls); "" = plain TCP
+    tls_key: str = ""  # its PEM private key file ("" = in tls_cert)
 
     def __post_init__(self) -> None:
         validate(self)
+
+    @property
+    def tokens(self) -> dict[str, str]:
+        """The configured tokens by role (only those set)."""
+        given = {"observer": self.observer_token, "controller": self.controller_token}
+        given["operator"] = self.operator_token
+        return {role: t for role, t in given.items() if t}
 
     def with_overrides(self, **changes: Any) -> ServerConfig:
         """A copy with the given fields replaced (``None`` values are ignored: flag not given)."""
@@ -83,7 +96,9 @@ LIMITS = {
     "control_queue": "answers waiting for a client; a full queue stops reading it (backpressure)",
     "max_requests_per_s": "requests per client and second; more: its socket is read more slowly",
     "max_frame": "bytes in one frame",
-    "max_soldiers_per_client": "soldiers one client may create",
+    "max_soldiers_per_client": "soldiers one client id may own",
+    "min_report_interval": "the shortest STATUS period a client may ask for",
+    "orphan_grace": "seconds a gone client's soldiers wait for it to come back",
 }
 
 
@@ -133,6 +148,17 @@ def validate(c: ServerConfig) -> None:
     _check_number("control_queue", c.control_queue, 8, 1_000_000, integer=True)
     if not isinstance(c.name, str) or not c.name:
         raise ConfigError("must be a non-empty string", "name")
+    _check_number("orphan_grace", c.orphan_grace, 0.0, 86400.0)
+    _check_number("min_report_interval", c.min_report_interval, 0.0, 3600.0, lo_open=True)
+    for role in ("observer", "controller", "operator"):
+        token = getattr(c, f"{role}_token")
+        if not isinstance(token, str) or (token and len(token) < 8):
+            raise ConfigError("must be a string of at least 8 characters (or empty: none)", f"{role}_token")
+    for key in ("tls_cert", "tls_key"):
+        if not isinstance(getattr(c, key), str):
+            raise ConfigError("must be a path string", key)
+    if c.tls_key and not c.tls_cert:
+        raise ConfigError("a key without tls_cert", "tls_key")
     for flag in ("json_logs", "record_clips"):
         if not isinstance(getattr(c, flag), bool):
             raise ConfigError("must be true or false", flag)

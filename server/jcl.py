@@ -195,6 +195,10 @@ class JclInterpreter:
     ) -> None:
         self._commands[name] = JclCommand(name, func, types, optional, variadic)
 
+    def command(self, name: str) -> Callable[..., object]:
+        """The function registered as ``name`` (to wrap it)."""
+        return self._commands[name].func
+
     def register_file_handler(self, suffix: str, handler: Callable[[Path], object]) -> None:
         """``read_file`` dispatches on the file suffix (``.env``, ``.graph``, ...); ``.jcl`` runs nested."""
         self._file_handlers[suffix] = handler

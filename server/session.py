@@ -26,6 +26,7 @@ here so it can be tested without sockets.
 
 from __future__ import annotations
 
+import hmac
 import math
 from collections import deque
 from typing import TYPE_CHECKING
@@ -36,6 +37,7 @@ import trio
 from protocol.connection import NEED_DATA, PAUSED, SERVER, Connection, State
 from protocol.errors import ErrorCode, LocalProtocolError
 from protocol.events import (
+    ROLES,
     Accept,
     ConnectionClosed,
     CreateSoldier,
@@ -51,7 +53,9 @@ from protocol.events import (
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
+    Settings,
     SoldierCreated,
+    SoldierRemoved,
     Status,
     Subscribe,
     Unsubscribe,
@@ -84,7 +88,16 @@ class Session:
         self.peer = peer
         self.conn = Connection(SERVER, max_frame=config.max_frame, max_soldiers=config.max_soldiers)
         self.name = ""
-        self.role = ""
+        self.role = ""  # granted at HELLO (server.world.access, server.world.owners say what it allows)
+        self.client_id = ""  # the HELLO's client_id, or a fresh anonymous one: owns this client's soldiers
+        self.local = True  # the peer is on this host (with no tokens configured, only local peers may join)
+        self.joined = False  # counted in world.owners.connected (left again when the session ends)
+        self.throttle: float | None = None  # this connection's own rate cap (None: the server's)
+        self.report_interval: float | None = None  # this connection's STATUS period (None: the server's)
+        self.settings_changed = trio.Event()  # set when report_interval changes: the status task restarts
+        self.last_updates_at = -math.inf  # server time of the last joint updates written (own throttle)
+        self.retry_at: float | None = None  # updates held back by the own throttle: write them then
+        self.status_window = (0.0, 0)  # (time, published ticks) at the last STATUS: its update_rate
         self.control: deque[bytes] = deque()
         self.wake = trio.Event()
         self.closing = False  # no more reading; the writer flushes the control queue and closes
@@ -92,7 +105,6 @@ class Session:
         self.ready_sent = False
         self.flushed_serial = 0  # the board publish this client's last write covered
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
-        self.owned: set[int] = set()  # soldiers this client created (max_soldiers_per_client)
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
         self.cost = 0.0  # request tokens used since the last charge
@@ -148,13 +160,38 @@ class Session:
         self.wake.set()
         self.drained.set()  # a reader waiting for the writer stops waiting
 
-    def take_output(self) -> bytes:
-        """Everything to write now: queued control bytes, then the latest joint updates (latest-wins)."""
+    def take_output(self, now: float | None = None) -> bytes:
+        """Everything to write now: queued control bytes, then the latest joint updates (latest-wins), held
+        back while this connection's own throttle says so (``retry_at``: when they are due; ``now`` None:
+        never held)."""
         out = b"".join(self.control)
         self.control.clear()
+        self.retry_at = None
         if self.closing or self.conn.state is not State.OPEN or not self.tables_sent:
             return out
-        return out + self._joint_updates()
+        if now is not None:
+            due = self.last_updates_at + self.own_throttle() - 0.5 / self.config.tick_hz
+            if now < due - 1e-9:
+                # the tick at which they are due wakes the writer; this is for when no tick publishes:
+                # a quarter period after it, so a retry never writes ahead of that tick's poses
+                self.retry_at = due + 0.75 / self.config.tick_hz
+                return out
+        data = self._joint_updates()
+        if data and now is not None:
+            self.last_updates_at = now
+        return out + data
+
+    def own_throttle(self) -> float:
+        """This connection's rate cap: its own, never below the server's (a client only lowers its rate)."""
+        server = self.world.settings.throttle
+        return server if self.throttle is None else max(self.throttle, server)
+
+    def own_report_interval(self) -> float:
+        return self.world.report_interval if self.report_interval is None else self.report_interval
+
+    def may_see(self, indices: np.ndarray) -> np.ndarray:
+        """The soldiers of ``indices`` whose updates this client may receive (``Owners.visible``)."""
+        return self.world.owners.visible(indices, self.client_id, self.role)
 
     def _joint_updates(self) -> bytes:
         """The subscribed soldiers whose codes changed since the last write (or that are owed a full update),
@@ -167,7 +204,7 @@ class Session:
         self.flushed_serial = board.serial
         if len(sub) == 0:
             return b""
-        sub = sub[sub < board.capacity]
+        sub = self.may_see(sub[sub < board.capacity])
         due = board.valid[sub] & ((board.version[sub] > since) | self.force[sub])
         idx = sub[due]
         if len(idx) == 0:
@@ -262,8 +299,7 @@ class Session:
         elif isinstance(ev, RemoveSoldier):
             self._remove(ev)
         elif isinstance(ev, Subscribe):
-            self.force[np.asarray(ev.indices, np.int64)] = True
-            self.notify()
+            self._subscribe(np.asarray(ev.indices, np.int64))
         elif isinstance(ev, RequestFullUpdate):
             idx = np.asarray(ev.indices, np.int64) if ev.indices else self.conn.subscribed
             self.force[idx] = True
@@ -274,22 +310,56 @@ class Session:
             self._requests(ev)
 
     def _hello(self, ev: Hello) -> None:
-        self.name, self.role = ev.name, ev.role
-        refusal = ""
-        if self.full:
-            refusal = f"server full ({self.config.max_clients} clients)"
-        elif self.crowded:
-            host = self.peer.rpartition(":")[0]
-            refusal = f"too many connections: {self.crowded} connections from {host} (max_clients_per_host)"
-        if refusal:
-            self.send(Error(int(ErrorCode.NOT_PERMITTED), refusal))
-            self.goodbye(refusal.partition(" (")[0])
+        self.name = ev.name
+        refused = self._refusal(ev)
+        if refused:
+            self.send(Error(int(ErrorCode.NOT_PERMITTED), refused))
+            self.goodbye(refused.partition(" (")[0])
             self.dropped = True
+            log.info("client_refused", session=self.id, peer=self.peer, name=ev.name, reason=refused)
             return
-        self.send(Accept(self.config.name, self.config.max_frame, self.config.max_soldiers))
-        log.info("client_accepted", session=self.id, peer=self.peer, name=ev.name, role=ev.role)
+        self.role = ev.role
+        self.client_id = ev.client_id or f"~anon-{self.id}"
+        reclaimed = self.world.owners.join(self.client_id)
+        self.joined = True
+        c = self.config
+        self.send(Accept(c.name, c.max_frame, c.max_soldiers, client_id=self.client_id, role=self.role))
+        log.info(
+            "client_accepted",
+            session=self.id,
+            peer=self.peer,
+            name=ev.name,
+            role=self.role,
+            client_id=self.client_id,
+            reclaimed=len(reclaimed),
+        )
         if self.world.ready:
             self.send_ready()
+
+    def _refusal(self, ev: Hello) -> str:
+        """Why this HELLO is refused ("" = accepted): the server is full, the peer's address holds its share
+        of the slots (``max_clients_per_host``), or the role is not granted."""
+        if self.full:
+            return f"server full ({self.config.max_clients} clients)"
+        if self.crowded:
+            host = self.peer.rpartition(":")[0]
+            return f"too many connections: {self.crowded} connections from {host} (max_clients_per_host)"
+        return self._grant(ev)
+
+    def _grant(self, ev: Hello) -> str:
+        """Why the role asked for is refused ("" = granted). With tokens configured a role comes only from a
+        token (its own or a higher role's); with none, any local client may claim any role."""
+        tokens = self.config.tokens
+        if not tokens:
+            return (
+                "" if self.local else "this server grants roles to local clients only (no tokens configured)"
+            )
+        held = [
+            ROLES.index(r) for r, t in tokens.items() if hmac.compare_digest(ev.token.encode(), t.encode())
+        ]
+        if max(held, default=-1) >= ROLES.index(ev.role):
+            return ""
+        return f"the {ev.role} role needs its token (or a higher role's)"
 
     def send_tables(self) -> None:
         if not self.tables_sent and self.conn.state is State.OPEN:
@@ -306,12 +376,41 @@ class Session:
         m = self.world.manager
         soldiers: tuple[tuple[int, int], ...] = ()
         if m is not None:
-            live = m.table.live
+            live = self.may_see(m.table.live)
             fset = m.table.fset[live]
             ids = np.array([s.table.table_id for s in self.world.sets], np.int64)[fset]
             soldiers = tuple(zip(live.tolist(), ids.tolist(), strict=True))
         self.send(Ready(soldiers, self.config.tick_hz, self.world.settings.throttle))
         self.ready_sent = True
+        self.send_settings()
+
+    # -- this connection's settings (JCL set_ttes_soldier_throttle / set_ttes_report_interval) ---------------
+    def send_settings(self) -> None:
+        if self.conn.state is State.OPEN and self.ready_sent:
+            self.send(Settings(self.own_throttle(), self.own_report_interval()))
+
+    def set_throttle(self, seconds: float) -> None:
+        """This connection's rate cap, at once; below the server's it is the server's (a client may only
+        lower its own rate). ValueError for a value out of 0 … 60 s."""
+        if not (math.isfinite(seconds) and 0.0 <= seconds <= 60.0):
+            raise ValueError(f"throttle {seconds} is not in 0 … 60 s")
+        self.throttle = float(seconds)
+        self.send_settings()
+        self.notify()
+
+    def set_report_interval(self, seconds: float) -> None:
+        """This connection's STATUS period, at once; ValueError below the server's floor."""
+        floor = self.config.min_report_interval
+        if not (math.isfinite(seconds) and floor <= seconds <= 86400.0):
+            raise ValueError(f"report interval {seconds} is not in {floor:g} … 86400 s")
+        self.report_interval = float(seconds)
+        self.settings_changed.set()
+        self.send_settings()
+
+    def soldier_removed(self, index: int, reason: str) -> None:
+        """Tell this client a soldier it could see is gone."""
+        if self.conn.state is State.OPEN and self.ready_sent and len(self.may_see(np.array([index]))):
+            self.send(SoldierRemoved(index, reason))
 
     def _permitted(self, ref: int | None, what: str) -> bool:
         if self.role == "observer":
@@ -325,9 +424,21 @@ class Session:
             return False
         return True
 
+    def _subscribe(self, indices: np.ndarray) -> None:
+        hidden = np.setdiff1d(indices, self.may_see(indices))
+        if len(hidden):  # the connection keeps them subscribed, but updates are filtered by may_see
+            self.send(
+                Error(
+                    int(ErrorCode.NOT_PERMITTED),
+                    f"soldier {int(hidden[0])} belongs to another client"
+                    + (f" ({len(hidden)} soldiers)" if len(hidden) > 1 else "")
+                    + ": a controller sees its own and the shared soldiers only",
+                )
+            )
+        self.force[indices] = True
+        self.notify()
+
     def _jcl(self, ev: Jcl) -> None:
-        if not self._permitted(ev.id, "JCL"):
-            return
         if self.offload_jcl:  # the reader runs it off the tick (TtesServer.run_jcl) before reading on
             self.pending_jcl = ev
             return
@@ -354,11 +465,10 @@ class Session:
         code, msg = self._create_error(ev)
         if code is None:
             try:
-                i = self.world.create_soldier(ev.figure, ev.weapon, ev.index)
+                i = self.world.create_soldier(ev.figure, ev.weapon, ev.index, owner=self.client_id)
             except (ValueError, KeyError) as exc:
                 code, msg = ErrorCode.NO_FREE_SOLDIER, str(exc)
             else:
-                self.owned.add(i)
                 self.send(SoldierCreated(ev.id, i, self.world.table_of(i)))
                 log.info("soldier_created", session=self.id, index=i, figure=ev.figure, weapon=ev.weapon)
                 return
@@ -368,11 +478,10 @@ class Session:
         m = self.world.manager
         assert m is not None
         lib = m.library
-        if len(self.owned) >= self.config.max_soldiers_per_client:
-            return (
-                ErrorCode.NO_FREE_SOLDIER,
-                f"this client may create {self.config.max_soldiers_per_client} soldiers",
-            )
+        try:
+            self.world.owners.check_cap(self.client_id)
+        except ValueError as exc:
+            return ErrorCode.NO_FREE_SOLDIER, str(exc)
         fig = ev.figure.rsplit("/", 1)[-1]
         wpn = ev.weapon.rsplit("/", 1)[-1]
         if not any(f == fig for f, _ in lib.set_keys):
@@ -392,8 +501,14 @@ class Session:
     def _remove(self, ev: RemoveSoldier) -> None:
         if not (self._permitted(None, "REMOVE_SOLDIER") and self._is_ready(None, "REMOVE_SOLDIER")):
             return
+        live = self.world.manager is not None and self.world.manager.table.is_live(ev.index)
+        if live and not self.world.owners.may_remove(ev.index, self.client_id, self.role):
+            self.send(
+                Error(int(ErrorCode.NOT_PERMITTED), f"soldier {ev.index} is not this client's to remove")
+            )
+            return
         try:
-            self.world.remove_soldier(ev.index)
+            self.world.remove_soldier(ev.index, f"removed by {self.client_id}")
         except KeyError:
             self.send(Error(int(ErrorCode.UNKNOWN_SOLDIER), f"no soldier {ev.index}"))
             return
@@ -404,14 +519,18 @@ class Session:
             return
         m = self.world.manager
         assert m is not None
-        status = m.apply_requests(ev.rows, self.world.clock())
-        bad = np.flatnonzero(status == REQUEST_BAD_VALUE)
+        kept = self._own_rows(ev.rows)  # row numbers of the batch, for the errors
+        if not len(kept):
+            return
+        rows = ev.rows if len(kept) == len(ev.rows) else ev.rows[kept]
+        status = m.apply_requests(rows, self.world.clock())
+        bad = kept[status == REQUEST_BAD_VALUE]
         if len(bad):
             self.fatal(
                 ErrorCode.BAD_VALUE, f"entity requests row {int(bad[0])}: speed above the server's limit"
             )
             return
-        unknown = np.flatnonzero(status == REQUEST_UNKNOWN_SOLDIER)
+        unknown = kept[status == REQUEST_UNKNOWN_SOLDIER]
         if len(unknown):
             row = int(unknown[0])
             self.send(
@@ -421,6 +540,22 @@ class Session:
                     + (f" ({len(unknown)} rows)" if len(unknown) > 1 else ""),
                 )
             )
+
+    def _own_rows(self, rows: np.ndarray) -> np.ndarray:
+        """The row numbers of the requests for soldiers this client may drive; the others are refused with
+        one ERROR."""
+        ok = self.world.owners.drivable(rows["index"], self.client_id, self.role)
+        if ok.all():
+            return np.arange(len(rows))
+        bad = np.flatnonzero(~ok)
+        self.send(
+            Error(
+                int(ErrorCode.NOT_PERMITTED),
+                f"entity requests row {int(bad[0])}: soldier {int(rows['index'][bad[0]])} belongs to another "
+                "client" + (f" ({len(bad)} rows)" if len(bad) > 1 else ""),
+            )
+        )
+        return np.flatnonzero(ok)
 
     # -- server → client ---------------------------------------------------------------------------------
     def status(self, now: float, soldiers: int, update_rate: float, text: str) -> None:

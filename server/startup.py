@@ -37,8 +37,10 @@ from server.motion.posture_change import LoadedPostureGraph
 from server.soldier.library import MotionLibrary
 from server.soldier.manager import SoldierManager
 from server.soldier.settings import SoldierSettings
+from server.world.access import caller_of
 from server.world.commands import JclCommands
 from server.world.library import build_library
+from server.world.owners import Owners
 from server.world.soldiers import FigureSet, Soldiers
 from server.world.store import MotionStore
 from server.world.synthetic import SyntheticDataDir, write_synthetic_data_dir
@@ -56,7 +58,7 @@ class WorldEvents:
 
     ready: Callable[[object | None], None] = lambda caller: None
     soldier_created: Callable[[int], None] = lambda index: None
-    soldier_removed: Callable[[int], None] = lambda index: None
+    soldier_removed: Callable[[int, str], None] = lambda index, reason: None
     report: Callable[[object | None, str], None] = lambda caller, text: None
 
 
@@ -68,6 +70,7 @@ class ServerWorld:
         data_dir: str | Path,
         *,
         max_soldiers: int = DEFAULT_MAX_SOLDIERS,
+        max_soldiers_per_client: int = 4096,
         clock: Callable[[], float] = lambda: 0.0,
         record_clips: bool = False,
         library: MotionLibrary | None = None,
@@ -79,6 +82,8 @@ class ServerWorld:
         self.jcl = JclInterpreter(self.data_dir, SEARCH_SUBDIRS)
         self.store = MotionStore(cache_dir=Path(cache_dir) if cache_dir is not None else None)
         self.soldiers = Soldiers(max_soldiers, SoldierSettings(record_clips=record_clips))
+        self.owners = Owners(max_soldiers, max_soldiers_per_client)
+        self.startup_script: Path | None = None  # the script run_startup ran
         self.commands = JclCommands(self)
         self.commands.register(self.jcl)
         self.ready = False
@@ -106,6 +111,11 @@ class ServerWorld:
         if not path.is_file():
             raise JclError(f"start-up script {script!r} not found in {self.data_dir} (or its search path)")
         self.run_jcl(f"read_file({json.dumps(script)});", None, "<startup>")
+        self.startup_script = path
+
+    def is_startup_script(self, name: str) -> bool:
+        """Whether ``name`` is the start-up script the server has already run."""
+        return self.startup_script is not None and self.jcl.resolve_path(name) == self.startup_script
 
     # -- the core operations the JCL commands and the sessions share --------------------------------------
     def ensure_library(self, wanted: tuple[Figure, Figure | None] | None = None) -> MotionLibrary:
@@ -116,11 +126,19 @@ class ServerWorld:
         return self.soldiers.library
 
     def create_soldier(
-        self, figure: str, weapon: str, index: int | None = None, name: str | None = None
+        self,
+        figure: str,
+        weapon: str,
+        index: int | None = None,
+        name: str | None = None,
+        owner: str | None = None,
     ) -> int:
-        """A new soldier of figure/weapon *types* (``"DI.fig"``, ``"AK_47.fig"``); ValueError/KeyError."""
+        """A new soldier of figure/weapon *types* (``"DI.fig"``, ``"AK_47.fig"``) owned by client ``owner``
+        (None: shared); ValueError (the owner's cap, no free index)/KeyError."""
+        self.owners.check_cap(owner)
         self.ensure_library()
         i = self.soldiers.create(figure, weapon, index, name, self.clock())
+        self.owners.add(i, owner)
         self.events.soldier_created(i)
         return i
 
@@ -136,13 +154,18 @@ class ServerWorld:
                 return  # the start-up script run again
             raise JclError(f"create_soldier_state: soldier {name!r} exists with figures {have}")
         self.ensure_library((fig, gun))
-        i = self.create_soldier(ftype, wtype, None, name)
+        who = caller_of(
+            self.caller
+        )  # an operator's are shared, as the start-up script's; a controller's its own
+        owner = who.client_id if who is not None and who.role != "operator" else None
+        i = self.create_soldier(ftype, wtype, None, name, owner)
         self.soldiers.figures_of[name] = (figure, weapon) if weapon else (figure,)
         log.info("soldier_state_created", soldier=name, index=i, figure=figure, weapon=weapon)
 
-    def remove_soldier(self, index: int) -> None:
+    def remove_soldier(self, index: int, reason: str = "removed") -> None:
         self.soldiers.remove(index)
-        self.events.soldier_removed(index)
+        self.events.soldier_removed(index, reason)  # before the owner is forgotten: who could see it
+        self.owners.discard(index)
 
     def start(self) -> None:
         """``start_ttes_socket_simulation()``: the "I'm ready!" message (READY) — the library must exist."""
@@ -162,7 +185,9 @@ class ServerWorld:
         self.report_interval = float(seconds)
 
     def soldier_report(self, names: Sequence[str] = ()) -> dict[str, Any]:
-        return self.soldiers.report(self.clock, self.ready, names)
+        return self.soldiers.report(
+            self.clock, self.ready, [self.soldiers.index_of(n) for n in names] or None
+        )
 
     # -- views of the parts (what the trio layer and the tests read) -------------------------------------
     @property

@@ -34,7 +34,7 @@ async def test_ticks_keep_coming_while_a_slow_load_runs(
 
     monkeypatch.setattr(store_module, "load_posture_graph", slow_load)
     async with running_server(report_interval=1000.0) as server:
-        c = await Client.open(port_of(server), "loader")
+        c = await Client.open(port_of(server), "loader", role="operator")
         await c.expect(Ready)
         await c.jcl('load_posture_graph("soldier_low.graph", "slow"); report_ttes_status("s0");')
         before = server.ticks

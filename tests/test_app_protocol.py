@@ -187,6 +187,11 @@ async def test_not_ready_until_a_client_starts_the_simulation(autojump_clock: tr
         e = await c.expect(Error)
         assert (e.code, e.ref) == (ErrorCode.NOT_READY, 1)
         # the 1994 way: the client sends the start-up script; READY follows start_ttes_socket_simulation()
+        # loading data changes the world: an operator's (issue 17), not a controller's
+        await c.jcl('read_file("jack-ttes-soldier_low.jcl");', 2)
+        e = await c.expect(Error)
+        assert (e.code, e.ref) == (ErrorCode.JCL_ERROR, 2) and "needs the operator role" in e.message
+        c = await Client.open(port_of(server), role="operator")
         await c.jcl('read_file("jack-ttes-soldier_low.jcl");', 2)
         await c.expect(UpdateTableMsg)
         ready = await c.expect(Ready)

@@ -248,3 +248,16 @@ def test_ramp_grows_until_its_bound(server) -> None:
     assert all(s["passed"] for s in r["stages"]) and r["largest_sustained_soldiers"] == 8
     assert not any(s["latency_checked"] for s in r["stages"])  # the moving mix has no probes
     assert r["first_failed_soldiers"] is None and r["series"]["soldiers"] == [4.0, 8.0]
+
+
+def test_subscribe_all_sees_every_connections_soldiers(server) -> None:
+    """Issue 17: a controller sees only its client's soldiers, so the load tester's connections are one
+    client (one client id): each connection still gets every soldier's updates."""
+    from client_stub.loadtest.session import LoadTestConfig, run_loadtest
+
+    cfg = LoadTestConfig(
+        soldiers=8, clients=2, seconds=1.0, warmup_s=0.5, host=server.host, port=server.port,
+        mix="moving", subscribe_all=True,
+    )  # fmt: skip
+    r = run_loadtest(cfg)
+    assert r["delivered_pct"] >= 95.0, r["delivered_pct"]

@@ -15,6 +15,7 @@ from protocol.connection import CLIENT, NEED_DATA, PAUSED, SERVER, Connection, S
 from protocol.entity import ENTITY_REQUEST_DTYPE, make_entity_requests
 from protocol.errors import ErrorCode, LocalProtocolError, WireError
 from protocol.events import (
+    ROLES,
     Accept,
     ConnectionClosed,
     CreateSoldier,
@@ -31,14 +32,16 @@ from protocol.events import (
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
+    Settings,
     SoldierCreated,
+    SoldierRemoved,
     Status,
     Subscribe,
     Unsubscribe,
     UpdateTableMsg,
 )
 from protocol.framing import HANDSHAKE_MAX_FRAME, encode_frame
-from protocol.messages import CODECS, MAGIC, MessageType
+from protocol.messages import CODECS, HANDSHAKE_PREFIX, MAGIC, MessageType
 from protocol.update_table import DofRange, FigureEntry, JointEntry, UpdateTable, example_di_table
 
 MAX_SOLDIERS = 64
@@ -243,6 +246,35 @@ def test_handshake_round_trip(name: str, role: str, max_frame: int) -> None:
     assert server.next_event() is PAUSED  # the server answers before reading on
     assert deliver(client, server.send(Accept("jack", 4096, 10))) == [Accept("jack", 4096, 10)]
     assert client.max_soldiers == 10 and client.peer_max_frame == 4096
+
+
+@given(st.sampled_from(["", "stub-1", "x" * 64]), st.sampled_from(["", "tok"]), st.sampled_from(ROLES))
+def test_handshake_identity_round_trip(client_id: str, token: str, role: str) -> None:
+    """Issue 17: HELLO's optional client_id and token, ACCEPT's granted id and role."""
+    client, server = Connection(CLIENT), Connection(SERVER)
+    hello = Hello("ig", role, client_id=client_id, token=token)
+    assert deliver(server, client.send(hello)) == [hello]
+    accept = Accept("jack", client_id=client_id or "~anon-1", role=role)
+    assert deliver(client, server.send(accept)) == [accept]
+
+
+def test_hello_without_the_identity_fields_is_anonymous_and_bad_ids_are_refused() -> None:
+    old = HANDSHAKE_PREFIX.pack(MAGIC, 1) + msgpack.packb(
+        {"name": "1994", "role": "controller", "max_frame": 4096}
+    )
+    (ev,) = deliver(Connection(SERVER), encode_frame(MessageType.HELLO, old))
+    assert ev == Hello("1994", "controller", 4096)
+    for bad in ("~anon-1", "x" * 65, "tab\t"):
+        body = {"name": "n", "role": "controller", "max_frame": 4096, "client_id": bad}
+        frame = encode_frame(MessageType.HELLO, HANDSHAKE_PREFIX.pack(MAGIC, 1) + msgpack.packb(body))
+        (err,) = deliver(Connection(SERVER), frame)
+        assert isinstance(err, ProtocolError) and err.code == ErrorCode.BAD_VALUE
+
+
+def test_settings_and_soldier_removed_round_trip() -> None:
+    client, server = open_pair()
+    for ev in (Settings(0.04, 0.5), SoldierRemoved(7, "owner gone")):
+        assert deliver(client, server.send(ev)) == [ev]
 
 
 def test_entity_request_batches_split_to_the_peers_frame_limit() -> None:

@@ -109,16 +109,23 @@ class Client:
     events: list[Event] = field(default_factory=list)
     closed: bool = False
     bytes_in: int = 0
+    accept: Accept | None = None
 
     @classmethod
     async def open(
-        cls, port: int, name: str = "test", role: str = "controller", hello: bool = True
+        cls,
+        port: int,
+        name: str = "test",
+        role: str = "controller",
+        hello: bool = True,
+        client_id: str = "",
+        token: str = "",
     ) -> Client:
         stream = await trio.open_tcp_stream("127.0.0.1", port)
         c = cls(stream, Connection(CLIENT))
         if hello:
-            await c.send(Hello(name, role))
-            await c.expect(Accept)
+            await c.send(Hello(name, role, client_id=client_id, token=token))
+            c.accept = await c.expect(Accept)
         return c
 
     async def send(self, event: Event) -> None:

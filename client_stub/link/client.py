@@ -19,6 +19,9 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import ssl
+import uuid
+from collections import deque
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 
@@ -71,6 +74,11 @@ class Client:
     ) -> None:
         self.name = name
         self.role = role
+        # who this link is across reconnects (the server keeps its soldiers for it, issue 17) and the role's
+        # token when the server has tokens: set them before open()
+        self.client_id = f"{name[:40]}-{uuid.uuid4().hex[:12]}"
+        self.token = ""
+        self.tls: ssl.SSLContext | None = None  # speak TLS (a server with tls_cert); checks its certificate
         self.buffer_updates = buffer_updates
         self.on_updates = on_updates
         self.conn = Connection(CLIENT, decode_updates=decode_updates)
@@ -83,6 +91,8 @@ class Client:
         self.refused: dict[int, ev.Error] = {}  # request id -> its error
         self.errors: list[ev.Error | ev.ProtocolError] = []
         self.status: ev.Status | None = None
+        self.settings: ev.Settings | None = None  # this connection's throttle and STATUS period
+        self.removed: deque[int] = deque(maxlen=1024)  # the latest soldiers the server said are gone
         self.failure: str | None = None
         self.last_tick = 0
         self.bytes_sent = 0
@@ -125,14 +135,16 @@ class Client:
         for READY (if ``wait_ready``). LinkError (and the link closed) on failure."""
         with trio.move_on_after(timeout) as cs:
             try:
-                stream = await trio.open_tcp_stream(host, port)
+                stream: trio.abc.Stream = await trio.open_tcp_stream(host, port)
+                if self.tls is not None:
+                    stream = trio.SSLStream(stream, self.tls, server_hostname=host)
             except OSError as exc:
                 raise LinkError(f"cannot connect to {host}:{port}: {_why(exc)}") from None
         if cs.cancelled_caught:
             raise LinkError(f"cannot connect to {host}:{port} within {timeout} s")
         self._outbox_open = True
         nursery.start_soon(self._run, stream)
-        self.send(ev.Hello(self.name, self.role))
+        self.send(ev.Hello(self.name, self.role, client_id=self.client_id, token=self.token))
         with trio.move_on_after(timeout):
             await self._accepted.wait()
             if soldierprefix is not None and self.accepted:
@@ -293,7 +305,7 @@ class Client:
             self._cancel.cancel()
 
     # -- the tasks --------------------------------------------------------------------------------
-    async def _run(self, stream: trio.SocketStream) -> None:
+    async def _run(self, stream: trio.abc.Stream) -> None:
         try:
             with trio.CancelScope() as scope:
                 self._cancel = scope
@@ -309,7 +321,7 @@ class Client:
             for ev in (self._accepted, self._ready, self._answer, self._progress, *self._pongs.values()):
                 ev.set()
 
-    async def _writer(self, stream: trio.SocketStream) -> None:
+    async def _writer(self, stream: trio.abc.Stream) -> None:
         while True:
             if not self._out:
                 if not self._outbox_open:
@@ -328,7 +340,7 @@ class Client:
             self._progress.set()
             self._progress = trio.Event()
 
-    async def _reader(self, stream: trio.SocketStream) -> None:
+    async def _reader(self, stream: trio.abc.Stream) -> None:
         conn = self.conn
         arrival = 0.0
         while True:
@@ -376,6 +388,12 @@ class Client:
                 self._pongs[nonce].set()
             case ev.Status():
                 self.status = event
+            case ev.Settings():
+                self.settings = event
+            case ev.SoldierRemoved(index=index):
+                self.removed.append(index)
+                self.ready_soldiers.pop(index, None)
+                self.created.pop(index, None)
             case ev.Error():
                 self._error(event)
             case ev.Goodbye(reason=reason):

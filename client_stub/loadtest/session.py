@@ -95,6 +95,8 @@ class LoadSession:
             LoadClient(k, self._on_updates, decode=cfg.decode, buffer_updates=buffer_updates)
             for k in range(cfg.clients)
         ]
+        for c in self.clients[1:]:  # one client over C connections: each may see every soldier it made
+            c.link.client_id = self.clients[0].link.client_id
         self.driver = MixDriver(0, mix=cfg.mix, seed=cfg.seed, now=0.0)
         nsub = cfg.clients
         self.tracker = Tracker(cfg.rate_hz, nsub)

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 from server.jcl import JclError, JclInterpreter
 from server.logging import get_logger
+from server.world.access import caller_of, check_access
 
 if TYPE_CHECKING:
     from server.startup import ServerWorld
@@ -47,6 +48,7 @@ class Command:
     optional: int = 0
     variadic: type | None = None
     refused: bool = False
+    access: str = "operator"  # who may run it (server.world.access): operator, soldier, connection, read
 
 
 _SLAVING = (
@@ -64,6 +66,7 @@ COMMANDS: tuple[Command, ...] = (
         "to a new `.chset.env` file inside the data directory and loads it as `name` (the server's only "
         "channels are bound channelsets: it has no motions to interpolate)",
         (S, S, F, F, F, F, S),
+        access="operator",
     ),
     Command(
         "load_channelset",
@@ -72,6 +75,7 @@ COMMANDS: tuple[Command, ...] = (
         "reads a `.chset.env` channelset (also `read_file`) under its own name or `name`",
         (S, S),
         1,
+        access="operator",
     ),
     Command(
         "bind_channelset",
@@ -82,6 +86,7 @@ COMMANDS: tuple[Command, ...] = (
         (S, S),
         1,
         S,
+        access="operator",
     ),
     Command(
         "play_bound_channelset",
@@ -91,6 +96,7 @@ COMMANDS: tuple[Command, ...] = (
         "`time` s, -1 = stored time), then takes up its last request again; the channelset must be a clip "
         "of the motion library (loaded through its posture graphs)",
         (S, S, F),
+        access="soldier",
     ),
     Command(
         "step_bound_channelset",
@@ -101,6 +107,7 @@ COMMANDS: tuple[Command, ...] = (
         "soldiers are not moved",
         (S, F),
         1,
+        access="operator",
     ),
     Command(
         "set_channelset_parameters",
@@ -108,6 +115,7 @@ COMMANDS: tuple[Command, ...] = (
         "3.4.1",
         "the soldier manager setting every_frame: one stored frame per tick (yes) or real time (no)",
         (S,),
+        access="operator",
     ),
     Command(
         "print_channelset_info",
@@ -116,6 +124,7 @@ COMMANDS: tuple[Command, ...] = (
         "reports frames, channels and memory of one or every loaded channelset to the caller",
         (S, F),
         2,
+        access="read",
     ),
     Command(
         "reroot_figure_channel",
@@ -125,6 +134,7 @@ COMMANDS: tuple[Command, ...] = (
         "relative to root `site` (batched FK); bind it again to use it (the motion library keeps the clips "
         "it was built from)",
         (S, S, S),
+        access="operator",
     ),
     # -- 3.4.2 posture graphs
     Command(
@@ -135,6 +145,7 @@ COMMANDS: tuple[Command, ...] = (
         "stem); `soldier_low`, `soldier_loco`, `soldier_crawl` are the library's graphs",
         (S, S),
         1,
+        access="operator",
     ),
     Command(
         "bind_posture_graph",
@@ -146,6 +157,7 @@ COMMANDS: tuple[Command, ...] = (
         (S, S),
         1,
         S,
+        access="operator",
     ),
     Command(
         "posture_change",
@@ -155,14 +167,15 @@ COMMANDS: tuple[Command, ...] = (
         "a standing-still request for it would (a DEAD variant is picked as for a request; a soldier in a "
         "transition finishes it first); reports the goal and the path playing to the caller",
         (S, S),
+        access="soldier",
     ),
     # -- 3.4.4 slaving
-    Command("create_master_slave_pair", "...", "3.4.4", _SLAVING, (), 0, _ANY, True),
-    Command("slave_parameters", "...", "3.4.4", _SLAVING, (), 0, _ANY, True),
-    Command("turn_slave_on", "...", "3.4.4", _SLAVING, (), 0, _ANY, True),
-    Command("turn_slave_off", "...", "3.4.4", _SLAVING, (), 0, _ANY, True),
-    Command("turn_behavior_constr_off", "...", "3.4.4", _SLAVING, (), 0, _ANY, True),
-    Command("create_channelset_motion", "...", "3.4.4", _SLAVING, (), 0, _ANY, True),
+    Command("create_master_slave_pair", "...", "3.4.4", _SLAVING, (), 0, _ANY, True, access="operator"),
+    Command("slave_parameters", "...", "3.4.4", _SLAVING, (), 0, _ANY, True, access="operator"),
+    Command("turn_slave_on", "...", "3.4.4", _SLAVING, (), 0, _ANY, True, access="operator"),
+    Command("turn_slave_off", "...", "3.4.4", _SLAVING, (), 0, _ANY, True, access="operator"),
+    Command("turn_behavior_constr_off", "...", "3.4.4", _SLAVING, (), 0, _ANY, True, access="operator"),
+    Command("create_channelset_motion", "...", "3.4.4", _SLAVING, (), 0, _ANY, True, access="operator"),
     # -- 3.6 start-up
     Command(
         "open_ttes_sockets",
@@ -170,6 +183,7 @@ COMMANDS: tuple[Command, ...] = (
         "3.6",
         "accepted and ignored: the server listens on `ttes server --host/--port` before any script runs",
         (S,),
+        access="read",
     ),
     Command(
         "change_directory",
@@ -181,6 +195,7 @@ COMMANDS: tuple[Command, ...] = (
         0,
         _ANY,
         True,
+        access="operator",
     ),
     Command(
         "read_file",
@@ -189,6 +204,7 @@ COMMANDS: tuple[Command, ...] = (
         "runs a `.jcl` script or reads an `.env` / `.chset.env` / `.graph` file (inside the data "
         "directory, then its figures/, channelsets/, posture_graphs/)",
         (S,),
+        access="operator",
     ),
     Command(
         "create_soldier_state",
@@ -197,14 +213,18 @@ COMMANDS: tuple[Command, ...] = (
         "creates soldier `name` from environment figures; the first one builds the motion library",
         (S, S, S),
         1,
+        access="soldier",
     ),
-    Command("set_ttes_report_interval", "seconds", "3.6", "the STATUS period (> 0 s)", (F,)),
+    Command(
+        "set_ttes_report_interval", "seconds", "3.6", "the STATUS period (> 0 s)", (F,), access="connection"
+    ),
     Command(
         "set_ttes_heading_offset",
         "static, loco, crawl",
         "3.6",
         "the soldier manager setting heading_offsets (compass degrees per graph)",
         (F, F, F),
+        access="operator",
     ),
     Command(
         "set_ttes_soldier_throttle",
@@ -213,15 +233,17 @@ COMMANDS: tuple[Command, ...] = (
         "the soldier manager setting throttle: a rate cap, at most one update per soldier per `seconds` (due"
         " at a tick when its last update is at least `seconds` − ½ tick old: 0.04 at 30 Hz is every tick)",
         (F,),
+        access="connection",
     ),
     Command(
         "start_ttes_socket_simulation",
         "",
         "3.6",
         'builds the library if needed and sends READY (the "I\'m ready!" message)',
+        access="operator",
     ),
-    Command("disable_graphics", "", "3.6", "accepted: there are no graphics"),
-    Command("enable_graphics", "", "3.6", "accepted: there are no graphics"),
+    Command("disable_graphics", "", "3.6", "accepted: there are no graphics", access="operator"),
+    Command("enable_graphics", "", "3.6", "accepted: there are no graphics", access="operator"),
     # -- appendix: TIPS
     Command(
         "spit",
@@ -230,9 +252,17 @@ COMMANDS: tuple[Command, ...] = (
         "writes the environment's figures as TIPS to a new `.tips` file inside the data directory "
         "(without geometry: the server reads no psurfs; `ttes figure spit` writes it all)",
         (S,),
+        access="operator",
     ),
     # -- this server's own
-    Command("remove_soldier_state", "name", "", "removes a soldier (REMOVE_SOLDIER over the wire)", (S,)),
+    Command(
+        "remove_soldier_state",
+        "name",
+        "",
+        "removes a soldier (REMOVE_SOLDIER over the wire)",
+        (S,),
+        access="soldier",
+    ),
     Command(
         "react_soldier_state",
         'name, "recoil" or "flinch"',
@@ -240,6 +270,7 @@ COMMANDS: tuple[Command, ...] = (
         "a resting soldier plays its posture's recoil (a Fire PDU) or flinch (a near detonation) once; "
         "reports the clip, or null when it cannot react now",
         (S, S),
+        access="soldier",
     ),
     Command(
         "set_ttes_walk_run_threshold",
@@ -247,29 +278,52 @@ COMMANDS: tuple[Command, ...] = (
         "",
         "the soldier manager setting walk_run_threshold (> 0 m/s)",
         (F,),
+        access="operator",
     ),
-    Command("set_ttes_blend_time", "seconds", "", "the soldier manager setting blend_time (>= 0 s)", (F,)),
+    Command(
+        "set_ttes_blend_time",
+        "seconds",
+        "",
+        "the soldier manager setting blend_time (>= 0 s)",
+        (F,),
+        access="operator",
+    ),
     Command(
         "set_ttes_clip_recording",
         '"yes" or "no"',
         "",
         "the soldier manager setting record_clips (for report_ttes_clips)",
         (S,),
+        access="operator",
     ),
     Command(
-        "report_ttes_status", "[soldier ...]", "", "reports soldier states to the caller (JSON)", (), 0, S
+        "report_ttes_status",
+        "[soldier ...]",
+        "",
+        "reports soldier states to the caller (JSON)",
+        (),
+        0,
+        S,
+        access="soldier",
     ),
-    Command("report_ttes_clips", "soldier", "", "reports a soldier's recorded clip starts (JSON)", (S,)),
-    Command("help", "", "", "reports this table to the caller"),
+    Command(
+        "report_ttes_clips",
+        "soldier",
+        "",
+        "reports a soldier's recorded clip starts (JSON)",
+        (S,),
+        access="soldier",
+    ),
+    Command("help", "", "", "reports this table to the caller", access="connection"),
 )
 del S, F
 
 
 def help_table() -> str:
     """The command table as Markdown: ``help()`` answers it and ``docs/JCL.md`` holds it."""
-    rows = ["| command | seed | what it does here |", "| --- | --- | --- |"]
+    rows = ["| command | seed | access | what it does here |", "| --- | --- | --- | --- |"]
     for c in sorted(COMMANDS, key=lambda c: (c.seed or "~", c.name)):
-        rows.append(f"| `{c.name}({c.args})` | {c.seed or 'server'} | {c.here} |")
+        rows.append(f"| `{c.name}({c.args})` | {c.seed or 'server'} | {c.access} | {c.here} |")
     return "\n".join(rows) + "\n"
 
 
@@ -298,10 +352,11 @@ class JclCommands:
     def register(self, jcl: JclInterpreter) -> None:
         for c in COMMANDS:
             if c.name == "read_file":  # the interpreter's own (it dispatches on the file suffix)
-                continue
-            func = self._refuse(c) if c.refused else getattr(self, f"cmd_{c.name}")
-            if c.name not in OFF_LOOP:
-                func = self._in_loop(func)
+                func = self._read_file_guard(jcl.command("read_file"))
+            else:
+                func = self._refuse(c) if c.refused else self._guard(c, getattr(self, f"cmd_{c.name}"))
+                if c.name not in OFF_LOOP:
+                    func = self._in_loop(func)
             jcl.register(c.name, func, c.types, optional=c.optional, variadic=c.variadic)
         jcl.register_file_handler(".env", lambda p: self.store.read_env(p, jcl.search_dirs))
         jcl.register_file_handler(".graph", self.store.load_graph)
@@ -312,6 +367,39 @@ class JclCommands:
             return self.world.in_loop(lambda: func(*args))
 
         return run
+
+    def _guard(self, command: Command, func: Any) -> Any:
+        """The handler, run only when the caller's role may run the command (``server.world.access``)."""
+
+        def guarded(*args: Any) -> object:
+            check_access(command.name, command.access, self.world.caller)
+            return func(*args)
+
+        return guarded
+
+    def _read_file_guard(self, read_file: Any) -> Any:
+        """``read_file`` is the operator's, but a 1994 client (a controller) always sends the start-up
+        script first: once the server has run it, that request is answered as done (nothing runs)."""
+
+        def guarded(name: str) -> object:
+            if caller_of(self.world.caller) is not None and self.world.is_startup_script(name):
+                log.info("startup_script_rerun_skipped", file=name)
+                return None
+            check_access("read_file", "operator", self.world.caller)
+            return read_file(name)
+
+        return guarded
+
+    def _own(self, index: int, name: str = "", *, remove: bool = False) -> int:
+        """``index``, when the caller may drive (or ``remove``) that soldier; else JclError."""
+        who, owners = caller_of(self.world.caller), self.world.owners
+        if who is None:
+            return index
+        if remove and not owners.may_remove(index, who.client_id, who.role):
+            raise JclError(f"soldier {name or index!r} (index {index}) is not this client's to remove")
+        if not owners.may_drive(index, who.client_id, who.role):
+            raise JclError(f"soldier {name or index!r} (index {index}) belongs to another client")
+        return index
 
     @staticmethod
     def _refuse(command: Command) -> Any:
@@ -371,7 +459,7 @@ class JclCommands:
         b = self.store.bound_channelset(bound)
         lib, m = self.world.ensure_library(), self.soldiers.manager
         assert m is not None
-        i = self.soldiers.soldier_with([bf.figure for bf in b.figures])
+        i = self._own(self.soldiers.soldier_with([bf.figure for bf in b.figures]))
         clip = lib.clip_of(b.channelset)  # the same clip id in every figure set
         m.play_clip(i, clip, d.startswith("forward"), time, self.world.clock())
 
@@ -439,7 +527,7 @@ class JclCommands:
         self.world.ensure_library()
         m = self.soldiers.manager
         assert m is not None
-        i = self.soldiers.soldier_with([bf.figure for bf in g.bound[0].figures] if g.bound else [])
+        i = self._own(self.soldiers.soldier_with([bf.figure for bf in g.bound[0].figures] if g.bound else []))
         if not any(posture in (p, p.partition("@")[0]) for p in g.graph.postures):
             raise JclError(f"posture_change: posture graph {bound!r} has no posture {posture!r}")
         path = m.posture_change(i, posture, self.world.clock())
@@ -454,13 +542,21 @@ class JclCommands:
         self.world.create_soldier_state(name, figure, weapon)
 
     def cmd_set_ttes_report_interval(self, seconds: float) -> None:
-        self.world.set_report_interval(seconds)
+        who = caller_of(self.world.caller)
+        if who is None:
+            self.world.set_report_interval(seconds)
+        else:
+            who.set_report_interval(seconds)
 
     def cmd_set_ttes_heading_offset(self, static: float, loco: float, crawl: float) -> None:
         self.soldiers.configure(heading_offsets=(static, loco, crawl))
 
     def cmd_set_ttes_soldier_throttle(self, seconds: float) -> None:
-        self.soldiers.configure(throttle=seconds)
+        who = caller_of(self.world.caller)
+        if who is None:
+            self.soldiers.configure(throttle=seconds)
+        else:
+            who.set_throttle(seconds)
 
     def cmd_start_ttes_socket_simulation(self) -> None:
         self.world.start()
@@ -480,7 +576,9 @@ class JclCommands:
 
     # -- this server's own -------------------------------------------------------------------------------
     def cmd_remove_soldier_state(self, name: str) -> None:
-        self.world.remove_soldier(self.soldiers.index_of(name))
+        self.world.remove_soldier(
+            self._own(self.soldiers.index_of(name), name, remove=True), "removed by JCL"
+        )
 
     def cmd_react_soldier_state(self, name: str, kind: str) -> None:
         k = kind.strip().lower()
@@ -489,7 +587,7 @@ class JclCommands:
         m = self.soldiers.manager
         if m is None:
             raise JclError("react_soldier_state: no soldiers yet")
-        clip = m.react(self.soldiers.index_of(name), k, self.world.clock())
+        clip = m.react(self._own(self.soldiers.index_of(name), name), k, self.world.clock())
         self._report(json.dumps({"soldier": name, "reaction": k, "clip": clip}))
 
     def cmd_set_ttes_walk_run_threshold(self, mps: float) -> None:
@@ -502,11 +600,17 @@ class JclCommands:
         self.soldiers.configure(record_clips=_yes_no("set_ttes_clip_recording", on))
 
     def cmd_report_ttes_status(self, *names: str) -> None:
-        self._report(json.dumps(self.soldiers.report(self.world.clock, self.world.ready, names)))
+        indices = [self._own(self.soldiers.index_of(n), n) for n in names]
+        who, m = caller_of(self.world.caller), self.soldiers.manager
+        if not names and who is not None and m is not None:  # every soldier the caller may drive
+            live = m.table.live
+            indices = live[self.world.owners.drivable(live, who.client_id, who.role)][:100].tolist()
+        report = self.soldiers.report(self.world.clock, self.world.ready, indices if who or names else None)
+        self._report(json.dumps(report))
 
     def cmd_report_ttes_clips(self, name: str) -> None:
         m = self.soldiers.manager
-        i = self.soldiers.index_of(name)
+        i = self._own(self.soldiers.index_of(name), name)
         assert m is not None
         clips = [
             {

@@ -107,9 +107,12 @@ class Soldiers:
                 return self.index_of(name)
         raise KeyError(f"no soldier state uses figure(s) {sorted(figures)}; create_soldier_state first")
 
-    def report(self, clock: Callable[[], float], ready: bool, names: Sequence[str] = ()) -> dict[str, Any]:
+    def report(
+        self, clock: Callable[[], float], ready: bool, indices: Sequence[int] | None = None
+    ) -> dict[str, Any]:
+        """The states of these soldiers (None: the first 100 live ones)."""
         m = self.manager
         if m is None:
             return {"ready": ready, "soldiers": []}
-        idx = [self.index_of(n) for n in names] if names else [int(i) for i in m.table.live[:100]]
+        idx = [int(i) for i in m.table.live[:100]] if indices is None else list(indices)
         return {"ready": ready, "time": clock(), "soldiers": [m.soldier_info(i) for i in idx]}

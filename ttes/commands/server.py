@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
     import trio
 
-    from server.app import TtesServer, run_server
+    from server.app import TtesServer, check_exposure, run_server
     from server.config import ServerConfig, load_config
     from server.logging import configure
     from ttes.output import print_json
@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_overrides(data_dir=synth.path, startup_script=synth.startup_script)
     configure(json_logs=cfg.json_logs, level=logging.DEBUG if args.verbose > 1 else logging.INFO)
     try:
+        check_exposure(cfg)  # no tokens: loopback only
         server = TtesServer(cfg)
         server.start_world()  # a bad script or data dir fails here, before listening
 
