@@ -16,6 +16,7 @@ from test_server_support import make_server, running_server
 from client_stub.dis.drive import ProgressLine, replay_to_server
 from client_stub.dis.gateway import DisGateway, GatewayConfig
 from client_stub.dis.reconnect import GaveUp, keep_linked, keep_linked_or_stop
+from client_stub.dis.reconnect import connector as reconnect_connector
 from client_stub.dis.replayer import Replayer
 from client_stub.dis.sink import MAX_SOLDIERS_PER_CLIENT, ServerSink
 from client_stub.dis.translator import SOLDIER_DTYPE, Translation
@@ -34,6 +35,20 @@ async def until(condition: Callable[[], bool], timeout: float = 20.0) -> None:
             await trio.sleep(0.05)
 
 
+def test_soldiers_the_server_kept_for_us_are_taken_back_not_created() -> None:
+    link = FakeLink({0: 0})
+    sink = ServerSink(link, subscribe=True)  # type: ignore[arg-type]
+    sink.apply(born(range(3)))
+    assert link.created == [1, 2, 3]
+    link.fail = True
+    sink.apply(Translation(removed=np.array([2])))
+    same = FakeLink({0: 0, 1: 0, 2: 0, 3: 0})  # the same server, our soldiers still there (client id)
+    sink.rebind(same)  # type: ignore[arg-type]
+    assert same.created == [] and sorted(same.subscribed) == [1, 2] and sink.stats["reclaimed"] == 2
+    assert sink.server_index(np.array([0, 1])).tolist() == [1, 2]  # the slots keep their indices
+    assert same.rows[0]["index"].tolist() == [1, 2]
+
+
 async def serving(nursery: trio.Nursery, port: int = 0) -> TtesServer:
     """A server (the synthetic library) started in ``nursery``; ``port`` 0: any free one."""
     server = make_server(report_interval=1000.0, port=port)
@@ -42,14 +57,7 @@ async def serving(nursery: trio.Nursery, port: int = 0) -> TtesServer:
 
 
 def connector(nursery: trio.Nursery, port: int, timeout: float) -> Callable[[], Awaitable[Client]]:
-    """What keep_linked calls: a new client link to the server on ``port``."""
-
-    async def connect() -> Client:
-        c = Client("ttes-gateway")
-        await c.open(nursery, "127.0.0.1", port, timeout=timeout)
-        return c
-
-    return connect
+    return reconnect_connector(nursery, "127.0.0.1", port, "ttes-gateway", timeout)
 
 
 class FakeLink:
@@ -133,12 +141,12 @@ def test_a_lost_link_is_remembered_and_a_new_one_gets_the_soldiers_again() -> No
     sink.apply(gone)
     sink.apply(Translation(requests=stand))  # never raises: the sink keeps the state for the next link
     assert sink.lost and sink.stats["while_lost"] == 2
-    fresh = FakeLink({0: 0, 1: 0})  # the restarted server made one more start-up soldier
+    fresh = FakeLink({0: 0, 7: 0})  # the restarted server made one more start-up soldier
     sink.rebind(fresh)  # type: ignore[arg-type]
-    assert not sink.lost and sink.stats["relinked"] == 1
-    assert fresh.created == [2, 4] and sorted(fresh.subscribed) == [2, 4]
+    assert not sink.lost and sink.stats["relinked"] == 1 and sink.stats["reclaimed"] == 0
+    assert fresh.created == [1, 3] and sorted(fresh.subscribed) == [1, 3]  # the slots keep their indices
     (rows,) = fresh.rows
-    assert rows["index"].tolist() == [2, 4]
+    assert rows["index"].tolist() == [1, 3]
     assert rows["appearance"].tolist() == [Appearance.KNEEL, Appearance.PRONE]
 
 
@@ -230,3 +238,24 @@ async def test_a_replay_goes_on_through_a_server_restart(
             inner.cancel_scope.cancel()
         assert not failures and sink.stats["relinked"] == 1 and sink.stats["while_lost"] > 0
         servers[-1].shutdown()
+
+
+async def test_a_reconnect_to_the_same_server_takes_the_soldiers_back(autojump_clock: trio.abc.Clock) -> None:
+    async with trio.open_nursery() as nursery:
+        server = await serving(nursery)
+        connect = connector(nursery, server.addresses[0][1], 2.0)
+        link = await connect()
+        sink = ServerSink(link)
+        sink.apply(born(range(3)))
+        m = server.world.manager
+        assert m is not None
+        await until(lambda: m.count == 13)
+        linker = await nursery.start(keep_linked, sink, connect, (0.5, 1.0), 30.0)
+        await link.aclose("network blip")  # within the owner's grace period: the server keeps the soldiers
+        await until(lambda: sink.stats["relinked"] == 1 and not sink.lost)
+        new = sink.link
+        assert isinstance(new, Client) and new is not link and new.client_id == link.client_id
+        assert await new.roundtrip(5.0)
+        assert sink.stats["reclaimed"] == 3 and m.count == 13 and not new.errors
+        linker.cancel()
+        server.shutdown()

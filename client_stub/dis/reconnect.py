@@ -23,6 +23,24 @@ class GaveUp(LinkError):
     """No server answered for ``give_up_after`` seconds."""
 
 
+def connector(
+    nursery: trio.Nursery, host: str, port: int, name: str = "ttes-client", timeout: float = 10.0
+) -> Callable[[], Awaitable[Client]]:
+    """What :func:`keep_linked` calls: a new link to ``host:port`` with the first one's client id (and token),
+    so a server that kept our soldiers for us hands them back."""
+    first: list[Client] = []
+
+    async def connect() -> Client:
+        link = Client(name)
+        if first:
+            link.client_id, link.token = first[0].client_id, first[0].token
+        await link.open(nursery, host, port, timeout=timeout)
+        first[:] = first or [link]
+        return link
+
+    return connect
+
+
 async def keep_linked(
     sink: ServerSink,
     connect: Callable[[], Awaitable[Client]],

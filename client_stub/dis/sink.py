@@ -12,7 +12,10 @@ counted in ``stats["weapon_substituted"]``.
 A lost link never raises out of :meth:`ServerSink.apply`: the sink keeps what its soldiers are (alive, their
 rifle, their last request) and :meth:`ServerSink.rebind` gives them to a new link (a restarted server):
 created again, subscribed again, their last requests sent again (:func:`client_stub.dis.reconnect.keep_linked`
-reconnects with backoff and calls it).
+reconnects with backoff and calls it). The slots keep their server indices; a soldier whose index the new
+link's READY lists is taken back, not created (the same server kept it for our client id; a restarted server
+whose start-up script made a soldier at that index hands us a shared soldier instead: READY does not say whose
+a soldier is).
 
 Works with any :class:`~client_stub.link.api.Link`: the trio-native client (replay, gateway) or the
 stub's threaded one.
@@ -54,6 +57,7 @@ class ServerSink:
             "dropped": 0,
             "while_lost": 0,  # translations kept but not sent: the link was lost
             "relinked": 0,
+            "reclaimed": 0,  # soldiers the server kept for our client id across a reconnect
         }
         self.lost = ""  # why the link was lost ("" while it works)
         self.rifle_of: dict[int, int] = {}  # live slot -> its entity's rifle (RIFLE_FIGURES index)
@@ -61,9 +65,9 @@ class ServerSink:
         self._has_last = np.zeros(max_soldiers, bool)
         self._bind(link)
 
-    def _bind(self, link: Link) -> None:
+    def _bind(self, link: Link, ours: frozenset[int] = frozenset()) -> None:
         self.link = link
-        taken = np.fromiter(link.ready_soldiers, np.int64, len(link.ready_soldiers))
+        taken = np.fromiter((i for i in link.ready_soldiers if i not in ours), np.int64)
         free = np.setdiff1d(np.arange(link.max_soldiers, dtype=np.int64), taken)
         self.indices = free[: self.max_soldiers]
         self.capacity = len(self.indices)
@@ -104,18 +108,24 @@ class ServerSink:
             self.stats["while_lost"] += 1
 
     def rebind(self, link: Link) -> None:
-        """A new link (the server restarted): every live soldier created, subscribed and requested again."""
-        self._bind(link)
+        """A new link: every live soldier created again (a restarted server) or taken back (the same server
+        kept them for our client id: they are in its READY), then subscribed and requested again."""
+        ours = frozenset(int(self.indices[s]) for s in self.rifle_of)
+        self._bind(link, ours)  # our old indices count as free: the slots keep their indices
         gone = [s for s in self.rifle_of if s >= self.capacity]
         for s in gone:
             del self.rifle_of[s]
             self.stats["dropped"] += 1
         live = sorted(self.rifle_of)
+        kept = [s for s in live if int(self.indices[s]) in link.ready_soldiers]
         rows = self._last[live][self._has_last[live]]
         self.lost = ""
         self.stats["relinked"] += 1
+        self.stats["reclaimed"] += len(kept)
         try:
-            self._send([], live, rows)
+            if self.subscribe and kept:
+                self.link.subscribe(self.indices[kept])
+            self._send([], [s for s in live if s not in set(kept)], rows)
         except LinkError as exc:
             self.lost = str(exc) or "connection lost"
 

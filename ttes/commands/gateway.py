@@ -97,7 +97,7 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
 
     import trio
 
-    from client_stub.dis.reconnect import keep_linked_or_stop
+    from client_stub.dis.reconnect import connector, keep_linked_or_stop
     from client_stub.dis.sink import ServerSink
     from client_stub.link.client import Client, LinkError
     from ttes.commands.replay import private_server, stop_on_signal
@@ -109,12 +109,7 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
                 server = await stack.enter_async_context(private_server(data_dir, args.synthetic_server))
                 host, port = server.addresses[0]
             nursery = await stack.enter_async_context(trio.open_nursery())
-
-            async def connect() -> Client:
-                link = Client("ttes-gateway")
-                await link.open(nursery, host, port, timeout=10.0)
-                return link
-
+            connect = connector(nursery, host, port, "ttes-gateway")
             sink = ServerSink(await connect())
             failures: list[str] = []
             with trio.CancelScope() as scope:

@@ -228,7 +228,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
     import trio
 
     from client_stub.dis.drive import ProgressLine, replay_to_server
-    from client_stub.dis.reconnect import keep_linked_or_stop
+    from client_stub.dis.reconnect import connector, keep_linked_or_stop
     from client_stub.dis.sink import ServerSink
     from client_stub.link.client import Client, LinkError
 
@@ -239,12 +239,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
                 server = await stack.enter_async_context(private_server(args.data_dir, args.synthetic_server))
                 host, port = server.addresses[0]
             async with trio.open_nursery() as nursery:
-
-                async def connect() -> Client:
-                    link = Client()
-                    await link.open(nursery, host, port, timeout=10.0)
-                    return link
-
+                connect = connector(nursery, host, port)
                 sink = ServerSink(await connect())
                 progress = ProgressLine(out=None if args.json else sys.stderr)
                 failures: list[str] = []
