@@ -37,6 +37,14 @@ class WeaponState(IntEnum):
     FIRING = 2
 
 
+class Reaction(IntEnum):
+    """What a REACT message asks a soldier to play once in place (docs/PROTOCOL.md §5): a Fire PDU's
+    firing recoil or a near detonation's flinch."""
+
+    RECOIL = 1
+    FLINCH = 2
+
+
 # The API dtype (native byte order) and the wire dtype (big-endian, packed, 33 bytes a row).
 ENTITY_REQUEST_DTYPE = np.dtype(
     [

@@ -173,6 +173,14 @@ class RequestFullUpdate(Event):
     indices: tuple[int, ...] = ()
 
 
+@dataclass(frozen=True)
+class React(Event):
+    """Client → server: these soldiers play a reaction once (``protocol.entity.Reaction``)."""
+
+    kind: int
+    indices: tuple[int, ...] = ()
+
+
 @dataclass(frozen=True, eq=False)
 class EntityRequests(Event):
     """Client → server: a batch of JackPackIn requests (:data:`protocol.entity.ENTITY_REQUEST_DTYPE` rows)."""

@@ -18,7 +18,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from protocol.entity import decode_entity_requests, encode_entity_requests
+from protocol.entity import Reaction, decode_entity_requests, encode_entity_requests
 from protocol.errors import ErrorCode, WireError
 from protocol.events import (
     MAX_CLIENT_ID,
@@ -35,6 +35,7 @@ from protocol.events import (
     JointUpdates,
     Ping,
     Pong,
+    React,
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
@@ -76,6 +77,7 @@ class MessageType(IntEnum):
     UNSUBSCRIBE = 0x24
     REQUEST_FULL_UPDATE = 0x25
     SOLDIER_REMOVED = 0x26
+    REACT = 0x27
     ENTITY_REQUESTS = 0x30
     UPDATE_TABLE = 0x31
     JOINT_UPDATES = 0x32
@@ -90,6 +92,7 @@ CLIENT_SENDS = BOTH | {
     MessageType.SUBSCRIBE,
     MessageType.UNSUBSCRIBE,
     MessageType.REQUEST_FULL_UPDATE,
+    MessageType.REACT,
     MessageType.ENTITY_REQUESTS,
 }
 SERVER_SENDS = BOTH | {
@@ -313,6 +316,11 @@ def _dec_created(p: bytes, n: int) -> SoldierCreated:
     return SoldierCreated(b.int("id", 0, U32), b.int("index", 0, n - 1), b.int("table", 0, 0xFFFF))
 
 
+def _dec_react(p: bytes, n: int) -> React:
+    b = unpack_body(p, "REACT")
+    return React(b.int("kind", min(Reaction), max(Reaction)), _indices(b, "indices", n))
+
+
 def _enc_status(e: Status) -> bytes:
     return pack_body(
         {"time": float(e.time), "soldiers": e.soldiers, "update_rate": float(e.update_rate), "text": e.text}
@@ -414,6 +422,11 @@ _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
         RequestFullUpdate,
         lambda e: pack_body({"indices": list(e.indices)}),
         lambda p, n: RequestFullUpdate(_indices(unpack_body(p, "REQUEST_FULL_UPDATE"), "indices", n)),
+    ),
+    MessageType.REACT: (
+        React,
+        lambda e: pack_body({"kind": int(e.kind), "indices": list(e.indices)}),
+        _dec_react,
     ),
     MessageType.ENTITY_REQUESTS: (
         EntityRequests,

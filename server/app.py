@@ -84,7 +84,7 @@ class TtesServer:
         self._published_ticks = 0
         self._shutdown = trio.Event()
         self._answer_wanted = trio.Event()
-        self._requests_seen = 0  # the manager's request count at the last answer
+        self._requests_seen = 0  # the manager's request and reaction count at the last answer
         self.answers = 0  # out-of-cycle publishes
         self.next_tick = 0.0  # server time of the next scheduled tick (what an answer samples at)
         self.stopped = trio.Event()
@@ -398,8 +398,9 @@ class TtesServer:
 
     def _requests_arrived(self) -> None:
         m = self.world.manager
-        if m is not None and m.stats["requests"] != self._requests_seen:
-            self._requests_seen = int(m.stats["requests"])
+        seen = int(m.stats["requests"] + m.stats["reactions"]) if m is not None else self._requests_seen
+        if seen != self._requests_seen:
+            self._requests_seen = seen
             self._answer_wanted.set()
 
     async def _answer_loop(self) -> None:

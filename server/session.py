@@ -35,6 +35,7 @@ import numpy as np
 import trio
 
 from protocol.connection import NEED_DATA, PAUSED, SERVER, Connection, State
+from protocol.entity import Reaction
 from protocol.errors import ErrorCode, LocalProtocolError
 from protocol.events import (
     ROLES,
@@ -50,6 +51,7 @@ from protocol.events import (
     Ping,
     Pong,
     ProtocolError,
+    React,
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
@@ -308,6 +310,8 @@ class Session:
             pass  # the connection forgets them; subscribing again starts with a full update
         elif isinstance(ev, EntityRequests):
             self._requests(ev)
+        elif isinstance(ev, React):
+            self._react(ev)
 
     def _hello(self, ev: Hello) -> None:
         self.name = ev.name
@@ -556,6 +560,35 @@ class Session:
             )
         )
         return np.flatnonzero(ok)
+
+    def _react(self, ev: React) -> None:
+        """REACT: each soldier this client may drive plays the reaction now or when it comes to rest
+        (``SoldierManager.react``); one that cannot react is skipped silently, one of another client's is
+        refused with ERROR 107 and an unknown one answered by ERROR 100 (neither fatal)."""
+        if not (self._permitted(None, "REACT") and self._is_ready(None, "REACT")):
+            return
+        m = self.world.manager
+        assert m is not None
+        idx = np.asarray(ev.indices, np.int64)
+        ok = self.world.owners.drivable(idx, self.client_id, self.role)
+        if not ok.all():
+            bad = idx[~ok]
+            more = f" ({len(bad)} soldiers)" if len(bad) > 1 else ""
+            self.send(
+                Error(
+                    int(ErrorCode.NOT_PERMITTED),
+                    f"react: soldier {int(bad[0])} belongs to another client{more}",
+                )
+            )
+        kind = Reaction(ev.kind).name.lower()
+        now = self.world.clock()
+        unknown = [i for i in idx[ok].tolist() if not m.table.is_live(i)]
+        for i in idx[ok].tolist():
+            if m.table.is_live(i):
+                m.react(i, kind, now)
+        if unknown:
+            more = f" ({len(unknown)} soldiers)" if len(unknown) > 1 else ""
+            self.send(Error(int(ErrorCode.UNKNOWN_SOLDIER), f"react: no soldier {unknown[0]}{more}"))
 
     # -- server → client ---------------------------------------------------------------------------------
     def status(self, now: float, soldiers: int, update_rate: float, text: str) -> None:

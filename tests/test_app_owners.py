@@ -9,6 +9,7 @@ import pytest
 import trio
 from test_server_support import Client, running_server
 
+from protocol.entity import Reaction
 from protocol.errors import ErrorCode
 from protocol.events import (
     CreateSoldier,
@@ -16,6 +17,7 @@ from protocol.events import (
     Goodbye,
     Hello,
     JointUpdates,
+    React,
     Ready,
     RemoveSoldier,
     Settings,
@@ -276,3 +278,18 @@ def test_without_tokens_the_server_listens_on_loopback_only() -> None:
     with pytest.raises(ConfigError, match="operator_token"):
         ServerConfig(operator_token="short")
     assert "long-enough" not in repr(ServerConfig(operator_token="long-enough"))
+
+
+async def test_a_non_owner_cannot_make_anothers_soldier_react(autojump_clock: trio.abc.Clock) -> None:
+    """REACT follows the drive rule: the shared soldier reacts, another client's is refused by name."""
+    async with running_server() as server:
+        _, i = await owner_and_soldier(server)
+        b = await Client.open(port_of(server), "b", client_id="bravo")
+        await b.expect(Ready)
+        before = server.world.manager.stats["reactions"]
+        await b.send(React(int(Reaction.FLINCH), (i, 0)))
+        e = await b.expect(Error)
+        assert (
+            e.code == ErrorCode.NOT_PERMITTED and f"react: soldier {i} belongs to another client" in e.message
+        )
+        assert server.world.manager.stats["reactions"] == before + 1  # soldier 0's

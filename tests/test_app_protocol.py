@@ -8,7 +8,7 @@ import pytest
 import trio
 from test_server_support import Client, running_server
 
-from protocol.entity import Appearance
+from protocol.entity import Appearance, Reaction, WeaponState
 from protocol.errors import ErrorCode
 from protocol.events import (
     CreateSoldier,
@@ -18,6 +18,7 @@ from protocol.events import (
     JointUpdates,
     Ping,
     Pong,
+    React,
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
@@ -315,3 +316,32 @@ async def test_an_m16_soldier_is_served_with_the_m16_library(autojump_clock: tri
             np.testing.assert_allclose(got[w][1], want[w].positions[0], atol=0.002)  # figure placements (m)
         rifle_m16, rifle_ak = got["M16.fig"][1][1], got["AK_47.fig"][1][1]
         assert np.abs(rifle_m16 - rifle_ak).max() > 0.01  # held by its own grip: not the AK's placement
+
+
+async def test_a_controller_makes_its_soldiers_react_without_jcl(autojump_clock: trio.abc.Clock) -> None:
+    """REACT (docs/PROTOCOL.md §5): a resting soldier flinches at once and the first update after the message
+    shows it; a soldier asked to fire recoils once the rifle is up; unknown indices are a request error;
+    observers may not. The shipped data dir (the synthetic one has no reaction clips)."""
+    async with running_server(throttle=0.0, share_library=False, data_dir=str(DEFAULT_DATA_DIR)) as server:
+        m = server.world.manager
+        m.configure(record_clips=True)
+        c = await Client.open(port_of(server))
+        await c.expect(Ready)
+        await c.send(Subscribe((4,)))
+        await c.expect(JointUpdates)
+        await c.requests(index=3, weapon=WeaponState.FIRING, velocity=(0.0, 0.0, 0.0))
+        await c.send(React(int(Reaction.RECOIL), (3,)))
+        await c.send(React(int(Reaction.FLINCH), (4, 600)))
+        e = await c.expect(Error)
+        assert e.code == ErrorCode.UNKNOWN_SOLDIER and "no soldier 600" in e.message
+        sent = server.now()
+        ev = await c.expect(JointUpdates)
+        assert 4 in ev.indices.tolist() and server.now() - sent <= 1 / 30 + 1e-6
+        assert [c.clip.rsplit("/", 1)[-1] for c in m.clips_of(4)][-1] == "ststow_flinch_low"
+        await trio.sleep(4.0)
+        clips = [c.clip.rsplit("/", 1)[-1] for c in m.clips_of(3)]
+        assert clips[-1] == "stfire_recoil_low" and m.soldier_info(3)["posture"] == "STAND_FIRE"
+        obs = await Client.open(port_of(server), "watcher", role="observer")
+        await obs.expect(Ready)
+        await obs.send(React(int(Reaction.FLINCH), (4,)))
+        assert (await obs.expect(Error)).code == ErrorCode.NOT_PERMITTED

@@ -95,6 +95,9 @@ class FakeLink:
         self._check()
         self.rows.append(rows.copy())
 
+    def react(self, indices: list[int] | np.ndarray, kind: object) -> None:
+        self._check()
+
     def swap(self) -> list:
         return []
 

@@ -176,3 +176,31 @@ def test_a_stepping_soldier_does_not_react(lib) -> None:
     move(m, i, 0.0, 1.4)
     run(m, 0.0, 2.0)
     assert m.react(i, "flinch", 2.0) is None and m.soldier_info(i)["mode"] == "LOCO"
+
+
+def test_a_shot_asked_with_the_firing_posture_recoils_once_the_rifle_is_up(lib) -> None:
+    """A Fire PDU turns into weapon FIRING and RECOIL at one instant: the soldier raises his rifle (a posture
+    change) and the recoil he kept plays when that ends, in the firing posture."""
+    m, i = soldier(lib)
+    rest(m, i, 0.0, Appearance.UPRIGHT, WeaponState.FIRING)
+    assert m.soldier_info(i)["mode"] == "TRANSITION"
+    assert m.react(i, "recoil", 0.0) is None  # kept, not refused
+    run(m, 0.0, 4.0)
+    assert gaits(m, i)[-1] == "stfire_recoil"
+    assert m.soldier_info(i)["posture"] == "STAND_FIRE" and m.soldier_info(i)["mode"] == "IDLE"
+
+
+def test_a_burst_recoils_shot_after_shot_and_a_stale_reaction_is_dropped(lib) -> None:
+    m, i = soldier(lib)
+    rest(m, i, 0.0, Appearance.UPRIGHT, WeaponState.FIRING)
+    run(m, 0.0, 5.0)
+    for k in range(3):  # three shots 0.1 s apart: one plays, one waits, the third replaces the waiting one
+        m.react(i, "recoil", 5.0 + 0.1 * k)
+    run(m, 5.0, 7.0)
+    starts = [c for c in m.clips_of(i) if c.clip.endswith("stfire_recoil_low")]
+    assert len(starts) == 2 and starts[1].time == pytest.approx(starts[0].time + starts[0].duration)
+    # a flinch kept through a long posture change (stand -> prone) is too old when it ends
+    rest(m, i, 7.0, Appearance.PRONE, WeaponState.DEPLOYED)
+    m.react(i, "flinch", 7.0)
+    run(m, 7.0, 15.0)
+    assert "prstow_flinch" not in gaits(m, i, since=7.0) and m.soldier_info(i)["posture"] == "PRONE_STOWED"

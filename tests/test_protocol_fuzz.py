@@ -33,6 +33,7 @@ from protocol.events import (
     Ping,
     Pong,
     ProtocolError,
+    React,
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
@@ -82,6 +83,8 @@ def _corpus() -> tuple[bytes, list[bytes], bytes, list[bytes]]:
             Subscribe((0, 1, 2)),
             Unsubscribe((2,)),
             RequestFullUpdate(()),
+            React(1, (1, 2)),
+            React(2, ()),
             EntityRequests(rows),
             Ping(5),
             Pong(6),
@@ -232,7 +235,7 @@ KEYS = [
     "text",
     "soldiers",
 ]
-KEYS += ["time", "update_rate", "figure", "weapon", "index", "table", "indices", "entries"]
+KEYS += ["time", "update_rate", "figure", "weapon", "index", "table", "indices", "entries", "kind"]
 
 
 @pytest.mark.fuzz

@@ -12,7 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from protocol.connection import CLIENT, NEED_DATA, PAUSED, SERVER, Connection, State
-from protocol.entity import ENTITY_REQUEST_DTYPE, make_entity_requests
+from protocol.entity import ENTITY_REQUEST_DTYPE, Reaction, make_entity_requests
 from protocol.errors import ErrorCode, LocalProtocolError, WireError
 from protocol.events import (
     ROLES,
@@ -29,6 +29,7 @@ from protocol.events import (
     Ping,
     Pong,
     ProtocolError,
+    React,
     Ready,
     RemoveSoldier,
     RequestFullUpdate,
@@ -101,6 +102,7 @@ client_events = st.one_of(
     st.builds(Subscribe, indices),
     st.builds(Unsubscribe, indices),
     st.builds(RequestFullUpdate, indices),
+    st.builds(React, st.sampled_from([int(r) for r in Reaction]), indices),
 )
 both_events = st.one_of(
     st.builds(Ping, st.integers(0, 2**64 - 1)),
@@ -419,6 +421,45 @@ def test_request_errors_keep_the_connection_open_and_fatal_ones_do_not() -> None
 def test_server_rejects_bad_frames(frame: bytes, code: ErrorCode) -> None:
     _, server = open_pair()
     expect_protocol_error(server, frame, code)
+
+
+def _react_frame(body: object) -> bytes:
+    return encode_frame(MessageType.REACT, msgpack.packb(body))
+
+
+@pytest.mark.parametrize(
+    ("body", "code"),
+    [
+        ({"kind": 3, "indices": [1]}, ErrorCode.BAD_VALUE),
+        ({"kind": 0, "indices": [1]}, ErrorCode.BAD_VALUE),
+        ({"kind": 1, "indices": [MAX_SOLDIERS]}, ErrorCode.BAD_VALUE),
+        ({"kind": 1.0, "indices": [1]}, ErrorCode.SCHEMA),
+        ({"kind": True, "indices": [1]}, ErrorCode.SCHEMA),
+        ({"kind": 1}, ErrorCode.SCHEMA),
+        ({"kind": 2, "indices": 1}, ErrorCode.SCHEMA),
+        ([1, [1]], ErrorCode.SCHEMA),
+    ],
+)
+def test_react_decoder_checks_kind_and_indices(body: object, code: ErrorCode) -> None:
+    _, server = open_pair()
+    expect_protocol_error(server, _react_frame(body), code)
+
+
+@given(st.integers(-5, 5), st.lists(st.integers(-2, MAX_SOLDIERS + 2), max_size=8), st.booleans())
+def test_react_decoder_accepts_exactly_the_documented_bodies(kind: int, idx: list[int], extra: bool) -> None:
+    """docs/PROTOCOL.md §5: kind 1 (recoil) or 2 (flinch), indices < max_soldiers, unknown keys ignored."""
+    body: dict[str, object] = {"kind": kind, "indices": idx}
+    if extra:
+        body["later"] = "ignored"
+    _, server = open_pair()
+    server.receive_data(_react_frame(body))
+    got = server.next_event()
+    if kind in (1, 2) and all(0 <= i < MAX_SOLDIERS for i in idx):
+        assert got == React(kind, tuple(idx))
+        assert server.state is State.OPEN
+    else:
+        assert isinstance(got, ProtocolError)
+        assert got.code in (ErrorCode.BAD_VALUE, ErrorCode.SCHEMA)
 
 
 def _rows_frame(**bad: object) -> bytes:

@@ -106,6 +106,9 @@ class FakeLink:
     def send_requests(self, rows: np.ndarray) -> None:
         self.sent.append(("requests", rows["index"].tolist(), rows["appearance"].tolist()))
 
+    def react(self, indices: np.ndarray, kind: int) -> None:
+        self.sent.append(("react", int(kind), *(int(i) for i in indices)))
+
     def swap(self) -> list[UpdateBatch]:
         out, self.pending = self.pending, []
         return out

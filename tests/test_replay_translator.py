@@ -12,6 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from client_stub.dis import DisTranslator, EntityFilter, FilterError, RemoveReason, Replayer, Translation
+from client_stub.dis.translator import REACTION_MAX_AGE
 from protocol.dis import (
     RIFLE_FIGURES,
     DisLog,
@@ -188,6 +189,7 @@ def test_fire_pdu_raises_a_short_firing_reaction_for_a_standing_still_shooter() 
         0: (Appearance.UPRIGHT, W.FIRING)
     }  # the walker keeps walking; 3 already fires
     assert out.fire_reactions.tolist() == [0]
+    assert out.recoils.tolist() == [0, 1, 2]  # every live shooter recoils (the server skips the walker)
     assert not feed(tr, 2.5).requests.size  # still holding
     assert requests_of(feed(tr, 3.0)) == {0: (Appearance.UPRIGHT, W.DEPLOYED)}  # hold over: back to the PDU's
     # the PDUs stay the authority: a new posture during the hold ends the reaction
@@ -198,15 +200,18 @@ def test_fire_pdu_raises_a_short_firing_reaction_for_a_standing_still_shooter() 
     assert not feed(tr, 5.5).requests.size
 
 
-def test_detonations_near_soldiers_are_counted() -> None:
+def test_detonations_near_soldiers_flinch_them_and_are_counted() -> None:
     tr = DisTranslator(FRAME)
     feed(tr, 0.0, pdu(1, (0.0, 0.0)), pdu(2, (20.0, 0.0)))
     where = tuple(FRAME.to_ecef(np.array([1.0, 1.0, 0.0])).tolist())
     det = WeaponEvent("detonation", 1.0, EntityId(1, 2, 9), EntityId(1, 2, 1), EntityType(), where,
                       EntityId(1, 2, 5), result=1)  # fmt: skip
     out = feed(tr, 1.0, events=(det,))
-    assert not out.requests.size
+    assert not out.requests.size and out.flinches.tolist() == [0]
     assert tr.near_detonations[:2].tolist() == [1, 0] and tr.stats["detonations"] == 1
+    # a late event (a replay's skipped start) is counted, but nobody reacts to it
+    late = feed(tr, 1.0 + REACTION_MAX_AGE + 0.1, events=(det,))
+    assert not len(late.flinches) and tr.near_detonations[0] == 2
 
 
 def test_full_table_reuses_the_slot_gone_longest_then_drops() -> None:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from peabody.fk import FigureKinematics
+from peabody.quaternion import to_matrix
 from protocol.entity import Appearance, WeaponState, make_entity_requests
 from server.soldier.manager import REQUEST_OK, SoldierManager
 from server.soldier.root_motion import TURN_RATE, feet_points
@@ -69,7 +70,15 @@ def drive(lib, script: list[tuple[float, ...]], heading: float, until: float) ->
     world = np.array(entity)[:, None, None, :] * 100.0 + local[..., 0:1] * right - local[..., 2:3] * forward
     root = np.array(figures)[:, [0, 2]]  # the figure's offset from the entity (soldier frame)
     gap = root[:, 0:1] * right[:, 0, 0] - root[:, 1:2] * forward[:, 0, 0]  # ... in the world
-    return {"world": world, "height": local[..., 1], "clips": np.array(clips), "gap": gap}
+    faces = np.einsum("nij,j->ni", to_matrix(np.array(figures, np.float64)[:, 3:7]), [0.0, 0.0, -1.0])
+    ahead = faces[:, 0:1] * right[:, 0, 0] - faces[:, 2:3] * forward[:, 0, 0]  # the figure's forward, world
+    yaw = np.degrees(np.arctan2(ahead[:, 0], ahead[:, 1]))  # compass degrees the figure faces
+    return {"world": world, "height": local[..., 1], "clips": np.array(clips), "gap": gap, "yaw": yaw}
+
+
+def yaw_steps(run: dict[str, np.ndarray]) -> np.ndarray:
+    """Per tick how far (degrees) the figure turned in the world since the tick before."""
+    return np.abs((np.diff(run["yaw"]) + 180.0) % 360.0 - 180.0)
 
 
 def skates(run: dict[str, np.ndarray], t0: float = 0.0, t1: float = math.inf) -> list[tuple[float, str]]:

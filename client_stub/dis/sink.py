@@ -1,4 +1,4 @@
-"""ServerSink: a Translation becomes CREATE_SOLDIER / REMOVE_SOLDIER / ENTITY_REQUESTS messages.
+"""ServerSink: a Translation becomes CREATE_SOLDIER / REMOVE_SOLDIER / ENTITY_REQUESTS / REACT messages.
 
 Slot ``k`` of the translator is the ``k``-th server index no start-up soldier (those of READY) holds, so a
 DIS entity's soldier keeps one server index for the whole replay, across re-appearances, never collides with a
@@ -23,13 +23,15 @@ stub's threaded one.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from client_stub.dis.translator import Translation
 from client_stub.link.api import Link
 from client_stub.link.client import LinkError
 from protocol.dis import RIFLE_FIGURES
-from protocol.entity import ENTITY_REQUEST_DTYPE
+from protocol.entity import ENTITY_REQUEST_DTYPE, Reaction
 
 FIGURE = "DI.fig"
 MAX_SOLDIERS_PER_CLIENT = 4096  # the server's default max_soldiers_per_client
@@ -53,6 +55,7 @@ class ServerSink:
             "created": 0,
             "removed": 0,
             "requests": 0,
+            "reactions": 0,  # soldiers asked to react (REACT indices)
             "weapon_substituted": 0,
             "dropped": 0,
             "while_lost": 0,  # translations kept but not sent: the link was lost
@@ -80,7 +83,9 @@ class ServerSink:
         return self.indices[np.asarray(slots, np.int64)]
 
     def apply(self, tr: Translation) -> None:
-        """Removals, then creations, then requests (the server takes them in order on one stream)."""
+        """Removals, then creations, then requests, then reactions (the server takes them in order on one
+        stream: a shooter's FIRING request comes before his recoil, which the server plays once the rifle
+        is up). Reactions are moments: a lost link loses them (the rest is kept for :meth:`rebind`)."""
         removed = [s for s in tr.removed.tolist() if s < self.capacity]
         for s in removed:
             self.rifle_of.pop(s, None)
@@ -101,8 +106,10 @@ class ServerSink:
         if self.lost:
             self.stats["while_lost"] += 1
             return
+        reactions = [(slots[slots < self.capacity], kind) for slots, kind in
+                     ((tr.recoils, Reaction.RECOIL), (tr.flinches, Reaction.FLINCH))]  # fmt: skip
         try:
-            self._send(removed, born, rows)
+            self._send(removed, born, rows, reactions)
         except LinkError as exc:
             self.lost = str(exc) or "connection lost"
             self.stats["while_lost"] += 1
@@ -129,7 +136,13 @@ class ServerSink:
         except LinkError as exc:
             self.lost = str(exc) or "connection lost"
 
-    def _send(self, removed: list[int], born: list[int], rows: np.ndarray) -> None:
+    def _send(
+        self,
+        removed: list[int],
+        born: list[int],
+        rows: np.ndarray,
+        reactions: Sequence[tuple[np.ndarray, Reaction]] = (),
+    ) -> None:
         for s in removed:
             self.link.remove(int(self.indices[s]))
             self.stats["removed"] += 1
@@ -150,3 +163,7 @@ class ServerSink:
             rows["index"] = self.indices[rows["index"].astype(np.int64)]
             self.link.send_requests(rows)
             self.stats["requests"] += len(rows)
+        for slots, kind in reactions:
+            if len(slots):
+                self.link.react(self.server_index(slots), kind)
+                self.stats["reactions"] += len(slots)

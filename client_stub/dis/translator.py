@@ -9,10 +9,14 @@ entity's own algorithm; an entity request whenever the posture, weapon, velocity
 should show changes. Everything is struct-of-arrays indexed by *slot*; a slot belongs to one entity for
 good, so a soldier that re-appears gets its old slot (and server index) back.
 
-Weapon events: a Fire PDU whose shooter is a live, standing-still soldier holds his weapon at FIRING for
-``fire_hold`` seconds (the firing posture, "if not already"); a moving soldier keeps moving (a posture change
-would cut his step). The motion library has no recoil or flinch clip, so Detonations are only counted
-(``near_detonations`` within ``flinch_radius`` of a soldier): no flinch is animated.
+Weapon events: a Fire PDU makes its shooter's soldier recoil (``Translation.recoils``, sent as REACT) and,
+if he is a live, standing-still soldier, holds his weapon at FIRING for ``fire_hold`` seconds (the firing
+posture, "if not already": the server plays the recoil once the rifle is up); a moving soldier keeps moving
+(a posture change would cut his step, and the server does not make a stepping soldier react). A Detonation
+makes every live soldier within ``flinch_radius`` (FLINCH_RADIUS, 5 m, horizontally) of its location
+flinch (``Translation.flinches``; one vectorised distance over the soldier slots), counted in
+``near_detonations``. An event older than REACTION_MAX_AGE when its step runs (a replay's skipped start, a
+late chunk) is counted but not played.
 """
 
 from __future__ import annotations
@@ -41,7 +45,8 @@ from protocol.events import DEFAULT_MAX_SOLDIERS
 
 DIS_TIMEOUT = 12.0  # s without a PDU before an entity is dropped (IEEE 1278.1 default)
 FIRE_HOLD = 1.0  # s a Fire PDU holds a standing-still shooter at FIRING
-FLINCH_RADIUS = 5.0  # m: a detonation this close to a soldier counts as "near"
+FLINCH_RADIUS = 5.0  # m: a detonation this close to a soldier counts as "near" (he flinches)
+REACTION_MAX_AGE = 0.5  # s: a Fire or Detonation older than this when translated makes nobody react
 MAX_REQUEST_SPEED = 50.0  # m/s: the server refuses > 100 m/s; no lifeform is faster than this
 MAX_ECEF_RADIUS = 1e8  # m: PDUs placed further from the Earth's centre are bad values
 STILL_SPEED = 0.1  # m/s: slower counts as standing still
@@ -88,9 +93,17 @@ class Translation:
     reasons: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, np.uint8))
     requests: NDArray[np.void] = field(default_factory=lambda: np.zeros(0, ENTITY_REQUEST_DTYPE))
     fire_reactions: I64 = field(default_factory=lambda: np.zeros(0, np.int64))  # slots set FIRING by Fire
+    recoils: I64 = field(default_factory=lambda: np.zeros(0, np.int64))  # slots that fired (REACT RECOIL)
+    flinches: I64 = field(default_factory=lambda: np.zeros(0, np.int64))  # slots near a blast (REACT FLINCH)
 
     def __bool__(self) -> bool:
-        return bool(len(self.created) or len(self.removed) or len(self.requests))
+        return bool(
+            len(self.created)
+            or len(self.removed)
+            or len(self.requests)
+            or len(self.recoils)
+            or len(self.flinches)
+        )
 
     @staticmethod
     def merge(parts: list[Translation]) -> Translation:
@@ -108,6 +121,7 @@ class Translation:
             parts[0].reasons,
             parts[0].requests,
         )
+        recoils, flinches = parts[0].recoils, parts[0].flinches
         for p in parts[1:]:
             if len(p.removed):
                 fresh = np.isin(created["slot"], p.removed)
@@ -117,14 +131,20 @@ class Translation:
                 removed = np.concatenate([removed, p.removed[keep]])
                 reasons = np.concatenate([reasons, p.reasons[keep]])
                 requests = requests[~np.isin(requests["index"], p.removed)]
+                recoils = recoils[~np.isin(recoils, p.removed)]
+                flinches = flinches[~np.isin(flinches, p.removed)]
             created = np.concatenate([created, p.created])
             requests = np.concatenate([requests, p.requests])
+            recoils = np.concatenate([recoils, p.recoils])
+            flinches = np.concatenate([flinches, p.flinches])
         return Translation(
             created,
             removed,
             reasons,
             _last_per_index(requests),
             np.concatenate([p.fire_reactions for p in parts]),
+            recoils,
+            flinches,
         )
 
 
@@ -217,6 +237,8 @@ class DisTranslator:
             "requests": 0,
             "fire_events": 0,
             "fire_reactions": 0,
+            "recoils": 0,
+            "flinches": 0,
             "detonations": 0,
             "near_detonations": 0,
             "dropped": 0,
@@ -334,7 +356,7 @@ class DisTranslator:
         if batch is not None and len(batch):
             parts.append(self.ingest(batch, np.asarray(times, np.float64)))
         if events:
-            parts.append(self.weapon_events(events))
+            parts.append(self.weapon_events(events, now))
         parts.append(self.advance(now))
         return Translation.merge(parts)
 
@@ -432,40 +454,57 @@ class DisTranslator:
             self._requests(live_slots, float(t.max())),
         )
 
-    def weapon_events(self, events: list[WeaponEvent] | tuple[WeaponEvent, ...]) -> Translation:
-        """Fire: a standing-still live shooter holds FIRING for ``fire_hold`` s. Detonation: counted near
-        soldiers (no flinch clip exists to play)."""
+    def weapon_events(
+        self, events: list[WeaponEvent] | tuple[WeaponEvent, ...], now: float | None = None
+    ) -> Translation:
+        """Fire: the shooter recoils; a standing-still live shooter holds FIRING for ``fire_hold`` s.
+        Detonation: the live soldiers within ``flinch_radius`` flinch. Events older than REACTION_MAX_AGE at
+        ``now`` make nobody react (the hold and the counts still apply)."""
         fires = [e for e in events if e.kind == "fire"]
         dets = [e for e in events if e.kind == "detonation"]
         self.stats["fire_events"] += len(fires)
         self.stats["detonations"] += len(dets)
         out = Translation()
+        fresh = -np.inf if now is None else now - REACTION_MAX_AGE
         if fires:
-            ids = np.array([e.shooter for e in fires], np.uint64).reshape(-1, 3)
-            shooters = self.slots_of((ids[:, 0] << np.uint64(32)) | (ids[:, 1] << np.uint64(16)) | ids[:, 2])
-            t = np.array([e.t for e in fires])
-            ok = shooters >= 0
-            shooters, t = shooters[ok], t[ok]
-            ok = self.live[shooters] & (self.posture[shooters] != TtesPosture.DEAD)
-            ok &= self.weapon[shooters] != TtesWeapon.FIRING  # the PDUs already show him firing
-            ok &= np.hypot(self.local_velocity[shooters, 0], self.local_velocity[shooters, 1]) < STILL_SPEED
-            shooters, t = shooters[ok], t[ok]
-            if len(shooters):
-                np.maximum.at(self.fire_until, shooters, t + self.fire_hold)
-                react = np.unique(shooters)
-                self.stats["fire_reactions"] += len(react)
-                out.requests = self._requests(np.unique(shooters), float(t.max()))
-                out.fire_reactions = react
+            self._fires(fires, fresh, out)
         if dets and self.frame is not None:
-            live = self.live_slots()
-            if len(live):
-                where = self.to_local(np.array([e.location for e in dets]))
-                pos, _ = self.dead_reckoned(max(e.t for e in dets), live)
-                d = np.linalg.norm(pos[None, :, :2] - where[:, None, :2], axis=2)
-                near = (d <= self.flinch_radius).sum(axis=0)
-                self.near_detonations[live] += near
-                self.stats["near_detonations"] += int(near.sum())
+            self._detonations(dets, fresh, out)
         return out
+
+    def _fires(self, fires: list[WeaponEvent], fresh: float, out: Translation) -> None:
+        ids = np.array([e.shooter for e in fires], np.uint64).reshape(-1, 3)
+        shooters = self.slots_of((ids[:, 0] << np.uint64(32)) | (ids[:, 1] << np.uint64(16)) | ids[:, 2])
+        t = np.array([e.t for e in fires])
+        ok = shooters >= 0
+        shooters, t = shooters[ok], t[ok]
+        ok = self.live[shooters] & (self.posture[shooters] != TtesPosture.DEAD)
+        shooters, t = shooters[ok], t[ok]
+        out.recoils = shooters[t >= fresh]
+        self.stats["recoils"] += len(out.recoils)
+        ok = self.weapon[shooters] != TtesWeapon.FIRING  # the PDUs already show him firing
+        ok &= np.hypot(self.local_velocity[shooters, 0], self.local_velocity[shooters, 1]) < STILL_SPEED
+        shooters, t = shooters[ok], t[ok]
+        if len(shooters):
+            np.maximum.at(self.fire_until, shooters, t + self.fire_hold)
+            react = np.unique(shooters)
+            self.stats["fire_reactions"] += len(react)
+            out.requests = self._requests(react, float(t.max()))
+            out.fire_reactions = react
+
+    def _detonations(self, dets: list[WeaponEvent], fresh: float, out: Translation) -> None:
+        live = self.live_slots()
+        if not len(live):
+            return
+        where = self.to_local(np.array([e.location for e in dets]))
+        pos, _ = self.dead_reckoned(max(e.t for e in dets), live)
+        near = np.linalg.norm(pos[None, :, :2] - where[:, None, :2], axis=2) <= self.flinch_radius
+        self.near_detonations[live] += near.sum(axis=0)
+        self.stats["near_detonations"] += int(near.sum())
+        near &= (np.array([e.t for e in dets]) >= fresh)[:, None]
+        near &= (self.posture[live] != TtesPosture.DEAD)[None, :]
+        out.flinches = live[np.flatnonzero(near.any(axis=0))]
+        self.stats["flinches"] += len(out.flinches)
 
     def advance(self, now: float) -> Translation:
         """Expire entities silent for ``timeout`` s, end Fire reactions whose hold is over."""

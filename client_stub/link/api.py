@@ -9,6 +9,7 @@ from typing import Protocol
 import numpy as np
 
 from client_stub.link.buffer import UpdateBatch
+from protocol.entity import Reaction
 from protocol.update_table import UpdateTable
 
 
@@ -29,5 +30,7 @@ class Link(Protocol):
     def subscribe(self, indices: list[int] | np.ndarray) -> None: ...
 
     def send_requests(self, rows: np.ndarray) -> None: ...
+
+    def react(self, indices: list[int] | np.ndarray, kind: Reaction) -> None: ...
 
     def swap(self) -> list[UpdateBatch]: ...

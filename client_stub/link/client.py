@@ -31,7 +31,7 @@ import trio
 from client_stub.link.buffer import UpdateBatch, UpdateBuffer
 from protocol import events as ev
 from protocol.connection import CLIENT, NEED_DATA, Connection
-from protocol.entity import ENTITY_REQUEST_DTYPE
+from protocol.entity import ENTITY_REQUEST_DTYPE, Reaction
 from protocol.errors import LocalProtocolError, is_fatal
 from protocol.update_table import UpdateTable
 
@@ -247,15 +247,23 @@ class Client:
     def remove(self, index: int) -> None:
         self.send(ev.RemoveSoldier(int(index)))
 
-    def subscribe(self, indices: list[int] | np.ndarray) -> None:
+    def _send_indices(
+        self, make: Callable[[tuple[int, ...]], ev.Event], indices: list[int] | np.ndarray
+    ) -> None:
+        """One message per MAX_INDICES_PER_MESSAGE indices (a frame's size limit)."""
         idx = np.asarray(indices, np.int64)
         for k in range(0, len(idx), MAX_INDICES_PER_MESSAGE):
-            self.send(ev.Subscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+            self.send(make(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+
+    def subscribe(self, indices: list[int] | np.ndarray) -> None:
+        self._send_indices(ev.Subscribe, indices)
 
     def unsubscribe(self, indices: list[int] | np.ndarray) -> None:
-        idx = np.asarray(indices, np.int64)
-        for k in range(0, len(idx), MAX_INDICES_PER_MESSAGE):
-            self.send(ev.Unsubscribe(tuple(idx[k : k + MAX_INDICES_PER_MESSAGE].tolist())))
+        self._send_indices(ev.Unsubscribe, indices)
+
+    def react(self, indices: list[int] | np.ndarray, kind: Reaction) -> None:
+        """REACT: these soldiers play ``kind`` (recoil, flinch) once, now or when they come to rest."""
+        self._send_indices(lambda idx: ev.React(int(kind), idx), indices)
 
     def request_full_update(self, indices: list[int] | None = None) -> None:
         self.send(ev.RequestFullUpdate(tuple(int(i) for i in indices or ())))

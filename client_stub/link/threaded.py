@@ -20,6 +20,7 @@ import trio
 
 from client_stub.link.buffer import UpdateBatch
 from client_stub.link.client import STARTUP_JCL, Client, LinkError
+from protocol.entity import Reaction
 from protocol.events import (
     Accept,
     Error,
@@ -154,6 +155,10 @@ class ThreadedClient:
     def unsubscribe(self, indices: list[int] | np.ndarray) -> None:
         if len(indices):
             self.call(self.client.unsubscribe, indices)
+
+    def react(self, indices: list[int] | np.ndarray, kind: Reaction) -> None:
+        if len(indices):
+            self.call(self.client.react, indices, kind)
 
     def request_full_update(self, indices: list[int] | None = None) -> None:
         self.call(self.client.request_full_update, indices)

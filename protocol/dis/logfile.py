@@ -492,7 +492,6 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
     )
 
 
-
 class _Found:
     """What the decoders of one log yielded, and each PDU's status: the ``match`` over the typed events."""
 

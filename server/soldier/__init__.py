@@ -6,7 +6,8 @@
 * :mod:`~server.soldier.locomotion` — Figure 5 as a table, vectorised;
 * :mod:`~server.soldier.blend` — cross-fades and heading offsets;
 * :mod:`~server.soldier.settings` — :class:`SoldierSettings`: the manager's one frozen, validated settings;
-* :mod:`~server.soldier.manager` — :class:`SoldierManager` (Figure 12) and :class:`TickUpdate`;
+* :mod:`~server.soldier.manager` — :class:`SoldierManager` (Figure 12), assembled from its parts
+  (``core``, ``stepping``, ``turning``, ``events``, ``ticking``, ``requests``, ``reactions``);
 * :mod:`~server.soldier.wire` — TickUpdate → protocol ``JointUpdates`` and the update table;
 * :mod:`~server.soldier.synthetic` — a small library with the real names, for tests and benches.
 """

@@ -273,7 +273,8 @@ class MotionLibrary:
         """Each clip's own travel (:mod:`~server.soldier.root_motion`): measured from the planted feet for
         walking, running and side-steps, the stride spread evenly for crawling (hands and knees carry it) or
         a figure without sole sites, none for posture changes, turns (their yaw is the entity's) and
-        reactions."""
+        reactions. Turns in place keep where their weight is (``TravelTable.contact``), for a reversal's pivot
+        (:func:`~server.soldier.root_motion.pivot`)."""
         kin = FigureKinematics(figure)
         feet = has_feet(kin)
         first = self.sets[0]
@@ -286,18 +287,30 @@ class MotionLibrary:
             contacts.append(np.zeros((n, 2)))
             if cid not in stepping or n < 2:
                 curves.append(np.zeros((n, 2)))
+                if feet and n >= 2 and info.graph == GRAPH_TURN and self.clip_end_offset[cid, 2] != 0.0:
+                    contacts[-1] = stance_contact(self._feet(kin, cid, sl))
                 continue
             if info.graph == GRAPH_CRAWL or not feet:
                 curves.append(linear_travel(n, self._travel_vector(cid)))
                 continue
-            t = np.arange(n) * self.clip_frame_time[cid]
-            s = first.sample(
-                np.full(n, cid), np.zeros(n), np.ones(n), np.full(n, info.duration), t, interpolate=False
-            )
-            points = feet_points(kin, s.joints[:, sl], s.figures[:, 0])
+            points = self._feet(kin, cid, sl)
             curves.append(stance_travel(points, self.sources[cid].stride_length))
             contacts[-1] = stance_contact(points)
         return TravelTable(curves, contacts)
+
+    def _feet(self, kin: FigureKinematics, cid: int, sl: slice) -> np.ndarray:
+        """The sole points of clip ``cid``'s every stored frame (``root_motion.feet_points``)."""
+        n = self.clips[cid].nframes
+        t = np.arange(n) * self.clip_frame_time[cid]
+        s = self.sets[0].sample(
+            np.full(n, cid),
+            np.zeros(n),
+            np.ones(n),
+            np.full(n, self.clips[cid].duration),
+            t,
+            interpolate=False,
+        )
+        return feet_points(kin, s.joints[:, sl], s.figures[:, 0])
 
     def _travel_vector(self, cid: int) -> np.ndarray:
         """(X, Z cm) a clip carries the soldier: its recorded root travel, else its ground speed times its

@@ -203,6 +203,7 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
     off = offset_at(tb, lib, idx, t, frames)
     yaw = tb.root_yaw[idx]
     turning = (yaw != 0.0) & ((tb.mode[idx] == STEPPING[0]) | (tb.mode[idx] == STEPPING[1]))
+    turning &= ~tb.reversing[idx]  # a reversing figure stops facing the old way, then pivots
     if turning.any():
         dt = np.maximum(np.asarray(t, np.float64) - tb.root_t[idx], 0.0)
         rate = TURN_RATE * np.maximum(1.0, np.abs(yaw) / 90.0)  # a reversal turns faster (it walks away)
@@ -213,6 +214,24 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         off = pivot - yawed(contact, new)
         tb.root_yaw[idx] = new
     tb.root_off[idx] = off
+    tb.root_t[idx] = t
+    tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
+
+
+def pivot(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
+    """A reversal's pivot (a turn in place) also turns the figure by what the turn clip lacks of the
+    reversal (``pivot_rate``, spread over the clip), about the sole point carrying its weight (as
+    :func:`fold` turns a stepping figure)."""
+    if len(idx) == 0:
+        return
+    t = np.minimum(np.asarray(t, np.float64), tb.end[idx])
+    frames = frame_at(tb, lib, idx, t)
+    off = offset_at(tb, lib, idx, t, frames)
+    yaw = tb.root_yaw[idx]
+    new = yaw + tb.pivot_rate[idx] * np.maximum(t - tb.root_t[idx], 0.0)
+    contact = lib.travel.contact_at(tb.clip[idx], frames)
+    tb.root_off[idx] = off + yawed(contact, yaw) - yawed(contact, new)
+    tb.root_yaw[idx] = new
     tb.root_t[idx] = t
     tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
 

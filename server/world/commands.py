@@ -268,7 +268,8 @@ COMMANDS: tuple[Command, ...] = (
         'name, "recoil" or "flinch"',
         "",
         "a resting soldier plays its posture's recoil (a Fire PDU) or flinch (a near detonation) once; "
-        "reports the clip, or null when it cannot react now",
+        "reports the clip, or null when it cannot react now (one changing posture or turning reacts when "
+        "that ends; REACT over the wire does the same)",
         (S, S),
         access="soldier",
     ),

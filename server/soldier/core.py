@@ -1,0 +1,232 @@
+"""The soldier manager's state: its tables, settings, lookups and the two ways a clip starts (a step of
+a path, a resting pose). The manager's other parts (stepping, turning, events, ticking, requests, reactions)
+are mixins over it, one module each, so :class:`~server.soldier.manager.SoldierManager` reads as Figure 12."""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from protocol.entity import Appearance, WeaponState
+from protocol.events import DEFAULT_MAX_SOLDIERS
+from server.soldier import root_motion
+from server.soldier.library import MotionLibrary, PathStep
+from server.soldier.locomotion import (
+    GAIT_STAY,
+    NEXT,
+    SCALED,
+    Cond,
+)
+from server.soldier.settings import SoldierSettings
+from server.soldier.state import (
+    BASE_POSTURE,
+    STAND_STOWED,
+    LocoState,
+    Mode,
+    Movement,
+    goal_posture,
+    movement,
+)
+from server.soldier.table import SoldierTable
+
+REQUEST_OK = 0
+REQUEST_UNKNOWN_SOLDIER = 1
+REQUEST_BAD_VALUE = 2
+
+MOVING_EPS = 1e-3  # m/s: slower than this is standing still
+MAX_SPEED = 100.0  # m/s: faster is a bad value
+# playback rate limits of a locomotion clip (speed / ground speed): human cadence stays within about
+# 0.6-1.6 times the recorded one (walk 1.1-2.9 steps/s, run 1.7-4.6); beyond, the stride length takes the rest
+MIN_RATE, MAX_RATE = 0.6, 1.6
+MIN_STRIDE, MAX_STRIDE = 0.5, 2.0  # stride scale limits (a scaled stride slides the feet by the difference)
+CATCH_UP_SECONDS = 1.5  # a stepping soldier's figure closes its root offset over about this long
+MIN_TURN_DEG = 22.5  # a standing soldier whose figure is this far from its heading turns in place
+MAX_CHAIN = 64  # clip ends handled per soldier per tick (a longer backlog is taken up next tick)
+MIN_CLIP_SECONDS = 1e-3  # a one-frame clip still takes this long, so clip ends cannot chain forever
+_EPS_T = 1e-9
+_CRAWL_CYCLE = int(LocoState.CRAWL_CYCLE)
+# plain ints for the per-event Python paths (enum attribute access costs a few hundred ns each)
+_IDLE, _TRANSITION, _LOCO, _CRAWL = (int(m) for m in (Mode.IDLE, Mode.TRANSITION, Mode.LOCO, Mode.CRAWL))
+_NONE = int(LocoState.NONE)
+_GAIT_STAY = np.arange(len(LocoState), dtype=np.int8)  # state -> itself, but a gait transition -> its stay
+for _t, _stay in GAIT_STAY.items():
+    _GAIT_STAY[_t] = _stay
+_FIRING = int(WeaponState.FIRING)
+_MOVE_CRAWL = int(Movement.CRAWL)
+_SCALED: tuple[bool, ...] = tuple(SCALED.tolist())
+
+
+@dataclass
+class TickUpdate:
+    """What one tick produced: the poses of the soldiers due for an update.
+
+    ``joints`` are pose vectors (soldier figure then weapon, ``MotionLibrary.sets[k].figure_slice``), radians
+    (translational DOFs in cm); ``figures`` each figure's root placement ``(x, y, z, qw, qx, qy, qz)`` in Jack
+    axes and centimetres relative to the soldier's feet (local motion only; the client owns heading and
+    position). ``heading_only`` rows repeat the last pose (the seed's "send the last update packet with
+    heading change"). ``server.soldier.wire.to_joint_updates`` converts to the protocol's units.
+    """
+
+    indices: np.ndarray  # (n,) int64, ascending
+    joints: np.ndarray  # (n, ndof) float32
+    figures: np.ndarray  # (n, nfig, 7) float32
+    heading_only: np.ndarray  # (n,) bool
+    clips: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # (n,) clip id shown
+    frames: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n,) fractional frame within the clip
+    headings: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n,) compass degrees last requested
+    now: float = 0.0
+    tick: int = 0
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+
+@dataclass(frozen=True)
+class ClipStart:
+    """A clip a soldier started (kept when ``record_clips`` is on): for tests and traces."""
+
+    time: float
+    index: int
+    clip: str
+    forward: bool
+    duration: float
+    mode: str
+    state: str
+
+
+class ManagerCore:
+    """What every part of the soldier manager shares: the table, the library, the settings, the lookups."""
+
+    def __init__(
+        self,
+        library: MotionLibrary,
+        settings: SoldierSettings | None = None,
+        *,
+        max_soldiers: int = DEFAULT_MAX_SOLDIERS,
+        record_limit: int = 100_000,
+        **changes: Any,
+    ) -> None:
+        """``changes`` are :class:`SoldierSettings` fields (``throttle=0.0``) applied over ``settings``."""
+        self.library = library
+        self.table = SoldierTable(library.ndof, library.nfig, 16, max_soldiers)
+        self.settings = (settings or SoldierSettings()).replace(**changes)
+        self.names: dict[int, str] = {}
+        self._by_name: dict[str, int] = {}
+        self._paths: dict[int, list[Any]] = {}  # soldier -> [steps, arc index] while in TRANSITION
+        self._pending: dict[
+            int, tuple[str, float]
+        ] = {}  # soldier -> (reaction, time asked) kept in TRANSITION
+        self.clip_log: deque[ClipStart] = deque(maxlen=record_limit)
+        self._build_lookups()
+        self.ticks = 0
+        self.stats = {
+            "tick_seconds": 0.0,
+            "last_tick_seconds": 0.0,
+            "updates": 0,
+            "requests": 0,
+            "requests_unknown": 0,
+            "requests_bad": 0,
+            "events": 0,
+            "clip_ends": 0,
+            "unreachable": 0,
+            "reactions": 0,  # reaction requests (react), played or kept
+            "answers": 0,  # out-of-cycle updates (answer)
+        }
+
+    @property
+    def settings(self) -> SoldierSettings:
+        return self._settings
+
+    @settings.setter
+    def settings(self, value: SoldierSettings) -> None:
+        if not isinstance(value, SoldierSettings):
+            raise TypeError(f"settings must be SoldierSettings, not {type(value).__name__}")
+        self._settings = value
+        # what the vectorised pose path reads, per clip graph (turn and react clips: the static offset)
+        o = value.heading_offsets
+        self._offsets = np.array((*o, o[0], o[0]), np.float64)
+
+    def configure(self, **changes: Any) -> SoldierSettings:
+        """Replace the settings by a validated copy with ``changes`` (ValueError: nothing changes)."""
+        self.settings = self._settings.replace(**changes)
+        return self._settings
+
+    def _build_lookups(self) -> None:
+        lib = self.library
+        # GOAL[appearance, firing] -> posture node (-1: not in this graph)
+        self._goal = np.full((len(Appearance) + 1, 2), -1, np.int16)
+        for app in Appearance:
+            for firing in (False, True):
+                name = goal_posture(app, WeaponState.FIRING if firing else WeaponState.DEPLOYED)
+                self._goal[app, int(firing)] = lib.node(name) if lib.has_node(name) else -1
+        # what moving means per appearance, given the clips this library has
+        self._move = np.zeros(len(Appearance) + 1, np.int8)
+        for app in Appearance:
+            kind = movement(app)
+            if (kind == Movement.WALK and lib.can_walk) or (kind == Movement.CRAWL and lib.can_crawl):
+                self._move[app] = kind
+        self._base = np.full(3, -1, np.int16)
+        for kind, name in BASE_POSTURE.items():
+            if lib.has_node(name):
+                self._base[kind] = lib.node(name)
+        self._home = lib.node(STAND_STOWED) if lib.has_node(STAND_STOWED) else 0
+        # per Figure-5 state, how far behind the entity its figure walks (cm): what it still travels when the
+        # entity stops, on average (half a step and the end step), so a stop ends near the entity
+        travel = np.hypot(*lib.travel.total.T)
+        self._stop_lag = np.zeros(len(LocoState))
+        for state in LocoState:
+            clip, end = lib.loco_clip[state, 0], lib.loco_clip[NEXT[state, Cond.STOP], 0]
+            if clip >= 0:
+                self._stop_lag[state] = 0.5 * travel[clip] + (
+                    travel[end] if end >= 0 and NEXT[state, Cond.STOP] else 0.0
+                )
+
+    def _play_step(self, i: int, step: PathStep, t: float) -> None:
+        tb = self.table
+        root_motion.fold1(tb, self.library, i, t)
+        tb.stride[i] = 1.0
+        tb.pivot_rate[i] = 0.0  # (a reversal's pivot sets its own after this)
+        tb.clip[i] = step.clip
+        tb.direc[i] = 1 if step.forward else -1
+        tb.start[i] = t
+        dur = max(step.duration, MIN_CLIP_SECONDS)
+        tb.dur[i] = dur
+        tb.end[i] = t + dur
+        root_motion.rebase1(tb, self.library, i)
+        self._record(i, t)
+
+    def _rest(self, i: int, node: int, t: float) -> None:
+        """Show posture ``node``'s pose: its clip held at the frame that is that posture."""
+        tb = self.table
+        lib = self.library
+        root_motion.fold1(tb, lib, i, t)  # the offset stays where the last step left it (feet planted)
+        tb.stride[i] = 1.0
+        tb.pivot_rate[i] = 0.0
+        clip = int(lib.rest_clip[node])
+        tb.node[i] = node
+        tb.clip[i] = clip
+        tb.direc[i] = lib.rest_dir[node]
+        tb.dur[i] = lib.clip_duration[clip]
+        tb.start[i] = t - tb.dur[i]
+        tb.end[i] = t
+        tb.dirty[i] = True
+        root_motion.rebase1(tb, lib, i)
+
+    def _record(self, i: int, t: float, what: str | None = None) -> None:
+        if not self._settings.record_clips:
+            return
+        tb = self.table
+        self.clip_log.append(
+            ClipStart(
+                t,
+                i,
+                what or self.library.clip_names[int(tb.clip[i])],
+                bool(tb.direc[i] > 0),
+                float(tb.dur[i]),
+                Mode(int(tb.mode[i])).name,
+                LocoState(int(tb.loco[i])).name,
+            )
+        )

@@ -1,0 +1,229 @@
+"""Figure 12's first half: entity requests in (vectorised), and the JCL debugging commands on one soldier."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from protocol import coords
+from protocol.entity import Appearance, WeaponState, make_entity_requests
+from server.soldier import root_motion
+from server.soldier.core import (
+    _CRAWL,
+    _EPS_T,
+    _IDLE,
+    _LOCO,
+    _NONE,
+    _TRANSITION,
+    MAX_SPEED,
+    MIN_TURN_DEG,
+    MOVING_EPS,
+    REQUEST_BAD_VALUE,
+    REQUEST_OK,
+    REQUEST_UNKNOWN_SOLDIER,
+)
+from server.soldier.library import PathStep
+from server.soldier.locomotion import (
+    SCALED,
+    Side,
+    direction,
+)
+from server.soldier.state import (
+    Movement,
+    request_for,
+)
+from server.soldier.ticking import Ticking
+
+
+class Requests(Ticking):
+    """Requests in: stored (TTES → Jack) and turned into events where they change what a soldier does."""
+
+    def apply_requests(self, batch: np.ndarray, now: float) -> np.ndarray:
+        """Take a batch of entity requests (``protocol.entity.ENTITY_REQUEST_DTYPE``, Performer coordinates).
+
+        Returns a per-row status: REQUEST_OK, REQUEST_UNKNOWN_SOLDIER or REQUEST_BAD_VALUE (enum values out of
+        range, non-finite numbers, speed above MAX_SPEED). Never raises on the rows' contents; when several
+        rows name one soldier the last one wins.
+        """
+        rows = np.asarray(batch)
+        n = len(rows)
+        status = np.zeros(n, np.uint8)
+        if n == 0:
+            return status
+        tb = self.table
+        idx = rows["index"].astype(np.int64)
+        app = rows["appearance"].astype(np.int64)
+        wpn = rows["weapon"].astype(np.int64)
+        imm = rows["immediate"].astype(np.int64)
+        with np.errstate(invalid="ignore", over="ignore"):  # garbage floats (signalling NaNs) are bad values
+            vel = np.asarray(rows["velocity"], np.float64).reshape(n, 3)
+            hdg = np.asarray(rows["heading"], np.float64).reshape(n)
+            pos = np.asarray(rows["position"], np.float64).reshape(n, 3)
+            finite = np.isfinite(vel).all(1) & np.isfinite(hdg) & np.isfinite(pos).all(1)
+            bad = (
+                (app < Appearance.DEAD)
+                | (app > Appearance.CRAWL)
+                | (wpn < 0)
+                | (wpn > WeaponState.FIRING)
+                | (imm < 0)
+                | (imm > 1)
+                | ~finite
+                | ~(np.linalg.norm(np.where(finite[:, None], vel, 0.0), axis=1) <= MAX_SPEED)
+            )
+        live = tb.live_mask(idx)
+        status[~live] = REQUEST_UNKNOWN_SOLDIER
+        status[live & bad] = REQUEST_BAD_VALUE
+        self.stats["requests"] += n
+        self.stats["requests_unknown"] += int((~live).sum())
+        self.stats["requests_bad"] += int((live & bad).sum())
+        ok = np.flatnonzero(status == REQUEST_OK)
+        if len(ok) == 0:
+            return status
+        if len(ok) > 1:  # the last row per soldier wins
+            rev = ok[::-1]
+            _, first = np.unique(idx[rev], return_index=True)
+            ok = np.sort(rev[first])
+        i = idx[ok]
+        app, wpn, imm, vel, hdg, pos = app[ok], wpn[ok], imm[ok].astype(bool), vel[ok], hdg[ok], pos[ok]
+        if not self._settings.every_frame:
+            tb.clock[i] = now
+        self._advance(i)  # clips that ended before the request end first (the next tick would do it later)
+        t = tb.clock[i]
+        speed = np.hypot(vel[:, 0], vel[:, 1])  # Performer: Z up
+        moving = speed > MOVING_EPS
+        fwd = coords.compass_to_direction(hdg)
+        ahead = np.einsum("ij,ij->i", vel[:, :2], fwd[:, :2])
+        left = vel[:, 1] * fwd[:, 0] - vel[:, 0] * fwd[:, 1]  # Performer Z up: (fwd x vel).z
+        backward, side = direction(ahead, left, self.library.can_side)
+        backward &= moving
+        side = np.where(moving, side, Side.AHEAD)
+        mode = tb.mode[i]
+        changed_pw = (app != tb.appearance[i]) | (wpn != tb.weapon[i])
+        heading_changed = hdg != tb.heading[i]
+        speed_changed = speed != tb.speed[i]
+        kind = self._move[app]
+        event = (
+            imm | (changed_pw & (mode != _TRANSITION)) | ((mode == _IDLE) & moving & (kind != Movement.NONE))
+        )
+        # the root offset up to now under the old velocity; a turned entity turns a world-fixed offset
+        root_motion.fold(tb, self.library, i, t)
+        turned = np.where(tb.has_heading[i], hdg - tb.heading[i], 0.0)
+        tb.has_heading[i] = True
+        root_motion.turn_offsets(tb, i, turned)
+        # a standing figure keeps its orientation in the world (it turns in place, below); a moving one
+        # turns with the entity at once
+        keeps = (mode == _LOCO) | (mode == _CRAWL) | (tb.node[i] == self._home) | moving
+        tb.root_yaw[i] = np.where(keeps, (tb.root_yaw[i] - turned + 180.0) % 360.0 - 180.0, 0.0)
+        # store the request (Jack coordinates)
+        tb.appearance[i] = app
+        tb.weapon[i] = wpn
+        tb.velocity[i] = coords.vectors_performer_to_jack(vel)
+        tb.position[i] = coords.points_performer_to_jack(pos)
+        tb.heading[i] = hdg
+        tb.yaw[i] = coords.compass_to_jack_yaw(hdg)
+        tb.speed[i] = speed
+        tb.backward[i] = backward
+        tb.side[i] = side
+        tb.vlocal[i] = np.stack([-left, -ahead], axis=1) * 100.0  # soldier frame: forwards -Z, left -X
+        # a speed change within a gait: keep the phase, change the playback rate
+        stepping = (mode == _LOCO) | (mode == _CRAWL)
+        self._mark_reversals(i, mode, moving)
+        # (a reversing soldier's step ends at its pace: the new velocity is not his step's)
+        rescale = ~event & stepping & moving & speed_changed & SCALED[tb.loco[i]] & ~tb.reversing[i]
+        if rescale.any():
+            r = i[rescale]
+            tr = t[rescale]
+            new_dur, tb.stride[r] = self._step_duration(r, tb.clip[r], tb.loco[r])
+            u = np.clip((tr - tb.start[r]) / np.maximum(tb.dur[r], _EPS_T), 0.0, 1.0)
+            tb.start[r] = tr - u * new_dur
+            tb.dur[r] = new_dur
+            tb.end[r] = tb.start[r] + new_dur
+        hp = ~event & (mode == _IDLE) & ~moving & heading_changed
+        tb.heading_pending[i[hp]] = True
+        for k in np.flatnonzero(hp & (np.abs(tb.root_yaw[i]) >= MIN_TURN_DEG)).tolist():
+            self._turn(int(i[k]), float(t[k]))
+        tb.requested[i[event | hp | rescale]] = True  # what :meth:`answer` answers between ticks
+        ev = np.flatnonzero(event)
+        if len(ev):
+            self.stats["events"] += len(ev)
+            cap = ev[stepping[ev] & ~imm[ev]] if self._settings.blend_time > 0 else ev[:0]
+            captured: dict[int, int] = {}
+            cj = cf = np.zeros(0, np.float32)
+            if len(cap):
+                cj, cf, _, _ = self._pose(i[cap])
+                captured = {int(s): k for k, s in enumerate(i[cap])}
+            for k in ev.tolist():
+                s = int(i[k])
+                c = captured.get(s)
+                self._on_event(s, float(t[k]), bool(imm[k]), None if c is None else (cj[c], cf[c]))
+        return status
+
+    def posture_change(self, index: int, posture: str, now: float) -> list[str]:
+        """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing
+        still request for that posture would take it (heading and position kept; a soldier in a transition
+        finishes it first). Returns the postures of the path playing now; KeyError for an unknown soldier or
+        posture."""
+        if not self.table.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        appearance, weapon = request_for(posture)
+        tb = self.table
+        row = make_entity_requests(
+            index,
+            appearance,
+            weapon,
+            heading=float(tb.heading[index]),
+            position=coords.points_jack_to_performer(tb.position[index].astype(np.float64)),
+        )
+        if self.apply_requests(row, now)[0] != REQUEST_OK:
+            raise KeyError(f"soldier {index} refused posture {posture!r}")
+        return [self.library.posture_names[s.end] for s in self._paths.get(index, [()])[0]]
+
+    def play_clip(
+        self, index: int, clip: int, forward: bool = True, duration: float = -1.0, now: float = 0.0
+    ) -> float:
+        """``play_bound_channelset``: the soldier plays ``clip`` once (over ``duration`` s, <= 0: the stored
+        time), then takes up its last request again from the posture the clip ends in (a static arc's end,
+        else where it was). Returns the play time; KeyError / ValueError for a bad soldier or clip."""
+        tb, lib = self.table, self.library
+        if not tb.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        if not 0 <= clip < lib.nclips:
+            raise ValueError(f"no clip {clip}")
+        if not math.isfinite(duration):
+            raise ValueError(f"play time must be finite, not {duration}")
+        i = int(index)
+        if not self._settings.every_frame:
+            tb.clock[i] = now
+        self._advance(np.array([i], np.int64))
+        t = float(tb.clock[i])
+        node = int(tb.node[i])
+        end = lib.clip_end_node(clip, forward, node)
+        step = PathStep(
+            clip, forward, float(duration) if duration > 0 else float(lib.clip_duration[clip]), node, end
+        )
+        tb.blend_len[i] = 0.0
+        tb.loco[i] = _NONE
+        tb.mode[i] = _TRANSITION
+        self._paths[i] = [(step,), 0]
+        self._play_step(i, step, t)
+        tb.dirty[i] = True
+        return step.duration
+
+    def react(self, index: int, kind: str, now: float) -> str | None:
+        """A Fire PDU's ``"recoil"`` or a near detonation's ``"flinch"`` (REACT, ``react_soldier_state``):
+        a soldier resting in a posture with that reaction plays it once (soldier_react.graph) and rests there
+        again; returns the clip. One changing posture, turning or reacting plays it when that ends
+        (:mod:`server.soldier.reactions`); a stepping one, or one whose posture has no such clip, does not
+        react. Both return None. KeyError for an unknown soldier."""
+        tb = self.table
+        if not tb.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        if not self._settings.every_frame:
+            tb.clock[index] = now
+        self._advance(np.array([index], np.int64))
+        self.stats["reactions"] += 1
+        clip = self._react_now(int(index), kind, float(tb.clock[index]))
+        if clip is not None:
+            tb.requested[index] = True  # what :meth:`answer` answers between ticks
+        return clip

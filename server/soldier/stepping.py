@@ -1,0 +1,110 @@
+"""Locomotion steps (Figure 5, vectorised): which clip a step plays, for how long and with what stride."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from server.soldier import root_motion
+from server.soldier.core import (
+    _CRAWL_CYCLE,
+    _SCALED,
+    CATCH_UP_SECONDS,
+    MAX_RATE,
+    MAX_STRIDE,
+    MIN_CLIP_SECONDS,
+    MIN_RATE,
+    MIN_STRIDE,
+    MOVING_EPS,
+    ManagerCore,
+)
+from server.soldier.locomotion import (
+    IS_RUN,
+    IS_WALK,
+    SCALED,
+    is_fast,
+)
+
+
+class Stepping(ManagerCore):
+    """The pacing of walk, run, crawl and side-step clips: human cadence, the stride taking the rest."""
+
+    def _step_duration(
+        self, idx: np.ndarray, clip: np.ndarray, states: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Play time and stride scale of ``clip`` in Figure-5 ``states`` for soldiers ``idx`` (root offsets
+        folded to now).
+
+        A cycle aims at the entity's speed plus what brings the root offset along the velocity to its stop lag
+        (the figure trails the entity by what it would still travel if the entity stopped) in about
+        CATCH_UP_SECONDS, within human cadence (MIN_RATE..MAX_RATE). When the entity's speed alone is beyond
+        that cadence the stride length takes the rest (the feet slide by the difference), except in a gait
+        the speed is about to leave (a walk step before walk→run): there the root offset takes it. Start and
+        end steps and gait changes play at their recorded rate."""
+        tb, lib = self.table, self.library
+        st = np.asarray(states, np.int64)
+        speed = tb.speed[idx]
+        stored = lib.clip_duration[clip]
+        gs = lib.clip_ground_speed[clip]
+        ok = SCALED[st] & (speed > MOVING_EPS) & (gs > 0)
+        v = tb.vlocal[idx]
+        along = np.einsum("ij,ij->i", tb.root_off[idx], v) / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
+        gs = np.where(gs > 0, gs, 1.0)
+        cfg = self._settings
+        hysteresis = min(cfg.walk_run_hysteresis, 0.5 * cfg.walk_run_threshold)
+        fast = is_fast(st, speed, cfg.walk_run_threshold, hysteresis)
+        leaving = (IS_RUN[st] & ~fast) | (IS_WALK[st] & fast & lib.can_run)
+        ideal = speed / gs  # the entity's speed alone
+        scale = np.clip(ideal / np.clip(ideal, MIN_RATE, MAX_RATE), MIN_STRIDE, MAX_STRIDE)
+        stride = np.where(ok & ~leaving, scale, 1.0)
+        error = along + self._stop_lag[st]  # cm ahead of where the figure should be
+        want = speed + np.clip(-error / 100.0 / CATCH_UP_SECONDS, -0.5 * speed, 0.5 * speed)
+        rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, MAX_RATE), 1.0)
+        return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
+
+    def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray) -> None:
+        """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot)."""
+        if len(idx) == 0:
+            return
+        tb, lib = self.table, self.library
+        st = states.astype(np.int64)
+        foot = 1 - tb.foot[idx]
+        clip = lib.loco_clip[st, foot]
+        direc = lib.loco_dir[st].astype(np.int8)
+        direc = np.where((st == _CRAWL_CYCLE) & tb.backward[idx], -direc, direc)
+        root_motion.fold(tb, lib, idx, t)
+        dur, tb.stride[idx] = self._step_duration(idx, clip, st)
+        tb.loco[idx] = st
+        tb.foot[idx] = foot
+        tb.clip[idx] = clip
+        tb.direc[idx] = direc
+        tb.start[idx] = t
+        tb.dur[idx] = dur
+        tb.end[idx] = t + dur
+        root_motion.rebase(tb, lib, idx)
+        if self._settings.record_clips:
+            for k in range(len(idx)):
+                self._record(int(idx[k]), float(t[k]))
+
+    def _enter_one(self, i: int, state: int, t: float) -> None:
+        """:meth:`_enter_states` for one soldier in scalar Python (the per-event path, ~10x cheaper)."""
+        tb, lib = self.table, self.library
+        foot = 1 - int(tb.foot[i])
+        clip = int(lib.loco_clip[state, foot])
+        direc = int(lib.loco_dir[state])
+        if state == _CRAWL_CYCLE and tb.backward[i]:
+            direc = -direc
+        root_motion.fold1(tb, lib, i, t)
+        if _SCALED[state]:  # a side-step: the vectorised pacing
+            durs, strides = self._step_duration(np.array([i], np.int64), np.array([clip]), np.array([state]))
+            dur, tb.stride[i] = float(durs[0]), strides[0]
+        else:  # a start step: its recorded pace
+            dur, tb.stride[i] = max(float(lib.clip_duration[clip]), MIN_CLIP_SECONDS), 1.0
+        tb.loco[i] = state
+        tb.foot[i] = foot
+        tb.clip[i] = clip
+        tb.direc[i] = direc
+        tb.start[i] = t
+        tb.dur[i] = dur
+        tb.end[i] = t + dur
+        root_motion.rebase1(tb, lib, i)
+        self._record(i, t)

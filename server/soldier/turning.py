@@ -1,0 +1,80 @@
+"""Turns in place (issue 16): a standing figure that faces away from its heading turns on the spot.
+
+A walking or running soldier whose entity reverses (its heading turns by REVERSAL_DEG or more at once, as a
+DIS entity's does when it walks back the way it came) does what a person does: he stops (the step he is in
+ends, then the end step, the figure still facing the old way: no turning over the steps), pivots on the
+spot (the turn in place that fits, played REVERSAL_TURN_SPEEDUP times faster: a pivot, not a slow
+about-face) and walks away. His feet stay planted in the world throughout; the figure trails the entity by
+what it did not travel meanwhile and catches up with faster cadence (``stepping``), as after any start.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from server.soldier import root_motion
+from server.soldier.core import (
+    _IDLE,
+    _LOCO,
+    _TRANSITION,
+    ManagerCore,
+)
+from server.soldier.library import PathStep
+
+REVERSAL_DEG = 135.0  # a walking figure this far from its new heading stops, pivots and walks away
+REVERSAL_TURN_SPEEDUP = 2.5  # the pivot plays the 180° turn in place this many times faster (3.4 s -> 1.4 s)
+
+
+class Turning(ManagerCore):
+    """The turn-in-place path: pick the turn clip that fits, then fold its own move into the root offset."""
+
+    def _turning(self, clip: int) -> bool:
+        return self.library.clip_end_offset[clip, 2] != 0.0 and self.library.clip_graph[clip] != 0
+
+    def _mark_reversals(self, idx: np.ndarray, mode: np.ndarray, moving: np.ndarray) -> None:
+        """After requests to soldiers ``idx`` (``mode`` before them): a walking or running one whose figure
+        now faces REVERSAL_DEG or more away from his heading, and still moves, reverses; one whose heading
+        came back no longer does. Other modes keep the mark (a reversal under way ends in ``_decide``)."""
+        loco = mode == _LOCO
+        if self.library.turn_clips and loco.any():
+            i = idx[loco]
+            self.table.reversing[i] = moving[loco] & (np.abs(self.table.root_yaw[i]) >= REVERSAL_DEG)
+
+    def _turn(self, i: int, t: float, speedup: float = 1.0) -> bool:
+        """A standing soldier whose figure faces away from its heading plays the turn in place that fits
+        (``speedup`` times faster than recorded: a reversal's pivot)."""
+        tb, lib = self.table, self.library
+        if not lib.turn_clips or int(tb.node[i]) != self._home or int(tb.mode[i]) != _IDLE:
+            return False
+        want = -float(tb.root_yaw[i])  # compass degrees to turn
+        clip, turn = min(  # the nearest turn; of two as near (180 both ways) the one turning the asked way
+            lib.turn_clips, key=lambda c: (abs((c[1] - want + 180.0) % 360.0 - 180.0), c[1] * want < 0)
+        )
+        if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
+            return False
+        step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, self._home, self._home)
+        tb.blend_len[i] = 0.0
+        tb.mode[i] = _TRANSITION
+        self._paths[i] = [(step,), 0]
+        self._play_step(i, step, t)
+        tb.dirty[i] = True
+        if speedup != 1.0:  # a reversal's pivot turns by all the reversal asked: the clip's turn and the rest
+            rest = float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i])
+            tb.pivot_rate[i] = (rest + 180.0) % 360.0 - 180.0 if abs(rest) < 180.0 else 0.0
+            tb.pivot_rate[i] /= max(step.duration, 1e-9)
+        return True
+
+    def _turn_end(self, i: int, t: float) -> None:
+        """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading."""
+        tb, lib = self.table, self.library
+        x, z, yaw = lib.clip_end_offset[int(tb.clip[i])]
+        if tb.pivot_rate[i] != 0.0:  # the pivot's last bit of turn, about where the figure ends
+            root_motion.pivot(tb, lib, np.array([i], np.int64), t)
+            tb.pivot_rate[i] = 0.0
+        a = -math.radians(float(tb.root_yaw[i]))  # as blend.yaw_rotate turns the clip's placements
+        self._rest(i, self._home, t)
+        tb.root_off[i, 0] += math.cos(a) * x + math.sin(a) * z
+        tb.root_off[i, 1] += math.cos(a) * z - math.sin(a) * x
+        tb.root_yaw[i] = (float(tb.root_yaw[i]) - yaw + 180.0) % 360.0 - 180.0
