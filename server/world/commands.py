@@ -72,7 +72,8 @@ COMMANDS: tuple[Command, ...] = (
         "load_channelset",
         "file [, name]",
         "3.4.1",
-        "reads a `.chset.env` channelset (also `read_file`) under its own name or `name`",
+        "reads a `.chset.env` channelset (also `read_file`) under its own name or `name`, in a worker "
+        "thread beside the tick; the same unchanged file again shares the loaded one (at most 4096 names)",
         (S, S),
         1,
         access="operator",
@@ -142,7 +143,8 @@ COMMANDS: tuple[Command, ...] = (
         "file [, name]",
         "3.4.2",
         "reads a `.graph` file and its channelsets (registered by name too) as `name` (default: the file "
-        "stem); `soldier_low`, `soldier_loco`, `soldier_crawl` are the library's graphs",
+        "stem), in a worker thread beside the tick; the same unchanged file again shares the loaded graph "
+        "(at most 256 names); `soldier_low`, `soldier_loco`, `soldier_crawl` are the library's graphs",
         (S, S),
         1,
         access="operator",
