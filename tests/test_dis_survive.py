@@ -262,3 +262,21 @@ async def test_a_reconnect_to_the_same_server_takes_the_soldiers_back(autojump_c
         assert sink.stats["reclaimed"] == 3 and m.count == 13 and not new.errors
         linker.cancel()
         server.shutdown()
+
+
+async def test_every_reconnected_link_carries_the_commands_token(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A gateway with --token must send it again on each reconnection (the first link's id kept too)."""
+    from client_stub.link.auth import Credentials
+
+    opened: list[tuple[str, str]] = []
+
+    async def fake_open(self: Client, nursery: trio.Nursery, host: str, port: int, **_: float) -> None:
+        opened.append((self.token, self.client_id))
+
+    monkeypatch.setattr(Client, "open", fake_open)
+    async with trio.open_nursery() as nursery:
+        connect = reconnect_connector(nursery, "127.0.0.1", 1, credentials=Credentials(token="s3cret-token"))
+        await connect()
+        await connect()
+    assert [t for t, _ in opened] == ["s3cret-token", "s3cret-token"]
+    assert opened[0][1] == opened[1][1]
