@@ -61,13 +61,16 @@ def test_after_a_reversal_the_figure_catches_up_with_its_entity(reversal) -> Non
 
 @pytest.mark.parametrize("turn", [140.0, -140.0, 160.0, -160.0])
 def test_a_near_reversal_pivots_too_its_rest_turned_about_the_planted_foot(lib, turn: float) -> None:  # type: ignore[no-untyped-def]
-    """135-160°: the 180° pivot plus the rest (20-45° the other way) spread over it, about the sole point
-    carrying the weight: the other end of that foot twists a little (measured 1.8-4.9 cm), far less than
-    turning over the steps did (8-10 cm, and the figure drifted 1.7 m off its entity for good)."""
+    """135-160°: the 180° pivot, then the 45° turn back for what is left when that is too much for a rest
+    (140°: measured 0.9-1.0 cm, was 3.6-4.9 with the 40° spread over the pivot); 160°: the 180° pivot plus
+    the 20° rest spread over it about the sole point carrying the weight, whose other end twists a little
+    (1.8-2.4 cm); turning over the steps slid 8-10 cm and left the figure 1.7 m off its entity for good."""
     script = [(0.0, 0.0, 0.0), (0.5, 1.4, 0.0), (T_REVERSE, 1.4, 0.0, 20.0 + turn), (12.0, 0.0, 0.0)]
     played = drive(lib, script, heading=20.0, until=12.0)
     assert any("turn_" in c for c in played["clips"].tolist())
-    assert max(s for s, _ in skates(played, T_REVERSE - 0.6, 12.0)) <= 5.0
+    assert max(s for s, _ in skates(played, T_REVERSE - 0.6, 12.0)) <= (
+        SKATE_CM if abs(turn) < 150.0 else 2.5
+    )
     assert yaw_steps(played).max() <= MAX_YAW_STEP_DEG
 
 

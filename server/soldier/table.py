@@ -49,6 +49,11 @@ _COLUMNS: dict[str, tuple[type | str, tuple[int, ...], float]] = {
     "stride": (np.float64, (), 1.0),
     "root_yaw": (np.float64, (), 0.0),  # the figure's yaw from the entity's heading (compass degrees)
     "has_heading": (np.bool_, (), False),  # a request gave the heading (the first one turns nothing)
+    "face": (
+        np.float64,
+        (),
+        0.0,
+    ),  # compass degrees the figure's frame is from the heading: 0, or 180 (turning.py)
     "reversing": (np.bool_, (), False),  # walking the other way: stop, pivot, walk away (turning.py)
     "pivot_rate": (np.float64, (), 0.0),  # deg/s root_yaw turns while a reversal's pivot plays (0: none)
     # output bookkeeping
@@ -113,6 +118,7 @@ class SoldierTable:
     stride: np.ndarray
     root_yaw: np.ndarray
     has_heading: np.ndarray
+    face: np.ndarray
     reversing: np.ndarray
     pivot_rate: np.ndarray
     last_sent: np.ndarray
