@@ -32,9 +32,7 @@ from server.soldier.library import PathStep
 
 REVERSAL_DEG = 135.0  # a walking figure this far from its new heading stops, pivots and walks away
 BACKWARD_MAX_SPEED = 1.0  # m/s: a velocity straight back faster than people walk backwards is walked forwards
-BACKWARD_HYSTERESIS = (
-    0.2  # m/s: one walking away forwards goes on facing his velocity down to the limit - this
-)
+BACKWARD_HYSTERESIS = 0.2  # m/s: walking away forwards, he faces his velocity down to the limit - this
 REVERSAL_TURN_SPEEDUP = 2.5  # the pivot plays the 180° turn in place this many times faster (3.4 s -> 1.4 s)
 
 
