@@ -144,7 +144,7 @@ class Ticking(Events):
             mode = tb.mode[idx]
             turning = (tb.root_yaw[idx] != 0.0) & ((mode == _LOCO) | (mode == _CRAWL))
             root_motion.fold(tb, lib, idx[turning], clock[turning])
-            p = np.flatnonzero(tb.pivot_rate[idx] != 0.0)
+            p = np.flatnonzero(tb.pivot_rest[idx] != 0.0)
             if len(p):
                 root_motion.pivot(tb, lib, idx[p], clock[p])
             # the figure's yaw and offset from the heading: its frame's (``face``, turning.py) and in it

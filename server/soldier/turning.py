@@ -71,24 +71,27 @@ class Turning(ManagerCore):
         )
         if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
             return False
+        rest = 0.0
+        if speedup != 1.0:  # a pivot turns by the clip's turn and a rest too small for another turn clip
+            rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
+            rest = rest if abs(rest) < MIN_TURN_DEG else 0.0
+            speedup *= min(1.0, abs(turn) / abs(want))  # turning more, it turns no faster than the clip
         step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, self._home, self._home)
         tb.blend_len[i] = 0.0
         tb.mode[i] = _TRANSITION
         self._paths[i] = [(step,), 0]
         self._play_step(i, step, t)
         tb.dirty[i] = True
-        if speedup != 1.0:  # a pivot turns by the clip's turn and a rest too small for another turn clip
-            rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
-            tb.pivot_rate[i] = rest / max(step.duration, 1e-9) if abs(rest) < MIN_TURN_DEG else 0.0
+        tb.pivot_rest[i] = rest
         return True
 
     def _turn_end(self, i: int, t: float) -> None:
         """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading."""
         tb, lib = self.table, self.library
         x, z, yaw = lib.clip_end_offset[int(tb.clip[i])]
-        if tb.pivot_rate[i] != 0.0:  # the pivot's last bit of turn, about where the figure ends
+        if tb.pivot_rest[i] != 0.0:  # the pivot's last bit of turn, about where the figure ends
             root_motion.pivot(tb, lib, np.array([i], np.int64), t)
-            tb.pivot_rate[i] = 0.0
+            tb.pivot_rest[i] = 0.0
         a = -math.radians(float(tb.root_yaw[i]))  # as blend.yaw_rotate turns the clip's placements
         self._rest(i, self._home, t)
         tb.root_off[i, 0] += math.cos(a) * x + math.sin(a) * z
