@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from server.soldier.turning import BACKWARD_MAX_SPEED
+from server.soldier.turning import BACKWARD_MAX_SPEED, facing
 from tests.test_gait_selection import shipped_library
 from tests.test_reversal import MAX_YAW_STEP_DEG
 from tests.test_root_motion import HZ, SKATE_CM, drive, skates, yaw_steps
@@ -29,7 +29,7 @@ def families(played: dict[str, np.ndarray], since: float = 0.0) -> list[str]:
     return [f for k, f in enumerate(fam) if k == 0 or fam[k - 1] != f]
 
 
-def facing(played: dict[str, np.ndarray], t: float) -> float:
+def faces(played: dict[str, np.ndarray], t: float) -> float:
     return float(played["yaw"][int(t * HZ)])
 
 
@@ -53,7 +53,7 @@ def test_a_walk_start_with_a_heading_change_pivots_then_walks(lib, turn: float, 
     slides = skates(played, 0.5, 12.0)
     assert slides and max(s for s, _ in slides) <= slide, sorted(slides)[-3:]
     assert yaw_steps(played).max() <= MAX_YAW_STEP_DEG
-    assert off(facing(played, 8.5), 30.0 + turn) < 10.0
+    assert off(faces(played, 8.5), 30.0 + turn) < 10.0
     assert np.linalg.norm(played["gap"][-1]) < 80.0  # the pivot's lag caught up: within half a step (74 cm)
 
 
@@ -75,8 +75,17 @@ def test_a_fast_velocity_straight_back_is_walked_forwards(lib, start: str) -> No
     played = drive(lib, script, heading=20.0, until=18.0)
     seq = families(played, 4.0)
     assert "bwalk_cycle" not in seq and ("turn_l180" in seq or "turn_r180" in seq), seq
-    assert off(facing(played, 13.5), 200.0) < 10.0
+    assert off(faces(played, 13.5), 200.0) < 10.0
     slides = skates(played, 0.0, 18.0)
     assert max(s for s, _ in slides) <= SKATE_CM, sorted(slides)[-3:]
     assert yaw_steps(played).max() <= MAX_YAW_STEP_DEG
     assert np.linalg.norm(played["gap"][-1]) < 80.0  # stopped near the entity
+
+
+def test_the_backward_limit_has_hysteresis() -> None:
+    """Turned about at 1.0+ m/s, the figure goes on facing its velocity down to 0.8 m/s; a velocity that is
+    not behind the heading never turns it."""
+    back = np.array([True, True, True, True, False])
+    speed = np.array([1.1, 0.9, 0.9, 0.7, 3.0])
+    was = np.array([0.0, 0.0, 180.0, 180.0, 180.0])
+    assert facing(back, speed, was).tolist() == [180.0, 0.0, 180.0, 0.0, 0.0]
