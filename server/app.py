@@ -45,6 +45,7 @@ from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.startup import ServerWorld
 from server.tls import server_context
+from server.world.commands import needs_worker
 
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
@@ -151,13 +152,17 @@ class TtesServer:
         return trio.from_thread.run_sync(func, trio_token=self._trio_token)
 
     async def run_jcl(self, session: Session) -> None:
-        """A client's JCL frame, in a worker thread: file loads run there, beside the tick; every other
-        command hops back to the loop between ticks (``ServerWorld.in_loop``). One frame at a time."""
+        """A client's JCL frame. One that may load files runs in a worker thread: the loads run there, beside
+        the tick; every other command hops back to the loop between ticks (``ServerWorld.in_loop``). Any
+        other frame runs here at once (``needs_worker``). One frame at a time."""
         ev, session.pending_jcl = session.pending_jcl, None
         if ev is None:
             return
         async with self._jcl_lock:
-            error = await trio.to_thread.run_sync(session.run_jcl, ev)
+            if needs_worker(ev.text):
+                error = await trio.to_thread.run_sync(session.run_jcl, ev)
+            else:
+                error = session.run_jcl(ev)
         session.jcl_done(ev, error)
 
     # -- running -----------------------------------------------------------------------------------------

@@ -92,3 +92,16 @@ def test_loads_write_nothing_into_the_data_directory(
     configured.run_startup(data.startup_script)
     assert len(list((tmp_path / "mine").glob("*.npz"))) > 10
     assert files_of(data.path) == before
+
+
+def test_only_frames_that_may_load_files_go_to_a_worker_thread() -> None:
+    """A frame of settings or soldier commands runs at once on the loop: in a thread it let virtual time
+    run under autojump (and real ticks pass) before a throttle change took effect; loads still go there."""
+    from server.world.commands import needs_worker
+
+    assert not needs_worker("set_ttes_soldier_throttle(0.2);")
+    assert not needs_worker('set_soldier_state("s0", "PRONE_STOWED"); set_ttes_report_interval(2);')
+    assert needs_worker('load_channelset("walk.chset.env", "DI.fig");')
+    assert needs_worker('load_posture_graph("soldier_low.graph");')
+    assert needs_worker('read_file("jack-ttes-soldier_low.jcl");')
+    assert not needs_worker("unload_channelsets_x();")  # a word, not a prefix

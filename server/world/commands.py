@@ -16,6 +16,7 @@ import copy
 import io
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,6 +35,14 @@ OFF_LOOP = frozenset(
     {"load_channelset", "load_posture_graph", "write_channelset", "reroot_figure_channel", "spit"}
 )
 _ANY = object  # argument type of a refused command: whatever it is given
+_WORKER_WORDS = re.compile(r"\b(?:" + "|".join(sorted(OFF_LOOP | {"read_file"})) + r")\b")
+
+
+def needs_worker(text: str) -> bool:
+    """Whether a JCL frame may load files (an OFF_LOOP command, or ``read_file`` of a script that may): only
+    such frames go to a worker thread; the rest (settings, soldier commands) run at once on the loop, so a
+    frame of cheap commands neither waits for a thread nor lets virtual time run while it does."""
+    return _WORKER_WORDS.search(text) is not None
 
 
 @dataclass(frozen=True)
