@@ -35,16 +35,17 @@ from authoring.transitions import (
     slerp_frames,
     track_solve,
 )
-from peabody.fk import FigureKinematics
+from authoring.transitions import _track
+from peabody.fk import FigureKinematics, rigid_inverse
 from peabody.model import Figure
 
 FPS = 60
 NAME = "crawl2prstow"
 START, END = "CRAWL", "PRONE_STOWED"
 DURATION = 1.6  # s
-BODY = (0.0, 0.9)  # s: pelvis, spine, legs and head turn over to prone
+BODY = (0.1, 1.0)  # s: pelvis, spine, legs and head turn over to prone
 SETTLE = (0.5, 1.0)  # s: the pelvis comes down from the crawl's height (after the left leg is back)
-ARMS = (0.0, 1.55)  # s: the arms' joints (the IK pulls towards them) and the rifle's carry
+ARMS = (0.0, 1.1)  # s: the arms' joints (the IK pulls towards them) and the rifle's carry
 HOLD = (0.0, 0.7)  # s: the rifle, first left where the forearms hold it, goes over to the chest's carry
 # (start, duration) in s of each limb's move: the knees (with their toes) first, then the forearms
 MOVES = {
@@ -59,6 +60,14 @@ LIFT = {"knee": 12.0, "toes": 8.0, "elbow": 5.0}  # cm a contact rises while it 
 ROOT_WEIGHT = 1.5
 LEG_SITES = {"knee": "{s}_lower_leg.knee", "toes": "{s}_toes.distal"}
 ELBOW_SITE = "{s}_upper_arm.distal"
+ARM_BLEND = (0.1, 0.45)  # s: the arms go over from the crawl's branch to the track back from prone ...
+ARM_PULL = 0.05  # ... each frame starting this share of the way towards it (then all of it)
+ELBOW_UP = (0.0, 0.15)  # s: both elbows rise while the chest still holds
+ELBOW_ALONG = (0.1, 1.1)  # s: ... travel with the chest from the crawl's place to prone's (in its frame)
+ELBOW_DOWN = (1.05, 1.3)
+ELBOW_FREE = (0.15, 0.35)  # s: the elbows' tracks let go once they are clear ...
+ELBOW_STEER = (0.85, 1.05)  # s: ... and take them again to land
+ELBOW_AIR_WEIGHT = 0.05  # s: ... and come down once they are there
 class _Tracking(TypedDict):
     iterations: int
     max_dof_step: float
@@ -86,6 +95,32 @@ def move_track(
 def _site(kin: FigureKinematics, key: KeyPosture, site: str) -> np.ndarray:
     g = kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])
     return g[kin.site_names.index(site), :3, 3]
+
+
+def arms_up(t: np.ndarray) -> np.ndarray:
+    """How far (fraction of the elbows' lift) the forearms and the rifle between them are raised at ``t``."""
+    return np.minimum(_ramp(t, *ELBOW_UP), 1.0 - _ramp(t, *ELBOW_DOWN))
+
+
+def elbow_track(kin: FigureKinematics, first: KeyPosture, last: KeyPosture, t: np.ndarray, side: str) -> np.ndarray:
+    """World track ``(n, 3)`` of one elbow from where the crawl has it to where prone has it: it rises while the
+    chest still holds (:data:`ELBOW_UP`), travels while the body turns over and lands once the chest is still.
+
+    The shoulders swing 40-70 cm as the body turns over, so an elbow cannot stay planted."""
+    site = ELBOW_SITE.format(s=side)
+    p0, p1 = _site(kin, first, site), _site(kin, last, site)
+    track = p0[None] + _ramp(t, *ELBOW_ALONG)[:, None] * (p1 - p0)[None]
+    track[:, 1] += LIFT["elbow"] * arms_up(t)
+    return track
+
+
+def _arm_track(kin: FigureKinematics, poses: np.ndarray, goals: Sequence[ik.Goal], roots: np.ndarray) -> np.ndarray:
+    """The arms tracked frame after frame forwards from the crawl.
+
+    Tracked back from prone, the arms reach the crawl's first frames turned another way (the left shoulder
+    about 100 degrees apart, the elbows 9-12 cm from their tracks), and a blend of the two tracks leaves the
+    palms off the rifle; the forward track holds the rifle throughout and arrives at prone's pose."""
+    return track_solve(kin, poses, goals, roots, **ARM_TRACKING, forward_only=True)
 
 
 def record_crawl_to_prone(keys: Mapping[str, KeyPosture], figures: Sequence[Figure]) -> ClipFrames:
@@ -131,20 +166,20 @@ def record_crawl_to_prone(keys: Mapping[str, KeyPosture], figures: Sequence[Figu
     # back from prone alone: the forward track puts the left toes on another branch, 25 degrees a frame)
     poses = track_solve(kin, rest, goals[1:], roots, **LEG_TRACKING, backward_only=True)
     poses = np.where(arm_dofs[None], rest, poses)
-    # the elbows' tracks; the chest carries the rifle, its carry turning from the cradle to the prone one
-    elbows = {}
-    for side in ("left", "right"):
-        site = ELBOW_SITE.format(s=side)
-        a, d = MOVES["elbow", side]
-        elbows[side] = move_track(_site(kin, first, site), _site(kin, last, site), t, a, d, LIFT["elbow"])
+    # the chest carries the rifle (its carry turning from the cradle to the prone one) and the lifted elbows
+    chest = carrier_globals(kin, poses, roots)
+    elbows = {side: elbow_track(kin, first, last, t, side) for side in ("left", "right")}
     carry = slerp_frames(carry_of(kin, first), carry_of(kin, last), u_arms)
-    carried = carrier_globals(kin, poses, roots) @ carry
+    carried = chest @ carry
     hold = _ramp(t, *HOLD)
     rifles = np.stack(
         [slerp_frames(first.locations[RIFLE], c, hold[i : i + 1])[0] for i, c in enumerate(carried)]
     )
+    rifles[:, 1, 3] += LIFT["elbow"] * arms_up(t)  # raised with the forearms that hold it
     off_a, off_b = palm_offsets(kin, rkin, first), palm_offsets(kin, rkin, last)
     arm_goals: list[ik.Goal] = []
+    # the elbows are steered near the ground (lifting off, landing); in the air the palms on the rifle lead
+    steer = np.maximum(np.maximum(1.0 - _ramp(t, *ELBOW_FREE), _ramp(t, *ELBOW_STEER)), ELBOW_AIR_WEIGHT)
     for side in ("right", "left"):
         tgt = palm_targets(rkin, rifles, side) @ slerp_frames(off_a[side], off_b[side], u_arms)
         site = f"{side}_palm.palmcenter"
@@ -153,7 +188,7 @@ def record_crawl_to_prone(keys: Mapping[str, KeyPosture], figures: Sequence[Figu
     for side in ("left", "right"):
         site = ELBOW_SITE.format(s=side)
         arm_goals.append(ik.Goal(site, elbows[side], None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
-    poses = track_solve(kin, poses, arm_goals, roots, **ARM_TRACKING)
+    poses = _arm_track(kin, poses, arm_goals, roots)
     poses[0], poses[-1] = q0, q1
     roots[0], roots[-1] = first.locations[SOLDIER], last.locations[SOLDIER]
     rifles[0], rifles[-1] = first.locations[RIFLE], last.locations[RIFLE]
