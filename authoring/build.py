@@ -427,6 +427,7 @@ def snap_endpoints(
         ref = ref_clip.joint_data[ref_frame].copy()
         for c, f in have:
             _snap_end(chsets[c].joint_data, f, ref)
+            _snap_rifle(chsets[c], f, ref_clip, ref_frame)
 
 
 def clamp_to_limits(chset: Channelset, body: Figure) -> None:
@@ -437,6 +438,38 @@ def clamp_to_limits(chset: Channelset, body: Figure) -> None:
     chset.joint_data[:, bf.src] = q.astype(chset.joint_data.dtype)
 
 
+def _held_rifles(cs: Channelset, frame: int) -> tuple[np.ndarray, dict[str, tuple[int, np.ndarray]]]:
+    """The body's root site frame at ``frame`` (0 or -1) and, by figure type, each rifle's (a figure channel
+    without joints) column and position relative to it (none without a body channel)."""
+    bodies = {c.protofiletype for c in cs.joint_channels()}
+    figs = cs.figure_channels()
+    body = next((c for c in figs if c.protofiletype in bodies), None)
+    if body is None:
+        return np.eye(4), {}
+    root = cs.transforms(body)[frame]
+    inv = np.linalg.inv(root)
+    rifles = {
+        c.protofiletype: (c.column, inv[:3, :3] @ cs.fig_pos[frame, c.column] + inv[:3, 3])
+        for c in figs
+        if c.protofiletype not in bodies
+    }
+    return root, rifles
+
+
+def _snap_rifle(cs: Channelset, frame: int, ref: Channelset, ref_frame: int) -> None:
+    """Where a slid rifle (:mod:`authoring.slave_rifle`: slid by each clip's own solve of the prone forearms)
+    lies elsewhere at a clip's end than in ``ref`` at the same posture node, by more than ``SNAP_RIFLE_CM``
+    relative to the body, put it where ``ref`` has it, the change faded into the clip like the joints' (the
+    palms, snapped with the joints, stay on it). Below that the clips agree as recorded."""
+    (root, mine), (_, theirs) = _held_rifles(cs, frame), _held_rifles(ref, ref_frame)
+    for ptype, (col, at) in mine.items():
+        if ptype in theirs and np.linalg.norm(theirs[ptype][1] - at) > SNAP_RIFLE_CM:
+            pos = cs.fig_pos[:, col].astype(np.float64)
+            pin_end(pos, frame, pos[frame] + root[:3, :3] @ (theirs[ptype][1] - at), SNAP_FADE_FRAMES)
+            cs.fig_pos[:, col] = pos.astype(cs.fig_pos.dtype)
+
+
+SNAP_RIFLE_CM = 0.5  # more than any two recorded clips differ by at a node (0.46 cm, KNEEL_STOWED)
 SNAP_FADE_FRAMES = 12  # a snapped endpoint's change fades out over this many frames (0.2 s at 60 fps)
 
 

@@ -78,7 +78,9 @@ REACTIONS: tuple[Reaction, ...] = (
     Reaction("stfire_recoil", "STAND_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
     Reaction("kfire_recoil", "KNEEL_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
     # prone, on the elbows: a smaller climb (more kick moved the elbows 2-3 cm with the hands, and so did
-    # 1.2 degrees: the elbow swivels round the raised handguard)
+    # 1.2 degrees: the elbow swivels round the raised handguard). It swings the raised right upper arm 1.04 cm
+    # into the butt's toe (the posture's own 0.9 cm; 1.0 degree: 0.98 cm, but the climb is then under 1.5
+    # degrees and the left elbow moves 2.4 cm; rocking the spine back with it fails DI's end speeds)
     Reaction("prfire_recoil", "PRONE_FIRE", "recoil", joints=_RECOIL, kick=(0.0, 1.8)),
     Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
     Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),

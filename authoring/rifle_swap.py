@@ -67,11 +67,12 @@ def pitch_about(locations: np.ndarray, pivot: np.ndarray, degrees: np.ndarray) -
     return np.asarray(locations) @ (to @ rot @ back)
 
 
-def _smooth_above(need: np.ndarray, sigma: float) -> np.ndarray:
+def _smooth_above(need: np.ndarray, sigma: float, ease: int | None = None) -> np.ndarray:
     """A smooth curve at or above ``need``: a running maximum, then Gaussian, so it rises ahead of a rifle
     that comes down fast. Its first and last values are ``need``'s (the difference fades in linearly over
-    the ends' ``3 sigma`` frames): a posture node's pitch depends on its pose alone, so every clip meeting
-    there agrees and none starts with a jump."""
+    the ends' ``3 sigma`` frames; given ``ease``, smoothly over that many, so it starts and ends at rest): a
+    posture node's pitch depends on its pose alone, so every clip meeting there agrees and none starts with
+    a jump."""
     n = len(need)
     half = int(np.ceil(3.0 * sigma))
     if n < 3 or not need.any():
@@ -83,8 +84,10 @@ def _smooth_above(need: np.ndarray, sigma: float) -> np.ndarray:
     kernel = np.exp(-0.5 * (k / sigma) ** 2)
     smooth = np.convolve(runmax, kernel / kernel.sum(), mode="valid")
     frames = np.arange(n, dtype=np.float64)
-    to_first = np.maximum(0.0, 1.0 - frames / half)
-    to_last = np.maximum(0.0, 1.0 - frames[::-1] / half)
+    to_first = np.maximum(0.0, 1.0 - frames / (ease or half))
+    to_last = to_first[::-1]
+    if ease:
+        to_first, to_last = (1.0 - (1.0 - u) ** 2 * (1.0 + 2.0 * u) for u in (to_first, to_last))
     smooth += to_first * (need[0] - smooth[0]) + to_last * (need[-1] - smooth[-1])
     return np.maximum(need, smooth)
 

@@ -30,6 +30,7 @@ from authoring import ik
 from authoring.postures import leg, segment_heights
 from authoring.quality_frames import FigureSet, play
 from authoring.rifle_swap import _smooth_above
+from authoring.slave_rifle import held_rifle, rifle_slide, slide_rifle
 from peabody import quaternion
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -128,6 +129,9 @@ HEAD = ("neck",)  # the head is at its limits prone: turning it there jumps betw
 FOREARM_PASSES = 6  # the forearm's lowest node is near, not at, the elbow: solve again for what is left
 AIM_BELOW_CM = 0.5  # the solve stops short of its goal: aim this much below the master's forearm ...
 CONTACT_CM = 1.3  # ... but not into contact (the quality check's 1.25 cm) where the master's is not
+RIFLE_PASSES = 3  # prone: the rifle settled, the arms solved after it, and again for what is left
+FOREARM_REST_CM = 1.0  # a prone slave forearm higher than this brings the rifle down (see _forearm_aim)
+RIFLE_ABOVE_GROUND_CM = 0.3  # ... but the rifle stays this far above the ground
 EYE_BALL_CM = 2.0  # the eye stays this close to where the slaving put it (a ball: GOAL_RADIUS is 0.9)
 
 
@@ -217,6 +221,15 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
                 held[site] = held[site].copy()
                 held[site][:, 1, 3] += lift
         pose, goals = passes(pose)  # (every clip alike, so clips meeting at a posture agree there)
+    for _ in range(RIFLE_PASSES):  # prone: the rifle out of the body, and down where a forearm cannot go
+        s_h = part_heights(pose, loc, figures, stype, "forearm")
+        high = np.max(
+            [(weight[s] - crawling[s]) * (s_h[s] - _forearm_aim(m_h[s])) for s in weight],
+            axis=0,
+        )
+        if not _settle_rifle(slave, figures, (pose, loc, stype), prone * held_rifle, high, held):
+            break
+        pose, goals = passes(pose)  # the palms after the rifle, the forearms kept down
     # frames solved alone land a few degrees apart where the neck is at its limit: smooth the change over
     # the clip (its ends kept), then put the palms and the eye back exactly (a small, smooth correction)
     change = pose - q
@@ -233,6 +246,40 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     bf = bound.figures[0]
     slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
     return np.max([w * np.maximum(0.0, s_h[s] - m_h[s]) for s, w in weight.items()], axis=0)
+
+
+def _forearm_aim(master: np.ndarray) -> np.ndarray:
+    """How high a prone slave forearm may stay before the rifle comes down for it: ``FOREARM_REST_CM``
+    where the master's forearm rests (the check's 2 cm, ``REST_CM``), else as high as the master's."""
+    return np.where(master <= REST_CM, FOREARM_REST_CM, master)
+
+
+def _settle_rifle(
+    slave: Channelset,
+    figures: FigureSet,
+    body: tuple[np.ndarray, np.ndarray, str],
+    weight: np.ndarray,
+    high: np.ndarray,
+    held: dict[str, np.ndarray],
+) -> bool:
+    """Prone (``weight``), slide the held rifle out of the body (:mod:`authoring.slave_rifle`) and lower it
+    by ``high`` (cm per frame: how far a forearm that the arm could not lay down is still up; smoothed, at
+    least that much, never into the ground), the palm goals in ``held`` going with it (in place). Whether it
+    moved: then the arms are to be solved again."""
+    pose, loc, stype = body
+    rifle = held_rifle(slave, figures, stype)
+    if rifle is None or not weight.any():
+        return False
+    slide = rifle_slide(figures, stype, pose, loc, rifle[1:], weight)
+    room = np.maximum(0.0, rifle[2][..., 1].min(axis=1) - RIFLE_ABOVE_GROUND_CM)
+    slide[:, 1] -= np.minimum(_smooth_above(weight * np.maximum(0.0, high), RIFLE_LIFT_SIGMA_FRAMES), room)
+    if np.abs(slide).max() < 0.01:
+        return False
+    slide_rifle(slave, rifle[0], slide)
+    for site in [s for s in held if s.endswith("palmcenter")]:
+        held[site] = held[site].copy()
+        held[site][:, :3, 3] += slide
+    return True
 
 
 def _planted_tracks(

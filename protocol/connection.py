@@ -46,6 +46,7 @@ from protocol.messages import (
     TYPE_OF,
     MessageType,
 )
+from protocol.shared_encode import SharedEncodes
 from protocol.updates import UPDATE_HEADER, UpdateDecoder, UpdateEncoder
 
 
@@ -99,6 +100,7 @@ class Connection:
         max_soldiers: int = DEFAULT_MAX_SOLDIERS,
         *,
         decode_updates: bool = True,
+        shared_encodes: SharedEncodes | None = None,
     ) -> None:
         if max_frame < MIN_MAX_FRAME:
             raise ValueError(f"max_frame must be >= {MIN_MAX_FRAME}")
@@ -121,6 +123,7 @@ class Connection:
         self._hello_sent = False
         self._sent_version: int | None = None
         self._encoders: dict[int, UpdateEncoder] = {}
+        self._shared_encodes = shared_encodes  # server: one memo for all its connections (encode once)
         self._decoders: dict[int, UpdateDecoder] = {}
         self._subscribed = np.zeros(0, bool)
 
@@ -132,6 +135,11 @@ class Connection:
             self._eof = True
         elif not self._eof and self.state not in (State.CLOSED, State.ERROR):
             self._reader.feed(data)
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes of a frame received only in part (0 between whole frames): a server's frame deadline."""
+        return self._reader.buffered
 
     def data_to_send(self) -> bytes:
         """Bytes the connection produced by itself (the Error frame after a ProtocolError); clears them."""
@@ -346,7 +354,7 @@ class Connection:
         elif isinstance(event, UpdateTableMsg):
             tid = event.table.table_id
             self.tables[tid] = event
-            self._encoders[tid] = UpdateEncoder(event.table, self.max_soldiers)
+            self._encoders[tid] = UpdateEncoder(event.table, self.max_soldiers, self._shared_encodes)
 
     def _send_updates(self, event: JointUpdates) -> bytes:
         encoder = self._encoders.get(event.table)
@@ -371,11 +379,15 @@ class Connection:
             raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
         return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
 
-    def send_update_codes(self, table: int, indices: np.ndarray, codes: np.ndarray, tick: int) -> bytes:
+    def send_update_codes(
+        self, table: int, indices: np.ndarray, codes: np.ndarray, tick: int, version: object = None
+    ) -> bytes:
         """JOINT_UPDATES frames from codes already quantised for ``table`` (server side).
 
         For servers that quantise every soldier once per tick and share the codes between their clients: the
         same checks, delta state and bytes as ``send(JointUpdates(...))`` with the poses those codes encode.
+        ``version`` (equal versions and rows mean equal codes) lets connections made with one
+        ``shared_encodes`` memo share the encode (:mod:`protocol.shared_encode`).
         """
         if self.role is not SERVER:
             raise LocalProtocolError(ErrorCode.UNEXPECTED_MESSAGE, "a client may not send JOINT_UPDATES")
@@ -390,7 +402,7 @@ class Connection:
         if not keep.all():
             idx, codes = idx[keep], np.asarray(codes)[keep]
         try:
-            payloads = encoder.encode_codes(idx, codes, tick & 0xFFFFFFFF, self.peer_max_frame - 1)
+            payloads = encoder.encode_codes(idx, codes, tick & 0xFFFFFFFF, self.peer_max_frame - 1, version)
         except ValueError as exc:
             raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
         return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)

@@ -30,6 +30,7 @@ from protocol.bitpack import (
 )
 from protocol.errors import ErrorCode, WireError
 from protocol.events import DEFAULT_MAX_SOLDIERS, JointUpdates
+from protocol.shared_encode import FRESH, JOIN_RETRY, Encoded, Held, SharedEncodes, digest
 from protocol.update_table import UpdateTable
 
 UPDATE_HEADER = struct.Struct(">HIH")  # table, tick, count
@@ -162,19 +163,40 @@ class _Plan:
 class UpdateEncoder:
     """Server side, one per client and update table: what this client last received, and the packer."""
 
-    def __init__(self, table: UpdateTable, max_soldiers: int = DEFAULT_MAX_SOLDIERS) -> None:
+    def __init__(
+        self,
+        table: UpdateTable,
+        max_soldiers: int = DEFAULT_MAX_SOLDIERS,
+        shared: SharedEncodes | None = None,
+    ) -> None:
         self.table = table
         self.max_soldiers = max_soldiers
-        self._last = np.zeros((max_soldiers, table.layout.nfields), np.int32)
-        self._known = np.zeros(max_soldiers, bool)
+        self._hlast = Held(np.zeros((max_soldiers, table.layout.nfields), np.int32))
+        self._hknown = Held(np.zeros(max_soldiers, bool))
         self._plan = _Plan(table)
+        self.shared = shared  # the server's memo: encoders in one state share one encode per version
+        self.state = FRESH  # this encoder's state id in ``shared`` (equal ids: equal content)
+        self._join_after = 0  # encodes before trying to join a group whose content may equal this one's
+        self._sent = np.zeros(0, np.int64)  # the rows the last encode sent
+
+    @property
+    def _last(self) -> np.ndarray:
+        """(max_soldiers, F) the codes this client last received (rows not ``_known``: stale, unused)."""
+        return self._hlast.array
+
+    @property
+    def _known(self) -> np.ndarray:
+        return self._hknown.array
 
     def reset(self, indices: np.ndarray | list[int] | None = None) -> None:
         """Forget what these soldiers (all if None) last sent: their next update is full."""
+        self._hknown = self._hknown.writable()
         if indices is None:
             self._known[:] = False
         else:
             self._known[np.asarray(indices, np.int64)] = False
+        if self.shared is not None:
+            self.state = self.shared.reset(self.state, None if indices is None else np.asarray(indices))
 
     def known(self, indices: np.ndarray) -> np.ndarray:
         return self._known[np.asarray(indices, np.int64)]
@@ -197,13 +219,15 @@ class UpdateEncoder:
         return self.encode_codes(idx, q_all, updates.tick, max_payload)
 
     def encode_codes(
-        self, indices: np.ndarray, codes: np.ndarray, tick: int, max_payload: int
+        self, indices: np.ndarray, codes: np.ndarray, tick: int, max_payload: int, version: object = None
     ) -> list[bytes]:
         """Like :meth:`encode` for poses already quantised (:func:`quantise`, rows matching ``indices``).
 
-        Lets a server quantise a tick's poses once and share the codes between every client's encoder.
+        Lets a server quantise a tick's poses once and share the codes between every client's encoder. With
+        a ``version`` (the caller's promise: equal versions and rows mean equal codes) and a ``shared`` memo,
+        an encoder in the same state as one that already encoded these rows at this version takes its bytes.
         """
-        plan, lay = self._plan, self.table.layout
+        lay = self.table.layout
         idx: np.ndarray = np.asarray(indices, np.int64).reshape(-1)
         q: np.ndarray = np.asarray(codes, np.int32)
         if q.shape != (len(idx), lay.nfields):
@@ -217,6 +241,60 @@ class UpdateEncoder:
                 raise ValueError("duplicate soldier index in one JointUpdates")
         if len(idx) == 0:
             return []
+        if self.shared is not None and version is not None:
+            return self._shared_encode(idx, q, tick, max_payload, version)
+        payloads = self._encode_sorted(idx, q, tick, max_payload)
+        if self.shared is not None and len(self._sent):  # a state no other encoder is known to share
+            self.state = self.shared.new_id()
+        return payloads
+
+    def _shared_encode(
+        self, idx: np.ndarray, q: np.ndarray, tick: int, max_payload: int, version: object
+    ) -> list[bytes]:
+        """:meth:`_encode_sorted` through the shared memo (same bytes, one diff-and-pack per state)."""
+        shared = self.shared
+        assert shared is not None
+        rows = (id(self.table), digest(idx), tick, max_payload)
+        hit = shared.lookup(self.state, rows, version)
+        if hit is not None:  # same state, same rows, same codes: same bytes; adopt the state it led to
+            self._adopt(hit.last, hit.known)
+            self.state = hit.state
+            return list(hit.payloads)
+        payloads = self._encode_sorted(idx, q, tick, max_payload)
+        new = shared.new_id()
+        shared.store(self.state, rows, Encoded(tuple(payloads), new, self._hlast, self._hknown))
+        self.state = new
+        self._try_join(rows)
+        return payloads
+
+    def _try_join(self, rows: tuple[object, ...]) -> None:
+        """Adopt the state id of the first encoder that sent these rows at this version if our content is
+        equal to its (a late joiner after its first full update, a client after a resubscription)."""
+        shared = self.shared
+        assert shared is not None
+        first_state, first = shared.group(rows, self.state, self)
+        if first is self or not isinstance(first, UpdateEncoder) or first.state != first_state:
+            return
+        if self._join_after > 0:
+            self._join_after -= 1
+            return
+        if np.array_equal(self._known, first._known) and np.array_equal(
+            self._last[self._known], first._last[first._known]
+        ):
+            self.state = first_state
+            self._adopt(first._hlast, first._hknown)
+        else:
+            self._join_after = JOIN_RETRY
+
+    def _adopt(self, last: Held, known: Held) -> None:
+        """Share another encoder's state arrays (equal content) instead of keeping our own."""
+        self._hlast.drop()
+        self._hknown.drop()
+        self._hlast, self._hknown = last.take(), known.take()
+
+    def _encode_sorted(self, idx: np.ndarray, q: np.ndarray, tick: int, max_payload: int) -> list[bytes]:
+        """The frames for sorted, distinct, non-empty ``idx``; records what was sent in ``_sent``."""
+        plan, lay = self._plan, self.table.layout
         known = self._known[idx]
         delta = q - self._last[idx]
         diff = delta != 0
@@ -226,6 +304,7 @@ class UpdateEncoder:
         send = changed.any(axis=1)
         if not send.all():
             if not send.any():
+                self._sent = idx[:0]
                 return []
             idx, q, delta, diff, changed, known = (a[send] for a in (idx, q, delta, diff, changed, known))
         # smallest k holding every delta: bit length of max(d, -d - 1) plus a sign (unchanged fields are 0)
@@ -241,8 +320,10 @@ class UpdateEncoder:
         widths = plan.widths(absolute, k, np.take(changed_i, plan.entry_of, axis=1))
         values = np.where(absolute[:, None], q, delta)  # deltas keep their sign bits: the packer drops them
         payloads = self._chunks(idx, mode, changed_i, row_bits, values, widths, tick, max_payload)
+        self._hlast, self._hknown = self._hlast.writable(), self._hknown.writable()
         self._last[idx] = q
         self._known[idx] = True
+        self._sent = idx
         return payloads
 
     def _chunks(

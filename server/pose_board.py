@@ -7,10 +7,12 @@ stalled client never holds more than one batch.
 
 from __future__ import annotations
 
+import os
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from protocol.shared_encode import SharedEncodes
 from protocol.update_table import UpdateTable
 from protocol.updates import quantise
 from server.logging import get_logger
@@ -175,7 +177,10 @@ def _select(update: TickUpdate, sel: np.ndarray) -> TickUpdate:
 
 
 class BoardRef:
-    """Where sessions find the board (it exists once the motion library does)."""
+    """Where sessions find the board (it exists once the motion library does), and the server's one memo of
+    joint-update encodes: clients in the same delta state share one encode per publish."""
 
     def __init__(self) -> None:
         self.board: PoseBoard | None = None
+        # TTES_SHARED_ENCODES=0: every client encodes on its own (the A/B switch of bench/bench_fanout.py)
+        self.encodes = None if os.environ.get("TTES_SHARED_ENCODES") == "0" else SharedEncodes()

@@ -536,6 +536,30 @@ def test_locomotion_graphs_check_speeds_only_at_the_base_posture(
     assert cycle["end_speed_m_s"] is None and cycle["end_speeds_m_s"]["first"] > 0.7
 
 
+def test_a_point_inside_a_hull_leaves_it_by_the_nearest_face() -> None:
+    """SegmentHulls.exits: per frame the deepest point's depth and the world normal of its nearest face (the
+    way the slaves' rifle is slid out of the body), nothing where no point is inside."""
+    pytest.importorskip("scipy")
+    from authoring.body_parts import SegmentHulls
+
+    cube = np.array([[x, y, z, 1.0] for x in (0, 10) for y in (0, 10) for z in (0, 10)], dtype=np.float64)
+    hulls = SegmentHulls.build(cube, np.zeros(8, dtype=int), np.array([0]))
+    turn = np.eye(4)
+    turn[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # the segment turned 90 deg about z
+    segg = np.stack([np.eye(4), turn, np.eye(4)])[:, None]
+    points = np.array(
+        [[[9.0, 5.0, 4.0], [5.0, 5.0, 5.0]], [[-5.0, 9.5, 5.0], [-5.0, 5.0, 5.0]], [[20.0, 5, 5], [-1, 5, 5]]]
+    )
+    depth, normal = hulls.exits(points, segg)
+    np.testing.assert_allclose(depth, [5.0, 5.0, 0.0])  # the cube's centre is 5 deep in either frame
+    assert depth[0] == hulls.depth(points[:1], segg[:1])[0]
+    np.testing.assert_allclose(normal[2], 0.0)
+    shallow, way = hulls.exits(points[:, :1], segg)
+    np.testing.assert_allclose(shallow, [1.0, 0.5, 0.0])
+    np.testing.assert_allclose(way[0], [1.0, 0.0, 0.0], atol=1e-9)  # out through x = 10
+    np.testing.assert_allclose(way[1], [0.0, 1.0, 0.0], atol=1e-9)  # local +x turned onto world +y
+
+
 def _pitched(rifle: np.ndarray, degrees: np.ndarray) -> np.ndarray:
     """The rifles ``(n, 4, 4)`` turned muzzle-up by ``degrees`` per frame (about their own +X axis)."""
     out = rifle.copy()

@@ -75,9 +75,11 @@ def spy_encoder(session: Session, table: int = 1) -> list[np.ndarray]:
     calls: list[np.ndarray] = []
     plain = enc.encode_codes
 
-    def encode_codes(indices: np.ndarray, codes: np.ndarray, tick: int, max_payload: int) -> Any:
+    def encode_codes(
+        indices: np.ndarray, codes: np.ndarray, tick: int, max_payload: int, version: object = None
+    ) -> Any:
         calls.append(np.asarray(indices).copy())
-        return plain(indices, codes, tick, max_payload)
+        return plain(indices, codes, tick, max_payload, version)
 
     enc.encode_codes = encode_codes  # type: ignore[method-assign]
     return calls
@@ -154,3 +156,29 @@ def test_two_clients_get_identical_correct_poses_and_the_float_paths_bytes() -> 
     dofs_a = a.client.decoder(1).current(idx)[0]  # type: ignore[union-attr]
     np.testing.assert_allclose(dofs_a, board.dofs[idx], atol=2 * np.pi / 4096)
     assert len(b.updates) < len(a.updates)
+
+
+def test_clients_share_encodes_and_each_gets_the_float_paths_bytes() -> None:
+    """Issue 18: clients joining at different ticks with different subscriptions each get exactly the
+    per-client bytes, while clients in one delta state share one encode (the server's memo hits)."""
+    server = make_server(throttle=0.0)
+    server.start_world()
+    walk(server, [0, 1, 2, 5, 8], 1.4)
+    walk(server, [4], 4.0)
+    pairs: list[Pair] = []
+    subs = [tuple(range(10)), tuple(range(10)), tuple(range(0, 10, 2)), tuple(range(10))]
+    for k in range(1, 30):
+        if k in (1, 2, 9, 15):  # joins: two together, two late
+            p = Pair(server, f"c{k}")
+            p.subscribe(subs[len(pairs)])
+            pairs.append(p)
+        server.tick(k / 30)
+        for j, p in enumerate(pairs):
+            if j == 2 and k % 4:
+                continue  # a lagging reader
+            want = p.expected()
+            assert p.flush() == want
+    encodes = server.board_ref.encodes
+    assert encodes.hits > encodes.misses, (encodes.hits, encodes.misses)
+    states = [p.session.conn._encoders[1].state for p in pairs]
+    assert states[0] == states[1] == states[3] != states[2]  # the late joiner joined after its keyframe

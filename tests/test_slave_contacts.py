@@ -13,6 +13,7 @@ import pytest
 pytest.importorskip("scipy")
 
 from authoring.build import SNAP_FADE_FRAMES, BuildContext, _snap_end, lift_off_ground, slave_pair
+from authoring.quality import check_clip
 from authoring.quality_frames import FigureSet, play
 from authoring.slave_contacts import (
     _planted_tracks,
@@ -90,8 +91,15 @@ def prone():
     return figs, master, slave
 
 
+def _on_rifle(figs: FigureSet, cs, names: tuple[str, ...]) -> np.ndarray:
+    """Sites of DI.fig in the frame of the rifle it holds."""
+    rifle = np.linalg.inv(play(cs, figs).locations["AK_47.fig"])
+    return np.einsum("fij,fkj->fki", rifle[:, :3, :3], _sites(figs, cs, names)) + rifle[:, None, :3, 3]
+
+
 @pytest.mark.xfail(
-    strict=True, reason="issue 14 open: DI's right forearm is 2.1-2.7 cm up in the prone recoil (frames 4-14)"
+    strict=True,
+    reason="issue 14 open: DI's right forearm 2.1 cm up at the recoil's kick (frame 5), an 11 deg joint step",
 )
 def test_the_prone_slave_lays_his_forearms_on_the_ground_with_the_rifle_in_his_hands(prone) -> None:
     figs, master, slave = prone
@@ -100,9 +108,11 @@ def test_the_prone_slave_lays_his_forearms_on_the_ground_with_the_rifle_in_his_h
     before = _knees(figs, slave, "forearm")
     after, m = _knees(figs, rested, "forearm"), _knees(figs, master, "forearm")
     assert np.all(before - m > 2.0)  # DI.fig's prone shoulders sit higher: its forearm floats
-    assert np.all(after < 2.0)  # resting (the quality check's 2 cm)
+    assert np.all(after < 2.0)  # resting (the quality check's 2 cm), through the recoil too
+    # the rifle slid out of his right upper arm and came down with the palms; they hold it as before
     palms, eye = ("right_palm.palmcenter", "left_palm.palmcenter"), ("bottom_head.sight",)
-    np.testing.assert_allclose(_sites(figs, rested, palms), _sites(figs, slave, palms), atol=0.1)
+    np.testing.assert_allclose(_on_rifle(figs, rested, palms), _on_rifle(figs, slave, palms), atol=0.1)
+    assert check_clip(rested, figs)["rifle_in_body_cm"] < 1.0
     assert np.linalg.norm(_sites(figs, rested, eye) - _sites(figs, slave, eye), axis=-1).max() < 2.1
     q = play(rested, figs).poses["DI.fig"]
     assert np.degrees(np.abs(np.diff(q, axis=0))).max() < 10.0  # smooth over the clip
@@ -185,3 +195,42 @@ def test_the_slaved_crawl_start_passes_the_check_and_rests_at_crawl(figure: str)
     for part in ("kneecap", "forearm"):
         for h in part_heights(f.poses["DI.fig"], f.locations["DI.fig"], figs, "DI.fig", part).values():
             assert -0.05 < h[0] <= 2.0
+
+
+def _held(n: int, turn: float, rifle_at: tuple[float, float, float]):
+    """A clip of ``n`` frames: a body turned ``turn`` radians about y at x = 100 cm, holding a rifle at
+    ``rifle_at`` (cm, the body's frame)."""
+    from server.motion.channelset import FigureTrack, JointTrack, make_channelset
+
+    body = np.tile(np.eye(4), (n, 1, 1))
+    body[:, :3, :3] = [[np.cos(turn), 0.0, np.sin(turn)], [0.0, 1.0, 0.0], [-np.sin(turn), 0.0, np.cos(turn)]]
+    body[:, 0, 3] = 100.0
+    rifle = body.copy()
+    rifle[:, :3, 3] = body[:, :3, :3] @ np.array(rifle_at) + body[:, :3, 3]
+    return make_channelset(
+        "c",
+        60.0,
+        [
+            JointTrack("DI.waist", "DI.fig", "DI.waist", np.zeros((n, 3))),
+            FigureTrack("DI", "DI.fig", "DI", ["DI.root"] * n, body),
+            FigureTrack("AK", "AK_47.fig", "AK", ["rifle.proximal"] * n, rifle),
+        ],
+    )
+
+
+def test_a_slid_rifle_is_put_where_the_reference_holds_it_at_a_posture_node() -> None:
+    """build._snap_rifle: a rifle more than SNAP_RIFLE_CM from the reference clip's at the node (relative
+    to the body, whichever way the body is turned) goes there, faded into the clip; a closer one is left."""
+    from authoring.build import SNAP_RIFLE_CM, _snap_rifle
+
+    ref = _held(30, 0.0, (10.0, 5.0, 0.0))
+    slid = _held(30, np.pi / 2, (12.0, 5.0, 0.0))
+    _snap_rifle(slid, -1, ref, 0)
+    at = slid.fig_pos[:, 1] - slid.fig_pos[:, 0]
+    np.testing.assert_allclose(at[-1], [0.0, 5.0, -10.0], atol=1e-4)  # 10 cm along the turned body's x
+    np.testing.assert_allclose(at[0], [0.0, 5.0, -12.0], atol=1e-4)
+    assert np.abs(np.diff(at, axis=0)).max() < 0.3  # faded in, no jump
+    near = _held(30, 0.0, (10.0 + 0.9 * SNAP_RIFLE_CM, 5.0, 0.0))
+    pos = near.fig_pos.copy()
+    _snap_rifle(near, 0, ref, 0)
+    np.testing.assert_array_equal(near.fig_pos, pos)

@@ -1,0 +1,146 @@
+"""Benchmark: fan-out of joint updates — one server, N soldiers, 1, 2, 4 and 8 clients subscribed to all.
+
+Runs ``ttes loadtest --spawn-server --subscribe-all`` once per client count and reports, per count, the
+server's CPU (percent of a core and milliseconds per 30 Hz tick), the steady movers' updates delivered and the
+bytes per soldier-update on the wire. With encode-once-send-to-many (issue 18) the server's CPU should stay
+nearly flat as clients are added. ``--per-client`` sets ``TTES_SHARED_ENCODES=0`` for the spawned server:
+every client encodes on its own (the behaviour before), for an A/B on the same machine.
+
+    python bench/bench_fanout.py [--soldiers 10000] [--clients 1,2,4,8] [--seconds 5] [--per-client] [--json]
+
+``--in-process`` measures the server's side alone, without sockets or a load generator competing for the
+CPU (for a loaded or small machine): the server's tick and C sessions (observers subscribed to every soldier,
+each reading every tick) in this process, simulated time; reports CPU milliseconds per tick of the tick and
+of the sessions' joint-update encoding, and bytes per soldier-update.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--soldiers", type=int, default=10000)
+    ap.add_argument("--clients", default="1,2,4,8")
+    ap.add_argument("--rate", type=float, default=30.0)
+    ap.add_argument("--seconds", type=float, default=5.0)
+    ap.add_argument("--warmup", type=float, default=3.0)
+    ap.add_argument("--mix", default="realistic")
+    ap.add_argument("--per-client", action="store_true", help="no shared encodes (TTES_SHARED_ENCODES=0)")
+    ap.add_argument("--in-process", action="store_true", help="the server's CPU alone (see above)")
+    ap.add_argument("--ticks", type=int, default=60, help="--in-process: measured ticks")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    if args.per_client:
+        os.environ["TTES_SHARED_ENCODES"] = "0"
+
+    if args.in_process:
+        runs = [in_process(args.soldiers, int(c), args.ticks) for c in args.clients.split(",")]
+        out = {"soldiers": args.soldiers, "shared_encodes": not args.per_client, "cpus": os.cpu_count(),
+               "runs": runs}  # fmt: skip
+        print(json.dumps(out) if args.json else "\n".join(map(str, [out.pop("runs"), out])))
+        return 0
+    from client_stub.loadtest.session import LoadTestConfig, run_loadtest
+
+    rows = []
+    for c in (int(x) for x in args.clients.split(",")):
+        load = os.getloadavg()
+        t0 = time.perf_counter()
+        cfg = LoadTestConfig(soldiers=args.soldiers, clients=c, rate_hz=args.rate, seconds=args.seconds,
+                             warmup_s=args.warmup, spawn_server=True, subscribe_all=True, mix=args.mix,
+                             latency_metric="delivery")  # fmt: skip
+        s = run_loadtest(cfg)
+        cpu = s.get("server_cpu_pct")
+        rows.append({
+            "clients": c, "server_cpu_pct": cpu,
+            "server_ms_per_tick": round(cpu * 10.0 / args.rate, 2) if cpu is not None else None,
+            "delivered_pct": s.get("delivered_pct"), "delivery_ms_p99": s.get("delivery_ms_p99"),
+            "bytes_per_update": s.get("bytes_per_update"), "client_cpu_pct": s.get("client_cpu_pct"),
+            "loadavg_before": [round(x, 2) for x in load], "wall_s": round(time.perf_counter() - t0, 1),
+        })  # fmt: skip
+    out = {"soldiers": args.soldiers, "rate_hz": args.rate, "shared_encodes": not args.per_client,
+           "cpus": os.cpu_count(), "runs": rows}  # fmt: skip
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    mode = "per-client encodes" if args.per_client else "shared encodes"
+    print(f"bench_fanout: {args.soldiers} soldiers at {args.rate:g} Hz, {mode}, {os.cpu_count()} CPUs")
+    for r in rows:
+        print(f"  {r['clients']} clients: server {r['server_cpu_pct']}% of a core ({r['server_ms_per_tick']} "
+              f"ms/tick), delivered {r['delivered_pct']}%, tick->arrival p99 {r['delivery_ms_p99']} ms, "
+              f"{r['bytes_per_update']} B/update, load before {r['loadavg_before']}")  # fmt: skip
+    return 0
+
+
+def in_process(soldiers: int, clients: int, ticks: int) -> dict[str, object]:
+    """CPU per tick of the server's tick and of ``clients`` observers' joint-update encoding (no sockets)."""
+    import tempfile
+
+    import numpy as np
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_server import mix_requests
+
+    from protocol.connection import CLIENT, NEED_DATA, PAUSED, Connection
+    from protocol.events import DEFAULT_MAX_SOLDIERS, Hello, Subscribe
+    from server.app import TtesServer
+    from server.config import ServerConfig
+    from server.session import Session
+    from server.startup import ServerWorld, write_synthetic_data_dir
+
+    tmp = tempfile.TemporaryDirectory(prefix="bench-fanout-")
+    synth = write_synthetic_data_dir(tmp.name, soldiers=1)
+    cfg = ServerConfig(port=0, data_dir=synth.path, startup_script=synth.startup_script, throttle=0.0,
+                       max_soldiers=max(DEFAULT_MAX_SOLDIERS, soldiers), max_requests_per_s=1e9)  # fmt: skip
+    server = TtesServer(cfg, ServerWorld(cfg.data_dir, max_soldiers=cfg.max_soldiers))
+    server.start_world()
+    for _ in range(soldiers - 1):
+        server.world.create_soldier("DI.fig", "AK_47.fig")
+    m = server.world.manager
+    assert m is not None
+    m.apply_requests(mix_requests(soldiers, np.random.default_rng(1)), server.request_time())
+    pairs = []
+    for k in range(clients):
+        s = Session(server.world, server.board_ref, server.config, f"c{k}")
+        server.sessions[s.id] = s
+        c = Connection(CLIENT, decode_updates=False)
+        s.feed(c.send(Hello(f"c{k}", "observer")))
+        c.receive_data(s.take_output())
+        while c.next_event() not in (NEED_DATA, PAUSED):
+            pass
+        s.feed(c.send(Subscribe(tuple(range(soldiers)))))
+        pairs.append((s, c))
+    tick_cpu = enc_cpu = 0.0
+    nbytes = nrows = 0
+    for t in range(1, ticks + 31):
+        c0 = time.process_time()
+        server.tick(t / 30)
+        c1 = time.process_time()
+        outs = [s.take_output() for s, _ in pairs]
+        c2 = time.process_time()
+        if t <= 30:
+            continue  # warm-up: the first full updates, soldiers getting under way
+        tick_cpu += c1 - c0
+        enc_cpu += c2 - c1
+        for (_, c), data in zip(pairs, outs, strict=True):
+            c.receive_data(data)
+            while (ev := c.next_event()) is not NEED_DATA and ev is not PAUSED:
+                nrows += len(getattr(ev, "indices", ()))
+            nbytes += len(data)
+    return {"clients": clients, "tick_ms": round(1000 * tick_cpu / ticks, 2),
+            "encode_ms": round(1000 * enc_cpu / ticks, 2),
+            "server_ms_per_tick": round(1000 * (tick_cpu + enc_cpu) / ticks, 2),
+            "bytes_per_update": round(nbytes / max(nrows, 1), 2),
+            "updates_per_tick": round(nrows / ticks / clients)}  # fmt: skip
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,125 @@
+"""Encode once, send to many: a memo of joint-update encodes shared by the encoders of one server.
+
+An :class:`~protocol.updates.UpdateEncoder`'s output is a pure function of its delta state (what the client
+last received), the soldier rows it is given and their codes. Encoders whose states are known to be equal
+therefore produce the same bytes for the same rows, and the server need diff and pack only once per group of
+clients in that state (same subscription, same visibility, same history) per tick.
+
+States are named, not hashed: every state gets an id, equal ids mean equal content. A fresh encoder's state
+is :data:`FRESH`; an encode or a reset from state ``s`` leads to the id memoised for ``(s, what was done)``,
+so clients that do the same thing from the same state stay together. Histories that differ but end in equal
+content (a late joiner after its first full update) are joined by comparing the content once
+(``UpdateEncoder._try_join``); a client that fails the comparison retries only after :data:`JOIN_RETRY`
+encodes. Encoders in one state share its arrays copy-on-write (:class:`Held`): taking a memoised encode
+costs a client no copy of the rows it sent.
+
+The caller vouches for ``version``: equal versions with equal rows mean equal codes (the server passes the
+pose board's publish serial). Entries live for one version: a new version clears the memo.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+FRESH = 0  # the state id of an encoder that knows nothing (new, or reset for every soldier)
+JOIN_RETRY = 32  # encodes before a client whose content differed from its group's compares again
+
+
+class Held:
+    """An encoder's state array, shared copy-on-write by the encoders (and memo entries) in one state: a
+    client that takes a memoised encode adopts its arrays instead of writing the sent rows into its own."""
+
+    __slots__ = ("array", "users")
+
+    def __init__(self, array: np.ndarray) -> None:
+        self.array = array
+        self.users = 1
+
+    def take(self) -> Held:
+        self.users += 1
+        return self
+
+    def drop(self) -> None:
+        self.users -= 1
+
+    def writable(self) -> Held:
+        """This holder if its one user is the caller, else the caller's own copy (the caller's use moves)."""
+        if self.users <= 1:
+            return self
+        self.users -= 1
+        return Held(self.array.copy())
+
+
+@dataclass(frozen=True)
+class Encoded:
+    """One memoised encode: its frames, and the state it led to (id and arrays, held by the memo)."""
+
+    payloads: tuple[bytes, ...]
+    state: int
+    last: Held
+    known: Held
+
+
+def digest(indices: np.ndarray) -> bytes:
+    """A collision-resistant name for a set of rows (sorted int64 indices)."""
+    return hashlib.blake2b(np.ascontiguousarray(indices, np.int64).tobytes(), digest_size=16).digest()
+
+
+class SharedEncodes:
+    """The memo of one server: encodes and resets by (state, table, rows, version), for one version."""
+
+    def __init__(self) -> None:
+        self._ids = itertools.count(FRESH + 1)
+        self._version: object = None
+        self._encodes: dict[tuple[object, ...], Encoded] = {}
+        self._resets: dict[tuple[int, bytes], int] = {}
+        self._groups: dict[tuple[object, ...], tuple[int, object]] = {}  # rows key -> (state, its owner)
+        self.hits = 0
+        self.misses = 0
+
+    def new_id(self) -> int:
+        return next(self._ids)
+
+    def _at(self, version: object) -> None:
+        if version != self._version:
+            self._version = version
+            for e in self._encodes.values():
+                e.last.drop()
+                e.known.drop()
+            self._encodes.clear()
+            self._resets.clear()
+            self._groups.clear()
+
+    def lookup(self, state: int, rows: tuple[object, ...], version: object) -> Encoded | None:
+        """The memoised encode of ``rows`` (table, digest, tick, max_payload) from ``state``, or None."""
+        self._at(version)
+        hit = self._encodes.get((state, *rows))
+        if hit is None:
+            self.misses += 1
+        else:
+            self.hits += 1
+        return hit
+
+    def store(self, state: int, rows: tuple[object, ...], encoded: Encoded) -> None:
+        """Memoise an encode; the memo holds its arrays (``take``) until the version changes."""
+        encoded.last.take()
+        encoded.known.take()
+        self._encodes[(state, *rows)] = encoded
+
+    def group(self, rows: tuple[object, ...], state: int, owner: object) -> tuple[int, object]:
+        """The first (state, owner) that encoded these rows at this version; records this one if none did."""
+        return self._groups.setdefault(rows, (state, owner))
+
+    def reset(self, state: int, indices: np.ndarray | None) -> int:
+        """The state id after forgetting ``indices`` (all if None) from ``state``."""
+        if indices is None or state == FRESH:
+            return FRESH
+        key = (state, digest(np.unique(np.asarray(indices, np.int64))))
+        new = self._resets.get(key)
+        if new is None:
+            new = self._resets[key] = self.new_id()
+        return new
