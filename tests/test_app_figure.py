@@ -36,6 +36,12 @@ async def test_request_figure_is_answered_and_draws_a_live_soldier(autojump_cloc
         await c.send(RequestFigure(7, table.table_id, meshes=True))
         with_meshes = await c.expect(FigureMsg)  # the synthetic figures have no surfaces: an empty list
         assert [f.name for f in with_meshes.figures] == ["soldier", "rifle"]
+        # a FIGURE over the client's max_frame (here: padded by a key receivers ignore) is a request error
+        big = FigureMsg(fig.table, fig.figures, {**fig.body, "padding": "x" * (1 << 20)})
+        server.world.soldiers._figure_msgs[(table.table_id, True)] = big
+        await c.send(RequestFigure(8, table.table_id, meshes=True))
+        err = await c.expect(Error)
+        assert (err.code, err.ref) == (ErrorCode.FIGURE_TOO_LARGE, 8)
         await c.send(Subscribe((0,)))
         upd = await c.expect(JointUpdates, lambda u: 0 in u.indices.tolist())
         row = upd.indices.tolist().index(0)
