@@ -90,21 +90,21 @@ def figure_to_wire(
 def _figure_body(fig: Figure, name: str, entry_of: list[int], meshes: bool) -> dict[str, Any]:
     kin = FigureKinematics(fig)
     seg_rows: list[list[Any]] = [
-        [kin.segment_names[kin._root_seg], -1, -1, False, _rows(_perf(kin._root_inv)), _rows(np.eye(4))]
+        [kin.segment_names[kin.root_segment], -1, -1, False, _rows(_perf(kin.root_inverse)), _rows(np.eye(4))]
     ]
-    order = [kin._root_seg]
+    order = [kin.root_segment]
     joint_index = {n: i for i, n in enumerate(fig.joints)}
-    for step in kin._steps:
-        order.append(step.child)
-        entry = entry_of[joint_index[step.joint]]
+    for via, parent, child, forward, pre, post in kin.tree_steps():
+        order.append(child)
+        entry = entry_of[joint_index[via]]
         seg_rows.append(
             [
-                kin.segment_names[step.child],
-                order.index(step.parent),
+                kin.segment_names[child],
+                order.index(parent),
                 entry,
-                not step.forward,
-                _rows(_perf(step.pre)),
-                _rows(_perf(step.post)),
+                not forward,
+                _rows(_perf(pre)),
+                _rows(_perf(post)),
             ]
         )
     row_of = {seg: i for i, seg in enumerate(order)}
@@ -119,7 +119,11 @@ def _figure_body(fig: Figure, name: str, entry_of: list[int], meshes: bool) -> d
             dofs.append([d.kind, *map(float, axis), _limit(d.lower, scale), _limit(d.upper, scale)])
         joints.append([entry, jname, dofs])
     sites = [
-        [f"{s.segment.name}.{s.name}", row_of[kin._seg_index[s.segment.name]], _rows(_perf(s.location))]
+        [
+            f"{s.segment.name}.{s.name}",
+            row_of[kin.segment_names.index(s.segment.name)],
+            _rows(_perf(s.location)),
+        ]
         for s in fig.sites()
         if s.segment is not None
     ]

@@ -53,7 +53,7 @@ async def test_request_figure_is_answered_and_draws_a_live_soldier(autojump_cloc
             kin = FigureKinematics(figure)
             q = upd.dofs[row, start : start + kin.ndof].copy()
             start += kin.ndof
-            q[~kin._is_rot] *= coords.CM_PER_M
+            q[~kin.rotational] *= coords.CM_PER_M
             root = coords.transforms_performer_to_jack(placements[k])
             ref = coords.points_jack_to_performer(kin.site_globals(q, root)[:, :3, 3])
             got = wire.site_globals(table, upd.dofs[row], placements[k])[:, :3, 3]

@@ -61,7 +61,7 @@ def _peabody_sites(figure: Figure, dofs: np.ndarray, placement: np.ndarray) -> d
     """Reference: Peabody FK in Jack units on the same decoded values, sites converted to the wire's axes."""
     kin = FigureKinematics(figure)
     q = dofs.copy()
-    q[~kin._is_rot] *= coords.CM_PER_M
+    q[~kin.rotational] *= coords.CM_PER_M
     root = coords.transforms_performer_to_jack(placement)
     p = coords.points_jack_to_performer(kin.site_globals(q, root)[:, :3, 3])
     return dict(zip(kin.site_names, p, strict=True))
