@@ -13,6 +13,7 @@ import numpy as np
 from test_protocol_figure import soldier
 from test_protocol_messages import deliver, open_pair
 
+from protocol import coords
 from protocol.connection import SERVER, Connection
 from protocol.errors import ErrorCode
 from protocol.events import JointUpdates, ProtocolError, Subscribe, UpdateTableMsg
@@ -113,3 +114,16 @@ def test_section_11_says_tables_and_ready_come_unasked() -> None:
     text = _section("## 11. Example session", "<!-- example-session:begin")
     assert re.search(r"then, \*\*unasked\*\*, the server sends every UPDATE_TABLE and READY", text)
     assert "A client need not send any JCL" in text
+
+
+def test_the_root_yaw_the_doc_explains_is_the_shipped_clips() -> None:
+    """§7.2: a standing soldier's figure quaternion is −45° about +Z (bladed), a kneeling one's −30°."""
+    from server.config import DEFAULT_DATA_DIR
+    from server.motion.cache import load_channelset
+
+    for clip, yaw in (("ststow2stfire", -45.0), ("kstow2kfire", -30.0)):
+        c = load_channelset(DEFAULT_DATA_DIR / "channelsets" / f"{clip}_low.chset.env")
+        w, x, y, z = coords.quats_jack_to_performer(c.fig_quat[-1, 0])
+        assert abs(x) < 1e-3 and abs(y) < 1e-3
+        assert abs(math.degrees(2 * math.atan2(z, w)) - yaw) < 0.5
+    assert "`(0.924, 0, 0, −0.383)`,\n−45° about +Z" in DOC and "Kneeling soldiers\narrive turned −30°" in DOC
