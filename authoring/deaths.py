@@ -36,7 +36,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    :data:`REST_SECONDS` (or after :data:`MAX_SECONDS`); the clip keeps those still frames, so the last frame
    is at rest;
 5. **the skid is taken out**: the ragdoll's parts slide over the ground as he falls, and the recorded frames
-   are moved back by their drift (:func:`authoring.planted.plant`).
+   are moved back by their drift (:func:`authoring.planted.plant`);
+6. **a face-down body goes limp**: a short kinematic settle drops the head where that slides nothing on
+   the ground (:func:`authoring.dead_settle.settle`).
 
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph
@@ -54,6 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from authoring import dead_settle
 from authoring.motion import KeyPosture
 from authoring.planted import plant
 from authoring.postures import RIFLE, SOLDIER
@@ -390,4 +393,5 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         if still * dt >= REST_SECONDS:
             break
     frames = plant(ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS), soldier)
+    frames = dead_settle.settle(frames, soldier, rifle)  # face down: the head drops, kinematically
     return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))

@@ -137,6 +137,11 @@ class Connection:
         elif not self._eof and self.state not in (State.CLOSED, State.ERROR):
             self._reader.feed(data)
 
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes of a frame received only in part (0 between whole frames): a server's frame deadline."""
+        return self._reader.buffered
+
     def data_to_send(self) -> bytes:
         """Bytes the connection produced by itself (the Error frame after a ProtocolError); clears them."""
         out = bytes(self._outbox)

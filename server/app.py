@@ -31,6 +31,7 @@ import errno
 import ipaddress
 import math
 import signal
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -44,6 +45,7 @@ from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.startup import ServerWorld
 from server.tls import server_context
+from server.world.commands import needs_worker
 
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
@@ -58,7 +60,10 @@ class TtesServer:
         self.config = config
         self._t0 = 0.0
         self.world = world or ServerWorld(
-            config.data_dir, max_soldiers=config.max_soldiers, record_clips=config.record_clips
+            config.data_dir,
+            max_soldiers=config.max_soldiers,
+            record_clips=config.record_clips,
+            cache_dir=config.cache_dir,
         )
         self.world.clock = self.request_time
         self.world.owners.per_owner = config.max_soldiers_per_client
@@ -89,6 +94,10 @@ class TtesServer:
         self._nursery: trio.Nursery | None = None
         self._tls = server_context(config)  # None: plain TCP
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
+        self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
+        self._loop_thread = threading.get_ident()
+        self._trio_token: trio.lowlevel.TrioToken | None = None
+        self.world.in_loop = self._in_loop
 
     # -- clock -------------------------------------------------------------------------------------------
     def now(self) -> float:
@@ -135,6 +144,27 @@ class TtesServer:
         if isinstance(caller, Session):
             caller.report(text)
 
+    def _in_loop(self, func: Callable[[], object]) -> object:
+        """Run a JCL command that touches soldiers, settings or clients on the trio loop (called from the
+        worker thread that runs a client's JCL; called on the loop, it just runs)."""
+        if self._trio_token is None or threading.get_ident() == self._loop_thread:
+            return func()
+        return trio.from_thread.run_sync(func, trio_token=self._trio_token)
+
+    async def run_jcl(self, session: Session) -> None:
+        """A client's JCL frame. One that may load files runs in a worker thread: the loads run there, beside
+        the tick; every other command hops back to the loop between ticks (``ServerWorld.in_loop``). Any
+        other frame runs here at once (``needs_worker``). One frame at a time."""
+        ev, session.pending_jcl = session.pending_jcl, None
+        if ev is None:
+            return
+        async with self._jcl_lock:
+            if needs_worker(ev.text):
+                error = await trio.to_thread.run_sync(session.run_jcl, ev)
+            else:
+                error = session.run_jcl(ev)
+        session.jcl_done(ev, error)
+
     # -- running -----------------------------------------------------------------------------------------
     def start_world(self) -> None:
         """Run the start-up script (JclError if it fails) and apply the config's overrides; once."""
@@ -161,6 +191,8 @@ class TtesServer:
     async def serve(self, *, task_status: Any = trio.TASK_STATUS_IGNORED) -> None:
         """Start up, listen, and run until :meth:`shutdown`; ``task_status.started(addresses)``."""
         self._t0 = trio.current_time()
+        self._loop_thread = threading.get_ident()
+        self._trio_token = trio.lowlevel.current_trio_token()
         check_exposure(self.config)
         self.start_world()
         listeners = await trio.open_tcp_listeners(self.config.port, host=self.config.host)
@@ -217,8 +249,13 @@ class TtesServer:
             peer = "?"
         self.clients_total += 1
         session = Session(self.world, self.board_ref, self.config, peer)
+        session.offload_jcl = True
         session.local = _is_loopback(socket)
         session.full = len(self.sessions) >= self.config.max_clients
+        same_host = (
+            sum(s.peer.rpartition(":")[0] == host for s in self.sessions.values()) if peer != "?" else 0
+        )
+        session.crowded = same_host if same_host >= self.config.max_clients_per_host else 0
         self.sessions[session.id] = session
         stream: trio.abc.Stream = (
             socket if self._tls is None else trio.SSLStream(socket, self._tls, server_side=True)
@@ -259,16 +296,40 @@ class TtesServer:
                     session.drop(session.drop_reason or "closed")
         if session.conn.state is State.HANDSHAKE and not session.closing:
             session.drop("no HELLO in time", dropped=True)
+        frame_started: float | None = None  # when the frame now received in part began arriving
         while not session.closing:
-            data = await _receive(stream)
-            wait = session.feed(data, self.now())
-            self._requests_arrived()
-            while wait > 0 and not session.closing:  # over the request rate: stop reading (backpressure)
-                await trio.sleep(wait)
-                wait = session.resume(self.now())
-                self._requests_arrived()
+            deadline = math.inf if frame_started is None else frame_started + self.config.frame_timeout
+            data = b""
+            with trio.move_on_at(deadline) as cs:
+                data = await _receive(stream)
+            if cs.cancelled_caught:
+                session.drop(f"a frame not completed in {self.config.frame_timeout:g} s", dropped=True)
+                return
+            session.conn.receive_data(data)
+            await self._handle_buffered(session)
             if not data:
                 session.drop(session.drop_reason or "closed")
+                return
+            if not session.conn.pending_bytes:
+                frame_started = None
+            elif frame_started is None:
+                frame_started = trio.current_time()
+
+    async def _handle_buffered(self, session: Session) -> None:
+        """Handle what the client sent; the socket is not read meanwhile (TCP backpressure): while it is over
+        its request rate, and while its JCL runs."""
+        while not session.closing:
+            wait = session.resume(self.now())
+            self._requests_arrived()
+            if session.pending_jcl is not None:
+                await self.run_jcl(session)
+            elif session.output_full:  # the client's answers wait: read on once the writer took them
+                session.drained = trio.Event()
+                session.notify()
+                await session.drained.wait()
+            elif wait > 0:  # over the request rate
+                await trio.sleep(wait)
+            else:
                 return
 
     async def _writer(self, session: Session, stream: trio.abc.Stream, scope: trio.CancelScope) -> None:
@@ -284,6 +345,7 @@ class TtesServer:
                         await session.wake.wait()
                 session.wake = trio.Event()
                 data = session.take_output(self.now())
+                session.drained.set()
                 if data:
                     with trio.move_on_after(timeout) as cs:
                         await stream.send_all(data)

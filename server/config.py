@@ -58,11 +58,14 @@ class ServerConfig:
     max_frame: int = 1 << 20  # largest frame we accept (announced in ACCEPT)
     max_requests_per_s: float = 1e6  # entity rows + other messages per client and second; more: slower reads
     handshake_timeout: float = 10.0  # a connection that sends no HELLO in time is closed
+    frame_timeout: float = 10.0  # a frame begun after HELLO must be whole this soon, else the client goes
+    max_clients_per_host: int = 128  # connections from one peer address (it never holds every slot)
     write_timeout: float = 30.0  # a client that takes no bytes for this long is dropped
-    control_queue: int = 256  # control messages waiting for one client; overflow drops the client
+    control_queue: int = 256  # control messages waiting for one client; a full queue stops reading its socket
     name: str = "jack-ttes"
     json_logs: bool = False
     record_clips: bool = False  # keep every soldier's clip starts (debug; report_ttes_clips)
+    cache_dir: Path | None = None  # channelset .npz caches (None: $TTES_CACHE_DIR or the XDG cache dir)
     orphan_grace: float = 12.0  # seconds a gone client's soldiers wait for it to reconnect (the DIS timeout)
     min_report_interval: float = 0.1  # the shortest STATUS period a client may ask for
     # a credential per role (HELLO token); any set: roles come only from tokens. Never logged or printed.
@@ -85,12 +88,34 @@ class ServerConfig:
     def with_overrides(self, **changes: Any) -> ServerConfig:
         """A copy with the given fields replaced (``None`` values are ignored: flag not given)."""
         given = {k: v for k, v in changes.items() if v is not None}
-        if "data_dir" in given:
-            given["data_dir"] = Path(given["data_dir"])
+        for key in ("data_dir", "cache_dir"):
+            if key in given:
+                given[key] = Path(given[key])
         return dataclasses.replace(self, **given)
 
 
 _FIELDS = {f.name: f for f in dataclasses.fields(ServerConfig)}
+
+# what a peer may do and what it costs (docs/PROTOCOL.md §15; `ttes server --help` lists them with defaults)
+LIMITS = {
+    "max_clients": "connections; the next HELLO is refused",
+    "max_clients_per_host": "connections from one peer address; the next HELLO is refused",
+    "handshake_timeout": "seconds to send HELLO, else closed",
+    "frame_timeout": "seconds to finish a frame begun after HELLO, else dropped",
+    "write_timeout": "seconds one write to a client may stall, else dropped",
+    "control_queue": "answers waiting for a client; a full queue stops reading it (backpressure)",
+    "max_requests_per_s": "requests per client and second; more: its socket is read more slowly",
+    "max_frame": "bytes in one frame",
+    "max_soldiers_per_client": "soldiers one client id may own",
+    "min_report_interval": "the shortest STATUS period a client may ask for",
+    "orphan_grace": "seconds a gone client's soldiers wait for it to come back",
+}
+
+
+def limits_help() -> str:
+    """The limits with their defaults, one per line (for ``--help``)."""
+    d = ServerConfig()
+    return "\n".join(f"  {k} = {getattr(d, k)!r}: {v}" for k, v in LIMITS.items())
 
 
 def _check_number(
@@ -112,6 +137,8 @@ def validate(c: ServerConfig) -> None:
     _check_number("port", c.port, 0, 65535, integer=True)
     if not isinstance(c.data_dir, Path):
         raise ConfigError("must be a path", "data_dir")
+    if c.cache_dir is not None and not isinstance(c.cache_dir, Path):
+        raise ConfigError("must be a path", "cache_dir")
     if not isinstance(c.startup_script, str):
         raise ConfigError("must be a string", "startup_script")
     _check_number("tick_hz", c.tick_hz, 0.0, 1000.0, lo_open=True)
@@ -126,6 +153,8 @@ def validate(c: ServerConfig) -> None:
     _check_number("max_requests_per_s", c.max_requests_per_s, 0.0, 1e9, lo_open=True)
     _check_number("handshake_timeout", c.handshake_timeout, 0.0, 3600.0, lo_open=True)
     _check_number("write_timeout", c.write_timeout, 0.0, 3600.0, lo_open=True)
+    _check_number("frame_timeout", c.frame_timeout, 0.0, 3600.0, lo_open=True)
+    _check_number("max_clients_per_host", c.max_clients_per_host, 1, 100_000, integer=True)
     _check_number("control_queue", c.control_queue, 8, 1_000_000, integer=True)
     if not isinstance(c.name, str) or not c.name:
         raise ConfigError("must be a non-empty string", "name")
@@ -158,11 +187,12 @@ def config_from_mapping(
     if unknown:
         raise ConfigError(f"unknown key(s) {unknown}; known: {sorted(_FIELDS)}", source)
     kwargs = dict(values)
-    if "data_dir" in kwargs:
-        if not isinstance(kwargs["data_dir"], str) or not kwargs["data_dir"]:
-            raise ConfigError("must be a non-empty string", f"{source}: data_dir")
-        p = Path(kwargs["data_dir"]).expanduser()
-        kwargs["data_dir"] = p if p.is_absolute() or base_dir is None else base_dir / p
+    for key in ("data_dir", "cache_dir"):
+        if key in kwargs:
+            if not isinstance(kwargs[key], str) or not kwargs[key]:
+                raise ConfigError("must be a non-empty string", f"{source}: {key}")
+            p = Path(kwargs[key]).expanduser()
+            kwargs[key] = p if p.is_absolute() or base_dir is None else base_dir / p
     try:
         return ServerConfig(**kwargs)
     except ConfigError as exc:

@@ -8,10 +8,13 @@ Memory per client is bounded whatever the client does:
   soldiers that changed since its last write (the connection's ``UpdateEncoder`` diffs against what this
   client last received, so skipped ticks cost nothing and deltas stay exact). A stalled reader therefore
   holds at most one encoded batch, and never slows the tick or other clients;
-* **control messages** (errors, READY, STATUS, answers) go through a small bounded queue; overflow means the
-  client is not reading at all, and it is dropped;
-* reading stops (TCP backpressure) while the client exceeds its request rate, and a frame longer than
-  ``max_frame`` is refused before it is buffered (the connection checks the length prefix).
+* **control messages** (errors, READY, STATUS, answers) go through a small bounded queue. While it holds
+  ``control_queue`` messages the reader stops reading the socket (TCP backpressure: a client that pipelines
+  requests is slowed, never dropped, while it reads); only the server's own pushes can add more, and twice
+  ``control_queue`` means the client reads nothing at all: it is dropped (so is a client whose socket takes no
+  bytes for ``write_timeout``);
+* reading stops (TCP backpressure) while the client exceeds its request rate or its JCL runs, and a frame
+  longer than ``max_frame`` is refused before it is buffered (the connection checks the length prefix).
 
 Heading-only changes (the seed's "send the last update packet with heading change",
 ``TickUpdate.heading_only``) need nothing here: heading and position are the client's and the pose is
@@ -119,7 +122,11 @@ class Session:
         self.dropped = False  # ended by the server (error, stall, overflow), not by the client
         self.lingering = False  # after a fatal error: half-close and drain before closing the socket
         self.full = False  # the server had max_clients already: refuse the HELLO
+        self.crowded = 0  # > 0: the peer's address had this many connections (max_clients_per_host): refuse
+        self.drained = trio.Event()  # set by the writer each time it takes the control queue
         self.writer_done = trio.Event()
+        self.offload_jcl = False  # True under the trio app: a JCL frame waits in pending_jcl for the reader
+        self.pending_jcl: Jcl | None = None
 
     # -- output ------------------------------------------------------------------------------------------
     def notify(self) -> None:
@@ -129,11 +136,16 @@ class Session:
         """Queue control bytes; a full queue means the client reads nothing: drop it."""
         if not data:
             return
-        if len(self.control) >= self.config.control_queue:
-            self.drop(f"control queue full ({self.config.control_queue} messages): client not reading", True)
+        if len(self.control) >= 2 * self.config.control_queue:
+            self.drop(f"control queue full ({len(self.control)} messages): client not reading", True)
             return
         self.control.append(data)
         self.wake.set()
+
+    @property
+    def output_full(self) -> bool:
+        """The control queue is full: stop reading this client until the writer has taken it."""
+        return len(self.control) >= self.config.control_queue
 
     def send(self, event: Event) -> None:
         if self.conn.state in (State.CLOSED, State.ERROR):
@@ -154,6 +166,7 @@ class Session:
             self.drop_reason = reason
             self.dropped = dropped
         self.wake.set()
+        self.drained.set()  # a reader waiting for the writer stops waiting
 
     def take_output(self, now: float | None = None) -> bytes:
         """Everything to write now: queued control bytes, then the latest joint updates (latest-wins), held
@@ -227,7 +240,7 @@ class Session:
 
     def resume(self, now: float | None = None) -> float:
         """Handle buffered events until the buffer is empty (0.0) or the budget is spent (seconds to wait)."""
-        while not self.closing:
+        while not self.closing and self.pending_jcl is None and not self.output_full:
             if now is not None:
                 wait = self.charge(now)
                 if wait > 0:
@@ -323,10 +336,10 @@ class Session:
 
     def _hello(self, ev: Hello) -> None:
         self.name = ev.name
-        refused = f"server full ({self.config.max_clients} clients)" if self.full else self._grant(ev)
+        refused = self._refusal(ev)
         if refused:
             self.send(Error(int(ErrorCode.NOT_PERMITTED), refused))
-            self.goodbye(refused)
+            self.goodbye(refused.partition(" (")[0])
             self.dropped = True
             log.info("client_refused", session=self.id, peer=self.peer, name=ev.name, reason=refused)
             return
@@ -347,6 +360,16 @@ class Session:
         )
         if self.world.ready:
             self.send_ready()
+
+    def _refusal(self, ev: Hello) -> str:
+        """Why this HELLO is refused ("" = accepted): the server is full, the peer's address holds its share
+        of the slots (``max_clients_per_host``), or the role is not granted."""
+        if self.full:
+            return f"server full ({self.config.max_clients} clients)"
+        if self.crowded:
+            host = self.peer.rpartition(":")[0]
+            return f"too many connections: {self.crowded} connections from {host} (max_clients_per_host)"
+        return self._grant(ev)
 
     def _grant(self, ev: Hello) -> str:
         """Why the role asked for is refused ("" = granted). With tokens configured a role comes only from a
@@ -441,11 +464,23 @@ class Session:
         self.notify()
 
     def _jcl(self, ev: Jcl) -> None:
+        if self.offload_jcl:  # the reader runs it off the tick (TtesServer.run_jcl) before reading on
+            self.pending_jcl = ev
+            return
+        self.jcl_done(ev, self.run_jcl(ev))
+
+    def run_jcl(self, ev: Jcl) -> JclError | None:
+        """Run a JCL frame (any thread: the world sends what touches soldiers to the trio loop)."""
         try:
             self.world.run_jcl(ev.text, self, f"<jcl {ev.id} from {self.name or self.peer}>")
         except JclError as exc:
-            self.send(Error(int(ErrorCode.JCL_ERROR), str(exc), ev.id))
-            log.info("jcl_error", session=self.id, error=str(exc))
+            return exc
+        return None
+
+    def jcl_done(self, ev: Jcl, error: JclError | None) -> None:
+        if error is not None:
+            self.send(Error(int(ErrorCode.JCL_ERROR), str(error), ev.id))
+            log.info("jcl_error", session=self.id, error=str(error))
 
     def _create(self, ev: CreateSoldier) -> None:
         if not (self._permitted(ev.id, "CREATE_SOLDIER") and self._is_ready(ev.id, "CREATE_SOLDIER")):

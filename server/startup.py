@@ -74,12 +74,13 @@ class ServerWorld:
         clock: Callable[[], float] = lambda: 0.0,
         record_clips: bool = False,
         library: MotionLibrary | None = None,
+        cache_dir: str | Path | None = None,
     ) -> None:
         self.data_dir = Path(data_dir).resolve()
         self.clock = clock
         self.events = WorldEvents()
         self.jcl = JclInterpreter(self.data_dir, SEARCH_SUBDIRS)
-        self.store = MotionStore()
+        self.store = MotionStore(cache_dir=Path(cache_dir) if cache_dir is not None else None)
         self.soldiers = Soldiers(max_soldiers, SoldierSettings(record_clips=record_clips))
         self.owners = Owners(max_soldiers, max_soldiers_per_client)
         self.startup_script: Path | None = None  # the script run_startup ran
@@ -89,6 +90,9 @@ class ServerWorld:
         self.graphics = True
         self.report_interval = DEFAULT_REPORT_INTERVAL
         self.caller: object | None = None  # who runs the JCL now (a session; None: the server itself)
+        # how a JCL command that touches soldiers, settings or clients runs: directly, or (JCL run by the trio
+        # app in a worker thread) on the trio loop, so that only file loads run beside the tick
+        self.in_loop: Callable[[Callable[[], object]], object] = lambda func: func()
         if library is not None:
             self.soldiers.adopt(library)
 

@@ -7,8 +7,10 @@ Hypothesis profiles: ``ci`` (default, bounded so `make test` stays fast) and
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
+import pytest
 from hypothesis import HealthCheck, settings
 
 settings.register_profile(
@@ -21,3 +23,10 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED = REPO.parent / "shared"
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _channelset_cache_dir() -> None:
+    """Channelset caches of test runs go to one folder under the temp dir (warm between runs; spawned servers
+    inherit it), never into the user's cache."""
+    os.environ["TTES_CACHE_DIR"] = str(Path(tempfile.gettempdir()) / f"ttes-test-cache-{os.getuid()}")

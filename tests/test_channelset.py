@@ -14,7 +14,7 @@ from peabody import quaternion
 from peabody.fk import FigureKinematics
 from peabody.loader import load_text
 from server.motion.binding import bind_channelset, pose_layout
-from server.motion.cache import cache_path, load_channelset, load_npz, save_npz
+from server.motion.cache import cache_dir, cache_path, load_channelset, load_npz, save_npz
 from server.motion.channelset import JointTrack, channelsets_close, make_channelset
 from server.motion.channelset_file import (
     format_channelset,
@@ -186,9 +186,10 @@ def test_writer_output_uses_the_parser_fast_paths() -> None:
 def test_cache_is_written_used_and_rebuilt(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     src = tmp_path / "c.chset.env"
     shutil.copy(DATA / "ststow2crawl_low.chset.env", src)
-    assert cache_path(src) == tmp_path / "c.chset.npz"
+    assert cache_path(src).parent == cache_dir() and cache_path(src).name.startswith("c.chset-")
     first = load_channelset(src)
     assert cache_path(src).is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.chset.env"]  # nothing beside the data
 
     import server.motion.channelset_file as cf
 

@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from authoring import deaths, postures
+from authoring import dead_settle, deaths, postures
 from authoring.build import BuildContext
 from authoring.postures import RIFLE, SOLDIER
+from authoring.quality_frames import FigureSet
 from authoring.slaving import create_channelset_motion
+from authoring.transitions import ClipFrames
 from peabody.fk import FigureKinematics
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
@@ -107,3 +109,26 @@ def test_every_death_lets_go_of_the_rifle_and_ends_at_rest(ctx: BuildContext, na
     rifle_speed = np.linalg.norm(np.diff(rifles[-3:, :3, 3], axis=0), axis=-1) * 60.0 / 100.0
     assert rifle_speed.max() <= 0.5
     assert postures.lowest_point(kin, poses[-1], roots[-1]) <= 2.0  # lying on the ground
+
+
+@pytest.mark.parametrize("name", ["prstow2dead", "prfire2dead"])
+def test_a_prone_death_lays_the_head_down(ctx: BuildContext, name: str) -> None:
+    """Issue 14: the physics left the head held up about 30 cm, like a live prone soldier's."""
+    poses, roots, _, _ = _played(ctx, name)
+    lows = part_lows_of(ctx, poses[-1], roots[-1])
+    assert lows["head"] <= 20.0
+
+
+def test_a_body_not_on_its_front_does_not_settle(ctx: BuildContext) -> None:
+    poses, roots, rifles, _ = _played(ctx, "kstow2dead")  # on his side
+    frames = ClipFrames(poses, roots, rifles)
+    assert dead_settle.settle(frames, ctx.soldier, ctx.rifle) is frames
+
+
+def part_lows_of(ctx: BuildContext, q: np.ndarray, root: np.ndarray) -> dict[str, float]:
+    figs = FigureSet({"body": ctx.soldier})
+    kin = figs.kin["body"]
+    nodes, segs = figs.nodes("body")
+    parts = figs.node_parts("body")
+    y = np.einsum("kj,kj->k", kin.segment_globals(q, root)[segs, 1, :], nodes)
+    return {str(p): float(y[parts == p].min()) for p in np.unique(parts)}

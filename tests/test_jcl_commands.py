@@ -107,9 +107,13 @@ def test_play_bound_channelset_plays_the_clip_on_the_bound_soldier(world) -> Non
         w.run_jcl('play_bound_channelset("ststow2kstow/s0", "sideways", -1);')
     with pytest.raises(JclError, match="no bound channelset"):
         w.run_jcl('play_bound_channelset("nothing/s0", "forwards", -1);')
-    w.run_jcl(
-        'load_channelset("ststow2kstow_low.chset.env", "copy"); bind_channelset("copy", "copy/s0", "Di2_0");'
+    w.run_jcl(  # the same file under another name is the library's clip (issue 17: loads share)
+        'load_channelset("ststow2kstow_low.chset.env", "same"); bind_channelset("same", "same/s0", "Di2_0");'
     )
+    w.run_jcl('play_bound_channelset("same/s0", "forwards", -1);')
+    graphs = w.data_dir / "posture_graphs"
+    shutil.copy(graphs / "ststow2kstow_low.chset.env", graphs / "copy_low.chset.env")
+    w.run_jcl('load_channelset("copy_low.chset.env", "copy"); bind_channelset("copy", "copy/s0", "Di2_0");')
     with pytest.raises(JclError, match="not a clip of the motion library"):
         w.run_jcl('play_bound_channelset("copy/s0", "forwards", -1);')
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from server.motion.cache import cache_path
 from server.motion.errors import BindingError, PostureGraphError
 from server.motion.posture_change import bind_posture_graph, load_posture_graph
 from server.motion.posture_graph import (
@@ -199,7 +200,7 @@ def test_missing_channelset_file_names_the_graph_line(seed_dir: Path) -> None:
 
 def test_load_and_bind_the_seed_graph(seed_dir: Path) -> None:
     loaded = load_posture_graph(seed_dir / "soldier_low.graph", "ptrans")
-    assert len(loaded.channelsets) == 17 and (seed_dir / "crawl2dead_low.chset.npz").is_file()
+    assert len(loaded.channelsets) == 17 and cache_path(seed_dir / "crawl2dead_low.chset.env").is_file()
     assert loaded.protofiletypes == ["toy_rifle.fig", "toy_soldier.fig"]
     assert loaded.durations[2] == pytest.approx(2.0)
     with pytest.raises(BindingError, match=r"toy_rifle\.fig"):

@@ -61,13 +61,17 @@ def test_after_a_reversal_the_figure_catches_up_with_its_entity(reversal) -> Non
 
 @pytest.mark.parametrize("turn", [140.0, -140.0, 160.0, -160.0])
 def test_a_near_reversal_pivots_too_its_rest_turned_about_the_planted_foot(lib, turn: float) -> None:  # type: ignore[no-untyped-def]
-    """135-160°: the 180° pivot plus the rest (20-45° the other way) spread over it, about the sole point
-    carrying the weight: the other end of that foot twists a little (measured 1.8-4.9 cm), far less than
-    turning over the steps did (8-10 cm, and the figure drifted 1.7 m off its entity for good)."""
+    """135-160°: the 180° pivot, then the 45° turn back for what is left when that is too much for a rest
+    (140°: measured 0.9-1.0 cm, was 3.6-4.9 with the 40° spread over the pivot); 160°: the 180° pivot plus
+    the 20° rest, turned about the sole point carrying the weight while one foot alone is down (1.2-1.4 cm;
+    spread over the whole pivot 1.8-2.4); turning over the steps slid 8-10 cm and left the figure 1.7 m off
+    its entity for good."""
     script = [(0.0, 0.0, 0.0), (0.5, 1.4, 0.0), (T_REVERSE, 1.4, 0.0, 20.0 + turn), (12.0, 0.0, 0.0)]
     played = drive(lib, script, heading=20.0, until=12.0)
     assert any("turn_" in c for c in played["clips"].tolist())
-    assert max(s for s, _ in skates(played, T_REVERSE - 0.6, 12.0)) <= 5.0
+    assert max(s for s, _ in skates(played, T_REVERSE - 0.6, 12.0)) <= (
+        SKATE_CM if abs(turn) < 150.0 else 2.5
+    )
     assert yaw_steps(played).max() <= MAX_YAW_STEP_DEG
 
 
@@ -80,9 +84,9 @@ def test_a_snap_during_the_pivot_ends_it(lib) -> None:  # type: ignore[no-untype
     run(m, 0.5, 4.0)
     move(m, i, 4.0, 1.4, 0.0, heading=190.0)
     run(m, 4.0, 6.0)
-    assert "turn_r180" in m.soldier_info(i)["clip"] and m.table.pivot_rate[i] != 0.0
+    assert "turn_r180" in m.soldier_info(i)["clip"] and m.table.pivot_rest[i] != 0.0
     rows = make_entity_requests(
         i, Appearance.UPRIGHT, WeaponState.DEPLOYED, (0, 0, 0), 190.0, (0, 0, 0), True
     )
     m.apply_requests(rows, 6.0)
-    assert m.table.pivot_rate[i] == 0.0 and not m.table.reversing[i]
+    assert m.table.pivot_rest[i] == 0.0 and not m.table.reversing[i]

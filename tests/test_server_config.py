@@ -160,3 +160,15 @@ def test_spawned_private_servers_ignore_role_tokens_in_the_environment(
     monkeypatch.setenv("TTES_TOKEN", "client-token")
     env = child_env()
     assert "TTES_CONTROLLER_TOKEN" not in env and env["TTES_TOKEN"] == "client-token"
+
+
+def test_the_flow_limits_are_settings_and_listed_in_help() -> None:
+    from server.config import LIMITS, limits_help
+
+    c = config_from_mapping({"frame_timeout": 2.5, "max_clients_per_host": 4, "cache_dir": "/tmp/x"})
+    assert (c.frame_timeout, c.max_clients_per_host, c.cache_dir) == (2.5, 4, Path("/tmp/x"))
+    with pytest.raises(ConfigError, match="frame_timeout"):
+        ServerConfig(frame_timeout=0.0)
+    with pytest.raises(ConfigError, match="max_clients_per_host"):
+        ServerConfig(max_clients_per_host=0)
+    assert all(f"  {k} = " in limits_help() for k in LIMITS)

@@ -192,7 +192,7 @@ class DisSoldiers:
     def _bind(self, app: StubApp, slot: int, kind: int) -> None:
         """The server soldier of ``slot`` (created by the sink): its wire table bound to our kind."""
         assert self.sink is not None and self._link is not None
-        index = self.sink.base + slot
+        index = int(self.sink.server_index(np.array([slot]))[0])
         weapon = self.sink.weapon_of.get(index, "")
         wire = next(
             (t for t in self._link.tables.values() if t.figure == self.sink.figure and t.weapon == weapon),

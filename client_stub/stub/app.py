@@ -135,6 +135,9 @@ class StubApp:
         self._slot_by_server = np.full(0, -1, np.int64)  # the same map as an array, for whole batches
         self.renderer: StubRenderer | None = None
         self.time = 0.0
+        self.server_lost = ""  # "server lost: why" while the source has no server (after having one)
+        self.server_lost_count = 0
+        self.gave_up = ""  # the source stopped reconnecting (``ttes stub`` exits 3)
 
     @property
     def link(self) -> Link | None:
@@ -250,12 +253,19 @@ class StubApp:
         self._slot_by_server[index] = slot
 
     def lose_server(self, exc: Exception) -> None:
-        """The server went away: the soldiers go on, posed by the stub."""
-        log.warning("server connection lost: %s; the stub poses the soldiers from now on", exc)
+        """The server went away: the soldiers go on, posed by the stub (a source that can reconnects)."""
+        log.warning("server lost: %s; the stub poses the soldiers from now on", exc)
+        self.server_lost = f"server lost: {exc}"
+        self.server_lost_count += 1
         self.source.lose_server()
         self.server_of[:] = -1
         self.slot_of_server.clear()
         self._slot_by_server[:] = -1
+
+    def regain_server(self) -> None:
+        """The source has a server again (its soldiers bound again)."""
+        log.warning("server back after %s", self.server_lost.removeprefix("server lost: "))
+        self.server_lost = ""
 
     def _apply_updates(self, batches: list[UpdateBatch]) -> None:
         for batch in batches:
@@ -295,6 +305,8 @@ class StubApp:
             self.grow()
             link = self.source.link
             if link is not None:
+                if not getattr(link, "connected", True):  # the link's thread saw the server go
+                    raise LinkError(getattr(link, "failure", None) or "connection closed")
                 self._apply_updates(link.swap())
         except LinkError as exc:
             self.lose_server(exc)

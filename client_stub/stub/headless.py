@@ -60,6 +60,20 @@ class Tour:
         return keys
 
 
+def _frame(app: StubApp, step: float, t: float, script: Tour | None, quiet: bool) -> bool:
+    """The tour's keys due at ``t`` and one frame of the app; False when it gave up on its server."""
+    if script is not None:
+        for key in script.due(t):
+            message = app.handle_key(key)
+            if message and not quiet:
+                print(f"[{t:5.1f} s] {key}: {message}")
+    lost = app.server_lost
+    app.frame(step)
+    if app.server_lost != lost and not quiet:
+        print(f"[{t:5.1f} s] {app.server_lost or 'server back'}")
+    return not app.gave_up
+
+
 def run_headless(
     app: StubApp,
     seconds: float,
@@ -105,12 +119,8 @@ def run_headless(
                 break
             step = dt if rendered else 0.0
         t += step
-        if script is not None:
-            for key in script.due(t):
-                message = app.handle_key(key)
-                if message and not quiet:
-                    print(f"[{t:5.1f} s] {key}: {message}")
-        app.frame(step)
+        if not _frame(app, step, t, script, quiet):
+            break
         app.draw()
         r0 = time.perf_counter()
         frame = renderer.render()
@@ -139,5 +149,7 @@ def run_headless(
         "render_fps": round(rendered / render_time, 2) if render_time > 0 else None,
         "soldiers": int(app.soldiers.count),
         "server": app.link is not None,
+        "server_lost": app.server_lost_count,
+        "gave_up": app.gave_up,
         "last_frame_mean": None if frame is None else float(np.asarray(frame).mean()),
     }

@@ -4,11 +4,17 @@ each is bound to a server soldier (Figures 9 and 10) and its changed requests go
 Binding: a slot takes a free soldier of those the start-up JCL made (READY), else one CREATE_SOLDIER made
 for it (an AK-47 soldier when the server has no motion for the slot's rifle). The joint updates of bound
 slots pose them (:meth:`StubApp.frame`); slots without a server soldier are posed offline.
+
+A lost server (:meth:`StubApp.lose_server`, seen within one frame) is tried again with ``reconnect`` after
+backoff delays counted in stub time (0.5, 1, 2, 4, 8 s, then every 8 s); once it answers, every slot is bound
+again. After ``give_up_after`` seconds without one, ``app.gave_up`` says so (``ttes stub`` exits 3).
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -21,11 +27,28 @@ from protocol.entity import Appearance, WeaponState
 log = logging.getLogger("ttes.stub")
 
 
+BACKOFF = (0.5, 1.0, 2.0, 4.0, 8.0)  # stub seconds between reconnection attempts (the last repeats)
+
+
 class LiveSoldiers:
     """A :class:`~client_stub.stub.app.SoldierSource`: SimSoldiers and keys, optionally on a server."""
 
-    def __init__(self) -> None:
+    def __init__(
+        self,
+        reconnect: Callable[[], JackProc] | None = None,
+        *,
+        give_up_after: float = 120.0,
+        ready_timeout: float = 30.0,
+        backoff: Sequence[float] = BACKOFF,
+    ) -> None:
         self.jack: JackProc | None = None
+        self.reconnect = reconnect  # a new connected JackProc (LinkError when no server answers)
+        self.give_up_after = give_up_after
+        self.ready_timeout = ready_timeout
+        self.backoff = tuple(backoff)
+        self._lost_at: float | None = None  # stub time the reconnection attempts began
+        self._attempt = 0
+        self._next_try = 0.0
 
     @property
     def link(self) -> JackProc | None:
@@ -93,6 +116,35 @@ class LiveSoldiers:
             out = requests[app.server_of[requests["index"]] >= 0]
             out["index"] = app.server_of[out["index"]]
             jack.send_requests(out)
+        elif jack is None and app.server_lost and self.reconnect is not None and not app.gave_up:
+            self._try_again(app)
+
+    def _try_again(self, app: StubApp) -> None:
+        """One reconnection attempt when the backoff says so; give up after ``give_up_after``."""
+        now = app.time
+        if self._lost_at is None:
+            self._lost_at, self._attempt = now, 0
+            self._next_try = now + self.backoff[0]
+            return
+        if now - self._lost_at > self.give_up_after:
+            app.gave_up = f"gave up after {now - self._lost_at:.0f} s without a server ({app.server_lost})"
+            log.error("%s", app.gave_up)
+            return
+        if now < self._next_try:
+            return
+        self._attempt += 1
+        self._next_try = now + self.backoff[min(self._attempt, len(self.backoff) - 1)]
+        assert self.reconnect is not None
+        try:
+            jack = self.reconnect()
+        except LinkError as exc:
+            log.info("reconnecting: %s", exc)
+            return
+        if self.connect(app, jack, self.ready_timeout):
+            self._lost_at = None
+            app.regain_server()
+        else:
+            self.lose_server()
 
     def refuse_key(self, key: str) -> str | None:
         return None
@@ -101,6 +153,9 @@ class LiveSoldiers:
         return None
 
     def lose_server(self) -> None:
+        if self.jack is not None:
+            with contextlib.suppress(LinkError):
+                self.jack.quit()
         self.jack = None
 
     def close(self) -> None:

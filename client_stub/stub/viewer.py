@@ -8,6 +8,8 @@ renders the scene. Escape closes the window.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from client_stub.stub.app import StubApp
@@ -79,14 +81,28 @@ def make_window(app: StubApp, width: int = 800, height: int = 600, fps: float = 
         pyglet.clock.unschedule(tick)
         renderer.delete()
 
+    shown = [""]
+
     def tick(dt: float) -> None:
         app.frame(float(np.clip(dt, 0.0, 0.25)))
         app.draw()
+        _show_server(app, window, shown)
 
     pyglet.clock.schedule_interval(tick, 1.0 / fps)
     app.frame(0.0)
     app.draw()
     return window
+
+
+def _show_server(app: StubApp, window: Any, shown: list[str]) -> None:
+    """A lost server shows in the caption (and the console) at the next frame; giving up closes the window."""
+    news = app.gave_up or app.server_lost
+    if news != shown[0]:
+        _report(news or "server back")
+        window.set_caption(f"ttes-stub: {news.upper()}" if news else "ttes-stub")
+        shown[0] = news
+    if app.gave_up:
+        window.close()
 
 
 def _report(message: str | None) -> None:

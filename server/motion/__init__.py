@@ -5,7 +5,7 @@ Seed 002, sections 3.4.1-3.4.2. Modules, bottom up:
 * :mod:`~server.motion.channelset` — the in-memory channelset (contiguous float32 arrays) and sharedchannels;
 * :mod:`~server.motion.channelset_file` — ``*.chset.env`` text through the Peabody parser, and the writer
   (importing this package registers the ``channelset`` block with the Peabody loader);
-* :mod:`~server.motion.cache` — ``X.chset.npz`` binary caches and :func:`load_channelset`;
+* :mod:`~server.motion.cache` — ``.npz`` binary caches (in a cache directory) and :func:`load_channelset`;
 * :mod:`~server.motion.binding` — bound channelsets (index maps onto figures' pose vectors);
 * :mod:`~server.motion.playback` — the frame arithmetic of a play (the scalar reference of sampling);
 * :mod:`~server.motion.sampling` — :class:`ClipLibrary`, sampling thousands of soldiers per call;

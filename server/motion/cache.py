@@ -1,14 +1,19 @@
-"""Binary caches of channelset files: ``X.chset.npz`` beside ``X.chset.env``.
+"""Binary caches of channelset files: ``X.chset.npz`` in a cache directory, never beside ``X.chset.env``.
 
 Parsing a big channelset text file costs far more than loading its arrays, so the first load writes the arrays
-to an ``.npz`` (no pickles) beside the text. A cache is used only when it is readable, has this format version
-and records the text file's current size and modification time; otherwise the text is parsed again and the
-cache rewritten (atomically, and silently skipped when the folder is read-only). Caches are never committed
-(``*.chset.npz`` is in ``.gitignore``).
+to an ``.npz`` (no pickles). A cache is used only when it is readable, has this format version and records the
+text file's current size and modification time; otherwise the text is parsed again and the cache rewritten
+(atomically, and silently skipped when the folder cannot be written).
+
+The caches live in a cache directory (:func:`cache_dir`: ``$TTES_CACHE_DIR``, else
+``$XDG_CACHE_HOME/jack-ttes`` or ``~/.cache/jack-ttes``; the server's ``cache_dir`` setting overrides it),
+named by the source's resolved path: a client's ``load_channelset`` must never write files into the data
+directory (issue 17).
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import tempfile
@@ -21,15 +26,25 @@ import numpy as np
 from server.motion.channelset import Channelset, SharedChannel
 
 FORMAT_VERSION = 3
+CACHE_DIR_ENV = "TTES_CACHE_DIR"
 log = logging.getLogger(__name__)
 
 
-def cache_path(path: str | Path) -> Path:
-    """``X.chset.env`` → ``X.chset.npz`` (any other name gets ``.npz`` appended)."""
+def cache_dir() -> Path:
+    """The default cache folder: ``$TTES_CACHE_DIR``, ``$XDG_CACHE_HOME/jack-ttes``, ``~/.cache/...``."""
+    if os.environ.get(CACHE_DIR_ENV):
+        return Path(os.environ[CACHE_DIR_ENV]).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg).expanduser() if xdg else Path.home() / ".cache"
+    return base / "jack-ttes"
+
+
+def cache_path(path: str | Path, directory: str | Path | None = None) -> Path:
+    """``.../X.chset.env`` → ``<cache dir>/X.chset-<hash of the resolved path>.npz``."""
     path = Path(path)
-    if path.suffix == ".env":
-        return path.with_suffix(".npz")
-    return path.with_name(path.name + ".npz")
+    stem = path.name.removesuffix(".env")
+    key = hashlib.sha1(str(path.resolve()).encode()).hexdigest()[:16]
+    return Path(directory if directory is not None else cache_dir()) / f"{stem}-{key}.npz"
 
 
 def _strings(values: list[str]) -> np.ndarray:
@@ -39,6 +54,7 @@ def _strings(values: list[str]) -> np.ndarray:
 def save_npz(chset: Channelset, target: str | Path, source_stat: os.stat_result | None = None) -> None:
     """Write ``chset`` to ``target`` atomically (temp file + rename)."""
     target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
     chans = chset.channels
     arrays: dict[str, Any] = {
         "format_version": np.array(FORMAT_VERSION),
@@ -118,21 +134,24 @@ def load_npz(path: str | Path, source_stat: os.stat_result | None = None) -> Cha
         return None
 
 
-def load_channelset(path: str | Path, *, use_cache: bool = True) -> Channelset:
-    """Load the one channelset in a ``.chset.env`` file, through its ``.npz`` cache when fresh."""
+def load_channelset(
+    path: str | Path, *, use_cache: bool = True, directory: str | Path | None = None
+) -> Channelset:
+    """Load the one channelset in a ``.chset.env`` file, through its ``.npz`` cache (in ``directory``, default
+    :func:`cache_dir`) when fresh."""
     from server.motion.channelset_file import read_channelset  # parsing pulls in the Peabody language
 
     path = Path(path)
     if not use_cache:
         return read_channelset(path)
     st = path.stat()
-    cpath = cache_path(path)
+    cpath = cache_path(path, directory)
     cached = load_npz(cpath, st)
     if cached is not None:
         return cached
     chset = read_channelset(path)
     try:
         save_npz(chset, cpath, st)
-    except OSError as exc:  # a read-only data folder still works, just slower
+    except OSError as exc:  # an unwritable cache folder still works, just slower
         log.debug("cannot write channelset cache %s: %s", cpath, exc)
     return chset

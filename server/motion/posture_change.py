@@ -9,7 +9,7 @@ quickest path for thousands of soldiers at once.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,9 +45,15 @@ class LoadedPostureGraph:
 
 
 def load_posture_graph(
-    path: str | Path, name: str | None = None, *, use_cache: bool = True
+    path: str | Path,
+    name: str | None = None,
+    *,
+    use_cache: bool = True,
+    cache_dir: str | Path | None = None,
+    loader: Callable[[Path], Channelset] | None = None,
 ) -> LoadedPostureGraph:
-    """Read a ``.graph`` and its channelsets; a missing channelset file is a located PostureGraphError."""
+    """Read a ``.graph`` and its channelsets (through ``loader`` when given: the server's store shares files
+    has loaded); a missing channelset file is a located PostureGraphError."""
     from server.motion.cache import load_channelset
 
     path = Path(path)
@@ -59,7 +65,10 @@ def load_posture_graph(
             raise PostureGraphError(
                 f"channelset file {fname!r} not found (looked in {path.parent})", str(path), line
             )
-        chsets.append(load_channelset(cpath, use_cache=use_cache))
+        if loader is not None:
+            chsets.append(loader(cpath))
+        else:
+            chsets.append(load_channelset(cpath, use_cache=use_cache, directory=cache_dir))
     return LoadedPostureGraph(name or path.stem, graph, chsets)
 
 

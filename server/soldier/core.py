@@ -189,7 +189,7 @@ class ManagerCore:
         tb = self.table
         root_motion.fold1(tb, self.library, i, t)
         tb.stride[i] = 1.0
-        tb.pivot_rate[i] = 0.0  # (a reversal's pivot sets its own after this)
+        tb.pivot_rest[i] = 0.0  # (a reversal's pivot sets its own after this)
         tb.clip[i] = step.clip
         tb.direc[i] = 1 if step.forward else -1
         tb.start[i] = t
@@ -205,7 +205,7 @@ class ManagerCore:
         lib = self.library
         root_motion.fold1(tb, lib, i, t)  # the offset stays where the last step left it (feet planted)
         tb.stride[i] = 1.0
-        tb.pivot_rate[i] = 0.0
+        tb.pivot_rest[i] = 0.0
         clip = int(lib.rest_clip[node])
         tb.node[i] = node
         tb.clip[i] = clip

@@ -106,7 +106,8 @@ class Events(Stepping, Turning, Reactions):
         kind = int(self._move[int(tb.appearance[i])]) if tb.speed[i] > MOVING_EPS else 0
         reversing = bool(tb.reversing[i])
         tb.reversing[i] = False
-        if kind and reversing and self._turn(i, t, REVERSAL_TURN_SPEEDUP):
+        turned_away = abs(tb.root_yaw[i]) >= MIN_TURN_DEG  # a start this far off pivots first, as a reversal
+        if kind and (reversing or turned_away) and self._turn(i, t, REVERSAL_TURN_SPEEDUP):
             return  # stopped: the pivot, then (its end decides again) the walk away
         if not kind and abs(tb.root_yaw[i]) >= MIN_TURN_DEG and self._turn(i, t):
             return

@@ -56,6 +56,7 @@ from server.soldier.root_motion import (
     feet_points,
     has_feet,
     linear_travel,
+    single_support_share,
     stance_contact,
     stance_travel,
 )
@@ -282,13 +283,17 @@ class MotionLibrary:
         stepping = {int(c) for c in self.loco_clip.ravel() if c >= 0}
         curves: list[np.ndarray] = []
         contacts: list[np.ndarray] = []
+        shares: list[np.ndarray] = []
         for cid, info in enumerate(self.clips):
             n = info.nframes
             contacts.append(np.zeros((n, 2)))
+            shares.append(np.linspace(0.0, 1.0, n) if n > 1 else np.zeros(n))
             if cid not in stepping or n < 2:
                 curves.append(np.zeros((n, 2)))
                 if feet and n >= 2 and info.graph == GRAPH_TURN and self.clip_end_offset[cid, 2] != 0.0:
-                    contacts[-1] = stance_contact(self._feet(kin, cid, sl))
+                    points = self._feet(kin, cid, sl)
+                    contacts[-1] = stance_contact(points)
+                    shares[-1] = single_support_share(points)
                 continue
             if info.graph == GRAPH_CRAWL or not feet:
                 curves.append(linear_travel(n, self._travel_vector(cid)))
@@ -296,7 +301,7 @@ class MotionLibrary:
             points = self._feet(kin, cid, sl)
             curves.append(stance_travel(points, self.sources[cid].stride_length))
             contacts[-1] = stance_contact(points)
-        return TravelTable(curves, contacts)
+        return TravelTable(curves, contacts, shares)
 
     def _feet(self, kin: FigureKinematics, cid: int, sl: slice) -> np.ndarray:
         """The sole points of clip ``cid``'s every stored frame (``root_motion.feet_points``)."""

@@ -34,6 +34,7 @@ from server.soldier.state import (
     request_for,
 )
 from server.soldier.ticking import Ticking
+from server.soldier.turning import facing
 
 
 class Requests(Ticking):
@@ -96,11 +97,17 @@ class Requests(Ticking):
         ahead = np.einsum("ij,ij->i", vel[:, :2], fwd[:, :2])
         left = vel[:, 1] * fwd[:, 0] - vel[:, 0] * fwd[:, 1]  # Performer Z up: (fwd x vel).z
         backward, side = direction(ahead, left, self.library.can_side)
+        # the figure's frame: the heading, or about from it to walk a fast velocity straight back forwards
+        walks = moving & (self._move[app] == Movement.WALK) & bool(self.library.turn_clips)  # it can pivot
+        face = facing(backward & walks, speed, tb.face[i])
+        about = face != 0.0
+        ahead, left = np.where(about, -ahead, ahead), np.where(about, -left, left)
+        backward, side = direction(ahead, left, self.library.can_side)
         backward &= moving
         side = np.where(moving, side, Side.AHEAD)
         mode = tb.mode[i]
         changed_pw = (app != tb.appearance[i]) | (wpn != tb.weapon[i])
-        heading_changed = hdg != tb.heading[i]
+        heading_changed = hdg + face != tb.heading[i] + tb.face[i]
         speed_changed = speed != tb.speed[i]
         kind = self._move[app]
         event = (
@@ -108,7 +115,7 @@ class Requests(Ticking):
         )
         # the root offset up to now under the old velocity; a turned entity turns a world-fixed offset
         root_motion.fold(tb, self.library, i, t)
-        turned = np.where(tb.has_heading[i], hdg - tb.heading[i], 0.0)
+        turned = np.where(tb.has_heading[i], hdg + face - tb.heading[i] - tb.face[i], 0.0)
         tb.has_heading[i] = True
         root_motion.turn_offsets(tb, i, turned)
         # a standing figure keeps its orientation in the world (it turns in place, below); a moving one
@@ -121,6 +128,7 @@ class Requests(Ticking):
         tb.velocity[i] = coords.vectors_performer_to_jack(vel)
         tb.position[i] = coords.points_performer_to_jack(pos)
         tb.heading[i] = hdg
+        tb.face[i] = face
         tb.yaw[i] = coords.compass_to_jack_yaw(hdg)
         tb.speed[i] = speed
         tb.backward[i] = backward
@@ -128,7 +136,7 @@ class Requests(Ticking):
         tb.vlocal[i] = np.stack([-left, -ahead], axis=1) * 100.0  # soldier frame: forwards -Z, left -X
         # a speed change within a gait: keep the phase, change the playback rate
         stepping = (mode == _LOCO) | (mode == _CRAWL)
-        self._mark_reversals(i, mode, moving)
+        self._mark_reversals(i, mode)
         # (a reversing soldier's step ends at its pace: the new velocity is not his step's)
         rescale = ~event & stepping & moving & speed_changed & SCALED[tb.loco[i]] & ~tb.reversing[i]
         if rescale.any():

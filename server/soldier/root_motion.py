@@ -28,6 +28,7 @@ if TYPE_CHECKING:
 
 TURN_RATE = 90.0  # degrees/s a walking, running or crawling figure turns towards its heading (faster > 90)
 STEPPING = (2, 3)  # state.Mode.LOCO, Mode.CRAWL (plain ints: this module does not import the manager's enums)
+SHARE_FLOOR = 0.2  # a pivot's extra turn in double support, relative to single (no spurt of yaw between)
 FLIGHT_CM = 3.0  # a foot whose lowest sole point is this far above the clip's lowest carries no weight
 # per foot, the sole points whose lower one carries the weight (heel strike, then the ball at push-off)
 FOOT_SITES: tuple[tuple[str, ...], ...] = (
@@ -81,6 +82,17 @@ def stance_contact(points: np.ndarray) -> np.ndarray:
     return flat[np.arange(n), which][:, [0, 2]]
 
 
+def single_support_share(points: np.ndarray) -> np.ndarray:
+    """``(n,)`` per frame the fraction of a pivot's extra turn done by then: mostly over the frames where one
+    foot alone is down (the other's lowest sole point FLIGHT_CM up), SHARE_FLOOR of that rate elsewhere."""
+    if len(points) < 2:
+        return np.zeros(len(points))
+    lift = points[..., 1].min(axis=2)  # (n, feet): each foot's lowest sole point
+    single = ((lift - lift.min()) > FLIGHT_CM).sum(axis=1) == 1
+    weight = (single[:-1] & single[1:]) + SHARE_FLOOR
+    return np.concatenate([[0.0], np.cumsum(weight) / weight.sum()])
+
+
 def stance_travel(points: np.ndarray, stride: float | None = None) -> np.ndarray:
     """``(n, 2)`` cumulative horizontal travel (X, Z cm) that keeps the point carrying the weight still
     (:func:`contact_points` of :func:`feet_points`): the body travels by minus its move. Frames with both feet
@@ -105,7 +117,12 @@ def stance_travel(points: np.ndarray, stride: float | None = None) -> np.ndarray
 class TravelTable:
     """Per clip its stance travel curve, flat like ``ClipLibrary`` data; interpolated at fractional frames."""
 
-    def __init__(self, curves: Sequence[np.ndarray], contacts: Sequence[np.ndarray] | None = None) -> None:
+    def __init__(
+        self,
+        curves: Sequence[np.ndarray],
+        contacts: Sequence[np.ndarray] | None = None,
+        shares: Sequence[np.ndarray] | None = None,
+    ) -> None:
         sizes = np.array([len(c) for c in curves], np.int64)
         self.start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
         self.nframes = sizes
@@ -119,20 +136,26 @@ class TravelTable:
             if contacts is not None and len(contacts)
             else np.zeros_like(self.data)
         )
+        lines = [np.linspace(0.0, 1.0, len(c)) if len(c) > 1 else np.zeros(len(c)) for c in curves]
+        self.share = np.concatenate(list(shares if shares is not None else lines) or [np.zeros(0)])
         self.total = np.array([c[-1] - c[0] if len(c) else (0.0, 0.0) for c in curves], np.float64).reshape(
             -1, 2
         )
 
     def at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """``(n, 2)`` travel of ``clip`` at fractional ``frame`` (clamped to the clip)."""
+        return self._lerp(self.data, clip, frame)
+
+    def _lerp(self, values: np.ndarray, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """Per-frame ``values`` (flat over clips) of ``clip`` at fractional ``frame`` (clamped), blended."""
         clip = np.asarray(clip, np.int64)
         last = np.maximum(self.nframes[clip] - 1, 0)
         f = np.clip(np.asarray(frame, np.float64), 0.0, last)
         f0 = np.floor(f).astype(np.int64)
         f1 = np.minimum(f0 + 1, last)
-        w = (f - f0)[:, None]
+        w = (f - f0).reshape((-1,) + (1,) * (values.ndim - 1))
         base = self.start[clip]
-        return self.data[base + f0] * (1.0 - w) + self.data[base + f1] * w
+        return values[base + f0] * (1.0 - w) + values[base + f1] * w
 
     def at1(self, clip: int, frame: float) -> tuple[float, float]:
         """:meth:`at` for one clip and frame in scalar Python (the per-event paths)."""
@@ -146,6 +169,10 @@ class TravelTable:
             return x0, z0
         x1, z1 = self.data[base + f0 + 1].tolist()
         return x0 + (x1 - x0) * w, z0 + (z1 - z0) * w
+
+    def share_at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """``(n,)`` :func:`single_support_share` of ``clip`` at fractional ``frame`` (clamped to the clip)."""
+        return self._lerp(self.share, clip, frame)
 
     def contact_at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """``(n, 2)`` the weight-bearing sole point of ``clip`` at the frame nearest ``frame``."""
@@ -219,16 +246,18 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
 
 
 def pivot(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
-    """A reversal's pivot (a turn in place) also turns the figure by what the turn clip lacks of the
-    reversal (``pivot_rate``, spread over the clip), about the sole point carrying its weight (as
-    :func:`fold` turns a stepping figure)."""
+    """A pivot (a turn in place) also turns the figure by what the turn clip lacks (``pivot_rest``
+    degrees), about the sole point carrying its weight (as :func:`fold` turns a stepping figure), while one
+    foot alone carries it (``TravelTable.share``): turned in double support it dragged the other foot."""
     if len(idx) == 0:
         return
     t = np.minimum(np.asarray(t, np.float64), tb.end[idx])
     frames = frame_at(tb, lib, idx, t)
     off = offset_at(tb, lib, idx, t, frames)
     yaw = tb.root_yaw[idx]
-    new = yaw + tb.pivot_rate[idx] * np.maximum(t - tb.root_t[idx], 0.0)
+    clip = tb.clip[idx]
+    was = lib.travel.share_at(clip, frame_at(tb, lib, idx, tb.root_t[idx]))
+    new = yaw + tb.pivot_rest[idx] * (lib.travel.share_at(clip, frames) - was)
     contact = lib.travel.contact_at(tb.clip[idx], frames)
     tb.root_off[idx] = off + yawed(contact, yaw) - yawed(contact, new)
     tb.root_yaw[idx] = new

@@ -49,8 +49,9 @@ _COLUMNS: dict[str, tuple[type | str, tuple[int, ...], float]] = {
     "stride": (np.float64, (), 1.0),
     "root_yaw": (np.float64, (), 0.0),  # the figure's yaw from the entity's heading (compass degrees)
     "has_heading": (np.bool_, (), False),  # a request gave the heading (the first one turns nothing)
+    "face": (np.float64, (), 0.0),  # the figure's frame from the heading: 0, or 180 (turning.py), degrees
     "reversing": (np.bool_, (), False),  # walking the other way: stop, pivot, walk away (turning.py)
-    "pivot_rate": (np.float64, (), 0.0),  # deg/s root_yaw turns while a reversal's pivot plays (0: none)
+    "pivot_rest": (np.float64, (), 0.0),  # degrees a pivot turns beyond its turn clip (turning.py; 0: none)
     # output bookkeeping
     "last_sent": (np.float64, (), -math.inf),  # last update of either kind (tick or answer)
     "tick_sent": (np.float64, (), -math.inf),  # last update by a tick: what the tick's throttle counts from
@@ -113,8 +114,9 @@ class SoldierTable:
     stride: np.ndarray
     root_yaw: np.ndarray
     has_heading: np.ndarray
+    face: np.ndarray
     reversing: np.ndarray
-    pivot_rate: np.ndarray
+    pivot_rest: np.ndarray
     last_sent: np.ndarray
     tick_sent: np.ndarray
     dirty: np.ndarray

@@ -144,15 +144,22 @@ class Ticking(Events):
             mode = tb.mode[idx]
             turning = (tb.root_yaw[idx] != 0.0) & ((mode == _LOCO) | (mode == _CRAWL))
             root_motion.fold(tb, lib, idx[turning], clock[turning])
-            p = np.flatnonzero(tb.pivot_rate[idx] != 0.0)
+            p = np.flatnonzero(tb.pivot_rest[idx] != 0.0)
             if len(p):
                 root_motion.pivot(tb, lib, idx[p], clock[p])
-            yawed = np.flatnonzero(tb.root_yaw[idx] != 0.0)
+            # the figure's yaw and offset from the heading: its frame's (``face``, turning.py) and in it
+            face = tb.face[idx]
+            yaw = tb.root_yaw[idx] + face
+            yawed = np.flatnonzero(yaw != 0.0)
             if len(yawed):
                 f = figures[yawed]
-                yaw_rotate(f, tb.root_yaw[idx[yawed]])
+                yaw_rotate(f, yaw[yawed])
                 figures[yawed] = f
-            off = root_motion.offset_at(tb, lib, idx, clock, frames).astype(np.float32)
+            off = root_motion.offset_at(tb, lib, idx, clock, frames)
+            about = np.flatnonzero(face != 0.0)
+            if len(about):
+                off[about] = root_motion.yawed(off[about], face[about])
+            off = off.astype(np.float32)
             figures[:, :, 0] += off[:, None, 0]
             figures[:, :, 2] += off[:, None, 1]
         if n and self._offsets.any():

@@ -6,6 +6,12 @@ ends, then the end step, the figure still facing the old way: no turning over th
 spot (the turn in place that fits, played REVERSAL_TURN_SPEEDUP times faster: a pivot, not a slow
 about-face) and walks away. His feet stay planted in the world throughout; the figure trails the entity by
 what it did not travel meanwhile and catches up with faster cadence (``stepping``), as after any start.
+
+A standing soldier asked to walk off MIN_TURN_DEG or more from where his figure faces pivots the same way
+first, then starts (turning the body over the start step twisted the planted foot 20 cm). A velocity
+straight back faster than BACKWARD_MAX_SPEED is walked forwards: the figure's frame turns by ``face`` = 180°
+from the heading (the root placement carries it, docs/PROTOCOL.md), so a standing soldier pivots and walks
+away and a walking one reverses.
 """
 
 from __future__ import annotations
@@ -19,12 +25,22 @@ from server.soldier.core import (
     _IDLE,
     _LOCO,
     _TRANSITION,
+    MIN_TURN_DEG,
     ManagerCore,
 )
 from server.soldier.library import PathStep
 
 REVERSAL_DEG = 135.0  # a walking figure this far from its new heading stops, pivots and walks away
+BACKWARD_MAX_SPEED = 1.0  # m/s: a velocity straight back faster than people walk backwards is walked forwards
+BACKWARD_HYSTERESIS = 0.2  # m/s: walking away forwards, he faces his velocity down to the limit - this
 REVERSAL_TURN_SPEEDUP = 2.5  # the pivot plays the 180° turn in place this many times faster (3.4 s -> 1.4 s)
+
+
+def facing(backward: np.ndarray, speed: np.ndarray, face: np.ndarray) -> np.ndarray:
+    """Compass degrees of the figure's frame from the heading (0 or 180): 180 walks a velocity straight back
+    forwards when it is faster than people walk backwards (``face``: the soldiers' present ones)."""
+    limit = np.where(face != 0.0, BACKWARD_MAX_SPEED - BACKWARD_HYSTERESIS, BACKWARD_MAX_SPEED)
+    return np.where(backward & (speed > limit), 180.0, 0.0)
 
 
 class Turning(ManagerCore):
@@ -33,14 +49,15 @@ class Turning(ManagerCore):
     def _turning(self, clip: int) -> bool:
         return self.library.clip_end_offset[clip, 2] != 0.0 and self.library.clip_graph[clip] != 0
 
-    def _mark_reversals(self, idx: np.ndarray, mode: np.ndarray, moving: np.ndarray) -> None:
+    def _mark_reversals(self, idx: np.ndarray, mode: np.ndarray) -> None:
         """After requests to soldiers ``idx`` (``mode`` before them): a walking or running one whose figure
-        now faces REVERSAL_DEG or more away from his heading, and still moves, reverses; one whose heading
-        came back no longer does. Other modes keep the mark (a reversal under way ends in ``_decide``)."""
+        now faces REVERSAL_DEG or more away from his heading reverses (stopping too: he stops facing the old
+        way, then turns in place); one whose heading came back no longer does. Other modes keep the mark (a
+        reversal under way ends in ``_decide``)."""
         loco = mode == _LOCO
         if self.library.turn_clips and loco.any():
             i = idx[loco]
-            self.table.reversing[i] = moving[loco] & (np.abs(self.table.root_yaw[i]) >= REVERSAL_DEG)
+            self.table.reversing[i] = np.abs(self.table.root_yaw[i]) >= REVERSAL_DEG
 
     def _turn(self, i: int, t: float, speedup: float = 1.0) -> bool:
         """A standing soldier whose figure faces away from its heading plays the turn in place that fits
@@ -54,25 +71,27 @@ class Turning(ManagerCore):
         )
         if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
             return False
+        rest = 0.0
+        if speedup != 1.0:  # a pivot turns by the clip's turn and a rest too small for another turn clip
+            rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
+            rest = rest if abs(rest) < MIN_TURN_DEG else 0.0
+            speedup *= min(1.0, abs(turn) / abs(want))  # turning more, it turns no faster than the clip
         step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, self._home, self._home)
         tb.blend_len[i] = 0.0
         tb.mode[i] = _TRANSITION
         self._paths[i] = [(step,), 0]
         self._play_step(i, step, t)
         tb.dirty[i] = True
-        if speedup != 1.0:  # a reversal's pivot turns by all the reversal asked: the clip's turn and the rest
-            rest = float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i])
-            tb.pivot_rate[i] = (rest + 180.0) % 360.0 - 180.0 if abs(rest) < 180.0 else 0.0
-            tb.pivot_rate[i] /= max(step.duration, 1e-9)
+        tb.pivot_rest[i] = rest
         return True
 
     def _turn_end(self, i: int, t: float) -> None:
         """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading."""
         tb, lib = self.table, self.library
         x, z, yaw = lib.clip_end_offset[int(tb.clip[i])]
-        if tb.pivot_rate[i] != 0.0:  # the pivot's last bit of turn, about where the figure ends
+        if tb.pivot_rest[i] != 0.0:  # the pivot's last bit of turn, about where the figure ends
             root_motion.pivot(tb, lib, np.array([i], np.int64), t)
-            tb.pivot_rate[i] = 0.0
+            tb.pivot_rest[i] = 0.0
         a = -math.radians(float(tb.root_yaw[i]))  # as blend.yaw_rotate turns the clip's placements
         self._rest(i, self._home, t)
         tb.root_off[i, 0] += math.cos(a) * x + math.sin(a) * z

@@ -16,6 +16,7 @@ import copy
 import io
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,7 +29,20 @@ if TYPE_CHECKING:
     from server.startup import ServerWorld
 
 log = get_logger("jcl")
+# commands that only read files and fill the store: they run where the JCL runs (a worker thread under the
+# trio app); every other command runs on the trio loop (ServerWorld.in_loop), between ticks
+OFF_LOOP = frozenset(
+    {"load_channelset", "load_posture_graph", "write_channelset", "reroot_figure_channel", "spit"}
+)
 _ANY = object  # argument type of a refused command: whatever it is given
+_WORKER_WORDS = re.compile(r"\b(?:" + "|".join(sorted(OFF_LOOP | {"read_file"})) + r")\b")
+
+
+def needs_worker(text: str) -> bool:
+    """Whether a JCL frame may load files (an OFF_LOOP command, or ``read_file`` of a script that may): only
+    such frames go to a worker thread; the rest (settings, soldier commands) run at once on the loop, so a
+    frame of cheap commands neither waits for a thread nor lets virtual time run while it does."""
+    return _WORKER_WORDS.search(text) is not None
 
 
 @dataclass(frozen=True)
@@ -67,7 +81,8 @@ COMMANDS: tuple[Command, ...] = (
         "load_channelset",
         "file [, name]",
         "3.4.1",
-        "reads a `.chset.env` channelset (also `read_file`) under its own name or `name`",
+        "reads a `.chset.env` channelset (also `read_file`) under its own name or `name`, in a worker "
+        "thread beside the tick; the same unchanged file again shares the loaded one (at most 4096 names)",
         (S, S),
         1,
         access="operator",
@@ -137,7 +152,8 @@ COMMANDS: tuple[Command, ...] = (
         "file [, name]",
         "3.4.2",
         "reads a `.graph` file and its channelsets (registered by name too) as `name` (default: the file "
-        "stem); `soldier_low`, `soldier_loco`, `soldier_crawl` are the library's graphs",
+        "stem), in a worker thread beside the tick; the same unchanged file again shares the loaded graph "
+        "(at most 256 names); `soldier_low`, `soldier_loco`, `soldier_crawl` are the library's graphs",
         (S, S),
         1,
         access="operator",
@@ -351,10 +367,18 @@ class JclCommands:
                 func = self._read_file_guard(jcl.command("read_file"))
             else:
                 func = self._refuse(c) if c.refused else self._guard(c, getattr(self, f"cmd_{c.name}"))
+                if c.name not in OFF_LOOP:
+                    func = self._in_loop(func)
             jcl.register(c.name, func, c.types, optional=c.optional, variadic=c.variadic)
         jcl.register_file_handler(".env", lambda p: self.store.read_env(p, jcl.search_dirs))
         jcl.register_file_handler(".graph", self.store.load_graph)
         jcl.register_file_handler(".chset", self.store.load_channelset)
+
+    def _in_loop(self, func: Any) -> Any:
+        def run(*args: object) -> object:
+            return self.world.in_loop(lambda: func(*args))
+
+        return run
 
     def _guard(self, command: Command, func: Any) -> Any:
         """The handler, run only when the caller's role may run the command (``server.world.access``)."""
@@ -397,7 +421,8 @@ class JclCommands:
         return refuse
 
     def _report(self, text: str) -> None:
-        self.world.events.report(self.world.caller, text)
+        caller = self.world.caller
+        self.world.in_loop(lambda: self.world.events.report(caller, text))
 
     def _new_file(self, name: str, suffix: str) -> Path:
         """A file a command writes: new, inside the data directory, with the expected suffix."""

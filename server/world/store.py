@@ -5,13 +5,18 @@ Seed 002, 3.4.1-3.4.2 and 3.6: ``read_file`` of an ``.env`` adds figures; ``load
 and ``bind_posture_graph`` bind them to figures of the environment. The bound tables are read: the motion
 library takes its figure sets from the bound posture graphs (:mod:`server.world.library`), and the JCL
 commands ``play_bound_channelset``, ``step_bound_channelset``, ``write_channelset`` and ``posture_change`` act
-on what is bound. Loading the same file again (the start-up script run twice) is a no-op.
+on what is bound. Loading the same file again (the start-up script run twice) is a no-op, and loading it under
+another name shares the loaded object: files are keyed by resolved path, size and modification time, so a JCL
+frame that loads one graph under a thousand names costs a thousand dictionary entries, not a thousand copies
+(issue 17). The names are bounded too (:data:`MAX_CHANNELSETS`, :data:`MAX_GRAPHS`): a load past the limit is
+a StoreError saying so. Channelset caches go to ``cache_dir`` (None: :func:`server.motion.cache.cache_dir`).
 
 Errors are :class:`StoreError` (a ``ValueError``); the JCL adapter turns them into located JCL errors.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +37,15 @@ from server.motion.posture_change import (
 
 log = get_logger("store")
 T = TypeVar("T")
+MAX_CHANNELSETS = 4096  # names in the channelset table (the shipped library loads 171)
+MAX_GRAPHS = 256  # names in the posture graph table (the shipped library loads 21)
+FileKey = tuple[str, int, int]  # resolved path, size, mtime_ns: the same file unchanged
+
+
+def file_key(path: Path) -> FileKey:
+    """What identifies a loaded file: its resolved path and its size and modification time now."""
+    st = path.stat()
+    return (str(path.resolve()), st.st_size, st.st_mtime_ns)
 
 
 class StoreError(ValueError):
@@ -49,6 +63,10 @@ class MotionStore:
     graph_paths: dict[str, Path] = field(default_factory=dict)
     bound_channelsets: dict[str, BoundChannelset] = field(default_factory=dict)
     bound_graphs: dict[str, BoundPostureGraph] = field(default_factory=dict)
+    cache_dir: Path | None = None  # channelset caches (None: the user's cache directory)
+    max_channelsets: int = MAX_CHANNELSETS
+    max_graphs: int = MAX_GRAPHS
+    loaded_files: dict[FileKey, Channelset | LoadedPostureGraph] = field(default_factory=dict)
 
     # -- loading -----------------------------------------------------------------------------------------
     def read_env(self, path: Path, search_path: Sequence[Path] = ()) -> None:
@@ -70,22 +88,44 @@ class MotionStore:
         log.info("environment_read", file=path.name, figures=len(self.environment.figures))
 
     def load_channelset(self, path: Path, name: str | None = None) -> Channelset:
+        """A channelset file under its own name or ``name``; the same file again shares the loaded one."""
+        _room(self.channelsets, name, 1, self.max_channelsets, "channelsets")
         try:
-            cs = load_channelset(path)
+            cs = self._channelset_file(path)
         except (ChannelsetError, OSError) as exc:
             raise StoreError(str(exc)) from None
+        _room(self.channelsets, name or cs.name, 1, self.max_channelsets, "channelsets")
         self.channelsets[name or cs.name] = cs
         return cs
 
+    def _channelset_file(self, path: Path) -> Channelset:
+        """The channelset of a file: the one loaded before when the file is unchanged, else read now."""
+        key = file_key(path)
+        cs = self.loaded_files.get(key)
+        if not isinstance(cs, Channelset):
+            cs = load_channelset(path, directory=self.cache_dir)
+            self.loaded_files[key] = cs
+        return cs
+
     def load_graph(self, path: Path, name: str | None = None) -> LoadedPostureGraph:
-        """A posture graph and its channelsets (registered by their names too, as Jack did)."""
+        """A posture graph and its channelsets (registered by their names too, as Jack did); the same file
+        again (under any name) shares the loaded graph and its channelsets."""
         key = name or path.stem
         if key in self.graphs and self.graph_paths.get(key) == path:
             return self.graphs[key]  # the start-up script run again
+        _room(self.graphs, key, 1, self.max_graphs, "posture graphs")
         try:
-            loaded = load_posture_graph(path, key)
+            fkey = file_key(path)
+            loaded = self.loaded_files.get(fkey)
+            if isinstance(loaded, LoadedPostureGraph):  # same graph and channelsets, its own name
+                loaded = dataclasses.replace(loaded, name=key)
+            else:
+                loaded = load_posture_graph(path, key, loader=self._channelset_file)
         except (PostureGraphError, ChannelsetError, OSError) as exc:
             raise StoreError(str(exc)) from None
+        new = [cs.name for cs in loaded.channelsets if cs.name not in self.channelsets]
+        _room(self.channelsets, None, len(new), self.max_channelsets, "channelsets")
+        self.loaded_files[fkey] = loaded
         self.graphs[key] = loaded
         self.graph_paths[key] = path
         for cs in loaded.channelsets:
@@ -151,6 +191,14 @@ class MotionStore:
             raise StoreError(str(exc)) from None
         self.bound_graphs[bound.name] = bound
         return bound
+
+
+def _room(table: dict[str, T], name: str | None, count: int, limit: int, what: str) -> None:
+    """StoreError when ``count`` new names (``name`` replaced in place costs none) would exceed ``limit``."""
+    if name is not None and name in table:
+        return
+    if len(table) + count > limit:
+        raise StoreError(f"too many {what}: {len(table)} loaded, the limit is {limit}")
 
 
 def _named(table: dict[str, T], name: str, what: str, hint: str) -> T:

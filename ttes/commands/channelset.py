@@ -12,7 +12,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     info = cmds.add_parser(
         "info",
         help="size, fps, duration, memory and sharedchannels of a channelset file",
-        description="Print a channelset's summary (loads through the X.chset.npz cache unless --no-cache).",
+        description="Print a channelset's summary (loads through its .npz cache unless --no-cache).",
     )
     info.add_argument("path", help="a *.chset.env file")
     info.add_argument("--json", action="store_true", help="machine-readable output")

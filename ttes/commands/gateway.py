@@ -6,6 +6,11 @@ entity becomes a server soldier (created on first sight, removed after --timeout
 deactivated); appearance, velocity and heading become entity requests; Fire PDUs make a standing-still shooter
 fire for a moment. Malformed datagrams, unknown PDU types and bursts are counted in the status line, never
 fatal. Stop with Ctrl-C: the gateway's soldiers are removed from the server.
+
+At most 4096 soldiers (the server's default cap per client): entities beyond it are counted (sink_dropped in
+the status lines and the summary), not sent. A lost server is reconnected with backoff and the live soldiers
+are created again (sink_relinked). Exit status: 0 stopped (Ctrl-C or --seconds), 1 no server (at the start, or
+lost for longer than --give-up-after), or the DIS port cannot be bound; 2 bad arguments.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from ttes.link_options import add_link_options, link_credentials, link_error
 
 if TYPE_CHECKING:
     from client_stub.dis.gateway import DisGateway
+    from client_stub.dis.sink import ServerSink
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -45,6 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seconds", type=float, help="stop after this many seconds (default: run until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="status lines and the final summary as JSON")
     add_link_options(p)
+    p.add_argument("--give-up-after", type=float, default=120.0, metavar="S",
+                   help="a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) for "
+                        "this long before the gateway exits 1 (default 120; 0: exit at once)")  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -91,6 +100,7 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
 
     import trio
 
+    from client_stub.dis.reconnect import connector, keep_linked_or_stop
     from client_stub.dis.sink import ServerSink
     from client_stub.link.client import Client, LinkError
     from ttes.commands.replay import private_server, stop_on_signal
@@ -102,14 +112,17 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
                 server = await stack.enter_async_context(private_server(data_dir, args.synthetic_server))
                 host, port = server.addresses[0]
             nursery = await stack.enter_async_context(trio.open_nursery())
-            link = link_credentials(args).apply(Client("ttes-gateway"))
-            await link.open(nursery, host, port)
-            sink = ServerSink(link)
+            connect = connector(nursery, host, port, "ttes-gateway", credentials=link_credentials(args))
+            sink = ServerSink(await connect())
+            failures: list[str] = []
             with trio.CancelScope() as scope:
                 if args.seconds is not None:
                     scope.deadline = trio.current_time() + args.seconds
                 async with trio.open_nursery() as inner:
                     inner.start_soon(stop_on_signal, inner.cancel_scope)
+                    inner.start_soon(
+                        keep_linked_or_stop, sink, connect, inner.cancel_scope, failures, args.give_up_after
+                    )
                     await inner.start(gateway.serve, sink)
                     assert gateway.address is not None
                     host_, port_ = gateway.address
@@ -118,11 +131,15 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
                               f"{' group ' + args.dis_group if args.dis_group else ''}, server {host}:{port}",
                               file=sys.stderr, flush=True)  # fmt: skip
                     if args.status_every > 0:
-                        inner.start_soon(_status_loop, gateway, args.status_every, args.json)
+                        inner.start_soon(_status_loop, gateway, sink, args.status_every, args.json)
             sink.apply(gateway.stop())
-            summary = {**gateway.snapshot(), **{f"sink_{k}": v for k, v in sink.stats.items()}}
+            summary = _snapshot(gateway, sink)
+            link = sink.link
+            assert isinstance(link, Client)
             summary["server_errors"] = len(link.errors)
             await link.aclose()
+            if failures:
+                raise LinkError(failures[0])
             return summary
 
     try:
@@ -134,12 +151,16 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
         return None
 
 
-async def _status_loop(gateway: DisGateway, every: float, as_json: bool) -> None:
+def _snapshot(gateway: DisGateway, sink: ServerSink) -> dict:
+    return {**gateway.snapshot(), **{f"sink_{k}": v for k, v in sink.stats.items()}, "server_lost": sink.lost}
+
+
+async def _status_loop(gateway: DisGateway, sink: ServerSink, every: float, as_json: bool) -> None:
     import trio
 
     while True:
         await trio.sleep(every)
-        _print(gateway.snapshot(), as_json)
+        _print(_snapshot(gateway, sink), as_json)
 
 
 def _print(status: dict, as_json: bool, final: bool = False) -> None:
@@ -160,6 +181,9 @@ def _print(status: dict, as_json: bool, final: bool = False) -> None:
         f"{status['other_pdus']} other PDUs",
         f"{bad} malformed/foreign",
         f"largest burst {status['max_burst']}",
+        f"{status['sink_dropped']} over the server's cap",
     ]
+    if status["server_lost"]:
+        parts.append(f"SERVER LOST ({status['server_lost']}): reconnecting")
     out = sys.stdout if final else sys.stderr
     print(f"{'gateway summary' if final else 'gateway'}: " + ", ".join(parts), file=out, flush=True)

@@ -11,6 +11,10 @@ With a display it opens the stub window (cameras and soldier selection on the ke
 running one; by default a private one (its own process for the window; in this process for --no-stub, and for
 --headless under a virtual clock, so the video is exact however slowly it renders). --offline: no server, the
 stub poses the soldiers itself. The stub's terrain point (0, 0) is the local frame's origin.
+
+--no-stub survives a server restart: the replay goes on, the server is reconnected with backoff and the live
+soldiers are created again (sink_relinked in the summary). Exit status: 0 replayed, 1 no server (at the start,
+or lost for longer than --give-up-after) or nothing to replay, 2 bad arguments or no display.
 """
 
 from __future__ import annotations
@@ -71,6 +75,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--terrain", type=Path, help="terrain mesh (default: the village)")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     add_link_options(p)
+    p.add_argument(
+        "--give-up-after",
+        type=float,
+        default=120.0,
+        metavar="S",
+        help="--no-stub: a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) "
+        "for this long before the replay exits 1 (default 120; 0: exit at once)",
+    )
     p.set_defaults(func=run)
 
 
@@ -219,6 +231,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
     import trio
 
     from client_stub.dis.drive import ProgressLine, replay_to_server
+    from client_stub.dis.reconnect import connector, keep_linked_or_stop
     from client_stub.dis.sink import ServerSink
     from client_stub.link.client import Client, LinkError
 
@@ -229,18 +242,30 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
                 server = await stack.enter_async_context(private_server(args.data_dir, args.synthetic_server))
                 host, port = server.addresses[0]
             async with trio.open_nursery() as nursery:
-                link = link_credentials(args).apply(Client())
-                await link.open(nursery, host, port)
-                sink = ServerSink(link)
+                connect = connector(nursery, host, port, credentials=link_credentials(args))
+                sink = ServerSink(await connect())
                 progress = ProgressLine(out=None if args.json else sys.stderr)
+                failures: list[str] = []
+
+                async def drain() -> None:
+                    if not sink.lost:
+                        await sink.link.drain()  # type: ignore[attr-defined]
+
                 async with trio.open_nursery() as inner:  # Ctrl-C ends the replay, not the clean-up
                     inner.start_soon(stop_on_signal, inner.cancel_scope)
-                    await replay_to_server(replayer, sink, progress=progress, drain=link.drain, finish=False)
+                    inner.start_soon(
+                        keep_linked_or_stop, sink, connect, inner.cancel_scope, failures, args.give_up_after
+                    )
+                    await replay_to_server(replayer, sink, progress=progress, drain=drain, finish=False)
                     inner.cancel_scope.cancel()
                 sink.apply(replayer.finish())  # the soldiers leave the server
                 summary = {**replayer.status(), **{f"sink_{k}": v for k, v in sink.stats.items()}}
+                link = sink.link
+                assert isinstance(link, Client)
                 summary["server_errors"] = len(link.errors)
                 await link.aclose()
+                if failures:
+                    raise LinkError(failures[0])
                 return summary
 
     try:

@@ -15,16 +15,24 @@ import sys
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from server.config import limits_help
+
     p = sub.add_parser(
         "server",
         help="run the Jack/TTES animation server",
         description=__doc__,
+        epilog="limits (config file keys; docs/PROTOCOL.md section 15 says what a peer may cost):\n"
+        + limits_help(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--host", help="address to bind (default 127.0.0.1; 0.0.0.0 inside a container)")
     p.add_argument("--port", type=int, help="TCP port (default 7000; 0 = any free port)")
     p.add_argument(
         "--data-dir", help="folder with the start-up script, figures/, channelsets/, posture_graphs/"
+    )
+    p.add_argument(
+        "--cache-dir",
+        help="channelset .npz caches (default $TTES_CACHE_DIR or ~/.cache/jack-ttes; never the data dir)",
     )
     p.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
     p.add_argument("--tick-hz", type=float, help="simulation ticks per second (default 30)")
@@ -61,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
         host=args.host,
         port=args.port,
         data_dir=args.data_dir,
+        cache_dir=args.cache_dir,
         tick_hz=args.tick_hz,
         startup_script=args.startup_script,
         throttle=args.throttle,

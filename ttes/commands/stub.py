@@ -6,15 +6,26 @@ video or a PNG, touring every posture and locomotion mode. Soldiers are posed by
 `ttes stub make-terrain` regenerates the village mesh. `ttes stub --scenario FILE --record OUT.mp4` records
 one soldier doing what a scenario file says (client_stub/stub/scenario.py), posed by an in-process server,
 one frame per server tick, with a contact sheet beside it.
+
+A lost server shows at the next frame (window caption, console; the stub poses the soldiers meanwhile); the
+stub reconnects with backoff (0.5..8 s) and binds its soldiers again. Exit status: 0 done; 1 no terrain or no
+server at the start; 2 bad arguments or no display; 3 the server was lost and not back (given up after
+--give-up-after, or still lost at the end of a headless run).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from client_stub.link.auth import Credentials
+    from client_stub.stub.jack import JackProc
 
 from ttes.link_options import add_link_options, link_credentials
 
@@ -46,6 +57,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--artic-dir", type=Path, help="where the TIPS loader writes the .artic files")
     p.add_argument("--no-tour", action="store_true", help="headless: no scripted key presses")
     p.add_argument("--ready-timeout", type=float, default=30.0, help="seconds to wait for the server's READY")
+    p.add_argument(
+        "--give-up-after",
+        type=float,
+        default=120.0,
+        metavar="S",
+        help="seconds of reconnecting to a lost server before the stub gives up and exits 3 (default 120)",
+    )
     p.add_argument("--json", action="store_true", help="machine-readable summary")
     add_link_options(p)
     p.add_argument("--scenario", type=Path, help="a scenario file of timed requests for one soldier")
@@ -93,7 +111,6 @@ def run(args: argparse.Namespace) -> int:
     from client_stub.link.client import LinkError
     from client_stub.link.spawn import spawn_server
     from client_stub.stub.app import StubApp
-    from client_stub.stub.jack import JackProc
     from client_stub.stub.live import LiveSoldiers, populate_demo
     from client_stub.stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
 
@@ -115,12 +132,12 @@ def run(args: argparse.Namespace) -> int:
                     data_dir = args.server_data_dir or _server_data_dir(stack)
                     server = spawn_server(["--data-dir", str(data_dir)], data="default")
                     host, port = server.host, server.port
-                jack = JackProc()
-                link_credentials(args).apply(jack.client)
-                jack.initsocketconnection(host, port)
+                jack = _connect(host, port, link_credentials(args))
             except LinkError as exc:
                 print(f"ttes stub: {exc}", file=sys.stderr)
                 return 1
+            live.reconnect = functools.partial(_connect, host, port, link_credentials(args))
+            live.give_up_after, live.ready_timeout = args.give_up_after, args.ready_timeout
             if not live.connect(app, jack, args.ready_timeout):
                 print(
                     f"ttes stub: server not ready ({jack.failure or 'timeout'}); posing offline",
@@ -134,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
             from client_stub.stub.viewer import run_viewer
 
             run_viewer(app, width, height, args.fps)
-            return 0
+            return 3 if app.gave_up else 0
         from client_stub.stub.headless import run_headless
 
         summary = run_headless(
@@ -155,6 +172,9 @@ def run(args: argparse.Namespace) -> int:
             f"wrote {summary['out']}: {summary['frames']} frames, {summary['soldiers']} soldiers, "
             f"render {summary['render_fps']} fps, server {'yes' if summary['server'] else 'no'}"
         )
+    if app.gave_up or app.server_lost:
+        print(f"ttes stub: {app.gave_up or app.server_lost}", file=sys.stderr)
+        return 3
     return 0
 
 
@@ -188,6 +208,16 @@ def _record_scenario(args: argparse.Namespace) -> int:
             f"wrote {summary['out']} ({summary['frames']} frames at {summary['hz']:g} Hz), {summary['sheet']}"
         )
     return 0
+
+
+def _connect(host: str, port: int, credentials: Credentials) -> JackProc:
+    """A connected Jack link, with the command's token and TLS (LinkError when nothing answers)."""
+    from client_stub.stub.jack import JackProc
+
+    jack = JackProc()
+    credentials.apply(jack.client)
+    jack.initsocketconnection(host, port)
+    return jack
 
 
 def _make_terrain(args: argparse.Namespace) -> int:
