@@ -186,6 +186,28 @@ class FigureKinematics:
         }
         self._sign = sign
 
+    # --- the tree, for writers of other forms of it (protocol.figure) -------------------------------------
+
+    @property
+    def root_segment(self) -> int:
+        """Index (``segment_names``) of the segment that holds the root site."""
+        return self._root_seg
+
+    @property
+    def root_inverse(self) -> np.ndarray:
+        """Inverse of the root site's location: the root segment's global is ``figure.location @ this``."""
+        return self._root_inv.copy()
+
+    @property
+    def rotational(self) -> np.ndarray:
+        """``(ndof,)`` bool: True for ``R`` DOFs (radians), False for ``T`` DOFs (centimetres)."""
+        return self._is_rot.copy()
+
+    def tree_steps(self) -> list[tuple[str, int, int, bool, np.ndarray, np.ndarray]]:
+        """The spanning tree parents first: ``(joint, parent segment, child segment, forward, pre, post)``,
+        ``G(child) = G(parent) @ pre @ D(q) @ post`` (``D`` inverted when not ``forward``; see the module)."""
+        return [(s.joint, s.parent, s.child, s.forward, s.pre.copy(), s.post.copy()) for s in self._steps]
+
     # --- poses ----------------------------------------------------------------------------------------------
 
     def neutral_pose(self) -> np.ndarray:

@@ -25,6 +25,7 @@ from protocol.events import (
     EntityRequests,
     Error,
     Event,
+    FigureMsg,
     Goodbye,
     Hello,
     JointUpdates,
@@ -233,7 +234,7 @@ class Connection:
         elif isinstance(event, UpdateTableMsg):
             self.tables[event.table.table_id] = event
             self._decoders[event.table.table_id] = UpdateDecoder(event.table, self.max_soldiers)
-        elif isinstance(event, SoldierCreated):
+        elif isinstance(event, SoldierCreated | FigureMsg):
             self._require_tables([event.table])
         elif isinstance(event, Ready):
             self._require_tables([t for _, t in event.soldiers])

@@ -36,6 +36,7 @@ class ErrorCode(IntEnum):
     JCL_ERROR = 105
     NOT_READY = 106
     NOT_PERMITTED = 107
+    FIGURE_TOO_LARGE = 108
 
 
 ERROR_DESCRIPTIONS: Mapping[ErrorCode, str] = MappingProxyType(
@@ -60,6 +61,7 @@ ERROR_DESCRIPTIONS: Mapping[ErrorCode, str] = MappingProxyType(
         ErrorCode.JCL_ERROR: "a JCL command failed to parse or run",
         ErrorCode.NOT_READY: "request before the server signalled Ready",
         ErrorCode.NOT_PERMITTED: "the client's role may not make this request",
+        ErrorCode.FIGURE_TOO_LARGE: "the FIGURE asked for exceeds the client's max_frame",
     }
 )
 

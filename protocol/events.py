@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from protocol.figure import WireFigure
 from protocol.framing import DEFAULT_MAX_FRAME
 from protocol.update_table import UpdateTable
 
@@ -193,6 +195,25 @@ class UpdateTableMsg(Event):
     """Server → client: the update table that JointUpdates with this ``table_id`` are read with."""
 
     table: UpdateTable
+
+
+@dataclass(frozen=True)
+class RequestFigure(Event):
+    """Client → server: send the FIGURE of update table ``table`` (``meshes``: with the segment surfaces)."""
+
+    id: int
+    table: int
+    meshes: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class FigureMsg(Event):
+    """Server → client: the skeleton of every figure of update table ``table`` (``protocol.figure``), in
+    figure-entry order; ``body`` is the msgpack map as sent (encoders take it as it is)."""
+
+    table: int
+    figures: tuple[WireFigure, ...]
+    body: dict[str, Any] = field(repr=False, default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)

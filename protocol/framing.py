@@ -15,7 +15,10 @@ HEADER = struct.Struct(">IB")
 LENGTH = struct.Struct(">I")
 DEFAULT_MAX_FRAME = 1 << 20  # 1 MiB: largest ``length`` a receiver accepts unless configured otherwise
 HANDSHAKE_MAX_FRAME = 4096  # the server's limit for the first frame (Hello), whatever max_frame is
-MIN_MAX_FRAME = 256  # smallest max_frame a peer may announce
+MIN_MAX_FRAME = 256  # smallest max_frame a server may announce (clients send small frames or split them)
+# smallest max_frame a client may announce: the server's UPDATE_TABLE (length 1,702 for DI.fig + AK-47) and
+# FIGURE without meshes (about 16 kB) each come in one frame (docs/PROTOCOL.md §2)
+MIN_CLIENT_MAX_FRAME = 65536
 
 
 def encode_frame(msg_type: int, payload: bytes | bytearray | memoryview) -> bytes:

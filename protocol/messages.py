@@ -29,6 +29,7 @@ from protocol.events import (
     EntityRequests,
     Error,
     Event,
+    FigureMsg,
     Goodbye,
     Hello,
     Jcl,
@@ -38,6 +39,7 @@ from protocol.events import (
     React,
     Ready,
     RemoveSoldier,
+    RequestFigure,
     RequestFullUpdate,
     Settings,
     SoldierCreated,
@@ -47,7 +49,8 @@ from protocol.events import (
     Unsubscribe,
     UpdateTableMsg,
 )
-from protocol.framing import MIN_MAX_FRAME
+from protocol.figure import figure_from_wire
+from protocol.framing import MIN_CLIENT_MAX_FRAME, MIN_MAX_FRAME
 from protocol.update_table import table_from_wire, table_to_wire
 
 MAGIC = b"TTES"
@@ -78,9 +81,11 @@ class MessageType(IntEnum):
     REQUEST_FULL_UPDATE = 0x25
     SOLDIER_REMOVED = 0x26
     REACT = 0x27
+    REQUEST_FIGURE = 0x28
     ENTITY_REQUESTS = 0x30
     UPDATE_TABLE = 0x31
     JOINT_UPDATES = 0x32
+    FIGURE = 0x33
 
 
 BOTH = frozenset({MessageType.ERROR, MessageType.GOODBYE, MessageType.PING, MessageType.PONG})
@@ -93,6 +98,7 @@ CLIENT_SENDS = BOTH | {
     MessageType.UNSUBSCRIBE,
     MessageType.REQUEST_FULL_UPDATE,
     MessageType.REACT,
+    MessageType.REQUEST_FIGURE,
     MessageType.ENTITY_REQUESTS,
 }
 SERVER_SENDS = BOTH | {
@@ -104,6 +110,7 @@ SERVER_SENDS = BOTH | {
     MessageType.SOLDIER_REMOVED,
     MessageType.UPDATE_TABLE,
     MessageType.JOINT_UPDATES,
+    MessageType.FIGURE,
 }
 
 
@@ -203,8 +210,8 @@ def unpack_body(payload: bytes, what: str) -> Body:
     return Body(raw, what)
 
 
-def pack_body(body: dict[str, Any]) -> bytes:
-    return msgpack.packb(body, use_bin_type=True)
+def pack_body(body: dict[str, Any], *, single_float: bool = False) -> bytes:
+    return msgpack.packb(body, use_bin_type=True, use_single_float=single_float)
 
 
 # -- per message ------------------------------------------------------------------------------------------
@@ -243,7 +250,14 @@ def _dec_hello(payload: bytes, ctx: int) -> Hello:
         raise WireError(
             ErrorCode.BAD_VALUE, "field 'client_id' must be printable, not start with '~'", "HELLO"
         )
-    name, max_frame = b.str("name", nonempty=True), b.int("max_frame", MIN_MAX_FRAME, U32)
+    name, max_frame = b.str("name", nonempty=True), b.int("max_frame", 0, U32)
+    if max_frame < MIN_CLIENT_MAX_FRAME:
+        raise WireError(
+            ErrorCode.BAD_VALUE,
+            f"max_frame {max_frame} is below {MIN_CLIENT_MAX_FRAME}, the least a client may announce: "
+            "UPDATE_TABLE and FIGURE (without meshes) must each fit in one frame",
+            "HELLO",
+        )
     return Hello(name, role, max_frame, version, client_id, b.optional_str("token", 1024))
 
 
@@ -330,6 +344,20 @@ def _enc_status(e: Status) -> bytes:
 def _dec_settings(p: bytes, n: int) -> Settings:
     b = unpack_body(p, "SETTINGS")
     return Settings(b.float("throttle", 0.0), b.float("report_interval", 0.0))
+
+
+def _dec_request_figure(p: bytes, n: int) -> RequestFigure:
+    b = unpack_body(p, "REQUEST_FIGURE")
+    meshes = b.raw.get("meshes", False)
+    if not isinstance(meshes, bool):
+        raise WireError(ErrorCode.SCHEMA, "field 'meshes' must be a bool", "REQUEST_FIGURE")
+    return RequestFigure(b.int("id", 0, U32), b.int("table", 0, 0xFFFF), meshes)
+
+
+def _dec_figure(p: bytes, n: int) -> FigureMsg:
+    raw = unpack_body(p, "FIGURE").raw
+    table, figures = figure_from_wire(raw)
+    return FigureMsg(table, figures, raw)
 
 
 def _dec_removed(p: bytes, n: int) -> SoldierRemoved:
@@ -428,6 +456,12 @@ _CODECS: dict[MessageType, tuple[type[Event], Encoder, Decoder]] = {
         lambda e: pack_body({"kind": int(e.kind), "indices": list(e.indices)}),
         _dec_react,
     ),
+    MessageType.REQUEST_FIGURE: (
+        RequestFigure,
+        lambda e: pack_body({"id": e.id, "table": e.table, "meshes": bool(e.meshes)}),
+        _dec_request_figure,
+    ),
+    MessageType.FIGURE: (FigureMsg, lambda e: pack_body(e.body, single_float=True), _dec_figure),
     MessageType.ENTITY_REQUESTS: (
         EntityRequests,
         lambda e: encode_entity_requests(e.rows),

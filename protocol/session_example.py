@@ -13,6 +13,8 @@ import struct
 import msgpack
 import numpy as np
 
+from peabody.loader import load_text
+from protocol import coords
 from protocol.connection import CLIENT, SERVER, Connection
 from protocol.entity import Appearance, WeaponState, decode_entity_requests, make_entity_requests
 from protocol.events import (
@@ -22,6 +24,7 @@ from protocol.events import (
     EntityRequests,
     Error,
     Event,
+    FigureMsg,
     Goodbye,
     Hello,
     Jcl,
@@ -31,13 +34,15 @@ from protocol.events import (
     ProtocolError,
     Ready,
     RemoveSoldier,
+    RequestFigure,
     SoldierCreated,
     Status,
     Subscribe,
     UpdateTableMsg,
 )
+from protocol.figure import figure_from_wire, figure_to_wire
 from protocol.framing import HEADER, encode_frame
-from protocol.messages import CODECS, MessageType
+from protocol.messages import CODECS, MessageType, pack_body
 from protocol.update_table import DofRange, FigureEntry, JointEntry, UpdateTable
 from protocol.updates import MODE_BITS, UPDATE_HEADER
 
@@ -59,6 +64,31 @@ def example_table() -> UpdateTable:
     )
 
 
+# The FIGURE of the example table: a pelvis and one leg (Peabody text, Jack's cm and +Y up; FIGURE converts).
+LEG_FIG = """
+figure leg {
+    segment pelvis { site proximal->location = trans(0cm, 0cm, 0cm);
+                     site left_hip->location = trans(-9cm, -6cm, 0cm); }
+    segment thigh { site proximal->location = trans(0cm, 0cm, 0cm);
+                    site distal->location = trans(0cm, -42cm, 0cm); }
+    segment shin { site proximal->location = trans(0cm, 0cm, 0cm);
+                   site heel->location = trans(0cm, -44cm, 4cm); }
+    joint left_hip { connect pelvis.left_hip to thigh.proximal; type = R(z) * R(x) * R(y); }
+    joint left_knee { connect thigh.distal to shin.proximal; type = R(x);
+                      lower_limits = (0deg); upper_limits = (160deg); }
+    root = pelvis.proximal;
+}
+"""
+
+
+def example_figure() -> FigureMsg:
+    """FIGURE for :func:`example_table`: the leg above as the ``soldier`` figure entry."""
+    leg = load_text(LEG_FIG, load_psurfs=False).figures["leg"]
+    leg.filename = "DI.fig"
+    body = figure_to_wire(example_table(), [leg], ["soldier"])
+    return FigureMsg(1, figure_from_wire(msgpack.unpackb(pack_body(body, single_float=True)))[1], body)
+
+
 def _quat_z(deg: float) -> list[float]:
     h = math.radians(deg) / 2
     return [math.cos(h), 0.0, 0.0, math.sin(h)]
@@ -78,8 +108,9 @@ def _deliver(dst: Connection, data: bytes) -> None:
         raise RuntimeError(f"example step not accepted by the peer: {events}")
 
 
-def example_session() -> list[tuple[str, str, bytes]]:
-    """``(direction, what, bytes)`` for every step; each step's bytes are also delivered to the peer."""
+def example_session(received: list[Event] | None = None) -> list[tuple[str, str, bytes]]:
+    """``(direction, what, bytes)`` for every step; each step's bytes are also delivered to the peer (and what
+    the client decodes appended to ``received``)."""
     client, server = Connection(CLIENT), Connection(SERVER, max_soldiers=16)
     steps: list[tuple[str, str, bytes]] = []
 
@@ -90,7 +121,11 @@ def example_session() -> list[tuple[str, str, bytes]]:
 
     def s2c(what: str, event: Event) -> None:
         data = server.send(event)
-        _deliver(client, data)
+        events = _pump(client, data)
+        if not events or any(isinstance(e, ProtocolError) for e in events):
+            raise RuntimeError(f"example step not accepted by the client: {events}")
+        if received is not None:
+            received.extend(events)
         steps.append(("S→C", what, data))
 
     table = example_table()
@@ -99,6 +134,8 @@ def example_session() -> list[tuple[str, str, bytes]]:
     c2s("Jcl", Jcl('read_file("jack-ttes-soldier_low.jcl");', id=1))
     s2c("UpdateTableMsg", UpdateTableMsg(table))
     s2c("Ready (soldier 0 uses table 1)", Ready(((0, 1),)))
+    c2s("RequestFigure for table 1", RequestFigure(3, 1))
+    s2c("FigureMsg: the skeleton of table 1 (a pelvis and a leg here)", example_figure())
     c2s("CreateSoldier", CreateSoldier(2, "DI.fig", "AK_47.fig", None))
     s2c("SoldierCreated (index 1, table 1)", SoldierCreated(2, 1, 1))
     c2s("Subscribe to soldiers 0 and 1", Subscribe((0, 1)))
@@ -220,9 +257,63 @@ def describe_frame(table: UpdateTable, frame: bytes) -> list[str]:
         lines.append("]}")
     elif mtype == MessageType.JOINT_UPDATES:
         lines += describe_joint_updates(table, payload)
+    elif mtype == MessageType.FIGURE:
+        lines += _describe_figure(msgpack.unpackb(payload))
     else:
         lines.append(f"msgpack {_json(payload)}")
     return lines
+
+
+def _short(v: object) -> object:
+    """Floats as the f32 they were sent as, printed to 6 decimals (0.1 for 0.10000000149011612)."""
+    if isinstance(v, float):
+        return round(v, 6) + 0.0
+    if isinstance(v, list):
+        return [_short(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _short(x) for k, x in v.items()}
+    return v
+
+
+def _describe_figure(body: dict) -> list[str]:
+    lines = [f'msgpack {{"table": {body["table"]}, "figures": [']
+    for f in body["figures"]:
+        head = {k: v for k, v in f.items() if k not in ("segments", "joints", "sites")}
+        lines.append(f"  {json.dumps(_short(head))[:-1]},")
+        for key in ("segments", "joints", "sites"):
+            lines.append(f'   "{key}": [')
+            lines += [f"    {json.dumps(_short(row))}," for row in f[key]]
+            lines.append("   ],")
+        lines.append("  }")
+    lines.append("]}")
+    return lines
+
+
+def worked_example() -> list[str]:
+    """Soldier 0's heel at tick 1, from FIGURE and the decoded JOINT_UPDATES alone (docs/PROTOCOL.md §7.2)."""
+    received: list[Event] = []
+    example_session(received)
+    (fig,) = [e for e in received if isinstance(e, FigureMsg)]
+    upd = next(e for e in received if isinstance(e, JointUpdates))
+    leg, table = fig.figures[0], example_table()
+    row = int(np.flatnonzero(upd.indices == 0)[0])
+    placement = coords.pose7_to_transform(upd.positions[row, 0], upd.orientations[row, 0])
+    g = leg.segment_globals(table, upd.dofs[row], placement)
+    heel = leg.site_globals(table, upd.dofs[row], placement)[leg.site_names.index("shin.heel")][:3, 3]
+    entity = coords.heading_transform(90.0, np.array([10.0, 20.0, 0.0]))
+    world = entity[:3, :3] @ heel + entity[:3, 3]
+
+    def v(x: np.ndarray) -> str:
+        return "(" + ", ".join(f"{c:.4f}" for c in x) + ")"
+
+    return [
+        f"decoded soldier 0, tick 1: left_hip {v(upd.dofs[row, :3])} rad, "
+        f"left_knee {upd.dofs[row, 3]:.4f} rad,",
+        f"  soldier figure position {v(upd.positions[row, 0])} m, quaternion {v(upd.orientations[row, 0])}",
+        *(f"G({name}) translation {v(g[s, :3, 3])}" for s, name in enumerate(leg.segment_names)),
+        f"heel (shin.heel) in the soldier frame {v(heel)} m",
+        f"entity request row 0: heading 90°, position (10, 20, 0): heel in the world {v(world)} m",
+    ]
 
 
 def _json(body: bytes) -> str:
@@ -245,6 +336,11 @@ def render() -> str:
         for frame in frames:
             out += [*hexdump(frame), "", *describe_frame(table, frame)]
         out += ["```", ""]
+    out += [
+        "**Worked example** (§7.2): soldier 0's heel from frames FIGURE and JOINT_UPDATES tick 1 alone",
+        "",
+    ]
+    out += ["```text", *worked_example(), "```", ""]
     out.append(END)
     return "\n".join(out)
 

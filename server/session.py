@@ -54,6 +54,7 @@ from protocol.events import (
     React,
     Ready,
     RemoveSoldier,
+    RequestFigure,
     RequestFullUpdate,
     Settings,
     SoldierCreated,
@@ -317,6 +318,21 @@ class Session:
             self._requests(ev)
         elif isinstance(ev, React):
             self._react(ev)
+        elif isinstance(ev, RequestFigure):
+            self._figure(ev)
+
+    def _figure(self, ev: RequestFigure) -> None:
+        """FIGURE for a table this client was sent; ERROR 103 (no such table) or 108 (over its max_frame)."""
+        msg = self.world.soldiers.figure_message(ev.table, ev.meshes) if self.tables_sent else None
+        if msg is None:
+            self.send(Error(int(ErrorCode.UNKNOWN_FIGURE), f"no update table {ev.table} was sent", ev.id))
+            return
+        try:
+            self.send(msg)
+        except LocalProtocolError as exc:
+            if exc.code is not ErrorCode.FRAME_TOO_LARGE:
+                raise
+            self.send(Error(int(ErrorCode.FIGURE_TOO_LARGE), exc.message, ev.id))
 
     def _hello(self, ev: Hello) -> None:
         self.name = ev.name

@@ -41,7 +41,7 @@ from protocol.events import (
     Unsubscribe,
     UpdateTableMsg,
 )
-from protocol.framing import HANDSHAKE_MAX_FRAME, encode_frame
+from protocol.framing import HANDSHAKE_MAX_FRAME, MIN_CLIENT_MAX_FRAME, encode_frame
 from protocol.messages import CODECS, HANDSHAKE_PREFIX, MAGIC, MessageType
 from protocol.update_table import DofRange, FigureEntry, JointEntry, UpdateTable, example_di_table
 
@@ -240,7 +240,7 @@ def test_entity_requests_round_trip(rows: np.ndarray) -> None:
     assert ev.rows.tobytes() == rows.tobytes()
 
 
-@given(names, st.sampled_from(["controller", "observer"]), st.integers(256, 2**32 - 1))
+@given(names, st.sampled_from(["controller", "observer"]), st.integers(MIN_CLIENT_MAX_FRAME, 2**32 - 1))
 def test_handshake_round_trip(name: str, role: str, max_frame: int) -> None:
     client, server = Connection(CLIENT), Connection(SERVER)
     assert deliver(server, client.send(Hello(name, role, max_frame))) == [Hello(name, role, max_frame)]
@@ -262,12 +262,12 @@ def test_handshake_identity_round_trip(client_id: str, token: str, role: str) ->
 
 def test_hello_without_the_identity_fields_is_anonymous_and_bad_ids_are_refused() -> None:
     old = HANDSHAKE_PREFIX.pack(MAGIC, 1) + msgpack.packb(
-        {"name": "1994", "role": "controller", "max_frame": 4096}
+        {"name": "1994", "role": "controller", "max_frame": 65536}
     )
     (ev,) = deliver(Connection(SERVER), encode_frame(MessageType.HELLO, old))
-    assert ev == Hello("1994", "controller", 4096)
+    assert ev == Hello("1994", "controller", 65536)
     for bad in ("~anon-1", "x" * 65, "tab\t"):
-        body = {"name": "n", "role": "controller", "max_frame": 4096, "client_id": bad}
+        body = {"name": "n", "role": "controller", "max_frame": 65536, "client_id": bad}
         frame = encode_frame(MessageType.HELLO, HANDSHAKE_PREFIX.pack(MAGIC, 1) + msgpack.packb(body))
         (err,) = deliver(Connection(SERVER), frame)
         assert isinstance(err, ProtocolError) and err.code == ErrorCode.BAD_VALUE

@@ -12,7 +12,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from protocol.update_table import UpdateTable
+import msgpack
+
+from protocol.events import FigureMsg
+from protocol.figure import figure_from_wire, figure_to_wire
+from protocol.update_table import FigureEntry, UpdateTable
 from server.logging import get_logger
 from server.soldier.library import MotionLibrary
 from server.soldier.manager import SoldierManager
@@ -42,6 +46,7 @@ class Soldiers:
         self.manager: SoldierManager | None = None
         self.sets: list[FigureSet] = []
         self.figures_of: dict[str, tuple[str, ...]] = {}  # soldier name -> environment figure names
+        self._figure_msgs: dict[tuple[int, bool], FigureMsg] = {}  # (table id, meshes) -> FIGURE, built once
         self._pending = settings or SoldierSettings()
 
     # -- settings ----------------------------------------------------------------------------------------
@@ -60,6 +65,7 @@ class Soldiers:
     def adopt(self, library: MotionLibrary) -> None:
         self.library = library
         self.sets = []
+        self._figure_msgs = {}
         for k, (fig, wpn) in enumerate(library.set_keys):
             table = update_table_for(library, k + 1, k)
             self.sets.append(FigureSet(k, fig, wpn, table, WireConverter(library, table, k)))
@@ -81,6 +87,21 @@ class Soldiers:
         """The update table id of a live soldier."""
         assert self.manager is not None
         return self.sets[int(self.manager.table.fset[index])].table.table_id
+
+    def figure_message(self, table_id: int, meshes: bool) -> FigureMsg | None:
+        """The FIGURE answering REQUEST_FIGURE for ``table_id`` (None: no such table), built once."""
+        key = (table_id, meshes)
+        if key not in self._figure_msgs:
+            fset = next((s for s in self.sets if s.table.table_id == table_id), None)
+            if fset is None or self.library is None:
+                return None
+            names = [e.name for e in fset.table.entries if isinstance(e, FigureEntry)]
+            figures = self.library.sets[fset.index].prototypes
+            body = figure_to_wire(fset.table, figures, names, meshes=meshes)
+            # decoded from its own f32 bytes, so the event holds what a client will hold
+            raw = msgpack.unpackb(msgpack.packb(body, use_single_float=True))
+            self._figure_msgs[key] = FigureMsg(table_id, figure_from_wire(raw)[1], body)
+        return self._figure_msgs[key]
 
     # -- soldier states ----------------------------------------------------------------------------------
     def create(self, figure: str, weapon: str, index: int | None, name: str | None, now: float) -> int:
