@@ -29,6 +29,7 @@ from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
 from authoring.rifle_swap import _smooth_above
 from authoring.slave_contacts import SIDES, _played
+from authoring.transitions import track_solve
 from peabody.fk import FigureKinematics
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -40,6 +41,10 @@ NEAR_CM = 6.0  # the master's foot this near the ground: the slave's is kept at 
 LIFT_SIGMA_FRAMES = 2.0  # the lift is smoothed over the clip (at or above the need)
 KNEE_DOWN_CM = 3.0  # a knee or thigh this near the ground carries the leg: its foot is left as slaved ...
 KNEE_FREE_CM = 10.0  # ... and planted from this height up (eased in between)
+TRACK_ITERATIONS = 20  # per frame of the legs' tracking ...
+TRACK_DOF_STEP = 0.01  # ... in steps of at most this (rad): a joint turns at most 11 degrees a frame
+FOOT_TURN_CM = 5.0  # a radian of the foot's turn weighs as much as this much move (held loosely: a
+# kneeling leg's ankle at its limits cannot keep the foot's exact orientation as the foot moves)
 FOOT_PASSES = 2  # the contact nodes change a little as the foot moves: measure and solve again
 
 
@@ -141,7 +146,9 @@ def _leg_goal(
         u = np.clip((leg_pts[..., 1].min(axis=1) - KNEE_DOWN_CM) / (KNEE_FREE_CM - KNEE_DOWN_CM), 0.0, 1.0)
         move *= (u * u * (3.0 - 2.0 * u))[:, None]
     heel = sites[:, kin.site_names.index(f"{side}_foot.heel")]
-    goal = ik.Goal(f"{side}_foot.heel", heel[:, :3, 3] + move, heel[:, :3, :3], 1.0, 2, leg(side))
+    goal = ik.Goal(
+        f"{side}_foot.heel", heel[:, :3, 3] + move, heel[:, :3, :3], 1.0, 2, leg(side), FOOT_TURN_CM
+    )
     return goal, np.linalg.norm(move, axis=1)
 
 
@@ -166,11 +173,9 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
         if not (worst > MIN_SHIFT_CM).any():
             break
         total = np.maximum(total, worst)
-        # damped small steps from the slaved pose (as rest_slave_knees: a bent hip is near its gimbal)
-        pose, _ = ik.solve(
-            kin, pose, goals, loc, iterations=60, damping=2.0, rest_pose=pose, rest_gain=0.05,
-            tolerance=0.02, max_dof_step=0.03,
-        )  # fmt: skip
+        # tracked frame after frame in small steps: solved frame by frame alone, a kneeling leg's hip and
+        # ankle swapped between their limits as the foot moved 2 cm (kstow2dead: 50 degrees in one frame)
+        pose = track_solve(kin, pose, goals, loc, iterations=TRACK_ITERATIONS, max_dof_step=TRACK_DOF_STEP)
     if total.any():
         bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
         slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
