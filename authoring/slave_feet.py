@@ -74,7 +74,7 @@ def plant_offsets(
     next one's first; it is none at the first and last frames."""
     n = len(points)
     below = points[..., 1] <= contact_cm
-    stance = below.any(axis=1) if planted is None else np.asarray(planted, bool)
+    stance = np.asarray(below.any(axis=1) if planted is None else planted, dtype=bool)
     both = below[1:] & below[:-1] & stance[1:, None] & stance[:-1, None]
     step = np.where(both[..., None], points[1:] - points[:-1], 0.0).sum(axis=1)
     step /= np.maximum(both.sum(axis=1), 1)[:, None]
