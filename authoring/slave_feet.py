@@ -10,9 +10,11 @@ on the ground, the foot slid along with it (8.5 cm).
 So while the master's foot is on the ground (a node below the quality check's contact height), the slave's
 is held there: the mean ground velocity of the slave's foot nodes in contact in both of two frames is
 cancelled by moving the foot the other way (:func:`plant_offsets`), and the legs are solved to carry the foot
-there, its orientation kept (heel-toe rolling is kept: a node the foot rolls about does not move). A node that
-touches down stays there; between stances the offset eases back to none, and a clip's first and last frames
-stay as they were (every clip meeting at a posture node agrees there). Where the master's foot is near the
+there, its orientation kept loosely (heel-toe rolling is kept: a node the foot rolls about does not move),
+tracked frame after frame in small steps. A node that touches down stays there; between stances the offset
+eases back to none, and it is none at a clip's first and last frames (every clip meeting at a posture node
+agrees there). A leg whose knee or thigh is on the ground is left as slaved (holding its foot too slid the
+knee). Where the master's foot is near the
 ground but not on it, the slave's is kept at least as high (:func:`lift_to_master`), so it does not touch
 down where the master's does not. Stances whose offset stays under ``MIN_PLANT_CM`` are left alone (the
 foot slides less than that), and so are locomotion clips (recorded in place: a planted foot there moves
