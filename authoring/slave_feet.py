@@ -1,0 +1,184 @@
+"""Planted feet carried over to the slave: a DI foot on the ground stays where it touched down.
+
+Slaving copies the leg angles and puts the slave's root where the master's is, so the slave's feet follow the
+master's to about a centimetre, but not its contacts: DI.fig's hips sit a little elsewhere on its pelvis and
+its foot mesh reaches lower with the foot pitched (crawl2prstow: the DI's toes on the ground through frames
+33-53 while the master's skim 1.1-1.6 cm above it and drag 8 cm), and the death slaves' pelvis is moved
+onto the ground where the master's lies (:mod:`~authoring.slave_ground`). Where the pelvis moves over a foot
+on the ground, the foot slid along with it (8.5 cm).
+
+So while the master's foot is on the ground (a node below the quality check's contact height), the slave's
+is held there: the mean ground velocity of the slave's foot nodes in contact in both of two frames is
+cancelled by moving the foot the other way (:func:`plant_offsets`), and the legs are solved to carry the foot
+there, its orientation kept loosely (heel-toe rolling is kept: a node the foot rolls about does not move),
+tracked frame after frame in small steps. A node that touches down stays there; between stances the offset
+eases back to none, and it is none at a clip's first and last frames (every clip meeting at a posture node
+agrees there). A leg whose knee or thigh is on the ground is left as slaved (holding its foot too slid the
+knee). Where the master's foot is near the
+ground but not on it, the slave's is kept at least as high (:func:`lift_to_master`), so it does not touch
+down where the master's does not. Stances whose offset stays under ``MIN_PLANT_CM`` are left alone (the
+foot slides less than that), and so are locomotion clips (recorded in place: a planted foot there moves
+with the ground, and their slaves' feet do not slide).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from authoring import ik
+from authoring.postures import leg
+from authoring.quality import CONTACT_HEIGHT_CM
+from authoring.quality_frames import FigureSet
+from authoring.rifle_swap import _smooth_above
+from authoring.slave_contacts import SIDES, _played
+from authoring.transitions import track_solve
+from peabody.fk import FigureKinematics
+from server.motion.binding import bind_channelset
+from server.motion.channelset import Channelset
+
+MERGE_GAP_FRAMES = 3  # a foot off the ground this briefly is still in its stance (a flickering contact)
+MIN_SHIFT_CM = 0.05  # a foot moved less than this is left as it is
+MIN_PLANT_CM = 1.0  # a stance whose offset stays below this is left as slaved (it slides less than that)
+NEAR_CM = 6.0  # the master's foot this near the ground: the slave's is kept at least as high
+LIFT_SIGMA_FRAMES = 2.0  # the lift is smoothed over the clip (at or above the need)
+KNEE_DOWN_CM = 3.0  # a knee or thigh this near the ground carries the leg: its foot is left as slaved ...
+KNEE_FREE_CM = 10.0  # ... and planted from this height up (eased in between)
+TRACK_ITERATIONS = 20  # per frame of the legs' tracking ...
+TRACK_DOF_STEP = 0.01  # ... in steps of at most this (rad): a joint turns at most 11 degrees a frame
+FOOT_TURN_CM = 5.0  # a radian of the foot's turn weighs as much as this much move (held loosely: a
+# kneeling leg's ankle at its limits cannot keep the foot's exact orientation as the foot moves)
+FOOT_PASSES = 2  # the contact nodes change a little as the foot moves: measure and solve again
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``(first, last)`` of every run of True in ``mask``, runs closer than ``MERGE_GAP_FRAMES`` merged."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    runs: list[tuple[int, int]] = []
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if runs and a - runs[-1][1] <= MERGE_GAP_FRAMES:
+            runs[-1] = (runs[-1][0], b - 1)
+        else:
+            runs.append((a, b - 1))
+    return runs
+
+
+def plant_offsets(
+    points: np.ndarray, planted: np.ndarray | None = None, contact_cm: float = CONTACT_HEIGHT_CM
+) -> np.ndarray:
+    """Per frame the ground offset ``(n, 3)`` (y = 0) that holds a foot's contacts where they touched down.
+
+    ``points`` ``(n, k, 3)`` are one foot's nodes over a clip; ``planted`` ``(n,)`` the frames it may be held
+    in (the master's foot on the ground; default: wherever a node is below ``contact_cm``). In a stance, the
+    offset changes by minus the
+    mean ground move of the nodes below ``contact_cm`` in both frames, starting from none at touchdown (or,
+    for a stance that reaches the clip's last frame, ending at none there; a stance over the whole clip
+    spreads what is left evenly). Between stances it eases (smoothstep) from one stance's last value to the
+    next one's first; it is none at the first and last frames."""
+    n = len(points)
+    below = points[..., 1] <= contact_cm
+    stance = np.asarray(below.any(axis=1) if planted is None else planted, dtype=bool)
+    both = below[1:] & below[:-1] & stance[1:, None] & stance[:-1, None]
+    step = np.where(both[..., None], points[1:] - points[:-1], 0.0).sum(axis=1)
+    step /= np.maximum(both.sum(axis=1), 1)[:, None]
+    step[:, 1] = 0.0
+    move = np.zeros((n, 3))
+    move[1:] = -step  # the offset's change into frame i
+    out = np.zeros((n, 3))
+    runs = _runs(stance)
+    for a, b in runs:
+        track = np.cumsum(move[a : b + 1], axis=0) - move[a]  # none at touchdown
+        if b == n - 1:
+            track -= track[-1] * (1.0 if a > 0 else np.linspace(0.0, 1.0, b - a + 1)[:, None])
+        if np.linalg.norm(track, axis=1).max() >= MIN_PLANT_CM:
+            out[a : b + 1] = track
+    gaps = [(-1, runs[0][0] if runs else n)] + [
+        (b, runs[i + 1][0] if i + 1 < len(runs) else n) for i, (_, b) in enumerate(runs)
+    ]
+    for last, nxt in gaps:
+        if nxt - last < 2:
+            continue
+        lo = out[last] if last >= 0 else np.zeros(3)
+        hi = out[nxt] if nxt < n else np.zeros(3)
+        u = (np.arange(last + 1, nxt) - last) / (nxt - last)
+        out[last + 1 : nxt] = lo + (u * u * (3.0 - 2.0 * u))[:, None] * (hi - lo)
+    out[[0, -1]] = 0.0
+    return out
+
+
+def part_points(
+    pose: np.ndarray, loc: np.ndarray, figures: FigureSet, ptype: str, parts: tuple[str, ...]
+) -> np.ndarray:
+    """The nodes of the body ``parts`` (as the quality check names them: ``left_foot`` is foot and toes)
+    per frame ``(n, k, 3)``."""
+    nodes, segs = figures.nodes(ptype)
+    sel = np.isin(figures.node_parts(ptype), parts)
+    g = figures.kin[ptype].segment_globals(pose, loc)
+    return np.einsum("fkij,kj->fki", g[:, segs[sel], :3, :], nodes[sel])
+
+
+def lift_to_master(slave_low: np.ndarray, master_low: np.ndarray) -> np.ndarray:
+    """Per frame how far ``(n,)`` to raise a slave's foot whose lowest node is at ``slave_low`` so that it
+    is not below the master's (``master_low``) while that is near the ground but not on it."""
+    off = (master_low > CONTACT_HEIGHT_CM) & (master_low < NEAR_CM)
+    need = np.where(off, np.maximum(0.0, np.minimum(master_low, NEAR_CM) - slave_low), 0.0)
+    return _smooth_above(need, LIFT_SIGMA_FRAMES) if need.any() else need
+
+
+def _leg_goal(
+    kin: FigureKinematics,
+    pose: np.ndarray,
+    loc: np.ndarray,
+    figures: FigureSet,
+    ptype: str,
+    master_foot: np.ndarray,
+    side: str,
+) -> tuple[ik.Goal, np.ndarray]:
+    """One leg's goal (the foot moved by its planting offset and lift, its orientation kept) and the move
+    per frame. A knee or thigh on the ground carries the leg too: the move fades out as it comes down
+    (holding the foot where the hip moves over a knee on the ground slid the knee 4-6 cm instead)."""
+    sites = kin.site_globals(pose, loc)
+    foot_pts = part_points(pose, loc, figures, ptype, (f"{side}_foot",))
+    master_low = master_foot[..., 1].min(axis=1)
+    move = plant_offsets(foot_pts, master_low <= CONTACT_HEIGHT_CM)
+    move[:, 1] = lift_to_master(foot_pts[..., 1].min(axis=1), master_low)
+    leg_pts = part_points(
+        pose, loc, figures, ptype, tuple(f"{side}_{p}" for p in ("knee", "kneecap", "thigh"))
+    )
+    if leg_pts.shape[1]:
+        u = np.clip((leg_pts[..., 1].min(axis=1) - KNEE_DOWN_CM) / (KNEE_FREE_CM - KNEE_DOWN_CM), 0.0, 1.0)
+        move *= (u * u * (3.0 - 2.0 * u))[:, None]
+    heel = sites[:, kin.site_names.index(f"{side}_foot.heel")]
+    goal = ik.Goal(
+        f"{side}_foot.heel", heel[:, :3, 3] + move, heel[:, :3, :3], 1.0, 2, leg(side), FOOT_TURN_CM
+    )
+    return goal, np.linalg.norm(move, axis=1)
+
+
+def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
+    """Hold the slave's feet planted where the master's are on the ground, and off it where his are not
+    (``slave``'s joint channels, in place); returns the largest move of a foot in each frame (cm)."""
+    q, loc, stype = _played(slave, figures)
+    if getattr(slave, "ground_speed", None) is not None:  # locomotion: recorded in place
+        return np.zeros(len(q))
+    mq, mloc, mtype = _played(master, figures)
+    master_feet = {side: part_points(mq, mloc, figures, mtype, (f"{side}_foot",)) for side in SIDES}
+    kin = figures.kin[stype]
+    pose = q
+    total = np.zeros(len(q))
+    for _ in range(FOOT_PASSES):
+        goals: list[ik.Goal] = []
+        worst = np.zeros(len(q))
+        for side in SIDES:
+            goal, moved = _leg_goal(kin, pose, loc, figures, stype, master_feet[side], side)
+            goals.append(goal)
+            worst = np.maximum(worst, moved)
+        if not (worst > MIN_SHIFT_CM).any():
+            break
+        total = np.maximum(total, worst)
+        # tracked frame after frame in small steps: solved frame by frame alone, a kneeling leg's hip and
+        # ankle swapped between their limits as the foot moved 2 cm (kstow2dead: 50 degrees in one frame)
+        pose = track_solve(kin, pose, goals, loc, iterations=TRACK_ITERATIONS, max_dof_step=TRACK_DOF_STEP)
+    if total.any():
+        bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
+        slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
+    return total

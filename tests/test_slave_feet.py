@@ -1,0 +1,83 @@
+"""Planted feet carried over to the slave (authoring/slave_feet.py): a slave foot on the ground stays where it
+touched down while the pelvis moves over it, rolls about the node it rests on, and the clip's ends and the
+swing between stances are left alone."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+pytest.importorskip("scipy")
+
+from authoring.build import BuildContext, lift_off_ground
+from authoring.quality import check_clip
+from authoring.quality_frames import FigureSet
+from authoring.slave_feet import plant_offsets, plant_slave_feet
+from server.motion.cache import load_channelset
+from ttes.paths import CHANNELSETS, FIGURES
+
+
+def _foot(n: int) -> np.ndarray:
+    """Three nodes of a foot, a heel (x=0), ball (x=10) and toe (x=15), on the ground, for ``n`` frames."""
+    return np.tile(np.array([[0.0, 0.5, 0.0], [10.0, 0.5, 0.0], [15.0, 0.5, 0.0]]), (n, 1, 1))
+
+
+def _slide(points: np.ndarray) -> float:
+    """The largest ground distance a node below the contact height moves over its run (the check's measure,
+    for one run per node)."""
+    worst = 0.0
+    for k in range(points.shape[1]):
+        down = points[:, k, 1] <= 1.25
+        if down.any():
+            p = points[down, k][:, [0, 2]]
+            worst = max(worst, float(np.linalg.norm(p - p[0], axis=1).max()))
+    return worst
+
+
+def test_a_stance_dragged_by_the_pelvis_is_held_where_it_touched_down() -> None:
+    n = 40
+    pts = _foot(n)
+    pts[:10, :, 1] = pts[30:, :, 1] = 8.0  # in the air, then down over frames 10-29, then up
+    pts[:, :, 0] += np.linspace(0.0, 8.0, n)[:, None]  # the pelvis drags it 8 cm forward
+    assert _slide(pts) > 3.0
+    off = plant_offsets(pts)
+    assert _slide(pts + off[:, None, :]) < 1e-9
+    assert np.allclose(off[[0, -1]], 0.0)  # the clip's ends are left as they are
+    assert np.allclose(off[:, 1], 0.0)  # only along the ground
+    assert np.abs(np.diff(off, axis=0)).max() < 1.0  # eased back between stances, no jump
+
+
+def test_a_foot_rolling_about_its_toe_is_not_pulled_back() -> None:
+    n = 30
+    pts = _foot(n)
+    lift = np.linspace(0.0, 12.0, n)  # the heel rises; the toe node stays where it is
+    pts[:, 0, 1] += lift
+    pts[:, 1, 1] += lift * 5.0 / 15.0
+    assert np.allclose(plant_offsets(pts), 0.0)
+
+
+def test_a_stance_reaching_the_clip_end_ends_where_the_clip_does() -> None:
+    n = 30
+    pts = _foot(n)
+    pts[:10, :, 1] = 8.0
+    pts[:, :, 2] += np.linspace(0.0, 6.0, n)[:, None]
+    off = plant_offsets(pts)
+    assert _slide(pts + off[:, None, :]) < 1e-9
+    assert np.allclose(off[-1], 0.0)
+
+
+def test_crawl2prstow_slave_left_foot_stays_planted() -> None:
+    """Issue 14: the DI's left toes on the ground while the pelvis comes down slid 8.5 cm (master 1.6)."""
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
+    master = load_channelset(CHANNELSETS / "crawl2prstow.chset.env", use_cache=False)
+    slave = load_channelset(CHANNELSETS / "crawl2prstow_low.chset.env", use_cache=False)
+    before = check_clip(copy.deepcopy(slave), figs)
+    plant_slave_feet(master, slave, figs)
+    lift_off_ground(slave, ctx.di)
+    after = check_clip(slave, figs)
+    assert after["contact_slides"]["left_foot"] <= 2.0
+    assert after["ground_penetration_cm"] <= 1.0
+    assert after["max_frame_jump_deg"] <= max(20.0, before["max_frame_jump_deg"])
