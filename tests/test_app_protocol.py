@@ -194,7 +194,8 @@ async def test_not_ready_until_a_client_starts_the_simulation(autojump_clock: tr
         assert (e.code, e.ref) == (ErrorCode.JCL_ERROR, 2) and "needs the operator role" in e.message
         c = await Client.open(port_of(server), role="operator")
         await c.jcl('read_file("jack-ttes-soldier_low.jcl");', 2)
-        await c.expect(UpdateTableMsg)
+        # the script loads files in a worker thread (issue 17): autojump's virtual time runs on meanwhile
+        await c.expect(UpdateTableMsg, timeout=1e9)
         ready = await c.expect(Ready)
         assert len(ready.soldiers) == 10
         other = await Client.open(port_of(server))
