@@ -159,7 +159,7 @@ class TtesServer:
         if ev is None:
             return
         async with self._jcl_lock:
-            if needs_worker(ev.text):
+            if needs_worker(ev.text, self.world.is_startup_script):
                 error = await trio.to_thread.run_sync(session.run_jcl, ev)
             else:
                 error = session.run_jcl(ev)
