@@ -18,23 +18,3 @@ def test_contact_is_planted_outside_its_move_and_lifted_during_it() -> None:
 
 def test_graph_arc_time_is_the_recorded_clip_length() -> None:
     assert transition_specs()["crawl2prstow"].duration == crawl_prone.DURATION
-
-
-def test_the_forearms_rise_before_the_chest_sets_off_and_land_after_it_stops() -> None:
-    t = np.arange(0, crawl_prone.DURATION + 1e-9, 1 / 60)
-    up = crawl_prone.arms_up(t)
-    assert up[0] == 0.0 and up[-1] == 0.0  # on the ground in CRAWL and in PRONE_STOWED
-    assert np.all(up[(t >= crawl_prone.BODY[0]) & (t <= crawl_prone.BODY[1])] > 0.5)  # up as the chest turns
-    assert np.all(up[(t >= crawl_prone.ELBOW_UP[1]) & (t <= crawl_prone.BODY[1])] == 1.0)
-
-
-def test_the_master_clip_meets_every_limit() -> None:
-    """Issue 14: the "planted" right forearm slid 10.4 cm as the shoulders swung over it, the rifle lay 2 cm
-    in the right upper arm."""
-    from authoring.quality import FigureSet, check_clip
-    from server.motion.cache import load_channelset
-    from ttes.paths import CHANNELSETS, FIGURES
-
-    figs = FigureSet.from_dir(FIGURES, ["soldier.fig", "AK_47.fig"])
-    row = check_clip(load_channelset(CHANNELSETS / "crawl2prstow.chset.env"), figs)
-    assert row["failures"] == []
