@@ -16,13 +16,12 @@ import copy
 import io
 import json
 import math
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from server.jcl import JclError, JclInterpreter
+from server.jcl import JclError, JclInterpreter, parse_jcl
 from server.logging import get_logger
 from server.world.access import caller_of, check_access
 
@@ -36,22 +35,22 @@ OFF_LOOP = frozenset(
     {"load_channelset", "load_posture_graph", "write_channelset", "reroot_figure_channel", "spit"}
 )
 _ANY = object  # argument type of a refused command: whatever it is given
-_LOADING_WORDS = re.compile(r"\b(?:" + "|".join(sorted(OFF_LOOP)) + r")\b")
-_READ_FILE = re.compile(r"\bread_file\b")
-_READ_FILE_NAME = re.compile(r'\bread_file\s*\(\s*"([^"]*)"\s*\)')
 
 
 def needs_worker(text: str, already_run: Callable[[str], bool] = lambda name: False) -> bool:
     """Whether a JCL frame may load files: an OFF_LOOP command, or ``read_file`` of anything but a script
     ``already_run`` says is done (a 1994 client's start-up script, answered as done). Only such frames go to a
     worker thread; the rest run at once on the loop, so a frame of cheap commands neither waits for a thread
-    nor lets (autojump's virtual) time run on while it does."""
-    if _LOADING_WORDS.search(text):
-        return True
-    names = _READ_FILE_NAME.findall(text)
-    if len(names) != len(_READ_FILE.findall(text)):
-        return True  # a read_file whose argument is not a plain string: assume it loads
-    return not all(already_run(name) for name in names)
+    nor lets (autojump's virtual) time run on while it does. A frame that does not parse fails at once: the
+    loop runs it."""
+    try:
+        calls = parse_jcl(text)
+    except JclError:
+        return False
+    return any(
+        c.name in OFF_LOOP or (c.name == "read_file" and not (c.args and already_run(str(c.args[0]))))
+        for c in calls
+    )
 
 
 @dataclass(frozen=True)
