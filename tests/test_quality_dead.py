@@ -79,3 +79,16 @@ def test_a_dead_body_lies_slack(tmp_path: Path, figset: FigureSet, capsys) -> No
     text = capsys.readouterr().out
     assert "FAIL soldier_low:DEAD@kneel rest_arm_cm = " in text and "raised.chset[" in text
     assert "FAIL soldier_low:DEAD@prone rest_head_cm = " in text
+
+
+@pytest.mark.parametrize("name", ["stfire2dead", "stfire2dead_low", "stfire2dead_m16_low"])
+def test_the_shipped_standing_fire_death_keeps_its_feet_down(name: str) -> None:
+    """Issue 14: stfire2dead lay face down at 1.4 s with both shins straight up (feet 81 cm over the pelvis);
+    its hips, waist and lower back are damped harder until he is down (authoring.deaths)."""
+    from server.motion.cache import load_channelset
+    from ttes.paths import CHANNELSETS
+
+    cs = load_channelset(CHANNELSETS / f"{name}.chset.env", use_cache=False)
+    types = sorted({c.protofiletype for c in cs.channels})
+    row = check_clip(cs, FigureSet.from_dir(FIGURES, types))
+    assert row["feet_up_cm"] <= THRESHOLDS["feet_up_cm"], row["feet_up_where"]
