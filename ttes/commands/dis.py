@@ -11,6 +11,8 @@ import argparse
 import sys
 from typing import Any
 
+from ttes.arguments import UsageError, port
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("dis", help="read DIS logs and write synthetic DIS exercises", description=__doc__)
@@ -20,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     def add_reading(q: argparse.ArgumentParser) -> None:
         q.add_argument("path", help="pcap, pcapng, .dislog or raw PDU file")
         q.add_argument("--json", action="store_true", help="machine-readable output")
-        q.add_argument("--port", type=int, default=3000, help="UDP port of the DIS traffic (default 3000)")
+        q.add_argument("--port", type=port, default=3000, help="UDP port of the DIS traffic (default 3000)")
         q.add_argument("--any-port", action="store_true", help="take DIS from every UDP port")
         q.add_argument(
             "--format", default="auto", choices=("auto", "pcap", "pcapng", "dislog", "raw"), help="log format"
@@ -64,10 +66,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _origin(text: str | None) -> tuple[float, float, float] | None:
     if not text:
         return None
-    parts = text.split(",")
-    if len(parts) not in (2, 3):
-        raise ValueError(f"--origin wants LAT,LON[,H], not {text!r}")
-    vals = [float(x) for x in parts]
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) not in (2, 3):
+        raise UsageError(f"--origin wants LAT,LON[,H], not {text!r}")
     return (vals[0], vals[1], vals[2] if len(vals) == 3 else 0.0)
 
 
@@ -260,6 +264,7 @@ def run_info(args: argparse.Namespace) -> int:
 
     from protocol.dis.entity_type import is_lifeform
     from protocol.dis.pdu import pdu_type_name
+    from server.logging import plain
     from ttes.output import print_json
 
     log = _read(args, lifeforms_only=False)
@@ -275,7 +280,7 @@ def run_info(args: argparse.Namespace) -> int:
     else:
         for key, value in info.items():
             if key != "issue_list":
-                print(f"{key:>20}: {value}")
+                print(f"{key:>20}: {plain(value)}")
         for e in info["issue_list"]:
             print(f"{'issue':>20}: {e}")
     return 0
@@ -327,6 +332,10 @@ def run_synth(args: argparse.Namespace) -> int:
             f"wrote {args.out}: {n} packets ({ex.counts['entity_state']} soldier entity states, "
             f"{ex.counts['fire']} fire, {ex.counts['detonation']} detonation, "
             f"{ex.counts['vehicle_entity_state']} vehicle), {len(ex.entities)} soldiers, "
-            f"victim {summary['victim']} at t={ex.t_kill:.1f} s"
+            + (
+                f"victim {':'.join(map(str, summary['victim']))} at t={ex.t_kill:.1f} s"
+                if ex.victim is not None
+                else "no victim"
+            )
         )
     return 0

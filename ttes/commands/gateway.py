@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ttes.arguments import host, listen_port, port
 from ttes.link_options import add_link_options, link_credentials, link_error
 
 if TYPE_CHECKING:
@@ -35,12 +36,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--dis-port", type=int, default=3000, help="UDP port to listen on (default 3000)")
-    p.add_argument("--dis-group", metavar="ADDR", help="multicast group to join (default: none)")
-    p.add_argument("--interface", default="127.0.0.1", metavar="ADDR",
+    p.add_argument("--dis-port", type=listen_port, default=3000, help="UDP port to listen on (default 3000)")
+    p.add_argument("--dis-group", type=host, metavar="ADDR", help="multicast group to join (default: none)")
+    p.add_argument("--interface", type=host, default="127.0.0.1", metavar="ADDR",
                    help="local address to bind / join on (default 127.0.0.1; 0.0.0.0: all)")  # fmt: skip
-    p.add_argument("--host", help="Jack/TTES server host (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
+    p.add_argument("--host", type=host, help="Jack/TTES server host (default 127.0.0.1)")
+    p.add_argument("--port", type=port, default=7000, help="server port (default 7000)")
     p.add_argument("--with-server", action="store_true", help="run a private server in this process")
     p.add_argument("--data-dir", help="private server: its data directory")
     p.add_argument("--synthetic-server", action="store_true", help="private server: synthetic motion library")

@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
+from ttes.arguments import UsageError, count, host, non_negative, port, positive
 from ttes.link_options import add_link_options, link_credentials
 
 
@@ -22,13 +24,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     where = p.add_mutually_exclusive_group()
     where.add_argument("--spawn-server", action="store_true", help="run a `ttes server` child on loopback")
-    where.add_argument("--host", default="127.0.0.1", help="server address (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
-    p.add_argument("--soldiers", type=int, default=100, help="soldiers N (the first stage with --ramp)")
-    p.add_argument("--clients", type=int, default=2, help="client connections C sharing the soldiers")
-    p.add_argument("--rate", type=float, default=30.0, help="update rate HZ (the spawned server's tick rate)")
-    p.add_argument("--seconds", type=float, default=10.0, help="steady-state seconds measured (per stage)")
-    p.add_argument("--warmup", type=float, default=3.0, help="seconds before measuring (per stage)")
+    where.add_argument("--host", type=host, default="127.0.0.1", help="server address (default 127.0.0.1)")
+    p.add_argument("--port", type=port, default=7000, help="server port (default 7000)")
+    p.add_argument("--soldiers", type=count(1), default=100, help="soldiers N (the first stage with --ramp)")
+    p.add_argument("--clients", type=count(1), default=2, help="client connections C sharing the soldiers")
+    p.add_argument(
+        "--rate", type=positive, default=30.0, help="update rate HZ (the spawned server's tick rate)"
+    )
+    p.add_argument("--seconds", type=positive, default=10.0, help="steady-state seconds measured (per stage)")
+    p.add_argument("--warmup", type=non_negative, default=3.0, help="seconds before measuring (per stage)")
     p.add_argument("--mix", choices=("realistic", "moving"), default="realistic", help="what the soldiers do")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument(
@@ -50,8 +54,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--server-pid", type=int, help="PID of an external server on this machine (for its CPU)")
     p.add_argument("--ramp", action="store_true", help="grow N until the server falls behind")
     p.add_argument("--ramp-factor", type=float, default=1.3, help="N multiplier per ramp stage")
-    p.add_argument("--ramp-max-soldiers", type=int, default=8000)
-    p.add_argument("--ramp-max-seconds", type=float, default=600.0, help="wall-clock bound of the ramp")
+    p.add_argument("--ramp-max-soldiers", type=count(1), default=8000)
+    p.add_argument("--ramp-max-seconds", type=positive, default=600.0, help="wall-clock bound of the ramp")
     p.add_argument("--min-delivered-pct", type=float, default=99.0, help="ramp criterion: delivered/expected")
     p.add_argument("--max-p99-ms", type=float, default=33.0, help="ramp criterion: p99 latency")
     p.add_argument(
@@ -66,11 +70,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    from client_stub.link.spawn import SpawnError
-    from client_stub.loadtest.client import LoadError
-    from client_stub.loadtest.session import LoadTestConfig, run_loadtest
-    from ttes.output import print_json
+def _config(args: argparse.Namespace) -> Any:
+    """The LoadTestConfig the options ask for (ValueError when they do not go together)."""
+    from client_stub.loadtest.session import LoadTestConfig
 
     throttle: float | None = None if args.throttle == "script" else float(args.throttle)
     cfg = LoadTestConfig(
@@ -98,6 +100,20 @@ def run(args: argparse.Namespace) -> int:
         latency_metric=args.latency_metric,
         credentials=link_credentials(args),
     )
+    cfg.check()
+    return cfg
+
+
+def run(args: argparse.Namespace) -> int:
+    from client_stub.link.spawn import SpawnError
+    from client_stub.loadtest.client import LoadError
+    from client_stub.loadtest.session import run_loadtest
+    from ttes.output import print_json
+
+    try:  # values that do not go together (more clients than soldiers): a usage error
+        cfg = _config(args)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     try:
         result = run_loadtest(cfg)
     except (LoadError, SpawnError) as exc:

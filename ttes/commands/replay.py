@@ -28,6 +28,17 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
+from ttes.arguments import (
+    HEADLESS_NEEDS_OUT,
+    VIDEO_SUFFIXES,
+    UsageError,
+    host,
+    number,
+    port,
+    positive,
+    size,
+    video_or_png,
+)
 from ttes.link_options import add_link_options, link_credentials, link_error
 
 
@@ -50,22 +61,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--origin", metavar="LAT,LON,H", help="local frame origin (default: the first entity)")
     p.add_argument("--timeout", type=float, default=12.0, help="seconds without a PDU before a soldier goes")
     p.add_argument("--format", choices=("auto", "pcap", "pcapng", "dislog", "raw"), default="auto")
-    p.add_argument("--dis-port", type=int, default=3000, help="UDP port of DIS in captures (default 3000)")
+    p.add_argument("--dis-port", type=port, default=3000, help="UDP port of DIS in captures (default 3000)")
     p.add_argument("--any-port", action="store_true", help="read DIS on every UDP port of a capture")
     p.add_argument(
         "--headless", action="store_true", help="render offscreen (EGL) to --out instead of a window"
     )
     p.add_argument(
-        "--out", type=Path, default=Path("ttes-replay.mp4"), help="headless: .mp4/.gif video or .png"
+        "--out",
+        type=video_or_png,
+        help=f"--headless (needed): the video ({', '.join(VIDEO_SUFFIXES)}) or a .png of the last frame",
     )
-    p.add_argument("--seconds", type=float, help="headless: video length (default: the log, at --speed)")
-    p.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
-    p.add_argument("--size", default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument("--seconds", type=positive, help="headless: video length (default: the log, at --speed)")
+    p.add_argument("--fps", type=number(1, 120), default=15.0, help="frames per second (default 15)")
+    p.add_argument("--size", type=size, default="640x480", help="image size WxH (default 640x480)")
     p.add_argument("--camera", choices=("squad", "birds-eye", "soldier", "overhead"), default="squad",
                    help="start camera (default: one framing the whole squad; keys take over)")  # fmt: skip
     p.add_argument("--no-stub", action="store_true", help="no image generator: only drive the server")
-    p.add_argument("--host", help="Jack/TTES server host (default: a private server)")
-    p.add_argument("--port", type=int, default=7000, help="server port with --host (default 7000)")
+    p.add_argument("--host", type=host, help="Jack/TTES server host (default: a private server)")
+    p.add_argument("--port", type=port, default=7000, help="server port with --host (default 7000)")
     p.add_argument("--offline", action="store_true", help="no server: the stub poses the soldiers itself")
     p.add_argument(
         "--data-dir", type=Path, help="private server: its data directory (default: the project's)"
@@ -108,16 +121,6 @@ def parse_origin(text: str | None) -> Any:
     if not (-90 <= lat <= 90 and -180 <= lon <= 360 and math.isfinite(h)):
         raise ValueError(f"--origin {text!r} out of range")
     return LocalFrame(lat, lon, h)
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"--size must be WxH, not {text!r}") from None
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise ValueError("--size out of range")
-    return w, h
 
 
 @contextlib.asynccontextmanager
@@ -167,17 +170,25 @@ def run(args: argparse.Namespace) -> int:
     try:
         entity_filter = EntityFilter.parse(args.entities) if args.entities else None
         origin = parse_origin(args.origin)
-        size = _size(args.size)
         if not (math.isfinite(args.start) and args.start >= 0):
             raise ValueError("--start must be >= 0 seconds")
         if not (math.isfinite(args.timeout) and args.timeout > 0):
             raise ValueError("--timeout must be > 0 seconds")
-        log = read_log(args.logfile, fmt=args.format, port=None if args.any_port else args.dis_port)
-    except (FilterError, DisError, ValueError) as exc:
+    except (FilterError, ValueError) as exc:
         print(f"ttes replay: {exc}", file=sys.stderr)
         return 2
+    try:  # a log that cannot be read is a runtime error (1), not a usage error
+        log = read_log(args.logfile, fmt=args.format, port=None if args.any_port else args.dis_port)
+    except (DisError, OSError) as exc:
+        print(f"ttes replay: {exc}", file=sys.stderr)
+        return 1
     if not len(log.batch):
-        print(f"ttes replay: {args.logfile}: no lifeform Entity State PDUs ({log.counters})", file=sys.stderr)
+        from server.logging import plain
+
+        print(
+            f"ttes replay: {args.logfile}: no lifeform Entity State PDUs ({plain(log.counters)})",
+            file=sys.stderr,
+        )
         return 1
     if args.offline and args.no_stub:
         print("ttes replay: --offline --no-stub would do nothing", file=sys.stderr)
@@ -188,10 +199,11 @@ def run(args: argparse.Namespace) -> int:
         summary = _run_server_only(args, replayer)
     elif args.headless:
         if args.loop and args.seconds is None:
-            print("ttes replay: --loop --headless needs --seconds", file=sys.stderr)
-            return 2
+            raise UsageError("--loop --headless needs --seconds")
+        if args.out is None:
+            raise UsageError(HEADLESS_NEEDS_OUT)
         os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-        summary = _run_headless(args, replayer, size)
+        summary = _run_headless(args, replayer, args.size)
     else:
         if not (
             os.environ.get("DISPLAY")
@@ -200,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
         ):
             print("ttes replay: no display; use --headless --out FILE.mp4 (or --no-stub)", file=sys.stderr)
             return 2
-        summary = _run_window(args, replayer, size)
+        summary = _run_window(args, replayer, args.size)
     if summary is None:
         return 1
     if args.json:
@@ -212,6 +224,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"replayed {summary['replay_time']:.1f} s: {summary['created']} soldiers, "
               f"{summary['pdus']} PDUs, {summary['requests']} requests{extra}")  # fmt: skip
     return 0
+
+
+def _log_length(replayer: Any) -> float | None:
+    """The replay time the status lines count to: the log's length (None when looping)."""
+    return None if replayer.loop else replayer.cursor.t_end - replayer.cursor.t0
 
 
 async def stop_on_signal(scope: Any) -> None:
@@ -244,7 +261,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
             async with trio.open_nursery() as nursery:
                 connect = connector(nursery, host, port, credentials=link_credentials(args))
                 sink = ServerSink(await connect())
-                progress = ProgressLine(out=None if args.json else sys.stderr)
+                progress = ProgressLine(out=None if args.json else sys.stderr, total=_log_length(replayer))
                 failures: list[str] = []
 
                 async def drain() -> None:
@@ -348,7 +365,10 @@ def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
 
     terrain = load_terrain(args.terrain or DEFAULT_TERRAIN)
     app = replay_app(
-        terrain, replayer, link=link, progress=ProgressLine(out=None if args.json else sys.stderr)
+        terrain,
+        replayer,
+        link=link,
+        progress=ProgressLine(out=None if args.json else sys.stderr, total=_log_length(replayer)),
     )
     camera = getattr(args, "camera", "squad")
     assert isinstance(app.source, DisSoldiers)
