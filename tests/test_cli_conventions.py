@@ -1,0 +1,175 @@
+"""The `ttes` conventions as a user meets them, in real processes (issue 19): exit 1 for a runtime error and 2
+for a usage error, values named in the message, ranges validated while parsing, `--version`, a taken port
+found before the data loads, valid names listed, no Python reprs in human output, one log format."""
+
+from __future__ import annotations
+
+import os
+import re
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from test_server_support import synthetic_dir
+
+REPO = Path(__file__).resolve().parents[1]
+GRAPH = REPO / "posture_graphs" / "soldier_low.graph"
+LOG_LINE = re.compile(r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z level=\w+ event=\S+")
+REPRS = ("{'", "['", "[[", "None", "True", "False")
+
+
+def ttes(*args: str, cwd: Path = REPO, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
+    cmd = [sys.executable, "-m", "ttes", *args]
+    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout, check=False)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_version_and_the_exit_statuses_in_help() -> None:
+    r = ttes("--version")
+    assert r.returncode == 0 and re.match(r"ttes \(jack-ttes\) \S+, protocol \d+$", r.stdout.strip()), r
+    r = ttes("--help")
+    assert r.returncode == 0
+    assert "exit status" in r.stdout and "  1    " in r.stdout and "  2    usage" in r.stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (["ping", "--port", "99999"], "--port: 99999 is outside 1..65535"),
+        (["ping", "--port", "0"], "--port: 0 is outside 1..65535"),
+        (["ping", "--port", "seven"], "--port: 'seven' is not a whole number"),
+        (["ping", "--host", "no such host"], "--host: 'no such host' is not an IP address or a host name"),
+        (["ping", "--timeout", "-1"], "--timeout: -1 must be > 0"),
+        (["server", "--port", "65536"], "--port: 65536 is outside 0..65535"),
+        (["stub", "--port", "70000"], "--port: 70000 is outside 1..65535"),
+        (["stub", "--size", "big"], "--size: 'big' is not WIDTHxHEIGHT"),
+        (["stub", "--headless", "--out", "x.jpg"], "--out: x.jpg: cannot write .jpg; use .mp4"),
+        (["stub", "--fps", "0"], "--fps: 0 is outside [1, 120]"),
+        (["loadtest", "--port", "-5"], "--port: -5 is outside 1..65535"),
+        (["loadtest", "--soldiers", "0"], "--soldiers: 0 must be >= 1"),
+        (["gateway", "--dis-port", "70000"], "--dis-port: 70000 is outside 0..65535"),
+        (["gateway", "--interface", "eth 0"], "--interface: 'eth 0' is not an IP address or a host name"),
+        (["replay", "x.pcap", "--port", "99999"], "--port: 99999 is outside 1..65535"),
+        (["replay", "x.pcap", "--out", "x.txt", "--headless"], "--out: x.txt: cannot write .txt"),
+        (["crowd", "--size", "8x8"], "--size: 8x8 is outside 16x16..8192x8192"),
+        (["dis", "info", "x.pcap", "--port", "99999"], "--port: 99999 is outside 1..65535"),
+        (["author", "contact-sheet", "--out", "x.png", "--tile", "8"], "--tile: 8 must be >= 32"),
+    ],
+)
+def test_a_bad_value_is_a_usage_error_naming_it(args: list[str], named: str) -> None:
+    r = ttes(*args)
+    assert r.returncode == 2 and named in r.stderr and "usage: ttes" in r.stderr, r.stderr
+
+
+def test_options_that_do_not_go_together_are_usage_errors() -> None:
+    r = ttes("loadtest", "--soldiers", "2", "--clients", "3")
+    assert r.returncode == 2 and "more clients than soldiers" in r.stderr
+    r = ttes("server", "--throttle", "0.5", "--tick-hz", "100000")
+    assert r.returncode == 2 and "tick_hz" in r.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (["figure", "info", "missing.fig"], "missing.fig"),
+        (["channelset", "info", "missing.chset.env"], "missing.chset.env"),
+        (["graph", "info", "missing.graph"], "missing.graph"),
+        (["dis", "info", "missing.pcap"], "missing.pcap"),
+        (["replay", "missing.pcap", "--no-stub"], "missing.pcap"),
+    ],
+)
+def test_a_file_that_cannot_be_read_is_a_runtime_error_naming_it(
+    args: list[str], named: str, tmp_path: Path
+) -> None:
+    r = ttes(*args, cwd=tmp_path)
+    assert r.returncode == 1 and named in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_no_server_is_a_runtime_error_naming_the_address() -> None:
+    port = _free_port()
+    r = ttes("ping", "--port", str(port), "--timeout", "1")
+    assert r.returncode == 1 and f"127.0.0.1:{port}" in r.stderr
+
+
+def test_a_port_in_use_fails_before_the_data_loads_and_names_the_address() -> None:
+    data = synthetic_dir().path
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        r = ttes("server", "--port", str(port), "--data-dir", str(data))
+    assert r.returncode == 1, r.stderr
+    assert f"cannot listen on 127.0.0.1:{port}: Address already in use" in r.stderr
+    # the server logs each step of its start-up: none ran (it used to load everything first)
+    assert "environment_read" not in r.stderr and "startup_done" not in r.stderr
+
+
+def test_graph_path_lists_the_valid_postures() -> None:
+    r = ttes("graph", "path", str(GRAPH), "stand", "prone")
+    assert r.returncode == 2
+    assert "unknown posture 'stand' (did you mean STAND_STOWED or STAND_FIRE?)" in r.stderr
+    assert "its postures: STAND_STOWED, STAND_FIRE, KNEEL_STOWED" in r.stderr
+
+
+def test_author_help_has_no_development_note() -> None:
+    r = ttes("author", "--help")
+    assert r.returncode == 0
+    assert "join it as" not in r.stdout and "AUTHOR_STEPS" not in r.stdout
+    for step in ("figures", "build", "check", "contact-sheet"):
+        assert step in r.stdout
+
+
+def test_headless_stub_needs_an_out_file(tmp_path: Path) -> None:
+    r = ttes("stub", "--headless", "--seconds", "1", cwd=tmp_path)
+    assert r.returncode == 2 and "--headless needs --out FILE" in r.stderr and ".png" in r.stderr
+    assert not list(tmp_path.iterdir())  # it used to write ./ttes-stub.mp4 unasked
+
+
+def test_human_output_has_no_python_reprs(tmp_path: Path) -> None:
+    pcap = tmp_path / "squad.pcap"
+    readme = tmp_path / "notes.txt"
+    readme.write_text("# not a DIS log\n" * 40)
+    runs = [
+        ttes("dis", "synth", "--out", str(pcap), "--seconds", "20"),
+        ttes("dis", "info", str(pcap)),
+        ttes("figure", "info", str(REPO / "figures" / "DI.fig")),
+        ttes("graph", "info", str(GRAPH)),
+        ttes("graph", "path", str(GRAPH), "STAND_STOWED", "PRONE_STOWED"),
+        ttes("demo", "--figures-only"),
+        ttes("replay", str(readme), "--no-stub"),
+    ]
+    for r in runs:
+        text = r.stdout + r.stderr
+        assert not [x for x in REPRS if x in text], f"{r.args[3:]}:\n{text}"
+    assert "pdu_types: entity_state:" in runs[1].stdout and "victim 1:2:2 at" in runs[0].stdout
+
+
+def test_every_process_logs_in_the_servers_format(tmp_path: Path) -> None:
+    """A client's logger (the stub's) and the server's write the same key=value lines, values plain."""
+    script = (
+        "import logging, sys\n"
+        "from ttes.cli import configure_logging\n"
+        "from server.logging import configure, get_logger\n"
+        "configure_logging(0)\n"
+        "logging.getLogger('ttes.stub').warning('server lost: %s', 'reset')\n"
+        "configure()\n"
+        "get_logger('world').info('motion_library_bound', figure_sets=[['DI.fig', 'AK_47.fig']], walk=True,\n"
+        "                         modes={'idle': 10}, last=None)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    r = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+    lines = r.stderr.splitlines()
+    assert len(lines) == 2 and all(LOG_LINE.match(x) for x in lines), lines
+    assert lines[0].endswith('level=warning event="server lost: reset" src=ttes.stub')
+    assert lines[1].endswith(
+        "event=motion_library_bound figure_sets=DI.fig+AK_47.fig walk=true modes=idle:10 last=none"
+    )
