@@ -4,6 +4,8 @@ found before the data loads, valid names listed, no Python reprs in human output
 
 from __future__ import annotations
 
+import io
+import json
 import os
 import re
 import socket
@@ -13,6 +15,9 @@ from pathlib import Path
 
 import pytest
 from test_server_support import synthetic_dir
+
+from client_stub.dis.drive import ProgressLine
+from ttes.progress import ENV, ProgressBar
 
 REPO = Path(__file__).resolve().parents[1]
 GRAPH = REPO / "posture_graphs" / "soldier_low.graph"
@@ -173,3 +178,53 @@ def test_every_process_logs_in_the_servers_format(tmp_path: Path) -> None:
     assert lines[1].endswith(
         "event=motion_library_bound figure_sets=DI.fig+AK_47.fig walk=true modes=idle:10 last=none"
     )
+
+
+# -- progress: totals and ETA on stderr, never in --json stdout ------------------------------------------
+def test_headless_stub_progress_goes_to_stderr_with_its_total(tmp_path: Path) -> None:
+    out = tmp_path / "last.png"
+    env_args = ["stub", "--headless", "--seconds", "1", "--fps", "5", "--size", "64x48", "--out", str(out),
+                "--artic-dir", str(tmp_path), "--no-tour", "--json"]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(REPO), "TTES_PROGRESS": "1"}
+    r = subprocess.run([sys.executable, "-m", "ttes", *env_args], cwd=tmp_path, env=env, capture_output=True,
+                       text=True, timeout=120, check=False)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["frames"] == 5  # stdout: the one JSON object
+    bars = r.stderr.replace("\r", "\n")
+    assert "ttes stub:  40%" in bars and "ttes stub: 100%" in bars and "| 1.0/1.0 s [" in bars
+
+
+def test_loadtest_progress_names_its_stage_and_total(tmp_path: Path) -> None:
+    args = ["loadtest", "--spawn-server", "--server-data", "synthetic", "--soldiers", "2", "--clients", "1",
+            "--seconds", "0.5", "--warmup", "0.2", "--json"]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(REPO), "TTES_PROGRESS": "1"}
+    r = subprocess.run([sys.executable, "-m", "ttes", *args], cwd=tmp_path, env=env, capture_output=True,
+                       text=True, timeout=120, check=False)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["soldiers"] == 2
+    assert "ttes loadtest N=2: 100%|" in r.stderr.replace("\r", "\n") and "| 0.7/0.7 s [" in r.stderr
+
+
+def test_progress_bar_restarts_per_stage_and_is_off_without_a_terminal(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.delenv(ENV, raising=False)
+    with ProgressBar("job") as quiet:  # stderr is captured: no terminal, no bar
+        quiet(1.0, 2.0)
+    assert capsys.readouterr().err == ""
+    with ProgressBar("job", enabled=True) as bar:
+        bar(1.0, 2.0, "N=10")
+        bar(2.0, 2.0, "N=10")
+        bar(0.5, 4.0, "N=13")
+    err = capsys.readouterr().err.replace("\r", "\n")
+    assert "job N=10: 100%" in err and "job N=13:  12%" in err and "| 0.5/4.0 s [" in err
+
+
+def test_replay_status_lines_give_the_total_and_an_eta() -> None:
+    wall = iter([100.0, 104.0, 108.0])  # the wall clock: 4 s for the first 10 s of a 60 s log
+    out = io.StringIO()
+    line = ProgressLine(out=out, total=60.0, clock=lambda: next(wall))
+    line.update(0.0, 0.0, 3, 0)
+    line.update(1.0, 10.0, 3, 40)  # 10 s of log in 4 s of wall clock: 50 s more take 20 s
+    assert out.getvalue() == "\rreplay    10.0 / 60.0 s |     3 alive |        40 PDU/s | ETA 0:20\n"
+    assert ProgressLine(out=None).text(12.0, 1).startswith("replay    12.0 s |")  # looping: no total, no ETA

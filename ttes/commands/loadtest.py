@@ -114,8 +114,11 @@ def run(args: argparse.Namespace) -> int:
         cfg = _config(args)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    from ttes.progress import ProgressBar
+
     try:
-        result = run_loadtest(cfg)
+        with ProgressBar("ttes loadtest") as bar:
+            result = run_loadtest(cfg, progress=bar)
     except (LoadError, SpawnError) as exc:
         print(f"ttes loadtest: error: {exc}", file=sys.stderr)
         return 1

@@ -170,10 +170,11 @@ def run(args: argparse.Namespace) -> int:
             run_viewer(app, width, height, args.fps)
             return 3 if app.gave_up else 0
         from client_stub.stub.headless import run_headless
+        from ttes.progress import ProgressBar
 
-        summary = run_headless(
-            app, args.seconds, args.out, fps=args.fps, realtime=app.link is not None, tour=not args.no_tour
-        )
+        with ProgressBar("ttes stub") as bar:
+            summary = run_headless(app, args.seconds, args.out, fps=args.fps, realtime=app.link is not None,
+                                   tour=not args.no_tour, progress=bar)  # fmt: skip
         app.renderer.close()
     finally:
         app.close()
