@@ -17,6 +17,7 @@ import pytest
 from test_server_support import synthetic_dir
 
 from client_stub.dis.drive import ProgressLine
+from ttes.commands.loadtest import format_result
 from ttes.progress import ENV, ProgressBar
 
 REPO = Path(__file__).resolve().parents[1]
@@ -228,3 +229,22 @@ def test_replay_status_lines_give_the_total_and_an_eta() -> None:
     line.update(1.0, 10.0, 3, 40)  # 10 s of log in 4 s of wall clock: 50 s more take 20 s
     assert out.getvalue() == "\rreplay    10.0 / 60.0 s |     3 alive |        40 PDU/s | ETA 0:20\n"
     assert ProgressLine(out=None).text(12.0, 1).startswith("replay    12.0 s |")  # looping: no total, no ETA
+
+
+def test_loadtest_ramp_summary_says_n_a_not_none() -> None:
+    stage = dict.fromkeys(("delivered_pct", "updates_per_s", "expected_updates_per_s", "latency_ms_p50",
+                           "latency_ms_p99", "delivery_ms_p99", "server_cpu_pct"))  # fmt: skip
+    result = {
+        "ramp": True,
+        "clients": 2,
+        "rate_hz": 30.0,
+        "criteria": {"min_delivered_pct": 99.0, "max_p99_ms": 33.0, "latency_metric": "request"},
+        "largest_sustained_soldiers": None,
+        "first_failed_soldiers": 100,
+        "stages": [{**stage, "soldiers": 100, "passed": False}],
+    }
+    text = format_result(result)
+    assert not [x for x in REPRS if x in text], text
+    assert "criteria: delivered >= 99% and request p99 <= 33 ms" in text
+    assert "largest sustained N = none (the first stage failed) (first failed: 100)" in text
+    assert "delivered n/a" in text and "FAIL" in text

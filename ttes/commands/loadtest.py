@@ -133,28 +133,18 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _na(value: object, unit: str = "") -> str:
+    return "n/a" if value is None else f"{value}{unit}"
+
+
 def format_result(r: dict) -> str:
-    """A short human summary."""
+    """A short human summary ("n/a" where a value could not be measured)."""
 
     def f(key: str, unit: str = "") -> str:
-        v = r.get(key)
-        return "n/a" if v is None else f"{v}{unit}"
+        return _na(r.get(key), unit)
 
     if r.get("ramp"):
-        lines = [
-            f"ttes loadtest --ramp: {r['clients']} clients at {r['rate_hz']:g} Hz, criteria {r['criteria']}",
-            f"  largest sustained N = {r['largest_sustained_soldiers']} "
-            f"(first failed: {r['first_failed_soldiers']})",
-        ]
-        for s in r["stages"]:
-            lines.append(
-                f"  N={s['soldiers']:>6}  delivered {s['delivered_pct']}%  updates/s {s['updates_per_s']} of "
-                f"{s['expected_updates_per_s']}  latency p50/p99 "
-                f"{s['latency_ms_p50']}/{s['latency_ms_p99']} ms  "
-                f"tick->arrival p99 {s['delivery_ms_p99']} ms  server CPU {s['server_cpu_pct']}%  "
-                f"{'ok' if s['passed'] else 'FAIL'}"
-            )
-        return "\n".join(lines)
+        return _format_ramp(r)
     return "\n".join(
         [
             f"ttes loadtest: {r['soldiers']} soldiers, {r['clients']} clients, {r['rate_hz']:g} Hz, "
@@ -174,3 +164,24 @@ def format_result(r: dict) -> str:
             f"{f('client_cpu_pct', '%')}",
         ]
     )
+
+
+def _format_ramp(r: dict) -> str:
+    c = r["criteria"]
+    best = r["largest_sustained_soldiers"]
+    lines = [
+        f"ttes loadtest --ramp: {r['clients']} clients at {r['rate_hz']:g} Hz, criteria: delivered >= "
+        f"{c['min_delivered_pct']:g}% and {c['latency_metric']} p99 <= {c['max_p99_ms']:g} ms",
+        f"  largest sustained N = {best if best is not None else 'none (the first stage failed)'} "
+        f"(first failed: {_na(r['first_failed_soldiers'])})",
+    ]
+    for s in r["stages"]:
+        lines.append(
+            f"  N={s['soldiers']:>6}  delivered {_na(s['delivered_pct'], '%')}  updates/s "
+            f"{_na(s['updates_per_s'])} of {_na(s['expected_updates_per_s'])}  latency p50/p99 "
+            f"{_na(s['latency_ms_p50'])}/{_na(s['latency_ms_p99'])} ms  "
+            f"tick->arrival p99 {_na(s['delivery_ms_p99'], ' ms')}  "
+            f"server CPU {_na(s['server_cpu_pct'], '%')}  "
+            f"{'ok' if s['passed'] else 'FAIL'}"
+        )
+    return "\n".join(lines)
