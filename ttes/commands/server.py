@@ -91,7 +91,10 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_overrides(data_dir=synth.path, startup_script=synth.startup_script)
     configure(json_logs=cfg.json_logs, level=logging.DEBUG if args.verbose > 1 else logging.INFO)
     try:
-        check_exposure(cfg)  # no tokens: loopback only
+        try:
+            check_exposure(cfg)  # no tokens: loopback only (--host beyond it without tokens: a usage error)
+        except ConfigError as exc:
+            raise UsageError(str(exc)) from None
         server = TtesServer(cfg)
         server.bind()  # a port in use fails here, at once and naming host:port, before the data loads
         server.start_world()  # a bad script or data dir fails here, before accepting
