@@ -28,7 +28,8 @@ EXIT_STATUS = """exit status (every command):
   2    usage: a bad option or value (named), or a missing extra (named, with its pip install)
   3    ttes stub: the server was lost and did not come back
   130  interrupted (Ctrl-C)
-`ttes author check` and `author figures --check` exit 1 when the data fail their check."""
+`ttes author check` and `author figures --check` exit 1 when the data fail their check; `author check`
+exits 2 when it could check nothing (a missing file too), as grep does."""
 
 
 def version() -> str:

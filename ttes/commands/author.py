@@ -126,8 +126,8 @@ def run_check(args: argparse.Namespace) -> int:
         return 2
     try:
         result = check_library(graphs, args.figures or FIGURES, clips=args.clips)
-    except (QualityError, ChannelsetError, PostureGraphError, PeabodyError) as exc:
-        print(f"ttes author check: {exc}", file=sys.stderr)
+    except (QualityError, ChannelsetError, PostureGraphError, PeabodyError, OSError) as exc:
+        print(f"ttes author check: {exc}", file=sys.stderr)  # 1 is a failing threshold: 2, as grep does
         return 2
     if args.only:
         result = only_clips(result, args.only)
