@@ -26,8 +26,15 @@ LOG_LINE = re.compile(r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z level=\w+ event=
 REPRS = ("{'", "['", "[[", "None", "True", "False")
 
 
-def ttes(*args: str, cwd: Path = REPO, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
+def ttes(
+    *args: str, cwd: Path = REPO, timeout: float = 120.0, progress: bool = False
+) -> subprocess.CompletedProcess[str]:
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(REPO),
+        "PYTHONUNBUFFERED": "1",
+        "TTES_PROGRESS": "1" if progress else "0",
+    }
     cmd = [sys.executable, "-m", "ttes", *args]
     return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout, check=False)
 
@@ -184,11 +191,8 @@ def test_every_process_logs_in_the_servers_format(tmp_path: Path) -> None:
 # -- progress: totals and ETA on stderr, never in --json stdout ------------------------------------------
 def test_headless_stub_progress_goes_to_stderr_with_its_total(tmp_path: Path) -> None:
     out = tmp_path / "last.png"
-    env_args = ["stub", "--headless", "--seconds", "1", "--fps", "5", "--size", "64x48", "--out", str(out),
-                "--artic-dir", str(tmp_path), "--no-tour", "--json"]  # fmt: skip
-    env = {**os.environ, "PYTHONPATH": str(REPO), "TTES_PROGRESS": "1"}
-    r = subprocess.run([sys.executable, "-m", "ttes", *env_args], cwd=tmp_path, env=env, capture_output=True,
-                       text=True, timeout=120, check=False)  # fmt: skip
+    r = ttes("stub", "--headless", "--seconds", "1", "--fps", "5", "--size", "64x48", "--out", str(out),
+             "--artic-dir", str(tmp_path), "--no-tour", "--json", cwd=tmp_path, progress=True)  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["frames"] == 5  # stdout: the one JSON object
     bars = r.stderr.replace("\r", "\n")
@@ -196,11 +200,8 @@ def test_headless_stub_progress_goes_to_stderr_with_its_total(tmp_path: Path) ->
 
 
 def test_loadtest_progress_names_its_stage_and_total(tmp_path: Path) -> None:
-    args = ["loadtest", "--spawn-server", "--server-data", "synthetic", "--soldiers", "2", "--clients", "1",
-            "--seconds", "0.5", "--warmup", "0.2", "--json"]  # fmt: skip
-    env = {**os.environ, "PYTHONPATH": str(REPO), "TTES_PROGRESS": "1"}
-    r = subprocess.run([sys.executable, "-m", "ttes", *args], cwd=tmp_path, env=env, capture_output=True,
-                       text=True, timeout=120, check=False)  # fmt: skip
+    r = ttes("loadtest", "--spawn-server", "--server-data", "synthetic", "--soldiers", "2", "--clients", "1",
+             "--seconds", "0.5", "--warmup", "0.2", "--json", cwd=tmp_path, progress=True)  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["soldiers"] == 2
     assert "ttes loadtest N=2: 100%|" in r.stderr.replace("\r", "\n") and "| 0.7/0.7 s [" in r.stderr
