@@ -17,6 +17,7 @@ import pytest
 from test_server_support import synthetic_dir
 
 from client_stub.dis.drive import ProgressLine
+from ttes.commands.author import print_check_table
 from ttes.commands.loadtest import format_result
 from ttes.progress import ENV, ProgressBar
 
@@ -249,3 +250,29 @@ def test_loadtest_ramp_summary_says_n_a_not_none() -> None:
     assert "criteria: delivered >= 99% and request p99 <= 33 ms" in text
     assert "largest sustained N = none (the first stage failed) (first failed: 100)" in text
     assert "delivered n/a" in text and "FAIL" in text
+
+
+def test_author_check_table_shows_ranges_and_unmeasured_values_plainly(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    clip = {"name": "walk_cycle", "pass": False, "gait": "walk", "failures": ["gait_speed_m_s"],
+            "gait_speed_m_s": 1.9, "foot_skate_cm": None}  # fmt: skip
+    summary = {
+        "clips": 1,
+        "clips_failing": 1,
+        "postures_checked": 0,
+        "thresholds": {
+            "gait_speed_m_s": {
+                "limit": (1.2, 1.6),
+                "worst": 1.9,
+                "where": "walk_cycle",
+                "failing": 1,
+                "pass": False,
+            },
+            "foot_skate_cm": {"limit": 2.0, "worst": None, "where": None, "failing": 0, "pass": True},
+        },
+    }
+    print_check_table({"clips": [clip], "continuity": [], "summary": summary})
+    text = capsys.readouterr().out
+    assert not [x for x in REPRS if x in text] and "(1.2" not in text, text
+    assert "gait_speed_m_s = 1.9 (limit 1.2..1.6)" in text and "foot_skate_cm: worst - (limit 2.0)" in text

@@ -155,6 +155,15 @@ CHECK_COLUMNS = (  # (metric, header, width, format)
 )
 
 
+def _shown(value: object) -> str:
+    """A value or limit for a person: ``-`` when not measured, ``1.2..1.6`` for a range."""
+    if value is None:
+        return "-"
+    if isinstance(value, tuple):
+        return "..".join(f"{v:g}" for v in value)
+    return str(value)
+
+
 def _cell(value: object, width: int, fmt: str) -> str:
     return f"{'-':>{width}}" if value is None else f"{value:>{width}{fmt}}"
 
@@ -173,14 +182,15 @@ def print_check_table(result: dict) -> None:
         for k in c["failures"]:
             limit = GAIT_LIMITS[c["gait"]][k] if k.startswith("gait_") else THRESHOLDS.get(k)
             where = where_detail(c, k)
-            print(f"       {k} = {c.get(k)} (limit {limit}){' at ' + where if where else ''}")
+            print(f"       {k} = {_shown(c.get(k))} (limit {_shown(limit)}){' at ' + where if where else ''}")
     for r in result["continuity"]:
         if not r["pass"]:
             for k in r["failures"]:
                 where = r.get("rest_contact_where") if k == "rest_contact_cm" else r.get("rest_foot_where")
                 if k.startswith("continuity"):
                     where = ", ".join(r["worst_pair"])
-                print(f"FAIL {r['graph']}:{r['posture']} {k} = {r[k]} (limit {THRESHOLDS[k]}) at {where}")
+                value = _shown(r[k])
+                print(f"FAIL {r['graph']}:{r['posture']} {k} = {value} (limit {THRESHOLDS[k]}) at {where}")
     print(
         f"{summary['clips']} clips, {summary['clips_failing']} failing; "
         f"{summary['postures_checked']} posture nodes checked, {summary.get('postures_failing', 0)} failing"
@@ -188,7 +198,8 @@ def print_check_table(result: dict) -> None:
     for key, row in summary["thresholds"].items():
         failing = f", {row['failing']} failing" if row["failing"] else ""
         print(
-            f"  {'pass' if row['pass'] else 'FAIL'}  {key}: worst {row['worst']} (limit {row['limit']})"
+            f"  {'pass' if row['pass'] else 'FAIL'}  {key}: worst {_shown(row['worst'])} "
+            f"(limit {_shown(row['limit'])})"
             f"{' at ' + str(row['where']) if row['where'] else ''}{failing}"
         )
 
