@@ -16,6 +16,7 @@ from typing import Any
 
 from ttes.arguments import UsageError, count, host, non_negative, port, positive
 from ttes.link_options import add_link_options, link_credentials
+from ttes.output import na
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -133,15 +134,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _na(value: object, unit: str = "") -> str:
-    return "n/a" if value is None else f"{value}{unit}"
-
-
 def format_result(r: dict) -> str:
     """A short human summary ("n/a" where a value could not be measured)."""
 
     def f(key: str, unit: str = "") -> str:
-        return _na(r.get(key), unit)
+        return na(r.get(key), unit)
 
     if r.get("ramp"):
         return _format_ramp(r)
@@ -173,15 +170,15 @@ def _format_ramp(r: dict) -> str:
         f"ttes loadtest --ramp: {r['clients']} clients at {r['rate_hz']:g} Hz, criteria: delivered >= "
         f"{c['min_delivered_pct']:g}% and {c['latency_metric']} p99 <= {c['max_p99_ms']:g} ms",
         f"  largest sustained N = {best if best is not None else 'none (the first stage failed)'} "
-        f"(first failed: {_na(r['first_failed_soldiers'])})",
+        f"(first failed: {na(r['first_failed_soldiers'])})",
     ]
     for s in r["stages"]:
         lines.append(
-            f"  N={s['soldiers']:>6}  delivered {_na(s['delivered_pct'], '%')}  updates/s "
-            f"{_na(s['updates_per_s'])} of {_na(s['expected_updates_per_s'])}  latency p50/p99 "
-            f"{_na(s['latency_ms_p50'])}/{_na(s['latency_ms_p99'])} ms  "
-            f"tick->arrival p99 {_na(s['delivery_ms_p99'], ' ms')}  "
-            f"server CPU {_na(s['server_cpu_pct'], '%')}  "
+            f"  N={s['soldiers']:>6}  delivered {na(s['delivered_pct'], '%')}  updates/s "
+            f"{na(s['updates_per_s'])} of {na(s['expected_updates_per_s'])}  latency p50/p99 "
+            f"{na(s['latency_ms_p50'])}/{na(s['latency_ms_p99'])} ms  "
+            f"tick->arrival p99 {na(s['delivery_ms_p99'], ' ms')}  "
+            f"server CPU {na(s['server_cpu_pct'], '%')}  "
             f"{'ok' if s['passed'] else 'FAIL'}"
         )
     return "\n".join(lines)

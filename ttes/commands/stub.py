@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         return _make_terrain(args)
     if args.scenario or args.record:
         return _record_scenario(args)
-    from ttes.output import print_json
+    from ttes.output import na, print_json
 
     width, height = args.size
     if args.headless:
@@ -188,16 +188,12 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(
             f"wrote {summary['out']}: {summary['frames']} frames, {summary['soldiers']} soldiers, "
-            f"render {_na(summary['render_fps'])} fps, server {'yes' if summary['server'] else 'no'}"
+            f"render {na(summary['render_fps'])} fps, server {'yes' if summary['server'] else 'no'}"
         )
     if app.gave_up or app.server_lost:
         print(f"ttes stub: {app.gave_up or app.server_lost}", file=sys.stderr)
         return 3
     return 0
-
-
-def _na(value: object) -> str:
-    return "n/a" if value is None else str(value)
 
 
 def _record_scenario(args: argparse.Namespace) -> int:
