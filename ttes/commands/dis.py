@@ -11,7 +11,7 @@ import argparse
 import sys
 from typing import Any
 
-from ttes.arguments import UsageError, port
+from ttes.arguments import UsageError, count, port, positive
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -53,11 +53,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "broadcasts to port 3000, deterministic for a seed.",
     )
     s.add_argument("--out", required=True, help="output .pcap path")
-    s.add_argument("--soldiers", type=int, default=8, help="number of soldiers (alternating forces)")
-    s.add_argument("--seconds", type=float, default=60.0, help="exercise length (s)")
+    s.add_argument("--soldiers", type=count(1), default=8, help="number of soldiers (alternating forces)")
+    s.add_argument("--seconds", type=positive, default=60.0, help="exercise length (s)")
     s.add_argument("--seed", type=int, default=0, help="random seed")
     s.add_argument("--origin", help="LAT,LON,H of the exercise (default: Quantico MOUT, 38.52,-77.44,60)")
-    s.add_argument("--vehicles", type=int, default=1, help="parked vehicles (non-lifeform traffic)")
+    s.add_argument("--vehicles", type=count(0), default=1, help="parked vehicles (non-lifeform traffic)")
     s.add_argument("--dis-version", type=int, default=7, choices=(5, 6, 7), help="DIS protocol version")
     s.add_argument("--json", action="store_true", help="machine-readable summary")
     s.set_defaults(func=run_synth)

@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ttes.arguments import host, listen_port, port
+from ttes.arguments import host, listen_port, non_negative, port
 from ttes.link_options import add_link_options, link_credentials, link_error
 
 if TYPE_CHECKING:
@@ -48,11 +48,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--timeout", type=float, default=12.0, help="seconds without a PDU before a soldier goes")
     p.add_argument("--entities", metavar="FILTER", help="keep only these entities (as in `ttes replay`)")
     p.add_argument("--origin", metavar="LAT,LON,H", help="local frame origin (default: the first entity)")
-    p.add_argument("--status-every", type=float, default=5.0, help="seconds between status lines (0: none)")
+    p.add_argument(
+        "--status-every", type=non_negative, default=5.0, help="seconds between status lines (0: none)"
+    )
     p.add_argument("--seconds", type=float, help="stop after this many seconds (default: run until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="status lines and the final summary as JSON")
     add_link_options(p)
-    p.add_argument("--give-up-after", type=float, default=120.0, metavar="S",
+    p.add_argument("--give-up-after", type=non_negative, default=120.0, metavar="S",
                    help="a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) for "
                         "this long before the gateway exits 1 (default 120; 0: exit at once)")  # fmt: skip
     p.set_defaults(func=run)

@@ -14,7 +14,7 @@ import argparse
 import sys
 from typing import Any
 
-from ttes.arguments import UsageError, count, host, non_negative, port, positive
+from ttes.arguments import UsageError, count, host, non_negative, number, port, positive
 from ttes.link_options import add_link_options, link_credentials
 from ttes.output import na
 
@@ -52,13 +52,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--throttle", default="0", help="spawned server's --throttle seconds, or 'script' (default 0)"
     )
-    p.add_argument("--server-pid", type=int, help="PID of an external server on this machine (for its CPU)")
+    p.add_argument(
+        "--server-pid", type=count(1), help="PID of an external server on this machine (for its CPU)"
+    )
     p.add_argument("--ramp", action="store_true", help="grow N until the server falls behind")
     p.add_argument("--ramp-factor", type=float, default=1.3, help="N multiplier per ramp stage")
     p.add_argument("--ramp-max-soldiers", type=count(1), default=8000)
     p.add_argument("--ramp-max-seconds", type=positive, default=600.0, help="wall-clock bound of the ramp")
-    p.add_argument("--min-delivered-pct", type=float, default=99.0, help="ramp criterion: delivered/expected")
-    p.add_argument("--max-p99-ms", type=float, default=33.0, help="ramp criterion: p99 latency")
+    p.add_argument(
+        "--min-delivered-pct", type=number(0, 100), default=99.0, help="ramp criterion: delivered/expected"
+    )
+    p.add_argument("--max-p99-ms", type=positive, default=33.0, help="ramp criterion: p99 latency")
     p.add_argument(
         "--latency-metric",
         choices=("request", "delivery"),

@@ -33,6 +33,7 @@ from ttes.arguments import (
     VIDEO_SUFFIXES,
     UsageError,
     host,
+    non_negative,
     number,
     port,
     positive,
@@ -90,7 +91,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_link_options(p)
     p.add_argument(
         "--give-up-after",
-        type=float,
+        type=non_negative,
         default=120.0,
         metavar="S",
         help="--no-stub: a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) "
