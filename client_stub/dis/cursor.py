@@ -4,11 +4,14 @@ A replay is paced by the capture's receipt times: wall (or trio) time ``w`` afte
 ``t0 + start + speed * w``. ``LogCursor.take(t)`` hands out, in receipt order, every lifeform Entity State
 PDU and weapon event whose time is ``<= t`` that it has not handed out yet (two ``searchsorted`` calls, no
 per-PDU Python). Looping restarts the log; the translator's clock keeps running (``ReplayClock.offset``),
-so dead reckoning and timeouts never see time go backwards.
+so dead reckoning and timeouts never see time go backwards. With ``max_gap`` the cursor's clock is the log's
+with every silence longer than ``max_gap`` seconds cut down to ``max_gap`` (:class:`GapSqueeze`): a log of a
+few PDUs spread over a quarter of an hour does not replay a quarter of an hour of nothing.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
@@ -108,10 +111,41 @@ class EntityFilter:
         return keep
 
 
+@dataclass(frozen=True)
+class GapSqueeze:
+    """Log time -> replay time with every silence between successive PDUs longer than ``max_gap`` cut to
+    ``max_gap`` (monotone; PDU times keep their order and every gap up to ``max_gap`` its length)."""
+
+    knots: NDArray[np.float64]  # the PDU times (sorted, unique)
+    cut: NDArray[np.float64]  # seconds removed before each knot
+
+    @classmethod
+    def of(cls, times: NDArray[np.float64], max_gap: float) -> GapSqueeze:
+        knots = np.unique(np.asarray(times, np.float64))
+        excess = np.maximum(np.diff(knots) - max_gap, 0.0)
+        return cls(knots, np.concatenate(([0.0], np.cumsum(excess))))
+
+    @property
+    def skipped(self) -> float:
+        """Seconds of silence cut from the whole log."""
+        return float(self.cut[-1]) if len(self.cut) else 0.0
+
+    def __call__(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        t = np.asarray(t, np.float64)
+        if not len(self.knots):
+            return t.copy()
+        k = np.clip(np.searchsorted(self.knots, t, side="right") - 1, 0, len(self.knots) - 1)
+        nxt = np.minimum(k + 1, len(self.knots) - 1)
+        out = t - self.cut[k]
+        return np.minimum(out, np.where(nxt > k, self.knots[nxt] - self.cut[nxt], np.inf))
+
+
 class LogCursor:
     """The PDUs of a log in receipt order, handed out by time (see the module docstring)."""
 
-    def __init__(self, log: DisLog, entity_filter: EntityFilter | None = None) -> None:
+    def __init__(
+        self, log: DisLog, entity_filter: EntityFilter | None = None, max_gap: float | None = None
+    ) -> None:
         order = np.argsort(log.times, kind="stable")
         batch = log.batch.select(order) if len(order) and (np.diff(order) != 1).any() else log.batch
         times = log.times[order]
@@ -123,15 +157,40 @@ class LogCursor:
         self.events: list[WeaponEvent] = sorted(log.events, key=lambda e: e.t)
         self.event_times = np.array([e.t for e in self.events], np.float64)
         self.pdu_times = np.sort(np.asarray(log.pdus["t"], np.float64)) if len(log.pdus) else np.zeros(0)
+        if max_gap is not None and not (math.isfinite(max_gap) and max_gap > 0):
+            raise ValueError("max_gap must be a positive number of seconds (None: keep the silences)")
+        self.skipped = 0.0  # seconds of silence cut (max_gap)
+        self.squeeze: GapSqueeze | None = None  # log time -> cursor time, with max_gap
+        if max_gap is not None:
+            self._squeeze(max_gap)
         starts = [a[0] for a in (self.times, self.event_times, self.pdu_times) if len(a)]
         ends = [a[-1] for a in (self.times, self.event_times, self.pdu_times) if len(a)]
         self.t0 = float(min(starts)) if starts else float(log.t0)
         self.t_end = float(max(ends)) if ends else self.t0
         self.rewind()
 
+    def _squeeze(self, max_gap: float) -> None:
+        """Cut the silences longer than ``max_gap`` out of every time the cursor hands out."""
+        every = np.concatenate([self.pdu_times, self.times, self.event_times])
+        squeeze = GapSqueeze.of(every, max_gap)
+        self.skipped = squeeze.skipped
+        if not self.skipped:
+            return
+        self.squeeze = squeeze
+        self.times = squeeze(self.times)
+        self.pdu_times = squeeze(self.pdu_times)
+        self.event_times = squeeze(self.event_times)
+        self.events = [
+            dataclasses.replace(e, t=float(t)) for e, t in zip(self.events, self.event_times, strict=True)
+        ]
+
     @property
     def duration(self) -> float:
         return self.t_end - self.t0
+
+    def cursor_time(self, t_log: float) -> float:
+        """A log time (``--start``) on the cursor's clock: the same, less the silences cut before it."""
+        return t_log if self.squeeze is None else float(self.squeeze(np.array([t_log]))[0])
 
     def rewind(self) -> None:
         self._es = 0

@@ -9,8 +9,9 @@ vectorised decoder, so a flood costs one decode per burst, not one per datagram.
 datagram stops the gateway: malformed, truncated, foreign and unknown PDUs are counted in :attr:`status`
 (the decoder's own counters, added up burst after burst, and the gateway's).
 
-The socket is bound to one interface, loopback by default: ``0.0.0.0`` hears broadcasts on every interface;
-with ``group`` it joins that multicast group on ``interface``.
+The socket is bound to one interface, loopback by default (only this machine's senders are heard): ``0.0.0.0``
+hears a LAN exercise's broadcasts on every interface; with ``group`` it joins that multicast group on
+``interface``.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ class GatewayConfig:
     timeout: float = DIS_TIMEOUT
     origin: LocalFrame | None = None  # default: the first entity heard
     entity_filter: EntityFilter | None = None
+    exercise: int | None = None  # only this DIS exercise's PDUs (the others are counted: other_exercise)
     max_burst: int = 4096  # datagrams decoded together at most
     receive_buffer: int = 4 << 20  # SO_RCVBUF asked for (the kernel may give less)
 
@@ -96,7 +98,7 @@ class DisGateway:
         st["max_burst"] = max(st["max_burst"], n)
         st["bytes"] += sum(len(d) for d in datagrams)
         try:
-            got = read_datagrams(datagrams, now)
+            got = read_datagrams(datagrams, now, exercise=self.config.exercise)
         except (DisError, ValueError, IndexError) as exc:  # never expected: the decoder reports issues itself
             st.update(datagrams=n, decode_failures=1)
             log.warning("burst of %d datagrams not decoded: %s", n, exc)

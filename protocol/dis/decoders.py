@@ -42,6 +42,7 @@ class PduStatus(IntEnum):
     EVENT = 3  # Fire / Detonation, in events
     CORRUPT = 4  # reported in issues
     UNSUPPORTED_VERSION = 5  # Entity State / Fire / Detonation of a DIS version other than 5, 6, 7
+    OTHER_EXERCISE = 6  # a PDU of an exercise other than the one asked for (``exercise=``), not decoded
 
 
 @dataclass(frozen=True, slots=True)
