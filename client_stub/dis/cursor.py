@@ -20,7 +20,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from protocol.dis import DisLog, EntityStateBatch, WeaponEvent
+from protocol.dis import DisEvent, DisLog, EntityStateBatch, RemoveEntity
 
 LOOP_GAP = 1.0  # s of replay time between the end of a log and its restart
 
@@ -154,7 +154,7 @@ class LogCursor:
             batch, times = batch.select(keep), times[keep]
         self.batch = batch
         self.times = np.asarray(times, np.float64)
-        self.events: list[WeaponEvent] = sorted(log.events, key=lambda e: e.t)
+        self.events: list[DisEvent] = sorted(log.events, key=lambda e: e.t)
         self.event_times = np.array([e.t for e in self.events], np.float64)
         self.pdu_times = np.sort(np.asarray(log.pdus["t"], np.float64)) if len(log.pdus) else np.zeros(0)
         if max_gap is not None and not (math.isfinite(max_gap) and max_gap > 0):
@@ -215,15 +215,17 @@ class LogCursor:
         cand = [a[i] for a, i in heads if i < len(a)]  # fmt: skip
         return float(min(cand)) if cand else math.inf
 
-    def skip_to(self, t: float) -> tuple[EntityStateBatch, NDArray[np.float64], list[WeaponEvent], int]:
-        """Everything before ``t`` (``--start``): the entity states only (old weapon events are dropped)."""
-        batch, times, _, npdus = self.take(t, inclusive=False)
-        return batch, times, [], npdus
+    def skip_to(self, t: float) -> tuple[EntityStateBatch, NDArray[np.float64], list[DisEvent], int]:
+        """Everything before ``t`` (``--start``): the entity states and removals (old weapon events are
+        dropped: nobody reacts to a shot long gone, but a removed entity stays removed)."""
+        batch, times, events, npdus = self.take(t, inclusive=False)
+        return batch, times, [e for e in events if isinstance(e, RemoveEntity)], npdus
 
     def take(
         self, t: float, inclusive: bool = True
-    ) -> tuple[EntityStateBatch, NDArray[np.float64], list[WeaponEvent], int]:
-        """Entity states, their times, weapon events and the number of DIS PDUs (all types) due by ``t``."""
+    ) -> tuple[EntityStateBatch, NDArray[np.float64], list[DisEvent], int]:
+        """Entity states, their times, events (Fire, Detonation, Remove Entity) and the number of DIS PDUs
+        (all types) due by ``t``."""
         side: Literal["left", "right"] = "right" if inclusive else "left"
         es_end = max(int(np.searchsorted(self.times, t, side=side)), self._es)
         ev_end = max(int(np.searchsorted(self.event_times, t, side=side)), self._ev)

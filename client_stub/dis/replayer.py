@@ -15,7 +15,7 @@ import numpy as np
 
 from client_stub.dis.cursor import LOOP_GAP, LogCursor
 from client_stub.dis.translator import DIS_TIMEOUT, DisTranslator, Translation, sane_records
-from protocol.dis import DisLog, EntityStateBatch, LocalFrame, WeaponEvent
+from protocol.dis import DisEvent, DisLog, EntityStateBatch, LocalFrame
 from protocol.events import DEFAULT_MAX_SOLDIERS
 
 UNLIMITED_CHUNK = 0.1  # s of log time per step when --speed is unlimited ...
@@ -132,8 +132,8 @@ class Replayer:
         return Translation.merge(parts)
 
     def _shift(
-        self, batch: EntityStateBatch, times: np.ndarray, events: list[WeaponEvent]
-    ) -> tuple[EntityStateBatch, np.ndarray, list[WeaponEvent]]:
+        self, batch: EntityStateBatch, times: np.ndarray, events: list[DisEvent]
+    ) -> tuple[EntityStateBatch, np.ndarray, list[DisEvent]]:
         if self.offset == 0.0:
             return batch, times, events
         return batch, times + self.offset, [dataclasses.replace(e, t=e.t + self.offset) for e in events]

@@ -29,7 +29,7 @@ import binascii
 import io
 import re
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -42,15 +42,17 @@ from protocol.dis.decoders import (
     Corrupt,
     Decoded,
     EntityStates,
+    EntityUpdates,
+    Event,
     PduRows,
     PduStatus,
     Skipped,
-    Weapon,
 )
+from protocol.dis.entity_update import UpdateBases, resolve_updates
 from protocol.dis.errors import DisError
 from protocol.dis.pdu import DEFAULT_PORT, PduType, timestamp_seconds, unwrap_timestamps
+from protocol.dis.remove_entity import DisEvent
 from protocol.dis.scan import scan_segments, scan_stream
-from protocol.dis.warfare import WeaponEvent
 
 FORMATS = ("pcap", "pcapng", "dislog", "raw")
 I64 = NDArray[np.int64]
@@ -80,7 +82,7 @@ class DisLog:
     format: str
     batch: EntityStateBatch
     times: F64
-    events: list[WeaponEvent]
+    events: list[DisEvent]  # Fire, Detonation, Remove Entity, file order
     pdus: NDArray[np.void]  # PDU_INDEX_DTYPE, every DIS PDU in file order
     counters: dict[str, int]
     pdu_types: dict[int, int]
@@ -96,13 +98,13 @@ class DisLog:
     def not_dis(self) -> str | None:
         """Why this file is not a DIS log at all (None when it holds DIS, or nothing).
 
-        A log is DIS when one PDU of a type TTES decodes (Entity State, Fire, Detonation) decoded. Without
+        A log is DIS when one PDU of a type TTES decodes (:data:`DECODERS`) decoded. Without
         one, it is DIS only if its PDUs of other types outnumber the problems (corrupt records, non-DIS
         datagrams) ten to one: a radio-only capture is DIS, a text file or an image read as PDUs is not
         (each of its lines or junk headers is a problem, the few "PDUs" it seems to hold are noise).
         """
         st = self.pdus["status"]
-        decoded = (st == PduStatus.DECODED) | (st == PduStatus.NOT_LIFEFORM) | (st == PduStatus.EVENT)
+        decoded = np.isin(st, (PduStatus.DECODED, PduStatus.NOT_LIFEFORM, PduStatus.EVENT, PduStatus.NO_BASE))
         if decoded.any():
             return None
         problems = len(self.issues) + self.counters.get("non_dis", 0)
@@ -111,8 +113,8 @@ class DisLog:
             return None
         first = f" (first: {self.issues[0]})" if self.issues else ""
         return (
-            f"not a DIS log (pcap, pcapng, .dislog or raw PDUs): read as {self.format}, it holds no Entity "
-            f"State, Fire or Detonation PDU, {problems} problem(s){first} and {others} PDU(s) of other types"
+            f"not a DIS log (pcap, pcapng, .dislog or raw PDUs): read as {self.format}, it holds no PDU that "
+            f"TTES reads, {problems} problem(s){first} and {others} PDU(s) of other types"
         )
 
     def summary(self) -> dict[str, object]:
@@ -224,9 +226,11 @@ def read_datagrams(
     lifeforms_only: bool = True,
     name: str = "<udp>",
     exercise: int | None = None,
+    bases: UpdateBases | None = None,
 ) -> DisLog:
     """Decode a burst of UDP payloads received at ``now`` (each one or more PDUs), as a live gateway hears
-    them: records are numbered 1.. in arrival order and every PDU is stamped ``now``."""
+    them: records are numbered 1.. in arrival order and every PDU is stamped ``now``. ``bases``: the last
+    Entity State PDU of each entity from earlier bursts, for this burst's Entity State Updates (updated)."""
     n = len(datagrams)
     sizes = np.fromiter((len(d) for d in datagrams), np.int64, n)
     end = np.cumsum(sizes)
@@ -242,7 +246,7 @@ def read_datagrams(
         t0=float(now),
         t_end=float(now),
     )
-    return _decode(seg, name, "udp", lifeforms_only, exercise)
+    return _decode(seg, name, "udp", lifeforms_only, exercise, bases)
 
 
 # --- captures ---------------------------------------------------------------------------------------------
@@ -462,9 +466,16 @@ def _base64_line(s: str) -> bytes:
 # --- the common decoding step -----------------------------------------------------------------------------
 
 
-def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool, exercise: int | None = None) -> DisLog:
+def _decode(
+    seg: _Segments,
+    name: str,
+    fmt: str,
+    lifeforms_only: bool,
+    exercise: int | None = None,
+    bases: UpdateBases | None = None,
+) -> DisLog:
     """Scan the segments into a PDU index, run each type's decoder (:data:`DECODERS`) on the PDUs of the
-    wanted exercise, collect its events."""
+    wanted exercise, put the Entity State Updates on their entities' states, collect the events."""
     issues = list(seg.issues)
     if seg.stream:
         index, scan_issues = scan_stream(seg.data)
@@ -495,8 +506,9 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool, exercise:
             )  # fmt: skip
             for decoded in decoder(at):
                 found.add(decoded)
+    found.resolve(bases)
     states, status, batch_index = found.states, found.status, found.batch_index
-    events = [w.event for w in sorted(found.weapons, key=lambda w: w.row)]  # file order
+    events = [w.event for w in sorted(found.events, key=lambda w: w.row)]  # file order
     issues += [_relocate(c.error, seg) for c in sorted(found.corrupt, key=lambda c: c.row)]
     pdus = np.zeros(n, PDU_INDEX_DTYPE)
     pdus["t"] = t
@@ -539,7 +551,8 @@ class _Found:
         self.status = np.full(n, PduStatus.OTHER_TYPE, np.uint8)  # a type without a decoder stays OTHER_TYPE
         self.batch_index = np.full(n, -1, np.int64)
         self.states = EntityStates.empty()  # a log without Entity State PDUs
-        self.weapons: list[Weapon] = []
+        self.updates: EntityUpdates | None = None
+        self.events: list[Event] = []
         self.corrupt: list[Corrupt] = []
 
     def add(self, decoded: Decoded) -> None:
@@ -549,32 +562,56 @@ class _Found:
                 self.status[kept] = PduStatus.DECODED
                 self.status[skipped] = PduStatus.NOT_LIFEFORM
                 self.batch_index[kept] = np.arange(len(kept))
-            case Weapon(row=row):
+            case EntityUpdates():
+                self.updates = decoded
+            case Event(row=row):
                 self.status[row] = PduStatus.EVENT
-                self.weapons.append(decoded)
+                self.events.append(decoded)
             case Skipped(rows=rows, status=why):
                 self.status[rows] = why
             case Corrupt(row=row):
                 self.status[row] = PduStatus.CORRUPT
                 self.corrupt.append(decoded)
 
+    def resolve(self, bases: UpdateBases | None) -> None:
+        """Each Entity State Update on its entity's last Entity State PDU before it (or in ``bases``): one
+        more state, merged in receipt order; an update with nothing to stand on is ``NO_BASE``. ``bases``
+        then learns this log's Entity State PDUs."""
+        st, up = self.states, self.updates
+        if up is not None and len(up.rows):
+            resolved, placed = resolve_updates(st.batch, st.rows, up.batch, up.rows, bases)
+            self.status[up.rows[~placed]] = PduStatus.NO_BASE
+            rows = np.concatenate([st.rows, up.rows[placed]])
+            order = np.argsort(rows, kind="stable")
+            merged = EntityStateBatch.concatenate([st.batch, resolved]).select(order)
+            self.states = replace(st, batch=merged, rows=rows[order])
+            self.status[rows] = PduStatus.DECODED
+            self.batch_index[rows[order]] = np.arange(len(rows))
+        if bases is not None:
+            records = self.states.batch.records
+            bases.learn(records[records["pdu_type"] == PduType.ENTITY_STATE])
+
 
 def _counters(
     ptype: NDArray[np.uint8],
     status: NDArray[np.uint8],
     states: EntityStates,
-    events: list[WeaponEvent],
+    events: list[DisEvent],
     corrupt: int,
 ) -> dict[str, int]:
     """Every counter of a log, derived from the PDU types, their statuses and the decoders' events."""
+    mine = status != PduStatus.OTHER_EXERCISE
     return {
         "pdus": len(ptype),
-        "entity_states": int(((ptype == PduType.ENTITY_STATE) & (status != PduStatus.OTHER_EXERCISE)).sum()),
+        "entity_states": int(((ptype == PduType.ENTITY_STATE) & mine).sum()),
         "lifeforms": states.lifeforms,
         "non_lifeforms": states.non_lifeforms,
         "decoded": len(states.batch),
         "fire": sum(e.kind == "fire" for e in events),
         "detonation": sum(e.kind == "detonation" for e in events),
+        "remove_entity": sum(e.kind == "remove_entity" for e in events),
+        "entity_state_updates": int(((ptype == PduType.ENTITY_STATE_UPDATE) & mine).sum()),
+        "updates_without_base": int((status == PduStatus.NO_BASE).sum()),
         "other_pdus": int((status == PduStatus.OTHER_TYPE).sum()),
         "other_exercise": int((status == PduStatus.OTHER_EXERCISE).sum()),
         "unsupported_version": int((status == PduStatus.UNSUPPORTED_VERSION).sum()),

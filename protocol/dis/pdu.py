@@ -28,11 +28,14 @@ class PduType(IntEnum):
     ENTITY_STATE = 1
     FIRE = 2
     DETONATION = 3
+    REMOVE_ENTITY = 12
+    ENTITY_STATE_UPDATE = 67
 
 
 class Family(IntEnum):
     ENTITY_INFORMATION = 1
     WARFARE = 2
+    SIMULATION_MANAGEMENT = 5
 
 
 _NAMES = (

@@ -192,6 +192,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
         PduStatus.CORRUPT: "corrupt",
         PduStatus.UNSUPPORTED_VERSION: "unsupported_version",
         PduStatus.OTHER_EXERCISE: "other_exercise",
+        PduStatus.NO_BASE: "update_without_entity_state",
     }
     for k, st in enumerate(status):
         if st == PduStatus.DECODED:
