@@ -282,8 +282,8 @@ def test_each_connection_is_its_own_client_so_the_per_client_cap_counts_per_conn
 
 def test_ramp_defaults_can_pass(server, capsys) -> None:
     """Issue 19: `ttes loadtest --spawn-server --ramp` failed its first stage with its own defaults ("largest
-    sustained N = None"): p99 request latency <= 33 ms, less than a request's wait for the next 30 Hz tick plus
-    its first pose (README: p99 49-84 ms on a working server). The default bound is DIS's 100 ms."""
+    sustained N = None"): p99 request latency <= 33 ms, less than a request's wait for the next 30 Hz tick
+    plus its first pose (README: p99 49-84 ms on a working server). The default bound is DIS's 100 ms."""
     from client_stub.loadtest.session import _passes
     from ttes.cli import build_parser, main
     from ttes.commands.loadtest import config
