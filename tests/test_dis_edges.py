@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from test_replay_support import pcap_of
 
 from client_stub.dis import LogCursor, Replayer
 from client_stub.dis.cursor import GapSqueeze
@@ -47,14 +48,6 @@ def espdu(entity: int, exercise: int = 1) -> bytes:
     )
 
 
-def pcap(frames: list[tuple[float, bytes]]) -> bytes:
-    f = io.BytesIO()
-    w = dpkt.pcap.Writer(f, linktype=dpkt.pcap.DLT_EN10MB)
-    for ts, payload in frames:
-        w.writepkt(udp_frame(payload, 0), ts=ts)
-    return f.getvalue()
-
-
 FIVE_OVER_813 = [0.0, 1.0, 400.0, 800.0, 813.0]  # five PDUs spanning 813 s: mostly silence
 
 
@@ -65,7 +58,7 @@ def test_text_and_binary_files_are_not_dis_logs(tmp_path: Path) -> None:
     junk = np.random.default_rng(1).integers(0, 256, 200_000, dtype=np.uint8).tobytes()
     assert read_bytes(junk).not_dis() is not None  # a few "PDUs" in noise do not make it DIS
     # DIS: a log of soldiers, an empty log, a log of PDUs TTES does not decode (comment PDUs), no problems
-    assert read_bytes(pcap([(0.0, espdu(1))])).not_dis() is None
+    assert read_bytes(pcap_of([(0.0, espdu(1))])).not_dis() is None
     assert read_bytes(b"").not_dis() is None
     comment = bytes([7, 1, 22, 5]) + (0).to_bytes(4, "big") + (20).to_bytes(2, "big") + bytes(10)
     assert read_bytes(comment * 30, fmt="raw").not_dis() is None
@@ -118,7 +111,7 @@ def test_gap_squeeze_is_monotone_and_keeps_short_gaps(times: list[float], max_ga
 
 
 def test_five_pdus_over_813_s_replay_in_16_s_and_the_summary_says_so() -> None:
-    log = read_bytes(pcap([(1000.0 + t, espdu(1)) for t in FIVE_OVER_813]))
+    log = read_bytes(pcap_of([(1000.0 + t, espdu(1)) for t in FIVE_OVER_813]))
     r = Replayer(LogCursor(log, max_gap=5.0))
     dues = []
     r.advance(0.0)
@@ -135,7 +128,7 @@ def test_five_pdus_over_813_s_replay_in_16_s_and_the_summary_says_so() -> None:
 
 def test_cli_max_gap_and_start_past_the_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "sparse.pcap"
-    path.write_bytes(pcap([(1000.0 + t, espdu(1)) for t in FIVE_OVER_813]))
+    path.write_bytes(pcap_of([(1000.0 + t, espdu(1)) for t in FIVE_OVER_813]))
     assert main(["replay", str(path), "--no-stub", "--speed", "0", "--synthetic-server"]) == 0
     out = capsys.readouterr().out
     assert "797.0 s of silence skipped" in out
@@ -159,7 +152,7 @@ def test_synthetic_exercises_start_on_the_seed_reports_date() -> None:
 def test_exercise_filter_decodes_one_exercise_and_counts_the_others(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    data = pcap([(1.0, espdu(1, exercise=1)), (1.5, espdu(2, exercise=2)), (2.0, espdu(3, exercise=2))])
+    data = pcap_of([(1.0, espdu(1, exercise=1)), (1.5, espdu(2, exercise=2)), (2.0, espdu(3, exercise=2))])
     every = read_bytes(data)
     assert len(every.batch) == 3 and every.exercises == {1: 1, 2: 2}
     two = read_bytes(data, exercise=2)

@@ -4,14 +4,13 @@ replay and the gateway (an update heard a burst after its Entity State PDU)."""
 
 from __future__ import annotations
 
-import io
 import math
 
-import dpkt
 import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from test_replay_support import pcap_of
 
 from client_stub.dis import LogCursor, RemoveReason, Replayer
 from client_stub.dis.gateway import DisGateway, GatewayConfig
@@ -38,7 +37,6 @@ from protocol.dis import (
 )
 from protocol.dis.appearance import LifeformState, WeaponState
 from protocol.dis.entity_update import decode_entity_updates
-from protocol.dis.synth import udp_frame
 from protocol.entity import Appearance
 
 FRAME = LocalFrame(38.52, -77.44, 60.0)
@@ -85,14 +83,6 @@ def update(entity: int, east: float, state: int = LifeformState.PRONE, params: i
 
 def remove(entity: int) -> bytes:
     return encode_remove_entity(RemoveEntityPdu(MANAGER, EntityId(1, 2, entity), request_id=7))
-
-
-def pcap(frames: list[tuple[float, bytes]]) -> bytes:
-    f = io.BytesIO()
-    w = dpkt.pcap.Writer(f, linktype=dpkt.pcap.DLT_EN10MB)
-    for ts, payload in frames:
-        w.writepkt(udp_frame(payload, 0), ts=ts)
-    return f.getvalue()
 
 
 # -- codecs -----------------------------------------------------------------------------------------
@@ -160,7 +150,7 @@ def test_bad_updates_and_removals_name_the_field() -> None:
 
 # -- the log readers -----------------------------------------------------------------------------------
 def test_updates_stand_on_their_entitys_last_entity_state_pdu() -> None:
-    log = read_bytes(pcap([
+    log = read_bytes(pcap_of([
         (0.0, espdu(1)),
         (0.5, update(2, 3.0)),  # entity 2 not seen yet: nothing to stand on
         (1.0, update(1, 2.0, params=2)),
@@ -184,7 +174,7 @@ def test_updates_stand_on_their_entitys_last_entity_state_pdu() -> None:
 
 
 def test_remove_entity_becomes_an_event() -> None:
-    log = read_bytes(pcap([(0.0, espdu(1)), (2.0, remove(1))]))
+    log = read_bytes(pcap_of([(0.0, espdu(1)), (2.0, remove(1))]))
     (ev,) = log.events
     assert isinstance(ev, RemoveEntity) and ev.entity == (1, 2, 1) and ev.t == 2.0
     assert ev.originator == MANAGER and log.counters["remove_entity"] == 1
@@ -193,7 +183,7 @@ def test_remove_entity_becomes_an_event() -> None:
 
 # -- the translator, the replay and the gateway -------------------------------------------------------
 def test_replay_plays_updates_and_removes_at_once() -> None:
-    log = read_bytes(pcap([
+    log = read_bytes(pcap_of([
         (100.0, espdu(1)),
         (100.0, espdu(2, 10.0)),
         (101.0, update(1, 1.0, state=LifeformState.PRONE)),
@@ -212,7 +202,7 @@ def test_replay_plays_updates_and_removes_at_once() -> None:
 
 
 def test_a_skipped_start_keeps_removed_entities_removed() -> None:
-    log = read_bytes(pcap([(0.0, espdu(1)), (1.0, espdu(2)), (2.0, remove(1)), (8.0, espdu(2))]))
+    log = read_bytes(pcap_of([(0.0, espdu(1)), (1.0, espdu(2)), (2.0, remove(1)), (8.0, espdu(2))]))
     r = Replayer(LogCursor(log), origin=FRAME, start=5.0)
     out = r.advance(0.0)
     assert out.created["slot"].tolist() == [1] and r.translator.alive == 1

@@ -39,13 +39,21 @@ from protocol.dis.entity_state import (
     EntityId,
     VariableParameter,
     Vec3,
+    unpack_params,
 )
 from protocol.dis.errors import DisError
-from protocol.dis.pdu import HEADER, HEADER_SIZE, SUPPORTED_VERSIONS, Family, PduType
+from protocol.dis.pdu import (
+    HEADER,
+    HEADER_SIZE,
+    SUPPORTED_VERSIONS,
+    Family,
+    PduType,
+    check_header,
+    header_fields,
+)
 
 ESU_FIXED_SIZE = 72
 _BODY = struct.Struct(">HHHBB 3f 3d 3f I")
-_VARPARAM = struct.Struct(">B15s")
 assert HEADER.size + _BODY.size == ESU_FIXED_SIZE
 UPDATED_FIELDS = ("velocity", "location", "orientation", "appearance")  # what an update overwrites
 ESU_WIRE_DTYPE = np.dtype(
@@ -121,26 +129,12 @@ def decode_entity_update(data: bytes | memoryview) -> EntityStateUpdatePdu:
     """Decode exactly one Entity State Update PDU (the buffer is the whole PDU); :class:`DisError` with the
     offset of the bad field."""
     data = bytes(data)
-    if len(data) < HEADER_SIZE:
-        raise DisError(f"truncated header: {len(data)} bytes", len(data))
-    version, pdu_type, length = data[0], data[2], (data[8] << 8) | data[9]
-    if pdu_type != PduType.ENTITY_STATE_UPDATE:
-        raise DisError(f"PDU type {pdu_type} is not Entity State Update (67)", 2)
-    if version not in SUPPORTED_VERSIONS:
-        raise DisError(f"protocol version {version} not supported (5, 6, 7)", 0)
-    if length != len(data):
-        raise DisError(f"length field {length} but {len(data)} bytes", 8)
-    if length < ESU_FIXED_SIZE:
-        raise DisError(f"Entity State Update PDU of {length} bytes is shorter than {ESU_FIXED_SIZE}", 8)
+    check_header(data, PduType.ENTITY_STATE_UPDATE, ESU_FIXED_SIZE)
     n = data[19]
-    if length != ESU_FIXED_SIZE + VARIABLE_PARAMETER_SIZE * n:
-        raise DisError(f"length {length} does not match {n} variable parameters ({72 + 16 * n})", 19)
-    h = HEADER.unpack_from(data, 0)
+    if len(data) != ESU_FIXED_SIZE + VARIABLE_PARAMETER_SIZE * n:
+        raise DisError(f"length {len(data)} does not match {n} variable parameters ({72 + 16 * n})", 19)
     b = _BODY.unpack_from(data, HEADER_SIZE)
-    params = tuple(
-        VariableParameter(*_VARPARAM.unpack_from(data, ESU_FIXED_SIZE + VARIABLE_PARAMETER_SIZE * i))
-        for i in range(n)
-    )
+    params = unpack_params(data, ESU_FIXED_SIZE, n)
     return EntityStateUpdatePdu(
         entity_id=EntityId(*b[0:3]),
         padding1=b[3],
@@ -149,12 +143,7 @@ def decode_entity_update(data: bytes | memoryview) -> EntityStateUpdatePdu:
         orientation=b[11:14],
         appearance=b[14],
         variable_parameters=params,
-        version=h[0],
-        exercise=h[1],
-        timestamp=h[4],
-        pdu_status=h[6],
-        padding=h[7],
-        family=h[3],
+        **header_fields(data),
     )
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from protocol.dis.entity_state import NO_ENTITY, EntityId
 from protocol.dis.errors import DisError
-from protocol.dis.pdu import HEADER, SUPPORTED_VERSIONS, Family, PduType
+from protocol.dis.pdu import HEADER, SUPPORTED_VERSIONS, Family, PduType, check_header, header_fields
 from protocol.dis.warfare import WeaponEvent
 
 REMOVE_ENTITY_SIZE = 28
@@ -70,29 +70,11 @@ def encode_remove_entity(pdu: RemoveEntityPdu) -> bytes:
 def decode_remove_entity(data: bytes | memoryview) -> RemoveEntityPdu:
     """Decode exactly one Remove Entity PDU; :class:`DisError` with the offset of the bad field."""
     data = bytes(data)
-    if len(data) < 12:
-        raise DisError(f"truncated header: {len(data)} bytes", len(data))
-    if data[2] != PduType.REMOVE_ENTITY:
-        raise DisError(f"PDU type {data[2]} is not Remove Entity (12)", 2)
-    if data[0] not in SUPPORTED_VERSIONS:
-        raise DisError(f"protocol version {data[0]} not supported (5, 6, 7)", 0)
-    length = (data[8] << 8) | data[9]
-    if length != len(data):
-        raise DisError(f"length field {length} but {len(data)} bytes", 8)
-    if length != REMOVE_ENTITY_SIZE:
-        raise DisError(f"Remove Entity PDU of {length} bytes, not {REMOVE_ENTITY_SIZE}", 8)
+    check_header(data, PduType.REMOVE_ENTITY, REMOVE_ENTITY_SIZE)
+    if len(data) != REMOVE_ENTITY_SIZE:
+        raise DisError(f"remove_entity PDU of {len(data)} bytes, not {REMOVE_ENTITY_SIZE}", 8)
     v = _PDU.unpack(data)
-    return RemoveEntityPdu(
-        originator=EntityId(*v[8:11]),
-        receiver=EntityId(*v[11:14]),
-        request_id=v[14],
-        version=v[0],
-        exercise=v[1],
-        timestamp=v[4],
-        pdu_status=v[6],
-        padding=v[7],
-        family=v[3],
-    )
+    return RemoveEntityPdu(EntityId(*v[8:11]), EntityId(*v[11:14]), v[14], **header_fields(data))
 
 
 def remove_event(data: bytes | memoryview, t: float = 0.0) -> RemoveEntity:

@@ -1,11 +1,11 @@
 """`ttes replay`: replay a DIS logfile (pcap, pcapng, .dislog or raw PDUs) through Jack/TTES into the stub.
 
 One soldier per lifeform entity: created on first sight, removed after the DIS timeout (12 s), when the
-entity is deactivated or by a Remove Entity PDU, dead-reckoned between PDUs with its own algorithm, placed on the stub's terrain in a
-local frame about --origin (default: the first entity). Appearance, velocity and heading become entity
-requests for the server; Fire PDUs make a standing-still shooter fire for a moment. Paced by the capture's
-receipt times, scaled by --speed (0 = as fast as possible); a silence longer than --max-gap (5 s) replays as
---max-gap seconds. --exercise N keeps exercise N's PDUs only.
+entity is deactivated or by a Remove Entity PDU, dead-reckoned between PDUs with its own algorithm, placed on
+the stub's terrain in a local frame about --origin (default: the first entity). Appearance, velocity and
+heading become entity requests for the server; Fire PDUs make a standing-still shooter fire for a moment.
+Paced by the capture's receipt times, scaled by --speed (0 = as fast as possible); a silence longer than
+--max-gap (5 s) replays as --max-gap seconds. --exercise N keeps exercise N's PDUs only.
 
 With a display it opens the stub window (cameras and soldier selection on the keys; ? lists them);
 --headless --out demo.mp4 renders a video; --no-stub only drives the server. The server: --host/--port for a
