@@ -178,3 +178,12 @@ def test_gateway_on_loopback_says_how_to_hear_a_lan_exercise(capsys: pytest.Capt
         main(["gateway", "--help"])
     help_text = capsys.readouterr().out
     assert "--listen" in help_text and "LAN exercise" in help_text
+
+
+def test_gateway_exercise_filter() -> None:
+    from client_stub.dis.gateway import DisGateway, GatewayConfig
+
+    gw = DisGateway(GatewayConfig(port=0, exercise=2))
+    out = gw.handle([espdu(1, exercise=1), espdu(2, exercise=2)], 5.0)
+    assert out.created["entity"][:, 2].tolist() == [2]
+    assert gw.status["other_exercise"] == 1

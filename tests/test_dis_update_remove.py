@@ -38,6 +38,7 @@ from protocol.dis import (
 from protocol.dis.appearance import LifeformState, WeaponState
 from protocol.dis.entity_update import decode_entity_updates
 from protocol.entity import Appearance
+from ttes.commands.dis import dump_rows
 
 FRAME = LocalFrame(38.52, -77.44, 60.0)
 SOLDIER = EntityType(3, 1, 225, 12, 5, 41, 0)
@@ -171,6 +172,12 @@ def test_updates_stand_on_their_entitys_last_entity_state_pdu() -> None:
     st_ = log.pdus["status"].tolist()
     assert st_.count(PduStatus.NO_BASE) == 2 and st_.count(PduStatus.DECODED) == 3
     assert log.pdus["batch_index"][log.pdus["status"] == PduStatus.DECODED].tolist() == [0, 1, 2]
+    lines = [row for row in dump_rows(log) if not row.get("skipped")]  # `ttes dis dump --json`
+    assert [row.get("update", False) for row in lines] == [False, True, True]
+    assert [row["posture"] for row in lines] == ["standing", "prone", "kneeling"]
+    assert {row["marking"] for row in lines} == {"SQD1"}
+    reasons = [row.get("reason") for row in dump_rows(log) if row.get("skipped")]
+    assert reasons.count("update_without_entity_state") == 2
 
 
 def test_remove_entity_becomes_an_event() -> None:

@@ -157,6 +157,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
     from protocol.dis.entity_type import is_lifeform
     from protocol.dis.geo import heading_deg
     from protocol.dis.logfile import PduStatus
+    from protocol.dis.pdu import PduType
 
     r = log.batch.records
     fields = decode_appearance(r["appearance"])
@@ -181,6 +182,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
         "dr": r["dr_algorithm"].tolist(),
         "params": r["num_params"].tolist(),
         "life": life.tolist(),
+        "update": (r["pdu_type"] == PduType.ENTITY_STATE_UPDATE).tolist(),
     }
     pdus = log.pdus
     t_rel = np.round(pdus["t"] - log.t0, 6).tolist()
@@ -220,6 +222,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
                     "heading_deg": round(cols["heading"][i], 6),
                     "dr_algorithm": cols["dr"][i],
                     "articulations": cols["params"][i],
+                    **({"update": True} if cols["update"][i] else {}),
                 }
             )
             continue

@@ -285,7 +285,7 @@ def _load(args: argparse.Namespace) -> tuple[Any, tuple[int, int]] | int:
 def nothing_to_replay(log: Any) -> str:
     """Why a DIS log gives no soldiers, in words (what it holds instead, and the option that may help)."""
     c = log.counters
-    held = [f"{c.get(k, 0)} {what}" for k, what in _HELD if c.get(k, 0) or k in ("records", "pdus")]
+    held = [f"{what}: {c.get(k, 0)}" for k, what in _HELD if c.get(k, 0) or k in ("records", "pdus")]
     hint = ""
     if c.get("other_port"):
         hint = "; DIS on another port? try --dis-port P or --any-port"
