@@ -6,8 +6,9 @@ host's firewall must let UDP --dis-port in), or --dis-group ADDR --listen LOCAL_
 container, broadcast DIS needs host networking. --exercise N keeps only exercise N's PDUs. Each lifeform
 entity becomes a server soldier (created on first sight, removed after --timeout seconds of silence, when
 deactivated or by a Remove Entity PDU; Entity State Update PDUs move him too); appearance, velocity and
-heading become entity requests; Fire PDUs make a standing-still shooter fire for a moment. Malformed datagrams, unknown PDU types and bursts are counted in the status line, never
-fatal. Stop with Ctrl-C: the gateway's soldiers are removed from the server.
+heading become entity requests; Fire PDUs make a standing-still shooter fire for a moment. Malformed
+datagrams, unknown PDU types and bursts are counted in the status line, never fatal. Stop with Ctrl-C: the
+gateway's soldiers are removed from the server.
 
 At most 4096 soldiers (the server's default cap per client): entities beyond it are counted (sink_dropped in
 the status lines and the summary), not sent. A lost server is reconnected with backoff and the live soldiers
