@@ -1,10 +1,11 @@
 """`ttes replay`: replay a DIS logfile (pcap, pcapng, .dislog or raw PDUs) through Jack/TTES into the stub.
 
-One soldier per lifeform entity: created on first sight, removed after the DIS timeout (12 s) or when the
-entity is deactivated, dead-reckoned between PDUs with its own algorithm, placed on the stub's terrain in a
-local frame about --origin (default: the first entity). Appearance, velocity and heading become entity
-requests for the server; Fire PDUs make a standing-still shooter fire for a moment. Paced by the capture's
-receipt times, scaled by --speed (0 = as fast as possible).
+One soldier per lifeform entity: created on first sight, removed after the DIS timeout (12 s), when the
+entity is deactivated or by a Remove Entity PDU, dead-reckoned between PDUs with its own algorithm, placed on
+the stub's terrain in a local frame about --origin (default: the first entity). Appearance, velocity and
+heading become entity requests for the server; Fire PDUs make a standing-still shooter fire for a moment.
+Paced by the capture's receipt times, scaled by --speed (0 = as fast as possible); a silence longer than
+--max-gap (5 s) replays as --max-gap seconds. --exercise N keeps exercise N's PDUs only.
 
 With a display it opens the stub window (cameras and soldier selection on the keys; ? lists them);
 --headless --out demo.mp4 renders a video; --no-stub only drives the server. The server: --host/--port for a
@@ -15,8 +16,8 @@ stub poses the soldiers itself. The stub's terrain point (0, 0) is the local fra
 A replay survives a server restart (window, --headless with --host, --no-stub): it goes on, the stub poses
 the soldiers meanwhile (the window says "server lost"), the server is reconnected with backoff (0.5..8 s) and
 the live soldiers are created again and posed by it (sink_relinked in the summary). Exit status: 0 replayed,
-1 no server (at the start, or lost for longer than --give-up-after) or nothing to replay, 2 bad arguments or
-no display.
+1 no server (at the start, or lost for longer than --give-up-after), a file that is not DIS, or nothing to
+replay; 2 bad arguments (--start past the log's end included) or no display.
 """
 
 from __future__ import annotations
@@ -31,7 +32,19 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
+from ttes.commands.dis import exercise_id, not_dis
 from ttes.link_options import add_link_options, link_credentials, link_error
+
+DEFAULT_MAX_GAP = 5.0  # s: longer silences of a log replay as this long
+_HELD = (  # what a log without soldiers holds instead: counter, words
+    ("records", "records"),
+    ("pdus", "DIS PDUs"),
+    ("non_lifeforms", "non-lifeform entity states"),
+    ("other_pdus", "PDUs of other types"),
+    ("other_exercise", "PDUs of other exercises"),
+    ("other_port", "UDP datagrams to other ports"),
+    ("unsupported_version", "PDUs of unsupported versions"),
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,7 +59,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--loop", action="store_true", help="start again at the end (soldiers are removed and re-made)"
     )
-    p.add_argument("--start", type=float, default=0.0, metavar="T", help="begin T seconds into the log")
+    p.add_argument(
+        "--start",
+        type=float,
+        default=0.0,
+        metavar="T",
+        help="begin T seconds into the log (silences included; at most the log's length)",
+    )
+    p.add_argument(
+        "--max-gap",
+        type=_max_gap,
+        default=DEFAULT_MAX_GAP,
+        metavar="S",
+        help=f"replay a silence of the log longer than S seconds as S seconds (default "
+        f"{DEFAULT_MAX_GAP:g}; 0: as recorded)",
+    )
+    p.add_argument(
+        "--exercise",
+        type=exercise_id,
+        metavar="N",
+        help="only the PDUs of DIS exercise N (1..255; default: every exercise)",
+    )
     p.add_argument("--entities", metavar="FILTER",
                    help="keep only these, comma-separated: SITE:APP:ENTITY (numbers or *), force=N, "
                         "friendly, opposing, neutral, marking=TEXT or marking=PREFIX*")  # fmt: skip
@@ -87,6 +120,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         "for this long before the replay exits 1 (default 120; 0: exit at once)",
     )
     p.set_defaults(func=run)
+
+
+def _max_gap(text: str) -> float | None:
+    """``--max-gap S``: seconds (> 0), or 0 / ``off`` to keep the log's silences (None)."""
+    if text.lower() in ("0", "off", "none"):
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(
+            f"--max-gap must be seconds > 0 (0: keep the silences), not {text!r}"
+        )
+    return v
 
 
 def _speed(text: str) -> float:
@@ -164,29 +212,10 @@ async def private_server(data_dir: Path | None, synthetic: bool, quiet: bool = T
 
 
 def run(args: argparse.Namespace) -> int:
-    from client_stub.dis import EntityFilter, FilterError, Replayer
-    from protocol.dis import DisError, read_log
-
-    try:
-        entity_filter = EntityFilter.parse(args.entities) if args.entities else None
-        origin = parse_origin(args.origin)
-        size = _size(args.size)
-        if not (math.isfinite(args.start) and args.start >= 0):
-            raise ValueError("--start must be >= 0 seconds")
-        if not (math.isfinite(args.timeout) and args.timeout > 0):
-            raise ValueError("--timeout must be > 0 seconds")
-        log = read_log(args.logfile, fmt=args.format, port=None if args.any_port else args.dis_port)
-    except (FilterError, DisError, ValueError) as exc:
-        print(f"ttes replay: {exc}", file=sys.stderr)
-        return 2
-    if not len(log.batch):
-        print(f"ttes replay: {args.logfile}: no lifeform Entity State PDUs ({log.counters})", file=sys.stderr)
-        return 1
-    if args.offline and args.no_stub:
-        print("ttes replay: --offline --no-stub would do nothing", file=sys.stderr)
-        return 2
-    replayer = Replayer(log, speed=args.speed, loop=args.loop, start=args.start, entity_filter=entity_filter,
-                        origin=origin, timeout=args.timeout)  # fmt: skip
+    loaded = _load(args)
+    if isinstance(loaded, int):
+        return loaded
+    replayer, size = loaded
     if args.no_stub:
         summary = _run_server_only(args, replayer)
     elif args.headless:
@@ -212,9 +241,59 @@ def run(args: argparse.Namespace) -> int:
         print_json(summary)
     else:
         extra = f", wrote {summary['out']} ({summary['frames']} frames)" if "out" in summary else ""
-        print(f"replayed {summary['replay_time']:.1f} s: {summary['created']} soldiers, "
+        skipped = summary.get("silence_skipped_s", 0)
+        cut = f" ({skipped:.1f} s of silence skipped, --max-gap {args.max_gap:g} s)" if skipped else ""
+        print(f"replayed {summary['replay_time']:.1f} s{cut}: {summary['created']} soldiers, "
               f"{summary['pdus']} PDUs, {summary['requests']} requests{extra}")  # fmt: skip
     return 0
+
+
+def _load(args: argparse.Namespace) -> tuple[Any, tuple[int, int]] | int:
+    """The checked arguments and the log, as a Replayer (and the image size); else the exit status: 2 for
+    bad arguments (--start past the log's end included), 1 for a file that is not DIS or holds no soldier."""
+    from client_stub.dis import EntityFilter, FilterError, LogCursor, Replayer
+    from protocol.dis import DisError, read_log
+
+    try:
+        entity_filter = EntityFilter.parse(args.entities) if args.entities else None
+        origin = parse_origin(args.origin)
+        size = _size(args.size)
+        if not (math.isfinite(args.start) and args.start >= 0):
+            raise ValueError("--start must be >= 0 seconds")
+        if not (math.isfinite(args.timeout) and args.timeout > 0):
+            raise ValueError("--timeout must be > 0 seconds")
+        if args.offline and args.no_stub:
+            raise ValueError("--offline --no-stub would do nothing")
+        log = read_log(args.logfile, fmt=args.format, port=None if args.any_port else args.dis_port,
+                       exercise=args.exercise)  # fmt: skip
+    except (FilterError, DisError, ValueError) as exc:
+        print(f"ttes replay: {exc}", file=sys.stderr)
+        return 2
+    if not_dis("replay", args.logfile, log):
+        return 1
+    if not len(log.batch):
+        print(f"ttes replay: {args.logfile}: {nothing_to_replay(log)}", file=sys.stderr)
+        return 1
+    if args.start > log.duration:
+        print(f"ttes replay: --start {args.start:g} is past the end of {args.logfile} "
+              f"({log.duration:.1f} s long)", file=sys.stderr)  # fmt: skip
+        return 2
+    cursor = LogCursor(log, entity_filter, max_gap=args.max_gap)
+    replayer = Replayer(cursor, speed=args.speed, loop=args.loop, start=args.start, origin=origin,
+                        timeout=args.timeout)  # fmt: skip
+    return replayer, size
+
+
+def nothing_to_replay(log: Any) -> str:
+    """Why a DIS log gives no soldiers, in words (what it holds instead, and the option that may help)."""
+    c = log.counters
+    held = [f"{what}: {c.get(k, 0)}" for k, what in _HELD if c.get(k, 0) or k in ("records", "pdus")]
+    hint = ""
+    if c.get("other_port"):
+        hint = "; DIS on another port? try --dis-port P or --any-port"
+    elif c.get("other_exercise"):
+        hint = f"; exercises in the log: {', '.join(map(str, sorted(log.exercises)))}"
+    return f"no lifeform Entity State PDUs to replay ({', '.join(held)}){hint}"
 
 
 async def stop_on_signal(scope: Any) -> None:
