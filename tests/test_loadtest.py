@@ -260,7 +260,7 @@ def test_subscribe_all_sees_every_connections_soldiers(server) -> None:
         mix="moving", subscribe_all=True,
     )  # fmt: skip
     r = run_loadtest(cfg)
-    assert r["delivered_pct"] >= 95.0, r["delivered_pct"]
+    assert r["soldiers_seen_min"] == 8, r  # not a delivered percentage: that depends on the machine's load
 
 
 def test_each_connection_is_its_own_client_so_the_per_client_cap_counts_per_connection(tmp_path) -> None:
@@ -277,7 +277,7 @@ def test_each_connection_is_its_own_client_so_the_per_client_cap_counts_per_conn
             soldiers=8, clients=2, seconds=0.8, warmup_s=0.3, host=srv.host, port=srv.port, mix="moving",
         )  # fmt: skip
         r = run_loadtest(cfg)
-    assert r["soldiers"] == 8 and r["delivered_pct"] >= 95.0, r
+    assert r["soldiers"] == 8 and r["soldiers_seen_min"] == 4, r  # each connection sees its own 4
 
 
 def test_ramp_defaults_can_pass(server, capsys) -> None:
