@@ -247,8 +247,8 @@ def test_loadtest_ramp_summary_says_n_a_not_none() -> None:
     }
     text = format_result(result)
     assert not [x for x in REPRS if x in text], text
-    assert "criteria: delivered >= 99% and request p99 <= 33 ms" in text
-    assert "largest sustained N = none (the first stage failed) (first failed: 100)" in text
+    assert "criteria: delivered >= 99%, p99 request latency <= 33 ms" in text
+    assert "no N sustained: the first stage (N=100) failed" in text
     assert "delivered n/a" in text and "FAIL" in text
 
 

@@ -27,6 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         q.add_argument(
             "--format", default="auto", choices=("auto", "pcap", "pcapng", "dislog", "raw"), help="log format"
         )
+        q.add_argument("--exercise", type=exercise_id, metavar="N",
+                       help="only the PDUs of DIS exercise N (1..255; default: every exercise)")  # fmt: skip
 
     d = dis.add_parser(
         "dump",
@@ -61,6 +63,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--dis-version", type=int, default=7, choices=(5, 6, 7), help="DIS protocol version")
     s.add_argument("--json", action="store_true", help="machine-readable summary")
     s.set_defaults(func=run_synth)
+
+
+def exercise_id(text: str) -> int:
+    """``--exercise N``: a DIS exercise identifier (the header's u8; 0 is not a valid exercise)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 1 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"an exercise ID is 1..255, not {text!r}")
+    return value
+
+
+def not_dis(command: str, path: object, log: Any) -> bool:
+    """Say so on stderr when ``log`` is not DIS at all (a text file, an image): the caller exits 1."""
+    why = log.not_dis()
+    if why is not None:
+        print(f"ttes {command}: {path}: {why}", file=sys.stderr)
+    return why is not None
 
 
 def _origin(text: str | None) -> tuple[float, float, float] | None:
@@ -100,6 +121,7 @@ def _read(args: argparse.Namespace, lifeforms_only: bool = True) -> Any:
             port=None if args.any_port else args.port,
             lifeforms_only=lifeforms_only,
             progress=update,
+            exercise=args.exercise,
         )
     finally:
         if bar is not None:
@@ -139,6 +161,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
     from protocol.dis.entity_type import is_lifeform
     from protocol.dis.geo import heading_deg
     from protocol.dis.logfile import PduStatus
+    from protocol.dis.pdu import PduType
 
     r = log.batch.records
     fields = decode_appearance(r["appearance"])
@@ -163,6 +186,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
         "dr": r["dr_algorithm"].tolist(),
         "params": r["num_params"].tolist(),
         "life": life.tolist(),
+        "update": (r["pdu_type"] == PduType.ENTITY_STATE_UPDATE).tolist(),
     }
     pdus = log.pdus
     t_rel = np.round(pdus["t"] - log.t0, 6).tolist()
@@ -173,6 +197,8 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
         PduStatus.NOT_LIFEFORM: "not_lifeform",
         PduStatus.CORRUPT: "corrupt",
         PduStatus.UNSUPPORTED_VERSION: "unsupported_version",
+        PduStatus.OTHER_EXERCISE: "other_exercise",
+        PduStatus.NO_BASE: "update_without_entity_state",
     }
     for k, st in enumerate(status):
         if st == PduStatus.DECODED:
@@ -200,6 +226,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
                     "heading_deg": round(cols["heading"][i], 6),
                     "dr_algorithm": cols["dr"][i],
                     "articulations": cols["params"][i],
+                    **({"update": True} if cols["update"][i] else {}),
                 }
             )
             continue
@@ -218,6 +245,8 @@ def run_dump(args: argparse.Namespace) -> int:
     from ttes.output import print_json
 
     log = _read(args, lifeforms_only=not args.all_entities)
+    if not_dis("dis dump", args.path, log):
+        return 1
     rows = dump_rows(log, attach_events=args.events)
     out = sys.stdout
     if args.json:
@@ -268,6 +297,8 @@ def run_info(args: argparse.Namespace) -> int:
     from ttes.output import print_json
 
     log = _read(args, lifeforms_only=False)
+    if not_dis("dis info", args.path, log):
+        return 1
     r = log.batch.records
     life = is_lifeform(r["entity_type"]["kind"], r["entity_type"]["domain"])
     info = log.summary()

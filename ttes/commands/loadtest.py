@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING
 
 from ttes.arguments import UsageError, count, host, non_negative, number, port, positive
 from ttes.link_options import add_link_options, link_credentials
 from ttes.output import na
+
+if TYPE_CHECKING:
+    from client_stub.loadtest.session import LoadTestConfig
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -62,7 +65,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--min-delivered-pct", type=number(0, 100), default=99.0, help="ramp criterion: delivered/expected"
     )
-    p.add_argument("--max-p99-ms", type=positive, default=33.0, help="ramp criterion: p99 latency")
+    p.add_argument(
+        "--max-p99-ms",
+        type=positive,
+        metavar="MS",
+        help="ramp criterion: p99 latency (default 100 ms, DIS's budget for tightly coupled interactions; a "
+        "request waits up to one server tick before it is computed)",
+    )
     p.add_argument(
         "--latency-metric",
         choices=("request", "delivery"),
@@ -75,12 +84,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _config(args: argparse.Namespace) -> Any:
-    """The LoadTestConfig the options ask for (ValueError when they do not go together)."""
+def config(args: argparse.Namespace) -> LoadTestConfig:
+    """The load test the arguments ask for (the library's defaults where an option has none of its own)."""
     from client_stub.loadtest.session import LoadTestConfig
 
     throttle: float | None = None if args.throttle == "script" else float(args.throttle)
-    cfg = LoadTestConfig(
+    return LoadTestConfig(
         soldiers=args.soldiers,
         clients=args.clients,
         rate_hz=args.rate,
@@ -101,12 +110,10 @@ def _config(args: argparse.Namespace) -> Any:
         ramp_max_soldiers=args.ramp_max_soldiers,
         ramp_max_s=args.ramp_max_seconds,
         min_delivered_pct=args.min_delivered_pct,
-        max_p99_ms=args.max_p99_ms,
+        max_p99_ms=LoadTestConfig.max_p99_ms if args.max_p99_ms is None else args.max_p99_ms,
         latency_metric=args.latency_metric,
         credentials=link_credentials(args),
     )
-    cfg.check()
-    return cfg
 
 
 def run(args: argparse.Namespace) -> int:
@@ -115,8 +122,9 @@ def run(args: argparse.Namespace) -> int:
     from client_stub.loadtest.session import run_loadtest
     from ttes.output import print_json
 
+    cfg = config(args)
     try:  # values that do not go together (more clients than soldiers): a usage error
-        cfg = _config(args)
+        cfg.check()
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     from ttes.progress import ProgressBar
@@ -168,13 +176,23 @@ def format_result(r: dict) -> str:
 
 
 def _format_ramp(r: dict) -> str:
+    """The ramp's verdict (which criterion the failing stage missed) and one line per stage."""
     c = r["criteria"]
-    best = r["largest_sustained_soldiers"]
+    latency = f"p99 {c['latency_metric']} latency <= {c['max_p99_ms']:g} ms"
+    criteria = f"delivered >= {c['min_delivered_pct']:g}%, {latency}"
+    best, first_fail = r["largest_sustained_soldiers"], r["first_failed_soldiers"]
+    last = r["stages"][-1] if r["stages"] else {}
+    if best is None:
+        verdict = (
+            f"  no N sustained: the first stage (N={first_fail}) failed ({last.get('failed_on', '')}); "
+            "try a smaller --soldiers, or a looser --max-p99-ms / --min-delivered-pct"
+        )
+    else:
+        more = f"N={first_fail} failed ({last.get('failed_on', '')})" if first_fail else "none failed"
+        verdict = f"  largest sustained N = {best} ({more})"
     lines = [
-        f"ttes loadtest --ramp: {r['clients']} clients at {r['rate_hz']:g} Hz, criteria: delivered >= "
-        f"{c['min_delivered_pct']:g}% and {c['latency_metric']} p99 <= {c['max_p99_ms']:g} ms",
-        f"  largest sustained N = {best if best is not None else 'none (the first stage failed)'} "
-        f"(first failed: {na(r['first_failed_soldiers'])})",
+        f"ttes loadtest --ramp: {r['clients']} clients at {r['rate_hz']:g} Hz, criteria: {criteria}",
+        verdict,
     ]
     for s in r["stages"]:
         lines.append(
