@@ -30,6 +30,7 @@ from client_stub.loadtest.stats import GRACE_TICKS, Tracker, series, summarise
 from protocol.events import Ready, ticks_per_update
 
 MAX_STAGES = 40
+Progress = Callable[[float, float, str], None]  # (seconds done, seconds in all, stage) of a running stage
 # The ramp's default latency bound: DIS's budget for tightly coupled interactions (IEEE 1278.2: 100 ms from
 # one simulator's action to another's display). A request's first update waits up to one server tick (33 ms
 # at 30 Hz) before it is even computed, so the bound this was before, 33 ms at p99, failed the first stage of
@@ -119,6 +120,8 @@ class LoadSession:
         self.rate = cfg.rate_hz  # the server's tick rate, from READY once connected
         self.throttle: float | None = None  # the server's throttle, from READY
         self.every = 1  # server ticks per update of a soldier that keeps moving (its throttle)
+        self.progress: Progress | None = None  # progress(done_s, total_s, stage) while driving
+        self.stage = ""  # the stage progress names ("N=130" of a ramp)
 
     def now(self) -> float:
         return trio.current_time() - self.t0
@@ -206,7 +209,10 @@ class LoadSession:
         """Step the mix until session time ``until``: requests, probes, CPU samples."""
         period = 1.0 / self.cfg.step_hz
         next_t = trio.current_time()
+        begin = self.now()
         while self.now() < until:
+            if self.progress is not None:
+                self.progress(self.now() - begin, until - begin, self.stage)
             self.failed()
             t = self.now()
             step = self.driver.step(t)
@@ -219,6 +225,8 @@ class LoadSession:
             self.sample_cpu()
             next_t += period
             await trio.sleep_until(max(next_t, trio.current_time()))
+        if self.progress is not None:
+            self.progress(until - begin, until - begin, self.stage)
 
     def failed(self) -> None:
         for c in self.clients:
@@ -274,8 +282,11 @@ def failed_on(cfg: LoadTestConfig, s: dict[str, Any]) -> str:
     return ", ".join(why)
 
 
-async def _run(cfg: LoadTestConfig, host: str, port: int, server_cpu: Any, remove: bool) -> dict[str, Any]:
+async def _run(
+    cfg: LoadTestConfig, host: str, port: int, server_cpu: Any, remove: bool, progress: Progress | None = None
+) -> dict[str, Any]:
     session = LoadSession(cfg, server_cpu)
+    session.progress, session.stage = progress, f"N={cfg.soldiers}"
     out: dict[str, Any] = {}
     async with trio.open_nursery() as nursery:
         await session.connect(nursery, host, port)
@@ -314,6 +325,7 @@ async def _ramp(cfg: LoadTestConfig, session: LoadSession) -> dict[str, Any]:
     first_fail: int | None = None
     wall0 = time.monotonic()
     for _ in range(MAX_STAGES):
+        session.stage = f"N={n}"
         await session.grow(n)
         start = session.now() + cfg.warmup_s
         await session.drive(start + cfg.seconds)
@@ -364,8 +376,9 @@ def server_args(tick_hz: float, throttle: float | None) -> list[str]:
     return ["--tick-hz", f"{tick_hz:g}", *(["--throttle", f"{throttle:g}"] if throttle is not None else [])]
 
 
-def run_loadtest(cfg: LoadTestConfig) -> dict[str, Any]:
-    """Run a load test (or a ramp) as configured; returns the JSON-ready result."""
+def run_loadtest(cfg: LoadTestConfig, progress: Progress | None = None) -> dict[str, Any]:
+    """Run a load test (or a ramp) as configured; returns the JSON-ready result. ``progress(done_s, total_s,
+    stage)`` while each stage runs (warm-up and measurement; a ramp's stages are named ``N=...``)."""
     cfg.check()
     server: ServerProcess | None = None
     server_cpu: Callable[[], float] | None
@@ -379,7 +392,7 @@ def run_loadtest(cfg: LoadTestConfig) -> dict[str, Any]:
             pid = cfg.server_pid
             server_cpu = (lambda: cpu_seconds(pid)) if pid else None
         try:
-            out = trio.run(_run, cfg, host, port, server_cpu, server is None)
+            out = trio.run(_run, cfg, host, port, server_cpu, server is None, progress)
         except BaseExceptionGroup as group:  # errors inside nurseries arrive grouped
             leaf = first_leaf(group)
             if isinstance(leaf, LoadError | OSError):

@@ -11,6 +11,8 @@ import argparse
 import sys
 from typing import Any
 
+from ttes.arguments import UsageError, count, port, positive
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("dis", help="read DIS logs and write synthetic DIS exercises", description=__doc__)
@@ -20,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     def add_reading(q: argparse.ArgumentParser) -> None:
         q.add_argument("path", help="pcap, pcapng, .dislog or raw PDU file")
         q.add_argument("--json", action="store_true", help="machine-readable output")
-        q.add_argument("--port", type=int, default=3000, help="UDP port of the DIS traffic (default 3000)")
+        q.add_argument("--port", type=port, default=3000, help="UDP port of the DIS traffic (default 3000)")
         q.add_argument("--any-port", action="store_true", help="take DIS from every UDP port")
         q.add_argument(
             "--format", default="auto", choices=("auto", "pcap", "pcapng", "dislog", "raw"), help="log format"
@@ -53,11 +55,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "broadcasts to port 3000, deterministic for a seed.",
     )
     s.add_argument("--out", required=True, help="output .pcap path")
-    s.add_argument("--soldiers", type=int, default=8, help="number of soldiers (alternating forces)")
-    s.add_argument("--seconds", type=float, default=60.0, help="exercise length (s)")
+    s.add_argument("--soldiers", type=count(1), default=8, help="number of soldiers (alternating forces)")
+    s.add_argument("--seconds", type=positive, default=60.0, help="exercise length (s)")
     s.add_argument("--seed", type=int, default=0, help="random seed")
     s.add_argument("--origin", help="LAT,LON,H of the exercise (default: Quantico MOUT, 38.52,-77.44,60)")
-    s.add_argument("--vehicles", type=int, default=1, help="parked vehicles (non-lifeform traffic)")
+    s.add_argument("--vehicles", type=count(0), default=1, help="parked vehicles (non-lifeform traffic)")
     s.add_argument("--dis-version", type=int, default=7, choices=(5, 6, 7), help="DIS protocol version")
     s.add_argument("--json", action="store_true", help="machine-readable summary")
     s.set_defaults(func=run_synth)
@@ -85,10 +87,12 @@ def not_dis(command: str, path: object, log: Any) -> bool:
 def _origin(text: str | None) -> tuple[float, float, float] | None:
     if not text:
         return None
-    parts = text.split(",")
-    if len(parts) not in (2, 3):
-        raise ValueError(f"--origin wants LAT,LON[,H], not {text!r}")
-    vals = [float(x) for x in parts]
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) not in (2, 3):
+        raise UsageError(f"--origin wants LAT,LON[,H], not {text!r}")
     return (vals[0], vals[1], vals[2] if len(vals) == 3 else 0.0)
 
 
@@ -289,6 +293,7 @@ def run_info(args: argparse.Namespace) -> int:
 
     from protocol.dis.entity_type import is_lifeform
     from protocol.dis.pdu import pdu_type_name
+    from server.logging import plain
     from ttes.output import print_json
 
     log = _read(args, lifeforms_only=False)
@@ -306,7 +311,7 @@ def run_info(args: argparse.Namespace) -> int:
     else:
         for key, value in info.items():
             if key != "issue_list":
-                print(f"{key:>20}: {value}")
+                print(f"{key:>20}: {plain(value)}")
         for e in info["issue_list"]:
             print(f"{'issue':>20}: {e}")
     return 0
@@ -358,6 +363,10 @@ def run_synth(args: argparse.Namespace) -> int:
             f"wrote {args.out}: {n} packets ({ex.counts['entity_state']} soldier entity states, "
             f"{ex.counts['fire']} fire, {ex.counts['detonation']} detonation, "
             f"{ex.counts['vehicle_entity_state']} vehicle), {len(ex.entities)} soldiers, "
-            f"victim {summary['victim']} at t={ex.t_kill:.1f} s"
+            + (
+                f"victim {':'.join(map(str, summary['victim']))} at t={ex.t_kill:.1f} s"
+                if ex.victim is not None
+                else "no victim"
+            )
         )
     return 0

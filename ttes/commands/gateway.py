@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ttes.arguments import host, listen_port, non_negative, port
 from ttes.commands.dis import exercise_id
 from ttes.link_options import add_link_options, link_credentials, link_error
 
@@ -41,9 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--dis-port", type=int, default=3000, help="UDP port to listen on (default 3000)")
-    p.add_argument("--dis-group", metavar="ADDR", help="multicast group to join (default: none)")
-    p.add_argument("--listen", "--interface", dest="interface", default=LOOPBACK, metavar="ADDR",
+    p.add_argument("--dis-port", type=listen_port, default=3000, help="UDP port to listen on (default 3000)")
+    p.add_argument("--dis-group", type=host, metavar="ADDR", help="multicast group to join (default: none)")
+    p.add_argument("--listen", "--interface", dest="interface", type=host, default=LOOPBACK, metavar="ADDR",
                    help=f"local address to bind / join on (default {LOOPBACK}: this machine only; "
                         "0.0.0.0: every interface, to hear a LAN exercise's broadcasts)")  # fmt: skip
     p.add_argument(
@@ -52,19 +53,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="only the PDUs of DIS exercise N (1..255; default: every exercise)",
     )
-    p.add_argument("--host", help="Jack/TTES server host (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
+    p.add_argument("--host", type=host, help="Jack/TTES server host (default 127.0.0.1)")
+    p.add_argument("--port", type=port, default=7000, help="server port (default 7000)")
     p.add_argument("--with-server", action="store_true", help="run a private server in this process")
     p.add_argument("--data-dir", help="private server: its data directory")
     p.add_argument("--synthetic-server", action="store_true", help="private server: synthetic motion library")
     p.add_argument("--timeout", type=float, default=12.0, help="seconds without a PDU before a soldier goes")
     p.add_argument("--entities", metavar="FILTER", help="keep only these entities (as in `ttes replay`)")
     p.add_argument("--origin", metavar="LAT,LON,H", help="local frame origin (default: the first entity)")
-    p.add_argument("--status-every", type=float, default=5.0, help="seconds between status lines (0: none)")
+    p.add_argument(
+        "--status-every", type=non_negative, default=5.0, help="seconds between status lines (0: none)"
+    )
     p.add_argument("--seconds", type=float, help="stop after this many seconds (default: run until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="status lines and the final summary as JSON")
     add_link_options(p)
-    p.add_argument("--give-up-after", type=float, default=120.0, metavar="S",
+    p.add_argument("--give-up-after", type=non_negative, default=120.0, metavar="S",
                    help="a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) for "
                         "this long before the gateway exits 1 (default 120; 0: exit at once)")  # fmt: skip
     p.set_defaults(func=run)

@@ -32,6 +32,18 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
+from ttes.arguments import (
+    HEADLESS_NEEDS_OUT,
+    VIDEO_SUFFIXES,
+    UsageError,
+    host,
+    non_negative,
+    number,
+    port,
+    positive,
+    size,
+    video_or_png,
+)
 from ttes.commands.dis import exercise_id, not_dis
 from ttes.link_options import add_link_options, link_credentials, link_error
 
@@ -86,22 +98,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--origin", metavar="LAT,LON,H", help="local frame origin (default: the first entity)")
     p.add_argument("--timeout", type=float, default=12.0, help="seconds without a PDU before a soldier goes")
     p.add_argument("--format", choices=("auto", "pcap", "pcapng", "dislog", "raw"), default="auto")
-    p.add_argument("--dis-port", type=int, default=3000, help="UDP port of DIS in captures (default 3000)")
+    p.add_argument("--dis-port", type=port, default=3000, help="UDP port of DIS in captures (default 3000)")
     p.add_argument("--any-port", action="store_true", help="read DIS on every UDP port of a capture")
     p.add_argument(
         "--headless", action="store_true", help="render offscreen (EGL) to --out instead of a window"
     )
     p.add_argument(
-        "--out", type=Path, default=Path("ttes-replay.mp4"), help="headless: .mp4/.gif video or .png"
+        "--out",
+        type=video_or_png,
+        help=f"--headless (needed): the video ({', '.join(VIDEO_SUFFIXES)}) or a .png of the last frame",
     )
-    p.add_argument("--seconds", type=float, help="headless: video length (default: the log, at --speed)")
-    p.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
-    p.add_argument("--size", default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument("--seconds", type=positive, help="headless: video length (default: the log, at --speed)")
+    p.add_argument("--fps", type=number(1, 120), default=15.0, help="frames per second (default 15)")
+    p.add_argument("--size", type=size, default="640x480", help="image size WxH (default 640x480)")
     p.add_argument("--camera", choices=("squad", "birds-eye", "soldier", "overhead"), default="squad",
                    help="start camera (default: one framing the whole squad; keys take over)")  # fmt: skip
     p.add_argument("--no-stub", action="store_true", help="no image generator: only drive the server")
-    p.add_argument("--host", help="Jack/TTES server host (default: a private server)")
-    p.add_argument("--port", type=int, default=7000, help="server port with --host (default 7000)")
+    p.add_argument("--host", type=host, help="Jack/TTES server host (default: a private server)")
+    p.add_argument("--port", type=port, default=7000, help="server port with --host (default 7000)")
     p.add_argument("--offline", action="store_true", help="no server: the stub poses the soldiers itself")
     p.add_argument(
         "--data-dir", type=Path, help="private server: its data directory (default: the project's)"
@@ -113,7 +127,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_link_options(p)
     p.add_argument(
         "--give-up-after",
-        type=float,
+        type=non_negative,
         default=120.0,
         metavar="S",
         help="a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) "
@@ -159,16 +173,6 @@ def parse_origin(text: str | None) -> Any:
     if not (-90 <= lat <= 90 and -180 <= lon <= 360 and math.isfinite(h)):
         raise ValueError(f"--origin {text!r} out of range")
     return LocalFrame(lat, lon, h)
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"--size must be WxH, not {text!r}") from None
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise ValueError("--size out of range")
-    return w, h
 
 
 @contextlib.asynccontextmanager
@@ -220,8 +224,9 @@ def run(args: argparse.Namespace) -> int:
         summary = _run_server_only(args, replayer)
     elif args.headless:
         if args.loop and args.seconds is None:
-            print("ttes replay: --loop --headless needs --seconds", file=sys.stderr)
-            return 2
+            raise UsageError("--loop --headless needs --seconds")
+        if args.out is None:
+            raise UsageError(HEADLESS_NEEDS_OUT)
         os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
         summary = _run_headless(args, replayer, size)
     else:
@@ -248,27 +253,36 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _log_length(replayer: Any) -> float | None:
+    """The replay time the status lines count to: the log's length (None when looping)."""
+    return None if replayer.loop else replayer.cursor.duration
+
+
 def _load(args: argparse.Namespace) -> tuple[Any, tuple[int, int]] | int:
     """The checked arguments and the log, as a Replayer (and the image size); else the exit status: 2 for
-    bad arguments (--start past the log's end included), 1 for a file that is not DIS or holds no soldier."""
+    bad arguments (--start past the log's end included), 1 for a file that cannot be read, is not DIS or holds
+    no soldier."""
     from client_stub.dis import EntityFilter, FilterError, LogCursor, Replayer
     from protocol.dis import DisError, read_log
 
     try:
         entity_filter = EntityFilter.parse(args.entities) if args.entities else None
         origin = parse_origin(args.origin)
-        size = _size(args.size)
         if not (math.isfinite(args.start) and args.start >= 0):
             raise ValueError("--start must be >= 0 seconds")
         if not (math.isfinite(args.timeout) and args.timeout > 0):
             raise ValueError("--timeout must be > 0 seconds")
         if args.offline and args.no_stub:
             raise ValueError("--offline --no-stub would do nothing")
-        log = read_log(args.logfile, fmt=args.format, port=None if args.any_port else args.dis_port,
-                       exercise=args.exercise)  # fmt: skip
-    except (FilterError, DisError, ValueError) as exc:
+    except (FilterError, ValueError) as exc:
         print(f"ttes replay: {exc}", file=sys.stderr)
         return 2
+    try:  # a log that cannot be read is a runtime error (1), not a usage error
+        log = read_log(args.logfile, fmt=args.format, port=None if args.any_port else args.dis_port,
+                       exercise=args.exercise)  # fmt: skip
+    except (DisError, OSError) as exc:
+        print(f"ttes replay: {exc}", file=sys.stderr)
+        return 1
     if not_dis("replay", args.logfile, log):
         return 1
     if not len(log.batch):
@@ -281,7 +295,7 @@ def _load(args: argparse.Namespace) -> tuple[Any, tuple[int, int]] | int:
     cursor = LogCursor(log, entity_filter, max_gap=args.max_gap)
     replayer = Replayer(cursor, speed=args.speed, loop=args.loop, start=args.start, origin=origin,
                         timeout=args.timeout)  # fmt: skip
-    return replayer, size
+    return replayer, args.size
 
 
 def nothing_to_replay(log: Any) -> str:
@@ -326,7 +340,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
             async with trio.open_nursery() as nursery:
                 connect = connector(nursery, host, port, credentials=link_credentials(args))
                 sink = ServerSink(await connect())
-                progress = ProgressLine(out=None if args.json else sys.stderr)
+                progress = ProgressLine(out=None if args.json else sys.stderr, total=_log_length(replayer))
                 failures: list[str] = []
 
                 async def drain() -> None:
@@ -463,7 +477,7 @@ def _make_app(args: argparse.Namespace, replayer: Any, link: Any, reconnect: Any
         terrain,
         replayer,
         link=link,
-        progress=ProgressLine(out=None if args.json else sys.stderr),
+        progress=ProgressLine(out=None if args.json else sys.stderr, total=_log_length(replayer)),
         reconnect=reconnect,
         retry=RetrySchedule(give_up_after=args.give_up_after),
     )
