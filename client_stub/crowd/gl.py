@@ -159,14 +159,16 @@ class TerrainMesh:
     hi: np.ndarray
 
 
-def terrain_mesh(meshes: dict, tile_m: float = 40.0) -> TerrainMesh:
-    """Triangles of trimesh meshes (Performer axes) as a :class:`TerrainMesh`."""
+def terrain_mesh(meshes: dict, tile_m: float = 40.0, smooth: tuple[str, ...] = ()) -> TerrainMesh:
+    """Triangles of trimesh meshes (Performer axes) as a :class:`TerrainMesh`; the meshes named in
+    ``smooth`` keep their vertex normals (a rolling ground), the others are flat-shaded."""
     parts = []
-    for mesh in meshes.values():
+    for name, mesh in meshes.items():
         tri = np.asarray(mesh.faces, np.int64)
         p = np.asarray(mesh.vertices, np.float64)[tri]
         n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        n = np.asarray(mesh.vertex_normals, np.float64)[tri] if name in smooth else n[:, None]
         col = None
         visual = getattr(mesh, "visual", None)
         kind = getattr(visual, "kind", None)
@@ -176,7 +178,7 @@ def terrain_mesh(meshes: dict, tile_m: float = 40.0) -> TerrainMesh:
             col = np.repeat(np.asarray(visual.face_colors, np.float64)[:, None, :3] / 255.0, 3, axis=1)
         if col is None:
             col = np.full((len(tri), 3, 3), 0.5)
-        parts.append(np.concatenate([p, np.repeat(n[:, None], 3, axis=1), col], axis=2))
+        parts.append(np.concatenate([p, np.broadcast_to(n, p.shape), col], axis=2))
     if not parts:
         z = np.zeros(0, np.int64)
         return TerrainMesh(np.zeros((0, 9), np.float32), z, z, np.zeros((0, 3)), np.zeros((0, 3)))

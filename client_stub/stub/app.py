@@ -36,19 +36,28 @@ from client_stub.stub.artic import (
     update_table_for,
     write_artic,
 )
-from client_stub.stub.camera import CameraState, camera_pose
-from client_stub.stub.keys import StubController
+from client_stub.stub.camera import (
+    ACTION_RADIUS_M,
+    SOLDIER_HEIGHT_M,
+    CameraState,
+    View,
+    action_pose,
+    camera_pose,
+)
+from client_stub.stub.keys import KEY_HELP, StubController
 from client_stub.stub.offline import OfflinePoser
+from client_stub.stub.overlay import Label, Overlay
 from client_stub.stub.scene_graph import Crowd, EntityLayout, FigureGraph
 from client_stub.stub.simsoldier import Force, SimSoldiers
 from client_stub.stub.terrain import Terrain
 from client_stub.stub.tips import TipsFigure, load_tips
 from protocol import coords
+from protocol.entity import Appearance, WeaponState
 from protocol.update_table import UpdateTable
 
 if TYPE_CHECKING:
     from client_stub.link.api import Link
-    from client_stub.stub.render import StubRenderer
+    from client_stub.renderer import StubBackend
 
 log = logging.getLogger("ttes.stub")
 DATA = Path(__file__).resolve().parent.parent / "data"
@@ -133,7 +142,10 @@ class StubApp:
         self.server_of = np.full(capacity, -1, np.int64)  # slot -> server soldier index
         self.slot_of_server: dict[int, int] = {}
         self._slot_by_server = np.full(0, -1, np.int64)  # the same map as an array, for whole batches
-        self.renderer: StubRenderer | None = None
+        self.renderer: StubBackend | None = None
+        self.show_help = False  # the keys over the picture (``?`` toggles)
+        self.figure_box = np.full((0, 2, 3), np.nan)  # slot -> lowest and highest joint as last drawn
+        self.labels = True  # name and posture above each soldier
         self.time = 0.0
         self.server_lost = ""  # "server lost: why" while the source has no server (after having one)
         self.server_lost_count = 0
@@ -236,6 +248,8 @@ class StubApp:
             return refused
         before = self.soldiers.count
         message = self.controller.handle(key)
+        if key == "?":
+            self.show_help = not self.show_help
         for slot in range(before, self.soldiers.count):  # key 'a' added soldiers
             self._place(slot)
         return message
@@ -325,20 +339,43 @@ class StubApp:
                 )
 
     def draw(self) -> None:
-        """Hand the live soldiers' world matrices (by kind and look) and the camera to the renderer."""
+        """Hand the live soldiers' world matrices (by kind and look), the camera and the overlay (labels,
+        caption, keys) to the renderer."""
         r = self.renderer
         if r is None:
             return
         n = self.soldiers.count
         slots = np.flatnonzero(self.soldiers.alive[:n])
+        labels: list[Label] = []
+        self.figure_box = np.full((self.soldiers.capacity, 2, 3), np.nan)
         for kind_id, k in enumerate(self.kinds):
             mine = slots[self.slot_kind[slots] == kind_id]
             looks = set(self.look[mine].tolist()) | {key for kid, key in r.soldiers if kid == kind_id}
             for look in sorted(looks):
                 rows = mine[self.look[mine] == look]
-                meshes = r.soldier_meshes(kind_id, k.layout, look)
-                meshes.update(k.crowd.world(rows) if len(rows) else np.zeros((0, k.layout.nnodes, 4, 4)))
+                world = k.crowd.world(rows) if len(rows) else np.zeros((0, k.layout.nnodes, 4, 4))
+                r.soldier_meshes(kind_id, k.layout, look).update(world)
+                joints = world[:, 1:, :3, 3]
+                self.figure_box[rows] = np.stack([joints.min(axis=1), joints.max(axis=1)], axis=1)
+                if self.labels:
+                    labels += self._labels(rows, world)
         r.set_camera(self.camera_pose())
+        r.overlay = Overlay(labels, self._caption(), KEY_HELP if self.show_help else ())
+
+    def _labels(self, rows: np.ndarray, world: np.ndarray) -> list[Label]:
+        """Name and posture above each soldier's head (the highest of his joints)."""
+        s, cur = self.soldiers, self.controller.current
+        out = []
+        for row, nodes in zip(rows.tolist(), world, strict=True):
+            p = nodes[:, :3, 3]
+            anchor = (float(p[:, 0].mean()), float(p[:, 1].mean()), float(p[:, 2].max()) + 0.25)
+            out.append(Label(f"soldier {row}", posture_text(s, row), anchor, row == cur))
+        return out
+
+    def _caption(self) -> str:
+        cur = self.controller.current
+        who = f" · current soldier {cur}" if cur < self.soldiers.count else ""
+        return f"{self.camera.view.value}{who}"
 
     def camera_pose(self) -> np.ndarray:
         wanted = self.source.camera_pose(self)
@@ -346,10 +383,35 @@ class StubApp:
             return wanted
         s = self.soldiers
         cur = self.controller.current
+        if self.camera.view is View.ACTION:
+            return self._action_pose()
         feet, heading = (s.position[cur], float(s.heading[cur])) if cur < s.count else (np.zeros(3), 0.0)
         if cur < s.count and self.slot_kind[cur] >= 0:
             feet = self.figure_feet(cur, feet)
         return camera_pose(self.camera, feet, heading, self.terrain.bounds)
+
+    def action_points(self) -> np.ndarray:
+        """Corners of the drawn figures ACTION CAM frames, ``(2n, 3)``: the current soldier and the live ones
+        near him (all live ones when there is no current soldier). The figures, not the entities: a server
+        may place a figure away from its entity (the root offset of a step, a late update)."""
+        s = self.soldiers
+        live = np.flatnonzero(s.alive[: s.count])
+        box = self.figure_box[live] if len(self.figure_box) >= s.count else np.full((len(live), 2, 3), np.nan)
+        unknown = np.isnan(box[:, 0, 0])  # not drawn yet: the entity, a soldier's height tall
+        box[unknown, 0] = s.position[live[unknown]]
+        box[unknown, 1] = s.position[live[unknown]] + np.array([0.0, 0.0, SOLDIER_HEIGHT_M])
+        if not len(live):
+            return np.array([[0.0, 0.0, 0.0], [0.0, 0.0, SOLDIER_HEIGHT_M]])
+        cur = np.flatnonzero(live == self.controller.current)
+        if len(cur):
+            middle = box.mean(axis=1)[:, :2]
+            box = box[np.linalg.norm(middle - middle[cur[0]], axis=1) <= ACTION_RADIUS_M]
+        return box.reshape(-1, 3)
+
+    def _action_pose(self) -> np.ndarray:
+        r = self.renderer
+        yfov, aspect = (r.yfov_deg, r.width / r.height) if r is not None else (50.0, 4 / 3)
+        return action_pose(self.camera, self.action_points(), yfov, aspect, self.terrain.height)
 
     def figure_feet(self, slot: int, feet: np.ndarray) -> np.ndarray:
         """Where the soldier's figure stands: the server sends a root offset (the figure trails or leads its
@@ -364,3 +426,17 @@ class StubApp:
 
     def close(self) -> None:
         self.source.close()
+
+
+def posture_text(soldiers: SimSoldiers, slot: int) -> str:
+    """``kneel, firing`` / ``upright, walk 1.3 m/s``: what a label says a soldier is doing."""
+    s = soldiers
+    code, weapon = int(s.appearance[slot]), int(s.weapon[slot])
+    text = Appearance(code).name.lower() if code in Appearance._value2member_map_ else f"posture {code}"
+    speed = float(s.speed[slot]) * float(s.moving(np.array([slot]))[0])
+    if abs(speed) > 0.05:
+        gait = "crawl" if code != Appearance.UPRIGHT else "run" if abs(speed) > 2.5 else "walk"
+        text += f", {gait} {speed:.1f} m/s"
+    if weapon in (WeaponState.DEPLOYED, WeaponState.FIRING):
+        text += f", {WeaponState(weapon).name.lower()}"
+    return text

@@ -21,6 +21,8 @@ import numpy as np
 import pyrender
 import trimesh
 
+from client_stub.stub.camera import viewproj
+from client_stub.stub.overlay import Overlay
 from client_stub.stub.scene_graph import EntityLayout, SegmentGeometry
 from client_stub.stub.simsoldier import Force
 
@@ -53,13 +55,14 @@ def _material(rgb: np.ndarray) -> pyrender.MetallicRoughnessMaterial:
     )
 
 
-def segment_primitives(
+def segment_arrays(
     geom: SegmentGeometry, uniform: np.ndarray | None, force_colour: tuple[float, float, float] | None
-) -> list[pyrender.Primitive]:
-    """One primitive per segment (one draw call per body part): smooth normals within each attribute,
-    attribute colours as vertex colours, the uniform recoloured for the force."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """A segment's indexed mesh as every back end draws it: positions, normals (smooth within each
+    attribute), RGB colours (attribute colours, the uniform recoloured for the force) and triangle indices;
+    None for a segment without triangles."""
     if not len(geom.triangles):
-        return []
+        return None
     diffuse = geom.diffuse if len(geom.diffuse) else np.full((1, 3), 0.7)
     if force_colour is not None and uniform is not None:
         diffuse = np.where(
@@ -80,15 +83,31 @@ def segment_primitives(
         )
         positions.append(geom.vertices[used])
         normals.append(n)
-        colours.append(np.column_stack([c, np.ones(len(used))]))
+        colours.append(c)
         indices.append(inverse.reshape(-1, 3) + base)
         base += len(used)
+    return (
+        np.concatenate(positions).astype(np.float32),
+        np.concatenate(normals).astype(np.float32),
+        np.concatenate(colours).astype(np.float32),
+        np.concatenate(indices).astype(np.uint32),
+    )
+
+
+def segment_primitives(
+    geom: SegmentGeometry, uniform: np.ndarray | None, force_colour: tuple[float, float, float] | None
+) -> list[pyrender.Primitive]:
+    """One primitive per segment (one draw call per body part) of :func:`segment_arrays`."""
+    arrays = segment_arrays(geom, uniform, force_colour)
+    if arrays is None:
+        return []
+    positions, normals, colours, indices = arrays
     return [
         pyrender.Primitive(
-            positions=np.concatenate(positions).astype(np.float32),
-            normals=np.concatenate(normals).astype(np.float32),
-            color_0=np.concatenate(colours).astype(np.float32),
-            indices=np.concatenate(indices).astype(np.uint32),
+            positions=positions,
+            normals=normals,
+            color_0=np.column_stack([colours, np.ones(len(colours), np.float32)]),
+            indices=indices,
             material=_material(np.ones(3)),
             poses=HIDDEN,
         )
@@ -164,7 +183,8 @@ class StubRenderer:
     def __init__(
         self, width: int = 640, height: int = 480, offscreen: bool = True, yfov_deg: float = 50.0
     ) -> None:
-        self.width, self.height = width, height
+        self.width, self.height, self.yfov_deg = width, height, yfov_deg
+        self.overlay: Overlay | None = None
         self.scene = pyrender.Scene(bg_color=(*SKY, 1.0), ambient_light=(0.35, 0.35, 0.38))
         self.camera = pyrender.PerspectiveCamera(
             yfov=np.radians(yfov_deg), znear=0.2, zfar=2000.0, aspectRatio=width / height
@@ -201,7 +221,11 @@ class StubRenderer:
         self._offscreen._platform.make_current()
         self.upload()
         colour, _ = self._offscreen.render(self.scene)
-        return np.asarray(colour)
+        frame = np.asarray(colour)
+        if self.overlay is not None:
+            pose = self.scene.get_pose(self.camera_node)
+            frame = self.overlay.draw(frame, viewproj(pose, self.yfov_deg, self.width / self.height))
+        return frame
 
     def close(self) -> None:
         """Free the GL objects and our context. With EGL the display is left alone: pyrender's own

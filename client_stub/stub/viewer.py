@@ -23,9 +23,11 @@ def make_window(app: StubApp, width: int = 800, height: int = 600, fps: float = 
     import pyrender
     from pyglet.window import key as keys
 
+    from client_stub.stub.render import StubRenderer
+
     stub_renderer = app.renderer
-    if stub_renderer is None:
-        raise RuntimeError("StubApp has no renderer")
+    if not isinstance(stub_renderer, StubRenderer):
+        raise RuntimeError("the window draws with the pyrender StubRenderer")
     # pyglet.gl.Config is the platform's concrete class at run time; mypy sees the abstract base that
     # pyglet's first (documentation-build) import branch names.
     configs = [

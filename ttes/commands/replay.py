@@ -367,11 +367,11 @@ async def _render(
     import numpy as np
     import trio
 
-    from client_stub.stub.render import StubRenderer
+    from client_stub.stub.gl_render import offscreen_renderer
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    app.renderer = StubRenderer(*size, offscreen=True)
+    app.renderer = offscreen_renderer(*size)
     app.renderer.set_terrain(app.terrain.meshes)
     video = out.suffix.lower() in (".mp4", ".mov", ".mkv", ".avi", ".gif")
     writer = None
