@@ -23,7 +23,7 @@ TETHER_ELEVATION = 15.0  # degrees: the normal tethered view
 OVERHEAD_ELEVATION = 85.0
 MIN_DISTANCE = 2.0
 LOOK_HEIGHT = 1.0  # metres above the feet the tethered camera looks at
-ACTION_RADIUS_M = 15.0  # ACTION CAM frames the soldiers this near the current one
+ACTION_RADIUS_M = 10.0  # ACTION CAM frames the soldiers this near the current one
 ACTION_EASE = 0.2  # fraction of the way to its new framing the ACTION CAM moves each frame
 ACTION_COMPASS = 200.0  # ACTION CAM looks from this compass direction (south-south-west) ...
 ACTION_ELEVATION = 35.0  # ... and this many degrees above the horizon
@@ -122,7 +122,7 @@ def frame_points(
     aspect: float,
     compass: float = ACTION_COMPASS,
     elevation: float = ACTION_ELEVATION,
-    min_distance: float = 6.0,
+    min_distance: float = 4.0,
     fill: float = 0.85,
 ) -> np.ndarray:
     """The camera pose that looks from ``compass``/``elevation`` at the middle of ``points`` (n, 3) from as

@@ -252,6 +252,7 @@ class GLStubRenderer:
         self.terrain_vao: moderngl.VertexArray | None = None
         self.pose = np.eye(4)
         self.overlay: Overlay | None = None
+        self.shadows = True  # blob shadows under the soldiers
         self.triangles_drawn = 0
         size = (width, height)
         self.fbo = ctx.framebuffer(
@@ -335,7 +336,7 @@ class GLStubRenderer:
         import moderngl
 
         quads = [b.shadows for b in self.soldiers.values() if b.count]
-        if not quads:
+        if not quads or not self.shadows:
             return
         q = np.concatenate(quads)
         tris = q[:, [0, 1, 2, 2, 1, 3]].reshape(-1, 5)
