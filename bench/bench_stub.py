@@ -4,7 +4,9 @@ Each run places the soldiers on the village (a mix of standing, walking, running
 both forces, posed offline: no server), looks at them from a tethered-camera height, and times
 ``app.frame`` (simulation, dead reckoning, ground rays, scene-graph updates), ``app.draw`` (world matrices
 into the instance buffers, labels) and the offscreen render (EGL; Mesa llvmpipe on a machine without a GPU)
-with each renderer: ``gl`` (moderngl, what headless runs use) and ``pyrender`` (the window's).
+with each renderer: ``gl`` (moderngl, what headless runs use) and ``pyrender`` (the window's). The CPU
+time a frame (all threads, llvmpipe's included) is the cost that other work on the machine does not
+inflate; CPU ms / CPUs is the frame time of an idle machine when llvmpipe keeps every CPU busy.
 
     python bench/bench_stub.py [--json] [--size 640x480] [--counts 10,100,1000] [--budget 4]
                                [--renderers gl,pyrender]
@@ -71,6 +73,7 @@ def run(n: int, width: int, height: int, budget: float, backend: str = "gl") -> 
     update = draw = render = 0.0
     frames = 0
     start = time.perf_counter()
+    cpu = time.process_time()  # every thread of the process: ours and llvmpipe's
     while frames < 3 or (time.perf_counter() - start < budget and frames < 60):
         t0 = time.perf_counter()
         app.frame(dt)
@@ -85,6 +88,7 @@ def run(n: int, width: int, height: int, budget: float, backend: str = "gl") -> 
         render += t3 - t2
         frames += 1
     total = update + draw + render
+    cpu = time.process_time() - cpu
     renderer = gl_renderer(app.renderer)
     app.renderer.close()
     return {
@@ -95,6 +99,9 @@ def run(n: int, width: int, height: int, budget: float, backend: str = "gl") -> 
         "update_ms": round(1000 * update / frames, 2),
         "draw_ms": round(1000 * draw / frames, 2),
         "render_ms": round(1000 * render / frames, 2),
+        "cpu_ms": round(1000 * cpu / frames, 2),
+        "cpus": os.cpu_count(),
+        "load": round(os.getloadavg()[0], 2),
         "gl_renderer": renderer,
     }
 
@@ -135,7 +142,8 @@ def main() -> int:
             print(
                 f"  {r['renderer']:>8} {r['soldiers']:>5} soldiers: {r['fps']:7.2f} fps  "
                 f"(update {r['update_ms']:.1f} ms, "
-                f"draw {r['draw_ms']:.1f} ms, render {r['render_ms']:.1f} ms)"
+                f"draw {r['draw_ms']:.1f} ms, render {r['render_ms']:.1f} ms; "
+                f"CPU {r['cpu_ms']:.1f} ms a frame on {r['cpus']} CPUs, load {r['load']})"
             )
     return 0
 

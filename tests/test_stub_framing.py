@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from client_stub.stub.app import StubApp, posture_text
+from client_stub.stub.app import StubApp, posture_texts
 from client_stub.stub.camera import ACTION_RADIUS_M, View, box_corners, clear_pose, frame_points, viewproj
 from client_stub.stub.gl_render import GLStubRenderer
 from client_stub.stub.keys import KEY_HELP
@@ -144,8 +144,8 @@ def test_labels_behind_the_camera_far_or_covered_are_left_out() -> None:
 def test_posture_text_says_gait_and_weapon(demo: StubApp) -> None:
     s = demo.soldiers
     slot = s.add((50.0, 50.0), 0.0, speed=3.5, appearance=Appearance.UPRIGHT, weapon=WeaponState.STOWED)
-    assert posture_text(s, slot) == "stand, run 3.5 m/s"
+    assert posture_texts(s, np.array([slot])) == ["stand, run 3.5 m/s"]
     s.set_appearance(slot, Appearance.PRONE)
     s.set_weapon(slot, WeaponState.DEPLOYED)
-    assert posture_text(s, slot) == "prone, crawl 3.5 m/s, deployed"
+    assert posture_texts(s, np.array([slot])) == ["prone, crawl 3.5 m/s, deployed"]
     demo.hide(slot)

@@ -17,6 +17,7 @@ One :class:`StubApp` ties the pieces of an image generator together, window or n
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import tempfile
@@ -364,13 +365,16 @@ class StubApp:
 
     def _labels(self, rows: np.ndarray, world: np.ndarray) -> list[Label]:
         """Name and posture above each soldier's head (the highest of his joints)."""
-        s, cur = self.soldiers, self.controller.current
-        out = []
-        for row, nodes in zip(rows.tolist(), world, strict=True):
-            p = nodes[:, :3, 3]
-            anchor = (float(p[:, 0].mean()), float(p[:, 1].mean()), float(p[:, 2].max()) + 0.25)
-            out.append(Label(f"soldier {row}", posture_text(s, row), anchor, row == cur))
-        return out
+        if not len(rows):
+            return []
+        p = world[:, :, :3, 3]
+        anchors = np.column_stack([p[..., 0].mean(1), p[..., 1].mean(1), p[..., 2].max(1) + 0.25]).tolist()
+        texts = posture_texts(self.soldiers, rows)
+        cur = self.controller.current
+        return [
+            Label(f"soldier {row}", text, tuple(anchor), row == cur)
+            for row, text, anchor in zip(rows.tolist(), texts, anchors, strict=True)
+        ]
 
     def _caption(self) -> str:
         cur = self.controller.current
@@ -428,12 +432,22 @@ class StubApp:
         self.source.close()
 
 
-def posture_text(soldiers: SimSoldiers, slot: int) -> str:
-    """``kneel, firing`` / ``upright, walk 1.3 m/s``: what a label says a soldier is doing."""
+def posture_texts(soldiers: SimSoldiers, slots: np.ndarray) -> list[str]:
+    """What the labels of ``slots`` say the soldiers are doing (see :func:`posture_text`)."""
     s = soldiers
-    code, weapon = int(s.appearance[slot]), int(s.weapon[slot])
+    speed = np.round(s.speed[slots] * s.moving(slots), 1)
+    return [
+        posture_text(a, w, v)
+        for a, w, v in zip(
+            s.appearance[slots].tolist(), s.weapon[slots].tolist(), speed.tolist(), strict=True
+        )
+    ]
+
+
+@functools.lru_cache(maxsize=512)
+def posture_text(code: int, weapon: int, speed: float) -> str:
+    """``kneel, firing`` / ``stand, walk 1.3 m/s, deployed`` / ``prone, crawl 0.5 m/s``."""
     text = Appearance(code).name.lower() if code in Appearance._value2member_map_ else f"posture {code}"
-    speed = float(s.speed[slot]) * float(s.moving(np.array([slot]))[0])
     if abs(speed) > 0.05:
         gait = "crawl" if code != Appearance.UPRIGHT else "run" if abs(speed) > 2.5 else "walk"
         text += f", {gait} {speed:.1f} m/s"
