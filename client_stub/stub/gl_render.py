@@ -21,7 +21,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from client_stub.crowd.gl import TerrainMesh, boxes_visible, terrain_mesh
+from client_stub.crowd.gl import (
+    FS,
+    TerrainMesh,
+    boxes_visible,
+    parts_vs,
+    terrain_array,
+    terrain_mesh,
+    terrain_vs,
+)
 from client_stub.stub.camera import viewproj
 from client_stub.stub.render import (
     FORCE_UNIFORMS,
@@ -62,56 +70,8 @@ vec3 shade(vec3 base, vec3 n) {
 }
 """
 
-SOLDIER_VS = (
-    """
-#version 330
-uniform mat4 viewproj;
-uniform sampler2D mats;
-in vec3 in_pos;
-in vec3 in_norm;
-in vec3 in_col;
-in float in_part;
-out vec3 v_col;
-"""
-    + _LIGHT
-    + """
-void main() {
-    int x = int(in_part + 0.5) * 3;
-    vec4 r0 = texelFetch(mats, ivec2(x, gl_InstanceID), 0);
-    vec4 r1 = texelFetch(mats, ivec2(x + 1, gl_InstanceID), 0);
-    vec4 r2 = texelFetch(mats, ivec2(x + 2, gl_InstanceID), 0);
-    vec4 p = vec4(in_pos, 1.0);
-    vec3 world = vec3(dot(r0, p), dot(r1, p), dot(r2, p));
-    v_col = shade(in_col, vec3(dot(r0.xyz, in_norm), dot(r1.xyz, in_norm), dot(r2.xyz, in_norm)));
-    gl_Position = viewproj * vec4(world, 1.0);
-}
-"""
-)
-
-TERRAIN_VS = (
-    """
-#version 330
-uniform mat4 viewproj;
-in vec3 in_pos;
-in vec3 in_norm;
-in vec3 in_col;
-out vec3 v_col;
-"""
-    + _LIGHT
-    + """
-void main() {
-    v_col = shade(in_col, in_norm);
-    gl_Position = viewproj * vec4(in_pos, 1.0);
-}
-"""
-)
-
-LIT_FS = """
-#version 330
-in vec3 v_col;
-out vec4 f_col;
-void main() { f_col = vec4(v_col, 1.0); }
-"""
+SOLDIER_VS = parts_vs(_LIGHT, "shade(in_col, n)")
+TERRAIN_VS = terrain_vs(_LIGHT, "shade(in_col, in_norm)")
 
 SHADOW_VS = """
 #version 330
@@ -236,8 +196,8 @@ class GLStubRenderer:
         self.width, self.height, self.yfov_deg = width, height, yfov_deg
         # moderngl's stub types each **settings value as a dict; the backend name is a str at run time.
         self.ctx = ctx = moderngl.create_standalone_context(backend="egl")  # type: ignore[arg-type]
-        self.soldier_prog = ctx.program(vertex_shader=SOLDIER_VS, fragment_shader=LIT_FS)
-        self.terrain_prog = ctx.program(vertex_shader=TERRAIN_VS, fragment_shader=LIT_FS)
+        self.soldier_prog = ctx.program(vertex_shader=SOLDIER_VS, fragment_shader=FS)
+        self.terrain_prog = ctx.program(vertex_shader=TERRAIN_VS, fragment_shader=FS)
         self.shadow_prog = ctx.program(vertex_shader=SHADOW_VS, fragment_shader=SHADOW_FS)
         self.shadow_prog["alpha"] = SHADOW_ALPHA
         for prog in (self.soldier_prog, self.terrain_prog):
@@ -267,13 +227,8 @@ class GLStubRenderer:
 
     def set_terrain(self, meshes: dict[str, trimesh.Trimesh]) -> None:
         mesh = terrain_mesh(meshes, smooth=("ground",))
-        if not len(mesh.vertices):
-            return
-        vbo = self.ctx.buffer(mesh.vertices.tobytes())
-        self.terrain_vao = self.ctx.vertex_array(
-            self.terrain_prog, [(vbo, "3f 3f 3f", "in_pos", "in_norm", "in_col")]
-        )
-        self.terrain = mesh
+        self.terrain_vao = terrain_array(self.ctx, self.terrain_prog, mesh)
+        self.terrain = mesh if self.terrain_vao is not None else None
 
     def soldier_meshes(self, kind: int, layout: EntityLayout, force: int) -> SoldierBatch:
         key = (kind, int(force))
