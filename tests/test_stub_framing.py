@@ -4,6 +4,7 @@ labels name each soldier and his posture, ``?`` shows the keys."""
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")  # before OpenGL is first imported
 
@@ -19,6 +20,7 @@ from client_stub.stub.gl_render import GLStubRenderer
 from client_stub.stub.keys import KEY_HELP
 from client_stub.stub.live import populate_demo
 from client_stub.stub.overlay import Label, Overlay, project_labels
+from client_stub.stub.simsoldier import Force
 from client_stub.stub.terrain import load_terrain
 from protocol.entity import Appearance, WeaponState
 
@@ -149,3 +151,30 @@ def test_posture_text_says_gait_and_weapon(demo: StubApp) -> None:
     s.set_weapon(slot, WeaponState.DEPLOYED)
     assert posture_texts(s, np.array([slot])) == ["prone, crawl 3.5 m/s, deployed"]
     demo.hide(slot)
+
+
+def test_a_touring_action_cam_turns_from_force_to_force_and_cuts(tmp_path: Path) -> None:
+    """The replay's default camera: ACTION CAM on a live soldier, the other force's every 10 s, cutting
+    (not gliding over empty ground) to a group far away; a key hands the camera to the user."""
+    app = StubApp(load_terrain(), artic_dir=tmp_path)
+    friendly = [app.add_soldier((x, -20.0), 0.0) for x in (0.0, 3.0)]
+    opposing = app.add_soldier((0.0, 40.0), 180.0, force=Force.OPPOSING)
+    app.renderer = GLStubRenderer(W, H)
+    try:
+        app.camera.action_view()
+        app.camera.action_tour = True
+        app.hide(friendly[0])  # the current soldier (0) is gone: the tour takes a live one of his force
+        seen = []
+        for _ in range(25):
+            app.frame(0.5)
+            app.draw()  # the camera follows in draw
+            seen.append(app.controller.current)
+        assert seen[0] == friendly[1] and seen[-1] == opposing
+        assert seen.index(opposing) == 19  # turned at 10 s
+        assert app.camera.action is not None
+        middle = (app.camera.action[:3] + app.camera.action[3:]) / 2
+        assert np.linalg.norm(middle[:2] - app.soldiers.position[opposing, :2]) < 1.5  # cut, not gliding
+        app.handle_key("n")
+        assert not app.camera.action_tour
+    finally:
+        app.renderer.close()

@@ -39,6 +39,7 @@ from client_stub.stub.artic import (
 )
 from client_stub.stub.camera import (
     ACTION_RADIUS_M,
+    ACTION_TURN_SECONDS,
     SOLDIER_HEIGHT_M,
     CameraState,
     View,
@@ -146,6 +147,7 @@ class StubApp:
         self.renderer: StubBackend | None = None
         self.show_help = False  # the keys over the picture (``?`` toggles)
         self.figure_box = np.full((0, 2, 3), np.nan)  # slot -> lowest and highest joint as last drawn
+        self._turned = 0.0  # when a touring ACTION CAM last turned to another soldier
         self.labels = True  # name and posture above each soldier
         self.time = 0.0
         self.server_lost = ""  # "server lost: why" while the source has no server (after having one)
@@ -251,6 +253,8 @@ class StubApp:
         message = self.controller.handle(key)
         if key == "?":
             self.show_help = not self.show_help
+        elif len(key) == 1 and key.lower() in "bcfvxoudijnp":
+            self.camera.action_tour = False  # the user takes the camera (and the current soldier)
         for slot in range(before, self.soldiers.count):  # key 'a' added soldiers
             self._place(slot)
         return message
@@ -412,7 +416,26 @@ class StubApp:
             box = box[np.linalg.norm(middle - middle[cur[0]], axis=1) <= ACTION_RADIUS_M]
         return box.reshape(-1, 3)
 
+    def follow_action(self) -> None:
+        """A touring ACTION CAM (``camera.action_tour``) follows a live soldier: the current one while he
+        lives, a soldier of the next force every :data:`ACTION_TURN_SECONDS` (a replay shows both sides)."""
+        s = self.soldiers
+        live = np.flatnonzero(s.alive[: s.count])
+        if not len(live):
+            return
+        cur = self.controller.current
+        turn = int(self.time // ACTION_TURN_SECONDS) != int(self._turned // ACTION_TURN_SECONDS)
+        if cur in live and not turn:
+            return
+        self._turned = self.time
+        forces = np.unique(s.force[live])
+        here = int(s.force[cur]) if cur < s.count else int(forces[0])
+        want = forces[(int(np.searchsorted(forces, here)) + (1 if turn else 0)) % len(forces)]
+        self.controller.current = int(live[s.force[live] == want][0])
+
     def _action_pose(self) -> np.ndarray:
+        if self.camera.action_tour:
+            self.follow_action()
         r = self.renderer
         yfov, aspect = (r.yfov_deg, r.width / r.height) if r is not None else (50.0, 4 / 3)
         return action_pose(self.camera, self.action_points(), yfov, aspect, self.terrain.height)
@@ -450,7 +473,7 @@ def posture_text(code: int, weapon: int, speed: float) -> str:
     text = Appearance(code).name.lower() if code in Appearance._value2member_map_ else f"posture {code}"
     if abs(speed) > 0.05:
         gait = "crawl" if code != Appearance.UPRIGHT else "run" if abs(speed) > 2.5 else "walk"
-        text += f", {gait} {speed:.1f} m/s"
+        text = f"{text} {speed:.1f} m/s" if gait == text else f"{text}, {gait} {speed:.1f} m/s"
     if weapon in (WeaponState.DEPLOYED, WeaponState.FIRING):
         text += f", {WeaponState(weapon).name.lower()}"
     return text

@@ -25,9 +25,11 @@ MIN_DISTANCE = 2.0
 LOOK_HEIGHT = 1.0  # metres above the feet the tethered camera looks at
 ACTION_RADIUS_M = 10.0  # ACTION CAM frames the soldiers this near the current one
 ACTION_EASE = 0.2  # fraction of the way to its new framing the ACTION CAM moves each frame
+ACTION_CUT_M = 15.0  # ... unless that moved this far: then it cuts there (no glide over empty ground)
 ACTION_COMPASS = 200.0  # ACTION CAM looks from this compass direction (south-south-west) ...
 ACTION_ELEVATION = 35.0  # ... and this many degrees above the horizon
 SOLDIER_HEIGHT_M = 1.9
+ACTION_TURN_SECONDS = 10.0  # a touring ACTION CAM turns to a soldier of the next force this often
 
 
 class View(Enum):
@@ -48,6 +50,7 @@ class CameraState:
     fly_heading: float = 0.0
     fly_pitch: float = -15.0
     action: np.ndarray | None = None  # ACTION CAM's eased box (low x y z, high x y z); None: jump to the next
+    action_tour: bool = False  # ACTION CAM turns from force to force (replays); keys that move it stop it
 
     def action_view(self) -> None:
         self.view = View.ACTION
@@ -171,10 +174,15 @@ def action_pose(
     height: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """ACTION CAM: eases ``state.action`` (a box: low and high corner) towards the box of ``points`` (the
-    soldiers in the action) and frames its corners from where the ground does not hide them."""
+    soldiers in the action; a cut when they are elsewhere) and frames its corners from where the ground does
+    not hide them."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     target = np.concatenate([p.min(axis=0), p.max(axis=0)])
-    if state.action is None:
+    middle = (target[:3] + target[3:]) / 2
+    if (
+        state.action is None
+        or np.linalg.norm((state.action[:3] + state.action[3:]) / 2 - middle) > ACTION_CUT_M
+    ):
         state.action = target
     else:
         state.action = state.action + ACTION_EASE * (target - state.action)

@@ -61,8 +61,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seconds", type=float, help="headless: video length (default: the log, at --speed)")
     p.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
     p.add_argument("--size", default="640x480", help="image size WxH (default 640x480)")
-    p.add_argument("--camera", choices=("squad", "birds-eye", "soldier", "overhead"), default="squad",
-                   help="start camera (default: one framing the whole squad; keys take over)")  # fmt: skip
+    p.add_argument(
+        "--camera",
+        choices=("action", "squad", "birds-eye", "soldier", "overhead"),
+        default="action",
+        help="start camera (default: ACTION CAM on a soldier and those near him, turning from force to force "
+        "every 10 s; squad: the whole squad; keys take over)",
+    )
     p.add_argument("--no-stub", action="store_true", help="no image generator: only drive the server")
     p.add_argument("--host", help="Jack/TTES server host (default: a private server)")
     p.add_argument("--port", type=int, default=7000, help="server port with --host (default 7000)")
@@ -350,10 +355,13 @@ def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
     app = replay_app(
         terrain, replayer, link=link, progress=ProgressLine(out=None if args.json else sys.stderr)
     )
-    camera = getattr(args, "camera", "squad")
+    camera = getattr(args, "camera", "action")
     assert isinstance(app.source, DisSoldiers)
     app.source.squad_view = camera == "squad"
-    if camera == "overhead":
+    if camera == "action":
+        app.camera.action_view()
+        app.camera.action_tour = True
+    elif camera == "overhead":
         app.camera.overhead()
     elif camera != "squad":
         app.camera.view = View.BIRDS_EYE if camera == "birds-eye" else View.SOLDIER_CAM
