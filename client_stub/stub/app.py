@@ -148,6 +148,7 @@ class StubApp:
         self.show_help = False  # the keys over the picture (``?`` toggles)
         self.figure_box = np.full((0, 2, 3), np.nan)  # slot -> lowest and highest joint as last drawn
         self._turned = 0.0  # when a touring ACTION CAM last turned to another soldier
+        self.source_camera = False  # the source chose the last camera pose (the replay's squad view)
         self.labels = True  # name and posture above each soldier
         self.time = 0.0
         self.server_lost = ""  # "server lost: why" while the source has no server (after having one)
@@ -383,10 +384,12 @@ class StubApp:
     def _caption(self) -> str:
         cur = self.controller.current
         who = f" · current soldier {cur}" if cur < self.soldiers.count else ""
-        return f"{self.camera.view.value}{who}"
+        view = "the source's camera (squad view)" if self.source_camera else self.camera.view.value
+        return f"{view}{who}"
 
     def camera_pose(self) -> np.ndarray:
         wanted = self.source.camera_pose(self)
+        self.source_camera = wanted is not None
         if wanted is not None:
             return wanted
         s = self.soldiers
