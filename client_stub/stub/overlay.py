@@ -46,8 +46,21 @@ class Overlay:
     def draw(self, frame: np.ndarray, viewproj: np.ndarray) -> np.ndarray:
         """``frame`` (h, w, 3) uint8 with the overlay on it (a new array). Each text is drawn once into a
         cached patch and blended in with numpy, so a hundred labels cost a few milliseconds."""
-        h, w = frame.shape[:2]
         out = np.array(frame, np.uint8, copy=True)
+        for left, top, patch in self.patches(frame.shape[1], frame.shape[0], viewproj):
+            _blend(out, patch, left, top)
+        return out
+
+    def rgba(self, width: int, height: int, viewproj: np.ndarray) -> np.ndarray:
+        """The overlay alone, ``(height, width, 4)`` uint8 premultiplied RGBA on transparent, top row first
+        (the window blends it over pyrender's picture)."""
+        out = np.zeros((height, width, 4), np.uint8)
+        for left, top, patch in self.patches(width, height, viewproj):
+            _blend(out, patch, left, top)
+        return out
+
+    def patches(self, w: int, h: int, viewproj: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
+        """``(left, top, RGBA patch)`` in drawing order: labels far to near, the caption, the keys."""
         size = max(10, h // 48)
         placed: list[tuple[int, int, np.ndarray]] = []
         taken: list[tuple[int, int, int, int]] = []
@@ -60,13 +73,12 @@ class Overlay:
                 taken.append(rect)
             if len(placed) >= MAX_LABELS:
                 break
-        for left, top, patch in reversed(placed):
-            _blend(out, patch, left, top)
+        placed.reverse()
         if self.caption:
-            _blend(out, _patch(self.caption + "   (? keys)", TEXT, max(11, h // 40), False), 6, 4)
+            placed.append((6, 4, _patch(self.caption + "   (? keys)", TEXT, max(11, h // 40), False)))
         if self.help:
-            _blend(out, _table_patch(self.help, TEXT, max(10, h // 52)), 6, 8 + h // 16)
-        return out
+            placed.append((6, 8 + h // 16, _table_patch(self.help, TEXT, max(10, h // 52))))
+        return placed
 
 
 def project_labels(
@@ -140,7 +152,8 @@ def _overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> bool
 
 
 def _blend(frame: np.ndarray, patch: np.ndarray, left: int, top: int) -> None:
-    """Alpha-blend an RGBA ``patch`` into ``frame`` at ``(left, top)``, clipped to the frame."""
+    """Alpha-blend an RGBA ``patch`` over ``frame`` at ``(left, top)``, clipped to it. An RGBA ``frame`` is
+    premultiplied: its alpha becomes ``a + old (1 - a)``."""
     h, w = frame.shape[:2]
     x0, y0 = max(left, 0), max(top, 0)
     x1, y1 = min(left + patch.shape[1], w), min(top + patch.shape[0], h)
@@ -149,4 +162,7 @@ def _blend(frame: np.ndarray, patch: np.ndarray, left: int, top: int) -> None:
     p = patch[y0 - top : y1 - top, x0 - left : x1 - left]
     a = p[..., 3:].astype(np.uint16)
     region = frame[y0:y1, x0:x1]
-    region[:] = ((p[..., :3] * a + region * (255 - a) + 127) // 255).astype(np.uint8)
+    old = region.astype(np.uint16)
+    region[..., :3] = (p[..., :3] * a + old[..., :3] * (255 - a) + 127) // 255
+    if region.shape[2] == 4:
+        region[..., 3] = a[..., 0] + (old[..., 3] * (255 - a[..., 0]) + 127) // 255
