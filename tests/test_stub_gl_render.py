@@ -16,8 +16,9 @@ import trimesh
 from client_stub.renderer import Renderer, StubBackend
 from client_stub.stub.app import StubApp
 from client_stub.stub.camera import look_at
-from client_stub.stub.gl_render import GLStubRenderer, offscreen_renderer, shadow_quads
+from client_stub.stub.gl_render import GLStubRenderer, offscreen_renderer
 from client_stub.stub.render import SKY, StubRenderer
+from client_stub.stub.shadow import shadow_quads
 from client_stub.stub.simsoldier import Force
 from client_stub.stub.terrain import terrain_from_mesh
 from protocol.entity import Appearance, WeaponState
@@ -70,8 +71,11 @@ def interior(mask: np.ndarray) -> np.ndarray:
 def test_gl_draws_the_picture_pyrender_draws(tmp_path: Path) -> None:
     app = two_soldiers(tmp_path)
     gl = GLStubRenderer(W, H)
-    gl.shadows = False  # pyrender has none; here they would hang in the sky
-    fast, slow = picture(app, gl), picture(app, StubRenderer(W, H))
+    gl.shadows = False  # without terrain they would hang in the sky
+    fast = picture(app, gl)
+    pr = StubRenderer(W, H)  # made after the moderngl context is gone: each EGL user on its own
+    pr.shadows = False
+    slow = picture(app, pr)
     a, b = figure_mask(fast), figure_mask(slow)
     assert b.sum() > 400  # two soldiers fill a fair part of the picture
     assert (a & b).sum() / (a | b).sum() > 0.8  # the same silhouettes (pyrender's are antialiased)
@@ -124,7 +128,8 @@ def test_blob_shadows_lie_under_the_soldiers(tmp_path: Path) -> None:
     assert size[1, 0] > 1.6 * size[1, 1] and size[1, 0] > 1.5  # prone facing east: long east-west
 
 
-def test_shadows_darken_the_ground_under_a_soldier(tmp_path: Path) -> None:
+@pytest.mark.parametrize("backend", ["gl", "pyrender"])
+def test_shadows_darken_the_ground_under_a_soldier(tmp_path: Path, backend: str) -> None:
     app = StubApp(terrain_from_mesh(flat_ground()), artic_dir=tmp_path)
     app.labels = False
     app.add_soldier((0.0, 0.0), 180.0)
@@ -132,7 +137,7 @@ def test_shadows_darken_the_ground_under_a_soldier(tmp_path: Path) -> None:
     overhead = look_at(np.array([0.0, -0.01, 8.0]), np.array([0.0, 0.0, 0.0]))
     frames = []
     for shadows in (False, True):
-        r = GLStubRenderer(W, H)
+        r = offscreen_renderer(W, H, backend)
         r.shadows = shadows
         r.set_terrain(app.terrain.meshes)
         app.renderer = r

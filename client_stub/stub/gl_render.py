@@ -39,6 +39,7 @@ from client_stub.stub.render import (
     segment_arrays,
     uniform_colour,
 )
+from client_stub.stub.shadow import SHADOW_ALPHA, shadow_quads
 
 if TYPE_CHECKING:
     import moderngl
@@ -51,8 +52,6 @@ AMBIENT = (0.35, 0.35, 0.38)
 SUN_RGB = np.array([1.0, 0.97, 0.9]) * 3.2  # pyrender's DirectionalLight colour × intensity
 FILL_RGB = np.array([0.8, 0.85, 1.0]) * 1.0
 DIFFUSE = 0.96 / np.pi  # pyrender's c_diff / π (dielectric, min roughness 0.04)
-SHADOW_ALPHA = 0.45
-SHADOW_LIFT_M = 0.04  # above the ground under the entity, so the depth test keeps it over the terrain
 
 _LIGHT = """
 uniform vec3 sun_dir;
@@ -93,25 +92,6 @@ void main() {
     f_col = vec4(0.0, 0.0, 0.0, alpha * (1.0 - smoothstep(0.45, 1.0, r)));
 }
 """
-
-
-def shadow_quads(world: np.ndarray, margin: float = 0.18) -> np.ndarray:
-    """``(n, 4, 5)`` blob-shadow corners (x, y, z, u, v) of soldiers with node matrices ``world``
-    ``(n, nodes, 4, 4)``: an ellipse over the footprint of the joints in the entity's frame (a standing
-    soldier's is round, a prone one's long), at the ground height of the entity (node 0)."""
-    if not len(world):
-        return np.zeros((0, 4, 5), np.float32)
-    entity = world[:, 0]
-    inverse = np.linalg.inv(entity)
-    local = np.einsum("nij,nkj->nki", inverse[:, :3, :3], world[:, 1:, :3, 3] - entity[:, None, :3, 3])
-    lo = local[..., :2].min(axis=1) - margin
-    hi = local[..., :2].max(axis=1) + margin
-    centre, half = (lo + hi) / 2, (hi - lo) / 2 * 1.15
-    uv = np.array([[-1.0, -1.0], [1.0, -1.0], [-1.0, 1.0], [1.0, 1.0]])
-    xy = centre[:, None] + uv[None] * half[:, None]  # (n, 4, 2), entity frame
-    corners = np.concatenate([xy, np.full((*xy.shape[:2], 1), SHADOW_LIFT_M), np.ones((*xy.shape[:2], 1))], 2)
-    points = np.einsum("nij,nkj->nki", entity, corners)[..., :3]
-    return np.concatenate([points, np.broadcast_to(uv, (len(world), 4, 2))], axis=2).astype(np.float32)
 
 
 def _uniform(prog: moderngl.Program, name: str) -> moderngl.Uniform:

@@ -24,6 +24,7 @@ import trimesh
 from client_stub.stub.camera import viewproj
 from client_stub.stub.overlay import Overlay
 from client_stub.stub.scene_graph import EntityLayout, SegmentGeometry
+from client_stub.stub.shadow import shadow_disc, shadow_matrices
 from client_stub.stub.simsoldier import Force
 
 FORCE_UNIFORMS: dict[int, tuple[float, float, float] | None] = {
@@ -137,6 +138,14 @@ class SoldierMeshes:
             mesh = pyrender.Mesh(prims, name=f"{geom.figure}.{geom.segment}")
             self.nodes.append(scene.add(mesh, name=f"{geom.figure}.{geom.segment}/{force}"))
             self.parts.append(_Part(node, prims))
+        positions, colours, indices = shadow_disc()
+        blend = pyrender.MetallicRoughnessMaterial(
+            baseColorFactor=(1.0, 1.0, 1.0, 1.0), alphaMode="BLEND", doubleSided=True
+        )
+        self.shadow = pyrender.Primitive(
+            positions=positions, color_0=colours, indices=indices, material=blend, poses=HIDDEN
+        )
+        self.nodes.append(scene.add(pyrender.Mesh([self.shadow], name="shadow"), name=f"shadow/{force}"))
         self.count = 0
 
     def update(self, world: np.ndarray) -> None:
@@ -146,6 +155,7 @@ class SoldierMeshes:
             poses = world[:, part.node].astype(np.float32) if len(world) else HIDDEN
             for prim in part.primitives:
                 prim.poses = poses
+        self.shadow.poses = shadow_matrices(world).astype(np.float32) if len(world) else HIDDEN
 
     @staticmethod
     def upload(primitives: list[pyrender.Primitive]) -> None:
@@ -160,7 +170,7 @@ class SoldierMeshes:
             glBufferData(GL_ARRAY_BUFFER, data.nbytes, data, GL_DYNAMIC_DRAW)
 
     def primitives(self) -> list[pyrender.Primitive]:
-        return [p for part in self.parts for p in part.primitives]
+        return [p for part in self.parts for p in part.primitives] + [self.shadow]
 
 
 def terrain_nodes(scene: pyrender.Scene, meshes: dict[str, trimesh.Trimesh]) -> list[pyrender.Node]:
@@ -185,6 +195,7 @@ class StubRenderer:
     ) -> None:
         self.width, self.height, self.yfov_deg = width, height, yfov_deg
         self.overlay: Overlay | None = None
+        self.shadows = True  # blob shadows under the soldiers
         self.scene = pyrender.Scene(bg_color=(*SKY, 1.0), ambient_light=(0.35, 0.35, 0.38))
         self.camera = pyrender.PerspectiveCamera(
             yfov=np.radians(yfov_deg), znear=0.2, zfar=2000.0, aspectRatio=width / height
@@ -212,6 +223,8 @@ class StubRenderer:
     def upload(self) -> None:
         """Instance poses into GL (context current)."""
         for meshes in self.soldiers.values():
+            if not self.shadows:
+                meshes.shadow.poses = HIDDEN
             SoldierMeshes.upload(meshes.primitives())
 
     def render(self) -> np.ndarray:
