@@ -8,7 +8,7 @@ with each renderer: ``gl`` (moderngl, what headless runs use) and ``pyrender`` (
 time a frame (all threads, llvmpipe's included) is the cost that other work on the machine does not
 inflate; CPU ms / CPUs is the frame time of an idle machine when llvmpipe keeps every CPU busy.
 
-    python bench/bench_stub.py [--json] [--size 640x480] [--counts 10,100,1000] [--budget 4]
+    python bench/bench_stub.py [--json] [--size 1280x720] [--counts 10,100,1000] [--budget 4]
                                [--renderers gl,pyrender]
 """
 
@@ -122,7 +122,7 @@ def gl_renderer(r: object) -> str:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--size", default="640x480")
+    ap.add_argument("--size", default="1280x720", help="the goal's size (issue 19: 100 soldiers >= 20 fps)")
     ap.add_argument("--counts", default="10,100,1000")
     ap.add_argument("--budget", type=float, default=4.0, help="seconds of frames per soldier count")
     ap.add_argument("--renderers", default="gl,pyrender", help="back ends to time (gl, pyrender)")
