@@ -153,3 +153,17 @@ def test_shadows_darken_the_ground_under_a_soldier(tmp_path: Path, backend: str)
 def test_offscreen_renderer_names_its_back_ends() -> None:
     with pytest.raises(ValueError, match="gl, pyrender"):
         offscreen_renderer(32, 24, "vulkan")
+
+
+@pytest.mark.parametrize("backend", ["gl", "pyrender"])
+def test_stub_cli_renders_with_either_back_end(tmp_path: Path, backend: str) -> None:
+    import imageio.v2 as imageio
+
+    from ttes.cli import main
+
+    out = tmp_path / "last.png"
+    argv = ["stub", "--headless", "--renderer", backend, "--seconds", "0.4", "--fps", "5", "--size", "96x64",
+            "--out", str(out), "--artic-dir", str(tmp_path)]  # fmt: skip
+    assert main(argv) == 0
+    img = imageio.imread(out)
+    assert img.shape == (64, 96, 3) and img.std() > 5
