@@ -12,15 +12,18 @@ running one; by default a private one (its own process for the window; in this p
 --headless under a virtual clock, so the video is exact however slowly it renders). --offline: no server, the
 stub poses the soldiers itself. The stub's terrain point (0, 0) is the local frame's origin.
 
---no-stub survives a server restart: the replay goes on, the server is reconnected with backoff and the live
-soldiers are created again (sink_relinked in the summary). Exit status: 0 replayed, 1 no server (at the start,
-or lost for longer than --give-up-after) or nothing to replay, 2 bad arguments or no display.
+A replay survives a server restart (window, --headless with --host, --no-stub): it goes on, the stub poses
+the soldiers meanwhile (the window says "server lost"), the server is reconnected with backoff (0.5..8 s) and
+the live soldiers are created again and posed by it (sink_relinked in the summary). Exit status: 0 replayed,
+1 no server (at the start, or lost for longer than --give-up-after) or nothing to replay, 2 bad arguments or
+no display.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import math
 import os
 import sys
@@ -85,7 +88,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         default=120.0,
         metavar="S",
-        help="--no-stub: a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) "
+        help="a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) "
         "for this long before the replay exits 1 (default 120; 0: exit at once)",
     )
     p.set_defaults(func=run)
@@ -306,9 +309,9 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
 
     async def main() -> dict:
         async with contextlib.AsyncExitStack() as stack:
-            link = None
+            connect = None
             if not args.offline:
-                from client_stub.link.client import Client
+                from client_stub.dis.reconnect import connector
 
                 host, port = args.host, args.port
                 if host is None:
@@ -317,17 +320,19 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
                     )
                     host, port = server.addresses[0]
                 nursery = await stack.enter_async_context(trio.open_nursery())
-                link = link_credentials(args).apply(Client())
-                await link.open(nursery, host, port)
-            app = _make_app(args, replayer, link)
+                connect = connector(nursery, host, port, "ttes-replay", credentials=link_credentials(args))
+            app = _make_app(args, replayer, await connect() if connect is not None else None)
+            failures: list[str] = []
             try:
-                summary = await _render(app, seconds, fps, size, args)
+                summary = await _render_linked(app, connect, failures, seconds, fps, size, args)
             finally:
                 app.source.finish(app)  # the soldiers leave the server
-                if link is not None:
-                    await link.aclose()
-            if link is not None:
-                summary["server_errors"] = len(link.errors)
+                if app.source.sink is not None:
+                    await app.source.sink.link.aclose()
+            if failures:
+                raise LinkError(failures[0])
+            if app.source.sink is not None:
+                summary["server_errors"] = len(app.source.sink.link.errors)
             return summary
 
     t = time.perf_counter()
@@ -345,15 +350,48 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
     return summary
 
 
-def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
+async def _render_linked(
+    app: Any,
+    connect: Any,
+    failures: list[str],
+    seconds: float,
+    fps: float,
+    size: tuple[int, int],
+    args: argparse.Namespace,
+) -> dict:
+    """:func:`_render`, with the sink kept linked (a restarted server gets the soldiers again); a server lost
+    for longer than --give-up-after ends the video early with the reason in ``failures``."""
+    import trio
+
+    from client_stub.dis.reconnect import keep_linked_or_stop
+
+    sink = app.source.sink
+    summary: dict = {}
+    async with trio.open_nursery() as inner:
+        if sink is not None:
+            inner.start_soon(
+                keep_linked_or_stop, sink, connect, inner.cancel_scope, failures, args.give_up_after
+            )
+        summary = await _render(app, seconds, fps, size, args)
+        inner.cancel_scope.cancel()
+    return summary
+
+
+def _make_app(args: argparse.Namespace, replayer: Any, link: Any, reconnect: Any = None) -> Any:
     from client_stub.dis.drive import ProgressLine
     from client_stub.dis.soldiers import DisSoldiers, replay_app
+    from client_stub.link.retry import RetrySchedule
     from client_stub.stub.camera import View
     from client_stub.stub.terrain import DEFAULT_TERRAIN, load_terrain
 
     terrain = load_terrain(args.terrain or DEFAULT_TERRAIN)
     app = replay_app(
-        terrain, replayer, link=link, progress=ProgressLine(out=None if args.json else sys.stderr)
+        terrain,
+        replayer,
+        link=link,
+        progress=ProgressLine(out=None if args.json else sys.stderr),
+        reconnect=reconnect,
+        retry=RetrySchedule(give_up_after=args.give_up_after),
     )
     camera = getattr(args, "camera", "action")
     assert isinstance(app.source, DisSoldiers)
@@ -424,13 +462,12 @@ async def _render(
 def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) -> dict | None:
     from client_stub.link.client import LinkError
     from client_stub.link.spawn import spawn_server
-    from client_stub.stub.jack import JackProc
     from client_stub.stub.render import StubRenderer
     from client_stub.stub.viewer import run_viewer
 
-    server = jack = None
+    server = app = None
     try:
-        link = None
+        link = reconnect = None
         if not args.offline:
             host, port = args.host, args.port
             try:
@@ -438,27 +475,47 @@ def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) 
                     extra = ["--data-dir", str(args.data_dir)] if args.data_dir else []
                     server = spawn_server(extra, data="synthetic" if args.synthetic_server else "auto")
                     host, port = server.host, server.port
-                jack = JackProc("ttes-replay")
-                link_credentials(args).apply(jack.client)
-                jack.initsocketconnection(host, port)
-                jack.start()
-                if not jack.wait_ready(30.0):
-                    raise LinkError(jack.failure or "server not ready")
+                link = _ready_jack(host, port, args)
             except LinkError as exc:
                 print(f"ttes replay: {exc}", file=sys.stderr)
                 return None
-            link = jack
-        app = _make_app(args, replayer, link)
+            if args.give_up_after > 0:
+                reconnect = functools.partial(_ready_jack, host, port, args, client_id=link.client.client_id)
+        app = _make_app(args, replayer, link, reconnect)
         app.renderer = StubRenderer(*size, offscreen=False)
         app.renderer.set_terrain(app.terrain.meshes)
         run_viewer(app, *size, args.fps)
         app.source.finish(app)
+        if app.gave_up:
+            print(f"ttes replay: {app.gave_up}", file=sys.stderr)
+            return None
         summary = {**replayer.status()}
         if app.source.sink is not None:
             summary.update({f"sink_{k}": v for k, v in app.source.sink.stats.items()})
         return summary
     finally:
-        if jack is not None:
-            jack.quit()
+        if app is not None and app.source.sink is not None:
+            app.source.sink.link.quit()  # the link in use (a reconnect's); the first one's too
+        if link is not None:
+            link.quit()
         if server is not None:
             server.close()
+
+
+def _ready_jack(host: str, port: int, args: argparse.Namespace, client_id: str = "") -> Any:
+    """A threaded link to ``host:port`` that has run the start-up JCL and seen READY (LinkError if not);
+    ``client_id``: the first link's, so a server that kept our soldiers hands them back."""
+    from client_stub.link.client import LinkError
+    from client_stub.stub.jack import JackProc
+
+    jack = JackProc("ttes-replay")
+    link_credentials(args).apply(jack.client)
+    if client_id:
+        jack.client.client_id = client_id
+    jack.initsocketconnection(host, port)
+    jack.start()
+    if not jack.wait_ready(30.0):
+        why = jack.failure or "server not ready"
+        jack.quit()
+        raise LinkError(why)
+    return jack
