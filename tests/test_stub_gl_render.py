@@ -88,6 +88,18 @@ def test_gl_draws_the_picture_pyrender_draws(tmp_path: Path) -> None:
         )
 
 
+def test_multisampling_smooths_the_same_picture(tmp_path: Path) -> None:
+    app = two_soldiers(tmp_path)
+    plain, smooth = GLStubRenderer(W, H), GLStubRenderer(W, H, samples=4)
+    plain.shadows = smooth.shadows = False
+    a, b = picture(app, plain), picture(app, smooth)
+    ma, mb = figure_mask(a), figure_mask(b)
+    assert (ma & mb).sum() / (ma | mb).sum() > 0.75  # the same figures; thin rifles and fingers differ most
+    edges = ma ^ interior(ma)
+    between = (b[edges].astype(int) - a[edges].astype(int)).any(axis=1).mean()
+    assert between > 0.2  # edge pixels blend with the sky
+
+
 def test_one_draw_per_kind_and_look_for_any_number_of_soldiers(tmp_path: Path) -> None:
     app = StubApp(terrain_from_mesh(flat_ground()), artic_dir=tmp_path)
     app.renderer = r = GLStubRenderer(64, 48)

@@ -2,7 +2,7 @@
 
 pyrender (:mod:`client_stub.stub.render`) shades every pixel with its PBR shader at 4× multisampling and
 reads the depth buffer back each frame; on Mesa's llvmpipe that fill cost, not the soldiers, set the frame
-rate (100 soldiers: about 1 fps at 1280×720 on a loaded machine). This back end draws the same meshes
+rate (100 soldiers at 1280×720: 766 ms of CPU a frame; here 43 ms). This back end draws the same meshes
 (:func:`~client_stub.stub.render.segment_arrays`: the same colours, force uniforms and smooth normals) lit
 the way pyrender lights them (sun, fill and ambient, Lambert on ``c_diff``, gamma 2.2), but per vertex,
 and without multisampling by default. Each kind + look is one vertex buffer of all its segments, every
@@ -32,11 +32,15 @@ from client_stub.crowd.gl import (
 )
 from client_stub.stub.camera import viewproj
 from client_stub.stub.render import (
+    AMBIENT,
+    FILL,
+    FILL_AT,
     FORCE_UNIFORMS,
     SKY,
+    SUN,
     StubRenderer,
-    _sun_pose,
     segment_arrays,
+    sun_pose,
     uniform_colour,
 )
 from client_stub.stub.shadow import SHADOW_ALPHA, shadow_quads
@@ -48,9 +52,6 @@ if TYPE_CHECKING:
     from client_stub.stub.overlay import Overlay
     from client_stub.stub.scene_graph import EntityLayout
 
-AMBIENT = (0.35, 0.35, 0.38)
-SUN_RGB = np.array([1.0, 0.97, 0.9]) * 3.2  # pyrender's DirectionalLight colour × intensity
-FILL_RGB = np.array([0.8, 0.85, 1.0]) * 1.0
 DIFFUSE = 0.96 / np.pi  # pyrender's c_diff / π (dielectric, min roughness 0.04)
 
 _LIGHT = """
@@ -181,10 +182,10 @@ class GLStubRenderer:
         self.shadow_prog = ctx.program(vertex_shader=SHADOW_VS, fragment_shader=SHADOW_FS)
         self.shadow_prog["alpha"] = SHADOW_ALPHA
         for prog in (self.soldier_prog, self.terrain_prog):
-            prog["sun_dir"] = tuple(_sun_pose()[:3, 2].tolist())
-            prog["fill_dir"] = tuple(_sun_pose(azimuth=-150.0, elevation=35.0)[:3, 2].tolist())
-            prog["sun_rgb"] = tuple(SUN_RGB.tolist())
-            prog["fill_rgb"] = tuple(FILL_RGB.tolist())
+            prog["sun_dir"] = tuple(sun_pose()[:3, 2].tolist())
+            prog["fill_dir"] = tuple(sun_pose(*FILL_AT)[:3, 2].tolist())
+            prog["sun_rgb"] = tuple((np.array(SUN[0]) * SUN[1]).tolist())  # pyrender: colour × intensity
+            prog["fill_rgb"] = tuple((np.array(FILL[0]) * FILL[1]).tolist())
             prog["ambient"] = AMBIENT
             prog["diffuse"] = float(DIFFUSE)
         self.soldiers: dict[tuple[int, int], SoldierBatch] = {}

@@ -32,6 +32,10 @@ FORCE_UNIFORMS: dict[int, tuple[float, float, float] | None] = {
     Force.OPPOSING: (0.50, 0.10, 0.14),  # maroon: far from olive, skin and the sky
 }
 SKY = (0.62, 0.74, 0.88)
+AMBIENT = (0.35, 0.35, 0.38)
+SUN = ((1.0, 0.97, 0.9), 3.2)  # colour, intensity; from compass 35°, 55° up
+FILL = ((0.8, 0.85, 1.0), 1.0)  # from compass -150°, 35° up
+FILL_AT = (-150.0, 35.0)
 HIDDEN = np.zeros((1, 4, 4), np.float32)  # an instance pose that draws nothing (all vertices at one point)
 
 
@@ -196,15 +200,15 @@ class StubRenderer:
         self.width, self.height, self.yfov_deg = width, height, yfov_deg
         self.overlay: Overlay | None = None
         self.shadows = True  # blob shadows under the soldiers
-        self.scene = pyrender.Scene(bg_color=(*SKY, 1.0), ambient_light=(0.35, 0.35, 0.38))
+        self.scene = pyrender.Scene(bg_color=(*SKY, 1.0), ambient_light=AMBIENT)
         self.camera = pyrender.PerspectiveCamera(
             yfov=np.radians(yfov_deg), znear=0.2, zfar=2000.0, aspectRatio=width / height
         )
         self.camera_node = self.scene.add(self.camera, pose=np.eye(4), name="camera")
-        sun = pyrender.DirectionalLight(color=(1.0, 0.97, 0.9), intensity=3.2)
-        self.scene.add(sun, pose=_sun_pose(), name="sun")
-        fill = pyrender.DirectionalLight(color=(0.8, 0.85, 1.0), intensity=1.0)
-        self.scene.add(fill, pose=_sun_pose(azimuth=-150.0, elevation=35.0), name="fill")
+        sun = pyrender.DirectionalLight(color=SUN[0], intensity=SUN[1])
+        self.scene.add(sun, pose=sun_pose(), name="sun")
+        fill = pyrender.DirectionalLight(color=FILL[0], intensity=FILL[1])
+        self.scene.add(fill, pose=sun_pose(*FILL_AT), name="fill")
         self.soldiers: dict[tuple[int, int], SoldierMeshes] = {}
         self._offscreen = pyrender.OffscreenRenderer(width, height) if offscreen else None
 
@@ -262,7 +266,7 @@ class StubRenderer:
         platform._egl_display = None  # so pyrender's __del__ -> delete() cannot terminate the shared display
 
 
-def _sun_pose(azimuth: float = 35.0, elevation: float = 55.0) -> np.ndarray:
+def sun_pose(azimuth: float = 35.0, elevation: float = 55.0) -> np.ndarray:
     """A directional light shining down from compass ``azimuth`` at ``elevation`` degrees."""
     az, el = np.radians(azimuth), np.radians(elevation)
     towards_sun = np.array([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)])
