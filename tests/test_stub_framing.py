@@ -14,7 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from client_stub.stub.app import StubApp, posture_texts
+from client_stub.stub.action import posture_texts
+from client_stub.stub.app import StubApp
 from client_stub.stub.camera import ACTION_RADIUS_M, View, box_corners, clear_pose, frame_points, viewproj
 from client_stub.stub.gl_render import GLStubRenderer
 from client_stub.stub.keys import KEY_HELP

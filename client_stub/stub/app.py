@@ -17,7 +17,6 @@ One :class:`StubApp` ties the pieces of an image generator together, window or n
 
 from __future__ import annotations
 
-import functools
 import logging
 import os
 import tempfile
@@ -29,6 +28,7 @@ import numpy as np
 
 from client_stub.link.buffer import UpdateBatch
 from client_stub.link.client import LinkError
+from client_stub.stub.action import action_points, follow_action, soldier_labels
 from client_stub.stub.artic import (
     TableBinding,
     articulation,
@@ -37,15 +37,7 @@ from client_stub.stub.artic import (
     update_table_for,
     write_artic,
 )
-from client_stub.stub.camera import (
-    ACTION_RADIUS_M,
-    ACTION_TURN_SECONDS,
-    SOLDIER_HEIGHT_M,
-    CameraState,
-    View,
-    action_pose,
-    camera_pose,
-)
+from client_stub.stub.camera import CameraState, View, action_pose, camera_pose
 from client_stub.stub.keys import KEY_HELP, StubController
 from client_stub.stub.offline import OfflinePoser
 from client_stub.stub.overlay import Label, Overlay
@@ -54,7 +46,6 @@ from client_stub.stub.simsoldier import Force, SimSoldiers
 from client_stub.stub.terrain import Terrain
 from client_stub.stub.tips import TipsFigure, load_tips
 from protocol import coords
-from protocol.entity import Appearance, WeaponState
 from protocol.update_table import UpdateTable
 
 if TYPE_CHECKING:
@@ -364,22 +355,9 @@ class StubApp:
                 joints = world[:, 1:, :3, 3]
                 self.figure_box[rows] = np.stack([joints.min(axis=1), joints.max(axis=1)], axis=1)
                 if self.labels:
-                    labels += self._labels(rows, world)
+                    labels += soldier_labels(self.soldiers, rows, world, self.controller.current)
         r.set_camera(self.camera_pose())
         r.overlay = Overlay(labels, self._caption(), KEY_HELP if self.show_help else ())
-
-    def _labels(self, rows: np.ndarray, world: np.ndarray) -> list[Label]:
-        """Name and posture above each soldier's head (the highest of his joints)."""
-        if not len(rows):
-            return []
-        p = world[:, :, :3, 3]
-        anchors = np.column_stack([p[..., 0].mean(1), p[..., 1].mean(1), p[..., 2].max(1) + 0.25]).tolist()
-        texts = posture_texts(self.soldiers, rows)
-        cur = self.controller.current
-        return [
-            Label(f"soldier {row}", text, tuple(anchor), row == cur)
-            for row, text, anchor in zip(rows.tolist(), texts, anchors, strict=True)
-        ]
 
     def _caption(self) -> str:
         cur = self.controller.current
@@ -401,47 +379,15 @@ class StubApp:
             feet = self.figure_feet(cur, feet)
         return camera_pose(self.camera, feet, heading, self.terrain.bounds)
 
-    def action_points(self) -> np.ndarray:
-        """Corners of the drawn figures ACTION CAM frames, ``(2n, 3)``: the current soldier and the live ones
-        near him (all live ones when there is no current soldier). The figures, not the entities: a server
-        may place a figure away from its entity (the root offset of a step, a late update)."""
-        s = self.soldiers
-        live = np.flatnonzero(s.alive[: s.count])
-        box = self.figure_box[live] if len(self.figure_box) >= s.count else np.full((len(live), 2, 3), np.nan)
-        unknown = np.isnan(box[:, 0, 0])  # not drawn yet: the entity, a soldier's height tall
-        box[unknown, 0] = s.position[live[unknown]]
-        box[unknown, 1] = s.position[live[unknown]] + np.array([0.0, 0.0, SOLDIER_HEIGHT_M])
-        if not len(live):
-            return np.array([[0.0, 0.0, 0.0], [0.0, 0.0, SOLDIER_HEIGHT_M]])
-        cur = np.flatnonzero(live == self.controller.current)
-        if len(cur):
-            middle = box.mean(axis=1)[:, :2]
-            box = box[np.linalg.norm(middle - middle[cur[0]], axis=1) <= ACTION_RADIUS_M]
-        return box.reshape(-1, 3)
-
-    def follow_action(self) -> None:
-        """A touring ACTION CAM (``camera.action_tour``) follows a live soldier: the current one while he
-        lives, a soldier of the next force every :data:`ACTION_TURN_SECONDS` (a replay shows both sides)."""
-        s = self.soldiers
-        live = np.flatnonzero(s.alive[: s.count])
-        if not len(live):
-            return
-        cur = self.controller.current
-        turn = int(self.time // ACTION_TURN_SECONDS) != int(self._turned // ACTION_TURN_SECONDS)
-        if cur in live and not turn:
-            return
-        self._turned = self.time
-        forces = np.unique(s.force[live])
-        here = int(s.force[cur]) if cur < s.count else int(forces[0])
-        want = forces[(int(np.searchsorted(forces, here)) + (1 if turn else 0)) % len(forces)]
-        self.controller.current = int(live[s.force[live] == want][0])
-
     def _action_pose(self) -> np.ndarray:
-        if self.camera.action_tour:
-            self.follow_action()
+        if self.camera.action_tour:  # the replay's: a live soldier, the next force's every 10 s
+            turned = follow_action(self.soldiers, self.controller.current, self.time, self._turned)
+            if turned is not None:
+                self.controller.current, self._turned = turned
         r = self.renderer
         yfov, aspect = (r.yfov_deg, r.width / r.height) if r is not None else (50.0, 4 / 3)
-        return action_pose(self.camera, self.action_points(), yfov, aspect, self.terrain.height)
+        points = action_points(self.soldiers, self.figure_box, self.controller.current)
+        return action_pose(self.camera, points, yfov, aspect, self.terrain.height)
 
     def figure_feet(self, slot: int, feet: np.ndarray) -> np.ndarray:
         """Where the soldier's figure stands: the server sends a root offset (the figure trails or leads its
@@ -456,27 +402,3 @@ class StubApp:
 
     def close(self) -> None:
         self.source.close()
-
-
-def posture_texts(soldiers: SimSoldiers, slots: np.ndarray) -> list[str]:
-    """What the labels of ``slots`` say the soldiers are doing (see :func:`posture_text`)."""
-    s = soldiers
-    speed = np.round(s.speed[slots] * s.moving(slots), 1)
-    return [
-        posture_text(a, w, v)
-        for a, w, v in zip(
-            s.appearance[slots].tolist(), s.weapon[slots].tolist(), speed.tolist(), strict=True
-        )
-    ]
-
-
-@functools.lru_cache(maxsize=512)
-def posture_text(code: int, weapon: int, speed: float) -> str:
-    """``kneel, firing`` / ``stand, walk 1.3 m/s, deployed`` / ``prone, crawl 0.5 m/s``."""
-    text = Appearance(code).name.lower() if code in Appearance._value2member_map_ else f"posture {code}"
-    if abs(speed) > 0.05:
-        gait = "crawl" if code != Appearance.UPRIGHT else "run" if abs(speed) > 2.5 else "walk"
-        text = f"{text} {speed:.1f} m/s" if gait == text else f"{text}, {gait} {speed:.1f} m/s"
-    if weapon in (WeaponState.DEPLOYED, WeaponState.FIRING):
-        text += f", {WeaponState(weapon).name.lower()}"
-    return text
