@@ -21,8 +21,8 @@ from client_stub.stub.app import StubApp
 
 # (seconds into a 40 s tour, keys pressed then)
 TOUR: tuple[tuple[float, tuple[str, ...]], ...] = (
-    (0.0, ("b",)),
-    (2.0, ("c",)),
+    (0.0, ("x", "?")),
+    (2.0, ("?", "c")),
     (3.5, ("6",)),
     (5.0, ("i", "i", "i")),
     (6.0, ("3",)),
@@ -40,7 +40,7 @@ TOUR: tuple[tuple[float, tuple[str, ...]], ...] = (
     (30.0, ("1",)),
     (33.0, ("2", "n")),
     (35.0, ("n", "u")),
-    (37.5, ("b",)),
+    (37.5, ("x",)),
 )
 TOUR_SECONDS = 40.0
 

@@ -111,8 +111,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seconds", type=positive, help="headless: video length (default: the log, at --speed)")
     p.add_argument("--fps", type=number(1, 120), default=15.0, help="frames per second (default 15)")
     p.add_argument("--size", type=size, default="640x480", help="image size WxH (default 640x480)")
-    p.add_argument("--camera", choices=("squad", "birds-eye", "soldier", "overhead"), default="squad",
-                   help="start camera (default: one framing the whole squad; keys take over)")  # fmt: skip
+    p.add_argument(
+        "--camera",
+        choices=("action", "squad", "birds-eye", "soldier", "overhead"),
+        default="action",
+        help="start camera (default: ACTION CAM on a soldier and those near him, turning from force to force "
+        "every 10 s; squad: the whole squad; keys take over)",
+    )
     p.add_argument("--no-stub", action="store_true", help="no image generator: only drive the server")
     p.add_argument("--host", type=host, help="Jack/TTES server host (default: a private server)")
     p.add_argument("--port", type=port, default=7000, help="server port with --host (default 7000)")
@@ -481,10 +486,13 @@ def _make_app(args: argparse.Namespace, replayer: Any, link: Any, reconnect: Any
         reconnect=reconnect,
         retry=RetrySchedule(give_up_after=args.give_up_after),
     )
-    camera = getattr(args, "camera", "squad")
+    camera = getattr(args, "camera", "action")
     assert isinstance(app.source, DisSoldiers)
     app.source.squad_view = camera == "squad"
-    if camera == "overhead":
+    if camera == "action":
+        app.camera.action_view()
+        app.camera.action_tour = True
+    elif camera == "overhead":
         app.camera.overhead()
     elif camera != "squad":
         app.camera.view = View.BIRDS_EYE if camera == "birds-eye" else View.SOLDIER_CAM
@@ -498,11 +506,11 @@ async def _render(
     import numpy as np
     import trio
 
-    from client_stub.stub.render import StubRenderer
+    from client_stub.stub.gl_render import offscreen_renderer
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    app.renderer = StubRenderer(*size, offscreen=True)
+    app.renderer = offscreen_renderer(*size)
     app.renderer.set_terrain(app.terrain.meshes)
     video = out.suffix.lower() in (".mp4", ".mov", ".mkv", ".avi", ".gif")
     writer = None

@@ -56,6 +56,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--fps", type=number(1, 120), default=15.0, help="frames per second (default 15)")
     p.add_argument("--size", type=size, default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument(
+        "--renderer",
+        choices=("gl", "pyrender"),
+        default="gl",
+        help="headless: moderngl (gl, default: fast) or pyrender (the window's renderer, multisampled)",
+    )
     p.add_argument("--host", type=host, help="Jack/TTES server host")
     p.add_argument("--port", type=port, default=7000, help="server port (default 7000)")
     p.add_argument("--spawn-server", action="store_true", help="start `ttes server` on a free loopback port")
@@ -160,9 +166,14 @@ def run(args: argparse.Namespace) -> int:
                     f"ttes stub: server not ready ({jack.failure or 'timeout'}); posing offline",
                     file=sys.stderr,
                 )
+        from client_stub.stub.gl_render import offscreen_renderer
         from client_stub.stub.render import StubRenderer
 
-        app.renderer = StubRenderer(width, height, offscreen=args.headless)
+        app.renderer = (
+            offscreen_renderer(width, height, args.renderer)
+            if args.headless
+            else StubRenderer(width, height, offscreen=False)
+        )
         app.renderer.set_terrain(terrain.meshes)
         if not args.headless:
             from client_stub.stub.viewer import run_viewer
