@@ -1,20 +1,21 @@
 """``crawl2prstow``: from the crawl (forearms, knees) down to prone (belly, thighs, forearms), limb by limb.
 
 The two postures' contacts are far apart (the left elbow 60 cm, the knees 40 cm, the left toes a metre
-sideways: prone lies turned about 60 degrees round the pelvis, its chest 36 cm right of and 26 cm behind
-the crawl's), so interpolating the joints drags every limb along the ground. Instead, as in the crawl
-(:mod:`authoring.crawl`), each limb is lifted, carried and set down in turn while the others stay planted:
-the hips and legs go down first (each knee and its toes lifted back to where prone has them, the left leg
-then the right; the toes held a little higher while the pelvis settles onto them). The forearms cannot stay planted meanwhile (the shoulders swing 40-70 cm with the turning
-chest and would drag them), so both rise while the chest still holds, travel in the air with the body and
-land at their prone places once it is still; the rifle between them, carried by the chest from the crawl's
-cradle to the prone carry, rises and lands with them and is held off the chin and the left upper arm.
-The body (pelvis, spine, legs) is one batched IK solve from the interpolated joints with the knees and toes
-on their tracks and the pelvis held firmly to its turn from the crawl to prone, kept at the crawl's height
-until the legs are back (a pelvis left free rolls over the moving leg and back, and the rifle on the chest
-with it; one lowered early drags the thigh); the arms are then tracked frame after frame from the crawl
-(palms on the rifle first, then the elbows on their tracks) so no joint jumps between IK branches.
-The clip starts exactly in ``CRAWL``, ends exactly in ``PRONE_STOWED`` and is eased at both ends.
+sideways: prone lies turned about 60 degrees round the pelvis, its chest 36 cm right of and 26 cm behind the
+crawl's), so interpolating the joints drags every limb along the ground. Instead, as in the crawl
+(:mod:`authoring.crawl`), each limb is lifted, carried and set down in turn while the others stay planted: the
+hips and legs go down first (each knee and its toes lifted back to where prone has them, the left leg then the
+right; the toes held a little higher while the pelvis settles onto them). The forearms cannot stay planted
+meanwhile (the shoulders swing 40-70 cm with the turning chest and would drag them), so both rise while the
+chest still holds, travel in the air with the body and land at their prone places once it is still; the rifle
+between them, carried by the chest from the crawl's cradle to the prone carry, rises and lands with them and
+is held off the chin and the left upper arm. The body (pelvis, spine, legs) is one batched IK solve from the
+interpolated joints with the knees and toes on their tracks and the pelvis held firmly to its turn from the
+crawl to prone, kept at the crawl's height until the legs are back (a pelvis left free rolls over the moving
+leg and back, and the rifle on the chest with it; one lowered early drags the thigh); the arms are then
+tracked frame after frame from the crawl (palms on the rifle first, then the elbows on their tracks) so no
+joint jumps between IK branches. The clip starts exactly in ``CRAWL``, ends exactly in ``PRONE_STOWED`` and is
+eased at both ends.
 """
 
 from __future__ import annotations

@@ -52,12 +52,14 @@ def _window(leaps: np.ndarray, n: int) -> np.ndarray:
 
 
 def _gaussian(values: np.ndarray, sigma: float) -> np.ndarray:
-    """``values`` ``(n, k)`` smoothed along the frames (the ends held)."""
+    """``values`` ``(n, k)`` smoothed along the frames by a Gaussian of ``sigma`` frames (ends held; also the
+    slaving's smoothing of a clip, :mod:`authoring.slaving`)."""
     half = int(np.ceil(3.0 * sigma))
-    k = np.exp(-0.5 * (np.arange(-half, half + 1) / sigma) ** 2)
-    k /= k.sum()
+    k = np.arange(-half, half + 1, dtype=np.float64)
+    kernel = np.exp(-0.5 * (k / sigma) ** 2)
+    kernel /= kernel.sum()
     padded = np.concatenate([np.repeat(values[:1], half, 0), values, np.repeat(values[-1:], half, 0)])
-    return np.stack([np.convolve(padded[:, j], k, mode="valid") for j in range(values.shape[1])], axis=1)
+    return np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(values.shape[1])], 1)
 
 
 def leap_frames(poses: np.ndarray, copied: np.ndarray, dofs: np.ndarray) -> np.ndarray:

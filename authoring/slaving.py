@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from authoring import ik
-from authoring.slave_leaps import ease_leaps
+from authoring.slave_leaps import _gaussian, ease_leaps
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
 from server.motion.binding import bind_channelset, protofiletype
@@ -455,16 +455,6 @@ class MasterSlavePair:
         pose, loc = self.slave_pose(self.master_kin.neutral_pose(), self.master.location)
         self.slave_kin.set_pose(pose)
         self.slave.location = loc
-
-
-def _gaussian(values: np.ndarray, sigma: float) -> np.ndarray:
-    """``values`` ``(n, k)`` smoothed along the frames by a Gaussian of ``sigma`` frames (ends held)."""
-    half = int(np.ceil(3.0 * sigma))
-    k = np.arange(-half, half + 1, dtype=np.float64)
-    kernel = np.exp(-0.5 * (k / sigma) ** 2)
-    kernel /= kernel.sum()
-    padded = np.concatenate([np.repeat(values[:1], half, 0), values, np.repeat(values[-1:], half, 0)])
-    return np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(values.shape[1])], 1)
 
 
 RELEASE_FADE_FRAMES = 12  # after the hands let go, the arm goals fade out over this many frames
