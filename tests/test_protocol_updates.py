@@ -261,7 +261,7 @@ def test_decoder_rejects_bad_payloads_without_touching_state(mutate, code: Error
 
 def test_delta_overflow_is_rejected_atomically() -> None:
     t = UpdateTable(1, "x", "", (JointEntry("j", (DofRange("R", -1.0, 1.0, 4),)),))
-    enc, dec = UpdateEncoder(t), UpdateDecoder(t)
+    enc, dec = UpdateEncoder(t, version=1), UpdateDecoder(t, version=1)  # a version-1 frame
     dec.decode(
         enc.encode(upd(t, [0, 1], np.array([[0.0], [0.9]]), np.zeros((2, 0, 3)), np.zeros((2, 0, 4))), BIG)[0]
     )
