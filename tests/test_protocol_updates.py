@@ -168,13 +168,14 @@ def small_tables(draw: st.DrawFn) -> UpdateTable:
     small_tables(),
     st.lists(st.tuples(st.integers(0, 15), st.floats(0, 0.3)), min_size=1, max_size=6),
     st.integers(0, 2**31),
+    st.sampled_from([1, 2]),
 )
 def test_decoder_reconstructs_the_encoders_quantised_values_exactly(
-    table: UpdateTable, ticks: list[tuple[int, float]], seed: int
+    table: UpdateTable, ticks: list[tuple[int, float]], seed: int, version: int
 ) -> None:
     """Whatever mix of absolute and delta modes the encoder picks, both sides hold identical values."""
     rng = np.random.default_rng(seed)
-    enc, dec = UpdateEncoder(table, 16), UpdateDecoder(table, 16)
+    enc, dec = UpdateEncoder(table, 16, version=version), UpdateDecoder(table, 16, version=version)
     d, p, q = poses(table, 16, seed)
     for step, (nmove, scale) in enumerate(ticks):
         who = rng.permutation(16)[:nmove]
