@@ -61,32 +61,33 @@ def tick_code(tick: int) -> np.int32:
     return np.uint32(tick & 0xFFFFFFFF).view(np.int32)
 
 
-def predict(cur: np.ndarray, state: np.ndarray, tick: int) -> np.ndarray:
-    """The predicted codes (int64, may leave the field's range): ``2 · cur − before`` for soldiers whose
-    last update was at ``tick − 1`` (mod 2³²), else ``cur``."""
-    nf = cur.shape[1]
-    cur64 = cur.astype(np.int64)
-    follows = state[:, nf] == tick_code(tick - 1)
-    return np.where(follows[:, None], 2 * cur64 - state[:, :nf], cur64)
-
-
-def next_state(cur: np.ndarray, new: np.ndarray, restart: np.ndarray, tick: int) -> np.ndarray:
-    """The state after an update at ``tick``: ``before`` = ``new`` where ``restart``, else ``cur``."""
-    out = np.empty((len(cur), cur.shape[1] + 1), np.int32)
-    out[:, :-1] = np.where(restart, new, cur)
-    out[:, -1] = tick_code(tick)
-    return out
-
-
 def field_widths(
     lay: TableLayout, ncols: int, present: np.ndarray, absolute: np.ndarray, w: np.ndarray
 ) -> np.ndarray:
     """(n, ncols) uint8: each present field's width, absolute entries at their own, delta entries ``w``."""
     n, nf = present.shape[0], lay.nfields
     out = np.zeros((n, ncols), np.uint8)
-    per = np.where(absolute[:, lay.entry_of], lay.width, w[:, lay.entry_of] * ~lay.is_qidx)
-    out[:, :nf] = per * present[:, lay.entry_of]
+    wd = np.where(absolute | ~present, 0, w).astype(np.uint8)
+    np.multiply(np.take(wd, lay.entry_of, axis=1), ~lay.is_qidx, out=out[:, :nf], casting="unsafe")
+    rows = np.flatnonzero((absolute & present).any(axis=1))  # few: new soldiers, qidx flips, jumps
+    if len(rows):
+        absf = np.take(absolute[rows] & present[rows], lay.entry_of, axis=1)
+        out[rows, :nf] = np.where(absf, lay.width, out[rows, :nf])
     return out
+
+
+def residuals(q: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int) -> np.ndarray:
+    """(n, F) int32: ``q`` minus the prediction, ``2 · cur − before`` for soldiers whose last update was at
+    ``tick − 1`` (mod 2³²), else ``cur``."""
+    nf = q.shape[1]
+    resid = q - cur
+    rows = np.flatnonzero(state[:, nf] == tick_code(tick - 1))
+    if len(rows) == len(q):
+        resid -= cur
+        resid += state[:, :nf]
+    elif len(rows):
+        resid[rows] -= cur[rows] - state[rows, :nf]
+    return resid
 
 
 def encode_rows(
@@ -105,12 +106,12 @@ def encode_rows(
     whose qidx changed, or whose residuals cost at least its absolute bits goes absolute (width 0); a row
     whose entries cost no less in delta mode, or that the receiver does not know, goes absolute whole.
     """
-    resid = q - predict(cur, state, tick)
-    kf = bit_lengths(resid)
-    kf[:, lay.is_qidx] = 1
-    ke = np.maximum.reduceat(kf, lay.entry_start, axis=1)
+    resid = residuals(q, cur, state, tick)
+    mag = np.maximum(resid, ~resid)
+    mag[:, lay.qidx_fields] = 0
+    ke = bit_lengths(np.maximum.reduceat(mag, lay.entry_start, axis=1))  # (n, E): one width per entry
     qflip = np.zeros(present.shape, bool)
-    qflip[:, lay.entry_of[lay.qidx_fields]] = (q != cur)[:, lay.qidx_fields]
+    qflip[:, lay.entry_of[lay.qidx_fields]] = q[:, lay.qidx_fields] != cur[:, lay.qidx_fields]
     delta_bits = ke * lay.entry_ndelta
     ent_abs = qflip | (ke > MAX_WIDTH) | (delta_bits >= lay.entry_absbits)
     cost_abs = present.astype(np.int64) @ lay.entry_absbits
@@ -122,15 +123,23 @@ def encode_rows(
     header = np.empty((len(q), MODE_BITS + present.shape[1]), np.uint8)
     header[:, 0] = ~row_abs
     header[:, MODE_BITS:] = present
-    sent_abs = (ent_abs & present)[:, lay.entry_of]
+    sent_abs = ent_abs & present
+    values, after = resid, np.empty((len(q), q.shape[1] + 1), np.int32)
+    after[:, :-1] = cur
+    after[:, -1] = tick_code(tick)
+    rows = np.flatnonzero(sent_abs.any(axis=1))  # few: the absolute entries send codes, restart predictions
+    if len(rows):
+        absf = np.take(sent_abs[rows], lay.entry_of, axis=1)
+        values[rows] = np.where(absf, q[rows], resid[rows])
+        after[rows, :-1] = np.where(absf, q[rows], cur[rows])
     return Rows(
         header=header,
         nibbles=w[present & ~row_abs[:, None]].astype(np.uint8),
         nibble_count=nibble_count,
         row_bits=np.where(row_abs, cost_abs, cost_delta - WIDTH_BITS * nibble_count),
-        values=np.where(sent_abs, q, resid),
+        values=values,
         widths=field_widths(lay, ncols, present, ent_abs, w),
-        state=next_state(cur, q, sent_abs, tick),
+        state=after,
     )
 
 
@@ -175,12 +184,29 @@ def read_header(lay: TableLayout, ncols: int, bits: np.ndarray, nibbles: np.ndar
 def apply_rows(
     lay: TableLayout, hdr: Header, vals: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The rows' new ``(cur, state)`` from their unsigned field values ``vals`` (n, F) as read at ``tick``."""
+    """The rows' new ``(cur, state)`` from their unsigned field values ``vals`` (n, F) as read at ``tick``.
+
+    Dense int32 passes over (n, F): a field of width 0 (absent, or a delta entry's qidx) reads 0 and keeps its
+    code; the few rows with an absolute entry are fixed up on their own.
+    """
     nf = lay.nfields
-    width = hdr.widths[:, :nf].astype(np.int64)
-    absf = hdr.absolute[:, lay.entry_of]
-    deltaf = (width != 0) & ~absf
-    sign = np.where(deltaf, np.left_shift(1, np.maximum(width, 1) - 1), 0)
-    resid = (vals.astype(np.int64) ^ sign) - sign
-    new = np.where(absf, vals, np.where(deltaf, predict(cur, state, tick) + resid, cur))
-    return new, next_state(cur, new, absf, tick)
+    width = hdr.widths[:, :nf]
+    sign = np.right_shift(np.left_shift(np.int32(1), width, dtype=np.int32), 1)  # 2^(w-1); 0 for w = 0
+    new = vals.astype(np.int32)
+    new ^= sign  # w-bit two's complement: (v ^ 2^(w-1)) - 2^(w-1)
+    new -= sign
+    new += cur
+    follows = np.flatnonzero(state[:, nf] == tick_code(tick - 1))
+    if len(follows):  # predicted: add the velocity cur - before to the fields sent as residuals
+        moved = cur[follows] - state[follows, :nf]
+        moved *= width[follows] != 0
+        new[follows] += moved
+    after = np.empty((len(cur), nf + 1), np.int32)
+    after[:, :nf] = cur
+    after[:, nf] = tick_code(tick)
+    rows = np.flatnonzero((hdr.absolute & hdr.mask).any(axis=1))
+    if len(rows):
+        absf = np.take(hdr.absolute[rows], lay.entry_of, axis=1)
+        new[rows] = np.where(absf, vals[rows], new[rows])
+        after[rows, :nf] = np.where(absf, new[rows], cur[rows])
+    return new, after
