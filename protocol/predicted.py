@@ -45,10 +45,9 @@ class Rows:
     state: np.ndarray  # (n, F + 1) the prediction state after these rows (see :func:`state_columns`)
 
 
-def bit_lengths(values: np.ndarray) -> np.ndarray:
-    """Bits of the smallest two's-complement field holding each value (1 for 0 and −1)."""
-    mag = np.maximum(values, ~values)
-    return np.frexp(mag.astype(np.float64))[1] + 1
+def _entry_bits(mag: np.ndarray) -> np.ndarray:
+    """int32 bit lengths plus one of magnitudes >= 0 (float32: exact below 2^24, where widths stop at 15)."""
+    return np.frexp(mag.astype(np.float32))[1].astype(np.int32) + 1
 
 
 def state_columns(nfields: int) -> int:
@@ -107,15 +106,19 @@ def encode_rows(
     whose entries cost no less in delta mode, or that the receiver does not know, goes absolute whole.
     """
     resid = residuals(q, cur, state, tick)
-    mag = np.maximum(resid, ~resid)
+    mag = np.maximum(resid, ~resid)  # the bit length of max(r, -r - 1), plus a sign bit, holds r
     mag[:, lay.qidx_fields] = 0
-    ke = bit_lengths(np.maximum.reduceat(mag, lay.entry_start, axis=1))  # (n, E): one width per entry
+    ke = _entry_bits(np.maximum.reduceat(mag, lay.entry_start, axis=1))  # (n, E): one width per entry
     qflip = np.zeros(present.shape, bool)
     qflip[:, lay.entry_of[lay.qidx_fields]] = q[:, lay.qidx_fields] != cur[:, lay.qidx_fields]
-    delta_bits = ke * lay.entry_ndelta
-    ent_abs = qflip | (ke > MAX_WIDTH) | (delta_bits >= lay.entry_absbits)
-    cost_abs = present.astype(np.int64) @ lay.entry_absbits
-    cost_delta = (present * (WIDTH_BITS + np.where(ent_abs, lay.entry_absbits, delta_bits))).sum(axis=1)
+    absbits = lay.entry_absbits.astype(np.int32)
+    delta_bits = ke * lay.entry_ndelta.astype(np.int32)
+    ent_abs = qflip | (ke > MAX_WIDTH) | (delta_bits >= absbits)
+    cost = np.where(ent_abs, absbits, delta_bits)
+    cost += WIDTH_BITS
+    cost *= present
+    cost_delta = cost.sum(axis=1)
+    cost_abs = (present * absbits).sum(axis=1)
     row_abs = ~known | (cost_abs <= cost_delta)
     ent_abs |= row_abs[:, None]
     w = np.where(ent_abs, 0, ke)
