@@ -202,7 +202,6 @@ def describe_joint_updates(table: UpdateTable, payload: bytes, version: int = PR
     """Field-by-field reading of one JOINT_UPDATES payload (a plain sequential walk, for the document)."""
     if version >= 2:
         return _describe_v2(table, payload)
-    lay = table.layout
     tid, tick, count = UPDATE_HEADER.unpack_from(payload)
     lines = [f"table {tid}, tick {tick}, count {count}"]
     at = UPDATE_HEADER.size
@@ -222,22 +221,8 @@ def describe_joint_updates(table: UpdateTable, payload: bytes, version: int = PR
     start = pos
     for soldier, mode, mask in heads:
         for e, flag in enumerate(mask):
-            if flag != "1":
-                continue
-            entry = table.entries[e]
-            for j in range(int(lay.entry_nfields[e])):
-                f = int(lay.entry_start[e]) + j
-                if mode and lay.is_qidx[f]:
-                    continue
-                w = int(lay.width[f]) if mode == 0 else mode
-                raw = bits[pos : pos + w]
-                v = int(raw, 2)
-                if mode:
-                    v = v - (1 << w) if v >= 1 << (w - 1) else v
-                label = f"dof {j}" if isinstance(entry, JointEntry) else _FIGURE_FIELDS[j]
-                kind = "delta" if mode else "value"
-                lines.append(f"  soldier {soldier} {entry.name}.{label}: {w:2d} bits {raw:>16} {kind} {v}")
-                pos += w
+            if flag == "1":
+                pos = _describe_entry(table, soldier, e, mode, bits, pos, "delta", lines)
     lines.append(f"fields: {pos - start} bits + {(-(pos - start)) % 8} zero padding bits")
     return lines
 
@@ -245,9 +230,32 @@ def describe_joint_updates(table: UpdateTable, payload: bytes, version: int = PR
 _FIGURE_FIELDS = {0: "x", 1: "y", 2: "z", 3: "qidx", 4: "c0", 5: "c1", 6: "c2"}
 
 
+def _describe_entry(
+    table: UpdateTable, soldier: int, e: int, w: int, bits: str, pos: int, signed: str, lines: list[str]
+) -> int:
+    """Append the reading of entry ``e``'s fields at bit ``pos``: absolute (``w`` = 0) or ``w``-bit signed
+    ``signed`` values (qidx not sent); returns the bit after them."""
+    lay = table.layout
+    entry = table.entries[e]
+    for j in range(int(lay.entry_nfields[e])):
+        f = int(lay.entry_start[e]) + j
+        if w and lay.is_qidx[f]:
+            continue
+        n = w or int(lay.width[f])
+        raw = bits[pos : pos + n]
+        v = int(raw, 2)
+        if w:
+            v = v - (1 << n) if v >= 1 << (n - 1) else v
+        label = f"dof {j}" if isinstance(entry, JointEntry) else _FIGURE_FIELDS[j]
+        lines.append(
+            f"  soldier {soldier} {entry.name}.{label}: {n:2d} bits {raw:>16} {signed if w else 'value'} {v}"
+        )
+        pos += n
+    return pos
+
+
 def _describe_v2(table: UpdateTable, payload: bytes) -> list[str]:
     """The reading of a version-2 payload (§8.5): header, width nibbles, then each entry's fields."""
-    lay = table.layout
     tid, tick, count = UPDATE_HEADER.unpack_from(payload)
     lines = [f"table {tid}, tick {tick}, count {count}"]
     at = UPDATE_HEADER.size + 2 * count
@@ -279,20 +287,7 @@ def _describe_v2(table: UpdateTable, payload: bytes) -> list[str]:
     for (soldier, mode, mask), row in zip(heads, widths, strict=True):
         present = [e for e, flag in enumerate(mask) if flag == "1"]
         for e, w in zip(present, row if mode else [0] * len(present), strict=True):
-            entry = table.entries[e]
-            for j in range(int(lay.entry_nfields[e])):
-                f = int(lay.entry_start[e]) + j
-                if w and lay.is_qidx[f]:
-                    continue
-                n = w or int(lay.width[f])
-                raw = bits[pos : pos + n]
-                v = int(raw, 2)
-                if w:
-                    v = v - (1 << n) if v >= 1 << (n - 1) else v
-                label = f"dof {j}" if isinstance(entry, JointEntry) else _FIGURE_FIELDS[j]
-                kind = "residual" if w else "value"
-                lines.append(f"  soldier {soldier} {entry.name}.{label}: {n:2d} bits {raw:>16} {kind} {v}")
-                pos += n
+            pos = _describe_entry(table, soldier, e, w, bits, pos, "residual", lines)
     lines.append(f"fields: {pos - start} bits + {(-(pos - start)) % 8} zero padding bits")
     return lines
 
