@@ -123,6 +123,21 @@ def test_the_spec_decoder_and_the_fast_one_agree_with_the_encoder(
         assert all(spec.cur[s] == codes[s].tolist() for s in sent.tolist())
 
 
+def test_the_prediction_follows_the_tick_through_its_wrap() -> None:
+    """Ticks 2^32 - 1 then 0 are consecutive (§8.5: t = T - 1 mod 2^32): the third update is predicted."""
+    lay = DI.layout
+    enc, dec = UpdateEncoder(DI, 1, version=2), UpdateDecoder(DI, 1, version=2)
+    codes = np.full((1, lay.nfields), 2000, np.int32)
+    codes[:, lay.qidx_fields] = 0
+    sizes = []
+    for k, tick in enumerate((2**32 - 2, 2**32 - 1, 0)):
+        (p,) = enc.encode_codes(np.array([0]), codes + 100 * k * (~lay.is_qidx), tick, 1 << 16)
+        dec.decode(p)
+        sizes.append(len(p))
+    assert np.array_equal(dec.codes(np.array([0])), codes + 200 * (~lay.is_qidx))
+    assert sizes[2] < sizes[1]  # residuals 0 (1 bit) instead of deltas of 100 (8 bits)
+
+
 def test_steady_motion_costs_fewer_bytes_than_version_1() -> None:
     """A DI crowd in steady motion (each field at its own constant rate): version 2 predicts it exactly."""
     rng = np.random.default_rng(3)

@@ -58,7 +58,7 @@ def _step(
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32), st.integers(1, 5), st.sampled_from([1 << 16, 300]), st.sampled_from([1, 2]))
+@given(st.integers(0, 2**32), st.integers(1, 5), st.sampled_from([1 << 16, 300]), st.sampled_from([1, 2, 0]))
 def test_shared_encoding_is_byte_identical_to_per_client(
     seed: int, nclients: int, max_payload: int, protocol: int
 ) -> None:
@@ -71,7 +71,11 @@ def test_shared_encoding_is_byte_identical_to_per_client(
         np.arange(1, NMAX, 2),
         np.sort(rng.choice(NMAX, 20, False)),
     ]
-    clients = [Client(shared, groups[int(rng.integers(len(groups)))], protocol) for _ in range(nclients)]
+    # protocol 0: version 1 and version 2 clients mixed in one memo (a server's old and new clients)
+    clients = [
+        Client(shared, groups[int(rng.integers(len(groups)))], protocol or int(rng.integers(1, 3)))
+        for _ in range(nclients)
+    ]
     codes = rng.integers(0, DI.layout.max_code + 1, (NMAX, DI.layout.nfields)).astype(np.int32)
     for version in range(1, 40):
         codes = _codes(rng, codes, float(rng.choice([0.0, 0.3, 1.0])))
