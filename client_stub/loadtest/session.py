@@ -13,15 +13,19 @@ largest N that met them. Every loop is bounded: stages, seconds, and a wall-cloc
 
 from __future__ import annotations
 
+import contextlib
 import math
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import trio
 
+from client_stub.dis.sink import MAX_SOLDIERS_PER_CLIENT
 from client_stub.link.auth import Credentials
 from client_stub.link.spawn import ServerProcess, cpu_seconds, self_cpu_seconds, spawn_server
 from client_stub.loadtest.client import LoadClient, LoadError, split_rows
@@ -376,15 +380,34 @@ def server_args(tick_hz: float, throttle: float | None) -> list[str]:
     return ["--tick-hz", f"{tick_hz:g}", *(["--throttle", f"{throttle:g}"] if throttle is not None else [])]
 
 
+def _owner_limit(soldiers: int, stack: contextlib.ExitStack) -> list[str]:
+    """``--config`` raising the spawned server's soldiers per client id (4096 by default) to ``soldiers``:
+    the load generator's first client creates them all (the file lives until ``stack`` closes)."""
+    if soldiers <= MAX_SOLDIERS_PER_CLIENT:
+        return []
+    folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="ttes-loadtest-"))
+    path = Path(folder) / "server.toml"
+    path.write_text(f"max_soldiers_per_client = {soldiers}\n", encoding="utf-8")
+    return ["--config", str(path)]
+
+
 def run_loadtest(cfg: LoadTestConfig, progress: Progress | None = None) -> dict[str, Any]:
     """Run a load test (or a ramp) as configured; returns the JSON-ready result. ``progress(done_s, total_s,
     stage)`` while each stage runs (warm-up and measurement; a ramp's stages are named ``N=...``)."""
     cfg.check()
+    with contextlib.ExitStack() as stack:
+        return _run_loadtest(cfg, stack, progress)
+
+
+def _run_loadtest(
+    cfg: LoadTestConfig, stack: contextlib.ExitStack, progress: Progress | None
+) -> dict[str, Any]:
     server: ServerProcess | None = None
     server_cpu: Callable[[], float] | None
     try:
         if cfg.spawn_server:
-            server = spawn_server(server_args(cfg.rate_hz, cfg.throttle), data=cfg.server_data)
+            args = server_args(cfg.rate_hz, cfg.throttle) + _owner_limit(cfg.soldiers, stack)
+            server = spawn_server(args, data=cfg.server_data)
             host, port = server.host, server.port
             server_cpu = server.cpu_seconds
         else:
