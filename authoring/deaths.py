@@ -113,7 +113,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         knee_damping=4.0,
         toss=120.0,
         knee_straighten=0.5,
-        hip_damping=12.0,
+        hip_damping=13.0,
         arm_tone=0.08,
     ),
     DeathSpec(
