@@ -15,7 +15,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    key's, legs straight and feet pointed, :func:`limp_pose`) fading to a faint tone by
    :attr:`DeathSpec.fade`; the knees give way at once (:data:`KNEES_GIVE_WAY`: held, they swung the shins up
    as the body pitched forward) but stay damped harder until he is down (:attr:`DeathSpec.knee_damping`:
-   limp, they flung the shins up as he hit the ground and dragged the feet), arms, neck and head keep no
+   limp, they flung the shins up as he hit the ground and dragged the feet) — standing at the trigger, his
+   hips, waist and lower back too (:attr:`DeathSpec.hip_damping`: landing on his chest, the legs whipped up
+   over it, shins straight up and the feet 81 cm over the pelvis, issue 14) and his knees straighten from
+   :attr:`DeathSpec.knee_straighten` on — arms, neck and head keep no
    tone (:data:`LOOSE`; :attr:`DeathSpec.arm_tone`: a faint one, so a soldier on his side lays his arm
    down instead of leaving it up in the air); dead joints stay damped;
    once he is down (after :attr:`DeathSpec.fade`, over :data:`KNEE_STRAIGHTEN`) the legs roll outward at
@@ -95,11 +98,24 @@ class DeathSpec:
     knee_damping: float = 1.0  # the knees' damping is this many times stronger until he is down
     arm_tone: float = 0.0  # the fraction of the arms' gain kept when dead (toward the DEAD key's arms)
     toss: float = TOSS  # N, the hands fling the rifle they let go of this hard (he must not land on it)
+    knee_straighten: float | None = None  # s, a standing death's knees start straightening (None: at fade)
+    hip_damping: float = 1.0  # the hips', waist's and lower back's (FALL_STIFF) damping: this many times
+    # stronger until he is down
 
 
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0),
-    DeathSpec("stfire2dead", "STAND_FIRE", 120.0, (0.0, -0.3, -1.0), knee_damping=4.0, toss=120.0),
+    DeathSpec(
+        "stfire2dead",
+        "STAND_FIRE",
+        120.0,
+        (0.0, -0.3, -1.0),
+        knee_damping=4.0,
+        toss=120.0,
+        knee_straighten=0.5,
+        hip_damping=13.0,
+        arm_tone=0.08,
+    ),
     DeathSpec(
         "kstow2dead",
         "KNEEL_STOWED",
@@ -182,6 +198,7 @@ KNEE_TONE = 0.3  # a standing death's knees straighten with this once he is down
 KNEE_STRAIGHTEN = 1.0  # s: bottom-up on his knees), slowly after DeathSpec.fade (quickly, the shins kick up)
 KNEE_DAMPING_FADE = 0.3  # s: after DeathSpec.fade the knees' extra damping fades this fast
 KNEES_GIVE_WAY = 0.15  # s: after the slump the knees go limp this fast
+FALL_STIFF = ("hip", "waist", "vl")  # the joints DeathSpec.hip_damping damps (vl: the lumbar vertebrae)
 DAMPING = 0.1  # joint damping = DAMPING * gain (s), at least MIN_DAMPING
 MIN_DAMPING = 4.0
 
@@ -254,6 +271,14 @@ def _face_down(doll) -> float:
     return _smoothstep((down - FACE_DOWN[0]) / (FACE_DOWN[1] - FACE_DOWN[0]))
 
 
+def _straightened(spec: DeathSpec, t: float, rolled: float) -> float:
+    """How far a standing death's knees have straightened at ``t``: as far as the legs have rolled outward
+    (``rolled``), or from the spec's own :attr:`DeathSpec.knee_straighten` on."""
+    if spec.knee_straighten is None:
+        return rolled
+    return _smoothstep((t - spec.knee_straighten) / KNEE_STRAIGHTEN)
+
+
 def _smoothstep(u: float) -> float:
     u = min(1.0, max(0.0, u))
     return u * u * (3.0 - 2.0 * u)
@@ -277,13 +302,15 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     rolled_ref = np.clip(limp_pose(doll.kin, dead.poses[SOLDIER], rolled=True)[jm.dof], lo, hi)
     slump_ref = np.clip(slump_pose(doll.kin, spec, keys)[jm.dof], lo, hi)
     knees = np.array([n.endswith("knee") for n in names])
+    trunk = np.array([n.endswith(FALL_STIFF) or n.startswith(FALL_STIFF) for n in names])
     loose = [n.endswith(LOOSE) for n in names]
     legs = [n.endswith(LEGS) for n in names]
     arms = np.array([n.endswith(("clavicle", "shoulder", "elbow")) for n in names])
     tone = np.where(spine, SPINE_TONE, np.where(loose, np.where(arms, spec.arm_tone, 0.0), TONE))
     # once he is down the legs roll outward (hips, ankles) and, standing deaths only, the knees straighten
     # (straightened, a fallen kneeling soldier's knees drag his feet along the ground)
-    settle = np.where(legs, LEG_TONE - TONE, 0.0) + (KNEE_TONE - TONE) * knees * (spec.slump == "all")
+    settle = np.where(legs, LEG_TONE - TONE, 0.0)
+    straighten = (KNEE_TONE - TONE) * knees * (spec.slump == "all")
 
     # the hit's direction in the world (MuJoCo frame): the pelvis' heading, horizontal
     pelvis = doll.body_global("lower_torso")
@@ -329,12 +356,14 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             if us > 0.0:
                 ref = ref + us * (rolled_ref - dead_ref)
                 g = g + settle * us
+            g = g + straighten * _straightened(spec, t, us)
         model.jnt_stiffness[jm.jnt] = gain * g
         model.qpos_spring[jm.qpos] = ref
         damping = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
         # until he is down the knees are damped harder (limp, they flung the shins up as he hit the ground)
         fall = 1.0 - _smoothstep((t - spec.fade) / KNEE_DAMPING_FADE)
-        model.dof_damping[jm.qvel] = damping * np.where(knees, 1.0 + (spec.knee_damping - 1.0) * fall, 1.0)
+        extra = np.where(knees, spec.knee_damping - 1.0, np.where(trunk, spec.hip_damping - 1.0, 0.0))
+        model.dof_damping[jm.qvel] = damping * (1.0 + extra * fall)
 
     # the living soldier's muscles carry his limbs and the rifle: gravity fed forward on every joint whose
     # limb does not rest on the ground (and an upward pull on the held rifle), fading as he slumps, so the

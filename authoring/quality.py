@@ -27,6 +27,10 @@ Per clip (a channelset bound to its soldier figure and rifle):
   base-posture ends of locomotion clips), the fastest site (body and rifle) over the first/last
   ``END_FRAMES`` frames: things ease in and out, deaths end at rest.
 * ``joint_limit_violations`` (float32 slack allowed) and ``max_frame_jump_deg`` (pops, IK flips).
+* ``feet_up_cm`` — while the chest faces the ground (the upper torso's front pointing down, cosine at least
+  ``FACE_DOWN_COS``), how far the higher foot's lowest node is above the pelvis' lowest node: a body falling
+  or lying face down with its shins straight up (a ragdoll's knees whipping) reads as a scorpion, not a
+  soldier; prone, crawling and dead bodies keep their feet down (not judged if the chest never faces down).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
   recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
   cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
@@ -41,7 +45,8 @@ Across clips, along every posture graph, at each posture node:
 * resting postures rest (``REST_PARTS``; ``NAME@variant`` is a variant of ``NAME``): at every endpoint the
   weight-bearing parts' lowest nodes are on the ground, ``rest_contact_cm`` (prone: chest or belly and both
   forearms; kneeling: the right kneecap; crawl: both kneecaps and forearms; DEAD: the lowest point, the
-  pelvis and the chest or belly) and, DEAD only, ``rest_foot_cm`` (each foot's heel and lowest node).
+  pelvis and the chest or belly) and, DEAD only, ``rest_foot_cm`` (each foot's heel and lowest node),
+  ``rest_head_cm`` (the head's lowest node) and ``rest_arm_cm`` (the highest arm part's lowest node).
 
 :func:`check_library` returns one object per clip, one per posture node and a ``summary`` with, per threshold,
 the limit, the worst value, where it happened and pass/fail. Playing clips on figures lives in
@@ -88,6 +93,7 @@ THRESHOLDS: dict[str, float] = {
     "end_speed_m_s": 0.5,
     "joint_limit_violations": 0.0,
     "max_frame_jump_deg": 20.0,
+    "feet_up_cm": 20.0,
     **POSTURE_LIMITS,
 }
 POSTURE_KEYS = tuple(POSTURE_LIMITS)
@@ -99,6 +105,7 @@ GAIT_LIMITS: dict[str, dict[str, tuple[float, float] | None]] = {
     "bwalk": {"gait_speed_m_s": None, "gait_steps_per_s": None},
 }
 STEPS_PER_CYCLE_CLIP = {"crawl": 2}  # gait.py cuts one step per cycle clip; crawl.py one full cycle
+FACE_DOWN_COS = 0.5  # the chest's front points down at least this much (cosine): he lies face down
 CONTACT_HEIGHT_CM = 1.25  # a 1 cm skim is contact; a toe leaving the ground at 2 cm is not
 END_FRAMES = 3  # frames over which an end's speed is measured
 LIMIT_SLACK = 1e-4  # rad / cm: float32 rounding of recorded angles
@@ -139,6 +146,23 @@ def rifle_pitch_jump(butt: np.ndarray, muzzle: np.ndarray, fps: float) -> tuple[
     change = np.abs(pitch[w:] - pitch[:-w])
     at = int(np.argmax(change))
     return float(change[at]), at, at + w
+
+
+def feet_up(kin, segg: np.ndarray, heights: np.ndarray, parts: np.ndarray) -> dict[str, Any]:
+    """``feet_up_cm`` and where: the higher foot's lowest node above the pelvis' lowest node (cm) in the
+    frames where the chest faces the ground (``segg`` segment globals ``(n, nseg, 4, 4)``, ``heights`` the
+    mesh nodes' ``(n, k)``, ``parts`` theirs); None when it never does (or the figure lacks the parts)."""
+    if "upper_torso" not in kin.segment_names or not {"pelvis", *FOOT_PARTS} <= set(parts):
+        return {"feet_up_cm": None}
+    down = segg[:, kin.segment_names.index("upper_torso"), 1, 2] >= FACE_DOWN_COS  # front (-Z) down
+    if not down.any():
+        return {"feet_up_cm": None}
+    pelvis = heights[:, parts == "pelvis"].min(axis=1)
+    feet = np.stack([heights[:, parts == f].min(axis=1) for f in FOOT_PARTS], axis=1) - pelvis[:, None]
+    frames = np.flatnonzero(down)
+    f, side = np.unravel_index(int(np.argmax(feet[frames])), (len(frames), 2))
+    at = int(frames[f])
+    return {"feet_up_cm": round(float(feet[at, side]), 3), "feet_up_where": f"{FOOT_PARTS[side]}[{at}]"}
 
 
 def ground_shift(cs: Channelset, locomotion: bool, direction: float | None = None) -> np.ndarray:
@@ -237,6 +261,7 @@ def check_clip(
     foot_down = [(pts[:, parts == f, 1] <= CONTACT_HEIGHT_CM).any(axis=1) for f in FOOT_PARTS]
     out["stance_phases"] = sum(1 for row in foot_down for a, b in _runs(row) if b - a >= 3)
     ys = pts[..., 1]
+    out.update(feet_up(kin, segg, ys, parts))
     low = np.unravel_index(int(np.argmin(ys)), ys.shape)
     out["ground_penetration_cm"] = round(max(0.0, -float(ys[low])), 3)
     out["lowest_segment"] = kin.segment_names[int(segs[low[1]])]

@@ -1,5 +1,11 @@
 """Posture nodes of the motion library for the quality check: arcs that arrive and leave must agree
-(continuity, a clip's own ``end_offset`` taken out) and resting postures must rest on the ground."""
+(continuity, a clip's own ``end_offset`` taken out) and resting postures must rest on the ground.
+
+A dead body also lies slack (DEAD only): ``rest_head_cm``, the head's lowest node (a head held up on a hand
+18 cm over the ground is a live prone soldier's; a dead one lies on its cheek, or on an arm), and
+``rest_arm_cm``, the highest of the arms' parts (upper arm, forearm, hand; each by its lowest node: a slack
+arm lies on the ground or on the body, at most a supine chest's height, one raised over the head is posed).
+"""
 
 from __future__ import annotations
 
@@ -21,7 +27,10 @@ POSTURE_LIMITS: dict[str, float] = {
     "continuity_rifle_cm": 1.0,
     "rest_contact_cm": 2.0,
     "rest_foot_cm": 15.0,
+    "rest_head_cm": 10.0,
+    "rest_arm_cm": 25.0,
 }
+ARM_PARTS = tuple(f"{side}_{p}" for side in ("left", "right") for p in ("upper_arm", "forearm", "hand"))
 # weight-bearing parts of resting postures ("chest|belly": either of them)
 REST_PARTS: dict[str, tuple[str, ...]] = {
     "PRONE": ("chest|belly", "left_forearm", "right_forearm"),
@@ -29,6 +38,11 @@ REST_PARTS: dict[str, tuple[str, ...]] = {
     "CRAWL": ("left_kneecap", "right_kneecap", "left_forearm", "right_forearm"),
     "DEAD": ("lowest", "pelvis", "chest|belly"),
 }
+
+
+# the resting rows' metrics and the key naming where each was measured
+REST_KEYS = (("rest_contact", "rest_part"), ("rest_foot", "rest_foot"), ("rest_head", "rest_head"),
+             ("rest_arm", "rest_arm"))  # fmt: skip
 
 
 def offset_transform(offset: tuple[float, float, float] | None) -> np.ndarray:
@@ -106,7 +120,20 @@ def rest_endpoint(cf: ClipFrames, frame: int, figures: FigureSet, kind: str) -> 
         side = max(feet, key=lambda s: feet[s]) if feet else None
         row["rest_foot_cm"] = None if side is None else round(feet[side], 3)
         row["rest_foot"] = None if side is None else f"{side}_foot"
+        row.update(_slack(lows))
     return row
+
+
+def _slack(lows: Mapping[str, float]) -> dict[str, Any]:
+    """A dead body's head and arms lie down (the module docstring): their heights, None if it lacks them."""
+    arms = [p for p in ARM_PARTS if p in lows]
+    arm = max(arms, key=lambda p: lows[p]) if arms else None
+    return {
+        "rest_head_cm": round(lows["head"], 3) if "head" in lows else None,
+        "rest_head": "head",
+        "rest_arm_cm": None if arm is None else round(lows[arm], 3),
+        "rest_arm": arm,
+    }
 
 
 def _endpoint(clips: Mapping[int, ClipFrames], token: int, forward: bool, arrive: bool) -> dict[str, Any]:
@@ -157,7 +184,7 @@ def check_continuity(
                     seen[(e["clip"], e["frame"])] = rest_endpoint(e["cf"], e["frame"], figures, kind)
             rest = list(seen.values())
             row.update(rest=rest, rest_kind=kind)
-            for key, part in (("rest_contact", "rest_part"), ("rest_foot", "rest_foot")):
+            for key, part in REST_KEYS:
                 judged = [r for r in rest if r.get(f"{key}_cm") is not None]
                 if judged:
                     w = max(judged, key=itemgetter(f"{key}_cm"))

@@ -426,7 +426,7 @@ def test_resting_postures_rest(tmp_path: Path, figset: FigureSet, holding, capsy
     floating = rows["DEAD@kneel"]  # a variant of DEAD, hovering 6 cm
     assert floating["rest_kind"] == "DEAD"
     assert floating["rest_contact_cm"] == pytest.approx(6.0 + dead["rest_contact_cm"], abs=0.01)
-    assert floating["failures"] == ["rest_contact_cm"]
+    assert floating["failures"] == ["rest_contact_cm", "rest_head_cm"]  # the head 6 cm up too (10.5)
     feet_up = rows["DEAD@fall"]  # head on the ground, body and heels up a 17 degree slope
     assert feet_up["rest_foot_cm"] > 30.0 and "rest_foot_cm" in feet_up["failures"]
     assert feet_up["rest_foot_where"].startswith(f"tilted.chset[{N - 1}]")  # a backward arc leaves there
@@ -446,7 +446,7 @@ def test_resting_postures_rest(tmp_path: Path, figset: FigureSet, holding, capsy
         assert [c["name"] for c in out["clips"]] == ["hover.chset"]
         nodes = {r["posture"]: r for r in out["continuity"]}
         assert set(nodes) == {"STAND_STOWED", "DEAD@kneel"}
-        assert nodes["DEAD@kneel"]["failures"] == ["rest_contact_cm"]
+        assert nodes["DEAD@kneel"]["failures"] == ["rest_contact_cm", "rest_head_cm"]
         assert out["summary"]["thresholds"]["rest_contact_cm"]["failing"] == 1
     assert main(["author", "check", "--graphs", str(graph), "--only", "tilted"]) == 1  # heels up at DEAD@fall
     assert "FAIL soldier_low:DEAD@fall rest_foot_cm" in capsys.readouterr().out

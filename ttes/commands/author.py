@@ -152,6 +152,7 @@ CHECK_COLUMNS = (  # (metric, header, width, format)
     ("rifle_pitch_jump_deg", "r.ptch", 6, ".1f"),
     ("end_speed_m_s", "v.end", 6, ".2f"),
     ("max_frame_jump_deg", "jump", 6, ".1f"),
+    ("feet_up_cm", "feetup", 6, ".1f"),
 )
 
 
@@ -186,7 +187,7 @@ def print_check_table(result: dict) -> None:
     for r in result["continuity"]:
         if not r["pass"]:
             for k in r["failures"]:
-                where = r.get("rest_contact_where") if k == "rest_contact_cm" else r.get("rest_foot_where")
+                where = r.get(f"{k.removesuffix('_cm')}_where")
                 if k.startswith("continuity"):
                     where = ", ".join(r["worst_pair"])
                 value = _shown(r[k])
