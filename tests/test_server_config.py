@@ -92,8 +92,8 @@ def test_event_logger_carries_fields(caplog: pytest.LogCaptureFixture) -> None:
 
 
 def test_docker_files_match_the_cli() -> None:
-    """docker/Dockerfile runs `ttes server --config /etc/ttes/server.toml` (docker/server.toml, no data_dir: the
-    install's own data) and pings with `ttes ping`."""
+    """docker/Dockerfile runs `ttes server --config /etc/ttes/server.toml` (docker/server.toml, no data_dir:
+    the install's own data) and pings with `ttes ping`."""
     import re
 
     from ttes.cli import build_parser
