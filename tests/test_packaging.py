@@ -90,3 +90,14 @@ def test_an_install_reads_the_wheels_copy_first(tmp_path: Path) -> None:
 
 def test_without_data_the_answer_is_still_a_path_that_errors_name(tmp_path: Path) -> None:
     assert find_data_root((tmp_path / "a", tmp_path / "b")) == tmp_path / "b"
+
+
+def test_the_stubs_spawned_server_serves_the_shipped_library() -> None:
+    """`ttes stub --spawn-server` (and so `ttes demo`) used a synthetic stand-in because it looked for the
+    start-up script at the data root; it lives in posture_graphs/, on the server's search path."""
+    import contextlib
+
+    from ttes.commands.stub import _server_data_dir
+
+    with contextlib.ExitStack() as stack:
+        assert _server_data_dir(stack) == ttes.paths.ROOT
