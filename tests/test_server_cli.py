@@ -76,7 +76,7 @@ def test_server_refuses_bad_settings_before_listening(
 ) -> None:
     bad = tmp_path / "ttes.toml"
     bad.write_text("tick_hz = -3\n")
-    assert main(["server", "--config", str(bad)]) == 2
+    assert main(["server", "--config", str(bad)]) == 1  # a file that cannot be used: a runtime error
     assert "tick_hz: -3 is outside" in capsys.readouterr().err
-    assert main(["server", "--data-dir", str(tmp_path), "--port", "0"]) == 2
+    assert main(["server", "--data-dir", str(tmp_path), "--port", "0"]) == 1
     assert "start-up script 'jack-ttes-soldier_low.jcl' not found" in capsys.readouterr().err

@@ -11,6 +11,7 @@ reckoning agree.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -83,8 +84,10 @@ def run_headless(
     realtime: bool = False,
     tour: bool = True,
     quiet: bool = True,
+    progress: Callable[[float, float], None] | None = None,
 ) -> dict:
-    """Render ``seconds`` of the stub to ``out`` (``.mp4``/``.gif`` video, or ``.png``: the last frame)."""
+    """Render ``seconds`` of the stub to ``out`` (``.mp4``/``.gif`` video, or ``.png``: the last frame);
+    ``progress(t, seconds)`` after each frame (a progress bar)."""
     import imageio.v2 as imageio
 
     renderer = app.renderer
@@ -128,7 +131,11 @@ def run_headless(
         rendered += 1
         if video:
             frames.append(frame)
+        if progress is not None:
+            progress(t, seconds)
     wall = time.perf_counter() - start
+    if progress is not None and not app.gave_up:
+        progress(seconds, seconds)  # done (the last frame shows t = seconds - 1/fps)
     if video and frames:
         # a real-time run plays back at the rate it achieved, so the video's time is the scene's time
         rate = fps if not realtime else max(1.0, min(fps, rendered / max(wall, 1e-6)))
