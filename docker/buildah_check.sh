@@ -77,7 +77,7 @@ grep -o '"data_dir": "[^"]*"' "$OUT/server.log"
 run ttes stub --host 127.0.0.1 --port "$PORT" --headless --seconds 3 --fps 5 --size 320x240 --out /out/stub.png
 run ttes crowd --headless --host 127.0.0.1 --port "$PORT" --soldiers 20 --seconds 1 --size 320x240 \
     --out /out/crowd.png | tail -1
-run ttes gateway --interface 0.0.0.0 --dis-port "$((PORT + 1))" --host 127.0.0.1 --port "$PORT" --seconds 2 \
+run ttes gateway --listen 0.0.0.0 --dis-port "$((PORT + 1))" --host 127.0.0.1 --port "$PORT" --seconds 2 \
     | tail -1
 MNT="$("${B[@]}" mount "$CTR")"
 cp "$MNT/out/stub.png" "$MNT/out/crowd.png" "$OUT/"
