@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench fuzz lint install clean authoring-deps
+.PHONY: demo test bench fuzz lint install clean authoring-deps wheel-check docker-lock
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,6 +20,18 @@ demo: $(STAMP)
 # The habits first (each a few seconds): ruff (style, complexity), mypy (types), import-linter (layers).
 test: lint
 	$(PY) -m pytest -q
+
+# The wheel as a user installs it: built, installed into a fresh venv outside the checkout, and run from an
+# empty folder (server, ping, headless stub, crowd, replay). Needs no .venv; CI runs it (.ci/run).
+wheel-check:
+	PYTHON=$(PYTHON) bash .ci/wheel_check.sh
+
+# The image's pinned dependencies with their hashes (the wheel's [stub] extra, Python 3.11, Debian bookworm):
+# after a change to pyproject.toml's dependencies. Needs uv (`pip install uv` anywhere on PATH).
+docker-lock:
+	uv pip compile pyproject.toml --extra stub --generate-hashes --python-version 3.11 \
+	    --python-platform x86_64-manylinux_2_36 --custom-compile-command "make docker-lock" \
+	    -o docker/requirements.lock
 
 fuzz: $(STAMP)
 	HYPOTHESIS_PROFILE=fuzz $(PY) -m pytest -q -m fuzz

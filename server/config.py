@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from protocol.events import DEFAULT_MAX_SOLDIERS
+from server.data_root import DATA_ROOT
 
-# the repository root (or an installed checkout): where figures/, channelsets/, posture_graphs/ live
-DEFAULT_DATA_DIR = Path(__file__).resolve().parent.parent
+DEFAULT_DATA_DIR = DATA_ROOT  # the checkout's root, or an install's copy of the shipped data folders
 DEFAULT_STARTUP_SCRIPT = "jack-ttes-soldier_low.jcl"
 MAX_SOLDIERS_LIMIT = 65536
 # the environment variable of each role's token (ttes server; the env wins over the config file)

@@ -29,6 +29,7 @@ from typing import Any
 from peabody.model import Environment, Figure
 from protocol.events import DEFAULT_MAX_SOLDIERS
 from protocol.update_table import UpdateTable
+from server.data_root import SEARCH_SUBDIRS
 from server.jcl import JclError, JclInterpreter
 from server.logging import get_logger
 from server.motion.binding import protofiletype
@@ -47,7 +48,6 @@ from server.world.synthetic import SyntheticDataDir, write_synthetic_data_dir
 
 __all__ = ["FigureSet", "ServerWorld", "SyntheticDataDir", "WorldEvents", "write_synthetic_data_dir"]
 
-SEARCH_SUBDIRS = ("figures", "channelsets", "posture_graphs")
 DEFAULT_REPORT_INTERVAL = 30.0
 log = get_logger("startup")
 

@@ -1,7 +1,9 @@
-"""docker/compose.yaml and the image's server config with tokens (issue 17 follow-up): there is no Docker
-engine on the development machines, so the files are checked as data. Compose passes the user's
-``TTES_TOKEN`` to the server (its controller token, and to its healthcheck ping) and to the stub, refusing to
-start without it; the image's config plus that environment passes ``check_exposure`` (it binds 0.0.0.0)."""
+"""docker/: compose.yaml, the Dockerfile, the lock and .dockerignore checked as data (the development machines
+have no Docker engine; docker/buildah_check.sh builds and runs the image there with buildah, by hand). Compose
+passes the user's ``TTES_TOKEN`` to the server (its controller token, and to its healthcheck ping), the stub
+and the gateway, refusing to start without it; the image's config plus that environment passes
+``check_exposure`` (it binds 0.0.0.0). One image for every service; the stub writes into a volume the image's
+user owns."""
 
 from __future__ import annotations
 
@@ -73,3 +75,68 @@ def test_dockerfile_healthcheck_pings_with_the_token_from_the_environment() -> N
     (check,) = re.findall(r"HEALTHCHECK .*?CMD (\[.*?\])", text, re.S)
     args = build_parser().parse_args(json.loads(check)[1:])
     assert args.command == "ping" and args.token is None  # so TTES_TOKEN is sent
+
+
+def test_one_image_for_every_service_built_once() -> None:
+    services = _compose()
+    image = services["server"]["image"]
+    assert services["server"]["build"]["dockerfile"] == "docker/Dockerfile"
+    for name in ("stub", "gateway"):
+        assert services[name]["image"] == image and "build" not in services[name], name
+
+
+def test_gateway_hears_udp_3000_on_every_interface_and_sends_the_token() -> None:
+    gateway = _compose()["gateway"]
+    args = build_parser().parse_args(gateway["command"][1:])
+    assert (args.command, args.interface, args.dis_port, args.host, args.port) == (
+        "gateway", "0.0.0.0", 3000, "server", 7000
+    )  # fmt: skip
+    assert gateway["ports"] == ["3000:3000/udp"]
+    server_env = _compose()["server"]["environment"]
+    assert gateway["environment"]["TTES_TOKEN"] == server_env["TTES_CONTROLLER_TOKEN"]
+    assert "network_mode: host" in (DOCKER / "compose.yaml").read_text(encoding="utf-8")  # the broadcast note
+
+
+def test_stub_writes_into_a_volume_the_image_user_owns() -> None:
+    """A bind mount of ./out would be created root-owned by the engine; a named volume starts as a copy of the
+    image's /out, which the Dockerfile makes the uid 1000 user's."""
+    stub = _compose()["stub"]
+    (volume,) = stub["volumes"]
+    name, target = volume.split(":")
+    assert "/" not in name and name in yaml.safe_load((DOCKER / "compose.yaml").read_text())["volumes"]
+    assert stub["command"][stub["command"].index("--out") + 1].startswith(target + "/")
+    text = (DOCKER / "Dockerfile").read_text(encoding="utf-8")
+    assert "--uid 1000 ttes" in text and re.search(rf"install -d -o ttes -g ttes [^\n]*{target}\b", text)
+
+
+def test_dockerfile_base_is_pinned_and_installs_the_lock_with_hashes() -> None:
+    text = (DOCKER / "Dockerfile").read_text(encoding="utf-8")
+    (base,) = re.findall(r"^ARG BASE=(\S+)$", text, re.M)
+    assert re.fullmatch(r"python:3\.11\.\d+-slim-bookworm(@sha256:[0-9a-f]{64})?", base), base
+    assert re.search(r"pip install --require-hashes --no-deps -r \S*requirements\.lock", text)
+    assert "pip check" in text
+
+
+def _requirement_names(specs: list[str]) -> set[str]:
+    return {re.split(r"[<>=!~\[; ]", s, maxsplit=1)[0].lower().replace("_", "-") for s in specs}
+
+
+def test_lock_pins_every_dependency_of_the_server_and_the_stub_extra_with_hashes() -> None:
+    import tomllib
+
+    project = tomllib.loads((DOCKER.parent / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    wanted = _requirement_names(project["dependencies"] + project["optional-dependencies"]["stub"])
+    lock = (DOCKER / "requirements.lock").read_text(encoding="utf-8")
+    pinned = dict(re.findall(r"^([A-Za-z0-9_.-]+)==(\S+) \\\n\s+--hash=sha256:", lock, re.M))
+    assert wanted <= {name.lower().replace("_", "-") for name in pinned}, wanted - set(pinned)
+    assert pinned["PyOpenGL".lower()] == "3.1.10"  # pyproject pins it exactly
+
+
+def test_dockerignore_sends_the_wheels_sources_and_nothing_else() -> None:
+    lines = [ln for ln in (DOCKER.parent / ".dockerignore").read_text().splitlines() if ln and ln[0] != "#"]
+    assert lines[0] == "*"  # everything out, then the wheel's inputs back in (setup.py, docker/Dockerfile)
+    kept = {ln[1:].rstrip("/") for ln in lines if ln.startswith("!")}
+    wheel_inputs = {"pyproject.toml", "setup.py", "README.md", "figures", "channelsets", "posture_graphs"}
+    code = {"peabody", "protocol", "server", "authoring", "client_stub", "ttes"}
+    assert wheel_inputs | code | {"docker/requirements.lock", "docker/server.toml"} <= kept
+    assert not kept & {".venv", ".git", "out", "tests", "bench"}

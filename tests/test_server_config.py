@@ -92,14 +92,16 @@ def test_event_logger_carries_fields(caplog: pytest.LogCaptureFixture) -> None:
 
 
 def test_docker_files_match_the_cli() -> None:
-    """docker/Dockerfile runs `ttes server --config docker/server.toml` and pings with `ttes ping`."""
+    """docker/Dockerfile runs `ttes server --config /etc/ttes/server.toml` (docker/server.toml, no data_dir:
+    the install's own data) and pings with `ttes ping`."""
     import re
 
     from ttes.cli import build_parser
 
     repo = Path(__file__).resolve().parents[1]
     c = load_config(repo / "docker" / "server.toml")
-    assert (c.host, c.port, c.data_dir) == ("0.0.0.0", 7000, Path("/srv/ttes"))
+    assert (c.host, c.port, c.data_dir) == ("0.0.0.0", 7000, DEFAULT_DATA_DIR)
+    assert "COPY docker/server.toml /etc/ttes/server.toml" in (repo / "docker" / "Dockerfile").read_text()
     text = (repo / "docker" / "Dockerfile").read_text()
     parser = build_parser()
     for cmd in re.findall(r"CMD (\[.*?\])", text):
@@ -107,7 +109,7 @@ def test_docker_files_match_the_cli() -> None:
         assert argv[0] == "ttes"
         args = parser.parse_args(argv[1:])  # exits (SystemExit) on an option the CLI lacks
         if args.command == "server":
-            assert args.config == "/srv/ttes/docker/server.toml"
+            assert args.config == "/etc/ttes/server.toml"
         else:
             assert (args.command, args.port) == ("ping", c.port)
     compose = (repo / "docker" / "compose.yaml").read_text()

@@ -1,10 +1,10 @@
-"""Where the shipped data folders live (the repository root, or an installed checkout)."""
+"""Where the shipped data folders live: the checkout's root, or an install's copy (``server.data_root``)."""
 
 from __future__ import annotations
 
-from pathlib import Path
+from server.data_root import DATA_ROOT
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = DATA_ROOT
 FIGURES = ROOT / "figures"
 CHANNELSETS = ROOT / "channelsets"
 POSTURE_GRAPHS = ROOT / "posture_graphs"

@@ -37,13 +37,12 @@ from client_stub.crowd.lod import (
     visible,
 )
 from client_stub.crowd.sources import CrowdState
+from client_stub.data_paths import CROWD_DATA, STUB_DATA
 from client_stub.link.auth import Credentials
 from client_stub.stub.scene_graph import FigureGraph
 from client_stub.stub.tips import TipsFigure, load_tips
 
 log = logging.getLogger("ttes.crowd")
-STUB_DATA = Path(__file__).resolve().parent.parent / "data"
-CROWD_DATA = Path(__file__).resolve().parent / "data"
 NEAR_TIPS = CROWD_DATA / "soldier.tips"
 MID_TIPS = STUB_DATA / "DI.tips"
 RIFLE_TIPS = STUB_DATA / "AK_47.tips"

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from client_stub.data_paths import STUB_DATA
 from client_stub.link.buffer import UpdateBatch
 from client_stub.link.client import LinkError
 from client_stub.stub.action import action_points, follow_action, soldier_labels
@@ -53,7 +54,6 @@ if TYPE_CHECKING:
     from client_stub.renderer import StubBackend
 
 log = logging.getLogger("ttes.stub")
-DATA = Path(__file__).resolve().parent.parent / "data"
 DEFAULT_FIGURE = "DI.fig"
 WEAPONS = {Force.FRIENDLY: "M16.fig", Force.OPPOSING: "AK_47.fig"}
 
@@ -111,7 +111,7 @@ class StubApp:
         terrain: Terrain,
         source: SoldierSource | None = None,
         *,
-        data_dir: str | os.PathLike[str] = DATA,
+        data_dir: str | os.PathLike[str] = STUB_DATA,
         artic_dir: str | os.PathLike[str] | None = None,
         capacity: int = 16,
         max_soldiers: int = 64,

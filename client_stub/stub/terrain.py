@@ -17,10 +17,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from client_stub.data_paths import DEFAULT_TERRAIN
 from client_stub.stub.ground import GroundQuery
 from protocol import coords
-
-DEFAULT_TERRAIN = Path(__file__).resolve().parent.parent / "data" / "village.glb"
 
 
 class TerrainError(ValueError):

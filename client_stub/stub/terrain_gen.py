@@ -22,12 +22,13 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from client_stub.data_paths import DEFAULT_TERRAIN
+
 SEED = 1994
 HALF = 150.0  # the terrain spans [-HALF, HALF]^2 metres
 GRID = 3.0  # ground mesh spacing, metres
 STOREY = 3.0
-DATA = Path(__file__).resolve().parent.parent / "data"
-DEFAULT_OUT = DATA / "village.glb"
+DEFAULT_OUT = DEFAULT_TERRAIN
 
 GRASS = (0.36, 0.47, 0.23)
 FIELD = (0.55, 0.55, 0.30)

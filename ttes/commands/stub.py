@@ -264,12 +264,14 @@ STARTUP_SCRIPT = "jack-ttes-soldier_low.jcl"
 
 
 def _server_data_dir(stack: contextlib.ExitStack) -> Path:
-    """The repository's data dir when it holds the start-up script, else a temporary stand-in."""
+    """The shipped data dir (the checkout's, or an install's copy) when the start-up script is on its search
+    path (it lives in posture_graphs/), else a temporary stand-in."""
     import tempfile
 
     import ttes.paths
+    from server.data_root import SEARCH_SUBDIRS
 
-    if (ttes.paths.ROOT / STARTUP_SCRIPT).is_file():
+    if any((ttes.paths.ROOT / sub / STARTUP_SCRIPT).is_file() for sub in ("", *SEARCH_SUBDIRS)):
         return ttes.paths.ROOT
     tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="ttes-stub-server-")))
     return stand_in_data_dir(tmp)
