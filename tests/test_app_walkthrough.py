@@ -296,6 +296,29 @@ async def test_a_request_between_ticks_is_reflected_before_the_next_tick(
         assert server.world.manager.stats["answers"] == 1
 
 
+async def test_a_start_asked_just_before_a_tick_is_reflected_in_its_answer(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Issue 16: kneel -> stand asked 1 ms before a tick. The answer samples the clip 1 ms in; its eased,
+    still first frames used to send the kneeling pose again (nothing new on the wire until a later tick).
+    The start now begins at its first moving frame: the first update already stands up."""
+    async with running_server(throttle=0.0) as server:
+        c = await watching(server)
+        await c.requests(index=0, appearance=A.KNEEL, weapon=W.DEPLOYED)
+        with trio.move_on_at(server._t0 + 3.0):  # kneels (1.6 s), then rests
+            while True:
+                await c.next_event()
+        kneeling = c.pose(1, 0)[0].copy()
+        await trio.sleep_until(server._t0 + 3.01)
+        nxt = server.next_tick
+        assert 3.01 < nxt <= 3.01 + 1 / 30
+        await trio.sleep_until(server._t0 + nxt - 0.001)
+        await c.requests(index=0, appearance=A.UPRIGHT, weapon=W.DEPLOYED)
+        ev = await c.expect(JointUpdates)
+        assert server.now() < nxt and ev.indices.tolist() == [0]  # the answer, before the tick
+        assert np.abs(ev.dofs[0] - kneeling).max() >= STEP  # already moving
+
+
 async def largest_jump_on_interrupt(blend_time: float) -> float:
     """Walk, then kneel mid-step: the largest per-tick change of any DOF the client sees (radians)."""
     async with running_server(throttle=0.0) as server:
