@@ -33,7 +33,7 @@ from server.soldier.library import PathStep
 REVERSAL_DEG = 135.0  # a walking figure this far from its new heading stops, pivots and walks away
 BACKWARD_MAX_SPEED = 1.0  # m/s: a velocity straight back faster than people walk backwards is walked forwards
 BACKWARD_HYSTERESIS = 0.2  # m/s: walking away forwards, he faces his velocity down to the limit - this
-COUNTER_REST_DEG = 40.0  # a pivot may turn a clip this much less than it turns (over a flat carrying foot)
+COUNTER_REST_DEG = 35.0  # a pivot may turn a clip this much less than it turns (over a flat carrying foot)
 REVERSAL_TURN_SPEEDUP = 2.5  # the pivot plays the 180° turn in place this many times faster (3.4 s -> 1.4 s)
 
 
@@ -96,8 +96,8 @@ class Turning(ManagerCore):
     def _pivot_clip(self, want: float) -> tuple[int, float]:
         """A pivot's turn clip: the nearest, unless that leaves MIN_TURN_DEG or more to turn after it and a
         clip turning the asked way at most COUNTER_REST_DEG more than asked exists: that one, its excess
-        turned back over it (a 140° reversal: the 180° pivot less 40°, not the 180° and then a 45° turn back,
-        which overshot the heading by 40° and turned back after the walk start)."""
+        turned back over it (a 150° reversal: the 180° pivot less 30°, not the 180° and then a 45° turn back,
+        which swung 30° past the heading and back after the walk start, and slid 2.3 cm)."""
         clip, turn = self._nearest_turn(want)
         if abs((turn - want + 180.0) % 360.0 - 180.0) < MIN_TURN_DEG:
             return clip, turn
