@@ -169,10 +169,17 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     weight = {side: _fade(m_h[side]) * prone + crawling[side] for side in SIDES if side in m_h}
     if not weight or not any(w.any() for w in weight.values()):
         return np.zeros(len(q))
+    # put at the master's height, up or down: crawling, and prone where a forearm comes down for good in a
+    # clip that ends lying with the rifle in his hands (crawl2prstow; not a death, which lets go of it)
+    settles = bool(prone[-1] > 0.5 and held_rifle[-1] > 0.5)
+    follow = {
+        side: crawling[side] + settles * _landing(m_h[side]) * _fade(m_h[side]) * prone for side in weight
+    }
     sites = kin.site_globals(q, loc)
     elbows = {side: sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3] for side in weight}
     planted = {
-        side: _planted_tracks(elbows[side], m_h[side] <= CONTACT_CM, crawling[side] > 0) for side in weight
+        side: _planted_tracks(elbows[side], m_h[side] <= CONTACT_CM, crawling[side] > 0, settles)
+        for side in weight
     }
     held = {s: sites[:, kin.site_names.index(s)] for s in [f"{side}_palm.palmcenter" for side in weight]}
     held["bottom_head.sight"] = sites[:, kin.site_names.index("bottom_head.sight")]
@@ -191,8 +198,8 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
             for side, w in weight.items():
                 aim = m_h[side] - AIM_BELOW_CM
                 aim = np.where(m_h[side] <= CONTACT_CM, aim, np.maximum(aim, CONTACT_CM))
-                need = (w - crawling[side]) * np.maximum(0.0, s_h[side] - np.maximum(aim, 0.0))
-                need += crawling[side] * (s_h[side] - np.maximum(m_h[side], 0.0))  # up or down
+                need = (w - follow[side]) * np.maximum(0.0, s_h[side] - np.maximum(aim, 0.0))
+                need += follow[side] * (s_h[side] - np.maximum(m_h[side], 0.0))  # up or down
                 elbow = now[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3].copy()
                 elbow[:, 1] -= need
                 track, down = planted[side]
@@ -248,6 +255,23 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     return np.max([w * np.maximum(0.0, s_h[s] - m_h[s]) for s, w in weight.items()], axis=0)
 
 
+def _landing(master: np.ndarray) -> np.ndarray:
+    """Per frame, 1 where the master's forearm (heights ``master``) is down for the rest of the clip after
+    coming down in it (crawl2prstow), easing in over the ``LAND_FRAMES`` before. The slave's follows the
+    master's height there, up or down: DI's forearm, only lowered, landed 4 frames before the master's while
+    the arms still swung the elbow towards its place, and slid 6 cm on the ground."""
+    down = master <= CONTACT_CM
+    n = len(master)
+    up = np.flatnonzero(~down)
+    if not down[-1] or not len(up):
+        return np.zeros(n)
+    u = np.clip(1.0 - (up[-1] + 1 - np.arange(n)) / LAND_FRAMES, 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
+LAND_FRAMES = 12  # a forearm coming down for good follows the master's height from this many frames before
+
+
 def _forearm_aim(master: np.ndarray) -> np.ndarray:
     """How high a prone slave forearm may stay before the rifle comes down for it: ``FOREARM_REST_CM``
     where the master's forearm rests (the check's 2 cm, ``REST_CM``), else as high as the master's."""
@@ -283,28 +307,36 @@ def _settle_rifle(
 
 
 def _planted_tracks(
-    points: np.ndarray, down: np.ndarray, crawling: np.ndarray
+    points: np.ndarray, down: np.ndarray, crawling: np.ndarray, settles: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per frame, where a planted site should stay (``points`` ``(n, 3)``) and the frames that holds in.
 
     Prone, over each run of ``down`` frames its mean position. Crawling (``crawling``, per frame), one place
-    per run too — where it is at the clip's first (last) frame for a run that starts (ends) the clip, so
-    the posture there is kept — eased in and out over ``PLANT_FADE_FRAMES`` either side, so the goal does
-    not jump as the contact starts or ends."""
+    per run too — where it is at the clip's first (last) frame for a run that starts (ends) the clip, so the
+    posture there is kept — eased in and out over ``PLANT_FADE_FRAMES`` either side, so the goal does not jump
+    as the contact starts or ends. With ``settles`` (the clip ends lying, rifle in hand), a prone elbow that
+    comes down and stays down to the clip's end (crawl2prstow) is held like that too, where the clip ends,
+    eased in over ``LAND_FRAMES``: held at the run's mean, its goal jumped there at touchdown and the end
+    frame, solved onto it, slid the forearm 3.9 cm after landing."""
     n = len(points)
     track, eased, hold = points.copy(), points.copy(), np.zeros(n)
     frames = np.arange(n)
+    landing = np.zeros(n, dtype=bool)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], down.astype(np.int8), [0]])))
     for a, b in zip(edges[::2], edges[1::2], strict=True):
         track[a:b] = points[a:b].mean(axis=0)
         place = points[0] if a == 0 else points[-1] if b == n else track[a]
         gap = np.maximum(a - frames, frames - (b - 1)).clip(0)
-        u = np.clip(1.0 - gap / PLANT_FADE_FRAMES, 0.0, 1.0)
+        lands = settles and a > 0 and b == n
+        u = np.clip(1.0 - gap / (LAND_FRAMES if lands else PLANT_FADE_FRAMES), 0.0, 1.0)
         u = u * u * (3.0 - 2.0 * u)
         near = u > hold
         eased[near] = points[near] + u[near, None] * (place - points[near])
         hold[near] = u[near]
-    return np.where(crawling[:, None], eased, track), np.where(crawling, hold > 0, down)
+        if lands:
+            landing |= u > 0
+    eased_here = (crawling > 0) | landing
+    return np.where(eased_here[:, None], eased, track), np.where(eased_here, hold > 0, down)
 
 
 def _holding(slave: Channelset) -> np.ndarray:

@@ -17,7 +17,8 @@ Per frame (all frames of a clip at once):
    tracked from there frame after frame, each frame warm-started from its neighbour's solution; the first
    and last frames stay the frames solved alone, so clips meeting at a posture node agree. A frame solved
    alone is polished by the tracking's own small-step solve (:meth:`MasterSlavePair._polish`), so the
-   tracks leave their end frames on the same branch.
+   tracks leave their end frames on the same branch. Where an arm still leaps near its shoulder's pole and
+   the master's does not, it is eased (:mod:`~authoring.slave_leaps`) and its palms put back.
 
 The sight and elbow goals are balls (:data:`GOAL_RADIUS`, ``ik.Goal.radius``): within 0.9 cm of the master's
 site they count as met. Chased to the millimetre they made the slave pop: prone with the neck at its
@@ -50,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from authoring import ik
+from authoring.slave_leaps import _gaussian, ease_leaps
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
 from server.motion.binding import bind_channelset, protofiletype
@@ -139,6 +141,11 @@ TRACK_SETTLE_ITERATIONS = 20  # the forward and backward tracks' blend put back 
 # reach elbow goal keeps drifting the arm in the palms' null space, with a hop now and then (prone: 3.5 deg
 # at the 4th pass); after 8 passes a pass moves it < 0.2 degrees
 POLISH_PASSES = 8
+# the arms eased where they leap and the master's do not (slave_leaps), and the palms' solve after that
+ARM_CHAINS = tuple(
+    tuple(f"{side}_{j}" for j in ("clavicle", "shoulder", "elbow", "wrist")) for side in ("left", "right")
+)
+EASE_ITERATIONS, EASE_DOF_STEP, EASE_REST_GAIN, EASE_DAMPING = 60, 0.01, 0.5, 3.0
 
 
 @dataclass
@@ -368,9 +375,33 @@ class MasterSlavePair:
         base[:, arms] += taper * (_gaussian(start[:, arms], COPY_SIGMA_FRAMES) - start[:, arms])
         blend = sk.clamp(base + ends + taper * (smooth - ends))
         out = self._track(blend, goals, slave_loc, pose[0], pose[-1])
+        if release_frame is None:  # (a death's arms are flung, then blended into the copied angles)
+            out = self._ease_leaps(out, start, goals, slave_loc)
         out = _let_go(out, start, release_frame)
         out[[0, -1]] = pose[[0, -1]]
         return out, slave_loc
+
+    def _ease_leaps(
+        self, poses: np.ndarray, copied: np.ndarray, goals: list[ik.Goal], roots: np.ndarray
+    ) -> np.ndarray:
+        """The arms eased through the frames where they leap and the master's do not
+        (:mod:`~authoring.slave_leaps`: near their shoulders' pole), and the palms of the eased frames put
+        back in small, heavily damped steps held near the eased pose (undamped, the shoulder's angles near
+        its pole, which turn the arm least, leap again)."""
+        eased = ease_leaps(self.slave_kin, poses, copied, ARM_CHAINS)
+        rows = np.flatnonzero(np.any(eased != poses, axis=1))
+        if not len(rows):
+            return poses
+        # the palms only: the elbow goals, often out of reach, would keep pulling the arms
+        held = [g.rows(rows) for g in goals if g.site in RIFLE_HOLDS]
+        opts: dict[str, Any] = {"tolerance": 0.02}
+        opts.update(self.ik_options)
+        opts.update(iterations=EASE_ITERATIONS, max_dof_step=EASE_DOF_STEP, rest_gain=EASE_REST_GAIN)
+        opts.update(damping=EASE_DAMPING)
+        eased[rows], _ = ik.solve(
+            self.slave_kin, eased[rows], held, roots[rows], rest_pose=eased[rows], **opts
+        )
+        return eased
 
     def _polish(self, poses: np.ndarray, goals: list[ik.Goal], roots: np.ndarray) -> np.ndarray:
         """Lone solves ``poses`` ``(..., ndof)`` carried on by the tracking's own small-step solve until it
@@ -424,16 +455,6 @@ class MasterSlavePair:
         pose, loc = self.slave_pose(self.master_kin.neutral_pose(), self.master.location)
         self.slave_kin.set_pose(pose)
         self.slave.location = loc
-
-
-def _gaussian(values: np.ndarray, sigma: float) -> np.ndarray:
-    """``values`` ``(n, k)`` smoothed along the frames by a Gaussian of ``sigma`` frames (ends held)."""
-    half = int(np.ceil(3.0 * sigma))
-    k = np.arange(-half, half + 1, dtype=np.float64)
-    kernel = np.exp(-0.5 * (k / sigma) ** 2)
-    kernel /= kernel.sum()
-    padded = np.concatenate([np.repeat(values[:1], half, 0), values, np.repeat(values[-1:], half, 0)])
-    return np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(values.shape[1])], 1)
 
 
 RELEASE_FADE_FRAMES = 12  # after the hands let go, the arm goals fade out over this many frames

@@ -223,6 +223,7 @@ def track_solve(
     iterations: int = 40,
     max_dof_step: float = 0.35,
     backward_only: bool = False,
+    forward_only: bool = False,
 ) -> np.ndarray:
     """IK over a clip without jumps between solutions.
 
@@ -232,16 +233,20 @@ def track_solve(
     with an ease-in/ease-out weight, and a short final solve from the blend puts the hands back on the
     rifle with small steps (``max_dof_step``), so it cannot leave the blend's branch. ``backward_only``:
     the track back from the end alone (where the forward one ends on another branch than the end key's,
-    and the backward one comes back to the start key's).
+    and the backward one comes back to the start key's); ``forward_only``: the track from the start alone
+    (the other way round).
     """
     n = len(poses)
     w = (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, n))) / 2.0
-    bwd = _track(kin, poses, goals, roots, np.arange(n)[::-1], iterations, max_dof_step)
-    if backward_only:
-        blend = bwd
+    if forward_only:
+        blend = _track(kin, poses, goals, roots, np.arange(n), iterations, max_dof_step)
     else:
-        fwd = _track(kin, poses, goals, roots, np.arange(n), iterations, max_dof_step)
-        blend = fwd + w[:, None] * (bwd - fwd)
+        bwd = _track(kin, poses, goals, roots, np.arange(n)[::-1], iterations, max_dof_step)
+        if backward_only:
+            blend = bwd
+        else:
+            fwd = _track(kin, poses, goals, roots, np.arange(n), iterations, max_dof_step)
+            blend = fwd + w[:, None] * (bwd - fwd)
     fix_step = 0.1  # rad
     fix = min(fix_step, max_dof_step)  # (small steps: the tracks are on the rifle already, a few steps)
     q, _ = ik.solve(

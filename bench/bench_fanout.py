@@ -11,7 +11,10 @@ every client encodes on its own (the behaviour before), for an A/B on the same m
 ``--in-process`` measures the server's side alone, without sockets or a load generator competing for the
 CPU (for a loaded or small machine): the server's tick and C sessions (observers subscribed to every soldier,
 each reading every tick) in this process, simulated time; reports CPU milliseconds per tick of the tick and
-of the sessions' joint-update encoding, and bytes per soldier-update.
+of the sessions' joint-update encoding, and bytes per soldier-update (every soldier-update after the warm-up
+is of a soldier that moved). ``--protocol 1`` makes the observers speak version 1 (the joint-update format
+before per-entry widths and predicted deltas, docs/PROTOCOL.md §8.5); ``--data shipped`` runs the shipped
+library (channelsets/, posture_graphs/) instead of the synthetic one, for the bytes that real clips give.
 """
 
 from __future__ import annotations
@@ -37,15 +40,23 @@ def main() -> int:
     ap.add_argument("--per-client", action="store_true", help="no shared encodes (TTES_SHARED_ENCODES=0)")
     ap.add_argument("--in-process", action="store_true", help="the server's CPU alone (see above)")
     ap.add_argument("--ticks", type=int, default=60, help="--in-process: measured ticks")
+    ap.add_argument(
+        "--protocol", type=int, default=2, choices=(1, 2), help="--in-process: the observers' version"
+    )
+    ap.add_argument(
+        "--data", choices=("synthetic", "shipped"), default="synthetic", help="--in-process: library"
+    )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     if args.per_client:
         os.environ["TTES_SHARED_ENCODES"] = "0"
 
     if args.in_process:
-        runs = [in_process(args.soldiers, int(c), args.ticks) for c in args.clients.split(",")]
+        runs = [in_process(args.soldiers, int(c), args.ticks, args.protocol, args.data == "shipped")
+                for c in args.clients.split(",")]  # fmt: skip
         out = {"soldiers": args.soldiers, "shared_encodes": not args.per_client, "cpus": os.cpu_count(),
-               "runs": runs}  # fmt: skip
+               "protocol": args.protocol, "data": args.data,
+               "loadavg": [round(x, 2) for x in os.getloadavg()], "runs": runs}  # fmt: skip
         print(json.dumps(out) if args.json else "\n".join(map(str, [out.pop("runs"), out])))
         return 0
     from client_stub.loadtest.session import LoadTestConfig, run_loadtest
@@ -80,7 +91,9 @@ def main() -> int:
     return 0
 
 
-def in_process(soldiers: int, clients: int, ticks: int) -> dict[str, object]:
+def in_process(
+    soldiers: int, clients: int, ticks: int, protocol: int = 2, shipped: bool = False
+) -> dict[str, object]:
     """CPU per tick of the server's tick and of ``clients`` observers' joint-update encoding (no sockets)."""
     import tempfile
 
@@ -97,22 +110,26 @@ def in_process(soldiers: int, clients: int, ticks: int) -> dict[str, object]:
     from server.startup import ServerWorld, write_synthetic_data_dir
 
     tmp = tempfile.TemporaryDirectory(prefix="bench-fanout-")
-    synth = write_synthetic_data_dir(tmp.name, soldiers=1)
-    cfg = ServerConfig(port=0, data_dir=synth.path, startup_script=synth.startup_script, throttle=0.0,
-                       max_soldiers=max(DEFAULT_MAX_SOLDIERS, soldiers), max_requests_per_s=1e9)  # fmt: skip
+    limits = {"throttle": 0.0, "max_soldiers": max(DEFAULT_MAX_SOLDIERS, soldiers), "max_requests_per_s": 1e9}
+    if shipped:
+        cfg = ServerConfig(port=0, **limits)  # type: ignore[arg-type]
+    else:
+        synth = write_synthetic_data_dir(tmp.name, soldiers=1)
+        where = {"data_dir": synth.path, "startup_script": synth.startup_script}
+        cfg = ServerConfig(port=0, **where, **limits)  # type: ignore[arg-type]
     server = TtesServer(cfg, ServerWorld(cfg.data_dir, max_soldiers=cfg.max_soldiers))
     server.start_world()
-    for _ in range(soldiers - 1):
-        server.world.create_soldier("DI.fig", "AK_47.fig")
     m = server.world.manager
     assert m is not None
+    for _ in range(soldiers - int(m.table.alive.sum())):
+        server.world.create_soldier("DI.fig", "AK_47.fig")
     m.apply_requests(mix_requests(soldiers, np.random.default_rng(1)), server.request_time())
     pairs = []
     for k in range(clients):
         s = Session(server.world, server.board_ref, server.config, f"c{k}")
         server.sessions[s.id] = s
         c = Connection(CLIENT, decode_updates=False)
-        s.feed(c.send(Hello(f"c{k}", "observer")))
+        s.feed(c.send(Hello(f"c{k}", "observer", version=protocol)))
         c.receive_data(s.take_output())
         while c.next_event() not in (NEED_DATA, PAUSED):
             pass

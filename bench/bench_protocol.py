@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from protocol.connection import CLIENT, SERVER, Connection
-from protocol.events import Accept, Hello, JointUpdates, Subscribe, UpdateTableMsg
+from protocol.events import PROTOCOL_VERSION, Accept, Hello, JointUpdates, Subscribe, UpdateTableMsg
 from protocol.legacy import packet_floats
 from protocol.update_table import example_di_table
 from protocol.updates import UpdateDecoder, UpdateEncoder, quantise
@@ -56,11 +56,11 @@ class Crowd:
         return dofs, pos, quat
 
 
-def run(ticks: int) -> dict[str, object]:
+def run(ticks: int, protocol: int = PROTOCOL_VERSION) -> dict[str, object]:
     table = example_di_table()
     crowd = Crowd(N)
     idx = np.arange(N)
-    enc, dec = UpdateEncoder(table, N), UpdateDecoder(table, N)
+    enc, dec = UpdateEncoder(table, N, version=protocol), UpdateDecoder(table, N, version=protocol)
 
     full = enc.encode(JointUpdates(1, idx, *crowd.pose(0)), BIG)
     for p in full:
@@ -140,8 +140,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     ap.add_argument("--ticks", type=int, default=20)
+    ap.add_argument("--protocol", type=int, default=PROTOCOL_VERSION, choices=(1, 2), help="update format")
     args = ap.parse_args()
-    r = run(args.ticks)
+    r = run(args.ticks, args.protocol)
     if args.json:
         print(json.dumps(r))
         return 0

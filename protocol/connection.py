@@ -20,6 +20,7 @@ from protocol.entity import ENTITY_REQUEST_DTYPE, MAX_ROWS_PER_FRAME, WIRE_ENTIT
 from protocol.errors import ErrorCode, LocalProtocolError, WireError, is_fatal
 from protocol.events import (
     DEFAULT_MAX_SOLDIERS,
+    PROTOCOL_VERSION,
     Accept,
     ConnectionClosed,
     EntityRequests,
@@ -233,7 +234,7 @@ class Connection:
             self.state = State.CLOSED
         elif isinstance(event, UpdateTableMsg):
             self.tables[event.table.table_id] = event
-            self._decoders[event.table.table_id] = UpdateDecoder(event.table, self.max_soldiers)
+            self._decoders[event.table.table_id] = UpdateDecoder(event.table, self.max_soldiers, self._format)
         elif isinstance(event, SoldierCreated | FigureMsg):
             self._require_tables([event.table])
         elif isinstance(event, Ready):
@@ -355,7 +356,9 @@ class Connection:
         elif isinstance(event, UpdateTableMsg):
             tid = event.table.table_id
             self.tables[tid] = event
-            self._encoders[tid] = UpdateEncoder(event.table, self.max_soldiers, self._shared_encodes)
+            self._encoders[tid] = UpdateEncoder(
+                event.table, self.max_soldiers, self._shared_encodes, self._format
+            )
 
     def _send_updates(self, event: JointUpdates) -> bytes:
         encoder = self._encoders.get(event.table)
@@ -420,6 +423,11 @@ class Connection:
         encode = CODECS[MessageType.ENTITY_REQUESTS][1]
         chunks = [rows[i : i + per_frame] for i in range(0, max(len(rows), 1), per_frame)]
         return b"".join(encode_frame(MessageType.ENTITY_REQUESTS, encode(EntityRequests(c))) for c in chunks)
+
+    @property
+    def _format(self) -> int:
+        """The joint-update format: the version agreed in the handshake (§8 version 1, §8.5 version 2)."""
+        return self.version if self.version is not None else PROTOCOL_VERSION
 
     # -- server helpers -------------------------------------------------------------------------------------
 

@@ -16,8 +16,8 @@ from protocol.figure import WireFigure
 from protocol.framing import DEFAULT_MAX_FRAME
 from protocol.update_table import UpdateTable
 
-PROTOCOL_VERSION = 1
-SUPPORTED_VERSIONS = (1,)
+PROTOCOL_VERSION = 2  # 2: per-entry widths and predicted deltas in JOINT_UPDATES (docs/PROTOCOL.md §8.5)
+SUPPORTED_VERSIONS = (1, 2)
 DEFAULT_MAX_SOLDIERS = 16384
 ROLES = ("observer", "controller", "operator")  # in order of rights: each may do what the one before may
 MAX_CLIENT_ID = 64  # characters of a HELLO client_id

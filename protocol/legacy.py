@@ -1,7 +1,8 @@
 """The 1994 layouts (Figure 11 and the update packet of section 3.7): codecs only.
 
-A library, not a server path: no listener speaks the 1994 protocol yet (issue 17), so a 1994 client cannot
-connect today; these codecs are what such a listener or a gateway would use (docs/PROTOCOL.md §12).
+A library, not a server path, by decision (issue 18): ``ttes server`` has no 1994 listener, since the 1994
+sockets carry no handshake, role or credential and leave the figure form to out-of-band agreement; a gateway
+process for a real 1994 client would use these codecs (docs/PROTOCOL.md §12 gives the reasons).
 
 ``JackPackIn`` (TTES → Jack) is eleven big-endian 32-bit words, 44 bytes::
 

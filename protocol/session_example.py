@@ -18,6 +18,7 @@ from protocol import coords
 from protocol.connection import CLIENT, SERVER, Connection
 from protocol.entity import Appearance, WeaponState, decode_entity_requests, make_entity_requests
 from protocol.events import (
+    PROTOCOL_VERSION,
     Accept,
     ConnectionClosed,
     CreateSoldier,
@@ -43,6 +44,7 @@ from protocol.events import (
 from protocol.figure import figure_from_wire, figure_to_wire
 from protocol.framing import HEADER, encode_frame
 from protocol.messages import CODECS, MessageType, pack_body
+from protocol.predicted import WIDTH_BITS
 from protocol.update_table import DofRange, FigureEntry, JointEntry, UpdateTable
 from protocol.updates import MODE_BITS, UPDATE_HEADER
 
@@ -160,6 +162,14 @@ def example_session(received: list[Event] | None = None) -> list[tuple[str, str,
         "JointUpdates tick 2: soldier 0's hip and knee moved (delta mode), soldier 1 idle (absent)",
         JointUpdates(1, idx, dofs2, pos, quat, tick=2),
     )
+    dofs3, pos3 = dofs2.copy(), pos.copy()
+    dofs3[0] = [0.12, -0.2, 0.05, 0.32]
+    pos3[1, 0, 1] = 0.13
+    s2c(
+        "JointUpdates tick 3: soldier 0's hip and knee moved on as predicted (1-bit residuals), soldier 1's "
+        "figure moved 30 mm (its first delta: the prediction is its current value)",
+        JointUpdates(1, idx, dofs3, pos3, quat, tick=3),
+    )
     c2s("RemoveSoldier 5", RemoveSoldier(5))
     s2c("Error 100 (request error, ref = none): the connection stays open", Error(100, "no soldier 5"))
     c2s("Ping", Ping(7))
@@ -167,12 +177,12 @@ def example_session(received: list[Event] | None = None) -> list[tuple[str, str,
     s2c("Status", Status(10.0, 2, 30.0, "2 soldiers, 30 Hz"))
     c2s("Goodbye", Goodbye("done"))
 
-    srv = Connection(SERVER)  # a client from the future: our Connection would refuse to send version 2
-    hello2 = encode_frame(
-        MessageType.HELLO, CODECS[MessageType.HELLO][1](Hello("future", "observer", 1 << 20, 2))
+    srv = Connection(SERVER)  # a client from the future: our Connection would refuse to send version 3
+    hello3 = encode_frame(
+        MessageType.HELLO, CODECS[MessageType.HELLO][1](Hello("future", "observer", 1 << 20, 3))
     )
-    _pump(srv, hello2)
-    steps.append(("C→S", "another connection: Hello asking for version 2", hello2))
+    _pump(srv, hello3)
+    steps.append(("C→S", "another connection: Hello asking for version 3", hello3))
     steps.append(
         ("S→C", "Error 6 (UNSUPPORTED_VERSION), queued by the connection itself", srv.data_to_send())
     )
@@ -188,9 +198,10 @@ def hexdump(data: bytes) -> list[str]:
     return lines
 
 
-def describe_joint_updates(table: UpdateTable, payload: bytes) -> list[str]:
+def describe_joint_updates(table: UpdateTable, payload: bytes, version: int = PROTOCOL_VERSION) -> list[str]:
     """Field-by-field reading of one JOINT_UPDATES payload (a plain sequential walk, for the document)."""
-    lay = table.layout
+    if version >= 2:
+        return _describe_v2(table, payload)
     tid, tick, count = UPDATE_HEADER.unpack_from(payload)
     lines = [f"table {tid}, tick {tick}, count {count}"]
     at = UPDATE_HEADER.size
@@ -208,30 +219,80 @@ def describe_joint_updates(table: UpdateTable, payload: bytes) -> list[str]:
     pos = ((hbits + 7) // 8) * 8
     lines.append(f"header: {hbits} bits + {pos - hbits} zero padding bits")
     start = pos
-    names = {0: "x", 1: "y", 2: "z", 3: "qidx", 4: "c0", 5: "c1", 6: "c2"}
     for soldier, mode, mask in heads:
         for e, flag in enumerate(mask):
-            if flag != "1":
-                continue
-            entry = table.entries[e]
-            for j in range(int(lay.entry_nfields[e])):
-                f = int(lay.entry_start[e]) + j
-                if mode and lay.is_qidx[f]:
-                    continue
-                w = int(lay.width[f]) if mode == 0 else mode
-                raw = bits[pos : pos + w]
-                v = int(raw, 2)
-                if mode:
-                    v = v - (1 << w) if v >= 1 << (w - 1) else v
-                label = f"dof {j}" if isinstance(entry, JointEntry) else names[j]
-                kind = "delta" if mode else "value"
-                lines.append(f"  soldier {soldier} {entry.name}.{label}: {w:2d} bits {raw:>16} {kind} {v}")
-                pos += w
+            if flag == "1":
+                pos = _describe_entry(table, soldier, e, mode, bits, pos, "delta", lines)
     lines.append(f"fields: {pos - start} bits + {(-(pos - start)) % 8} zero padding bits")
     return lines
 
 
-def describe_frame(table: UpdateTable, frame: bytes) -> list[str]:
+_FIGURE_FIELDS = {0: "x", 1: "y", 2: "z", 3: "qidx", 4: "c0", 5: "c1", 6: "c2"}
+
+
+def _describe_entry(
+    table: UpdateTable, soldier: int, e: int, w: int, bits: str, pos: int, signed: str, lines: list[str]
+) -> int:
+    """Append the reading of entry ``e``'s fields at bit ``pos``: absolute (``w`` = 0) or ``w``-bit signed
+    ``signed`` values (qidx not sent); returns the bit after them."""
+    lay = table.layout
+    entry = table.entries[e]
+    for j in range(int(lay.entry_nfields[e])):
+        f = int(lay.entry_start[e]) + j
+        if w and lay.is_qidx[f]:
+            continue
+        n = w or int(lay.width[f])
+        raw = bits[pos : pos + n]
+        v = int(raw, 2)
+        if w:
+            v = v - (1 << n) if v >= 1 << (n - 1) else v
+        label = f"dof {j}" if isinstance(entry, JointEntry) else _FIGURE_FIELDS[j]
+        lines.append(
+            f"  soldier {soldier} {entry.name}.{label}: {n:2d} bits {raw:>16} {signed if w else 'value'} {v}"
+        )
+        pos += n
+    return pos
+
+
+def _describe_v2(table: UpdateTable, payload: bytes) -> list[str]:
+    """The reading of a version-2 payload (§8.5): header, width nibbles, then each entry's fields."""
+    tid, tick, count = UPDATE_HEADER.unpack_from(payload)
+    lines = [f"table {tid}, tick {tick}, count {count}"]
+    at = UPDATE_HEADER.size + 2 * count
+    indices = struct.unpack_from(f">{count}H", payload, UPDATE_HEADER.size)
+    nent = len(table.entries)
+    bits = "".join(f"{b:08b}" for b in payload[at:])
+    heads = []
+    for i, soldier in enumerate(indices):
+        rec = bits[i * (1 + nent) : (i + 1) * (1 + nent)]
+        heads.append((soldier, int(rec[0]), rec[1:]))
+        lines.append(f"header soldier {soldier}: mode {rec[0]}, entry mask {rec[1:]}")
+    hbits = count * (1 + nent)
+    pos = -(-hbits // 8) * 8
+    lines.append(f"header: {hbits} bits + {pos - hbits} zero padding bits")
+    widths: list[list[int]] = []
+    nib = 0
+    for soldier, mode, mask in heads:
+        row = []
+        for e, flag in enumerate(mask):
+            if mode and flag == "1":
+                row.append(int(bits[pos + WIDTH_BITS * nib : pos + WIDTH_BITS * (nib + 1)], 2))
+                lines.append(f"width soldier {soldier} {table.entries[e].name}: {row[-1]}")
+                nib += 1
+        widths.append(row)
+    if nib:
+        lines.append(f"widths: {nib} nibbles + {4 * (nib & 1)} zero padding bits")
+    pos += -(-nib // 2) * 8
+    start = pos
+    for (soldier, mode, mask), row in zip(heads, widths, strict=True):
+        present = [e for e, flag in enumerate(mask) if flag == "1"]
+        for e, w in zip(present, row if mode else [0] * len(present), strict=True):
+            pos = _describe_entry(table, soldier, e, w, bits, pos, "residual", lines)
+    lines.append(f"fields: {pos - start} bits + {(-(pos - start)) % 8} zero padding bits")
+    return lines
+
+
+def describe_frame(table: UpdateTable, frame: bytes, version: int = PROTOCOL_VERSION) -> list[str]:
     """A reading of one frame: its header, then its body decoded (msgpack as JSON, binary field by field)."""
     length, mtype = HEADER.unpack_from(frame)
     name = MessageType(mtype).name
@@ -256,7 +317,7 @@ def describe_frame(table: UpdateTable, frame: bytes) -> list[str]:
         lines += [f"    {json.dumps(e)}," for e in entries]
         lines.append("]}")
     elif mtype == MessageType.JOINT_UPDATES:
-        lines += describe_joint_updates(table, payload)
+        lines += describe_joint_updates(table, payload, version)
     elif mtype == MessageType.FIGURE:
         lines += _describe_figure(msgpack.unpackb(payload))
     else:

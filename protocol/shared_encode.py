@@ -62,6 +62,7 @@ class Encoded:
     state: int
     last: Held
     known: Held
+    before: Held  # version 2's prediction state (no rows in version 1)
 
 
 def digest(indices: np.ndarray) -> bytes:
@@ -90,6 +91,7 @@ class SharedEncodes:
             for e in self._encodes.values():
                 e.last.drop()
                 e.known.drop()
+                e.before.drop()
             self._encodes.clear()
             self._resets.clear()
             self._groups.clear()
@@ -108,6 +110,7 @@ class SharedEncodes:
         """Memoise an encode; the memo holds its arrays (``take``) until the version changes."""
         encoded.last.take()
         encoded.known.take()
+        encoded.before.take()
         self._encodes[(state, *rows)] = encoded
 
     def group(self, rows: tuple[object, ...], state: int, owner: object) -> tuple[int, object]:

@@ -11,7 +11,8 @@ JOINT_UPDATES payload (docs/PROTOCOL.md §8)::
     | field bits: the changed entries' fields, soldier by soldier, zero-padded to a byte
 
 mode 0 = absolute quantised values; mode k in 1..15 = every field is a k-bit two's-complement delta from the
-receiver's current value (qidx fields are not sent and stay as they were).
+receiver's current value (qidx fields are not sent and stay as they were). That is protocol version 1;
+version 2 (per-entry widths, predicted deltas) is :mod:`protocol.predicted`, chosen by ``version``.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import struct
 
 import numpy as np
 
+from protocol import predicted
 from protocol.bitpack import (
     be_words,
     group_size,
@@ -29,7 +31,7 @@ from protocol.bitpack import (
     split_groups,
 )
 from protocol.errors import ErrorCode, WireError
-from protocol.events import DEFAULT_MAX_SOLDIERS, JointUpdates
+from protocol.events import DEFAULT_MAX_SOLDIERS, PROTOCOL_VERSION, SUPPORTED_VERSIONS, JointUpdates
 from protocol.shared_encode import FRESH, JOIN_RETRY, Encoded, Held, SharedEncodes, digest
 from protocol.update_table import UpdateTable
 
@@ -168,15 +170,22 @@ class UpdateEncoder:
         table: UpdateTable,
         max_soldiers: int = DEFAULT_MAX_SOLDIERS,
         shared: SharedEncodes | None = None,
+        version: int = PROTOCOL_VERSION,
     ) -> None:
         self.table = table
         self.max_soldiers = max_soldiers
-        self._hlast = Held(np.zeros((max_soldiers, table.layout.nfields), np.int32))
+        self.version = _checked(version)
+        nf = table.layout.nfields
+        self._hlast = Held(np.zeros((max_soldiers, nf), np.int32))
         self._hknown = Held(np.zeros(max_soldiers, bool))
+        ncols = predicted.state_columns(nf) if version >= 2 else 0
+        self._hbefore = Held(np.zeros((max_soldiers if version >= 2 else 0, ncols), np.int32))  # prediction
+        self._tick = 0  # the tick of the last encode (version 2's join compares the state it predicts from)
         self._plan = _Plan(table)
         self.shared = shared  # the server's memo: encoders in one state share one encode per version
         self.state = FRESH  # this encoder's state id in ``shared`` (equal ids: equal content)
         self._join_after = 0  # encodes before trying to join a group whose content may equal this one's
+        self._quick_retry = True  # version 2: may compare again at the next encode (see _try_join)
         self._sent = np.zeros(0, np.int64)  # the rows the last encode sent
 
     @property
@@ -187,6 +196,11 @@ class UpdateEncoder:
     @property
     def _known(self) -> np.ndarray:
         return self._hknown.array
+
+    @property
+    def _before(self) -> np.ndarray:
+        """Version 2: (max_soldiers, F + 1) the prediction state (``predicted.state_columns``)."""
+        return self._hbefore.array
 
     def reset(self, indices: np.ndarray | list[int] | None = None) -> None:
         """Forget what these soldiers (all if None) last sent: their next update is full."""
@@ -254,15 +268,17 @@ class UpdateEncoder:
         """:meth:`_encode_sorted` through the shared memo (same bytes, one diff-and-pack per state)."""
         shared = self.shared
         assert shared is not None
-        rows = (id(self.table), digest(idx), tick, max_payload)
+        rows = (id(self.table), self.version, digest(idx), tick, max_payload)
         hit = shared.lookup(self.state, rows, version)
         if hit is not None:  # same state, same rows, same codes: same bytes; adopt the state it led to
-            self._adopt(hit.last, hit.known)
+            self._adopt(hit.last, hit.known, hit.before)
+            self._tick = tick
             self.state = hit.state
             return list(hit.payloads)
         payloads = self._encode_sorted(idx, q, tick, max_payload)
         new = shared.new_id()
-        shared.store(self.state, rows, Encoded(tuple(payloads), new, self._hlast, self._hknown))
+        held = (self._hlast, self._hknown, self._hbefore)
+        shared.store(self.state, rows, Encoded(tuple(payloads), new, *held))
         self.state = new
         self._try_join(rows)
         return payloads
@@ -278,27 +294,42 @@ class UpdateEncoder:
         if self._join_after > 0:
             self._join_after -= 1
             return
-        if np.array_equal(self._known, first._known) and np.array_equal(
+        same = np.array_equal(self._known, first._known) and np.array_equal(
             self._last[self._known], first._last[first._known]
-        ):
+        )
+        if same and (self.version < 2 or self._predicts_as(first)):
             self.state = first_state
-            self._adopt(first._hlast, first._hknown)
+            self._adopt(first._hlast, first._hknown, first._hbefore)
+            self._quick_retry = True
+        elif same and self._quick_retry:
+            # version 2: a keyframe restarts the joiner's prediction (before = cur), so its ``before`` equals
+            # the group's only after one more encode: compare again then, once
+            self._quick_retry = False
         else:
             self._join_after = JOIN_RETRY
 
-    def _adopt(self, last: Held, known: Held) -> None:
+    def _predicts_as(self, first: UpdateEncoder) -> bool:
+        """Version 2: both predict alike from now on. Only soldiers updated at this tick may predict from
+        ``before`` at the next; every other soldier's ``before`` is never used again."""
+        now = predicted.tick_code(self._tick)
+        mine = self._known & (self._before[:, -1] == now)
+        theirs = first._known & (first._before[:, -1] == now)
+        return np.array_equal(mine, theirs) and np.array_equal(self._before[mine], first._before[theirs])
+
+    def _adopt(self, last: Held, known: Held, before: Held) -> None:
         """Share another encoder's state arrays (equal content) instead of keeping our own."""
         self._hlast.drop()
         self._hknown.drop()
-        self._hlast, self._hknown = last.take(), known.take()
+        self._hbefore.drop()
+        self._hlast, self._hknown, self._hbefore = last.take(), known.take(), before.take()
 
     def _encode_sorted(self, idx: np.ndarray, q: np.ndarray, tick: int, max_payload: int) -> list[bytes]:
         """The frames for sorted, distinct, non-empty ``idx``; records what was sent in ``_sent``."""
-        plan, lay = self._plan, self.table.layout
+        plan = self._plan
+        self._tick = tick
         known = self._known[idx]
-        delta = q - self._last[idx]
-        diff = delta != 0
-        changed = plan.changed(diff)
+        last = self._last[idx]
+        changed = plan.changed(q != last)
         if not known.all():
             changed[~known] = True
         send = changed.any(axis=1)
@@ -306,42 +337,58 @@ class UpdateEncoder:
             if not send.any():
                 self._sent = idx[:0]
                 return []
-            idx, q, delta, diff, changed, known = (a[send] for a in (idx, q, delta, diff, changed, known))
+            idx, q, last, changed, known = (a[send] for a in (idx, q, last, changed, known))
+        if self.version >= 2:
+            rows = predicted.encode_rows(
+                self.table.layout, plan.cols, q, last, self._before[idx], known, changed, tick
+            )
+        else:
+            rows = self._rows_v1(q, last, changed, known)
+        payloads = self._chunks(idx, rows, tick, max_payload)
+        self._hlast, self._hknown = self._hlast.writable(), self._hknown.writable()
+        self._last[idx] = q
+        self._known[idx] = True
+        if self.version >= 2:
+            self._hbefore = self._hbefore.writable()
+            self._before[idx] = rows.state
+        self._sent = idx
+        return payloads
+
+    def _rows_v1(
+        self, q: np.ndarray, last: np.ndarray, changed: np.ndarray, known: np.ndarray
+    ) -> predicted.Rows:
+        """Version 1: one width ``k`` per soldier (its widest delta), or absolute."""
+        plan, lay = self._plan, self.table.layout
+        delta = q - last
         # smallest k holding every delta: bit length of max(d, -d - 1) plus a sign (unchanged fields are 0)
         mag = np.maximum(delta.max(axis=1), ~delta.min(axis=1))
         k = np.frexp(mag.astype(np.float64))[1] + 1
-        qidx_moved = diff[:, lay.qidx_fields].any(axis=1)
+        qidx_moved = (delta[:, lay.qidx_fields] != 0).any(axis=1)
         changed_i = changed.view(np.uint8)
         delta_bits = k * (changed_i @ plan.ndelta)
         abs_bits = changed_i @ plan.absbits
         absolute = ~known | qidx_moved | (k > MAX_DELTA_BITS) | (delta_bits >= abs_bits)
         mode = np.where(absolute, 0, k)
-        row_bits = np.where(absolute, abs_bits, delta_bits)
-        widths = plan.widths(absolute, k, np.take(changed_i, plan.entry_of, axis=1))
-        values = np.where(absolute[:, None], q, delta)  # deltas keep their sign bits: the packer drops them
-        payloads = self._chunks(idx, mode, changed_i, row_bits, values, widths, tick, max_payload)
-        self._hlast, self._hknown = self._hlast.writable(), self._hknown.writable()
-        self._last[idx] = q
-        self._known[idx] = True
-        self._sent = idx
-        return payloads
+        header = np.empty((len(q), MODE_BITS + changed.shape[1]), np.uint8)
+        np.bitwise_and(mode.astype(np.uint8)[:, None] >> plan.mode_shift, 1, out=header[:, :MODE_BITS])
+        header[:, MODE_BITS:] = changed_i
+        return predicted.Rows(
+            header=header,
+            nibbles=np.zeros(0, np.uint8),
+            nibble_count=np.zeros(len(q), np.int64),
+            row_bits=np.where(absolute, abs_bits, delta_bits),
+            values=np.where(absolute[:, None], q, delta),  # deltas keep their sign bits: the packer drops
+            widths=plan.widths(absolute, k, np.take(changed_i, plan.entry_of, axis=1)),
+            state=last[:0],
+        )
 
-    def _chunks(
-        self,
-        idx: np.ndarray,
-        mode: np.ndarray,
-        changed: np.ndarray,
-        row_bits: np.ndarray,
-        values: np.ndarray,
-        widths: np.ndarray,
-        tick: int,
-        max_payload: int,
-    ) -> list[bytes]:
+    def _chunks(self, idx: np.ndarray, rows: predicted.Rows, tick: int, max_payload: int) -> list[bytes]:
         """Split rows into frames; pack all frames' fields in one pass (each frame's body word-aligned)."""
         plan = self._plan
-        nent = changed.shape[1]
-        per_row = 16 + MODE_BITS + nent + row_bits  # index + header + fields
-        capacity = (max_payload - UPDATE_HEADER.size - 2) * 8  # 2 bytes slack for the two paddings
+        row_bits = rows.row_bits
+        per_row = 16 + rows.header.shape[1] + predicted.WIDTH_BITS * rows.nibble_count + row_bits
+        slack = 3 if self.version >= 2 else 2  # bytes for the paddings of the header, widths, fields
+        capacity = (max_payload - UPDATE_HEADER.size - slack) * 8
         if capacity < int(per_row.max()):
             raise ValueError(f"max_payload {max_payload} cannot hold one soldier update")
         cum = np.concatenate([[0], np.cumsum(per_row)])
@@ -357,35 +404,49 @@ class UpdateEncoder:
         for f in range(len(bounds) - 1):
             a, b = bounds[f], bounds[f + 1]
             row_start[a:b] += frame_word[f] * 64 - fbits[a]
-        groups, gwidth = merge_groups(plan.padded(values), widths, plan.g)
+        groups, gwidth = merge_groups(plan.padded(rows.values), rows.widths, plan.g)
         starts = np.cumsum(gwidth, axis=1)
         starts -= gwidth
         starts += row_start[:, None]
         body = place_groups(groups, starts, int(frame_word[-1])).astype(">u8").tobytes()
-        hdr = np.empty((len(idx), MODE_BITS + nent), np.uint8)
-        np.bitwise_and(mode.astype(np.uint8)[:, None] >> plan.mode_shift, 1, out=hdr[:, :MODE_BITS])
-        hdr[:, MODE_BITS:] = changed
         index = idx.astype(">u2").tobytes()
+        nib_at = np.concatenate([[0], np.cumsum(rows.nibble_count)])
         out: list[bytes] = []
         for f in range(len(bounds) - 1):
             a, b = bounds[f], bounds[f + 1]
             at = int(frame_word[f]) * 8
+            widths = b""
+            if self.version >= 2:
+                widths = predicted.pack_nibbles(rows.nibbles[nib_at[a] : nib_at[b]])
             out.append(
                 UPDATE_HEADER.pack(self.table.table_id, tick & 0xFFFFFFFF, b - a)
                 + index[2 * a : 2 * b]
-                + np.packbits(hdr[a:b].reshape(-1)).tobytes()
+                + np.packbits(rows.header[a:b].reshape(-1)).tobytes()
+                + widths
                 + body[at : at + ((int(frame_bits[f]) + 7) >> 3)]
             )
         return out
 
 
+def _checked(version: int) -> int:
+    if version not in SUPPORTED_VERSIONS:
+        raise ValueError(f"protocol version {version} not in {SUPPORTED_VERSIONS}")
+    return version
+
+
 class UpdateDecoder:
     """Client side, one per update table: the current quantised pose of every soldier, updated atomically."""
 
-    def __init__(self, table: UpdateTable, max_soldiers: int = DEFAULT_MAX_SOLDIERS) -> None:
+    def __init__(
+        self, table: UpdateTable, max_soldiers: int = DEFAULT_MAX_SOLDIERS, version: int = PROTOCOL_VERSION
+    ) -> None:
         self.table = table
         self.max_soldiers = max_soldiers
-        self._state = np.zeros((max_soldiers, table.layout.nfields), np.int32)
+        self.version = _checked(version)
+        nf = table.layout.nfields
+        self._state = np.zeros((max_soldiers, nf), np.int32)
+        ncols = predicted.state_columns(nf) if version >= 2 else 0
+        self._before = np.zeros((max_soldiers if version >= 2 else 0, ncols), np.int32)
         self._known = np.zeros(max_soldiers, bool)
         self._plan = _Plan(table)
 
@@ -412,11 +473,7 @@ class UpdateDecoder:
         nf = lay.nfields
         absolute = mode == 0
         widths = plan.widths(absolute, mode, np.take(mask.view(np.uint8), plan.entry_of, axis=1))
-        gwidth = widths.reshape(len(q), -1, plan.g).sum(axis=2, dtype=np.int64)
-        starts = np.cumsum(gwidth.reshape(-1)).reshape(gwidth.shape)  # rows are consecutive in the stream
-        starts -= gwidth
-        starts += bit0
-        vals = split_groups(read_groups(words, starts), widths, plan.g)[:, :nf]
+        vals = _read_fields(plan, words, bit0, widths)[:, :nf]
         sign = np.where(absolute, 0, np.left_shift(1, np.maximum(mode, 1) - 1)).astype(np.int32)[:, None]
         vals ^= sign  # k-bit two's complement: (v ^ 2^(k-1)) - 2^(k-1); absent fields (v = 0) stay 0
         vals -= sign
@@ -434,8 +491,7 @@ class UpdateDecoder:
 
     def decode(self, payload: bytes) -> JointUpdates:
         """Apply one JOINT_UPDATES payload; :class:`WireError` (state untouched) if it is bad in any way."""
-        lay = self.table.layout
-        nent = len(lay.entry_start)
+        nent = len(self.table.layout.entry_start)
         if len(payload) < UPDATE_HEADER.size:
             raise WireError(
                 ErrorCode.MALFORMED_FRAME, "joint updates: payload shorter than its 8-byte header"
@@ -445,7 +501,8 @@ class UpdateDecoder:
             raise WireError(
                 ErrorCode.UNKNOWN_TABLE, f"update for table {table_id} given to table {self.table.table_id}"
             )
-        hbits = count * (MODE_BITS + nent)
+        hwidth = (predicted.MODE_BITS if self.version >= 2 else MODE_BITS) + nent
+        hbits = count * hwidth
         hbytes = (hbits + 7) >> 3
         body_at = UPDATE_HEADER.size + 2 * count + hbytes
         if len(payload) < body_at:
@@ -453,6 +510,21 @@ class UpdateDecoder:
                 ErrorCode.MALFORMED_FRAME,
                 f"joint updates: {count} soldiers need >= {body_at} bytes, got {len(payload)}",
             )
+        indices = self._indices(payload, count)
+        bits = np.unpackbits(np.frombuffer(payload, np.uint8, hbytes, UPDATE_HEADER.size + 2 * count))
+        if bits[hbits:].any():
+            raise WireError(ErrorCode.MALFORMED_FRAME, "joint updates: header padding bits not zero")
+        hdr = bits[:hbits].reshape(count, hwidth)
+        if self.version >= 2:
+            q, mask = self._decode_v2(payload, body_at, indices, hdr, tick)
+        else:
+            q, mask = self._decode_v1(payload[body_at:], indices, hdr)
+        self._state[indices] = q
+        self._known[indices] = True
+        dofs, positions, orientations = dequantise(self.table, q)
+        return JointUpdates(self.table.table_id, indices, dofs, positions, orientations, tick, mask)
+
+    def _indices(self, payload: bytes, count: int) -> np.ndarray:
         indices = np.frombuffer(payload, ">u2", count, UPDATE_HEADER.size).astype(np.int64)
         if count > 1 and (np.diff(indices) <= 0).any():
             row = int(np.flatnonzero(np.diff(indices) <= 0)[0]) + 1
@@ -464,14 +536,11 @@ class UpdateDecoder:
             raise WireError(
                 ErrorCode.BAD_VALUE, f"index >= max_soldiers {self.max_soldiers}", f"soldier row {row}"
             )
-        bits = np.unpackbits(np.frombuffer(payload, np.uint8, hbytes, UPDATE_HEADER.size + 2 * count))
-        if bits[hbits:].any():
-            raise WireError(ErrorCode.MALFORMED_FRAME, "joint updates: header padding bits not zero")
-        hdr = bits[:hbits].reshape(count, MODE_BITS + nent)
-        mode = hdr[:, :MODE_BITS].astype(np.int64) @ (1 << np.arange(MODE_BITS - 1, -1, -1))
-        mask = hdr[:, MODE_BITS:].astype(bool)
-        known = self._known[indices]
-        bad = ~known & ((mode != 0) | ~mask.all(axis=1))
+        return indices
+
+    def _check_first(self, indices: np.ndarray, absolute: np.ndarray, mask: np.ndarray) -> None:
+        """A soldier the receiver holds nothing for must come absolute with every entry."""
+        bad = ~self._known[indices] & (~absolute | ~mask.all(axis=1))
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
             raise WireError(
@@ -479,32 +548,80 @@ class UpdateDecoder:
                 f"soldier {indices[row]}: first update must be absolute (mode 0) with every entry",
                 f"soldier row {row}",
             )
+
+    def _decode_v1(self, body: bytes, indices: np.ndarray, hdr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lay = self.table.layout
+        count = len(indices)
+        mode = hdr[:, :MODE_BITS].astype(np.int64) @ (1 << np.arange(MODE_BITS - 1, -1, -1))
+        mask = hdr[:, MODE_BITS:].astype(bool)
+        self._check_first(indices, mode == 0, mask)
         mask_i = mask.astype(np.int64)
         row_bits = np.where(mode == 0, mask_i @ lay.entry_absbits, mode * (mask_i @ lay.entry_ndelta))
-        total = int(row_bits.sum())
-        body = payload[body_at:]
-        if len(body) != (total + 7) >> 3:
-            raise WireError(
-                ErrorCode.MALFORMED_FRAME,
-                f"joint updates: field bits need {(total + 7) >> 3} bytes, got {len(body)}",
-            )
-        if total & 7 and body[-1] & ((1 << (8 - (total & 7))) - 1):
-            raise WireError(ErrorCode.MALFORMED_FRAME, "joint updates: field padding bits not zero")
+        words = _field_words(body, int(row_bits.sum()))
         q = self._state[indices]
-        words = be_words(body)
         row_start = np.concatenate([[0], np.cumsum(row_bits)])
         step = max(1, DECODE_CHUNK // lay.nfields)  # soldiers per pass: bounded memory for any frame
         for a in range(0, count, step):
             b = min(count, a + step)
             over = self._apply(q[a:b], words, int(row_start[a]), mode[a:b], mask[a:b])
             if over is not None:
-                row = a + over
-                raise WireError(
-                    ErrorCode.BAD_UPDATE,
-                    f"soldier {indices[row]}: value outside its field range",
-                    f"soldier row {row}",
-                )
-        self._state[indices] = q
-        self._known[indices] = True
-        dofs, positions, orientations = dequantise(self.table, q)
-        return JointUpdates(self.table.table_id, indices, dofs, positions, orientations, tick, mask)
+                _out_of_range(indices, a + over)
+        return q, mask
+
+    def _decode_v2(
+        self, payload: bytes, at: int, indices: np.ndarray, bits: np.ndarray, tick: int
+    ) -> tuple[np.ndarray, np.ndarray]:
+        plan, lay = self._plan, self.table.layout
+        mask = bits[:, predicted.MODE_BITS :].astype(bool)
+        if not len(indices):
+            _field_words(payload[at:], 0)  # a count-0 frame is its head alone (§8.2)
+            return self._state[:0], mask
+        delta = bits[:, 0].astype(bool)
+        self._check_first(indices, ~delta, mask)
+        nnib = int(mask[delta].sum())
+        fields_at = at + ((nnib + 1) >> 1)
+        if len(payload) < fields_at:
+            raise WireError(
+                ErrorCode.MALFORMED_FRAME,
+                f"joint updates: {nnib} entry widths need >= {fields_at} bytes, got {len(payload)}",
+            )
+        nibbles, pad_ok = predicted.unpack_nibbles(payload[at:], nnib)
+        if not pad_ok:
+            raise WireError(ErrorCode.MALFORMED_FRAME, "joint updates: width padding bits not zero")
+        hdr = predicted.read_header(lay, plan.cols, bits, nibbles)
+        row_bits = hdr.widths.sum(axis=1, dtype=np.int64)
+        words = _field_words(payload[fields_at:], int(row_bits.sum()))
+        vals = _read_fields(plan, words, 0, hdr.widths)[:, : lay.nfields]
+        new, state = predicted.apply_rows(lay, hdr, vals, self._state[indices], self._before[indices], tick)
+        bad = ((new < 0) | (new > lay.max_code)).any(axis=1)
+        if bad.any():
+            _out_of_range(indices, int(np.flatnonzero(bad)[0]))
+        self._before[indices] = state
+        return new.astype(np.int32), mask
+
+
+def _field_words(body: bytes, total: int) -> np.ndarray:
+    """The field section as :func:`be_words`, after checking its length and padding."""
+    if len(body) != (total + 7) >> 3:
+        raise WireError(
+            ErrorCode.MALFORMED_FRAME,
+            f"joint updates: field bits need {(total + 7) >> 3} bytes, got {len(body)}",
+        )
+    if total & 7 and body[-1] & ((1 << (8 - (total & 7))) - 1):
+        raise WireError(ErrorCode.MALFORMED_FRAME, "joint updates: field padding bits not zero")
+    return be_words(body)
+
+
+def _read_fields(plan: _Plan, words: np.ndarray, bit0: int, widths: np.ndarray) -> np.ndarray:
+    """The unsigned fields (m, C) of consecutive rows of these ``widths``, the first at bit ``bit0``."""
+    gwidth = widths.reshape(len(widths), -1, plan.g).sum(axis=2, dtype=np.int64)
+    starts = np.cumsum(gwidth.reshape(-1)).reshape(gwidth.shape)  # rows are consecutive in the stream
+    starts -= gwidth
+    starts += bit0
+    return split_groups(read_groups(words, starts), widths, plan.g)
+
+
+def _out_of_range(indices: np.ndarray, row: int) -> None:
+    raise WireError(
+        ErrorCode.BAD_UPDATE, f"soldier {indices[row]}: value outside its field range", f"soldier row {row}"
+    )

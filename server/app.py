@@ -40,6 +40,7 @@ import trio
 
 from protocol.connection import State
 from server.config import ConfigError, ServerConfig
+from server.listen import bind_tcp
 from server.logging import get_logger
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
@@ -93,6 +94,7 @@ class TtesServer:
         self._cancel: trio.CancelScope | None = None
         self._nursery: trio.Nursery | None = None
         self._tls = server_context(config)  # None: plain TCP
+        self._bound: list[Any] | None = None  # listening sockets bound by bind(), before serve()
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
         self._loop_thread = threading.get_ident()
@@ -188,6 +190,12 @@ class TtesServer:
             data_dir=str(self.world.data_dir),
         )
 
+    def bind(self) -> None:
+        """Bind the listening sockets now, before :meth:`start_world` loads anything: a port in use fails at
+        once with a ListenError naming host:port (OSError). :meth:`serve` binds when this was not called."""
+        if self._bound is None:
+            self._bound = bind_tcp(self.config.host, self.config.port)
+
     async def serve(self, *, task_status: Any = trio.TASK_STATUS_IGNORED) -> None:
         """Start up, listen, and run until :meth:`shutdown`; ``task_status.started(addresses)``."""
         self._t0 = trio.current_time()
@@ -195,7 +203,9 @@ class TtesServer:
         self._trio_token = trio.lowlevel.current_trio_token()
         check_exposure(self.config)
         self.start_world()
-        listeners = await trio.open_tcp_listeners(self.config.port, host=self.config.host)
+        self.bind()
+        bound, self._bound = self._bound or [], []
+        listeners = [trio.SocketListener(trio.socket.from_stdlib_socket(s)) for s in bound]
         self.addresses = [tuple(ln.socket.getsockname()[:2]) for ln in listeners]
         async with trio.open_nursery() as nursery:
             self._cancel = nursery.cancel_scope

@@ -2,6 +2,8 @@
 
 Operators grep ``event=client_dropped``; log collectors parse ``--json-logs``. Built on the standard library's
 :mod:`logging` (handlers, levels), so tests can capture records with ``caplog`` and read ``record.fields``.
+Every ``ttes`` command logs in this format (``ttes.cli`` hands the formatter to the clients' loggers), and
+values print plainly (``a,b``, ``true``, ``none``), never as Python reprs.
 """
 
 from __future__ import annotations
@@ -16,10 +18,23 @@ from typing import Any, TextIO
 LOGGER_NAME = "ttes.server"
 
 
-def _text(v: Any) -> str:
+def plain(v: Any, depth: int = 0) -> str:
+    """A field's value without Python's reprs: ``a,b`` for a list (``a+b`` one level down: ``DI.fig+AK_47.fig,
+    DI.fig+M16.fig``), ``idle:10,loco:0`` for a dict, ``true``/``false``/``none``, floats to 6 digits."""
+    if v is None or isinstance(v, bool):
+        return {None: "none", True: "true", False: "false"}[v]
     if isinstance(v, float):
         return f"{v:.6g}" if math.isfinite(v) else str(v)
-    s = str(v)
+    sep = "," if depth == 0 else "+"
+    if isinstance(v, dict):
+        return sep.join(f"{k}:{plain(x, depth + 1)}" for k, x in v.items())
+    if isinstance(v, list | tuple | set | frozenset):
+        return sep.join(plain(x, depth + 1) for x in v)
+    return str(v)
+
+
+def _text(v: Any) -> str:
+    s = plain(v)
     if not s or any(c in s for c in ' "=\n\t'):
         return json.dumps(s)
     return s
@@ -33,6 +48,8 @@ class KeyValueFormatter(logging.Formatter):
         ts = time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(record.created)) + f".{int(record.msecs):03d}Z"
         parts = [ts, f"level={record.levelname.lower()}", f"event={_text(record.getMessage())}"]
         parts += [f"{k}={_text(v)}" for k, v in fields.items()]
+        if not record.name.startswith(LOGGER_NAME):  # a client's line (ttes.stub, ttes.link, ...): say whose
+            parts.append(f"src={record.name}")
         if record.exc_info:
             parts.append(f"exc={_text(self.formatException(record.exc_info))}")
         return " ".join(parts)

@@ -348,7 +348,16 @@ class Session:
         reclaimed = self.world.owners.join(self.client_id)
         self.joined = True
         c = self.config
-        self.send(Accept(c.name, c.max_frame, c.max_soldiers, client_id=self.client_id, role=self.role))
+        self.send(
+            Accept(
+                c.name,
+                c.max_frame,
+                c.max_soldiers,
+                version=ev.version,  # the client's: an older client keeps its joint-update format
+                client_id=self.client_id,
+                role=self.role,
+            )
+        )
         log.info(
             "client_accepted",
             session=self.id,

@@ -54,16 +54,16 @@ async def test_handshake_tables_and_ready_list_the_start_up_soldiers(autojump_cl
 async def test_unsupported_version_and_foreign_clients_are_refused(autojump_clock: trio.abc.Clock) -> None:
     async with running_server() as server:
         c = await Client.open(port_of(server), hello=False)
-        # a version-2 HELLO: the connection answers UNSUPPORTED_VERSION and the server closes
+        # a version-3 HELLO: the connection answers UNSUPPORTED_VERSION and the server closes
         from protocol.framing import encode_frame
         from protocol.messages import CODECS, MessageType
 
-        payload = CODECS[MessageType.HELLO][1](Hello("future", "observer", version=2))
+        payload = CODECS[MessageType.HELLO][1](Hello("future", "observer", version=3))
         await c.send_raw(encode_frame(MessageType.HELLO, payload))
         events = await c.until_closed()
         errors = [e for e in c.events if isinstance(e, Error)]
         assert errors and errors[0].code == ErrorCode.UNSUPPORTED_VERSION, events
-        assert "supported: [1]" in errors[0].message
+        assert "supported: [1, 2]" in errors[0].message
         # an HTTP client: the length prefix "GET " is refused after 4 bytes
         h = await Client.open(port_of(server), hello=False)
         await h.send_raw(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
@@ -72,6 +72,30 @@ async def test_unsupported_version_and_foreign_clients_are_refused(autojump_cloc
         # still serving
         ok = await Client.open(port_of(server))
         await ok.expect(Ready)
+
+
+async def test_a_version_1_client_keeps_its_format_beside_a_version_2_client(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Issue 18: version 2 changed JOINT_UPDATES; a version-1 client is answered in version 1 and decodes the
+    same codes as a version-2 client of the same walking soldier (a shared one of the start-up script)."""
+    async with running_server(throttle=0.0) as server:
+        old = await Client.open(port_of(server), "old", version=1)
+        new = await Client.open(port_of(server), "new")
+        assert (old.accept.version, new.accept.version) == (1, 2)
+        for c in (old, new):
+            await c.expect(Ready)
+            await c.send(Subscribe((0,)))
+        await new.requests(index=0, appearance=Appearance.UPRIGHT, velocity=(0.0, 1.4, 0.0), heading=0.0)
+        for c in (old, new):
+            assert len([e for e in await c.drain(2.0) if isinstance(e, JointUpdates)]) >= 20
+        await new.requests(index=0, appearance=Appearance.UPRIGHT, velocity=(0.0, 0.0, 0.0), heading=0.0)
+        for c in (old, new):  # he stops and stands: both end on his resting pose
+            await c.drain(4.0)
+        dec_old, dec_new = old.conn.decoder(1), new.conn.decoder(1)
+        assert dec_old is not None and dec_new is not None
+        assert (dec_old.version, dec_new.version) == (1, 2)
+        assert np.array_equal(dec_old.codes(np.array([0])), dec_new.codes(np.array([0])))
 
 
 async def test_create_subscribe_full_then_deltas_and_idle_costs_nothing(

@@ -297,7 +297,7 @@ def test_cli_channelset_info_json(capsys: pytest.CaptureFixture[str], tmp_path: 
     }
     bad = tmp_path / "bad.chset.env"
     bad.write_text("channelset x { fps = 1; }\n")
-    assert main(["channelset", "info", str(bad)]) == 2
+    assert main(["channelset", "info", str(bad)]) == 1
     assert "bad.chset.env:1" in capsys.readouterr().err
 
 

@@ -20,8 +20,10 @@ from protocol.dis import (
     DisError,
     EntityId,
     EntityStatePdu,
+    EntityStateUpdatePdu,
     EntityType,
     FirePdu,
+    RemoveEntityPdu,
     VariableParameter,
     decode_entity_state,
     decode_entity_states,
@@ -29,8 +31,10 @@ from protocol.dis import (
     encode_appearance,
     encode_detonation,
     encode_entity_state,
+    encode_entity_update,
     encode_fire,
     encode_pdu,
+    encode_remove_entity,
     read_bytes,
 )
 from protocol.dis.synth import udp_frame
@@ -62,6 +66,19 @@ def _seeds() -> list[bytes]:
                 )
             )
         out.append(encode_fire(FirePdu(shooter=EntityId(1, 1, 1), range=5.0, version=version)))
+        out.append(encode_remove_entity(RemoveEntityPdu(EntityId(1, 1, 0), EntityId(1, 2, 4), 9, version)))
+        out.append(
+            encode_entity_update(
+                EntityStateUpdatePdu(
+                    entity_id=EntityId(1, 2, 3),
+                    velocity=(1.0, 2.0, 3.0),
+                    location=(1.1e6, -4.8e6, 3.9e6),
+                    appearance=int(encode_appearance(state=5, weapon1=2)),
+                    variable_parameters=(VariableParameter.articulated(4096, 0.5),) * (version - 5),
+                    version=version,
+                )
+            )
+        )
         out.append(
             encode_detonation(
                 DetonationPdu(

@@ -345,10 +345,16 @@ def test_real_samples_as_a_raw_stream_and_a_capture() -> None:
 
 
 def test_pdu_decoders_are_a_read_only_registry_yielding_typed_events() -> None:
-    from protocol.dis.decoders import DECODERS, Corrupt, EntityStates, PduRows, Weapon
+    from protocol.dis.decoders import DECODERS, Corrupt, EntityStates, Event, PduRows
     from protocol.dis.pdu import PduType
 
-    assert set(DECODERS) == {PduType.ENTITY_STATE, PduType.FIRE, PduType.DETONATION}
+    assert set(DECODERS) == {
+        PduType.ENTITY_STATE,
+        PduType.FIRE,
+        PduType.DETONATION,
+        PduType.REMOVE_ENTITY,
+        PduType.ENTITY_STATE_UPDATE,
+    }
     with pytest.raises(TypeError):
         DECODERS[99] = DECODERS[PduType.FIRE]  # type: ignore[index]
     data = espdu(1) + espdu(2, TANK) + espdu(3)[:100]
@@ -370,5 +376,5 @@ def test_pdu_decoders_are_a_read_only_registry_yielding_typed_events() -> None:
                 np.array([FIRE[0]], np.uint8), np.array([3.0]), True)
     )  # fmt: skip
     (event,) = fire
-    assert isinstance(event, Weapon) and event.row == 7
+    assert isinstance(event, Event) and event.row == 7
     assert event.event.kind == "fire" and event.event.t == 3.0

@@ -24,8 +24,8 @@ from protocol.dis.synth import write_pcap
 
 
 def unknown_pdu() -> bytes:
-    """A well-formed DIS 7 header of PDU type 67 (a type TTES does not read) with a small body."""
-    return HEADER.pack(7, 1, 67, 1, 0, 24, 0, 0) + bytes(12)
+    """A well-formed DIS 7 header of PDU type 26 (Signal, a type TTES does not read) with a small body."""
+    return HEADER.pack(7, 1, 26, 4, 0, 24, 0, 0) + bytes(12)
 
 
 async def test_gateway_over_loopback_udp_drives_the_server_like_a_replay(

@@ -260,7 +260,7 @@ def test_subscribe_all_sees_every_connections_soldiers(server) -> None:
         mix="moving", subscribe_all=True,
     )  # fmt: skip
     r = run_loadtest(cfg)
-    assert r["delivered_pct"] >= 95.0, r["delivered_pct"]
+    assert r["soldiers_seen_min"] == 8, r  # not a delivered percentage: that depends on the machine's load
 
 
 def test_each_connection_is_its_own_client_so_the_per_client_cap_counts_per_connection(tmp_path) -> None:
@@ -277,4 +277,24 @@ def test_each_connection_is_its_own_client_so_the_per_client_cap_counts_per_conn
             soldiers=8, clients=2, seconds=0.8, warmup_s=0.3, host=srv.host, port=srv.port, mix="moving",
         )  # fmt: skip
         r = run_loadtest(cfg)
-    assert r["soldiers"] == 8 and r["delivered_pct"] >= 95.0, r
+    assert r["soldiers"] == 8 and r["soldiers_seen_min"] == 4, r  # each connection sees its own 4
+
+
+def test_ramp_defaults_can_pass(server, capsys) -> None:
+    """Issue 19: `ttes loadtest --spawn-server --ramp` failed its first stage with its own defaults ("largest
+    sustained N = None"): p99 request latency <= 33 ms, less than a request's wait for the next 30 Hz tick
+    plus its first pose (README: p99 49-84 ms on a working server). The default bound is DIS's 100 ms."""
+    from client_stub.loadtest.session import _passes
+    from ttes.cli import build_parser, main
+    from ttes.commands.loadtest import config
+
+    cfg = config(build_parser().parse_args(["loadtest", "--spawn-server", "--ramp"]))
+    assert _passes(cfg, {"delivered_pct": 99.5, "latency_ms_p99": 84.0})  # the README's worst measured p99
+    assert not _passes(cfg, {"delivered_pct": 99.5, "latency_ms_p99": 150.0})
+    # a short ramp with the default criteria on a real server sustains its one stage, and says why not if not
+    argv = ["loadtest", "--port", str(server.port), "--ramp", "--soldiers", "8", "--clients", "2",
+            "--seconds", "2", "--warmup", "1", "--ramp-max-soldiers", "8"]  # fmt: skip
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "largest sustained N = 8" in out, out
+    assert "p99 request latency <= 100 ms" in out

@@ -42,7 +42,7 @@ def test_info_text_and_rifle_length(capsys: pytest.CaptureFixture[str]) -> None:
 def test_info_reports_located_errors(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     bad = tmp_path / "bad.fig"
     bad.write_text("figure f {\n  segment s { psurf = 3; }\n}\n")
-    assert main(["figure", "info", str(bad)]) == 2
+    assert main(["figure", "info", str(bad)]) == 1
     assert f"{bad}:2:23: expected a string or a name" in capsys.readouterr().err
 
 

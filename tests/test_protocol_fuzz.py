@@ -21,6 +21,7 @@ from protocol.connection import CLIENT, NEED_DATA, PAUSED, SERVER, Connection, S
 from protocol.entity import make_entity_requests
 from protocol.errors import ErrorCode, WireError
 from protocol.events import (
+    PROTOCOL_VERSION,
     Accept,
     ConnectionClosed,
     CreateSoldier,
@@ -62,13 +63,13 @@ def _frames(data: bytes) -> list[bytes]:
     return out
 
 
-def _corpus() -> tuple[bytes, list[bytes], bytes, list[bytes]]:
+def _corpus(version: int = PROTOCOL_VERSION) -> tuple[bytes, list[bytes], bytes, list[bytes]]:
     """Valid frames from a real session: (hello, client→server frames, accept, server→client frames)."""
     client, server = Connection(CLIENT), Connection(SERVER, max_soldiers=MAX_SOLDIERS)
-    hello = client.send(Hello("fuzz"))
+    hello = client.send(Hello("fuzz", version=version))
     server.receive_data(hello)
     server.next_event()
-    accept = server.send(Accept("jack", max_soldiers=MAX_SOLDIERS))
+    accept = server.send(Accept("jack", max_soldiers=MAX_SOLDIERS, version=version))
     client.receive_data(accept)
     client.next_event()
     rows = make_entity_requests(
@@ -112,6 +113,7 @@ def _corpus() -> tuple[bytes, list[bytes], bytes, list[bytes]]:
 
 
 HELLO, TO_SERVER, ACCEPT, TO_CLIENT = _corpus()
+V1 = _corpus(1)  # version 1's joint updates (§8.1-8.3) stay fuzzed too
 
 
 @st.composite
@@ -192,18 +194,20 @@ def test_connections_survive_random_and_mutated_frames(
     to_server: bool, data: st.DataObject, eof: bool, chunk: int
 ) -> None:
     """Either side, after a real handshake, fed 1..8 valid/mutated/random frames split at random points."""
-    corpus = TO_SERVER if to_server else TO_CLIENT
+    version = data.draw(st.sampled_from([1, PROTOCOL_VERSION]))
+    hello, to_server_frames, accept, to_client = V1 if version == 1 else (HELLO, TO_SERVER, ACCEPT, TO_CLIENT)
+    corpus = to_server_frames if to_server else to_client
     frame = st.sampled_from(corpus) | mutated(corpus)  # about half the frames stay valid: errors come late
     frames = data.draw(st.lists(frame, min_size=1, max_size=8))
     if to_server:
         conn = Connection(SERVER, max_soldiers=MAX_SOLDIERS)
-        lead = data.draw(st.just(HELLO) | mutated([HELLO]))
+        lead = data.draw(st.just(hello) | mutated([hello]))
     else:
         conn = Connection(CLIENT)
-        conn.send(Hello("fuzz"))
-        lead = data.draw(st.just(ACCEPT) | mutated([ACCEPT]))
+        conn.send(Hello("fuzz", version=version))
+        lead = data.draw(st.just(accept) | mutated([accept]))
         if data.draw(st.booleans()):  # the update table and a full update first, so deltas can apply
-            frames = [TO_CLIENT[0], TO_CLIENT[4], *frames]
+            frames = [to_client[0], to_client[4], *frames]
     stream = lead + b"".join(frames)
     FED["frames"] += len(frames) + 1
     FED["bytes"] += len(stream)

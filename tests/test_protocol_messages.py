@@ -265,7 +265,7 @@ def test_hello_without_the_identity_fields_is_anonymous_and_bad_ids_are_refused(
         {"name": "1994", "role": "controller", "max_frame": 65536}
     )
     (ev,) = deliver(Connection(SERVER), encode_frame(MessageType.HELLO, old))
-    assert ev == Hello("1994", "controller", 65536)
+    assert ev == Hello("1994", "controller", 65536, version=1)
     for bad in ("~anon-1", "x" * 65, "tab\t"):
         body = {"name": "n", "role": "controller", "max_frame": 65536, "client_id": bad}
         frame = encode_frame(MessageType.HELLO, HANDSHAKE_PREFIX.pack(MAGIC, 1) + msgpack.packb(body))

@@ -4,6 +4,7 @@ private per-client encoder sends, whatever the subscription mixes, resets and jo
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,11 +19,12 @@ NMAX = 48
 class Client:
     """One client: a shared encoder, the private reference it must match, and a decoder of what it got."""
 
-    def __init__(self, shared: SharedEncodes, rows: np.ndarray) -> None:
-        self.enc = UpdateEncoder(DI, NMAX, shared)
-        self.ref = UpdateEncoder(DI, NMAX)
-        self.dec = UpdateDecoder(DI, NMAX)
+    def __init__(self, shared: SharedEncodes, rows: np.ndarray, protocol: int = 2) -> None:
+        self.enc = UpdateEncoder(DI, NMAX, shared, protocol)
+        self.ref = UpdateEncoder(DI, NMAX, version=protocol)
+        self.dec = UpdateDecoder(DI, NMAX, protocol)
         self.rows = rows
+        self.protocol = protocol
 
     def reset(self, idx: np.ndarray | None) -> None:
         self.enc.reset(idx)
@@ -42,7 +44,7 @@ def _step(
     """One random event between publishes: a join, a (re)subscription, a reused index, a new row set."""
     ev = int(rng.integers(0, 8))
     if ev == 0:
-        clients.append(Client(shared, groups[int(rng.integers(len(groups)))]))
+        clients.append(Client(shared, groups[int(rng.integers(len(groups)))], clients[0].protocol))
     elif ev == 1 and clients:
         clients[int(rng.integers(len(clients)))].reset(rng.choice(NMAX, 3, replace=False))
     elif ev == 2:
@@ -56,8 +58,10 @@ def _step(
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32), st.integers(1, 5), st.sampled_from([1 << 16, 300]))
-def test_shared_encoding_is_byte_identical_to_per_client(seed: int, nclients: int, max_payload: int) -> None:
+@given(st.integers(0, 2**32), st.integers(1, 5), st.sampled_from([1 << 16, 300]), st.sampled_from([1, 2, 0]))
+def test_shared_encoding_is_byte_identical_to_per_client(
+    seed: int, nclients: int, max_payload: int, protocol: int
+) -> None:
     rng = np.random.default_rng(seed)
     shared = SharedEncodes()
     # visibility / subscription mixes: everything, one owner's soldiers, the others', a random subset
@@ -67,7 +71,11 @@ def test_shared_encoding_is_byte_identical_to_per_client(seed: int, nclients: in
         np.arange(1, NMAX, 2),
         np.sort(rng.choice(NMAX, 20, False)),
     ]
-    clients = [Client(shared, groups[int(rng.integers(len(groups)))]) for _ in range(nclients)]
+    # protocol 0: version 1 and version 2 clients mixed in one memo (a server's old and new clients)
+    clients = [
+        Client(shared, groups[int(rng.integers(len(groups)))], protocol or int(rng.integers(1, 3)))
+        for _ in range(nclients)
+    ]
     codes = rng.integers(0, DI.layout.max_code + 1, (NMAX, DI.layout.nfields)).astype(np.int32)
     for version in range(1, 40):
         codes = _codes(rng, codes, float(rng.choice([0.0, 0.3, 1.0])))
@@ -80,6 +88,7 @@ def test_shared_encoding_is_byte_identical_to_per_client(seed: int, nclients: in
             assert got == want
             for p in got:
                 c.dec.decode(p)
+            assert np.array_equal(c.dec.codes(sel), codes[sel])  # what the client decodes is the pose
         _step(rng, clients, shared, groups)
     everyone = np.arange(NMAX)
     for c in clients:  # the same delta state (codes of soldiers not known are stale and never used)
@@ -88,20 +97,22 @@ def test_shared_encoding_is_byte_identical_to_per_client(seed: int, nclients: in
         assert np.array_equal(c.enc.codes(everyone[known]), c.ref.codes(everyone[known]))
 
 
-def test_clients_in_one_state_share_one_encode_and_a_late_joiner_joins_them() -> None:
+@pytest.mark.parametrize("protocol", [1, 2])
+def test_clients_in_one_state_share_one_encode_and_a_late_joiner_joins_them(protocol: int) -> None:
     shared = SharedEncodes()
     rng = np.random.default_rng(1)
     rows = np.arange(NMAX)
     codes = rng.integers(0, DI.layout.max_code + 1, (NMAX, DI.layout.nfields)).astype(np.int32)
-    early = [UpdateEncoder(DI, NMAX, shared) for _ in range(3)]
-    late = UpdateEncoder(DI, NMAX, shared)
-    for version in range(1, 6):
+    early = [UpdateEncoder(DI, NMAX, shared, protocol) for _ in range(3)]
+    late = UpdateEncoder(DI, NMAX, shared, protocol)
+    for version in range(1, 7):
         codes = _codes(rng, codes, 0.5)
         for enc in early + ([late] if version >= 3 else []):
             enc.encode_codes(rows, codes, version, 1 << 16, version)
-    # versions 1-2: one encode for three clients; 3: the late joiner's keyframe (its own) joins the group
+    # versions 1-2: one encode for three clients; 3: the late joiner's keyframe (its own) joins the group;
+    # protocol 2: its keyframe restarted its prediction, so it joins after one more encode of its own
     assert len({e.state for e in [*early, late]}) == 1
-    assert shared.misses <= 5 + 1
+    assert shared.misses == 6 + 1 + (protocol - 1)
 
 
 def test_visibility_groups_never_share_rows() -> None:

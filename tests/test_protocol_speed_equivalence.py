@@ -179,7 +179,11 @@ def test_encoder_and_decoder_match_the_reference(
     nmax = 64
     per_soldier = 2 + (4 + len(lay.entry_start) + int(lay.width.sum()) + 7) // 8 + 11
     max_payload = max(max_payload, per_soldier)
-    enc, dec, ref = UpdateEncoder(table, nmax), UpdateDecoder(table, nmax), RefEncoder(table, nmax)
+    enc, dec, ref = (
+        UpdateEncoder(table, nmax, version=1),
+        UpdateDecoder(table, nmax, version=1),
+        RefEncoder(table, nmax),
+    )
     ref_state = np.zeros((nmax, lay.nfields), np.int64)
     idx = rng.choice(nmax, n, replace=False)
     codes = rng.integers(0, (1 << lay.width), (n, lay.nfields))
@@ -213,10 +217,10 @@ def test_quantise_and_float_encode_match_the_reference(table: UpdateTable, n: in
     want = ref_quantise(table, dofs, pos, quat)
     assert np.array_equal(quantise(table, dofs, pos, quat), want)
     idx = rng.permutation(n)  # unsorted indices: frames list soldiers in index order
-    enc, ref = UpdateEncoder(table, 32), RefEncoder(table, 32)
+    enc, ref = UpdateEncoder(table, 32, version=1), RefEncoder(table, 32)
     got = enc.encode(JointUpdates(table.table_id, idx, dofs, pos, quat, 9), 1 << 20)
     assert got == ref.encode(idx.tolist(), want, 9, 1 << 20)
-    dec = UpdateDecoder(table, 32)
+    dec = UpdateDecoder(table, 32, version=1)
     ev = dec.decode(got[0])
     order = np.argsort(idx)
     expect = dequantise(table, want[order])
@@ -230,7 +234,11 @@ def test_di_crowd_batch_matches_the_reference_over_several_ticks() -> None:
     rng = np.random.default_rng(5)
     n, nmax = 300, 400
     idx = np.sort(rng.choice(nmax, n, replace=False))
-    enc, dec, ref = UpdateEncoder(table, nmax), UpdateDecoder(table, nmax), RefEncoder(table, nmax)
+    enc, dec, ref = (
+        UpdateEncoder(table, nmax, version=1),
+        UpdateDecoder(table, nmax, version=1),
+        RefEncoder(table, nmax),
+    )
     state = np.zeros((nmax, table.layout.nfields), np.int64)
     base = rng.normal(size=(n, table.ndofs)) * 0.5
     for tick in range(4):
@@ -276,7 +284,7 @@ def test_grouped_packing_round_trips_and_matches_a_bit_string(widths: list[int],
 
 def test_decoder_still_rejects_a_frame_the_reference_would_overflow() -> None:
     table = UpdateTable(1, "x", "", (JointEntry("j", (DofRange("R", -1.0, 1.0, 4),)),))
-    enc, dec = UpdateEncoder(table, 4), UpdateDecoder(table, 4)
+    enc, dec = UpdateEncoder(table, 4, version=1), UpdateDecoder(table, 4, version=1)
     dec.decode(enc.encode_codes(np.array([0]), np.array([[15]]), 0, 1 << 10)[0])
     frame = bytes([0, 1, 0, 0, 0, 1, 0, 1, 0, 0]) + bitstring_bytes("00011") + bitstring_bytes("01")
     with pytest.raises(WireError):

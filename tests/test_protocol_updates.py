@@ -168,13 +168,14 @@ def small_tables(draw: st.DrawFn) -> UpdateTable:
     small_tables(),
     st.lists(st.tuples(st.integers(0, 15), st.floats(0, 0.3)), min_size=1, max_size=6),
     st.integers(0, 2**31),
+    st.sampled_from([1, 2]),
 )
 def test_decoder_reconstructs_the_encoders_quantised_values_exactly(
-    table: UpdateTable, ticks: list[tuple[int, float]], seed: int
+    table: UpdateTable, ticks: list[tuple[int, float]], seed: int, version: int
 ) -> None:
     """Whatever mix of absolute and delta modes the encoder picks, both sides hold identical values."""
     rng = np.random.default_rng(seed)
-    enc, dec = UpdateEncoder(table, 16), UpdateDecoder(table, 16)
+    enc, dec = UpdateEncoder(table, 16, version=version), UpdateDecoder(table, 16, version=version)
     d, p, q = poses(table, 16, seed)
     for step, (nmove, scale) in enumerate(ticks):
         who = rng.permutation(16)[:nmove]
@@ -261,7 +262,7 @@ def test_decoder_rejects_bad_payloads_without_touching_state(mutate, code: Error
 
 def test_delta_overflow_is_rejected_atomically() -> None:
     t = UpdateTable(1, "x", "", (JointEntry("j", (DofRange("R", -1.0, 1.0, 4),)),))
-    enc, dec = UpdateEncoder(t), UpdateDecoder(t)
+    enc, dec = UpdateEncoder(t, version=1), UpdateDecoder(t, version=1)  # a version-1 frame
     dec.decode(
         enc.encode(upd(t, [0, 1], np.array([[0.0], [0.9]]), np.zeros((2, 0, 3)), np.zeros((2, 0, 4))), BIG)[0]
     )

@@ -608,8 +608,8 @@ def test_the_shipped_clips_getting_down_to_crawl_pass(clip: str, suffix: str) ->
 def test_the_shipped_crawl_to_prone_keeps_the_rifle_steady(suffix: str) -> None:
     """Down from the crawl to prone the pelvis no longer rolls 38 degrees over the moving leg and snaps back,
     so the rifle on the chest turns within the pitch limit (34 degrees in 0.1 s before) and no joint leaps
-    (22.6 degrees a frame before, 53.7 on DI with the M16). Still failing, not asked here: the right forearm's
-    slide and the rifle in the right upper arm (soldier), the left foot's slide on DI."""
+    (22.6 degrees a frame before, 53.7 on DI with the M16; the M16 slave's shoulders near their pole 25.6,
+    eased by :mod:`authoring.slave_leaps`). Every other limit: ``test_crawl_prone``."""
     from server.motion.cache import load_channelset
 
     shipped = Path(__file__).resolve().parents[1] / "channelsets"
@@ -617,7 +617,6 @@ def test_the_shipped_crawl_to_prone_keeps_the_rifle_steady(suffix: str) -> None:
     types = sorted({c.protofiletype for c in cs.channels})
     row = check_clip(cs, FigureSet.from_dir(FIGURES, types))
     assert row["rifle_pitch_jump_deg"] <= THRESHOLDS["rifle_pitch_jump_deg"]
-    if suffix != "_m16_low":  # the M16 slave's left shoulder still pops 25.6 degrees (slaving, not the plan)
-        assert row["max_frame_jump_deg"] <= THRESHOLDS["max_frame_jump_deg"]
+    assert row["max_frame_jump_deg"] <= THRESHOLDS["max_frame_jump_deg"]
     if suffix == "":
         assert row["foot_skate_cm"] <= THRESHOLDS["foot_skate_cm"]

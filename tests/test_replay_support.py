@@ -37,6 +37,21 @@ def exercise_pcap(tmp: Path, soldiers: int = 4, seconds: float = 40.0, seed: int
     return path, read_log(path)
 
 
+def pcap_of(payloads: list[tuple[float, bytes]]) -> bytes:
+    """A pcap (bytes) of UDP broadcasts to port 3000: one datagram per (receipt time, DIS payload)."""
+    import io
+
+    import dpkt
+
+    from protocol.dis.synth import udp_frame
+
+    f = io.BytesIO()
+    w = dpkt.pcap.Writer(f, linktype=dpkt.pcap.DLT_EN10MB)
+    for ts, payload in payloads:
+        w.writepkt(udp_frame(payload, 0), ts=ts)
+    return f.getvalue()
+
+
 def activity(posture: int, weapon: int, speed: float) -> str:
     """What a request asks for: WALK / RUN / CRAWLING when moving, else the goal posture node."""
     if speed > MOVING and posture == 2:

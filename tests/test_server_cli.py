@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 from test_server_support import shared_library, synthetic_dir
 
+from protocol.events import PROTOCOL_VERSION
 from ttes.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -48,7 +49,7 @@ def test_server_prints_ready_answers_ping_and_stops_on_sigterm(capsys: pytest.Ca
         port = int(line.split("127.0.0.1:")[1].split()[0])
         assert main(["ping", "--port", str(port), "--json"]) == 0
         info = json.loads(capsys.readouterr().out)
-        assert info["ok"] and info["server"] == "jack-ttes" and info["version"] == 1
+        assert info["ok"] and info["server"] == "jack-ttes" and info["version"] == PROTOCOL_VERSION
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=20) == 0
         logs = [json.loads(x) for x in proc.stderr.read().splitlines() if x.startswith("{")]  # type: ignore[union-attr]
@@ -76,7 +77,7 @@ def test_server_refuses_bad_settings_before_listening(
 ) -> None:
     bad = tmp_path / "ttes.toml"
     bad.write_text("tick_hz = -3\n")
-    assert main(["server", "--config", str(bad)]) == 2
+    assert main(["server", "--config", str(bad)]) == 1  # a file that cannot be used: a runtime error
     assert "tick_hz: -3 is outside" in capsys.readouterr().err
-    assert main(["server", "--data-dir", str(tmp_path), "--port", "0"]) == 2
+    assert main(["server", "--data-dir", str(tmp_path), "--port", "0"]) == 1
     assert "start-up script 'jack-ttes-soldier_low.jcl' not found" in capsys.readouterr().err

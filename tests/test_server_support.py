@@ -25,6 +25,7 @@ import trio
 from protocol.connection import CLIENT, NEED_DATA, Connection
 from protocol.entity import make_entity_requests
 from protocol.events import (
+    PROTOCOL_VERSION,
     Accept,
     ConnectionClosed,
     EntityRequests,
@@ -120,11 +121,12 @@ class Client:
         hello: bool = True,
         client_id: str = "",
         token: str = "",
+        version: int = PROTOCOL_VERSION,
     ) -> Client:
         stream = await trio.open_tcp_stream("127.0.0.1", port)
         c = cls(stream, Connection(CLIENT))
         if hello:
-            await c.send(Hello(name, role, client_id=client_id, token=token))
+            await c.send(Hello(name, role, version=version, client_id=client_id, token=token))
             c.accept = await c.expect(Accept)
         return c
 

@@ -46,11 +46,21 @@ SCRIPT = textwrap.dedent(
     img = np.frombuffer(buf.get_data("RGB", buf.width * 3), np.uint8).reshape(buf.height, buf.width, 3)
     r, g, b = (img[..., k].astype(int) for k in range(3))
     olive = (g >= r - 6) & (g - b >= 10) & (r - b >= 5)
+    caption_text = int((img[-14:, :100].min(axis=2) > 200).sum())  # the caption, top left (rows bottom-up)
+    win.dispatch_event("on_text", "?")
+    win.dispatch_events()
+    app.draw()  # the window's clock tick draws the app: the overlay now holds the keys
+    win.dispatch_event("on_draw")
+    win.dispatch_events()
+    buf = pyglet.image.get_buffer_manager().get_color_buffer().get_image_data()
+    keys = np.frombuffer(buf.get_data("RGB", buf.width * 3), np.uint8).reshape(buf.height, buf.width, 3)
+    help_dark = float(keys[20:90, 5:150].mean() - img[20:90, 5:150].mean())
     win.dispatch_event("on_key_press", key.ESCAPE, 0)
     win.dispatch_events()
     print(json.dumps({"appearance": int(app.soldiers.appearance[0]), "speed": float(app.soldiers.speed[0]),
                       "heading": float(app.soldiers.heading[0]), "view": app.camera.view.value,
-                      "olive_centre": int(olive[30:110, 40:120].sum()), "std": float(img.std())}))
+                      "olive_centre": int(olive[30:110, 40:120].sum()), "std": float(img.std()),
+                      "caption_text": caption_text, "help_dark": help_dark}))
     """
 )
 
@@ -69,3 +79,5 @@ def test_window_keys_drive_the_soldier_and_draw_him(tmp_path: Path) -> None:
     assert result["view"] == "SOLDIER CAM"
     assert result["std"] > 5 and result["olive_centre"] > 20  # the tethered camera shows soldier 0
     assert "soldier 0: KNEEL" in proc.stdout  # key messages go to the console, as the seed's do
+    assert result["caption_text"] > 20  # the overlay's caption over pyrender's picture
+    assert result["help_dark"] < -15  # '?' lays the keys' dark box over the picture

@@ -4,6 +4,9 @@ Each subcommand lives in its own module under :mod:`ttes.commands` and exposes
 ``register(subparsers)``; modules are discovered, so adding a command never edits
 this file. Command modules import their heavy dependencies inside their handlers,
 so ``ttes --help`` stays fast.
+
+One exit-status convention for every command (``EXIT_STATUS``), and one log format for every process:
+the server's ``key=value`` lines (:mod:`server.logging`), so a stub's and its server's lines read alike.
 """
 
 from __future__ import annotations
@@ -16,14 +19,41 @@ import sys
 from collections.abc import Sequence
 
 import ttes.commands
+from ttes.arguments import UsageError
 from ttes.extras import missing_extra_message
+
+EXIT_STATUS = """exit status (every command):
+  0    done
+  1    it failed at run time: a file that cannot be read, an address in use, no server, ...
+  2    usage: a bad option or value (named), or a missing extra (named, with its pip install)
+  3    ttes stub: the server was lost and did not come back
+  130  interrupted (Ctrl-C)
+`ttes author check` and `author figures --check` exit 1 when the data fail their check; `author check`
+exits 2 when it could check nothing (a missing file too), as grep does."""
+
+
+def version() -> str:
+    """The installed distribution's version and the wire protocol's."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    from protocol.events import PROTOCOL_VERSION
+
+    try:
+        ours = dist_version("jack-ttes")
+    except PackageNotFoundError:  # run from a checkout that was never installed
+        ours = "unknown (not installed)"
+    return f"ttes (jack-ttes) {ours}, protocol {PROTOCOL_VERSION}"
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ttes",
         description="Jack/TTES: real-time human-figure animation service for distributed simulation.",
+        epilog=EXIT_STATUS,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    parser.add_argument("--version", action="version", version=version())
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
@@ -35,11 +65,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def configure_logging(verbose: int) -> None:
+    """Every ``ttes.*`` logger not configured by its command writes the server's ``key=value`` lines to
+    stderr (``logging.basicConfig``: a no-op where the root logger already has handlers, as under pytest)."""
+    from server.logging import KeyValueFormatter
+
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(KeyValueFormatter())
+    logging.basicConfig(level=logging.WARNING - 10 * min(verbose, 2), handlers=[handler])
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    level = logging.WARNING - 10 * min(args.verbose, 2)
-    logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    configure_logging(args.verbose)
     try:
         result = args.func(args)
     except KeyboardInterrupt:
@@ -52,7 +91,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(message, file=sys.stderr)
         return 2
-    except (OSError, ValueError) as exc:
+    except UsageError as exc:
         print(f"ttes {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except (OSError, ValueError) as exc:
+        print(f"ttes {args.command}: error: {exc}", file=sys.stderr)
+        return 1
     return int(result or 0)

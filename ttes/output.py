@@ -1,4 +1,4 @@
-"""Shared output helpers so every subcommand prints JSON the same way."""
+"""Shared output helpers so every subcommand prints JSON the same way, and values without Python reprs."""
 
 from __future__ import annotations
 
@@ -14,6 +14,11 @@ def _default(obj: Any) -> Any:
     if hasattr(obj, "item"):
         return obj.item()
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def na(value: object, unit: str = "") -> str:
+    """A measured value for a person: ``n/a`` when it could not be measured (None), never ``None``."""
+    return "n/a" if value is None else f"{value}{unit}"
 
 
 def print_json(obj: Any, *, stream: Any = None, indent: int | None = None) -> None:

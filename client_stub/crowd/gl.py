@@ -39,8 +39,7 @@ vec3 shade(vec3 colour, vec3 n, vec3 world) {
 }
 """
 
-SOLDIER_VS = (
-    """
+_PARTS_VS_INPUTS = """
 #version 330
 uniform mat4 viewproj;
 uniform sampler2D mats;
@@ -50,9 +49,7 @@ in vec3 in_col;
 in float in_part;
 out vec3 v_col;
 """
-    + _COMMON
-    + """
-void main() {
+_PARTS_VS_TRANSFORM = """
     int x = int(in_part + 0.5) * 3;
     vec4 r0 = texelFetch(mats, ivec2(x, gl_InstanceID), 0);
     vec4 r1 = texelFetch(mats, ivec2(x + 1, gl_InstanceID), 0);
@@ -60,14 +57,9 @@ void main() {
     vec4 p = vec4(in_pos, 1.0);
     vec3 world = vec3(dot(r0, p), dot(r1, p), dot(r2, p));
     vec3 n = vec3(dot(r0.xyz, in_norm), dot(r1.xyz, in_norm), dot(r2.xyz, in_norm));
-    v_col = shade(in_col, n, world);
-    gl_Position = viewproj * vec4(world, 1.0);
-}
 """
-)
 
-TERRAIN_VS = (
-    """
+_TERRAIN_VS_INPUTS = """
 #version 330
 uniform mat4 viewproj;
 in vec3 in_pos;
@@ -75,14 +67,25 @@ in vec3 in_norm;
 in vec3 in_col;
 out vec3 v_col;
 """
-    + _COMMON
-    + """
-void main() {
-    v_col = shade(in_col, in_norm, in_pos);
-    gl_Position = viewproj * vec4(in_pos, 1.0);
-}
-"""
-)
+
+
+def parts_vs(lighting: str, colour: str) -> str:
+    """An instanced soldier's vertex shader: the world position and normal ``n`` of a vertex of part
+    ``in_part`` from the part's 3×4 world matrix (three texels of row ``gl_InstanceID`` of ``mats``), its
+    colour the GLSL expression ``colour`` of ``in_col``, ``n`` and ``world`` with the functions of
+    ``lighting``. The stub's moderngl renderer (:mod:`client_stub.stub.gl_render`) lights its own way."""
+    main = f"void main() {{{_PARTS_VS_TRANSFORM}    v_col = {colour};\n"
+    return f"{_PARTS_VS_INPUTS}{lighting}{main}    gl_Position = viewproj * vec4(world, 1.0);\n}}\n"
+
+
+def terrain_vs(lighting: str, colour: str) -> str:
+    """The terrain's vertex shader: world ``in_pos``, ``in_norm``, ``in_col``, coloured by ``colour``."""
+    main = f"void main() {{\n    v_col = {colour};\n    gl_Position = viewproj * vec4(in_pos, 1.0);\n}}\n"
+    return _TERRAIN_VS_INPUTS + lighting + main
+
+
+SOLDIER_VS = parts_vs(_COMMON, "shade(in_col, n, world)")
+TERRAIN_VS = terrain_vs(_COMMON, "shade(in_col, in_norm, in_pos)")
 
 FS = """
 #version 330
@@ -159,14 +162,16 @@ class TerrainMesh:
     hi: np.ndarray
 
 
-def terrain_mesh(meshes: dict, tile_m: float = 40.0) -> TerrainMesh:
-    """Triangles of trimesh meshes (Performer axes) as a :class:`TerrainMesh`."""
+def terrain_mesh(meshes: dict, tile_m: float = 40.0, smooth: tuple[str, ...] = ()) -> TerrainMesh:
+    """Triangles of trimesh meshes (Performer axes) as a :class:`TerrainMesh`; the meshes named in
+    ``smooth`` keep their vertex normals (a rolling ground), the others are flat-shaded."""
     parts = []
-    for mesh in meshes.values():
+    for name, mesh in meshes.items():
         tri = np.asarray(mesh.faces, np.int64)
         p = np.asarray(mesh.vertices, np.float64)[tri]
         n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        n = np.asarray(mesh.vertex_normals, np.float64)[tri] if name in smooth else n[:, None]
         col = None
         visual = getattr(mesh, "visual", None)
         kind = getattr(visual, "kind", None)
@@ -176,7 +181,7 @@ def terrain_mesh(meshes: dict, tile_m: float = 40.0) -> TerrainMesh:
             col = np.repeat(np.asarray(visual.face_colors, np.float64)[:, None, :3] / 255.0, 3, axis=1)
         if col is None:
             col = np.full((len(tri), 3, 3), 0.5)
-        parts.append(np.concatenate([p, np.repeat(n[:, None], 3, axis=1), col], axis=2))
+        parts.append(np.concatenate([p, np.broadcast_to(n, p.shape), col], axis=2))
     if not parts:
         z = np.zeros(0, np.int64)
         return TerrainMesh(np.zeros((0, 9), np.float32), z, z, np.zeros((0, 3)), np.zeros((0, 3)))
@@ -193,6 +198,16 @@ def terrain_mesh(meshes: dict, tile_m: float = 40.0) -> TerrainMesh:
     hi = np.maximum.reduceat(pts.max(axis=1), starts, axis=0)
     verts = np.ascontiguousarray(tris.reshape(-1, 9), np.float32)
     return TerrainMesh(verts, starts * 3, counts * 3, lo, hi)
+
+
+def terrain_array(
+    ctx: moderngl.Context, prog: moderngl.Program, mesh: TerrainMesh
+) -> moderngl.VertexArray | None:
+    """The terrain's vertex buffer bound to ``prog``'s inputs (None for an empty mesh)."""
+    if not len(mesh.vertices):
+        return None
+    vbo = ctx.buffer(mesh.vertices.tobytes())
+    return ctx.vertex_array(prog, [(vbo, "3f 3f 3f", "in_pos", "in_norm", "in_col")])
 
 
 def boxes_visible(lo: np.ndarray, hi: np.ndarray, viewproj: np.ndarray) -> np.ndarray:
@@ -264,13 +279,8 @@ class CrowdGL:
         self.triangles_drawn = 0
 
     def set_terrain(self, mesh: TerrainMesh) -> None:
-        if not len(mesh.vertices):
-            return
-        vbo = self.ctx.buffer(mesh.vertices.tobytes())
-        self.terrain_vao = self.ctx.vertex_array(
-            self.terrain_prog, [(vbo, "3f 3f 3f", "in_pos", "in_norm", "in_col")]
-        )
-        self.terrain = mesh
+        self.terrain_vao = terrain_array(self.ctx, self.terrain_prog, mesh)
+        self.terrain = mesh if self.terrain_vao is not None else None
 
     def draw(self, viewproj: np.ndarray, eye: np.ndarray, instances: list[np.ndarray]) -> None:
         """One frame: ``instances`` are (n, parts, 3, 4) float32 world part matrices of the near and mid

@@ -4,11 +4,14 @@ A replay is paced by the capture's receipt times: wall (or trio) time ``w`` afte
 ``t0 + start + speed * w``. ``LogCursor.take(t)`` hands out, in receipt order, every lifeform Entity State
 PDU and weapon event whose time is ``<= t`` that it has not handed out yet (two ``searchsorted`` calls, no
 per-PDU Python). Looping restarts the log; the translator's clock keeps running (``ReplayClock.offset``),
-so dead reckoning and timeouts never see time go backwards.
+so dead reckoning and timeouts never see time go backwards. With ``max_gap`` the cursor's clock is the log's
+with every silence longer than ``max_gap`` seconds cut down to ``max_gap`` (:class:`GapSqueeze`): a log of a
+few PDUs spread over a quarter of an hour does not replay a quarter of an hour of nothing.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
@@ -17,7 +20,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from protocol.dis import DisLog, EntityStateBatch, WeaponEvent
+from protocol.dis import DisEvent, DisLog, EntityStateBatch, RemoveEntity
 
 LOOP_GAP = 1.0  # s of replay time between the end of a log and its restart
 
@@ -108,10 +111,41 @@ class EntityFilter:
         return keep
 
 
+@dataclass(frozen=True)
+class GapSqueeze:
+    """Log time -> replay time with every silence between successive PDUs longer than ``max_gap`` cut to
+    ``max_gap`` (monotone; PDU times keep their order and every gap up to ``max_gap`` its length)."""
+
+    knots: NDArray[np.float64]  # the PDU times (sorted, unique)
+    cut: NDArray[np.float64]  # seconds removed before each knot
+
+    @classmethod
+    def of(cls, times: NDArray[np.float64], max_gap: float) -> GapSqueeze:
+        knots = np.unique(np.asarray(times, np.float64))
+        excess = np.maximum(np.diff(knots) - max_gap, 0.0)
+        return cls(knots, np.concatenate(([0.0], np.cumsum(excess))))
+
+    @property
+    def skipped(self) -> float:
+        """Seconds of silence cut from the whole log."""
+        return float(self.cut[-1]) if len(self.cut) else 0.0
+
+    def __call__(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        t = np.asarray(t, np.float64)
+        if not len(self.knots):
+            return t.copy()
+        k = np.clip(np.searchsorted(self.knots, t, side="right") - 1, 0, len(self.knots) - 1)
+        nxt = np.minimum(k + 1, len(self.knots) - 1)
+        out = t - self.cut[k]
+        return np.minimum(out, np.where(nxt > k, self.knots[nxt] - self.cut[nxt], np.inf))
+
+
 class LogCursor:
     """The PDUs of a log in receipt order, handed out by time (see the module docstring)."""
 
-    def __init__(self, log: DisLog, entity_filter: EntityFilter | None = None) -> None:
+    def __init__(
+        self, log: DisLog, entity_filter: EntityFilter | None = None, max_gap: float | None = None
+    ) -> None:
         order = np.argsort(log.times, kind="stable")
         batch = log.batch.select(order) if len(order) and (np.diff(order) != 1).any() else log.batch
         times = log.times[order]
@@ -120,18 +154,43 @@ class LogCursor:
             batch, times = batch.select(keep), times[keep]
         self.batch = batch
         self.times = np.asarray(times, np.float64)
-        self.events: list[WeaponEvent] = sorted(log.events, key=lambda e: e.t)
+        self.events: list[DisEvent] = sorted(log.events, key=lambda e: e.t)
         self.event_times = np.array([e.t for e in self.events], np.float64)
         self.pdu_times = np.sort(np.asarray(log.pdus["t"], np.float64)) if len(log.pdus) else np.zeros(0)
+        if max_gap is not None and not (math.isfinite(max_gap) and max_gap > 0):
+            raise ValueError("max_gap must be a positive number of seconds (None: keep the silences)")
+        self.skipped = 0.0  # seconds of silence cut (max_gap)
+        self.squeeze: GapSqueeze | None = None  # log time -> cursor time, with max_gap
+        if max_gap is not None:
+            self._squeeze(max_gap)
         starts = [a[0] for a in (self.times, self.event_times, self.pdu_times) if len(a)]
         ends = [a[-1] for a in (self.times, self.event_times, self.pdu_times) if len(a)]
         self.t0 = float(min(starts)) if starts else float(log.t0)
         self.t_end = float(max(ends)) if ends else self.t0
         self.rewind()
 
+    def _squeeze(self, max_gap: float) -> None:
+        """Cut the silences longer than ``max_gap`` out of every time the cursor hands out."""
+        every = np.concatenate([self.pdu_times, self.times, self.event_times])
+        squeeze = GapSqueeze.of(every, max_gap)
+        self.skipped = squeeze.skipped
+        if not self.skipped:
+            return
+        self.squeeze = squeeze
+        self.times = squeeze(self.times)
+        self.pdu_times = squeeze(self.pdu_times)
+        self.event_times = squeeze(self.event_times)
+        self.events = [
+            dataclasses.replace(e, t=float(t)) for e, t in zip(self.events, self.event_times, strict=True)
+        ]
+
     @property
     def duration(self) -> float:
         return self.t_end - self.t0
+
+    def cursor_time(self, t_log: float) -> float:
+        """A log time (``--start``) on the cursor's clock: the same, less the silences cut before it."""
+        return t_log if self.squeeze is None else float(self.squeeze(np.array([t_log]))[0])
 
     def rewind(self) -> None:
         self._es = 0
@@ -156,15 +215,17 @@ class LogCursor:
         cand = [a[i] for a, i in heads if i < len(a)]  # fmt: skip
         return float(min(cand)) if cand else math.inf
 
-    def skip_to(self, t: float) -> tuple[EntityStateBatch, NDArray[np.float64], list[WeaponEvent], int]:
-        """Everything before ``t`` (``--start``): the entity states only (old weapon events are dropped)."""
-        batch, times, _, npdus = self.take(t, inclusive=False)
-        return batch, times, [], npdus
+    def skip_to(self, t: float) -> tuple[EntityStateBatch, NDArray[np.float64], list[DisEvent], int]:
+        """Everything before ``t`` (``--start``): the entity states and removals (old weapon events are
+        dropped: nobody reacts to a shot long gone, but a removed entity stays removed)."""
+        batch, times, events, npdus = self.take(t, inclusive=False)
+        return batch, times, [e for e in events if isinstance(e, RemoveEntity)], npdus
 
     def take(
         self, t: float, inclusive: bool = True
-    ) -> tuple[EntityStateBatch, NDArray[np.float64], list[WeaponEvent], int]:
-        """Entity states, their times, weapon events and the number of DIS PDUs (all types) due by ``t``."""
+    ) -> tuple[EntityStateBatch, NDArray[np.float64], list[DisEvent], int]:
+        """Entity states, their times, events (Fire, Detonation, Remove Entity) and the number of DIS PDUs
+        (all types) due by ``t``."""
         side: Literal["left", "right"] = "right" if inclusive else "left"
         es_end = max(int(np.searchsorted(self.times, t, side=side)), self._es)
         ev_end = max(int(np.searchsorted(self.event_times, t, side=side)), self._ev)

@@ -1,16 +1,20 @@
-"""The live DIS gateway: Entity State / Fire / Detonation PDUs from UDP into the Jack/TTES server.
+"""The live DIS gateway: Entity State (and Update) / Remove Entity / Fire / Detonation PDUs from UDP into the
+Jack/TTES server.
 
 What the 1994 TTES did on the exercise network: listen to DIS, keep one soldier per lifeform entity, and
 send Jack the posture and command tokens (seed 002, section 2). The translation is the replay's
 (:class:`~client_stub.dis.translator.DisTranslator`, :class:`~client_stub.dis.sink.ServerSink`); only
 the source differs. Datagrams are read in bursts: after each wake-up every datagram already queued in the
 socket is taken without waiting (up to ``max_burst``) and the burst is decoded at once by the DIS library's
-vectorised decoder, so a flood costs one decode per burst, not one per datagram. Nothing a sender puts in a
-datagram stops the gateway: malformed, truncated, foreign and unknown PDUs are counted in :attr:`status`
+vectorised decoder, so a flood costs one decode per burst, not one per datagram. Entity State Update PDUs are
+put on the entity's last Entity State PDU, heard in this burst or an earlier one (``bases``). Nothing a
+sender puts in a datagram stops the gateway: malformed, truncated, foreign and unknown PDUs are counted in
+:attr:`status`
 (the decoder's own counters, added up burst after burst, and the gateway's).
 
-The socket is bound to one interface, loopback by default: ``0.0.0.0`` hears broadcasts on every interface;
-with ``group`` it joins that multicast group on ``interface``.
+The socket is bound to one interface, loopback by default (only this machine's senders are heard): ``0.0.0.0``
+hears a LAN exercise's broadcasts on every interface; with ``group`` it joins that multicast group on
+``interface``.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ import trio
 from client_stub.dis.cursor import EntityFilter
 from client_stub.dis.sink import ServerSink
 from client_stub.dis.translator import DIS_TIMEOUT, DisTranslator, Translation
-from protocol.dis import DEFAULT_PORT, DisError, DisLog, LocalFrame, read_datagrams
+from protocol.dis import DEFAULT_PORT, DisError, DisLog, LocalFrame, UpdateBases, read_datagrams
 
 log = logging.getLogger("ttes.gateway")
 MAX_DATAGRAM = 65535
@@ -43,6 +47,7 @@ class GatewayConfig:
     timeout: float = DIS_TIMEOUT
     origin: LocalFrame | None = None  # default: the first entity heard
     entity_filter: EntityFilter | None = None
+    exercise: int | None = None  # only this DIS exercise's PDUs (the others are counted: other_exercise)
     max_burst: int = 4096  # datagrams decoded together at most
     receive_buffer: int = 4 << 20  # SO_RCVBUF asked for (the kernel may give less)
 
@@ -77,6 +82,7 @@ class DisGateway:
     config: GatewayConfig = field(default_factory=GatewayConfig)
     translator: DisTranslator = field(init=False)
     status: Counter[str] = field(init=False)
+    bases: UpdateBases = field(default_factory=UpdateBases)  # each entity's last Entity State PDU
     address: tuple[str, int] | None = None
 
     def __post_init__(self) -> None:
@@ -96,7 +102,7 @@ class DisGateway:
         st["max_burst"] = max(st["max_burst"], n)
         st["bytes"] += sum(len(d) for d in datagrams)
         try:
-            got = read_datagrams(datagrams, now)
+            got = read_datagrams(datagrams, now, exercise=self.config.exercise, bases=self.bases)
         except (DisError, ValueError, IndexError) as exc:  # never expected: the decoder reports issues itself
             st.update(datagrams=n, decode_failures=1)
             log.warning("burst of %d datagrams not decoded: %s", n, exc)

@@ -14,10 +14,9 @@ import trio
 from client_stub.dis.sink import ServerSink
 from client_stub.link.auth import Credentials
 from client_stub.link.client import Client, LinkError
+from client_stub.link.retry import BACKOFF, GIVE_UP_AFTER
 
 log = logging.getLogger("ttes.reconnect")
-BACKOFF = (0.5, 1.0, 2.0, 4.0, 8.0)  # s between attempts (the last one repeats)
-GIVE_UP_AFTER = 120.0  # s without a server
 
 
 class GaveUp(LinkError):

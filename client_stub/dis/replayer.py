@@ -13,9 +13,9 @@ import math
 
 import numpy as np
 
-from client_stub.dis.cursor import LOOP_GAP, EntityFilter, LogCursor
+from client_stub.dis.cursor import LOOP_GAP, LogCursor
 from client_stub.dis.translator import DIS_TIMEOUT, DisTranslator, Translation, sane_records
-from protocol.dis import DisLog, EntityStateBatch, LocalFrame, WeaponEvent
+from protocol.dis import DisEvent, DisLog, EntityStateBatch, LocalFrame
 from protocol.events import DEFAULT_MAX_SOLDIERS
 
 UNLIMITED_CHUNK = 0.1  # s of log time per step when --speed is unlimited ...
@@ -27,21 +27,22 @@ class Replayer:
 
     def __init__(
         self,
-        log: DisLog,
+        log: DisLog | LogCursor,
         *,
         speed: float = 1.0,
         loop: bool = False,
         start: float = 0.0,
-        entity_filter: EntityFilter | None = None,
         origin: LocalFrame | None = None,
         timeout: float = DIS_TIMEOUT,
         capacity: int = DEFAULT_MAX_SOLDIERS,
     ) -> None:
+        """``log``: a whole log, or a :class:`LogCursor` over it that filters entities and cuts silences
+        (``max_gap``). ``start`` counts log seconds, silences included."""
         if not (speed > 0):
             raise ValueError("speed must be positive (inf: unlimited)")
         if not (math.isfinite(start) and start >= 0):
             raise ValueError("start must be a finite number of seconds >= 0")
-        self.cursor = LogCursor(log, entity_filter)
+        self.cursor = log if isinstance(log, LogCursor) else LogCursor(log)
         if origin is None:  # the first entity of the log, wherever the replay starts
             usable = np.flatnonzero(sane_records(self.cursor.batch.records))
             if len(usable):
@@ -50,7 +51,7 @@ class Replayer:
         self.speed = float(speed)
         self.loop = loop
         self.start = float(start)
-        self.t_begin = self.cursor.t0 + self.start
+        self.t_begin = self.cursor.cursor_time(self.cursor.t0 + self.start)
         self.offset = 0.0  # translator time = log time + offset
         self.loops = 0
         self.pdus = 0  # DIS PDUs (every type) replayed
@@ -131,8 +132,8 @@ class Replayer:
         return Translation.merge(parts)
 
     def _shift(
-        self, batch: EntityStateBatch, times: np.ndarray, events: list[WeaponEvent]
-    ) -> tuple[EntityStateBatch, np.ndarray, list[WeaponEvent]]:
+        self, batch: EntityStateBatch, times: np.ndarray, events: list[DisEvent]
+    ) -> tuple[EntityStateBatch, np.ndarray, list[DisEvent]]:
         if self.offset == 0.0:
             return batch, times, events
         return batch, times + self.offset, [dataclasses.replace(e, t=e.t + self.offset) for e in events]
@@ -150,5 +151,6 @@ class Replayer:
             "pdus": self.pdus,
             "loops": self.loops,
             "finished": self.finished,
+            "silence_skipped_s": round(self.cursor.skipped, 3),
             **self.translator.stats,
         }

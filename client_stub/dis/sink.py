@@ -118,6 +118,7 @@ class ServerSink:
         """A new link: every live soldier created again (a restarted server) or taken back (the same server
         kept them for our client id: they are in its READY), then subscribed and requested again."""
         ours = frozenset(int(self.indices[s]) for s in self.rifle_of)
+        weapon_of = self.weapon_of
         self._bind(link, ours)  # our old indices count as free: the slots keep their indices
         gone = [s for s in self.rifle_of if s >= self.capacity]
         for s in gone:
@@ -125,6 +126,10 @@ class ServerSink:
             self.stats["dropped"] += 1
         live = sorted(self.rifle_of)
         kept = [s for s in live if int(self.indices[s]) in link.ready_soldiers]
+        for s in kept:  # taken back as they were made
+            index = int(self.indices[s])
+            if index in weapon_of:
+                self.weapon_of[index] = weapon_of[index]
         rows = self._last[live][self._has_last[live]]
         self.lost = ""
         self.stats["relinked"] += 1

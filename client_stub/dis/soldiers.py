@@ -10,14 +10,22 @@ subscribed) and the joint updates that come back pose the soldiers; without one 
 shows each soldier's posture, weapon and gait (also for soldiers whose server update table shares no joint
 with the stub's figure, such as the synthetic library's chain soldier).
 
+A lost server shows within a frame (the stub poses the soldiers meanwhile; the sink keeps what they are). A
+new link comes either from ``reconnect`` (the window's threaded link: tried on the frames, on a
+:class:`~client_stub.link.retry.RetrySchedule` in stub time) or from whoever relinks the sink (the headless
+replay runs :func:`client_stub.dis.reconnect.keep_linked`); either way the next frame binds every live
+soldier to its server soldier again. Out of time: ``app.gave_up`` says so (the replay exits 1).
+
 Looks: friendly, opposing and neutral forces get different uniform colours; a camouflage paint scheme
 (appearance bit 0) tints the uniform by the camouflage type (desert, winter, forest, other).
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -27,6 +35,7 @@ from client_stub.dis.sink import ServerSink
 from client_stub.dis.translator import DisTranslator, Translation
 from client_stub.link.api import Link
 from client_stub.link.client import LinkError
+from client_stub.link.retry import RetrySchedule
 from client_stub.stub.app import DEFAULT_FIGURE, StubApp
 from client_stub.stub.camera import look_at
 from client_stub.stub.render import FORCE_UNIFORMS
@@ -85,21 +94,32 @@ def replay_app(
     link: Link | None = None,
     artic_dir: str | os.PathLike[str] | None = None,
     progress: ProgressLine | None = None,
+    reconnect: Callable[[], Link] | None = None,
+    retry: RetrySchedule | None = None,
 ) -> StubApp:
     """The stub fed by DIS: a :class:`StubApp` given :class:`DisSoldiers`."""
-    return StubApp(terrain, DisSoldiers(replay, link=link, progress=progress), artic_dir=artic_dir)
+    source = DisSoldiers(replay, link=link, progress=progress, reconnect=reconnect, retry=retry)
+    return StubApp(terrain, source, artic_dir=artic_dir)
 
 
 class DisSoldiers:
     """The stub's soldiers from DIS translations (see the module docstring)."""
 
     def __init__(
-        self, replay: TranslationSource, *, link: Link | None = None, progress: ProgressLine | None = None
+        self,
+        replay: TranslationSource,
+        *,
+        link: Link | None = None,
+        progress: ProgressLine | None = None,
+        reconnect: Callable[[], Link] | None = None,
+        retry: RetrySchedule | None = None,
     ) -> None:
         self.replay = replay
         self.translator = replay.translator
-        self._link = link
         self.sink = ServerSink(link, subscribe=True) if link is not None else None
+        self.reconnect = reconnect  # a new READY link (LinkError when none answers); None: others relink
+        self.retry = retry or RetrySchedule()  # in stub time
+        self._relinked = 0  # the sink's relink count when the slots were last bound
         self.progress = progress
         self.elapsed = 0.0
         self.squad_view = False  # camera framing the whole squad (headless demos); keys hand it back
@@ -107,7 +127,9 @@ class DisSoldiers:
 
     @property
     def link(self) -> Link | None:
-        return self._link
+        """The sink's link while it works (None: no server, or lost)."""
+        sink = self.sink
+        return None if sink is None or sink.lost else sink.link
 
     # -- keys: the DIS stream drives the soldiers; cameras and soldier selection still work -------
     def refuse_key(self, key: str) -> str | None:
@@ -149,7 +171,8 @@ class DisSoldiers:
     def step(self, app: StubApp, dt: float) -> None:
         self.elapsed += dt
         tr = self.replay.advance(self.elapsed)
-        self._send(app, tr)  # first: the stub binds new soldiers to the server soldiers made here
+        if self.sink is not None:  # first: the stub binds new soldiers to the server soldiers made here
+            self.sink.apply(tr)  # never raises: a lost link keeps the state for the next one
         self._take(app, tr)
         self._place_soldiers(app, dt)
         if self.progress is not None:
@@ -157,17 +180,53 @@ class DisSoldiers:
             self.progress.update(
                 self.elapsed, float(r), self.translator.alive, int(getattr(self.replay, "pdus", 0))
             )
+        self._keep_linked(app)
 
-    def _send(self, app: StubApp, tr: Translation) -> None:
-        if self.sink is not None:
-            try:
-                self.sink.apply(tr)
-            except LinkError as exc:
-                app.lose_server(exc)  # the replay goes on, posed by the stub
+    def _keep_linked(self, app: StubApp) -> None:
+        """A lost link shows (LinkError: the app poses the soldiers); a new one binds every live soldier."""
+        sink = self.sink
+        if sink is None:
+            return
+        if sink.lost and not app.server_lost:
+            raise LinkError(sink.lost)
+        if sink.lost and self.reconnect is not None and not app.gave_up:
+            self._try_again(app, sink)
+        if not sink.lost and sink.stats["relinked"] != self._relinked:
+            self._relinked = sink.stats["relinked"]
+            for slot in sorted(sink.rifle_of):
+                if slot < app.soldiers.count and app.slot_kind[slot] >= 0:
+                    self._bind(app, slot, int(app.slot_kind[slot]))
+            self.retry.reset()
+            if app.server_lost:
+                app.regain_server()
+
+    def _try_again(self, app: StubApp, sink: ServerSink) -> None:
+        """One reconnection attempt when the schedule says so; out of time: ``app.gave_up``."""
+        if self.retry.out_of_time(app.time):
+            app.gave_up = self.retry.gave_up_message(app.time, sink.lost)
+            log.error("%s", app.gave_up)
+            return
+        if not self.retry.due(app.time):
+            return
+        assert self.reconnect is not None
+        try:
+            link = self.reconnect()
+        except LinkError as exc:
+            log.info("reconnecting: %s", exc)
+            return
+        sink.rebind(link)
+        log.warning("server back: %d soldiers bound again", len(sink.rifle_of))
 
     def lose_server(self) -> None:
-        self._link = None
-        self.sink = None
+        """The app saw the link go: the sink keeps its soldiers for the next link; a threaded link stops."""
+        sink = self.sink
+        if sink is None:
+            return
+        sink.lost = sink.lost or "connection lost"
+        quit_link = getattr(sink.link, "quit", None)
+        if self.reconnect is not None and quit_link is not None:
+            with contextlib.suppress(LinkError):
+                quit_link()
 
     def _take(self, app: StubApp, tr: Translation) -> None:
         """New soldiers into the stub, removed ones hidden."""
@@ -186,16 +245,17 @@ class DisSoldiers:
             app.look[slot] = LOOK_BASE + int(look_of(row["force"], row["paint"], row["camouflage"]))
             kind = app.kind(DEFAULT_FIGURE, RIFLE_FIGURES[int(row["rifle"])])
             app.set_kind(slot, kind, reactivate=True)
-            if self.sink is not None and slot < self.sink.capacity:
-                self._bind(app, slot, kind)
+            if self.sink is not None and not self.sink.lost and slot < self.sink.capacity:
+                self._bind(app, slot, kind)  # while lost: bound when the next link comes
 
     def _bind(self, app: StubApp, slot: int, kind: int) -> None:
         """The server soldier of ``slot`` (created by the sink): its wire table bound to our kind."""
-        assert self.sink is not None and self._link is not None
-        index = int(self.sink.server_index(np.array([slot]))[0])
-        weapon = self.sink.weapon_of.get(index, "")
+        sink = self.sink
+        assert sink is not None
+        index = int(sink.server_index(np.array([slot]))[0])
+        weapon = sink.weapon_of.get(index, "")
         wire = next(
-            (t for t in self._link.tables.values() if t.figure == self.sink.figure and t.weapon == weapon),
+            (t for t in sink.link.tables.values() if t.figure == sink.figure and t.weapon == weapon),
             None,
         )
         if wire is None:
@@ -234,7 +294,8 @@ class DisSoldiers:
     def finish(self, app: StubApp) -> None:
         """Remove every soldier from the server (the replay is over)."""
         reset = self.translator.reset()
-        self._send(app, reset)
+        if self.sink is not None:
+            self.sink.apply(reset)
         self._take(app, reset)
 
     def close(self) -> None:

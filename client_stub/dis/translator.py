@@ -17,10 +17,16 @@ makes every live soldier within ``flinch_radius`` (FLINCH_RADIUS, 5 m, horizonta
 flinch (``Translation.flinches``; one vectorised distance over the soldier slots), counted in
 ``near_detonations``. An event older than REACTION_MAX_AGE when its step runs (a replay's skipped start, a
 late chunk) is counted but not played.
+
+A Remove Entity PDU removes its entity's soldier at once (``RemoveReason.REMOVED``; 65535 in a field of the
+id matches every site, application or entity), without waiting out the timeout; counted in
+``removed_by_pdu``. Entity State Update PDUs arrive here as Entity State records (the log readers put each on
+its entity's last Entity State PDU), so they need nothing of their own.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -28,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from protocol.dis import (
+    DisEvent,
     EntityStateBatch,
     LocalFrame,
     TtesPosture,
@@ -35,11 +42,14 @@ from protocol.dis import (
     WeaponEvent,
     dead_reckon,
     decode_appearance,
+    entity_keys,
     heading_deg,
     rifle_code,
     ttes_posture,
     ttes_weapon,
 )
+from protocol.dis.remove_entity import ALL as ALL_IDS
+from protocol.dis.remove_entity import RemoveEntity
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from protocol.events import DEFAULT_MAX_SOLDIERS
 
@@ -60,6 +70,7 @@ class RemoveReason(IntEnum):
     TIMEOUT = 1  # no PDU for ``timeout`` seconds
     DEACTIVATED = 2  # appearance bit 23
     RESET = 3  # replay looped / stopped
+    REMOVED = 4  # a Remove Entity PDU named it
 
 
 # One row per soldier created (or re-created): what the image generator and the server need to make him.
@@ -74,14 +85,6 @@ SOLDIER_DTYPE = np.dtype(
         ("marking", "S11"),
     ]
 )
-
-
-def entity_keys(entity_id: NDArray[np.void]) -> NDArray[np.uint64]:
-    """One u64 per DIS entity id (site, application, entity)."""
-    site: NDArray[np.uint64] = entity_id["site"].astype(np.uint64)
-    application: NDArray[np.uint64] = entity_id["application"].astype(np.uint64)
-    entity: NDArray[np.uint64] = entity_id["entity"].astype(np.uint64)
-    return (site << np.uint64(32)) | (application << np.uint64(16)) | entity
 
 
 @dataclass
@@ -234,6 +237,7 @@ class DisTranslator:
             "recreated": 0,
             "removed_timeout": 0,
             "removed_deactivated": 0,
+            "removed_by_pdu": 0,
             "requests": 0,
             "fire_events": 0,
             "fire_reactions": 0,
@@ -348,15 +352,20 @@ class DisTranslator:
         now: float,
         batch: EntityStateBatch | None = None,
         times: F64 | None = None,
-        events: list[WeaponEvent] | tuple[WeaponEvent, ...] = (),
+        events: Sequence[DisEvent] = (),
     ) -> Translation:
-        """Take the PDUs received up to ``now`` (``times`` per record, non-decreasing) and the weapon events,
-        then expire what ``now`` makes stale. Returns everything the server and the stub must hear."""
+        """Take the PDUs received up to ``now`` (``times`` per record, non-decreasing) and the events (Fire,
+        Detonation, Remove Entity), then expire what ``now`` makes stale. Returns everything the server and
+        the stub must hear."""
         parts = []
         if batch is not None and len(batch):
             parts.append(self.ingest(batch, np.asarray(times, np.float64)))
-        if events:
-            parts.append(self.weapon_events(events, now))
+        weapons = [e for e in events if isinstance(e, WeaponEvent)]
+        if weapons:
+            parts.append(self.weapon_events(weapons, now))
+        removals = [e for e in events if isinstance(e, RemoveEntity)]
+        if removals:
+            parts.append(self.remove_entities(removals))
         parts.append(self.advance(now))
         return Translation.merge(parts)
 
@@ -454,9 +463,22 @@ class DisTranslator:
             self._requests(live_slots, float(t.max())),
         )
 
-    def weapon_events(
-        self, events: list[WeaponEvent] | tuple[WeaponEvent, ...], now: float | None = None
-    ) -> Translation:
+    def remove_entities(self, events: Sequence[RemoveEntity]) -> Translation:
+        """Remove Entity PDUs: the live soldiers of the named entities go at once (65535 matches all)."""
+        live = self.live_slots()
+        keys = self.key[live]
+        ids = np.stack([(keys >> np.uint64(s)) & np.uint64(0xFFFF) for s in (32, 16, 0)], axis=1)
+        gone = np.zeros(len(live), bool)
+        for e in events:
+            gone |= ((ids == np.array(e.entity, np.uint64)) | (np.array(e.entity) == ALL_IDS)).all(axis=1)
+        removed = live[gone]
+        self.live[removed] = False
+        self.sent_appearance[removed] = 0
+        self.fire_until[removed] = 0.0
+        self.stats["removed_by_pdu"] += len(removed)
+        return Translation(removed=removed, reasons=np.full(len(removed), RemoveReason.REMOVED, np.uint8))
+
+    def weapon_events(self, events: Sequence[WeaponEvent], now: float | None = None) -> Translation:
         """Fire: the shooter recoils; a standing-still live shooter holds FIRING for ``fire_hold`` s.
         Detonation: the live soldiers within ``flinch_radius`` flinch. Events older than REACTION_MAX_AGE at
         ``now`` make nobody react (the hold and the counts still apply)."""

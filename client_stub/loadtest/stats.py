@@ -260,6 +260,12 @@ def _round(x: float, nd: int = 3) -> float | None:
     return None if x is None or not math.isfinite(x) else round(float(x), nd)
 
 
+def _soldiers_seen_min(slot: np.ndarray, conn: np.ndarray, nconn: int) -> int:
+    """The fewest distinct soldiers any one connection received updates of (over the whole run): with
+    --subscribe-all, every connection should see every soldier."""
+    return min((len(np.unique(slot[conn == c])) for c in range(nconn)), default=0)
+
+
 def summarise(
     arr: dict[str, np.ndarray], rate: float, t0: float, t1: float, nconn: int, every: int = 1
 ) -> dict:
@@ -308,6 +314,7 @@ def summarise(
         "delivery_ms_p50": _round(percentile_ms(lateness, 50), 2),
         "delivery_ms_p99": _round(percentile_ms(lateness, 99), 2),
         "server_ticks_seen": tick_span,
+        "soldiers_seen_min": _soldiers_seen_min(arr["row_slot"], arr["row_conn"], nconn),
         "server_tick_hz": _round(tick_span / dur, 2),
         "latency_ms_p50": _round(percentile_ms(lat, 50), 2),
         "latency_ms_p99": _round(percentile_ms(lat, 99), 2),

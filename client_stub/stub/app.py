@@ -28,6 +28,7 @@ import numpy as np
 
 from client_stub.link.buffer import UpdateBatch
 from client_stub.link.client import LinkError
+from client_stub.stub.action import action_points, follow_action, soldier_labels
 from client_stub.stub.artic import (
     TableBinding,
     articulation,
@@ -36,9 +37,10 @@ from client_stub.stub.artic import (
     update_table_for,
     write_artic,
 )
-from client_stub.stub.camera import CameraState, camera_pose
-from client_stub.stub.keys import StubController
+from client_stub.stub.camera import CameraState, View, action_pose, camera_pose
+from client_stub.stub.keys import KEY_HELP, StubController
 from client_stub.stub.offline import OfflinePoser
+from client_stub.stub.overlay import Label, Overlay
 from client_stub.stub.scene_graph import Crowd, EntityLayout, FigureGraph
 from client_stub.stub.simsoldier import Force, SimSoldiers
 from client_stub.stub.terrain import Terrain
@@ -48,7 +50,7 @@ from protocol.update_table import UpdateTable
 
 if TYPE_CHECKING:
     from client_stub.link.api import Link
-    from client_stub.stub.render import StubRenderer
+    from client_stub.renderer import StubBackend
 
 log = logging.getLogger("ttes.stub")
 DATA = Path(__file__).resolve().parent.parent / "data"
@@ -133,7 +135,12 @@ class StubApp:
         self.server_of = np.full(capacity, -1, np.int64)  # slot -> server soldier index
         self.slot_of_server: dict[int, int] = {}
         self._slot_by_server = np.full(0, -1, np.int64)  # the same map as an array, for whole batches
-        self.renderer: StubRenderer | None = None
+        self.renderer: StubBackend | None = None
+        self.show_help = False  # the keys over the picture (``?`` toggles)
+        self.figure_box = np.full((0, 2, 3), np.nan)  # slot -> lowest and highest joint as last drawn
+        self._turned = 0.0  # when a touring ACTION CAM last turned to another soldier
+        self.source_camera = False  # the source chose the last camera pose (the replay's squad view)
+        self.labels = True  # name and posture above each soldier
         self.time = 0.0
         self.server_lost = ""  # "server lost: why" while the source has no server (after having one)
         self.server_lost_count = 0
@@ -236,6 +243,10 @@ class StubApp:
             return refused
         before = self.soldiers.count
         message = self.controller.handle(key)
+        if key == "?":
+            self.show_help = not self.show_help
+        elif len(key) == 1 and key.lower() in "bcfvxoudijnp":
+            self.camera.action_tour = False  # the user takes the camera (and the current soldier)
         for slot in range(before, self.soldiers.count):  # key 'a' added soldiers
             self._place(slot)
         return message
@@ -325,31 +336,58 @@ class StubApp:
                 )
 
     def draw(self) -> None:
-        """Hand the live soldiers' world matrices (by kind and look) and the camera to the renderer."""
+        """Hand the live soldiers' world matrices (by kind and look), the camera and the overlay (labels,
+        caption, keys) to the renderer."""
         r = self.renderer
         if r is None:
             return
         n = self.soldiers.count
         slots = np.flatnonzero(self.soldiers.alive[:n])
+        labels: list[Label] = []
+        self.figure_box = np.full((self.soldiers.capacity, 2, 3), np.nan)
         for kind_id, k in enumerate(self.kinds):
             mine = slots[self.slot_kind[slots] == kind_id]
             looks = set(self.look[mine].tolist()) | {key for kid, key in r.soldiers if kid == kind_id}
             for look in sorted(looks):
                 rows = mine[self.look[mine] == look]
-                meshes = r.soldier_meshes(kind_id, k.layout, look)
-                meshes.update(k.crowd.world(rows) if len(rows) else np.zeros((0, k.layout.nnodes, 4, 4)))
+                world = k.crowd.world(rows) if len(rows) else np.zeros((0, k.layout.nnodes, 4, 4))
+                r.soldier_meshes(kind_id, k.layout, look).update(world)
+                joints = world[:, 1:, :3, 3]
+                self.figure_box[rows] = np.stack([joints.min(axis=1), joints.max(axis=1)], axis=1)
+                if self.labels:
+                    labels += soldier_labels(self.soldiers, rows, world, self.controller.current)
         r.set_camera(self.camera_pose())
+        r.overlay = Overlay(labels, self._caption(), KEY_HELP if self.show_help else ())
+
+    def _caption(self) -> str:
+        cur = self.controller.current
+        who = f" · current soldier {cur}" if cur < self.soldiers.count else ""
+        view = "the source's camera (squad view)" if self.source_camera else self.camera.view.value
+        return f"{view}{who}"
 
     def camera_pose(self) -> np.ndarray:
         wanted = self.source.camera_pose(self)
+        self.source_camera = wanted is not None
         if wanted is not None:
             return wanted
         s = self.soldiers
         cur = self.controller.current
+        if self.camera.view is View.ACTION:
+            return self._action_pose()
         feet, heading = (s.position[cur], float(s.heading[cur])) if cur < s.count else (np.zeros(3), 0.0)
         if cur < s.count and self.slot_kind[cur] >= 0:
             feet = self.figure_feet(cur, feet)
         return camera_pose(self.camera, feet, heading, self.terrain.bounds)
+
+    def _action_pose(self) -> np.ndarray:
+        if self.camera.action_tour:  # the replay's: a live soldier, the next force's every 10 s
+            turned = follow_action(self.soldiers, self.controller.current, self.time, self._turned)
+            if turned is not None:
+                self.controller.current, self._turned = turned
+        r = self.renderer
+        yfov, aspect = (r.yfov_deg, r.width / r.height) if r is not None else (50.0, 4 / 3)
+        points = action_points(self.soldiers, self.figure_box, self.controller.current)
+        return action_pose(self.camera, points, yfov, aspect, self.terrain.height)
 
     def figure_feet(self, slot: int, feet: np.ndarray) -> np.ndarray:
         """Where the soldier's figure stands: the server sends a root offset (the figure trails or leads its

@@ -1,4 +1,6 @@
-"""The stub's views (seed 002, 4.1–4.3): bird's eye, SOLDIER CAM (tethered), overhead, fly.
+"""The stub's views (seed 002, 4.1–4.3): bird's eye, SOLDIER CAM (tethered), overhead, fly; and ours,
+ACTION CAM, which frames the current soldier and the soldiers near him (:func:`frame_points`: every one of
+them inside the picture, as close as that allows), follows them smoothly and rises over what hides them.
 
 The tethered camera keeps a distance and an azimuth relative to the current soldier's heading (azimuth 0
 is behind him) and an elevation; keys move it away/towards by 5 m and swing it by 10°. ``o`` raises it
@@ -9,6 +11,7 @@ own -Z with +Y up, in Performer axes (+Z up).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -20,6 +23,13 @@ TETHER_ELEVATION = 15.0  # degrees: the normal tethered view
 OVERHEAD_ELEVATION = 85.0
 MIN_DISTANCE = 2.0
 LOOK_HEIGHT = 1.0  # metres above the feet the tethered camera looks at
+ACTION_RADIUS_M = 10.0  # ACTION CAM frames the soldiers this near the current one
+ACTION_EASE = 0.2  # fraction of the way to its new framing the ACTION CAM moves each frame
+ACTION_CUT_M = 15.0  # ... unless that moved this far: then it cuts there (no glide over empty ground)
+ACTION_COMPASS = 200.0  # ACTION CAM looks from this compass direction (south-south-west) ...
+ACTION_ELEVATION = 35.0  # ... and this many degrees above the horizon
+SOLDIER_HEIGHT_M = 1.9
+ACTION_TURN_SECONDS = 10.0  # a touring ACTION CAM turns to a soldier of the next force this often
 
 
 class View(Enum):
@@ -27,6 +37,7 @@ class View(Enum):
     SOLDIER_CAM = "SOLDIER CAM"
     OVERHEAD = "overhead"
     FLY = "fly"
+    ACTION = "ACTION CAM"
 
 
 @dataclass
@@ -38,6 +49,12 @@ class CameraState:
     fly_position: np.ndarray = field(default_factory=lambda: np.array([0.0, -60.0, 20.0]))
     fly_heading: float = 0.0
     fly_pitch: float = -15.0
+    action: np.ndarray | None = None  # ACTION CAM's eased box (low x y z, high x y z); None: jump to the next
+    action_tour: bool = False  # ACTION CAM turns from force to force (replays); keys that move it stop it
+
+    def action_view(self) -> None:
+        self.view = View.ACTION
+        self.action = None
 
     def tether(self) -> None:
         self.view = View.SOLDIER_CAM
@@ -78,6 +95,98 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray | None = None) -
     pose = np.eye(4)
     pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, -f, eye
     return pose
+
+
+def perspective(yfov_deg: float, aspect: float, znear: float = 0.2, zfar: float = 2000.0) -> np.ndarray:
+    """OpenGL projection matrix (pyrender's ``PerspectiveCamera``)."""
+    t = 1.0 / np.tan(np.radians(yfov_deg) / 2)
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = t / aspect, t
+    m[2, 2], m[2, 3] = (zfar + znear) / (znear - zfar), 2 * zfar * znear / (znear - zfar)
+    m[3, 2] = -1.0
+    return m
+
+
+def viewproj(pose: np.ndarray, yfov_deg: float, aspect: float) -> np.ndarray:
+    """World → clip for a camera-to-world ``pose``."""
+    return perspective(yfov_deg, aspect) @ np.linalg.inv(np.asarray(pose, np.float64))
+
+
+def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The 8 corners of the axis-aligned box ``lo``..``hi``."""
+    return np.array(
+        [[(hi if i & 1 else lo)[0], (hi if i & 2 else lo)[1], (hi if i & 4 else lo)[2]] for i in range(8)]
+    )
+
+
+def frame_points(
+    points: np.ndarray,
+    yfov_deg: float,
+    aspect: float,
+    compass: float = ACTION_COMPASS,
+    elevation: float = ACTION_ELEVATION,
+    min_distance: float = 4.0,
+    fill: float = 0.85,
+) -> np.ndarray:
+    """The camera pose that looks from ``compass``/``elevation`` at the middle of ``points`` (n, 3) from as
+    close as keeps every one of them inside the middle ``fill`` of the picture (each point's own depth)."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    centre = (p.min(axis=0) + p.max(axis=0)) / 2
+    el = np.radians(elevation)
+    back = np.cos(el) * coords.compass_to_direction(compass) + np.array([0.0, 0.0, np.sin(el)])
+    axes = look_at(back, np.zeros(3))[:3, :3]  # columns: right, up, backwards
+    q = (p - centre) @ axes
+    tan_y = fill * np.tan(np.radians(yfov_deg) / 2)
+    tan_x = aspect * tan_y
+    need = np.maximum(np.abs(q[:, 0]) / tan_x, np.abs(q[:, 1]) / tan_y) + q[:, 2]  # depth = d - q_back
+    distance = max(min_distance, float(need.max()))
+    return look_at(centre + distance * back, centre)
+
+
+def clear_pose(
+    points: np.ndarray,
+    yfov_deg: float,
+    aspect: float,
+    height: Callable[[np.ndarray], np.ndarray] | None = None,
+    elevations: tuple[float, ...] = (ACTION_ELEVATION, 50.0, 65.0, 80.0),
+) -> np.ndarray:
+    """:func:`frame_points` at the lowest of ``elevations`` from which the line of sight to the middle
+    clears the ground and the roofs (``height``: ground height under (n, 2) points), else the highest."""
+    pose = frame_points(points, yfov_deg, aspect)
+    if height is None:
+        return pose
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    centre = (p.min(axis=0) + p.max(axis=0)) / 2
+    t = np.linspace(0.0, 0.9, 19)[:, None]
+    for elevation in elevations:
+        pose = frame_points(points, yfov_deg, aspect, elevation=elevation)
+        sight = pose[:3, 3] + t * (centre - pose[:3, 3])
+        if np.all(height(sight[:, :2]) < sight[:, 2] - 0.3):
+            break
+    return pose
+
+
+def action_pose(
+    state: CameraState,
+    points: np.ndarray,
+    yfov_deg: float,
+    aspect: float,
+    height: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> np.ndarray:
+    """ACTION CAM: eases ``state.action`` (a box: low and high corner) towards the box of ``points`` (the
+    soldiers in the action; a cut when they are elsewhere) and frames its corners from where the ground does
+    not hide them."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    target = np.concatenate([p.min(axis=0), p.max(axis=0)])
+    middle = (target[:3] + target[3:]) / 2
+    if (
+        state.action is None
+        or np.linalg.norm((state.action[:3] + state.action[3:]) / 2 - middle) > ACTION_CUT_M
+    ):
+        state.action = target
+    else:
+        state.action = state.action + ACTION_EASE * (target - state.action)
+    return clear_pose(box_corners(state.action[:3], state.action[3:]), yfov_deg, aspect, height)
 
 
 def tethered_eye(state: CameraState, feet: np.ndarray, heading: float) -> tuple[np.ndarray, np.ndarray]:

@@ -11,6 +11,7 @@ reckoning agree.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,8 +21,8 @@ from client_stub.stub.app import StubApp
 
 # (seconds into a 40 s tour, keys pressed then)
 TOUR: tuple[tuple[float, tuple[str, ...]], ...] = (
-    (0.0, ("b",)),
-    (2.0, ("c",)),
+    (0.0, ("x", "?")),
+    (2.0, ("?", "c")),
     (3.5, ("6",)),
     (5.0, ("i", "i", "i")),
     (6.0, ("3",)),
@@ -39,7 +40,7 @@ TOUR: tuple[tuple[float, tuple[str, ...]], ...] = (
     (30.0, ("1",)),
     (33.0, ("2", "n")),
     (35.0, ("n", "u")),
-    (37.5, ("b",)),
+    (37.5, ("x",)),
 )
 TOUR_SECONDS = 40.0
 
@@ -83,8 +84,10 @@ def run_headless(
     realtime: bool = False,
     tour: bool = True,
     quiet: bool = True,
+    progress: Callable[[float, float], None] | None = None,
 ) -> dict:
-    """Render ``seconds`` of the stub to ``out`` (``.mp4``/``.gif`` video, or ``.png``: the last frame)."""
+    """Render ``seconds`` of the stub to ``out`` (``.mp4``/``.gif`` video, or ``.png``: the last frame);
+    ``progress(t, seconds)`` after each frame (a progress bar)."""
     import imageio.v2 as imageio
 
     renderer = app.renderer
@@ -128,7 +131,11 @@ def run_headless(
         rendered += 1
         if video:
             frames.append(frame)
+        if progress is not None:
+            progress(t, seconds)
     wall = time.perf_counter() - start
+    if progress is not None and not app.gave_up:
+        progress(seconds, seconds)  # done (the last frame shows t = seconds - 1/fps)
     if video and frames:
         # a real-time run plays back at the rate it achieved, so the video's time is the scene's time
         rate = fps if not realtime else max(1.0, min(fps, rendered / max(wall, 1e-6)))

@@ -3,8 +3,9 @@
 No window is needed: :meth:`StubController.handle` takes a key name (``"1"``, ``"n"``, ``"UP"``, ...) and
 changes the :class:`~client_stub.stub.simsoldier.SimSoldiers` (whose next entity requests carry the change)
 and the :class:`~client_stub.stub.camera.CameraState`; it returns the line to show, if any. The seed's keys
-come first; the View menu of 1994's ``pickfly`` is keys ``b`` / ``c`` / ``f`` / ``v`` here, and fly mode moves
-with ``w`` ``s`` ``q`` ``e`` ``r`` ``g`` (our additions, listed by ``?`` too).
+come first; the View menu of 1994's ``pickfly`` is keys ``b`` / ``c`` / ``f`` / ``v`` here, ``x`` is our
+ACTION CAM (the current soldier and those near him, framed), and fly mode moves with ``w`` ``s`` ``q`` ``e``
+``r`` ``g`` (our additions, listed by ``?`` too).
 """
 
 from __future__ import annotations
@@ -38,8 +39,9 @@ KEY_HELP: tuple[tuple[str, str], ...] = (
     ("o or O", "Move tethered camera to OVERHEAD view on current soldier."),
     ("Left, Right Arrows", "Change heading -10 or +10 degrees on current soldier."),
     ("Up, Down Arrows", "Change velocity +0.5 or -0.5 meters/second on current soldier."),
-    ("?", "Prints a list of keyboard commands to the stdout (console)."),
+    ("?", "Prints a list of keyboard commands to the stdout (console); shows or hides them on screen."),
     ("b / c / f / v", "View: bird's eye / SOLDIER CAM / fly / next view."),
+    ("x", "View: ACTION CAM, the current soldier and the soldiers near him."),
     ("w s q e r g", "Fly: forward, back 5 m; turn -10, +10 degrees; up, down 2 m."),
 )
 
@@ -47,7 +49,7 @@ _APPEARANCE = {"1": Appearance.DEAD, "2": Appearance.UPRIGHT, "3": Appearance.KN
 _WEAPON = {"5": WeaponState.DEPLOYED, "6": WeaponState.FIRING}
 _FLY = {"w": (CAMERA_STEP, 0.0, 0.0), "s": (-CAMERA_STEP, 0.0, 0.0), "q": (0.0, 0.0, -SWING_STEP),
         "e": (0.0, 0.0, SWING_STEP), "r": (0.0, 2.0, 0.0), "g": (0.0, -2.0, 0.0)}  # fmt: skip
-_VIEWS = [View.BIRDS_EYE, View.SOLDIER_CAM, View.OVERHEAD, View.FLY]
+_VIEWS = [View.BIRDS_EYE, View.SOLDIER_CAM, View.OVERHEAD, View.FLY, View.ACTION]
 
 
 def help_text() -> str:
@@ -103,7 +105,7 @@ class StubController:
             return self._tether(k)
         if k == "?":
             return help_text()
-        if k in ("b", "c", "f", "v"):
+        if k in ("b", "c", "f", "v", "x"):
             return self._view(k)
         if k in _FLY and self.camera.view is View.FLY:
             self.camera.fly(*_FLY[k])
@@ -147,6 +149,9 @@ class StubController:
             cam.tether()
         elif k == "f":
             cam.view = View.FLY
+        elif k == "x":
+            cam.action_view()
         else:
             cam.view = _VIEWS[(_VIEWS.index(cam.view) + 1) % len(_VIEWS)]
+            cam.action = None
         return f"view: {cam.view.value}"

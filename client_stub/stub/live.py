@@ -19,15 +19,13 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from client_stub.link.client import LinkError
+from client_stub.link.retry import BACKOFF, RetrySchedule
 from client_stub.stub.app import DEFAULT_FIGURE, WEAPONS, StubApp
 from client_stub.stub.jack import JackProc, JackSoldier
 from client_stub.stub.simsoldier import Behaviour, Force
 from protocol.entity import Appearance, WeaponState
 
 log = logging.getLogger("ttes.stub")
-
-
-BACKOFF = (0.5, 1.0, 2.0, 4.0, 8.0)  # stub seconds between reconnection attempts (the last repeats)
 
 
 class LiveSoldiers:
@@ -43,12 +41,16 @@ class LiveSoldiers:
     ) -> None:
         self.jack: JackProc | None = None
         self.reconnect = reconnect  # a new connected JackProc (LinkError when no server answers)
-        self.give_up_after = give_up_after
         self.ready_timeout = ready_timeout
-        self.backoff = tuple(backoff)
-        self._lost_at: float | None = None  # stub time the reconnection attempts began
-        self._attempt = 0
-        self._next_try = 0.0
+        self.retry = RetrySchedule(backoff, give_up_after)  # in stub time
+
+    @property
+    def give_up_after(self) -> float:
+        return self.retry.give_up_after
+
+    @give_up_after.setter
+    def give_up_after(self, seconds: float) -> None:
+        self.retry.give_up_after = seconds
 
     @property
     def link(self) -> JackProc | None:
@@ -122,18 +124,12 @@ class LiveSoldiers:
     def _try_again(self, app: StubApp) -> None:
         """One reconnection attempt when the backoff says so; give up after ``give_up_after``."""
         now = app.time
-        if self._lost_at is None:
-            self._lost_at, self._attempt = now, 0
-            self._next_try = now + self.backoff[0]
-            return
-        if now - self._lost_at > self.give_up_after:
-            app.gave_up = f"gave up after {now - self._lost_at:.0f} s without a server ({app.server_lost})"
+        if self.retry.out_of_time(now):
+            app.gave_up = self.retry.gave_up_message(now, app.server_lost)
             log.error("%s", app.gave_up)
             return
-        if now < self._next_try:
+        if not self.retry.due(now):
             return
-        self._attempt += 1
-        self._next_try = now + self.backoff[min(self._attempt, len(self.backoff) - 1)]
         assert self.reconnect is not None
         try:
             jack = self.reconnect()
@@ -141,7 +137,7 @@ class LiveSoldiers:
             log.info("reconnecting: %s", exc)
             return
         if self.connect(app, jack, self.ready_timeout):
-            self._lost_at = None
+            self.retry.reset()
             app.regain_server()
         else:
             self.lose_server()

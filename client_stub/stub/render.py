@@ -21,7 +21,10 @@ import numpy as np
 import pyrender
 import trimesh
 
+from client_stub.stub.camera import viewproj
+from client_stub.stub.overlay import Overlay
 from client_stub.stub.scene_graph import EntityLayout, SegmentGeometry
+from client_stub.stub.shadow import shadow_disc, shadow_matrices
 from client_stub.stub.simsoldier import Force
 
 FORCE_UNIFORMS: dict[int, tuple[float, float, float] | None] = {
@@ -29,6 +32,10 @@ FORCE_UNIFORMS: dict[int, tuple[float, float, float] | None] = {
     Force.OPPOSING: (0.50, 0.10, 0.14),  # maroon: far from olive, skin and the sky
 }
 SKY = (0.62, 0.74, 0.88)
+AMBIENT = (0.35, 0.35, 0.38)
+SUN = ((1.0, 0.97, 0.9), 3.2)  # colour, intensity; from compass 35°, 55° up
+FILL = ((0.8, 0.85, 1.0), 1.0)  # from compass -150°, 35° up
+FILL_AT = (-150.0, 35.0)
 HIDDEN = np.zeros((1, 4, 4), np.float32)  # an instance pose that draws nothing (all vertices at one point)
 
 
@@ -53,13 +60,14 @@ def _material(rgb: np.ndarray) -> pyrender.MetallicRoughnessMaterial:
     )
 
 
-def segment_primitives(
+def segment_arrays(
     geom: SegmentGeometry, uniform: np.ndarray | None, force_colour: tuple[float, float, float] | None
-) -> list[pyrender.Primitive]:
-    """One primitive per segment (one draw call per body part): smooth normals within each attribute,
-    attribute colours as vertex colours, the uniform recoloured for the force."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """A segment's indexed mesh as every back end draws it: positions, normals (smooth within each
+    attribute), RGB colours (attribute colours, the uniform recoloured for the force) and triangle indices;
+    None for a segment without triangles."""
     if not len(geom.triangles):
-        return []
+        return None
     diffuse = geom.diffuse if len(geom.diffuse) else np.full((1, 3), 0.7)
     if force_colour is not None and uniform is not None:
         diffuse = np.where(
@@ -80,15 +88,31 @@ def segment_primitives(
         )
         positions.append(geom.vertices[used])
         normals.append(n)
-        colours.append(np.column_stack([c, np.ones(len(used))]))
+        colours.append(c)
         indices.append(inverse.reshape(-1, 3) + base)
         base += len(used)
+    return (
+        np.concatenate(positions).astype(np.float32),
+        np.concatenate(normals).astype(np.float32),
+        np.concatenate(colours).astype(np.float32),
+        np.concatenate(indices).astype(np.uint32),
+    )
+
+
+def segment_primitives(
+    geom: SegmentGeometry, uniform: np.ndarray | None, force_colour: tuple[float, float, float] | None
+) -> list[pyrender.Primitive]:
+    """One primitive per segment (one draw call per body part) of :func:`segment_arrays`."""
+    arrays = segment_arrays(geom, uniform, force_colour)
+    if arrays is None:
+        return []
+    positions, normals, colours, indices = arrays
     return [
         pyrender.Primitive(
-            positions=np.concatenate(positions).astype(np.float32),
-            normals=np.concatenate(normals).astype(np.float32),
-            color_0=np.concatenate(colours).astype(np.float32),
-            indices=np.concatenate(indices).astype(np.uint32),
+            positions=positions,
+            normals=normals,
+            color_0=np.column_stack([colours, np.ones(len(colours), np.float32)]),
+            indices=indices,
             material=_material(np.ones(3)),
             poses=HIDDEN,
         )
@@ -118,6 +142,14 @@ class SoldierMeshes:
             mesh = pyrender.Mesh(prims, name=f"{geom.figure}.{geom.segment}")
             self.nodes.append(scene.add(mesh, name=f"{geom.figure}.{geom.segment}/{force}"))
             self.parts.append(_Part(node, prims))
+        positions, colours, indices = shadow_disc()
+        blend = pyrender.MetallicRoughnessMaterial(
+            baseColorFactor=(1.0, 1.0, 1.0, 1.0), alphaMode="BLEND", doubleSided=True
+        )
+        self.shadow = pyrender.Primitive(
+            positions=positions, color_0=colours, indices=indices, material=blend, poses=HIDDEN
+        )
+        self.nodes.append(scene.add(pyrender.Mesh([self.shadow], name="shadow"), name=f"shadow/{force}"))
         self.count = 0
 
     def update(self, world: np.ndarray) -> None:
@@ -127,6 +159,7 @@ class SoldierMeshes:
             poses = world[:, part.node].astype(np.float32) if len(world) else HIDDEN
             for prim in part.primitives:
                 prim.poses = poses
+        self.shadow.poses = shadow_matrices(world).astype(np.float32) if len(world) else HIDDEN
 
     @staticmethod
     def upload(primitives: list[pyrender.Primitive]) -> None:
@@ -141,7 +174,7 @@ class SoldierMeshes:
             glBufferData(GL_ARRAY_BUFFER, data.nbytes, data, GL_DYNAMIC_DRAW)
 
     def primitives(self) -> list[pyrender.Primitive]:
-        return [p for part in self.parts for p in part.primitives]
+        return [p for part in self.parts for p in part.primitives] + [self.shadow]
 
 
 def terrain_nodes(scene: pyrender.Scene, meshes: dict[str, trimesh.Trimesh]) -> list[pyrender.Node]:
@@ -164,16 +197,18 @@ class StubRenderer:
     def __init__(
         self, width: int = 640, height: int = 480, offscreen: bool = True, yfov_deg: float = 50.0
     ) -> None:
-        self.width, self.height = width, height
-        self.scene = pyrender.Scene(bg_color=(*SKY, 1.0), ambient_light=(0.35, 0.35, 0.38))
+        self.width, self.height, self.yfov_deg = width, height, yfov_deg
+        self.overlay: Overlay | None = None
+        self.shadows = True  # blob shadows under the soldiers
+        self.scene = pyrender.Scene(bg_color=(*SKY, 1.0), ambient_light=AMBIENT)
         self.camera = pyrender.PerspectiveCamera(
             yfov=np.radians(yfov_deg), znear=0.2, zfar=2000.0, aspectRatio=width / height
         )
         self.camera_node = self.scene.add(self.camera, pose=np.eye(4), name="camera")
-        sun = pyrender.DirectionalLight(color=(1.0, 0.97, 0.9), intensity=3.2)
-        self.scene.add(sun, pose=_sun_pose(), name="sun")
-        fill = pyrender.DirectionalLight(color=(0.8, 0.85, 1.0), intensity=1.0)
-        self.scene.add(fill, pose=_sun_pose(azimuth=-150.0, elevation=35.0), name="fill")
+        sun = pyrender.DirectionalLight(color=SUN[0], intensity=SUN[1])
+        self.scene.add(sun, pose=sun_pose(), name="sun")
+        fill = pyrender.DirectionalLight(color=FILL[0], intensity=FILL[1])
+        self.scene.add(fill, pose=sun_pose(*FILL_AT), name="fill")
         self.soldiers: dict[tuple[int, int], SoldierMeshes] = {}
         self._offscreen = pyrender.OffscreenRenderer(width, height) if offscreen else None
 
@@ -192,6 +227,8 @@ class StubRenderer:
     def upload(self) -> None:
         """Instance poses into GL (context current)."""
         for meshes in self.soldiers.values():
+            if not self.shadows:
+                meshes.shadow.poses = HIDDEN
             SoldierMeshes.upload(meshes.primitives())
 
     def render(self) -> np.ndarray:
@@ -201,7 +238,11 @@ class StubRenderer:
         self._offscreen._platform.make_current()
         self.upload()
         colour, _ = self._offscreen.render(self.scene)
-        return np.asarray(colour)
+        frame = np.asarray(colour)
+        if self.overlay is not None:
+            pose = self.scene.get_pose(self.camera_node)
+            frame = self.overlay.draw(frame, viewproj(pose, self.yfov_deg, self.width / self.height))
+        return frame
 
     def close(self) -> None:
         """Free the GL objects and our context. With EGL the display is left alone: pyrender's own
@@ -225,7 +266,7 @@ class StubRenderer:
         platform._egl_display = None  # so pyrender's __del__ -> delete() cannot terminate the shared display
 
 
-def _sun_pose(azimuth: float = 35.0, elevation: float = 55.0) -> np.ndarray:
+def sun_pose(azimuth: float = 35.0, elevation: float = 55.0) -> np.ndarray:
     """A directional light shining down from compass ``azimuth`` at ``elevation`` degrees."""
     az, el = np.radians(azimuth), np.radians(elevation)
     towards_sun = np.array([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)])

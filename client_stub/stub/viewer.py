@@ -2,8 +2,9 @@
 
 Characters arrive through ``on_text`` (so ``A`` and ``a``, ``?`` work with any keyboard layout), the arrows
 through ``on_key_press``; both go to :meth:`StubApp.handle_key`, whose messages are printed to the console,
-as the seed's ``?`` list is. The simulation steps on a pyglet clock; drawing uploads the instance poses and
-renders the scene. Escape closes the window.
+as the seed's ``?`` list is. The simulation steps on a pyglet clock; drawing uploads the instance poses,
+renders the scene and blends the overlay (labels, caption, the keys while ``?`` shows them) over it.
+Escape closes the window.
 """
 
 from __future__ import annotations
@@ -23,9 +24,11 @@ def make_window(app: StubApp, width: int = 800, height: int = 600, fps: float = 
     import pyrender
     from pyglet.window import key as keys
 
+    from client_stub.stub.render import StubRenderer
+
     stub_renderer = app.renderer
-    if stub_renderer is None:
-        raise RuntimeError("StubApp has no renderer")
+    if not isinstance(stub_renderer, StubRenderer):
+        raise RuntimeError("the window draws with the pyrender StubRenderer")
     # pyglet.gl.Config is the platform's concrete class at run time; mypy sees the abstract base that
     # pyglet's first (documentation-build) import branch names.
     configs = [
@@ -59,6 +62,7 @@ def make_window(app: StubApp, width: int = 800, height: int = 600, fps: float = 
         window.clear()
         stub_renderer.upload()
         renderer.render(scene, pyrender.RenderFlags.NONE)
+        _draw_overlay(stub_renderer, window)
 
     @window.event
     def on_text(text: str) -> None:
@@ -92,6 +96,29 @@ def make_window(app: StubApp, width: int = 800, height: int = 600, fps: float = 
     app.frame(0.0)
     app.draw()
     return window
+
+
+def _draw_overlay(stub_renderer: Any, window: Any) -> None:
+    """The labels, caption and keys (``?``) over pyrender's picture: one premultiplied RGBA image blitted
+    with blending (pyrender sets its own GL state again for the next frame)."""
+    import pyglet
+    from pyglet import gl
+
+    from client_stub.stub.camera import viewproj
+
+    overlay = stub_renderer.overlay
+    if overlay is None:
+        return
+    w, h = window.get_framebuffer_size()
+    pose = stub_renderer.scene.get_pose(stub_renderer.camera_node)
+    rgba = overlay.rgba(w, h, viewproj(pose, stub_renderer.yfov_deg, w / max(h, 1)))
+    image = pyglet.image.ImageData(w, h, "RGBA", np.ascontiguousarray(rgba[::-1]).tobytes())
+    gl.glDisable(gl.GL_DEPTH_TEST)
+    gl.glEnable(gl.GL_BLEND)
+    gl.glBlendFunc(gl.GL_ONE, gl.GL_ONE_MINUS_SRC_ALPHA)
+    gl.glViewport(0, 0, w, h)
+    window.projection = pyglet.math.Mat4.orthogonal_projection(0, w, 0, h, -1, 1)
+    image.blit(0, 0)
 
 
 def _show_server(app: StubApp, window: Any, shown: list[str]) -> None:

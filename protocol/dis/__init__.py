@@ -1,5 +1,6 @@
-"""DIS (IEEE 1278.1) for TTES: Entity State / Fire / Detonation codecs, batch decoding, lifeform
-appearance and TTES tokens, WGS84 frames, dead reckoning, logfile readers and synthetic exercises.
+"""DIS (IEEE 1278.1) for TTES: Entity State (and Update), Remove Entity, Fire, Detonation codecs, batch
+decoding, lifeform appearance and TTES tokens, WGS84 frames, dead reckoning, logfile readers and synthetic
+exercises.
 
 Sans-IO and pure: bytes and numpy arrays in, dataclasses and arrays out. See docs/DIS.md.
 """
@@ -37,6 +38,13 @@ from protocol.dis.entity_state import (
     make_marking,
 )
 from protocol.dis.entity_type import RIFLE_FIGURES, is_lifeform, rifle_code, rifle_figure
+from protocol.dis.entity_update import (
+    EntityStateUpdatePdu,
+    UpdateBases,
+    decode_entity_update,
+    encode_entity_update,
+    entity_keys,
+)
 from protocol.dis.errors import DisError
 from protocol.dis.geo import (
     LocalFrame,
@@ -47,6 +55,13 @@ from protocol.dis.geo import (
 )
 from protocol.dis.logfile import DisLog, PduStatus, read_bytes, read_datagrams, read_log
 from protocol.dis.pdu import DEFAULT_PORT, PduType
+from protocol.dis.remove_entity import (
+    DisEvent,
+    RemoveEntity,
+    RemoveEntityPdu,
+    decode_remove_entity,
+    encode_remove_entity,
+)
 from protocol.dis.tokens import TOKEN_DTYPE, translate
 from protocol.dis.warfare import (
     DetonationPdu,
@@ -67,11 +82,13 @@ __all__ = [
     "VARIABLE_PARAMETER_DTYPE",
     "DetonationPdu",
     "DisError",
+    "DisEvent",
     "DisLog",
     "DrAlgorithm",
     "EntityId",
     "EntityStateBatch",
     "EntityStatePdu",
+    "EntityStateUpdatePdu",
     "EntityType",
     "FirePdu",
     "Health",
@@ -80,8 +97,11 @@ __all__ = [
     "LocalFrame",
     "PduStatus",
     "PduType",
+    "RemoveEntity",
+    "RemoveEntityPdu",
     "TtesPosture",
     "TtesWeapon",
+    "UpdateBases",
     "VariableParameter",
     "WeaponEvent",
     "WeaponState",
@@ -90,15 +110,20 @@ __all__ = [
     "decode_detonation",
     "decode_entity_state",
     "decode_entity_states",
+    "decode_entity_update",
     "decode_fire",
     "decode_pdu",
+    "decode_remove_entity",
     "ecef_to_geodetic",
     "encode_appearance",
     "encode_detonation",
     "encode_entity_state",
     "encode_entity_states",
+    "encode_entity_update",
     "encode_fire",
     "encode_pdu",
+    "encode_remove_entity",
+    "entity_keys",
     "geodetic_to_ecef",
     "heading_deg",
     "is_lifeform",

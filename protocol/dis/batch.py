@@ -157,6 +157,18 @@ def validate_entity_states(
     ``available`` is how many bytes each PDU may use (defaults to the rest of the buffer). The length field
     must fit, be at least 144 and equal 144 + 16 N.
     """
+    return validate_pdus(u8, offsets, available, PduType.ENTITY_STATE, ESPDU_FIXED_SIZE)
+
+
+def validate_pdus(
+    u8: NDArray[np.uint8],
+    offsets: NDArray[np.integer],
+    available: NDArray[np.int64] | None,
+    pdu_type: int,
+    fixed_size: int,
+) -> tuple[NDArray[np.uint8], NDArray[np.int64]]:
+    """:func:`validate_entity_states` for any PDU of ``fixed_size`` bytes plus 16 N whose N is byte 19
+    (Entity State, Entity State Update): the ``ES_*`` reason codes (``ES_TYPE``: not ``pdu_type``)."""
     offsets = np.asarray(offsets, dtype=np.int64)
     n = offsets.shape[0]
     n_bytes = u8.shape[0]
@@ -170,11 +182,11 @@ def validate_entity_states(
     version = head[:, 0]
     reason = np.where(has_header, ES_OK, ES_TRUNCATED).astype(np.uint8)
     checks = (
-        (ES_TYPE, head[:, 2] != PduType.ENTITY_STATE),
+        (ES_TYPE, head[:, 2] != pdu_type),
         (ES_VERSION, (version < SUPPORTED_VERSIONS[0]) | (version > SUPPORTED_VERSIONS[-1])),
         (ES_TRUNCATED, length > avail),
-        (ES_SHORT, length < ESPDU_FIXED_SIZE),
-        (ES_COUNT, length != ESPDU_FIXED_SIZE + VARIABLE_PARAMETER_SIZE * head[:, 19].astype(np.int64)),
+        (ES_SHORT, length < fixed_size),
+        (ES_COUNT, length != fixed_size + VARIABLE_PARAMETER_SIZE * head[:, 19].astype(np.int64)),
     )
     for code, bad in checks:
         reason[(reason == ES_OK) & bad] = code
@@ -222,20 +234,25 @@ def decode_entity_states(
     else:
         wire = sliding_window_view(u8, ESPDU_FIXED_SIZE)[offsets].view(ESPDU_WIRE_DTYPE).reshape(n)
     records = wire.astype(ESPDU_DTYPE)
-    counts = records["num_params"].astype(np.int64)
-    start = np.zeros(n + 1, np.int64)
+    first = (offsets + ESPDU_FIXED_SIZE).astype(np.int64)
+    return EntityStateBatch(records, *gather_params(u8, first, records["num_params"]))
+
+
+def gather_params(
+    u8: NDArray[np.uint8], first: NDArray[np.int64], counts: NDArray[np.integer]
+) -> tuple[NDArray[np.void], NDArray[np.int64]]:
+    """The 16-byte variable-parameter records of many PDUs (``counts[i]`` of them at ``first[i]``), in one
+    gather: (records in ``VARIABLE_PARAMETER_DTYPE``, CSR ``param_start``)."""
+    counts = np.asarray(counts, np.int64)
+    start = np.zeros(counts.shape[0] + 1, np.int64)
     np.cumsum(counts, out=start[1:])
     total = int(start[-1])
-    if total:
-        first = offsets + ESPDU_FIXED_SIZE
-        at = np.repeat(
-            first - VARIABLE_PARAMETER_SIZE * start[:-1], counts
-        ) + VARIABLE_PARAMETER_SIZE * np.arange(total, dtype=np.int64)
-        rows = sliding_window_view(u8, VARIABLE_PARAMETER_SIZE)[at]
-        params = rows.view(VARIABLE_PARAMETER_WIRE_DTYPE).reshape(total).astype(VARIABLE_PARAMETER_DTYPE)
-    else:
-        params = np.zeros(0, VARIABLE_PARAMETER_DTYPE)
-    return EntityStateBatch(records, params, start)
+    if not total:
+        return np.zeros(0, VARIABLE_PARAMETER_DTYPE), start
+    step = VARIABLE_PARAMETER_SIZE * np.arange(total, dtype=np.int64)
+    at = np.repeat(first - VARIABLE_PARAMETER_SIZE * start[:-1], counts) + step
+    rows = sliding_window_view(u8, VARIABLE_PARAMETER_SIZE)[at]
+    return rows.view(VARIABLE_PARAMETER_WIRE_DTYPE).reshape(total).astype(VARIABLE_PARAMETER_DTYPE), start
 
 
 def pdu_lengths(batch: EntityStateBatch) -> NDArray[np.int64]:

@@ -3,11 +3,12 @@ events (the shape of :data:`protocol.messages.CODECS`).
 
 A decoder gets every PDU of its type in a log at once (:class:`PduRows`: offsets, lengths, versions, times
 and the rows of the PDU index they are) and yields what it found: :class:`EntityStates` (one vectorised
-batch), :class:`Weapon` (a Fire or Detonation event), :class:`Skipped` (rows with a status, e.g. an
-unsupported version) or :class:`Corrupt` (a row and its located :class:`DisError`). The log reader
-(:mod:`protocol.dis.logfile`) dispatches on them with ``match`` and derives every counter from what came back.
-To read one more PDU type, write its decoder and add it to :data:`DECODERS`; a type without one is counted
-as ``other_pdus``.
+batch), :class:`EntityUpdates` (Entity State Update PDUs, still to be put on top of their entities' Entity
+State PDUs), :class:`Event` (a Fire, Detonation or Remove Entity event), :class:`Skipped` (rows with a
+status, e.g. an unsupported version) or :class:`Corrupt` (a row and its located :class:`DisError`). The log
+reader (:mod:`protocol.dis.logfile`) dispatches on them with ``match`` and derives every counter from what
+came back. To read one more PDU type, write its decoder and add it to :data:`DECODERS`; a type without one
+is counted as ``other_pdus``.
 """
 
 from __future__ import annotations
@@ -26,11 +27,14 @@ from protocol.dis.batch import (
     EntityStateBatch,
     decode_entity_states,
     validate_entity_states,
+    validate_pdus,
 )
 from protocol.dis.entity_type import is_lifeform
+from protocol.dis.entity_update import ESU_FIXED_SIZE, ESU_REASONS, decode_entity_updates
 from protocol.dis.errors import DisError
 from protocol.dis.pdu import SUPPORTED_VERSIONS, PduType
-from protocol.dis.warfare import WeaponEvent, weapon_event
+from protocol.dis.remove_entity import DisEvent, remove_event
+from protocol.dis.warfare import weapon_event
 
 I64 = NDArray[np.int64]
 
@@ -42,6 +46,8 @@ class PduStatus(IntEnum):
     EVENT = 3  # Fire / Detonation, in events
     CORRUPT = 4  # reported in issues
     UNSUPPORTED_VERSION = 5  # Entity State / Fire / Detonation of a DIS version other than 5, 6, 7
+    OTHER_EXERCISE = 6  # a PDU of an exercise other than the one asked for (``exercise=``), not decoded
+    NO_BASE = 7  # an Entity State Update of an entity whose (kept) Entity State PDU was not seen before it
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,9 +83,18 @@ class EntityStates:
 
 
 @dataclass(frozen=True, slots=True)
-class Weapon:
+class EntityUpdates:
+    """Decoded Entity State Update PDUs as partial records (:func:`~protocol.dis.entity_update.
+    decode_entity_updates`); ``rows`` their index rows."""
+
+    batch: EntityStateBatch
+    rows: I64
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
     row: int
-    event: WeaponEvent
+    event: DisEvent
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,7 +109,7 @@ class Corrupt:
     error: DisError  # offset in the buffer, record = the segment
 
 
-Decoded = EntityStates | Weapon | Skipped | Corrupt
+Decoded = EntityStates | EntityUpdates | Event | Skipped | Corrupt
 PduDecoder = Callable[[PduRows], Iterator[Decoded]]
 
 
@@ -116,27 +131,48 @@ def entity_state(p: PduRows) -> Iterator[Decoded]:
     yield EntityStates(kept, rows[keep], int(life.sum()), int((~life).sum()), rows[~keep])
 
 
-def _weapon(p: PduRows) -> Iterator[Decoded]:
-    """Fire and Detonation PDUs are rare: decoded one by one into events."""
+def entity_state_update(p: PduRows) -> Iterator[Decoded]:
+    """Vectorised header checks, then one gather of every good update (resolved later by the reader)."""
+    reason, field_off = validate_pdus(p.u8, p.offset, p.length, PduType.ENTITY_STATE_UPDATE, ESU_FIXED_SIZE)
+    yield Skipped(p.rows[reason == ES_VERSION], PduStatus.UNSUPPORTED_VERSION)
+    for k in np.flatnonzero((reason != 0) & (reason != ES_VERSION)).tolist():
+        error = DisError(ESU_REASONS[int(reason[k])], int(p.offset[k] + field_off[k]), int(p.segment[k]))
+        yield Corrupt(int(p.rows[k]), error)
+    good = reason == 0
+    yield EntityUpdates(decode_entity_updates(p.u8, p.offset[good]), p.rows[good])
+
+
+def _events(p: PduRows, decode: Callable[[bytes, float], DisEvent]) -> Iterator[Decoded]:
+    """Fire, Detonation and Remove Entity PDUs are rare: decoded one by one into events."""
     for k in range(len(p.rows)):
         if int(p.version[k]) not in SUPPORTED_VERSIONS:
             yield Skipped(p.rows[k : k + 1], PduStatus.UNSUPPORTED_VERSION)
             continue
         o, n = int(p.offset[k]), int(p.length[k])
         try:
-            yield Weapon(int(p.rows[k]), weapon_event(p.data[o : o + n], float(p.t[k])))
+            yield Event(int(p.rows[k]), decode(p.data[o : o + n], float(p.t[k])))
         except DisError as exc:
             yield Corrupt(int(p.rows[k]), DisError(exc.message, o + exc.offset, int(p.segment[k])))
 
 
 def fire(p: PduRows) -> Iterator[Decoded]:
-    yield from _weapon(p)
+    yield from _events(p, weapon_event)
 
 
 def detonation(p: PduRows) -> Iterator[Decoded]:
-    yield from _weapon(p)
+    yield from _events(p, weapon_event)
+
+
+def remove_entity(p: PduRows) -> Iterator[Decoded]:
+    yield from _events(p, remove_event)
 
 
 DECODERS: Mapping[int, PduDecoder] = MappingProxyType(
-    {PduType.ENTITY_STATE: entity_state, PduType.FIRE: fire, PduType.DETONATION: detonation}
+    {
+        PduType.ENTITY_STATE: entity_state,
+        PduType.FIRE: fire,
+        PduType.DETONATION: detonation,
+        PduType.REMOVE_ENTITY: remove_entity,
+        PduType.ENTITY_STATE_UPDATE: entity_state_update,
+    }
 )

@@ -220,16 +220,20 @@ def check_entity_state_header(data: bytes | memoryview) -> int:
     return n
 
 
+def unpack_params(data: bytes, first: int, n: int) -> tuple[VariableParameter, ...]:
+    """The ``n`` 16-byte variable-parameter records from byte ``first`` (Entity State and its Update)."""
+    return tuple(
+        VariableParameter(*_VARPARAM.unpack_from(data, first + VARIABLE_PARAMETER_SIZE * i)) for i in range(n)
+    )
+
+
 def decode_entity_state(data: bytes | memoryview) -> EntityStatePdu:
     """Decode exactly one Entity State PDU (the buffer must be the whole PDU)."""
     data = bytes(data)
     n = check_entity_state_header(data)
     h = HEADER.unpack_from(data, 0)
     b = _BODY.unpack_from(data, HEADER_SIZE)
-    params = tuple(
-        VariableParameter(*_VARPARAM.unpack_from(data, ESPDU_FIXED_SIZE + VARIABLE_PARAMETER_SIZE * i))
-        for i in range(n)
-    )
+    params = unpack_params(data, ESPDU_FIXED_SIZE, n)
     return EntityStatePdu(
         entity_id=EntityId(*b[0:3]),
         force_id=b[3],

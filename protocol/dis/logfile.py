@@ -29,7 +29,7 @@ import binascii
 import io
 import re
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -42,15 +42,17 @@ from protocol.dis.decoders import (
     Corrupt,
     Decoded,
     EntityStates,
+    EntityUpdates,
+    Event,
     PduRows,
     PduStatus,
     Skipped,
-    Weapon,
 )
+from protocol.dis.entity_update import UpdateBases, resolve_updates
 from protocol.dis.errors import DisError
 from protocol.dis.pdu import DEFAULT_PORT, PduType, timestamp_seconds, unwrap_timestamps
+from protocol.dis.remove_entity import DisEvent
 from protocol.dis.scan import scan_segments, scan_stream
-from protocol.dis.warfare import WeaponEvent
 
 FORMATS = ("pcap", "pcapng", "dislog", "raw")
 I64 = NDArray[np.int64]
@@ -80,17 +82,40 @@ class DisLog:
     format: str
     batch: EntityStateBatch
     times: F64
-    events: list[WeaponEvent]
+    events: list[DisEvent]  # Fire, Detonation, Remove Entity, file order
     pdus: NDArray[np.void]  # PDU_INDEX_DTYPE, every DIS PDU in file order
     counters: dict[str, int]
     pdu_types: dict[int, int]
     issues: list[DisError]
     t0: float = 0.0  # receipt time of the first record (packet / line / PDU) of the log
     t_end: float = 0.0
+    exercises: dict[int, int] = field(default_factory=dict)  # PDUs seen per exercise ID (every exercise)
 
     @property
     def duration(self) -> float:
         return max(self.t_end - self.t0, 0.0)
+
+    def not_dis(self) -> str | None:
+        """Why this file is not a DIS log at all (None when it holds DIS, or nothing).
+
+        A log is DIS when one PDU of a type TTES decodes (:data:`DECODERS`) decoded. Without
+        one, it is DIS only if its PDUs of other types outnumber the problems (corrupt records, non-DIS
+        datagrams) ten to one: a radio-only capture is DIS, a text file or an image read as PDUs is not
+        (each of its lines or junk headers is a problem, the few "PDUs" it seems to hold are noise).
+        """
+        st = self.pdus["status"]
+        decoded = np.isin(st, (PduStatus.DECODED, PduStatus.NOT_LIFEFORM, PduStatus.EVENT, PduStatus.NO_BASE))
+        if decoded.any():
+            return None
+        problems = len(self.issues) + self.counters.get("non_dis", 0)
+        others = int(((st == PduStatus.OTHER_TYPE) | (st == PduStatus.OTHER_EXERCISE)).sum())
+        if problems == 0 or others >= 10 * problems:
+            return None
+        first = f" (first: {self.issues[0]})" if self.issues else ""
+        return (
+            f"not a DIS log (pcap, pcapng, .dislog or raw PDUs): read as {self.format}, it holds no PDU that "
+            f"TTES reads, {problems} problem(s){first} and {others} PDU(s) of other types"
+        )
 
     def summary(self) -> dict[str, object]:
         ids = self.batch.records["entity_id"]
@@ -99,6 +124,7 @@ class DisLog:
             "format": self.format,
             **self.counters,
             "pdu_types": {str(k): v for k, v in sorted(self.pdu_types.items())},
+            "exercises": {str(k): v for k, v in sorted(self.exercises.items())},
             "entities": int(np.unique(ids).shape[0]) if len(self.batch) else 0,
             "duration_s": round(self.duration, 6),
             "issues": len(self.issues),
@@ -149,11 +175,14 @@ def read_log(
     port: int | None = DEFAULT_PORT,
     lifeforms_only: bool = True,
     progress: Progress | None = None,
+    exercise: int | None = None,
 ) -> DisLog:
-    """Read a log file (format sniffed unless ``fmt`` says). OSError for unreadable files only."""
+    """Read a log file (format sniffed unless ``fmt`` says). OSError for unreadable files only.
+    ``exercise``: decode only the PDUs of that exercise ID (the others are counted as ``other_exercise``)."""
     p = Path(path)
     data = p.read_bytes()
-    return read_bytes(data, fmt=fmt, port=port, lifeforms_only=lifeforms_only, progress=progress, name=str(p))
+    return read_bytes(data, fmt=fmt, port=port, lifeforms_only=lifeforms_only, progress=progress, name=str(p),
+                      exercise=exercise)  # fmt: skip
 
 
 def read_bytes(
@@ -164,6 +193,7 @@ def read_bytes(
     lifeforms_only: bool = True,
     progress: Progress | None = None,
     name: str = "<bytes>",
+    exercise: int | None = None,
 ) -> DisLog:
     """Read a log from memory. Unknown ``fmt`` or an unreadable capture header raise :class:`DisError`."""
     data = bytes(data)
@@ -186,14 +216,21 @@ def read_bytes(
         )
     else:
         raise DisError(f"unknown log format {fmt!r} (one of {', '.join(FORMATS)})", 0)
-    return _decode(seg, name, fmt, lifeforms_only)
+    return _decode(seg, name, fmt, lifeforms_only, exercise)
 
 
 def read_datagrams(
-    datagrams: Sequence[bytes], now: float, *, lifeforms_only: bool = True, name: str = "<udp>"
+    datagrams: Sequence[bytes],
+    now: float,
+    *,
+    lifeforms_only: bool = True,
+    name: str = "<udp>",
+    exercise: int | None = None,
+    bases: UpdateBases | None = None,
 ) -> DisLog:
     """Decode a burst of UDP payloads received at ``now`` (each one or more PDUs), as a live gateway hears
-    them: records are numbered 1.. in arrival order and every PDU is stamped ``now``."""
+    them: records are numbered 1.. in arrival order and every PDU is stamped ``now``. ``bases``: the last
+    Entity State PDU of each entity from earlier bursts, for this burst's Entity State Updates (updated)."""
     n = len(datagrams)
     sizes = np.fromiter((len(d) for d in datagrams), np.int64, n)
     end = np.cumsum(sizes)
@@ -209,7 +246,7 @@ def read_datagrams(
         t0=float(now),
         t_end=float(now),
     )
-    return _decode(seg, name, "udp", lifeforms_only)
+    return _decode(seg, name, "udp", lifeforms_only, exercise, bases)
 
 
 # --- captures ---------------------------------------------------------------------------------------------
@@ -429,8 +466,16 @@ def _base64_line(s: str) -> bytes:
 # --- the common decoding step -----------------------------------------------------------------------------
 
 
-def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog:
-    """Scan the segments into a PDU index, run each type's decoder (:data:`DECODERS`), collect its events."""
+def _decode(
+    seg: _Segments,
+    name: str,
+    fmt: str,
+    lifeforms_only: bool,
+    exercise: int | None = None,
+    bases: UpdateBases | None = None,
+) -> DisLog:
+    """Scan the segments into a PDU index, run each type's decoder (:data:`DECODERS`) on the PDUs of the
+    wanted exercise, put the Entity State Updates on their entities' states, collect the events."""
     issues = list(seg.issues)
     if seg.stream:
         index, scan_issues = scan_stream(seg.data)
@@ -442,6 +487,8 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
     n = len(index)
     ptype = u8[index.offset + 2] if n else np.zeros(0, np.uint8)
     version = u8[index.offset] if n else np.zeros(0, np.uint8)
+    exercises = u8[index.offset + 1] if n else np.zeros(0, np.uint8)
+    wanted = np.ones(n, bool) if exercise is None else exercises == exercise
     if seg.stream:
         ts = _u32(u8, index.offset + 4) if n else np.zeros(0, np.uint32)
         t = unwrap_timestamps(timestamp_seconds(ts))
@@ -449,8 +496,9 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
     else:
         t = seg.time[index.segment]
     found = _Found(n)
+    found.status[~wanted] = PduStatus.OTHER_EXERCISE
     for pdu_type, decoder in DECODERS.items():
-        rows = np.flatnonzero(ptype == pdu_type)
+        rows = np.flatnonzero((ptype == pdu_type) & wanted)
         if len(rows):
             at = PduRows(
                 seg.data, u8, rows, index.offset[rows], index.length[rows], index.segment[rows],
@@ -458,8 +506,9 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
             )  # fmt: skip
             for decoded in decoder(at):
                 found.add(decoded)
+    found.resolve(bases)
     states, status, batch_index = found.states, found.status, found.batch_index
-    events = [w.event for w in sorted(found.weapons, key=lambda w: w.row)]  # file order
+    events = [w.event for w in sorted(found.events, key=lambda w: w.row)]  # file order
     issues += [_relocate(c.error, seg) for c in sorted(found.corrupt, key=lambda c: c.row)]
     pdus = np.zeros(n, PDU_INDEX_DTYPE)
     pdus["t"] = t
@@ -470,8 +519,10 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
     pdus["version"] = version
     pdus["status"] = status
     pdus["batch_index"] = batch_index
-    type_counts = np.bincount(ptype, minlength=256)
+    type_counts = np.bincount(ptype[wanted], minlength=256)
     types = np.flatnonzero(type_counts)
+    ex_counts = np.bincount(exercises, minlength=256)
+    ex_ids = np.flatnonzero(ex_counts)
     counters = {
         **seg.counters,
         "non_dis": int(non_dis.sum()),
@@ -487,6 +538,7 @@ def _decode(seg: _Segments, name: str, fmt: str, lifeforms_only: bool) -> DisLog
         counters=counters,
         pdu_types=dict(zip(types.tolist(), type_counts[types].tolist(), strict=True)),
         issues=issues,
+        exercises=dict(zip(ex_ids.tolist(), ex_counts[ex_ids].tolist(), strict=True)),
         t0=seg.t0,
         t_end=seg.t_end,
     )
@@ -499,7 +551,8 @@ class _Found:
         self.status = np.full(n, PduStatus.OTHER_TYPE, np.uint8)  # a type without a decoder stays OTHER_TYPE
         self.batch_index = np.full(n, -1, np.int64)
         self.states = EntityStates.empty()  # a log without Entity State PDUs
-        self.weapons: list[Weapon] = []
+        self.updates: EntityUpdates | None = None
+        self.events: list[Event] = []
         self.corrupt: list[Corrupt] = []
 
     def add(self, decoded: Decoded) -> None:
@@ -509,33 +562,58 @@ class _Found:
                 self.status[kept] = PduStatus.DECODED
                 self.status[skipped] = PduStatus.NOT_LIFEFORM
                 self.batch_index[kept] = np.arange(len(kept))
-            case Weapon(row=row):
+            case EntityUpdates():
+                self.updates = decoded
+            case Event(row=row):
                 self.status[row] = PduStatus.EVENT
-                self.weapons.append(decoded)
+                self.events.append(decoded)
             case Skipped(rows=rows, status=why):
                 self.status[rows] = why
             case Corrupt(row=row):
                 self.status[row] = PduStatus.CORRUPT
                 self.corrupt.append(decoded)
 
+    def resolve(self, bases: UpdateBases | None) -> None:
+        """Each Entity State Update on its entity's last Entity State PDU before it (or in ``bases``): one
+        more state, merged in receipt order; an update with nothing to stand on is ``NO_BASE``. ``bases``
+        then learns this log's Entity State PDUs."""
+        st, up = self.states, self.updates
+        if up is not None and len(up.rows):
+            resolved, placed = resolve_updates(st.batch, st.rows, up.batch, up.rows, bases)
+            self.status[up.rows[~placed]] = PduStatus.NO_BASE
+            rows = np.concatenate([st.rows, up.rows[placed]])
+            order = np.argsort(rows, kind="stable")
+            merged = EntityStateBatch.concatenate([st.batch, resolved]).select(order)
+            self.states = replace(st, batch=merged, rows=rows[order])
+            self.status[rows] = PduStatus.DECODED
+            self.batch_index[rows[order]] = np.arange(len(rows))
+        if bases is not None:
+            records = self.states.batch.records
+            bases.learn(records[records["pdu_type"] == PduType.ENTITY_STATE])
+
 
 def _counters(
     ptype: NDArray[np.uint8],
     status: NDArray[np.uint8],
     states: EntityStates,
-    events: list[WeaponEvent],
+    events: list[DisEvent],
     corrupt: int,
 ) -> dict[str, int]:
     """Every counter of a log, derived from the PDU types, their statuses and the decoders' events."""
+    mine = status != PduStatus.OTHER_EXERCISE
     return {
         "pdus": len(ptype),
-        "entity_states": int((ptype == PduType.ENTITY_STATE).sum()),
+        "entity_states": int(((ptype == PduType.ENTITY_STATE) & mine).sum()),
         "lifeforms": states.lifeforms,
         "non_lifeforms": states.non_lifeforms,
         "decoded": len(states.batch),
         "fire": sum(e.kind == "fire" for e in events),
         "detonation": sum(e.kind == "detonation" for e in events),
+        "remove_entity": sum(e.kind == "remove_entity" for e in events),
+        "entity_state_updates": int(((ptype == PduType.ENTITY_STATE_UPDATE) & mine).sum()),
+        "updates_without_base": int((status == PduStatus.NO_BASE).sum()),
         "other_pdus": int((status == PduStatus.OTHER_TYPE).sum()),
+        "other_exercise": int((status == PduStatus.OTHER_EXERCISE).sum()),
         "unsupported_version": int((status == PduStatus.UNSUPPORTED_VERSION).sum()),
         "corrupt": corrupt,
     }

@@ -28,11 +28,14 @@ class PduType(IntEnum):
     ENTITY_STATE = 1
     FIRE = 2
     DETONATION = 3
+    REMOVE_ENTITY = 12
+    ENTITY_STATE_UPDATE = 67
 
 
 class Family(IntEnum):
     ENTITY_INFORMATION = 1
     WARFARE = 2
+    SIMULATION_MANAGEMENT = 5
 
 
 _NAMES = (
@@ -149,6 +152,29 @@ def unpack_header(data: bytes | memoryview, offset: int = 0) -> PduHeader:
     if len(data) - offset < HEADER_SIZE:
         raise DisError(f"need {HEADER_SIZE} header bytes, have {max(len(data) - offset, 0)}", offset)
     return PduHeader(*HEADER.unpack_from(data, offset))
+
+
+def check_header(data: bytes, pdu_type: PduType, minimum: int) -> None:
+    """The checks every one-PDU decoder makes first (type, version, length field = the bytes, at least
+    ``minimum`` bytes); :class:`DisError` at the field's offset."""
+    if len(data) < HEADER_SIZE:
+        raise DisError(f"truncated header: {len(data)} bytes", len(data))
+    if data[2] != pdu_type:
+        raise DisError(f"PDU type {data[2]} is not {pdu_type.name.lower()} ({int(pdu_type)})", 2)
+    if data[0] not in SUPPORTED_VERSIONS:
+        raise DisError(f"protocol version {data[0]} not supported (5, 6, 7)", 0)
+    length = (data[8] << 8) | data[9]
+    if length != len(data):
+        raise DisError(f"length field {length} but {len(data)} bytes", 8)
+    if length < minimum:
+        raise DisError(f"{pdu_type.name.lower()} PDU of {length} bytes is shorter than {minimum}", 8)
+
+
+def header_fields(data: bytes) -> dict[str, int]:
+    """The header's fields a PDU dataclass keeps for byte-exact round trips (keyword arguments)."""
+    h = HEADER.unpack_from(data, 0)
+    return {"version": h[0], "exercise": h[1], "timestamp": h[4], "pdu_status": h[6], "padding": h[7],
+            "family": h[3]}  # fmt: skip
 
 
 def looks_like_dis(version: int, pdu_type: int, length: int) -> bool:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,9 @@ DT = 0.05  # simulation step (s)
 HEARTBEAT = 5.0  # s between Entity State PDUs of an unchanging entity
 DR_POSITION_THRESHOLD = 1.0  # m
 DR_HEADING_THRESHOLD = 3.0  # degrees
-EPOCH = 776_001_600.0  # 1994-08-05 12:00:00 UTC, the date of the seed report
+# receipt time of t = 0: 1994-08-05 12:00:00 UTC, the date of the seed report (MS-CIS-94-42). Written as a
+# date, not a count of seconds: 776_001_600, the count this was before, is 1994-08-04.
+EPOCH = datetime(1994, 8, 5, 12, 0, 0, tzinfo=UTC).timestamp()
 
 FRIENDLY, OPPOSING = 1, 2
 # friendly: USA, new scheme, naval infantry (12), assault rifles (5), M16A2/A3/A4 (41)

@@ -24,7 +24,7 @@ from protocol.dis.entity_state import (
     VariableParameter,
 )
 from protocol.dis.errors import DisError
-from protocol.dis.pdu import HEADER, HEADER_SIZE, SUPPORTED_VERSIONS, Family, PduType
+from protocol.dis.pdu import HEADER, HEADER_SIZE, SUPPORTED_VERSIONS, Family, PduType, check_header
 
 FIRE_SIZE = 96
 DETONATION_FIXED_SIZE = 104
@@ -167,23 +167,9 @@ def encode_detonation(pdu: DetonationPdu) -> bytes:
         raise DisError(f"detonation field out of range: {exc}", 0) from None
 
 
-def _check(data: bytes, pdu_type: PduType, minimum: int) -> None:
-    if len(data) < HEADER_SIZE:
-        raise DisError(f"truncated header: {len(data)} bytes", len(data))
-    if data[2] != pdu_type:
-        raise DisError(f"PDU type {data[2]} is not {pdu_type.name.lower()} ({int(pdu_type)})", 2)
-    if data[0] not in SUPPORTED_VERSIONS:
-        raise DisError(f"protocol version {data[0]} not supported (5, 6, 7)", 0)
-    length = (data[8] << 8) | data[9]
-    if length != len(data):
-        raise DisError(f"length field {length} but {len(data)} bytes", 8)
-    if length < minimum:
-        raise DisError(f"{pdu_type.name.lower()} PDU of {length} bytes is shorter than {minimum}", 8)
-
-
 def decode_fire(data: bytes | memoryview) -> FirePdu:
     data = bytes(data)
-    _check(data, PduType.FIRE, FIRE_SIZE)
+    check_header(data, PduType.FIRE, FIRE_SIZE)
     if len(data) != FIRE_SIZE:
         raise DisError(f"fire PDU of {len(data)} bytes (expected {FIRE_SIZE})", 8)
     h = HEADER.unpack_from(data)
@@ -209,7 +195,7 @@ def decode_fire(data: bytes | memoryview) -> FirePdu:
 
 def decode_detonation(data: bytes | memoryview) -> DetonationPdu:
     data = bytes(data)
-    _check(data, PduType.DETONATION, DETONATION_FIXED_SIZE)
+    check_header(data, PduType.DETONATION, DETONATION_FIXED_SIZE)
     h = HEADER.unpack_from(data)
     b = _DETONATION.unpack_from(data, HEADER_SIZE)
     n = b[33]

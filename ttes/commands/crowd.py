@@ -13,6 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ttes.arguments import UsageError, count, host, output_file, port, positive, size
 from ttes.link_options import add_link_options, link_credentials
 
 
@@ -30,16 +31,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     prep.add_argument("--check", action="store_true", help="exit 1 if the shipped file is not current")
     prep.set_defaults(crowd_func=_prepare)
     p.add_argument("--headless", action="store_true", help="render offscreen (EGL); the only mode so far")
-    p.add_argument("--soldiers", type=int, default=1000)
-    p.add_argument("--seconds", type=float, default=10.0)
-    p.add_argument("--out", metavar="FILE.png|FILE.mp4", help="last frame (.png) or every frame (.mp4)")
-    p.add_argument("--size", default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
+    p.add_argument("--soldiers", type=count(1), default=1000)
+    p.add_argument("--seconds", type=positive, default=10.0)
+    p.add_argument(
+        "--out",
+        type=output_file(".png", ".mp4"),
+        metavar="FILE.png|FILE.mp4",
+        help="last frame (.png) or every frame (.mp4)",
+    )
+    p.add_argument("--size", type=size, default="1280x720", help="image size WIDTHxHEIGHT (default 1280x720)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--offline", action="store_true", help="pose on the client, no server (default)")
     where.add_argument("--spawn-server", action="store_true", help="run a `ttes server` child and use it")
-    where.add_argument("--host", help="use the Jack/TTES server at this address")
-    p.add_argument("--port", type=int, default=7000)
-    p.add_argument("--clients", type=int, default=2, help="connections sharing the soldiers (server mode)")
+    where.add_argument("--host", type=host, help="use the Jack/TTES server at this address")
+    p.add_argument("--port", type=port, default=7000)
+    p.add_argument(
+        "--clients", type=count(1), default=2, help="connections sharing the soldiers (server mode)"
+    )
     p.add_argument("--server-data", choices=("auto", "synthetic", "default"), default="auto")
     p.add_argument("--mix", choices=("realistic", "moving"), default="realistic")
     p.add_argument("--seed", type=int, default=1)
@@ -66,11 +74,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if not NEAR_TIPS.is_file():
         write_near_tips(NEAR_TIPS)
-    try:
-        width, height = (int(v) for v in args.size.lower().split("x"))
-    except ValueError:
-        print(f"ttes crowd: error: bad --size {args.size!r} (want WIDTHxHEIGHT)", file=sys.stderr)
-        return 2
+    width, height = args.size
     pose = None
     if args.camera:
         try:
@@ -86,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         seconds=args.seconds,
         width=width,
         height=height,
-        out=args.out,
+        out=str(args.out) if args.out else None,
         source="server" if server else "offline",
         host=args.host or "127.0.0.1",
         port=args.port,
@@ -103,6 +107,10 @@ def run(args: argparse.Namespace) -> int:
         terrain=args.terrain,
         credentials=link_credentials(args),
     )
+    try:
+        cfg.check()
+    except ValueError as exc:  # options that do not go together (--near beyond --mid)
+        raise UsageError(str(exc)) from None
     try:
         stats = run_crowd(cfg)
     except RuntimeError as exc:

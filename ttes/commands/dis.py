@@ -11,6 +11,8 @@ import argparse
 import sys
 from typing import Any
 
+from ttes.arguments import UsageError, count, port, positive
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("dis", help="read DIS logs and write synthetic DIS exercises", description=__doc__)
@@ -20,11 +22,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     def add_reading(q: argparse.ArgumentParser) -> None:
         q.add_argument("path", help="pcap, pcapng, .dislog or raw PDU file")
         q.add_argument("--json", action="store_true", help="machine-readable output")
-        q.add_argument("--port", type=int, default=3000, help="UDP port of the DIS traffic (default 3000)")
+        q.add_argument("--port", type=port, default=3000, help="UDP port of the DIS traffic (default 3000)")
         q.add_argument("--any-port", action="store_true", help="take DIS from every UDP port")
         q.add_argument(
             "--format", default="auto", choices=("auto", "pcap", "pcapng", "dislog", "raw"), help="log format"
         )
+        q.add_argument("--exercise", type=exercise_id, metavar="N",
+                       help="only the PDUs of DIS exercise N (1..255; default: every exercise)")  # fmt: skip
 
     d = dis.add_parser(
         "dump",
@@ -51,23 +55,44 @@ def register(sub: argparse._SubParsersAction) -> None:
         "broadcasts to port 3000, deterministic for a seed.",
     )
     s.add_argument("--out", required=True, help="output .pcap path")
-    s.add_argument("--soldiers", type=int, default=8, help="number of soldiers (alternating forces)")
-    s.add_argument("--seconds", type=float, default=60.0, help="exercise length (s)")
+    s.add_argument("--soldiers", type=count(1), default=8, help="number of soldiers (alternating forces)")
+    s.add_argument("--seconds", type=positive, default=60.0, help="exercise length (s)")
     s.add_argument("--seed", type=int, default=0, help="random seed")
     s.add_argument("--origin", help="LAT,LON,H of the exercise (default: Quantico MOUT, 38.52,-77.44,60)")
-    s.add_argument("--vehicles", type=int, default=1, help="parked vehicles (non-lifeform traffic)")
+    s.add_argument("--vehicles", type=count(0), default=1, help="parked vehicles (non-lifeform traffic)")
     s.add_argument("--dis-version", type=int, default=7, choices=(5, 6, 7), help="DIS protocol version")
     s.add_argument("--json", action="store_true", help="machine-readable summary")
     s.set_defaults(func=run_synth)
 
 
+def exercise_id(text: str) -> int:
+    """``--exercise N``: a DIS exercise identifier (the header's u8; 0 is not a valid exercise)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 1 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"an exercise ID is 1..255, not {text!r}")
+    return value
+
+
+def not_dis(command: str, path: object, log: Any) -> bool:
+    """Say so on stderr when ``log`` is not DIS at all (a text file, an image): the caller exits 1."""
+    why = log.not_dis()
+    if why is not None:
+        print(f"ttes {command}: {path}: {why}", file=sys.stderr)
+    return why is not None
+
+
 def _origin(text: str | None) -> tuple[float, float, float] | None:
     if not text:
         return None
-    parts = text.split(",")
-    if len(parts) not in (2, 3):
-        raise ValueError(f"--origin wants LAT,LON[,H], not {text!r}")
-    vals = [float(x) for x in parts]
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) not in (2, 3):
+        raise UsageError(f"--origin wants LAT,LON[,H], not {text!r}")
     return (vals[0], vals[1], vals[2] if len(vals) == 3 else 0.0)
 
 
@@ -96,6 +121,7 @@ def _read(args: argparse.Namespace, lifeforms_only: bool = True) -> Any:
             port=None if args.any_port else args.port,
             lifeforms_only=lifeforms_only,
             progress=update,
+            exercise=args.exercise,
         )
     finally:
         if bar is not None:
@@ -135,6 +161,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
     from protocol.dis.entity_type import is_lifeform
     from protocol.dis.geo import heading_deg
     from protocol.dis.logfile import PduStatus
+    from protocol.dis.pdu import PduType
 
     r = log.batch.records
     fields = decode_appearance(r["appearance"])
@@ -159,6 +186,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
         "dr": r["dr_algorithm"].tolist(),
         "params": r["num_params"].tolist(),
         "life": life.tolist(),
+        "update": (r["pdu_type"] == PduType.ENTITY_STATE_UPDATE).tolist(),
     }
     pdus = log.pdus
     t_rel = np.round(pdus["t"] - log.t0, 6).tolist()
@@ -169,6 +197,8 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
         PduStatus.NOT_LIFEFORM: "not_lifeform",
         PduStatus.CORRUPT: "corrupt",
         PduStatus.UNSUPPORTED_VERSION: "unsupported_version",
+        PduStatus.OTHER_EXERCISE: "other_exercise",
+        PduStatus.NO_BASE: "update_without_entity_state",
     }
     for k, st in enumerate(status):
         if st == PduStatus.DECODED:
@@ -196,6 +226,7 @@ def dump_rows(log: Any, attach_events: bool = False) -> list[dict[str, Any]]:
                     "heading_deg": round(cols["heading"][i], 6),
                     "dr_algorithm": cols["dr"][i],
                     "articulations": cols["params"][i],
+                    **({"update": True} if cols["update"][i] else {}),
                 }
             )
             continue
@@ -214,6 +245,8 @@ def run_dump(args: argparse.Namespace) -> int:
     from ttes.output import print_json
 
     log = _read(args, lifeforms_only=not args.all_entities)
+    if not_dis("dis dump", args.path, log):
+        return 1
     rows = dump_rows(log, attach_events=args.events)
     out = sys.stdout
     if args.json:
@@ -260,9 +293,12 @@ def run_info(args: argparse.Namespace) -> int:
 
     from protocol.dis.entity_type import is_lifeform
     from protocol.dis.pdu import pdu_type_name
+    from server.logging import plain
     from ttes.output import print_json
 
     log = _read(args, lifeforms_only=False)
+    if not_dis("dis info", args.path, log):
+        return 1
     r = log.batch.records
     life = is_lifeform(r["entity_type"]["kind"], r["entity_type"]["domain"])
     info = log.summary()
@@ -275,7 +311,7 @@ def run_info(args: argparse.Namespace) -> int:
     else:
         for key, value in info.items():
             if key != "issue_list":
-                print(f"{key:>20}: {value}")
+                print(f"{key:>20}: {plain(value)}")
         for e in info["issue_list"]:
             print(f"{'issue':>20}: {e}")
     return 0
@@ -327,6 +363,10 @@ def run_synth(args: argparse.Namespace) -> int:
             f"wrote {args.out}: {n} packets ({ex.counts['entity_state']} soldier entity states, "
             f"{ex.counts['fire']} fire, {ex.counts['detonation']} detonation, "
             f"{ex.counts['vehicle_entity_state']} vehicle), {len(ex.entities)} soldiers, "
-            f"victim {summary['victim']} at t={ex.t_kill:.1f} s"
+            + (
+                f"victim {':'.join(map(str, summary['victim']))} at t={ex.t_kill:.1f} s"
+                if ex.victim is not None
+                else "no victim"
+            )
         )
     return 0

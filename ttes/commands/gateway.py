@@ -1,11 +1,14 @@
 """`ttes gateway`: live DIS from UDP into the Jack/TTES server (one soldier per lifeform entity).
 
-Listens for DIS on UDP (broadcast or multicast) bound to one interface, loopback by default: --interface
-0.0.0.0 hears broadcasts on every interface, --dis-group joins a multicast group on --interface. Each lifeform
-entity becomes a server soldier (created on first sight, removed after --timeout seconds of silence or when
-deactivated); appearance, velocity and heading become entity requests; Fire PDUs make a standing-still shooter
-fire for a moment. Malformed datagrams, unknown PDU types and bursts are counted in the status line, never
-fatal. Stop with Ctrl-C: the gateway's soldiers are removed from the server.
+Listens for DIS on UDP (broadcast or multicast) bound to one interface, LOOPBACK BY DEFAULT: only senders on
+this machine are heard. To hear an exercise on the LAN: --listen 0.0.0.0 (broadcast DIS, every interface; the
+host's firewall must let UDP --dis-port in), or --dis-group ADDR --listen LOCAL_ADDR (multicast DIS). In a
+container, broadcast DIS needs host networking. --exercise N keeps only exercise N's PDUs. Each lifeform
+entity becomes a server soldier (created on first sight, removed after --timeout seconds of silence, when
+deactivated or by a Remove Entity PDU; Entity State Update PDUs move him too); appearance, velocity and
+heading become entity requests; Fire PDUs make a standing-still shooter fire for a moment. Malformed
+datagrams, unknown PDU types and bursts are counted in the status line, never fatal. Stop with Ctrl-C: the
+gateway's soldiers are removed from the server.
 
 At most 4096 soldiers (the server's default cap per client): entities beyond it are counted (sink_dropped in
 the status lines and the summary), not sent. A lost server is reconnected with backoff and the live soldiers
@@ -21,7 +24,11 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ttes.arguments import host, listen_port, non_negative, port
+from ttes.commands.dis import exercise_id
 from ttes.link_options import add_link_options, link_credentials, link_error
+
+LOOPBACK = "127.0.0.1"
 
 if TYPE_CHECKING:
     from client_stub.dis.gateway import DisGateway
@@ -35,23 +42,32 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--dis-port", type=int, default=3000, help="UDP port to listen on (default 3000)")
-    p.add_argument("--dis-group", metavar="ADDR", help="multicast group to join (default: none)")
-    p.add_argument("--interface", default="127.0.0.1", metavar="ADDR",
-                   help="local address to bind / join on (default 127.0.0.1; 0.0.0.0: all)")  # fmt: skip
-    p.add_argument("--host", help="Jack/TTES server host (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
+    p.add_argument("--dis-port", type=listen_port, default=3000, help="UDP port to listen on (default 3000)")
+    p.add_argument("--dis-group", type=host, metavar="ADDR", help="multicast group to join (default: none)")
+    p.add_argument("--listen", "--interface", dest="interface", type=host, default=LOOPBACK, metavar="ADDR",
+                   help=f"local address to bind / join on (default {LOOPBACK}: this machine only; "
+                        "0.0.0.0: every interface, to hear a LAN exercise's broadcasts)")  # fmt: skip
+    p.add_argument(
+        "--exercise",
+        type=exercise_id,
+        metavar="N",
+        help="only the PDUs of DIS exercise N (1..255; default: every exercise)",
+    )
+    p.add_argument("--host", type=host, help="Jack/TTES server host (default 127.0.0.1)")
+    p.add_argument("--port", type=port, default=7000, help="server port (default 7000)")
     p.add_argument("--with-server", action="store_true", help="run a private server in this process")
     p.add_argument("--data-dir", help="private server: its data directory")
     p.add_argument("--synthetic-server", action="store_true", help="private server: synthetic motion library")
     p.add_argument("--timeout", type=float, default=12.0, help="seconds without a PDU before a soldier goes")
     p.add_argument("--entities", metavar="FILTER", help="keep only these entities (as in `ttes replay`)")
     p.add_argument("--origin", metavar="LAT,LON,H", help="local frame origin (default: the first entity)")
-    p.add_argument("--status-every", type=float, default=5.0, help="seconds between status lines (0: none)")
+    p.add_argument(
+        "--status-every", type=non_negative, default=5.0, help="seconds between status lines (0: none)"
+    )
     p.add_argument("--seconds", type=float, help="stop after this many seconds (default: run until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="status lines and the final summary as JSON")
     add_link_options(p)
-    p.add_argument("--give-up-after", type=float, default=120.0, metavar="S",
+    p.add_argument("--give-up-after", type=non_negative, default=120.0, metavar="S",
                    help="a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) for "
                         "this long before the gateway exits 1 (default 120; 0: exit at once)")  # fmt: skip
     p.set_defaults(func=run)
@@ -70,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
             timeout=args.timeout,
             origin=parse_origin(args.origin),
             entity_filter=EntityFilter.parse(args.entities) if args.entities else None,
+            exercise=args.exercise,
         )
         if not (0 <= args.dis_port <= 65535 and math.isfinite(args.timeout) and args.timeout > 0):
             raise ValueError("--dis-port must be 0..65535 and --timeout > 0")
@@ -127,9 +144,8 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
                     assert gateway.address is not None
                     host_, port_ = gateway.address
                     if not args.json:
-                        print(f"ttes gateway: listening for DIS on {host_}:{port_}"
-                              f"{' group ' + args.dis_group if args.dis_group else ''}, server {host}:{port}",
-                              file=sys.stderr, flush=True)  # fmt: skip
+                        line = listening_line(args, host_, port_, f"{host}:{port}")
+                        print(line, file=sys.stderr, flush=True)
                     if args.status_every > 0:
                         inner.start_soon(_status_loop, gateway, sink, args.status_every, args.json)
             sink.apply(gateway.stop())
@@ -149,6 +165,19 @@ def _serve(args: argparse.Namespace, gateway: DisGateway, data_dir: Path | None)
             raise
         print(f"ttes gateway: {failure}", file=sys.stderr)
         return None
+
+
+def listening_line(args: argparse.Namespace, host: str, port: int, server: str) -> str:
+    """The start-up line; on loopback it says how to hear a LAN exercise (else nothing would be heard)."""
+    group = f" group {args.dis_group}" if args.dis_group else ""
+    exercise = f", exercise {args.exercise}" if args.exercise else ""
+    line = f"ttes gateway: listening for DIS on {host}:{port}{group}{exercise}, server {server}"
+    if host.startswith("127.") and not args.dis_group:
+        line += (
+            "\nttes gateway: loopback only: senders on this machine are heard, a LAN exercise is not; to "
+            f"hear one, --listen 0.0.0.0 (broadcast DIS on UDP {port}) or --dis-group ADDR (multicast)"
+        )
+    return line
 
 
 def _snapshot(gateway: DisGateway, sink: ServerSink) -> dict:

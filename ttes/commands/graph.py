@@ -41,11 +41,28 @@ def _durations(graph_path: str, graph: PostureGraph) -> list[float] | None:
     return load_posture_graph(graph_path).durations
 
 
+def _check_posture(graph: PostureGraph, name: str, where: str) -> None:
+    """A usage error naming the graph's postures (and the likeliest one) when ``name`` is not among them."""
+    import difflib
+
+    from ttes.arguments import UsageError
+
+    if name in graph.postures:
+        return
+    upper = {p.upper(): p for p in graph.postures}
+    close = [p for u, p in upper.items() if u.startswith(name.upper())]
+    close = close or [upper[u] for u in difflib.get_close_matches(name.upper(), list(upper), n=1, cutoff=0.5)]
+    hint = f" (did you mean {' or '.join(close)}?)" if close else ""
+    raise UsageError(f"{where}: unknown posture {name!r}{hint}; its postures: {', '.join(graph.postures)}")
+
+
 def run_path(args: argparse.Namespace) -> int:
     from server.motion.posture_graph import read_posture_graph
     from ttes.output import print_json
 
     graph = read_posture_graph(args.graph)
+    for name in (args.start, args.goal):
+        _check_posture(graph, name, args.graph)
     durations = _durations(args.graph, graph)
     arcs = graph.shortest_path(args.start, args.goal, durations)
     result: dict[str, Any] = {

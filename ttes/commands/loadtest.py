@@ -12,8 +12,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
+from ttes.arguments import UsageError, count, host, non_negative, number, port, positive
 from ttes.link_options import add_link_options, link_credentials
+from ttes.output import na
+
+if TYPE_CHECKING:
+    from client_stub.loadtest.session import LoadTestConfig
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,13 +28,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     where = p.add_mutually_exclusive_group()
     where.add_argument("--spawn-server", action="store_true", help="run a `ttes server` child on loopback")
-    where.add_argument("--host", default="127.0.0.1", help="server address (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
-    p.add_argument("--soldiers", type=int, default=100, help="soldiers N (the first stage with --ramp)")
-    p.add_argument("--clients", type=int, default=2, help="client connections C sharing the soldiers")
-    p.add_argument("--rate", type=float, default=30.0, help="update rate HZ (the spawned server's tick rate)")
-    p.add_argument("--seconds", type=float, default=10.0, help="steady-state seconds measured (per stage)")
-    p.add_argument("--warmup", type=float, default=3.0, help="seconds before measuring (per stage)")
+    where.add_argument("--host", type=host, default="127.0.0.1", help="server address (default 127.0.0.1)")
+    p.add_argument("--port", type=port, default=7000, help="server port (default 7000)")
+    p.add_argument("--soldiers", type=count(1), default=100, help="soldiers N (the first stage with --ramp)")
+    p.add_argument("--clients", type=count(1), default=2, help="client connections C sharing the soldiers")
+    p.add_argument(
+        "--rate", type=positive, default=30.0, help="update rate HZ (the spawned server's tick rate)"
+    )
+    p.add_argument("--seconds", type=positive, default=10.0, help="steady-state seconds measured (per stage)")
+    p.add_argument("--warmup", type=non_negative, default=3.0, help="seconds before measuring (per stage)")
     p.add_argument("--mix", choices=("realistic", "moving"), default="realistic", help="what the soldiers do")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument(
@@ -47,13 +55,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--throttle", default="0", help="spawned server's --throttle seconds, or 'script' (default 0)"
     )
-    p.add_argument("--server-pid", type=int, help="PID of an external server on this machine (for its CPU)")
+    p.add_argument(
+        "--server-pid", type=count(1), help="PID of an external server on this machine (for its CPU)"
+    )
     p.add_argument("--ramp", action="store_true", help="grow N until the server falls behind")
     p.add_argument("--ramp-factor", type=float, default=1.3, help="N multiplier per ramp stage")
-    p.add_argument("--ramp-max-soldiers", type=int, default=8000)
-    p.add_argument("--ramp-max-seconds", type=float, default=600.0, help="wall-clock bound of the ramp")
-    p.add_argument("--min-delivered-pct", type=float, default=99.0, help="ramp criterion: delivered/expected")
-    p.add_argument("--max-p99-ms", type=float, default=33.0, help="ramp criterion: p99 latency")
+    p.add_argument("--ramp-max-soldiers", type=count(1), default=8000)
+    p.add_argument("--ramp-max-seconds", type=positive, default=600.0, help="wall-clock bound of the ramp")
+    p.add_argument(
+        "--min-delivered-pct", type=number(0, 100), default=99.0, help="ramp criterion: delivered/expected"
+    )
+    p.add_argument(
+        "--max-p99-ms",
+        type=positive,
+        metavar="MS",
+        help="ramp criterion: p99 latency (default 100 ms, DIS's budget for tightly coupled interactions; a "
+        "request waits up to one server tick before it is computed)",
+    )
     p.add_argument(
         "--latency-metric",
         choices=("request", "delivery"),
@@ -66,14 +84,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    from client_stub.link.spawn import SpawnError
-    from client_stub.loadtest.client import LoadError
-    from client_stub.loadtest.session import LoadTestConfig, run_loadtest
-    from ttes.output import print_json
+def config(args: argparse.Namespace) -> LoadTestConfig:
+    """The load test the arguments ask for (the library's defaults where an option has none of its own)."""
+    from client_stub.loadtest.session import LoadTestConfig
 
     throttle: float | None = None if args.throttle == "script" else float(args.throttle)
-    cfg = LoadTestConfig(
+    return LoadTestConfig(
         soldiers=args.soldiers,
         clients=args.clients,
         rate_hz=args.rate,
@@ -94,12 +110,28 @@ def run(args: argparse.Namespace) -> int:
         ramp_max_soldiers=args.ramp_max_soldiers,
         ramp_max_s=args.ramp_max_seconds,
         min_delivered_pct=args.min_delivered_pct,
-        max_p99_ms=args.max_p99_ms,
+        max_p99_ms=LoadTestConfig.max_p99_ms if args.max_p99_ms is None else args.max_p99_ms,
         latency_metric=args.latency_metric,
         credentials=link_credentials(args),
     )
+
+
+def run(args: argparse.Namespace) -> int:
+    from client_stub.link.spawn import SpawnError
+    from client_stub.loadtest.client import LoadError
+    from client_stub.loadtest.session import run_loadtest
+    from ttes.output import print_json
+
+    cfg = config(args)
+    try:  # values that do not go together (more clients than soldiers): a usage error
+        cfg.check()
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    from ttes.progress import ProgressBar
+
     try:
-        result = run_loadtest(cfg)
+        with ProgressBar("ttes loadtest") as bar:
+            result = run_loadtest(cfg, progress=bar)
     except (LoadError, SpawnError) as exc:
         print(f"ttes loadtest: error: {exc}", file=sys.stderr)
         return 1
@@ -115,27 +147,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def format_result(r: dict) -> str:
-    """A short human summary."""
+    """A short human summary ("n/a" where a value could not be measured)."""
 
     def f(key: str, unit: str = "") -> str:
-        v = r.get(key)
-        return "n/a" if v is None else f"{v}{unit}"
+        return na(r.get(key), unit)
 
     if r.get("ramp"):
-        lines = [
-            f"ttes loadtest --ramp: {r['clients']} clients at {r['rate_hz']:g} Hz, criteria {r['criteria']}",
-            f"  largest sustained N = {r['largest_sustained_soldiers']} "
-            f"(first failed: {r['first_failed_soldiers']})",
-        ]
-        for s in r["stages"]:
-            lines.append(
-                f"  N={s['soldiers']:>6}  delivered {s['delivered_pct']}%  updates/s {s['updates_per_s']} of "
-                f"{s['expected_updates_per_s']}  latency p50/p99 "
-                f"{s['latency_ms_p50']}/{s['latency_ms_p99']} ms  "
-                f"tick->arrival p99 {s['delivery_ms_p99']} ms  server CPU {s['server_cpu_pct']}%  "
-                f"{'ok' if s['passed'] else 'FAIL'}"
-            )
-        return "\n".join(lines)
+        return _format_ramp(r)
     return "\n".join(
         [
             f"ttes loadtest: {r['soldiers']} soldiers, {r['clients']} clients, {r['rate_hz']:g} Hz, "
@@ -155,3 +173,34 @@ def format_result(r: dict) -> str:
             f"{f('client_cpu_pct', '%')}",
         ]
     )
+
+
+def _format_ramp(r: dict) -> str:
+    """The ramp's verdict (which criterion the failing stage missed) and one line per stage."""
+    c = r["criteria"]
+    latency = f"p99 {c['latency_metric']} latency <= {c['max_p99_ms']:g} ms"
+    criteria = f"delivered >= {c['min_delivered_pct']:g}%, {latency}"
+    best, first_fail = r["largest_sustained_soldiers"], r["first_failed_soldiers"]
+    last = r["stages"][-1] if r["stages"] else {}
+    if best is None:
+        verdict = (
+            f"  no N sustained: the first stage (N={first_fail}) failed ({last.get('failed_on', '')}); "
+            "try a smaller --soldiers, or a looser --max-p99-ms / --min-delivered-pct"
+        )
+    else:
+        more = f"N={first_fail} failed ({last.get('failed_on', '')})" if first_fail else "none failed"
+        verdict = f"  largest sustained N = {best} ({more})"
+    lines = [
+        f"ttes loadtest --ramp: {r['clients']} clients at {r['rate_hz']:g} Hz, criteria: {criteria}",
+        verdict,
+    ]
+    for s in r["stages"]:
+        lines.append(
+            f"  N={s['soldiers']:>6}  delivered {na(s['delivered_pct'], '%')}  updates/s "
+            f"{na(s['updates_per_s'])} of {na(s['expected_updates_per_s'])}  latency p50/p99 "
+            f"{na(s['latency_ms_p50'])}/{na(s['latency_ms_p99'])} ms  "
+            f"tick->arrival p99 {na(s['delivery_ms_p99'], ' ms')}  "
+            f"server CPU {na(s['server_cpu_pct'], '%')}  "
+            f"{'ok' if s['passed'] else 'FAIL'}"
+        )
+    return "\n".join(lines)

@@ -11,6 +11,7 @@ import sys
 import time
 from typing import TYPE_CHECKING
 
+from ttes.arguments import host, port, positive
 from ttes.link_options import add_link_options, link_credentials
 
 if TYPE_CHECKING:
@@ -19,9 +20,11 @@ if TYPE_CHECKING:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ping", help="check that a Jack/TTES server answers", description=__doc__)
-    p.add_argument("--host", default="127.0.0.1", help="server address (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
-    p.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for each answer (default 3)")
+    p.add_argument("--host", type=host, default="127.0.0.1", help="server address (default 127.0.0.1)")
+    p.add_argument("--port", type=port, default=7000, help="server port (default 7000)")
+    p.add_argument(
+        "--timeout", type=positive, default=3.0, help="seconds to wait for each answer (default 3)"
+    )
     p.add_argument("--json", action="store_true", help="machine-readable output")
     add_link_options(p)
     p.set_defaults(func=run)

@@ -1,10 +1,11 @@
 """`ttes replay`: replay a DIS logfile (pcap, pcapng, .dislog or raw PDUs) through Jack/TTES into the stub.
 
-One soldier per lifeform entity: created on first sight, removed after the DIS timeout (12 s) or when the
-entity is deactivated, dead-reckoned between PDUs with its own algorithm, placed on the stub's terrain in a
-local frame about --origin (default: the first entity). Appearance, velocity and heading become entity
-requests for the server; Fire PDUs make a standing-still shooter fire for a moment. Paced by the capture's
-receipt times, scaled by --speed (0 = as fast as possible).
+One soldier per lifeform entity: created on first sight, removed after the DIS timeout (12 s), when the
+entity is deactivated or by a Remove Entity PDU, dead-reckoned between PDUs with its own algorithm, placed on
+the stub's terrain in a local frame about --origin (default: the first entity). Appearance, velocity and
+heading become entity requests for the server; Fire PDUs make a standing-still shooter fire for a moment.
+Paced by the capture's receipt times, scaled by --speed (0 = as fast as possible); a silence longer than
+--max-gap (5 s) replays as --max-gap seconds. --exercise N keeps exercise N's PDUs only.
 
 With a display it opens the stub window (cameras and soldier selection on the keys; ? lists them);
 --headless --out demo.mp4 renders a video; --no-stub only drives the server. The server: --host/--port for a
@@ -12,15 +13,18 @@ running one; by default a private one (its own process for the window; in this p
 --headless under a virtual clock, so the video is exact however slowly it renders). --offline: no server, the
 stub poses the soldiers itself. The stub's terrain point (0, 0) is the local frame's origin.
 
---no-stub survives a server restart: the replay goes on, the server is reconnected with backoff and the live
-soldiers are created again (sink_relinked in the summary). Exit status: 0 replayed, 1 no server (at the start,
-or lost for longer than --give-up-after) or nothing to replay, 2 bad arguments or no display.
+A replay survives a server restart (window, --headless with --host, --no-stub): it goes on, the stub poses
+the soldiers meanwhile (the window says "server lost"), the server is reconnected with backoff (0.5..8 s) and
+the live soldiers are created again and posed by it (sink_relinked in the summary). Exit status: 0 replayed,
+1 no server (at the start, or lost for longer than --give-up-after), a file that is not DIS, or nothing to
+replay; 2 bad arguments (--start past the log's end included) or no display.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import math
 import os
 import sys
@@ -28,7 +32,31 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
+from ttes.arguments import (
+    HEADLESS_NEEDS_OUT,
+    VIDEO_SUFFIXES,
+    UsageError,
+    host,
+    non_negative,
+    number,
+    port,
+    positive,
+    size,
+    video_or_png,
+)
+from ttes.commands.dis import exercise_id, not_dis
 from ttes.link_options import add_link_options, link_credentials, link_error
+
+DEFAULT_MAX_GAP = 5.0  # s: longer silences of a log replay as this long
+_HELD = (  # what a log without soldiers holds instead: counter, words
+    ("records", "records"),
+    ("pdus", "DIS PDUs"),
+    ("non_lifeforms", "non-lifeform entity states"),
+    ("other_pdus", "PDUs of other types"),
+    ("other_exercise", "PDUs of other exercises"),
+    ("other_port", "UDP datagrams to other ports"),
+    ("unsupported_version", "PDUs of unsupported versions"),
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,29 +71,56 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--loop", action="store_true", help="start again at the end (soldiers are removed and re-made)"
     )
-    p.add_argument("--start", type=float, default=0.0, metavar="T", help="begin T seconds into the log")
+    p.add_argument(
+        "--start",
+        type=float,
+        default=0.0,
+        metavar="T",
+        help="begin T seconds into the log (silences included; at most the log's length)",
+    )
+    p.add_argument(
+        "--max-gap",
+        type=_max_gap,
+        default=DEFAULT_MAX_GAP,
+        metavar="S",
+        help=f"replay a silence of the log longer than S seconds as S seconds (default "
+        f"{DEFAULT_MAX_GAP:g}; 0: as recorded)",
+    )
+    p.add_argument(
+        "--exercise",
+        type=exercise_id,
+        metavar="N",
+        help="only the PDUs of DIS exercise N (1..255; default: every exercise)",
+    )
     p.add_argument("--entities", metavar="FILTER",
                    help="keep only these, comma-separated: SITE:APP:ENTITY (numbers or *), force=N, "
                         "friendly, opposing, neutral, marking=TEXT or marking=PREFIX*")  # fmt: skip
     p.add_argument("--origin", metavar="LAT,LON,H", help="local frame origin (default: the first entity)")
     p.add_argument("--timeout", type=float, default=12.0, help="seconds without a PDU before a soldier goes")
     p.add_argument("--format", choices=("auto", "pcap", "pcapng", "dislog", "raw"), default="auto")
-    p.add_argument("--dis-port", type=int, default=3000, help="UDP port of DIS in captures (default 3000)")
+    p.add_argument("--dis-port", type=port, default=3000, help="UDP port of DIS in captures (default 3000)")
     p.add_argument("--any-port", action="store_true", help="read DIS on every UDP port of a capture")
     p.add_argument(
         "--headless", action="store_true", help="render offscreen (EGL) to --out instead of a window"
     )
     p.add_argument(
-        "--out", type=Path, default=Path("ttes-replay.mp4"), help="headless: .mp4/.gif video or .png"
+        "--out",
+        type=video_or_png,
+        help=f"--headless (needed): the video ({', '.join(VIDEO_SUFFIXES)}) or a .png of the last frame",
     )
-    p.add_argument("--seconds", type=float, help="headless: video length (default: the log, at --speed)")
-    p.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
-    p.add_argument("--size", default="640x480", help="image size WxH (default 640x480)")
-    p.add_argument("--camera", choices=("squad", "birds-eye", "soldier", "overhead"), default="squad",
-                   help="start camera (default: one framing the whole squad; keys take over)")  # fmt: skip
+    p.add_argument("--seconds", type=positive, help="headless: video length (default: the log, at --speed)")
+    p.add_argument("--fps", type=number(1, 120), default=15.0, help="frames per second (default 15)")
+    p.add_argument("--size", type=size, default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument(
+        "--camera",
+        choices=("action", "squad", "birds-eye", "soldier", "overhead"),
+        default="action",
+        help="start camera (default: ACTION CAM on a soldier and those near him, turning from force to force "
+        "every 10 s; squad: the whole squad; keys take over)",
+    )
     p.add_argument("--no-stub", action="store_true", help="no image generator: only drive the server")
-    p.add_argument("--host", help="Jack/TTES server host (default: a private server)")
-    p.add_argument("--port", type=int, default=7000, help="server port with --host (default 7000)")
+    p.add_argument("--host", type=host, help="Jack/TTES server host (default: a private server)")
+    p.add_argument("--port", type=port, default=7000, help="server port with --host (default 7000)")
     p.add_argument("--offline", action="store_true", help="no server: the stub poses the soldiers itself")
     p.add_argument(
         "--data-dir", type=Path, help="private server: its data directory (default: the project's)"
@@ -77,13 +132,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_link_options(p)
     p.add_argument(
         "--give-up-after",
-        type=float,
+        type=non_negative,
         default=120.0,
         metavar="S",
-        help="--no-stub: a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) "
+        help="a lost server is reconnected (backoff 0.5..8 s; the soldiers are created again) "
         "for this long before the replay exits 1 (default 120; 0: exit at once)",
     )
     p.set_defaults(func=run)
+
+
+def _max_gap(text: str) -> float | None:
+    """``--max-gap S``: seconds (> 0), or 0 / ``off`` to keep the log's silences (None)."""
+    if text.lower() in ("0", "off", "none"):
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(
+            f"--max-gap must be seconds > 0 (0: keep the silences), not {text!r}"
+        )
+    return v
 
 
 def _speed(text: str) -> float:
@@ -108,16 +178,6 @@ def parse_origin(text: str | None) -> Any:
     if not (-90 <= lat <= 90 and -180 <= lon <= 360 and math.isfinite(h)):
         raise ValueError(f"--origin {text!r} out of range")
     return LocalFrame(lat, lon, h)
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"--size must be WxH, not {text!r}") from None
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise ValueError("--size out of range")
-    return w, h
 
 
 @contextlib.asynccontextmanager
@@ -161,35 +221,17 @@ async def private_server(data_dir: Path | None, synthetic: bool, quiet: bool = T
 
 
 def run(args: argparse.Namespace) -> int:
-    from client_stub.dis import EntityFilter, FilterError, Replayer
-    from protocol.dis import DisError, read_log
-
-    try:
-        entity_filter = EntityFilter.parse(args.entities) if args.entities else None
-        origin = parse_origin(args.origin)
-        size = _size(args.size)
-        if not (math.isfinite(args.start) and args.start >= 0):
-            raise ValueError("--start must be >= 0 seconds")
-        if not (math.isfinite(args.timeout) and args.timeout > 0):
-            raise ValueError("--timeout must be > 0 seconds")
-        log = read_log(args.logfile, fmt=args.format, port=None if args.any_port else args.dis_port)
-    except (FilterError, DisError, ValueError) as exc:
-        print(f"ttes replay: {exc}", file=sys.stderr)
-        return 2
-    if not len(log.batch):
-        print(f"ttes replay: {args.logfile}: no lifeform Entity State PDUs ({log.counters})", file=sys.stderr)
-        return 1
-    if args.offline and args.no_stub:
-        print("ttes replay: --offline --no-stub would do nothing", file=sys.stderr)
-        return 2
-    replayer = Replayer(log, speed=args.speed, loop=args.loop, start=args.start, entity_filter=entity_filter,
-                        origin=origin, timeout=args.timeout)  # fmt: skip
+    loaded = _load(args)
+    if isinstance(loaded, int):
+        return loaded
+    replayer, size = loaded
     if args.no_stub:
         summary = _run_server_only(args, replayer)
     elif args.headless:
         if args.loop and args.seconds is None:
-            print("ttes replay: --loop --headless needs --seconds", file=sys.stderr)
-            return 2
+            raise UsageError("--loop --headless needs --seconds")
+        if args.out is None:
+            raise UsageError(HEADLESS_NEEDS_OUT)
         os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
         summary = _run_headless(args, replayer, size)
     else:
@@ -209,9 +251,68 @@ def run(args: argparse.Namespace) -> int:
         print_json(summary)
     else:
         extra = f", wrote {summary['out']} ({summary['frames']} frames)" if "out" in summary else ""
-        print(f"replayed {summary['replay_time']:.1f} s: {summary['created']} soldiers, "
+        skipped = summary.get("silence_skipped_s", 0)
+        cut = f" ({skipped:.1f} s of silence skipped, --max-gap {args.max_gap:g} s)" if skipped else ""
+        print(f"replayed {summary['replay_time']:.1f} s{cut}: {summary['created']} soldiers, "
               f"{summary['pdus']} PDUs, {summary['requests']} requests{extra}")  # fmt: skip
     return 0
+
+
+def _log_length(replayer: Any) -> float | None:
+    """The replay time the status lines count to: the log's length (None when looping)."""
+    return None if replayer.loop else replayer.cursor.duration
+
+
+def _load(args: argparse.Namespace) -> tuple[Any, tuple[int, int]] | int:
+    """The checked arguments and the log, as a Replayer (and the image size); else the exit status: 2 for
+    bad arguments (--start past the log's end included), 1 for a file that cannot be read, is not DIS or holds
+    no soldier."""
+    from client_stub.dis import EntityFilter, FilterError, LogCursor, Replayer
+    from protocol.dis import DisError, read_log
+
+    try:
+        entity_filter = EntityFilter.parse(args.entities) if args.entities else None
+        origin = parse_origin(args.origin)
+        if not (math.isfinite(args.start) and args.start >= 0):
+            raise ValueError("--start must be >= 0 seconds")
+        if not (math.isfinite(args.timeout) and args.timeout > 0):
+            raise ValueError("--timeout must be > 0 seconds")
+        if args.offline and args.no_stub:
+            raise ValueError("--offline --no-stub would do nothing")
+    except (FilterError, ValueError) as exc:
+        print(f"ttes replay: {exc}", file=sys.stderr)
+        return 2
+    try:  # a log that cannot be read is a runtime error (1), not a usage error
+        log = read_log(args.logfile, fmt=args.format, port=None if args.any_port else args.dis_port,
+                       exercise=args.exercise)  # fmt: skip
+    except (DisError, OSError) as exc:
+        print(f"ttes replay: {exc}", file=sys.stderr)
+        return 1
+    if not_dis("replay", args.logfile, log):
+        return 1
+    if not len(log.batch):
+        print(f"ttes replay: {args.logfile}: {nothing_to_replay(log)}", file=sys.stderr)
+        return 1
+    if args.start > log.duration:
+        print(f"ttes replay: --start {args.start:g} is past the end of {args.logfile} "
+              f"({log.duration:.1f} s long)", file=sys.stderr)  # fmt: skip
+        return 2
+    cursor = LogCursor(log, entity_filter, max_gap=args.max_gap)
+    replayer = Replayer(cursor, speed=args.speed, loop=args.loop, start=args.start, origin=origin,
+                        timeout=args.timeout)  # fmt: skip
+    return replayer, args.size
+
+
+def nothing_to_replay(log: Any) -> str:
+    """Why a DIS log gives no soldiers, in words (what it holds instead, and the option that may help)."""
+    c = log.counters
+    held = [f"{what}: {c.get(k, 0)}" for k, what in _HELD if c.get(k, 0) or k in ("records", "pdus")]
+    hint = ""
+    if c.get("other_port"):
+        hint = "; DIS on another port? try --dis-port P or --any-port"
+    elif c.get("other_exercise"):
+        hint = f"; exercises in the log: {', '.join(map(str, sorted(log.exercises)))}"
+    return f"no lifeform Entity State PDUs to replay ({', '.join(held)}){hint}"
 
 
 async def stop_on_signal(scope: Any) -> None:
@@ -244,7 +345,7 @@ def _run_server_only(args: argparse.Namespace, replayer: Any) -> dict | None:
             async with trio.open_nursery() as nursery:
                 connect = connector(nursery, host, port, credentials=link_credentials(args))
                 sink = ServerSink(await connect())
-                progress = ProgressLine(out=None if args.json else sys.stderr)
+                progress = ProgressLine(out=None if args.json else sys.stderr, total=_log_length(replayer))
                 failures: list[str] = []
 
                 async def drain() -> None:
@@ -301,9 +402,9 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
 
     async def main() -> dict:
         async with contextlib.AsyncExitStack() as stack:
-            link = None
+            connect = None
             if not args.offline:
-                from client_stub.link.client import Client
+                from client_stub.dis.reconnect import connector
 
                 host, port = args.host, args.port
                 if host is None:
@@ -312,17 +413,19 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
                     )
                     host, port = server.addresses[0]
                 nursery = await stack.enter_async_context(trio.open_nursery())
-                link = link_credentials(args).apply(Client())
-                await link.open(nursery, host, port)
-            app = _make_app(args, replayer, link)
+                connect = connector(nursery, host, port, "ttes-replay", credentials=link_credentials(args))
+            app = _make_app(args, replayer, await connect() if connect is not None else None)
+            failures: list[str] = []
             try:
-                summary = await _render(app, seconds, fps, size, args)
+                summary = await _render_linked(app, connect, failures, seconds, fps, size, args)
             finally:
                 app.source.finish(app)  # the soldiers leave the server
-                if link is not None:
-                    await link.aclose()
-            if link is not None:
-                summary["server_errors"] = len(link.errors)
+                if app.source.sink is not None:
+                    await app.source.sink.link.aclose()
+            if failures:
+                raise LinkError(failures[0])
+            if app.source.sink is not None:
+                summary["server_errors"] = len(app.source.sink.link.errors)
             return summary
 
     t = time.perf_counter()
@@ -340,20 +443,56 @@ def _run_headless(args: argparse.Namespace, replayer: Any, size: tuple[int, int]
     return summary
 
 
-def _make_app(args: argparse.Namespace, replayer: Any, link: Any) -> Any:
+async def _render_linked(
+    app: Any,
+    connect: Any,
+    failures: list[str],
+    seconds: float,
+    fps: float,
+    size: tuple[int, int],
+    args: argparse.Namespace,
+) -> dict:
+    """:func:`_render`, with the sink kept linked (a restarted server gets the soldiers again); a server lost
+    for longer than --give-up-after ends the video early with the reason in ``failures``."""
+    import trio
+
+    from client_stub.dis.reconnect import keep_linked_or_stop
+
+    sink = app.source.sink
+    summary: dict = {}
+    async with trio.open_nursery() as inner:
+        if sink is not None:
+            inner.start_soon(
+                keep_linked_or_stop, sink, connect, inner.cancel_scope, failures, args.give_up_after
+            )
+        summary = await _render(app, seconds, fps, size, args)
+        inner.cancel_scope.cancel()
+    return summary
+
+
+def _make_app(args: argparse.Namespace, replayer: Any, link: Any, reconnect: Any = None) -> Any:
     from client_stub.dis.drive import ProgressLine
     from client_stub.dis.soldiers import DisSoldiers, replay_app
+    from client_stub.link.retry import RetrySchedule
     from client_stub.stub.camera import View
     from client_stub.stub.terrain import DEFAULT_TERRAIN, load_terrain
 
     terrain = load_terrain(args.terrain or DEFAULT_TERRAIN)
     app = replay_app(
-        terrain, replayer, link=link, progress=ProgressLine(out=None if args.json else sys.stderr)
+        terrain,
+        replayer,
+        link=link,
+        progress=ProgressLine(out=None if args.json else sys.stderr, total=_log_length(replayer)),
+        reconnect=reconnect,
+        retry=RetrySchedule(give_up_after=args.give_up_after),
     )
-    camera = getattr(args, "camera", "squad")
+    camera = getattr(args, "camera", "action")
     assert isinstance(app.source, DisSoldiers)
     app.source.squad_view = camera == "squad"
-    if camera == "overhead":
+    if camera == "action":
+        app.camera.action_view()
+        app.camera.action_tour = True
+    elif camera == "overhead":
         app.camera.overhead()
     elif camera != "squad":
         app.camera.view = View.BIRDS_EYE if camera == "birds-eye" else View.SOLDIER_CAM
@@ -367,11 +506,11 @@ async def _render(
     import numpy as np
     import trio
 
-    from client_stub.stub.render import StubRenderer
+    from client_stub.stub.gl_render import offscreen_renderer
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    app.renderer = StubRenderer(*size, offscreen=True)
+    app.renderer = offscreen_renderer(*size)
     app.renderer.set_terrain(app.terrain.meshes)
     video = out.suffix.lower() in (".mp4", ".mov", ".mkv", ".avi", ".gif")
     writer = None
@@ -416,13 +555,12 @@ async def _render(
 def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) -> dict | None:
     from client_stub.link.client import LinkError
     from client_stub.link.spawn import spawn_server
-    from client_stub.stub.jack import JackProc
     from client_stub.stub.render import StubRenderer
     from client_stub.stub.viewer import run_viewer
 
-    server = jack = None
+    server = app = None
     try:
-        link = None
+        link = reconnect = None
         if not args.offline:
             host, port = args.host, args.port
             try:
@@ -430,27 +568,47 @@ def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) 
                     extra = ["--data-dir", str(args.data_dir)] if args.data_dir else []
                     server = spawn_server(extra, data="synthetic" if args.synthetic_server else "auto")
                     host, port = server.host, server.port
-                jack = JackProc("ttes-replay")
-                link_credentials(args).apply(jack.client)
-                jack.initsocketconnection(host, port)
-                jack.start()
-                if not jack.wait_ready(30.0):
-                    raise LinkError(jack.failure or "server not ready")
+                link = _ready_jack(host, port, args)
             except LinkError as exc:
                 print(f"ttes replay: {exc}", file=sys.stderr)
                 return None
-            link = jack
-        app = _make_app(args, replayer, link)
+            if args.give_up_after > 0:
+                reconnect = functools.partial(_ready_jack, host, port, args, client_id=link.client.client_id)
+        app = _make_app(args, replayer, link, reconnect)
         app.renderer = StubRenderer(*size, offscreen=False)
         app.renderer.set_terrain(app.terrain.meshes)
         run_viewer(app, *size, args.fps)
         app.source.finish(app)
+        if app.gave_up:
+            print(f"ttes replay: {app.gave_up}", file=sys.stderr)
+            return None
         summary = {**replayer.status()}
         if app.source.sink is not None:
             summary.update({f"sink_{k}": v for k, v in app.source.sink.stats.items()})
         return summary
     finally:
-        if jack is not None:
-            jack.quit()
+        if app is not None and app.source.sink is not None:
+            app.source.sink.link.quit()  # the link in use (a reconnect's); the first one's too
+        if link is not None:
+            link.quit()
         if server is not None:
             server.close()
+
+
+def _ready_jack(host: str, port: int, args: argparse.Namespace, client_id: str = "") -> Any:
+    """A threaded link to ``host:port`` that has run the start-up JCL and seen READY (LinkError if not);
+    ``client_id``: the first link's, so a server that kept our soldiers hands them back."""
+    from client_stub.link.client import LinkError
+    from client_stub.stub.jack import JackProc
+
+    jack = JackProc("ttes-replay")
+    link_credentials(args).apply(jack.client)
+    if client_id:
+        jack.client.client_id = client_id
+    jack.initsocketconnection(host, port)
+    jack.start()
+    if not jack.wait_ready(30.0):
+        why = jack.failure or "server not ready"
+        jack.quit()
+        raise LinkError(why)
+    return jack

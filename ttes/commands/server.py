@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ttes.arguments import UsageError, host, listen_port, non_negative, positive
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     from server.config import limits_help
@@ -25,8 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         + limits_help(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--host", help="address to bind (default 127.0.0.1; 0.0.0.0 inside a container)")
-    p.add_argument("--port", type=int, help="TCP port (default 7000; 0 = any free port)")
+    p.add_argument(
+        "--host", type=host, help="address to bind (default 127.0.0.1; 0.0.0.0 inside a container)"
+    )
+    p.add_argument("--port", type=listen_port, help="TCP port (default 7000; 0 = any free port)")
     p.add_argument(
         "--data-dir", help="folder with the start-up script, figures/, channelsets/, posture_graphs/"
     )
@@ -35,12 +39,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="channelset .npz caches (default $TTES_CACHE_DIR or ~/.cache/jack-ttes; never the data dir)",
     )
     p.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
-    p.add_argument("--tick-hz", type=float, help="simulation ticks per second (default 30)")
+    p.add_argument("--tick-hz", type=positive, help="simulation ticks per second (default 30)")
     p.add_argument(
         "--startup-script", help='JCL run at start-up (default jack-ttes-soldier_low.jcl; "" = none)'
     )
     p.add_argument(
-        "--throttle", type=float, help="seconds between two updates of one soldier (overrides JCL)"
+        "--throttle", type=non_negative, help="seconds between two updates of one soldier (overrides JCL)"
     )
     p.add_argument("--json-logs", action="store_true", default=None, help="log one JSON object per line")
     p.add_argument(
@@ -60,21 +64,24 @@ def run(args: argparse.Namespace) -> int:
     import trio
 
     from server.app import TtesServer, check_exposure, run_server
-    from server.config import ServerConfig, load_config, with_env_tokens
+    from server.config import ConfigError, ServerConfig, load_config, with_env_tokens
     from server.logging import configure
     from ttes.output import print_json
 
-    cfg = load_config(args.config) if args.config else ServerConfig()
-    cfg = with_env_tokens(cfg, os.environ).with_overrides(
-        host=args.host,
-        port=args.port,
-        data_dir=args.data_dir,
-        cache_dir=args.cache_dir,
-        tick_hz=args.tick_hz,
-        startup_script=args.startup_script,
-        throttle=args.throttle,
-        json_logs=args.json_logs,
-    )
+    cfg = load_config(args.config) if args.config else ServerConfig()  # a bad file: exit 1, naming it
+    try:  # a flag's value the settings refuse: a usage error
+        cfg = with_env_tokens(cfg, os.environ).with_overrides(
+            host=args.host,
+            port=args.port,
+            data_dir=args.data_dir,
+            cache_dir=args.cache_dir,
+            tick_hz=args.tick_hz,
+            startup_script=args.startup_script,
+            throttle=args.throttle,
+            json_logs=args.json_logs,
+        )
+    except ConfigError as exc:
+        raise UsageError(str(exc)) from None
     tmp = None
     if args.synthetic:
         from server.startup import write_synthetic_data_dir
@@ -84,9 +91,13 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.with_overrides(data_dir=synth.path, startup_script=synth.startup_script)
     configure(json_logs=cfg.json_logs, level=logging.DEBUG if args.verbose > 1 else logging.INFO)
     try:
-        check_exposure(cfg)  # no tokens: loopback only
+        try:
+            check_exposure(cfg)  # no tokens: loopback only (--host beyond it without tokens: a usage error)
+        except ConfigError as exc:
+            raise UsageError(str(exc)) from None
         server = TtesServer(cfg)
-        server.start_world()  # a bad script or data dir fails here, before listening
+        server.bind()  # a port in use fails here, at once and naming host:port, before the data loads
+        server.start_world()  # a bad script or data dir fails here, before accepting
 
         def listening(s: TtesServer) -> None:
             host, port = s.addresses[0]

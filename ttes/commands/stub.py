@@ -27,6 +27,19 @@ if TYPE_CHECKING:
     from client_stub.link.auth import Credentials
     from client_stub.stub.jack import JackProc
 
+from ttes.arguments import (
+    HEADLESS_NEEDS_OUT,
+    VIDEO_SUFFIXES,
+    UsageError,
+    host,
+    non_negative,
+    number,
+    output_file,
+    port,
+    positive,
+    size,
+    video_or_png,
+)
 from ttes.link_options import add_link_options, link_credentials
 
 
@@ -35,14 +48,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--headless", action="store_true", help="render offscreen (EGL) instead of opening a window"
     )
-    p.add_argument("--seconds", type=float, default=40.0, help="headless: length of the run (default 40)")
+    p.add_argument("--seconds", type=positive, default=40.0, help="headless: length of the run (default 40)")
     p.add_argument(
-        "--out", type=Path, default=Path("ttes-stub.mp4"), help="headless: .mp4/.gif video or .png"
+        "--out",
+        type=video_or_png,
+        help=f"--headless (needed): the video ({', '.join(VIDEO_SUFFIXES)}) or a .png of the last frame",
     )
-    p.add_argument("--fps", type=float, default=15.0, help="frames per second (default 15)")
-    p.add_argument("--size", default="640x480", help="image size WxH (default 640x480)")
-    p.add_argument("--host", help="Jack/TTES server host")
-    p.add_argument("--port", type=int, default=7000, help="server port (default 7000)")
+    p.add_argument("--fps", type=number(1, 120), default=15.0, help="frames per second (default 15)")
+    p.add_argument("--size", type=size, default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument(
+        "--renderer",
+        choices=("gl", "pyrender"),
+        default="gl",
+        help="headless: moderngl (gl, default: fast) or pyrender (the window's renderer, multisampled)",
+    )
+    p.add_argument("--host", type=host, help="Jack/TTES server host")
+    p.add_argument("--port", type=port, default=7000, help="server port (default 7000)")
     p.add_argument("--spawn-server", action="store_true", help="start `ttes server` on a free loopback port")
     p.add_argument(
         "--server-data-dir",
@@ -56,10 +77,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--artic-dir", type=Path, help="where the TIPS loader writes the .artic files")
     p.add_argument("--no-tour", action="store_true", help="headless: no scripted key presses")
-    p.add_argument("--ready-timeout", type=float, default=30.0, help="seconds to wait for the server's READY")
+    p.add_argument(
+        "--ready-timeout", type=positive, default=30.0, help="seconds to wait for the server's READY"
+    )
     p.add_argument(
         "--give-up-after",
-        type=float,
+        type=non_negative,
         default=120.0,
         metavar="S",
         help="seconds of reconnecting to a lost server before the stub gives up and exits 3 (default 120)",
@@ -67,9 +90,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="machine-readable summary")
     add_link_options(p)
     p.add_argument("--scenario", type=Path, help="a scenario file of timed requests for one soldier")
-    p.add_argument("--record", type=Path, help="--scenario: the video (.mp4/.gif), one frame per server tick")
-    p.add_argument("--sheet", type=Path, help="--scenario: contact sheet PNG (default: beside the video)")
-    p.add_argument("--tick-hz", type=float, default=30.0, help="--scenario: the server's tick rate (30)")
+    p.add_argument(
+        "--record",
+        type=output_file(*VIDEO_SUFFIXES),
+        help="--scenario: the video (.mp4/.gif), one frame per server tick",
+    )
+    p.add_argument(
+        "--sheet", type=output_file(".png"), help="--scenario: contact sheet PNG (default: beside the video)"
+    )
+    p.add_argument(
+        "--tick-hz", type=number(1, 240), default=30.0, help="--scenario: the server's tick rate (30)"
+    )
     actions = p.add_subparsers(dest="stub_command", metavar="ACTION")
     terrain = actions.add_parser(
         "make-terrain",
@@ -83,25 +114,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise SystemExit(f"ttes stub: --size must be WxH, not {text!r}") from None
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise SystemExit("ttes stub: --size out of range")
-    return w, h
-
-
 def run(args: argparse.Namespace) -> int:
     if args.stub_command == "make-terrain":
         return _make_terrain(args)
     if args.scenario or args.record:
         return _record_scenario(args)
-    from ttes.output import print_json
+    from ttes.output import na, print_json
 
-    width, height = _size(args.size)
+    width, height = args.size
     if args.headless:
+        if args.out is None:
+            raise UsageError(HEADLESS_NEEDS_OUT)
         os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     elif not (
         os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or sys.platform in ("darwin", "win32")
@@ -143,9 +166,14 @@ def run(args: argparse.Namespace) -> int:
                     f"ttes stub: server not ready ({jack.failure or 'timeout'}); posing offline",
                     file=sys.stderr,
                 )
+        from client_stub.stub.gl_render import offscreen_renderer
         from client_stub.stub.render import StubRenderer
 
-        app.renderer = StubRenderer(width, height, offscreen=args.headless)
+        app.renderer = (
+            offscreen_renderer(width, height, args.renderer)
+            if args.headless
+            else StubRenderer(width, height, offscreen=False)
+        )
         app.renderer.set_terrain(terrain.meshes)
         if not args.headless:
             from client_stub.stub.viewer import run_viewer
@@ -153,10 +181,11 @@ def run(args: argparse.Namespace) -> int:
             run_viewer(app, width, height, args.fps)
             return 3 if app.gave_up else 0
         from client_stub.stub.headless import run_headless
+        from ttes.progress import ProgressBar
 
-        summary = run_headless(
-            app, args.seconds, args.out, fps=args.fps, realtime=app.link is not None, tour=not args.no_tour
-        )
+        with ProgressBar("ttes stub") as bar:
+            summary = run_headless(app, args.seconds, args.out, fps=args.fps, realtime=app.link is not None,
+                                   tour=not args.no_tour, progress=bar)  # fmt: skip
         app.renderer.close()
     finally:
         app.close()
@@ -170,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(
             f"wrote {summary['out']}: {summary['frames']} frames, {summary['soldiers']} soldiers, "
-            f"render {summary['render_fps']} fps, server {'yes' if summary['server'] else 'no'}"
+            f"render {na(summary['render_fps'])} fps, server {'yes' if summary['server'] else 'no'}"
         )
     if app.gave_up or app.server_lost:
         print(f"ttes stub: {app.gave_up or app.server_lost}", file=sys.stderr)
@@ -180,11 +209,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _record_scenario(args: argparse.Namespace) -> int:
     if not (args.scenario and args.record):
-        print("ttes stub: --scenario and --record go together", file=sys.stderr)
-        return 2
-    if not 1.0 <= args.tick_hz <= 240.0:
-        print("ttes stub: --tick-hz must be within [1, 240]", file=sys.stderr)
-        return 2
+        raise UsageError("--scenario and --record go together")
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     from client_stub.stub.scenario import ScenarioError, load_scenario
     from client_stub.stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
@@ -198,7 +223,7 @@ def _record_scenario(args: argparse.Namespace) -> int:
         print(f"ttes stub: {args.scenario}: {exc}", file=sys.stderr)
         return 1
     sheet = args.sheet or args.record.with_name(args.record.stem + "_sheet.png")
-    rec = Recording(scenario, terrain, args.record, sheet, _size(args.size), args.tick_hz,
+    rec = Recording(scenario, terrain, args.record, sheet, args.size, args.tick_hz,
                     args.server_data_dir, args.artic_dir)  # fmt: skip
     summary = record(rec)
     if args.json:
