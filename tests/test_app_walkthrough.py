@@ -109,19 +109,21 @@ async def test_walkthrough_4_3_clip_sequence_and_timings(autojump_clock: trio.ab
         if a[-2:] in ("_l", "_r") and b[-2:] in ("_l", "_r"):
             assert a[-1] != b[-1], (a, b)
     assert names[names.index("walk2run") - 1][-1] == names[names.index("walk2run") + 1][-1]
-    # posture changes start when requested, and each arc of a path starts when the previous one ends
+    # posture changes start when requested, and each arc of a path starts when the previous one ends (a
+    # request's first arc from its first moving frame: it ends as much sooner as it skipped)
+    skip = {k: [x["skipped"] for x in clips if short(x["clip"]) == k] for k in set(names)}
     assert t["ststow2kstow"] == [pytest.approx(18.0)]
     assert t["kstow2crawl"] == [pytest.approx(21.0)]
-    assert t["crawl2prstow"][0] == pytest.approx(21.0 + 1.4)
+    assert t["crawl2prstow"][0] == pytest.approx(21.0 + 1.4 - skip["kstow2crawl"][0])
     assert t["prstow2prfire"] == [pytest.approx(25.0), pytest.approx(27.0)]
     assert t["prstow2dead"] == [pytest.approx(29.0)]
     assert t["ststow2dead"] == [pytest.approx(32.0)]
     dead = clips[names.index("ststow2dead")]
     assert dead["duration"] == pytest.approx(10.0)  # the seed's 10 s resuscitation arc
     assert t["ststow2crawl"] == [pytest.approx(44.0)]
-    assert t["crawl2prstow"][1] == pytest.approx(46.0)  # 44 + 2.0
+    assert t["crawl2prstow"][1] == pytest.approx(46.0 - skip["ststow2crawl"][0])  # 44 + 2.0
     assert t["crawl2prstow"][2] == pytest.approx(48.0)  # prone → CRAWL base posture when moving
-    assert t["crawl_start"][0] == pytest.approx(48.8)
+    assert t["crawl_start"][0] == pytest.approx(48.8 - skip["crawl2prstow"][2])
     # locomotion: the first step starts at the request; then the clips chain exactly end to start (a step
     # under way when the speed changes keeps its phase and changes its rate, so it ends earlier or later)
     assert t["walk_start_l"] == [pytest.approx(1.0)]
@@ -174,36 +176,45 @@ async def watching(server) -> Client:  # type: ignore[no-untyped-def]
     return c
 
 
-async def kneel_frames(tick_hz: float, throttle: float) -> tuple[list[float], list[np.ndarray], object]:
-    """Kneel at t = 1 s; the (server time, pose) of every update the client gets in the next 2 s. The first
-    entry is the resting pose the client had before (frame 0 of the clip: the same pose, so never resent)."""
+async def kneel_frames(
+    tick_hz: float, throttle: float
+) -> tuple[list[float], list[np.ndarray], float, object]:
+    """Kneel at t = 1 s (a tick's time); the (server time, pose) of every update the client gets in the next
+    2 s, and the seconds of still lead-in the clip skipped (its start before the request)."""
     async with running_server(tick_hz=tick_hz, throttle=throttle) as server:
         c = await watching(server)
         await trio.sleep_until(server._t0 + 1.0)
         await c.requests(index=0, appearance=A.KNEEL, weapon=W.DEPLOYED)
-        times, poses = [1.0], [c.pose(1, 0)[0].copy()]
+        times: list[float] = []
+        poses: list[np.ndarray] = []
+        skipped = math.nan
         with trio.move_on_after(2.0):
             while True:
                 ev = await c.next_event()
                 if isinstance(ev, JointUpdates):
                     times.append(server.now())
                     poses.append(ev.dofs[0].copy())
-        return times, poses, server
+                    if len(times) == 1:
+                        skipped = 1.0 - server.world.manager.soldier_info(0)["clip_start"]
+        return times, poses, skipped, server
 
 
 @pytest.mark.parametrize(("tick_hz", "throttle"), [(20.0, 0.0), (60.0, 0.05)])
 async def test_frame_choice_under_a_20hz_client(
     autojump_clock: trio.abc.Clock, tick_hz: float, throttle: float
 ) -> None:
-    """Seed 3.4.2: a 60 fps transition sampled by a 20 Hz image generator plays frames 0, 3, 6, …"""
-    times, poses, server = await kneel_frames(tick_hz, throttle)
-    # 20 updates a second, whatever the tick rate
+    """Seed 3.4.2: a 60 fps transition sampled by a 20 Hz image generator plays frames 0, 3, 6, … (from its
+    first moving frame: the request's answer at once shows it, issue 16)."""
+    times, poses, skipped, server = await kneel_frames(tick_hz, throttle)
+    lead = round(skipped * 60.0)  # whole still frames skipped
+    assert skipped * 60.0 == pytest.approx(lead) and 0 < lead < 6
+    # answered at the request, then 20 updates a second, whatever the tick rate
+    assert times[0] == pytest.approx(1.0)
     assert np.diff(times) == pytest.approx(np.full(len(times) - 1, 0.05), abs=1e-6)
     k = np.round((np.array(times) - 1.0) / 0.05).astype(int)
-    inside = (k >= 0) & (3 * k <= 96)  # ststow2kstow: 1.6 s = 96 frames + 1
-    frames = 3 * k[inside]
-    got = np.array(poses)[inside]
-    assert frames[:4].tolist() == [0, 3, 6, 9] and frames[-1] == 96
+    frames = np.minimum(lead + 3 * k, 96)  # ststow2kstow: 1.6 s = 96 frames + 1, held at its last
+    got = np.array(poses)
+    assert frames[:4].tolist() == [lead, lead + 3, lead + 6, lead + 9] and frames[-1] == 96
     want = expected_pose(server, "ststow2kstow_low", frames.astype(float))
     assert np.abs(got - want).max() <= 1.01 * STEP  # exactly those stored frames (12-bit codes)
     # and not the neighbouring frames: in the middle of the clip they differ by several codes
@@ -283,6 +294,29 @@ async def test_a_request_between_ticks_is_reflected_before_the_next_tick(
         assert server.answers == 1 and ev.tick == server.ticks + 1  # labelled with the tick it anticipates
         await trio.sleep_until(server._t0 + nxt + 0.001)
         assert server.world.manager.stats["answers"] == 1
+
+
+async def test_a_start_asked_just_before_a_tick_is_reflected_in_its_answer(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Issue 16: kneel -> stand asked 1 ms before a tick. The answer samples the clip 1 ms in; its eased,
+    still first frames used to send the kneeling pose again (nothing new on the wire until a later tick).
+    The start now begins at its first moving frame: the first update already stands up."""
+    async with running_server(throttle=0.0) as server:
+        c = await watching(server)
+        await c.requests(index=0, appearance=A.KNEEL, weapon=W.DEPLOYED)
+        with trio.move_on_at(server._t0 + 3.0):  # kneels (1.6 s), then rests
+            while True:
+                await c.next_event()
+        kneeling = c.pose(1, 0)[0].copy()
+        await trio.sleep_until(server._t0 + 3.01)
+        nxt = server.next_tick
+        assert 3.01 < nxt <= 3.01 + 1 / 30
+        await trio.sleep_until(server._t0 + nxt - 0.001)
+        await c.requests(index=0, appearance=A.UPRIGHT, weapon=W.DEPLOYED)
+        ev = await c.expect(JointUpdates)
+        assert server.now() < nxt and ev.indices.tolist() == [0]  # the answer, before the tick
+        assert np.abs(ev.dofs[0] - kneeling).max() >= STEP  # already moving
 
 
 async def largest_jump_on_interrupt(blend_time: float) -> float:

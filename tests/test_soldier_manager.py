@@ -68,6 +68,14 @@ def starts(m: SoldierManager, i: int) -> list[tuple[str, float]]:
     return [(c.clip.rsplit("/", 1)[-1].removesuffix("_low"), round(c.time, 9)) for c in m.clips_of(i)]
 
 
+def skipped(m: SoldierManager, i: int, k: int = 0) -> float:
+    """The still lead-in (s) the ``k``-th clip soldier ``i`` started skipped (a request's start skips it:
+    server.soldier.lead_in; the synthetic clips ease in, 1-3 frames under one wire step)."""
+    s = m.clips_of(i)[k].skipped
+    assert 0.0 < s < 0.06
+    return s
+
+
 def names(m: SoldierManager, i: int) -> list[str]:
     return [s for s, _ in seq(m, i)]
 
@@ -79,7 +87,12 @@ def test_prone_fire_from_standing_takes_the_quickest_path_and_chains_exactly(lib
     m, i = manager(lib)
     request(m, i, 0.0, PRONE, FIRING)
     run(m, 0.0, 4.0)
-    assert starts(m, i) == [("ststow2crawl", 0.0), ("crawl2prstow", 2.0), ("prstow2prfire", 2.8)]
+    s = round(skipped(m, i), 9)  # the first arc, a request's start, skips its lead-in; the others chain
+    assert starts(m, i) == [
+        ("ststow2crawl", 0.0),
+        ("crawl2prstow", round(2.0 - s, 9)),
+        ("prstow2prfire", round(2.8 - s, 9)),
+    ]
     info = m.soldier_info(i)
     assert info["mode"] == "IDLE" and info["posture"] == "PRONE_FIRE"
 
@@ -91,7 +104,12 @@ def test_transition_continues_and_a_new_posture_waits_for_its_end(lib) -> None:
     request(m, i, 0.5, PRONE)  # Figure 12: transitioning soldiers only take the new heading
     assert m.soldier_info(i)["path"] == ["KNEEL_STOWED"]
     run(m, 0.5, 4.0)
-    assert starts(m, i) == [("ststow2kstow", 0.0), ("kstow2crawl", 1.6), ("crawl2prstow", 3.0)]
+    s = round(skipped(m, i), 9)
+    assert starts(m, i) == [
+        ("ststow2kstow", 0.0),
+        ("kstow2crawl", round(1.6 - s, 9)),
+        ("crawl2prstow", round(3.0 - s, 9)),
+    ]
     assert m.soldier_info(i)["posture"] == "PRONE_STOWED"
 
 
@@ -289,11 +307,13 @@ def test_playback_rate_follows_ground_speed_and_keeps_the_phase(lib) -> None:
 def test_real_time_frame_choice_at_20_hz(lib) -> None:
     m, i = manager(lib, throttle=0.0, interpolate=False)
     request(m, i, 0.0, KNEEL)  # ststow2kstow: 1.6 s at 60 fps
-    ups = run(m, 0.0, 1.6, hz=20.0)
+    ups = [u for u in run(m, 0.0, 1.6, hz=20.0) if len(u)]  # (it ends a lead-in sooner: then at rest)
     clip = lib.clip_id("ststow2kstow_low")
     frames = [u.frames[0] for u in ups]
-    np.testing.assert_allclose(frames, 3.0 * np.arange(len(ups)), atol=1e-6)
-    rows = lib.sets[0].clip_start[clip] + 3 * np.arange(len(ups))
+    lead = skipped(m, i) * 60.0  # whole frames: the first that moves by a wire step
+    assert lead == pytest.approx(round(lead))
+    np.testing.assert_allclose(frames, np.minimum(round(lead) + 3.0 * np.arange(len(ups)), 96), atol=1e-6)
+    rows = lib.sets[0].clip_start[clip] + np.minimum(round(lead) + 3 * np.arange(len(ups)), 96)
     np.testing.assert_array_equal(np.concatenate([u.joints for u in ups]), lib.sets[0].joint_data[rows])
 
 
@@ -340,7 +360,8 @@ def test_a_request_between_ticks_is_answered_by_the_next_ticks_update_at_once(li
     a = m.answer(1.01, 1 + 1 / 30)
     assert a.indices.tolist() == [i] and a.now == pytest.approx(1 + 1 / 30)
     assert lib.clip_names[int(a.clips[0])].endswith("ststow2kstow_low")  # the new clip...
-    assert a.frames[0] == pytest.approx((1 / 30 - 0.01) * 60, abs=1e-6)  # ...as the next tick shows it
+    lead = skipped(m, i, -1) * 60  # ...from its first moving frame, as the next tick shows it
+    assert a.frames[0] == pytest.approx(lead + (1 / 30 - 0.01) * 60, abs=1e-6)
     t = m.tick(1 + 1 / 30)  # the tick samples the same pose again (the board sends nothing new)
     np.testing.assert_array_equal(t.joints[t.indices.tolist().index(i)], a.joints[0])
     assert len(m.answer(1.04, 1 + 2 / 30)) == 0  # answered once per request
@@ -517,7 +538,12 @@ def test_moving_during_a_transition_walks_after_it_and_immediate_overrides(lib) 
     request(m, i, 0.2, UP, WeaponState.DEPLOYED, speed=1.4)  # taken up when the transition ends
     assert m.soldier_info(i)["mode"] == "TRANSITION"
     run(m, 0.0, 2.0)
-    assert starts(m, i)[:3] == [("ststow2stfire", 0.0), ("ststow2stfire", 0.8), ("walk_start_l", 1.6)]
+    s = round(skipped(m, i), 9)
+    assert starts(m, i)[:3] == [
+        ("ststow2stfire", 0.0),
+        ("ststow2stfire", round(0.8 - s, 9)),
+        ("walk_start_l", round(1.6 - s, 9)),
+    ]
     request(m, i, 2.0, KNEEL)  # cancel the step: a posture change starts
     assert m.soldier_info(i)["mode"] == "TRANSITION"
     request(m, i, 2.1, PRONE, immediate=True)

@@ -87,7 +87,9 @@ class TickUpdate:
 
 @dataclass(frozen=True)
 class ClipStart:
-    """A clip a soldier started (kept when ``record_clips`` is on): for tests and traces."""
+    """A clip a soldier started (kept when ``record_clips`` is on): for tests and traces. ``skipped``: the
+    seconds of its still lead-in a request's start skipped (:mod:`server.soldier.lead_in`); it showed from
+    ``time`` and ended ``duration - skipped`` later."""
 
     time: float
     index: int
@@ -96,6 +98,7 @@ class ClipStart:
     duration: float
     mode: str
     state: str
+    skipped: float = 0.0
 
 
 class ManagerCore:

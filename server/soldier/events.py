@@ -17,6 +17,7 @@ from server.soldier.core import (
     MIN_TURN_DEG,
     MOVING_EPS,
 )
+from server.soldier.lead_in import LeadIn
 from server.soldier.locomotion import (
     conditions,
     is_fast,
@@ -31,7 +32,7 @@ from server.soldier.stepping import Stepping
 from server.soldier.turning import REVERSAL_TURN_SPEEDUP, Turning
 
 
-class Events(Stepping, Turning, Reactions):
+class Events(Stepping, Turning, Reactions, LeadIn):
     """Per-soldier Python that runs only on events; :meth:`_advance` takes the clip ends up to each clock."""
 
     def _desired(self, i: int) -> int:

@@ -152,6 +152,15 @@ class Requests(Ticking):
         for k in np.flatnonzero(hp & (np.abs(tb.root_yaw[i]) >= MIN_TURN_DEG)).tolist():
             self._turn(int(i[k]), float(t[k]))
         tb.requested[i[event | hp | rescale]] = True  # what :meth:`answer` answers between ticks
+        self._events(i, t, event, imm, stepping)
+        self._skip_lead_in(i[event | hp], t[event | hp])
+        return status
+
+    def _events(
+        self, i: np.ndarray, t: np.ndarray, event: np.ndarray, imm: np.ndarray, stepping: np.ndarray
+    ) -> None:
+        """The per-soldier event path of the requests that change what a soldier does (a stepping one's pose
+        captured first, for the cross-fade)."""
         ev = np.flatnonzero(event)
         if len(ev):
             self.stats["events"] += len(ev)
@@ -165,7 +174,6 @@ class Requests(Ticking):
                 s = int(i[k])
                 c = captured.get(s)
                 self._on_event(s, float(t[k]), bool(imm[k]), None if c is None else (cj[c], cf[c]))
-        return status
 
     def posture_change(self, index: int, posture: str, now: float) -> list[str]:
         """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing
@@ -231,7 +239,9 @@ class Requests(Ticking):
             tb.clock[index] = now
         self._advance(np.array([index], np.int64))
         self.stats["reactions"] += 1
-        clip = self._react_now(int(index), kind, float(tb.clock[index]))
+        t = float(tb.clock[index])
+        clip = self._react_now(int(index), kind, t)
         if clip is not None:
             tb.requested[index] = True  # what :meth:`answer` answers between ticks
+            self._skip_lead_in(np.array([index], np.int64), np.array([t]))
         return clip

@@ -30,6 +30,7 @@ TURN_RATE = 90.0  # degrees/s a walking, running or crawling figure turns toward
 STEPPING = (2, 3)  # state.Mode.LOCO, Mode.CRAWL (plain ints: this module does not import the manager's enums)
 SHARE_FLOOR = 0.2  # a pivot's extra turn in double support, relative to single (no spurt of yaw between)
 FLIGHT_CM = 3.0  # a foot whose lowest sole point is this far above the clip's lowest carries no weight
+FLAT_CM = 1.0  # a carrying foot's sole points this near its lowest are all down: it turns about their middle
 # per foot, the sole points whose lower one carries the weight (heel strike, then the ball at push-off)
 FOOT_SITES: tuple[tuple[str, ...], ...] = (
     ("left_foot.heel", "left_foot.ball"),
@@ -70,16 +71,24 @@ def contact_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def stance_contact(points: np.ndarray) -> np.ndarray:
-    """``(n, 2)`` per frame the horizontal position (X, Z cm) of the sole point carrying the weight: the pivot
-    a moving soldier's figure turns about, so the turn does not slide the planted foot."""
+    """``(n, 2)`` per frame the horizontal position (X, Z cm) the figure turns about so that the turn does not
+    slide the planted foot: the sole point carrying the weight, or, while that foot is flat (its other sole
+    points within FLAT_CM), the middle of its points down. A flat foot turned about its heel dragged the ball
+    the heel-to-ball length times the angle (a 60° start's 15° rest: 2.2 cm); about the middle, half."""
     n = len(points)
     if n < 2:
         return np.zeros((n, 2))
+    npts = points.shape[2]
     flat = points.reshape(n, -1, 3)
     pair = np.maximum(flat[:-1, :, 1], flat[1:, :, 1])
+    pair = np.concatenate([pair, pair[-1:]])
     which = np.argmin(pair, axis=1)
-    which = np.append(which, which[-1])
-    return flat[np.arange(n), which][:, [0, 2]]
+    foot = which // npts
+    k = np.arange(n)
+    own = points[k, foot]  # (n, points, 3): the carrying foot's sole points
+    height = pair.reshape(n, -1, npts)[k, foot]
+    down = height <= pair[k, which][:, None] + FLAT_CM
+    return (own[..., [0, 2]] * down[..., None]).sum(axis=1) / down.sum(axis=1)[:, None]
 
 
 def single_support_share(points: np.ndarray) -> np.ndarray:

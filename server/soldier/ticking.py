@@ -62,8 +62,9 @@ class Ticking(Events):
         Requests are applied when they arrive (:meth:`apply_requests`: a new clip, rate or heading), so the
         pose the next tick would send is known now: this releases that update early. The soldiers are
         sampled at ``at`` (the next tick's time; never before ``now``), so the update that reflects a request
-        shows its motion already (a posture change eases in: at the request instant the pose is still the old
-        one on the wire) and the tick at ``at`` finds nothing new to send. It is the next tick's update, so
+        shows its motion already (a clip a request starts begins at its first moving frame,
+        :mod:`server.soldier.lead_in`, so even a request just before ``at`` changes the wire) and the tick at
+        ``at`` finds nothing new to send. It is the next tick's update, so
         the throttle is the tick's: a soldier not due at ``at`` waits for its tick. Nothing in every-frame
         mode (its clock steps one frame per tick).
         """

@@ -33,6 +33,7 @@ from server.soldier.library import PathStep
 REVERSAL_DEG = 135.0  # a walking figure this far from its new heading stops, pivots and walks away
 BACKWARD_MAX_SPEED = 1.0  # m/s: a velocity straight back faster than people walk backwards is walked forwards
 BACKWARD_HYSTERESIS = 0.2  # m/s: walking away forwards, he faces his velocity down to the limit - this
+COUNTER_REST_DEG = 35.0  # a pivot may turn a clip this much less than it turns (over a flat carrying foot)
 REVERSAL_TURN_SPEEDUP = 2.5  # the pivot plays the 180° turn in place this many times faster (3.4 s -> 1.4 s)
 
 
@@ -66,15 +67,14 @@ class Turning(ManagerCore):
         if not lib.turn_clips or int(tb.node[i]) != self._home or int(tb.mode[i]) != _IDLE:
             return False
         want = -float(tb.root_yaw[i])  # compass degrees to turn
-        clip, turn = min(  # the nearest turn; of two as near (180 both ways) the one turning the asked way
-            lib.turn_clips, key=lambda c: (abs((c[1] - want + 180.0) % 360.0 - 180.0), c[1] * want < 0)
-        )
+        clip, turn = (self._pivot_clip if speedup != 1.0 else self._nearest_turn)(want)
         if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
             return False
         rest = 0.0
         if speedup != 1.0:  # a pivot turns by the clip's turn and a rest too small for another turn clip
             rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
-            rest = rest if abs(rest) < MIN_TURN_DEG else 0.0
+            counter = abs(turn) > abs(want) and abs(rest) <= COUNTER_REST_DEG  # (_pivot_clip)
+            rest = rest if abs(rest) < MIN_TURN_DEG or counter else 0.0
             speedup *= min(1.0, abs(turn) / abs(want))  # turning more, it turns no faster than the clip
         step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, self._home, self._home)
         tb.blend_len[i] = 0.0
@@ -84,6 +84,29 @@ class Turning(ManagerCore):
         tb.dirty[i] = True
         tb.pivot_rest[i] = rest
         return True
+
+    def _nearest_turn(self, want: float) -> tuple[int, float]:
+        """The turn clip nearest ``want`` compass degrees; of two as near (180 both ways) the one turning the
+        asked way."""
+        return min(
+            self.library.turn_clips,
+            key=lambda c: (abs((c[1] - want + 180.0) % 360.0 - 180.0), c[1] * want < 0),
+        )
+
+    def _pivot_clip(self, want: float) -> tuple[int, float]:
+        """A pivot's turn clip: the nearest, unless that leaves MIN_TURN_DEG or more to turn after it and a
+        clip turning the asked way at most COUNTER_REST_DEG more than asked exists: that one, its excess
+        turned back over it (a 150° reversal: the 180° pivot less 30°, not the 180° and then a 45° turn back,
+        which swung 30° past the heading and back after the walk start, and slid 2.3 cm)."""
+        clip, turn = self._nearest_turn(want)
+        if abs((turn - want + 180.0) % 360.0 - 180.0) < MIN_TURN_DEG:
+            return clip, turn
+        over = [
+            c
+            for c in self.library.turn_clips
+            if c[1] * want > 0 and 0 < abs(c[1]) - abs(want) <= COUNTER_REST_DEG
+        ]
+        return min(over, key=lambda c: abs(c[1])) if over else (clip, turn)
 
     def _turn_end(self, i: int, t: float) -> None:
         """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading."""

@@ -16,8 +16,8 @@ import numpy as np
 from protocol import coords
 from protocol.events import JointUpdates
 from protocol.update_table import DEFAULT_DOF_BITS, DofRange, FigureEntry, JointEntry, UpdateTable
+from server.soldier.core import TickUpdate
 from server.soldier.library import MotionLibrary
-from server.soldier.manager import TickUpdate
 
 T_RANGE_M = 1.0  # range (±m) of a translational DOF without finite joint limits
 FIGURE_ENTRY_NAMES = ("soldier", "rifle")  # docs/PROTOCOL.md §7: the figure entries of a soldier's table

@@ -638,6 +638,7 @@ class JclCommands:
                 "clip": c.clip,
                 "forward": c.forward,
                 "duration": c.duration,
+                "skipped": c.skipped,
                 "mode": c.mode,
                 "state": c.state,
             }
