@@ -206,6 +206,7 @@ def test_loadtest_progress_names_its_stage_and_total(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["soldiers"] == 2
     assert "ttes loadtest N=2: 100%|" in r.stderr.replace("\r", "\n") and "| 0.7/0.7 s [" in r.stderr
+    assert "ttes loadtest server loading: 0.0 s" in r.stderr.replace("\r", "\n")  # the spawned server's wait
 
 
 def test_progress_bar_restarts_per_stage_and_is_off_without_a_terminal(
@@ -221,6 +222,17 @@ def test_progress_bar_restarts_per_stage_and_is_off_without_a_terminal(
         bar(0.5, 4.0, "N=13")
     err = capsys.readouterr().err.replace("\r", "\n")
     assert "job N=10: 100%" in err and "job N=13:  12%" in err and "| 0.5/4.0 s [" in err
+
+
+def test_a_wait_of_unknown_length_shows_the_seconds_so_far(capsys: pytest.CaptureFixture[str]) -> None:
+    with ProgressBar("ttes server: loading its library", enabled=True) as bar:
+        bar.waited(0.0)
+        bar.waited(7.5)
+        bar(1.0, 2.0, "N=10")  # the job's own stage closes the wait line
+        assert bar.wait_bar is None
+    err = capsys.readouterr().err.replace("\r", "\n")
+    assert "ttes server: loading its library: 0.0 s" in err and "library: 7.5 s" in err
+    assert "N=10:  50%" in err
 
 
 def test_replay_status_lines_give_the_total_and_an_eta() -> None:

@@ -25,19 +25,30 @@ def wanted() -> bool:
     return sys.stderr.isatty()
 
 
+WAIT_FORMAT = "{desc}: {n:.1f} {unit}"  # a wait of unknown length: the seconds so far
+
+
 class ProgressBar:
-    """``ttes stub:  45%|████      | 18.0/40.0 s [00:09<00:11]``; a no-op when bars are not wanted."""
+    """``ttes stub:  45%|████      | 18.0/40.0 s [00:09<00:11]``; a no-op when bars are not wanted. A wait of
+    unknown length (``total`` None: a spawned server loading its library) shows the seconds so far."""
 
     def __init__(self, desc: str, unit: str = "s", *, enabled: bool | None = None) -> None:
         self.desc = desc
         self.unit = unit
         self.stage = ""
         self.bar: Any = None
+        self.wait_bar: Any = None
         self.enabled = wanted() if enabled is None else enabled
 
-    def __call__(self, done: float, total: float, stage: str = "") -> None:
+    def __call__(self, done: float, total: float | None, stage: str = "") -> None:
         if not self.enabled:
             return
+        if total is None:
+            self._wait(done, stage)
+            return
+        if self.wait_bar is not None:
+            self.wait_bar.close()
+            self.wait_bar = None
         if self.bar is None:
             from tqdm import tqdm
 
@@ -51,10 +62,25 @@ class ProgressBar:
             self.stage = stage
         self.bar.update(max(0.0, min(done, total) - self.bar.n))
 
+    def waited(self, seconds: float) -> None:
+        """The seconds waited so far on something of unknown length (a callback for ``spawn_server``)."""
+        self(seconds, None)
+
+    def _wait(self, seconds: float, stage: str) -> None:
+        if self.wait_bar is None:
+            from tqdm import tqdm
+
+            self.wait_bar = tqdm(total=None, desc=self._label(stage), unit=self.unit, file=sys.stderr,
+                                 bar_format=WAIT_FORMAT, mininterval=0.5)  # fmt: skip
+        self.wait_bar.update(max(0.0, seconds - self.wait_bar.n))
+
     def _label(self, stage: str) -> str:
         return f"{self.desc} {stage}" if stage else self.desc
 
     def close(self) -> None:
+        if self.wait_bar is not None:
+            self.wait_bar.close()
+            self.wait_bar = None
         if self.bar is not None:
             self.bar.close()
             self.bar = None

@@ -20,7 +20,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from client_stub.link.client import LinkError
@@ -84,15 +84,19 @@ class ServerProcess:
         self.proc = subprocess.Popen(self.cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=self._log)
         self.pid = self.proc.pid
 
-    def wait_ready(self) -> tuple[str, int]:
-        """Block until the JSON ready line (SpawnError on exit or timeout); returns ``(host, port)``."""
+    def wait_ready(self, waiting: Callable[[float], None] | None = None) -> tuple[str, int]:
+        """Block until the JSON ready line (SpawnError on exit or timeout); returns ``(host, port)``.
+        ``waiting(seconds)``: told the seconds waited so far, twice a second (a progress line)."""
         assert self.proc.stdout is not None
         sel = selectors.DefaultSelector()
         sel.register(self.proc.stdout, selectors.EVENT_READ)
-        deadline = time.monotonic() + self.timeout
+        start = time.monotonic()
+        deadline = start + self.timeout
         buf = b""
         try:
             while time.monotonic() < deadline:
+                if waiting is not None:
+                    waiting(time.monotonic() - start)
                 if not sel.select(timeout=min(0.5, max(0.0, deadline - time.monotonic()))):
                     if self.proc.poll() is not None:
                         break
@@ -153,22 +157,29 @@ class ServerProcess:
         self.close()
 
 
-def spawn_server(args: Sequence[str] = (), *, data: str = "auto", timeout: float = 90.0) -> ServerProcess:
+def spawn_server(
+    args: Sequence[str] = (),
+    *,
+    data: str = "auto",
+    timeout: float = 90.0,
+    waiting: Callable[[float], None] | None = None,
+) -> ServerProcess:
     """A ready ``ttes server`` child. ``data``: ``default`` (what ``args`` say), ``synthetic`` (its generated
-    motion library), ``auto`` (the default, else the synthetic library when the default does not start)."""
+    motion library), ``auto`` (the default, else the synthetic library when the default does not start).
+    ``waiting(seconds)`` is told how long it has waited (a progress line while the library loads)."""
     if data not in ("auto", "synthetic", "default"):
         raise ValueError(f"data must be auto, synthetic or default, not {data!r}")
     args = [*args, "--synthetic"] if data == "synthetic" else list(args)
     server = ServerProcess(args, timeout=timeout)
     try:
-        server.wait_ready()
+        server.wait_ready(waiting)
     except SpawnError:
         server.close()
         if data != "auto":
             raise
         server = ServerProcess([*args, "--synthetic"], timeout=timeout)
         try:
-            server.wait_ready()
+            server.wait_ready(waiting)
         except SpawnError:
             server.close()
             raise

@@ -34,7 +34,7 @@ from client_stub.loadtest.stats import GRACE_TICKS, Tracker, series, summarise
 from protocol.events import Ready, ticks_per_update
 
 MAX_STAGES = 40
-Progress = Callable[[float, float, str], None]  # (seconds done, seconds in all, stage) of a running stage
+Progress = Callable[[float, float | None, str], None]  # (seconds done, in all: None unknown, stage)
 # The ramp's default latency bound: DIS's budget for tightly coupled interactions (IEEE 1278.2: 100 ms from
 # one simulator's action to another's display). A request's first update waits up to one server tick (33 ms
 # at 30 Hz) before it is even computed, so the bound this was before, 33 ms at p99, failed the first stage of
@@ -399,6 +399,13 @@ def run_loadtest(cfg: LoadTestConfig, progress: Progress | None = None) -> dict[
         return _run_loadtest(cfg, stack, progress)
 
 
+def _loading(progress: Progress | None) -> Callable[[float], None] | None:
+    """The spawned server's wait as a progress stage of unknown length."""
+    if progress is None:
+        return None
+    return lambda seconds: progress(seconds, None, "server loading")
+
+
 def _run_loadtest(
     cfg: LoadTestConfig, stack: contextlib.ExitStack, progress: Progress | None
 ) -> dict[str, Any]:
@@ -407,7 +414,7 @@ def _run_loadtest(
     try:
         if cfg.spawn_server:
             args = server_args(cfg.rate_hz, cfg.throttle) + _owner_limit(cfg.soldiers, stack)
-            server = spawn_server(args, data=cfg.server_data)
+            server = spawn_server(args, data=cfg.server_data, waiting=_loading(progress))
             host, port = server.host, server.port
             server_cpu = server.cpu_seconds
         else:

@@ -557,6 +557,7 @@ def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) 
     from client_stub.link.spawn import spawn_server
     from client_stub.stub.render import StubRenderer
     from client_stub.stub.viewer import run_viewer
+    from ttes.progress import ProgressBar
 
     server = app = None
     try:
@@ -566,7 +567,9 @@ def _run_window(args: argparse.Namespace, replayer: Any, size: tuple[int, int]) 
             try:
                 if host is None:
                     extra = ["--data-dir", str(args.data_dir)] if args.data_dir else []
-                    server = spawn_server(extra, data="synthetic" if args.synthetic_server else "auto")
+                    data = "synthetic" if args.synthetic_server else "auto"
+                    with ProgressBar("ttes server: loading its library") as loading:
+                        server = spawn_server(extra, data=data, waiting=loading.waited)
                     host, port = server.host, server.port
                 link = _ready_jack(host, port, args)
             except LinkError as exc:

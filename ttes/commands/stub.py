@@ -136,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
     from client_stub.stub.app import StubApp
     from client_stub.stub.live import LiveSoldiers, populate_demo
     from client_stub.stub.terrain import DEFAULT_TERRAIN, TerrainError, load_terrain
+    from ttes.progress import ProgressBar
 
     try:
         terrain = load_terrain(args.terrain or DEFAULT_TERRAIN, args.terrain_up)
@@ -153,7 +154,10 @@ def run(args: argparse.Namespace) -> int:
             try:
                 if args.spawn_server:
                     data_dir = args.server_data_dir or _server_data_dir(stack)
-                    server = spawn_server(["--data-dir", str(data_dir)], data="default")
+                    with ProgressBar("ttes server: loading its library") as loading:
+                        server = spawn_server(
+                            ["--data-dir", str(data_dir)], data="default", waiting=loading.waited
+                        )
                     host, port = server.host, server.port
                 jack = _connect(host, port, link_credentials(args))
             except LinkError as exc:
@@ -181,8 +185,6 @@ def run(args: argparse.Namespace) -> int:
             run_viewer(app, width, height, args.fps)
             return 3 if app.gave_up else 0
         from client_stub.stub.headless import run_headless
-        from ttes.progress import ProgressBar
-
         with ProgressBar("ttes stub") as bar:
             summary = run_headless(app, args.seconds, args.out, fps=args.fps, realtime=app.link is not None,
                                    tour=not args.no_tour, progress=bar)  # fmt: skip
