@@ -288,3 +288,13 @@ def test_author_check_table_shows_ranges_and_unmeasured_values_plainly(
     text = capsys.readouterr().out
     assert not [x for x in REPRS if x in text] and "(1.2" not in text, text
     assert "gait_speed_m_s = 1.9 (limit 1.2..1.6)" in text and "foot_skate_cm: worst - (limit 2.0)" in text
+
+
+def test_demo_json_is_one_object_with_the_figures_the_stub_and_the_last_frame(tmp_path: Path) -> None:
+    """`--json` is machine output: the demo printed two JSON documents (the figures, then the stub's)."""
+    r = ttes("demo", "--seconds", "1", "--out-dir", str(tmp_path), "--json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)  # one document
+    assert {f["file"] for f in out["figures"]} >= {"DI.fig", "soldier.fig"}
+    assert out["stub"]["frames"] == 10 and out["stub"]["server"] is True
+    assert out["png"] == str(tmp_path / "demo.png") and (tmp_path / "demo.png").stat().st_size > 0

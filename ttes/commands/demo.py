@@ -8,6 +8,9 @@ processes are stopped cleanly at the end.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
+import json
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
@@ -34,9 +37,9 @@ def run(args: argparse.Namespace) -> int:
     from ttes.output import print_json
 
     summaries = figure_summaries()
-    if args.json:
+    if args.json and args.figures_only:
         print_json({"figures": summaries})
-    else:
+    elif not args.json:
         print("Jack/TTES demo: the shipped figures")
         for s in summaries:
             print(
@@ -61,9 +64,13 @@ def run(args: argparse.Namespace) -> int:
         "--out",
         str(video),
     ]
-    if args.json:
+    stub_json = io.StringIO()
+    if args.json:  # one JSON object on stdout: the figures, the stub's summary, the last frame
         stub_args.append("--json")
-    rc = ttes_main(stub_args)
+        with contextlib.redirect_stdout(stub_json):
+            rc = ttes_main(stub_args)
+    else:
+        rc = ttes_main(stub_args)
     if rc != 0:
         return rc
     import imageio.v2 as imageio
@@ -73,8 +80,11 @@ def run(args: argparse.Namespace) -> int:
         # imageio's stub types the Reader's __iter__ as returning one Array; it yields the frames.
         for last in cast("Iterable[np.ndarray]", reader):  # noqa: B007 - we want the final frame
             pass
+    png = args.out_dir / "demo.png"
     if last is not None:
-        png = args.out_dir / "demo.png"
         imageio.imwrite(png, last)
         print(f"wrote {png} (the last frame)", file=sys.stderr)
+    if args.json:
+        stub = json.loads(stub_json.getvalue() or "{}")
+        print_json({"figures": summaries, "stub": stub, "png": str(png) if last is not None else None})
     return 0
