@@ -311,11 +311,11 @@ def channelset_motion(cs: Channelset, rig: Rig) -> tuple[np.ndarray, list[np.nda
     return np.array(dofs), [coords.transforms_jack_to_performer(p) for p in per_figure]
 
 
-def export_channelset(path: Path, out: Path, figures_dir: Path) -> Rig:
+def export_channelset(path: Path, out: Path, figures_dir: Path) -> tuple[Rig, int]:
     """Write the channelset at ``path`` as a .glb: its figures (from ``figures_dir``) and one animation."""
     cs = load_channelset(path)
     figures = [read_figure(figures_dir / name) for name in _figure_files(cs)]
     rig = rig_for(figures)
     dofs, placements = channelset_motion(cs, rig)
     write_animation(rig, cs.name, cs.fps, dofs, placements, out)
-    return rig
+    return rig, cs.nframes

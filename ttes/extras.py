@@ -20,6 +20,7 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "mujoco": "authoring",
     "scipy": "authoring",
     "fast_simplification": "authoring",
+    "pygltflib": "authoring",
 }
 
 
