@@ -311,11 +311,19 @@ def channelset_motion(cs: Channelset, rig: Rig) -> tuple[np.ndarray, list[np.nda
     return np.array(dofs), [coords.transforms_jack_to_performer(p) for p in per_figure]
 
 
-def export_channelset(path: Path, out: Path, figures_dir: Path) -> tuple[Rig, int]:
-    """Write the channelset at ``path`` as a .glb: its figures (from ``figures_dir``) and one animation."""
+def export_channelset(
+    path: Path, figures_dir: Path, *, gltf: Path | None = None, bvh: Path | None = None
+) -> tuple[Rig, int]:
+    """Write the channelset at ``path`` on its figures (from ``figures_dir``): a .glb with one animation,
+    and/or a BVH of the soldier (``authoring.bvh_io``)."""
     cs = load_channelset(path)
     figures = [read_figure(figures_dir / name) for name in _figure_files(cs)]
     rig = rig_for(figures)
     dofs, placements = channelset_motion(cs, rig)
-    write_animation(rig, cs.name, cs.fps, dofs, placements, out)
+    if gltf is not None:
+        write_animation(rig, cs.name, cs.fps, dofs, placements, gltf)
+    if bvh is not None:
+        from authoring.bvh_io import export_bvh
+
+        export_bvh(rig, cs.fps, dofs, placements, bvh)
     return rig, cs.nframes

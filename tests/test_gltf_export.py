@@ -95,7 +95,7 @@ def soldier_glb(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Rig]:
 @pytest.fixture(scope="module")
 def walk_glb(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("gltf") / "walk.glb"
-    export_channelset(WALK, out, FIGURES)
+    export_channelset(WALK, FIGURES, gltf=out)
     return out
 
 

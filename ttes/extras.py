@@ -21,6 +21,8 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "scipy": "authoring",
     "fast_simplification": "authoring",
     "pygltflib": "authoring",
+    "bvhio": "authoring",
+    "glm": "authoring",  # PyGLM, bvhio's vectors
 }
 
 
