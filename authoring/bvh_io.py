@@ -93,7 +93,7 @@ def export_bvh(rig: Rig, fps: float, dofs: np.ndarray, placements: list[np.ndarr
     """Write the soldier's ``dofs`` ``(N, ndof)`` (table order) at ``placements[0]`` ``(N, 4, 4)`` as BVH."""
     wf = rig.wire[0]
     local = _bvh_locals(rig, dofs, placements)
-    joints = []
+    joints: list[bvhio.BvhJoint] = []
     for row in range(len(wf.segment_names)):
         name = wf.segment_names[0] if row == 0 else rig.joint_names[0][row - 1]
         offset = glm.vec3(*map(float, local[0, row, :3, 3] * coords.CM_PER_M)) if row else None
@@ -138,7 +138,8 @@ def _signed_angle(axis: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
 
 
 def import_bvh(path: Path, rig: Rig) -> tuple[float, np.ndarray, np.ndarray]:
-    """Read a BVH written by :func:`export_bvh` for ``rig``: fps, the soldier's table-order DOFs ``(N, ndof0)``
+    """Read a BVH written by :func:`export_bvh` for ``rig``: fps, the soldier's table-order DOFs
+    ``(N, ndof0)``
     and its placement ``(N, 4, 4)`` (Performer)."""
     bvh = bvhio.readAsBvh(str(path))
     wf = rig.wire[0]

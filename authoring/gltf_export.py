@@ -1,18 +1,19 @@
-"""glTF 2.0 out (issue 20): a soldier and its rifle, and their channelsets as animations, for any image generator.
+"""glTF 2.0 out (issue 20): a soldier, its rifle and their channelsets as animations, for any image generator.
 
-The file is the FIGURE message (docs/PROTOCOL.md §7.2, ``protocol.figure``) written as a node tree, so a glTF
-client and a wire client see the same skeleton with the same names:
+The file is the FIGURE message (docs/PROTOCOL.md §7.2, ``protocol.figure``) written as a node tree, so a
+glTF client and a wire client see the same skeleton with the same names:
 
-    jack_to_gltf                     rotation only: Performer axes (+Z up, facing +Y) to glTF's (+Y up, facing +Z)
-      soldier / rifle                the figure entry F (the table's entry name); animated: translation, rotation
-        <root>.segment               pre of row 0, the segment's mesh (node mesh, rigidly bound)
-          <joint>                    pre · D(q): the update table's joint name; animated: rotation (+ translation
-            <segment>.segment        when the joint has T DOFs); then post, the segment's mesh
-              <segment>.<site>       an empty at each site's location
+    jack_to_gltf               rotation only: Performer axes (+Z up, facing +Y) to glTF's (+Y up, facing +Z)
+      soldier / rifle          the figure entry F (the table's entry name); animated: translation, rotation
+        <root>.segment         pre of row 0, the segment's mesh (node mesh, rigidly bound)
+          <joint>              pre · D(q), the update table's joint name; animated: rotation (+ translation
+            <segment>.segment  for T DOFs); then post, the segment's mesh
+              <segment>.<site> an empty at each site's location
 
 Segments are ``NAME.segment`` because a joint may share its segment's name (DI's ``neck``); the rifle's
-nodes are ``AK_47.…`` as its joints are in the table. Metres everywhere. The local transforms are taken from the wire client's segment globals
-(``WireFigure.segment_globals``), so no second FK lives here: joint = inv(G(parent)) · G(segment) · inv(post).
+nodes are ``AK_47.…`` as its joints are in the table. Metres everywhere. The local transforms come from
+the wire client's segment globals (``WireFigure.segment_globals``), so no second FK lives here:
+joint = inv(G(parent)) · G(segment) · inv(post).
 """
 
 from __future__ import annotations
@@ -26,10 +27,10 @@ import pygltflib as gl
 
 from peabody import quaternion
 from peabody.fk import FigureKinematics, rigid_inverse
+from peabody.loader import read_figure
 from peabody.model import Figure
 from protocol import coords
 from protocol.figure import WireFigure, dof_starts, figure_from_wire, figure_to_wire
-from peabody.loader import read_figure
 from protocol.update_table import FigureEntry, JointEntry, UpdateTable
 from server.motion.binding import FigurePlacement, bind_channelset
 from server.motion.cache import load_channelset
@@ -158,7 +159,7 @@ class _Writer:
 
 @dataclass(frozen=True)
 class _Nodes:
-    """Node indices of the written rig: per figure its entry node and its joint nodes (row 0: root segment)."""
+    """Node indices of the written rig: per figure its entry node and joint nodes (row 0: root segment)."""
 
     entries: tuple[int, ...]
     joints: tuple[tuple[int, ...], ...]
@@ -222,7 +223,7 @@ def export_figures(figures: Sequence[Figure], out: Path) -> Rig:
 
 
 def _continuous(quats: np.ndarray) -> np.ndarray:
-    """(N, 4) rotations with each one on the same side as the one before (LINEAR sampling slerps the short way)."""
+    """(N, 4) rotations, each on the same side as the one before (LINEAR sampling slerps the short way)."""
     q = quats.copy()
     for i in range(1, len(q)):
         if np.dot(q[i], q[i - 1]) < 0:
@@ -257,7 +258,8 @@ def write_animation(
     placements: Sequence[np.ndarray],
     out: Path,
 ) -> None:
-    """Write the rig posed at frame 0 and one animation ``name`` of ``len(dofs)`` frames: ``dofs`` ``(N, ndof)``
+    """Write the rig posed at frame 0 and one animation ``name`` of ``len(dofs)`` frames: ``dofs``
+    ``(N, ndof)``
     (table order, radians/metres), ``placements`` per figure ``(N, 4, 4)`` (Performer)."""
     n = len(dofs)
     frames = [local_transforms(rig, dofs[i], [p[i] for p in placements]) for i in range(n)]

@@ -50,7 +50,7 @@ def test_round_trip_reproduces_the_joint_angles_within_a_hundredth_of_a_degree(w
 
 
 def test_bvhio_places_every_joint_where_peabody_fk_does(walk_bvh) -> None:
-    path, rig, cs, _, _ = walk_bvh
+    path, _, cs, _, _ = walk_bvh
     fig = read_figure(FIGURES / "DI.fig")
     kin = FigureKinematics(fig)
     bound = bind_channelset(cs, [fig])
@@ -74,7 +74,7 @@ def test_bvhio_places_every_joint_where_peabody_fk_does(walk_bvh) -> None:
 
 
 def test_the_bvh_read_into_a_channelset_plays_the_walks_angles(walk_bvh) -> None:
-    path, rig, cs, _, _ = walk_bvh
+    path, _, cs, _, _ = walk_bvh
     fig = read_figure(FIGURES / "DI.fig")
     back = bvh_to_channelset(path, rig_for([fig]), "walk_back")
     assert (back.nframes, back.fps) == (cs.nframes, cs.fps)

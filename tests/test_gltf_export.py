@@ -15,7 +15,7 @@ import pytest
 
 pygltflib = pytest.importorskip("pygltflib")
 
-from authoring.gltf_export import ROOT_NODE, Rig, segment_node_name, export_channelset, export_figures  # noqa: E402
+from authoring.gltf_export import ROOT_NODE, Rig, export_channelset, export_figures, segment_node_name  # noqa: E402
 from peabody import quaternion  # noqa: E402
 from peabody.fk import FigureKinematics  # noqa: E402
 from peabody.loader import read_figure  # noqa: E402

@@ -25,9 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     export = cmds.add_parser(
         "export",
         help="write a channelset as a glTF 2.0 animation on its figures, or as BVH",
-        description="Write the figures a channelset drives (found in --figures by their protofiletype) and the "
-        "clip as one glTF animation: a key per stored frame, rotations per joint node, the figure entries' "
-        "translation and rotation; --bvh: the soldier's skeleton and motion as BVH (docs/GLTF.md).",
+        description="Write the figures a channelset drives (found in --figures by their protofiletype) and "
+        "the clip as one glTF animation: a key per stored frame, rotations per joint node, the figure "
+        "entries' translation and rotation; --bvh: the soldier's skeleton and motion as BVH (docs/GLTF.md).",
     )
     export.add_argument("path", type=Path, help="a *.chset.env file")
     export.add_argument("--gltf", type=Path, metavar="OUT.glb", help="the binary glTF to write")
@@ -76,11 +76,12 @@ def run_export(args: argparse.Namespace) -> int:
         args.path, args.figures or ttes.paths.FIGURES, gltf=args.gltf, bvh=args.bvh
     )
     outs = [str(p) for p in (args.gltf, args.bvh) if p is not None]
-    summary = {"out": outs, "figures": [f.name for f in rig.figures], "frames": frames}
+    names = [f.name for f in rig.figures]
+    summary = {"out": outs, "figures": names, "frames": frames}
     if args.json:
         print_json(summary)
     else:
-        print(f"wrote {', '.join(outs)}: {frames} frames on {', '.join(summary['figures'])}")
+        print(f"wrote {', '.join(outs)}: {frames} frames on {', '.join(names)}")
     return 0
 
 
