@@ -13,11 +13,15 @@ Only the soldier: BVH holds one skeleton, so the weapon's placement is not writt
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
-import bvhio
-import glm
 import numpy as np
+from pyglm import glm
+
+with warnings.catch_warnings():  # bvhio imports PyGLM the old way ("import glm": PendingDeprecationWarning)
+    warnings.simplefilter("ignore", PendingDeprecationWarning)
+    import bvhio
 
 from authoring.gltf_export import PERFORMER_TO_GLTF, Rig, local_transforms
 from authoring.ik import decompose_rotation

@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-bvhio = pytest.importorskip("bvhio")
-pytest.importorskip("pygltflib")
+bvh_io = pytest.importorskip("authoring.bvh_io")  # bvhio and pygltflib: the [authoring] extra
 
-from authoring.bvh_io import bvh_to_channelset, export_bvh, import_bvh  # noqa: E402
+from authoring.bvh_io import bvh_to_channelset, bvhio, export_bvh, import_bvh  # noqa: E402
 from authoring.gltf_export import Rig, channelset_motion, rig_for  # noqa: E402
 from peabody.fk import FigureKinematics  # noqa: E402
 from peabody.loader import read_figure  # noqa: E402

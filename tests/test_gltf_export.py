@@ -28,7 +28,6 @@ from server.motion.cache import load_channelset  # noqa: E402
 FIGURES = DEFAULT_DATA_DIR / "figures"
 WALK = DEFAULT_DATA_DIR / "channelsets" / "bwalk_cycle_l_low.chset.env"
 TOOLS = Path(__file__).parent / "tools"
-VALIDATOR = "gltf-validator@2.0.0-dev.3.10"
 MM = 1e-3
 
 
@@ -162,13 +161,16 @@ def test_channelset_animation_keyframes_are_fk_of_its_frames(walk_glb: Path) -> 
 
 
 def _validator_dir() -> Path | None:
-    """A folder with the npm gltf-validator installed (``TTES_NPM_DIR``, default ~/.cache/jack-ttes/npm):
-    installed there on first use; None without node/npm or the registry."""
+    """A folder with tests/tools/package.json's npm packages installed (``TTES_NPM_DIR``, default
+    ~/.cache/jack-ttes/npm; .ci/run installs them there first): installed on first use; None without node/npm
+    or the registry."""
     if shutil.which("node") is None or shutil.which("npm") is None:
         return None
     where = Path(os.environ.get("TTES_NPM_DIR", Path.home() / ".cache" / "jack-ttes" / "npm"))
     if not (where / "node_modules" / "gltf-validator").is_dir():
-        cmd = ["npm", "install", "--silent", "--no-audit", "--no-fund", "--prefix", str(where), VALIDATOR]
+        where.mkdir(parents=True, exist_ok=True)
+        shutil.copy(TOOLS / "package.json", where / "package.json")
+        cmd = ["npm", "install", "--silent", "--no-audit", "--no-fund", "--prefix", str(where)]
         try:
             subprocess.run(cmd, check=True, timeout=180, capture_output=True)
         except (subprocess.SubprocessError, OSError):
@@ -191,3 +193,21 @@ def test_khronos_validator_finds_no_error(soldier_glb: tuple[Path, Rig], walk_gl
         errors = [m for m in issues["messages"] if m["severity"] == 0]
         assert issues["numErrors"] == 0, errors[:5]
         assert issues["numWarnings"] == 0, issues["messages"][:5]
+
+
+def test_the_commands_write_the_files_and_say_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from ttes.cli import main
+
+    glb = tmp_path / "di.glb"
+    assert (
+        main(["figure", "export", str(FIGURES / "DI.fig"), str(FIGURES / "AK_47.fig"), "--gltf", str(glb)])
+        == 0
+    )
+    assert glb.stat().st_size > 10_000 and "soldier, rifle" in capsys.readouterr().out
+    assert main(["channelset", "export", str(WALK)]) == 2  # neither --gltf nor --bvh
+    assert "--gltf" in capsys.readouterr().err
+    bvh, back = tmp_path / "walk.bvh", tmp_path / "back.chset.env"
+    assert main(["channelset", "export", str(WALK), "--bvh", str(bvh), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["frames"] == 37
+    assert main(["channelset", "import-bvh", str(bvh), str(back), "--figure", str(FIGURES / "DI.fig")]) == 0
+    assert load_channelset(back, use_cache=False).nframes == 37

@@ -22,7 +22,7 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "fast_simplification": "authoring",
     "pygltflib": "authoring",
     "bvhio": "authoring",
-    "glm": "authoring",  # PyGLM, bvhio's vectors
+    "pyglm": "authoring",  # PyGLM, bvhio's vectors
 }
 
 
