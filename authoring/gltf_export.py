@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePath
+from typing import Any
 
 import numpy as np
 import pygltflib as gl
@@ -250,34 +251,42 @@ def _track(w: _Writer, anim: gl.Animation, times: int, node: int, mats: np.ndarr
         _channel(w, anim, times, node, "translation", np.array([t for t, _ in trs]))
 
 
-def write_animation(
-    rig: Rig,
-    name: str,
-    fps: float,
-    dofs: np.ndarray,
-    placements: Sequence[np.ndarray],
-    out: Path,
-) -> None:
-    """Write the rig posed at frame 0 and one animation ``name`` of ``len(dofs)`` frames: ``dofs``
-    ``(N, ndof)``
-    (table order, radians/metres), ``placements`` per figure ``(N, 4, 4)`` (Performer)."""
-    n = len(dofs)
-    frames = [local_transforms(rig, dofs[i], [p[i] for p in placements]) for i in range(n)]
-    w = _Writer()
-    nodes = _write_rig(w, rig, dofs[0], [p[0] for p in placements])
-    times = w.accessor((np.arange(n) / fps).astype(np.float32), gl.SCALAR, bounds=True)
-    anim = gl.Animation(name=name)
+@dataclass(frozen=True)
+class Clip:
+    """One animation: ``dofs`` ``(N, ndof)`` (table order, radians/metres) and per figure its placement
+    ``(N, 4, 4)`` (Performer), sampled at ``fps``; ``extras`` go into the glTF animation as they are."""
+
+    name: str
+    fps: float
+    dofs: np.ndarray
+    placements: list[np.ndarray]
+    extras: dict[str, Any] | None = None
+
+
+def _animation(w: _Writer, rig: Rig, nodes: _Nodes, clip: Clip) -> gl.Animation:
+    n = len(clip.dofs)
+    frames = [local_transforms(rig, clip.dofs[i], [p[i] for p in clip.placements]) for i in range(n)]
+    times = w.accessor((np.arange(n) / clip.fps).astype(np.float32), gl.SCALAR, bounds=True)
+    anim = gl.Animation(name=clip.name, extras=clip.extras or {})
     translational = rig.translational
     starts = dof_starts(rig.table)
     for k, wf in enumerate(rig.wire):
-        _track(w, anim, times, nodes.entries[k], placements[k], moves=True)
+        _track(w, anim, times, nodes.entries[k], clip.placements[k], moves=True)
         for row in range(1, len(wf.segment_names)):
             e = int(wf.entry[row])
             if e < 0:
                 continue
             moves = bool(translational[starts[e] : starts[e] + len(wf.joints[e][1])].any())
             _track(w, anim, times, nodes.joints[k][row], np.array([f[k][row] for f in frames]), moves)
-    w.gltf.animations = [anim]
+    return anim
+
+
+def write_animations(rig: Rig, clips: Sequence[Clip], out: Path) -> None:
+    """Write the rig, posed at the first clip's first frame, with one glTF animation per clip."""
+    w = _Writer()
+    first = clips[0]
+    nodes = _write_rig(w, rig, first.dofs[0], [p[0] for p in first.placements])
+    w.gltf.animations = [_animation(w, rig, nodes, clip) for clip in clips]
     w.write(out)
 
 
@@ -298,13 +307,14 @@ def _location(kin: FigureKinematics, placement: FigurePlacement | None, pose: np
 
 def channelset_motion(cs: Channelset, rig: Rig) -> tuple[np.ndarray, list[np.ndarray]]:
     """Per stored frame (not resampled): table-order DOFs ``(N, ndof)`` and per figure its placement
-    ``(N, 4, 4)`` (Performer)."""
+    ``(N, 4, 4)`` (Performer). A figure of the rig the channelset does not drive keeps its file's pose."""
     bound = bind_channelset(cs, rig.figures)
     kins = [FigureKinematics(f) for f in rig.figures]
+    rests = [k.neutral_pose() for k in kins]  # a figure the clip does not drive stays as its file has it
     dofs, places = [], []
     for i in range(cs.nframes):
         s = bound.sample(float(i), interpolate=False)
-        poses = [s.poses[f.name] for f in rig.figures]
+        poses = [s.poses.get(f.name, neutral) for f, neutral in zip(rig.figures, rests, strict=True)]
         dofs.append(rig.table_dofs(poses))
         places.append(
             [_location(kin, s.placements.get(kin.figure.name), p) for kin, p in zip(kins, poses, strict=True)]
@@ -323,9 +333,27 @@ def export_channelset(
     rig = rig_for(figures)
     dofs, placements = channelset_motion(cs, rig)
     if gltf is not None:
-        write_animation(rig, cs.name, cs.fps, dofs, placements, gltf)
+        write_animations(rig, [Clip(cs.name, cs.fps, dofs, placements)], gltf)
     if bvh is not None:
         from authoring.bvh_io import export_bvh
 
         export_bvh(rig, cs.fps, dofs, placements, bvh)
     return rig, cs.nframes
+
+
+def export_posture_graph(path: Path, figures_dir: Path, out: Path) -> tuple[Rig, int]:
+    """Write every channelset of a posture graph as one glTF animation each, on one rig (the figures they
+    drive, the soldier first); each animation's ``extras.arcs`` lists the graph's arcs that play it as
+    ``[from, to, "forward"|"backward"]``."""
+    from server.motion.posture_change import load_posture_graph
+
+    loaded = load_posture_graph(path)
+    files = list(dict.fromkeys(name for cs in loaded.channelsets for name in _figure_files(cs)))
+    rig = rig_for([read_figure(figures_dir / name) for name in files])
+    clips = []
+    for token, cs in enumerate(loaded.channelsets):
+        arcs = [[a.start, a.end, a.direction] for a in loaded.graph.arcs if a.channelset == token]
+        dofs, placements = channelset_motion(cs, rig)
+        clips.append(Clip(cs.name, cs.fps, dofs, placements, {"arcs": arcs}))
+    write_animations(rig, clips, out)
+    return rig, len(clips)

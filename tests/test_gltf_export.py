@@ -15,7 +15,14 @@ import pytest
 
 pygltflib = pytest.importorskip("pygltflib")
 
-from authoring.gltf_export import ROOT_NODE, Rig, export_channelset, export_figures, segment_node_name  # noqa: E402
+from authoring.gltf_export import (  # noqa: E402
+    ROOT_NODE,
+    Rig,
+    export_channelset,
+    export_figures,
+    export_posture_graph,
+    segment_node_name,
+)
 from peabody import quaternion  # noqa: E402
 from peabody.fk import FigureKinematics  # noqa: E402
 from peabody.loader import read_figure  # noqa: E402
@@ -24,6 +31,7 @@ from protocol.update_table import JointEntry  # noqa: E402
 from server.config import DEFAULT_DATA_DIR  # noqa: E402
 from server.motion.binding import bind_channelset  # noqa: E402
 from server.motion.cache import load_channelset  # noqa: E402
+from server.motion.posture_change import load_posture_graph  # noqa: E402
 
 FIGURES = DEFAULT_DATA_DIR / "figures"
 WALK = DEFAULT_DATA_DIR / "channelsets" / "bwalk_cycle_l_low.chset.env"
@@ -178,14 +186,21 @@ def _validator_dir() -> Path | None:
     return where
 
 
-def test_khronos_validator_finds_no_error(soldier_glb: tuple[Path, Rig], walk_glb: Path) -> None:
+def test_khronos_validator_finds_no_error(
+    soldier_glb: tuple[Path, Rig], walk_glb: Path, tmp_path: Path
+) -> None:
     where = _validator_dir()
     if where is None:
         pytest.skip("node/npm or the gltf-validator package is not available")
+    crawl = tmp_path / "crawl.glb"
+    export_posture_graph(DEFAULT_DATA_DIR / "posture_graphs" / "soldier_crawl.graph", FIGURES, crawl)
     env = {**os.environ, "NODE_PATH": str(where / "node_modules")}
     script = TOOLS / "validate_gltf.js"
     run = subprocess.run(
-        ["node", str(script), str(soldier_glb[0]), str(walk_glb)], env=env, capture_output=True, timeout=60
+        ["node", str(script), str(soldier_glb[0]), str(walk_glb), str(crawl)],
+        env=env,
+        capture_output=True,
+        timeout=60,
     )
     assert run.returncode == 0, run.stderr.decode()
     for report in json.loads(run.stdout):
@@ -193,6 +208,33 @@ def test_khronos_validator_finds_no_error(soldier_glb: tuple[Path, Rig], walk_gl
         errors = [m for m in issues["messages"] if m["severity"] == 0]
         assert issues["numErrors"] == 0, errors[:5]
         assert issues["numWarnings"] == 0, issues["messages"][:5]
+
+
+def test_a_posture_graph_is_one_animation_per_channelset_with_its_arcs(tmp_path: Path) -> None:
+    graph = DEFAULT_DATA_DIR / "posture_graphs" / "soldier_crawl.graph"
+    out = tmp_path / "crawl.glb"
+    rig, n = export_posture_graph(graph, FIGURES, out)
+    loaded = load_posture_graph(graph)
+    gltf = pygltflib.GLTF2().load(str(out))
+    assert n == len(gltf.animations) == len(loaded.channelsets) == 2
+    for token, (anim, cs) in enumerate(zip(gltf.animations, loaded.channelsets, strict=True)):
+        assert anim.name == cs.name
+        want = [[a.start, a.end, a.direction] for a in loaded.graph.arcs if a.channelset == token]
+        assert anim.extras["arcs"] == want and want
+        assert gltf.accessors[anim.samplers[0].input].count == cs.nframes
+    # the last frame of the second clip, set from its keys, is FK (the soldier's root segment and left palm)
+    frame = loaded.channelsets[1].nframes - 1
+    gltf.animations = gltf.animations[1:]
+    worlds = _worlds(gltf, frame)
+    fig = rig.figures[0]
+    kin = FigureKinematics(fig)
+    s = bind_channelset(loaded.channelsets[1], [fig]).sample(float(frame), interpolate=False)
+    pose, place = s.poses[fig.name].astype(np.float64), s.placements[fig.name]
+    assert place is not None
+    location = kin.location_for_site_global(place.root, place.matrix(), pose)
+    for name in ("lower_torso.proximal", "left_palm.grip"):
+        g = kin.site_globals(pose, root_location=location)[kin.site_names.index(name)]
+        _assert_close(worlds[name], _to_gltf(g), name)
 
 
 def test_the_commands_write_the_files_and_say_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -211,3 +253,7 @@ def test_the_commands_write_the_files_and_say_so(tmp_path: Path, capsys: pytest.
     assert json.loads(capsys.readouterr().out)["frames"] == 37
     assert main(["channelset", "import-bvh", str(bvh), str(back), "--figure", str(FIGURES / "DI.fig")]) == 0
     assert load_channelset(back, use_cache=False).nframes == 37
+    assert "37 frames at 60 fps" in capsys.readouterr().out
+    crawl = DEFAULT_DATA_DIR / "posture_graphs" / "soldier_crawl.graph"
+    assert main(["graph", "export", str(crawl), "--gltf", str(tmp_path / "crawl.glb"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["animations"] == 2
