@@ -132,7 +132,9 @@ def make_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.moveaxis(q, 0, axis)
 
 
-def slerp(a: np.ndarray, b: np.ndarray, t: ArrayLike, out: np.ndarray | None = None) -> np.ndarray:
+def slerp(
+    a: np.ndarray, b: np.ndarray, t: ArrayLike, out: np.ndarray | None = None
+) -> np.ndarray:
     """Spherical interpolation of ``(..., 4)`` unit quaternions with weights ``t`` broadcast to ``(...)``.
 
     Takes the short arc; nearly equal rotations fall back to normalised lerp (sin θ → 0).
