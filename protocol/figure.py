@@ -181,7 +181,7 @@ class WireFigure:
     def segment_globals(self, table: UpdateTable, dofs: np.ndarray, placement: np.ndarray) -> np.ndarray:
         """``(S, 4, 4)``: every segment in the soldier frame for one soldier's decoded ``dofs`` (table order,
         radians/metres) and this figure's ``placement`` (4x4 from its figure entry)."""
-        start = _dof_starts(table)
+        start = dof_starts(table)
         g = np.empty((len(self.segment_names), 4, 4))
         for s in range(len(self.segment_names)):
             parent = placement if self.parent[s] < 0 else g[self.parent[s]]
@@ -202,7 +202,8 @@ class WireFigure:
         return g[self.site_segment] @ self.site_location
 
 
-def _dof_starts(table: UpdateTable) -> dict[int, int]:
+def dof_starts(table: UpdateTable) -> dict[int, int]:
+    """Joint entry index -> its first column in a table-order DOF vector."""
     out, k = {}, 0
     for i, e in enumerate(table.entries):
         if isinstance(e, JointEntry):

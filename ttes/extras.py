@@ -20,6 +20,9 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "mujoco": "authoring",
     "scipy": "authoring",
     "fast_simplification": "authoring",
+    "pygltflib": "authoring",
+    "bvhio": "authoring",
+    "pyglm": "authoring",  # PyGLM, bvhio's vectors
 }
 
 

@@ -10,9 +10,11 @@ converts a whole tick in a few numpy calls (``protocol.coords`` for the axes).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
+from peabody.model import Figure
 from protocol import coords
 from protocol.events import JointUpdates
 from protocol.update_table import DEFAULT_DOF_BITS, DofRange, FigureEntry, JointEntry, UpdateTable
@@ -32,9 +34,18 @@ def update_table_for(
     Rotations use ``[-pi, pi)`` (angles are wrapped on the way out); translations the joint limits in metres
     when finite, else ``±T_RANGE_M``. Joints of figures after the first are named ``figure.joint``.
     """
-    clips = library.sets[set_index]
+    entries = table_entries(library.sets[set_index].prototypes, dof_bits=dof_bits)
+    figure, weapon = library.set_keys[set_index]
+    return UpdateTable(table_id, figure, weapon, entries)
+
+
+def table_entries(
+    figures: Sequence[Figure], *, dof_bits: int = DEFAULT_DOF_BITS
+) -> tuple[JointEntry | FigureEntry, ...]:
+    """The entries of :func:`update_table_for` for ``figures`` (soldier first): also what names the nodes of
+    the glTF export (``authoring.gltf_export``), so a joint has one name on the wire and in a file."""
     entries: list[JointEntry | FigureEntry] = []
-    for k, fig in enumerate(clips.prototypes):
+    for k, fig in enumerate(figures):
         for jname, joint in fig.joints.items():
             dofs = []
             for d in joint.dofs:
@@ -46,10 +57,9 @@ def update_table_for(
                 else:
                     dofs.append(DofRange("R", -math.pi, math.pi, dof_bits))
             entries.append(JointEntry(jname if k == 0 else f"{fig.name}.{jname}", tuple(dofs)))
-    for k, fig in enumerate(clips.prototypes):
+    for k, fig in enumerate(figures):
         entries.append(FigureEntry(FIGURE_ENTRY_NAMES[k] if k < len(FIGURE_ENTRY_NAMES) else fig.name))
-    figure, weapon = library.set_keys[set_index]
-    return UpdateTable(table_id, figure, weapon, tuple(entries))
+    return tuple(entries)
 
 
 class WireConverter:

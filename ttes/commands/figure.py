@@ -1,4 +1,5 @@
-"""`ttes figure`: inspect Peabody figure files (`ttes figure info PATH`)."""
+"""`ttes figure`: inspect Peabody figure files (`ttes figure info PATH`), write them for other tools
+(`ttes figure export FIG [WEAPON] --gltf OUT.glb`)."""
 
 from __future__ import annotations
 
@@ -30,6 +31,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     spit.add_argument("out", type=Path, help="the .tips file to write")
     spit.add_argument("--json", action="store_true", help="machine-readable output")
     spit.set_defaults(figure_func=_spit)
+    export = actions.add_parser(
+        "export",
+        help="write a figure (and its weapon) as glTF 2.0 for any image generator",
+        description="Write the soldier figure and optionally its weapon, in the neutral pose, as one .glb: "
+        "nodes named as the server's update table, segment meshes, sites as empty nodes (docs/GLTF.md).",
+    )
+    export.add_argument("figure", type=Path, help="the soldier's .fig file (figures/DI.fig)")
+    export.add_argument("weapon", type=Path, nargs="?", help="its weapon's .fig file (figures/AK_47.fig)")
+    export.add_argument(
+        "--gltf", type=Path, required=True, metavar="OUT.glb", help="the binary glTF to write"
+    )
+    export.add_argument("--json", action="store_true", help="machine-readable output")
+    export.set_defaults(figure_func=_export)
     p.set_defaults(func=run)
 
 
@@ -70,6 +84,30 @@ def _spit(args: argparse.Namespace) -> int:
         print_json(summary)
     else:
         print(f"wrote {summary['out']}: {len(env.figures)} figure(s) {', '.join(env.figures)}")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from authoring.gltf_export import export_figures
+    from peabody.loader import read_figure
+    from ttes.output import print_json
+
+    paths = [args.figure] + ([args.weapon] if args.weapon else [])
+    rig = export_figures([read_figure(p) for p in paths], args.gltf)
+    summary = {
+        "out": str(args.gltf),
+        "figures": list(rig.entry_names),
+        "segments": sum(len(w.segment_names) for w in rig.wire),
+        "sites": sum(len(w.site_names) for w in rig.wire),
+        "bytes": args.gltf.stat().st_size,
+    }
+    if args.json:
+        print_json(summary)
+    else:
+        print(
+            f"wrote {args.gltf}: {', '.join(rig.entry_names)}; {summary['segments']} segments, "
+            f"{summary['sites']} sites, {summary['bytes']} bytes"
+        )
     return 0
 
 

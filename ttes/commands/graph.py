@@ -1,8 +1,9 @@
-"""`ttes graph`: posture graph files (seed 002, 3.4.2): shortest paths in time and summaries."""
+"""`ttes graph`: posture graph files (seed 002, 3.4.2): shortest paths in time, summaries, glTF export."""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -30,6 +31,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     info.add_argument("--load", action="store_true", help="also load (and cache) every channelset it lists")
     info.add_argument("--json", action="store_true", help="machine-readable output")
     info.set_defaults(func=run_info)
+    export = cmds.add_parser(
+        "export",
+        help="every channelset of a graph as glTF 2.0 animations on one soldier",
+        description="Write the figures a graph's channelsets drive and one glTF animation per channelset "
+        "(its arcs in the animation's extras) as one .glb (docs/GLTF.md).",
+    )
+    export.add_argument("graph", type=Path, help="a .graph file")
+    export.add_argument(
+        "--gltf", type=Path, required=True, metavar="OUT.glb", help="the binary glTF to write"
+    )
+    export.add_argument(
+        "--figures", type=Path, default=None, help="where its .fig files are (default: figures/)"
+    )
+    export.add_argument("--json", action="store_true", help="machine-readable output")
+    export.set_defaults(func=run_export)
 
 
 def _durations(graph_path: str, graph: PostureGraph) -> list[float] | None:
@@ -123,4 +139,18 @@ def run_info(args: argparse.Namespace) -> int:
     print("  postures: " + ", ".join(graph.postures))
     if args.load:
         print(f"  channelset data: {result['channelset_bytes']} bytes")
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    import ttes.paths
+    from authoring.gltf_export import export_posture_graph
+    from ttes.output import print_json
+
+    rig, clips = export_posture_graph(args.graph, args.figures or ttes.paths.FIGURES, args.gltf)
+    names = [f.name for f in rig.figures]
+    if args.json:
+        print_json({"out": str(args.gltf), "figures": names, "animations": clips})
+    else:
+        print(f"wrote {args.gltf}: {clips} animations on {', '.join(names)}")
     return 0
