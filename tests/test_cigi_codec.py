@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import struct
 
 import pytest
@@ -110,3 +111,24 @@ def test_fuzzed_messages_decode_or_say_why(
     except CigiError:
         return
     assert all(isinstance(p, IgControl | EntityControl | ArticulatedPart | ShortArticulatedPart) for p in got)
+
+
+@pytest.mark.fuzz
+@given(st.binary(max_size=200), orders)
+def test_any_bytes_after_an_ig_control_decode_or_say_why(tail: bytes, order: cigi.Order) -> None:
+    with contextlib.suppress(CigiError):
+        decode_message(encode(IgControl(1), order) + tail)
+
+
+def test_part_ids_stop_at_255() -> None:
+    from protocol.cigi_scene import part_dofs
+    from protocol.update_table import DofRange, FigureEntry, JointEntry, UpdateTable
+
+    def table(njoints: int) -> UpdateTable:
+        dofs = (DofRange("R", -3.2, 3.2),) * 16
+        joints = tuple(JointEntry(f"j{k}", dofs) for k in range(njoints))
+        return UpdateTable(1, "X.fig", "Y.fig", (FigureEntry("soldier"), *joints))
+
+    assert [p.part_id for p in part_dofs(table(15))] == list(range(1, 241))
+    with pytest.raises(ValueError, match="part IDs stop at 255"):
+        part_dofs(table(16))
