@@ -12,7 +12,6 @@ integrator loads to bind part IDs to the model's joints.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -91,54 +90,104 @@ def entity_types(tables: dict[int, UpdateTable]) -> dict[int, int]:
     return {tid: FIRST_ENTITY_TYPE + n for n, tid in enumerate(sorted(tables))}
 
 
-def body_euler(q: np.ndarray) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (degrees, CIGI's yaw-pitch-roll order) of a soldier-frame (w, x, y, z) rotation."""
+def body_euler(q: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (``(..., 3)`` degrees, CIGI's yaw-pitch-roll order) of soldier-frame (w, x, y, z)
+    rotations ``(..., 4)``."""
     r = _SOLDIER_TO_BODY @ quaternion.to_matrix(np.asarray(q, np.float64)) @ _SOLDIER_TO_BODY.T
-    pitch = math.asin(max(-1.0, min(1.0, -float(r[2, 0]))))
-    roll = math.atan2(float(r[2, 1]), float(r[2, 2]))
-    yaw = math.atan2(float(r[1, 0]), float(r[0, 0]))
-    return math.degrees(roll), math.degrees(pitch), math.degrees(yaw)
+    pitch = np.arcsin(np.clip(-r[..., 2, 0], -1.0, 1.0))
+    roll = np.arctan2(r[..., 2, 1], r[..., 2, 2])
+    yaw = np.arctan2(r[..., 1, 0], r[..., 0, 0])
+    return np.degrees(np.stack([roll, pitch, yaw], axis=-1))
 
 
 @dataclass(frozen=True)
-class SoldierPose:
-    """What one frame says of one soldier: where (Performer east/north/up metres, compass heading), his
-    figure's entity type, his figures' offsets (soldier frame, metres; the root first) and rotations, the part
-    IDs of those figures and the joint DOFs (protocol units)."""
+class SoldierGroup:
+    """What one frame says of ``n`` soldiers of one update table: where (Performer east/north/up metres,
+    compass headings), their figure's entity type, their figures' offsets (soldier frame, metres; the root
+    first) and rotations, the part IDs of those figures, and the joint DOFs (protocol units)."""
 
-    entity_id: int
+    entity_ids: np.ndarray  # (n,)
     entity_type: int
-    position: np.ndarray
-    heading: float
-    offsets: np.ndarray  # (figures, 3)
-    rotations: np.ndarray  # (figures, 4)
+    positions: np.ndarray  # (n, 3)
+    headings: np.ndarray  # (n,)
+    offsets: np.ndarray  # (n, figures, 3)
+    rotations: np.ndarray  # (n, figures, 4)
     figure_parts: tuple[int, ...]
-    dofs: np.ndarray
+    dofs: np.ndarray  # (n, ndofs)
     kinds: tuple[str, ...]
 
+    def geodetic(self, origin: LocalFrame) -> np.ndarray:
+        """(n, 3) latitude, longitude (degrees), altitude (m) about ``origin``."""
+        return np.stack(ecef_to_geodetic(origin.to_ecef(np.asarray(self.positions, np.float64))), axis=-1)
 
-def soldier_packets(s: SoldierPose, origin: LocalFrame) -> Iterator[cigi.Packet]:
-    """Entity Control, the figures' Articulated Part Controls, then the DOFs two to a Short one."""
-    lat, lon, alt = (float(v) for v in ecef_to_geodetic(origin.to_ecef(np.asarray(s.position, np.float64))))
-    yield cigi.EntityControl(s.entity_id, s.entity_type, lat, lon, alt, yaw=float(s.heading) % 360.0)
-    for pid, offset, rotation in zip(s.figure_parts, s.offsets, s.rotations, strict=True):
-        x, y, z = (float(v) for v in _SOLDIER_TO_BODY @ np.asarray(offset, np.float64))
-        yield cigi.ArticulatedPart(s.entity_id, pid, True, x, y, z, *body_euler(rotation))
-    values = [math.degrees(v) if k == "R" else float(v) for v, k in zip(s.dofs, s.kinds, strict=True)]
-    selects = [cigi.DofSelect.ROLL if k == "R" else cigi.DofSelect.X_OFFSET for k in s.kinds]
-    for i in range(0, len(values), 2):
-        j = min(i + 1, len(values) - 1)
-        second = j != i  # an odd count: the last packet's second slot is not used
-        yield cigi.ShortArticulatedPart(
-            s.entity_id, i + 1, j + 1 if second else 0, selects[i],
-            selects[j] if second else cigi.DofSelect.NOT_USED, values[i], values[j] if second else 0.0,
-            True, second,
-        )  # fmt: skip
+    def values(self) -> np.ndarray:
+        """The DOFs in CIGI units: degrees for rotations, metres for translations."""
+        rot = np.array([k == "R" for k in self.kinds])
+        return np.where(rot, np.degrees(self.dofs), self.dofs)
+
+
+def soldier_packets(g: SoldierGroup, origin: LocalFrame) -> Iterator[cigi.Packet]:
+    """Per soldier: Entity Control, the figures' Articulated Part Controls, then the DOFs two to a Short one
+    (the packets one by one, as :func:`group_bytes` writes them all at once)."""
+    geo, euler, values = g.geodetic(origin), body_euler(g.rotations), g.values()
+    body = np.asarray(g.offsets, np.float64) @ _SOLDIER_TO_BODY.T
+    selects = [cigi.DofSelect.ROLL if k == "R" else cigi.DofSelect.X_OFFSET for k in g.kinds]
+    for n, eid in enumerate(int(e) for e in g.entity_ids):
+        lat, lon, alt = (float(v) for v in geo[n])
+        yield cigi.EntityControl(eid, g.entity_type, lat, lon, alt, yaw=float(g.headings[n]) % 360.0)
+        for f, pid in enumerate(g.figure_parts):
+            x, y, z = (float(v) for v in body[n, f])
+            yield cigi.ArticulatedPart(eid, pid, True, x, y, z, *(float(a) for a in euler[n, f]))
+        for i in range(0, len(selects), 2):
+            second = i + 1 < len(selects)  # an odd count: the last packet's second slot is not used
+            yield cigi.ShortArticulatedPart(
+                eid, i + 1, i + 2 if second else 0, selects[i],
+                selects[i + 1] if second else cigi.DofSelect.NOT_USED, float(values[n, i]),
+                float(values[n, i + 1]) if second else 0.0, True, second,
+            )  # fmt: skip
+
+
+_ENTITY = np.dtype([("head", "u1", 2), ("entity", ">u2"), ("flags", "u1", 4), ("type", ">u2"),
+                    ("parent", ">u2"), ("rpy", ">f4", 3), ("pos", ">f8", 3)])  # fmt: skip
+_PART = np.dtype([("head", "u1", 2), ("entity", ">u2"), ("part", "u1"), ("flags", "u1"), ("pad", "u1", 2),
+                  ("xyz", ">f4", 3), ("rpy", ">f4", 3)])  # fmt: skip
+_SHORT = np.dtype([("head", "u1", 2), ("entity", ">u2"), ("parts", "u1", 2), ("flags", "u1"), ("pad", "u1"),
+                   ("dof", ">f4", 2)])  # fmt: skip
+assert (_ENTITY.itemsize, _PART.itemsize, _SHORT.itemsize) == (48, 32, 16)
+
+
+def group_bytes(g: SoldierGroup, origin: LocalFrame) -> np.ndarray:
+    """``(n, bytes)``: each soldier's packets, big-endian, byte for byte :func:`soldier_packets` encoded."""
+    n, nfig, ndof = len(g.entity_ids), len(g.figure_parts), len(g.kinds)
+    eid = np.asarray(g.entity_ids, np.uint16)
+    ent = np.zeros(n, _ENTITY)
+    ent["head"] = (cigi.PacketId.ENTITY_CONTROL, 48)
+    ent["entity"], ent["type"], ent["flags"][:, 0], ent["flags"][:, 2] = eid, g.entity_type, 1, 255
+    ent["rpy"][:, 2] = np.asarray(g.headings, np.float64) % 360.0
+    ent["pos"] = g.geodetic(origin)
+    part = np.zeros((n, nfig), _PART)
+    part["head"] = (cigi.PacketId.ARTICULATED_PART, 32)
+    part["entity"], part["part"], part["flags"] = eid[:, None], g.figure_parts, 0x7F
+    part["xyz"] = np.asarray(g.offsets, np.float64) @ _SOLDIER_TO_BODY.T
+    part["rpy"] = body_euler(g.rotations)
+    nshort = (ndof + 1) // 2
+    values = np.zeros((n, 2 * nshort))
+    values[:, :ndof] = g.values()
+    select = np.zeros(2 * nshort, np.uint8)
+    select[:ndof] = [cigi.DofSelect.ROLL if k == "R" else cigi.DofSelect.X_OFFSET for k in g.kinds]
+    enable = np.arange(2 * nshort) < ndof
+    ids = np.where(enable, np.arange(1, 2 * nshort + 1), 0).reshape(nshort, 2)
+    short = np.zeros((n, nshort), _SHORT)
+    short["head"] = (cigi.PacketId.SHORT_ARTICULATED_PART, 16)
+    short["entity"], short["parts"], short["dof"] = eid[:, None], ids, values.reshape(n, nshort, 2)
+    sel, en = select.reshape(nshort, 2), enable.reshape(nshort, 2)
+    short["flags"] = sel[:, 0] | sel[:, 1] << 3 | en[:, 0] << 6 | en[:, 1].astype(np.uint8) << 7
+    return np.concatenate([a.view(np.uint8).reshape(n, -1) for a in (ent, part, short)], axis=1)
 
 
 def frame_messages(
     frame: int,
-    soldiers: list[SoldierPose],
+    groups: list[SoldierGroup],
     origin: LocalFrame,
     max_bytes: int = MAX_MESSAGE,
     timestamp: int = 0,
@@ -148,11 +197,14 @@ def frame_messages(
     head = cigi.encode(cigi.IgControl(frame & 0xFFFFFFFF, timestamp & 0xFFFFFFFF, timestamp_valid=True))
     messages: list[bytes] = []
     body = bytearray()
-    for s in soldiers:
-        chunk = b"".join(cigi.encode(p) for p in soldier_packets(s, origin))
-        if body and len(head) + len(body) + len(chunk) > max_bytes:
-            messages.append(head + bytes(body))
-            body.clear()
-        body += chunk
+    for g in groups:
+        rows = group_bytes(g, origin)
+        data, size = rows.tobytes(), rows.shape[1]
+        for k in range(len(rows)):
+            chunk = data[k * size : (k + 1) * size]
+            if body and len(head) + len(body) + len(chunk) > max_bytes:
+                messages.append(head + bytes(body))
+                body.clear()
+            body += chunk
     messages.append(head + bytes(body))
     return messages

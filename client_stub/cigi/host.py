@@ -82,36 +82,36 @@ class CigiHost:
             for row, i in enumerate(b.indices.tolist()):
                 self.poses[i] = (b.dofs[row], b.positions[row], b.orientations[row])
 
-    def soldiers(self) -> list[cigi_scene.SoldierPose]:
-        """The soldiers with a pose so far, as the scene module takes them."""
+    def groups(self) -> list[cigi_scene.SoldierGroup]:
+        """The soldiers with a pose so far, one group per update table, as the scene module takes them."""
         types = cigi_scene.entity_types(self.link.tables)
-        out = []
-        for req in self.requests:
+        rows: dict[int, list[int]] = {}
+        for r, req in enumerate(self.requests):
             i = int(req["index"])
-            if i not in self.poses:
-                continue
-            table = self.link.tables[self.table_of[i]]
-            kinds = tuple(d.kind for e in table.entries if isinstance(e, JointEntry) for d in e.dofs)
-            parts = tuple(pid for pid, _ in cigi_scene.figure_parts(table))
-            dofs, offsets, quats = self.poses[i]
-            out.append(cigi_scene.SoldierPose(
-                i, types[table.table_id], req["position"], float(req["heading"]),
-                offsets, quats, parts, dofs, kinds,
+            if i in self.poses:
+                rows.setdefault(self.table_of[i], []).append(r)
+        out = []
+        for tid, sel in sorted(rows.items()):
+            table, req = self.link.tables[tid], self.requests[sel]
+            poses = [self.poses[int(i)] for i in req["index"]]
+            out.append(cigi_scene.SoldierGroup(
+                req["index"], types[tid], req["position"], req["heading"],
+                np.stack([p[1] for p in poses]), np.stack([p[2] for p in poses]),
+                tuple(pid for pid, _ in cigi_scene.figure_parts(table)), np.stack([p[0] for p in poses]),
+                tuple(d.kind for e in table.entries if isinstance(e, JointEntry) for d in e.dofs),
             ))  # fmt: skip
         return out
 
     def frame(self, number: int, timestamp: int = 0) -> None:
         """Send frame ``number``'s messages (the newest poses)."""
         self.take_updates()
-        soldiers = self.soldiers()
-        for msg in cigi_scene.frame_messages(
-            number, soldiers, self.cfg.origin, self.cfg.max_bytes, timestamp
-        ):
+        groups = self.groups()
+        for msg in cigi_scene.frame_messages(number, groups, self.cfg.origin, self.cfg.max_bytes, timestamp):
             self.send(msg)
             self.stats["datagrams"] += 1
             self.stats["bytes"] += len(msg)
         self.stats["frames"] += 1
-        self.stats["soldiers_sent"] = len(soldiers)
+        self.stats["soldiers_sent"] = sum(len(g.entity_ids) for g in groups)
 
     async def run(self, frames: int | None = None) -> None:
         """Frames at ``fps`` (on trio's clock) until ``frames`` are sent or the link fails."""
