@@ -60,6 +60,7 @@ class TtesServer:
     def __init__(self, config: ServerConfig, world: ServerWorld | None = None) -> None:
         self.config = config
         self._t0 = 0.0
+        self._clock_started = False  # serve() starts the clock: until then server time is 0
         self.world = world or ServerWorld(
             config.data_dir,
             max_soldiers=config.max_soldiers,
@@ -103,7 +104,11 @@ class TtesServer:
 
     # -- clock -------------------------------------------------------------------------------------------
     def now(self) -> float:
-        """Server time in seconds since start (trio's clock)."""
+        """Server time in seconds since :meth:`serve` started (trio's clock); 0 before. A start-up run inside
+        trio before serve (``ttes replay/gateway/cigi --with-server``) must not stamp trio's absolute time on
+        the world: every later tick would run at that frozen stamp and no soldier would move."""
+        if not self._clock_started:
+            return 0.0
         try:
             return trio.current_time() - self._t0
         except RuntimeError:  # outside trio (start-up before the run loop)
@@ -199,6 +204,7 @@ class TtesServer:
     async def serve(self, *, task_status: Any = trio.TASK_STATUS_IGNORED) -> None:
         """Start up, listen, and run until :meth:`shutdown`; ``task_status.started(addresses)``."""
         self._t0 = trio.current_time()
+        self._clock_started = True
         self._loop_thread = threading.get_ident()
         self._trio_token = trio.lowlevel.current_trio_token()
         check_exposure(self.config)

@@ -74,6 +74,14 @@ def host(text: str) -> str:
     return name
 
 
+def host_port(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` (``[v6addr]:PORT`` for IPv6): a host (:func:`host`) and a port (:func:`port`)."""
+    name, sep, num = text.strip().rpartition(":")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT")
+    return host(name.removeprefix("[").removesuffix("]")), port(num)
+
+
 def number(lo: float, hi: float = math.inf, *, open_low: bool = False) -> Callable[[str], float]:
     """A finite float in ``[lo, hi]`` (``(lo, hi]`` with ``open_low``)."""
 
