@@ -14,10 +14,20 @@ taken out: with the pelvis where it lies, the thighs and knees on the ground sli
 turned (the thigh turns about the hip, it cannot roll along the ground) and the heels came down only 0-4 cm.
 
 Only a body lying on its front (the pelvis' front pointing down, :data:`FACE_DOWN`) settles so.
+
+A body on its back (a death that asks for it, ``arms_fall``) **lets its arms fall** instead (issue 14:
+kfire2dead's forearms stood up 37 cm; an arm tone in the physics made the DI slaves' feet jump, branch
+``legsup14-kfire``): the clavicle, shoulder, elbow and wrist angles of each arm that lay it lowest
+(:func:`fallen_arm`: its highest part's lowest node, as the check measures, plus a little of its nodes' mean
+height), into neither the ground, the rest of the body nor the rifle and sliding no node on the ground;
+from the arm's own pose and the best shapes of a coarse grid (:data:`ARM_GRID`), both arms in either order
+(:data:`SIDE_ORDERS`). The fall accelerates like a dropped limb and lands softly (:func:`fall_easing`).
+Half on his side, the top arm reaches the ground only past the head, its elbow on the body (17.5 cm).
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import numpy as np
@@ -37,6 +47,19 @@ PENALTY = 50.0  # per cm into the ground, the body or the rifle
 MOVE_COST = 0.01  # per degree moved: of two equally low shapes the nearer one
 HEAD_DOFS = ("vt4", "vt3", "vt2", "vt1", "neck", "head")  # the upper back gives a little too
 ARM_PARTS = ("_forearm", "_hand", "_upper_arm")  # what the head may come to rest on, but not go into
+FACE_UP = 0.3  # cosine: the pelvis' front points up at least this much (kfire2dead: half on his side)
+ARM_DOFS = ("clavicle", "shoulder", "elbow", "wrist")
+ARM_FALL_SECONDS = 0.8  # s: a dead arm drops to the ground
+ARM_CLEARANCE = 0.3  # cm: an arm's lowest node stops this far above the ground
+FALL_POWER = 1.8  # the fall's easing: smoothstep(s ** FALL_POWER), fast late, landing softly
+# degrees: the clavicle's two, the shoulder's three and the elbow's first angles tried for a fallen arm (a
+# grid: its best shapes are starts; the top arm of a body half on his side lies low only with the shoulder
+# dropped)
+ARM_GRID = ((-10.0, 40.0), (-25.0, 25.0), (-15.0, 20.0, 60.0, 100.0), (-30.0, 0.0, 30.0, 60.0, 90.0),
+            (-60.0, 0.0, 60.0), (0.0, 45.0, 90.0))  # fmt: skip
+MEAN_WEIGHT = 0.2  # of the arm nodes' mean height (besides the highest part's lowest node): lie flat
+ARM_STARTS = 2  # the grid's best shapes that Powell starts from (with the arm's own pose)
+SIDE_ORDERS = (("left", "right"), ("right", "left"))  # the arms fall one after the other: both tried
 
 
 def _face_down(kin, q: np.ndarray, root: np.ndarray) -> bool:
@@ -122,26 +145,123 @@ def dropped_head(body: _Body) -> np.ndarray:
     return _minimise(cost, [x0], kin.lower[idx], kin.upper[idx])
 
 
-def limp_target(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
-    """The limp shape the last frame settles into, or None if the body does not lie on its front."""
+def _face_up(kin, q: np.ndarray, root: np.ndarray) -> bool:
+    g = kin.segment_globals(q, root)[kin.segment_names.index("lower_torso")]
+    return float(g[1, 2]) <= -FACE_UP
+
+
+class _Arm:
+    """One arm of a body on its back, to lay on the ground: how high its parts lie in a shape ``x`` of its
+    clavicle, shoulder, elbow and wrist angles, and how far that shape goes wrong."""
+
+    def __init__(self, body: _Body, side: str) -> None:
+        self.body, self.side = body, side
+        self.idx = _dofs(body.kin, tuple(f"{side}_{j}" for j in ARM_DOFS))
+        parts = body.parts
+        self.arm = np.array([str(p).startswith(side) and str(p).endswith(ARM_PARTS) for p in parts])
+        arm_segs = np.unique(body.segs[self.arm])
+        others = np.setdiff1d(np.unique(body.segs[~self.arm]), arm_segs)
+        self.rest = SegmentHulls.build(body.nodes, body.segs, others)
+        self.hulls = SegmentHulls.build(body.nodes, body.segs, arm_segs)
+        self.lower = np.array([str(p) in (f"{side}_hand", f"{side}_forearm") for p in parts])
+        self.limb = [parts == f"{side}{part}" for part in ARM_PARTS]
+        self.x0 = body.q[self.idx]
+        p0, self.inside0 = self.into(self.x0)  # what lay that deep (or that low) already is not counted
+        self.clearance = min(ARM_CLEARANCE, float(p0[self.arm, 1].min()))
+
+    def pose(self, x: np.ndarray) -> np.ndarray:
+        q = self.body.q.copy()
+        q[self.idx] = x
+        return q
+
+    def into(self, x: np.ndarray) -> tuple[np.ndarray, float]:
+        """The body's nodes in shape ``x`` and how deep (cm) the forearm and hand go into the rest of the
+        body plus how deep the rifle goes into the arm."""
+        g, p = self.body.heights(self.pose(x))
+        d_body, _, _ = self.rest.depth(p[None, self.lower], g[None])
+        d_rifle, _, _ = self.hulls.depth(self.body.rifle_points[None], g[None])
+        return p, d_body + d_rifle
+
+    def terms(self, x: np.ndarray) -> tuple[float, float, float]:
+        """The highest part's lowest node (as the check sees it), the arm nodes' mean height, and cm wrong."""
+        p, inside = self.into(x)
+        low = float(p[self.arm, 1].min())
+        wrong = max(0.0, self.clearance - low) + max(0.0, inside - self.inside0)
+        wrong += self.body.misplaced(self.pose(x))
+        return max(float(p[m, 1].min()) for m in self.limb), float(p[self.arm, 1].mean()), wrong
+
+    def cost(self, x: np.ndarray) -> float:
+        high, mean, wrong = self.terms(x)
+        move = MOVE_COST * float(np.degrees(np.abs(x - self.x0)).sum())
+        return high + MEAN_WEIGHT * mean + PENALTY * wrong + move
+
+
+def fallen_arm(body: _Body, side: str) -> np.ndarray:
+    """The ``side`` arm's angles that lay it lowest, into neither the ground, the rest of the body nor the
+    rifle, sliding nothing on the ground (from its own pose and the best of :data:`ARM_GRID`)."""
+    arm = _Arm(body, side)
+    starts = [arm.x0, *_grid_starts(body.kin, side, arm.x0, arm.cost)]
+    return _minimise(arm.cost, starts, body.kin.lower[arm.idx], body.kin.upper[arm.idx])
+
+
+def _grid_starts(kin, side: str, x0: np.ndarray, cost: Callable[[np.ndarray], float]) -> list[np.ndarray]:
+    """The :data:`ARM_STARTS` lowest arm shapes of :data:`ARM_GRID` (the wrist and the elbow's second angle
+    as they are): a forearm standing up by the head may lie best beside or across the body."""
+    base = kin.dof_slices[f"{side}_clavicle"].start
+    grid = [kin.dof_slices[f"{side}_{j}"].start - base for j in ("clavicle", "shoulder", "elbow")]
+    at = np.array([grid[0], grid[0] + 1, grid[1], grid[1] + 1, grid[1] + 2, grid[2]])
+    shapes: list[tuple[float, int, np.ndarray]] = []
+    for angles in itertools.product(*ARM_GRID):
+        x = x0.copy()
+        x[at] = np.radians(angles)
+        shapes.append((cost(x), len(shapes), x))
+    return [x for _, _, x in sorted(shapes, key=lambda t: t[:2])[:ARM_STARTS]]
+
+
+def limp_target(figs: FigureSet, frames: ClipFrames, arms_fall: bool = False) -> np.ndarray | None:
+    """The limp shape the last frame settles into, or None if the body neither lies on its front nor (if
+    ``arms_fall``) on its back."""
     q, root, rifle = frames.poses[-1], frames.roots[-1], frames.rifles[-1]
     body = _Body(figs, q, root, rifle)
-    if not _face_down(body.kin, q, root):
-        return None
     target = q.copy()
-    target[_dofs(body.kin, HEAD_DOFS)] = dropped_head(body)
-    return target
+    if _face_down(body.kin, q, root):
+        target[_dofs(body.kin, HEAD_DOFS)] = dropped_head(body)
+        return target
+    if not (arms_fall and _face_up(body.kin, q, root)):
+        return None
+    return min((_fallen_arms(figs, frames, order) for order in SIDE_ORDERS), key=lambda t: t[0])[1]
 
 
-def settle(frames: ClipFrames, soldier: Figure, rifle: Figure) -> ClipFrames:
-    """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down."""
+def _fallen_arms(figs: FigureSet, frames: ClipFrames, order: tuple[str, str]) -> tuple[float, np.ndarray]:
+    """Both arms fallen, the first of ``order`` first and the second against it where it lies: the higher
+    arm's highest part (cm, as the check sees it) and the pose."""
+    body = _Body(figs, frames.poses[-1], frames.roots[-1], frames.rifles[-1])
+    target = body.q.copy()
+    for side in order:
+        target[_dofs(body.kin, tuple(f"{side}_{j}" for j in ARM_DOFS))] = fallen_arm(body, side)
+        body.q = target.copy()
+    arms = [_Arm(body, side) for side in order]
+    return max(arm.terms(arm.x0)[0] for arm in arms), target
+
+
+def fall_easing(s: np.ndarray) -> np.ndarray:
+    """A dropped limb's progress at ``s`` in [0, 1]: slow to start, fastest late, landing softly."""
+    v = s**FALL_POWER
+    return v * v * (3.0 - 2.0 * v)
+
+
+def settle(frames: ClipFrames, soldier: Figure, rifle: Figure, arms_fall: bool = False) -> ClipFrames:
+    """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
+    with ``arms_fall``, face up)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
-    target = limp_target(figs, frames)
+    target = limp_target(figs, frames, arms_fall)
     if target is None:
         return frames
-    n = round(SETTLE_SECONDS * frames.fps)
+    up = arms_fall and not _face_down(figs.kin["body"], frames.poses[-1], frames.roots[-1])
+    n = round((ARM_FALL_SECONDS if up else SETTLE_SECONDS) * frames.fps)
     s = np.arange(1, n + 1) / n
-    u = np.concatenate([s * s * (3.0 - 2.0 * s), np.ones(round(STILL_SECONDS * frames.fps))])
+    eased = fall_easing(s) if up else s * s * (3.0 - 2.0 * s)
+    u = np.concatenate([eased, np.ones(round(STILL_SECONDS * frames.fps))])
     last = frames.poses[-1]
     poses = last[None] + u[:, None] * (target - last)[None]
     k = len(u)

@@ -41,7 +41,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 5. **the skid is taken out**: the ragdoll's parts slide over the ground as he falls, and the recorded frames
    are moved back by their drift (:func:`authoring.planted.plant`);
 6. **a face-down body goes limp**: a short kinematic settle drops the head where that slides nothing on
-   the ground (:func:`authoring.dead_settle.settle`).
+   the ground (:func:`authoring.dead_settle.settle`); a body on its back (:attr:`DeathSpec.arms_fall`)
+   lets its arms fall to the ground the same way (a faint arm tone in the physics made the DI slaves' feet
+   jump and slide, branch ``legsup14-kfire``).
 
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph
@@ -101,6 +103,7 @@ class DeathSpec:
     knee_straighten: float | None = None  # s, a standing death's knees start straightening (None: at fade)
     hip_damping: float = 1.0  # the hips', waist's and lower back's (FALL_STIFF) damping: this many times
     # stronger until he is down
+    arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
 
 
 DEATHS: tuple[DeathSpec, ...] = (
@@ -135,6 +138,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         release=0.15,
         sideways=True,
         knee_damping=4.0,
+        arms_fall=True,
     ),
     DeathSpec(
         "prstow2dead", "PRONE_STOWED", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
@@ -422,5 +426,6 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         if still * dt >= REST_SECONDS:
             break
     frames = plant(ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS), soldier)
-    frames = dead_settle.settle(frames, soldier, rifle)  # face down: the head drops, kinematically
+    # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
+    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall)
     return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))

@@ -119,10 +119,29 @@ def test_a_prone_death_lays_the_head_down(ctx: BuildContext, name: str) -> None:
     assert lows["head"] <= 20.0
 
 
+def test_a_death_on_his_back_lets_the_arms_fall(ctx: BuildContext) -> None:
+    """Issue 14: kfire2dead's physics left him on his back with both forearms standing up (36.7 cm); the
+    kinematic settle lays them down (the check's rest_arm_cm, limit 25)."""
+    assert deaths.death_specs()["kfire2dead"].arms_fall
+    poses, roots, _, _ = _played(ctx, "kfire2dead")
+    lows = part_lows_of(ctx, poses[-1], roots[-1])
+    arms = [lows[f"{side}_{p}"] for side in ("left", "right") for p in ("upper_arm", "forearm", "hand")]
+    assert max(arms) <= 25.0
+
+
+def test_a_dead_arm_falls_fastest_late_and_lands_softly() -> None:
+    s = np.linspace(0.0, 1.0, 49)
+    u = dead_settle.fall_easing(s)
+    assert u[0] == 0.0 and u[-1] == pytest.approx(1.0)
+    v = np.diff(u)
+    assert (v >= 0.0).all() and int(np.argmax(v)) > len(v) // 2  # accelerates past half way
+    assert v[-1] < 0.15 * v.max()  # and lands softly (the last of 48 steps): the clip ends at rest
+
+
 def test_a_body_not_on_its_front_does_not_settle(ctx: BuildContext) -> None:
-    poses, roots, rifles, _ = _played(ctx, "kstow2dead")  # on his side
+    poses, roots, rifles, _ = _played(ctx, "kstow2dead")  # on his back, the arms already down
     frames = ClipFrames(poses, roots, rifles)
-    assert dead_settle.settle(frames, ctx.soldier, ctx.rifle) is frames
+    assert dead_settle.settle(frames, ctx.soldier, ctx.rifle) is frames  # only a death that asks for it
 
 
 def part_lows_of(ctx: BuildContext, q: np.ndarray, root: np.ndarray) -> dict[str, float]:
