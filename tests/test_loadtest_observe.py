@@ -5,6 +5,7 @@ cut into reads."""
 from __future__ import annotations
 
 import functools
+import itertools
 from collections import Counter
 
 import numpy as np
@@ -34,7 +35,9 @@ def captured_stream(version: int) -> bytes:
     speed = np.where(idx % 2 == 0, 1.4, 4.0)
     vel = np.column_stack([np.zeros(SOLDIERS), speed, np.zeros(SOLDIERS)])
     up = [int(Appearance.UPRIGHT)] * SOLDIERS
-    m.apply_requests(make_entity_requests(idx, up, [1] * SOLDIERS, vel, [0.0] * SOLDIERS), server.request_time())
+    m.apply_requests(
+        make_entity_requests(idx, up, [1] * SOLDIERS, vel, [0.0] * SOLDIERS), server.request_time()
+    )
     session = Session(server.world, server.board_ref, server.config, "counted")
     server.sessions[session.id] = session
     client = Connection(CLIENT)
@@ -106,7 +109,7 @@ def test_counts_do_not_depend_on_how_the_stream_is_cut(cuts: list[int]) -> None:
     want_others = whole.feed(data)
     parts = FrameCounter()
     edges = sorted({min(c, len(data)) for c in cuts} | {0, len(data)})
-    others = [f for a, b in zip(edges, edges[1:], strict=False) for f in parts.feed(data[a:b])]
+    others = [f for a, b in itertools.pairwise(edges) for f in parts.feed(data[a:b])]
     assert (parts.ticks, parts.counts, parts.sizes) == (whole.ticks, whole.counts, whole.sizes)
     assert others == want_others and not parts.buf
 

@@ -11,7 +11,6 @@ server's CPU over it; delivered % = updates received / (N × tick rate × window
 from __future__ import annotations
 
 import contextlib
-import math
 import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
