@@ -6,16 +6,18 @@ from __future__ import annotations
 
 import functools
 import itertools
+import selectors
 from collections import Counter
 
 import numpy as np
 import pytest
+import trio
 from hypothesis import given
 from hypothesis import strategies as st
-from test_server_support import make_server
+from test_server_support import make_server, running_server
 
 from client_stub.loadtest.fanout import FanoutConfig, summarise
-from client_stub.loadtest.observe import FrameCounter, window_counts
+from client_stub.loadtest.observe import CountingObserver, FrameCounter, window_counts
 from protocol.connection import CLIENT, NEED_DATA, PAUSED, Connection
 from protocol.entity import Appearance, make_entity_requests
 from protocol.events import ConnectionClosed, Hello, JointUpdates, ProtocolError, Ready, Subscribe
@@ -127,3 +129,28 @@ def test_window_and_summary_arithmetic() -> None:
     assert s["clients"][0]["delivered_pct"] == 20.0 and s["clients"][0]["bytes_per_update"] == 42.0
     assert s["server_ms_per_tick"] == 250.0  # 0.5 s of CPU over the 2 server ticks (7 and 8) of the window
     assert s["server_cpu_pct"] == 50.0
+
+
+def read_first_frames(port: int, indices: range) -> CountingObserver:
+    """An observer over a real socket: handshake, subscribe, read until a JOINT_UPDATES frame is counted."""
+    o = CountingObserver("counting", version=2)
+    o.connect("127.0.0.1", port, timeout=30.0)
+    o.subscribe(indices)
+    assert o.sock is not None
+    with selectors.DefaultSelector() as sel:
+        sel.register(o.sock, selectors.EVENT_READ)
+        for _ in range(600):  # bounded: at most 600 reads (30 s of selector waits)
+            if o.counter.counts or o.closed:
+                break
+            if sel.select(0.05):
+                o.pump(0.0)
+    o.close()
+    return o
+
+
+async def test_an_observer_shakes_hands_and_counts_the_first_full_updates() -> None:
+    async with running_server(throttle=0.0) as server:
+        port = server.addresses[0][1]
+        o = await trio.to_thread.run_sync(read_first_frames, port, range(SOLDIERS))
+    assert o.ready is not None and o.failure is None
+    assert o.counter.counts[0] == SOLDIERS  # every subscribed soldier, in full, in the first frame
