@@ -1,12 +1,18 @@
 """Benchmark: fan-out of joint updates — one server, N soldiers, 1, 2, 4 and 8 clients subscribed to all.
 
-Runs ``ttes loadtest --spawn-server --subscribe-all`` once per client count and reports, per count, the
-server's CPU (percent of a core and milliseconds per 30 Hz tick), the steady movers' updates delivered and the
-bytes per soldier-update on the wire. With encode-once-send-to-many (issue 18) the server's CPU should stay
-nearly flat as clients are added. ``--per-client`` sets ``TTES_SHARED_ENCODES=0`` for the spawned server:
-every client encodes on its own (the behaviour before), for an A/B on the same machine.
+By default, per client count: a spawned server (its own process, every tick due), one controller that makes
+N soldiers walk, run or crawl, and C *counting observers* (client_stub/loadtest/observe.py: each JOINT_UPDATES
+frame counted from its 8-byte head, never decoded; ``--procs`` processes, not this one) subscribed to all.
+Reports per count: delivered % (updates received / N x tick rate x window, the worst client), the server's
+CPU (% of a core, ms per server tick run), how long it waited for a CPU (run queue: a loaded machine, not its
+own work), bytes/s and bytes per soldier-update per client, the observers' CPU. With encode-once-send-to-many
+(issue 18) the server's CPU should stay nearly flat as clients are added. ``--per-client`` sets
+``TTES_SHARED_ENCODES=0`` for the spawned server: every client encodes on its own (the behaviour before).
+``--loadtest``: the full load generator instead (``ttes loadtest --spawn-server --subscribe-all``, one
+process, its own tracker per soldier: on a small machine it, not the server, bounds what is delivered).
 
-    python bench/bench_fanout.py [--soldiers 10000] [--clients 1,2,4,8] [--seconds 5] [--per-client] [--json]
+    python bench/bench_fanout.py [--soldiers 10000] [--clients 1,2,4,8] [--seconds 5] [--protocol 1|2]
+        [--procs 1] [--per-client] [--loadtest] [--json]
 
 ``--in-process`` measures the server's side alone, without sockets or a load generator competing for the
 CPU (for a loaded or small machine): the server's tick and C sessions (observers subscribed to every soldier,
@@ -35,17 +41,18 @@ def main() -> int:
     ap.add_argument("--clients", default="1,2,4,8")
     ap.add_argument("--rate", type=float, default=30.0)
     ap.add_argument("--seconds", type=float, default=5.0)
-    ap.add_argument("--warmup", type=float, default=3.0)
+    ap.add_argument("--warmup", type=float, default=5.0)
     ap.add_argument("--mix", default="realistic")
     ap.add_argument("--per-client", action="store_true", help="no shared encodes (TTES_SHARED_ENCODES=0)")
     ap.add_argument("--in-process", action="store_true", help="the server's CPU alone (see above)")
+    ap.add_argument("--loadtest", action="store_true", help="the full load generator (see above)")
+    ap.add_argument("--procs", type=int, default=1, help="observer processes (default 1)")
     ap.add_argument("--ticks", type=int, default=60, help="--in-process: measured ticks")
+    ap.add_argument("--protocol", type=int, default=2, choices=(1, 2), help="the observers' protocol version")
     ap.add_argument(
-        "--protocol", type=int, default=2, choices=(1, 2), help="--in-process: the observers' version"
-    )
-    ap.add_argument(
-        "--data", choices=("synthetic", "shipped"), default="synthetic", help="--in-process: library"
-    )
+        "--data", choices=("synthetic", "shipped"), default=None,
+        help="motion library (default: synthetic --in-process, shipped over TCP)",
+    )  # fmt: skip
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     if args.per_client:
@@ -59,6 +66,8 @@ def main() -> int:
                "loadavg": [round(x, 2) for x in os.getloadavg()], "runs": runs}  # fmt: skip
         print(json.dumps(out) if args.json else "\n".join(map(str, [out.pop("runs"), out])))
         return 0
+    if not args.loadtest:
+        return counted(args)
     from client_stub.loadtest.session import LoadTestConfig, run_loadtest
 
     rows = []
@@ -88,6 +97,39 @@ def main() -> int:
         print(f"  {r['clients']} clients: server {r['server_cpu_pct']}% of a core ({r['server_ms_per_tick']} "
               f"ms/tick), delivered {r['delivered_pct']}%, tick->arrival p99 {r['delivery_ms_p99']} ms, "
               f"{r['bytes_per_update']} B/update, load before {r['loadavg_before']}")  # fmt: skip
+    return 0
+
+
+def counted(args: argparse.Namespace) -> int:
+    """The counting observers over TCP, one spawned server per client count (see the module)."""
+    from client_stub.loadtest.fanout import FanoutConfig, run_fanout
+
+    rows = []
+    for c in (int(x) for x in args.clients.split(",")):
+        load = os.getloadavg()
+        cfg = FanoutConfig(soldiers=args.soldiers, observers=c, rate_hz=args.rate, seconds=args.seconds,
+                           warmup_s=args.warmup, version=args.protocol, procs=min(args.procs, c),
+                           data="synthetic" if args.data == "synthetic" else "default")  # fmt: skip
+        r = run_fanout(cfg)
+        r["loadavg_before"] = [round(x, 2) for x in load]
+        rows.append(r)
+    out = {"soldiers": args.soldiers, "rate_hz": args.rate, "shared_encodes": not args.per_client,
+           "protocol": args.protocol, "cpus": os.cpu_count(), "runs": rows}  # fmt: skip
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    mode = "per-client encodes" if args.per_client else "shared encodes"
+    print(f"bench_fanout: {args.soldiers} soldiers at {args.rate:g} Hz to counting observers, {mode}, "
+          f"protocol {args.protocol}, {os.cpu_count()} CPUs")  # fmt: skip
+    for r in rows:
+        bps = [c["bytes_per_s"] for c in r["clients"]]
+        bpu = [c["bytes_per_update"] for c in r["clients"] if c["bytes_per_update"]]
+        print(f"  {r['observers']} clients: delivered {r['delivered_pct_min']}% "
+              f"(mean {r['delivered_pct_mean']}%), "
+              f"server {r['server_cpu_pct']}% of a core + {r['server_wait_pct']}% waiting for one, "
+              f"{r['server_ms_per_tick']} ms/tick, {round(sum(bps) / len(bps) / 1e6, 2)} MB/s per client, "
+              f"{round(sum(bpu) / max(len(bpu), 1), 1)} B/update, observers {r['observer_cpu_pct']}%, "
+              f"load before {r['loadavg_before']}")  # fmt: skip
     return 0
 
 
