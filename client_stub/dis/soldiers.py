@@ -202,17 +202,10 @@ class DisSoldiers:
 
     def _try_again(self, app: StubApp, sink: ServerSink) -> None:
         """One reconnection attempt when the schedule says so; out of time: ``app.gave_up``."""
-        if self.retry.out_of_time(app.time):
-            app.gave_up = self.retry.gave_up_message(app.time, sink.lost)
-            log.error("%s", app.gave_up)
-            return
-        if not self.retry.due(app.time):
-            return
         assert self.reconnect is not None
-        try:
-            link = self.reconnect()
-        except LinkError as exc:
-            log.info("reconnecting: %s", exc)
+        link = self.retry.attempt(app.time, self.reconnect, sink.lost)
+        app.gave_up = self.retry.gave_up
+        if link is None:
             return
         sink.rebind(link)
         log.warning("server back: %d soldiers bound again", len(sink.rifle_of))

@@ -123,18 +123,10 @@ class LiveSoldiers:
 
     def _try_again(self, app: StubApp) -> None:
         """One reconnection attempt when the backoff says so; give up after ``give_up_after``."""
-        now = app.time
-        if self.retry.out_of_time(now):
-            app.gave_up = self.retry.gave_up_message(now, app.server_lost)
-            log.error("%s", app.gave_up)
-            return
-        if not self.retry.due(now):
-            return
         assert self.reconnect is not None
-        try:
-            jack = self.reconnect()
-        except LinkError as exc:
-            log.info("reconnecting: %s", exc)
+        jack = self.retry.attempt(app.time, self.reconnect, app.server_lost)
+        app.gave_up = self.retry.gave_up
+        if jack is None:
             return
         if self.connect(app, jack, self.ready_timeout):
             self.retry.reset()
