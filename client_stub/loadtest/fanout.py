@@ -24,7 +24,7 @@ from client_stub.link.spawn import ServerProcess, spawn_server
 from client_stub.loadtest.client import LoadClient
 from client_stub.loadtest.mix import MixDriver
 from client_stub.loadtest.observe import observe
-from client_stub.loadtest.session import _owner_limit, server_args
+from client_stub.loadtest.session import owner_limit, server_args
 
 
 @dataclass
@@ -44,7 +44,7 @@ class FanoutConfig:
 def run_fanout(cfg: FanoutConfig) -> dict[str, Any]:
     """Spawn the server, drive the soldiers, count in the observers; the JSON-ready result."""
     with contextlib.ExitStack() as stack:
-        args = server_args(cfg.rate_hz, 0.0) + _owner_limit(cfg.soldiers, stack)
+        args = server_args(cfg.rate_hz, 0.0) + owner_limit(cfg.soldiers, stack)
         server = stack.enter_context(spawn_server(args, data=cfg.data))
         out = trio.run(_drive, cfg, server)
         out["server"] = {"pid": server.pid, "synthetic": server.synthetic}

@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 import selectors
 import socket
-import struct
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -24,10 +23,10 @@ from typing import Any
 from client_stub.link.spawn import cpu_seconds, self_cpu_seconds
 from protocol.connection import CLIENT, NEED_DATA, Connection
 from protocol.events import ConnectionClosed, Error, Goodbye, Hello, ProtocolError, Ready, Subscribe
+from protocol.framing import HEADER as FRAME_HEADER  # length (type byte + payload), type
 from protocol.messages import MessageType
 from protocol.updates import UPDATE_HEADER
 
-FRAME_HEAD = struct.Struct(">IB")  # length (type byte + payload), type
 RECV_BYTES = 1 << 22  # one recv takes up to 4 MiB: a 10,000-soldier tick is ~0.4 MB
 RCVBUF = 1 << 24  # asked of the kernel (it caps this at net.core.rmem_max)
 JOINT_UPDATES = int(MessageType.JOINT_UPDATES)
@@ -51,7 +50,7 @@ class FrameCounter:
         pos, end = 0, len(buf)
         others: list[bytes] = []
         while end - pos >= 5:
-            length, mtype = FRAME_HEAD.unpack_from(buf, pos)
+            length, mtype = FRAME_HEADER.unpack_from(buf, pos)
             if end - pos < 4 + length:
                 break
             if mtype == JOINT_UPDATES and length >= 1 + UPDATE_HEADER.size:

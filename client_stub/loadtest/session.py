@@ -380,7 +380,7 @@ def server_args(tick_hz: float, throttle: float | None) -> list[str]:
     return ["--tick-hz", f"{tick_hz:g}", *(["--throttle", f"{throttle:g}"] if throttle is not None else [])]
 
 
-def _owner_limit(soldiers: int, stack: contextlib.ExitStack) -> list[str]:
+def owner_limit(soldiers: int, stack: contextlib.ExitStack) -> list[str]:
     """``--config`` raising the spawned server's soldiers per client id (4096 by default) to ``soldiers``:
     the load generator's first client creates them all (the file lives until ``stack`` closes)."""
     if soldiers <= MAX_SOLDIERS_PER_CLIENT:
@@ -413,7 +413,7 @@ def _run_loadtest(
     server_cpu: Callable[[], float] | None
     try:
         if cfg.spawn_server:
-            args = server_args(cfg.rate_hz, cfg.throttle) + _owner_limit(cfg.soldiers, stack)
+            args = server_args(cfg.rate_hz, cfg.throttle) + owner_limit(cfg.soldiers, stack)
             server = spawn_server(args, data=cfg.server_data, waiting=_loading(progress))
             host, port = server.host, server.port
             server_cpu = server.cpu_seconds
