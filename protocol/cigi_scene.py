@@ -19,7 +19,7 @@ import numpy as np
 
 from peabody import quaternion
 from protocol import cigi
-from protocol.dis.geo import LocalFrame, ecef_to_geodetic
+from protocol.dis.geo import LocalFrame, ecef_to_geodetic, euler_from_matrix
 from protocol.update_table import FigureEntry, JointEntry, UpdateTable
 
 ROOT_PART = 0
@@ -94,10 +94,8 @@ def body_euler(q: np.ndarray) -> np.ndarray:
     """Roll, pitch, yaw (``(..., 3)`` degrees, CIGI's yaw-pitch-roll order) of soldier-frame (w, x, y, z)
     rotations ``(..., 4)``."""
     r = _SOLDIER_TO_BODY @ quaternion.to_matrix(np.asarray(q, np.float64)) @ _SOLDIER_TO_BODY.T
-    pitch = np.arcsin(np.clip(-r[..., 2, 0], -1.0, 1.0))
-    roll = np.arctan2(r[..., 2, 1], r[..., 2, 2])
-    yaw = np.arctan2(r[..., 1, 0], r[..., 0, 0])
-    return np.degrees(np.stack([roll, pitch, yaw], axis=-1))
+    psi_theta_phi = euler_from_matrix(np.swapaxes(r, -1, -2))  # DIS's z-y-x angles of world-to-body
+    return np.degrees(psi_theta_phi[..., ::-1])
 
 
 @dataclass(frozen=True)
