@@ -24,7 +24,7 @@ with warnings.catch_warnings():  # bvhio imports PyGLM the old way ("import glm"
     import bvhio
 
 from authoring.gltf_export import PERFORMER_TO_GLTF, Rig, local_transforms
-from authoring.ik import decompose_rotation
+from authoring.ik import decompose_rotation, rotation_log, signed_angle
 from peabody import quaternion
 from peabody.fk import FigureKinematics, rigid_inverse
 from peabody.rotations import axis_angle
@@ -120,25 +120,13 @@ def _angles(d: np.ndarray, rot: np.ndarray, axes: np.ndarray, lo: np.ndarray, hi
         raise ValueError("a joint that mixes R and T DOFs is not read back from BVH")
     n = len(rot)
     if n == 1:
-        return np.array([_turn(d[:3, :3], axes[0])])
+        return np.array([float(rotation_log(d[:3, :3]) @ axes[0])])
     if n == 2:
-        t1 = _signed_angle(axes[0], axes[1], d[:3, :3] @ axes[1])
-        return np.array([t1, _turn(axis_angle(axes[0], -t1) @ d[:3, :3], axes[1])])
+        t1 = float(signed_angle(axes[0], axes[1], d[:3, :3] @ axes[1]))
+        return np.array([t1, float(rotation_log(axis_angle(axes[0], -t1) @ d[:3, :3]) @ axes[1])])
     lower = np.where(np.isfinite(lo), lo, -np.inf)
     upper = np.where(np.isfinite(hi), hi, np.inf)
     return decompose_rotation(d, axes, lower=lower, upper=upper)
-
-
-def _turn(r: np.ndarray, axis: np.ndarray) -> float:
-    """The angle of a rotation ``r`` about its known unit ``axis``."""
-    s = 0.5 * np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) @ axis
-    return float(np.arctan2(s, 0.5 * (np.trace(r) - 1.0)))
-
-
-def _signed_angle(axis: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-    """The turn about ``axis`` that takes ``a``'s part across the axis to ``b``'s."""
-    pa, pb = a - axis * (axis @ a), b - axis * (axis @ b)
-    return float(np.arctan2(axis @ np.cross(pa, pb), pa @ pb))
 
 
 def import_bvh(path: Path, rig: Rig) -> tuple[float, np.ndarray, np.ndarray]:

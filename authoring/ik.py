@@ -135,7 +135,7 @@ def rotation_log(r: np.ndarray) -> np.ndarray:
     return out
 
 
-def _signed_angle(axis: np.ndarray, v_from: np.ndarray, v_to: np.ndarray) -> np.ndarray:
+def signed_angle(axis: np.ndarray, v_from: np.ndarray, v_to: np.ndarray) -> np.ndarray:
     """Angle about ``axis`` turning ``v_from`` onto ``v_to`` (both projected on the plane normal to axis)."""
     cross = np.cross(v_from, v_to)
     y = np.sum(axis * cross, axis=-1)
@@ -181,10 +181,10 @@ def decompose_rotation(
         t2 = _wrap(h[..., 1] + _wrap(t2 - h[..., 1]))
         v = axis_angle(np.broadcast_to(a2, (*batch, 3)), t2) @ a3
         u = m @ a3
-        t1 = _signed_angle(a1, v, u)
+        t1 = signed_angle(a1, v, u)
         w = np.einsum("...ji,j->...i", axis_angle(np.broadcast_to(a2, (*batch, 3)), t2), a1)
         u3 = np.einsum("...ji,j->...i", m, a1)
-        t3 = -_signed_angle(a3, w, u3)
+        t3 = -signed_angle(a3, w, u3)
         t1 = h[..., 0] + _wrap(t1 - h[..., 0])
         t3 = h[..., 2] + _wrap(t3 - h[..., 2])
         candidates.append(np.stack([t1, t2, t3], axis=-1))
