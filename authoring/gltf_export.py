@@ -223,15 +223,6 @@ def export_figures(figures: Sequence[Figure], out: Path) -> Rig:
 # -- motion -----------------------------------------------------------------------------------------------
 
 
-def _continuous(quats: np.ndarray) -> np.ndarray:
-    """(N, 4) rotations, each on the same side as the one before (LINEAR sampling slerps the short way)."""
-    q = quats.copy()
-    for i in range(1, len(q)):
-        if np.dot(q[i], q[i - 1]) < 0:
-            q[i] = -q[i]
-    return q
-
-
 def _channel(w: _Writer, anim: gl.Animation, times: int, node: int, path: str, values: np.ndarray) -> None:
     kind = gl.VEC4 if path == "rotation" else gl.VEC3
     out = w.accessor(values.astype(np.float32), kind)
@@ -245,7 +236,7 @@ def _channel(w: _Writer, anim: gl.Animation, times: int, node: int, path: str, v
 
 def _track(w: _Writer, anim: gl.Animation, times: int, node: int, mats: np.ndarray, moves: bool) -> None:
     trs = [_trs(m) for m in mats]
-    rot = _continuous(np.array([r for _, r in trs]))
+    rot = quaternion.make_continuous(np.array([r for _, r in trs]))
     _channel(w, anim, times, node, "rotation", rot)
     if moves:
         _channel(w, anim, times, node, "translation", np.array([t for t, _ in trs]))
