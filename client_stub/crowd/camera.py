@@ -66,13 +66,7 @@ class FreeCamera:
         self.pitch = math.degrees(math.asin(float(np.clip(f[2], -1.0, 1.0))))
 
     def projection(self, aspect: float) -> np.ndarray:
-        t = 1.0 / math.tan(math.radians(self.fovy) / 2)
-        n, f = self.near, self.far
-        m = np.zeros((4, 4))
-        m[0, 0], m[1, 1] = t / aspect, t
-        m[2, 2], m[2, 3] = (f + n) / (n - f), 2 * f * n / (n - f)
-        m[3, 2] = -1.0
-        return m
+        return perspective(self.fovy, aspect, self.near, self.far)
 
     def viewproj(self, aspect: float) -> np.ndarray:
         return self.projection(aspect) @ self.view()
@@ -86,3 +80,13 @@ def orbit(
     c = np.asarray(centre, np.float64)
     camera.position = c + np.array([radius * math.sin(a), -radius * math.cos(a), height])
     camera.look_at(c + np.array([0.0, 0.0, 1.0]))
+
+
+def perspective(yfov_deg: float, aspect: float, znear: float = 0.2, zfar: float = 2000.0) -> np.ndarray:
+    """OpenGL projection matrix (pyrender's ``PerspectiveCamera``): the crowd's and the stub's."""
+    t = 1.0 / np.tan(np.radians(yfov_deg) / 2)
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = t / aspect, t
+    m[2, 2], m[2, 3] = (zfar + znear) / (znear - zfar), 2 * zfar * znear / (znear - zfar)
+    m[3, 2] = -1.0
+    return m

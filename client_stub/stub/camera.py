@@ -17,6 +17,7 @@ from enum import Enum
 
 import numpy as np
 
+from client_stub.crowd.camera import perspective
 from protocol import coords
 
 TETHER_ELEVATION = 15.0  # degrees: the normal tethered view
@@ -95,16 +96,6 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray | None = None) -
     pose = np.eye(4)
     pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = x, y, -f, eye
     return pose
-
-
-def perspective(yfov_deg: float, aspect: float, znear: float = 0.2, zfar: float = 2000.0) -> np.ndarray:
-    """OpenGL projection matrix (pyrender's ``PerspectiveCamera``)."""
-    t = 1.0 / np.tan(np.radians(yfov_deg) / 2)
-    m = np.zeros((4, 4))
-    m[0, 0], m[1, 1] = t / aspect, t
-    m[2, 2], m[2, 3] = (zfar + znear) / (znear - zfar), 2 * zfar * znear / (znear - zfar)
-    m[3, 2] = -1.0
-    return m
 
 
 def viewproj(pose: np.ndarray, yfov_deg: float, aspect: float) -> np.ndarray:
