@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 from protocol.dis.errors import DisError
-from protocol.dis.pdu import HEADER, HEADER_SIZE, SUPPORTED_VERSIONS, Family, PduType
+from protocol.dis.pdu import HEADER, HEADER_SIZE, SUPPORTED_VERSIONS, Family, PduType, check_encodable
 
 ESPDU_FIXED_SIZE = 144
 VARIABLE_PARAMETER_SIZE = 16
@@ -157,11 +157,8 @@ def make_marking(text: str) -> bytes:
 
 def encode_entity_state(pdu: EntityStatePdu) -> bytes:
     """The PDU's bytes (144 + 16 N). Raises :class:`DisError` for values that do not fit their fields."""
-    if pdu.version not in SUPPORTED_VERSIONS:
-        raise DisError(f"protocol version {pdu.version} not supported (5, 6, 7)", 0)
     n = len(pdu.variable_parameters)
-    if n > 255:
-        raise DisError(f"{n} variable parameters (at most 255)", 19)
+    check_encodable(pdu.version, n)
     if len(pdu.dr_other) != 15:
         raise DisError(f"dr_other must be 15 bytes, not {len(pdu.dr_other)}", 89)
     marking = pdu.marking.ljust(11, b"\0")

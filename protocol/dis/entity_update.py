@@ -45,9 +45,9 @@ from protocol.dis.errors import DisError
 from protocol.dis.pdu import (
     HEADER,
     HEADER_SIZE,
-    SUPPORTED_VERSIONS,
     Family,
     PduType,
+    check_encodable,
     check_header,
     header_fields,
 )
@@ -110,11 +110,8 @@ class EntityStateUpdatePdu:
 
 def encode_entity_update(pdu: EntityStateUpdatePdu) -> bytes:
     """The PDU's bytes (72 + 16 N); :class:`DisError` for values that do not fit their fields."""
-    if pdu.version not in SUPPORTED_VERSIONS:
-        raise DisError(f"protocol version {pdu.version} not supported (5, 6, 7)", 0)
     n = len(pdu.variable_parameters)
-    if n > 255:
-        raise DisError(f"{n} variable parameters (at most 255)", 19)
+    check_encodable(pdu.version, n)
     try:
         head = HEADER.pack(pdu.version, pdu.exercise, int(PduType.ENTITY_STATE_UPDATE), pdu.family,
                            pdu.timestamp, pdu.length, pdu.pdu_status, pdu.padding)  # fmt: skip

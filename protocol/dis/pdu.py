@@ -154,6 +154,15 @@ def unpack_header(data: bytes | memoryview, offset: int = 0) -> PduHeader:
     return PduHeader(*HEADER.unpack_from(data, offset))
 
 
+def check_encodable(version: int, parameters: int | None = None) -> None:
+    """The checks every encoder makes first: a version we speak and, for PDUs that carry them, at most 255
+    variable parameters (a one-byte count); :class:`DisError` at the field's offset."""
+    if version not in SUPPORTED_VERSIONS:
+        raise DisError(f"protocol version {version} not supported (5, 6, 7)", 0)
+    if parameters is not None and parameters > 255:
+        raise DisError(f"{parameters} variable parameters (at most 255)", 19)
+
+
 def check_header(data: bytes, pdu_type: PduType, minimum: int) -> None:
     """The checks every one-PDU decoder makes first (type, version, length field = the bytes, at least
     ``minimum`` bytes); :class:`DisError` at the field's offset."""

@@ -13,7 +13,14 @@ from dataclasses import dataclass
 
 from protocol.dis.entity_state import NO_ENTITY, EntityId
 from protocol.dis.errors import DisError
-from protocol.dis.pdu import HEADER, SUPPORTED_VERSIONS, Family, PduType, check_header, header_fields
+from protocol.dis.pdu import (
+    HEADER,
+    Family,
+    PduType,
+    check_encodable,
+    check_header,
+    header_fields,
+)
 from protocol.dis.warfare import WeaponEvent
 
 REMOVE_ENTITY_SIZE = 28
@@ -57,8 +64,7 @@ DisEvent = WeaponEvent | RemoveEntity  # the events of a log: Fire, Detonation, 
 
 
 def encode_remove_entity(pdu: RemoveEntityPdu) -> bytes:
-    if pdu.version not in SUPPORTED_VERSIONS:
-        raise DisError(f"protocol version {pdu.version} not supported (5, 6, 7)", 0)
+    check_encodable(pdu.version)
     try:
         return _PDU.pack(pdu.version, pdu.exercise, int(PduType.REMOVE_ENTITY), pdu.family, pdu.timestamp,
                          REMOVE_ENTITY_SIZE, pdu.pdu_status, pdu.padding, *pdu.originator, *pdu.receiver,

@@ -24,7 +24,14 @@ from protocol.dis.entity_state import (
     VariableParameter,
 )
 from protocol.dis.errors import DisError
-from protocol.dis.pdu import HEADER, HEADER_SIZE, SUPPORTED_VERSIONS, Family, PduType, check_header
+from protocol.dis.pdu import (
+    HEADER,
+    HEADER_SIZE,
+    Family,
+    PduType,
+    check_encodable,
+    check_header,
+)
 
 FIRE_SIZE = 96
 DETONATION_FIXED_SIZE = 104
@@ -101,8 +108,7 @@ class DetonationPdu:
 
 
 def _header(pdu: FirePdu | DetonationPdu, pdu_type: PduType, length: int) -> bytes:
-    if pdu.version not in SUPPORTED_VERSIONS:
-        raise DisError(f"protocol version {pdu.version} not supported (5, 6, 7)", 0)
+    check_encodable(pdu.version)
     return HEADER.pack(
         pdu.version,
         pdu.exercise,
