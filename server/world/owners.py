@@ -87,13 +87,8 @@ class Owners:
 
     # -- rights --------------------------------------------------------------------------------------------
     def may_drive(self, index: int, client_id: str, role: str) -> bool:
-        """Whether a client may drive or remove soldier ``index`` (live or not: liveness is checked later)."""
-        if role == "operator":
-            return True
-        if role != "controller":
-            return False
-        code = int(self.code[index])
-        return code == SHARED or code == self._codes.get(client_id, -2)
+        """Whether a client may drive soldier ``index`` (live or not: liveness is checked later)."""
+        return bool(self.drivable(np.array([index]), client_id, role)[0])
 
     def may_remove(self, index: int, client_id: str, role: str) -> bool:
         """Whether a client may remove soldier ``index``: an operator any, a controller only its own."""
