@@ -13,10 +13,10 @@ Structure (one trio nursery):
   are answered by the **answer loop** right after its publish), so the update that reflects a request does
   not wait for the next tick (issue 16: one-tick latency);
 * **readers are never starved by the tick's work**: the tick samples, lets the readers in, then publishes;
-  the writers encode one at a time, letting the readers in before each turn
-  (:meth:`TtesServer.let_readers_in`). A request that arrives while the tick samples or while another
-  client's batch is encoded is applied at the next of these turns and answered at once (or right after the
-  publish), instead of waiting for every client's encode;
+  the writers encode one at a time, at most ``ENCODE_TURN_ROWS`` soldiers a turn, letting the readers in
+  before each turn (:meth:`TtesServer.let_readers_in`). A request that arrives while the tick samples or
+  while a client's batch is encoded is applied at the next of these turns and answered at once (or right
+  after the publish), instead of waiting for every client's whole encode;
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
 * **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
   :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
@@ -59,6 +59,9 @@ from server.world.commands import needs_worker
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
+# soldier updates a writer encodes in one turn (~1 ms): a larger batch goes out in several turns, so the
+# readers and the other clients' writers (an answer) never wait for one client's whole tick
+ENCODE_TURN_ROWS = 1000
 log = get_logger("app")
 
 
@@ -389,7 +392,9 @@ class TtesServer:
                 async with self._encode_turn:
                     await self.let_readers_in()
                     session.wake = trio.Event()
-                    data = session.take_output(self.now())
+                    data = session.take_output(self.now(), ENCODE_TURN_ROWS)
+                if session.owed:  # the rest of this batch in a later turn, after the others' turns
+                    session.wake.set()
                 session.drained.set()
                 if data:
                     with trio.move_on_after(timeout) as cs:

@@ -113,6 +113,7 @@ class Session:
         self.ready_sent = False
         self.flushed_serial = 0  # the board publish this client's last write covered
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
+        self.owed = False  # the last write left updates owed (take_output's max_rows): write on at once
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
         self.cost = 0.0  # request tokens used since the last charge
@@ -168,24 +169,26 @@ class Session:
         self.wake.set()
         self.drained.set()  # a reader waiting for the writer stops waiting
 
-    def take_output(self, now: float | None = None) -> bytes:
+    def take_output(self, now: float | None = None, max_rows: int | None = None) -> bytes:
         """Everything to write now: queued control bytes, then the latest joint updates (latest-wins), held
         back while this connection's own throttle says so (``retry_at``: when they are due; ``now`` None:
-        never held)."""
+        never held). ``max_rows``: at most that many soldiers' updates; the others stay owed (``owed``) and
+        go with the next call, which the throttle does not hold back (they belong to this write)."""
         out = b"".join(self.control)
         self.control.clear()
         self.retry_at = None
         if self.closing or self.conn.state is not State.OPEN or not self.tables_sent:
             return out
-        if now is not None:
+        if now is not None and not self.owed:
             due = self.last_updates_at + self.own_throttle() - 0.5 / self.config.tick_hz
             if now < due - 1e-9:
                 # the tick at which they are due wakes the writer; this is for when no tick publishes:
                 # a quarter period after it, so a retry never writes ahead of that tick's poses
                 self.retry_at = due + 0.75 / self.config.tick_hz
                 return out
-        data = self._joint_updates()
-        if data and now is not None:
+        owed = self.owed
+        data = self._joint_updates(max_rows)
+        if data and now is not None and not owed:
             self.last_updates_at = now
         return out + data
 
@@ -201,9 +204,10 @@ class Session:
         """The soldiers of ``indices`` whose updates this client may receive (``Owners.visible``)."""
         return self.world.owners.visible(indices, self.client_id, self.role)
 
-    def _joint_updates(self) -> bytes:
-        """The subscribed soldiers whose codes changed since the last write (or that are owed a full update),
-        encoded from the board's shared codes: this client only diffs and packs, it never re-quantises."""
+    def _joint_updates(self, max_rows: int | None = None) -> bytes:
+        """The subscribed soldiers whose codes changed since the last write (or that are owed an update),
+        encoded from the board's shared codes: this client only diffs and packs, it never re-quantises. Past
+        ``max_rows`` soldiers, the rest are left owed (``force``) for the next call."""
         board = self.board_ref.board
         if board is None:
             return b""
@@ -215,6 +219,10 @@ class Session:
         sub = self.may_see(sub[sub < board.capacity])
         due = board.valid[sub] & ((board.version[sub] > since) | self.force[sub])
         idx = sub[due]
+        self.owed = max_rows is not None and len(idx) > max_rows
+        if self.owed:
+            self.force[idx[max_rows:]] = True
+            idx = idx[:max_rows]
         if len(idx) == 0:
             return b""
         self.force[idx] = False

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import pytest
 import trio
 from test_app_walkthrough import STEP, port_of, vel, watching
 from test_server_support import Client, running_server
@@ -21,6 +22,7 @@ from protocol.entity import Appearance as A
 from protocol.entity import WeaponState as W
 from protocol.entity import make_entity_requests
 from protocol.events import EntityRequests, JointUpdates, Ready, Subscribe
+from server import app
 from server.session import Session
 
 HZ = 30.0
@@ -80,11 +82,11 @@ async def test_a_request_that_arrives_while_one_client_is_encoded_is_applied_bef
         take = Session.take_output
         log: list[tuple[int, int]] = []  # (session, requests applied) at the start of each encode
 
-        def take_output(session: Session, now: float | None = None) -> bytes:
+        def take_output(session: Session, now: float | None = None, max_rows: int | None = None) -> bytes:
             log.append((session.id, requests_applied(server)))
             if len(log) == 1:
                 os.write(c.stream.socket.fileno(), kneel)  # arrives while this client is encoded
-            return take(session, now)
+            return take(session, now, max_rows)
 
         try:
             Session.take_output = take_output  # type: ignore[method-assign]
@@ -180,3 +182,48 @@ async def test_tick_frames_keep_their_tick_when_an_answer_is_published_before_th
                     got.append((ev.tick, ev.indices.tolist()))
         assert server.answers == 1
         assert got == [(board.ticks, [0]), (board.ticks + 1, [1])]
+
+
+async def test_a_large_batch_goes_out_in_turns_and_an_answer_is_written_between_them(
+    autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With 3 soldiers a turn, a watcher of 10 walking soldiers gets its tick in 4 turns, every soldier once
+    and under the tick's number, even with its own throttle (the turns of one write are not held back). A
+    second client watching the resting soldier asks it to kneel during the watcher's first turn: its answer
+    is written before the watcher's second turn, not after the watcher's whole batch."""
+    monkeypatch.setattr(app, "ENCODE_TURN_ROWS", 3)
+    async with running_server(throttle=0.0) as server:
+        w = await Client.open(port_of(server))
+        await w.expect(Ready)
+        await w.requests(index=list(range(9)), velocity=vel(1.4, 0.0), heading=0.0)  # 9 walk, 1 rests
+        await w.send(Subscribe(tuple(range(10))))
+        await w.jcl("set_ttes_soldier_throttle(0.1);")
+        c = await Client.open(port_of(server), name="asker")
+        await c.expect(Ready)
+        await c.send(Subscribe((9,)))
+        await w.drain(1.0)
+        await c.drain(0.01)
+        kneel = c.conn.send(EntityRequests(make_entity_requests(9, A.KNEEL, W.DEPLOYED)))
+        take = Session.take_output
+        turns: list[tuple[str, bool]] = []  # (client, more owed) of each write with updates
+
+        def take_output(session: Session, now: float | None = None, max_rows: int | None = None) -> bytes:
+            data = take(session, now, max_rows)
+            if data and (turns or session.owed):  # from the watcher's first turn of a tick on
+                turns.append((session.name, session.owed))
+                if len(turns) == 1:
+                    os.write(c.stream.socket.fileno(), kneel)  # arrives during the watcher's first turn
+            return data
+
+        monkeypatch.setattr(Session, "take_output", take_output)
+        got: dict[int, list[int]] = {}
+        with trio.move_on_after(0.35):
+            while True:
+                ev = await w.next_event()
+                if isinstance(ev, JointUpdates):
+                    got.setdefault(ev.tick, []).extend(ev.indices.tolist())
+        full = [t for t, rows in got.items() if len(rows) >= 9]
+        assert full and all(sorted(got[t])[:9] == list(range(9)) for t in full)  # each soldier once a tick
+        assert all(len(set(rows)) == len(rows) for rows in got.values())
+        assert np.diff(full).min() == 3  # its own throttle: every third tick, the turns of one write together
+        assert turns[:3] == [("test", True), ("asker", False), ("test", True)]  # the answer between turns
