@@ -74,6 +74,7 @@ if TYPE_CHECKING:
     from server.startup import ServerWorld
 
 RECEIVE_BYTES = 65536
+_NEVER = np.iinfo(np.int64).max  # sorts after every serial
 log = get_logger("session")
 
 
@@ -114,6 +115,7 @@ class Session:
         self.flushed_serial = 0  # the board publish this client's last write covered
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
         self.owed = False  # the last write left updates owed (take_output's max_rows): write on at once
+        self.owed_at = np.zeros(config.max_soldiers, np.int64)  # board serial (+1) a soldier was left owed at
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
         self.cost = 0.0  # request tokens used since the last charge
@@ -221,11 +223,11 @@ class Session:
         idx = sub[due]
         self.owed = max_rows is not None and len(idx) > max_rows
         if self.owed:
-            self.force[idx[max_rows:]] = True
-            idx = idx[:max_rows]
+            idx = self._turn(idx, board.labels(idx), int(max_rows or 0))
         if len(idx) == 0:
             return b""
         self.force[idx] = False
+        self.owed_at[idx] = 0
         tables = board.table_of[idx]
         ticks = board.labels(idx)  # the tick's rows, then the rows answered since (the next tick's), in order
         chunks = []
@@ -239,6 +241,17 @@ class Session:
         if data:
             self.batches_out += 1
         return data
+
+    def _turn(self, idx: np.ndarray, labels: np.ndarray, max_rows: int) -> np.ndarray:
+        """The ``max_rows`` of ``idx`` to write in this turn; the others are left owed (``force``). Lower tick
+        labels first (the wire's ticks never decrease), and within a label the soldiers owed longest first
+        (``owed_at``), so that when ticks come faster than the turns no soldier waits for ever."""
+        owed_at = self.owed_at[idx]
+        order = np.lexsort((np.where(owed_at > 0, owed_at, _NEVER), labels))
+        rest, chosen = idx[order[max_rows:]], idx[order[:max_rows]]
+        self.force[rest] = True
+        self.owed_at[rest] = np.where(self.owed_at[rest] > 0, self.owed_at[rest], self.flushed_serial + 1)
+        return np.sort(chosen)
 
     # -- input -------------------------------------------------------------------------------------------
     def feed(self, data: bytes, now: float | None = None) -> float:
