@@ -180,6 +180,7 @@ class Session:
         self.control.clear()
         self.retry_at = None
         if self.closing or self.conn.state is not State.OPEN or not self.tables_sent:
+            self.owed = False
             return out
         if now is not None and not self.owed:
             due = self.last_updates_at + self.own_throttle() - 0.5 / self.config.tick_hz
