@@ -8,15 +8,12 @@ Structure (one trio nursery):
 * per client a **reader** (bytes → protocol events → the world) and a **writer** (control queue + the
   latest poses, encoded against what that client last received) — see :mod:`server.session` for why memory
   stays bounded and a stalled client cannot slow anyone else;
-* soldiers with new requests get an out-of-cycle update as soon as their reader has handled what arrived
-  (:meth:`TtesServer.answer_requests`, ``SoldierManager.answer``; requests that arrive while the tick samples
-  are answered by the **answer loop** right after its publish), so the update that reflects a request does
-  not wait for the next tick (issue 16: one-tick latency);
-* **readers are never starved by the tick's work**: the tick samples, lets the readers in, then publishes;
-  the writers encode one at a time, at most ``ENCODE_TURN_ROWS`` soldiers a turn, letting the readers in
-  before each turn (:meth:`TtesServer.let_readers_in`). A request that arrives while the tick samples or
-  while a client's batch is encoded is applied at the next of these turns and answered at once (or right
-  after the publish), instead of waiting for every client's whole encode;
+* soldiers with new requests get an out-of-cycle update as soon as their reader has handled them
+  (:meth:`TtesServer.answer_requests`, ``SoldierManager.answer``), so the update that reflects a request does
+  not wait for the next tick (issue 16: one-tick latency). The tick and the writers **let the readers in**
+  first (:meth:`TtesServer.let_readers_in`): a request that arrived during the tick's work is applied and
+  answered before the writers encode that tick (its answer goes out with the tick's frames), and one that
+  arrived just before a tick is answered before the tick samples;
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
 * **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
   :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
@@ -42,7 +39,6 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 import trio
 
 from protocol.connection import State
@@ -51,7 +47,6 @@ from server.listen import bind_tcp
 from server.logging import get_logger
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
-from server.soldier.manager import TickUpdate
 from server.startup import ServerWorld
 from server.tls import server_context
 from server.world.commands import needs_worker
@@ -59,9 +54,6 @@ from server.world.commands import needs_worker
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
-# soldier updates a writer encodes in one turn (~1 ms): a larger batch goes out in several turns, so the
-# readers and the other clients' writers (an answer) never wait for one client's whole tick
-ENCODE_TURN_ROWS = 1000
 log = get_logger("app")
 
 
@@ -97,11 +89,6 @@ class TtesServer:
         self._batches_window = (0.0, 0)  # (time, ticks that published poses) at the last status report
         self._published_ticks = 0
         self._shutdown = trio.Event()
-        self._answer_wanted = trio.Event()
-        self._settled = trio.Event()  # set while no tick is between its sampling and its publish
-        self._settled.set()
-        self._unsettled: set[int] | None = None  # soldiers created or removed while a tick was unpublished
-        self._encode_turn = trio.Lock()  # writers encode one at a time (fair: in turn), readers between
         self._requests_seen = 0  # the manager's request and reaction count at the last answer
         self.answers = 0  # out-of-cycle publishes
         self.next_tick = 0.0  # server time of the next scheduled tick (what an answer samples at)
@@ -149,8 +136,6 @@ class TtesServer:
                 s.send_ready()
 
     def _on_created(self, index: int) -> None:
-        if self._unsettled is not None:
-            self._unsettled.add(index)
         board = self._board()
         if board is not None:
             board.add(index, self.world.table_of(index))
@@ -159,8 +144,6 @@ class TtesServer:
             s.force[index] = True
 
     def _on_removed(self, index: int, reason: str) -> None:
-        if self._unsettled is not None:
-            self._unsettled.add(index)
         if self.board_ref.board is not None:
             self.board_ref.board.remove(index)
         for s in self.sessions.values():
@@ -175,17 +158,7 @@ class TtesServer:
         worker thread that runs a client's JCL; called on the loop, it just runs)."""
         if self._trio_token is None or threading.get_ident() == self._loop_thread:
             return func()
-        return trio.from_thread.run(self._when_settled, func, trio_token=self._trio_token)
-
-    async def _when_settled(self, func: Callable[[], object]) -> object:
-        await self.settled()
-        return func()
-
-    async def settled(self) -> None:
-        """Wait until no tick is between its sampling and its publish: a JCL command or an answer must not
-        run there (the tick would publish poses sampled before it). Readers' requests may."""
-        while not self._settled.is_set():
-            await self._settled.wait()
+        return trio.from_thread.run_sync(func, trio_token=self._trio_token)
 
     async def run_jcl(self, session: Session) -> None:
         """A client's JCL frame. One that may load files runs in a worker thread: the loads run there, beside
@@ -198,7 +171,6 @@ class TtesServer:
             if needs_worker(ev.text, self.world.is_startup_script):
                 error = await trio.to_thread.run_sync(session.run_jcl, ev)
             else:
-                await self.settled()
                 error = session.run_jcl(ev)
         session.jcl_done(ev, error)
 
@@ -247,7 +219,6 @@ class TtesServer:
             self._cancel = nursery.cancel_scope
             self._nursery = nursery
             nursery.start_soon(self._tick_loop)
-            nursery.start_soon(self._answer_loop)
             nursery.start_soon(self._status_loop)
             nursery.start_soon(self._accept_all, listeners, nursery)
             log.info("listening", addresses=[f"{h}:{p}" for h, p in self.addresses], ready=self.world.ready)
@@ -389,12 +360,9 @@ class TtesServer:
                 else:  # updates held back by the connection's own throttle: write them when due
                     with trio.move_on_at(self._t0 + session.retry_at):
                         await session.wake.wait()
-                async with self._encode_turn:
-                    await self.let_readers_in()
-                    session.wake = trio.Event()
-                    data = session.take_output(self.now(), ENCODE_TURN_ROWS)
-                if session.owed:  # the rest of this batch in a later turn, after the others' turns
-                    session.wake.set()
+                await self.let_readers_in()  # their answers go out in this write
+                session.wake = trio.Event()
+                data = session.take_output(self.now())
                 session.drained.set()
                 if data:
                     with trio.move_on_after(timeout) as cs:
@@ -422,7 +390,8 @@ class TtesServer:
         while True:
             self.next_tick = next_t - self._t0
             await trio.sleep_until(next_t)
-            await self.tick_in_phases(next_t - self._t0)
+            await self.let_readers_in()  # answers to requests just before the tick go out before it samples
+            self.tick(next_t - self._t0)
             next_t += period
             now = trio.current_time()
             if now - next_t > MAX_TICK_BACKLOG * period:  # fell far behind: skip, do not burst
@@ -434,27 +403,11 @@ class TtesServer:
     @staticmethod
     async def let_readers_in() -> None:
         """Two passes of the scheduler. Trio polls the sockets between its batches of runnable tasks and runs
-        one batch in either order: after the first pass the readers with bytes waiting are in this task's
-        batch, after the second they have handled them. So a request that arrived during a long step (the
-        tick's sampling, another client's encode) is applied before the next one starts."""
+        a batch in either order: after the first pass the readers with bytes waiting (and the writers woken)
+        are in this task's batch, after the second they have run. So what arrived during a long step is
+        handled, and answered, before the next long step starts."""
         await trio.lowlevel.checkpoint()
         await trio.lowlevel.checkpoint()
-
-    async def tick_in_phases(self, scheduled: float) -> None:
-        """:meth:`tick` with the readers let in between sampling and publishing: requests that arrived while
-        the tick sampled apply at once and are answered right after the publish (creates and removes
-        meanwhile keep their soldiers out of this publish; JCL and answers wait for it)."""
-        update = self.sample(scheduled)
-        if update is None:
-            return
-        self._settled, self._unsettled = trio.Event(), set()
-        try:
-            await self.let_readers_in()
-        finally:
-            unsettled, self._unsettled = self._unsettled, None
-            self.next_tick = scheduled + 1.0 / self.config.tick_hz  # what an answer after it samples at
-            self.publish(_without(update, unsettled))
-            self._settled.set()
 
     def tick(self, scheduled: float | None = None) -> None:
         """One server tick: advance + sample every soldier, publish the poses, wake the writers.
@@ -462,51 +415,26 @@ class TtesServer:
         The manager runs at the tick's *scheduled* time, not the time the loop woke up: wake-up jitter would
         otherwise make a soldier throttled to one update per tick period miss every other tick, and frame
         choice would wobble. (A request taken after the scheduled time moves the tick's time up to it.)"""
-        update = self.sample(scheduled)
-        if update is not None:
-            self.publish(update)
-
-    def sample(self, scheduled: float | None = None) -> TickUpdate | None:
-        """The tick's first phase: every soldier advanced to the tick's time, the due ones sampled (None when
-        there is nothing to tick: no library, not ready)."""
         m, board = self.world.manager, self._board()
         if m is None or board is None or not self.world.ready:
-            return None
+            return
         self.ticks += 1
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
-        return m.tick(now)
-
-    def publish(self, update: TickUpdate) -> None:
-        """The tick's second phase: the poses onto the board, the writers woken."""
-        board = self._board()
-        assert board is not None
+        update = m.tick(now)
         if self.on_tick is not None:
             self.on_tick(update)
         if board.publish(update, self.world):
             self._published_ticks += 1
-            self._wake_writers()
-
-    def _wake_writers(self) -> None:
-        for s in self.sessions.values():
-            if s.tables_sent:
-                s.notify()
+            for s in self.sessions.values():
+                if s.tables_sent:
+                    s.notify()
 
     def _requests_arrived(self) -> None:
         m = self.world.manager
         seen = int(m.stats["requests"] + m.stats["reactions"]) if m is not None else self._requests_seen
         if seen != self._requests_seen:
             self._requests_seen = seen
-            if self._settled.is_set():  # answered by the reader that handled them, before anything else runs
-                self.answer_requests()
-            else:  # the tick samples: answered right after its publish
-                self._answer_wanted.set()
-
-    async def _answer_loop(self) -> None:
-        while True:
-            await self._answer_wanted.wait()
-            self._answer_wanted = trio.Event()
-            await self.settled()
-            self.answer_requests()
+            self.answer_requests()  # by the reader that handled them, before anything else runs
 
     def answer_requests(self) -> None:
         """Between ticks: publish the next tick's update early for the soldiers whose requests changed what
@@ -523,7 +451,9 @@ class TtesServer:
         if self.on_tick is not None:
             self.on_tick(update)
         if board.publish(update, self.world, between=True):
-            self._wake_writers()
+            for s in self.sessions.values():
+                if s.tables_sent:
+                    s.notify()
 
     # -- owners that left ----------------------------------------------------------------------------------
     def _left(self, session: Session) -> None:
@@ -602,14 +532,6 @@ class TtesServer:
             mean_tick_us=round(st.get("mean_tick_us", 0.0), 1),
             modes=st.get("modes", {}),
         )
-
-
-def _without(update: TickUpdate, indices: set[int]) -> TickUpdate:
-    """The update less the rows of ``indices`` (soldiers created or removed since it was sampled)."""
-    if not indices:
-        return update
-    keep = ~np.isin(update.indices, np.fromiter(indices, np.int64, len(indices)))
-    return update if keep.all() else update.select(np.flatnonzero(keep))
 
 
 def check_exposure(config: ServerConfig) -> None:

@@ -74,7 +74,6 @@ if TYPE_CHECKING:
     from server.startup import ServerWorld
 
 RECEIVE_BYTES = 65536
-_NEVER = np.iinfo(np.int64).max  # sorts after every serial
 log = get_logger("session")
 
 
@@ -114,8 +113,6 @@ class Session:
         self.ready_sent = False
         self.flushed_serial = 0  # the board publish this client's last write covered
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
-        self.owed = False  # the last write left updates owed (take_output's max_rows): write on at once
-        self.owed_at = np.zeros(config.max_soldiers, np.int64)  # board serial (+1) a soldier was left owed at
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
         self.cost = 0.0  # request tokens used since the last charge
@@ -171,27 +168,24 @@ class Session:
         self.wake.set()
         self.drained.set()  # a reader waiting for the writer stops waiting
 
-    def take_output(self, now: float | None = None, max_rows: int | None = None) -> bytes:
+    def take_output(self, now: float | None = None) -> bytes:
         """Everything to write now: queued control bytes, then the latest joint updates (latest-wins), held
         back while this connection's own throttle says so (``retry_at``: when they are due; ``now`` None:
-        never held). ``max_rows``: at most that many soldiers' updates; the others stay owed (``owed``) and
-        go with the next call, which the throttle does not hold back (they belong to this write)."""
+        never held)."""
         out = b"".join(self.control)
         self.control.clear()
         self.retry_at = None
         if self.closing or self.conn.state is not State.OPEN or not self.tables_sent:
-            self.owed = False
             return out
-        if now is not None and not self.owed:
+        if now is not None:
             due = self.last_updates_at + self.own_throttle() - 0.5 / self.config.tick_hz
             if now < due - 1e-9:
                 # the tick at which they are due wakes the writer; this is for when no tick publishes:
                 # a quarter period after it, so a retry never writes ahead of that tick's poses
                 self.retry_at = due + 0.75 / self.config.tick_hz
                 return out
-        owed = self.owed
-        data = self._joint_updates(max_rows)
-        if data and now is not None and not owed:
+        data = self._joint_updates()
+        if data and now is not None:
             self.last_updates_at = now
         return out + data
 
@@ -207,10 +201,9 @@ class Session:
         """The soldiers of ``indices`` whose updates this client may receive (``Owners.visible``)."""
         return self.world.owners.visible(indices, self.client_id, self.role)
 
-    def _joint_updates(self, max_rows: int | None = None) -> bytes:
-        """The subscribed soldiers whose codes changed since the last write (or that are owed an update),
-        encoded from the board's shared codes: this client only diffs and packs, it never re-quantises. Past
-        ``max_rows`` soldiers, the rest are left owed (``force``) for the next call."""
+    def _joint_updates(self) -> bytes:
+        """The subscribed soldiers whose codes changed since the last write (or that are owed a full update),
+        encoded from the board's shared codes: this client only diffs and packs, it never re-quantises."""
         board = self.board_ref.board
         if board is None:
             return b""
@@ -222,13 +215,9 @@ class Session:
         sub = self.may_see(sub[sub < board.capacity])
         due = board.valid[sub] & ((board.version[sub] > since) | self.force[sub])
         idx = sub[due]
-        self.owed = max_rows is not None and len(idx) > max_rows
-        if self.owed:
-            idx = self._turn(idx, board.labels(idx), int(max_rows or 0))
         if len(idx) == 0:
             return b""
         self.force[idx] = False
-        self.owed_at[idx] = 0
         tables = board.table_of[idx]
         ticks = board.labels(idx)  # the tick's rows, then the rows answered since (the next tick's), in order
         chunks = []
@@ -242,17 +231,6 @@ class Session:
         if data:
             self.batches_out += 1
         return data
-
-    def _turn(self, idx: np.ndarray, labels: np.ndarray, max_rows: int) -> np.ndarray:
-        """The ``max_rows`` of ``idx`` to write in this turn; the others are left owed (``force``). Lower tick
-        labels first (the wire's ticks never decrease), and within a label the soldiers owed longest first
-        (``owed_at``), so that when ticks come faster than the turns no soldier waits for ever."""
-        owed_at = self.owed_at[idx]
-        order = np.lexsort((np.where(owed_at > 0, owed_at, _NEVER), labels))
-        rest, chosen = idx[order[max_rows:]], idx[order[:max_rows]]
-        self.force[rest] = True
-        self.owed_at[rest] = np.where(self.owed_at[rest] > 0, self.owed_at[rest], self.flushed_serial + 1)
-        return np.sort(chosen)
 
     # -- input -------------------------------------------------------------------------------------------
     def feed(self, data: bytes, now: float | None = None) -> float:
