@@ -1,0 +1,136 @@
+"""`ttes web`, the browser image generator: the HTTP side serves the page and nothing else, and the page, in
+a real headless Chromium (SwiftShader WebGL) against a real server's WebSocket port, draws a soldier from the
+wire and shows the posture a key asks for (screenshots: soldier-blue pixels where he stands, a standing
+silhouette taller than wide, a prone one wider than tall). Skipped without chromium, node or puppeteer-core
+(tests/tools/package.json, installed outside the checkout); the screenshots stay in the test's tmp folder."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trio
+import trio.testing
+from npm_support import TOOLS, npm_dir
+
+from client_stub.web.site import Site
+from client_stub.web.vendor import vendored
+
+REPO = Path(__file__).resolve().parents[1]
+CHROMIUM = os.environ.get("CHROMIUM", "/usr/bin/chromium")
+
+
+def test_the_site_serves_the_page_its_data_and_config_only() -> None:
+    site = Site({"ws": "ws://127.0.0.1:7001/", "soldiers": 3})
+    status, kind, body = site.body("/")
+    assert status == 200 and kind.startswith("text/html") and b'src="js/app.js"' in body
+    assert site.body("/js/wire.js")[1].startswith("text/javascript")
+    assert json.loads(site.body("/config.json?x=1")[2]) == {"ws": "ws://127.0.0.1:7001/", "soldiers": 3}
+    assert site.body("/data/village.glb")[2][:4] == b"glTF"
+    assert json.loads(site.body("/data/village.json")[2])["office"]
+    for bad in ("/../setup.py", "/js/../../setup.py", "/site.py", "/vendor.py", "/data/DI.tips", "/.git/HEAD",
+                "/js/.hidden.js", "/package.json", "/data/../site.py"):  # fmt: skip
+        assert site.body(bad)[0] == 404, bad
+
+
+async def _http(site: Site, request: bytes) -> bytes:
+    ours, theirs = trio.testing.memory_stream_pair()
+    async with trio.open_nursery() as n:
+        n.start_soon(site.serve_client, ours)
+        await theirs.send_all(request)
+        got = bytearray()
+        while chunk := await theirs.receive_some(1 << 20):
+            got += chunk
+            if request.startswith(b"HEAD") or b"Connection: close" in request:
+                continue
+        return bytes(got)
+
+
+async def test_http_get_head_keep_alive_and_refusals() -> None:
+    site = Site({"ws": "ws://x/"})
+    two = (
+        b"GET /config.json HTTP/1.1\r\nHost: a\r\n\r\nHEAD / HTTP/1.1\r\nHost: a\r\nConnection: close\r\n\r\n"
+    )
+    got = await _http(site, two)
+    assert got.count(b"HTTP/1.1 200") == 2 and b'{"ws": "ws://x/"}' in got and b"<html" not in got
+    got = await _http(site, b"POST / HTTP/1.1\r\nHost: a\r\nContent-Length: 2\r\nConnection: close\r\n\r\nhi")
+    assert got.startswith(b"HTTP/1.1 405")
+    assert (await _http(site, b"NONSENSE\r\n\r\n")) == b""  # not HTTP: closed
+    assert site.requests == 3
+
+
+def _skip_without_browser() -> Path:
+    if not Path(CHROMIUM).is_file():
+        pytest.skip(f"no chromium at {CHROMIUM}")
+    if not vendored():
+        pytest.skip("three.js is not vendored (make vendor)")
+    where = npm_dir("puppeteer-core")
+    if where is None:
+        pytest.skip("node/npm or puppeteer-core is not available")
+    return where
+
+
+def _blue(png: Path) -> np.ndarray:
+    """The soldier-blue pixels (the page draws soldiers 0x2f6fe0, lit) of a screenshot, as a boolean mask."""
+    import imageio.v3 as iio
+
+    rgb = iio.imread(png)[..., :3].astype(int)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return (b > 90) & (b > 1.8 * r) & (b > 1.3 * g)  # the sky (157, 184, 214) is not
+
+
+def _extent(mask: np.ndarray) -> tuple[int, int]:
+    ys, xs = np.nonzero(mask)
+    return int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)
+
+
+def test_the_page_draws_a_soldier_and_key_4_lays_him_prone(tmp_path: Path) -> None:
+    where = _skip_without_browser()
+    env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
+    cmd = [sys.executable, "-m", "ttes", "web", "--with-server", "--port", "0", "--soldiers", "1", "--json",
+           "--seconds", "600"]  # fmt: skip
+    web = subprocess.Popen(
+        cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        assert web.stdout is not None
+        ready = json.loads(web.stdout.readline())
+        assert ready["event"] == "ready" and ready["server"].startswith("ws://127.0.0.1:")
+        drive = subprocess.run(
+            ["node", str(TOOLS / "drive_web.js"), "keys", ready["url"], str(tmp_path)],
+            env={**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM},
+            capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert drive.returncode == 0, drive.stderr[-3000:]
+    finally:
+        web.terminate()
+        web.wait(timeout=30)
+    got = json.loads(drive.stdout)
+    before, after = got["before"], got["after"]
+    assert before["version"] == 2 and before["role"] == "controller" and not before["errors"], before
+    assert before["soldiers"][0]["rootZ"] > 0.8 and after["soldiers"][0]["rootZ"] < 0.4
+    assert after["soldiers"][0]["appearance"] == 4 and not after["errors"]
+    standing, prone = _blue(tmp_path / "standing.png"), _blue(tmp_path / "prone.png")
+    x0, y0, x1, y1 = (int(v) for v in before["soldiers"][0]["box"])
+    inside = standing[max(y0, 0) : y1 + 1, max(x0, 0) : x1 + 1].sum()
+    assert inside > 300 and inside > 0.95 * standing.sum(), (inside, standing.sum())  # blue where he stands
+    w, h = _extent(standing)
+    assert h > 1.5 * w, (w, h)  # a standing soldier: taller than wide
+    w, h = _extent(prone)
+    assert w > 1.2 * h, (w, h)  # lying: wider than tall
+    assert (standing != prone).sum() > 300
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="needs node")
+def test_the_page_modules_parse() -> None:
+    """Every ES module of the page is valid JavaScript (node --check), without a browser."""
+    for js in sorted((REPO / "client_stub" / "web" / "js").glob("*.js")):
+        cmd = ["node", "--check", "--input-type=module"]
+        run = subprocess.run(cmd, input=js.read_text(), capture_output=True, text=True, timeout=30)
+        assert run.returncode == 0, (js.name, run.stderr)
