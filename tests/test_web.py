@@ -134,3 +134,45 @@ def test_the_page_modules_parse() -> None:
         cmd = ["node", "--check", "--input-type=module"]
         run = subprocess.run(cmd, input=js.read_text(), capture_output=True, text=True, timeout=30)
         assert run.returncode == 0, (js.name, run.stderr)
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="needs node")
+@pytest.mark.parametrize("version", [1, 2])
+def test_the_page_decodes_joint_updates_as_the_python_decoder(version: int, tmp_path: Path) -> None:
+    """client_stub/web/js/wire.js (run by node) over the Python encoder's frames of the DI.fig-shaped table:
+    smooth motion, jumps, repeated and skipped ticks (v2's prediction), soldiers that come and go; the same
+    codes as protocol.updates.UpdateDecoder, and the same decoded values."""
+    from protocol.update_table import example_di_table, table_to_wire
+    from protocol.updates import UpdateDecoder, UpdateEncoder
+
+    table, n = example_di_table(), 6
+    lay = table.layout
+    rng = np.random.default_rng(version)
+    enc, dec = UpdateEncoder(table, n, version=version), UpdateDecoder(table, n, version=version)
+    codes = rng.integers(0, lay.max_code + 1, (n, lay.nfields)).astype(np.int64)
+    vel = rng.integers(-20, 21, codes.shape)
+    payloads, tick = [], 7
+    for step in range(40):
+        tick += (1, 1, 0, 3)[step % 4]
+        vel += rng.integers(-2, 3, vel.shape)
+        jump = (rng.random(codes.shape) < 0.02) * rng.integers(-3000, 3000, codes.shape)
+        codes = np.clip(codes + vel + jump, 0, lay.max_code)
+        sent = np.sort(rng.choice(n, int(rng.integers(1, n + 1)), replace=False))
+        for p in enc.encode_codes(sent, codes[sent].astype(np.int32), tick, 1 << 16):
+            payloads.append(p.hex())
+            dec.decode(p)
+    case = tmp_path / "case.json"
+    case.write_text(json.dumps({"version": version, "table": table_to_wire(table), "payloads": payloads}))
+    run = subprocess.run(["node", str(TOOLS / "check_wire.mjs"), str(case)], capture_output=True, text=True,
+                         timeout=60)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    got = json.loads(run.stdout)
+    assert sorted(int(i) for i in got) == list(range(n))
+    for i in range(n):
+        assert got[str(i)]["codes"] == dec.codes(np.array([i]))[0].tolist()
+        d, p, q = dec.current(np.array([i]))
+        np.testing.assert_allclose(got[str(i)]["pose"]["dofs"], d[0], atol=1e-9)
+        figs = got[str(i)]["pose"]["figures"]
+        np.testing.assert_allclose([f["position"] for f in figs], p[0], atol=1e-9)
+        js_q, py_q = np.array([f["quaternion"] for f in figs]), q[0]
+        assert np.allclose(np.abs((js_q * py_q).sum(axis=1)), 1.0, atol=1e-9)  # the same rotation (±q)
