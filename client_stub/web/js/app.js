@@ -32,7 +32,7 @@ async function settings() {
   return {
     ws: cfg.ws || `ws://${location.hostname || "127.0.0.1"}:7001/`, soldiers: Number(cfg.soldiers ?? 4),
     version: Number(cfg.version ?? 2), role: cfg.role || "controller", token: cfg.token || "",
-    motion: cfg.motion || "stand", spacing: Number(cfg.spacing ?? 2.5),
+    motion: cfg.motion || "stand", spacing: Number(cfg.spacing ?? 2.5), view: cfg.view || "soldier",
   };
 }
 
@@ -296,6 +296,7 @@ document.getElementById("help").textContent = KEYS.map(([k, t]) => `${k.padEnd(8
 window.addEventListener("keydown", key);
 cfg = await settings();
 state.config = cfg;
+state.view = cfg.view;
 try { await loadVillage(); } catch (e) { state.errors.push(`village: ${e}`); }
 connect();
 requestAnimationFrame(frame);
