@@ -4,7 +4,7 @@
 // window.ttes holds the page's state for tests and benches (fps, soldiers, their screen boxes).
 import * as THREE from "three";
 import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
-import { FigureSet, SoldierFigure } from "./figure.js";
+import { Crowd, FigureSet, SoldierFigure } from "./figure.js";
 import { APPEARANCE, Deframer, T, UpdateTable, WEAPON, applyJointUpdates, control, entityRequests, hello, parseMessage } from "./wire.js";
 
 const KEYS = [
@@ -50,6 +50,7 @@ const materials = {
   soldier: new THREE.MeshLambertMaterial({ color: 0x2f6fe0 }), // friendly blue: the tests look for it
   rifle: new THREE.MeshLambertMaterial({ color: 0x303030 }),
 };
+const crowd = new Crowd(scene, materials);
 const cam = { distance: 9, azimuth: 200, elevation: 18 };
 let ground = null; // {x0, y0, step, n, heights}: the village's ground grid, for feet on the terrain
 let landmarks = { office: [34, -33], groups: { friendly: [-8, -8] } };
@@ -189,9 +190,9 @@ function bind(s) {
 function attach(s) {
   const set = figures.get(s.table);
   if (s.figure || !set) return;
-  s.figure = new SoldierFigure(set, materials);
+  s.figure = new SoldierFigure(set);
   s.figure.place(s.heading, s.position);
-  scene.add(s.figure.entity);
+  crowd.add(s.figure);
   if (tables.get(s.table).soldiers.has(s.index)) dirty.add(s.index);
 }
 
@@ -212,7 +213,7 @@ function key(ev) {
   const k = ev.key;
   if (s && POSTURE_KEYS[k]) { s.appearance = POSTURE_KEYS[k]; request([s]); say(`soldier ${state.current}: ${NAMES[s.appearance]}`); }
   else if (s && WEAPON_KEYS[k]) { s.weapon = WEAPON_KEYS[k]; request([s]); say(`soldier ${state.current}: weapon ${k === "5" ? "DEPLOYED" : "FIRING"}`); }
-  else if (s && (k === "ArrowLeft" || k === "ArrowRight")) { s.heading = (s.heading + (k === "ArrowLeft" ? -10 : 10) + 360) % 360; request([s]); say(`soldier ${state.current}: heading ${s.heading.toFixed(0)}`); }
+  else if (s && (k === "ArrowLeft" || k === "ArrowRight")) { s.heading = (s.heading + (k === "ArrowLeft" ? -10 : 10) + 360) % 360; s.figure?.place(s.heading, s.position); request([s]); say(`soldier ${state.current}: heading ${s.heading.toFixed(0)}`); }
   else if (s && (k === "ArrowUp" || k === "ArrowDown")) { s.speed += k === "ArrowUp" ? 0.5 : -0.5; request([s]); say(`soldier ${state.current}: velocity ${s.speed.toFixed(1)} m/s`); }
   else if ((k === "n" || k === "N" || k === "p" || k === "P") && state.soldiers.length) {
     const step = k.toLowerCase() === "n" ? 1 : -1;
@@ -255,7 +256,7 @@ function aimCamera() {
 const box = new THREE.Box3(), corner = new THREE.Vector3();
 function screenBox(s) {
   if (!s.figure) return null;
-  box.setFromObject(s.figure.entity);
+  crowd.box(s.figure, box);
   let x0 = Infinity, y0 = Infinity, x1 = -Infinity, y1 = -Infinity;
   for (let c = 0; c < 8; c++) {
     corner.set(c & 1 ? box.max.x : box.min.x, c & 2 ? box.max.y : box.min.y, c & 4 ? box.max.z : box.min.z).project(camera);
@@ -275,7 +276,7 @@ function frame(now) {
       const [vx, vy] = velocity(s);
       s.position[0] += vx * dt; s.position[1] += vy * dt; s.position[2] = groundZ(s.position[0], s.position[1]);
     }
-    if (s.figure) s.figure.place(s.heading, s.position);
+    if (s.figure && s.speed) s.figure.place(s.heading, s.position);
   }
   for (const i of dirty) {
     const s = bySoldier.get(i);
@@ -284,6 +285,7 @@ function frame(now) {
     if (p) { s.figure.pose(p); s.rootZ = p.figures[0].position[2]; s.posed++; }
   }
   dirty.clear();
+  crowd.update();
   aimCamera();
   renderer.render(scene, camera);
   state.frames++; windowFrames++;

@@ -1,6 +1,8 @@
 // Soldiers drawn from the wire (docs/PROTOCOL.md §7.2 "Drawing"): the FIGURE rows become three.js groups
-// parented as the segment tree, each segment's mesh a child; a pose (§8) sets the joint products D(s) and the
-// figure roots F; the entity's heading and position set E (§10). Axes are the wire's: metres, +Z up.
+// parented as the segment tree; a pose (§8) sets the joint products D(s) and the figure roots F; the entity's
+// heading and position set E (§10). Axes are the wire's: metres, +Z up. The meshes are drawn instanced
+// (Crowd): one draw per segment of a figure set for all its soldiers, each soldier's segment world matrices
+// written into the instance buffers when he moved, so a thousand soldiers are ~20 draws, not 20,000.
 import * as THREE from "three";
 
 const m4 = (t) => new THREE.Matrix4().set(t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8], t[9], t[10], t[11], 0, 0, 0, 1);
@@ -43,7 +45,7 @@ function jointMatrix(joint, dofs, column, reverse, out) {
 }
 
 export class SoldierFigure {
-  constructor(set, materials) {
+  constructor(set) {
     this.set = set;
     this.entity = new THREE.Group();
     this.entity.matrixAutoUpdate = false;
@@ -56,12 +58,6 @@ export class SoldierFigure {
       f.segments.forEach((s, k) => {
         (s.parent < 0 ? root : groups[s.parent]).add(groups[k]);
         if (s.entry < 0) groups[k].matrix.copy(s.pre).multiply(s.post); // fixed: pre · post (row 0: post = I)
-        const geometry = f.geometry.get(k);
-        if (geometry) {
-          const mesh = new THREE.Mesh(geometry, f.name === "soldier" ? materials.soldier : materials.rifle);
-          mesh.matrixAutoUpdate = false;
-          groups[k].add(mesh);
-        }
       });
       this.roots.push(root);
       this.nodes.push(groups);
@@ -72,7 +68,7 @@ export class SoldierFigure {
   place(heading, position) {
     const h = THREE.MathUtils.degToRad(heading);
     this.entity.matrix.makeRotationZ(-h).setPosition(position[0], position[1], position[2]);
-    this.entity.matrixWorldNeedsUpdate = true;
+    this.changed = true;
   }
 
   // a decoded pose ({dofs, figures}, wire.UpdateTable.pose): F per figure, D(s) per moving segment
@@ -91,6 +87,64 @@ export class SoldierFigure {
         this.nodes[i][k].matrix.copy(s.pre).multiply(_d).multiply(s.post);
       });
     });
-    this.entity.matrixWorldNeedsUpdate = true;
+    this.changed = true;
+  }
+}
+
+// every soldier of every figure set, drawn with one InstancedMesh per segment that has a surface
+export class Crowd {
+  constructor(scene, materials) {
+    this.scene = scene; this.materials = materials;
+    this.batches = new Map(); // FigureSet -> {parts: [{fi, k, mesh}], soldiers: [SoldierFigure]}
+  }
+
+  add(figure) {
+    let b = this.batches.get(figure.set);
+    if (!b) { b = { parts: [], soldiers: [], capacity: 0 }; this.batches.set(figure.set, b); }
+    figure.slot = b.soldiers.length;
+    b.soldiers.push(figure);
+    if (b.soldiers.length > b.capacity) this._grow(figure.set, b, Math.max(64, 2 * b.soldiers.length));
+    figure.changed = true;
+  }
+
+  _grow(set, b, capacity) {
+    for (const p of b.parts) { this.scene.remove(p.mesh); p.mesh.dispose(); }
+    b.parts = []; b.capacity = capacity;
+    set.figures.forEach((f, fi) => f.geometry.forEach((geometry, k) => {
+      const mesh = new THREE.InstancedMesh(geometry, f.name === "soldier" ? this.materials.soldier : this.materials.rifle, capacity);
+      mesh.frustumCulled = false; // the instances span the village: no one bounding sphere
+      mesh.count = 0;
+      this.scene.add(mesh);
+      b.parts.push({ fi, k, mesh });
+    }));
+    for (const s of b.soldiers) s.changed = true;
+  }
+
+  // write the matrices of the soldiers that moved or were posed since the last frame
+  update() {
+    for (const b of this.batches.values()) {
+      let dirty = false;
+      for (const s of b.soldiers) {
+        if (!s.changed) continue;
+        s.entity.updateMatrixWorld(true);
+        for (const p of b.parts) p.mesh.setMatrixAt(s.slot, s.nodes[p.fi][p.k].matrixWorld);
+        s.changed = false; dirty = true;
+      }
+      for (const p of b.parts) {
+        p.mesh.count = b.soldiers.length;
+        if (dirty) p.mesh.instanceMatrix.needsUpdate = true;
+      }
+    }
+  }
+
+  // the world box of one soldier's surfaces
+  box(s, out) {
+    out.makeEmpty();
+    const b = this.batches.get(s.set), part = new THREE.Box3();
+    for (const p of b ? b.parts : []) {
+      if (!p.mesh.geometry.boundingBox) p.mesh.geometry.computeBoundingBox();
+      out.union(part.copy(p.mesh.geometry.boundingBox).applyMatrix4(s.nodes[p.fi][p.k].matrixWorld));
+    }
+    return out;
   }
 }
