@@ -8,7 +8,7 @@ frames its requestAnimationFrame loop renders for --seconds. `stand`: every sold
 after the first); `walk`: every soldier walking at 1.4 m/s (a joint update per soldier per tick). The bird's
 eye view shows the whole grid.
 
-    python bench/bench_web.py [--soldiers 100,1000] [--motion stand,walk] [--seconds 5] [--json]
+    python bench/bench_web.py [--soldiers 100,1000] [--motion stand,walk] [--seconds 5] [--shots DIR] [--json]
 """
 
 from __future__ import annotations
@@ -26,11 +26,20 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 
+def shot(folder: Path | None, n: int, motion: str) -> dict[str, str]:
+    """drive_web.js's SHOT variable: where the run's screenshot goes (none without --shots)."""
+    if folder is None:
+        return {}
+    folder.mkdir(parents=True, exist_ok=True)
+    return {"SHOT": str(folder / f"web_{n}_{motion}.png")}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--soldiers", default="100,1000")
     ap.add_argument("--motion", default="stand,walk")
     ap.add_argument("--seconds", type=float, default=5.0)
+    ap.add_argument("--shots", type=Path, help="save a screenshot of each run in this folder")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     from npm_support import TOOLS, npm_dir
@@ -53,9 +62,10 @@ def main() -> int:
         for motion in args.motion.split(","):
             for n in (int(v) for v in args.soldiers.split(",")):
                 page = f"{url}?soldiers={n}&motion={motion}&view=birds-eye&spacing=2"
+                env = {**os.environ, "NODE_PATH": str(where / "node_modules"), **shot(args.shots, n, motion)}
                 run = subprocess.run(
                     ["node", str(TOOLS / "drive_web.js"), "fps", page, str(args.seconds)],
-                    env={**os.environ, "NODE_PATH": str(where / "node_modules")},
+                    env=env,
                     capture_output=True, text=True, timeout=900,
                 )  # fmt: skip
                 if run.returncode != 0:

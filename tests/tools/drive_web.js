@@ -2,6 +2,7 @@
 // npm folder of tests/tools/package.json). Prints one JSON object on stdout.
 //   node drive_web.js keys URL OUT_DIR   standing screenshot, key "4" (PRONE), prone screenshot, the state
 //   node drive_web.js fps URL SECONDS    the page's frames per second once every soldier is drawn
+//                                        (SHOT=FILE.png: and a screenshot after the count)
 // CHROMIUM: the browser (default /usr/bin/chromium). WebGL runs on SwiftShader (CPU), as on any headless box.
 const puppeteer = require("puppeteer-core");
 
@@ -48,6 +49,7 @@ async function main() {
       await page.evaluate((s) => new Promise((r) => setTimeout(r, s * 1000)), seconds);
       const t1 = await page.evaluate(() => [performance.now(), ttes.frames, ttes.updates]);
       const dt = (t1[0] - t0[0]) / 1000;
+      if (process.env.SHOT) await page.screenshot({ path: process.env.SHOT });
       const s = await state();
       console.log(JSON.stringify({ fps: (t1[1] - t0[1]) / dt, updates_per_s: (t1[2] - t0[2]) / dt, seconds: dt,
         soldiers: s.soldiers.length, errors: s.errors, console: console_ }));
