@@ -24,7 +24,7 @@ async function main() {
     page.on("pageerror", (e) => console_.push(`pageerror: ${e.message}`));
     await page.goto(url, { waitUntil: "load" });
     // every soldier bound, drawn and posed from the wire
-    await page.waitForFunction(() => window.ttes && ttes.soldiers.length >= ttes.config.soldiers
+    await page.waitForFunction(() => window.ttes && ttes.ready && ttes.soldiers.length > 0
       && ttes.soldiers.every((s) => s.posed > 0), { timeout: WAIT_MS, polling: 200 });
     const state = () => page.evaluate(() => ({
       status: ttes.status, version: ttes.version, role: ttes.role, fps: ttes.fps, frames: ttes.frames,

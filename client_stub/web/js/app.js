@@ -148,6 +148,15 @@ function handle(type, msg) {
       break;
     }
     case T.ERROR: state.errors.push(`${msg.code}: ${msg.message}`); say(`server error ${msg.code}: ${msg.message}`); break;
+    case T.SOLDIER_REMOVED: {
+      const s = bySoldier.get(msg.index);
+      if (s) { // drawn nowhere: his instances collapse to a point (slots are not reused)
+        bySoldier.delete(msg.index); s.index = -1; s.speed = 0;
+        if (s.figure) { s.figure.entity.matrix.makeScale(0, 0, 0); s.figure.changed = true; }
+        say(`soldier removed: ${msg.reason}`);
+      }
+      break;
+    }
     case T.GOODBYE: say(`goodbye: ${msg.reason}`); break;
     case T.PING: send(control(T.PONG, { nonce: msg.nonce })); break;
     default: break;
@@ -157,8 +166,9 @@ function handle(type, msg) {
 // our soldiers: the ones READY lists first (the start-up script's), then CREATE_SOLDIER for the rest
 function populate(ready) {
   const [gx, gy] = (landmarks.groups && landmarks.groups.friendly) || [-8, -8];
-  const cols = Math.max(1, Math.ceil(Math.sqrt(cfg.soldiers)));
-  for (let k = 0; k < cfg.soldiers; k++) {
+  const n = cfg.role === "observer" ? ready.length : cfg.soldiers; // an observer shows every soldier there is
+  const cols = Math.max(1, Math.ceil(Math.sqrt(n)));
+  for (let k = 0; k < n; k++) {
     const x = gx + (k % cols) * cfg.spacing, y = gy + Math.floor(k / cols) * cfg.spacing;
     const s = newSoldier([x, y]);
     if (cfg.motion === "walk") s.speed = 1.4;
@@ -183,7 +193,7 @@ function create(s) {
 function bind(s) {
   bySoldier.set(s.index, s);
   send(control(T.SUBSCRIBE, { indices: [s.index] }));
-  request([s], true);
+  if (cfg.role !== "observer") request([s], true); // an observer draws them where it places them
   attach(s);
 }
 
@@ -202,6 +212,7 @@ function velocity(s) {
 }
 
 function request(list, immediate = false) {
+  if (cfg.role === "observer") return;
   const rows = list.filter((s) => s.index >= 0).map((s) => ({ index: s.index, appearance: s.appearance, weapon: s.weapon,
     velocity: velocity(s), heading: s.heading, position: s.position, immediate }));
   for (let k = 0; k < rows.length; k += 1000) send(entityRequests(rows.slice(k, k + 1000)));
