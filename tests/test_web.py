@@ -122,8 +122,8 @@ def test_the_page_draws_a_soldier_and_key_4_lays_him_prone(tmp_path: Path) -> No
     assert inside > 300 and inside > 0.95 * standing.sum(), (inside, standing.sum())  # blue where he stands
     w, h = _extent(standing)
     assert h > 1.5 * w, (w, h)  # a standing soldier: taller than wide
-    w, h = _extent(prone)
-    assert w > 1.2 * h, (w, h)  # lying: wider than tall
+    w2, h2 = _extent(prone)
+    assert w2 / h2 > 2 * w / h and h2 < 0.8 * h, (w, h, w2, h2)  # lying: much wider for his height, lower
     assert (standing != prone).sum() > 300
 
 
@@ -176,3 +176,60 @@ def test_the_page_decodes_joint_updates_as_the_python_decoder(version: int, tmp_
         np.testing.assert_allclose([f["position"] for f in figs], p[0], atol=1e-9)
         js_q, py_q = np.array([f["quaternion"] for f in figs]), q[0]
         assert np.allclose(np.abs((js_q * py_q).sum(axis=1)), 1.0, atol=1e-9)  # the same rotation (±q)
+
+
+def test_entities_json_rows() -> None:
+    from protocol.entity import make_entity_requests
+
+    rows = make_entity_requests(
+        index=[12, 3], appearance=[3, 2], weapon=[1, 0], velocity=[(1, 2, 0), (0, 0, 0)],
+        heading=[90.0, 0.0], position=[(5.0, -2.0, 0.5), (0.0, 0.0, 0.0)],
+    )  # fmt: skip
+    site = Site(entities=lambda: rows)
+    got = json.loads(site.body("/entities.json")[2])
+    assert got == {
+        "soldiers": [[12, 5.0, -2.0, 0.5, 90.0, 1.0, 2.0, 0.0, 3, 1], [3, 0, 0, 0, 0, 0, 0, 0, 2, 0]]
+    }
+    assert Site().body("/entities.json")[0] == 404  # no replay: no such file
+
+
+def test_the_page_follows_a_dis_replay(tmp_path: Path) -> None:
+    """`ttes web --replay LOG`: the page, an observer, draws every soldier the replay drives, posed by the
+    server's updates and placed where the log puts them (entities.json)."""
+    where = _skip_without_browser()
+    env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
+    log = tmp_path / "squad.pcap"
+    subprocess.run([sys.executable, "-m", "ttes", "dis", "synth", "--out", str(log), "--soldiers", "4",
+                    "--seconds", "60"], env=env, check=True, capture_output=True, timeout=120)  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "ttes",
+        "web",
+        "--replay",
+        str(log),
+        "--port",
+        "0",
+        "--json",
+        "--seconds",
+        "600",
+    ]
+    web = subprocess.Popen(
+        cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        assert web.stdout is not None
+        url = json.loads(web.stdout.readline())["url"]
+        drive = subprocess.run(
+            ["node", str(TOOLS / "drive_web.js"), "fps", url, "1"],
+            env={**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM,
+                 "SHOT": str(tmp_path / "replay.png")},
+            capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert drive.returncode == 0, drive.stderr[-3000:]
+    finally:
+        web.terminate()
+        web.wait(timeout=30)
+    got = json.loads(drive.stdout)
+    assert got["soldiers"] == 4 and not got["errors"] and got["updates_per_s"] > 0, got
+    assert _blue(tmp_path / "replay.png").sum() > 100

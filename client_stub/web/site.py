@@ -4,7 +4,9 @@ h11 over trio streams, GET and HEAD only, keep-alive. What it serves, and nothin
 
 * ``/`` and ``/index.html``, ``/js/*.js``, ``/vendor/...`` (three.js, :mod:`client_stub.web.vendor`);
 * ``/data/village.glb`` and ``/data/village.json``: the stub's terrain and its landmarks;
-* ``/config.json``: where the page connects (the server's WebSocket URL) and its defaults (soldiers, version).
+* ``/config.json``: where the page connects (the server's WebSocket URL) and its defaults (soldiers, version);
+* ``/entities.json`` while ``ttes web --replay`` drives the server: where each replayed soldier is (the wire
+  carries no entity positions: a page that only watches could not place them).
 
 The page then talks to the Jack/TTES server's WebSocket port itself (docs/PROTOCOL.md §2.1): this process
 never touches the protocol.
@@ -13,6 +15,7 @@ never touches the protocol.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from email.utils import formatdate
 from pathlib import Path
@@ -38,6 +41,7 @@ class Site:
     root: Path = WEB
     terrain: Path = DEFAULT_TERRAIN
     requests: int = 0
+    entities: Callable[[], Any] | None = None  # the replayed soldiers' last requests (ENTITY_REQUEST_DTYPE)
 
     def resolve(self, target: str) -> Path | None:
         """The file a request path names, or None (outside the served folders, or missing)."""
@@ -61,8 +65,11 @@ class Site:
 
     def body(self, target: str) -> tuple[int, str, bytes]:
         """(status, content type, body) for a GET of ``target``."""
-        if target.split("?", 1)[0] == "/config.json":
+        path = target.split("?", 1)[0]
+        if path == "/config.json":
             return 200, TYPES[".json"], json.dumps(self.config).encode()
+        if path == "/entities.json" and self.entities is not None:
+            return 200, TYPES[".json"], json.dumps(entity_rows(self.entities())).encode()
         found = self.resolve(target)
         if found is None:
             if target.startswith("/vendor/"):
@@ -118,11 +125,21 @@ class Site:
         await stream.send_all(conn.send(h11.EndOfMessage()) or b"")
 
 
-async def serve_site(
-    site: Site, host: str, port: int, *, task_status: Any = trio.TASK_STATUS_IGNORED
-) -> None:
-    """Serve ``site`` on ``host:port`` until cancelled; ``task_status.started((host, port))`` once bound."""
-    listeners = await trio.open_tcp_listeners(port, host=host)
+def entity_rows(rows: Any) -> dict[str, Any]:
+    """``{"soldiers": [[index, x, y, z, heading, vx, vy, vz, appearance, weapon], ...]}`` (metres, degrees,
+    m/s, Performer axes) from entity request rows."""
+    out = []
+    for r in rows:
+        p, v = r["position"], r["velocity"]
+        out.append([int(r["index"]), *(round(float(x), 3) for x in (*p, r["heading"], *v)),
+                    int(r["appearance"]), int(r["weapon"])])  # fmt: skip
+    return {"soldiers": out}
+
+
+async def serve_site(site: Site, sockets: list[Any], *, task_status: Any = trio.TASK_STATUS_IGNORED) -> None:
+    """Serve ``site`` on listening stdlib ``sockets`` (bound by the caller, so that a taken port fails before
+    anything loads) until cancelled; ``task_status.started((host, port))`` of the first."""
+    listeners = [trio.SocketListener(trio.socket.from_stdlib_socket(s)) for s in sockets]
     bound = listeners[0].socket.getsockname()[:2]
     async with trio.open_nursery() as nursery:
         task_status.started((bound[0], bound[1]))

@@ -25,20 +25,26 @@ async function main() {
     await page.goto(url, { waitUntil: "load" });
     // every soldier bound, drawn and posed from the wire
     await page.waitForFunction(() => window.ttes && ttes.ready && ttes.soldiers.length > 0
-      && ttes.soldiers.every((s) => s.posed > 0), { timeout: WAIT_MS, polling: 200 });
+      && ttes.soldiers.filter((s) => s.index >= 0).every((s) => s.posed > 0), { timeout: WAIT_MS, polling: 200 });
     const state = () => page.evaluate(() => ({
       status: ttes.status, version: ttes.version, role: ttes.role, fps: ttes.fps, frames: ttes.frames,
       updates: ttes.updates, errors: ttes.errors, log: ttes.log,
       soldiers: ttes.soldiers.map((s, k) => ({ index: s.index, appearance: s.appearance, rootZ: s.rootZ, box: ttes.screenBox(k) })),
     }));
+    // at rest: soldier 0 got no new pose for a second (an idle soldier costs no update, PROTOCOL.md §8.4)
+    const settled = () => page.waitForFunction(() => {
+      const s = ttes.soldiers[0], now = performance.now();
+      if (s.posed !== s.seenPosed) { s.seenPosed = s.posed; s.seenAt = now; }
+      return now - s.seenAt > 1000;
+    }, { timeout: WAIT_MS, polling: 100 });
     if (mode === "keys") {
-      await page.evaluate(() => new Promise((r) => setTimeout(r, 1500)));
+      await settled();
       await page.screenshot({ path: `${arg}/standing.png` });
       const before = await state();
       await page.keyboard.press("4");
       await page.waitForFunction(() => ttes.soldiers[0].rootZ !== null && ttes.soldiers[0].rootZ < 0.4,
         { timeout: WAIT_MS, polling: 100 });
-      await page.evaluate(() => new Promise((r) => setTimeout(r, 2500))); // let him settle on the ground
+      await settled(); // lying still on the ground
       await page.screenshot({ path: `${arg}/prone.png` });
       const after = await state();
       console.log(JSON.stringify({ before, after, console: console_ }));

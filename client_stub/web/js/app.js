@@ -33,6 +33,7 @@ async function settings() {
     ws: cfg.ws || `ws://${location.hostname || "127.0.0.1"}:7001/`, soldiers: Number(cfg.soldiers ?? 4),
     version: Number(cfg.version ?? 2), role: cfg.role || "controller", token: cfg.token || "",
     motion: cfg.motion || "stand", spacing: Number(cfg.spacing ?? 2.5), view: cfg.view || "soldier",
+    entities: cfg.entities || "", // ttes web --replay: where the replayed soldiers are (the wire does not say)
   };
 }
 
@@ -134,7 +135,7 @@ function handle(type, msg) {
       state.soldiers.forEach(attach);
       break;
     case T.READY:
-      if (!state.ready) { state.ready = true; populate(msg.soldiers); }
+      if (!state.ready) { state.ready = true; if (cfg.entities) follow(); else populate(msg.soldiers); }
       break;
     case T.SOLDIER_CREATED: {
       const s = state.soldiers.find((x) => x.request === msg.id);
@@ -142,21 +143,19 @@ function handle(type, msg) {
       break;
     }
     case T.JOINT_UPDATES: {
-      const { indices } = applyJointUpdates(tables, msg, state.version);
+      const { table, indices } = applyJointUpdates(tables, msg, state.version);
       state.updates++;
-      for (const i of indices) dirty.add(i);
-      break;
-    }
-    case T.ERROR: state.errors.push(`${msg.code}: ${msg.message}`); say(`server error ${msg.code}: ${msg.message}`); break;
-    case T.SOLDIER_REMOVED: {
-      const s = bySoldier.get(msg.index);
-      if (s) { // drawn nowhere: his instances collapse to a point (slots are not reused)
-        bySoldier.delete(msg.index); s.index = -1; s.speed = 0;
-        if (s.figure) { s.figure.entity.matrix.makeScale(0, 0, 0); s.figure.changed = true; }
-        say(`soldier removed: ${msg.reason}`);
+      for (const i of indices) {
+        dirty.add(i);
+        const s = bySoldier.get(i);
+        if (s && s.table < 0) { s.table = table.id; attach(s); } // a followed soldier: his table is the frame's
       }
       break;
     }
+    case T.ERROR: state.errors.push(`${msg.code}: ${msg.message}`); say(`server error ${msg.code}: ${msg.message}`); break;
+    case T.SOLDIER_REMOVED:
+      if (bySoldier.has(msg.index)) { hide(bySoldier.get(msg.index)); say(`soldier removed: ${msg.reason}`); }
+      break;
     case T.GOODBYE: say(`goodbye: ${msg.reason}`); break;
     case T.PING: send(control(T.PONG, { nonce: msg.nonce })); break;
     default: break;
@@ -175,6 +174,35 @@ function populate(ready) {
     if (k < ready.length) { [s.index, s.table] = ready[k]; bind(s); } else create(s);
   }
   state.current = 0;
+}
+
+// a soldier drawn nowhere: his instances collapse to a point (slots are not reused)
+function hide(s) {
+  bySoldier.delete(s.index); s.index = -1; s.speed = 0; s.vel = null;
+  if (s.figure) { s.figure.entity.matrix.makeScale(0, 0, 0); s.figure.changed = true; }
+}
+
+// ttes web --replay: follow the soldiers the replay drives, placed where entities.json says, every 250 ms
+async function follow() {
+  let rows = [];
+  try { rows = (await (await fetch(cfg.entities)).json()).soldiers; } catch { /* ttes web gone: keep going */ }
+  const seen = new Set();
+  for (const [index, x, y, , heading, vx, vy, , appearance, weapon] of rows) {
+    seen.add(index);
+    let s = bySoldier.get(index);
+    if (!s) {
+      s = newSoldier([x, y]);
+      s.index = index; s.table = -1;
+      bySoldier.set(index, s);
+      send(control(T.SUBSCRIBE, { indices: [index] }));
+    }
+    Object.assign(s, { heading, appearance, weapon, vel: [vx, vy] });
+    s.position = [x, y, groundZ(x, y)];
+    s.figure?.place(heading, s.position);
+  }
+  for (const s of [...bySoldier.values()]) if (!seen.has(s.index)) hide(s);
+  state.followed = seen.size;
+  setTimeout(follow, 250);
 }
 
 function newSoldier(xy) {
@@ -283,11 +311,11 @@ function frame(now) {
   const dt = Math.min((now - last) / 1000, 0.25);
   last = now;
   for (const s of state.soldiers) {
-    if (s.speed) {
-      const [vx, vy] = velocity(s);
+    if (s.speed || s.vel) {
+      const [vx, vy] = s.vel || velocity(s);
       s.position[0] += vx * dt; s.position[1] += vy * dt; s.position[2] = groundZ(s.position[0], s.position[1]);
     }
-    if (s.figure && s.speed) s.figure.place(s.heading, s.position);
+    if (s.figure && (s.speed || s.vel)) s.figure.place(s.heading, s.position);
   }
   for (const i of dirty) {
     const s = bySoldier.get(i);
