@@ -233,3 +233,71 @@ def test_the_page_follows_a_dis_replay(tmp_path: Path) -> None:
     got = json.loads(drive.stdout)
     assert got["soldiers"] == 4 and not got["errors"] and got["updates_per_s"] > 0, got
     assert _blue(tmp_path / "replay.png").sum() > 100
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _start_server(port: int, ws_port: int, env: dict[str, str]) -> subprocess.Popen[str]:
+    cmd = [sys.executable, "-m", "ttes", "server", "--synthetic", "--json"]
+    cmd += ["--port", str(port), "--ws-port", str(ws_port)]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    assert proc.stdout is not None
+    assert json.loads(proc.stdout.readline())["websocket"] == [f"127.0.0.1:{ws_port}"]
+    return proc
+
+
+def test_the_page_binds_its_soldiers_again_after_a_server_restart() -> None:
+    """The server goes away (SIGTERM: GOODBYE, close) and comes back on the same ports: the page retries with
+    backoff, shakes hands again and binds its soldiers as they were (soldier 0 still asked to kneel)."""
+    where = _skip_without_browser()
+    env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
+    port, ws_port = _free_port(), _free_port()
+    server = _start_server(port, ws_port, env)
+    cmd = [
+        sys.executable,
+        "-m",
+        "ttes",
+        "web",
+        "--port",
+        "0",
+        "--soldiers",
+        "3",
+        "--json",
+        "--seconds",
+        "600",
+    ]
+    cmd += ["--server", f"127.0.0.1:{ws_port}"]
+    web = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    drive = None
+    try:
+        assert web.stdout is not None
+        url = json.loads(web.stdout.readline())["url"]
+        drive = subprocess.Popen(
+            ["node", str(TOOLS / "drive_web.js"), "reconnect", url],
+            env={**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM},
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        assert drive.stdout is not None
+        first = json.loads(drive.stdout.readline())
+        assert first["phase"] == "restart the server", first
+        server.terminate()
+        server.wait(timeout=30)
+        server = _start_server(port, ws_port, env)
+        out, err = drive.communicate(timeout=300)
+        assert drive.returncode == 0, err[-3000:]
+    finally:
+        for proc in (drive, web, server):
+            if proc is not None and proc.poll() is None:
+                proc.terminate()
+                proc.wait(timeout=30)
+    got = json.loads(out)
+    assert got["lost"] >= 1 and got["after"]["version"] == 2 and not got["after"]["errors"], got
+    soldiers = got["after"]["soldiers"]
+    assert len(soldiers) == 3 and all(s["index"] >= 0 for s in soldiers)
+    assert [s["appearance"] for s in soldiers] == [3, 2, 2]  # the kneel asked for before, asked for again

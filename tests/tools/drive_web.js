@@ -1,6 +1,7 @@
 // Drive the browser image generator (`ttes web`) in headless Chromium with puppeteer-core (NODE_PATH: the
 // npm folder of tests/tools/package.json). Prints one JSON object on stdout.
 //   node drive_web.js keys URL OUT_DIR   standing screenshot, key "4" (PRONE), prone screenshot, the state
+//   node drive_web.js reconnect URL      key 3, then (the caller restarts the server) bound again: the state
 //   node drive_web.js fps URL SECONDS    the page's frames per second once every soldier is drawn
 //                                        (SHOT=FILE.png: and a screenshot after the count)
 // CHROMIUM: the browser (default /usr/bin/chromium). WebGL runs on SwiftShader (CPU), as on any headless box.
@@ -37,7 +38,16 @@ async function main() {
       if (s.posed !== s.seenPosed) { s.seenPosed = s.posed; s.seenAt = now; }
       return now - s.seenAt > 1000;
     }, { timeout: WAIT_MS, polling: 100 });
-    if (mode === "keys") {
+    const bound = () => page.waitForFunction(() => ttes.accepted && ttes.soldiers.length > 0
+      && ttes.soldiers.every((s) => s.index >= 0 && s.posed > 0), { timeout: WAIT_MS, polling: 200 });
+    if (mode === "reconnect") { // soldier 0 kneels; the test restarts the server; the page binds them again
+      await page.keyboard.press("3");
+      console.log(JSON.stringify({ phase: "restart the server", before: await state() }));
+      await page.waitForFunction(() => ttes.lost >= 1, { timeout: WAIT_MS, polling: 100 });
+      await bound();
+      await settled();
+      console.log(JSON.stringify({ after: await state(), lost: await page.evaluate(() => ttes.lost), console: console_ }));
+    } else if (mode === "keys") {
       await settled();
       await page.screenshot({ path: `${arg}/standing.png` });
       const before = await state();

@@ -117,12 +117,27 @@ function connect() {
       state.errors.push(String(e)); say(`error: ${e}`); ws.close();
     }
   };
-  ws.onclose = (ev) => { state.status = `closed (${ev.code})`; say(`server connection closed (${ev.code})`); };
+  ws.onclose = (ev) => lost(ev.code);
+}
+
+// the server is gone: forget what it sent, keep our soldiers' requests, try again after 0.5, 1, 2, 4, 8, 8 ... s
+// (as the stub and the replay do, PROTOCOL.md §15); READY binds the soldiers again
+const BACKOFF = [0.5, 1, 2, 4, 8];
+let retries = 0;
+function lost(code) {
+  const wait = BACKOFF[Math.min(retries++, BACKOFF.length - 1)];
+  state.status = `lost (${code}), retrying in ${wait} s`; state.lost = (state.lost || 0) + 1;
+  say(`server connection closed (${code}): retrying in ${wait} s`);
+  Object.assign(state, { accepted: false, ready: false });
+  tables.clear(); figures.clear(); bySoldier.clear(); dirty.clear(); crowd.clear();
+  for (const s of state.soldiers) Object.assign(s, { index: -1, table: -1, request: 0, figure: null, posed: 0 });
+  setTimeout(connect, wait * 1000);
 }
 
 function handle(type, msg) {
   switch (type) {
     case T.ACCEPT:
+      retries = 0;
       state.accepted = true; state.version = msg.version; state.role = msg.role || cfg.role;
       say(`accepted by ${msg.name}: protocol version ${msg.version}, role ${state.role}`);
       break;
@@ -135,7 +150,11 @@ function handle(type, msg) {
       state.soldiers.forEach(attach);
       break;
     case T.READY:
-      if (!state.ready) { state.ready = true; if (cfg.entities) follow(); else populate(msg.soldiers); }
+      if (!state.ready) {
+        state.ready = true;
+        if (!cfg.entities) populate(msg.soldiers);
+        else if (!state.following) { state.following = true; follow(); }
+      }
       break;
     case T.SOLDIER_CREATED: {
       const s = state.soldiers.find((x) => x.request === msg.id);
@@ -164,6 +183,12 @@ function handle(type, msg) {
 
 // our soldiers: the ones READY lists first (the start-up script's), then CREATE_SOLDIER for the rest
 function populate(ready) {
+  if (state.soldiers.length) { // a new connection: our soldiers again, as they were
+    state.soldiers.forEach((s, k) => {
+      if (k < ready.length) { [s.index, s.table] = ready[k]; bind(s); } else if (cfg.role !== "observer") create(s);
+    });
+    return;
+  }
   const [gx, gy] = (landmarks.groups && landmarks.groups.friendly) || [-8, -8];
   const n = cfg.role === "observer" ? ready.length : cfg.soldiers; // an observer shows every soldier there is
   const cols = Math.max(1, Math.ceil(Math.sqrt(n)));

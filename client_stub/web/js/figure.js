@@ -98,6 +98,12 @@ export class Crowd {
     this.batches = new Map(); // FigureSet -> {parts: [{fi, k, mesh}], soldiers: [SoldierFigure]}
   }
 
+  // forget every soldier (a new connection: new tables, new figures)
+  clear() {
+    for (const b of this.batches.values()) for (const p of b.parts) { this.scene.remove(p.mesh); p.mesh.dispose(); }
+    this.batches.clear();
+  }
+
   add(figure) {
     let b = this.batches.get(figure.set);
     if (!b) { b = { parts: [], soldiers: [], capacity: 0 }; this.batches.set(figure.set, b); }
