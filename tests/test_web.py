@@ -90,13 +90,14 @@ def _extent(mask: np.ndarray) -> tuple[int, int]:
     return int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)
 
 
+@pytest.mark.browser
 def test_the_page_draws_a_soldier_and_key_4_lays_him_prone(tmp_path: Path) -> None:
     where = _skip_without_browser()
     env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
     cmd = [sys.executable, "-m", "ttes", "web", "--with-server", "--port", "0", "--soldiers", "1", "--json",
            "--seconds", "600"]  # fmt: skip
     web = subprocess.Popen(
-        cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
     )
     try:
         assert web.stdout is not None
@@ -193,9 +194,11 @@ def test_entities_json_rows() -> None:
     assert Site().body("/entities.json")[0] == 404  # no replay: no such file
 
 
+@pytest.mark.browser
 def test_the_page_follows_a_dis_replay(tmp_path: Path) -> None:
     """`ttes web --replay LOG`: the page, an observer, draws every soldier the replay drives, posed by the
-    server's updates and placed where the log puts them (entities.json)."""
+    server's updates and placed where the log puts them (entities.json). The synthetic library starts fast;
+    its figures have no surfaces, so this checks the page's state, not its pixels (the test above does)."""
     where = _skip_without_browser()
     env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
     log = tmp_path / "squad.pcap"
@@ -208,14 +211,13 @@ def test_the_page_follows_a_dis_replay(tmp_path: Path) -> None:
         "web",
         "--replay",
         str(log),
+        "--synthetic-server",
         "--port",
         "0",
         "--json",
-        "--seconds",
-        "600",
     ]
     web = subprocess.Popen(
-        cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
     )
     try:
         assert web.stdout is not None
@@ -223,7 +225,7 @@ def test_the_page_follows_a_dis_replay(tmp_path: Path) -> None:
         drive = subprocess.run(
             ["node", str(TOOLS / "drive_web.js"), "fps", url, "1"],
             env={**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM,
-                 "SHOT": str(tmp_path / "replay.png")},
+                 "SHOT": str(tmp_path / "replay.png")},  # a look, by hand
             capture_output=True, text=True, timeout=300,
         )  # fmt: skip
         assert drive.returncode == 0, drive.stderr[-3000:]
@@ -231,8 +233,9 @@ def test_the_page_follows_a_dis_replay(tmp_path: Path) -> None:
         web.terminate()
         web.wait(timeout=30)
     got = json.loads(drive.stdout)
-    assert got["soldiers"] == 4 and not got["errors"] and got["updates_per_s"] > 0, got
-    assert _blue(tmp_path / "replay.png").sum() > 100
+    assert got["soldiers"] == 4 and not got["errors"] and got["updates_per_s"] > 0, (
+        got
+    )  # (synthetic: no meshes)
 
 
 def _free_port() -> int:
@@ -252,6 +255,7 @@ def _start_server(port: int, ws_port: int, env: dict[str, str]) -> subprocess.Po
     return proc
 
 
+@pytest.mark.browser
 def test_the_page_binds_its_soldiers_again_after_a_server_restart() -> None:
     """The server goes away (SIGTERM: GOODBYE, close) and comes back on the same ports: the page retries with
     backoff, shakes hands again and binds its soldiers as they were (soldier 0 still asked to kneel)."""
