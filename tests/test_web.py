@@ -12,6 +12,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -90,29 +91,36 @@ def _extent(mask: np.ndarray) -> tuple[int, int]:
     return int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)
 
 
-@pytest.mark.browser
-def test_the_page_draws_a_soldier_and_key_4_lays_him_prone(tmp_path: Path) -> None:
+def _web_and_browser(
+    web_args: list[str], drive_args: list[str], cwd: Path, env: dict[str, str] | None = None
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """`ttes web WEB_ARGS --port 0 --json` in a process, tests/tools/drive_web.js MODE URL ARGS... in
+    headless Chromium against it: (the ready line, what the driver printed)."""
     where = _skip_without_browser()
-    env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
-    cmd = [sys.executable, "-m", "ttes", "web", "--with-server", "--port", "0", "--soldiers", "1", "--json",
-           "--seconds", "600"]  # fmt: skip
+    cmd = [sys.executable, "-m", "ttes", "web", *web_args, "--port", "0", "--json"]
+    env_web = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
     web = subprocess.Popen(
-        cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
+        cmd, cwd=cwd, env=env_web, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
     )
     try:
         assert web.stdout is not None
         ready = json.loads(web.stdout.readline())
-        assert ready["event"] == "ready" and ready["server"].startswith("ws://127.0.0.1:")
         drive = subprocess.run(
-            ["node", str(TOOLS / "drive_web.js"), "keys", ready["url"], str(tmp_path)],
-            env={**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM},
+            ["node", str(TOOLS / "drive_web.js"), drive_args[0], ready["url"], *drive_args[1:]],
+            env={**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM, **(env or {})},
             capture_output=True, text=True, timeout=300,
         )  # fmt: skip
         assert drive.returncode == 0, drive.stderr[-3000:]
     finally:
         web.terminate()
         web.wait(timeout=30)
-    got = json.loads(drive.stdout)
+    return ready, json.loads(drive.stdout)
+
+
+@pytest.mark.browser
+def test_the_page_draws_a_soldier_and_key_4_lays_him_prone(tmp_path: Path) -> None:
+    ready, got = _web_and_browser(["--with-server", "--soldiers", "1"], ["keys", str(tmp_path)], tmp_path)
+    assert ready["event"] == "ready" and ready["server"].startswith("ws://127.0.0.1:")
     before, after = got["before"], got["after"]
     assert before["version"] == 2 and before["role"] == "controller" and not before["errors"], before
     assert before["soldiers"][0]["rootZ"] > 0.8 and after["soldiers"][0]["rootZ"] < 0.4
@@ -199,43 +207,14 @@ def test_the_page_follows_a_dis_replay(tmp_path: Path) -> None:
     """`ttes web --replay LOG`: the page, an observer, draws every soldier the replay drives, posed by the
     server's updates and placed where the log puts them (entities.json). The synthetic library starts fast;
     its figures have no surfaces, so this checks the page's state, not its pixels (the test above does)."""
-    where = _skip_without_browser()
+    _skip_without_browser()  # before writing the log
     env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
     log = tmp_path / "squad.pcap"
     subprocess.run([sys.executable, "-m", "ttes", "dis", "synth", "--out", str(log), "--soldiers", "4",
                     "--seconds", "60"], env=env, check=True, capture_output=True, timeout=120)  # fmt: skip
-    cmd = [
-        sys.executable,
-        "-m",
-        "ttes",
-        "web",
-        "--replay",
-        str(log),
-        "--synthetic-server",
-        "--port",
-        "0",
-        "--json",
-    ]
-    web = subprocess.Popen(
-        cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
-    )
-    try:
-        assert web.stdout is not None
-        url = json.loads(web.stdout.readline())["url"]
-        drive = subprocess.run(
-            ["node", str(TOOLS / "drive_web.js"), "fps", url, "1"],
-            env={**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM,
-                 "SHOT": str(tmp_path / "replay.png")},  # a look, by hand
-            capture_output=True, text=True, timeout=300,
-        )  # fmt: skip
-        assert drive.returncode == 0, drive.stderr[-3000:]
-    finally:
-        web.terminate()
-        web.wait(timeout=30)
-    got = json.loads(drive.stdout)
-    assert got["soldiers"] == 4 and not got["errors"] and got["updates_per_s"] > 0, (
-        got
-    )  # (synthetic: no meshes)
+    shot = {"SHOT": str(tmp_path / "replay.png")}  # a look, by hand
+    _, got = _web_and_browser(["--replay", str(log), "--synthetic-server"], ["fps", "1"], tmp_path, shot)
+    assert got["soldiers"] == 4 and not got["errors"] and got["updates_per_s"] > 0, got
 
 
 def _free_port() -> int:
