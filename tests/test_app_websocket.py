@@ -6,7 +6,10 @@ split of valid client frames)."""
 from __future__ import annotations
 
 import os
+import shutil
+import ssl
 import struct
+from pathlib import Path
 
 import pytest
 import trio
@@ -220,3 +223,24 @@ def test_fuzz_any_split_of_binary_messages_is_their_concatenation(
 def test_fuzz_garbage_after_or_instead_of_the_upgrade_ends_quietly(junk: bytes, upgraded: bool) -> None:
     got, ws = trio.run(_serve_bytes, [UPGRADE + junk if upgraded else junk], 64)
     assert ws.ended and len(got) <= len(junk)
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="needs the openssl command")
+async def test_wss_when_the_server_serves_tls(
+    autojump_clock: trio.abc.Clock, cert: tuple[Path, Path]
+) -> None:
+    """With ``tls_cert`` the WebSocket port speaks TLS too (wss://): TLS, then the upgrade, then HELLO."""
+    async with running_server(ws_port=0, tls_cert=str(cert[0]), tls_key=str(cert[1])) as server:
+        port = ws_port_of(server)
+        tls = trio.SSLStream(
+            await trio.open_tcp_stream("127.0.0.1", port),
+            ssl.create_default_context(cafile=str(cert[0])),
+            server_hostname="127.0.0.1",
+        )
+        ws = WebSocketStream(tls, client=True)
+        await ws.connect(f"127.0.0.1:{port}")
+        c = Client(ws, Connection(CLIENT))  # type: ignore[arg-type]
+        await c.send(Hello("wss", "observer"))
+        assert (await c.expect(Accept)).role == "observer"
+        await c.expect(Ready)
+        await c.aclose()
