@@ -146,6 +146,23 @@ def test_neutral_pose_node_worlds_are_peabody_fk(soldier_glb: tuple[Path, Rig]) 
     assert checked > 150
 
 
+def test_every_mesh_has_unit_normals_pointing_out_of_its_segment(soldier_glb: tuple[Path, Rig]) -> None:
+    """Viewers shade a mesh without normals flat: every primitive carries one unit NORMAL per vertex, and
+    on the body's segments they point away from the segment's middle (the psurfs' winding is outward)."""
+    gltf = pygltflib.GLTF2().load(str(soldier_glb[0]))
+    outward = []
+    for mesh in gltf.meshes:
+        for prim in mesh.primitives:
+            assert prim.attributes.NORMAL is not None, mesh.name
+            pos = _floats(gltf, prim.attributes.POSITION)
+            nrm = _floats(gltf, prim.attributes.NORMAL)
+            assert nrm.shape == pos.shape
+            np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, atol=1e-5)
+            if not mesh.name.startswith("AK_47."):
+                outward.append(np.mean(np.einsum("ij,ij->i", nrm, pos - pos.mean(axis=0)) > 0))
+    assert len(outward) > 10 and min(outward) > 0.7
+
+
 def test_channelset_animation_keyframes_are_fk_of_its_frames(walk_glb: Path) -> None:
     gltf = pygltflib.GLTF2().load(str(walk_glb))
     cs = load_channelset(WALK)
