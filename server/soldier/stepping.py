@@ -8,6 +8,8 @@ from server.soldier import root_motion
 from server.soldier.core import (
     _CRAWL_CYCLE,
     _SCALED,
+    CATCH_UP_BEHIND_SECONDS,
+    CATCH_UP_FASTER,
     CATCH_UP_SECONDS,
     MAX_RATE,
     MAX_STRIDE,
@@ -37,10 +39,11 @@ class Stepping(ManagerCore):
 
         A cycle aims at the entity's speed plus what brings the root offset along the velocity to its stop lag
         (the figure trails the entity by what it would still travel if the entity stopped) in about
-        CATCH_UP_SECONDS, within human cadence (MIN_RATE..MAX_RATE). When the entity's speed alone is beyond
-        that cadence the stride length takes the rest (the feet slide by the difference), except in a gait
-        the speed is about to leave (a walk step before walk→run): there the root offset takes it. Start and
-        end steps and gait changes play at their recorded rate."""
+        CATCH_UP_SECONDS (CATCH_UP_BEHIND_SECONDS when it is behind that: after a pivot, metres), at most
+        CATCH_UP_FASTER of its speed faster than the entity, within human cadence (MIN_RATE..MAX_RATE).
+        When the entity's speed alone is beyond that cadence the stride length takes the rest (the feet slide
+        by the difference), except in a gait the speed is about to leave (a walk step before walk→run): there
+        the root offset takes it. Start and end steps and gait changes play at their recorded rate."""
         tb, lib = self.table, self.library
         st = np.asarray(states, np.int64)
         speed = tb.speed[idx]
@@ -59,7 +62,8 @@ class Stepping(ManagerCore):
         scale = np.clip(ideal / np.clip(ideal, MIN_RATE, top), MIN_STRIDE, MAX_STRIDE)
         stride = np.where(ok & ~leaving, scale, 1.0)
         error = along + self._stop_lag[st]  # cm ahead of where the figure should be
-        want = speed + np.clip(-error / 100.0 / CATCH_UP_SECONDS, -0.5 * speed, 0.5 * speed)
+        seconds = np.where(error < 0.0, CATCH_UP_BEHIND_SECONDS, CATCH_UP_SECONDS)  # behind: closes sooner
+        want = speed + np.clip(-error / 100.0 / seconds, -0.5 * speed, CATCH_UP_FASTER * speed)
         rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, top), 1.0)
         return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
 
