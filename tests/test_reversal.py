@@ -81,23 +81,23 @@ def test_the_lag_a_reversal_leaves_closes_at_the_walks_top_cadence(reversal) -> 
     assert caught_up(played, T_REVERSE, (T_STOP - 2.0, T_STOP)) < 10.5
 
 
-@pytest.mark.parametrize("turn", [140.0, -140.0, 150.0, -150.0, 160.0, -160.0])
+@pytest.mark.parametrize("turn", [120.0, -120.0, 130.0, -130.0, 135.0, -135.0, 140.0, -140.0, 150.0, -160.0])
 def test_a_near_reversal_pivots_too_its_rest_turned_about_the_planted_foot(lib, turn: float) -> None:  # type: ignore[no-untyped-def]
-    """145-160°: the 180° pivot alone, what it turns too much turned back over it (up to COUNTER_REST_DEG),
-    or too little turned on (a rest under MIN_TURN_DEG), about the foot carrying the weight while one foot
-    alone is down (its middle while it is flat). 150°: 1.4-1.5 cm (was the 180° pivot and a 45° turn back
-    after it, the body swinging 30° past the heading and back: 2.3 cm). 160°: the 20° rest, 1.1-1.2 cm
-    (about the foot's lowest sole point 1.4-1.5; spread over the whole pivot 1.8-2.4). 140°: still the 180°
-    pivot and the 45° turn back (0.8 cm; 40° turned back over the pivot slid 1.8-2.2 cm, the stub's scenario
-    measure 2.2). Turning over the steps slid 8-10 cm and left the figure 1.7 m off its entity for good."""
+    """135-180°: the 180° pivot alone, what it turns too much turned back over it, about the foot carrying
+    the weight while one foot alone is down (its middle while it is flat), at most 9° per such stance
+    (turning.PIVOT_REST_PER_STANCE_DEG; each degree twists the heel and ball ~0.2 cm): 135° 1.8 cm, 140°
+    1.6-1.7 (was the 180° pivot and a 45° turn back), 150° 1.3, 160° 1.0. 120-134°: the 90° pivot would turn
+    10° and more per stance (2.0-2.7 cm), so the 90° and then the 45° (0.7-1.5 cm); these turned over the
+    steps while walking (below turning.REVERSAL_DEG, then 135°) and slid 9.4-9.8 cm."""
     script = [(0.0, 0.0, 0.0), (0.5, 1.4, 0.0), (T_REVERSE, 1.4, 0.0, 20.0 + turn), (12.0, 0.0, 0.0)]
     played = drive(lib, script, heading=20.0, until=12.0)
     clips = [c.rsplit("/", 1)[-1].removesuffix("_low") for c in played["clips"].tolist()]
     turns = [c for k, c in enumerate(clips) if c.startswith("turn_") and (k == 0 or clips[k - 1] != c)]
-    pivot, back = ("turn_r180", "turn_l45") if turn > 0 else ("turn_l180", "turn_r45")
-    assert turns == ([pivot] if abs(turn) >= 145.0 else [pivot, back])  # 145+: no turn back after it
+    side = "r" if turn > 0 else "l"
+    assert turns == ([f"turn_{side}180"] if abs(turn) >= 135.0 else [f"turn_{side}90", f"turn_{side}45"])
     assert max(s for s, _ in skates(played, T_REVERSE - 0.6, 12.0)) <= SKATE_CM
     assert yaw_steps(played).max() <= MAX_YAW_STEP_DEG
+    assert abs((played["yaw"][int(11.5 * HZ)] - 20.0 - turn + 180.0) % 360.0 - 180.0) < 10.0
 
 
 def test_a_snap_during_the_pivot_ends_it(lib) -> None:  # type: ignore[no-untyped-def]

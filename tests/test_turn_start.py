@@ -40,11 +40,13 @@ def off(a: float, b: float) -> float:
 @pytest.mark.parametrize("turn", [90.0, -90.0, 135.0, 60.0, -60.0, 150.0, -150.0])
 def test_a_walk_start_with_a_heading_change_pivots_then_walks(lib, turn: float) -> None:  # type: ignore[no-untyped-def]
     """90°: the 90° turn in place, then the start (was: the body turned over the start step about the
-    planted heel, its ball swinging 22.7 cm, the start step sliding 6.6 cm). 135°: 90° then 45° (no rest).
-    ±60°: the 45° turn with the 15° rest turned while one foot alone is down, about the middle of the
-    carrying foot while it is flat (1.7-1.9 cm; about its lowest sole point 1.7-2.3: the heel-to-ball length
-    times the angle; spread evenly, 2.9), the pivot slowed to turn no faster than the clip. 150°: the 180°
-    turn less the excess, turned back over it (1.5-1.6 cm; it was the 180° turn and a 45° turn back)."""
+    planted heel, its ball swinging 22.7 cm, the start step sliding 6.6 cm). 135°: the 180° less 45° over its
+    five stances (1.8 cm; it was 90° then 45°). ±60°: the 45° turn with the 15° rest turned while one foot
+    alone is down, about the middle of the carrying foot while it is flat (1.6 cm; 1.7-1.9 with a fifth of
+    that rate in double support, root_motion.SHARE_FLOOR 0.2; about its lowest sole point 1.7-2.3: the
+    heel-to-ball length times the angle; spread evenly, 2.9), the pivot slowed to turn no faster than the
+    clip. 150°: the 180° turn less the excess, turned back over it (1.2-1.3 cm; it was the 180° turn and a 45°
+    turn back)."""
     script = [(0.0, 0.0, 0.0), (1.0, 1.4, 0.0, 30.0 + turn), (9.0, 0.0, 0.0)]
     played = drive(lib, script, heading=30.0, until=12.0)
     seq = families(played, 1.0)
