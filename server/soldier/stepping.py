@@ -10,6 +10,7 @@ from server.soldier.core import (
     _SCALED,
     CATCH_UP_BEHIND_SECONDS,
     CATCH_UP_FASTER,
+    CATCH_UP_RUN_CM,
     CATCH_UP_SECONDS,
     MAX_RATE,
     MAX_STRIDE,
@@ -21,6 +22,7 @@ from server.soldier.core import (
     ManagerCore,
 )
 from server.soldier.locomotion import (
+    IS_BACKWARD,
     IS_RUN,
     IS_WALK,
     SCALED,
@@ -50,8 +52,7 @@ class Stepping(ManagerCore):
         stored = lib.clip_duration[clip]
         gs = lib.clip_ground_speed[clip]
         ok = SCALED[st] & (speed > MOVING_EPS) & (gs > 0)
-        v = tb.vlocal[idx]
-        along = np.einsum("ij,ij->i", tb.root_off[idx], v) / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
+        along = self._along(idx, tb.root_off[idx])
         gs = np.where(gs > 0, gs, 1.0)
         cfg = self._settings
         hysteresis = min(cfg.walk_run_hysteresis, 0.5 * cfg.walk_run_threshold)
@@ -66,6 +67,21 @@ class Stepping(ManagerCore):
         want = speed + np.clip(-error / 100.0 / seconds, -0.5 * speed, CATCH_UP_FASTER * speed)
         rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, top), 1.0)
         return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
+
+    def _along(self, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
+        """``(n,)`` cm the root offsets ``off`` of soldiers ``idx`` lie ahead along their velocity."""
+        v = self.table.vlocal[idx]
+        return np.einsum("ij,ij->i", off, v) / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
+
+    def _far_behind(self, idx: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Whether walking (running) soldiers ``idx`` are so far behind their entity at ``t`` that their
+        figure jogs to catch up (goes on jogging): CATCH_UP_RUN_CM behind their stop lag."""
+        tb, lib = self.table, self.library
+        st = tb.loco[idx].astype(np.int64)
+        along = self._along(idx, root_motion.offset_at(tb, lib, idx, t))
+        behind = -(along + self._stop_lag[st])
+        limit = np.where(IS_RUN[st], CATCH_UP_RUN_CM[1], CATCH_UP_RUN_CM[0])
+        return (IS_WALK[st] | IS_RUN[st]) & ~IS_BACKWARD[st] & (behind > limit) & lib.can_run
 
     def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray) -> None:
         """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot)."""
