@@ -330,13 +330,13 @@ class StubApp:
             if not len(rows):
                 continue
             k.crowd.set_entity(rows, s.entity_matrices(rows))
-            if k.layout.figures:  # on the ground under the feet, not under the entity (slopes, root offsets)
-                ground_figures(k.crowd, rows, body_figure(k.layout), self._ground)
             off = rows[self.server_of[rows] < 0]
             if len(off):
                 k.poser.pose(
                     off, s.appearance[off], s.weapon[off], s.speed[off] * s.moving(off), s.distance[off], dt
                 )
+            if k.layout.figures:  # on the ground under the feet, not under the entity (slopes, root offsets)
+                ground_figures(k.crowd, rows, body_figure(k.layout), self._ground)
 
     def draw(self) -> None:
         """Hand the live soldiers' world matrices (by kind and look), the camera and the overlay (labels,
