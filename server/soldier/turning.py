@@ -5,7 +5,8 @@ DIS entity's does when it walks back the way it came) does what a person does: h
 ends, then the end step, the figure still facing the old way: no turning over the steps), pivots on the
 spot (the turn in place that fits, played REVERSAL_TURN_SPEEDUP times faster: a pivot, not a slow
 about-face) and walks away. His feet stay planted in the world throughout; the figure trails the entity by
-what it did not travel meanwhile and catches up with faster cadence (``stepping``), as after any start.
+what it did not travel meanwhile and catches up with faster cadence (``stepping``), as after any start,
+jogging while it is more than CATCH_UP_RUN_CM behind (a 180° reversal leaves it 4.6 m behind).
 
 A standing soldier asked to walk off MIN_TURN_DEG or more from where his figure faces pivots the same way
 first, then starts (turning the body over the start step twisted the planted foot 20 cm). A velocity
