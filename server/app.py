@@ -97,6 +97,11 @@ class TtesServer:
         self._tls = server_context(config)  # None: plain TCP
         self._bound: list[Any] | None = None  # listening sockets bound by bind(), before serve()
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
+        # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
+        self.on_publish: Callable[[PoseBoard], None] | None = None
+        # a front-end's tick: fills the board from elsewhere (the shards' batches) instead of the manager,
+        # which then only keeps the books; returns the soldiers whose codes changed
+        self.feed: Callable[[PoseBoard], int] | None = None
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
         self._loop_thread = threading.get_ident()
         self._trio_token: trio.lowlevel.TrioToken | None = None
@@ -336,7 +341,7 @@ class TtesServer:
         its request rate, and while its JCL runs."""
         while not session.closing:
             wait = session.resume(self.now())
-            self._requests_arrived()
+            self.requests_arrived()
             if session.pending_jcl is not None:
                 await self.run_jcl(session)
             elif session.output_full:  # the client's answers wait: read on once the writer took them
@@ -407,17 +412,26 @@ class TtesServer:
         if m is None or board is None or not self.world.ready:
             return
         self.ticks += 1
+        if self.feed is not None:
+            self._published(board, self.feed(board))
+            return
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
         update = m.tick(now)
         if self.on_tick is not None:
             self.on_tick(update)
-        if board.publish(update, self.world):
-            self._published_ticks += 1
+        self._published(board, board.publish(update, self.world))
+
+    def _published(self, board: PoseBoard, changed: int, *, between: bool = False) -> None:
+        if self.on_publish is not None:
+            self.on_publish(board)
+        if changed:
+            self._published_ticks += 0 if between else 1
             for s in self.sessions.values():
                 if s.tables_sent:
                     s.notify()
 
-    def _requests_arrived(self) -> None:
+    def requests_arrived(self) -> None:
+        """Requests were taken (from a client, or a shard's from the fabric): answer them between ticks."""
         m = self.world.manager
         seen = int(m.stats["requests"] + m.stats["reactions"]) if m is not None else self._requests_seen
         if seen != self._requests_seen:
@@ -436,7 +450,7 @@ class TtesServer:
         they show (``SoldierManager.answer``: sampled at the next tick's time, throttled as that tick) and
         wake the writers. Its frames carry the next tick's number (``PoseBoard.publish(between=True)``)."""
         m, board = self.world.manager, self._board()
-        if m is None or board is None or not self.world.ready:
+        if m is None or board is None or not self.world.ready or self.feed is not None:
             return
         now = self.request_time()
         update = m.answer(now, max(now, self.next_tick))
@@ -445,10 +459,7 @@ class TtesServer:
         self.answers += 1
         if self.on_tick is not None:
             self.on_tick(update)
-        if board.publish(update, self.world, between=True):
-            for s in self.sessions.values():
-                if s.tables_sent:
-                    s.notify()
+        self._published(board, board.publish(update, self.world, between=True), between=True)
 
     # -- owners that left ----------------------------------------------------------------------------------
     def _left(self, session: Session) -> None:

@@ -1,0 +1,186 @@
+"""A server's part on the fabric: a shard's (:class:`ShardNode`) or a front-end's (:class:`FrontNode`).
+
+Soldier ``i`` belongs to shard ``i % N`` (:class:`Sharding`): the one client-visible index space stays one,
+and the front-end, which allocates indices as a single server does, knows the owner of every index without
+asking. Both sides run a :class:`~server.app.TtesServer` over the same data: the start-up script creates
+the same soldiers everywhere (a shard then drops the ones that are not its own), and the update tables are
+the same, so a client of the front-end gets the handshake, tables and FIGURE of a single server.
+
+* a shard publishes, after each publish of its pose board, every soldier it holds as one batch
+  (:mod:`server.fabric.batch`; full state each tick, so a lost best-effort batch costs one tick, never a
+  pose), and takes the requests for its soldiers from ``requests/K`` on the trio loop;
+* a front-end keeps, per shard, only the newest batch that arrived (latest-wins); each of its ticks merges
+  them into its board (``PoseBoard.publish_codes``), and its sessions encode from there as always. Its own
+  manager keeps the books (who lives, tables, owners, the requests' checks) and is never ticked; what its
+  clients ask goes to the owning shard (``ServerWorld.relay``).
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import trio
+
+from server.fabric import Fabric, Kind, poses_topic, requests_topic
+from server.fabric import requests as req
+from server.fabric.batch import Batch, decode_batch, encode_batch
+from server.logging import get_logger
+from server.pose_board import PoseBoard
+
+if TYPE_CHECKING:
+    from server.app import TtesServer
+
+log = get_logger("fabric")
+
+
+@dataclass(frozen=True)
+class Sharding:
+    """Shard ``k`` of ``n`` owns the soldiers whose index is ``k`` modulo ``n``."""
+
+    k: int
+    n: int
+
+    @classmethod
+    def parse(cls, text: str) -> Sharding:
+        """``"K/N"``; ValueError unless 0 <= K < N."""
+        k, sep, n = text.partition("/")
+        if not sep or not (k.strip().isdigit() and n.strip().isdigit()) or not 0 <= int(k) < int(n):
+            raise ValueError(f"shard {text!r} is not K/N with 0 <= K < N")
+        return cls(int(k), int(n))
+
+    def owns(self, indices: np.ndarray) -> np.ndarray:
+        return np.asarray(indices, np.int64) % self.n == self.k
+
+
+class ShardNode:
+    """A shard's link: its batches out on ``poses/K``, its requests in from ``requests/K``."""
+
+    def __init__(self, server: TtesServer, fabric: Fabric, sharding: Sharding) -> None:
+        self.server, self.fabric, self.sharding = server, fabric, sharding
+        self._put = fabric.publisher(poses_topic(sharding.k), Kind.POSES)
+        self.seq = 0
+        self.taken = 0  # fabric requests handled
+        server.on_publish = self.publish
+
+    def keep_own(self) -> None:
+        """Drop the soldiers of the start-up script that other shards own."""
+        m = self.server.world.manager
+        if m is None:
+            return
+        for i in m.table.live[~self.sharding.owns(m.table.live)].tolist():
+            self.server.world.remove_soldier(int(i), "another shard's")
+
+    def start(self, token: trio.lowlevel.TrioToken) -> None:
+        """Take requests (each one on the trio loop, in order of arrival)."""
+        self.fabric.subscribe(
+            requests_topic(self.sharding.k),
+            Kind.REQUESTS,
+            lambda data: token.run_sync_soon(self.handle, data),
+        )
+
+    def publish(self, board: PoseBoard) -> None:
+        rows = np.flatnonzero(board.valid)
+        self._put(
+            encode_batch(
+                Batch(
+                    self.sharding.k,
+                    self.sharding.n,
+                    self.seq,
+                    board.tick,
+                    time.monotonic(),
+                    rows,
+                    board.table_of[rows],
+                    board.codes[rows],
+                )
+            )
+        )
+        self.seq += 1
+
+    def handle(self, data: bytes) -> None:
+        """One request from a front-end (already checked there: a failure here is logged, not answered)."""
+        try:
+            msg = req.decode(data)
+            self._apply(msg)
+        except (ValueError, KeyError) as exc:
+            log.warning("fabric_request_failed", shard=self.sharding.k, error=str(exc))
+            return
+        self.taken += 1
+        self.server.requests_arrived()
+
+    def _apply(self, msg: dict[str, object]) -> None:
+        world = self.server.world
+        op = msg["op"]
+        if op == "create":
+            owner = msg["owner"]
+            world.create_soldier(
+                str(msg["figure"]),
+                str(msg["weapon"]),
+                int(msg["index"]),  # type: ignore[call-overload]
+                owner=str(owner) if owner is not None else None,
+            )
+        elif op == "remove":
+            world.remove_soldier(int(msg["index"]), "removed by a front-end")  # type: ignore[call-overload]
+        elif op == "requests":
+            rows = msg["rows"]
+            assert isinstance(rows, np.ndarray)
+            world.apply_requests(rows[self.sharding.owns(rows["index"])])
+        elif op == "react":
+            world.react(int(msg["index"]), str(msg["kind"]))  # type: ignore[call-overload]
+
+
+class FrontNode:
+    """A front-end's link: every shard's newest batch in, its clients' requests out to the owning shard
+    (it is the world's :class:`~server.startup.Relay`)."""
+
+    def __init__(self, server: TtesServer, fabric: Fabric, shards: int) -> None:
+        self.server, self.fabric, self.shards = server, fabric, shards
+        self._puts = [fabric.publisher(requests_topic(k), Kind.REQUESTS) for k in range(shards)]
+        self._latest: dict[int, bytes] = {}  # shard -> its newest batch (written on the fabric's thread)
+        self.last_seq = [-1] * shards
+        self.batches = 0  # merged
+        self.skipped = 0  # superseded before a tick merged them, or lost on the fabric
+        server.feed = self.feed
+        server.world.relay = self
+
+    def start(self) -> None:
+        for k in range(self.shards):
+            self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._latest.__setitem__, k))
+
+    def feed(self, board: PoseBoard) -> int:
+        """One front-end tick: merge the newest batch of every shard into the board."""
+        batches = [decode_batch(self._latest.pop(k)) for k in range(self.shards) if k in self._latest]
+        for b in batches:
+            if self.last_seq[b.shard] >= 0:
+                self.skipped += max(0, b.seq - self.last_seq[b.shard] - 1)
+            self.last_seq[b.shard] = b.seq
+        self.batches += len(batches)
+        m = self.server.world.manager
+        if not batches or m is None:
+            return board.publish_codes(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 0)))
+        rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
+        tables = np.concatenate([b.tables for b in batches])
+        codes = np.concatenate([b.codes for b in batches]).astype(np.int32)
+        alive = m.table.alive
+        live = (rows < len(alive)) & alive[
+            np.minimum(rows, len(alive) - 1)
+        ]  # a soldier removed here meanwhile
+        return board.publish_codes(rows[live], tables[live], codes[live])
+
+    # -- the world's Relay ---------------------------------------------------------------------------------
+    def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
+        self._puts[index % self.shards](req.create(index, figure, weapon, owner))
+
+    def removed(self, index: int) -> None:
+        self._puts[index % self.shards](req.remove(index))
+
+    def requests(self, rows: np.ndarray) -> None:
+        shard = rows["index"].astype(np.int64) % self.shards
+        for k in np.unique(shard).tolist():
+            self._puts[k](req.requests(rows[shard == k]))
+
+    def react(self, index: int, kind: str) -> None:
+        self._puts[index % self.shards](req.react(index, kind))
