@@ -17,7 +17,7 @@ import trio
 from test_server_support import Client, synthetic_dir
 
 from client_stub.link.spawn import ServerProcess, free_port
-from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, Subscribe
+from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, SoldierRemoved, Subscribe
 
 pytest.importorskip("zenoh")
 
@@ -75,3 +75,33 @@ async def test_requests_reach_their_shard_and_both_shards_reach_one_client() -> 
         for k, shard in enumerate(shards):  # each soldier lives in its own shard alone
             assert await _soldiers_of(shard.port) == [i for i in range(12) if i % 2 == k]
         await c.aclose()
+
+
+async def test_a_killed_shards_soldiers_go_on_in_the_survivor() -> None:
+    """Failover: shard 1 is killed; within its silence limit the front-end hands its soldiers (the
+    start-up script's odd ones and a walker created by the client) to shard 0 with their last requests.
+    The client sees no soldier removed and the walker moving again."""
+    with cluster() as (front, *shards):
+        c = await Client.open(front.port, "ig", client_id="alpha")
+        await c.expect(Ready)
+        await c.send(CreateSoldier(1, "DI.fig", "AK_47.fig", 11))
+        assert (await c.expect(SoldierCreated)).index == 11
+        await c.send(Subscribe(tuple(range(12))))
+        await c.requests(index=[11], velocity=WALK)
+        await _updates_of(c, 11, 5)
+        shards[1].proc.kill()
+        shards[1].proc.wait()
+        with trio.fail_after(60):
+            while await _soldiers_of(shards[0].port) != [*range(10), 11]:  # the survivor animates all
+                await trio.sleep(0.2)
+        await _updates_of(c, 11, 10)  # walking on: its last request went with it
+        assert not [e for e in c.events if isinstance(e, SoldierRemoved)]
+        await c.aclose()
+
+
+async def _updates_of(c: Client, index: int, count: int) -> None:
+    seen = 0
+    with trio.fail_after(60):
+        while seen < count:
+            ju = await c.expect(JointUpdates)
+            seen += int(index in ju.indices)

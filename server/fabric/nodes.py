@@ -18,6 +18,7 @@ the same, so a client of the front-end gets the handshake, tables and FIGURE of 
 from __future__ import annotations
 
 import functools
+import math
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -25,7 +26,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import trio
 
-from server.fabric import Fabric, Kind, poses_topic, requests_topic
+from protocol.entity import ENTITY_REQUEST_DTYPE
+from server.fabric import Fabric, Handler, Kind, poses_topic, requests_topic
 from server.fabric import requests as req
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.logging import get_logger
@@ -127,22 +129,53 @@ class ShardNode:
         elif op == "requests":
             rows = msg["rows"]
             assert isinstance(rows, np.ndarray)
-            world.apply_requests(rows[self.sharding.owns(rows["index"])])
+            world.apply_requests(rows)
         elif op == "react":
             world.react(int(msg["index"]), str(msg["kind"]))  # type: ignore[call-overload]
+        elif op == "sync":
+            self._sync(msg)
+
+    def _sync(self, msg: dict[str, object]) -> None:
+        """Animate every soldier of the sync that is not here yet, from its last request."""
+        world, m = self.server.world, self.server.world.manager
+        assert m is not None
+        soldiers = msg["soldiers"]
+        rows = msg["rows"]
+        assert isinstance(soldiers, list) and isinstance(rows, np.ndarray)
+        new = []
+        for index, figure, weapon, owner in soldiers:
+            if not m.table.is_live(index):
+                world.create_soldier(figure, weapon, index, owner=owner)
+                new.append(index)
+        log.info("fabric_sync", shard=self.sharding.k, soldiers=len(soldiers), created=len(new))
+        if len(rows):
+            world.apply_requests(rows[np.isin(rows["index"], new)])
 
 
 class FrontNode:
-    """A front-end's link: every shard's newest batch in, its clients' requests out to the owning shard
-    (it is the world's :class:`~server.startup.Relay`)."""
+    """A front-end's link: every shard's newest batch in, its clients' requests out to the shard that
+    animates the soldier (it is the world's :class:`~server.startup.Relay`).
 
-    def __init__(self, server: TtesServer, fabric: Fabric, shards: int) -> None:
+    Shard ``k``'s soldiers are animated by shard ``route[k]``: ``k`` itself, or after ``k`` fell silent for
+    ``failover_s`` (no batch), a surviving shard, sent a sync of those soldiers with their last requests. A
+    shard heard for the first time, or again after a restart (its batch count went back), gets a sync of
+    its own soldiers: creations sent before it listened are not lost. A shard that comes back takes its
+    soldiers back from the one that stood in."""
+
+    def __init__(self, server: TtesServer, fabric: Fabric, shards: int, *, failover_s: float = 1.0) -> None:
         self.server, self.fabric, self.shards = server, fabric, shards
+        self.failover_s = failover_s
         self._puts = [fabric.publisher(requests_topic(k), Kind.REQUESTS) for k in range(shards)]
         self._latest: dict[int, bytes] = {}  # shard -> its newest batch (written on the fabric's thread)
+        self.route = list(range(shards))
+        self.heard_at = [-math.inf] * shards  # server time of each shard's last batch
         self.last_seq = [-1] * shards
+        n = server.config.max_soldiers
+        self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request, for a sync
+        self.has_last = np.zeros(n, bool)
         self.batches = 0  # merged
         self.skipped = 0  # superseded before a tick merged them, or lost on the fabric
+        self.failovers = 0
         server.feed = self.feed
         server.world.relay = self
 
@@ -151,12 +184,12 @@ class FrontNode:
             self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._latest.__setitem__, k))
 
     def feed(self, board: PoseBoard) -> int:
-        """One front-end tick: merge the newest batch of every shard into the board."""
+        """A front-end tick: merge every shard's newest batch into the board; fail over silent shards."""
+        now = self.server.now()
         batches = [decode_batch(self._latest.pop(k)) for k in range(self.shards) if k in self._latest]
         for b in batches:
-            if self.last_seq[b.shard] >= 0:
-                self.skipped += max(0, b.seq - self.last_seq[b.shard] - 1)
-            self.last_seq[b.shard] = b.seq
+            self._heard(b, now)
+        self._fail_over(now)
         self.batches += len(batches)
         m = self.server.world.manager
         if not batches or m is None:
@@ -170,17 +203,70 @@ class FrontNode:
         ]  # a soldier removed here meanwhile
         return board.publish_codes(rows[live], tables[live], codes[live])
 
+    def _heard(self, b: Batch, now: float) -> None:
+        k = b.shard
+        back = self.heard_at[k] == -math.inf or b.seq < self.last_seq[k] or self.route[k] != k
+        if not back:
+            self.skipped += max(0, b.seq - self.last_seq[k] - 1)
+        self.last_seq[k], self.heard_at[k] = b.seq, now
+        if back:
+            stood_in = self.route[k]
+            self.route[k] = k
+            if stood_in != k:  # it stood in for k: k's soldiers go home
+                for i in self._homed(k).tolist():
+                    self._puts[stood_in](req.remove(i))
+            log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
+            self._sync(k, [k])
+
+    def _fail_over(self, now: float) -> None:
+        alive = [k for k in range(self.shards) if now - self.heard_at[k] <= self.failover_s]
+        for k in range(self.shards):
+            if self.route[k] == k and self.heard_at[k] > -math.inf and k not in alive and alive:
+                survivor = min(alive, key=lambda s: sum(r == s for r in self.route))
+                self.route[k] = survivor
+                self.failovers += 1
+                log.warning(
+                    "fabric_failover", shard=k, to=survivor, silent_s=round(now - self.heard_at[k], 3)
+                )
+                self._sync(survivor, [k])
+
+    def _homed(self, k: int) -> np.ndarray:
+        """The live soldiers whose home is shard ``k``."""
+        m = self.server.world.manager
+        live = m.table.live if m is not None else np.zeros(0, np.int64)
+        return live[live % self.shards == k]
+
+    def _sync(self, shard: int, homes: list[int]) -> None:
+        m = self.server.world.manager
+        if m is None:
+            return
+        idx = np.concatenate([self._homed(h) for h in homes])
+        keys = m.library.set_keys
+        soldiers = [
+            (i, *keys[int(m.table.fset[i])], self.server.world.owners.owner_of(i)) for i in idx.tolist()
+        ]
+        have = idx[self.has_last[idx]]
+        self._puts[shard](req.sync(soldiers, self.last[have]))
+
+    def _put_for(self, index: int) -> Handler:
+        return self._puts[self.route[index % self.shards]]
+
     # -- the world's Relay ---------------------------------------------------------------------------------
     def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
-        self._puts[index % self.shards](req.create(index, figure, weapon, owner))
+        self.has_last[index] = False
+        self._put_for(index)(req.create(index, figure, weapon, owner))
 
     def removed(self, index: int) -> None:
-        self._puts[index % self.shards](req.remove(index))
+        self.has_last[index] = False
+        self._put_for(index)(req.remove(index))
 
     def requests(self, rows: np.ndarray) -> None:
-        shard = rows["index"].astype(np.int64) % self.shards
+        idx = rows["index"].astype(np.int64)
+        self.last[idx] = rows
+        self.has_last[idx] = True
+        shard = np.asarray(self.route)[idx % self.shards]
         for k in np.unique(shard).tolist():
             self._puts[k](req.requests(rows[shard == k]))
 
     def react(self, index: int, kind: str) -> None:
-        self._puts[index % self.shards](req.react(index, kind))
+        self._put_for(index)(req.react(index, kind))
