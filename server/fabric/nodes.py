@@ -107,7 +107,7 @@ class ShardNode:
         try:
             msg = req.decode(data)
             self._apply(msg)
-        except (ValueError, KeyError) as exc:
+        except (ValueError, KeyError, TypeError) as exc:  # a bad message, or a soldier gone meanwhile
             log.warning("fabric_request_failed", shard=self.sharding.k, error=str(exc))
             return
         self.taken += 1

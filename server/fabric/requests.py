@@ -52,7 +52,10 @@ def decode(data: bytes) -> dict[str, Any]:
     if not isinstance(msg, dict) or msg.get("op") not in OPS:
         raise ValueError(f"not a fabric request: {msg!r:.80}")
     if msg["op"] in ("requests", "sync"):
-        msg["rows"] = np.frombuffer(msg["rows"], ENTITY_REQUEST_DTYPE)
+        try:
+            msg["rows"] = np.frombuffer(msg["rows"], ENTITY_REQUEST_DTYPE)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"fabric {msg['op']} without rows: {exc}") from exc
     return msg
 
 
