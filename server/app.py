@@ -85,6 +85,7 @@ class TtesServer:
         self.clients_dropped = 0
         self._batches_window = (0.0, 0)  # (time, ticks that published poses) at the last status report
         self._published_ticks = 0
+        self._counted_tick = -1  # the wire tick last counted in _published_ticks
         self._shutdown = trio.Event()
         self._answer_wanted = trio.Event()
         self._requests_seen = 0  # the manager's request and reaction count at the last answer
@@ -421,11 +422,22 @@ class TtesServer:
             self.on_tick(update)
         self._published(board, board.publish(update, self.world))
 
-    def _published(self, board: PoseBoard, changed: int, *, between: bool = False) -> None:
+    def publish_fed(self) -> None:
+        """A front-end's publish as soon as a shard's batch arrives (``feed`` takes it), between its ticks."""
+        board = self._board()
+        if self.feed is None or board is None or not self.world.ready:
+            return
+        self._published(board, self.feed(board))
+
+    def _published(self, board: PoseBoard, changed: int) -> None:
+        """After a publish: the shard's hook, then wake the writers; a tick whose poses changed counts once
+        for the update rate, however many publishes carried it (answers, a front-end's shards)."""
         if self.on_publish is not None:
             self.on_publish(board)
         if changed:
-            self._published_ticks += 0 if between else 1
+            if board.tick != self._counted_tick:
+                self._counted_tick = board.tick
+                self._published_ticks += 1
             for s in self.sessions.values():
                 if s.tables_sent:
                     s.notify()
@@ -459,7 +471,7 @@ class TtesServer:
         self.answers += 1
         if self.on_tick is not None:
             self.on_tick(update)
-        self._published(board, board.publish(update, self.world, between=True), between=True)
+        self._published(board, board.publish(update, self.world, between=True))
 
     # -- owners that left ----------------------------------------------------------------------------------
     def _left(self, session: Session) -> None:

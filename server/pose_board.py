@@ -140,13 +140,13 @@ class PoseBoard:
         self.rows_changed += changed
         return changed
 
-    def publish_codes(self, rows: np.ndarray, tables: np.ndarray, codes: np.ndarray) -> int:
+    def publish_codes(self, rows: np.ndarray, tables: np.ndarray, codes: np.ndarray, tick: int) -> int:
         """Take poses already quantised elsewhere (a front-end's batches from the shards,
-        :mod:`server.fabric`): one publish of the tick loop, like :meth:`publish`; returns the soldiers whose
-        codes changed. The board's Jack-unit arrays keep their last values for these rows."""
+        :mod:`server.fabric`), labelled ``tick`` on the wire (several publishes may share one tick, as an
+        out-of-cycle publish shares the next tick's); returns the soldiers whose codes changed. The board's
+        Jack-unit arrays keep their last values for these rows."""
         self.serial += 1
-        self.ticks += 1
-        self.tick = self.ticks
+        self.ticks = self.tick = tick
         if len(rows) == 0:
             return 0
         rows = np.asarray(rows, np.int64)

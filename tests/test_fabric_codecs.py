@@ -72,11 +72,11 @@ def test_sharding_is_k_of_n() -> None:
 def test_merged_codes_bump_the_version_of_changed_soldiers_only() -> None:
     board = PoseBoard(50, 2)
     codes = np.ones((3, 64), np.int32)
-    assert board.publish_codes(np.array([0, 1, 2]), np.array([1, 1, 1]), codes) == 3
+    assert board.publish_codes(np.array([0, 1, 2]), np.array([1, 1, 1]), codes, 1) == 3
     codes[1, 5] = 9
-    assert board.publish_codes(np.array([0, 1, 2]), np.array([1, 1, 1]), codes) == 1
+    assert board.publish_codes(np.array([0, 1, 2]), np.array([1, 1, 1]), codes, 2) == 1
     assert board.version[:3].tolist() == [1, 2, 1] and board.tick == 2
-    assert board.publish_codes(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 0))) == 0
+    assert board.publish_codes(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 0)), 2) == 0
 
 
 def test_a_request_without_its_rows_is_a_value_error() -> None:

@@ -176,32 +176,45 @@ class FrontNode:
         self.batches = 0  # merged
         self.skipped = 0  # superseded before a tick merged them, or lost on the fabric
         self.failovers = 0
+        self.tick = 1  # the wire's tick of the batches merged now
+        self._round: set[int] = set()  # the shards whose batches this tick carries already
         server.feed = self.feed
         server.world.relay = self
 
-    def start(self) -> None:
+    def start(self, token: trio.lowlevel.TrioToken) -> None:
         for k in range(self.shards):
-            self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._latest.__setitem__, k))
+            self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._arrived, token, k))
+
+    def _arrived(self, token: trio.lowlevel.TrioToken, k: int, data: bytes) -> None:
+        """On the fabric's thread: keep the newest batch; the first one waiting asks the loop to publish."""
+        waiting = k in self._latest
+        self._latest[k] = data
+        if not waiting:
+            token.run_sync_soon(self.server.publish_fed)
 
     def feed(self, board: PoseBoard) -> int:
-        """A front-end tick: merge every shard's newest batch into the board; fail over silent shards."""
+        """Merge the newest batch of every shard that sent one into the board (as soon as one arrives, and
+        on each tick of the front-end's own loop), and fail silent shards over. The wire's tick advances when
+        a shard sends its next tick: the batches of one round of the shards' ticks share a tick number."""
         now = self.server.now()
         batches = [decode_batch(self._latest.pop(k)) for k in range(self.shards) if k in self._latest]
         for b in batches:
             self._heard(b, now)
         self._fail_over(now)
-        self.batches += len(batches)
         m = self.server.world.manager
         if not batches or m is None:
-            return board.publish_codes(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 0)))
+            return 0
+        self.batches += len(batches)
+        if any(b.shard in self._round for b in batches):
+            self._round.clear()
+            self.tick += 1
+        self._round.update(b.shard for b in batches)
         rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
         tables = np.concatenate([b.tables for b in batches])
         codes = np.concatenate([b.codes for b in batches]).astype(np.int32)
         alive = m.table.alive
-        live = (rows < len(alive)) & alive[
-            np.minimum(rows, len(alive) - 1)
-        ]  # a soldier removed here meanwhile
-        return board.publish_codes(rows[live], tables[live], codes[live])
+        live = (rows < len(alive)) & alive[np.minimum(rows, len(alive) - 1)]  # not removed here meanwhile
+        return board.publish_codes(rows[live], tables[live], codes[live], self.tick)
 
     def _heard(self, b: Batch, now: float) -> None:
         k = b.shard

@@ -193,7 +193,7 @@ def _fabric_node(
         node.keep_own()
         return (lambda: node.start(trio.lowlevel.current_trio_token())), fabric.close
     front = FrontNode(server, fabric, int(shards or 1))
-    return front.start, fabric.close
+    return (lambda: front.start(trio.lowlevel.current_trio_token())), fabric.close
 
 
 def _first_leaf(exc: BaseException) -> BaseException:
