@@ -100,9 +100,9 @@ class TtesServer:
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
         # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
         self.on_publish: Callable[[PoseBoard], None] | None = None
-        # a front-end's tick: fills the board from elsewhere (the shards' batches) instead of the manager,
-        # which then only keeps the books; returns the soldiers whose codes changed
-        self.feed: Callable[[PoseBoard], int] | None = None
+        # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
+        # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
+        self.feed: Callable[[PoseBoard, int], int] | None = None
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
         self._loop_thread = threading.get_ident()
         self._trio_token: trio.lowlevel.TrioToken | None = None
@@ -414,7 +414,7 @@ class TtesServer:
             return
         self.ticks += 1
         if self.feed is not None:
-            self._published(board, self.feed(board))
+            self._published(board, self.feed(board, self.ticks))
             return
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
         update = m.tick(now)
@@ -423,11 +423,12 @@ class TtesServer:
         self._published(board, board.publish(update, self.world))
 
     def publish_fed(self) -> None:
-        """A front-end's publish as soon as a shard's batch arrives (``feed`` takes it), between its ticks."""
+        """A front-end's publish as soon as a shard's batch arrives (``feed`` takes it), between its ticks:
+        labelled with the next tick, as an answer is, so the wire's tick keeps the tick loop's rate."""
         board = self._board()
         if self.feed is None or board is None or not self.world.ready:
             return
-        self._published(board, self.feed(board))
+        self._published(board, self.feed(board, self.ticks + 1))
 
     def _published(self, board: PoseBoard, changed: int) -> None:
         """After a publish: the shard's hook, then wake the writers; a tick whose poses changed counts once

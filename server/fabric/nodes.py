@@ -85,7 +85,14 @@ class ShardNode:
         )
 
     def publish(self, board: PoseBoard) -> None:
-        rows = np.flatnonzero(board.valid)
+        """A tick's publish sends every soldier (a lost batch costs one tick); an answer between ticks sends
+        only the soldiers it changed (requests come often: full batches would multiply the traffic)."""
+        if board.tick == board.ticks:
+            rows = np.flatnonzero(board.valid)
+        else:
+            rows = np.flatnonzero(board.valid & (board.version == board.serial))
+            if not len(rows):
+                return
         self._put(
             encode_batch(
                 Batch(
@@ -176,8 +183,6 @@ class FrontNode:
         self.batches = 0  # merged
         self.skipped = 0  # superseded before a tick merged them, or lost on the fabric
         self.failovers = 0
-        self.tick = 1  # the wire's tick of the batches merged now
-        self._round: set[int] = set()  # the shards whose batches this tick carries already
         server.feed = self.feed
         server.world.relay = self
 
@@ -192,10 +197,9 @@ class FrontNode:
         if not waiting:
             token.run_sync_soon(self.server.publish_fed)
 
-    def feed(self, board: PoseBoard) -> int:
-        """Merge the newest batch of every shard that sent one into the board (as soon as one arrives, and
-        on each tick of the front-end's own loop), and fail silent shards over. The wire's tick advances when
-        a shard sends its next tick: the batches of one round of the shards' ticks share a tick number."""
+    def feed(self, board: PoseBoard, tick: int) -> int:
+        """Merge the newest batch of every shard that sent one into the board, labelled ``tick`` (as soon as
+        one arrives, and on each tick of the front-end's own loop), and fail silent shards over."""
         now = self.server.now()
         batches = [decode_batch(self._latest.pop(k)) for k in range(self.shards) if k in self._latest]
         for b in batches:
@@ -205,16 +209,12 @@ class FrontNode:
         if not batches or m is None:
             return 0
         self.batches += len(batches)
-        if any(b.shard in self._round for b in batches):
-            self._round.clear()
-            self.tick += 1
-        self._round.update(b.shard for b in batches)
         rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
         tables = np.concatenate([b.tables for b in batches])
         codes = np.concatenate([b.codes for b in batches]).astype(np.int32)
         alive = m.table.alive
         live = (rows < len(alive)) & alive[np.minimum(rows, len(alive) - 1)]  # not removed here meanwhile
-        return board.publish_codes(rows[live], tables[live], codes[live], self.tick)
+        return board.publish_codes(rows[live], tables[live], codes[live], tick)
 
     def _heard(self, b: Batch, now: float) -> None:
         k = b.shard
