@@ -1,0 +1,138 @@
+"""Issue 21 in one process: a front-end and two shards (``TtesServer`` each) over an in-memory fabric, on
+trio's autojump clock — the routing, the sync of a late shard and the failover, without processes."""
+
+from __future__ import annotations
+
+import contextlib
+from collections import defaultdict
+from collections.abc import AsyncIterator
+
+import trio
+from test_server_support import Client, make_server
+
+from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, SoldierRemoved, Subscribe
+from server.app import TtesServer
+from server.fabric import Handler, Kind
+from server.fabric.nodes import FrontNode, Sharding, ShardNode
+
+WALK = (0.0, 1.4, 0.0)
+
+
+class MemoryFabric:
+    """Every node of one process on one dictionary of topics; a message reaches the handlers at once."""
+
+    engine = "memory"
+
+    def __init__(self, topics: dict[str, list[Handler]]) -> None:
+        self.topics = topics
+        self.mine: list[tuple[str, Handler]] = []
+        self.closed = False
+
+    def publisher(self, topic: str, kind: Kind) -> Handler:
+        def put(data: bytes) -> None:
+            if not self.closed:
+                for handler in list(self.topics[topic]):
+                    handler(data)
+
+        return put
+
+    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
+        self.topics[topic].append(on_message)
+        self.mine.append((topic, on_message))
+
+    def close(self) -> None:
+        """A dead process: it neither publishes nor hears anything more."""
+        self.closed = True
+        for topic, handler in self.mine:
+            self.topics[topic].remove(handler)
+
+
+@contextlib.asynccontextmanager
+async def cluster() -> AsyncIterator[tuple[TtesServer, FrontNode, list[TtesServer], list[MemoryFabric]]]:
+    topics: dict[str, list[Handler]] = defaultdict(list)
+    token = trio.lowlevel.current_trio_token()
+    front = make_server()
+    front_node = FrontNode(front, MemoryFabric(topics), 2)
+    shards, fabrics = [], []
+    async with trio.open_nursery() as nursery:
+        await nursery.start(front.serve)
+        front_node.start(token)
+        for k in range(2):
+            shard, fabric = make_server(), MemoryFabric(topics)
+            node = ShardNode(shard, fabric, Sharding(k, 2))
+            await nursery.start(shard.serve)
+            node.keep_own()
+            node.start(token)
+            shards.append(shard)
+            fabrics.append(fabric)
+        yield front, front_node, shards, fabrics
+        for s in (front, *shards):
+            s.shutdown()
+
+
+def live(server: TtesServer) -> list[int]:
+    assert server.world.manager is not None
+    return server.world.manager.table.live.tolist()
+
+
+async def walker(front: TtesServer, index: int) -> Client:
+    c = await Client.open(front.addresses[0][1], "ig", client_id="alpha")
+    await c.expect(Ready)
+    await c.send(CreateSoldier(1, "DI.fig", "AK_47.fig", index))
+    assert (await c.expect(SoldierCreated)).index == index
+    await c.send(Subscribe(tuple(range(12))))
+    await c.requests(index=[index], velocity=WALK)
+    return c
+
+
+async def moving(c: Client, index: int, updates: int = 10) -> list[int]:
+    """The ticks of the next ``updates`` joint updates of ``index`` (they keep coming while it walks)."""
+    ticks = []
+    with trio.fail_after(30):  # one that stands still is sent once: it would never come
+        while len(ticks) < updates:
+            ju = await c.expect(JointUpdates)
+            if index in ju.indices:
+                ticks.append(ju.tick)
+    return ticks
+
+
+async def test_each_soldier_lives_in_its_shard_and_reaches_the_client(autojump_clock: trio.abc.Clock) -> None:
+    async with cluster() as (front, _, shards, _):
+        assert live(shards[0]) == [0, 2, 4, 6, 8] and live(shards[1]) == [1, 3, 5, 7, 9]
+        c = await walker(front, 11)
+        assert 11 in live(shards[1]) and 11 not in live(shards[0])
+        ticks = await moving(c, 11)
+        assert ticks == sorted(ticks)  # in order (a shard tick and an answer may share the front's tick)
+        assert live(front) == [*range(10), 11]  # the front-end keeps the books: one index space
+
+
+async def test_a_silent_shards_walker_walks_on_in_the_survivor(autojump_clock: trio.abc.Clock) -> None:
+    async with cluster() as (front, node, shards, fabrics):
+        c = await walker(front, 11)
+        await moving(c, 11, 3)
+        fabrics[1].close()  # shard 1 dies (as far as anyone can hear)
+        shards[1].shutdown()
+        await moving(c, 11)  # walking on in shard 0, from its last request
+        assert node.failovers == 1 and live(shards[0]) == [*range(10), 11]
+        assert not [e for e in c.events if isinstance(e, SoldierRemoved)]
+        await c.aclose()
+
+
+async def test_a_shard_that_hears_late_gets_its_soldiers_by_sync(autojump_clock: trio.abc.Clock) -> None:
+    """A creation and a request sent while no shard listened are not lost: the shard's first batch brings a
+    sync, and the soldier walks."""
+    topics: dict[str, list[Handler]] = defaultdict(list)
+    token = trio.lowlevel.current_trio_token()
+    front = make_server()
+    FrontNode(front, MemoryFabric(topics), 1).start(token)
+    async with trio.open_nursery() as nursery:
+        await nursery.start(front.serve)
+        c = await walker(front, 11)  # no shard yet: the creation goes nowhere
+        shard = make_server()
+        node = ShardNode(shard, MemoryFabric(topics), Sharding(0, 1))
+        await nursery.start(shard.serve)
+        node.start(token)
+        await moving(c, 11)
+        assert live(shard) == [*range(10), 11]
+        front.shutdown()
+        shard.shutdown()
