@@ -69,6 +69,7 @@ def main() -> int:
             for p in procs.values():
                 p.stop()
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
+    keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
     out = {
         "soldiers": args.soldiers,
         "clients": args.clients,

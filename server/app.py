@@ -33,7 +33,7 @@ import math
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import trio
@@ -242,6 +242,11 @@ class TtesServer:
 
     def shutdown(self) -> None:
         self._shutdown.set()
+
+    def spawn(self, task: Callable[[], Awaitable[None]]) -> None:
+        """Run ``task`` beside the server's own tasks (a fabric node's), cancelled with them; once serving."""
+        assert self._nursery is not None, "spawn() before serve() started"
+        self._nursery.start_soon(task)
 
     async def _accept_all(self, listeners: list[trio.SocketListener], nursery: trio.Nursery) -> None:
         async def one(listener: trio.SocketListener) -> None:

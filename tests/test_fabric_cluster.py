@@ -25,10 +25,10 @@ WALK = (0.0, 1.4, 0.0)
 
 
 @contextlib.contextmanager
-def cluster(shards: int = 2) -> Iterator[list[ServerProcess]]:
+def cluster(shards: int = 2, fabric: str = "zenoh") -> Iterator[list[ServerProcess]]:
     """A front-end, then ``shards`` shards connected to its fabric endpoint; stopped on exit."""
     d = synthetic_dir()
-    data = ["--data-dir", str(d.path), "--startup-script", d.startup_script]
+    data = ["--data-dir", str(d.path), "--startup-script", d.startup_script, "--fabric", fabric]
     endpoint = f"127.0.0.1:{free_port()}"
     procs = [ServerProcess([*data, "--shards", str(shards), "--fabric-listen", endpoint], command="front")]
     try:

@@ -6,59 +6,85 @@ from __future__ import annotations
 import contextlib
 from collections import defaultdict
 from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
 
 import trio
 from test_server_support import Client, make_server
 
 from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, SoldierRemoved, Subscribe
 from server.app import TtesServer
-from server.fabric import Handler, Kind
+from server.fabric import Handler, Kind, Presence
 from server.fabric.nodes import FrontNode, Sharding, ShardNode
 
 WALK = (0.0, 1.4, 0.0)
 
 
+@dataclass
+class Bus:
+    """One process's in-memory fabric: topics and their handlers, presences and their watchers."""
+
+    topics: dict[str, list[Handler]] = field(default_factory=lambda: defaultdict(list))
+    present: set[str] = field(default_factory=set)
+    watchers: dict[str, list[Presence]] = field(default_factory=lambda: defaultdict(list))
+
+
 class MemoryFabric:
-    """Every node of one process on one dictionary of topics; a message reaches the handlers at once."""
+    """A node on a :class:`Bus`: a message reaches the handlers at once."""
 
     engine = "memory"
 
-    def __init__(self, topics: dict[str, list[Handler]]) -> None:
-        self.topics = topics
+    def __init__(self, bus: Bus) -> None:
+        self.bus = bus
         self.mine: list[tuple[str, Handler]] = []
+        self.announced: list[str] = []
         self.closed = False
 
     def publisher(self, topic: str, kind: Kind) -> Handler:
         def put(data: bytes) -> None:
             if not self.closed:
-                for handler in list(self.topics[topic]):
+                for handler in list(self.bus.topics[topic]):
                     handler(data)
 
         return put
 
     def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
-        self.topics[topic].append(on_message)
+        self.bus.topics[topic].append(on_message)
         self.mine.append((topic, on_message))
 
+    def announce(self, key: str) -> None:
+        self.announced.append(key)
+        self.bus.present.add(key)
+        for watcher in self.bus.watchers[key]:
+            watcher(True)
+
+    def watch(self, key: str, on_change: Presence) -> None:
+        self.bus.watchers[key].append(on_change)
+        if key in self.bus.present:
+            on_change(True)
+
     def close(self) -> None:
-        """A dead process: it neither publishes nor hears anything more."""
+        """A dead process: it neither publishes nor hears anything more, and is gone from the fabric."""
         self.closed = True
         for topic, handler in self.mine:
-            self.topics[topic].remove(handler)
+            self.bus.topics[topic].remove(handler)
+        for key in self.announced:
+            self.bus.present.discard(key)
+            for watcher in self.bus.watchers[key]:
+                watcher(False)
 
 
 @contextlib.asynccontextmanager
 async def cluster() -> AsyncIterator[tuple[TtesServer, FrontNode, list[TtesServer], list[MemoryFabric]]]:
-    topics: dict[str, list[Handler]] = defaultdict(list)
+    bus = Bus()
     token = trio.lowlevel.current_trio_token()
     front = make_server()
-    front_node = FrontNode(front, MemoryFabric(topics), 2)
+    front_node = FrontNode(front, MemoryFabric(bus), 2)
     shards, fabrics = [], []
     async with trio.open_nursery() as nursery:
         await nursery.start(front.serve)
         front_node.start(token)
         for k in range(2):
-            shard, fabric = make_server(), MemoryFabric(topics)
+            shard, fabric = make_server(), MemoryFabric(bus)
             node = ShardNode(shard, fabric, Sharding(k, 2))
             await nursery.start(shard.serve)
             node.keep_own()
@@ -121,18 +147,30 @@ async def test_a_silent_shards_walker_walks_on_in_the_survivor(autojump_clock: t
 async def test_a_shard_that_hears_late_gets_its_soldiers_by_sync(autojump_clock: trio.abc.Clock) -> None:
     """A creation and a request sent while no shard listened are not lost: the shard's first batch brings a
     sync, and the soldier walks."""
-    topics: dict[str, list[Handler]] = defaultdict(list)
+    bus = Bus()
     token = trio.lowlevel.current_trio_token()
     front = make_server()
-    FrontNode(front, MemoryFabric(topics), 1).start(token)
+    FrontNode(front, MemoryFabric(bus), 1).start(token)
     async with trio.open_nursery() as nursery:
         await nursery.start(front.serve)
         c = await walker(front, 11)  # no shard yet: the creation goes nowhere
         shard = make_server()
-        node = ShardNode(shard, MemoryFabric(topics), Sharding(0, 1))
+        node = ShardNode(shard, MemoryFabric(bus), Sharding(0, 1))
         await nursery.start(shard.serve)
         node.start(token)
         await moving(c, 11)
         assert live(shard) == [*range(10), 11]
         front.shutdown()
         shard.shutdown()
+
+
+async def test_a_hung_shard_fails_over_after_its_silence(autojump_clock: trio.abc.Clock) -> None:
+    """Present on the fabric but sending nothing (a hung process): failed over after ``hung_s``, not before."""
+    async with cluster() as (front, node, shards, fabrics):
+        c = await walker(front, 11)
+        await moving(c, 11, 3)
+        fabrics[1].closed = True  # it publishes nothing more, yet its presence stays
+        hung_at = trio.current_time()
+        await moving(c, 11)
+        assert node.failovers == 1 and trio.current_time() - hung_at >= node.hung_s
+        await c.aclose()

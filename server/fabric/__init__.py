@@ -37,7 +37,12 @@ def requests_topic(shard: int) -> str:
     return f"ttes/requests/{shard}"
 
 
+def alive_key(shard: int) -> str:
+    return f"ttes/alive/{shard}"
+
+
 Handler = Callable[[bytes], None]  # called on the fabric's own thread, once per message
+Presence = Callable[[bool], None]  # called on the fabric's own thread: present (True) or gone (False)
 
 
 class Fabric(Protocol):
@@ -51,6 +56,14 @@ class Fabric(Protocol):
 
     def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
         """Call ``on_message`` (on the fabric's thread) with every message published on ``topic``."""
+        ...
+
+    def announce(self, key: str) -> None:
+        """Be present under ``key`` while this node lives (gone when its process dies or it closes)."""
+        ...
+
+    def watch(self, key: str, on_change: Presence) -> None:
+        """Call ``on_change`` when a node announced under ``key`` appears (True) or goes (False)."""
         ...
 
     def close(self) -> None: ...

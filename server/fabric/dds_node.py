@@ -20,7 +20,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from server.fabric import FabricConfig, Handler, Kind
+from server.fabric import FabricConfig, Handler, Kind, Presence
 
 if TYPE_CHECKING:
     Octets = bytes  # what the fields hold at run time (see _octets_as_bytes)
@@ -70,6 +70,12 @@ _QOS = {
 }
 
 
+_PRESENCE = Qos(
+    Policy.Reliability.Reliable(duration(seconds=1)),
+    Policy.Liveliness.Automatic(lease_duration=duration(seconds=1)),
+)
+
+
 class DdsFabric:
     """A DDS participant on ``config.domain``."""
 
@@ -104,6 +110,19 @@ class DdsFabric:
             listener=Listener(on_data_available=available),
         )
         self._keep.append(reader)
+
+    def announce(self, key: str) -> None:
+        """A writer with automatic liveliness on the key's own topic: its lease lapses when we die."""
+        writer = DataWriter(self.participant, self._topic(key), qos=_PRESENCE)
+        writer.write(Blob(b""))
+        self._keep.append(writer)
+
+    def watch(self, key: str, on_change: Presence) -> None:
+        def changed(reader: DataReader, status: Any) -> None:
+            on_change(status.alive_count > 0)
+
+        listener = Listener(on_liveliness_changed=changed)
+        self._keep.append(DataReader(self.participant, self._topic(key), qos=_PRESENCE, listener=listener))
 
     def close(self) -> None:
         self._keep.clear()

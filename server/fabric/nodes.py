@@ -27,7 +27,7 @@ import numpy as np
 import trio
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
-from server.fabric import Fabric, Handler, Kind, poses_topic, requests_topic
+from server.fabric import Fabric, Handler, Kind, alive_key, poses_topic, requests_topic
 from server.fabric import requests as req
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.logging import get_logger
@@ -77,12 +77,22 @@ class ShardNode:
             self.server.world.remove_soldier(int(i), "another shard's")
 
     def start(self, token: trio.lowlevel.TrioToken) -> None:
-        """Take requests (each one on the trio loop, in order of arrival)."""
+        """Take requests on the trio loop, in order of arrival, one at a time: the tick runs between them
+        when it is due (thousands of creations arrive at once when a client creates a crowd)."""
+        self.fabric.announce(alive_key(self.sharding.k))
+        send, receive = trio.open_memory_channel[bytes](math.inf)
         self.fabric.subscribe(
             requests_topic(self.sharding.k),
             Kind.REQUESTS,
-            lambda data: token.run_sync_soon(self.handle, data),
+            lambda data: token.run_sync_soon(send.send_nowait, data),
         )
+
+        async def take() -> None:
+            async for data in receive:
+                self.handle(data)
+                await trio.lowlevel.checkpoint()
+
+        self.server.spawn(take)
 
     def publish(self, board: PoseBoard) -> None:
         """A tick's publish sends every soldier (a lost batch costs one tick); an answer between ticks sends
@@ -163,15 +173,17 @@ class FrontNode:
     """A front-end's link: every shard's newest batch in, its clients' requests out to the shard that
     animates the soldier (it is the world's :class:`~server.startup.Relay`).
 
-    Shard ``k``'s soldiers are animated by shard ``route[k]``: ``k`` itself, or after ``k`` fell silent for
-    ``failover_s`` (no batch), a surviving shard, sent a sync of those soldiers with their last requests. A
-    shard heard for the first time, or again after a restart (its batch count went back), gets a sync of
-    its own soldiers: creations sent before it listened are not lost. A shard that comes back takes its
-    soldiers back from the one that stood in."""
+    Shard ``k``'s soldiers are animated by shard ``route[k]``: ``k`` itself, or once ``k`` is down, a
+    surviving shard, sent a sync of those soldiers with their last requests. Down means gone from the
+    fabric (its process died: the fabric's presence says so at once) or silent for ``hung_s`` (no batch: a
+    process that hangs; a busy one is only late). A shard heard for the first time, or again after a
+    restart (its batch count went back), gets a sync of its own soldiers: creations sent before it listened
+    are not lost. A shard that comes back takes its soldiers back from the one that stood in."""
 
-    def __init__(self, server: TtesServer, fabric: Fabric, shards: int, *, failover_s: float = 1.0) -> None:
+    def __init__(self, server: TtesServer, fabric: Fabric, shards: int, *, hung_s: float = 5.0) -> None:
         self.server, self.fabric, self.shards = server, fabric, shards
-        self.failover_s = failover_s
+        self.hung_s = hung_s
+        self.present = [False] * shards  # on the fabric now (its presence)
         self._puts = [fabric.publisher(requests_topic(k), Kind.REQUESTS) for k in range(shards)]
         self._latest: dict[int, bytes] = {}  # shard -> its newest batch (written on the fabric's thread)
         self.route = list(range(shards))
@@ -189,6 +201,16 @@ class FrontNode:
     def start(self, token: trio.lowlevel.TrioToken) -> None:
         for k in range(self.shards):
             self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._arrived, token, k))
+            self.fabric.watch(alive_key(k), functools.partial(self._watched, token, k))
+
+    def _watched(self, token: trio.lowlevel.TrioToken, k: int, present: bool) -> None:
+        token.run_sync_soon(self._presence, k, present)  # from the fabric's thread to the loop
+
+    def _presence(self, k: int, present: bool) -> None:
+        self.present[k] = present
+        log.info("fabric_shard_presence", shard=k, present=present)
+        if not present:
+            self._fail_over(self.server.now())
 
     def _arrived(self, token: trio.lowlevel.TrioToken, k: int, data: bytes) -> None:
         """On the fabric's thread: keep the newest batch; the first one waiting asks the loop to publish."""
@@ -232,7 +254,7 @@ class FrontNode:
             self._sync(k, [k])
 
     def _fail_over(self, now: float) -> None:
-        alive = [k for k in range(self.shards) if now - self.heard_at[k] <= self.failover_s]
+        alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
         for k in range(self.shards):
             if self.route[k] == k and self.heard_at[k] > -math.inf and k not in alive and alive:
                 survivor = min(alive, key=lambda s: sum(r == s for r in self.route))

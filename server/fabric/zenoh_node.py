@@ -7,7 +7,7 @@ from typing import Any
 
 import zenoh
 
-from server.fabric import FabricConfig, Handler, Kind
+from server.fabric import FabricConfig, Handler, Kind, Presence
 
 
 class ZenohFabric:
@@ -38,6 +38,15 @@ class ZenohFabric:
     def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
         del kind  # the publisher sets the quality of service
         self._keep.append(self.session.declare_subscriber(topic, lambda s: on_message(s.payload.to_bytes())))
+
+    def announce(self, key: str) -> None:
+        self._keep.append(self.session.liveliness().declare_token(key))
+
+    def watch(self, key: str, on_change: Presence) -> None:
+        def changed(sample: zenoh.Sample) -> None:
+            on_change(sample.kind == zenoh.SampleKind.PUT)
+
+        self._keep.append(self.session.liveliness().declare_subscriber(key, changed, history=True))
 
     def close(self) -> None:
         self._keep.clear()
