@@ -165,8 +165,8 @@ async def test_a_shard_that_hears_late_gets_its_soldiers_by_sync(autojump_clock:
 
 
 async def test_a_hung_shard_fails_over_after_its_silence(autojump_clock: trio.abc.Clock) -> None:
-    """Present on the fabric but sending nothing (a hung process): failed over after ``hung_s``, not before."""
-    async with cluster() as (front, node, shards, fabrics):
+    """Present on the fabric but sending nothing (a hung process): failed over after ``hung_s``."""
+    async with cluster() as (front, node, _, fabrics):
         c = await walker(front, 11)
         await moving(c, 11, 3)
         fabrics[1].closed = True  # it publishes nothing more, yet its presence stays
