@@ -43,22 +43,23 @@ def test_any_bytes_decode_to_a_batch_or_a_value_error(data: bytes) -> None:
 
 
 @given(st.binary(max_size=200))
-def test_any_bytes_decode_to_a_request_or_a_value_error(data: bytes) -> None:
+def test_any_bytes_decode_to_requests_or_a_value_error(data: bytes) -> None:
     try:
-        msg = req.decode(data)
+        ops = req.decode(data)
     except ValueError:
         return
-    assert msg["op"] in req.OPS
+    assert all(op["op"] in req.OPS for op in ops)
 
 
 def test_requests_and_syncs_survive_the_fabric() -> None:
     rows = make_entity_requests([4, 6], velocity=(0.0, 1.4, 0.0))
-    got = req.decode(req.requests(rows))
-    assert got["op"] == "requests" and np.array_equal(got["rows"], rows)
-    got = req.decode(req.sync([(4, "DI.fig", "M16.fig", "alpha"), (6, "DI.fig", "", None)], rows[:1]))
-    assert got["soldiers"] == [[4, "DI.fig", "M16.fig", "alpha"], [6, "DI.fig", "", None]]
-    assert got["rows"]["index"].tolist() == [4]
-    assert req.decode(req.create(3, "DI.fig", "AK_47.fig", None))["owner"] is None
+    sync = req.sync([(4, "DI.fig", "M16.fig", "alpha"), (6, "DI.fig", "", None)], rows[:1])
+    got = req.decode(req.pack([req.requests(rows), sync, req.create(3, "DI.fig", "AK_47.fig", None)]))
+    assert [op["op"] for op in got] == ["requests", "sync", "create"]
+    assert np.array_equal(got[0]["rows"], rows)
+    assert got[1]["soldiers"] == [[4, "DI.fig", "M16.fig", "alpha"], [6, "DI.fig", "", None]]
+    assert got[1]["rows"]["index"].tolist() == [4]
+    assert got[2]["owner"] is None
 
 
 def test_sharding_is_k_of_n() -> None:
@@ -81,4 +82,4 @@ def test_merged_codes_bump_the_version_of_changed_soldiers_only() -> None:
 
 def test_a_request_without_its_rows_is_a_value_error() -> None:
     with pytest.raises(ValueError, match="without rows"):
-        req.decode(msgpack.packb({"op": "requests", "rows": 5}))
+        req.decode(msgpack.packb([{"op": "requests", "rows": 5}]))

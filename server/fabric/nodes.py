@@ -27,7 +27,7 @@ import numpy as np
 import trio
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
-from server.fabric import Fabric, Handler, Kind, alive_key, poses_topic, requests_topic
+from server.fabric import Fabric, Kind, alive_key, poses_topic, requests_topic
 from server.fabric import requests as req
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.logging import get_logger
@@ -89,8 +89,9 @@ class ShardNode:
 
         async def take() -> None:
             async for data in receive:
-                self.handle(data)
-                await trio.lowlevel.checkpoint()
+                for op in self._decoded(data):
+                    self.handle(op)
+                    await trio.lowlevel.checkpoint()
 
         self.server.spawn(take)
 
@@ -119,13 +120,19 @@ class ShardNode:
         )
         self.seq += 1
 
-    def handle(self, data: bytes) -> None:
+    def _decoded(self, data: bytes) -> list[req.Op]:
+        try:
+            return req.decode(data)
+        except ValueError as exc:
+            log.warning("fabric_message_refused", shard=self.sharding.k, error=str(exc))
+            return []
+
+    def handle(self, op: req.Op) -> None:
         """One request from a front-end (already checked there: a failure here is logged, not answered)."""
         try:
-            msg = req.decode(data)
-            self._apply(msg)
-        except (ValueError, KeyError, TypeError) as exc:  # a bad message, or a soldier gone meanwhile
-            log.warning("fabric_request_failed", shard=self.sharding.k, error=str(exc))
+            self._apply(op)
+        except (ValueError, KeyError, TypeError) as exc:  # a bad operation, or a soldier gone meanwhile
+            log.warning("fabric_request_failed", shard=self.sharding.k, op=op.get("op"), error=str(exc))
             return
         self.taken += 1
         self.server.requests_arrived()
@@ -185,6 +192,9 @@ class FrontNode:
         self.hung_s = hung_s
         self.present = [False] * shards  # on the fabric now (its presence)
         self._puts = [fabric.publisher(requests_topic(k), Kind.REQUESTS) for k in range(shards)]
+        self._out: list[list[req.Op]] = [[] for _ in range(shards)]  # per shard, sent at the loop's next turn
+        self._token: trio.lowlevel.TrioToken | None = None
+        self._flush_due = False
         self._latest: dict[int, bytes] = {}  # shard -> its newest batch (written on the fabric's thread)
         self.route = list(range(shards))
         self.heard_at = [-math.inf] * shards  # server time of each shard's last batch
@@ -199,6 +209,7 @@ class FrontNode:
         server.world.relay = self
 
     def start(self, token: trio.lowlevel.TrioToken) -> None:
+        self._token = token
         for k in range(self.shards):
             self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._arrived, token, k))
             self.fabric.watch(alive_key(k), functools.partial(self._watched, token, k))
@@ -249,7 +260,7 @@ class FrontNode:
             self.route[k] = k
             if stood_in != k:  # it stood in for k: k's soldiers go home
                 for i in self._homed(k).tolist():
-                    self._puts[stood_in](req.remove(i))
+                    self._send(stood_in, req.remove(i))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
             self._sync(k, [k])
 
@@ -281,19 +292,35 @@ class FrontNode:
             (i, *keys[int(m.table.fset[i])], self.server.world.owners.owner_of(i)) for i in idx.tolist()
         ]
         have = idx[self.has_last[idx]]
-        self._puts[shard](req.sync(soldiers, self.last[have]))
+        self._send(shard, req.sync(soldiers, self.last[have]))
 
-    def _put_for(self, index: int) -> Handler:
-        return self._puts[self.route[index % self.shards]]
+    def _send(self, shard: int, op: req.Op) -> None:
+        """Queue an operation for ``shard``: what one turn of the loop queued goes as one message."""
+        self._out[shard].append(op)
+        if self._token is None:
+            self._flush()
+        elif not self._flush_due:
+            self._flush_due = True
+            self._token.run_sync_soon(self._flush)
+
+    def _flush(self) -> None:
+        self._flush_due = False
+        for k, ops in enumerate(self._out):
+            if ops:
+                self._puts[k](req.pack(ops))
+                ops.clear()
+
+    def _shard_of(self, index: int) -> int:
+        return self.route[index % self.shards]
 
     # -- the world's Relay ---------------------------------------------------------------------------------
     def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
         self.has_last[index] = False
-        self._put_for(index)(req.create(index, figure, weapon, owner))
+        self._send(self._shard_of(index), req.create(index, figure, weapon, owner))
 
     def removed(self, index: int) -> None:
         self.has_last[index] = False
-        self._put_for(index)(req.remove(index))
+        self._send(self._shard_of(index), req.remove(index))
 
     def requests(self, rows: np.ndarray) -> None:
         idx = rows["index"].astype(np.int64)
@@ -301,7 +328,7 @@ class FrontNode:
         self.has_last[idx] = True
         shard = np.asarray(self.route)[idx % self.shards]
         for k in np.unique(shard).tolist():
-            self._puts[k](req.requests(rows[shard == k]))
+            self._send(k, req.requests(rows[shard == k]))
 
     def react(self, index: int, kind: str) -> None:
-        self._put_for(index)(req.react(index, kind))
+        self._send(self._shard_of(index), req.react(index, kind))
