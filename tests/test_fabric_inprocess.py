@@ -17,6 +17,7 @@ from server.fabric import Handler, Kind, Presence
 from server.fabric.nodes import FrontNode, Sharding, ShardNode
 
 WALK = (0.0, 1.4, 0.0)
+RUN = (0.0, 3.5, 0.0)
 
 
 @dataclass
@@ -173,4 +174,29 @@ async def test_a_hung_shard_fails_over_after_its_silence(autojump_clock: trio.ab
         hung_at = trio.current_time()
         await moving(c, 11)
         assert node.failovers == 1 and trio.current_time() - hung_at >= node.hung_s
+        await c.aclose()
+
+
+async def test_a_hung_shard_that_resumes_takes_its_soldiers_back_with_their_requests(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Shard 1 hangs, shard 0 stands in and gets the walker's new request (run instead of walk); shard 1
+    resumes: the soldier goes home, the stand-in lets go, and the home shard replays the last request."""
+    async with cluster() as (front, node, shards, fabrics):
+        c = await walker(front, 11)
+        await moving(c, 11, 3)
+        fabrics[1].closed = True
+        with trio.fail_after(30):
+            while node.failovers == 0:
+                await trio.sleep(0.1)
+        await c.requests(index=[11], velocity=RUN)
+        await moving(c, 11, 3)
+        fabrics[1].closed = False  # it resumes
+        with trio.fail_after(30):
+            while 11 in live(shards[0]):
+                await trio.sleep(0.1)
+        assert 11 in live(shards[1]) and node.route == [0, 1]
+        m = shards[1].world.manager
+        assert m is not None and m.soldier_info(11)["speed"] > 2.0  # the run it was asked for while away
+        await moving(c, 11)
         await c.aclose()

@@ -160,7 +160,8 @@ class ShardNode:
             self._sync(msg)
 
     def _sync(self, msg: dict[str, object]) -> None:
-        """Animate every soldier of the sync that is not here yet, from its last request."""
+        """Animate every soldier of the sync that is not here yet, from its last request; with ``replay``
+        (soldiers coming home after a stand-in animated them) replay the last request of every one."""
         world, m = self.server.world, self.server.world.manager
         assert m is not None
         soldiers = msg["soldiers"]
@@ -173,7 +174,7 @@ class ShardNode:
                 new.append(index)
         log.info("fabric_sync", shard=self.sharding.k, soldiers=len(soldiers), created=len(new))
         if len(rows):
-            world.apply_requests(rows[np.isin(rows["index"], new)])
+            world.apply_requests(rows if msg.get("replay") else rows[np.isin(rows["index"], new)])
 
 
 class FrontNode:
@@ -262,7 +263,7 @@ class FrontNode:
                 for i in self._homed(k).tolist():
                     self._send(stood_in, req.remove(i))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
-            self._sync(k, [k])
+            self._sync(k, [k], replay=stood_in != k)
 
     def _fail_over(self, now: float) -> None:
         alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
@@ -282,7 +283,7 @@ class FrontNode:
         live = m.table.live if m is not None else np.zeros(0, np.int64)
         return live[live % self.shards == k]
 
-    def _sync(self, shard: int, homes: list[int]) -> None:
+    def _sync(self, shard: int, homes: list[int], *, replay: bool = False) -> None:
         m = self.server.world.manager
         if m is None:
             return
@@ -292,7 +293,7 @@ class FrontNode:
             (i, *keys[int(m.table.fset[i])], self.server.world.owners.owner_of(i)) for i in idx.tolist()
         ]
         have = idx[self.has_last[idx]]
-        self._send(shard, req.sync(soldiers, self.last[have]))
+        self._send(shard, req.sync(soldiers, self.last[have], replay=replay))
 
     def _send(self, shard: int, op: req.Op) -> None:
         """Queue an operation for ``shard``: what one turn of the loop queued goes as one message."""

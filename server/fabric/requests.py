@@ -6,7 +6,8 @@ figure, weapon, owner: the front-end allocates indices, so the one client-visibl
 ``remove`` (index), ``requests`` (rows of ``protocol.entity.ENTITY_REQUEST_DTYPE`` as bytes, checked
 already by the front-end), ``react`` (index, kind) and ``sync``: every soldier the shard is to animate
 (index, figure, weapon, owner) with the last request of each that had one: what a shard that joined late,
-restarted or takes over another's soldiers (failover) needs to animate them. The topic is reliable:
+restarted or takes over another's soldiers (failover) needs to animate them (``replay``: the shard's own
+soldiers come home from a stand-in, replay every last request). The topic is reliable:
 ownership and requests are never lost once a shard listens, and a sync covers the time before.
 """
 
@@ -39,10 +40,11 @@ def react(index: int, kind: str) -> Op:
     return {"op": "react", "index": index, "kind": kind}
 
 
-def sync(soldiers: list[tuple[int, str, str, str | None]], last: np.ndarray) -> Op:
-    """``soldiers``: (index, figure, weapon, owner) each; ``last``: the last requests of those with one."""
+def sync(soldiers: list[tuple[int, str, str, str | None]], last: np.ndarray, *, replay: bool = False) -> Op:
+    """``soldiers``: (index, figure, weapon, owner) each; ``last``: the last requests of those with one;
+    ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in)."""
     rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
-    return {"op": "sync", "soldiers": [list(s) for s in soldiers], "rows": rows}
+    return {"op": "sync", "soldiers": [list(s) for s in soldiers], "rows": rows, "replay": replay}
 
 
 def pack(ops: list[Op]) -> bytes:
