@@ -103,6 +103,9 @@ class TtesServer:
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
         self.feed: Callable[[PoseBoard, int], int] | None = None
+        self.status_note: Callable[[], str] | None = (
+            None  # appended to STATUS (a shard's or front-end's role)
+        )
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
         self._loop_thread = threading.get_ident()
         self._trio_token: trio.lowlevel.TrioToken | None = None
@@ -534,6 +537,8 @@ class TtesServer:
             f"{soldiers} soldiers, {len(self.sessions)} clients, {{rate:.1f}} Hz, "
             f"tick {st.get('mean_tick_us', 0.0):.0f} us mean"
         )
+        if self.status_note is not None:
+            text += "; " + self.status_note().replace("{", "{{").replace("}", "}}")
         return self.now(), soldiers, text
 
     def report_status(self) -> None:

@@ -142,6 +142,7 @@ async def test_a_silent_shards_walker_walks_on_in_the_survivor(autojump_clock: t
         await moving(c, 11)  # walking on in shard 0, from its last request
         assert node.failovers == 1 and live(shards[0]) == [*range(10), 11]
         assert not [e for e in c.events if isinstance(e, SoldierRemoved)]
+        assert front.status_text()[2].endswith("front-end of 2 shards: 0 up, 1 on 0 (gone)")
         await c.aclose()
 
 

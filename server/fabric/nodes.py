@@ -67,6 +67,7 @@ class ShardNode:
         self.seq = 0
         self.taken = 0  # fabric requests handled
         server.on_publish = self.publish
+        server.status_note = lambda: f"shard {sharding.k}/{sharding.n}, {self.seq} batches"
 
     def keep_own(self) -> None:
         """Drop the soldiers of the start-up script that other shards own."""
@@ -208,6 +209,15 @@ class FrontNode:
         self.failovers = 0
         server.feed = self.feed
         server.world.relay = self
+        server.status_note = self.describe
+
+    def describe(self) -> str:
+        """The shards as STATUS shows them: ``shards 0 up, 1 on 0 (gone)``."""
+        parts = []
+        for k in range(self.shards):
+            where = "up" if self.route[k] == k else f"on {self.route[k]}"
+            parts.append(f"{k} {where}" + ("" if self.present[k] else " (gone)"))
+        return f"front-end of {self.shards} shards: " + ", ".join(parts)
 
     def start(self, token: trio.lowlevel.TrioToken) -> None:
         self._token = token
