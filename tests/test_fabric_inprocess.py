@@ -11,7 +11,17 @@ from dataclasses import dataclass, field
 import trio
 from test_server_support import Client, make_server
 
-from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, SoldierRemoved, Subscribe
+from protocol.events import (
+    CreateSoldier,
+    FigureMsg,
+    JointUpdates,
+    Ready,
+    RequestFigure,
+    SoldierCreated,
+    SoldierRemoved,
+    Subscribe,
+    UpdateTableMsg,
+)
 from server.app import TtesServer
 from server.fabric import Handler, Kind, Presence
 from server.fabric.nodes import FrontNode, Sharding, ShardNode
@@ -201,3 +211,22 @@ async def test_a_hung_shard_that_resumes_takes_its_soldiers_back_with_their_requ
         assert m is not None and m.soldier_info(11)["speed"] > 2.0  # the run it was asked for while away
         await moving(c, 11)
         await c.aclose()
+
+
+async def test_a_client_cannot_tell_the_front_end_from_a_server(autojump_clock: trio.abc.Clock) -> None:
+    """Same ACCEPT, update tables, READY soldiers (the start-up script's) and FIGURE as a single server."""
+    async with cluster() as (front, _, _, _):
+        alone = make_server()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(alone.serve)
+            seen = []
+            for server in (front, alone):
+                c = await Client.open(server.addresses[0][1], "ig", client_id="alpha")
+                tables = [(await c.expect(UpdateTableMsg)).table for _ in server.world.tables]
+                ready = await c.expect(Ready)
+                await c.send(RequestFigure(5, tables[0].table_id))
+                figure = await c.expect(FigureMsg)
+                seen.append((c.accept, tables, ready.soldiers, repr(figure)))  # repr: its numpy arrays
+                await c.aclose()
+            assert seen[0] == seen[1]
+            alone.shutdown()
