@@ -33,7 +33,7 @@ import math
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import trio
@@ -87,6 +87,7 @@ class TtesServer:
         self.clients_dropped = 0
         self._batches_window = (0.0, 0)  # (time, ticks that published poses) at the last status report
         self._published_ticks = 0
+        self._counted_tick = -1  # the wire tick last counted in _published_ticks
         self._shutdown = trio.Event()
         self._answer_wanted = trio.Event()
         self._requests_seen = 0  # the manager's request and reaction count at the last answer
@@ -100,6 +101,14 @@ class TtesServer:
         self._bound: list[Any] | None = None  # listening sockets bound by bind(), before serve()
         self._bound_ws: list[Any] = []  # and the WebSocket port's
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
+        # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
+        self.on_publish: Callable[[PoseBoard], None] | None = None
+        # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
+        # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
+        self.feed: Callable[[PoseBoard, int], int] | None = None
+        self.status_note: Callable[[], str] | None = (
+            None  # appended to STATUS (a shard's or front-end's role)
+        )
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
         self._loop_thread = threading.get_ident()
         self._trio_token: trio.lowlevel.TrioToken | None = None
@@ -260,6 +269,11 @@ class TtesServer:
     def shutdown(self) -> None:
         self._shutdown.set()
 
+    def spawn(self, task: Callable[[], Awaitable[None]]) -> None:
+        """Run ``task`` beside the server's own tasks (a fabric node's), cancelled with them; once serving."""
+        assert self._nursery is not None, "spawn() before serve() started"
+        self._nursery.start_soon(task)
+
     async def _accept_all(
         self, listeners: list[tuple[trio.SocketListener, bool]], nursery: trio.Nursery
     ) -> None:
@@ -377,7 +391,7 @@ class TtesServer:
         its request rate, and while its JCL runs."""
         while not session.closing:
             wait = session.resume(self.now())
-            self._requests_arrived()
+            self.requests_arrived()
             if session.pending_jcl is not None:
                 await self.run_jcl(session)
             elif session.output_full:  # the client's answers wait: read on once the writer took them
@@ -448,17 +462,38 @@ class TtesServer:
         if m is None or board is None or not self.world.ready:
             return
         self.ticks += 1
+        if self.feed is not None:
+            self._published(board, self.feed(board, self.ticks))
+            return
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
         update = m.tick(now)
         if self.on_tick is not None:
             self.on_tick(update)
-        if board.publish(update, self.world):
-            self._published_ticks += 1
+        self._published(board, board.publish(update, self.world))
+
+    def publish_fed(self) -> None:
+        """A front-end's publish as soon as a shard's batch arrives (``feed`` takes it), between its ticks:
+        labelled with the next tick, as an answer is, so the wire's tick keeps the tick loop's rate."""
+        board = self._board()
+        if self.feed is None or board is None or not self.world.ready:
+            return
+        self._published(board, self.feed(board, self.ticks + 1))
+
+    def _published(self, board: PoseBoard, changed: int) -> None:
+        """After a publish: the shard's hook, then wake the writers; a tick whose poses changed counts once
+        for the update rate, however many publishes carried it (answers, a front-end's shards)."""
+        if self.on_publish is not None:
+            self.on_publish(board)
+        if changed:
+            if board.tick != self._counted_tick:
+                self._counted_tick = board.tick
+                self._published_ticks += 1
             for s in self.sessions.values():
                 if s.tables_sent:
                     s.notify()
 
-    def _requests_arrived(self) -> None:
+    def requests_arrived(self) -> None:
+        """Requests were taken (from a client, or a shard's from the fabric): answer them between ticks."""
         m = self.world.manager
         seen = int(m.stats["requests"] + m.stats["reactions"]) if m is not None else self._requests_seen
         if seen != self._requests_seen:
@@ -477,7 +512,7 @@ class TtesServer:
         they show (``SoldierManager.answer``: sampled at the next tick's time, throttled as that tick) and
         wake the writers. Its frames carry the next tick's number (``PoseBoard.publish(between=True)``)."""
         m, board = self.world.manager, self._board()
-        if m is None or board is None or not self.world.ready:
+        if m is None or board is None or not self.world.ready or self.feed is not None:
             return
         now = self.request_time()
         update = m.answer(now, max(now, self.next_tick))
@@ -486,10 +521,7 @@ class TtesServer:
         self.answers += 1
         if self.on_tick is not None:
             self.on_tick(update)
-        if board.publish(update, self.world, between=True):
-            for s in self.sessions.values():
-                if s.tables_sent:
-                    s.notify()
+        self._published(board, board.publish(update, self.world, between=True))
 
     # -- owners that left ----------------------------------------------------------------------------------
     def _left(self, session: Session) -> None:
@@ -546,6 +578,8 @@ class TtesServer:
             f"{soldiers} soldiers, {len(self.sessions)} clients, {{rate:.1f}} Hz, "
             f"tick {st.get('mean_tick_us', 0.0):.0f} us mean"
         )
+        if self.status_note is not None:
+            text += "; " + self.status_note().replace("{", "{{").replace("}", "}}")
         return self.now(), soldiers, text
 
     def report_status(self) -> None:
