@@ -148,12 +148,17 @@ def test_the_page_modules_parse() -> None:
 @pytest.mark.skipif(shutil.which("node") is None, reason="needs node")
 @pytest.mark.parametrize("version", [1, 2])
 def test_the_page_decodes_joint_updates_as_the_python_decoder(version: int, tmp_path: Path) -> None:
-    """client_stub/web/js/wire.js (run by node) over the Python encoder's frames of the DI.fig-shaped table:
-    smooth motion, jumps, repeated and skipped ticks (v2's prediction), soldiers that come and go; the same
-    codes as protocol.updates.UpdateDecoder, and the same decoded values."""
-    from protocol.update_table import example_di_table, table_to_wire
+    """client_stub/web/js/wire.js (run by node; msgpack by the vendored @msgpack/msgpack) over the Python
+    encoder's frames of the DI.fig-shaped table: the UPDATE_TABLE message, then JOINT_UPDATES of smooth
+    motion, jumps, repeated and skipped ticks (v2's prediction), soldiers that come and go; the same codes as
+    protocol.updates.UpdateDecoder, and the same decoded values. And the page's HELLO reads in Python."""
+    from protocol.framing import FrameReader
+    from protocol.messages import CODECS, MessageType
+    from protocol.update_table import example_di_table
     from protocol.updates import UpdateDecoder, UpdateEncoder
 
+    if not vendored():
+        pytest.skip("msgpack is not vendored (make vendor)")
     table, n = example_di_table(), 6
     lay = table.layout
     rng = np.random.default_rng(version)
@@ -170,12 +175,15 @@ def test_the_page_decodes_joint_updates_as_the_python_decoder(version: int, tmp_
         for p in enc.encode_codes(sent, codes[sent].astype(np.int32), tick, 1 << 16):
             payloads.append(p.hex())
             dec.decode(p)
+    msg_type, encode_table, _ = CODECS[MessageType.UPDATE_TABLE]
+    update_table = encode_table(msg_type(table)).hex()  # type: ignore[call-arg]
     case = tmp_path / "case.json"
-    case.write_text(json.dumps({"version": version, "table": table_to_wire(table), "payloads": payloads}))
+    case.write_text(json.dumps({"version": version, "update_table": update_table, "payloads": payloads}))
     run = subprocess.run(["node", str(TOOLS / "check_wire.mjs"), str(case)], capture_output=True, text=True,
                          timeout=60)  # fmt: skip
     assert run.returncode == 0, run.stderr
-    got = json.loads(run.stdout)
+    out = json.loads(run.stdout)
+    got = out["soldiers"]
     assert sorted(int(i) for i in got) == list(range(n))
     for i in range(n):
         assert got[str(i)]["codes"] == dec.codes(np.array([i]))[0].tolist()
@@ -185,6 +193,13 @@ def test_the_page_decodes_joint_updates_as_the_python_decoder(version: int, tmp_
         np.testing.assert_allclose([f["position"] for f in figs], p[0], atol=1e-9)
         js_q, py_q = np.array([f["quaternion"] for f in figs]), q[0]
         assert np.allclose(np.abs((js_q * py_q).sum(axis=1)), 1.0, atol=1e-9)  # the same rotation (±q)
+    frames = FrameReader()
+    frames.feed(bytes.fromhex(out["hello"]))
+    kind, payload = frames.next_frame(1 << 24) or (0, b"")
+    assert kind == MessageType.HELLO and frames.buffered == 0
+    hello = CODECS[MessageType.HELLO][2](payload, 0)
+    assert (hello.name, hello.role, hello.version, hello.token) == ("ttes-web", "observer", version, "sésame")
+    assert hello.max_frame == 1 << 24
 
 
 def test_entities_json_rows() -> None:

@@ -27,8 +27,9 @@ import trio
 from client_stub.data_paths import DEFAULT_TERRAIN
 
 WEB = Path(__file__).resolve().parent
-TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
-         ".json": "application/json", ".glb": "model/gltf-binary"}  # fmt: skip
+JS = "text/javascript; charset=utf-8"
+TYPES = {".html": "text/html; charset=utf-8", ".js": JS, ".mjs": JS, ".json": "application/json",
+         ".glb": "model/gltf-binary"}  # fmt: skip
 MAX_REQUEST = 16384  # bytes of request head (h11's incomplete-event limit)
 IDLE_TIMEOUT_S = 30.0
 
