@@ -134,6 +134,22 @@ def test_the_page_draws_a_soldier_and_key_4_lays_him_prone(tmp_path: Path) -> No
     w2, h2 = _extent(prone)
     assert w2 / h2 > 2 * w / h and h2 < 0.8 * h, (w, h, w2, h2)  # lying: much wider for his height, lower
     assert (standing != prone).sum() > 300
+    _assert_the_view_keys(got, prone, _blue(tmp_path / "action.png"))
+
+
+def _assert_the_view_keys(got: dict[str, Any], prone: np.ndarray, action_shot: np.ndarray) -> None:
+    """x: ACTION CAM frames the prone soldier (another picture, he fills more of it, every corner of his
+    box inside it); f: fly from the stub's start (0, -60, 20); w: 5 m forward (north); v: the next view."""
+    after, action, fly, forward = got["after"], got["action"], got["fly"], got["forward"]
+    assert after["camera"]["view"] == "soldier" and action["camera"]["view"] == "action"
+    assert np.linalg.norm(np.subtract(action["camera"]["position"], after["camera"]["position"])) > 1
+    assert (action_shot != prone).sum() > 300
+    assert action_shot.sum() > prone.sum(), (action_shot.sum(), prone.sum())
+    x0, y0, x1, y1 = action["soldiers"][0]["box"]
+    assert 0 <= x0 < x1 <= 800 and 0 <= y0 < y1 <= 600, action["soldiers"][0]["box"]
+    assert fly["camera"]["view"] == "fly" and fly["camera"]["position"] == pytest.approx([0, -60, 20])
+    assert forward["camera"]["position"] == pytest.approx([0, -55, 20])
+    assert got["next"]["camera"]["view"] == "action"  # the stub's order: ..., fly, ACTION CAM
 
 
 @pytest.mark.skipif(shutil.which("node") is None, reason="needs node")
@@ -209,27 +225,50 @@ def test_entities_json_rows() -> None:
         index=[12, 3], appearance=[3, 2], weapon=[1, 0], velocity=[(1, 2, 0), (0, 0, 0)],
         heading=[90.0, 0.0], position=[(5.0, -2.0, 0.5), (0.0, 0.0, 0.0)],
     )  # fmt: skip
-    site = Site(entities=lambda: rows)
+    site = Site(entities=lambda: (rows, np.array([2, 1], np.uint8)))
     got = json.loads(site.body("/entities.json")[2])
     assert got == {
-        "soldiers": [[12, 5.0, -2.0, 0.5, 90.0, 1.0, 2.0, 0.0, 3, 1], [3, 0, 0, 0, 0, 0, 0, 0, 2, 0]]
+        "soldiers": [[12, 5.0, -2.0, 0.5, 90.0, 1.0, 2.0, 0.0, 3, 1, 2], [3, 0, 0, 0, 0, 0, 0, 0, 2, 0, 1]]
     }
     assert Site().body("/entities.json")[0] == 404  # no replay: no such file
 
 
+def _red(png: Path) -> np.ndarray:
+    """The opposing-red pixels (the page's 0xa82a1a, lit) of a screenshot, as a boolean mask."""
+    import imageio.v3 as iio
+
+    rgb = iio.imread(png)[..., :3].astype(int)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return (r > 70) & (r > 2 * g) & (r > 2 * b)  # the ground (brown-grey) and the roofs are not
+
+
+def _inside(mask: np.ndarray, box: list[float]) -> int:
+    x0, y0, x1, y1 = (int(v) for v in box)
+    return int(mask[max(y0, 0) : y1 + 1, max(x0, 0) : x1 + 1].sum())
+
+
 @pytest.mark.browser
-def test_the_page_follows_a_dis_replay(tmp_path: Path) -> None:
+def test_the_page_follows_a_dis_replay_coloured_by_force(tmp_path: Path) -> None:
     """`ttes web --replay LOG`: the page, an observer, draws every soldier the replay drives, posed by the
-    server's updates and placed where the log puts them (entities.json). The synthetic library starts fast;
-    its figures have no surfaces, so this checks the page's state, not its pixels (the test above does)."""
+    server's updates and placed where the log puts them (entities.json), each in his DIS force's colour as
+    the stub does: a friendly soldier (force 1) blue, an opposing one (force 2) red, from his tethered
+    camera (screenshots force-1.png, force-2.png)."""
     _skip_without_browser()  # before writing the log
     env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
     log = tmp_path / "squad.pcap"
     subprocess.run([sys.executable, "-m", "ttes", "dis", "synth", "--out", str(log), "--soldiers", "4",
                     "--seconds", "60"], env=env, check=True, capture_output=True, timeout=120)  # fmt: skip
-    shot = {"SHOT": str(tmp_path / "replay.png")}  # a look, by hand
-    _, got = _web_and_browser(["--replay", str(log), "--synthetic-server"], ["fps", "1"], tmp_path, shot)
-    assert got["soldiers"] == 4 and not got["errors"] and got["updates_per_s"] > 0, got
+    _, got = _web_and_browser(["--replay", str(log)], ["forces", str(tmp_path)], tmp_path)
+    assert got["soldiers"] == 4 and not got["errors"] and got["updates"] > 0, got
+    forces = [s["force"] for s in got["shots"]["2"]["soldiers"]]
+    assert sorted(set(forces)) == [1, 2], forces
+    for force, mine, other in ((1, _blue, _red), (2, _red, _blue)):
+        shot = got["shots"][str(force)]
+        me = shot["soldiers"][shot["current"]]
+        assert me["force"] == force and me["colour"] == {1: 0x2F6FE0, 2: 0xA82A1A}[force], me
+        png = tmp_path / f"force-{force}.png"
+        ours, theirs = _inside(mine(png), me["box"]), _inside(other(png), me["box"])
+        assert ours > 300 and theirs < ours / 10, (force, ours, theirs)
 
 
 def _free_port() -> int:

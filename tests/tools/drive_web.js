@@ -1,6 +1,9 @@
 // Drive the browser image generator (`ttes web`) in headless Chromium with puppeteer-core (NODE_PATH: the
 // npm folder of tests/tools/package.json). Prints one JSON object on stdout.
-//   node drive_web.js keys URL OUT_DIR   standing screenshot, key "4" (PRONE), prone screenshot, the state
+//   node drive_web.js keys URL OUT_DIR   standing screenshot, key "4" (PRONE), prone screenshot; key "x"
+//                                        (ACTION CAM), its screenshot; keys "f" "w" (fly, forward); the states
+//   node drive_web.js forces URL OUT_DIR a screenshot of a soldier of each force (DIS force 1, 2) from his
+//                                        tethered camera (keys n, c): force-1.png, force-2.png; the states
 //   node drive_web.js reconnect URL      key 3, then (the caller restarts the server) bound again: the state
 //   node drive_web.js fps URL SECONDS    the page's frames per second once every soldier is drawn
 //                                        (SHOT=FILE.png: and a screenshot after the count)
@@ -9,6 +12,7 @@ const puppeteer = require("puppeteer-core");
 
 const [mode, url, arg] = process.argv.slice(2);
 const WAIT_MS = 120000;
+const console_ = []; // the page's console and errors, printed when a wait fails
 
 async function main() {
   const browser = await puppeteer.launch({
@@ -18,7 +22,6 @@ async function main() {
       "--window-size=800,600"],
     defaultViewport: { width: 800, height: 600 },
   });
-  const console_ = [];
   try {
     const page = await browser.newPage();
     page.on("console", (m) => console_.push(`${m.type()}: ${m.text()}`));
@@ -30,8 +33,13 @@ async function main() {
     const state = () => page.evaluate(() => ({
       status: ttes.status, version: ttes.version, role: ttes.role, fps: ttes.fps, frames: ttes.frames,
       updates: ttes.updates, errors: ttes.errors, log: ttes.log,
-      soldiers: ttes.soldiers.map((s, k) => ({ index: s.index, appearance: s.appearance, rootZ: s.rootZ, box: ttes.screenBox(k) })),
+      camera: ttes.camera(), current: ttes.current,
+      soldiers: ttes.soldiers.map((s, k) => ({ index: s.index, appearance: s.appearance, rootZ: s.rootZ, force: s.force,
+        colour: s.colour, box: ttes.screenBox(k) })),
     }));
+    const frames = (n) => page.evaluate((k) => new Promise((r) => { // n more frames drawn
+      const until = ttes.frames + k, poll = () => (ttes.frames >= until ? r() : requestAnimationFrame(poll)); poll();
+    }), n);
     // at rest: soldier 0 got no new pose for a second (an idle soldier costs no update, PROTOCOL.md §8.4)
     const settled = () => page.waitForFunction(() => {
       const s = ttes.soldiers[0], now = performance.now();
@@ -57,7 +65,31 @@ async function main() {
       await settled(); // lying still on the ground
       await page.screenshot({ path: `${arg}/prone.png` });
       const after = await state();
-      console.log(JSON.stringify({ before, after, console: console_ }));
+      await page.keyboard.press("x");
+      await frames(2);
+      await page.screenshot({ path: `${arg}/action.png` });
+      const action = await state();
+      await page.keyboard.press("f");
+      await frames(1);
+      const fly = await state();
+      await page.keyboard.press("w");
+      await frames(1);
+      const forward = await state();
+      await page.keyboard.press("v");
+      const next = await state();
+      console.log(JSON.stringify({ before, after, action, fly, forward, next, console: console_ }));
+    } else if (mode === "forces") {
+      const shots = {};
+      for (const force of [1, 2]) {
+        await page.waitForFunction((f) => ttes.soldiers.some((s) => s.force === f && s.posed > 0), { timeout: WAIT_MS, polling: 200 }, force);
+        while (await page.evaluate((f) => ttes.soldiers[ttes.current].force !== f, force)) await page.keyboard.press("n");
+        await page.keyboard.press("c");
+        await frames(3);
+        await page.screenshot({ path: `${arg}/force-${force}.png` });
+        shots[force] = await state();
+      }
+      const s = await state();
+      console.log(JSON.stringify({ shots, soldiers: s.soldiers.length, updates: s.updates, errors: s.errors, console: console_ }));
     } else {
       const seconds = Number(arg || 5);
       await page.evaluate(() => new Promise((r) => setTimeout(r, 2000)));
