@@ -11,6 +11,7 @@ import os
 import shutil
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +67,9 @@ async def test_http_get_head_keep_alive_and_refusals() -> None:
     assert site.requests == 3
 
 
+VIEWPORT = (480, 360)  # the page's pixels: SwiftShader draws each on the CPU
+
+
 def _skip_without_browser() -> Path:
     if not Path(CHROMIUM).is_file():
         pytest.skip(f"no chromium at {CHROMIUM}")
@@ -91,12 +95,30 @@ def _extent(mask: np.ndarray) -> tuple[int, int]:
     return int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)
 
 
+@pytest.fixture(scope="module")
+def browser() -> Iterator[dict[str, str]]:
+    """One headless Chromium for the module's browser tests (each drives a page of it: a browser's start is
+    not paid per test): the drivers' environment (NODE_PATH, BROWSER_WS, VIEWPORT)."""
+    where = _skip_without_browser()
+    env = {**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM,
+           "VIEWPORT": "{}x{}".format(*VIEWPORT)}  # fmt: skip
+    cmd = ["node", str(TOOLS / "drive_web.js"), "browser"]
+    proc = subprocess.Popen(cmd, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert proc.stdin is not None and proc.stdout is not None
+    try:
+        endpoint = proc.stdout.readline().strip()
+        assert endpoint.startswith("ws://"), endpoint
+        yield {**env, "BROWSER_WS": endpoint}
+    finally:
+        proc.stdin.close()  # the browser closes
+        proc.wait(timeout=60)
+
+
 def _web_and_browser(
-    web_args: list[str], drive_args: list[str], cwd: Path, env: dict[str, str] | None = None
+    web_args: list[str], drive_args: list[str], cwd: Path, browser: dict[str, str]
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """`ttes web WEB_ARGS --port 0 --json` in a process, tests/tools/drive_web.js MODE URL ARGS... in
-    headless Chromium against it: (the ready line, what the driver printed)."""
-    where = _skip_without_browser()
+    a page of the module's headless Chromium against it: (the ready line, what the driver printed)."""
     cmd = [sys.executable, "-m", "ttes", "web", *web_args, "--port", "0", "--json"]
     env_web = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
     web = subprocess.Popen(
@@ -107,7 +129,7 @@ def _web_and_browser(
         ready = json.loads(web.stdout.readline())
         drive = subprocess.run(
             ["node", str(TOOLS / "drive_web.js"), drive_args[0], ready["url"], *drive_args[1:]],
-            env={**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM, **(env or {})},
+            env=browser,
             capture_output=True, text=True, timeout=300,
         )  # fmt: skip
         assert drive.returncode == 0, drive.stderr[-3000:]
@@ -118,8 +140,9 @@ def _web_and_browser(
 
 
 @pytest.mark.browser
-def test_the_page_draws_a_soldier_and_key_4_lays_him_prone(tmp_path: Path) -> None:
-    ready, got = _web_and_browser(["--with-server", "--soldiers", "1"], ["keys", str(tmp_path)], tmp_path)
+def test_the_page_draws_a_soldier_and_key_4_lays_him_prone(tmp_path: Path, browser: dict[str, str]) -> None:
+    web = ["--with-server", "--soldiers", "1"]
+    ready, got = _web_and_browser(web, ["keys", str(tmp_path)], tmp_path, browser)
     assert ready["event"] == "ready" and ready["server"].startswith("ws://127.0.0.1:")
     before, after = got["before"], got["after"]
     assert before["version"] == 2 and before["role"] == "controller" and not before["errors"], before
@@ -146,7 +169,7 @@ def _assert_the_view_keys(got: dict[str, Any], prone: np.ndarray, action_shot: n
     assert (action_shot != prone).sum() > 300
     assert action_shot.sum() > prone.sum(), (action_shot.sum(), prone.sum())
     x0, y0, x1, y1 = action["soldiers"][0]["box"]
-    assert 0 <= x0 < x1 <= 800 and 0 <= y0 < y1 <= 600, action["soldiers"][0]["box"]
+    assert 0 <= x0 < x1 <= VIEWPORT[0] and 0 <= y0 < y1 <= VIEWPORT[1], action["soldiers"][0]["box"]
     assert fly["camera"]["view"] == "fly" and fly["camera"]["position"] == pytest.approx([0, -60, 20])
     assert forward["camera"]["position"] == pytest.approx([0, -55, 20])
     assert got["next"]["camera"]["view"] == "action"  # the stub's order: ..., fly, ACTION CAM
@@ -248,17 +271,16 @@ def _inside(mask: np.ndarray, box: list[float]) -> int:
 
 
 @pytest.mark.browser
-def test_the_page_follows_a_dis_replay_coloured_by_force(tmp_path: Path) -> None:
+def test_the_page_follows_a_dis_replay_coloured_by_force(tmp_path: Path, browser: dict[str, str]) -> None:
     """`ttes web --replay LOG`: the page, an observer, draws every soldier the replay drives, posed by the
     server's updates and placed where the log puts them (entities.json), each in his DIS force's colour as
     the stub does: a friendly soldier (force 1) blue, an opposing one (force 2) red, from his tethered
     camera (screenshots force-1.png, force-2.png)."""
-    _skip_without_browser()  # before writing the log
     env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
     log = tmp_path / "squad.pcap"
     subprocess.run([sys.executable, "-m", "ttes", "dis", "synth", "--out", str(log), "--soldiers", "4",
                     "--seconds", "60"], env=env, check=True, capture_output=True, timeout=120)  # fmt: skip
-    _, got = _web_and_browser(["--replay", str(log)], ["forces", str(tmp_path)], tmp_path)
+    _, got = _web_and_browser(["--replay", str(log)], ["forces", str(tmp_path)], tmp_path, browser)
     assert got["soldiers"] == 4 and not got["errors"] and got["updates"] > 0, got
     forces = [s["force"] for s in got["shots"]["2"]["soldiers"]]
     assert sorted(set(forces)) == [1, 2], forces
@@ -280,7 +302,7 @@ def _free_port() -> int:
 
 
 def _start_server(port: int, ws_port: int, env: dict[str, str]) -> subprocess.Popen[str]:
-    cmd = [sys.executable, "-m", "ttes", "server", "--synthetic", "--json"]
+    cmd = [sys.executable, "-m", "ttes", "server", "--json"]  # the real data: starts in half the time
     cmd += ["--port", str(port), "--ws-port", str(ws_port)]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     assert proc.stdout is not None
@@ -289,10 +311,9 @@ def _start_server(port: int, ws_port: int, env: dict[str, str]) -> subprocess.Po
 
 
 @pytest.mark.browser
-def test_the_page_binds_its_soldiers_again_after_a_server_restart() -> None:
+def test_the_page_binds_its_soldiers_again_after_a_server_restart(browser: dict[str, str]) -> None:
     """The server goes away (SIGTERM: GOODBYE, close) and comes back on the same ports: the page retries with
     backoff, shakes hands again and binds its soldiers as they were (soldier 0 still asked to kneel)."""
-    where = _skip_without_browser()
     env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
     port, ws_port = _free_port(), _free_port()
     server = _start_server(port, ws_port, env)
@@ -317,7 +338,7 @@ def test_the_page_binds_its_soldiers_again_after_a_server_restart() -> None:
         url = json.loads(web.stdout.readline())["url"]
         drive = subprocess.Popen(
             ["node", str(TOOLS / "drive_web.js"), "reconnect", url],
-            env={**os.environ, "NODE_PATH": str(where / "node_modules"), "CHROMIUM": CHROMIUM},
+            env=browser,
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
         assert drive.stdout is not None
