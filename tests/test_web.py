@@ -191,6 +191,7 @@ def test_the_page_decodes_joint_updates_as_the_python_decoder(version: int, tmp_
     encoder's frames of the DI.fig-shaped table: the UPDATE_TABLE message, then JOINT_UPDATES of smooth
     motion, jumps, repeated and skipped ticks (v2's prediction), soldiers that come and go; the same codes as
     protocol.updates.UpdateDecoder, and the same decoded values. And the page's HELLO reads in Python."""
+    from protocol.events import Hello, UpdateTableMsg
     from protocol.framing import FrameReader
     from protocol.messages import CODECS, MessageType
     from protocol.update_table import example_di_table
@@ -214,8 +215,7 @@ def test_the_page_decodes_joint_updates_as_the_python_decoder(version: int, tmp_
         for p in enc.encode_codes(sent, codes[sent].astype(np.int32), tick, 1 << 16):
             payloads.append(p.hex())
             dec.decode(p)
-    msg_type, encode_table, _ = CODECS[MessageType.UPDATE_TABLE]
-    update_table = encode_table(msg_type(table)).hex()  # type: ignore[call-arg]
+    update_table = CODECS[MessageType.UPDATE_TABLE][1](UpdateTableMsg(table)).hex()
     case = tmp_path / "case.json"
     case.write_text(json.dumps({"version": version, "update_table": update_table, "payloads": payloads}))
     run = subprocess.run(["node", str(TOOLS / "check_wire.mjs"), str(case)], capture_output=True, text=True,
@@ -237,6 +237,7 @@ def test_the_page_decodes_joint_updates_as_the_python_decoder(version: int, tmp_
     kind, payload = frames.next_frame(1 << 24) or (0, b"")
     assert kind == MessageType.HELLO and frames.buffered == 0
     hello = CODECS[MessageType.HELLO][2](payload, 0)
+    assert isinstance(hello, Hello)
     assert (hello.name, hello.role, hello.version, hello.token) == ("ttes-web", "observer", version, "sésame")
     assert hello.max_frame == 1 << 24
 

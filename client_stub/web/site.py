@@ -16,7 +16,7 @@ never touches the protocol.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from email.utils import formatdate
 from pathlib import Path
@@ -44,7 +44,7 @@ class Site:
     terrain: Path = DEFAULT_TERRAIN
     requests: int = 0
     # the replayed soldiers' last requests (ENTITY_REQUEST_DTYPE) and DIS force ids (1 friendly, 2 opposing)
-    entities: Callable[[], tuple[Any, Sequence[int]]] | None = None
+    entities: Callable[[], tuple[Any, Any]] | None = None
 
     def resolve(self, target: str) -> Path | None:
         """The file a request path names, or None (outside the served folders, or missing)."""
@@ -128,7 +128,7 @@ class Site:
         await stream.send_all(conn.send(h11.EndOfMessage()) or b"")
 
 
-def entity_rows(rows: Any, forces: Sequence[int]) -> dict[str, Any]:
+def entity_rows(rows: Any, forces: Any) -> dict[str, Any]:
     """``{"soldiers": [[index, x, y, z, heading, vx, vy, vz, appearance, weapon, force], ...]}`` (metres,
     degrees, m/s, Performer axes; the DIS force id) from entity request rows and their soldiers' forces."""
     out = []
