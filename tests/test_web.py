@@ -146,6 +146,7 @@ def test_the_page_draws_a_soldier_and_key_4_lays_him_prone(tmp_path: Path, brows
     assert ready["event"] == "ready" and ready["server"].startswith("ws://127.0.0.1:")
     before, after = got["before"], got["after"]
     assert before["version"] == 2 and before["role"] == "controller" and not before["errors"], before
+    assert before["soldiers"][0]["force"] == 1 and before["soldiers"][0]["colour"] == 0x2F6FE0  # friendly
     assert before["soldiers"][0]["rootZ"] > 0.8 and after["soldiers"][0]["rootZ"] < 0.4
     assert after["soldiers"][0]["appearance"] == 4 and not after["errors"]
     standing, prone = _blue(tmp_path / "standing.png"), _blue(tmp_path / "prone.png")
@@ -173,6 +174,9 @@ def _assert_the_view_keys(got: dict[str, Any], prone: np.ndarray, action_shot: n
     assert fly["camera"]["view"] == "fly" and fly["camera"]["position"] == pytest.approx([0, -60, 20])
     assert forward["camera"]["position"] == pytest.approx([0, -55, 20])
     assert got["next"]["camera"]["view"] == "action"  # the stub's order: ..., fly, ACTION CAM
+    firsts = [line.split()[0] for line in got["help"].splitlines()]  # ?: every key the stub has
+    for keys in ("1", "5", "n", "a", "A", "u", "i", "o", "b", "x", "w", "q", "r", "←", "↑", "?"):
+        assert keys in firsts, (keys, got["help"])
 
 
 @pytest.mark.skipif(shutil.which("node") is None, reason="needs node")

@@ -105,8 +105,10 @@ async function main() {
       const forward = await state();
       await page.keyboard.press("v");
       const next = await state();
+      await page.keyboard.press("?");
+      const help = await page.evaluate(() => { const h = document.getElementById("help"); return h.hidden ? "" : h.textContent; });
       mark("views");
-      console.log(JSON.stringify({ before, after, action, fly, forward, next, console: console_ }));
+      console.log(JSON.stringify({ before, after, action, fly, forward, next, help, console: console_ }));
     } else if (mode === "forces") {
       const shots = {};
       for (const force of [1, 2]) {

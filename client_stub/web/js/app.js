@@ -10,6 +10,7 @@ import { APPEARANCE, Deframer, T, UpdateTable, WEAPON, applyJointUpdates, contro
 const KEYS = [
   ["1 2 3 4", "posture DEAD / STANDING / KNEELING / PRONE on the current soldier"],
   ["5 6", "weapon DEPLOYED / FIRING"], ["n p", "next / previous soldier"], ["a", "add a soldier near the office"],
+  ["A", "add a Jack controlled soldier (reactive behaviours: not implemented)"],
   ["u d", "tethered camera away / towards by 5 m"], ["i j", "rotate the tethered camera ±10°"],
   ["o", "overhead view"], ["b c f v", "view: bird's eye / soldier cam / fly / next view"],
   ["x", "ACTION CAM: the current soldier and the soldiers near him, framed"],
@@ -305,8 +306,9 @@ function key(ev) {
     const s2 = newSoldier([ox + (n % 5) * 2.5 - 5, oy - (Math.floor(n / 5) % 4) * 2.5]);
     create(s2); state.current = state.soldiers.length - 1; say(`added soldier ${state.current} near the office building`);
   } else if ("udijo".includes(k.toLowerCase()) && k.length === 1) tether(k.toLowerCase());
-  else if ("bcfvx".includes(k) && k.length === 1) view(k);
-  else if (FLY_KEYS[k] && state.view === "fly") fly(...FLY_KEYS[k]);
+  else if (k === "A") say("Jack controlled soldiers (reactive behaviours) are not implemented");
+  else if ("bcfvx".includes(k.toLowerCase()) && k.length === 1) view(k.toLowerCase());
+  else if (FLY_KEYS[k.toLowerCase()] && state.view === "fly") fly(...FLY_KEYS[k.toLowerCase()]);
   else if (k === "?") document.getElementById("help").hidden = !document.getElementById("help").hidden;
   else return;
   ev.preventDefault();
