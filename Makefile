@@ -21,8 +21,8 @@ demo: $(STAMP)
 test: lint
 	$(PY) -m pytest -q
 
-# three.js for the browser image generator (ttes web): npm installs client_stub/web/package.json's pinned
-# version, the page's files are copied to client_stub/web/vendor/ (not committed; the wheel's build does it too).
+# three.js and @msgpack/msgpack for the browser image generator (ttes web): npm installs client_stub/web/package.json's
+# pinned versions, the page's files are copied to client_stub/web/vendor/ (not committed; the wheel's build does it too).
 vendor:
 	$(PYTHON) client_stub/web/vendor.py
 

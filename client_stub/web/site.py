@@ -2,11 +2,12 @@
 
 h11 over trio streams, GET and HEAD only, keep-alive. What it serves, and nothing else:
 
-* ``/`` and ``/index.html``, ``/js/*.js``, ``/vendor/...`` (three.js, :mod:`client_stub.web.vendor`);
+* ``/`` and ``/index.html``, ``/js/*.js``, ``/vendor/...`` (three.js, msgpack: :mod:`client_stub.web.vendor`);
 * ``/data/village.glb`` and ``/data/village.json``: the stub's terrain and its landmarks;
 * ``/config.json``: where the page connects (the server's WebSocket URL) and its defaults (soldiers, version);
-* ``/entities.json`` while ``ttes web --replay`` drives the server: where each replayed soldier is (the wire
-  carries no entity positions: a page that only watches could not place them).
+* ``/entities.json`` while ``ttes web --replay`` drives the server: where each replayed soldier is and his DIS
+  force (the wire carries neither entity positions nor forces: a page that only watches could not place them,
+  nor colour them by force as the stub does).
 
 The page then talks to the Jack/TTES server's WebSocket port itself (docs/PROTOCOL.md §2.1): this process
 never touches the protocol.
@@ -27,8 +28,9 @@ import trio
 from client_stub.data_paths import DEFAULT_TERRAIN
 
 WEB = Path(__file__).resolve().parent
-TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
-         ".json": "application/json", ".glb": "model/gltf-binary"}  # fmt: skip
+JS = "text/javascript; charset=utf-8"
+TYPES = {".html": "text/html; charset=utf-8", ".js": JS, ".mjs": JS, ".json": "application/json",
+         ".glb": "model/gltf-binary"}  # fmt: skip
 MAX_REQUEST = 16384  # bytes of request head (h11's incomplete-event limit)
 IDLE_TIMEOUT_S = 30.0
 
@@ -41,7 +43,8 @@ class Site:
     root: Path = WEB
     terrain: Path = DEFAULT_TERRAIN
     requests: int = 0
-    entities: Callable[[], Any] | None = None  # the replayed soldiers' last requests (ENTITY_REQUEST_DTYPE)
+    # the replayed soldiers' last requests (ENTITY_REQUEST_DTYPE) and DIS force ids (1 friendly, 2 opposing)
+    entities: Callable[[], tuple[Any, Any]] | None = None
 
     def resolve(self, target: str) -> Path | None:
         """The file a request path names, or None (outside the served folders, or missing)."""
@@ -69,11 +72,11 @@ class Site:
         if path == "/config.json":
             return 200, TYPES[".json"], json.dumps(self.config).encode()
         if path == "/entities.json" and self.entities is not None:
-            return 200, TYPES[".json"], json.dumps(entity_rows(self.entities())).encode()
+            return 200, TYPES[".json"], json.dumps(entity_rows(*self.entities())).encode()
         found = self.resolve(target)
         if found is None:
             if target.startswith("/vendor/"):
-                text = b"three.js is not vendored: run `make vendor` (npm) in the checkout\n"
+                text = b"three.js and msgpack are not vendored: run `make vendor` (npm) in the checkout\n"
                 return 404, "text/plain; charset=utf-8", text
             return 404, "text/plain; charset=utf-8", b"not found\n"
         return 200, TYPES[found.suffix], found.read_bytes()
@@ -125,14 +128,14 @@ class Site:
         await stream.send_all(conn.send(h11.EndOfMessage()) or b"")
 
 
-def entity_rows(rows: Any) -> dict[str, Any]:
-    """``{"soldiers": [[index, x, y, z, heading, vx, vy, vz, appearance, weapon], ...]}`` (metres, degrees,
-    m/s, Performer axes) from entity request rows."""
+def entity_rows(rows: Any, forces: Any) -> dict[str, Any]:
+    """``{"soldiers": [[index, x, y, z, heading, vx, vy, vz, appearance, weapon, force], ...]}`` (metres,
+    degrees, m/s, Performer axes; the DIS force id) from entity request rows and their soldiers' forces."""
     out = []
-    for r in rows:
+    for r, force in zip(rows, forces, strict=True):
         p, v = r["position"], r["velocity"]
         out.append([int(r["index"]), *(round(float(x), 3) for x in (*p, r["heading"], *v)),
-                    int(r["appearance"]), int(r["weapon"])])  # fmt: skip
+                    int(r["appearance"]), int(r["weapon"]), int(force)])  # fmt: skip
     return {"soldiers": out}
 
 

@@ -3,8 +3,9 @@
 Open the printed URL in a browser. The page connects to the Jack/TTES server's WebSocket port (`ttes server
 --ws-port N`, docs/PROTOCOL.md section 2.1), takes --soldiers soldiers (the start-up script's first, then
 CREATE_SOLDIER), draws the village and every soldier from the server's FIGURE message, and answers the stub's
-keys (1-4 posture, 5-6 weapon, arrows, n/p, a, u/d/i/j/o camera; ? lists them). URL parameters override the
-defaults: ?soldiers=100&version=1&motion=walk&role=observer&ws=ws://host:port/.
+keys (1-4 posture, 5-6 weapon, arrows, n/p, a, u/d/i/j/o camera, b/c/f/v/x views, w/s/q/e/r/g fly; ? lists
+them). URL parameters override the defaults: ?soldiers=100&version=1&motion=walk&role=observer&view=action&
+ws=ws://host:port/.
 
 --replay LOGFILE (a pcap/pcapng/.dislog of DIS, as `ttes replay` reads) replays it into the private server
 while the page watches as an observer: every replayed soldier where the log puts him, posed by the server.
@@ -106,7 +107,7 @@ def _replayer(args: argparse.Namespace) -> Any:
 
 async def _replay(nursery: Any, server: Any, replayer: Any, site: Any) -> None:
     """Drive the private server with the replay (as ``ttes replay --no-stub``); the site tells the page where
-    the soldiers are."""
+    the soldiers are, and their DIS force (the page colours them by it)."""
     from client_stub.dis.drive import replay_to_server
     from client_stub.dis.sink import ServerSink
     from client_stub.link.client import Client
@@ -115,7 +116,7 @@ async def _replay(nursery: Any, server: Any, replayer: Any, site: Any) -> None:
     host, port = server.addresses[0]
     await link.open(nursery, host, port)
     sink = ServerSink(link)
-    site.entities = sink.live_requests
+    site.entities = lambda: (sink.live_requests(), replayer.translator.force[sink.live_slots()])
     await replay_to_server(replayer, sink, finish=False)
 
 

@@ -10,13 +10,19 @@ import { APPEARANCE, Deframer, T, UpdateTable, WEAPON, applyJointUpdates, contro
 const KEYS = [
   ["1 2 3 4", "posture DEAD / STANDING / KNEELING / PRONE on the current soldier"],
   ["5 6", "weapon DEPLOYED / FIRING"], ["n p", "next / previous soldier"], ["a", "add a soldier near the office"],
+  ["A", "add a Jack controlled soldier (reactive behaviours: not implemented)"],
   ["u d", "tethered camera away / towards by 5 m"], ["i j", "rotate the tethered camera ±10°"],
-  ["o", "overhead view"], ["b c", "bird's eye / soldier cam"], ["← →", "heading −10 / +10°"],
-  ["↑ ↓", "velocity +0.5 / −0.5 m/s"], ["?", "show or hide this list"],
+  ["o", "overhead view"], ["b c f v", "view: bird's eye / soldier cam / fly / next view"],
+  ["x", "ACTION CAM: the current soldier and the soldiers near him, framed"],
+  ["w s", "fly: forward / back 5 m"], ["q e", "fly: turn −10 / +10°"], ["r g", "fly: up / down 2 m"],
+  ["← →", "heading −10 / +10°"], ["↑ ↓", "velocity +0.5 / −0.5 m/s"], ["?", "show or hide this list"],
 ];
 const POSTURE_KEYS = { 1: APPEARANCE.DEAD, 2: APPEARANCE.UPRIGHT, 3: APPEARANCE.KNEEL, 4: APPEARANCE.PRONE };
 const WEAPON_KEYS = { 5: WEAPON.DEPLOYED, 6: WEAPON.FIRING };
 const NAMES = Object.fromEntries(Object.entries(APPEARANCE).map(([k, v]) => [v, k]));
+// the stub's views in the order `v` steps through them (client_stub/stub/keys.py), and fly mode's moves
+const VIEWS = ["birds-eye", "soldier", "overhead", "fly", "action"];
+const FLY_KEYS = { w: [5, 0, 0], s: [-5, 0, 0], q: [0, 0, -10], e: [0, 0, 10], r: [0, 2, 0], g: [0, -2, 0] }; // forward, up, turn
 
 const state = (window.ttes = {
   status: "starting", version: 0, role: "", accepted: false, ready: false, errors: [], log: [],
@@ -48,11 +54,16 @@ const sun = new THREE.DirectionalLight(0xffffff, 2.0);
 sun.position.set(40, -30, 80);
 scene.add(sun);
 const materials = {
-  soldier: new THREE.MeshLambertMaterial({ color: 0x2f6fe0 }), // friendly blue: the tests look for it
+  soldier: new THREE.MeshLambertMaterial({ color: 0xffffff }), // each soldier's body: his force's colour
   rifle: new THREE.MeshLambertMaterial({ color: 0x303030 }),
 };
+// uniforms by DIS force id (entities.json; the page's own soldiers are friendly), three looks as the stub's
+// replay (client_stub/dis/soldiers.py): friendly blue (the tests look for it), opposing brick red, others slate
+const FORCE = { FRIENDLY: 1, OPPOSING: 2 };
+const FORCE_COLOURS = { [FORCE.FRIENDLY]: 0x2f6fe0, [FORCE.OPPOSING]: 0xa82a1a, other: 0x8a8a80 };
+const forceColour = (force) => FORCE_COLOURS[force] ?? FORCE_COLOURS.other;
 const crowd = new Crowd(scene, materials);
-const cam = { distance: 9, azimuth: 200, elevation: 18 };
+const cam = { distance: 9, azimuth: 200, elevation: 18, fly: { position: [0, -60, 20], heading: 0, pitch: -15 }, action: null };
 let ground = null; // {x0, y0, step, n, heights}: the village's ground grid, for feet on the terrain
 let landmarks = { office: [34, -33], groups: { friendly: [-8, -8] } };
 
@@ -212,7 +223,7 @@ async function follow() {
   let rows = [];
   try { rows = (await (await fetch(cfg.entities)).json()).soldiers; } catch { /* ttes web gone: keep going */ }
   const seen = new Set();
-  for (const [index, x, y, , heading, vx, vy, , appearance, weapon] of rows) {
+  for (const [index, x, y, , heading, vx, vy, , appearance, weapon, force] of rows) {
     seen.add(index);
     let s = bySoldier.get(index);
     if (!s) {
@@ -222,6 +233,7 @@ async function follow() {
       send(control(T.SUBSCRIBE, { indices: [index] }));
     }
     Object.assign(s, { heading, appearance, weapon, vel: [vx, vy] });
+    if (force !== undefined && force !== s.force) { s.force = force; colour(s); }
     s.position = [x, y, groundZ(x, y)];
     s.figure?.place(heading, s.position);
   }
@@ -232,7 +244,7 @@ async function follow() {
 
 function newSoldier(xy) {
   const s = { index: -1, table: -1, request: 0, appearance: APPEARANCE.UPRIGHT, weapon: WEAPON.STOWED, heading: 0, speed: 0,
-    position: [xy[0], xy[1], groundZ(xy[0], xy[1])], figure: null, rootZ: null, posed: 0 };
+    position: [xy[0], xy[1], groundZ(xy[0], xy[1])], figure: null, rootZ: null, posed: 0, force: FORCE.FRIENDLY };
   state.soldiers.push(s);
   return s;
 }
@@ -254,9 +266,15 @@ function attach(s) {
   const set = figures.get(s.table);
   if (s.figure || !set) return;
   s.figure = new SoldierFigure(set);
+  colour(s);
   s.figure.place(s.heading, s.position);
   crowd.add(s.figure);
   if (tables.get(s.table).soldiers.has(s.index)) dirty.add(s.index);
+}
+
+function colour(s) {
+  s.colour = forceColour(s.force);
+  if (s.figure) { s.figure.colour.setHex(s.colour); s.figure.changed = true; }
 }
 
 function velocity(s) {
@@ -288,7 +306,9 @@ function key(ev) {
     const s2 = newSoldier([ox + (n % 5) * 2.5 - 5, oy - (Math.floor(n / 5) % 4) * 2.5]);
     create(s2); state.current = state.soldiers.length - 1; say(`added soldier ${state.current} near the office building`);
   } else if ("udijo".includes(k.toLowerCase()) && k.length === 1) tether(k.toLowerCase());
-  else if (k === "b" || k === "c") { state.view = k === "b" ? "birds-eye" : "soldier"; say(`view: ${state.view}`); }
+  else if (k === "A") say("Jack controlled soldiers (reactive behaviours) are not implemented");
+  else if ("bcfvx".includes(k.toLowerCase()) && k.length === 1) view(k.toLowerCase());
+  else if (FLY_KEYS[k.toLowerCase()] && state.view === "fly") fly(...FLY_KEYS[k.toLowerCase()]);
   else if (k === "?") document.getElementById("help").hidden = !document.getElementById("help").hidden;
   else return;
   ev.preventDefault();
@@ -304,8 +324,64 @@ function tether(k) {
   say(`camera ${state.view}: ${cam.distance} m, azimuth ${cam.azimuth}, elevation ${cam.elevation}`);
 }
 
+// b c f v x: as the stub's (client_stub/stub/keys.py); a new ACTION CAM cuts to its framing (no glide)
+function view(k) {
+  const next = { b: "birds-eye", c: "soldier", f: "fly", x: "action" }[k] || VIEWS[(VIEWS.indexOf(state.view) + 1) % VIEWS.length];
+  state.view = next; cam.action = null;
+  say(`view: ${state.view}`);
+}
+
+function fly(forward, up, turn) {
+  const f = cam.fly, h = THREE.MathUtils.degToRad((f.heading = (f.heading + turn + 360) % 360));
+  f.position = [f.position[0] + forward * Math.sin(h), f.position[1] + forward * Math.cos(h), f.position[2] + up];
+  say(`fly: ${f.position.map((x) => x.toFixed(0)).join(" ")}, heading ${f.heading}`);
+}
+state.camera = () => ({ view: state.view, position: camera.position.toArray(), fly: cam.fly });
+
+// ACTION CAM (client_stub/stub/camera.py frame_points): from compass 200°, 35° up, as near as keeps the
+// current soldier and every soldier within 10 m of him inside the middle 85 % of the picture; eased
+const ACTION = { radius: 10, compass: 200, elevation: 35, fill: 0.85, ease: 0.2, cut: 15, nearest: 4 };
+const _box = new THREE.Box3();
+function actionBox(s) {
+  const near = state.soldiers.filter((o) => o.figure && o.index >= 0
+    && Math.hypot(o.position[0] - s.position[0], o.position[1] - s.position[1]) <= ACTION.radius);
+  const all = new THREE.Box3();
+  for (const o of near.length ? near : [s]) { // a figure without surfaces (or none yet): his entity, 1.9 m tall
+    const b = o.figure ? crowd.box(o.figure, _box) : _box.makeEmpty();
+    if (b.isEmpty()) b.setFromPoints([new THREE.Vector3(...o.position), new THREE.Vector3(o.position[0], o.position[1], o.position[2] + 1.9)]);
+    all.union(b);
+  }
+  return all;
+}
+
+function aimAction(s) {
+  const target = actionBox(s), mid = target.getCenter(new THREE.Vector3());
+  if (!cam.action || cam.action.getCenter(new THREE.Vector3()).distanceTo(mid) > ACTION.cut) cam.action = target.clone();
+  else { cam.action.min.lerp(target.min, ACTION.ease); cam.action.max.lerp(target.max, ACTION.ease); }
+  const centre = cam.action.getCenter(new THREE.Vector3());
+  const el = THREE.MathUtils.degToRad(ACTION.elevation), az = THREE.MathUtils.degToRad(ACTION.compass);
+  const back = new THREE.Vector3(Math.cos(el) * Math.sin(az), Math.cos(el) * Math.cos(az), Math.sin(el));
+  const right = new THREE.Vector3().crossVectors(back.clone().negate(), camera.up).normalize();
+  const up = new THREE.Vector3().crossVectors(right, back.clone().negate());
+  const tanY = ACTION.fill * Math.tan(THREE.MathUtils.degToRad(camera.fov) / 2), tanX = camera.aspect * tanY;
+  let distance = ACTION.nearest;
+  for (let c = 0; c < 8; c++) {
+    const q = new THREE.Vector3(c & 1 ? cam.action.max.x : cam.action.min.x, c & 2 ? cam.action.max.y : cam.action.min.y, c & 4 ? cam.action.max.z : cam.action.min.z).sub(centre);
+    distance = Math.max(distance, Math.max(Math.abs(q.dot(right)) / tanX, Math.abs(q.dot(up)) / tanY) + q.dot(back));
+  }
+  camera.position.copy(centre).addScaledVector(back, distance);
+  camera.lookAt(centre);
+}
+
 function aimCamera() {
   const s = state.soldiers[state.current];
+  if (state.view === "fly") {
+    const f = cam.fly, h = THREE.MathUtils.degToRad(f.heading), p = THREE.MathUtils.degToRad(f.pitch);
+    camera.position.set(...f.position);
+    camera.lookAt(f.position[0] + Math.cos(p) * Math.sin(h), f.position[1] + Math.cos(p) * Math.cos(h), f.position[2] + Math.sin(p));
+    return;
+  }
+  if (state.view === "action" && s) { aimAction(s); return; }
   if (state.view === "birds-eye" || !s) {
     camera.position.set(0, -160, 140); camera.lookAt(0, 0, 0); return;
   }

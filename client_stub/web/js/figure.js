@@ -2,7 +2,8 @@
 // parented as the segment tree; a pose (§8) sets the joint products D(s) and the figure roots F; the entity's
 // heading and position set E (§10). Axes are the wire's: metres, +Z up. The meshes are drawn instanced
 // (Crowd): one draw per segment of a figure set for all its soldiers, each soldier's segment world matrices
-// written into the instance buffers when he moved, so a thousand soldiers are ~20 draws, not 20,000.
+// written into the instance buffers when he moved, so a thousand soldiers are ~20 draws, not 20,000. A
+// soldier's body takes his colour (his force's: SoldierFigure.colour) as an instance colour; rifles keep theirs.
 import * as THREE from "three";
 
 const m4 = (t) => new THREE.Matrix4().set(t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8], t[9], t[10], t[11], 0, 0, 0, 1);
@@ -50,6 +51,7 @@ export class SoldierFigure {
     this.entity = new THREE.Group();
     this.entity.matrixAutoUpdate = false;
     this.roots = []; this.nodes = [];
+    this.colour = new THREE.Color(0xffffff); // the body's colour (times the body material's): set by the page
     for (const f of set.figures) {
       const root = new THREE.Group();
       root.matrixAutoUpdate = false;
@@ -121,7 +123,7 @@ export class Crowd {
       mesh.frustumCulled = false; // the instances span the village: no one bounding sphere
       mesh.count = 0;
       this.scene.add(mesh);
-      b.parts.push({ fi, k, mesh });
+      b.parts.push({ fi, k, mesh, body: f.name === "soldier" });
     }));
     for (const s of b.soldiers) s.changed = true;
   }
@@ -133,12 +135,16 @@ export class Crowd {
       for (const s of b.soldiers) {
         if (!s.changed) continue;
         s.entity.updateMatrixWorld(true);
-        for (const p of b.parts) p.mesh.setMatrixAt(s.slot, s.nodes[p.fi][p.k].matrixWorld);
+        for (const p of b.parts) {
+          p.mesh.setMatrixAt(s.slot, s.nodes[p.fi][p.k].matrixWorld);
+          if (p.body) p.mesh.setColorAt(s.slot, s.colour);
+        }
         s.changed = false; dirty = true;
       }
       for (const p of b.parts) {
         p.mesh.count = b.soldiers.length;
         if (dirty) p.mesh.instanceMatrix.needsUpdate = true;
+        if (dirty && p.mesh.instanceColor) p.mesh.instanceColor.needsUpdate = true;
       }
     }
   }

@@ -1,7 +1,8 @@
 // A TTES client of the wire, written from docs/PROTOCOL.md alone: framing (§2, over WebSocket §2.1), HELLO /
 // ACCEPT (§3), the control messages it needs (§5), entity requests (§6), update tables and their quantisation
-// (§7, §7.1), FIGURE (§7.2) and JOINT_UPDATES versions 1 (§8.1–8.3) and 2 (§8.5). No three.js here.
-import { decode, encode } from "./msgpack.js";
+// (§7, §7.1), FIGURE (§7.2) and JOINT_UPDATES versions 1 (§8.1–8.3) and 2 (§8.5). No three.js here. msgpack
+// (§1) is @msgpack/msgpack's ESM build, vendored (client_stub/web/vendor.py); a relative path, so node runs this too.
+import { decode, encode } from "../vendor/msgpack/index.mjs";
 
 export const T = {
   HELLO: 0x01, ACCEPT: 0x02, ERROR: 0x03, GOODBYE: 0x04, PING: 0x05, PONG: 0x06, JCL: 0x10, READY: 0x11,
