@@ -80,6 +80,10 @@ async function loadVillage() {
   try { landmarks = await (await fetch("data/village.json")).json(); } catch { /* defaults */ }
   const gltf = await new GLTFLoader().loadAsync("data/village.glb");
   gltf.scene.rotation.x = Math.PI / 2; // glTF's +Y up → the wire's +Z up: (x, y, z) → (x, −z, y)
+  // village.glb names no material, so the loader gives glTF's default: fully metallic, which with no environment
+  // map reflects no diffuse light (walls facing away from the sun drew black); a matte one, its vertex colours
+  const matte = new THREE.MeshStandardMaterial({ vertexColors: true, metalness: 0, roughness: 0.9, flatShading: true });
+  gltf.scene.traverse((o) => { if (o.isMesh) o.material = matte; });
   scene.add(gltf.scene);
   const mesh = gltf.scene.getObjectByName("ground");
   if (mesh && mesh.geometry) ground = heightGrid(mesh.geometry.attributes.position);
