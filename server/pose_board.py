@@ -156,6 +156,7 @@ class PoseBoard:
         Jack-unit arrays keep their last values for these rows."""
         self.serial += 1
         self.ticks = self.tick = tick
+        self.tick_serial = self.serial  # every row of it is labelled ``tick`` (labels)
         if len(rows) == 0:
             return 0
         rows = np.asarray(rows, np.int64)
