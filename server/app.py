@@ -8,9 +8,12 @@ Structure (one trio nursery):
 * per client a **reader** (bytes → protocol events → the world) and a **writer** (control queue + the
   latest poses, encoded against what that client last received) — see :mod:`server.session` for why memory
   stays bounded and a stalled client cannot slow anyone else;
-* an **answer loop** gives soldiers with new requests an out-of-cycle update as soon as the readers have
-  handled what arrived (:meth:`TtesServer.answer_requests`, ``SoldierManager.answer``), so the update that
-  reflects a request does not wait for the next tick (issue 16: one-tick latency);
+* soldiers with new requests get an out-of-cycle update as soon as their reader has handled them
+  (:meth:`TtesServer.answer_requests`, ``SoldierManager.answer``), so the update that reflects a request does
+  not wait for the next tick (issue 16: one-tick latency). The tick and the writers **let the readers in**
+  first (:meth:`TtesServer.let_readers_in`): a request that arrived during the tick's work is applied and
+  answered before the writers encode that tick (its answer goes out with the tick's frames), and one that
+  arrived just before a tick is answered before the tick samples;
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
 * **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
   :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
@@ -89,7 +92,6 @@ class TtesServer:
         self._published_ticks = 0
         self._counted_tick = -1  # the wire tick last counted in _published_ticks
         self._shutdown = trio.Event()
-        self._answer_wanted = trio.Event()
         self._requests_seen = 0  # the manager's request and reaction count at the last answer
         self.answers = 0  # out-of-cycle publishes
         self.next_tick = 0.0  # server time of the next scheduled tick (what an answer samples at)
@@ -240,7 +242,6 @@ class TtesServer:
             self._cancel = nursery.cancel_scope
             self._nursery = nursery
             nursery.start_soon(self._tick_loop)
-            nursery.start_soon(self._answer_loop)
             nursery.start_soon(self._status_loop)
             nursery.start_soon(
                 self._accept_all,
@@ -414,6 +415,7 @@ class TtesServer:
                 else:  # updates held back by the connection's own throttle: write them when due
                     with trio.move_on_at(self._t0 + session.retry_at):
                         await session.wake.wait()
+                await self.let_readers_in()  # their answers go out in this write
                 session.wake = trio.Event()
                 data = session.take_output(self.now())
                 session.drained.set()
@@ -443,6 +445,7 @@ class TtesServer:
         while True:
             self.next_tick = next_t - self._t0
             await trio.sleep_until(next_t)
+            await self.let_readers_in()  # answers to requests just before the tick go out before it samples
             self.tick(next_t - self._t0)
             next_t += period
             now = trio.current_time()
@@ -451,6 +454,15 @@ class TtesServer:
                 self.ticks_skipped += skipped
                 next_t += skipped * period
                 self.tick_overruns += 1
+
+    @staticmethod
+    async def let_readers_in() -> None:
+        """Two passes of the scheduler. Trio polls the sockets between its batches of runnable tasks and runs
+        a batch in either order: after the first pass the readers with bytes waiting (and the writers woken)
+        are in this task's batch, after the second they have run. So what arrived during a long step is
+        handled, and answered, before the next long step starts."""
+        await trio.lowlevel.checkpoint()
+        await trio.lowlevel.checkpoint()
 
     def tick(self, scheduled: float | None = None) -> None:
         """One server tick: advance + sample every soldier, publish the poses, wake the writers.
@@ -498,14 +510,7 @@ class TtesServer:
         seen = int(m.stats["requests"] + m.stats["reactions"]) if m is not None else self._requests_seen
         if seen != self._requests_seen:
             self._requests_seen = seen
-            self._answer_wanted.set()
-
-    async def _answer_loop(self) -> None:
-        while True:
-            await self._answer_wanted.wait()
-            self._answer_wanted = trio.Event()
-            await trio.sleep(0)  # let the other readers with bytes waiting hand theirs in first: one answer
-            self.answer_requests()
+            self.answer_requests()  # by the reader that handled them, before anything else runs
 
     def answer_requests(self) -> None:
         """Between ticks: publish the next tick's update early for the soldiers whose requests changed what

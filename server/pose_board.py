@@ -38,7 +38,9 @@ class PoseBoard:
     publishes. An out-of-cycle publish (:meth:`TtesServer.answer_requests`: the next tick's update of the
     soldiers with new requests, released early) bumps ``serial`` and labels its frames with that next tick,
     so a client sees every tick once, in order, and the tick that follows sends those soldiers only if their
-    pose changed again.
+    pose changed again. ``tick_serial`` is the serial of the tick loop's last publish: a writer that encodes
+    after an answer was published labels the rows of that tick with ``ticks`` and only the answered rows
+    (``version > tick_serial``) with the next tick (:meth:`labels`).
     """
 
     def __init__(self, ndofs: int, nfigs: int, capacity: int = 64) -> None:
@@ -46,6 +48,7 @@ class PoseBoard:
         self.tick = 0
         self.ticks = 0  # the tick loop's publishes
         self.serial = 0  # publishes, in and out of cycle: what versions count
+        self.tick_serial = 0  # the serial of the tick loop's last publish
         self.capacity = 0
         self.dofs = np.zeros((0, ndofs))
         self.positions = np.zeros((0, nfigs, 3))
@@ -98,6 +101,11 @@ class PoseBoard:
             self.valid[index] = False
             self.table_of[index] = -1
 
+    def labels(self, indices: np.ndarray) -> np.ndarray:
+        """The wire tick of each soldier's pose on the board: the tick loop's last tick, or the next tick for
+        a soldier answered since (an out-of-cycle publish)."""
+        return self.ticks + (self.version[indices] > self.tick_serial)
+
     def publish(self, update: TickUpdate, world: ServerWorld, *, between: bool = False) -> int:
         """Take one tick's poses (converted and quantised per figure set); returns the number of soldiers
         whose codes changed (0: nothing for any client to send). ``between``: an out-of-cycle update, the
@@ -105,6 +113,7 @@ class PoseBoard:
         self.serial += 1
         if not between:
             self.ticks += 1
+            self.tick_serial = self.serial
         self.tick = self.ticks + 1 if between else self.ticks
         n = len(update)
         if n == 0:
@@ -119,7 +128,7 @@ class PoseBoard:
         for k, sel in enumerate(groups):
             if len(sel) == 0:
                 continue
-            part = update if len(sel) == n else _select(update, sel)
+            part = update if len(sel) == n else update.select(sel)
             ju = sets[k].converter.convert(part)
             table = sets[k].table
             rows = idx[sel]
@@ -147,6 +156,7 @@ class PoseBoard:
         Jack-unit arrays keep their last values for these rows."""
         self.serial += 1
         self.ticks = self.tick = tick
+        self.tick_serial = self.serial  # every row of it is labelled ``tick`` (labels)
         if len(rows) == 0:
             return 0
         rows = np.asarray(rows, np.int64)
@@ -188,17 +198,6 @@ def _quantise_rows(
         full = np.zeros((len(dofs), q.shape[1]), np.int32)
         full[ok] = q
         return full, ok
-
-
-def _select(update: TickUpdate, sel: np.ndarray) -> TickUpdate:
-    return TickUpdate(
-        update.indices[sel],
-        update.joints[sel],
-        update.figures[sel],
-        update.heading_only[sel],
-        now=update.now,
-        tick=update.tick,
-    )
 
 
 class BoardRef:

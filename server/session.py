@@ -219,10 +219,14 @@ class Session:
             return b""
         self.force[idx] = False
         tables = board.table_of[idx]
+        ticks = board.labels(idx)  # the tick's rows, then the rows answered since (the next tick's), in order
         chunks = []
-        for t in np.unique(tables).tolist():
-            rows = idx if len(tables) == 1 or (tables == t).all() else idx[tables == t]
-            chunks.append(self.conn.send_update_codes(t, rows, board.codes[rows], board.tick, board.serial))
+        for tick in np.unique(ticks).tolist():
+            for t in np.unique(tables).tolist():
+                sel = (tables == t) & (ticks == tick)
+                rows = idx if sel.all() else idx[sel]
+                if len(rows):
+                    chunks.append(self.conn.send_update_codes(t, rows, board.codes[rows], tick, board.serial))
         data = b"".join(chunks)
         if data:
             self.batches_out += 1

@@ -182,3 +182,15 @@ def test_clients_share_encodes_and_each_gets_the_float_paths_bytes() -> None:
     assert encodes.hits > encodes.misses, (encodes.hits, encodes.misses)
     states = [p.session.conn._encoders[1].state for p in pairs]
     assert states[0] == states[1] == states[3] != states[2]  # the late joiner joined after its keyframe
+
+
+def test_a_fed_publish_labels_its_rows_with_the_tick_it_names() -> None:
+    """A front-end's board (``publish_codes``, no tick loop of its own) labels what it sends with the tick
+    each publish names, not one more (``PoseBoard.labels``)."""
+    from server.pose_board import PoseBoard
+
+    board = PoseBoard(4, 2)
+    board.publish_codes(np.array([0, 1]), np.array([1, 1]), np.zeros((2, 3), np.int32), 7)
+    assert board.labels(np.array([0, 1])).tolist() == [7, 7]
+    board.publish_codes(np.array([1]), np.array([1]), np.ones((1, 3), np.int32), 8)
+    assert board.labels(np.array([0, 1])).tolist() == [8, 8]

@@ -89,6 +89,24 @@ class TickUpdate:
     def __len__(self) -> int:
         return len(self.indices)
 
+    def select(self, rows: np.ndarray) -> TickUpdate:
+        """The update of its rows ``rows`` only (the optional per-row arrays where present)."""
+
+        def part(a: np.ndarray) -> np.ndarray:
+            return a[rows] if len(a) == len(self.indices) else a
+
+        return TickUpdate(
+            self.indices[rows],
+            self.joints[rows],
+            self.figures[rows],
+            self.heading_only[rows],
+            part(self.clips),
+            part(self.frames),
+            part(self.headings),
+            now=self.now,
+            tick=self.tick,
+        )
+
 
 @dataclass(frozen=True)
 class ClipStart:
