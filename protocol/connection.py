@@ -411,6 +411,27 @@ class Connection:
             raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
         return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
 
+    def catch_up_codes(
+        self, table: int, missed: list[tuple[object, np.ndarray]], allowed: np.ndarray
+    ) -> bytes | None:
+        """JOINT_UPDATES frames of publishes this server connection missed, from the shared memo; None when
+        they cannot stand in for its own encode (``UpdateEncoder.catch_up``: ``missed`` is, oldest first,
+        each missed publish's version and the soldiers it owes; ``allowed``, a bool mask, the soldiers this
+        client may be sent besides being subscribed). Then only what changed at the newest publish is owed."""
+        if self.role is not SERVER:
+            raise LocalProtocolError(ErrorCode.UNEXPECTED_MESSAGE, "a client may not send JOINT_UPDATES")
+        self._check_send_state(MessageType.JOINT_UPDATES)
+        encoder = self._encoders.get(table)
+        if encoder is None:
+            raise LocalProtocolError(ErrorCode.UNKNOWN_TABLE, f"send UpdateTableMsg {table} first")
+        mask = self._subscribed.copy()
+        mask[len(allowed) :] = False
+        mask[: len(allowed)] &= allowed[: len(mask)]
+        payloads = encoder.catch_up(missed, mask, self.peer_max_frame - 1)
+        if payloads is None:
+            return None
+        return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
+
     def _send_requests(self, event: EntityRequests) -> bytes:
         rows = np.asarray(event.rows)
         if rows.dtype.names != ENTITY_REQUEST_DTYPE.names:

@@ -14,7 +14,11 @@ encodes. Encoders in one state share its arrays copy-on-write (:class:`Held`): t
 costs a client no copy of the rows it sent.
 
 The caller vouches for ``version``: equal versions with equal rows mean equal codes (the server passes the
-pose board's publish serial). Entries live for one version: a new version clears the memo.
+pose board's publish serial). Lookups see the newest version only, but the encodes of the last :data:`KEEP`
+versions stay, indexed by the state they started from, so that a writer that missed publishes catches up
+through them (``UpdateEncoder.catch_up``): the frames its group was sent, in order, from the state it is in,
+instead of an encode of its own that spans the missed ticks (which loses version 2's prediction and, on a
+busy server, makes more writers late).
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ import numpy as np
 
 FRESH = 0  # the state id of an encoder that knows nothing (new, or reset for every soldier)
 JOIN_RETRY = 32  # encodes before a client whose content differed from its group's compares again
+KEEP = 4  # versions whose encodes a late writer may catch up through
+ARRAYS_KEPT = 2  # of which the newest keep the arrays of the states they led to (a catch-up ends there)
 
 
 class Held:
@@ -54,15 +60,22 @@ class Held:
         return Held(self.array.copy())
 
 
-@dataclass(frozen=True)
+@dataclass
 class Encoded:
-    """One memoised encode: its frames, and the state it led to (id and arrays, held by the memo)."""
+    """One memoised encode: its frames, the rows asked for, and the state it led to (id, and the arrays,
+    held by the memo while the encode is of one of the two newest versions)."""
 
     payloads: tuple[bytes, ...]
     state: int
-    last: Held
-    known: Held
-    before: Held  # version 2's prediction state (no rows in version 1)
+    held: tuple[Held, Held, Held] | None  # last, known, before (version 2's prediction; no rows in version 1)
+    rows: np.ndarray  # the sorted soldier indices asked for (the client holds their codes after it)
+    tick: int
+
+    def release(self) -> None:
+        if self.held is not None:
+            for h in self.held:
+                h.drop()
+            self.held = None
 
 
 def digest(indices: np.ndarray) -> bytes:
@@ -71,7 +84,8 @@ def digest(indices: np.ndarray) -> bytes:
 
 
 class SharedEncodes:
-    """The memo of one server: encodes and resets by (state, table, rows, version), for one version."""
+    """The memo of one server: encodes and resets by (state, table, rows, version), for one version; the
+    encodes of the last :data:`KEEP` versions by (state, stream) for catching up."""
 
     def __init__(self) -> None:
         self._ids = itertools.count(FRESH + 1)
@@ -79,8 +93,11 @@ class SharedEncodes:
         self._encodes: dict[tuple[object, ...], Encoded] = {}
         self._resets: dict[tuple[int, bytes], int] = {}
         self._groups: dict[tuple[object, ...], tuple[int, object]] = {}  # rows key -> (state, its owner)
+        # version -> (state, table, format, max_payload) -> the encodes from that state, oldest version first
+        self._kept: dict[object, dict[tuple[object, ...], list[Encoded]]] = {}
         self.hits = 0
         self.misses = 0
+        self.caught_up = 0  # memoised encodes sent to writers that missed their publish
 
     def new_id(self) -> int:
         return next(self._ids)
@@ -88,16 +105,24 @@ class SharedEncodes:
     def _at(self, version: object) -> None:
         if version != self._version:
             self._version = version
-            for e in self._encodes.values():
-                e.last.drop()
-                e.known.drop()
-                e.before.drop()
             self._encodes.clear()
             self._resets.clear()
             self._groups.clear()
+            self._kept.setdefault(version, {})
+            while len(self._kept) > KEEP:
+                self._release(self._kept.pop(next(iter(self._kept))))
+            if len(self._kept) > ARRAYS_KEPT:  # older encodes keep their frames, not their states' arrays
+                self._release(self._kept[list(self._kept)[-ARRAYS_KEPT - 1]])
+
+    @staticmethod
+    def _release(by_state: dict[tuple[object, ...], list[Encoded]]) -> None:
+        for entries in by_state.values():
+            for e in entries:
+                e.release()
 
     def lookup(self, state: int, rows: tuple[object, ...], version: object) -> Encoded | None:
-        """The memoised encode of ``rows`` (table, digest, tick, max_payload) from ``state``, or None."""
+        """The memoised encode of ``rows`` (table, format, max_soldiers, digest, tick, max_payload) from
+        ``state``, or None."""
         self._at(version)
         hit = self._encodes.get((state, *rows))
         if hit is None:
@@ -107,11 +132,20 @@ class SharedEncodes:
         return hit
 
     def store(self, state: int, rows: tuple[object, ...], encoded: Encoded) -> None:
-        """Memoise an encode; the memo holds its arrays (``take``) until the version changes."""
-        encoded.last.take()
-        encoded.known.take()
-        encoded.before.take()
+        """Memoise an encode (after a :meth:`lookup` at its version); the memo holds its arrays (``take``)
+        while its version is one of the :data:`ARRAYS_KEPT` newest."""
+        assert encoded.held is not None
+        for h in encoded.held:
+            h.take()
         self._encodes[(state, *rows)] = encoded
+        table, fmt, nmax, _, _, max_payload = rows
+        self._kept[self._version].setdefault((state, table, fmt, nmax, max_payload), []).append(encoded)
+
+    def kept(self, version: object, state: int, stream: tuple[object, ...]) -> list[Encoded]:
+        """The encodes memoised at ``version`` (one of the last :data:`KEEP`) from ``state`` for ``stream``
+        (table, format, max_soldiers, max_payload): frames a writer that missed that publish may send."""
+        by_state = self._kept.get(version)
+        return [] if by_state is None else by_state.get((state, *stream), [])
 
     def group(self, rows: tuple[object, ...], state: int, owner: object) -> tuple[int, object]:
         """The first (state, owner) that encoded these rows at this version; records this one if none did."""

@@ -268,20 +268,54 @@ class UpdateEncoder:
         """:meth:`_encode_sorted` through the shared memo (same bytes, one diff-and-pack per state)."""
         shared = self.shared
         assert shared is not None
-        rows = (id(self.table), self.version, digest(idx), tick, max_payload)
+        rows = (id(self.table), self.version, self.max_soldiers, digest(idx), tick, max_payload)
         hit = shared.lookup(self.state, rows, version)
-        if hit is not None:  # same state, same rows, same codes: same bytes; adopt the state it led to
-            self._adopt(hit.last, hit.known, hit.before)
+        if hit is not None and hit.held is not None:  # same state, rows, codes: same bytes; adopt its state
+            self._adopt(*hit.held)
             self._tick = tick
             self.state = hit.state
             return list(hit.payloads)
         payloads = self._encode_sorted(idx, q, tick, max_payload)
         new = shared.new_id()
         held = (self._hlast, self._hknown, self._hbefore)
-        shared.store(self.state, rows, Encoded(tuple(payloads), new, *held))
+        shared.store(self.state, rows, Encoded(tuple(payloads), new, held, idx, tick))
         self.state = new
         self._try_join(rows)
         return payloads
+
+    def catch_up(
+        self, missed: list[tuple[object, np.ndarray]], allowed: np.ndarray, max_payload: int
+    ) -> list[bytes] | None:
+        """The frames of publishes this encoder missed, taken from the shared memo; None (nothing changed)
+        when they cannot stand in for an encode of its own.
+
+        ``missed``: per missed publish, oldest first, its ``version`` and the soldiers it owes this client
+        (whose codes last changed at that publish); ``allowed`` (max_soldiers,) bool: the soldiers this client
+        may be sent now. From its state, at each version, it takes an encode memoised from that state (one
+        whose rows are all allowed; a version with none is passed over: those soldiers are owed on) and
+        moves to the state that encode led to. It takes them only if every owed soldier was in an encode at
+        or after the publish that owes it, so the client then holds every soldier's current code: the same
+        content as after an encode of its own of everything owed, in the frames its group was sent.
+        """
+        shared = self.shared
+        if shared is None:
+            return None
+        stream = (id(self.table), self.version, self.max_soldiers, max_payload)
+        owed = np.zeros(self.max_soldiers, bool)
+        state, taken = self.state, []
+        for version, due in missed:
+            owed[due] = True
+            fits = [e for e in shared.kept(version, state, stream) if allowed[e.rows].all()]
+            if fits:
+                owed[fits[0].rows] = False
+                taken.append(fits[0])
+                state = fits[0].state
+        if not taken or owed.any() or taken[-1].held is None:
+            return None
+        self._adopt(*taken[-1].held)
+        self.state, self._tick, self._sent = state, taken[-1].tick, taken[-1].rows
+        shared.caught_up += len(taken)
+        return [p for e in taken for p in e.payloads]
 
     def _try_join(self, rows: tuple[object, ...]) -> None:
         """Adopt the state id of the first encoder that sent these rows at this version if our content is

@@ -64,6 +64,7 @@ from protocol.events import (
     Unsubscribe,
     UpdateTableMsg,
 )
+from protocol.shared_encode import KEEP
 from server.config import ServerConfig
 from server.jcl import JclError
 from server.logging import get_logger
@@ -203,7 +204,10 @@ class Session:
 
     def _joint_updates(self) -> bytes:
         """The subscribed soldiers whose codes changed since the last write (or that are owed a full update),
-        encoded from the board's shared codes: this client only diffs and packs, it never re-quantises."""
+        encoded from the board's shared codes: this client only diffs and packs, it never re-quantises.
+
+        A writer that missed publishes (a busy server, a slow socket) first catches up through the encodes
+        its group was sent at them (:meth:`_catch_up`), then needs only what changed at the newest."""
         board = self.board_ref.board
         if board is None:
             return b""
@@ -217,16 +221,43 @@ class Session:
         idx = sub[due]
         if len(idx) == 0:
             return b""
+        late = self._may_catch_up(since, board.serial) and not self.force[idx].any()
         self.force[idx] = False
         tables = board.table_of[idx]
         chunks = []
         for t in np.unique(tables).tolist():
             rows = idx if len(tables) == 1 or (tables == t).all() else idx[tables == t]
+            caught = self._catch_up(t, rows, sub, since) if late else None
+            if caught is not None:
+                chunks.append(caught)
+                rows = rows[board.version[rows] == board.serial]
             chunks.append(self.conn.send_update_codes(t, rows, board.codes[rows], board.tick, board.serial))
         data = b"".join(chunks)
         if data:
             self.batches_out += 1
         return data
+
+    def _may_catch_up(self, since: int, serial: int) -> bool:
+        """Missed publishes worth catching up: a shared memo that still keeps them, and no throttle of this
+        connection's that skips ticks on purpose (a writer held back by it is not late)."""
+        return (
+            self.board_ref.encodes is not None
+            and 0 < since < serial - 1
+            and serial - since <= KEEP + 1
+            and self.own_throttle() * self.config.tick_hz < 1.5
+        )
+
+    def _catch_up(self, table: int, rows: np.ndarray, sub: np.ndarray, since: int) -> bytes | None:
+        """Frames of the publishes after ``since`` and before the newest, from the shared memo, or None (then
+        this client's own encode covers them). ``rows``: the due soldiers of ``table``, ``sub`` the soldiers
+        this client may see: the memo's frames are sent only if every row in them is one of those."""
+        board = self.board_ref.board
+        assert board is not None
+        allowed = np.zeros(self.conn.max_soldiers, bool)
+        allowed[sub[board.valid[sub] & (board.table_of[sub] == table)]] = True
+        changed = board.version[rows]
+        missed = [(v, rows[changed == v]) for v in range(since + 1, board.serial)]
+        return self.conn.catch_up_codes(table, missed, allowed)
 
     # -- input -------------------------------------------------------------------------------------------
     def feed(self, data: bytes, now: float | None = None) -> float:

@@ -182,3 +182,44 @@ def test_clients_share_encodes_and_each_gets_the_float_paths_bytes() -> None:
     assert encodes.hits > encodes.misses, (encodes.hits, encodes.misses)
     states = [p.session.conn._encoders[1].state for p in pairs]
     assert states[0] == states[1] == states[3] != states[2]  # the late joiner joined after its keyframe
+
+
+def test_a_late_writer_catches_up_through_its_groups_frames() -> None:
+    """Issue 18's spiral: a writer that missed publishes sends the frames its group got for them (from the
+    memo, ticks in order) and the newest publish's shared encode, never an encode of its own; a client
+    whose throttle skips ticks on purpose is not late: it gets one encode spanning them."""
+    server = make_server(throttle=0.0)
+    server.start_world()
+    walk(server, list(range(10)), 1.4)
+    a, b = Pair(server, "a"), Pair(server, "b")
+    a.subscribe(tuple(range(10)))
+    b.subscribe(tuple(range(10)))
+    encodes = server.board_ref.encodes
+    assert encodes is not None
+    sent: dict[int, bytes] = {}
+    calls = spy_encoder(b.session)
+    last = 0
+    for k in range(1, 13):
+        server.tick(k / 30)
+        sent[k] = a.flush()
+        if k == 1 or k % 3 == 0:  # b misses one publish, then two at a time
+            misses = encodes.misses
+            assert b.flush() == b"".join(sent[j] for j in range(last + 1, k + 1))
+            assert encodes.misses == misses
+            last = k
+    assert encodes.caught_up == 1 + 2 * 3 and len(calls) == 5  # b's encoder: ticks 1, 3, 6, 9, 12 only
+    idx = np.arange(10)
+    board = server.board_ref.board
+    assert board is not None
+    for p in (a, b):
+        dec = p.client.decoder(1)
+        assert dec is not None
+        np.testing.assert_array_equal(dec.codes(idx), board.codes[idx])
+    b.session.throttle = 0.1  # b asks for 10 updates a second: skipped ticks are its choice
+    server.tick(13 / 30)
+    a.flush()
+    server.tick(14 / 30)
+    a.flush()
+    caught = encodes.caught_up
+    assert b.flush() and encodes.caught_up == caught and len(calls) == 6
+    np.testing.assert_array_equal(b.client.decoder(1).codes(idx), board.codes[idx])  # type: ignore[union-attr]
