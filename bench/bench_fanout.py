@@ -61,7 +61,8 @@ def main() -> int:
         os.environ["TTES_SHARED_ENCODES"] = "0"
 
     if args.in_process:
-        runs = [in_process(args.soldiers, int(c), args.ticks, args.protocol, args.data == "shipped", args.late)
+        shipped = args.data == "shipped"
+        runs = [in_process(args.soldiers, int(c), args.ticks, args.protocol, shipped, args.late)
                 for c in args.clients.split(",")]  # fmt: skip
         out = {"soldiers": args.soldiers, "shared_encodes": not args.per_client, "cpus": os.cpu_count(),
                "protocol": args.protocol, "data": args.data, "late": args.late,
@@ -214,7 +215,8 @@ def in_process(
             "server_ms_per_tick": round(1000 * (tick_cpu + enc_cpu) / ticks, 2),
             "bytes_per_update": round(nbytes / max(nrows, 1), 2),
             "updates_per_tick": round(nrows / ticks / clients),
-            "encodes_per_tick": round(encodes / ticks, 2), "caught_up_per_tick": round(caught / ticks, 2)}  # fmt: skip
+            "encodes_per_tick": round(encodes / ticks, 2),
+            "caught_up_per_tick": round(caught / ticks, 2)}  # fmt: skip
 
 
 if __name__ == "__main__":
