@@ -32,18 +32,20 @@ import numpy as np
 FRESH = 0  # the state id of an encoder that knows nothing (new, or reset for every soldier)
 JOIN_RETRY = 32  # encodes before a client whose content differed from its group's compares again
 KEEP = 4  # versions whose encodes a late writer may catch up through
-ARRAYS_KEPT = 2  # of which the newest keep the arrays of the states they led to (a catch-up ends there)
 
 
 class Held:
     """An encoder's state array, shared copy-on-write by the encoders (and memo entries) in one state: a
-    client that takes a memoised encode adopts its arrays instead of writing the sent rows into its own."""
+    client that takes a memoised encode adopts its arrays instead of writing the sent rows into its own.
+    ``writes`` counts the times a sole user was let write in place (a holder that is not a user sees its
+    content changed)."""
 
-    __slots__ = ("array", "users")
+    __slots__ = ("array", "users", "writes")
 
     def __init__(self, array: np.ndarray) -> None:
         self.array = array
         self.users = 1
+        self.writes = 0
 
     def take(self) -> Held:
         self.users += 1
@@ -55,6 +57,7 @@ class Held:
     def writable(self) -> Held:
         """This holder if its one user is the caller, else the caller's own copy (the caller's use moves)."""
         if self.users <= 1:
+            self.writes += 1
             return self
         self.users -= 1
         return Held(self.array.copy())
@@ -62,20 +65,36 @@ class Held:
 
 @dataclass
 class Encoded:
-    """One memoised encode: its frames, the rows asked for, and the state it led to (id, and the arrays,
-    held by the memo while the encode is of one of the two newest versions)."""
+    """One memoised encode: its frames, the rows asked for, and the state it led to (id and arrays).
+
+    The memo is a user of the arrays while the encode's version is the newest (a hit adopts them). After
+    that it only watches them (``marks``: their write counts when it let go): holding them would make the
+    one encoder of a state copy them at every encode for a catch-up that may never come. A catch-up may end
+    in a watched state while no encoder has written its arrays (:meth:`intact`), or by a memo hit at the
+    newest version; the encodes of older versions keep their frames only."""
 
     payloads: tuple[bytes, ...]
     state: int
     held: tuple[Held, Held, Held] | None  # last, known, before (version 2's prediction; no rows in version 1)
     rows: np.ndarray  # the sorted soldier indices asked for (the client holds their codes after it)
     tick: int
+    marks: tuple[int, ...] | None = None
 
-    def release(self) -> None:
-        if self.held is not None:
+    def let_go(self) -> None:
+        if self.held is not None and self.marks is None:
+            self.marks = tuple(h.writes for h in self.held)
             for h in self.held:
                 h.drop()
-            self.held = None
+
+    def release(self) -> None:
+        self.let_go()
+        self.held = None
+
+    def intact(self) -> tuple[Held, Held, Held] | None:
+        """The arrays of the state this encode led to, if they still hold it."""
+        if self.held is None or (self.marks is not None and self.marks != tuple(h.writes for h in self.held)):
+            return None
+        return self.held
 
 
 def digest(indices: np.ndarray) -> bytes:
@@ -108,17 +127,18 @@ class SharedEncodes:
             self._encodes.clear()
             self._resets.clear()
             self._groups.clear()
-            self._kept.setdefault(version, {})
-            while len(self._kept) > KEEP:
-                self._release(self._kept.pop(next(iter(self._kept))))
-            if len(self._kept) > ARRAYS_KEPT:  # older encodes keep their frames, not their states' arrays
-                self._release(self._kept[list(self._kept)[-ARRAYS_KEPT - 1]])
-
-    @staticmethod
-    def _release(by_state: dict[tuple[object, ...], list[Encoded]]) -> None:
-        for entries in by_state.values():
-            for e in entries:
-                e.release()
+            versions = list(self._kept)
+            for k, v in enumerate(versions):  # the newest: watched; older: frames only; beyond KEEP: gone
+                for entries in self._kept[v].values():
+                    for e in entries:
+                        if k == len(versions) - 1:
+                            e.let_go()
+                        else:
+                            e.release()
+            for v in versions[: max(0, len(versions) + 1 - KEEP)]:
+                del self._kept[v]
+            self._kept.pop(version, None)
+            self._kept[version] = {}
 
     def lookup(self, state: int, rows: tuple[object, ...], version: object) -> Encoded | None:
         """The memoised encode of ``rows`` (table, format, max_soldiers, digest, tick, max_payload) from
@@ -131,9 +151,13 @@ class SharedEncodes:
             self.hits += 1
         return hit
 
+    def peek(self, state: int, rows: tuple[object, ...], version: object) -> Encoded | None:
+        """Like :meth:`lookup`, counting nothing: whether a catch-up can end in a memo hit."""
+        return self._encodes.get((state, *rows)) if version == self._version else None
+
     def store(self, state: int, rows: tuple[object, ...], encoded: Encoded) -> None:
-        """Memoise an encode (after a :meth:`lookup` at its version); the memo holds its arrays (``take``)
-        while its version is one of the :data:`ARRAYS_KEPT` newest."""
+        """Memoise an encode (after a :meth:`lookup` at its version); the memo is a user of its arrays
+        (``take``) while its version is the newest."""
         assert encoded.held is not None
         for h in encoded.held:
             h.take()

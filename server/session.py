@@ -7,7 +7,9 @@ Memory per client is bounded whatever the client does:
   A session's writer, whenever its socket can take bytes, encodes the *current* poses of its subscribed
   soldiers that changed since its last write (the connection's ``UpdateEncoder`` diffs against what this
   client last received, so skipped ticks cost nothing and deltas stay exact). A stalled reader therefore
-  holds at most one encoded batch, and never slows the tick or other clients;
+  holds at most one encoded batch, and never slows the tick or other clients. A writer only a few publishes
+  late (its group's encodes of them still in the server's memo) sends those frames instead of an encode of
+  its own (:meth:`Session._catch_up`): on a busy server, lateness costs bytes, not CPU;
 * **control messages** (errors, READY, STATUS, answers) go through a small bounded queue. While it holds
   ``control_queue`` messages the reader stops reading the socket (TCP backpressure: a client that pipelines
   requests is slowed, never dropped, while it reads); only the server's own pushes can add more, and twice
@@ -228,10 +230,9 @@ class Session:
         for t in np.unique(tables).tolist():
             rows = idx if len(tables) == 1 or (tables == t).all() else idx[tables == t]
             caught = self._catch_up(t, rows, sub, since) if late else None
-            if caught is not None:
-                chunks.append(caught)
-                rows = rows[board.version[rows] == board.serial]
-            chunks.append(self.conn.send_update_codes(t, rows, board.codes[rows], board.tick, board.serial))
+            if caught is None:
+                caught = self.conn.send_update_codes(t, rows, board.codes[rows], board.tick, board.serial)
+            chunks.append(caught)
         data = b"".join(chunks)
         if data:
             self.batches_out += 1
@@ -248,16 +249,19 @@ class Session:
         )
 
     def _catch_up(self, table: int, rows: np.ndarray, sub: np.ndarray, since: int) -> bytes | None:
-        """Frames of the publishes after ``since`` and before the newest, from the shared memo, or None (then
-        this client's own encode covers them). ``rows``: the due soldiers of ``table``, ``sub`` the soldiers
-        this client may see: the memo's frames are sent only if every row in them is one of those."""
+        """The frames of the publishes after ``since``, the newest's last, through the shared memo, or None
+        (then this client's own encode covers them). ``rows``: the due soldiers of ``table``, ``sub`` the
+        soldiers this client may see: the memo's frames are sent only if every row in them is one of those."""
         board = self.board_ref.board
         assert board is not None
         allowed = np.zeros(self.conn.max_soldiers, bool)
         allowed[sub[board.valid[sub] & (board.table_of[sub] == table)]] = True
         changed = board.version[rows]
         missed = [(v, rows[changed == v]) for v in range(since + 1, board.serial)]
-        return self.conn.catch_up_codes(table, missed, allowed)
+        now = rows[changed == board.serial]
+        return self.conn.catch_up_codes(
+            table, missed, allowed, now, board.codes[now], board.tick, board.serial
+        )
 
     # -- input -------------------------------------------------------------------------------------------
     def feed(self, data: bytes, now: float | None = None) -> float:

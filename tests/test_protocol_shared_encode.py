@@ -145,16 +145,16 @@ class Writer:
     def write(self, serial: int, codes: np.ndarray, changed_at: np.ndarray, max_payload: int) -> list[bytes]:
         due = self.rows[changed_at[self.rows] > self.since]
         since, self.since = self.since, serial
-        frames = None
+        got = None
         if 0 < since < serial - 1 and len(due):
             allowed = np.zeros(NMAX, bool)
             allowed[self.rows] = True
             missed = [(v, due[changed_at[due] == v]) for v in range(since + 1, serial)]
-            frames = self.enc.catch_up(missed, allowed, max_payload)
-        if frames is not None:
-            self.caught += 1
-            due = due[changed_at[due] == serial]
-        got = (frames or []) + self.enc.encode_codes(due, codes[due], serial, max_payload, serial)
+            now = due[changed_at[due] == serial]
+            got = self.enc.catch_up(missed, allowed, now, codes[now], serial, max_payload, serial)
+            self.caught += got is not None
+        if got is None:
+            got = self.enc.encode_codes(due, codes[due], serial, max_payload, serial)
         for p in got:
             ju = self.dec.decode(p)
             assert set(ju.indices.tolist()) <= set(self.rows.tolist())  # never a soldier it may not see
