@@ -12,6 +12,7 @@ not send raises :class:`LocalProtocolError` and sends nothing.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from enum import Enum
 
 import numpy as np
@@ -409,7 +410,7 @@ class Connection:
     def catch_up_codes(
         self,
         table: int,
-        missed: list[tuple[object, np.ndarray]],
+        missed: Sequence[tuple[object, np.ndarray]],
         allowed: np.ndarray,
         indices: np.ndarray,
         codes: np.ndarray,

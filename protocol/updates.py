@@ -18,6 +18,7 @@ version 2 (per-entry widths, predicted deltas) is :mod:`protocol.predicted`, cho
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -285,7 +286,7 @@ class UpdateEncoder:
 
     def catch_up(
         self,
-        missed: list[tuple[object, np.ndarray]],
+        missed: Sequence[tuple[object, np.ndarray]],
         allowed: np.ndarray,
         indices: np.ndarray,
         codes: np.ndarray,
@@ -332,7 +333,7 @@ class UpdateEncoder:
         return frames + self.encode_codes(idx, q, tick, max_payload, version)
 
     def _chain(
-        self, missed: list[tuple[object, np.ndarray]], allowed: np.ndarray, max_payload: int
+        self, missed: Sequence[tuple[object, np.ndarray]], allowed: np.ndarray, max_payload: int
     ) -> list[Encoded] | None:
         """The memo's encodes that take this encoder's state through the missed publishes (see
         :meth:`catch_up`), or None."""
