@@ -224,3 +224,25 @@ def test_a_writer_one_publish_late_sends_its_groups_frames_and_stays_in_the_grou
                 assert got == sent[6] + sent[7] + sent[8]
             assert late.enc.state == on_time.enc.state
     assert late.caught == 2 and shared.caught_up == 3
+
+
+def test_a_late_writer_never_takes_frames_with_a_soldier_it_may_no_longer_see() -> None:
+    """Visibility changes without a reset (a soldier's owner changes): the group's frames for the missed
+    publish hold soldiers this writer may not see now, so it encodes on its own, and only what it may see."""
+    shared = SharedEncodes()
+    rng = np.random.default_rng(3)
+    everyone, even = np.arange(NMAX), np.arange(0, NMAX, 2)
+    codes = rng.integers(0, DI.layout.max_code + 1, (NMAX, DI.layout.nfields)).astype(np.int32)
+    changed_at = np.ones(NMAX, np.int64)
+    a, b = Writer(shared, everyone, 2), Writer(shared, everyone, 2)
+    for serial in (1, 2, 3):
+        if serial > 1:
+            codes = _codes(rng, codes, 1.0)
+            changed_at[:] = serial
+        if serial == 3:
+            b.rows = even  # b may see only the even soldiers now; its encoder was not reset
+        if serial != 2:  # b first: the group's state of publish 2 is still intact, a chain could end there
+            assert b.write(serial, codes, changed_at, 1 << 16)  # (asserts every decoded soldier is b's)
+        a.write(serial, codes, changed_at, 1 << 16)
+    assert b.caught == 0
+    assert np.array_equal(b.dec.codes(even), codes[even])
