@@ -112,7 +112,7 @@ class SharedEncodes:
         self._encodes: dict[tuple[object, ...], Encoded] = {}
         self._resets: dict[tuple[int, bytes], int] = {}
         self._groups: dict[tuple[object, ...], tuple[int, object]] = {}  # rows key -> (state, its owner)
-        # version -> (state, table, format, max_payload) -> the encodes from that state, oldest version first
+        # version -> (state, table, format, max_soldiers, max_payload) -> the encodes from that state, by age
         self._kept: dict[object, dict[tuple[object, ...], list[Encoded]]] = {}
         self.hits = 0
         self.misses = 0
