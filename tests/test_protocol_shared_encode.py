@@ -161,7 +161,7 @@ class Writer:
         return got
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=30, deadline=None)
 @given(st.integers(0, 2**32), st.sampled_from([1 << 16, 300]), st.sampled_from([1, 2, 0]))
 def test_late_writers_catch_up_through_the_memo_and_decode_every_pose(
     seed: int, max_payload: int, protocol: int
