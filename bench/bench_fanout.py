@@ -125,7 +125,7 @@ def counted(args: argparse.Namespace) -> int:
     print(f"bench_fanout: {args.soldiers} soldiers at {args.rate:g} Hz to counting observers, {mode}, "
           f"protocol {args.protocol}, {os.cpu_count()} CPUs")  # fmt: skip
     for r in rows:
-        bps = [c["bytes_per_s"] for c in r["clients"]]
+        bps = [c["bytes_per_s"] or 0 for c in r["clients"]]  # None: a client got nothing in the window
         bpu = [c["bytes_per_update"] for c in r["clients"] if c["bytes_per_update"]]
         print(f"  {r['observers']} clients: delivered {r['delivered_pct_min']}% "
               f"(mean {r['delivered_pct_mean']}%), "
