@@ -46,6 +46,7 @@ from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.startup import ServerWorld
 from server.tls import server_context
+from server.websocket import WebSocketStream, origin_allowed
 from server.world.commands import needs_worker
 
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
@@ -78,6 +79,7 @@ class TtesServer:
         self.board_ref = BoardRef()
         self.sessions: dict[int, Session] = {}
         self.addresses: list[tuple[str, int]] = []
+        self.ws_addresses: list[tuple[str, int]] = []  # the WebSocket listeners (``ws_port``), if any
         self.ticks = 0
         self.tick_overruns = 0
         self.ticks_skipped = 0
@@ -96,6 +98,7 @@ class TtesServer:
         self._nursery: trio.Nursery | None = None
         self._tls = server_context(config)  # None: plain TCP
         self._bound: list[Any] | None = None  # listening sockets bound by bind(), before serve()
+        self._bound_ws: list[Any] = []  # and the WebSocket port's
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
         self._loop_thread = threading.get_ident()
@@ -200,6 +203,14 @@ class TtesServer:
         once with a ListenError naming host:port (OSError). :meth:`serve` binds when this was not called."""
         if self._bound is None:
             self._bound = bind_tcp(self.config.host, self.config.port)
+            if self.config.ws_port is not None:
+                try:
+                    self._bound_ws = bind_tcp(self.config.host, self.config.ws_port)
+                except OSError:
+                    for s in self._bound:
+                        s.close()
+                    self._bound = None
+                    raise
 
     async def serve(self, *, task_status: Any = trio.TASK_STATUS_IGNORED) -> None:
         """Start up, listen, and run until :meth:`shutdown`; ``task_status.started(addresses)``."""
@@ -211,19 +222,31 @@ class TtesServer:
         self.start_world()
         self.bind()
         bound, self._bound = self._bound or [], []
+        bound_ws, self._bound_ws = self._bound_ws, []
         listeners = [trio.SocketListener(trio.socket.from_stdlib_socket(s)) for s in bound]
+        ws_listeners = [trio.SocketListener(trio.socket.from_stdlib_socket(s)) for s in bound_ws]
         self.addresses = [tuple(ln.socket.getsockname()[:2]) for ln in listeners]
+        self.ws_addresses = [tuple(ln.socket.getsockname()[:2]) for ln in ws_listeners]
         async with trio.open_nursery() as nursery:
             self._cancel = nursery.cancel_scope
             self._nursery = nursery
             nursery.start_soon(self._tick_loop)
             nursery.start_soon(self._answer_loop)
             nursery.start_soon(self._status_loop)
-            nursery.start_soon(self._accept_all, listeners, nursery)
-            log.info("listening", addresses=[f"{h}:{p}" for h, p in self.addresses], ready=self.world.ready)
+            nursery.start_soon(
+                self._accept_all,
+                [(ln, False) for ln in listeners] + [(ln, True) for ln in ws_listeners],
+                nursery,
+            )
+            log.info(
+                "listening",
+                addresses=[f"{h}:{p}" for h, p in self.addresses],
+                websocket=[f"{h}:{p}" for h, p in self.ws_addresses],
+                ready=self.world.ready,
+            )
             task_status.started(self.addresses)
             await self._shutdown.wait()
-            for ln in listeners:
+            for ln in listeners + ws_listeners:
                 await ln.aclose()
             for s in list(self.sessions.values()):
                 s.goodbye("server shutting down")
@@ -237,8 +260,12 @@ class TtesServer:
     def shutdown(self) -> None:
         self._shutdown.set()
 
-    async def _accept_all(self, listeners: list[trio.SocketListener], nursery: trio.Nursery) -> None:
-        async def one(listener: trio.SocketListener) -> None:
+    async def _accept_all(
+        self, listeners: list[tuple[trio.SocketListener, bool]], nursery: trio.Nursery
+    ) -> None:
+        """Accept on every listener; ``(listener, True)`` is a WebSocket port (:mod:`server.websocket`)."""
+
+        async def one(listener: trio.SocketListener, websocket: bool) -> None:
             while True:
                 try:
                     stream = await listener.accept()
@@ -250,14 +277,29 @@ class TtesServer:
                     )
                     await trio.sleep(0.1)
                     continue
-                nursery.start_soon(self._client, stream)
+                nursery.start_soon(self._client, stream, websocket)
 
         async with trio.open_nursery() as inner:
-            for ln in listeners:
-                inner.start_soon(one, ln)
+            for ln, websocket in listeners:
+                inner.start_soon(one, ln, websocket)
 
     # -- one client --------------------------------------------------------------------------------------
-    async def _client(self, socket: trio.SocketStream) -> None:
+    def _wrap(self, socket: trio.SocketStream, websocket: bool) -> trio.abc.Stream:
+        """The session's byte stream over the accepted socket: TLS when configured, then WebSocket (whose
+        messages may hold a frame and its 5-byte head at the most)."""
+        stream: trio.abc.Stream = (
+            socket if self._tls is None else trio.SSLStream(socket, self._tls, server_side=True)
+        )
+        if websocket:
+            origins = self.config.ws_origins
+            stream = WebSocketStream(
+                stream,
+                max_message=self.config.max_frame + 5,
+                accept_origin=lambda o: origin_allowed(o, origins),
+            )
+        return stream
+
+    async def _client(self, socket: trio.SocketStream, websocket: bool = False) -> None:
         try:
             host, port = socket.socket.getpeername()[:2]
             peer = f"{host}:{port}"
@@ -273,9 +315,7 @@ class TtesServer:
         )
         session.crowded = same_host if same_host >= self.config.max_clients_per_host else 0
         self.sessions[session.id] = session
-        stream: trio.abc.Stream = (
-            socket if self._tls is None else trio.SSLStream(socket, self._tls, server_side=True)
-        )
+        stream = self._wrap(socket, websocket)
         try:
             async with trio.open_nursery() as n:
                 n.start_soon(self._writer, session, stream, n.cancel_scope)
@@ -298,6 +338,7 @@ class TtesServer:
                 "client_closed",
                 session=session.id,
                 peer=peer,
+                websocket=websocket,
                 name=session.name,
                 reason=session.drop_reason,
                 bytes_out=session.bytes_out,

@@ -82,6 +82,7 @@ class ServerWorld:
         self.jcl = JclInterpreter(self.data_dir, SEARCH_SUBDIRS)
         self.store = MotionStore(cache_dir=Path(cache_dir) if cache_dir is not None else None)
         self.soldiers = Soldiers(max_soldiers, SoldierSettings(record_clips=record_clips))
+        self.soldiers.resolve = self.jcl.resolve_path  # FIGURE with meshes reads the figure's surfaces
         self.owners = Owners(max_soldiers, max_soldiers_per_client)
         self.startup_script: Path | None = None  # the script run_startup ran
         self.commands = JclCommands(self)

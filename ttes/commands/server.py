@@ -32,6 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--port", type=listen_port, help="TCP port (default 7000; 0 = any free port)")
     p.add_argument(
+        "--ws-port",
+        type=listen_port,
+        help="also serve the protocol over WebSocket on this port (browsers: ttes web; 0 = any free port)",
+    )
+    p.add_argument(
         "--data-dir", help="folder with the start-up script, figures/, channelsets/, posture_graphs/"
     )
     p.add_argument(
@@ -73,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = with_env_tokens(cfg, os.environ).with_overrides(
             host=args.host,
             port=args.port,
+            ws_port=args.ws_port,
             data_dir=args.data_dir,
             cache_dir=args.cache_dir,
             tick_hz=args.tick_hz,
@@ -110,12 +116,14 @@ def run(args: argparse.Namespace) -> int:
                         "host": host,
                         "port": port,
                         "addresses": [f"{h}:{p}" for h, p in s.addresses],
+                        "websocket": [f"{h}:{p}" for h, p in s.ws_addresses],
                         "soldiers": soldiers,
                     }
                 )
             else:
                 state = "ready" if s.world.ready else "listening (not ready: waiting for a client's JCL)"
-                print(f"ttes server: {state} on {host}:{port} ({soldiers} soldiers)", flush=True)
+                ws = "".join(f", WebSocket ws://{h}:{p}/" for h, p in s.ws_addresses[:1])
+                print(f"ttes server: {state} on {host}:{port}{ws} ({soldiers} soldiers)", flush=True)
             sys.stdout.flush()
 
         try:
