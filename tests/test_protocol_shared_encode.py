@@ -246,3 +246,16 @@ def test_a_late_writer_never_takes_frames_with_a_soldier_it_may_no_longer_see() 
         a.write(serial, codes, changed_at, 1 << 16)
     assert b.caught == 0
     assert np.array_equal(b.dec.codes(even), codes[even])
+
+
+def test_encoders_of_different_max_soldiers_never_share_arrays() -> None:
+    """Clients may negotiate different max_soldiers: equal rows from FRESH must not hand one the other's
+    (smaller) state arrays."""
+    shared = SharedEncodes()
+    small, large = UpdateEncoder(DI, NMAX, shared), UpdateEncoder(DI, 2 * NMAX, shared)
+    codes = np.zeros((2 * NMAX, DI.layout.nfields), np.int32)
+    rows = np.arange(4)
+    for enc in (small, large):
+        enc.encode_codes(rows, codes[rows], 1, 1 << 16, 1)
+    far = np.arange(NMAX, NMAX + 4)
+    assert large.encode_codes(far, codes[far] + 1, 2, 1 << 16, 2)
