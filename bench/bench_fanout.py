@@ -48,6 +48,8 @@ def main() -> int:
     ap.add_argument("--loadtest", action="store_true", help="the full load generator (see above)")
     ap.add_argument("--procs", type=int, default=1, help="observer processes (default 1)")
     ap.add_argument("--ticks", type=int, default=60, help="--in-process: measured ticks")
+    ap.add_argument("--late", type=float, default=0.0,
+                    help="--in-process: chance that a session misses a publish (a late writer)")  # fmt: skip
     ap.add_argument("--protocol", type=int, default=2, choices=(1, 2), help="the observers' protocol version")
     ap.add_argument(
         "--data", choices=("synthetic", "shipped"), default=None,
@@ -59,10 +61,11 @@ def main() -> int:
         os.environ["TTES_SHARED_ENCODES"] = "0"
 
     if args.in_process:
-        runs = [in_process(args.soldiers, int(c), args.ticks, args.protocol, args.data == "shipped")
+        shipped = args.data == "shipped"
+        runs = [in_process(args.soldiers, int(c), args.ticks, args.protocol, shipped, args.late)
                 for c in args.clients.split(",")]  # fmt: skip
         out = {"soldiers": args.soldiers, "shared_encodes": not args.per_client, "cpus": os.cpu_count(),
-               "protocol": args.protocol, "data": args.data,
+               "protocol": args.protocol, "data": args.data, "late": args.late,
                "loadavg": [round(x, 2) for x in os.getloadavg()], "runs": runs}  # fmt: skip
         print(json.dumps(out) if args.json else "\n".join(map(str, [out.pop("runs"), out])))
         return 0
@@ -122,7 +125,7 @@ def counted(args: argparse.Namespace) -> int:
     print(f"bench_fanout: {args.soldiers} soldiers at {args.rate:g} Hz to counting observers, {mode}, "
           f"protocol {args.protocol}, {os.cpu_count()} CPUs")  # fmt: skip
     for r in rows:
-        bps = [c["bytes_per_s"] for c in r["clients"]]
+        bps = [c["bytes_per_s"] or 0 for c in r["clients"]]  # None: a client got nothing in the window
         bpu = [c["bytes_per_update"] for c in r["clients"] if c["bytes_per_update"]]
         print(f"  {r['observers']} clients: delivered {r['delivered_pct_min']}% "
               f"(mean {r['delivered_pct_mean']}%), "
@@ -134,9 +137,12 @@ def counted(args: argparse.Namespace) -> int:
 
 
 def in_process(
-    soldiers: int, clients: int, ticks: int, protocol: int = 2, shipped: bool = False
+    soldiers: int, clients: int, ticks: int, protocol: int = 2, shipped: bool = False, late: float = 0.0
 ) -> dict[str, object]:
-    """CPU per tick of the server's tick and of ``clients`` observers' joint-update encoding (no sockets)."""
+    """CPU per tick of the server's tick and of ``clients`` observers' joint-update encoding (no sockets).
+
+    ``late``: the chance that a session's writer misses a publish (as a writer does on a busy server or
+    behind a slow socket); its next write then owes two or more publishes."""
     import tempfile
 
     import numpy as np
@@ -179,17 +185,27 @@ def in_process(
         pairs.append((s, c))
     tick_cpu = enc_cpu = 0.0
     nbytes = nrows = 0
+    rng = np.random.default_rng(7)
+    memo = server.board_ref.encodes
+    encodes = caught = 0
     for t in range(1, ticks + 31):
         c0 = time.process_time()
         server.tick(t / 30)
         c1 = time.process_time()
-        outs = [s.take_output() for s, _ in pairs]
+        missing = (rng.random(clients) < late) & (t > 30)
+        misses0, caught0 = (memo.misses, getattr(memo, "caught_up", 0)) if memo is not None else (0, 0)
+        outs = [b"" if miss else s.take_output() for (s, _), miss in zip(pairs, missing, strict=True)]
         c2 = time.process_time()
         if t <= 30:
             continue  # warm-up: the first full updates, soldiers getting under way
+        if memo is not None:
+            encodes += memo.misses - misses0
+            caught += getattr(memo, "caught_up", 0) - caught0
         tick_cpu += c1 - c0
         enc_cpu += c2 - c1
         for (_, c), data in zip(pairs, outs, strict=True):
+            if not data:
+                continue
             c.receive_data(data)
             while (ev := c.next_event()) is not NEED_DATA and ev is not PAUSED:
                 nrows += len(getattr(ev, "indices", ()))
@@ -198,7 +214,9 @@ def in_process(
             "encode_ms": round(1000 * enc_cpu / ticks, 2),
             "server_ms_per_tick": round(1000 * (tick_cpu + enc_cpu) / ticks, 2),
             "bytes_per_update": round(nbytes / max(nrows, 1), 2),
-            "updates_per_tick": round(nrows / ticks / clients)}  # fmt: skip
+            "updates_per_tick": round(nrows / ticks / clients),
+            "encodes_per_tick": round(encodes / ticks, 2),
+            "caught_up_per_tick": round(caught / ticks, 2)}  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ not send raises :class:`LocalProtocolError` and sends nothing.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from enum import Enum
 
 import numpy as np
@@ -393,12 +394,7 @@ class Connection:
         ``version`` (equal versions and rows mean equal codes) lets connections made with one
         ``shared_encodes`` memo share the encode (:mod:`protocol.shared_encode`).
         """
-        if self.role is not SERVER:
-            raise LocalProtocolError(ErrorCode.UNEXPECTED_MESSAGE, "a client may not send JOINT_UPDATES")
-        self._check_send_state(MessageType.JOINT_UPDATES)
-        encoder = self._encoders.get(table)
-        if encoder is None:
-            raise LocalProtocolError(ErrorCode.UNKNOWN_TABLE, f"send UpdateTableMsg {table} first")
+        encoder = self._update_encoder(table)
         idx = np.asarray(indices, np.int64).reshape(-1)
         if len(idx) and (idx.min() < 0 or idx.max() >= self.max_soldiers):
             raise LocalProtocolError(ErrorCode.BAD_VALUE, f"soldier index outside 0..{self.max_soldiers - 1}")
@@ -410,6 +406,48 @@ class Connection:
         except ValueError as exc:
             raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
         return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
+
+    def catch_up_codes(
+        self,
+        table: int,
+        missed: Sequence[tuple[object, np.ndarray]],
+        allowed: np.ndarray,
+        indices: np.ndarray,
+        codes: np.ndarray,
+        tick: int,
+        version: object,
+    ) -> bytes | None:
+        """:meth:`send_update_codes` for a server connection that missed publishes: the shared memo's frames
+        of them, then the newest's (``indices``, ``codes``: what changed at it); None when the memo cannot
+        stand in for its own encode (``UpdateEncoder.catch_up``: ``missed`` is, oldest first, each missed
+        publish's version and the soldiers it owes; ``allowed``, a bool mask, the soldiers this client may
+        be sent besides being subscribed)."""
+        encoder = self._update_encoder(table)
+        mask = self._subscribed.copy()
+        mask[len(allowed) :] = False
+        mask[: len(allowed)] &= allowed[: len(mask)]
+        idx = np.asarray(indices, np.int64).reshape(-1)
+        keep = mask[idx]
+        try:
+            payloads = encoder.catch_up(
+                missed, mask, idx[keep], np.asarray(codes)[keep], tick & 0xFFFFFFFF, self.peer_max_frame - 1,
+                version,
+            )  # fmt: skip
+        except ValueError as exc:
+            raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
+        if payloads is None:
+            return None
+        return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
+
+    def _update_encoder(self, table: int) -> UpdateEncoder:
+        """The server's encoder of ``table``, once JOINT_UPDATES may be sent."""
+        if self.role is not SERVER:
+            raise LocalProtocolError(ErrorCode.UNEXPECTED_MESSAGE, "a client may not send JOINT_UPDATES")
+        self._check_send_state(MessageType.JOINT_UPDATES)
+        encoder = self._encoders.get(table)
+        if encoder is None:
+            raise LocalProtocolError(ErrorCode.UNKNOWN_TABLE, f"send UpdateTableMsg {table} first")
+        return encoder
 
     def _send_requests(self, event: EntityRequests) -> bytes:
         rows = np.asarray(event.rows)

@@ -18,6 +18,7 @@ version 2 (per-entry widths, predicted deltas) is :mod:`protocol.predicted`, cho
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -268,20 +269,87 @@ class UpdateEncoder:
         """:meth:`_encode_sorted` through the shared memo (same bytes, one diff-and-pack per state)."""
         shared = self.shared
         assert shared is not None
-        rows = (id(self.table), self.version, digest(idx), tick, max_payload)
+        rows = (id(self.table), self.version, self.max_soldiers, digest(idx), tick, max_payload)
         hit = shared.lookup(self.state, rows, version)
-        if hit is not None:  # same state, same rows, same codes: same bytes; adopt the state it led to
-            self._adopt(hit.last, hit.known, hit.before)
+        if hit is not None and hit.held is not None:  # same state, rows, codes: same bytes; adopt its state
+            self._adopt(*hit.held)
             self._tick = tick
             self.state = hit.state
             return list(hit.payloads)
         payloads = self._encode_sorted(idx, q, tick, max_payload)
         new = shared.new_id()
         held = (self._hlast, self._hknown, self._hbefore)
-        shared.store(self.state, rows, Encoded(tuple(payloads), new, *held))
+        shared.store(self.state, rows, Encoded(tuple(payloads), new, held, idx, tick))
         self.state = new
         self._try_join(rows)
         return payloads
+
+    def catch_up(
+        self,
+        missed: Sequence[tuple[object, np.ndarray]],
+        allowed: np.ndarray,
+        indices: np.ndarray,
+        codes: np.ndarray,
+        tick: int,
+        max_payload: int,
+        version: object,
+    ) -> list[bytes] | None:
+        """:meth:`encode_codes` for a writer that missed publishes, through the shared memo: the frames its
+        group was sent at them, then the newest publish's; None (nothing changed) when the memo cannot.
+
+        ``missed``: per missed publish, oldest first, its ``version`` and the soldiers it owes this client
+        (whose codes last changed then); ``allowed`` (max_soldiers,) bool: the soldiers this client may be
+        sent now; ``indices``/``codes``: what changed at the newest publish, ``version``. From its state, at
+        each missed version, it takes an encode memoised from that state whose rows are all allowed (a
+        version with none is passed over: its soldiers are owed on) and moves to the state it led to. It
+        takes them only if every owed soldier was in one at or after the publish that owes it, so the client
+        then holds every soldier's code as of the last missed publish (what an encode of its own would
+        bring), and if it can go on from there: a memo hit at the newest version, or that state's arrays
+        unwritten since (:meth:`Encoded.intact`).
+        """
+        shared = self.shared
+        taken = self._chain(missed, allowed, max_payload) if shared is not None else None
+        if shared is None or taken is None:
+            return None
+        end = taken[-1]
+        idx = np.asarray(indices, np.int64).reshape(-1)
+        q = np.asarray(codes, np.int32)
+        order = np.argsort(idx, kind="stable")
+        idx, q = idx[order], q[order]
+        rows = (id(self.table), self.version, self.max_soldiers, digest(idx), tick, max_payload)
+        hit = shared.peek(end.state, rows, version) if len(idx) else None
+        held = hit.held if hit is not None else end.intact()
+        if held is None:
+            return None
+        frames = [p for e in taken for p in e.payloads]
+        shared.caught_up += len(taken)
+        self._adopt(*held)
+        self._tick, self._sent = end.tick, end.rows
+        if hit is not None:
+            shared.hits += 1
+            self.state, self._tick = hit.state, tick
+            return frames + list(hit.payloads)
+        self.state = end.state
+        return frames + self.encode_codes(idx, q, tick, max_payload, version)
+
+    def _chain(
+        self, missed: Sequence[tuple[object, np.ndarray]], allowed: np.ndarray, max_payload: int
+    ) -> list[Encoded] | None:
+        """The memo's encodes that take this encoder's state through the missed publishes (see
+        :meth:`catch_up`), or None."""
+        shared = self.shared
+        assert shared is not None
+        stream = (id(self.table), self.version, self.max_soldiers, max_payload)
+        owed = np.zeros(self.max_soldiers, bool)
+        state, taken = self.state, []
+        for version, due in missed:
+            owed[due] = True
+            fits = [e for e in shared.kept(version, state, stream) if allowed[e.rows].all()]
+            if fits:
+                owed[fits[0].rows] = False
+                taken.append(fits[0])
+                state = fits[0].state
+        return taken if taken and not owed.any() else None
 
     def _try_join(self, rows: tuple[object, ...]) -> None:
         """Adopt the state id of the first encoder that sent these rows at this version if our content is

@@ -7,7 +7,9 @@ Memory per client is bounded whatever the client does:
   A session's writer, whenever its socket can take bytes, encodes the *current* poses of its subscribed
   soldiers that changed since its last write (the connection's ``UpdateEncoder`` diffs against what this
   client last received, so skipped ticks cost nothing and deltas stay exact). A stalled reader therefore
-  holds at most one encoded batch, and never slows the tick or other clients;
+  holds at most one encoded batch, and never slows the tick or other clients. A writer only a few publishes
+  late (its group's encodes of them still in the server's memo) sends those frames instead of an encode of
+  its own (:meth:`Session._catch_up`): on a busy server, lateness costs bytes, not CPU;
 * **control messages** (errors, READY, STATUS, answers) go through a small bounded queue. While it holds
   ``control_queue`` messages the reader stops reading the socket (TCP backpressure: a client that pipelines
   requests is slowed, never dropped, while it reads); only the server's own pushes can add more, and twice
@@ -64,6 +66,7 @@ from protocol.events import (
     Unsubscribe,
     UpdateTableMsg,
 )
+from protocol.shared_encode import KEEP
 from server.config import ServerConfig
 from server.jcl import JclError
 from server.logging import get_logger
@@ -203,7 +206,10 @@ class Session:
 
     def _joint_updates(self) -> bytes:
         """The subscribed soldiers whose codes changed since the last write (or that are owed a full update),
-        encoded from the board's shared codes: this client only diffs and packs, it never re-quantises."""
+        encoded from the board's shared codes: this client only diffs and packs, it never re-quantises.
+
+        A writer that missed publishes (a busy server, a slow socket) first catches up through the encodes
+        its group was sent at them (:meth:`_catch_up`), then needs only what changed at the newest."""
         board = self.board_ref.board
         if board is None:
             return b""
@@ -217,20 +223,53 @@ class Session:
         idx = sub[due]
         if len(idx) == 0:
             return b""
+        late = self._may_catch_up(since, board.serial) and not self.force[idx].any()
         self.force[idx] = False
         tables = board.table_of[idx]
         ticks = board.labels(idx)  # the tick's rows, then the rows answered since (the next tick's), in order
         chunks = []
-        for tick in np.unique(ticks).tolist():
+        labels = np.unique(ticks).tolist()
+        # catching up through the memo is for a tick's plain publish: rows labelled with the board's tick only
+        late = late and labels == [board.tick]
+        for tick in labels:
             for t in np.unique(tables).tolist():
                 sel = (tables == t) & (ticks == tick)
                 rows = idx if sel.all() else idx[sel]
-                if len(rows):
-                    chunks.append(self.conn.send_update_codes(t, rows, board.codes[rows], tick, board.serial))
+                if not len(rows):
+                    continue
+                caught = self._catch_up(t, rows, sub, since) if late else None
+                if caught is None:
+                    caught = self.conn.send_update_codes(t, rows, board.codes[rows], tick, board.serial)
+                chunks.append(caught)
         data = b"".join(chunks)
         if data:
             self.batches_out += 1
         return data
+
+    def _may_catch_up(self, since: int, serial: int) -> bool:
+        """Missed publishes worth catching up: a shared memo that still keeps them, and no throttle of this
+        connection's that skips ticks on purpose (a writer held back by it is not late)."""
+        return (
+            self.board_ref.encodes is not None
+            and 0 < since < serial - 1
+            and serial - since <= KEEP + 1
+            and self.own_throttle() * self.config.tick_hz < 1.5
+        )
+
+    def _catch_up(self, table: int, rows: np.ndarray, sub: np.ndarray, since: int) -> bytes | None:
+        """The frames of the publishes after ``since``, the newest's last, through the shared memo, or None
+        (then this client's own encode covers them). ``rows``: the due soldiers of ``table``, ``sub`` the
+        soldiers this client may see: the memo's frames are sent only if every row in them is one of those."""
+        board = self.board_ref.board
+        assert board is not None
+        allowed = np.zeros(self.conn.max_soldiers, bool)
+        allowed[sub[board.valid[sub] & (board.table_of[sub] == table)]] = True
+        changed = board.version[rows]
+        missed = [(v, rows[changed == v]) for v in range(since + 1, board.serial)]
+        now = rows[changed == board.serial]
+        return self.conn.catch_up_codes(
+            table, missed, allowed, now, board.codes[now], board.tick, board.serial
+        )
 
     # -- input -------------------------------------------------------------------------------------------
     def feed(self, data: bytes, now: float | None = None) -> float:

@@ -194,3 +194,44 @@ def test_a_fed_publish_labels_its_rows_with_the_tick_it_names() -> None:
     assert board.labels(np.array([0, 1])).tolist() == [7, 7]
     board.publish_codes(np.array([1]), np.array([1]), np.ones((1, 3), np.int32), 8)
     assert board.labels(np.array([0, 1])).tolist() == [8, 8]
+
+
+def test_a_late_writer_catches_up_through_its_groups_frames() -> None:
+    """Issue 18's spiral: a writer that missed publishes sends the frames its group got for them (from the
+    memo, ticks in order) and the newest publish's shared encode, never an encode of its own; a client
+    whose throttle skips ticks on purpose is not late: it gets one encode spanning them."""
+    server = make_server(throttle=0.0)
+    server.start_world()
+    walk(server, list(range(10)), 1.4)
+    a, b = Pair(server, "a"), Pair(server, "b")
+    a.subscribe(tuple(range(10)))
+    b.subscribe(tuple(range(10)))
+    encodes = server.board_ref.encodes
+    assert encodes is not None
+    sent: dict[int, bytes] = {}
+    calls = spy_encoder(b.session)
+    last = 0
+    for k in range(1, 13):
+        server.tick(k / 30)
+        sent[k] = a.flush()
+        if k == 1 or k % 3 == 0:  # b misses one publish, then two at a time
+            misses = encodes.misses
+            assert b.flush() == b"".join(sent[j] for j in range(last + 1, k + 1))
+            assert encodes.misses == misses
+            last = k
+    assert encodes.caught_up == 1 + 2 * 3 and len(calls) == 1  # b encoded at tick 1 only: then memo frames
+    idx = np.arange(10)
+    board = server.board_ref.board
+    assert board is not None
+    for p in (a, b):
+        dec = p.client.decoder(1)
+        assert dec is not None
+        np.testing.assert_array_equal(dec.codes(idx), board.codes[idx])
+    b.session.throttle = 0.1  # b asks for 10 updates a second: skipped ticks are its choice
+    server.tick(13 / 30)
+    a.flush()
+    server.tick(14 / 30)
+    a.flush()
+    caught = encodes.caught_up
+    assert b.flush() and encodes.caught_up == caught and len(calls) == 2
+    np.testing.assert_array_equal(b.client.decoder(1).codes(idx), board.codes[idx])  # type: ignore[union-attr]
