@@ -154,7 +154,7 @@ class _Arm:
     """One arm of a body on its back, to lay on the ground: how high its parts lie in a shape ``x`` of its
     clavicle, shoulder, elbow and wrist angles, and how far that shape goes wrong."""
 
-    def __init__(self, body: _Body, side: str) -> None:
+    def __init__(self, body: _Body, side: str, clearance: float | None = None) -> None:
         self.body, self.side = body, side
         self.idx = _dofs(body.kin, tuple(f"{side}_{j}" for j in ARM_DOFS))
         parts = body.parts
@@ -167,7 +167,7 @@ class _Arm:
         self.limb = [parts == f"{side}{part}" for part in ARM_PARTS]
         self.x0 = body.q[self.idx]
         p0, self.inside0 = self.into(self.x0)  # what lay that deep (or that low) already is not counted
-        self.clearance = min(ARM_CLEARANCE, float(p0[self.arm, 1].min()))
+        self.clearance = min(ARM_CLEARANCE, float(p0[self.arm, 1].min())) if clearance is None else clearance
 
     def pose(self, x: np.ndarray) -> np.ndarray:
         q = self.body.q.copy()
@@ -250,10 +250,16 @@ def fall_easing(s: np.ndarray) -> np.ndarray:
     return v * v * (3.0 - 2.0 * v)
 
 
-def settle(frames: ClipFrames, soldier: Figure, rifle: Figure, arms_fall: bool = False) -> ClipFrames:
+def settle(
+    frames: ClipFrames, soldier: Figure, rifle: Figure, arms_fall: bool = False, propped: bool = False
+) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
-    with ``arms_fall``, face up)."""
+    with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
+    (:mod:`authoring.dead_prone`)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
+    lowered = _lowered(figs, frames) if propped else None
+    if lowered is not None:
+        return _appended(frames, lowered)
     target = limp_target(figs, frames, arms_fall)
     if target is None:
         return frames
@@ -263,8 +269,25 @@ def settle(frames: ClipFrames, soldier: Figure, rifle: Figure, arms_fall: bool =
     eased = fall_easing(s) if up else s * s * (3.0 - 2.0 * s)
     u = np.concatenate([eased, np.ones(round(STILL_SECONDS * frames.fps))])
     last = frames.poses[-1]
-    poses = last[None] + u[:, None] * (target - last)[None]
-    k = len(u)
+    return _appended(frames, last[None] + u[:, None] * (target - last)[None])
+
+
+def _lowered(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
+    """The settle poses of a face-down body left propped on its arms (:mod:`authoring.dead_prone`), then
+    still; None if it is not."""
+    from authoring import dead_prone
+
+    q, root = frames.poses[-1], frames.roots[-1]
+    body = _Body(figs, q, root, frames.rifles[-1])
+    if not _face_down(body.kin, q, root):
+        return None
+    poses = dead_prone.lowered(body, round(SETTLE_SECONDS * frames.fps))
+    return np.concatenate([poses, np.repeat(poses[-1:], round(STILL_SECONDS * frames.fps), axis=0)])
+
+
+def _appended(frames: ClipFrames, poses: np.ndarray) -> ClipFrames:
+    """``frames`` and then ``poses``, the body and the rifle staying where they lie."""
+    k = len(poses)
     return ClipFrames(
         np.concatenate([frames.poses, poses]),
         np.concatenate([frames.roots, np.repeat(frames.roots[-1:], k, axis=0)]),

@@ -104,6 +104,7 @@ class DeathSpec:
     hip_damping: float = 1.0  # the hips', waist's and lower back's (FALL_STIFF) damping: this many times
     # stronger until he is down
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
+    propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
 
 
 DEATHS: tuple[DeathSpec, ...] = (
@@ -141,10 +142,26 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_fall=True,
     ),
     DeathSpec(
-        "prstow2dead", "PRONE_STOWED", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
+        "prstow2dead",
+        "PRONE_STOWED",
+        80.0,
+        (0.0, -1.0, 0.0),
+        "head",
+        slump_time=0.25,
+        fade=0.6,
+        release=0.15,
+        propped=True,
     ),
     DeathSpec(
-        "prfire2dead", "PRONE_FIRE", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
+        "prfire2dead",
+        "PRONE_FIRE",
+        80.0,
+        (0.0, -1.0, 0.0),
+        "head",
+        slump_time=0.25,
+        fade=0.6,
+        release=0.15,
+        propped=True,
     ),
     DeathSpec(
         "crawl2dead",
@@ -156,6 +173,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         fade=0.6,
         release=0.15,
         knee_damping=4.0,
+        propped=True,
     ),
 )
 SLUMP = "SLUMP"  # the in-between key of a body crumpling onto its knees (authoring.postures)
@@ -427,5 +445,5 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             break
     frames = plant(ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS), soldier)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall)
+    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
     return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))
