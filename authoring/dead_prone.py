@@ -7,17 +7,21 @@ ground. So a prone death's settle (:func:`lowered`) is solved in three steps:
 
 1. **the torso and head come down** (:func:`lowered_torso`): the spine's forward bend, by groups of
    vertebrae (:data:`SPINE_GROUPS`), and the neck's and head's angles that lay the head lowest and the
-   chest flattest, the arms left out (they are laid next), into neither the ground nor the trunk and
-   sliding nothing on the ground;
+   chest flattest, the arms left out (they are laid next), into neither the ground, the trunk nor the
+   rifle where it lies, sliding nothing on the ground (crawl2dead's rifle lies by the face: the head is
+   turned apart from the spine, from several starts, :data:`NECK_GRID`);
 2. **the arms are laid against the lowered torso** (:func:`laid_arm`): each arm's clavicle, shoulder, elbow
    and wrist angles that lay it lowest (its highest part's lowest node, as the check measures, plus a
    little of its nodes' mean height), into neither the ground, the body nor the rifle: the elbows slide out
    and the forearms lie on the ground;
-3. **the arms are lifted clear while they move** (:func:`lifted_arm`): three shapes in the air (near the
-   start, halfway, near the end; every arm node at least :data:`LIFT_CM` up, into neither the body nor the
-   rifle, the torso where it is then) between the propped and the laid arm, so an elbow never skids over
-   the ground (the check judges contact by height alone); the torso comes down while the arms are in the
-   air (:data:`TORSO_SPAN`), and the arms pass the shapes on a smooth spline (:func:`arm_path`).
+3. **the arms are lifted clear while they move** (:func:`lifted_arm`): shapes straight above where each
+   arm lay and will lie, just clear (:data:`CLEAR_CM`, :data:`LIFT_OFF`) and well clear (:data:`LIFT_CM`,
+   :data:`AIR_SPAN`), shapes between them (:data:`AIR_KEYS`) and more where the spline between dips
+   (:data:`MORE_KEYS`), each into neither the body nor the rifle with the torso where it is then, so an
+   elbow never skids over the ground (the check judges contact by height alone: pulled sideways out of a
+   propped pose the elbows slid 5-8 cm); the torso comes down while the arms are in the air
+   (:data:`TORSO_SPAN`), the arms pass their shapes on a smooth spline (:func:`arm_path`), and a head that
+   would pass through the rifle on its way gets shapes clear of it too.
 
 The searches are batched pattern searches (:func:`search`): one forward-kinematics call evaluates every
 trial step of every start at once, so a settle takes seconds, not minutes; deterministic.
@@ -39,6 +43,7 @@ SPINE_GROUPS = (
     ("vt6", "vt5", "vt4", "vt3", "vt2", "vt1"),
 )
 FLEX = 1  # a spine joint's second angle bends it forward (face down: the chest comes down)
+HAND_EVERY = 3  # of the hand's nodes, every so many are tested against the body (the searches' cost)
 REACH_MARGIN_CM = 10.0  # an arm's search tests the body and the rifle this much beyond its reach
 MAX_FLEX_DEG = 12.0  # per joint of a group: the most the spine bends forward from where it lies
 NECK_DOFS = ("neck", "head")
@@ -204,7 +209,9 @@ class _LaidArm:
         parts = body.parts
         self.idx = ds._dofs(body.kin, tuple(f"{side}_{j}" for j in ds.ARM_DOFS))
         self.arm = np.array([str(p).startswith(side) and str(p).endswith(ds.ARM_PARTS) for p in parts])
-        self.lower = np.array([str(p) in (f"{side}_hand", f"{side}_forearm") for p in parts])
+        hand = np.flatnonzero(parts == f"{side}_hand")
+        self.lower = parts == f"{side}_forearm"
+        self.lower[hand[::HAND_EVERY]] = True  # the fingers' nodes are dense: every few test the body
         # only what the arm can reach from its shoulder is tested (the hull tests are the searches' cost)
         g, p = body.heights(body.q)
         shoulder = g[body.kin.segment_names.index(f"{side}_upper_arm"), :3, 3]
