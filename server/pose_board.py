@@ -132,20 +132,45 @@ class PoseBoard:
                 rows, q, dofs, positions, orientations = (
                     a[ok] for a in (rows, q, dofs, positions, orientations)
                 )
-            new = ~self.valid[rows] | (self.table_of[rows] != table.table_id)
-            new |= (self.codes[rows] != q).any(axis=1)
             self.dofs[rows] = dofs
             self.positions[rows] = positions
             self.orientations[rows] = orientations
-            self.codes[rows] = q
-            self.table_of[rows] = table.table_id
-            self.valid[rows] = True
-            moved = rows[new] if not new.all() else rows
-            self.version[moved] = self.serial
-            changed += len(moved)
+            changed += self._store(rows, q, table.table_id)
         self.rows_published += n
         self.rows_changed += changed
         return changed
+
+    def publish_codes(self, rows: np.ndarray, tables: np.ndarray, codes: np.ndarray, tick: int) -> int:
+        """Take poses already quantised elsewhere (a front-end's batches from the shards,
+        :mod:`server.fabric`), labelled ``tick`` on the wire (several publishes may share one tick, as an
+        out-of-cycle publish shares the next tick's); returns the soldiers whose codes changed. The board's
+        Jack-unit arrays keep their last values for these rows."""
+        self.serial += 1
+        self.ticks = self.tick = tick
+        if len(rows) == 0:
+            return 0
+        rows = np.asarray(rows, np.int64)
+        self.ensure(int(rows.max()))
+        self._code_width(codes.shape[1])
+        changed = 0
+        tables = np.asarray(tables, np.int32)
+        for t in np.unique(tables).tolist():
+            sel = tables == t
+            changed += self._store(rows[sel], codes[sel], t)
+        self.rows_published += len(rows)
+        self.rows_changed += changed
+        return changed
+
+    def _store(self, rows: np.ndarray, q: np.ndarray, table_id: int) -> int:
+        """Write codes of one table; bump the version of the rows whose codes (or table) changed."""
+        new = ~self.valid[rows] | (self.table_of[rows] != table_id)
+        new |= (self.codes[rows] != q).any(axis=1)
+        self.codes[rows] = q
+        self.table_of[rows] = table_id
+        self.valid[rows] = True
+        moved = rows[new] if not new.all() else rows
+        self.version[moved] = self.serial
+        return len(moved)
 
 
 def _quantise_rows(

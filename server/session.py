@@ -557,7 +557,7 @@ class Session:
         if not len(kept):
             return
         rows = ev.rows if len(kept) == len(ev.rows) else ev.rows[kept]
-        status = m.apply_requests(rows, self.world.clock())
+        status = self.world.apply_requests(rows)
         bad = kept[status == REQUEST_BAD_VALUE]
         if len(bad):
             self.fatal(
@@ -611,11 +611,10 @@ class Session:
                 )
             )
         kind = Reaction(ev.kind).name.lower()
-        now = self.world.clock()
         unknown = [i for i in idx[ok].tolist() if not m.table.is_live(i)]
         for i in idx[ok].tolist():
             if m.table.is_live(i):
-                m.react(i, kind, now)
+                self.world.react(i, kind)
         if unknown:
             more = f" ({len(unknown)} soldiers)" if len(unknown) > 1 else ""
             self.send(Error(int(ErrorCode.UNKNOWN_SOLDIER), f"react: no soldier {unknown[0]}{more}"))

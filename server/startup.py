@@ -24,7 +24,9 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
+
+import numpy as np
 
 from peabody.model import Environment, Figure
 from protocol.events import DEFAULT_MAX_SOLDIERS
@@ -36,7 +38,7 @@ from server.motion.binding import protofiletype
 from server.motion.channelset import Channelset
 from server.motion.posture_change import LoadedPostureGraph
 from server.soldier.library import MotionLibrary
-from server.soldier.manager import SoldierManager
+from server.soldier.manager import REQUEST_OK, SoldierManager
 from server.soldier.settings import SoldierSettings
 from server.world.access import caller_of
 from server.world.commands import JclCommands
@@ -62,6 +64,20 @@ class WorldEvents:
     report: Callable[[object | None, str], None] = lambda caller, text: None
 
 
+class Relay(Protocol):
+    """Where a front-end (``ttes front``, :mod:`server.fabric`) sends what its clients ask of soldiers that
+    shards animate. The front's own manager keeps the books (which soldiers live, their tables and owners,
+    the requests' checks); it is never ticked."""
+
+    def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None: ...
+
+    def removed(self, index: int) -> None: ...
+
+    def requests(self, rows: np.ndarray) -> None: ...
+
+    def react(self, index: int, kind: str) -> None: ...
+
+
 class ServerWorld:
     """The server's one simulation: its parts, readiness, and the JCL that drives them."""
 
@@ -82,6 +98,7 @@ class ServerWorld:
         self.jcl = JclInterpreter(self.data_dir, SEARCH_SUBDIRS)
         self.store = MotionStore(cache_dir=Path(cache_dir) if cache_dir is not None else None)
         self.soldiers = Soldiers(max_soldiers, SoldierSettings(record_clips=record_clips))
+        self.soldiers.resolve = self.jcl.resolve_path  # FIGURE with meshes reads the figure's surfaces
         self.owners = Owners(max_soldiers, max_soldiers_per_client)
         self.startup_script: Path | None = None  # the script run_startup ran
         self.commands = JclCommands(self)
@@ -93,6 +110,7 @@ class ServerWorld:
         # how a JCL command that touches soldiers, settings or clients runs: directly, or (JCL run by the trio
         # app in a worker thread) on the trio loop, so that only file loads run beside the tick
         self.in_loop: Callable[[Callable[[], object]], object] = lambda func: func()
+        self.relay: Relay | None = None  # a front-end's: soldiers live in shards (server.fabric)
         if library is not None:
             self.soldiers.adopt(library)
 
@@ -139,6 +157,8 @@ class ServerWorld:
         self.ensure_library()
         i = self.soldiers.create(figure, weapon, index, name, self.clock())
         self.owners.add(i, owner)
+        if self.relay is not None:
+            self.relay.created(i, figure, weapon, owner)
         self.events.soldier_created(i)
         return i
 
@@ -166,6 +186,27 @@ class ServerWorld:
         self.soldiers.remove(index)
         self.events.soldier_removed(index, reason)  # before the owner is forgotten: who could see it
         self.owners.discard(index)
+        if self.relay is not None:
+            self.relay.removed(index)
+
+    def apply_requests(self, rows: np.ndarray) -> np.ndarray:
+        """Entity requests (``SoldierManager.apply_requests``: its per-row status); a front-end also sends
+        the rows taken to the shards."""
+        m = self.manager
+        assert m is not None
+        status = m.apply_requests(rows, self.clock())
+        if self.relay is not None:
+            ok = status == REQUEST_OK
+            self.relay.requests(rows if ok.all() else rows[ok])
+        return status
+
+    def react(self, index: int, kind: str) -> None:
+        """A reaction (``SoldierManager.react``); a front-end also sends it to the owning shard."""
+        m = self.manager
+        assert m is not None
+        m.react(index, kind, self.clock())
+        if self.relay is not None:
+            self.relay.react(index, kind)
 
     def start(self) -> None:
         """``start_ttes_socket_simulation()``: the "I'm ready!" message (READY) — the library must exist."""

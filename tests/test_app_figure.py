@@ -72,3 +72,18 @@ async def test_hello_below_the_least_max_frame_is_refused_clearly(autojump_clock
         (err,) = [e for e in c.events if isinstance(e, Error)]
         assert err.code == ErrorCode.BAD_VALUE
         assert f"max_frame 256 is below {MIN_CLIENT_MAX_FRAME}" in err.message
+
+
+def test_figure_with_meshes_reads_the_surfaces_the_server_loads_without() -> None:
+    """The server reads figures without psurfs (it never draws): a FIGURE with meshes reads them again, from
+    the file its search path resolves (an empty list before: the browser page had nothing to draw)."""
+    from peabody.loader import read_figure
+    from server.world.soldiers import _with_surfaces
+    from ttes.paths import FIGURES
+
+    bare = read_figure(FIGURES / "DI.fig", load_psurfs=False)
+    assert all(s.psurf is None for s in bare.segments.values())
+    full = _with_surfaces(bare, lambda name: FIGURES / name)
+    assert sum(s.psurf is not None for s in full.segments.values()) == 19
+    assert list(full.segments) == list(bare.segments) and full.name == bare.name
+    assert _with_surfaces(bare, lambda name: FIGURES / "missing.fig") is bare  # unreadable: as it was

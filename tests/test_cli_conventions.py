@@ -76,6 +76,9 @@ def test_version_and_the_exit_statuses_in_help() -> None:
         (["crowd", "--size", "8x8"], "--size: 8x8 is outside 16x16..8192x8192"),
         (["dis", "info", "x.pcap", "--port", "99999"], "--port: 99999 is outside 1..65535"),
         (["author", "contact-sheet", "--out", "x.png", "--tile", "8"], "--tile: 8 must be >= 32"),
+        (["web", "--port", "99999"], "--port: 99999 is outside 0..65535"),
+        (["web", "--server", "nowhere"], "--server"),
+        (["server", "--ws-port", "70000"], "--ws-port: 70000 is outside 0..65535"),
     ],
 )
 def test_a_bad_value_is_a_usage_error_naming_it(args: list[str], named: str) -> None:
@@ -88,6 +91,8 @@ def test_options_that_do_not_go_together_are_usage_errors() -> None:
     assert r.returncode == 2 and "more clients than soldiers" in r.stderr
     r = ttes("server", "--throttle", "0.5", "--tick-hz", "100000")
     assert r.returncode == 2 and "tick_hz" in r.stderr
+    r = ttes("web", "--with-server", "--server", "127.0.0.1:7001")
+    assert r.returncode == 2 and "--with-server or --server" in r.stderr
 
 
 @pytest.mark.parametrize(

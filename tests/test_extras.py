@@ -56,10 +56,11 @@ def test_every_extra_module_is_in_an_extra_of_pyproject() -> None:
 
 
 def test_the_server_imports_no_extra() -> None:
-    """`ttes server`'s modules load without any module of an extra (the base install is enough)."""
+    """`ttes server`'s modules load without any module of an extra (the base install is enough); so do the
+    fabric's nodes (only its adapters, opened by --shard or ttes front, import Zenoh or Cyclone DDS)."""
     code = (
         "import sys, ttes.cli; ttes.cli.build_parser();"
-        "import server.app, server.startup, server.config, server.logging;"
+        "import server.app, server.startup, server.config, server.logging, server.fabric.nodes;"
         "from ttes.extras import EXTRA_OF_MODULE;"
         "print(sorted(m for m in EXTRA_OF_MODULE if m in sys.modules))"
     )

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -14,6 +13,8 @@ import numpy as np
 import pytest
 
 pygltflib = pytest.importorskip("pygltflib")
+
+from npm_support import npm_dir  # noqa: E402
 
 from authoring.gltf_export import (  # noqa: E402
     ROOT_NODE,
@@ -145,6 +146,23 @@ def test_neutral_pose_node_worlds_are_peabody_fk(soldier_glb: tuple[Path, Rig]) 
     assert checked > 150
 
 
+def test_every_mesh_has_unit_normals_pointing_out_of_its_segment(soldier_glb: tuple[Path, Rig]) -> None:
+    """Viewers shade a mesh without normals flat: every primitive carries one unit NORMAL per vertex, and
+    on the body's segments they point away from the segment's middle (the psurfs' winding is outward)."""
+    gltf = pygltflib.GLTF2().load(str(soldier_glb[0]))
+    outward = []
+    for mesh in gltf.meshes:
+        for prim in mesh.primitives:
+            assert prim.attributes.NORMAL is not None, mesh.name
+            pos = _floats(gltf, prim.attributes.POSITION)
+            nrm = _floats(gltf, prim.attributes.NORMAL)
+            assert nrm.shape == pos.shape
+            np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, atol=1e-5)
+            if not mesh.name.startswith("AK_47."):
+                outward.append(np.mean(np.einsum("ij,ij->i", nrm, pos - pos.mean(axis=0)) > 0))
+    assert len(outward) > 10 and min(outward) > 0.7
+
+
 def test_channelset_animation_keyframes_are_fk_of_its_frames(walk_glb: Path) -> None:
     gltf = pygltflib.GLTF2().load(str(walk_glb))
     cs = load_channelset(WALK)
@@ -168,28 +186,10 @@ def test_channelset_animation_keyframes_are_fk_of_its_frames(walk_glb: Path) -> 
                 _assert_close(worlds[prefix + name], _to_gltf(g), f"frame {frame} {name}")
 
 
-def _validator_dir() -> Path | None:
-    """A folder with tests/tools/package.json's npm packages installed (``TTES_NPM_DIR``, default
-    ~/.cache/jack-ttes/npm; .ci/run installs them there first): installed on first use; None without node/npm
-    or the registry."""
-    if shutil.which("node") is None or shutil.which("npm") is None:
-        return None
-    where = Path(os.environ.get("TTES_NPM_DIR", Path.home() / ".cache" / "jack-ttes" / "npm"))
-    if not (where / "node_modules" / "gltf-validator").is_dir():
-        where.mkdir(parents=True, exist_ok=True)
-        shutil.copy(TOOLS / "package.json", where / "package.json")
-        cmd = ["npm", "install", "--silent", "--no-audit", "--no-fund", "--prefix", str(where)]
-        try:
-            subprocess.run(cmd, check=True, timeout=180, capture_output=True)
-        except (subprocess.SubprocessError, OSError):
-            return None
-    return where
-
-
 def test_khronos_validator_finds_no_error(
     soldier_glb: tuple[Path, Rig], walk_glb: Path, tmp_path: Path
 ) -> None:
-    where = _validator_dir()
+    where = npm_dir("gltf-validator")
     if where is None:
         pytest.skip("node/npm or the gltf-validator package is not available")
     crawl = tmp_path / "crawl.glb"

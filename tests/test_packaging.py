@@ -64,6 +64,24 @@ def test_every_shipped_data_file_is_package_data(setup_args: dict[str, Any]) -> 
     assert not missing, f"not in the wheel: {missing[:10]}"
 
 
+def test_the_pages_files_are_package_data_of_listed_packages(setup_args: dict[str, Any]) -> None:
+    """`ttes web`'s page: its HTML, scripts and (once `make vendor` ran) the vendored three.js and msgpack,
+    each in a listed package with a glob that matches it; a folder that is not listed made setuptools warn
+    ("Package would be ignored") and would ship nothing in a setuptools that stops guessing."""
+    page = REPO / "client_stub" / "web"
+    files = [f for top in ("js", "vendor") for f in (page / top).rglob("*") if f.is_file()]
+    files += [page / "index.html", page / "package.json"]
+    assert (page / "js" / "wire.js") in files
+    packages, data = set(setup_args["packages"]), setup_args["package_data"]
+    missing = []
+    for f in files:
+        rel = f.relative_to(REPO)
+        dotted = ".".join(rel.parent.parts)
+        if dotted not in packages or not any(fnmatch.fnmatch(f.name, g) for g in data.get(dotted, [])):
+            missing.append(str(rel))
+    assert not missing, f"not in the wheel: {missing[:10]}"
+
+
 def test_every_code_package_is_in_the_wheel(setup_args: dict[str, Any]) -> None:
     inits = _tracked("peabody", "protocol", "server", "authoring", "client_stub", "ttes")
     wanted = {str(Path(f).parent).replace("/", ".") for f in inits if f.endswith("__init__.py")}

@@ -32,17 +32,21 @@ def lib():
     return shipped_library()
 
 
-def drive(lib, script: list[tuple[float, ...]], heading: float, until: float) -> dict[str, np.ndarray]:
+def drive(
+    lib, script: list[tuple[float, ...]], heading: float, until: float, weapon: str = "AK_47.fig"
+) -> dict[str, np.ndarray]:
     """Play ``(time, speed m/s, compass degrees of the velocity from the heading[, new heading])`` requests;
     return per tick the world positions of the sole points ``(n, feet, points, 2)`` (Performer X east, Y
-    north, cm), their heights ``(n, feet, points)`` and the clip each tick shows."""
+    north, cm), their heights ``(n, feet, points)``, the clip each tick shows and what the client got: the
+    ``placements`` ``(n, figures, 7)`` (soldier frame) and ``joints`` of the soldier then the weapon."""
     m = SoldierManager(lib, throttle=0.0, record_clips=True)
-    i = m.create_soldier(figure="DI.fig", weapon="AK_47.fig", now=0.0)
-    kin = FigureKinematics(lib.sets[0].prototypes[0])
-    sl = lib.sets[0].figure_slice("DI.fig")
+    i = m.create_soldier(figure="DI.fig", weapon=weapon, now=0.0)
+    fset = lib.sets[lib.set_index("DI.fig", weapon)]
+    kin = FigureKinematics(fset.prototypes[0])
+    sl = fset.figure_slice("DI.fig")
     pos, vel, last = np.zeros(2), np.zeros(2), 0.0  # the entity, dead-reckoned (m, m/s)
     pending = sorted(script)
-    joints, figures, entity, clips, headings = [], [], [], [], []
+    joints, figures, entity, clips, headings, placements, poses = [], [], [], [], [], [], []
     for k in range(int(until * HZ) + 1):
         now = k / HZ
         pos = pos + vel * (now - last)
@@ -60,6 +64,8 @@ def drive(lib, script: list[tuple[float, ...]], heading: float, until: float) ->
         up = m.snapshot([i])  # what the client shows now (a resting soldier's last update included)
         joints.append(up.joints[0, sl])
         figures.append(up.figures[0, 0])
+        placements.append(up.figures[0])
+        poses.append(up.joints[0])
         entity.append(pos.copy())
         headings.append(math.radians(heading))
         clips.append(lib.clip_names[int(up.clips[0])])
@@ -73,7 +79,8 @@ def drive(lib, script: list[tuple[float, ...]], heading: float, until: float) ->
     faces = np.einsum("nij,j->ni", to_matrix(np.array(figures, np.float64)[:, 3:7]), [0.0, 0.0, -1.0])
     ahead = faces[:, 0:1] * right[:, 0, 0] - faces[:, 2:3] * forward[:, 0, 0]  # the figure's forward, world
     yaw = np.degrees(np.arctan2(ahead[:, 0], ahead[:, 1]))  # compass degrees the figure faces
-    return {"world": world, "height": local[..., 1], "clips": np.array(clips), "gap": gap, "yaw": yaw}
+    return {"world": world, "height": local[..., 1], "clips": np.array(clips), "gap": gap, "yaw": yaw,
+            "placements": np.array(placements), "joints": np.array(poses)}  # fmt: skip
 
 
 def yaw_steps(run: dict[str, np.ndarray]) -> np.ndarray:

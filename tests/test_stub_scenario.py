@@ -195,3 +195,37 @@ def test_touchdowns_measure_the_slide_of_a_planted_point() -> None:
     ]
     windows = worst_by_window(downs, [0.0, 1.5])
     assert [w["max_slide_cm"] for w in windows] == [4.5, 0.0]
+
+
+def test_on_a_slope_the_figure_stands_on_the_ground_under_its_feet(tmp_path: Path, capsys) -> None:
+    """Up a 10 % slope (the demo's uphill walk): the figure trails its entity by up to a metre, so the ground
+    under the entity is up to 10 cm above the ground under the figure. Placed at the entity's ground height
+    the lowest sole point was -3.3..12.6 cm above the ground under it and no touchdown was found while walking
+    (the recorder measured the feet against the ground under the entity). Stood on the ground under the foot
+    carrying it (client_stub.stub.grounding) and measured against the ground under each sole point:
+    -0.6..2.4 cm (flat ground: -0.6..0.5; a rigid flat foot on a 10 % slope has one end 2 cm up), every
+    touchdown planted (0.3 cm)."""
+    pytest.importorskip("pyrender")
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    import trimesh
+
+    from ttes.cli import main
+
+    corners = [[-100.0, -100.0, -10.0], [100.0, -100.0, -10.0], [100.0, 100.0, 10.0], [-100.0, 100.0, 10.0]]
+    slope = trimesh.Trimesh(vertices=corners, faces=[[0, 1, 2], [0, 2, 3]])
+    terrain = tmp_path / "slope.obj"
+    slope.export(terrain)
+    scenario = tmp_path / "uphill.scenario"
+    scenario.write_text("soldier heading=0\nend 6\n0.5 speed=1.4\n4.0 speed=0\n")
+    try:
+        code = main(["stub", "--scenario", str(scenario), "--record", str(tmp_path / "u.mp4"), "--json",
+                     "--size", "32x24", "--terrain", str(terrain), "--artic-dir", str(tmp_path)])  # fmt: skip
+    except Exception as exc:  # no EGL / OpenGL on this machine
+        pytest.skip(f"offscreen rendering unavailable: {exc!r}")
+    assert code == 0
+    feet = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["feet"]
+    assert [w["event"] for w in feet] == ["start", "speed=1.4", "speed=0.0"]
+    assert all(w["touchdowns"] >= 1 and w["max_slide_cm"] <= 2.0 for w in feet), feet  # standing: the balls
+    assert feet[1]["touchdowns"] >= 8  # walking 3.5 s: every heel and ball strike
+    lowest = [w["sole_above_ground_cm"] for w in feet]
+    assert all(low >= -1.0 and high <= 3.0 for low, high in lowest), lowest

@@ -1,6 +1,7 @@
-"""Turns in place and side-steps (committed soldier.fig and DI.fig clips): each reaches its yaw or its
-sideways displacement, ends in STAND_STOWED moved by its ``end_offset``, turns a foot only while it is in
-the air (stepping round the inside foot's ball), and never slides a foot that touches the ground."""
+"""Turns in place and side-steps (committed soldier.fig and DI.fig clips, the M16 ones too): each
+reaches its yaw or its sideways displacement, ends in STAND_STOWED moved by its ``end_offset``, turns a
+foot only while it is in the air (stepping round the inside foot's ball), and never slides a foot that
+touches the ground."""
 
 from __future__ import annotations
 
@@ -17,14 +18,15 @@ from server.motion.posture_change import load_posture_graph
 from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
 
 CONTACT = 2.5  # cm: a foot point this low is touching the ground, whatever its speed (the check: 1.25)
-SUFFIXES = {"": "soldier.fig", "_low": "DI.fig"}
+SUFFIXES = {"": "soldier.fig", "_low": "DI.fig", "_m16_low": "DI.fig"}
+GRAPHS = {"": "soldier_turn_hi.graph", "_low": "soldier_turn.graph", "_m16_low": "soldier_turn_m16.graph"}
 TURNS = [(f"turn_{d[0]}{a}", d, a) for d in ("left", "right") for a in turns.TURN_ANGLES]
 FOOT_POINTS = ("foot.heel", "foot.ball", "toes.distal")
 
 
 @pytest.fixture(scope="module")
 def figures() -> FigureSet:
-    return FigureSet.from_dir(FIGURES, ["soldier.fig", "DI.fig", "AK_47.fig"])
+    return FigureSet.from_dir(FIGURES, ["soldier.fig", "DI.fig", "AK_47.fig", "M16.fig"])
 
 
 def _played(name: str, suffix: str, figures: FigureSet):
@@ -48,8 +50,7 @@ def _yaw(m: np.ndarray) -> float:
 
 @pytest.mark.parametrize("suffix", SUFFIXES)
 def test_turn_graph_lists_every_clip_as_a_stand_stowed_self_loop(suffix: str):
-    name = "soldier_turn.graph" if suffix else "soldier_turn_hi.graph"
-    loaded = load_posture_graph(POSTURE_GRAPHS / name)
+    loaded = load_posture_graph(POSTURE_GRAPHS / GRAPHS[suffix])
     assert loaded.graph.postures == ["STAND_STOWED"]
     stems = [f.rsplit("/", 1)[-1].removesuffix(f"{suffix}.chset.env") for f in loaded.graph.files]
     assert stems == list(turns.TURN_CLIPS)

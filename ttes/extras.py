@@ -23,6 +23,8 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "pygltflib": "authoring",
     "bvhio": "authoring",
     "pyglm": "authoring",  # PyGLM, bvhio's vectors
+    "zenoh": "fabric",  # ttes server --shard, ttes front (server.fabric)
+    "cyclonedds": "fabric",
 }
 
 

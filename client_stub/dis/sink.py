@@ -114,6 +114,18 @@ class ServerSink:
             self.lost = str(exc) or "connection lost"
             self.stats["while_lost"] += 1
 
+    def live_slots(self) -> np.ndarray:
+        """The translator slots of the live soldiers (those :meth:`live_requests` lists, in its order)."""
+        return np.array(sorted(s for s in self.rifle_of if self._has_last[s]), np.int64)
+
+    def live_requests(self) -> np.ndarray:
+        """The last request of every live soldier, ``index`` its server index (what a viewer that does not
+        drive them needs to place them: ``ttes web --replay``)."""
+        live = self.live_slots()
+        rows = self._last[live].copy()
+        rows["index"] = self.indices[live] if len(live) else rows["index"]
+        return rows
+
     def rebind(self, link: Link) -> None:
         """A new link: every live soldier created again (a restarted server) or taken back (the same server
         kept them for our client id: they are in its READY), then subscribed and requested again."""

@@ -71,8 +71,9 @@ def child_env() -> dict[str, str]:
 class ServerProcess:
     """A ``ttes server`` child process (see the module docstring); use as a context manager."""
 
-    def __init__(self, args: Sequence[str] = (), *, timeout: float = 90.0) -> None:
-        self.cmd = [sys.executable, "-m", "ttes", "server", "--host", "127.0.0.1", "--port", "0", "--json"]
+    def __init__(self, args: Sequence[str] = (), *, timeout: float = 90.0, command: str = "server") -> None:
+        """``command``: ``server``, or ``front`` (``ttes front``: the same flags, a front-end's process)."""
+        self.cmd = [sys.executable, "-m", "ttes", command, "--host", "127.0.0.1", "--port", "0", "--json"]
         self.cmd += list(args)
         self.synthetic = "--synthetic" in args
         self.timeout = timeout

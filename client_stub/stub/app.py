@@ -39,6 +39,7 @@ from client_stub.stub.artic import (
     write_artic,
 )
 from client_stub.stub.camera import CameraState, View, action_pose, camera_pose
+from client_stub.stub.grounding import body_figure, ground_figures
 from client_stub.stub.keys import KEY_HELP, StubController
 from client_stub.stub.offline import OfflinePoser
 from client_stub.stub.overlay import Label, Overlay
@@ -334,6 +335,8 @@ class StubApp:
                 k.poser.pose(
                     off, s.appearance[off], s.weapon[off], s.speed[off] * s.moving(off), s.distance[off], dt
                 )
+            if k.layout.figures:  # on the ground under the feet, not under the entity (slopes, root offsets)
+                ground_figures(k.crowd, rows, body_figure(k.layout), self._ground)
 
     def draw(self) -> None:
         """Hand the live soldiers' world matrices (by kind and look), the camera and the overlay (labels,
@@ -396,9 +399,12 @@ class StubApp:
         figs = k.layout.figures
         if not figs:
             return feet
-        body = max(range(len(figs)), key=lambda f: figs[f].ndof)  # the soldier, not his rifle
-        root = self.soldiers.entity_matrices(np.array([slot]))[0] @ k.crowd.placements[slot, body]
-        return np.array([root[0, 3], root[1, 3], feet[2]])
+        body = body_figure(k.layout)
+        root = k.crowd.entity[slot] @ k.crowd.placements[slot, body]
+        return np.array([root[0, 3], root[1, 3], k.crowd.entity[slot, 2, 3]])
+
+    def _ground(self, xy: np.ndarray, top: np.ndarray) -> np.ndarray:
+        return self.terrain.height(xy, top, default=0.0)
 
     def close(self) -> None:
         self.source.close()

@@ -25,7 +25,8 @@ import numpy as np
 
 from client_stub.stub.app import StubApp
 from client_stub.stub.camera import LOOK_HEIGHT, look_at
-from client_stub.stub.feet import sole_points, touchdowns, worst_by_window
+from client_stub.stub.feet import heights_above, sole_points, touchdowns, worst_by_window
+from client_stub.stub.grounding import RAY_START
 from client_stub.stub.scenario import Event, Scenario, describe
 from protocol import coords
 from protocol.entity import Appearance, WeaponState, make_entity_requests
@@ -177,7 +178,7 @@ async def record_scenario(
         kwargs.update(codec="libx264", quality=7, macro_block_size=8, pixelformat="yuv420p")
     thumbs: list[tuple[float, np.ndarray]] = []
     soles: list[np.ndarray] = []
-    ground: list[float] = []
+    ground: list[np.ndarray] = []  # per frame the ground under each sole point
     start = time.perf_counter()
     with imageio.get_writer(out, **kwargs) as writer:
         for k in range(nframes):
@@ -194,7 +195,8 @@ async def record_scenario(
             pts = sole_points(app, soldier.slot)
             if pts is not None:
                 soles.append(pts)
-                ground.append(float(app.soldiers.position[soldier.slot, 2]))
+                top = app.soldiers.position[soldier.slot, 2] + RAY_START
+                ground.append(app.terrain.height(pts[:, :2], np.full(len(pts), top)))
     if sheet is not None:
         write_sheet(thumbs, sheet)
     return {
@@ -209,14 +211,15 @@ async def record_scenario(
     }
 
 
-def _feet(scenario: Scenario, soles: list[np.ndarray], ground: list[float], hz: float) -> list[dict]:
-    """Per scenario event (and the start): the touchdowns that began before the next and their worst slide."""
+def _feet(scenario: Scenario, soles: list[np.ndarray], ground: list[np.ndarray], hz: float) -> list[dict]:
+    """Per scenario event (and the start): the touchdowns that began before the next and their worst slide,
+    and how high the lowest sole point got above the ground under it."""
     if not soles:
         return []
     events = scenario.events
-    windows = worst_by_window(
-        touchdowns(np.array(soles), np.array(ground), hz), [0.0] + [e.time for e in events]
-    )
+    pts, under = np.array(soles), np.array(ground)
+    lowest = heights_above(pts, under).min(axis=1)
+    windows = worst_by_window(touchdowns(pts, under, hz), [0.0] + [e.time for e in events], lowest, hz)
     for w, label in zip(windows, ["start", *(describe(e) for e in events)], strict=True):
         w["event"] = label
     return windows

@@ -44,6 +44,11 @@ MAX_SPEED = 100.0  # m/s: faster is a bad value
 MIN_RATE, MAX_RATE, WALK_MAX_RATE = 0.6, 1.6, 1.8
 MIN_STRIDE, MAX_STRIDE = 0.5, 2.0  # stride scale limits (a scaled stride slides the feet by the difference)
 CATCH_UP_SECONDS = 1.5  # a stepping soldier's figure closes its root offset over about this long
+CATCH_UP_BEHIND_SECONDS = 1.0  # ... a figure behind that lag: this long (a pivot left it metres behind)
+CATCH_UP_FASTER = 1.0  # ... going at most this fraction faster than its entity (cadence within MAX_RATE)
+# a walking figure this far (cm) behind its stop lag (a pivot left it metres behind) jogs to catch up;
+# jogging, it walks again once within the second of the run's (run2walk closes ~30 cm more, the walk the rest)
+CATCH_UP_RUN_CM = (200.0, 80.0)
 MIN_TURN_DEG = 22.5  # a standing soldier whose figure is this far from its heading turns in place
 MAX_CHAIN = 64  # clip ends handled per soldier per tick (a longer backlog is taken up next tick)
 MIN_CLIP_SECONDS = 1e-3  # a one-frame clip still takes this long, so clip ends cannot chain forever

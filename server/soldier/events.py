@@ -132,7 +132,7 @@ class Events(Stepping, Turning, Reactions, LeadIn):
             tb.loco[idx],
             (speed > MOVING_EPS) & ~tb.reversing[idx],  # a reversing soldier stops first
             tb.backward[idx],
-            is_fast(tb.loco[idx], speed, st.walk_run_threshold, hysteresis),
+            is_fast(tb.loco[idx], speed, st.walk_run_threshold, hysteresis) | self._far_behind(idx, t),
             self.library.can_run,
             tb.side[idx],
         )

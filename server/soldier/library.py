@@ -58,6 +58,7 @@ from server.soldier.root_motion import (
     linear_travel,
     single_support_share,
     stance_contact,
+    stance_count,
     stance_travel,
 )
 from server.soldier.state import CRAWL_NODE, STAND_STOWED, LocoState
@@ -284,6 +285,7 @@ class MotionLibrary:
         curves: list[np.ndarray] = []
         contacts: list[np.ndarray] = []
         shares: list[np.ndarray] = []
+        stances = [1] * len(self.clips)
         for cid, info in enumerate(self.clips):
             n = info.nframes
             contacts.append(np.zeros((n, 2)))
@@ -294,6 +296,7 @@ class MotionLibrary:
                     points = self._feet(kin, cid, sl)
                     contacts[-1] = stance_contact(points)
                     shares[-1] = single_support_share(points)
+                    stances[cid] = stance_count(points)
                 continue
             if info.graph == GRAPH_CRAWL or not feet:
                 curves.append(linear_travel(n, self._travel_vector(cid)))
@@ -301,7 +304,7 @@ class MotionLibrary:
             points = self._feet(kin, cid, sl)
             curves.append(stance_travel(points, self.sources[cid].stride_length))
             contacts[-1] = stance_contact(points)
-        return TravelTable(curves, contacts, shares)
+        return TravelTable(curves, contacts, shares, stances)
 
     def _feet(self, kin: FigureKinematics, cid: int, sl: slice) -> np.ndarray:
         """The sole points of clip ``cid``'s every stored frame (``root_motion.feet_points``)."""

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
 TURN_RATE = 90.0  # degrees/s a walking, running or crawling figure turns towards its heading (faster > 90)
 STEPPING = (2, 3)  # state.Mode.LOCO, Mode.CRAWL (plain ints: this module does not import the manager's enums)
-SHARE_FLOOR = 0.2  # a pivot's extra turn in double support, relative to single (no spurt of yaw between)
+SHARE_FLOOR = 0.05  # a pivot's extra turn in double support, relative to single (no spurt of yaw between)
 FLIGHT_CM = 3.0  # a foot whose lowest sole point is this far above the clip's lowest carries no weight
 FLAT_CM = 1.0  # a carrying foot's sole points this near its lowest are all down: it turns about their middle
 # per foot, the sole points whose lower one carries the weight (heel strike, then the ball at push-off)
@@ -91,13 +91,24 @@ def stance_contact(points: np.ndarray) -> np.ndarray:
     return (own[..., [0, 2]] * down[..., None]).sum(axis=1) / down.sum(axis=1)[:, None]
 
 
+def single_support(points: np.ndarray) -> np.ndarray:
+    """``(n,)`` whether one foot alone is down (the other's lowest sole point FLIGHT_CM up) per frame."""
+    lift = points[..., 1].min(axis=2)  # (n, feet): each foot's lowest sole point
+    return np.asarray(((lift - lift.min()) > FLIGHT_CM).sum(axis=1) == 1)
+
+
+def stance_count(points: np.ndarray) -> int:
+    """How many times one foot alone carries the figure (a pivot's extra turn is shared among them)."""
+    single = single_support(points).astype(np.int8)
+    return int((np.diff(np.concatenate([[0], single])) == 1).sum()) if len(points) else 0
+
+
 def single_support_share(points: np.ndarray) -> np.ndarray:
     """``(n,)`` per frame the fraction of a pivot's extra turn done by then: mostly over the frames where one
-    foot alone is down (the other's lowest sole point FLIGHT_CM up), SHARE_FLOOR of that rate elsewhere."""
+    foot alone is down, SHARE_FLOOR of that rate elsewhere."""
     if len(points) < 2:
         return np.zeros(len(points))
-    lift = points[..., 1].min(axis=2)  # (n, feet): each foot's lowest sole point
-    single = ((lift - lift.min()) > FLIGHT_CM).sum(axis=1) == 1
+    single = single_support(points)
     weight = (single[:-1] & single[1:]) + SHARE_FLOOR
     return np.concatenate([[0.0], np.cumsum(weight) / weight.sum()])
 
@@ -131,6 +142,7 @@ class TravelTable:
         curves: Sequence[np.ndarray],
         contacts: Sequence[np.ndarray] | None = None,
         shares: Sequence[np.ndarray] | None = None,
+        stances: Sequence[int] | None = None,
     ) -> None:
         sizes = np.array([len(c) for c in curves], np.int64)
         self.start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
@@ -145,6 +157,8 @@ class TravelTable:
             if contacts is not None and len(contacts)
             else np.zeros_like(self.data)
         )
+        # per clip how many single-support stances it has (turns in place; 1 elsewhere)
+        self.stances = np.maximum(np.asarray(stances if stances is not None else [1] * len(curves)), 1)
         lines = [np.linspace(0.0, 1.0, len(c)) if len(c) > 1 else np.zeros(len(c)) for c in curves]
         self.share = np.concatenate(list(shares if shares is not None else lines) or [np.zeros(0)])
         self.total = np.array([c[-1] - c[0] if len(c) else (0.0, 0.0) for c in curves], np.float64).reshape(

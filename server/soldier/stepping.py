@@ -8,6 +8,9 @@ from server.soldier import root_motion
 from server.soldier.core import (
     _CRAWL_CYCLE,
     _SCALED,
+    CATCH_UP_BEHIND_SECONDS,
+    CATCH_UP_FASTER,
+    CATCH_UP_RUN_CM,
     CATCH_UP_SECONDS,
     MAX_RATE,
     MAX_STRIDE,
@@ -19,6 +22,7 @@ from server.soldier.core import (
     ManagerCore,
 )
 from server.soldier.locomotion import (
+    IS_BACKWARD,
     IS_RUN,
     IS_WALK,
     SCALED,
@@ -37,18 +41,18 @@ class Stepping(ManagerCore):
 
         A cycle aims at the entity's speed plus what brings the root offset along the velocity to its stop lag
         (the figure trails the entity by what it would still travel if the entity stopped) in about
-        CATCH_UP_SECONDS, within human cadence (MIN_RATE..MAX_RATE). When the entity's speed alone is beyond
-        that cadence the stride length takes the rest (the feet slide by the difference), except in a gait
-        the speed is about to leave (a walk step before walk→run): there the root offset takes it. Start and
-        end steps and gait changes play at their recorded rate."""
+        CATCH_UP_SECONDS (CATCH_UP_BEHIND_SECONDS when it is behind that: after a pivot, metres), at most
+        CATCH_UP_FASTER of its speed faster than the entity, within human cadence (MIN_RATE..MAX_RATE).
+        When the entity's speed alone is beyond that cadence the stride length takes the rest (the feet slide
+        by the difference), except in a gait the speed is about to leave (a walk step before walk→run): there
+        the root offset takes it. Start and end steps and gait changes play at their recorded rate."""
         tb, lib = self.table, self.library
         st = np.asarray(states, np.int64)
         speed = tb.speed[idx]
         stored = lib.clip_duration[clip]
         gs = lib.clip_ground_speed[clip]
         ok = SCALED[st] & (speed > MOVING_EPS) & (gs > 0)
-        v = tb.vlocal[idx]
-        along = np.einsum("ij,ij->i", tb.root_off[idx], v) / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
+        along = self._along(idx, tb.root_off[idx])
         gs = np.where(gs > 0, gs, 1.0)
         cfg = self._settings
         hysteresis = min(cfg.walk_run_hysteresis, 0.5 * cfg.walk_run_threshold)
@@ -59,9 +63,25 @@ class Stepping(ManagerCore):
         scale = np.clip(ideal / np.clip(ideal, MIN_RATE, top), MIN_STRIDE, MAX_STRIDE)
         stride = np.where(ok & ~leaving, scale, 1.0)
         error = along + self._stop_lag[st]  # cm ahead of where the figure should be
-        want = speed + np.clip(-error / 100.0 / CATCH_UP_SECONDS, -0.5 * speed, 0.5 * speed)
+        seconds = np.where(error < 0.0, CATCH_UP_BEHIND_SECONDS, CATCH_UP_SECONDS)  # behind: closes sooner
+        want = speed + np.clip(-error / 100.0 / seconds, -0.5 * speed, CATCH_UP_FASTER * speed)
         rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, top), 1.0)
         return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
+
+    def _along(self, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
+        """``(n,)`` cm the root offsets ``off`` of soldiers ``idx`` lie ahead along their velocity."""
+        v = self.table.vlocal[idx]
+        return np.einsum("ij,ij->i", off, v) / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
+
+    def _far_behind(self, idx: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Whether walking (running) soldiers ``idx`` are so far behind their entity at ``t`` that their
+        figure jogs to catch up (goes on jogging): CATCH_UP_RUN_CM behind their stop lag."""
+        tb, lib = self.table, self.library
+        st = tb.loco[idx].astype(np.int64)
+        along = self._along(idx, root_motion.offset_at(tb, lib, idx, t))
+        behind = -(along + self._stop_lag[st])
+        limit = np.where(IS_RUN[st], CATCH_UP_RUN_CM[1], CATCH_UP_RUN_CM[0])
+        return (IS_WALK[st] | IS_RUN[st]) & ~IS_BACKWARD[st] & (behind > limit) & lib.can_run
 
     def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray) -> None:
         """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot)."""

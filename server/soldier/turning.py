@@ -5,7 +5,8 @@ DIS entity's does when it walks back the way it came) does what a person does: h
 ends, then the end step, the figure still facing the old way: no turning over the steps), pivots on the
 spot (the turn in place that fits, played REVERSAL_TURN_SPEEDUP times faster: a pivot, not a slow
 about-face) and walks away. His feet stay planted in the world throughout; the figure trails the entity by
-what it did not travel meanwhile and catches up with faster cadence (``stepping``), as after any start.
+what it did not travel meanwhile and catches up with faster cadence (``stepping``), as after any start,
+jogging while it is more than CATCH_UP_RUN_CM behind (a 180° reversal leaves it 4.6 m behind).
 
 A standing soldier asked to walk off MIN_TURN_DEG or more from where his figure faces pivots the same way
 first, then starts (turning the body over the start step twisted the planted foot 20 cm). A velocity
@@ -25,15 +26,16 @@ from server.soldier.core import (
     _IDLE,
     _LOCO,
     _TRANSITION,
-    MIN_TURN_DEG,
     ManagerCore,
 )
 from server.soldier.library import PathStep
 
-REVERSAL_DEG = 135.0  # a walking figure this far from its new heading stops, pivots and walks away
+REVERSAL_DEG = 120.0  # a walking figure this far from its new heading stops, pivots and walks away
 BACKWARD_MAX_SPEED = 1.0  # m/s: a velocity straight back faster than people walk backwards is walked forwards
 BACKWARD_HYSTERESIS = 0.2  # m/s: walking away forwards, he faces his velocity down to the limit - this
-COUNTER_REST_DEG = 35.0  # a pivot may turn a clip this much less than it turns (over a flat carrying foot)
+# a pivot may turn more or less than its clip, about the flat carrying foot while one foot alone is down: at
+# most this much per such stance (each degree twists that foot's heel and ball ~0.2 cm: 9° -> 1.8 cm)
+PIVOT_REST_PER_STANCE_DEG = 9.0
 REVERSAL_TURN_SPEEDUP = 2.5  # the pivot plays the 180° turn in place this many times faster (3.4 s -> 1.4 s)
 
 
@@ -73,8 +75,7 @@ class Turning(ManagerCore):
         rest = 0.0
         if speedup != 1.0:  # a pivot turns by the clip's turn and a rest too small for another turn clip
             rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
-            counter = abs(turn) > abs(want) and abs(rest) <= COUNTER_REST_DEG  # (_pivot_clip)
-            rest = rest if abs(rest) < MIN_TURN_DEG or counter else 0.0
+            rest = rest if self._pivot_fits(clip, abs(rest)) else 0.0  # else another turn after (_pivot_clip)
             speedup *= min(1.0, abs(turn) / abs(want))  # turning more, it turns no faster than the clip
         step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, self._home, self._home)
         tb.blend_len[i] = 0.0
@@ -93,20 +94,23 @@ class Turning(ManagerCore):
             key=lambda c: (abs((c[1] - want + 180.0) % 360.0 - 180.0), c[1] * want < 0),
         )
 
+    def _pivot_fits(self, clip: int, rest: float) -> bool:
+        """Whether turn ``clip`` may turn ``rest`` degrees more or less than it does, as a pivot."""
+        return rest <= PIVOT_REST_PER_STANCE_DEG * float(self.library.travel.stances[clip])
+
     def _pivot_clip(self, want: float) -> tuple[int, float]:
-        """A pivot's turn clip: the nearest, unless that leaves MIN_TURN_DEG or more to turn after it and a
-        clip turning the asked way at most COUNTER_REST_DEG more than asked exists: that one, its excess
-        turned back over it (a 150° reversal: the 180° pivot less 30°, not the 180° and then a 45° turn back,
-        which swung 30° past the heading and back after the walk start, and slid 2.3 cm)."""
-        clip, turn = self._nearest_turn(want)
-        if abs((turn - want + 180.0) % 360.0 - 180.0) < MIN_TURN_DEG:
-            return clip, turn
-        over = [
-            c
-            for c in self.library.turn_clips
-            if c[1] * want > 0 and 0 < abs(c[1]) - abs(want) <= COUNTER_REST_DEG
-        ]
-        return min(over, key=lambda c: abs(c[1])) if over else (clip, turn)
+        """A pivot's turn clip: of those turning the asked way that fit (:meth:`_pivot_fits`) the one whose
+        rest (what it turns too much or too little) is least per stance. A 140° reversal: the 180° pivot less
+        40° over its five stances (1.6 cm), not the 180° and then a 45° turn back. None fits (118-134°: the
+        90° clip would turn 10° and more per stance, 2-2.7 cm): the nearest, and another turn after it."""
+
+        def rest(c: tuple[int, float]) -> float:
+            return abs((c[1] - want + 180.0) % 360.0 - 180.0)
+
+        fits = [c for c in self.library.turn_clips if c[1] * want > 0 and self._pivot_fits(c[0], rest(c))]
+        if not fits:
+            return self._nearest_turn(want)
+        return min(fits, key=lambda c: rest(c) / float(self.library.travel.stances[c[0]]))
 
     def _turn_end(self, i: int, t: float) -> None:
         """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading."""

@@ -10,10 +10,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import msgpack
 
+from peabody.language import PeabodyError
+from peabody.loader import read_figure
 from protocol.events import FigureMsg
 from protocol.figure import figure_from_wire, figure_to_wire
 from protocol.update_table import FigureEntry, UpdateTable
@@ -48,6 +51,7 @@ class Soldiers:
         self.figures_of: dict[str, tuple[str, ...]] = {}  # soldier name -> environment figure names
         self._figure_msgs: dict[tuple[int, bool], FigureMsg] = {}  # (table id, meshes) -> FIGURE, built once
         self._pending = settings or SoldierSettings()
+        self.resolve: Callable[[str], Path] = Path  # a figure file name -> its path (the world's search path)
 
     # -- settings ----------------------------------------------------------------------------------------
     @property
@@ -97,6 +101,8 @@ class Soldiers:
                 return None
             names = [e.name for e in fset.table.entries if isinstance(e, FigureEntry)]
             figures = self.library.sets[fset.index].prototypes
+            if meshes:
+                figures = [_with_surfaces(f, self.resolve) for f in figures]
             body = figure_to_wire(fset.table, figures, names, meshes=meshes)
             # decoded from its own f32 bytes, so the event holds what a client will hold
             raw = msgpack.unpackb(msgpack.packb(body, use_single_float=True))
@@ -137,3 +143,16 @@ class Soldiers:
             return {"ready": ready, "soldiers": []}
         idx = [int(i) for i in m.table.live[:100]] if indices is None else list(indices)
         return {"ready": ready, "time": clock(), "soldiers": [m.soldier_info(i) for i in idx]}
+
+
+def _with_surfaces(figure: Any, resolve: Callable[[str], Path]) -> Any:
+    """The figure with its psurfs: the server loads figures without them (it never draws), so a FIGURE with
+    meshes (docs/PROTOCOL.md §7.2, asked for by a drawing client such as ``ttes web``) reads the figure's file
+    again, once per table; a figure whose file cannot be read again goes without surfaces."""
+    if not figure.filename:
+        return figure
+    try:
+        return read_figure(resolve(figure.filename), figure.name, load_psurfs=True)
+    except (PeabodyError, OSError) as exc:
+        log.warning("figure_surfaces_unreadable", figure=figure.name, error=str(exc))
+        return figure

@@ -181,9 +181,12 @@ def parse_origin(text: str | None) -> Any:
 
 
 @contextlib.asynccontextmanager
-async def private_server(data_dir: Path | None, synthetic: bool, quiet: bool = True) -> AsyncIterator[Any]:
-    """A Jack/TTES server in this trio run on a free loopback port. The project's data dir first; without a
-    motion library there (or with ``synthetic``) the generated synthetic one."""
+async def private_server(
+    data_dir: Path | None, synthetic: bool, quiet: bool = True, websocket: bool = False
+) -> AsyncIterator[Any]:
+    """A Jack/TTES server in this trio run on a free loopback port (and a WebSocket one with ``websocket``:
+    ``ttes web``). The project's data dir first; without a motion library there (or with ``synthetic``) the
+    generated synthetic one."""
     import logging
     import tempfile
 
@@ -199,7 +202,8 @@ async def private_server(data_dir: Path | None, synthetic: bool, quiet: bool = T
     with tempfile.TemporaryDirectory(prefix="ttes-replay-") as tmp:
         server = None
         if not synthetic:
-            cfg = ServerConfig(port=0).with_overrides(data_dir=data_dir)
+            ws_port = 0 if websocket else None
+            cfg = ServerConfig(port=0, ws_port=ws_port).with_overrides(data_dir=data_dir)
             server = TtesServer(cfg)
             try:
                 server.start_world()
@@ -209,7 +213,12 @@ async def private_server(data_dir: Path | None, synthetic: bool, quiet: bool = T
         if server is None:
             synth = write_synthetic_data_dir(tmp)
             server = TtesServer(
-                ServerConfig(port=0, data_dir=synth.path, startup_script=synth.startup_script)
+                ServerConfig(
+                    port=0,
+                    ws_port=0 if websocket else None,
+                    data_dir=synth.path,
+                    startup_script=synth.startup_script,
+                )
             )
             server.start_world()
         async with trio.open_nursery() as nursery:

@@ -12,17 +12,51 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ttes.arguments import UsageError, host, listen_port, non_negative, positive
 
+if TYPE_CHECKING:
+    from server.app import TtesServer
+
 
 def register(sub: argparse._SubParsersAction) -> None:
+    p = add_server_parser(sub, "server", "run the Jack/TTES animation server", __doc__ or "")
+    p.add_argument(
+        "--shard",
+        metavar="K/N",
+        help="animate only soldiers whose index is K modulo N and publish them on the fabric (ttes front "
+        "serves the clients; needs the [fabric] extra)",
+    )
+    add_fabric_options(p)
+
+
+def add_fabric_options(p: argparse.ArgumentParser) -> None:
+    """The publish/subscribe fabric between shards and front-ends (docs/SCALING.md)."""
+    p.add_argument(
+        "--fabric", choices=("zenoh", "dds"), default="zenoh", help="fabric engine (default zenoh)"
+    )
+    p.add_argument("--fabric-listen", metavar="HOST:PORT", default="", help="fabric endpoint to listen on")
+    p.add_argument(
+        "--fabric-connect",
+        metavar="HOST:PORT",
+        action="append",
+        default=[],
+        help="fabric endpoint to connect to (repeatable; a shard connects to its front-ends)",
+    )
+
+
+def add_server_parser(
+    sub: argparse._SubParsersAction, name: str, help_text: str, description: str
+) -> argparse.ArgumentParser:
+    """The parser of ``ttes server`` and of ``ttes front`` (a front-end takes the same settings)."""
     from server.config import limits_help
 
     p = sub.add_parser(
-        "server",
-        help="run the Jack/TTES animation server",
-        description=__doc__,
+        name,
+        help=help_text,
+        description=description,
         epilog="limits (config file keys; docs/PROTOCOL.md section 15 says what a peer may cost):\n"
         + limits_help(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -31,6 +65,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--host", type=host, help="address to bind (default 127.0.0.1; 0.0.0.0 inside a container)"
     )
     p.add_argument("--port", type=listen_port, help="TCP port (default 7000; 0 = any free port)")
+    p.add_argument(
+        "--ws-port",
+        type=listen_port,
+        help="also serve the protocol over WebSocket on this port (browsers: ttes web; 0 = any free port)",
+    )
     p.add_argument(
         "--data-dir", help="folder with the start-up script, figures/, channelsets/, posture_graphs/"
     )
@@ -54,6 +93,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", action="store_true", help="print the ready line as JSON")
     p.set_defaults(func=run)
+    return p
 
 
 def run(args: argparse.Namespace) -> int:
@@ -73,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = with_env_tokens(cfg, os.environ).with_overrides(
             host=args.host,
             port=args.port,
+            ws_port=args.ws_port,
             data_dir=args.data_dir,
             cache_dir=args.cache_dir,
             tick_hz=args.tick_hz,
@@ -98,8 +139,10 @@ def run(args: argparse.Namespace) -> int:
         server = TtesServer(cfg)
         server.bind()  # a port in use fails here, at once and naming host:port, before the data loads
         server.start_world()  # a bad script or data dir fails here, before accepting
+        start_fabric, close_fabric = _fabric_node(server, args)
 
         def listening(s: TtesServer) -> None:
+            start_fabric()
             host, port = s.addresses[0]
             m = s.world.manager
             soldiers = m.count if m is not None else 0
@@ -110,12 +153,14 @@ def run(args: argparse.Namespace) -> int:
                         "host": host,
                         "port": port,
                         "addresses": [f"{h}:{p}" for h, p in s.addresses],
+                        "websocket": [f"{h}:{p}" for h, p in s.ws_addresses],
                         "soldiers": soldiers,
                     }
                 )
             else:
                 state = "ready" if s.world.ready else "listening (not ready: waiting for a client's JCL)"
-                print(f"ttes server: {state} on {host}:{port} ({soldiers} soldiers)", flush=True)
+                ws = "".join(f", WebSocket ws://{h}:{p}/" for h, p in s.ws_addresses[:1])
+                print(f"ttes server: {state} on {host}:{port}{ws} ({soldiers} soldiers)", flush=True)
             sys.stdout.flush()
 
         try:
@@ -125,10 +170,38 @@ def run(args: argparse.Namespace) -> int:
             if isinstance(leaf, OSError | ValueError):
                 raise leaf from None
             raise
+        finally:
+            close_fabric()  # its threads would keep the process alive
         return 0
     finally:
         if tmp is not None:
             tmp.cleanup()
+
+
+def _fabric_node(
+    server: TtesServer, args: argparse.Namespace
+) -> tuple[Callable[[], None], Callable[[], None]]:
+    """Join the fabric as a shard (``--shard``) or a front-end (``ttes front``); returns what starts taking
+    messages (call it on the trio loop once serving) and what leaves the fabric (no-ops: a plain server)."""
+    shard, shards = getattr(args, "shard", None), getattr(args, "shards", None)
+    if shard is None and shards is None:
+        return (lambda: None), (lambda: None)
+    import trio
+
+    from server.fabric import FabricConfig, open_fabric
+    from server.fabric.nodes import FrontNode, Sharding, ShardNode
+
+    try:
+        sharding = Sharding.parse(shard) if shard is not None else None
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    fabric = open_fabric(FabricConfig(args.fabric, args.fabric_listen, tuple(args.fabric_connect)))
+    if sharding is not None:
+        node = ShardNode(server, fabric, sharding)
+        node.keep_own()
+        return (lambda: node.start(trio.lowlevel.current_trio_token())), fabric.close
+    front = FrontNode(server, fabric, int(shards or 1))
+    return (lambda: front.start(trio.lowlevel.current_trio_token())), fabric.close
 
 
 def _first_leaf(exc: BaseException) -> BaseException:

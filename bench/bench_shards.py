@@ -1,0 +1,153 @@
+"""Benchmark: soldiers over 2 shards and a front-end at 30 Hz to C clients, all real processes on this machine
+(issue 21's: 20,000 soldiers, 2 clients, ≥ 99 % delivered, p99 request → update ≤ 50 ms).
+
+Spawns ``ttes front --shards 2`` and two ``ttes server --shard K/2`` on the shipped library over the Zenoh
+fabric (loopback), every soldier updated every tick (``--throttle 0``), then drives the front-end with the
+load generator (``client_stub.loadtest``, as ``ttes loadtest --host --port``): delivered % of steady-mover
+updates, request → first reflecting update p50/p99, bytes per update; and each process's CPU (% of a core)
+over the run. On this 2-core machine the four processes share two cores with everything else: quote the
+load average.
+
+``--probe N`` measures instead the path a request takes alone: N soldiers, one posture request at a time
+(kneel, then stand), the time until that soldier's next update reaches the client (client → front-end →
+shard → front-end → client), on the synthetic library.
+
+    python bench/bench_shards.py [--soldiers 20000] [--clients 2] [--seconds 10] [--fabric zenoh] [--json]
+    python bench/bench_shards.py --probe 40 [--fabric dds]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import trio
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from client_stub.link.client import Client
+from client_stub.link.spawn import ServerProcess, cpu_seconds, free_port
+from client_stub.loadtest.session import LoadTestConfig, run_loadtest
+from protocol.entity import Appearance, make_entity_requests
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--soldiers", type=int, default=20000)
+    ap.add_argument("--clients", type=int, default=2)
+    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--warmup", type=float, default=3.0)
+    ap.add_argument("--fabric", choices=("zenoh", "dds"), default="zenoh")
+    ap.add_argument("--probe", type=int, metavar="N", help="request -> update latency of N soldiers")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    if args.probe:
+        out = probe(args.probe, args.fabric)
+        print(json.dumps(out) if args.json else json.dumps(out, indent=1))
+        return 0
+    with tempfile.TemporaryDirectory(prefix="ttes-shards-") as tmp:
+        config = Path(tmp) / "scale.toml"  # room for every soldier, one client id may own them all
+        n = args.soldiers + 64
+        config.write_text(f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\n")
+        common = ["--config", str(config), "--throttle", "0", "--fabric", args.fabric]
+        with cluster(common) as procs:
+            cpu0, t0 = {k: p.cpu_seconds() for k, p in procs.items()}, time.monotonic()
+            load = os.getloadavg()[0]
+            report = run_loadtest(
+                LoadTestConfig(
+                    soldiers=args.soldiers,
+                    clients=args.clients,
+                    seconds=args.seconds,
+                    warmup_s=args.warmup,
+                    port=procs["front"].port,
+                    throttle=None,
+                    timeout_s=120.0,
+                )
+            )
+            wall = time.monotonic() - t0
+            cpu = {k: round(100 * (cpu_seconds(p.pid) - cpu0[k]) / wall, 1) for k, p in procs.items()}
+    keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
+    keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
+    out = {
+        "soldiers": args.soldiers,
+        "clients": args.clients,
+        "fabric": args.fabric,
+        "load": round(load, 2),
+        **{k: report.get(k) for k in keys},
+        "cpu_pct": cpu,
+    }
+    print(json.dumps(out) if args.json else json.dumps(out, indent=1))
+    return 0
+
+
+@contextlib.contextmanager
+def cluster(flags: list[str]) -> Iterator[dict[str, ServerProcess]]:
+    """A front-end and two shards with ``flags`` each, ready; stopped on exit."""
+    endpoint = f"127.0.0.1:{free_port()}"
+    procs = {"front": ServerProcess([*flags, "--shards", "2", "--fabric-listen", endpoint], command="front")}
+    for k in (0, 1):
+        procs[f"shard{k}"] = ServerProcess([*flags, "--shard", f"{k}/2", "--fabric-connect", endpoint])
+    try:
+        for p in procs.values():
+            p.wait_ready()
+        yield procs
+    finally:
+        for p in procs.values():
+            p.stop()
+
+
+def probe(n: int, fabric: str) -> dict[str, object]:
+    with cluster(["--synthetic", "--fabric", fabric]) as procs:
+        lat = trio.run(_probe, procs["front"].port, n)
+    ms = np.asarray(lat) * 1000
+    return {
+        "soldiers": n,
+        "fabric": fabric,
+        "load": round(os.getloadavg()[0], 2),
+        "requests": len(ms),
+        **{f"request_to_update_ms_p{q}": round(float(np.percentile(ms, q)), 1) for q in (50, 90, 99)},
+        "max_ms": round(float(ms.max()), 1),
+    }
+
+
+async def _probe(port: int, n: int) -> list[float]:
+    arrived: dict[int, float] = {}
+
+    def updates(when: float, tick: int, indices: np.ndarray, size: int, event: object) -> None:
+        for i in indices.tolist():
+            arrived[i] = time.monotonic()
+
+    lat = []
+    async with trio.open_nursery() as nursery:
+        c = Client("probe", on_updates=updates)
+        await c.open(nursery, "127.0.0.1", port, soldierprefix=None)
+        idx = [(await c.create_soldier("DI.fig", "AK_47.fig")).index for _ in range(n)]
+        c.subscribe(idx)
+        await trio.sleep(2.0)  # every soldier's first update, and settled
+        for rep in range(3 * n):
+            i = idx[rep % n]
+            posture = Appearance.KNEEL if (rep // n) % 2 == 0 else Appearance.UPRIGHT
+            arrived.pop(i, None)
+            sent = time.monotonic()
+            c.send_requests(make_entity_requests([i], appearance=posture))
+            with trio.move_on_after(5.0):
+                while i not in arrived:
+                    await trio.sleep(0.001)
+            if i in arrived:
+                lat.append(arrived[i] - sent)
+            await trio.sleep(0.05)
+        await c.aclose()
+        nursery.cancel_scope.cancel()
+    return lat
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

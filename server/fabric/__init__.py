@@ -1,0 +1,95 @@
+"""The publish/subscribe fabric between shards and front-ends (issue 21), behind one small interface.
+
+A shard (``ttes server --shard K/N``) publishes each tick's quantised codes on ``poses/K`` and takes the
+requests for its soldiers from ``requests/K``; a front-end (``ttes front``) subscribes to every shard's poses
+and publishes its clients' requests to the owning shard. The engine is an existing one, chosen by name:
+Eclipse Zenoh (``zenoh``, the default: see docs/SCALING.md for the measurements) or Eclipse Cyclone DDS
+(``dds``). Each adapter imports its library when it is opened, never at import time of ``ttes server``
+(the ``[fabric]`` extra; an import-linter contract keeps the libraries inside their adapters).
+
+Quality of service by what a topic carries (:class:`Kind`): poses are best-effort and latest-wins (a late
+batch is superseded by the next tick's, never queued), requests are reliable and kept until delivered.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+ENGINES = ("zenoh", "dds")
+DEFAULT_PORT = 7447
+
+
+class Kind(enum.Enum):
+    """What a topic carries, which sets its quality of service."""
+
+    POSES = "poses"  # best-effort, keep-last-1: a newer batch supersedes a lost or late one
+    REQUESTS = "requests"  # reliable, keep-all: requests, creations and removals (ownership) all arrive
+
+
+def poses_topic(shard: int) -> str:
+    return f"ttes/poses/{shard}"
+
+
+def requests_topic(shard: int) -> str:
+    return f"ttes/requests/{shard}"
+
+
+def alive_key(shard: int) -> str:
+    return f"ttes/alive/{shard}"
+
+
+Handler = Callable[[bytes], None]  # called on the fabric's own thread, once per message
+Presence = Callable[[bool], None]  # called on the fabric's own thread: present (True) or gone (False)
+
+
+class Fabric(Protocol):
+    """One process's node on the fabric."""
+
+    engine: str
+
+    def publisher(self, topic: str, kind: Kind) -> Handler:
+        """A function that publishes one message (bytes) on ``topic``."""
+        ...
+
+    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
+        """Call ``on_message`` (on the fabric's thread) with every message published on ``topic``."""
+        ...
+
+    def announce(self, key: str) -> None:
+        """Be present under ``key`` while this node lives (gone when its process dies or it closes)."""
+        ...
+
+    def watch(self, key: str, on_change: Presence) -> None:
+        """Call ``on_change`` when a node announced under ``key`` appears (True) or goes (False)."""
+        ...
+
+    def close(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class FabricConfig:
+    """Where this node listens and whom it connects to: unicast endpoints ``host:port``, no multicast.
+
+    Zenoh (peer mode) listens on ``listen`` and connects to ``connect``; Cyclone DDS uses the hosts of
+    ``listen`` and ``connect`` as its unicast peers (on a domain of its own, ``domain``)."""
+
+    engine: str = "zenoh"
+    listen: str = ""  # "" = no listener (Zenoh); a front-end listens, shards connect to it
+    connect: tuple[str, ...] = field(default_factory=tuple)
+    domain: int = 0
+
+
+def open_fabric(config: FabricConfig) -> Fabric:
+    """A node on the configured engine (ModuleNotFoundError without the ``[fabric]`` extra)."""
+    if config.engine == "zenoh":
+        from server.fabric.zenoh_node import ZenohFabric
+
+        return ZenohFabric(config)
+    if config.engine == "dds":
+        from server.fabric.dds_node import DdsFabric
+
+        return DdsFabric(config)
+    raise ValueError(f"no fabric engine {config.engine!r} (have {', '.join(ENGINES)})")

@@ -1,0 +1,345 @@
+"""A server's part on the fabric: a shard's (:class:`ShardNode`) or a front-end's (:class:`FrontNode`).
+
+Soldier ``i`` belongs to shard ``i % N`` (:class:`Sharding`): the one client-visible index space stays one,
+and the front-end, which allocates indices as a single server does, knows the owner of every index without
+asking. Both sides run a :class:`~server.app.TtesServer` over the same data: the start-up script creates
+the same soldiers everywhere (a shard then drops the ones that are not its own), and the update tables are
+the same, so a client of the front-end gets the handshake, tables and FIGURE of a single server.
+
+* a shard publishes, after each publish of its pose board, every soldier it holds as one batch
+  (:mod:`server.fabric.batch`; full state each tick, so a lost best-effort batch costs one tick, never a
+  pose), and takes the requests for its soldiers from ``requests/K`` on the trio loop;
+* a front-end keeps, per shard, only the newest batch that arrived (latest-wins); each of its ticks merges
+  them into its board (``PoseBoard.publish_codes``), and its sessions encode from there as always. Its own
+  manager keeps the books (who lives, tables, owners, the requests' checks) and is never ticked; what its
+  clients ask goes to the owning shard (``ServerWorld.relay``).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import trio
+
+from protocol.entity import ENTITY_REQUEST_DTYPE
+from server.fabric import Fabric, Kind, alive_key, poses_topic, requests_topic
+from server.fabric import requests as req
+from server.fabric.batch import Batch, decode_batch, encode_batch
+from server.logging import get_logger
+from server.pose_board import PoseBoard
+
+if TYPE_CHECKING:
+    from server.app import TtesServer
+
+log = get_logger("fabric")
+
+
+@dataclass(frozen=True)
+class Sharding:
+    """Shard ``k`` of ``n`` owns the soldiers whose index is ``k`` modulo ``n``."""
+
+    k: int
+    n: int
+
+    @classmethod
+    def parse(cls, text: str) -> Sharding:
+        """``"K/N"``; ValueError unless 0 <= K < N."""
+        k, sep, n = text.partition("/")
+        if not sep or not (k.strip().isdigit() and n.strip().isdigit()) or not 0 <= int(k) < int(n):
+            raise ValueError(f"shard {text!r} is not K/N with 0 <= K < N")
+        return cls(int(k), int(n))
+
+    def owns(self, indices: np.ndarray) -> np.ndarray:
+        return np.asarray(indices, np.int64) % self.n == self.k
+
+
+class ShardNode:
+    """A shard's link: its batches out on ``poses/K``, its requests in from ``requests/K``."""
+
+    def __init__(self, server: TtesServer, fabric: Fabric, sharding: Sharding) -> None:
+        self.server, self.fabric, self.sharding = server, fabric, sharding
+        self._put = fabric.publisher(poses_topic(sharding.k), Kind.POSES)
+        self.seq = 0
+        self.taken = 0  # fabric requests handled
+        server.on_publish = self.publish
+        server.status_note = lambda: f"shard {sharding.k}/{sharding.n}, {self.seq} batches"
+
+    def keep_own(self) -> None:
+        """Drop the soldiers of the start-up script that other shards own."""
+        m = self.server.world.manager
+        if m is None:
+            return
+        for i in m.table.live[~self.sharding.owns(m.table.live)].tolist():
+            self.server.world.remove_soldier(int(i), "another shard's")
+
+    def start(self, token: trio.lowlevel.TrioToken) -> None:
+        """Take requests on the trio loop, in order of arrival, one at a time: the tick runs between them
+        when it is due (thousands of creations arrive at once when a client creates a crowd)."""
+        self.fabric.announce(alive_key(self.sharding.k))
+        send, receive = trio.open_memory_channel[bytes](math.inf)
+        self.fabric.subscribe(
+            requests_topic(self.sharding.k),
+            Kind.REQUESTS,
+            lambda data: token.run_sync_soon(send.send_nowait, data),
+        )
+
+        async def take() -> None:
+            async for data in receive:
+                for op in self._decoded(data):
+                    self.handle(op)
+                    await trio.lowlevel.checkpoint()
+
+        self.server.spawn(take)
+
+    def publish(self, board: PoseBoard) -> None:
+        """A tick's publish sends every soldier (a lost batch costs one tick); an answer between ticks sends
+        only the soldiers it changed (requests come often: full batches would multiply the traffic)."""
+        if board.tick == board.ticks:
+            rows = np.flatnonzero(board.valid)
+        else:
+            rows = np.flatnonzero(board.valid & (board.version == board.serial))
+            if not len(rows):
+                return
+        self._put(
+            encode_batch(
+                Batch(
+                    self.sharding.k,
+                    self.sharding.n,
+                    self.seq,
+                    board.tick,
+                    time.monotonic(),
+                    rows,
+                    board.table_of[rows],
+                    board.codes[rows],
+                )
+            )
+        )
+        self.seq += 1
+
+    def _decoded(self, data: bytes) -> list[req.Op]:
+        try:
+            return req.decode(data)
+        except ValueError as exc:
+            log.warning("fabric_message_refused", shard=self.sharding.k, error=str(exc))
+            return []
+
+    def handle(self, op: req.Op) -> None:
+        """One request from a front-end (already checked there: a failure here is logged, not answered)."""
+        try:
+            self._apply(op)
+        except (ValueError, KeyError, TypeError) as exc:  # a bad operation, or a soldier gone meanwhile
+            log.warning("fabric_request_failed", shard=self.sharding.k, op=op.get("op"), error=str(exc))
+            return
+        self.taken += 1
+        self.server.requests_arrived()
+
+    def _apply(self, msg: dict[str, object]) -> None:
+        world = self.server.world
+        op = msg["op"]
+        if op == "create":
+            owner = msg["owner"]
+            world.create_soldier(
+                str(msg["figure"]),
+                str(msg["weapon"]),
+                int(msg["index"]),  # type: ignore[call-overload]
+                owner=str(owner) if owner is not None else None,
+            )
+        elif op == "remove":
+            world.remove_soldier(int(msg["index"]), "removed by a front-end")  # type: ignore[call-overload]
+        elif op == "requests":
+            rows = msg["rows"]
+            assert isinstance(rows, np.ndarray)
+            world.apply_requests(rows)
+        elif op == "react":
+            world.react(int(msg["index"]), str(msg["kind"]))  # type: ignore[call-overload]
+        elif op == "sync":
+            self._sync(msg)
+
+    def _sync(self, msg: dict[str, object]) -> None:
+        """Animate every soldier of the sync that is not here yet, from its last request; with ``replay``
+        (soldiers coming home after a stand-in animated them) replay the last request of every one."""
+        world, m = self.server.world, self.server.world.manager
+        assert m is not None
+        soldiers = msg["soldiers"]
+        rows = msg["rows"]
+        assert isinstance(soldiers, list) and isinstance(rows, np.ndarray)
+        new = []
+        for index, figure, weapon, owner in soldiers:
+            if not m.table.is_live(index):
+                world.create_soldier(figure, weapon, index, owner=owner)
+                new.append(index)
+        log.info("fabric_sync", shard=self.sharding.k, soldiers=len(soldiers), created=len(new))
+        if len(rows):
+            world.apply_requests(rows if msg.get("replay") else rows[np.isin(rows["index"], new)])
+
+
+class FrontNode:
+    """A front-end's link: every shard's newest batch in, its clients' requests out to the shard that
+    animates the soldier (it is the world's :class:`~server.startup.Relay`).
+
+    Shard ``k``'s soldiers are animated by shard ``route[k]``: ``k`` itself, or once ``k`` is down, a
+    surviving shard, sent a sync of those soldiers with their last requests. Down means gone from the
+    fabric (its process died: the fabric's presence says so at once) or silent for ``hung_s`` (no batch: a
+    process that hangs; a busy one is only late). A shard heard for the first time, or again after a
+    restart (its batch count went back), gets a sync of its own soldiers: creations sent before it listened
+    are not lost. A shard that comes back takes its soldiers back from the one that stood in."""
+
+    def __init__(self, server: TtesServer, fabric: Fabric, shards: int, *, hung_s: float = 5.0) -> None:
+        self.server, self.fabric, self.shards = server, fabric, shards
+        self.hung_s = hung_s
+        self.present = [False] * shards  # on the fabric now (its presence)
+        self._puts = [fabric.publisher(requests_topic(k), Kind.REQUESTS) for k in range(shards)]
+        self._out: list[list[req.Op]] = [[] for _ in range(shards)]  # per shard, sent at the loop's next turn
+        self._token: trio.lowlevel.TrioToken | None = None
+        self._flush_due = False
+        self._latest: dict[int, bytes] = {}  # shard -> its newest batch (written on the fabric's thread)
+        self.route = list(range(shards))
+        self.heard_at = [-math.inf] * shards  # server time of each shard's last batch
+        self.last_seq = [-1] * shards
+        n = server.config.max_soldiers
+        self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request, for a sync
+        self.has_last = np.zeros(n, bool)
+        self.batches = 0  # merged
+        self.skipped = 0  # superseded before a tick merged them, or lost on the fabric
+        self.failovers = 0
+        server.feed = self.feed
+        server.world.relay = self
+        server.status_note = self.describe
+
+    def describe(self) -> str:
+        """The shards as STATUS shows them: ``shards 0 up, 1 on 0 (gone)``."""
+        parts = []
+        for k in range(self.shards):
+            where = "up" if self.route[k] == k else f"on {self.route[k]}"
+            parts.append(f"{k} {where}" + ("" if self.present[k] else " (gone)"))
+        return f"front-end of {self.shards} shards: " + ", ".join(parts)
+
+    def start(self, token: trio.lowlevel.TrioToken) -> None:
+        self._token = token
+        for k in range(self.shards):
+            self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._arrived, token, k))
+            self.fabric.watch(alive_key(k), functools.partial(self._watched, token, k))
+
+    def _watched(self, token: trio.lowlevel.TrioToken, k: int, present: bool) -> None:
+        token.run_sync_soon(self._presence, k, present)  # from the fabric's thread to the loop
+
+    def _presence(self, k: int, present: bool) -> None:
+        self.present[k] = present
+        log.info("fabric_shard_presence", shard=k, present=present)
+        if not present:
+            self._fail_over(self.server.now())
+
+    def _arrived(self, token: trio.lowlevel.TrioToken, k: int, data: bytes) -> None:
+        """On the fabric's thread: keep the newest batch; the first one waiting asks the loop to publish."""
+        waiting = k in self._latest
+        self._latest[k] = data
+        if not waiting:
+            token.run_sync_soon(self.server.publish_fed)
+
+    def feed(self, board: PoseBoard, tick: int) -> int:
+        """Merge the newest batch of every shard that sent one into the board, labelled ``tick`` (as soon as
+        one arrives, and on each tick of the front-end's own loop), and fail silent shards over."""
+        now = self.server.now()
+        batches = [decode_batch(self._latest.pop(k)) for k in range(self.shards) if k in self._latest]
+        for b in batches:
+            self._heard(b, now)
+        self._fail_over(now)
+        m = self.server.world.manager
+        if not batches or m is None:
+            return 0
+        self.batches += len(batches)
+        rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
+        tables = np.concatenate([b.tables for b in batches])
+        codes = np.concatenate([b.codes for b in batches]).astype(np.int32)
+        alive = m.table.alive
+        live = (rows < len(alive)) & alive[np.minimum(rows, len(alive) - 1)]  # not removed here meanwhile
+        return board.publish_codes(rows[live], tables[live], codes[live], tick)
+
+    def _heard(self, b: Batch, now: float) -> None:
+        k = b.shard
+        back = self.heard_at[k] == -math.inf or b.seq < self.last_seq[k] or self.route[k] != k
+        if not back:
+            self.skipped += max(0, b.seq - self.last_seq[k] - 1)
+        self.last_seq[k], self.heard_at[k] = b.seq, now
+        if back:
+            stood_in = self.route[k]
+            self.route[k] = k
+            if stood_in != k:  # it stood in for k: k's soldiers go home
+                for i in self._homed(k).tolist():
+                    self._send(stood_in, req.remove(i))
+            log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
+            self._sync(k, [k], replay=stood_in != k)
+
+    def _fail_over(self, now: float) -> None:
+        alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
+        for k in range(self.shards):
+            if self.route[k] == k and self.heard_at[k] > -math.inf and k not in alive and alive:
+                survivor = min(alive, key=lambda s: sum(r == s for r in self.route))
+                self.route[k] = survivor
+                self.failovers += 1
+                log.warning(
+                    "fabric_failover", shard=k, to=survivor, silent_s=round(now - self.heard_at[k], 3)
+                )
+                self._sync(survivor, [k])
+
+    def _homed(self, k: int) -> np.ndarray:
+        """The live soldiers whose home is shard ``k``."""
+        m = self.server.world.manager
+        live = m.table.live if m is not None else np.zeros(0, np.int64)
+        return live[live % self.shards == k]
+
+    def _sync(self, shard: int, homes: list[int], *, replay: bool = False) -> None:
+        m = self.server.world.manager
+        if m is None:
+            return
+        idx = np.concatenate([self._homed(h) for h in homes])
+        keys = m.library.set_keys
+        soldiers = [
+            (i, *keys[int(m.table.fset[i])], self.server.world.owners.owner_of(i)) for i in idx.tolist()
+        ]
+        have = idx[self.has_last[idx]]
+        self._send(shard, req.sync(soldiers, self.last[have], replay=replay))
+
+    def _send(self, shard: int, op: req.Op) -> None:
+        """Queue an operation for ``shard``: what one turn of the loop queued goes as one message."""
+        self._out[shard].append(op)
+        if self._token is None:
+            self._flush()
+        elif not self._flush_due:
+            self._flush_due = True
+            self._token.run_sync_soon(self._flush)
+
+    def _flush(self) -> None:
+        self._flush_due = False
+        for k, ops in enumerate(self._out):
+            if ops:
+                self._puts[k](req.pack(ops))
+                ops.clear()
+
+    def _shard_of(self, index: int) -> int:
+        return self.route[index % self.shards]
+
+    # -- the world's Relay ---------------------------------------------------------------------------------
+    def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
+        self.has_last[index] = False
+        self._send(self._shard_of(index), req.create(index, figure, weapon, owner))
+
+    def removed(self, index: int) -> None:
+        self.has_last[index] = False
+        self._send(self._shard_of(index), req.remove(index))
+
+    def requests(self, rows: np.ndarray) -> None:
+        idx = rows["index"].astype(np.int64)
+        self.last[idx] = rows
+        self.has_last[idx] = True
+        shard = np.asarray(self.route)[idx % self.shards]
+        for k in np.unique(shard).tolist():
+            self._send(k, req.requests(rows[shard == k]))
+
+    def react(self, index: int, kind: str) -> None:
+        self._send(self._shard_of(index), req.react(index, kind))

@@ -1,0 +1,73 @@
+"""What a front-end sends a shard on ``requests/K``: its clients' requests for that shard's soldiers.
+
+A message is a msgpack list of operations (a front-end sends what one turn of its loop produced as one
+message: a client creating a crowd makes thousands), each a map with ``op`` first: ``create`` (index,
+figure, weapon, owner: the front-end allocates indices, so the one client-visible index space stays one),
+``remove`` (index), ``requests`` (rows of ``protocol.entity.ENTITY_REQUEST_DTYPE`` as bytes, checked
+already by the front-end), ``react`` (index, kind) and ``sync``: every soldier the shard is to animate
+(index, figure, weapon, owner) with the last request of each that had one: what a shard that joined late,
+restarted or takes over another's soldiers (failover) needs to animate them (``replay``: the shard's own
+soldiers come home from a stand-in, replay every last request). The topic is reliable:
+ownership and requests are never lost once a shard listens, and a sync covers the time before.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import msgpack
+import numpy as np
+
+from protocol.entity import ENTITY_REQUEST_DTYPE
+
+OPS = ("create", "remove", "requests", "react", "sync")
+Op = dict[str, Any]
+
+
+def create(index: int, figure: str, weapon: str, owner: str | None) -> Op:
+    return {"op": "create", "index": index, "figure": figure, "weapon": weapon, "owner": owner}
+
+
+def remove(index: int) -> Op:
+    return {"op": "remove", "index": index}
+
+
+def requests(rows: np.ndarray) -> Op:
+    return {"op": "requests", "rows": np.ascontiguousarray(rows, ENTITY_REQUEST_DTYPE).tobytes()}
+
+
+def react(index: int, kind: str) -> Op:
+    return {"op": "react", "index": index, "kind": kind}
+
+
+def sync(soldiers: list[tuple[int, str, str, str | None]], last: np.ndarray, *, replay: bool = False) -> Op:
+    """``soldiers``: (index, figure, weapon, owner) each; ``last``: the last requests of those with one;
+    ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in)."""
+    rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
+    return {"op": "sync", "soldiers": [list(s) for s in soldiers], "rows": rows, "replay": replay}
+
+
+def pack(ops: list[Op]) -> bytes:
+    return bytes(msgpack.packb(ops))
+
+
+def decode(data: bytes) -> list[Op]:
+    """The message's operations (``rows`` as ENTITY_REQUEST_DTYPE arrays); ValueError if it is not one."""
+    try:
+        ops = msgpack.unpackb(data)
+    except (ValueError, msgpack.UnpackException) as exc:
+        raise ValueError(f"not a fabric request: {exc}") from exc
+    if not isinstance(ops, list):
+        raise ValueError(f"not a list of fabric requests: {ops!r:.80}")
+    return [_checked(op) for op in ops]
+
+
+def _checked(op: object) -> Op:
+    if not isinstance(op, dict) or op.get("op") not in OPS:
+        raise ValueError(f"not a fabric request: {op!r:.80}")
+    if op["op"] in ("requests", "sync"):
+        try:
+            op["rows"] = np.frombuffer(op["rows"], ENTITY_REQUEST_DTYPE)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"fabric {op['op']} without rows: {exc}") from exc
+    return op

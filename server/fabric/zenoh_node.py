@@ -1,0 +1,53 @@
+"""The fabric on Eclipse Zenoh: a peer session with explicit unicast endpoints (no scouting)."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import zenoh
+
+from server.fabric import FabricConfig, Handler, Kind, Presence
+
+
+class ZenohFabric:
+    """A Zenoh peer: listens on ``config.listen`` and connects to ``config.connect`` over TCP."""
+
+    engine = "zenoh"
+
+    def __init__(self, config: FabricConfig) -> None:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"peer"')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("listen/endpoints", json.dumps([f"tcp/{config.listen}"] if config.listen else []))
+        conf.insert_json5("connect/endpoints", json.dumps([f"tcp/{c}" for c in config.connect]))
+        self.session = zenoh.open(conf)
+        self._keep: list[Any] = []
+
+    def publisher(self, topic: str, kind: Kind) -> Handler:
+        poses = kind is Kind.POSES
+        pub = self.session.declare_publisher(
+            topic,
+            congestion_control=zenoh.CongestionControl.DROP if poses else zenoh.CongestionControl.BLOCK,
+            reliability=zenoh.Reliability.BEST_EFFORT if poses else zenoh.Reliability.RELIABLE,
+            express=poses,  # do not batch a pose batch behind others: latency over throughput
+        )
+        self._keep.append(pub)
+        return pub.put
+
+    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
+        del kind  # the publisher sets the quality of service
+        self._keep.append(self.session.declare_subscriber(topic, lambda s: on_message(s.payload.to_bytes())))
+
+    def announce(self, key: str) -> None:
+        self._keep.append(self.session.liveliness().declare_token(key))
+
+    def watch(self, key: str, on_change: Presence) -> None:
+        def changed(sample: zenoh.Sample) -> None:
+            on_change(sample.kind == zenoh.SampleKind.PUT)
+
+        self._keep.append(self.session.liveliness().declare_subscriber(key, changed, history=True))
+
+    def close(self) -> None:
+        self._keep.clear()
+        self.session.close()

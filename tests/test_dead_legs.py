@@ -1,0 +1,55 @@
+"""A face-down dead body's legs go limp (authoring/dead_settle.py, issue 14): on a constructed body lying on
+its toes with its heels up, the legs' settle lowers the heels, sliding nothing on the ground."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from authoring import dead_settle
+from authoring.body_parts import contact_runs
+from authoring.quality import CONTACT_HEIGHT_CM
+from authoring.quality_frames import FigureSet
+from peabody.loader import read_figure
+from ttes.paths import FIGURES
+
+
+@pytest.fixture(scope="module")
+def figs() -> FigureSet:
+    return FigureSet(
+        {"body": read_figure(FIGURES / "soldier.fig"), "rifle": read_figure(FIGURES / "AK_47.fig")}
+    )
+
+
+def _on_his_toes(figs: FigureSet) -> dead_settle._Body:
+    """soldier.fig face down, legs straight and feet pointed as far as they go, hips bent just enough that
+    the toes dig in: he lies on his face and toes, heels 21 cm up."""
+    kin = figs.kin["body"]
+    q = np.zeros(kin.ndof)
+    for side in ("left", "right"):
+        q[kin.dof_slices[f"{side}_ankle"]] = np.radians([-50.0, 0.0])
+        q[kin.dof_slices[f"{side}_hip"]] = np.radians([0.0, 5.0, 0.0])
+    root = np.eye(4)
+    root[:3, :3] = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]  # his front (-Z) down
+    nodes, segs = figs.nodes("body")
+    root[1, 3] -= np.einsum("kj,kj->k", kin.segment_globals(q, root)[segs, 1, :], nodes).min()
+    rifle = np.eye(4)
+    rifle[0, 3] = 300.0  # out of the way
+    return dead_settle._Body(figs, q, root, rifle)
+
+
+def test_the_legs_of_a_body_on_his_toes_go_limp(figs: FigureSet) -> None:
+    body = _on_his_toes(figs)
+    leg = dead_settle._Leg(body, "left")
+    assert leg.planted.sum() >= 3  # the toes are on the ground
+    x = dead_settle.limp_leg(body, "left")
+    kin = body.kin
+    assert (x >= kin.lower[leg.idx] - 1e-9).all() and (x <= kin.upper[leg.idx] + 1e-9).all()
+    # the settle as the clip plays it: eased, linear in the angles
+    s = np.arange(49) / 48.0
+    u = s * s * (3.0 - 2.0 * s)
+    pts, heel = leg._shape(leg.x0 + u[:, None] * (x - leg.x0), 1.0)
+    assert heel[0] > 20.0 and heel[-1] < heel[0] - 2.0  # 21.3 -> 19.0 cm: turned out, the foot on its side
+    assert pts[..., 1].min() >= -0.05  # nothing into the ground
+    runs = contact_runs(pts, CONTACT_HEIGHT_CM)
+    assert runs.slide.max(initial=0.0) <= 2.0 * dead_settle.LEG_SLIDE_CM  # the check allows 2 cm a run

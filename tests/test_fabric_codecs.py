@@ -1,0 +1,85 @@
+"""Issue 21: what travels on the fabric between shards and front-ends, and the front-end's board merge."""
+
+from __future__ import annotations
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from protocol.entity import make_entity_requests
+from server.fabric import requests as req
+from server.fabric.batch import Batch, decode_batch, encode_batch
+from server.fabric.nodes import Sharding
+from server.pose_board import PoseBoard
+
+
+def _batch(n: int = 3, nf: int = 64) -> Batch:
+    codes = (np.arange(n * nf).reshape(n, nf) * 97) % 65536
+    return Batch(1, 2, 7, 9, 12.5, np.arange(n) * 2 + 1, np.full(n, 2), codes)
+
+
+def test_a_batch_survives_the_fabric() -> None:
+    b = decode_batch(encode_batch(_batch()))
+    assert (b.shard, b.shards, b.seq, b.tick, b.sent) == (1, 2, 7, 9, 12.5)
+    assert b.indices.tolist() == [1, 3, 5] and b.tables.tolist() == [2, 2, 2]
+    assert np.array_equal(b.codes, _batch().codes)
+
+
+def test_codes_beyond_16_bits_are_refused() -> None:
+    b = _batch()
+    with pytest.raises(ValueError, match="16 bits"):
+        encode_batch(Batch(0, 1, 0, 0, 0.0, b.indices, b.tables, b.codes + 65536))
+
+
+@given(st.binary(max_size=200))
+def test_any_bytes_decode_to_a_batch_or_a_value_error(data: bytes) -> None:
+    try:
+        b = decode_batch(data)
+    except ValueError:
+        return
+    assert len(b.indices) == len(b.tables) == len(b.codes)
+
+
+@given(st.binary(max_size=200))
+def test_any_bytes_decode_to_requests_or_a_value_error(data: bytes) -> None:
+    try:
+        ops = req.decode(data)
+    except ValueError:
+        return
+    assert all(op["op"] in req.OPS for op in ops)
+
+
+def test_requests_and_syncs_survive_the_fabric() -> None:
+    rows = make_entity_requests([4, 6], velocity=(0.0, 1.4, 0.0))
+    sync = req.sync([(4, "DI.fig", "M16.fig", "alpha"), (6, "DI.fig", "", None)], rows[:1])
+    got = req.decode(req.pack([req.requests(rows), sync, req.create(3, "DI.fig", "AK_47.fig", None)]))
+    assert [op["op"] for op in got] == ["requests", "sync", "create"]
+    assert np.array_equal(got[0]["rows"], rows)
+    assert got[1]["soldiers"] == [[4, "DI.fig", "M16.fig", "alpha"], [6, "DI.fig", "", None]]
+    assert got[1]["rows"]["index"].tolist() == [4]
+    assert got[2]["owner"] is None
+
+
+def test_sharding_is_k_of_n() -> None:
+    s = Sharding.parse("1/3")
+    assert s.owns(np.arange(7)).tolist() == [False, True, False, False, True, False, False]
+    for bad in ("3/3", "1", "-1/2", "a/b"):
+        with pytest.raises(ValueError):
+            Sharding.parse(bad)
+
+
+def test_merged_codes_bump_the_version_of_changed_soldiers_only() -> None:
+    board = PoseBoard(50, 2)
+    codes = np.ones((3, 64), np.int32)
+    assert board.publish_codes(np.array([0, 1, 2]), np.array([1, 1, 1]), codes, 1) == 3
+    codes[1, 5] = 9
+    assert board.publish_codes(np.array([0, 1, 2]), np.array([1, 1, 1]), codes, 2) == 1
+    assert board.version[:3].tolist() == [1, 2, 1] and board.tick == 2
+    assert board.publish_codes(np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros((0, 0)), 2) == 0
+
+
+def test_a_request_without_its_rows_is_a_value_error() -> None:
+    with pytest.raises(ValueError, match="without rows"):
+        req.decode(msgpack.packb([{"op": "requests", "rows": 5}]))

@@ -1,0 +1,232 @@
+"""Issue 21 in one process: a front-end and two shards (``TtesServer`` each) over an in-memory fabric, on
+trio's autojump clock — the routing, the sync of a late shard and the failover, without processes."""
+
+from __future__ import annotations
+
+import contextlib
+from collections import defaultdict
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
+
+import trio
+from test_server_support import Client, make_server
+
+from protocol.events import (
+    CreateSoldier,
+    FigureMsg,
+    JointUpdates,
+    Ready,
+    RequestFigure,
+    SoldierCreated,
+    SoldierRemoved,
+    Subscribe,
+    UpdateTableMsg,
+)
+from server.app import TtesServer
+from server.fabric import Handler, Kind, Presence
+from server.fabric.nodes import FrontNode, Sharding, ShardNode
+
+WALK = (0.0, 1.4, 0.0)
+RUN = (0.0, 3.5, 0.0)
+
+
+@dataclass
+class Bus:
+    """One process's in-memory fabric: topics and their handlers, presences and their watchers."""
+
+    topics: dict[str, list[Handler]] = field(default_factory=lambda: defaultdict(list))
+    present: set[str] = field(default_factory=set)
+    watchers: dict[str, list[Presence]] = field(default_factory=lambda: defaultdict(list))
+
+
+class MemoryFabric:
+    """A node on a :class:`Bus`: a message reaches the handlers at once."""
+
+    engine = "memory"
+
+    def __init__(self, bus: Bus) -> None:
+        self.bus = bus
+        self.mine: list[tuple[str, Handler]] = []
+        self.announced: list[str] = []
+        self.closed = False
+
+    def publisher(self, topic: str, kind: Kind) -> Handler:
+        def put(data: bytes) -> None:
+            if not self.closed:
+                for handler in list(self.bus.topics[topic]):
+                    handler(data)
+
+        return put
+
+    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
+        self.bus.topics[topic].append(on_message)
+        self.mine.append((topic, on_message))
+
+    def announce(self, key: str) -> None:
+        self.announced.append(key)
+        self.bus.present.add(key)
+        for watcher in self.bus.watchers[key]:
+            watcher(True)
+
+    def watch(self, key: str, on_change: Presence) -> None:
+        self.bus.watchers[key].append(on_change)
+        if key in self.bus.present:
+            on_change(True)
+
+    def close(self) -> None:
+        """A dead process: it neither publishes nor hears anything more, and is gone from the fabric."""
+        self.closed = True
+        for topic, handler in self.mine:
+            self.bus.topics[topic].remove(handler)
+        for key in self.announced:
+            self.bus.present.discard(key)
+            for watcher in self.bus.watchers[key]:
+                watcher(False)
+
+
+@contextlib.asynccontextmanager
+async def cluster() -> AsyncIterator[tuple[TtesServer, FrontNode, list[TtesServer], list[MemoryFabric]]]:
+    bus = Bus()
+    token = trio.lowlevel.current_trio_token()
+    front = make_server()
+    front_node = FrontNode(front, MemoryFabric(bus), 2)
+    shards, fabrics = [], []
+    async with trio.open_nursery() as nursery:
+        await nursery.start(front.serve)
+        front_node.start(token)
+        for k in range(2):
+            shard, fabric = make_server(), MemoryFabric(bus)
+            node = ShardNode(shard, fabric, Sharding(k, 2))
+            await nursery.start(shard.serve)
+            node.keep_own()
+            node.start(token)
+            shards.append(shard)
+            fabrics.append(fabric)
+        yield front, front_node, shards, fabrics
+        for s in (front, *shards):
+            s.shutdown()
+
+
+def live(server: TtesServer) -> list[int]:
+    assert server.world.manager is not None
+    return server.world.manager.table.live.tolist()
+
+
+async def walker(front: TtesServer, index: int) -> Client:
+    c = await Client.open(front.addresses[0][1], "ig", client_id="alpha")
+    await c.expect(Ready)
+    await c.send(CreateSoldier(1, "DI.fig", "AK_47.fig", index))
+    assert (await c.expect(SoldierCreated)).index == index
+    await c.send(Subscribe(tuple(range(12))))
+    await c.requests(index=[index], velocity=WALK)
+    return c
+
+
+async def moving(c: Client, index: int, updates: int = 10) -> list[int]:
+    """The ticks of the next ``updates`` joint updates of ``index`` (they keep coming while it walks)."""
+    ticks = []
+    with trio.fail_after(30):  # one that stands still is sent once: it would never come
+        while len(ticks) < updates:
+            ju = await c.expect(JointUpdates)
+            if index in ju.indices:
+                ticks.append(ju.tick)
+    return ticks
+
+
+async def test_each_soldier_lives_in_its_shard_and_reaches_the_client(autojump_clock: trio.abc.Clock) -> None:
+    async with cluster() as (front, _, shards, _):
+        assert live(shards[0]) == [0, 2, 4, 6, 8] and live(shards[1]) == [1, 3, 5, 7, 9]
+        c = await walker(front, 11)
+        assert 11 in live(shards[1]) and 11 not in live(shards[0])
+        ticks = await moving(c, 11)
+        assert ticks == sorted(ticks)  # in order (a shard tick and an answer may share the front's tick)
+        assert live(front) == [*range(10), 11]  # the front-end keeps the books: one index space
+
+
+async def test_a_silent_shards_walker_walks_on_in_the_survivor(autojump_clock: trio.abc.Clock) -> None:
+    async with cluster() as (front, node, shards, fabrics):
+        c = await walker(front, 11)
+        await moving(c, 11, 3)
+        fabrics[1].close()  # shard 1 dies (as far as anyone can hear)
+        shards[1].shutdown()
+        await moving(c, 11)  # walking on in shard 0, from its last request
+        assert node.failovers == 1 and live(shards[0]) == [*range(10), 11]
+        assert not [e for e in c.events if isinstance(e, SoldierRemoved)]
+        assert front.status_text()[2].endswith("front-end of 2 shards: 0 up, 1 on 0 (gone)")
+        await c.aclose()
+
+
+async def test_a_shard_that_hears_late_gets_its_soldiers_by_sync(autojump_clock: trio.abc.Clock) -> None:
+    """A creation and a request sent while no shard listened are not lost: the shard's first batch brings a
+    sync, and the soldier walks."""
+    bus = Bus()
+    token = trio.lowlevel.current_trio_token()
+    front = make_server()
+    FrontNode(front, MemoryFabric(bus), 1).start(token)
+    async with trio.open_nursery() as nursery:
+        await nursery.start(front.serve)
+        c = await walker(front, 11)  # no shard yet: the creation goes nowhere
+        shard = make_server()
+        node = ShardNode(shard, MemoryFabric(bus), Sharding(0, 1))
+        await nursery.start(shard.serve)
+        node.start(token)
+        await moving(c, 11)
+        assert live(shard) == [*range(10), 11]
+        front.shutdown()
+        shard.shutdown()
+
+
+async def test_a_hung_shard_fails_over_after_its_silence(autojump_clock: trio.abc.Clock) -> None:
+    """Present on the fabric but sending nothing (a hung process): failed over after ``hung_s``."""
+    async with cluster() as (front, node, _, fabrics):
+        c = await walker(front, 11)
+        await moving(c, 11, 3)
+        fabrics[1].closed = True  # it publishes nothing more, yet its presence stays
+        hung_at = trio.current_time()
+        await moving(c, 11)
+        assert node.failovers == 1 and trio.current_time() - hung_at >= node.hung_s
+        await c.aclose()
+
+
+async def test_a_hung_shard_that_resumes_takes_its_soldiers_back_with_their_requests(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Shard 1 hangs, shard 0 stands in and gets the walker's new request (run instead of walk); shard 1
+    resumes: the soldier goes home, the stand-in lets go, and the home shard replays the last request."""
+    async with cluster() as (front, node, shards, fabrics):
+        c = await walker(front, 11)
+        await moving(c, 11, 3)
+        fabrics[1].closed = True
+        with trio.fail_after(30):
+            while node.failovers == 0:
+                await trio.sleep(0.1)
+        await c.requests(index=[11], velocity=RUN)
+        await moving(c, 11, 3)
+        fabrics[1].closed = False  # it resumes
+        with trio.fail_after(30):
+            while 11 in live(shards[0]):
+                await trio.sleep(0.1)
+        assert 11 in live(shards[1]) and node.route == [0, 1]
+        m = shards[1].world.manager
+        assert m is not None and m.soldier_info(11)["speed"] > 2.0  # the run it was asked for while away
+        await moving(c, 11)
+        await c.aclose()
+
+
+async def test_a_client_cannot_tell_the_front_end_from_a_server(autojump_clock: trio.abc.Clock) -> None:
+    """Same ACCEPT, update tables, READY soldiers (the start-up script's) and FIGURE as a single server."""
+    async with cluster() as (front, _, _, _):
+        alone = make_server()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(alone.serve)
+            seen = []
+            for server in (front, alone):
+                c = await Client.open(server.addresses[0][1], "ig", client_id="alpha")
+                tables = [(await c.expect(UpdateTableMsg)).table for _ in server.world.tables]
+                ready = await c.expect(Ready)
+                await c.send(RequestFigure(5, tables[0].table_id))
+                figure = await c.expect(FigureMsg)
+                seen.append((c.accept, tables, ready.soldiers, repr(figure)))  # repr: its numpy arrays
+                await c.aclose()
+            assert seen[0] == seen[1]
+            alone.shutdown()
