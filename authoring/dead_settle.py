@@ -21,7 +21,10 @@ thigh turns about the hip, it cannot roll along the ground. So the heels come do
 30 deg) the boot props the ankle up: a face-down soldier.fig lies with his heels about 15 cm up at the
 least. The legs are not checked against each other or the rifle (they turn outward, away from each other).
 
-Only a body lying on its front (the pelvis' front pointing down, :data:`FACE_DOWN`) settles so.
+Only a body lying on its front (the pelvis' front pointing down, :data:`FACE_DOWN`) settles so. A prone
+death (``propped``) is left propped on its elbows, the head 18-19 cm up even dropped: its chest comes down
+instead (:mod:`authoring.dead_prone`: spine, neck and head, the arms laid anew and lifted clear while they
+move), its legs going limp with it.
 
 A body on its back (a death that asks for it, ``arms_fall``) **lets its arms fall** instead (issue 14:
 kfire2dead's forearms stood up 37 cm; an arm tone in the physics made the DI slaves' feet jump, branch
