@@ -21,7 +21,10 @@ thigh turns about the hip, it cannot roll along the ground. So the heels come do
 30 deg) the boot props the ankle up: a face-down soldier.fig lies with his heels about 15 cm up at the
 least. The legs are not checked against each other or the rifle (they turn outward, away from each other).
 
-Only a body lying on its front (the pelvis' front pointing down, :data:`FACE_DOWN`) settles so.
+Only a body lying on its front (the pelvis' front pointing down, :data:`FACE_DOWN`) settles so. A prone
+death (``propped``) is left propped on its elbows, the head 18-19 cm up even dropped: its chest comes down
+instead (:mod:`authoring.dead_prone`: spine, neck and head, the arms laid anew and lifted clear while they
+move), its legs going limp with it.
 
 A body on its back (a death that asks for it, ``arms_fall``) **lets its arms fall** instead (issue 14:
 kfire2dead's forearms stood up 37 cm; an arm tone in the physics made the DI slaves' feet jump, branch
@@ -250,6 +253,15 @@ def limp_leg(body: _Body, side: str) -> np.ndarray:
     return best
 
 
+def _leg_dofs(kin) -> np.ndarray:
+    return _dofs(kin, tuple(f"{side}_{j}" for side in ("left", "right") for j in LEG_DOFS))
+
+
+def _limp_legs(body: _Body) -> np.ndarray:
+    """Both legs' angles (:func:`_leg_dofs` order) gone limp (:func:`limp_leg`)."""
+    return np.concatenate([limp_leg(body, side) for side in ("left", "right")])
+
+
 def _face_up(kin, q: np.ndarray, root: np.ndarray) -> bool:
     g = kin.segment_globals(q, root)[kin.segment_names.index("lower_torso")]
     return float(g[1, 2]) <= -FACE_UP
@@ -259,7 +271,7 @@ class _Arm:
     """One arm of a body on its back, to lay on the ground: how high its parts lie in a shape ``x`` of its
     clavicle, shoulder, elbow and wrist angles, and how far that shape goes wrong."""
 
-    def __init__(self, body: _Body, side: str) -> None:
+    def __init__(self, body: _Body, side: str, clearance: float | None = None) -> None:
         self.body, self.side = body, side
         self.idx = _dofs(body.kin, tuple(f"{side}_{j}" for j in ARM_DOFS))
         parts = body.parts
@@ -272,7 +284,7 @@ class _Arm:
         self.limb = [parts == f"{side}{part}" for part in ARM_PARTS]
         self.x0 = body.q[self.idx]
         p0, self.inside0 = self.into(self.x0)  # what lay that deep (or that low) already is not counted
-        self.clearance = min(ARM_CLEARANCE, float(p0[self.arm, 1].min()))
+        self.clearance = min(ARM_CLEARANCE, float(p0[self.arm, 1].min())) if clearance is None else clearance
 
     def pose(self, x: np.ndarray) -> np.ndarray:
         q = self.body.q.copy()
@@ -331,8 +343,7 @@ def limp_target(figs: FigureSet, frames: ClipFrames, arms_fall: bool = False) ->
     target = q.copy()
     if _face_down(body.kin, q, root):
         target[_dofs(body.kin, HEAD_DOFS)] = dropped_head(body)
-        for side in ("left", "right"):
-            target[_dofs(body.kin, tuple(f"{side}_{j}" for j in LEG_DOFS))] = limp_leg(body, side)
+        target[_leg_dofs(body.kin)] = _limp_legs(body)
         return target
     if not (arms_fall and _face_up(body.kin, q, root)):
         return None
@@ -357,10 +368,16 @@ def fall_easing(s: np.ndarray) -> np.ndarray:
     return v * v * (3.0 - 2.0 * v)
 
 
-def settle(frames: ClipFrames, soldier: Figure, rifle: Figure, arms_fall: bool = False) -> ClipFrames:
+def settle(
+    frames: ClipFrames, soldier: Figure, rifle: Figure, arms_fall: bool = False, propped: bool = False
+) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
-    with ``arms_fall``, face up)."""
+    with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
+    (:mod:`authoring.dead_prone`)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
+    lowered = _lowered(figs, frames) if propped else None
+    if lowered is not None:
+        return _appended(frames, lowered)
     target = limp_target(figs, frames, arms_fall)
     if target is None:
         return frames
@@ -370,8 +387,29 @@ def settle(frames: ClipFrames, soldier: Figure, rifle: Figure, arms_fall: bool =
     eased = fall_easing(s) if up else s * s * (3.0 - 2.0 * s)
     u = np.concatenate([eased, np.ones(round(STILL_SECONDS * frames.fps))])
     last = frames.poses[-1]
-    poses = last[None] + u[:, None] * (target - last)[None]
-    k = len(u)
+    return _appended(frames, last[None] + u[:, None] * (target - last)[None])
+
+
+def _lowered(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
+    """The settle poses of a face-down body left propped on its arms (:mod:`authoring.dead_prone`), then
+    still; None if it is not."""
+    from authoring import dead_prone
+
+    q, root = frames.poses[-1], frames.roots[-1]
+    body = _Body(figs, q, root, frames.rifles[-1])
+    if not _face_down(body.kin, q, root):
+        return None
+    n = round(SETTLE_SECONDS * frames.fps)
+    legs, i = _limp_legs(body), _leg_dofs(body.kin)
+    poses = dead_prone.lowered(body, n)
+    u = dead_prone.torso_progress(np.arange(1, n + 1) / n)  # the legs go limp as the torso comes down
+    poses[:, i] = q[i] + u[:, None] * (legs - q[i])
+    return np.concatenate([poses, np.repeat(poses[-1:], round(STILL_SECONDS * frames.fps), axis=0)])
+
+
+def _appended(frames: ClipFrames, poses: np.ndarray) -> ClipFrames:
+    """``frames`` and then ``poses``, the body and the rifle staying where they lie."""
+    k = len(poses)
     return ClipFrames(
         np.concatenate([frames.poses, poses]),
         np.concatenate([frames.roots, np.repeat(frames.roots[-1:], k, axis=0)]),

@@ -41,8 +41,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 5. **the skid is taken out**: the ragdoll's parts slide over the ground as he falls, and the recorded frames
    are moved back by their drift (:func:`authoring.planted.plant`);
 6. **a face-down body goes limp**: a short kinematic settle drops the head and turns the legs out (heels
-   lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`); a body on its
-   back (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way (a faint arm tone in the
+   lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
+   left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
+   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`); a body on its back
+   (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way (a faint arm tone in the
    physics made the DI slaves' feet jump and slide, branch ``legsup14-kfire``).
 
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
@@ -104,6 +106,24 @@ class DeathSpec:
     hip_damping: float = 1.0  # the hips', waist's and lower back's (FALL_STIFF) damping: this many times
     # stronger until he is down
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
+    propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
+
+
+def _prone(name: str, start: str, force: float = 80.0, knee_damping: float = 1.0) -> DeathSpec:
+    """A death of a soldier lying on his front: hit down on the upper torso, only the head slumping, quick;
+    left propped on his elbows, his chest comes down after the physics."""
+    return DeathSpec(
+        name,
+        start,
+        force,
+        (0.0, -1.0, 0.0),
+        "head",
+        slump_time=0.25,
+        fade=0.6,
+        release=0.15,
+        knee_damping=knee_damping,
+        propped=True,
+    )
 
 
 DEATHS: tuple[DeathSpec, ...] = (
@@ -140,23 +160,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         knee_damping=4.0,
         arms_fall=True,
     ),
-    DeathSpec(
-        "prstow2dead", "PRONE_STOWED", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
-    ),
-    DeathSpec(
-        "prfire2dead", "PRONE_FIRE", 80.0, (0.0, -1.0, 0.0), "head", slump_time=0.25, fade=0.6, release=0.15
-    ),
-    DeathSpec(
-        "crawl2dead",
-        "CRAWL",
-        120.0,
-        (0.0, -1.0, 0.0),
-        "head",
-        slump_time=0.25,
-        fade=0.6,
-        release=0.15,
-        knee_damping=4.0,
-    ),
+    _prone("prstow2dead", "PRONE_STOWED"),
+    _prone("prfire2dead", "PRONE_FIRE"),
+    _prone("crawl2dead", "CRAWL", force=120.0, knee_damping=4.0),
 )
 SLUMP = "SLUMP"  # the in-between key of a body crumpling onto its knees (authoring.postures)
 UPPER = ("waist", "neck", "head")  # with the vertebrae: what slumps of a kneeling soldier
@@ -427,5 +433,5 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             break
     frames = plant(ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS), soldier)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall)
+    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
     return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))

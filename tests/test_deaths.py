@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from authoring import dead_settle, deaths, postures
+from authoring import dead_prone, dead_settle, deaths, postures
 from authoring.build import BuildContext
 from authoring.postures import RIFLE, SOLDIER
 from authoring.quality_frames import FigureSet
@@ -113,10 +113,11 @@ def test_every_death_lets_go_of_the_rifle_and_ends_at_rest(ctx: BuildContext, na
 
 @pytest.mark.parametrize("name", ["prstow2dead", "prfire2dead"])
 def test_a_prone_death_lays_the_head_down(ctx: BuildContext, name: str) -> None:
-    """Issue 14: the physics left the head held up about 30 cm, like a live prone soldier's."""
+    """Issue 14: the physics left the head held up about 30 cm, like a live prone soldier's, and propped on
+    his elbows dropping the head alone left it 18-19 cm up."""
     poses, roots, _, _ = _played(ctx, name)
     lows = part_lows_of(ctx, poses[-1], roots[-1])
-    assert lows["head"] <= 20.0
+    assert lows["head"] <= 10.0  # the check's rest_head_cm (18.6-19.0 cm before the chest came down)
 
 
 def test_a_death_on_his_back_lets_the_arms_fall(ctx: BuildContext) -> None:
@@ -151,3 +152,79 @@ def part_lows_of(ctx: BuildContext, q: np.ndarray, root: np.ndarray) -> dict[str
     parts = figs.node_parts("body")
     y = np.einsum("kj,kj->k", kin.segment_globals(q, root)[segs, 1, :], nodes)
     return {str(p): float(y[parts == p].min()) for p in np.unique(parts)}
+
+
+def test_the_compass_search_finds_the_lowest_of_its_starts_within_the_bounds() -> None:
+    calls: list[int] = []
+
+    def cost(x: np.ndarray) -> np.ndarray:  # two bowls: the deeper at (0.3, -0.2)
+        calls.append(len(x))
+        return np.minimum(((x - [0.3, -0.2]) ** 2).sum(axis=1), ((x - [-0.6, 0.6]) ** 2).sum(axis=1) + 0.1)
+
+    lo, hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
+    tol = np.radians(dead_prone.TOL_DEG)
+    best = dead_prone.search(cost, np.array([[-0.9, 0.9], [0.9, -0.9]]), lo, hi)
+    np.testing.assert_allclose(best, [0.3, -0.2], atol=tol)
+    assert set(calls[1:]) == {2 * 2 * 2}  # every step of both starts in one call
+    beyond = dead_prone.search(lambda x: ((x - [2.0, 0.0]) ** 2).sum(axis=1), np.zeros((1, 2)), lo, hi)
+    np.testing.assert_allclose(beyond, [1.0, 0.0], atol=tol)  # the bowl's centre is out of bounds
+
+
+def test_an_arm_path_passes_its_shapes_and_starts_and_ends_at_rest() -> None:
+    keys = {-1: np.zeros(2), 5: np.array([1.0, 2.0]), 20: np.array([0.5, -1.0]), 29: np.array([2.0, 0.0])}
+    frames = np.arange(-1, 30)
+    path = dead_prone.arm_path(keys, frames)
+    for f, x in keys.items():
+        np.testing.assert_allclose(path[f + 1], x, atol=1e-12)
+    ends = dead_prone.arm_path(keys, np.array([-1.0, -0.99, 28.99, 29.0]))
+    assert np.abs(ends[1] - ends[0]).max() < 1e-3 and np.abs(ends[3] - ends[2]).max() < 1e-3  # at rest
+    u = dead_prone.torso_progress(np.linspace(0.0, 1.0, 41))
+    a, b = dead_prone.TORSO_SPAN
+    assert u[0] == 0.0 and u[-1] == 1.0 and (np.diff(u) >= 0).all()
+    assert dead_prone.torso_progress(np.array([a, b])).tolist() == [0.0, 1.0]
+
+
+@pytest.fixture(scope="module")
+def propped(ctx: BuildContext):
+    """A live prone soldier (PRONE_FIRE: head up, propped on his elbows) taken as a dead one, his rifle let
+    go and lying well away, and his settle."""
+    key = ctx.keys["PRONE_FIRE"]
+    q, root = key.poses[SOLDIER], key.locations[SOLDIER]
+    rifle = key.locations[RIFLE].copy()
+    rifle[0, 3] += 200.0
+    figs = FigureSet({"body": ctx.soldier, "rifle": ctx.rifle})
+    body = dead_settle._Body(figs, q, root, rifle)
+    return ctx, q, root, dead_prone.lowered(body, 48)
+
+
+def test_a_propped_prone_body_lays_its_chest_and_head_down(propped) -> None:
+    """Issue 14: the prone deaths' heads stayed 18-19 cm up, the shoulders propped on the elbows."""
+    ctx, q, root, poses = propped
+    before, after = part_lows_of(ctx, q, root), part_lows_of(ctx, poses[-1], root)
+    assert before["head"] > 15.0
+    assert after["head"] <= 2.0  # the cheek on the ground (the check's rest_head_cm: 10)
+    kin = FigureKinematics(ctx.soldier)
+    assert postures.lowest_point(kin, poses, np.broadcast_to(root, (len(poses), 4, 4))).min() > -0.5
+    np.testing.assert_array_equal(
+        poses[:, kin.dof_slices["left_hip"]], np.broadcast_to(q[kin.dof_slices["left_hip"]], (48, 3))
+    )
+
+
+def test_the_propped_arms_are_lifted_clear_while_they_move(propped) -> None:
+    """Lowering the spine drove the elbows 11-19 cm into the ground; the arms are laid anew, in the air
+    between: no arm node skids over the ground (the check's contact slide: 3 cm) and the forearms end on
+    it."""
+    from authoring.body_parts import contact_slides
+    from authoring.quality import CONTACT_HEIGHT_CM
+
+    ctx, q, root, poses = propped
+    figs = FigureSet({"body": ctx.soldier})
+    kin, (nodes, segs), parts = figs.kin["body"], figs.nodes("body"), figs.node_parts("body")
+    arm = np.array([str(p).endswith(("_upper_arm", "_forearm", "_hand")) for p in parts])
+    g = kin.segment_globals(np.r_[q[None], poses], root)
+    points = np.einsum("nkij,kj->nki", g[:, segs[arm], :3, :], nodes[arm])
+    slide, _ = contact_slides(points, CONTACT_HEIGHT_CM)
+    assert slide.max() < 3.0
+    assert points[-1, :, 1].min() > -0.5
+    lows = part_lows_of(ctx, poses[-1], root)
+    assert max(lows["left_forearm"], lows["right_forearm"]) <= 5.0
