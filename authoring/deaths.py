@@ -46,7 +46,7 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    jump and slide, branch ``legsup14-kfire``);
 7. **the limbs stay where they land** (:attr:`DeathSpec.pinned`): hands, forearms, feet and the head on the
    ground are held where they touched down by re-solving the limb (:func:`authoring.contact_pin.pin_frames`;
-   the first and last frames unchanged; ststow2dead and kstow2dead: pinned, kfire2dead's DI slave's
+   the first and last frames unchanged; the standing deaths and kstow2dead: pinned, kfire2dead's DI slave's
    kneeling knee slid 1.3 cm more). Knees, thighs and the trunk still skid (ststow2dead's knee 10 cm: the
    hip pitches further than the thigh reaches). Making every part stick in the physics instead
    (MuJoCo connect constraints to mocap points following a part's lowest node, released 2.5 cm up) held
@@ -130,6 +130,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         knee_straighten=0.5,
         hip_damping=13.0,
         arm_tone=0.08,
+        pinned=True,
     ),
     DeathSpec(
         "kstow2dead",
