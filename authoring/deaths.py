@@ -46,6 +46,16 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    and lifted clear of the ground while they move (:mod:`authoring.dead_prone`); a body on its back
    (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way (a faint arm tone in the
    physics made the DI slaves' feet jump and slide, branch ``legsup14-kfire``).
+7. **the limbs stay where they land** (:attr:`DeathSpec.pinned`): hands, forearms, feet and the head on the
+   ground are held where they touched down by re-solving the limb (:func:`authoring.contact_pin.pin_frames`;
+   the first and last frames unchanged; the standing deaths and kstow2dead: pinned, kfire2dead's DI slave's
+   kneeling knee slid 1.3 cm more). Knees, thighs and the trunk still skid (ststow2dead's knee 10 cm: the
+   hip pitches further than the thigh reaches). Making every part stick in the physics instead
+   (MuJoCo connect constraints to mocap points following a part's lowest node, released 2.5 cm up) held
+   every contact under 1.5 cm but changed the falls: from the start, the standing soldier sat down
+   backwards; from touchdown, he ended bottom-up on his knees (pelvis 24 cm up) and the kneeling ones
+   on their sides with an arm up (52-60 cm): the muscle program that lays a body out needs its knees to
+   slide (issue 14, branch ``dfall14``).
 
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph
@@ -64,6 +74,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from authoring import dead_settle
+from authoring.contact_pin import pin_frames
 from authoring.motion import KeyPosture
 from authoring.planted import plant
 from authoring.postures import RIFLE, SOLDIER
@@ -107,6 +118,7 @@ class DeathSpec:
     # stronger until he is down
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
     propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
+    pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
 
 
 def _prone(name: str, start: str, force: float = 80.0, knee_damping: float = 1.0) -> DeathSpec:
@@ -127,7 +139,7 @@ def _prone(name: str, start: str, force: float = 80.0, knee_damping: float = 1.0
 
 
 DEATHS: tuple[DeathSpec, ...] = (
-    DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0),
+    DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0, pinned=True),
     DeathSpec(
         "stfire2dead",
         "STAND_FIRE",
@@ -138,6 +150,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         knee_straighten=0.5,
         hip_damping=13.0,
         arm_tone=0.08,
+        pinned=True,
     ),
     DeathSpec(
         "kstow2dead",
@@ -148,6 +161,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         release=0.15,
         sideways=True,
         arm_tone=0.05,
+        pinned=True,
     ),
     DeathSpec(
         "kfire2dead",
@@ -431,7 +445,16 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         still = still + 1 if speed < REST_SPEED and t > spec.fade + spec.release else 0
         if still * dt >= REST_SECONDS:
             break
-    frames = plant(ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS), soldier)
+    recorded = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
+    frames = _after_physics(spec, recorded, figures)
+    return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))
+
+
+def _after_physics(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure]) -> ClipFrames:
+    """The recorded fall with its skid taken out, settled limp and (:attr:`DeathSpec.pinned`) its limbs on
+    the ground held where they touched down (steps 5-7 of the module docstring)."""
+    soldier, rifle = figures
+    frames = plant(frames, soldier)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
     frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
-    return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))
+    return pin_frames(frames, soldier) if spec.pinned else frames

@@ -63,7 +63,10 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def plant_offsets(
-    points: np.ndarray, planted: np.ndarray | None = None, contact_cm: float = CONTACT_HEIGHT_CM
+    points: np.ndarray,
+    planted: np.ndarray | None = None,
+    contact_cm: float = CONTACT_HEIGHT_CM,
+    at_lift_off: bool = False,
 ) -> np.ndarray:
     """Per frame the ground offset ``(n, 3)`` (y = 0) that holds a foot's contacts where they touched down.
 
@@ -72,8 +75,10 @@ def plant_offsets(
     offset changes by minus the
     mean ground move of the nodes below ``contact_cm`` in both frames, starting from none at touchdown (or,
     for a stance that reaches the clip's last frame, ending at none there; a stance over the whole clip
-    spreads what is left evenly). Between stances it eases (smoothstep) from one stance's last value to the
-    next one's first; it is none at the first and last frames."""
+    spreads what is left evenly; ``at_lift_off``: every stance after the first frame ends at none, so the
+    part is held where it lifts off, where the rest of the fall put it). Between stances it eases
+    (smoothstep) from one stance's last value to the next one's first; it is none at the first and last
+    frames."""
     n = len(points)
     below = points[..., 1] <= contact_cm
     stance = np.asarray(below.any(axis=1) if planted is None else planted, dtype=bool)
@@ -87,7 +92,7 @@ def plant_offsets(
     runs = _runs(stance)
     for a, b in runs:
         track = np.cumsum(move[a : b + 1], axis=0) - move[a]  # none at touchdown
-        if b == n - 1:
+        if b == n - 1 or (at_lift_off and a > 0):
             track -= track[-1] * (1.0 if a > 0 else np.linspace(0.0, 1.0, b - a + 1)[:, None])
         if np.linalg.norm(track, axis=1).max() >= MIN_PLANT_CM:
             out[a : b + 1] = track

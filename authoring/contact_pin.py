@@ -1,0 +1,215 @@
+"""A fall's limbs on the ground stay where they touched down (issue 14): hands, forearms, feet, head.
+
+The ragdoll of :mod:`authoring.deaths` slides its contacts as it collapses (ststow2dead: a hand 6.5 cm as
+it landed, the toes 7.5 cm as the foot untucked), and :func:`authoring.planted.plant` takes out only the
+drift the parts share (it moves the root), not one part dragging against the others. So, in the spirit of
+foot-skate cleanup (Kovar, Schreiner and Gleicher, 2002), each limb's contacts are found **by height**, as
+the check finds them (a mesh node below :data:`~authoring.quality.CONTACT_HEIGHT_CM`), and held by
+re-solving that limb with the project's IK (:func:`authoring.transitions.track_solve`: frame after frame
+in small steps, so no joint leaps). The offset that cancels the contact nodes' ground motion
+(:func:`~authoring.slave_feet.plant_offsets`, held where the part lifts off, or at the clip's first frame
+for a stance that starts there) moves the site of the part nearest its contacts (:data:`PINS`: heel, ball
+or toes for a foot, palm, elbow or wrist for a forearm, face for the head); its frame is kept loosely and
+the limb's joints carry it there (the arm's without the clavicle, which is the chest's). Between stances
+the offset eases back to none, and it is none at a clip's first and last frames: the postures it starts
+and ends in (the DEAD rest) do not change.
+
+A knee or thigh near the ground is not moved by its foot's pin (:attr:`Pin.stays`, more important than
+the foot): held by the hip and knee instead, a knee whose body pitches past its reach (ststow2dead: the
+hip travels 63 cm while the thigh allows 52) went 3 cm into the ground and still slid 5. Knees, thighs
+and the trunk are left as they fall. Where holding a limb would still press the body more than
+:data:`SINK_CM` deeper into the ground (a foot turned about its held toes), that frame's change is taken
+back in part (:func:`_above_ground`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from authoring import ik
+from authoring.quality import CONTACT_HEIGHT_CM
+from authoring.quality_frames import FigureSet
+from authoring.rifle_swap import _smooth_above
+from authoring.slave_feet import _runs, part_points, plant_offsets
+from authoring.transitions import ClipFrames, track_solve
+from peabody.model import Figure
+
+SIDES = ("left", "right")
+MIN_SHIFT_CM = 0.05  # a site moved less than this is left as it is
+TRACK_ITERATIONS = 20  # per frame of the tracking ...
+TRACK_DOF_STEP = 0.01  # ... in steps of at most this (rad): a joint turns at most 11 degrees a frame
+TURN_CM = 5.0  # a radian of a pinned part's turn weighs as much as this much move (held loosely: a foot
+# untucking rolls over its toes)
+STAY_DOWN_CM, STAY_FREE_CM = 3.0, 10.0  # a staying part this near the ground is kept where it is, fully ...
+# ... and from this height up not at all (eased in between)
+SINK_CM = 0.5  # cm: holding a limb may press the body this much deeper into the ground than it was
+GUARD_STEPS = 8  # bisection steps of the share of a frame's change that keeps the body out of the ground
+GUARD_SIGMA_FRAMES = 3.0
+EASE_FRAMES = 15  # a limb's hold eases in (and out) over this many frames next to its stance
+PASSES = 2  # the nodes on the ground change a little as a limb moves: measure and solve again
+
+
+@dataclass(frozen=True)
+class Pin:
+    """A body part held still while on the ground: its parts (as the check names them, ``{side}`` filled
+    in), the sites that may carry its goal and the joints that move it there."""
+
+    parts: tuple[str, ...]
+    sites: tuple[str, ...]  # the one nearest the part's contacts carries the goal
+    joints: tuple[str, ...]
+    priority: int = 0  # a larger number is more important: a knee on the ground before its foot
+    stays: bool = False  # not moved, only kept where it is while near the ground (a knee under its foot)
+
+    def sided(self, side: str) -> Pin:
+        parts, sites, joints = (
+            tuple(x.format(side=side) for x in xs) for xs in (self.parts, self.sites, self.joints)
+        )
+        return Pin(parts, sites, joints, self.priority, self.stays)
+
+
+LEG = ("{side}_hip", "{side}_knee", "{side}_ankle", "{side}_toes")
+ARM = ("{side}_shoulder", "{side}_elbow", "{side}_wrist")  # not the clavicle: it is the chest's
+PINS: tuple[Pin, ...] = (
+    Pin(("{side}_foot",), ("{side}_foot.heel", "{side}_foot.ball", "{side}_toes.distal"), LEG),
+    Pin(("{side}_knee", "{side}_kneecap", "{side}_thigh"), ("{side}_lower_leg.knee",), LEG[:2], 1, True),
+    Pin(("{side}_hand",), ("{side}_palm.palmcenter",), ARM),
+    Pin(("{side}_forearm",), ("{side}_lower_arm.proximal", "{side}_lower_arm.distal"), ARM[:2]),
+)
+HEAD = Pin(
+    ("head",),
+    ("bottom_head.nose", "bottom_head.chin", "bottom_head.left_ear", "bottom_head.right_ear"),
+    ("neck", "head"),
+)
+
+
+def pins(kin) -> list[Pin]:
+    """The pins of a figure: both sides' limbs and the head, those whose site and joints it has."""
+    out = [p.sided(side) for side in SIDES for p in PINS] + [HEAD]
+    return [
+        Pin(
+            p.parts,
+            tuple(s for s in p.sites if s in kin.site_names),
+            tuple(j for j in p.joints if j in kin.dof_slices),
+            p.priority,
+            p.stays,
+        )
+        for p in out
+        if any(s in kin.site_names for s in p.sites)
+    ]
+
+
+def _nearest_site(kin, sites: np.ndarray, points: np.ndarray, names: tuple[str, ...]) -> str:
+    """Of ``names``, the site nearest the part's nodes on the ground, on average over the frames with any
+    (the heel for a foot on its heel, the toes' tip for one on its toes)."""
+    down = points[..., 1] <= CONTACT_HEIGHT_CM
+    frames = np.flatnonzero(down.any(axis=1))
+    if len(names) == 1 or not len(frames):
+        return names[0]
+    centre = np.array([points[f, down[f]].mean(axis=0) for f in frames])
+    at = [kin.site_names.index(s) for s in names]
+    dist = np.linalg.norm(sites[frames][:, at][..., :3, 3] - centre[:, None], axis=-1).mean(axis=0)
+    return names[int(np.argmin(dist))]
+
+
+def _goal(
+    kin, pose: np.ndarray, loc: np.ndarray, figures: FigureSet, ptype: str, pin: Pin
+) -> tuple[ik.Goal, np.ndarray]:
+    """One pin's goal (its site moved by the offset that holds its contacts, its frame kept loosely; a
+    staying part's where it is, weighed by how near the ground it is) and the move per frame (cm)."""
+    points = part_points(pose, loc, figures, ptype, pin.parts)
+    sites = kin.site_globals(pose, loc)
+    near = _nearest_site(kin, sites, points, pin.sites)
+    site = sites[:, kin.site_names.index(near)]
+    weight: float | np.ndarray = 1.0
+    if pin.stays or not points.shape[1]:
+        move = np.zeros((len(pose), 3))
+        low = points[..., 1].min(axis=1) if points.shape[1] else np.full(len(pose), np.inf)
+        u = np.clip((STAY_FREE_CM - low) / (STAY_FREE_CM - STAY_DOWN_CM), 0.0, 1.0)
+        weight = u * u * (3.0 - 2.0 * u)
+    else:
+        move = _near_stances(plant_offsets(points, at_lift_off=True), points)
+    goal = ik.Goal(near, site[:, :3, 3] + move, site[:, :3, :3], weight, pin.priority, pin.joints, TURN_CM)
+    return goal, np.linalg.norm(move, axis=1)
+
+
+def _near_stances(move: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``move`` eased in and out only over the :data:`EASE_FRAMES` next to each stance: a limb in the air
+    longer than that moves as it fell in between (eased over the whole gap, the hands that still held the
+    rifle moved off it, 47 frames before they landed)."""
+    out = move.copy()
+    stance = np.zeros(len(move), dtype=bool)
+    for a, b in _runs(np.asarray((points[..., 1] <= CONTACT_HEIGHT_CM).any(axis=1))):
+        stance[a : b + 1] = True
+    edges = np.flatnonzero(np.diff(np.r_[True, stance, True].astype(np.int8)))
+    for first, stop in zip(edges[::2], edges[1::2], strict=True):  # the gaps [first, stop)
+        if stop - first <= 2 * EASE_FRAMES:
+            continue
+        lo = move[first - 1] if first > 0 else np.zeros(3)
+        hi = move[stop] if stop < len(move) else np.zeros(3)
+        u = np.arange(1, EASE_FRAMES + 1) / (EASE_FRAMES + 1)
+        s = (u * u * (3.0 - 2.0 * u))[:, None]
+        out[first:stop] = 0.0
+        out[first : first + EASE_FRAMES] = lo * (1.0 - s)
+        out[stop - EASE_FRAMES : stop] = hi * s
+    return out
+
+
+def pin_contacts(
+    pose: np.ndarray, loc: np.ndarray, figures: FigureSet, ptype: str
+) -> tuple[np.ndarray, float]:
+    """``pose`` ``(n, ndof)`` (root globals ``loc``) with every limb's contacts held (see the module
+    docstring); returns the poses and the largest move of a site (cm)."""
+    kin = figures.kin[ptype]
+    worst = 0.0
+    start = pose
+    for _ in range(PASSES):
+        goals: list[ik.Goal] = []
+        moved = np.zeros(len(pose))
+        for pin in pins(kin):
+            goal, m = _goal(kin, pose, loc, figures, ptype, pin)
+            goals.append(goal)
+            moved = np.maximum(moved, m)
+        if not (moved > MIN_SHIFT_CM).any():
+            break
+        worst = max(worst, float(moved.max()))
+        pose = track_solve(kin, pose, goals, loc, iterations=TRACK_ITERATIONS, max_dof_step=TRACK_DOF_STEP)
+    return _above_ground(kin, np.asarray(start), pose, loc), worst
+
+
+def _lowest(kin, pose: np.ndarray, loc: np.ndarray) -> np.ndarray:
+    """Per frame the body's lowest mesh node (cm)."""
+    from authoring.postures import lowest_point
+
+    return np.asarray(lowest_point(kin, pose, loc), dtype=np.float64)
+
+
+def _above_ground(kin, before: np.ndarray, after: np.ndarray, loc: np.ndarray) -> np.ndarray:
+    """``after`` taken back toward ``before`` in the frames where holding a limb pressed the body deeper
+    than :data:`SINK_CM` into the ground (a foot turned about its held toes): per frame the largest share
+    of the change that does not, the shares smoothed over the clip (at or below the need, so no joint
+    leaps)."""
+    floor = np.minimum(_lowest(kin, before, loc), 0.0) - SINK_CM
+    ok = _lowest(kin, after, loc) >= floor
+    if ok.all():
+        return after
+    lo, hi = np.zeros(len(after)), np.ones(len(after))
+    for _ in range(GUARD_STEPS):  # bisection on the share of the change, every frame at once
+        mid = 0.5 * (lo + hi)
+        fine = _lowest(kin, before + mid[:, None] * (after - before), loc) >= floor
+        lo, hi = np.where(fine, mid, lo), np.where(fine, hi, mid)
+    share = np.where(ok, 1.0, lo)
+    return before + _smooth_below(share, GUARD_SIGMA_FRAMES)[:, None] * (after - before)
+
+
+def pin_frames(frames: ClipFrames, soldier: Figure) -> ClipFrames:
+    """A simulated clip of ``soldier`` with its limbs' contacts held (:func:`pin_contacts`)."""
+    figs = FigureSet({"body": soldier})
+    poses, _ = pin_contacts(frames.poses, frames.roots, figs, "body")
+    return ClipFrames(poses, frames.roots, frames.rifles, frames.fps)
+
+
+def _smooth_below(share: np.ndarray, sigma: float) -> np.ndarray:
+    """``share`` smoothed over frames, never above it (the mirror of :func:`_smooth_above`)."""
+    return 1.0 - _smooth_above(1.0 - share, sigma)
