@@ -7,12 +7,16 @@
 #   BASE=debootstrap  a Debian bookworm base with python3.11 made here with debootstrap, for machines that reach
 #                     Debian's mirrors but no image registry; it trusts the host's extra CAs
 #                     (/usr/local/share/ca-certificates/*.crt), as pip must behind a TLS-inspecting proxy
-#   PORT=N            the server's port (default 17000; chroot isolation shares the host's network)
+#   PORT=N            the server's port (default 17000; chroot isolation shares the host's network); the
+#                     scaled profile's front-end and shards use PORT+10 .. PORT+12 and the fabric PORT+13
+#   IMAGE=NAME        the tag to build (default localhost/jack-ttes:local)
+# Then compose's scaled profile: a front-end and 2 shards on the Zenoh fabric (127.0.0.1 for the service name
+# "front"), the stub and `ttes loadtest` against the front-end (its JSON names the shards).
 set -euo pipefail
 REPO="$(cd "$(dirname "$0")/.." && pwd)"
 B=(buildah --storage-driver vfs)
 PORT="${PORT:-17000}"
-IMAGE=localhost/jack-ttes:local
+IMAGE="${IMAGE:-localhost/jack-ttes:local}"
 OUT="$(mktemp -d /tmp/ttes-buildah-check.XXXXXX)"
 step() { echo "buildah-check: $*"; }
 
@@ -51,8 +55,10 @@ step "building $IMAGE ${BASE_ARG[*]}"
 CTR="$("${B[@]}" from "$IMAGE")"
 TOKEN="check-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')"
 SERVER=""
+SCALED=()
 cleanup() {
     [[ -z "$SERVER" ]] || kill -TERM "$SERVER" 2>/dev/null || true
+    for pid in "${SCALED[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
     sleep 1
     "${B[@]}" rm "$CTR" >/dev/null 2>&1 || true
 }
@@ -82,3 +88,27 @@ run ttes gateway --listen 0.0.0.0 --dis-port "$((PORT + 1))" --host 127.0.0.1 --
 MNT="$("${B[@]}" mount "$CTR")"
 cp "$MNT/out/stub.png" "$MNT/out/crowd.png" "$OUT/"
 step "ok: stub, crowd and gateway ran in the image; pictures in $OUT/stub.png, $OUT/crowd.png"
+
+# compose's scaled profile (its commands, with the host's loopback for the service name and ports moved)
+FRONT=$((PORT + 10)) FABRIC=$((PORT + 13))
+scaled() {  # NAME ARGS...: one process of the profile in the background; its pid in /tmp/NAME.pid
+    local name="$1"; shift
+    "${B[@]}" run --isolation chroot --env "TTES_CONTROLLER_TOKEN=$TOKEN" --env "TTES_TOKEN=$TOKEN" "$CTR" -- \
+        sh -c "$* & echo \$! >/tmp/$name.pid; wait" >"$OUT/$name.log" 2>&1 &
+}
+scaled front ttes front --config /etc/ttes/server.toml --port "$FRONT" --shards 2 --fabric-listen "0.0.0.0:$FABRIC"
+for _ in $(seq 1 180); do grep -q '"listening"' "$OUT/front.log" && break; sleep 1; done
+for k in 0 1; do
+    scaled "shard$k" ttes server --config /etc/ttes/server.toml --port "$((FRONT + 1 + k))" --shard "$k/2" \
+        --fabric-connect "127.0.0.1:$FABRIC"
+done
+for p in "$FRONT" "$((FRONT + 1))" "$((FRONT + 2))"; do
+    for _ in $(seq 1 90); do run ttes ping --host 127.0.0.1 --port "$p" --timeout 2 >/dev/null 2>&1 && break; sleep 2; done
+done
+SCALED=("$(run cat /tmp/front.pid)" "$(run cat /tmp/shard0.pid)" "$(run cat /tmp/shard1.pid)")
+run ttes stub --host 127.0.0.1 --port "$FRONT" --headless --seconds 3 --fps 5 --size 320x240 --out /out/scaled.png
+run ttes loadtest --port "$FRONT" --soldiers 20 --clients 2 --seconds 3 --warmup 2 --json >"$OUT/loadtest.json"
+grep -q '"role": "front-end"' "$OUT/loadtest.json" || { step "FAILED: loadtest did not name the shards"; exit 1; }
+cp "$MNT/out/scaled.png" "$OUT/"
+step "ok: scaled profile: a front-end and 2 shards answer ttes ping, the stub ($OUT/scaled.png) and ttes loadtest \
+ran against the front-end; its JSON names the shards ($OUT/loadtest.json)"

@@ -7,6 +7,7 @@ user owns."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import re
 from pathlib import Path
@@ -121,11 +122,12 @@ def _requirement_names(specs: list[str]) -> set[str]:
     return {re.split(r"[<>=!~\[; ]", s, maxsplit=1)[0].lower().replace("_", "-") for s in specs}
 
 
-def test_lock_pins_every_dependency_of_the_server_and_the_stub_extra_with_hashes() -> None:
+def test_lock_pins_every_dependency_of_the_server_the_stub_and_fabric_extras_with_hashes() -> None:
     import tomllib
 
     project = tomllib.loads((DOCKER.parent / "pyproject.toml").read_text(encoding="utf-8"))["project"]
-    wanted = _requirement_names(project["dependencies"] + project["optional-dependencies"]["stub"])
+    extras = project["optional-dependencies"]
+    wanted = _requirement_names(project["dependencies"] + extras["stub"] + extras["fabric"])  # scaled profile
     lock = (DOCKER / "requirements.lock").read_text(encoding="utf-8")
     pinned = dict(re.findall(r"^([A-Za-z0-9_.-]+)==(\S+) \\\n\s+--hash=sha256:", lock, re.M))
     assert wanted <= {name.lower().replace("_", "-") for name in pinned}, wanted - set(pinned)
@@ -140,3 +142,63 @@ def test_dockerignore_sends_the_wheels_sources_and_nothing_else() -> None:
     code = {"peabody", "protocol", "server", "authoring", "client_stub", "ttes"}
     assert wheel_inputs | code | {"docker/requirements.lock", "docker/server.toml"} <= kept
     assert not kept & {".venv", ".git", "out", "tests", "bench"}
+
+
+# -- the scaled profile (issue 21): N shards + a front-end + the stub, on the fabric -------------------------
+SCALED = ("front", "shard0", "shard1", "scaled-stub")
+
+
+def _argv(service: dict) -> argparse.Namespace:
+    """The service's command through ttes's own parser (an invalid one exits: SystemExit fails the test)."""
+    assert service["command"][0] == "ttes"
+    return build_parser().parse_args(service["command"][1:])
+
+
+def test_scaled_profile_is_its_own_and_the_default_stays_one_server() -> None:
+    services = _compose()
+    assert {name for name, s in services.items() if s.get("profiles") == ["scaled"]} == set(SCALED)
+    assert "profiles" not in services["server"] and "profiles" not in services["stub"]
+    for name in SCALED:  # compose's one default network: they reach each other by service name
+        assert not {"networks", "network_mode", "build"} & services[name].keys(), name
+        assert services[name]["image"] == services["server"]["image"], name
+    ports = [p for s in services.values() for p in s.get("ports", [])]
+    assert len({p.rsplit(":", 1)[0] for p in ports}) == len(ports)  # no host port published twice
+
+
+def test_scaled_commands_parse_and_the_shards_cover_the_front_ends_count() -> None:
+    from server.fabric.nodes import Sharding
+
+    services = _compose()
+    front = _argv(services["front"])
+    assert front.command == "front" and front.fabric == "zenoh" and front.config == "/etc/ttes/server.toml"
+    listen_host, listen_port = front.fabric_listen.rsplit(":", 1)
+    assert listen_host == "0.0.0.0" and 0 < int(listen_port) < 65536  # the shards' containers reach it
+    shards = [name for name in services if name.startswith("shard")]
+    seen = set()
+    for name in shards:
+        args = _argv(services[name])
+        assert args.command == "server" and args.config == front.config, name
+        sharding = Sharding.parse(args.shard)
+        assert sharding.n == front.shards and args.fabric_connect == [f"front:{listen_port}"], name
+        seen.add(sharding.k)
+        assert services[name]["depends_on"]["front"]["condition"] == "service_healthy", name
+    assert seen == set(range(front.shards))  # every shard K/N once
+    stub = services["scaled-stub"]
+    args = _argv(stub)
+    assert (args.command, args.host, args.port, args.headless) == ("stub", "front", 7000, True)
+    assert set(stub["depends_on"]) == {"front", *shards}
+    assert services["front"]["ports"] == ["127.0.0.1:7001:7000"]  # 7000 in its container, as the server's
+
+
+def test_every_scaled_process_starts_with_the_compose_token() -> None:
+    """Each binds 0.0.0.0 in its container (docker/server.toml): each needs the controller token, and the
+    stub sends it; never on a command line."""
+    services, user = _compose(), {"TTES_TOKEN": "a-long-random-token"}
+    for name in ("front", "shard0", "shard1"):
+        env = {k: _interpolate(v, user) for k, v in services[name]["environment"].items()}
+        cfg = with_env_tokens(load_config(DOCKER / "server.toml"), env)
+        check_exposure(cfg)
+        assert cfg.tokens == {"controller": "a-long-random-token"} and env["TTES_TOKEN"] == user["TTES_TOKEN"]
+    stub_token = services["stub"]["environment"]["TTES_TOKEN"]
+    assert services["scaled-stub"]["environment"]["TTES_TOKEN"] == stub_token
+    assert not any("token" in a.lower() for name in SCALED for a in services[name]["command"])

@@ -230,3 +230,20 @@ async def test_a_client_cannot_tell_the_front_end_from_a_server(autojump_clock: 
                 await c.aclose()
             assert seen[0] == seen[1]
             alone.shutdown()
+
+
+async def test_the_load_tester_names_the_shards_behind_a_front_end(autojump_clock: trio.abc.Clock) -> None:
+    """`ttes loadtest` against a front-end: its report names the shards and where each one's soldiers live
+    (from the front-end's STATUS), as a run against one server says it was one."""
+    from client_stub.loadtest.session import LoadTestConfig, _run
+
+    async with cluster() as (front, _, _, fabrics):
+        port = front.addresses[0][1]
+        cfg = LoadTestConfig(soldiers=4, clients=2, seconds=1.0, warmup_s=0.5, port=port, mix="moving")
+        out = await _run(cfg, "127.0.0.1", port, None, True)
+        assert out["delivered_pct"] > 0  # the run was driven through the front-end
+        shards = [{"shard": k, "animated_by": k, "present": True} for k in range(2)]
+        assert out["server"] == {"role": "front-end", "shards": shards, "status": out["server"]["status"]}
+        fabrics[1].close()  # shard 1 dies: the next run says its soldiers live on shard 0
+        out = await _run(cfg, "127.0.0.1", port, None, True)
+        assert out["server"]["shards"][1] == {"shard": 1, "animated_by": 0, "present": False}

@@ -205,6 +205,7 @@ def test_tiny_run_arithmetic(tiny_run: dict) -> None:
     assert 8 < r["bytes_per_update"] < 120
     assert r["server_cpu_pct"] is not None and r["server_cpu_pct"] > 0
     assert not r["server"]["spawned"] and r["mode"] == "tap"
+    assert r["server"]["role"] == "server"  # it says it is a single server (STATUS), not a front-end
     assert all(MOVING[a] for a in range(len(MOVING)) if r["activities"][Activity(a).name.lower()])
 
 
@@ -298,3 +299,42 @@ def test_ramp_defaults_can_pass(server, capsys) -> None:
     out = capsys.readouterr().out
     assert "largest sustained N = 8" in out, out
     assert "p99 request latency <= 100 ms" in out
+
+
+# -- what the server says it is (issue 21) ------------------------------------------------------------------
+@given(st.lists(st.tuples(st.booleans(), st.booleans()), min_size=1, max_size=8))
+def test_role_reads_every_front_end_status_the_front_end_writes(shards: list[tuple[bool, bool]]) -> None:
+    """Round trip through the front-end's own STATUS note (``FrontNode.describe``): each shard home or
+    stood in for by the next, present or gone."""
+    from types import SimpleNamespace
+
+    from client_stub.loadtest.role import role_line, server_role
+    from server.fabric.nodes import FrontNode
+
+    n = len(shards)
+    route = [k if home else (k + 1) % n for k, (home, _) in enumerate(shards)]
+    node = SimpleNamespace(shards=n, route=route, present=[p for _, p in shards])
+    text = "3 soldiers, 1 clients, 30.0 Hz, tick 12 us mean; " + FrontNode.describe(node)  # type: ignore[arg-type]
+    r = server_role(text)
+    assert r["role"] == "front-end" and r["status"] == text
+    expected = [{"shard": k, "animated_by": route[k], "present": shards[k][1]} for k in range(n)]
+    assert r["shards"] == expected
+    assert role_line(r).startswith(f"front-end of {n} shards (0 ")
+
+
+def test_role_of_a_shard_a_single_server_and_silence() -> None:
+    from client_stub.loadtest.role import role_line, server_role
+
+    shard = server_role("5 soldiers, 0 clients, 30.0 Hz, tick 80 us mean; shard 1/2, 340 batches")
+    assert (shard["role"], shard["shard"], shard["of"], role_line(shard)) == ("shard", 1, 2, "shard 1/2")
+    assert server_role("5 soldiers, 2 clients, 30.0 Hz, tick 80 us mean")["role"] == "server"
+    assert server_role(None) == {"role": None, "status": None}
+    assert role_line({}) == "unknown (no STATUS)"
+
+
+@given(st.text(max_size=200))
+def test_role_never_raises_on_any_status_text(text: str) -> None:
+    from client_stub.loadtest.role import role_line, server_role
+
+    r = server_role(text)
+    assert r["role"] in ("front-end", "shard", "server") and isinstance(role_line(r), str)

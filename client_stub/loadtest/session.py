@@ -30,6 +30,7 @@ from client_stub.link.auth import Credentials
 from client_stub.link.spawn import ServerProcess, cpu_seconds, self_cpu_seconds, spawn_server
 from client_stub.loadtest.client import LoadClient, LoadError, split_rows
 from client_stub.loadtest.mix import MOVING, MixDriver
+from client_stub.loadtest.role import STATUS_EVERY_S, STATUS_JCL, server_role
 from client_stub.loadtest.stats import GRACE_TICKS, Tracker, series, summarise
 from protocol.events import Ready, ticks_per_update
 
@@ -142,6 +143,19 @@ class LoadSession:
         for c in self.clients:
             await c.wait_ready(self.cfg.timeout_s)
         self._server_rate(self.clients[0].link.ready_event)
+
+    def ask_status(self) -> None:
+        """STATUS a second on the first connection (its own setting): what the server says it is."""
+        self.clients[0].link.jcl(STATUS_JCL)
+
+    async def server_role(self) -> dict[str, Any]:
+        """What the server says it is (:func:`~client_stub.loadtest.role.server_role`), from the newest
+        STATUS; a run shorter than the STATUS period waits (bounded) for its first."""
+        link = self.clients[0].link
+        with trio.move_on_after(2 * STATUS_EVERY_S + 1.0):
+            while link.status is None and link.failure is None:
+                await trio.sleep(STATUS_EVERY_S / 10)
+        return server_role(None if link.status is None else link.status.text)
 
     def _server_rate(self, ready: Ready | None) -> None:
         """Count "expected" on the server's own tick rate and throttle (READY), not on what was asked for."""
@@ -294,6 +308,7 @@ async def _run(
     out: dict[str, Any] = {}
     async with trio.open_nursery() as nursery:
         await session.connect(nursery, host, port)
+        session.ask_status()
         try:
             if cfg.ramp:
                 out = await _ramp(cfg, session)
@@ -313,6 +328,7 @@ async def _run(
                 }
                 if cfg.keep_recording:
                     out["_recording"] = session.tracker.rec.arrays()
+            out["server"] = await session.server_role()
         finally:
             with trio.CancelScope(shield=True), trio.move_on_after(5.0):
                 await session.close(remove)
@@ -428,10 +444,11 @@ def _run_loadtest(
             if isinstance(leaf, LoadError | OSError):
                 raise LoadError(str(leaf)) from None
             raise
+        said = out.pop("server", {})  # what it says it is (role, shards), then how it was reached
         if server is not None:
-            out["server"] = {"spawned": True, "synthetic": server.synthetic, "pid": server.pid}
+            out["server"] = {**said, "spawned": True, "synthetic": server.synthetic, "pid": server.pid}
         else:
-            out["server"] = {"spawned": False, "address": f"{host}:{port}"}
+            out["server"] = {**said, "spawned": False, "address": f"{host}:{port}"}
         # credentials: a secret (and an SSL context), never in a report
         hidden = ("host", "port", "keep_recording", "credentials")
         out["config"] = {f.name: getattr(cfg, f.name) for f in fields(cfg) if f.name not in hidden}

@@ -4,8 +4,9 @@ Measures over the steady state: steady-mover updates received per second against
 walking, running or crawling soldier in every tick the server's throttle lets it have: READY's tick rate
 and throttle), request -> first reflecting update latency (p50, p99,
 max), bytes per soldier update, dropped and late updates, and the server's CPU (when it was spawned, or
-given by --server-pid). --ramp grows N until the server falls behind and reports the largest N it
-sustained. Loopback by default; every loop is bounded in count and time.
+given by --server-pid); and what the server says it is (its STATUS: a front-end names its shards). --ramp
+grows N until the server falls behind and reports the largest N it sustained. Loopback by default; every
+loop is bounded in count and time.
 """
 
 from __future__ import annotations
@@ -152,12 +153,15 @@ def format_result(r: dict) -> str:
     def f(key: str, unit: str = "") -> str:
         return na(r.get(key), unit)
 
+    from client_stub.loadtest.role import role_line
+
     if r.get("ramp"):
         return _format_ramp(r)
     return "\n".join(
         [
             f"ttes loadtest: {r['soldiers']} soldiers, {r['clients']} clients, {r['rate_hz']:g} Hz, "
             f"{r['seconds']:g} s steady state ({r.get('mode')} mode)",
+            f"  server                  {role_line(r.get('server', {}))}",
             f"  steady-mover updates/s  {f('updates_per_s')} of {f('expected_updates_per_s')} expected "
             f"({f('delivered_pct', '%')}; {f('steady_movers_mean')} movers on average; server "
             f"{f('ready_tick_hz', ' Hz')}, throttle {f('ready_throttle', ' s')}: one update per "
@@ -177,6 +181,8 @@ def format_result(r: dict) -> str:
 
 def _format_ramp(r: dict) -> str:
     """The ramp's verdict (which criterion the failing stage missed) and one line per stage."""
+    from client_stub.loadtest.role import role_line
+
     c = r["criteria"]
     latency = f"p99 {c['latency_metric']} latency <= {c['max_p99_ms']:g} ms"
     criteria = f"delivered >= {c['min_delivered_pct']:g}%, {latency}"
@@ -193,6 +199,7 @@ def _format_ramp(r: dict) -> str:
     lines = [
         f"ttes loadtest --ramp: {r['clients']} clients at {r['rate_hz']:g} Hz, criteria: {criteria}",
         verdict,
+        f"  server: {role_line(r.get('server', {}))}",
     ]
     for s in r["stages"]:
         lines.append(
