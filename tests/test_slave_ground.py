@@ -84,8 +84,13 @@ def test_the_dropped_rifle_is_put_clear_of_the_body_and_the_ground(fallen) -> No
     assert n > r + 6
 
 
+def _lowest(figs: FigureSet, cs) -> np.ndarray:
+    f = play(cs, figs)
+    return lowest_point(figs.kin["DI.fig"], f.poses["DI.fig"], f.locations["DI.fig"])
+
+
 def test_lifting_the_body_leaves_a_dropped_rifle_where_it_lies(fallen) -> None:
-    ctx, _, _, before = fallen
+    ctx, figs, _, before = fallen
     slave = copy.deepcopy(before)
     body = next(c for c in slave.figure_channels() if c.protofiletype == "DI.fig")
     rifle = next(c for c in slave.figure_channels() if c.protofiletype == "AK_47.fig")
@@ -93,7 +98,12 @@ def test_lifting_the_body_leaves_a_dropped_rifle_where_it_lies(fallen) -> None:
     lifted = copy.deepcopy(slave)
     lift_off_ground(lifted, ctx.di)
     r = slave.release_frame
-    assert np.all(lifted.fig_pos[:, body.column, 1] - slave.fig_pos[:, body.column, 1] > 4.0)
+    # out of the ground in every frame, and lifted the 5 cm back wherever the body was on the ground (a
+    # falling body may be in the air a moment: ststow2dead's slave 1.4 cm up as he pitches off his knees)
+    assert _lowest(figs, lifted).min() > -0.1
+    rise = lifted.fig_pos[:, body.column, 1] - slave.fig_pos[:, body.column, 1]
+    on_ground = _lowest(figs, before) < 1.0
+    assert on_ground.mean() > 0.8 and np.all(rise[on_ground] > 4.0)
     np.testing.assert_array_equal(lifted.fig_pos[r:, rifle.column], slave.fig_pos[r:, rifle.column])
     assert np.all(lifted.fig_pos[:r, rifle.column, 1] > slave.fig_pos[:r, rifle.column, 1])
 
