@@ -78,10 +78,14 @@ REACTIONS: tuple[Reaction, ...] = (
     Reaction("stfire_recoil", "STAND_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
     Reaction("kfire_recoil", "KNEEL_FIRE", "recoil", (0.0, -3.0, 0.0), _RECOIL, kick=(0.0, 4.0)),
     # prone, on the elbows: a smaller climb (more kick moved the elbows 2-3 cm with the hands, and so did
-    # 1.2 degrees: the elbow swivels round the raised handguard). It swings the raised right upper arm 1.04 cm
-    # into the butt's toe (the posture's own 0.9 cm; 1.0 degree: 0.98 cm, but the climb is then under 1.5
-    # degrees and the left elbow moves 2.4 cm; rocking the spine back with it fails DI's end speeds)
-    Reaction("prfire_recoil", "PRONE_FIRE", "recoil", joints=_RECOIL, kick=(0.0, 1.8)),
+    # 1.2 degrees: the elbow swivels round the raised handguard). Lying angled to the line of fire, 0.7 degree
+    # of lateral bend rocks the shoulders (0.2-0.3 cm) and the rifle (0.5 cm) back with the kick, and the
+    # muzzle climbs 1.6 degrees (1.4 in the carry): the right hand rises less, so the raised right upper arm
+    # keeps off the butt's toe (0.99 cm in it, the posture's own 0.9; climbing 1.8 degrees about the butt
+    # alone: 1.04 cm; a forward pivot: 1.1-1.3; kicked back 0.3-1 cm: 1.2-1.5). A degree of bend puts DI's
+    # right palm 2 mm off the slaved rifle (its elbow out of reach); flexing the spine back fails DI's end
+    # speeds
+    Reaction("prfire_recoil", "PRONE_FIRE", "recoil", (-0.7, 0.0, 0.0), _RECOIL, kick=(0.0, 1.4)),
     Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
     Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),
     Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 8.0, -10.0), _HEAD_DOWN, kick=(0.0, -5.0)),
