@@ -2,8 +2,9 @@
 
 ``ttes loadtest`` measures wall time on a shared machine: there the server waits for a CPU (at load 6-11 on
 2 cores it gets 15-40 % of one) and one run says more about the machine than about the server. And its mix
-driver steps at 10 Hz, a divisor of the 30 Hz tick, so within one run every request arrives at the same
-phase of the tick period: runs differ by where that phase fell (p50 9-18 ms at 5,000 soldiers, issue 16).
+driver stepped at 10 Hz, a divisor of the 30 Hz tick, so within one run every request arrived at the same
+phase of the tick period: runs differed by where that phase fell (p50 9-18 ms at 5,000 soldiers, issue 16;
+its steps are now jittered over their period, so one run mixes the phases this bench separates).
 
 Here the server (``TtesServer``, the shipped library) and the load generator (``LoadSession``, its real
 mix and tracker) run in one trio run over loopback TCP, on a clock that advances by the CPU time of the

@@ -2,7 +2,8 @@
 
 One trio loop runs C :class:`~client_stub.loadtest.client.LoadClient` connections (each creates, subscribes
 to and drives its share of the soldiers) and the *driver*, which steps the :class:`MixDriver` at
-``step_hz`` (a DIS gateway's granularity), sends the requests it decides, marks latency probes and samples
+``step_hz`` (a DIS gateway's granularity; each step at a random point of its period, so the requests
+sample every phase of the server's tick), sends the requests it decides, marks latency probes and samples
 CPU. :class:`~client_stub.loadtest.stats.Tracker` turns what arrives into a recording; the figures of the
 steady-state window (after ``warmup_s``) come from :func:`~client_stub.loadtest.stats.summarise`.
 
@@ -14,10 +15,11 @@ largest N that met them. Every loop is bounded: stages, seconds, and a wall-cloc
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -41,6 +43,7 @@ Progress = Callable[[float, float | None, str], None]  # (seconds done, in all: 
 # at 30 Hz) before it is even computed, so the bound this was before, 33 ms at p99, failed the first stage of
 # any run on a working server ("largest sustained N = None").
 DIS_LATENCY_MS = 100.0
+JITTER_STREAM = 16  # the step jitter's random stream, apart from the mix's (same --seed, same mix)
 
 
 @dataclass
@@ -63,6 +66,7 @@ class LoadTestConfig:
     subscribe_all: bool = False
     decode: bool = False
     step_hz: float = 10.0
+    step_jitter: bool = True  # each step at a random point of its period (False: every step at one phase)
     timeout_s: float = 60.0
     keep_recording: bool = False  # tests: put the raw recording (numpy arrays) under "_recording"
     # ramp
@@ -114,6 +118,7 @@ class LoadSession:
         for c in self.clients:
             cfg.credentials.apply(c.link)
         self.driver = MixDriver(0, mix=cfg.mix, seed=cfg.seed, now=0.0)
+        self.jitter = np.random.default_rng((cfg.seed, JITTER_STREAM)) if cfg.step_jitter else None
         nsub = cfg.clients
         self.tracker = Tracker(cfg.rate_hz, nsub)
         self.server_cpu = server_cpu or (lambda: math.nan)
@@ -225,9 +230,9 @@ class LoadSession:
 
     async def drive(self, until: float) -> None:
         """Step the mix until session time ``until``: requests, probes, CPU samples."""
-        period = 1.0 / self.cfg.step_hz
-        next_t = trio.current_time()
+        times = step_times(trio.current_time(), 1.0 / self.cfg.step_hz, self.jitter)
         begin = self.now()
+        await trio.sleep_until(next(times))
         while self.now() < until:
             if self.progress is not None:
                 self.progress(self.now() - begin, until - begin, self.stage)
@@ -241,8 +246,7 @@ class LoadSession:
                 self.tracker.activity(t, ch, MOVING[self.driver.activity[ch]], probe)
             await self._send(step.rows)
             self.sample_cpu()
-            next_t += period
-            await trio.sleep_until(max(next_t, trio.current_time()))
+            await trio.sleep_until(next(times))
         if self.progress is not None:
             self.progress(until - begin, until - begin, self.stage)
 
@@ -266,6 +270,15 @@ class LoadSession:
 
     def series(self, t0: float, t1: float) -> dict[str, list[float]]:
         return series(self.tracker.arrays(self.now()), self.rate, t0, t1, self.cfg.clients, every=self.every)
+
+
+def step_times(start: float, period: float, jitter: np.random.Generator | None) -> Iterator[float]:
+    """The mix driver's step times: one in each ``period`` after ``start``, at a uniformly random point of
+    it. Steps at a fixed rate that divides the server's tick rate (10 Hz against 30 Hz) would all land at one
+    phase of the tick period, and a run's latency would measure that phase only (issue 16); jittered, one
+    run samples them all. ``jitter`` None: every step at the start of its period."""
+    for k in itertools.count():
+        yield start + period * (k + (jitter.uniform() if jitter is not None else 0.0))
 
 
 def _header(cfg: LoadTestConfig, n: int) -> dict[str, Any]:

@@ -39,7 +39,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seconds", type=positive, default=10.0, help="steady-state seconds measured (per stage)")
     p.add_argument("--warmup", type=non_negative, default=3.0, help="seconds before measuring (per stage)")
     p.add_argument("--mix", choices=("realistic", "moving"), default="realistic", help="what the soldiers do")
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--seed", type=int, default=1, help="the mix's and the step jitter's random seed")
+    p.add_argument(
+        "--no-jitter",
+        action="store_true",
+        help="step the mix at a fixed phase (10 Hz divides the tick rate: every request then lands at one "
+        "phase of the tick period, and the latency measures that phase only)",
+    )
     p.add_argument(
         "--subscribe-all",
         action="store_true",
@@ -104,6 +110,7 @@ def config(args: argparse.Namespace) -> LoadTestConfig:
         throttle=throttle,
         mix=args.mix,
         seed=args.seed,
+        step_jitter=not args.no_jitter,
         subscribe_all=args.subscribe_all,
         decode=args.decode,
         ramp=args.ramp,
