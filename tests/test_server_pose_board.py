@@ -235,3 +235,41 @@ def test_a_late_writer_catches_up_through_its_groups_frames() -> None:
     caught = encodes.caught_up
     assert b.flush() and encodes.caught_up == caught and len(calls) == 2
     np.testing.assert_array_equal(b.client.decoder(1).codes(idx), board.codes[idx])  # type: ignore[union-attr]
+
+
+def test_a_late_writer_with_answers_between_ticks_decodes_the_board_in_tick_order() -> None:
+    """The catch-up through the memo (issue 18) and the answers between ticks (issue 16, rows labelled with
+    the next tick) together: a writer reading every third tick, while soldiers are answered between ticks,
+    still decodes exactly the board's codes, and the ticks it receives never go backwards."""
+    server = make_server(throttle=0.0)
+    server.start_world()
+    walk(server, list(range(10)), 1.4)
+    a, b = Pair(server, "a"), Pair(server, "b")
+    a.subscribe(tuple(range(10)))
+    b.subscribe(tuple(range(10)))
+    m = server.world.manager
+    assert m is not None
+    idx = np.arange(10)
+    for k in range(1, 16):
+        server.tick(k / 30)
+        a.flush()
+        if k == 1 or k % 3 == 0:  # b joins a's group at tick 1, then misses publishes
+            b.flush()
+            board = server.board_ref.board
+            assert board is not None
+            for p in (a, b):
+                dec = p.client.decoder(1)
+                assert dec is not None
+                np.testing.assert_array_equal(dec.codes(idx), board.codes[idx])
+        if k % 2 == 0:  # between this tick and the next: soldier k % 10 kneels, answered at once
+            i = k % 10
+            kneel = make_entity_requests(np.array([i]), [int(Appearance.KNEEL)], [1], np.zeros((1, 3)), [0.0])
+            m.apply_requests(kneel, server.request_time())
+            server.answer_requests()
+            a.flush()
+    encodes = server.board_ref.encodes
+    assert encodes is not None
+    assert server.answers > 0 and encodes.caught_up > 0  # both paths were taken
+    for p in (a, b):
+        ticks = [u.tick for u in p.updates]
+        assert ticks == sorted(ticks), ticks
