@@ -141,6 +141,9 @@ async def test_each_soldier_lives_in_its_shard_and_reaches_the_client(autojump_c
         ticks = await moving(c, 11)
         assert ticks == sorted(ticks)  # in order (a shard tick and an answer may share the front's tick)
         assert live(front) == [*range(10), 11]  # the front-end keeps the books: one index space
+        # its STATUS says who animates (a front-end's own tick time read "tick 0 us mean"); a shard's its tick
+        assert "animated by its shards" in front.status_text()[2]
+        assert "us mean" not in front.status_text()[2] and "us mean" in shards[0].status_text()[2]
 
 
 async def test_a_silent_shards_walker_walks_on_in_the_survivor(autojump_clock: trio.abc.Clock) -> None:
