@@ -1,4 +1,4 @@
-"""CIGI 3.3 host → IG packets (SISO-STD-013-2014), sans I/O: pack and unpack four packet types.
+"""CIGI 3.3 packets (SISO-STD-013-2014), sans I/O: host → IG packets, and the IG's Start of Frame.
 
 An image generator that speaks the Common Image Generator Interface can show our soldiers without knowing
 Jack: per frame the host sends one *message* (a UDP datagram) that starts with IG Control, then Entity
@@ -262,3 +262,61 @@ def decode_message(message: bytes) -> tuple[list[Packet], int]:
             skipped += 1
         at += size
     return packets, skipped
+
+
+# --- IG → host: Start of Frame --------------------------------------------------------------------------
+
+START_OF_FRAME = 101  # packet ID; an IG → host message opens with it, as a host message opens with IG Control
+SOF_SIZE = 24
+HOST_PORT = 8005  # the host's receive port most CIGI implementations use, beside the IG's 8004
+_SOF_STRUCTS = {o: struct.Struct(o + "BBBbBBHIII4x") for o in (">", "<")}
+assert _SOF_STRUCTS[">"].size == SOF_SIZE
+
+
+@dataclass(frozen=True)
+class StartOfFrame:
+    """Start of Frame (packet 101, 24 bytes, IG → host): the IG's frame, and the last host frame it read."""
+
+    ig_frame: int
+    last_host_frame: int = 0
+    timestamp: int = 0  # 10 µs ticks
+    timestamp_valid: bool = False
+    database: int = 0  # int8; negative: the database cannot be loaded
+    ig_status: int = 0  # 0 normal, else an IG-defined error code
+    ig_mode: int = 1  # 0 reset/standby, 1 operate, 2 debug, 3 offline maintenance
+    earth_reference_model: bool = False  # True: the IG uses a custom ERM, not WGS 84
+    minor_version: int = MINOR_VERSION
+
+
+def encode_start_of_frame(sof: StartOfFrame, order: Order = ">") -> bytes:
+    """A Start of Frame's bytes (what an IG sends; the host only reads them: for tests and fake IGs)."""
+    flags = (
+        (sof.ig_mode & 3) | sof.timestamp_valid << 2 | sof.earth_reference_model << 3
+        | (sof.minor_version & 15) << 4
+    )  # fmt: skip
+    try:
+        return _SOF_STRUCTS[order].pack(
+            START_OF_FRAME, SOF_SIZE, MAJOR_VERSION, sof.database, sof.ig_status, flags, MAGIC,
+            sof.ig_frame, sof.timestamp, sof.last_host_frame,
+        )  # fmt: skip
+    except struct.error as exc:
+        raise CigiError(f"StartOfFrame: {exc}") from None
+
+
+def decode_start_of_frame(message: bytes) -> StartOfFrame:
+    """The Start of Frame that opens an IG → host message, in either byte order (the magic number tells).
+
+    The packets after it (HAT/HOT responses, ...) are not read. Raises :class:`CigiError` for a message that
+    does not open with a CIGI 3 24-byte Start of Frame or whose magic number is neither 0x8000 nor 0x0080."""
+    if len(message) < SOF_SIZE or message[0] != START_OF_FRAME or message[1] != SOF_SIZE:
+        raise CigiError("a CIGI IG message starts with a 24-byte Start of Frame")
+    magic = message[6:8]
+    if magic not in (b"\x80\x00", b"\x00\x80"):
+        raise CigiError(f"Start of Frame magic number {magic.hex()} is neither 8000 nor 0080")
+    order: Order = ">" if magic == b"\x80\x00" else "<"
+    _, _, major, db, status, flags, _, frame, stamp, last = _SOF_STRUCTS[order].unpack_from(message)
+    if major != MAJOR_VERSION:
+        raise CigiError(f"Start of Frame of CIGI {major}, not CIGI 3")
+    return StartOfFrame(
+        frame, last, stamp, bool(flags & 4), db, status, flags & 3, bool(flags & 8), flags >> 4
+    )

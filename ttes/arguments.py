@@ -74,12 +74,17 @@ def host(text: str) -> str:
     return name
 
 
-def host_port(text: str) -> tuple[str, int]:
+def host_port(text: str, parse_port: Callable[[str], int] = port) -> tuple[str, int]:
     """``HOST:PORT`` (``[v6addr]:PORT`` for IPv6): a host (:func:`host`) and a port (:func:`port`)."""
     name, sep, num = text.strip().rpartition(":")
     if not sep:
         raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT")
-    return host(name.removeprefix("[").removesuffix("]")), port(num)
+    return host(name.removeprefix("[").removesuffix("]")), parse_port(num)
+
+
+def listen_host_port(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` to bind: as :func:`host_port`, with port 0 (any free port) allowed."""
+    return host_port(text, listen_port)
 
 
 def number(lo: float, hi: float = math.inf, *, open_low: bool = False) -> Callable[[str], float]:

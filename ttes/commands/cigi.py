@@ -6,22 +6,32 @@ a frame is bigger than --max-datagram): IG Control, then per soldier Entity Cont
 yaw = heading, the entity type of his figure), an Articulated Part Control for the figure root (part 0) and
 Short Articulated Part Controls for the joint DOFs (parts 1..). The part IDs, joint by joint, and the entity
 types are written to --map (JSON) for the IG integrator. docs/CIGI.md has the packets' layouts.
+The IG's Start of Frame datagrams are received on --listen HOST:PORT (default 127.0.0.1:8005; "off": none)
+and counted, with the newest IG frame number and the last host frame number the IG read (the host still runs
+free at --fps; a datagram that is not a Start of Frame is counted as malformed).
 
-Exit status: 0 done (--frames sent, --seconds passed or Ctrl-C), 1 no server or the part map cannot be
-written, 2 bad arguments.
+Exit status: 0 done (--frames sent, --seconds passed or Ctrl-C), 1 no server, the part map cannot be
+written or --listen cannot be bound, 2 bad arguments.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import socket
 import sys
 from pathlib import Path
 
-from ttes.arguments import count, host, host_port, port, positive
+from ttes.arguments import count, host, host_port, listen_host_port, port, positive
 from ttes.link_options import add_link_options, link_credentials, link_error
 
 DEFAULT_IG = "127.0.0.1:8004"
+DEFAULT_LISTEN = "127.0.0.1:8005"
+
+
+def listen_address(text: str) -> tuple[str, int] | None:
+    """``HOST:PORT`` to receive the IG's Start of Frame on, or ``off``."""
+    return None if text.strip().lower() == "off" else listen_host_port(text)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--ig", type=host_port, default=host_port(DEFAULT_IG), metavar="HOST:PORT",
                    help=f"the image generator's CIGI address (default {DEFAULT_IG})")  # fmt: skip
+    p.add_argument("--listen", type=listen_address, default=listen_address(DEFAULT_LISTEN),
+                   metavar="HOST:PORT|off",
+                   help=f"receive the IG's Start of Frame (default {DEFAULT_LISTEN}; off: none)")  # fmt: skip
     p.add_argument("--host", type=host, help="Jack/TTES server host (default 127.0.0.1)")
     p.add_argument("--port", type=port, default=7000, help="server port (default 7000)")
     p.add_argument("--with-server", action="store_true", help="run a private server in this process")
@@ -50,6 +63,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="the summary as JSON")
     add_link_options(p)
     p.set_defaults(func=run)
+
+
+def _address(addr: tuple) -> str:
+    return f"{addr[0]}:{addr[1]}"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,15 +94,37 @@ def run(args: argparse.Namespace) -> int:
             f"{summary['datagrams']} datagrams, {summary['bytes']} bytes to {summary['ig']}; part map "
             f"{summary['map']}"
         )
+        print(_sof_line(summary))
     return 0
+
+
+def _sof_line(summary: dict) -> str:
+    if summary["listen"] is None:
+        return "cigi IG: not listening (--listen off)"
+    return (
+        f"cigi IG: {summary['sof_received']} Start of Frame on {summary['listen']} "
+        f"({summary['sof_malformed']} malformed), IG frame {summary['ig_frame']}, "
+        f"last host frame {summary['ig_last_host_frame']}"
+    )
+
+
+def _bind_listener(address: tuple[str, int]) -> socket.socket:
+    """The UDP socket the IG's Start of Frame arrives on; OSError when the address cannot be bound."""
+    sock = socket.socket(socket.AF_INET6 if ":" in address[0] else socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.bind(address)
+    except OSError:
+        sock.close()
+        raise
+    return sock
 
 
 def _serve(args: argparse.Namespace, origin: object) -> dict | None:
     import contextlib
-    import socket
 
     import trio
 
+    from client_stub.cigi import listen
     from client_stub.cigi.host import CigiHost, HostConfig
     from client_stub.link.client import Client, LinkError
     from protocol import cigi_scene
@@ -106,6 +145,15 @@ def _serve(args: argparse.Namespace, origin: object) -> dict | None:
                                                     socket.SOCK_DGRAM))  # fmt: skip
             cfg = HostConfig(args.soldiers, args.fps, origin, args.max_datagram)  # type: ignore[arg-type]
             cigi_host = CigiHost(link, cfg, lambda msg: udp.sendto(msg, args.ig))
+            counter, ear = listen.SofCounter(), None
+            if args.listen is not None:
+                try:
+                    ear = trio.socket.from_stdlib_socket(stack.enter_context(_bind_listener(args.listen)))
+                except OSError as exc:
+                    print(f"ttes cigi: cannot listen on {_address(args.listen)}: {exc.strerror or exc}",
+                          file=sys.stderr)  # fmt: skip
+                    await link.aclose()
+                    return None
             await cigi_host.populate()
             try:
                 args.map.write_text(json.dumps(cigi_scene.part_map(link.tables), indent=1) + "\n")
@@ -118,12 +166,16 @@ def _serve(args: argparse.Namespace, origin: object) -> dict | None:
                     scope.deadline = trio.current_time() + args.seconds
                 async with trio.open_nursery() as inner:
                     inner.start_soon(stop_on_signal, inner.cancel_scope)
+                    if ear is not None:
+                        inner.start_soon(listen.receive, ear, counter)
                     await cigi_host.run(args.frames)
                     inner.cancel_scope.cancel()
             for i in cigi_host.table_of:
                 link.remove(i)
             await link.aclose()
-            return {**cigi_host.stats, "ig": f"{args.ig[0]}:{args.ig[1]}", "map": str(args.map)}
+            listening = None if ear is None else _address(ear.getsockname())
+            return {**cigi_host.stats, "ig": _address(args.ig), "map": str(args.map), "listen": listening,
+                    **counter.stats()}  # fmt: skip
 
     try:
         return trio.run(main)
