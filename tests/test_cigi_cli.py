@@ -101,11 +101,11 @@ def test_the_ig_s_start_of_frames_are_counted(capsys: pytest.CaptureFixture[str]
         answer = threading.Thread(target=_fake_ig, args=(ig, listen), daemon=True)
         answer.start()
         args = ["cigi", "--with-server", "--synthetic-server", "--soldiers", "1"]
-        args += ["--frames", "4", "--fps", "5"]
+        args += ["--frames", "11", "--fps", "5"]  # 2 s after frame 0 for three datagrams over loopback
         ig_args = ["--ig", f"127.0.0.1:{ig.getsockname()[1]}", "--listen", f"127.0.0.1:{listen}"]
         assert main([*args, *ig_args, "--map", str(tmp_path / "m.json")]) == 0
         answer.join(10)
-    out = capsys.readouterr().out  # the answers came after frame 0, three frames (0.6 s) before the end
+    out = capsys.readouterr().out  # the answers came after frame 0, ten frames (2 s) before the end
     said = f"cigi IG: 3 Start of Frame on 127.0.0.1:{listen} (1 malformed), IG frame 502, last host frame 0"
     assert said in out
 
