@@ -275,6 +275,24 @@ def _inside(mask: np.ndarray, box: list[float]) -> int:
     return int(mask[max(y0, 0) : y1 + 1, max(x0, 0) : x1 + 1].sum())
 
 
+HIDDEN_XY = (-30.0, -11.0)  # a street north of a house: from ACTION CAM's 200°, 35° its roof hides 3 soldiers
+
+
+@pytest.mark.browser
+def test_the_action_cam_rises_over_the_house_hiding_them(tmp_path: Path, browser: dict[str, str]) -> None:
+    """x: soldiers standing behind a house (from ACTION CAM's compass 200°) are seen: the camera rises over
+    its roof as the stub's does (client_stub/stub/camera.py clear_pose), each one's blue inside his box."""
+    drive = ["hidden", str(tmp_path), "{},{}".format(*HIDDEN_XY)]
+    _, got = _web_and_browser(["--with-server", "--soldiers", "3"], drive, tmp_path, browser)
+    hidden = got["hidden"]
+    assert hidden["camera"]["view"] == "action" and not hidden["errors"], hidden
+    blue = _blue(tmp_path / "hidden.png")
+    for s in hidden["soldiers"]:  # each framed and seen: without the rise the house covers the third
+        x0, y0, x1, y1 = s["box"]
+        assert 0 <= x0 < x1 <= VIEWPORT[0] and 0 <= y0 < y1 <= VIEWPORT[1], s["box"]
+        assert _inside(blue, s["box"]) > 200, (_inside(blue, s["box"]), s["box"], hidden["camera"])
+
+
 @pytest.mark.browser
 def test_the_page_follows_a_dis_replay_coloured_by_force(tmp_path: Path, browser: dict[str, str]) -> None:
     """`ttes web --replay LOG`: the page, an observer, draws every soldier the replay drives, posed by the

@@ -4,6 +4,7 @@
 //                                        (ACTION CAM), its screenshot; keys "f" "w" (fly, forward); the states
 //   node drive_web.js forces URL OUT_DIR a screenshot of a soldier of each force (DIS force 1, 2) from his
 //                                        tethered camera (keys n, c): force-1.png, force-2.png; the states
+//   node drive_web.js hidden URL OUT_DIR X,Y  soldier k moved to X+3k,Y, key "x" (ACTION CAM): hidden.png; the state
 //   node drive_web.js reconnect URL      key 3, then (the caller restarts the server) bound again: the state
 //   node drive_web.js fps URL SECONDS    the page's frames per second once every soldier is drawn
 //                                        (SHOT=FILE.png: and a screenshot after the count)
@@ -109,6 +110,13 @@ async function main() {
       const help = await page.evaluate(() => { const h = document.getElementById("help"); return h.hidden ? "" : h.textContent; });
       mark("views");
       console.log(JSON.stringify({ before, after, action, fly, forward, next, help, console: console_ }));
+    } else if (mode === "hidden") {
+      const xy = process.argv[5].split(",").map(Number);
+      await page.evaluate(([x, y]) => ttes.soldiers.forEach((s, k) => ttes.place(k, [x + 3 * k, y])), xy);
+      await page.keyboard.press("x");
+      await frames(3);
+      await page.screenshot({ path: `${arg}/hidden.png` });
+      console.log(JSON.stringify({ hidden: await state(), console: console_ }));
     } else if (mode === "forces") {
       const shots = {};
       for (const force of [1, 2]) {

@@ -87,6 +87,48 @@ async function loadVillage() {
   scene.add(gltf.scene);
   const mesh = gltf.scene.getObjectByName("ground");
   if (mesh && mesh.geometry) ground = heightGrid(mesh.geometry.attributes.position);
+  gltf.scene.updateMatrixWorld(true);
+  const others = [];
+  gltf.scene.traverse((o) => { if (o.isMesh && o !== mesh) others.push(o); });
+  tops = topGrid(others);
+}
+
+// what hides the soldiers from ACTION CAM, as the stub's terrain.height (client_stub/stub/ground.py): the highest
+// roof, street or tree under a point (every mesh of the village but the ground); their triangles bucketed by 2 m cell
+let tops = null;
+function topGrid(meshes, step = 2) {
+  const bounds = new THREE.Box3();
+  for (const m of meshes) bounds.expandByObject(m);
+  const x0 = bounds.min.x, y0 = bounds.min.y, nx = Math.floor((bounds.max.x - x0) / step) + 1, ny = Math.floor((bounds.max.y - y0) / step) + 1;
+  const cells = Array.from({ length: nx * ny }, () => []), tris = [], v = new THREE.Vector3();
+  const cell = (c, o) => Math.floor((c - o) / step);
+  for (const m of meshes) {
+    const pos = m.geometry.attributes.position, index = m.geometry.index, n = index ? index.count : pos.count;
+    for (let t = 0; t + 2 < n; t += 3) {
+      const p = [0, 1, 2].flatMap((k) => v.fromBufferAttribute(pos, index ? index.getX(t + k) : t + k).applyMatrix4(m.matrixWorld).toArray());
+      const det = (p[3] - p[0]) * (p[7] - p[1]) - (p[4] - p[1]) * (p[6] - p[0]);
+      if (Math.abs(det) < 1e-9) continue; // a wall: no footprint
+      const i0 = cell(Math.min(p[0], p[3], p[6]), x0), i1 = cell(Math.max(p[0], p[3], p[6]), x0);
+      const j0 = cell(Math.min(p[1], p[4], p[7]), y0), j1 = cell(Math.max(p[1], p[4], p[7]), y0);
+      for (let j = j0; j <= j1; j++) for (let i = i0; i <= i1; i++) cells[j * nx + i].push(tris.length);
+      tris.push([...p, det]);
+    }
+  }
+  return { x0, y0, step, nx, ny, cells, tris };
+}
+
+// the top of the village under x, y: the ground or the highest triangle over it (barycentric in XY, as ground.py)
+function topZ(x, y) {
+  let h = groundZ(x, y);
+  if (!tops) return h;
+  const { x0, y0, step, nx, ny, cells, tris } = tops, i = Math.floor((x - x0) / step), j = Math.floor((y - y0) / step);
+  if (i < 0 || j < 0 || i >= nx || j >= ny) return h;
+  for (const t of cells[j * nx + i]) {
+    const [ax, ay, az, bx, by, bz, cx, cy, cz, det] = tris[t], dx = x - ax, dy = y - ay;
+    const u = (dx * (cy - ay) - dy * (cx - ax)) / det, w = ((bx - ax) * dy - (by - ay) * dx) / det;
+    if (u >= -1e-9 && w >= -1e-9 && u + w <= 1 + 1e-9) h = Math.max(h, az + u * (bz - az) + w * (cz - az));
+  }
+  return h;
 }
 
 // the ground is a regular grid of vertices (client_stub/stub/terrain_gen.py): heights by bilinear lookup
@@ -342,9 +384,10 @@ function fly(forward, up, turn) {
 }
 state.camera = () => ({ view: state.view, position: camera.position.toArray(), fly: cam.fly });
 
-// ACTION CAM (client_stub/stub/camera.py frame_points): from compass 200°, 35° up, as near as keeps the
-// current soldier and every soldier within 10 m of him inside the middle 85 % of the picture; eased
-const ACTION = { radius: 10, compass: 200, elevation: 35, fill: 0.85, ease: 0.2, cut: 15, nearest: 4 };
+// ACTION CAM (client_stub/stub/camera.py frame_points, clear_pose): from compass 200°, 35° up (else 50°, 65°, 80°:
+// the lowest from which roofs and ground do not hide them), as near as keeps the current soldier and every soldier
+// within 10 m of him inside the middle 85 % of the picture; eased
+const ACTION = { radius: 10, compass: 200, elevations: [35, 50, 65, 80], fill: 0.85, ease: 0.2, cut: 15, nearest: 4 };
 const _box = new THREE.Box3();
 function actionBox(s) {
   const near = state.soldiers.filter((o) => o.figure && o.index >= 0
@@ -362,8 +405,24 @@ function aimAction(s) {
   const target = actionBox(s), mid = target.getCenter(new THREE.Vector3());
   if (!cam.action || cam.action.getCenter(new THREE.Vector3()).distanceTo(mid) > ACTION.cut) cam.action = target.clone();
   else { cam.action.min.lerp(target.min, ACTION.ease); cam.action.max.lerp(target.max, ACTION.ease); }
-  const centre = cam.action.getCenter(new THREE.Vector3());
-  const el = THREE.MathUtils.degToRad(ACTION.elevation), az = THREE.MathUtils.degToRad(ACTION.compass);
+  const centre = cam.action.getCenter(new THREE.Vector3()), eye = new THREE.Vector3(), sight = new THREE.Vector3();
+  for (const elevation of ACTION.elevations) { // the lowest whose line of sight clears roofs and ground (clear_pose)
+    frameAction(centre, elevation, eye);
+    let clear = true;
+    for (let t = 0; t <= 0.9 + 1e-9 && clear; t += 0.05) {
+      sight.lerpVectors(eye, centre, t);
+      clear = topZ(sight.x, sight.y) < sight.z - 0.3;
+    }
+    if (clear) break;
+  }
+  camera.position.copy(eye);
+  camera.lookAt(centre);
+}
+
+// frame_points: the eye that looks from ACTION.compass, elevation degrees up, at the eased box's centre, as near as
+// keeps its corners inside the middle of the picture (each corner's own depth)
+function frameAction(centre, elevation, eye) {
+  const el = THREE.MathUtils.degToRad(elevation), az = THREE.MathUtils.degToRad(ACTION.compass);
   const back = new THREE.Vector3(Math.cos(el) * Math.sin(az), Math.cos(el) * Math.cos(az), Math.sin(el));
   const right = new THREE.Vector3().crossVectors(back.clone().negate(), camera.up).normalize();
   const up = new THREE.Vector3().crossVectors(right, back.clone().negate());
@@ -373,8 +432,7 @@ function aimAction(s) {
     const q = new THREE.Vector3(c & 1 ? cam.action.max.x : cam.action.min.x, c & 2 ? cam.action.max.y : cam.action.min.y, c & 4 ? cam.action.max.z : cam.action.min.z).sub(centre);
     distance = Math.max(distance, Math.max(Math.abs(q.dot(right)) / tanX, Math.abs(q.dot(up)) / tanY) + q.dot(back));
   }
-  camera.position.copy(centre).addScaledVector(back, distance);
-  camera.lookAt(centre);
+  return eye.copy(centre).addScaledVector(back, distance);
 }
 
 function aimCamera() {
@@ -410,6 +468,10 @@ function screenBox(s) {
   return [x0, y0, x1, y1];
 }
 state.screenBox = (k) => screenBox(state.soldiers[k]);
+state.place = (k, [x, y]) => { // tests: soldier k moved to x, y on the ground
+  const s = state.soldiers[k];
+  s.position = [x, y, groundZ(x, y)]; s.figure?.place(s.heading, s.position); request([s]);
+};
 
 let last = performance.now(), windowStart = last, windowFrames = 0;
 function frame(now) {
