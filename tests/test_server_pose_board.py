@@ -196,16 +196,22 @@ def test_a_fed_publish_labels_its_rows_with_the_tick_it_names() -> None:
     assert board.labels(np.array([0, 1])).tolist() == [8, 8]
 
 
-def test_a_late_writer_catches_up_through_its_groups_frames() -> None:
-    """Issue 18's spiral: a writer that missed publishes sends the frames its group got for them (from the
-    memo, ticks in order) and the newest publish's shared encode, never an encode of its own; a client
-    whose throttle skips ticks on purpose is not late: it gets one encode spanning them."""
+def _two_watching_ten_walkers() -> tuple[TtesServer, Pair, Pair]:
+    """A server with soldiers 0-9 walking, and two observers subscribed to all of them."""
     server = make_server(throttle=0.0)
     server.start_world()
     walk(server, list(range(10)), 1.4)
     a, b = Pair(server, "a"), Pair(server, "b")
     a.subscribe(tuple(range(10)))
     b.subscribe(tuple(range(10)))
+    return server, a, b
+
+
+def test_a_late_writer_catches_up_through_its_groups_frames() -> None:
+    """Issue 18's spiral: a writer that missed publishes sends the frames its group got for them (from the
+    memo, ticks in order) and the newest publish's shared encode, never an encode of its own; a client
+    whose throttle skips ticks on purpose is not late: it gets one encode spanning them."""
+    server, a, b = _two_watching_ten_walkers()
     encodes = server.board_ref.encodes
     assert encodes is not None
     sent: dict[int, bytes] = {}
@@ -241,12 +247,7 @@ def test_a_late_writer_with_answers_between_ticks_decodes_the_board_in_tick_orde
     """The catch-up through the memo (issue 18) and the answers between ticks (issue 16, rows labelled with
     the next tick) together: a writer reading every third tick, while soldiers are answered between ticks,
     still decodes exactly the board's codes, and the ticks it receives never go backwards."""
-    server = make_server(throttle=0.0)
-    server.start_world()
-    walk(server, list(range(10)), 1.4)
-    a, b = Pair(server, "a"), Pair(server, "b")
-    a.subscribe(tuple(range(10)))
-    b.subscribe(tuple(range(10)))
+    server, a, b = _two_watching_ten_walkers()
     m = server.world.manager
     assert m is not None
     idx = np.arange(10)
