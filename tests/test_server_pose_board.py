@@ -196,6 +196,17 @@ def test_a_fed_publish_labels_its_rows_with_the_tick_it_names() -> None:
     assert board.labels(np.array([0, 1])).tolist() == [8, 8]
 
 
+def assert_decode_the_board(server: TtesServer, *pairs: Pair) -> None:
+    """Each client's decoder holds exactly the board's codes for soldiers 0-9."""
+    board = server.board_ref.board
+    assert board is not None
+    idx = np.arange(10)
+    for p in pairs:
+        dec = p.client.decoder(1)
+        assert dec is not None
+        np.testing.assert_array_equal(dec.codes(idx), board.codes[idx])
+
+
 def _two_watching_ten_walkers() -> tuple[TtesServer, Pair, Pair]:
     """A server with soldiers 0-9 walking, and two observers subscribed to all of them."""
     server = make_server(throttle=0.0)
@@ -226,13 +237,10 @@ def test_a_late_writer_catches_up_through_its_groups_frames() -> None:
             assert encodes.misses == misses
             last = k
     assert encodes.caught_up == 1 + 2 * 3 and len(calls) == 1  # b encoded at tick 1 only: then memo frames
+    assert_decode_the_board(server, a, b)
     idx = np.arange(10)
     board = server.board_ref.board
     assert board is not None
-    for p in (a, b):
-        dec = p.client.decoder(1)
-        assert dec is not None
-        np.testing.assert_array_equal(dec.codes(idx), board.codes[idx])
     b.session.throttle = 0.1  # b asks for 10 updates a second: skipped ticks are its choice
     server.tick(13 / 30)
     a.flush()
@@ -250,18 +258,12 @@ def test_a_late_writer_with_answers_between_ticks_decodes_the_board_in_tick_orde
     server, a, b = _two_watching_ten_walkers()
     m = server.world.manager
     assert m is not None
-    idx = np.arange(10)
     for k in range(1, 16):
         server.tick(k / 30)
         a.flush()
         if k == 1 or k % 3 == 0:  # b joins a's group at tick 1, then misses publishes
             b.flush()
-            board = server.board_ref.board
-            assert board is not None
-            for p in (a, b):
-                dec = p.client.decoder(1)
-                assert dec is not None
-                np.testing.assert_array_equal(dec.codes(idx), board.codes[idx])
+            assert_decode_the_board(server, a, b)
         if k % 2 == 0:  # between this tick and the next: soldier k % 10 kneels, answered at once
             i = k % 10
             kneel = make_entity_requests(np.array([i]), [int(Appearance.KNEEL)], [1], np.zeros((1, 3)), [0.0])

@@ -54,8 +54,13 @@ class Sharding:
             raise ValueError(f"shard {text!r} is not K/N with 0 <= K < N")
         return cls(int(k), int(n))
 
+    @staticmethod
+    def home(indices: np.ndarray | int, n: int) -> np.ndarray:
+        """The home shard of each soldier index among ``n`` shards: one rule for shards and front-ends."""
+        return np.asarray(indices, np.int64) % n
+
     def owns(self, indices: np.ndarray) -> np.ndarray:
-        return np.asarray(indices, np.int64) % self.n == self.k
+        return self.home(indices, self.n) == self.k
 
 
 class ShardNode:
@@ -291,7 +296,7 @@ class FrontNode:
         """The live soldiers whose home is shard ``k``."""
         m = self.server.world.manager
         live = m.table.live if m is not None else np.zeros(0, np.int64)
-        return live[live % self.shards == k]
+        return live[Sharding.home(live, self.shards) == k]
 
     def _sync(self, shard: int, homes: list[int], *, replay: bool = False) -> None:
         m = self.server.world.manager
@@ -322,7 +327,7 @@ class FrontNode:
                 ops.clear()
 
     def _shard_of(self, index: int) -> int:
-        return self.route[index % self.shards]
+        return self.route[int(Sharding.home(index, self.shards))]
 
     # -- the world's Relay ---------------------------------------------------------------------------------
     def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
@@ -337,7 +342,7 @@ class FrontNode:
         idx = rows["index"].astype(np.int64)
         self.last[idx] = rows
         self.has_last[idx] = True
-        shard = np.asarray(self.route)[idx % self.shards]
+        shard = np.asarray(self.route)[Sharding.home(idx, self.shards)]
         for k in np.unique(shard).tolist():
             self._send(k, req.requests(rows[shard == k]))
 
