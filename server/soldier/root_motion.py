@@ -31,7 +31,7 @@ TURN_RATE = 90.0  # degrees/s a crawling figure (or one without sole sites) turn
 # ball at push-off, or none in a run's flight), about that point, so no planted point slides (issue 16)
 STEP_TURN_DEG = 45.0  # at most this much per such window (one a step): 90° over 2-3 steps, 110° over three
 FRAME_TURN_DEG = 5.0  # ... and per recorded 60 Hz frame (a walk's window is 7-8 frames: 35-40°)
-STEP_TURN_RATE = 300.0  # degrees/s at most, however fast the clip plays (a snap is 6° in a 60 Hz frame)
+STEP_TURN_RATE = 240.0  # degrees/s at most, however fast the clip plays (a snap is 6° in a 60 Hz frame)
 # ... and, being slower than the entity's turn, it overshoots the corner: it heads back to its entity's path
 STEER_S = 1.0  # over about this time (the lateral gap it steers by is looked ahead this many seconds' walk)
 STEER_FREE_CM = 10.0  # ... once more than this beside it, until it is within and faces the heading again
@@ -211,6 +211,9 @@ class TravelTable:
             -1, 2
         )
         self.ahead = self.paced & (self.total[:, 1] < -np.abs(self.total[:, 0]))
+        # a side-step has no such window (its feet shuffle flat): it turns at TURN_RATE, twisting them; an end
+        # step has none either: a forwards one does not turn (a turn in place follows if it must)
+        self.paced &= self.ahead | np.array([t is not None and len(t) > 0 and t[-1] > 0 for t in turns], bool)
 
     def at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """``(n, 2)`` travel of ``clip`` at fractional ``frame`` (clamped to the clip)."""
