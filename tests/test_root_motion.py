@@ -16,7 +16,7 @@ from peabody.fk import FigureKinematics
 from peabody.quaternion import to_matrix
 from protocol.entity import Appearance, WeaponState, make_entity_requests
 from server.soldier.manager import REQUEST_OK, SoldierManager
-from server.soldier.root_motion import feet_points
+from server.soldier.root_motion import FRAME_TURN_DEG, feet_points, step_turns
 from tests.test_gait_selection import shipped_library
 
 HZ = 60.0
@@ -175,6 +175,23 @@ def test_small_heading_changes_do_not_turn_and_the_figure_stays_put(lib) -> None
     run = drive(lib, [(0.0, 0.0, 0.0), (0.5, 0.0, 0.0, 20.0), (1.0, 0.0, 0.0, 0.0)], heading=0.0, until=2.0)
     assert not any("turn_" in c for c in run["clips"].tolist())
     assert np.abs(run["world"] - run["world"][0]).max() < 0.5
+
+
+def test_a_stepping_figure_may_turn_only_while_one_sole_point_alone_is_down() -> None:
+    """Six frames: both feet flat, then the left ball alone down (heel and right foot 5 cm up), then the right
+    heel lands. It may turn between frames 2-3 and 3-4 only (FRAME_TURN_DEG each), about the left ball, which
+    it keeps as the point to turn about while that ball stays down."""
+    points = np.zeros((6, 2, 2, 3))  # (frames, feet, heel/ball, XYZ cm)
+    points[..., 2] = [[[10.0, -10.0], [10.0, -10.0]]]
+    points[:, 1, :, 0] = 20.0  # the right foot, beside the left
+    points[:, 0, 1, 2] = -10.0 - np.arange(6)  # the left ball carries the figure (the treadmill)
+    points[2:5, :, :, 1] = 5.0
+    points[2:5, 0, 1, 1] = 0.0  # ... alone down in frames 2-4
+    points[5, 1, 1, 1] = 5.0  # the right heel lands in frame 5, its ball still up
+    points[5, 0, 0, 1] = 5.0
+    turn, about = step_turns(points)
+    assert turn.tolist() == [0.0, 0.0, 0.0, FRAME_TURN_DEG, 2 * FRAME_TURN_DEG, 2 * FRAME_TURN_DEG]
+    assert np.allclose(about, points[:, 0, 1][:, [0, 2]])
 
 
 TURNS = [(1.4, a) for a in (30.0, 45.0, 60.0, 90.0, 110.0)] + [(3.5, 45.0), (3.5, 90.0), (3.0, 60.0)]
