@@ -139,6 +139,38 @@ def merge_groups(values: np.ndarray, widths: np.ndarray, g: int) -> tuple[np.nda
     return group, used.view(np.int64)
 
 
+def merge_columns(values: np.ndarray, widths: np.ndarray, g: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`merge_groups` of field-major input: ``values`` (C, n) int32 and ``widths`` (C, n) uint8, one
+    row per field (C a multiple of ``g``); the same groups and widths, (n, C/g), row-major. Every pass runs
+    along the n soldiers (long, contiguous loops) instead of across a soldier's few fields. Fields of at
+    most 16 bits with ``g = 4`` (the usual tables) merge as a tree in uint32: fields into 32-bit pairs,
+    pairs into 64-bit quads."""
+    c, n = values.shape
+    u = values.view(np.uint32) if values.dtype == np.int32 else values.astype(np.uint32)
+    if g == 4 and c and int(widths.max(initial=0)) <= 16:
+        w = widths.astype(np.uint32)
+        top = np.subtract(np.uint32(32), w)
+        np.left_shift(u, top, out=top)  # top-aligned in 32 bits; width 0 shifts by 32: 0
+        pair = np.right_shift(top[1::2], w[0::2])
+        pair |= top[0::2]
+        pw = w[0::2] + w[1::2]
+        group = pair[0::2].astype(_U64)
+        group <<= _U64(32)
+        low = pair[1::2].astype(_U64)
+        low <<= (np.uint32(32) - pw[0::2]).astype(_U64)
+        group |= low
+        gw = (pw[0::2] + pw[1::2]).astype(np.int64)
+    else:
+        group = np.zeros((c // g, n), _U64)
+        gw = np.zeros((c // g, n), np.int64)
+        for j in range(g):
+            wj = widths[j::g].astype(_U64)
+            t = u[j::g].astype(_U64) << (_U64(64) - wj)
+            group |= t >> gw.view(_U64)
+            gw += wj.view(np.int64)
+    return np.ascontiguousarray(group.T), np.ascontiguousarray(gw.T)
+
+
 def place_groups(groups: np.ndarray, starts: np.ndarray, nwords: int) -> np.ndarray:
     """Native uint64 words (``nwords`` + 2 of slack) holding top-aligned ``groups`` at bit ``starts``.
 
