@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocol.bitpack import merge_columns
+from protocol.bitpack import merge_columns, scratch
 from protocol.update_table import TableLayout
 
 MODE_BITS = 1
@@ -91,9 +91,11 @@ def _entry_bits(mag: np.ndarray) -> np.ndarray:
 def entry_widths(cols: Columns, resid: np.ndarray) -> np.ndarray:
     """(E, n) int32: per entry the smallest two's-complement width holding its delta fields' residuals,
     from field-major residuals ``resid`` (F', n)."""
-    m = resid[cols.perm]
-    np.maximum(m, np.invert(m), out=m)  # the bit length of max(r, -r - 1), plus a sign bit, holds r
-    for at, k in cols.spans:
+    sc = scratch()
+    shape = (len(cols.perm), resid.shape[1])
+    m = np.take(resid, cols.perm, axis=0, out=sc.get("v2.mag", shape, np.int32), mode="clip")
+    np.maximum(m, np.invert(m, out=sc.get("v2.inv", shape, np.int32)), out=m)  # bit length of max(r, -r-1)
+    for at, k in cols.spans:  # plus a sign bit holds r
         np.maximum(m[:k], m[at : at + k], out=m[:k])
     return _entry_bits(m[: cols.nent] if cols.inverse is None else m[cols.inverse])
 
@@ -123,11 +125,13 @@ def field_widths(
     return out
 
 
-def residuals(q: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int) -> np.ndarray:
+def residuals(
+    q: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int, out: np.ndarray | None = None
+) -> np.ndarray:
     """(n, F) int32: ``q`` minus the prediction, ``2 · cur − before`` for soldiers whose last update was at
     ``tick − 1`` (mod 2³²), else ``cur``."""
     nf = q.shape[1]
-    resid = q - cur
+    resid = np.subtract(q, cur, out=out)
     rows = np.flatnonzero(state[:, nf] == tick_code(tick - 1))
     if len(rows) == len(q):
         resid -= cur
@@ -196,12 +200,15 @@ def encode_rows(
     jumps) are fixed up on their own.
     """
     n, nf = q.shape
-    values = np.zeros((cols.ncols, n), np.int32)  # field-major; padding fields have width 0
-    values[:nf] = residuals(q, cur, state, tick).T
+    sc = scratch()  # big work arrays reused from tick to tick: no page faults for fresh megabytes
+    values = sc.get("v2.values", (cols.ncols, n), np.int32)  # field-major; padding fields have width 0
+    values[nf:] = 0
+    np.copyto(values[:nf], residuals(q, cur, state, tick, sc.get("v2.resid", (n, nf), np.int32)).T)
     pres = np.ascontiguousarray(present.T)
     c = _choose(cols, entry_widths(cols, values), q, cur, known, pres)
-    widths = np.zeros((cols.ncols, n), np.uint8)
-    widths[:nf] = c.w[cols.entry_of]
+    widths = sc.get("v2.widths", (cols.ncols, n), np.uint8)
+    widths[nf:] = 0
+    np.take(c.w, cols.entry_of, axis=0, out=widths[:nf], mode="clip")
     widths[cols.qidx_fields] = 0
     header = np.empty((n, MODE_BITS + cols.nent), np.uint8)
     header[:, 0] = ~c.row_abs

@@ -29,6 +29,7 @@ from protocol.bitpack import (
     merge_groups,
     place_groups,
     read_groups,
+    scratch,
     split_groups,
 )
 from protocol.errors import ErrorCode, WireError
@@ -397,7 +398,8 @@ class UpdateEncoder:
         plan = self._plan
         self._tick = tick
         known = self._known[idx]
-        last = self._last[idx]
+        sc = scratch()  # gathers into reused buffers (idx is checked: clip gathers unbuffered)
+        last = np.take(self._last, idx, axis=0, out=sc.get("enc.last", q.shape, np.int32), mode="clip")
         changed = plan.changed(q != last)
         if not known.all():
             changed[~known] = True
@@ -408,7 +410,9 @@ class UpdateEncoder:
                 return []
             idx, q, last, changed, known = (a[send] for a in (idx, q, last, changed, known))
         if self.version >= 2:
-            rows = self._rows_v2(q, last, self._before[idx], known, changed, tick)
+            before = sc.get("enc.before", (len(idx), self._before.shape[1]), np.int32)
+            np.take(self._before, idx, axis=0, out=before, mode="clip")
+            rows = self._rows_v2(q, last, before, known, changed, tick)
         else:
             rows = self._rows_v1(q, last, changed, known)
         payloads = self._chunks(idx, rows, tick, max_payload)
