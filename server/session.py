@@ -239,7 +239,7 @@ class Session:
                     continue
                 caught = self._catch_up(t, rows, sub, since) if late else None
                 if caught is None:
-                    caught = self.conn.send_update_codes(t, rows, board.codes[rows], tick, board.serial)
+                    caught = self.conn.send_update_codes(t, rows, board.codes_of(rows), tick, board.serial)
                 chunks.append(caught)
         data = b"".join(chunks)
         if data:
