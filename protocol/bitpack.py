@@ -70,6 +70,8 @@ def read_fields(words: np.ndarray, starts: np.ndarray, widths: np.ndarray) -> np
 # instead of C. A group starting at stream bit s lies in the 64-bit words s >> 6 and (s >> 6) + 1; groups are
 # in stream order, so those starting in the same word are contiguous and one ``bitwise_or.reduceat`` per half
 # assembles the words. numpy defines shifts by 64 or more as 0, which absent (width-0) groups rely on.
+# Version 2's encoder works field-major ((C, n): each field a row over the soldiers) and merges with
+# :func:`merge_columns`, whose passes run along the soldiers; the groups are the same.
 
 
 class Scratch:
