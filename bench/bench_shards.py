@@ -70,12 +70,14 @@ def main() -> int:
                     port=procs["front"].port,
                     throttle=None,
                     timeout_s=120.0,
+                    server_pid=procs["front"].pid,
                 )
             )
             wall = time.monotonic() - t0
             cpu = {k: round(100 * (cpu_seconds(p.pid) - cpu0[k]) / wall, 1) for k, p in procs.items()}
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
+    keys += ("server_cpu_pct", "client_cpu_pct")  # the front-end's and the load generator's, steady window
     out = {
         "soldiers": args.soldiers,
         "clients": args.clients,

@@ -13,6 +13,7 @@ from test_server_support import Client, make_server
 
 from protocol.events import (
     CreateSoldier,
+    Error,
     FigureMsg,
     JointUpdates,
     Ready,
@@ -144,6 +145,23 @@ async def test_each_soldier_lives_in_its_shard_and_reaches_the_client(autojump_c
         # its STATUS says who animates (a front-end's own tick time read "tick 0 us mean"); a shard's its tick
         assert "animated by its shards" in front.status_text()[2]
         assert "us mean" not in front.status_text()[2] and "us mean" in shards[0].status_text()[2]
+
+
+async def test_the_front_end_checks_requests_and_leaves_the_animation_to_the_shard(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """The front-end's manager keeps the books but never runs the event path (that cost its core most of
+    its time): the walk is the shard's; a bad request is still refused by the front-end itself."""
+    async with cluster() as (front, _, shards, _):
+        c = await walker(front, 11)
+        await moving(c, 11, 3)
+        fm, sm = front.world.manager, shards[1].world.manager
+        assert fm is not None and sm is not None
+        assert sm.soldier_info(11)["speed"] > 1.0 and fm.soldier_info(11)["speed"] == 0.0
+        assert fm.stats["requests"] == 1 and fm.stats["events"] == 0
+        await c.requests(index=[11], velocity=(0.0, 150.0, 0.0))  # beyond MAX_SPEED
+        err = await c.expect(Error)
+        assert "speed above" in err.message and sm.soldier_info(11)["speed"] < 2.0
 
 
 async def test_a_silent_shards_walker_walks_on_in_the_survivor(autojump_clock: trio.abc.Clock) -> None:
