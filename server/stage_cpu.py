@@ -4,6 +4,7 @@ On a shared machine wall-clock timings measure the neighbours; the loop thread's
 (``time.thread_time``) per stage does not. A server's status line reports them in ms per tick of its own
 loop, with the process's CPU per tick beside them: the rest is the fabric's threads, the sockets and trio.
 Stages may nest: ``requests`` holds the publish of the answers it releases (their ``fabric`` too).
+A stage costs two ``thread_time`` calls (≈ 9 µs on this project's VM: ≈ 0.1 ms of a tick in all).
 """
 
 from __future__ import annotations
