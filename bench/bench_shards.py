@@ -5,8 +5,10 @@ Spawns ``ttes front --shards 2`` and two ``ttes server --shard K/2`` on the ship
 fabric (loopback), every soldier updated every tick (``--throttle 0``), then drives the front-end with the
 load generator (``client_stub.loadtest``, as ``ttes loadtest --host --port``): delivered % of steady-mover
 updates, request → first reflecting update p50/p99, bytes per update; and each process's CPU (% of a core)
-over the run. On this 2-core machine the four processes share two cores with everything else: quote the
-load average.
+over the run (``server_cpu_pct``: the front-end's in the steady window). The load generator only taps the
+update frames (header and indices), so it stays cheap beside the servers (``client_cpu_pct``: 2–5 % of a
+core at 10,000–20,000). On this 2-core machine the four processes share two cores with everything else:
+quote the load average. Each server's status line has its CPU per tick by stage (``cpu_ms_per_tick``).
 
 ``--probe N`` measures instead the path a request takes alone: N soldiers, one posture request at a time
 (kneel, then stand), the time until that soldier's next update reaches the client (client → front-end →
@@ -70,12 +72,14 @@ def main() -> int:
                     port=procs["front"].port,
                     throttle=None,
                     timeout_s=120.0,
+                    server_pid=procs["front"].pid,
                 )
             )
             wall = time.monotonic() - t0
             cpu = {k: round(100 * (cpu_seconds(p.pid) - cpu0[k]) / wall, 1) for k, p in procs.items()}
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
+    keys += ("server_cpu_pct", "client_cpu_pct")  # the front-end's and the load generator's, steady window
     out = {
         "soldiers": args.soldiers,
         "clients": args.clients,

@@ -48,6 +48,7 @@ from server.logging import get_logger
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.soldier.manager import TickUpdate
+from server.stage_cpu import StageCpu
 from server.startup import ServerWorld
 from server.tls import server_context
 from server.websocket import WebSocketStream, origin_allowed
@@ -108,6 +109,7 @@ class TtesServer:
         self._bound: list[Any] | None = None  # listening sockets bound by bind(), before serve()
         self._bound_ws: list[Any] = []  # and the WebSocket port's
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
+        self.cpu = StageCpu()  # the loop's CPU per stage, in the status log line
         # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
         self.on_publish: Callable[[PoseBoard], None] | None = None
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
@@ -396,8 +398,9 @@ class TtesServer:
         """Handle what the client sent; the socket is not read meanwhile (TCP backpressure): while it is over
         its request rate, and while its JCL runs."""
         while not session.closing:
-            wait = session.resume(self.now())
-            self.requests_arrived()
+            with self.cpu("requests"):
+                wait = session.resume(self.now())
+                self.requests_arrived()
             if session.pending_jcl is not None:
                 await self.run_jcl(session)
             elif session.output_full:  # the client's answers wait: read on once the writer took them
@@ -422,7 +425,8 @@ class TtesServer:
                         await session.wake.wait()
                 await self.let_readers_in()  # their answers go out in this write
                 session.wake = trio.Event()
-                data = session.take_output(self.now())
+                with self.cpu("encode"):
+                    data = session.take_output(self.now())
                 session.drained.set()
                 if data:
                     with trio.move_on_after(timeout) as cs:
@@ -507,10 +511,13 @@ class TtesServer:
         t0 = time.perf_counter()
         self.ticks += 1
         if self.feed is not None:
-            self._published(board, self.feed(board, self.ticks))
+            with self.cpu("merge"):
+                changed = self.feed(board, self.ticks)
+            self._published(board, changed)
             return None
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
-        update = m.tick(now)
+        with self.cpu("animate"):
+            update = m.tick(now)
         self._requests_at_tick = self._request_count()
         self.last_tick_seconds = time.perf_counter() - t0
         return update
@@ -524,14 +531,19 @@ class TtesServer:
         t0 = time.perf_counter()
         if self.on_tick is not None:
             self.on_tick(update)
-        self._published(board, board.publish(update, self.world))
+        with self.cpu("quantise"):
+            changed = board.publish(update, self.world)
+        self._published(board, changed)
         if self._request_count() != self._requests_at_tick:
             self._requests_seen = self._request_count()
-            again = m.answer(update.now, update.now)  # at the tick's time: its due rule
+            with self.cpu("animate"):
+                again = m.answer(update.now, update.now)  # at the tick's time: its due rule
             if len(again):
                 if self.on_tick is not None:
                     self.on_tick(again)
-                self._published(board, board.publish(again, self.world, again=True))
+                with self.cpu("quantise"):
+                    changed = board.publish(again, self.world, again=True)
+                self._published(board, changed)
                 # a start whose first frames are still (a walk off a rest) shows nothing yet at the tick's
                 # time: those soldiers get the answer after the tick, at the next tick's time, as before
                 still = again.indices[board.version[again.indices] != board.serial]
@@ -549,13 +561,16 @@ class TtesServer:
         board = self._board()
         if self.feed is None or board is None or not self.world.ready:
             return
-        self._published(board, self.feed(board, self.ticks + 1))
+        with self.cpu("merge"):
+            changed = self.feed(board, self.ticks + 1)
+        self._published(board, changed)
 
     def _published(self, board: PoseBoard, changed: int) -> None:
         """After a publish: the shard's hook, then wake the writers; a tick whose poses changed counts once
         for the update rate, however many publishes carried it (answers, a front-end's shards)."""
         if self.on_publish is not None:
-            self.on_publish(board)
+            with self.cpu("fabric"):
+                self.on_publish(board)
         if changed:
             if board.tick != self._counted_tick:
                 self._counted_tick = board.tick
@@ -668,6 +683,7 @@ class TtesServer:
             overruns=self.tick_overruns,
             mean_tick_us=round(st.get("mean_tick_us", 0.0), 1),
             modes=st.get("modes", {}),
+            cpu_ms_per_tick=self.cpu.report(self.ticks),
         )
 
 

@@ -190,23 +190,28 @@ class ServerWorld:
             self.relay.removed(index)
 
     def apply_requests(self, rows: np.ndarray) -> np.ndarray:
-        """Entity requests (``SoldierManager.apply_requests``: its per-row status); a front-end also sends
-        the rows taken to the shards."""
+        """Entity requests (``SoldierManager.apply_requests``: its per-row status). A front-end only checks
+        them (``check_requests``) and sends the rows taken to the shards, which animate the soldiers."""
         m = self.manager
         assert m is not None
-        status = m.apply_requests(rows, self.clock())
-        if self.relay is not None:
-            ok = status == REQUEST_OK
-            self.relay.requests(rows if ok.all() else rows[ok])
+        if self.relay is None:
+            return m.apply_requests(rows, self.clock())
+        status = m.check_requests(rows)
+        ok = status == REQUEST_OK
+        self.relay.requests(rows if ok.all() else rows[ok])
         return status
 
     def react(self, index: int, kind: str) -> None:
-        """A reaction (``SoldierManager.react``); a front-end also sends it to the owning shard."""
+        """A reaction (``SoldierManager.react``); a front-end only sends it to the shard that animates the
+        soldier (KeyError for an unknown one, as the manager's)."""
         m = self.manager
         assert m is not None
-        m.react(index, kind, self.clock())
-        if self.relay is not None:
-            self.relay.react(index, kind)
+        if self.relay is None:
+            m.react(index, kind, self.clock())
+            return
+        if not m.table.is_live(index):
+            raise KeyError(f"no soldier {index}")
+        self.relay.react(index, kind)
 
     def start(self) -> None:
         """``start_ttes_socket_simulation()``: the "I'm ready!" message (READY) — the library must exist."""

@@ -13,6 +13,7 @@ from test_server_support import Client, make_server
 
 from protocol.events import (
     CreateSoldier,
+    Error,
     FigureMsg,
     JointUpdates,
     Ready,
@@ -24,7 +25,7 @@ from protocol.events import (
 )
 from server.app import TtesServer
 from server.fabric import Handler, Kind, Presence
-from server.fabric.nodes import FrontNode, Sharding, ShardNode
+from server.fabric.nodes import KEY_EVERY, FrontNode, Sharding, ShardNode
 
 WALK = (0.0, 1.4, 0.0)
 RUN = (0.0, 3.5, 0.0)
@@ -85,8 +86,10 @@ class MemoryFabric:
 
 
 @contextlib.asynccontextmanager
-async def cluster() -> AsyncIterator[tuple[TtesServer, FrontNode, list[TtesServer], list[MemoryFabric]]]:
-    bus = Bus()
+async def cluster(
+    bus: Bus | None = None, key_every: int = KEY_EVERY
+) -> AsyncIterator[tuple[TtesServer, FrontNode, list[TtesServer], list[MemoryFabric]]]:
+    bus = bus or Bus()
     token = trio.lowlevel.current_trio_token()
     front = make_server()
     front_node = FrontNode(front, MemoryFabric(bus), 2)
@@ -96,7 +99,7 @@ async def cluster() -> AsyncIterator[tuple[TtesServer, FrontNode, list[TtesServe
         front_node.start(token)
         for k in range(2):
             shard, fabric = make_server(), MemoryFabric(bus)
-            node = ShardNode(shard, fabric, Sharding(k, 2))
+            node = ShardNode(shard, fabric, Sharding(k, 2), key_every=key_every)
             await nursery.start(shard.serve)
             node.keep_own()
             node.start(token)
@@ -144,6 +147,48 @@ async def test_each_soldier_lives_in_its_shard_and_reaches_the_client(autojump_c
         # its STATUS says who animates (a front-end's own tick time read "tick 0 us mean"); a shard's its tick
         assert "animated by its shards" in front.status_text()[2]
         assert "us mean" not in front.status_text()[2] and "us mean" in shards[0].status_text()[2]
+
+
+async def test_the_front_end_checks_requests_and_leaves_the_animation_to_the_shard(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """The front-end's manager keeps the books but never runs the event path (that cost its core most of
+    its time): the walk is the shard's; a bad request is still refused by the front-end itself."""
+    async with cluster() as (front, _, shards, _):
+        c = await walker(front, 11)
+        await moving(c, 11, 3)
+        fm, sm = front.world.manager, shards[1].world.manager
+        assert fm is not None and sm is not None
+        assert sm.soldier_info(11)["speed"] > 1.0 and fm.soldier_info(11)["speed"] == 0.0
+        assert fm.stats["requests"] == 1 and fm.stats["events"] == 0
+        await c.requests(index=[11], velocity=(0.0, 150.0, 0.0))  # beyond MAX_SPEED
+        err = await c.expect(Error)
+        assert "speed above" in err.message and sm.soldier_info(11)["speed"] < 2.0
+
+
+async def test_a_late_front_end_gets_every_soldier_from_a_key_batch(autojump_clock: trio.abc.Clock) -> None:
+    """Batches carry only what changed and the shards' periodic keys are off: a front-end that comes late
+    gets the soldiers that stand still too, from the key its first sync asks for, as the first has them."""
+    bus = Bus()
+    async with cluster(bus, key_every=10**9) as (front, node, _, _):
+        c = await walker(front, 11)
+        await moving(c, 11, 3)
+        late = make_server()
+        late_node = FrontNode(late, MemoryFabric(bus), 2)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(late.serve)
+            late_node.start(trio.lowlevel.current_trio_token())
+            with trio.fail_after(30):
+                while late_node.keys < 2:  # one per shard
+                    await trio.sleep(0.1)
+            await trio.sleep(0.1)
+            a, b = front.board_ref.board, late.board_ref.board
+            assert a is not None and b is not None
+            still = list(range(10))  # the start-up script's soldiers, standing
+            assert b.valid[still].all() and (a.codes[still] == b.codes[still]).all()
+            assert node.keys > 2  # after the first batches of each shard, keys only when a sync asked
+            late.shutdown()
+        await c.aclose()
 
 
 async def test_a_silent_shards_walker_walks_on_in_the_survivor(autojump_clock: trio.abc.Clock) -> None:

@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from protocol.entity import Appearance, WeaponState, make_entity_requests
+from server.soldier.core import WALK_MAX_RATE
 from server.soldier.manager import SoldierManager
+from server.soldier.turning import REVERSAL_TURN_SPEEDUP
 from tests.test_gait_selection import move, run, shipped_library
 from tests.test_root_motion import HZ, SKATE_CM, drive, skates, yaw_steps
 
@@ -52,11 +54,13 @@ def test_after_a_reversal_the_figure_catches_up_with_its_entity(reversal) -> Non
     _, played = reversal
     gap = np.linalg.norm(played["gap"], axis=1)
     t = np.arange(len(gap)) / HZ
-    # the entity walked on during the stop and the pivot (~4 s): the figure trails it by up to ~6 m, then
-    # catches up with faster cadence (up to ~1 m/s faster) to the usual walking lag; a stop ends near it
-    assert gap.max() < 650.0
+    # the entity walked on during the stop and the pivot (~3 s): the figure trails it by up to ~5 m, then
+    # catches up with faster cadence (up to ~1 m/s faster) to the usual walking lag; a stop ends within a
+    # walking step of it (74 cm: by the phase it falls in, a plain walk's stop ends 1-61 cm from the entity,
+    # the shorter end step after a step just ended ~70)
+    assert gap.max() < 500.0
     assert gap[(t > T_STOP - 1.0) & (t < T_STOP)].mean() < 110.0  # walking: 37 + 53 cm, as any walk
-    assert gap[t > T_END - 0.5].max() < 47.0
+    assert gap[t > T_END - 0.5].max() < 74.0
 
 
 def caught_up(played: dict[str, np.ndarray], since: float, steady: tuple[float, float]) -> float:
@@ -70,17 +74,47 @@ def caught_up(played: dict[str, np.ndarray], since: float, steady: tuple[float, 
 
 
 def test_the_lag_a_reversal_leaves_is_closed_at_a_jog(reversal) -> None:  # type: ignore[no-untyped-def]
-    """The stop, the pivot and the walk start take 3.5 s at their own timing (1.13 + 1.37 + 1.02 s) while the
-    entity walks on at 1.4 m/s: the figure falls 4.6 m further behind than a walker's usual 0.9 m (no
-    root offset keeps planted feet nearer). More than 2 m behind that, it jogs (walk2run, run cycles closing
-    ~1.4 m/s, core.CATCH_UP_RUN_CM) and walks again within 80 cm of the run's lag, the walk's faster cadence
-    closing the rest (up to core.WALK_MAX_RATE): back within 5 cm of the usual lag 8.0-9.4 s after the
-    reversal (12.9 s at most 1.5 times the entity's speed; 9.8-11.2 s walking at the top cadence)."""
+    """The stop, the pivot and the walk start take 2.6 s (the end and start steps hurried to the walk's upper
+    cadence, stepping.HURRY_RATE: 0.63 + 1.37 + 0.57 s; at their recorded pace 1.13 + 1.37 + 1.02 = 3.5 s)
+    while the entity walks on at 1.4 m/s: the figure falls 3.3-3.9 m further behind than a walker's usual
+    0.9 m (was 4.6-5.2; no root offset keeps planted feet nearer). More than 2 m behind that, it jogs
+    (walk2run, run cycles closing ~1.4 m/s, core.CATCH_UP_RUN_CM) and walks again within 80 cm of the run's
+    lag, the walk's faster cadence closing the rest (up to core.WALK_MAX_RATE): back within 5 cm of the
+    usual lag 6.1-7.5 s after the reversal (was 8.0-9.4 s; 12.9 s at most 1.5 times the entity's speed)."""
     _, played = reversal
     gap = np.linalg.norm(played["gap"], axis=1)
-    assert gap.max() < 140.0 * (0.55 + 3.52) + 93.0  # the entity walks on over the step under way and these
+    assert gap.max() < 140.0 * (0.55 + 2.57) + 93.0  # the entity walks on over the step under way and these
     assert "run_cycle" in [c.rsplit("/", 1)[-1].removesuffix("_low")[:-2] for c in played["clips"].tolist()]
-    assert caught_up(played, T_REVERSE, (T_STOP - 2.0, T_STOP)) < 9.5
+    assert caught_up(played, T_REVERSE, (T_STOP - 2.0, T_STOP)) < 8.0
+
+
+def paces(lib, script: list[tuple[float, ...]], until: float, since: float) -> dict[str, float]:  # type: ignore[no-untyped-def]
+    """Play ``(time, speed m/s, new heading)`` requests; per clip family the seconds its first clip from
+    ``since`` s on took."""
+    m = SoldierManager(lib, throttle=0.0, record_clips=True)
+    i = m.create_soldier(now=0.0)
+    for k, (t, speed, heading) in enumerate(script):
+        move(m, i, t, speed, 0.0, heading=heading)
+        run(m, t, script[k + 1][0] if k + 1 < len(script) else until)
+    out: dict[str, float] = {}
+    for c in m.clips_of(i):
+        name = c.clip.rsplit("/", 1)[-1].removesuffix("_low")
+        if c.time >= since - 1e-9:
+            out.setdefault(name[:-2] if name[-2:] in ("_l", "_r") else name, c.duration - c.skipped)
+    return out
+
+
+def test_a_reversal_hurries_its_stop_and_its_start(lib) -> None:  # type: ignore[no-untyped-def]
+    """A person stopping to turn back, and setting off after the turn, steps at his upper cadence: the end
+    step (1.13 s recorded) and the start step after the pivot (1.02 s) play at core.WALK_MAX_RATE; the pivot
+    stays at turning.REVERSAL_TURN_SPEEDUP (its in-place steps already ~0.2 s each, a sprinter's cadence).
+    Starting from standing facing the heading, and a plain stop, keep their recorded pace."""
+    took = paces(lib, [(0.5, 1.4, 20.0), (T_REVERSE, 1.4, 200.0)], 8.0, T_REVERSE)
+    assert took["walk_end"] == pytest.approx(1.133 / WALK_MAX_RATE, abs=0.01)
+    assert took["turn_r180"] == pytest.approx(3.417 / REVERSAL_TURN_SPEEDUP, abs=0.01)
+    assert took["walk_start"] == pytest.approx(1.017 / WALK_MAX_RATE, abs=0.01)
+    plain = paces(lib, [(0.5, 1.4, 20.0), (T_REVERSE, 0.0, 20.0)], 7.0, 0.0)
+    assert (plain["walk_start"], plain["walk_end"]) == pytest.approx((1.017, 1.133), abs=0.01)
 
 
 @pytest.mark.parametrize("turn", [120.0, -120.0, 130.0, -130.0, 135.0, -135.0, 140.0, -140.0, 150.0, -160.0])

@@ -6,19 +6,22 @@ asking. Both sides run a :class:`~server.app.TtesServer` over the same data: the
 the same soldiers everywhere (a shard then drops the ones that are not its own), and the update tables are
 the same, so a client of the front-end gets the handshake, tables and FIGURE of a single server.
 
-* a shard publishes, after each publish of its pose board, every soldier it holds as one batch
-  (:mod:`server.fabric.batch`; full state each tick, so a lost best-effort batch costs one tick, never a
-  pose), and takes the requests for its soldiers from ``requests/K`` on the trio loop;
-* a front-end keeps, per shard, only the newest batch that arrived (latest-wins); each of its ticks merges
-  them into its board (``PoseBoard.publish_codes``), and its sessions encode from there as always. Its own
-  manager keeps the books (who lives, tables, owners, the requests' checks) and is never ticked; what its
-  clients ask goes to the owning shard (``ServerWorld.relay``).
+* a shard publishes, after each publish of its pose board, the soldiers whose codes changed since its
+  previous batch as one batch (:mod:`server.fabric.batch`), and every soldier it holds in a *key* batch
+  every ``key_every`` ticks and when a front-end asks (a sync, or a ``key`` request after a lost batch):
+  the merge and the wire cost what moves, and a lost batch costs at most until the next key; it takes
+  the requests for its soldiers from ``requests/K`` on the trio loop;
+* a front-end queues each shard's batches as they arrive and merges them in order (from the newest key
+  batch among them) into its board (``PoseBoard.publish_codes``, one scatter), and its sessions encode
+  from there as always. Its own manager keeps the books (who lives, tables, owners, the requests' checks)
+  and never animates; what its clients ask goes to the owning shard (``ServerWorld.relay``).
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import threading
 import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -37,6 +40,8 @@ if TYPE_CHECKING:
     from server.app import TtesServer
 
 log = get_logger("fabric")
+KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
+PENDING_MAX = 64  # a front-end's queue of one shard's batches; beyond, the oldest go (and it asks for a key)
 
 
 @dataclass(frozen=True)
@@ -66,10 +71,16 @@ class Sharding:
 class ShardNode:
     """A shard's link: its batches out on ``poses/K``, its requests in from ``requests/K``."""
 
-    def __init__(self, server: TtesServer, fabric: Fabric, sharding: Sharding) -> None:
+    def __init__(
+        self, server: TtesServer, fabric: Fabric, sharding: Sharding, *, key_every: int = KEY_EVERY
+    ) -> None:
         self.server, self.fabric, self.sharding = server, fabric, sharding
         self._put = fabric.publisher(poses_topic(sharding.k), Kind.POSES)
         self.seq = 0
+        self.key_every = key_every
+        self.key_due = True  # the first batch is a key
+        self._since_key = 0  # tick batches since the last key
+        self._sent_serial = 0  # the board publish the last batch covered
         self.taken = 0  # fabric requests handled
         server.on_publish = self.publish
         server.status_note = lambda: f"shard {sharding.k}/{sharding.n}, {self.seq} batches"
@@ -96,32 +107,32 @@ class ShardNode:
         async def take() -> None:
             async for data in receive:
                 for op in self._decoded(data):
-                    self.handle(op)
+                    with self.server.cpu("requests"):
+                        self.handle(op)
                     await trio.lowlevel.checkpoint()
 
         self.server.spawn(take)
 
     def publish(self, board: PoseBoard) -> None:
-        """A tick's publish sends every soldier (a lost batch costs one tick); an answer between ticks sends
-        only the soldiers it changed (requests come often: full batches would multiply the traffic)."""
-        if board.tick == board.ticks:
+        """After each publish of the board: the soldiers whose codes changed since the previous batch (a
+        tick's batch goes even when none did: it says the shard lives), or at a tick due for a key, every
+        soldier. An answer between ticks sends only what it changed, and nothing if that is nothing."""
+        tick = board.tick == board.ticks
+        key = tick and (self.key_due or self._since_key + 1 >= self.key_every)
+        if key:
             rows = np.flatnonzero(board.valid)
+            self.key_due, self._since_key = False, 0
         else:
-            rows = np.flatnonzero(board.valid & (board.version == board.serial))
-            if not len(rows):
-                return
+            rows = np.flatnonzero(board.valid & (board.version > self._sent_serial))
+            self._since_key += tick
+        self._sent_serial = board.serial
+        if not tick and not len(rows):
+            return
+        k, n = self.sharding.k, self.sharding.n
+        codes = board.codes[rows]
         self._put(
             encode_batch(
-                Batch(
-                    self.sharding.k,
-                    self.sharding.n,
-                    self.seq,
-                    board.tick,
-                    time.monotonic(),
-                    rows,
-                    board.table_of[rows],
-                    board.codes[rows],
-                )
+                Batch(k, n, self.seq, board.tick, time.monotonic(), rows, board.table_of[rows], codes, key)
             )
         )
         self.seq += 1
@@ -164,6 +175,9 @@ class ShardNode:
             world.react(int(msg["index"]), str(msg["kind"]))  # type: ignore[call-overload]
         elif op == "sync":
             self._sync(msg)
+            self.key_due = True  # the front-end that sent it may lack soldiers no batch carried since
+        elif op == "key":
+            self.key_due = True
 
     def _sync(self, msg: dict[str, object]) -> None:
         """Animate every soldier of the sync that is not here yet, from its last request; with ``replay``
@@ -202,7 +216,9 @@ class FrontNode:
         self._out: list[list[req.Op]] = [[] for _ in range(shards)]  # per shard, sent at the loop's next turn
         self._token: trio.lowlevel.TrioToken | None = None
         self._flush_due = False
-        self._latest: dict[int, bytes] = {}  # shard -> its newest batch (written on the fabric's thread)
+        self._pending: dict[int, list[bytes]] = {}  # shard -> its batches not merged yet, in arrival order
+        self._pending_lock = threading.Lock()  # appended on the fabric's thread, taken on the loop
+        self.key_asked = [False] * shards  # a key batch asked for after a lost batch, not come yet
         self.route = list(range(shards))
         self.heard_at = [-math.inf] * shards  # server time of each shard's last batch
         self.last_seq = [-1] * shards
@@ -210,8 +226,9 @@ class FrontNode:
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request, for a sync
         self.has_last = np.zeros(n, bool)
         self.batches = 0  # merged
-        self.skipped = 0  # superseded before a tick merged them, or lost on the fabric
+        self.skipped = 0  # lost on the fabric (or dropped from a full queue)
         self.failovers = 0
+        self.keys = 0  # key batches heard
         server.feed = self.feed
         server.world.relay = self
         server.status_note = self.describe
@@ -240,9 +257,13 @@ class FrontNode:
             self._fail_over(self.server.now())
 
     def _arrived(self, token: trio.lowlevel.TrioToken, k: int, data: bytes) -> None:
-        """On the fabric's thread: keep the newest batch; the first one waiting asks the loop to publish."""
-        waiting = k in self._latest
-        self._latest[k] = data
+        """On the fabric's thread: queue the batch; the first one waiting asks the loop to publish."""
+        with self._pending_lock:
+            queue = self._pending.setdefault(k, [])
+            waiting = bool(queue)
+            queue.append(data)
+            if len(queue) > PENDING_MAX:  # the loop is far behind: the seq gap asks for a key
+                del queue[0]
         if not waiting:
             token.run_sync_soon(self.server.publish_fed)
 
@@ -250,7 +271,9 @@ class FrontNode:
         """Merge the newest batch of every shard that sent one into the board, labelled ``tick`` (as soon as
         one arrives, and on each tick of the front-end's own loop), and fail silent shards over."""
         now = self.server.now()
-        batches = [decode_batch(self._latest.pop(k)) for k in range(self.shards) if k in self._latest]
+        with self._pending_lock:
+            pending, self._pending = self._pending, {}
+        batches = [decode_batch(data) for k in sorted(pending) for data in pending[k]]
         for b in batches:
             self._heard(b, now)
         self._fail_over(now)
@@ -258,18 +281,19 @@ class FrontNode:
         if not batches or m is None:
             return 0
         self.batches += len(batches)
-        rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
-        tables = np.concatenate([b.tables for b in batches])
-        codes = np.concatenate([b.codes for b in batches]).astype(np.int32)
-        alive = m.table.alive
-        live = (rows < len(alive)) & alive[np.minimum(rows, len(alive) - 1)]  # not removed here meanwhile
-        return board.publish_codes(rows[live], tables[live], codes[live], tick)
+        return merge(board, batches, tick, m.table.alive)
 
     def _heard(self, b: Batch, now: float) -> None:
         k = b.shard
         back = self.heard_at[k] == -math.inf or b.seq < self.last_seq[k] or self.route[k] != k
-        if not back:
-            self.skipped += max(0, b.seq - self.last_seq[k] - 1)
+        lost = 0 if back else max(0, b.seq - self.last_seq[k] - 1)
+        self.skipped += lost
+        if b.key:
+            self.keys += 1
+            self.key_asked[k] = False
+        elif lost and not self.key_asked[k]:  # its rows that changed in the lost batch are stale until a key
+            self.key_asked[k] = True
+            self._send(self.route[k], req.key())
         self.last_seq[k], self.heard_at[k] = b.seq, now
         if back:
             stood_in = self.route[k]
@@ -348,3 +372,26 @@ class FrontNode:
 
     def react(self, index: int, kind: str) -> None:
         self._send(self._shard_of(index), req.react(index, kind))
+
+
+def merge(board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray) -> int:
+    """Merge shards' batches (each shard's in the order sent) into ``board`` as one publish labelled
+    ``tick``: per shard from its newest key batch on (a key holds every soldier it animates), the newest
+    codes of each soldier, of the soldiers still ``alive`` here (not removed meanwhile). Returns the
+    soldiers whose codes changed (``PoseBoard.publish_codes``)."""
+    used: list[Batch] = []
+    for k in dict.fromkeys(b.shard for b in batches):
+        own = [b for b in batches if b.shard == k]
+        keys = [i for i, b in enumerate(own) if b.key]
+        used += own[keys[-1] :] if keys else own
+    rows = np.concatenate([b.indices for b in used]).astype(np.int64)
+    tables = np.concatenate([b.tables for b in used])
+    codes = np.concatenate([b.codes for b in used])
+    if len(used) > len({b.shard for b in used}):  # a shard's later batch wins for the rows both carry
+        _, first = np.unique(rows[::-1], return_index=True)
+        newest = len(rows) - 1 - first
+        rows, tables, codes = rows[newest], tables[newest], codes[newest]
+    live = (rows < len(alive)) & alive[np.minimum(rows, len(alive) - 1)]
+    if not live.all():
+        rows, tables, codes = rows[live], tables[live], codes[live]
+    return board.publish_codes(rows, tables, codes.astype(np.int32), tick)

@@ -7,7 +7,9 @@ figure, weapon, owner: the front-end allocates indices, so the one client-visibl
 already by the front-end), ``react`` (index, kind) and ``sync``: every soldier the shard is to animate
 (index, figure, weapon, owner) with the last request of each that had one: what a shard that joined late,
 restarted or takes over another's soldiers (failover) needs to animate them (``replay``: the shard's own
-soldiers come home from a stand-in, replay every last request). The topic is reliable:
+soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
+soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for
+one too. The topic is reliable:
 ownership and requests are never lost once a shard listens, and a sync covers the time before.
 """
 
@@ -20,7 +22,7 @@ import numpy as np
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
 
-OPS = ("create", "remove", "requests", "react", "sync")
+OPS = ("create", "remove", "requests", "react", "sync", "key")
 Op = dict[str, Any]
 
 
@@ -45,6 +47,10 @@ def sync(soldiers: list[tuple[int, str, str, str | None]], last: np.ndarray, *, 
     ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in)."""
     rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
     return {"op": "sync", "soldiers": [list(s) for s in soldiers], "rows": rows, "replay": replay}
+
+
+def key() -> Op:
+    return {"op": "key"}
 
 
 def pack(ops: list[Op]) -> bytes:

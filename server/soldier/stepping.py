@@ -22,12 +22,24 @@ from server.soldier.core import (
     ManagerCore,
 )
 from server.soldier.locomotion import (
+    HURRY_STATES,
     IS_BACKWARD,
     IS_RUN,
     IS_WALK,
     SCALED,
     is_fast,
 )
+from server.soldier.state import LocoState
+
+# per Figure-5 state the rate a hurried start or end step plays at (locomotion.HURRY_STATES; 1 elsewhere):
+# the gait's upper cadence, the walk's 1.02 s start step in 0.57 s
+HURRY_RATE = np.array(
+    [
+        (WALK_MAX_RATE if s.name.startswith("WALK") else MAX_RATE) if s in HURRY_STATES else 1.0
+        for s in LocoState
+    ]
+)
+HURRY_BEHIND_CM = 30.0  # a start step whose figure is this far behind its stop lag hurries (after a pivot)
 
 
 class Stepping(ManagerCore):
@@ -45,7 +57,8 @@ class Stepping(ManagerCore):
         CATCH_UP_FASTER of its speed faster than the entity, within human cadence (MIN_RATE..MAX_RATE).
         When the entity's speed alone is beyond that cadence the stride length takes the rest (the feet slide
         by the difference), except in a gait the speed is about to leave (a walk step before walk→run): there
-        the root offset takes it. Start and end steps and gait changes play at their recorded rate."""
+        the root offset takes it. Start and end steps and gait changes play at their recorded rate, except a
+        hurried start or end (HURRY_RATE: a reversal's end step, a start or end far behind the entity)."""
         tb, lib = self.table, self.library
         st = np.asarray(states, np.int64)
         speed = tb.speed[idx]
@@ -66,6 +79,8 @@ class Stepping(ManagerCore):
         seconds = np.where(error < 0.0, CATCH_UP_BEHIND_SECONDS, CATCH_UP_SECONDS)  # behind: closes sooner
         want = speed + np.clip(-error / 100.0 / seconds, -0.5 * speed, CATCH_UP_FASTER * speed)
         rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, top), 1.0)
+        hurry = tb.reversing[idx] | (error < -HURRY_BEHIND_CM)  # stopping to turn back, or metres behind
+        rate = np.where(hurry & (HURRY_RATE[st] > 1.0), HURRY_RATE[st], rate)
         return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
 
     def _along(self, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
@@ -119,8 +134,9 @@ class Stepping(ManagerCore):
         if _SCALED[state]:  # a side-step: the vectorised pacing
             durs, strides = self._step_duration(np.array([i], np.int64), np.array([clip]), np.array([state]))
             dur, tb.stride[i] = float(durs[0]), strides[0]
-        else:  # a start step: its recorded pace
-            dur, tb.stride[i] = max(float(lib.clip_duration[clip]), MIN_CLIP_SECONDS), 1.0
+        else:  # a start step: its recorded pace, hurried when its figure is behind (after a pivot)
+            dur = float(lib.clip_duration[clip]) / self._start_rate(i, state)
+            dur, tb.stride[i] = max(dur, MIN_CLIP_SECONDS), 1.0
         tb.loco[i] = state
         tb.foot[i] = foot
         tb.clip[i] = clip
@@ -130,3 +146,14 @@ class Stepping(ManagerCore):
         tb.end[i] = t + dur
         root_motion.rebase1(tb, lib, i)
         self._record(i, t)
+
+    def _start_rate(self, i: int, state: int) -> float:
+        """The rate start step ``state`` of soldier ``i`` plays at (root offset folded to now): its recorded
+        one, or HURRY_RATE when the figure is more than HURRY_BEHIND_CM behind its stop lag (a pivot or a
+        posture change left it behind its moving entity)."""
+        rate = float(HURRY_RATE[state])
+        if rate == 1.0:
+            return 1.0
+        (ox, oz), (vx, vz) = self.table.root_off[i].tolist(), self.table.vlocal[i].tolist()
+        along = (ox * vx + oz * vz) / max(float(np.hypot(vx, vz)), 1e-9)
+        return rate if along + float(self._stop_lag[state]) < -HURRY_BEHIND_CM else 1.0

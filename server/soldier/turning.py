@@ -2,11 +2,13 @@
 
 A walking or running soldier whose entity reverses (its heading turns by REVERSAL_DEG or more at once, as a
 DIS entity's does when it walks back the way it came) does what a person does: he stops (the step he is in
-ends, then the end step, the figure still facing the old way: no turning over the steps), pivots on the
-spot (the turn in place that fits, played REVERSAL_TURN_SPEEDUP times faster: a pivot, not a slow
-about-face) and walks away. His feet stay planted in the world throughout; the figure trails the entity by
-what it did not travel meanwhile and catches up with faster cadence (``stepping``), as after any start,
-jogging while it is more than CATCH_UP_RUN_CM behind (a 180° reversal leaves it 4.6 m behind).
+ends, then the end step at his upper cadence, the figure still facing the old way: no turning over the
+steps), pivots on the spot (the turn in place that fits, played REVERSAL_TURN_SPEEDUP times faster: a
+pivot, not a slow about-face; its in-place steps then take ~0.2 s, a sprinter's cadence) and walks away
+(the start step hurried too: ``stepping.HURRY_RATE``). His feet stay planted in the world throughout; the
+figure trails the entity by what it did not travel meanwhile and catches up with faster cadence
+(``stepping``), as after any start, jogging while it is more than CATCH_UP_RUN_CM behind (a 180° reversal
+leaves it 3.3 m behind; 4.6 m with the end and start steps at their recorded pace).
 
 A standing soldier asked to walk off MIN_TURN_DEG or more from where his figure faces pivots the same way
 first, then starts (turning the body over the start step twisted the planted foot 20 cm). A velocity
