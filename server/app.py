@@ -11,9 +11,11 @@ Structure (one trio nursery):
 * soldiers with new requests get an out-of-cycle update as soon as their reader has handled them
   (:meth:`TtesServer.answer_requests`, ``SoldierManager.answer``), so the update that reflects a request does
   not wait for the next tick (issue 16: one-tick latency). The tick and the writers **let the readers in**
-  first (:meth:`TtesServer.let_readers_in`): a request that arrived during the tick's work is applied and
-  answered before the writers encode that tick (its answer goes out with the tick's frames), and one that
-  arrived just before a tick is answered before the tick samples;
+  first (:meth:`TtesServer.let_readers_in`): a request that arrived just before a tick is answered before
+  the tick samples; one that arrived while it sampled is taken up by that tick before it publishes
+  (:meth:`TtesServer.run_tick`: those soldiers sampled again, in the tick's frames); one that arrived during
+  the publish or the writers' encodes is answered before the next writer encodes (its answer goes out with
+  the tick's frames);
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
 * **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
   :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
@@ -536,20 +538,31 @@ class TtesServer:
         self._published(board, changed)
         if self._request_count() != self._requests_at_tick:
             self._requests_seen = self._request_count()
-            with self.cpu("animate"):
-                again = m.answer(update.now, update.now)  # at the tick's time: its due rule
-            if len(again):
-                if self.on_tick is not None:
-                    self.on_tick(again)
-                with self.cpu("quantise"):
-                    changed = board.publish(again, self.world, again=True)
-                self._published(board, changed)
-                # a start whose first frames are still (a walk off a rest) shows nothing yet at the tick's
-                # time: those soldiers get the answer after the tick, at the next tick's time, as before
-                still = again.indices[board.version[again.indices] != board.serial]
-                m.table.requested[still] = True
-                self._answer_after_tick = len(still) > 0
+            if self.on_publish is None:
+                self._take_up(update.now)
+            else:  # a shard's batches count a tick's publishes: its answer after the tick, as before
+                self._answer_after_tick = True
         self.last_tick_seconds = time.perf_counter() - t0
+
+    def _take_up(self, now: float) -> None:
+        """The soldiers whose requests were applied while the tick sampled: sampled again at the tick's time
+        ``now`` (their clock: the request's, if later) and published as more of that tick."""
+        m, board = self.world.manager, self._board()
+        assert m is not None and board is not None
+        with self.cpu("animate"):
+            again = m.answer(now, now)  # at the tick's time: its due rule
+        if not len(again):
+            return
+        if self.on_tick is not None:
+            self.on_tick(again)
+        with self.cpu("quantise"):
+            changed = board.publish(again, self.world, again=True)
+        self._published(board, changed)
+        # a start whose first frames are still (a walk off a rest) shows nothing yet at the tick's time:
+        # those soldiers get the answer after the tick, at the next tick's time, as before
+        still = again.indices[board.version[again.indices] != board.serial]
+        m.table.requested[still] = True
+        self._answer_after_tick = len(still) > 0
 
     def _request_count(self) -> int:
         m = self.world.manager
