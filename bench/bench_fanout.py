@@ -20,7 +20,8 @@ each reading every tick) in this process, simulated time; reports CPU millisecon
 of the sessions' joint-update encoding, and bytes per soldier-update (every soldier-update after the warm-up
 is of a soldier that moved). ``--protocol 1`` makes the observers speak version 1 (the joint-update format
 before per-entry widths and predicted deltas, docs/PROTOCOL.md §8.5); ``--data shipped`` runs the shipped
-library (channelsets/, posture_graphs/) instead of the synthetic one, for the bytes that real clips give.
+library (channelsets/, posture_graphs/) instead of the synthetic one, for the bytes that real clips give;
+``--mix moving`` the TCP measurement's soldiers (every one walking, running or crawling).
 """
 
 from __future__ import annotations
@@ -62,10 +63,10 @@ def main() -> int:
 
     if args.in_process:
         shipped = args.data == "shipped"
-        runs = [in_process(args.soldiers, int(c), args.ticks, args.protocol, shipped, args.late)
+        runs = [in_process(args.soldiers, int(c), args.ticks, args.protocol, shipped, args.late, args.mix)
                 for c in args.clients.split(",")]  # fmt: skip
         out = {"soldiers": args.soldiers, "shared_encodes": not args.per_client, "cpus": os.cpu_count(),
-               "protocol": args.protocol, "data": args.data, "late": args.late,
+               "protocol": args.protocol, "data": args.data, "late": args.late, "mix": args.mix,
                "loadavg": [round(x, 2) for x in os.getloadavg()], "runs": runs}  # fmt: skip
         print(json.dumps(out) if args.json else "\n".join(map(str, [out.pop("runs"), out])))
         return 0
@@ -137,12 +138,14 @@ def counted(args: argparse.Namespace) -> int:
 
 
 def in_process(
-    soldiers: int, clients: int, ticks: int, protocol: int = 2, shipped: bool = False, late: float = 0.0
-) -> dict[str, object]:
+    soldiers: int, clients: int, ticks: int, protocol: int = 2, shipped: bool = False, late: float = 0.0,
+    mix: str = "realistic",
+) -> dict[str, object]:  # fmt: skip
     """CPU per tick of the server's tick and of ``clients`` observers' joint-update encoding (no sockets).
 
     ``late``: the chance that a session's writer misses a publish (as a writer does on a busy server or
-    behind a slow socket); its next write then owes two or more publishes."""
+    behind a slow socket); its next write then owes two or more publishes. ``mix="moving"``: every soldier
+    walks, runs or crawls (the requests of the TCP measurement) instead of the bench's realistic mix."""
     import tempfile
 
     import numpy as np
@@ -171,7 +174,13 @@ def in_process(
     assert m is not None
     for _ in range(soldiers - int(m.table.alive.sum())):
         server.world.create_soldier("DI.fig", "AK_47.fig")
-    m.apply_requests(mix_requests(soldiers, np.random.default_rng(1)), server.request_time())
+    if mix == "moving":
+        from client_stub.loadtest.mix import MixDriver
+
+        requests = MixDriver(soldiers, mix="moving", seed=1).initial()
+    else:
+        requests = mix_requests(soldiers, np.random.default_rng(1))
+    m.apply_requests(requests, server.request_time())
     pairs = []
     for k in range(clients):
         s = Session(server.world, server.board_ref, server.config, f"c{k}")

@@ -10,6 +10,7 @@ then OR-ed into place (window ``k``'s low half and window ``k + 1``'s high half 
 
 from __future__ import annotations
 
+import math
 import threading
 
 import numpy as np
@@ -69,6 +70,8 @@ def read_fields(words: np.ndarray, starts: np.ndarray, widths: np.ndarray) -> np
 # instead of C. A group starting at stream bit s lies in the 64-bit words s >> 6 and (s >> 6) + 1; groups are
 # in stream order, so those starting in the same word are contiguous and one ``bitwise_or.reduceat`` per half
 # assembles the words. numpy defines shifts by 64 or more as 0, which absent (width-0) groups rely on.
+# Version 2's encoder works field-major ((C, n): each field a row over the soldiers) and merges with
+# :func:`merge_columns`, whose passes run along the soldiers; the groups are the same.
 
 
 class Scratch:
@@ -86,7 +89,7 @@ class Scratch:
 
     def get(self, name: str, shape: tuple[int, ...], dtype: type | np.dtype) -> np.ndarray:
         dt = np.dtype(dtype)
-        nbytes = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
+        nbytes = math.prod(shape) * dt.itemsize
         buf = self._bufs.get(name)
         if buf is None or buf.nbytes < nbytes:
             buf = np.empty(max(nbytes, 64), np.uint8)
@@ -137,6 +140,49 @@ def merge_groups(values: np.ndarray, widths: np.ndarray, g: int) -> tuple[np.nda
         np.bitwise_or(group, wj, out=group)
         np.add(used, w[:, :, j], out=used, dtype=_U64)
     return group, used.view(np.int64)
+
+
+def merge_columns(values: np.ndarray, widths: np.ndarray, g: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`merge_groups` of field-major input: ``values`` (C, n) int32 and ``widths`` (C, n) uint8, one
+    row per field (C a multiple of ``g``); the same groups and widths, (n, C/g), row-major. Every pass runs
+    along the n soldiers (long, contiguous loops) instead of across a soldier's few fields. Fields of at
+    most 16 bits with ``g = 4`` (the usual tables) merge as a tree in uint32: fields into 32-bit pairs,
+    pairs into 64-bit quads. The results are :func:`scratch` buffers (``cols.*``), valid until the next
+    call."""
+    c, n = values.shape
+    sc = scratch()
+    u = values.view(np.uint32) if values.dtype == np.int32 else values.astype(np.uint32)
+    out, out_w = sc.get("cols.out", (n, c // g), _U64), sc.get("cols.out_w", (n, c // g), np.int64)
+    if g == 4 and c and int(widths.max(initial=0)) <= 16:
+        w = sc.get("cols.w", (c, n), np.uint32)
+        np.copyto(w, widths)
+        top = sc.get("cols.top", (c, n), np.uint32)
+        np.subtract(np.uint32(32), w, out=top)
+        np.left_shift(u, top, out=top)  # top-aligned in 32 bits; width 0 shifts by 32: 0
+        pair, pw = sc.get("cols.pair", (c // 2, n), np.uint32), sc.get("cols.pw", (c // 2, n), np.uint32)
+        np.right_shift(top[1::2], w[0::2], out=pair)
+        pair |= top[0::2]
+        np.add(w[0::2], w[1::2], out=pw)
+        group, low = sc.get("cols.group", (c // 4, n), _U64), sc.get("cols.low", (c // 4, n), _U64)
+        np.copyto(group, pair[0::2])
+        group <<= _U64(32)
+        np.subtract(np.uint32(32), pw[0::2], out=pair[0::2])  # the high pair's room, as a shift
+        np.copyto(low, pair[1::2])
+        low <<= pair[0::2].astype(_U64)
+        group |= low
+        np.add(pw[0::2], pw[1::2], out=pw[0::2])
+        np.copyto(out_w, pw[0::2].T)
+    else:
+        group = np.zeros((c // g, n), _U64)
+        gw = np.zeros((c // g, n), np.int64)
+        for j in range(g):
+            wj = widths[j::g].astype(_U64)
+            t = u[j::g].astype(_U64) << (_U64(64) - wj)
+            group |= t >> gw.view(_U64)
+            gw += wj.view(np.int64)
+        np.copyto(out_w, gw.T)
+    np.copyto(out, group.T)
+    return out, out_w
 
 
 def place_groups(groups: np.ndarray, starts: np.ndarray, nwords: int) -> np.ndarray:

@@ -22,10 +22,10 @@ shared frame splitting).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cache
 
 import numpy as np
 
+from protocol.bitpack import merge_columns, scratch
 from protocol.update_table import TableLayout
 
 MODE_BITS = 1
@@ -41,9 +41,46 @@ class Rows:
     nibbles: np.ndarray  # flat uint8 widths, row after row (the width section's nibbles)
     nibble_count: np.ndarray  # (n,) nibbles of each row
     row_bits: np.ndarray  # (n,) field bits of each row
-    values: np.ndarray  # (n, F) field values (absolute codes or signed residuals)
-    widths: np.ndarray  # (n, C) uint8 field widths (C: the plan's padded columns; 0 = absent)
-    state: np.ndarray  # (n, F + 1) the prediction state after these rows (see :func:`state_columns`)
+    groups: np.ndarray  # (n, C/g) the rows' fields merged into top-aligned groups (``protocol.bitpack``)
+    gwidth: np.ndarray  # (n, C/g) int64 their bit widths
+    restart_rows: np.ndarray  # rows with an entry sent absolute: their prediction restarts
+    restart: np.ndarray  # (len(restart_rows), F) their ``before`` codes (every other row's: its old ``cur``)
+
+
+class Columns:
+    """Per-table constants of the version-2 encoder (built once per table, see ``updates._Plan``).
+
+    ``perm`` lists the delta fields (qidx left out) position-major: the first field of every entry, then the
+    second field of the entries that have one, and so on, the entries ordered by delta-field count (most
+    first). Gathered once into that order, the per-entry maxima are a few passes over a shrinking prefix
+    (``spans``) instead of a column gather per field position."""
+
+    def __init__(self, lay: TableLayout, ncols: int, g: int) -> None:
+        nd = lay.entry_ndelta.astype(np.int64)
+        self.nent, self.nfields, self.ncols, self.g = len(nd), lay.nfields, ncols, g
+        order = np.argsort(-nd, kind="stable")
+        self.inverse = None if (order == np.arange(self.nent)).all() else np.argsort(order)
+        delta = [
+            [f for f in range(s, s + c) if not lay.is_qidx[f]]
+            for s, c in zip(lay.entry_start.tolist(), lay.entry_nfields.tolist(), strict=True)
+        ]
+        perm: list[int] = []
+        spans: list[tuple[int, int]] = []
+        for j in range(int(nd.max(initial=1))):
+            es = [e for e in order.tolist() if nd[e] > j]
+            if j:
+                spans.append((len(perm), len(es)))
+            perm += [delta[e][j] for e in es]
+        self.perm = np.asarray(perm, np.int64)
+        self.spans = tuple(spans)
+        self.absbits = lay.entry_absbits.astype(np.int32)
+        self.ndelta = nd.astype(np.int32)
+        self.absbits_f = lay.entry_absbits.astype(np.float32)
+        self.ones_f = np.ones(self.nent, np.float32)
+        self.entry_of = lay.entry_of
+        self.qidx_fields = lay.qidx_fields
+        self.qidx_entry = lay.entry_of[lay.qidx_fields]
+        self.width = lay.width.astype(np.uint8)
 
 
 def _entry_bits(mag: np.ndarray) -> np.ndarray:
@@ -51,30 +88,16 @@ def _entry_bits(mag: np.ndarray) -> np.ndarray:
     return np.frexp(mag.astype(np.float32))[1].astype(np.int32) + 1
 
 
-@cache
-def _entry_passes(
-    starts: tuple[int, ...], counts: tuple[int, ...]
-) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
-    """Per ``j`` >= 1: the entries with more than ``j`` fields and their ``j``-th field's column."""
-    st, ct = np.array(starts, np.int64), np.array(counts, np.int64)
-    out = []
-    for j in range(1, int(ct.max(initial=1))):
-        es = np.flatnonzero(ct > j)
-        out.append((es, st[es] + j))
-    return tuple(out)
-
-
-def entry_max(lay: TableLayout, values: np.ndarray) -> np.ndarray:
-    """(n, E): each entry's largest field value of ``values`` (n, F). A column pass per field position in
-    an entry (at most 7) instead of ``np.maximum.reduceat`` along rows, which runs an inner loop per
-    (soldier, entry) pair and costs about twice as much for a server's batch."""
-    out = values[:, lay.entry_start]
-    for es, cols in _entry_passes(tuple(lay.entry_start.tolist()), tuple(lay.entry_nfields.tolist())):
-        if len(es) == out.shape[1]:
-            np.maximum(out, values[:, cols], out=out)
-        else:
-            out[:, es] = np.maximum(out[:, es], values[:, cols])
-    return out
+def entry_widths(cols: Columns, resid: np.ndarray) -> np.ndarray:
+    """(E, n) int32: per entry the smallest two's-complement width holding its delta fields' residuals,
+    from field-major residuals ``resid`` (F', n)."""
+    sc = scratch()
+    shape = (len(cols.perm), resid.shape[1])
+    m = np.take(resid, cols.perm, axis=0, out=sc.get("v2.mag", shape, np.int32), mode="clip")
+    np.maximum(m, np.invert(m, out=sc.get("v2.inv", shape, np.int32)), out=m)  # bit length of max(r, -r-1)
+    for at, k in cols.spans:  # plus a sign bit holds r
+        np.maximum(m[:k], m[at : at + k], out=m[:k])
+    return _entry_bits(m[: cols.nent] if cols.inverse is None else m[cols.inverse])
 
 
 def state_columns(nfields: int) -> int:
@@ -102,11 +125,13 @@ def field_widths(
     return out
 
 
-def residuals(q: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int) -> np.ndarray:
+def residuals(
+    q: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int, out: np.ndarray | None = None
+) -> np.ndarray:
     """(n, F) int32: ``q`` minus the prediction, ``2 · cur − before`` for soldiers whose last update was at
     ``tick − 1`` (mod 2³²), else ``cur``."""
     nf = q.shape[1]
-    resid = q - cur
+    resid = np.subtract(q, cur, out=out)
     rows = np.flatnonzero(state[:, nf] == tick_code(tick - 1))
     if len(rows) == len(q):
         resid -= cur
@@ -116,9 +141,50 @@ def residuals(q: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int) -> n
     return resid
 
 
+@dataclass(frozen=True)
+class _Choice:
+    """Per entry and row (field-major, (E, n)): which go absolute, the widths sent, the rows' bit costs."""
+
+    ent_abs: np.ndarray  # (E, n) bool: entries sent absolute (every entry of an absolute row)
+    row_abs: np.ndarray  # (n,) bool: mode 0
+    w: np.ndarray  # (E, n) uint8: each present delta entry's width, else 0
+    cost_abs: np.ndarray  # (n,) float32: the row's field bits in mode 0
+    cost_delta: np.ndarray  # (n,) float32: its field and width bits in mode 1
+    npresent: np.ndarray  # (n,) float32: its present entries
+
+
+def _choose(
+    cols: Columns, ke: np.ndarray, q: np.ndarray, cur: np.ndarray, known: np.ndarray, present: np.ndarray
+) -> _Choice:
+    """An entry whose residuals need more than 15 bits, whose qidx changed, or whose residuals cost at least
+    its absolute bits goes absolute (width 0); a row whose entries cost no less in delta mode, or that the
+    receiver does not know, goes absolute whole. ``ke``, ``present``: (E, n); row sums are float32 matrix
+    products (small integers: exact)."""
+    cost = ke * cols.ndelta[:, None]
+    ent_abs = (ke > MAX_WIDTH) | (cost >= cols.absbits[:, None])
+    ent_abs[cols.qidx_entry] |= (q[:, cols.qidx_fields] != cur[:, cols.qidx_fields]).T
+    some = bool(ent_abs.any())
+    if some:
+        cost = np.where(ent_abs, cols.absbits[:, None], cost)
+    pres = present.astype(np.float32)
+    costf = cost.astype(np.float32)
+    costf += WIDTH_BITS
+    costf *= pres
+    cost_delta = cols.ones_f @ costf
+    cost_abs = cols.absbits_f @ pres
+    row_abs = cost_abs <= cost_delta
+    row_abs |= ~known
+    if row_abs.any():
+        ent_abs |= row_abs
+        some = True
+    w = np.multiply(ke, present, dtype=np.uint8, casting="unsafe")
+    if some:
+        w[ent_abs] = 0
+    return _Choice(ent_abs, row_abs, w, cost_abs, cost_delta, cols.ones_f @ pres)
+
+
 def encode_rows(
-    lay: TableLayout,
-    ncols: int,
+    cols: Columns,
     q: np.ndarray,
     cur: np.ndarray,
     state: np.ndarray,
@@ -128,48 +194,44 @@ def encode_rows(
 ) -> Rows:
     """Version-2 rows of soldiers with at least one present entry (``present`` (n, E): changed entries).
 
-    Per entry the smallest width holding every residual; an entry whose residuals need more than 15 bits,
-    whose qidx changed, or whose residuals cost at least its absolute bits goes absolute (width 0); a row
-    whose entries cost no less in delta mode, or that the receiver does not know, goes absolute whole.
+    Per entry the smallest width holding every residual, or absolute (:func:`_choose`). The work is
+    field-major (one transposed copy of the residuals): every pass runs along the soldiers. The dense passes
+    treat every entry as a delta entry; the few rows with an absolute entry (new soldiers, qidx flips,
+    jumps) are fixed up on their own.
     """
-    resid = residuals(q, cur, state, tick)
-    mag = np.maximum(resid, ~resid)  # the bit length of max(r, -r - 1), plus a sign bit, holds r
-    mag[:, lay.qidx_fields] = 0
-    ke = _entry_bits(entry_max(lay, mag))  # (n, E): one width per entry
-    qflip = np.zeros(present.shape, bool)
-    qflip[:, lay.entry_of[lay.qidx_fields]] = q[:, lay.qidx_fields] != cur[:, lay.qidx_fields]
-    absbits = lay.entry_absbits.astype(np.int32)
-    delta_bits = ke * lay.entry_ndelta.astype(np.int32)
-    ent_abs = qflip | (ke > MAX_WIDTH) | (delta_bits >= absbits)
-    cost = np.where(ent_abs, absbits, delta_bits)
-    cost += WIDTH_BITS
-    cost *= present
-    cost_delta = cost.sum(axis=1)
-    cost_abs = (present * absbits).sum(axis=1)
-    row_abs = ~known | (cost_abs <= cost_delta)
-    ent_abs |= row_abs[:, None]
-    w = np.where(ent_abs, 0, ke)
-    nibble_count = np.where(row_abs, 0, present.sum(axis=1))
-    header = np.empty((len(q), MODE_BITS + present.shape[1]), np.uint8)
-    header[:, 0] = ~row_abs
+    n, nf = q.shape
+    sc = scratch()  # big work arrays reused from tick to tick: no page faults for fresh megabytes
+    values = sc.get("v2.values", (cols.ncols, n), np.int32)  # field-major; padding fields have width 0
+    values[nf:] = 0
+    np.copyto(values[:nf], residuals(q, cur, state, tick, sc.get("v2.resid", (n, nf), np.int32)).T)
+    pres = np.ascontiguousarray(present.T)
+    c = _choose(cols, entry_widths(cols, values), q, cur, known, pres)
+    widths = sc.get("v2.widths", (cols.ncols, n), np.uint8)
+    widths[nf:] = 0
+    np.take(c.w, cols.entry_of, axis=0, out=widths[:nf], mode="clip")
+    widths[cols.qidx_fields] = 0
+    header = np.empty((n, MODE_BITS + cols.nent), np.uint8)
+    header[:, 0] = ~c.row_abs
     header[:, MODE_BITS:] = present
-    sent_abs = ent_abs & present
-    values, after = resid, np.empty((len(q), q.shape[1] + 1), np.int32)
-    after[:, :-1] = cur
-    after[:, -1] = tick_code(tick)
-    rows = np.flatnonzero(sent_abs.any(axis=1))  # few: the absolute entries send codes, restart predictions
+    sent = present & ~c.row_abs[:, None] if c.row_abs.any() else present
+    nibble_count = np.where(c.row_abs, 0, c.npresent).astype(np.int64)
+    rows = np.flatnonzero((c.ent_abs & pres).any(axis=0))  # few: absolute entries send codes
+    restart = q[:0]
     if len(rows):
-        absf = np.take(sent_abs[rows], lay.entry_of, axis=1)
-        values[rows] = np.where(absf, q[rows], resid[rows])
-        after[rows, :-1] = np.where(absf, q[rows], cur[rows])
+        absf = c.ent_abs[:, rows][cols.entry_of] & pres[:, rows][cols.entry_of]  # (F, m)
+        values[:nf, rows] = np.where(absf, q[rows].T, values[:nf, rows])
+        widths[:nf, rows] = np.where(absf, cols.width[:, None], widths[:nf, rows])
+        restart = np.where(absf.T, q[rows], cur[rows])
+    groups, gwidth = merge_columns(values, widths, cols.g)
     return Rows(
         header=header,
-        nibbles=w[present & ~row_abs[:, None]].astype(np.uint8),
+        nibbles=np.compress(sent.reshape(-1), np.ascontiguousarray(c.w.T).reshape(-1)),
         nibble_count=nibble_count,
-        row_bits=np.where(row_abs, cost_abs, cost_delta - WIDTH_BITS * nibble_count),
-        values=values,
-        widths=field_widths(lay, ncols, present, ent_abs, w),
-        state=after,
+        row_bits=np.where(c.row_abs, c.cost_abs, c.cost_delta - WIDTH_BITS * nibble_count).astype(np.int64),
+        groups=groups,
+        gwidth=gwidth,
+        restart_rows=rows,
+        restart=restart,
     )
 
 

@@ -29,6 +29,7 @@ from protocol.bitpack import (
     merge_groups,
     place_groups,
     read_groups,
+    scratch,
     split_groups,
 )
 from protocol.errors import ErrorCode, WireError
@@ -138,6 +139,7 @@ class _Plan:
         member = np.zeros((self.nent, self.nwords * 64), bool)
         member[lay.entry_of, np.arange(nf)] = True
         self.member = np.packbits(member, axis=1).view(">u8").astype(np.uint64)  # (E, nwords)
+        self.v2 = predicted.Columns(lay, self.cols, self.g)
 
     def changed(self, diff: np.ndarray) -> np.ndarray:
         """(n, E) bool: entries with at least one changed field, from the (n, F) bool ``diff``."""
@@ -396,7 +398,8 @@ class UpdateEncoder:
         plan = self._plan
         self._tick = tick
         known = self._known[idx]
-        last = self._last[idx]
+        sc = scratch()  # gathers into reused buffers (idx is checked: clip gathers unbuffered)
+        last = np.take(self._last, idx, axis=0, out=sc.get("enc.last", q.shape, np.int32), mode="clip")
         changed = plan.changed(q != last)
         if not known.all():
             changed[~known] = True
@@ -407,9 +410,9 @@ class UpdateEncoder:
                 return []
             idx, q, last, changed, known = (a[send] for a in (idx, q, last, changed, known))
         if self.version >= 2:
-            rows = predicted.encode_rows(
-                self.table.layout, plan.cols, q, last, self._before[idx], known, changed, tick
-            )
+            before = sc.get("enc.before", (len(idx), self._before.shape[1]), np.int32)
+            np.take(self._before, idx, axis=0, out=before, mode="clip")
+            rows = self._rows_v2(q, last, before, known, changed, tick)
         else:
             rows = self._rows_v1(q, last, changed, known)
         payloads = self._chunks(idx, rows, tick, max_payload)
@@ -418,9 +421,26 @@ class UpdateEncoder:
         self._known[idx] = True
         if self.version >= 2:
             self._hbefore = self._hbefore.writable()
-            self._before[idx] = rows.state
+            self._restart(idx, last, rows, tick)
         self._sent = idx
         return payloads
+
+    def _rows_v2(
+        self, q: np.ndarray, last: np.ndarray, before: np.ndarray, known: np.ndarray, changed: np.ndarray,
+        tick: int,
+    ) -> predicted.Rows:  # fmt: skip
+        """Version 2: per-entry widths of predicted residuals (:func:`predicted.encode_rows`)."""
+        return predicted.encode_rows(self._plan.v2, q, last, before, known, changed, tick)
+
+    def _restart(self, idx: np.ndarray, last: np.ndarray, rows: predicted.Rows, tick: int) -> None:
+        """Version 2: the prediction state after sending ``rows``: ``before`` is the code each soldier held
+        until now (or, for an entry sent absolute, the code sent), at ``tick``."""
+        nf = last.shape[1]
+        before = self._before
+        before[idx, :nf] = last
+        before[idx, nf] = predicted.tick_code(tick)
+        if len(rows.restart_rows):
+            before[idx[rows.restart_rows], :nf] = rows.restart
 
     def _rows_v1(
         self, q: np.ndarray, last: np.ndarray, changed: np.ndarray, known: np.ndarray
@@ -440,19 +460,22 @@ class UpdateEncoder:
         header = np.empty((len(q), MODE_BITS + changed.shape[1]), np.uint8)
         np.bitwise_and(mode.astype(np.uint8)[:, None] >> plan.mode_shift, 1, out=header[:, :MODE_BITS])
         header[:, MODE_BITS:] = changed_i
+        values = np.where(absolute[:, None], q, delta)  # deltas keep their sign bits: the packer drops
+        widths = plan.widths(absolute, k, np.take(changed_i, plan.entry_of, axis=1))
+        groups, gwidth = merge_groups(plan.padded(values), widths, plan.g)
         return predicted.Rows(
             header=header,
             nibbles=np.zeros(0, np.uint8),
             nibble_count=np.zeros(len(q), np.int64),
             row_bits=np.where(absolute, abs_bits, delta_bits),
-            values=np.where(absolute[:, None], q, delta),  # deltas keep their sign bits: the packer drops
-            widths=plan.widths(absolute, k, np.take(changed_i, plan.entry_of, axis=1)),
-            state=last[:0],
+            groups=groups.copy(),
+            gwidth=gwidth.copy(),
+            restart_rows=np.zeros(0, np.int64),
+            restart=last[:0],
         )
 
     def _chunks(self, idx: np.ndarray, rows: predicted.Rows, tick: int, max_payload: int) -> list[bytes]:
         """Split rows into frames; pack all frames' fields in one pass (each frame's body word-aligned)."""
-        plan = self._plan
         row_bits = rows.row_bits
         per_row = 16 + rows.header.shape[1] + predicted.WIDTH_BITS * rows.nibble_count + row_bits
         slack = 3 if self.version >= 2 else 2  # bytes for the paddings of the header, widths, fields
@@ -468,15 +491,13 @@ class UpdateEncoder:
         fbits = np.concatenate([[0], np.cumsum(row_bits)])
         frame_bits = np.diff(fbits[bounds])
         frame_word = np.concatenate([[0], np.cumsum((frame_bits + 63) >> 6)])  # each body starts a word
-        row_start = fbits[:-1].copy()
-        for f in range(len(bounds) - 1):
-            a, b = bounds[f], bounds[f + 1]
-            row_start[a:b] += frame_word[f] * 64 - fbits[a]
-        groups, gwidth = merge_groups(plan.padded(rows.values), rows.widths, plan.g)
-        starts = np.cumsum(gwidth, axis=1)
+        gwidth = rows.gwidth
+        starts = np.cumsum(gwidth.reshape(-1)).reshape(gwidth.shape)  # rows are consecutive in the stream
         starts -= gwidth
-        starts += row_start[:, None]
-        body = place_groups(groups, starts, int(frame_word[-1])).astype(">u8").tobytes()
+        for f in range(1, len(bounds) - 1):  # each frame's body starts a word
+            a, b = bounds[f], bounds[f + 1]
+            starts[a:b] += frame_word[f] * 64 - fbits[a]
+        body = place_groups(rows.groups, starts, int(frame_word[-1])).astype(">u8").tobytes()
         index = idx.astype(">u2").tobytes()
         nib_at = np.concatenate([[0], np.cumsum(rows.nibble_count)])
         out: list[bytes] = []

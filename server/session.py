@@ -228,18 +228,18 @@ class Session:
         tables = board.table_of[idx]
         ticks = board.labels(idx)  # the tick's rows, then the rows answered since (the next tick's), in order
         chunks = []
-        labels = np.unique(ticks).tolist()
+        labels = _distinct(ticks)
         # catching up through the memo is for a tick's plain publish: rows labelled with the board's tick only
         late = late and labels == [board.tick]
         for tick in labels:
-            for t in np.unique(tables).tolist():
+            for t in _distinct(tables):
                 sel = (tables == t) & (ticks == tick)
                 rows = idx if sel.all() else idx[sel]
                 if not len(rows):
                     continue
                 caught = self._catch_up(t, rows, sub, since) if late else None
                 if caught is None:
-                    caught = self.conn.send_update_codes(t, rows, board.codes[rows], tick, board.serial)
+                    caught = self.conn.send_update_codes(t, rows, board.codes_of(rows), tick, board.serial)
                 chunks.append(caught)
         data = b"".join(chunks)
         if data:
@@ -681,3 +681,11 @@ class Session:
         if self.conn.state in (State.OPEN, State.HANDSHAKE):
             self.control.append(self.conn.send(Goodbye(reason)))
         self.drop(reason)
+
+
+def _distinct(values: np.ndarray) -> list[int]:
+    """The distinct values, sorted; one comparison pass when they are all equal (every soldier of one tick
+    and one table, each client, each tick), not a sort or hash of them."""
+    if len(values) and (values == values[0]).all():
+        return [int(values[0])]
+    return [int(v) for v in np.unique(values)]

@@ -196,6 +196,21 @@ def test_a_fed_publish_labels_its_rows_with_the_tick_it_names() -> None:
     assert board.labels(np.array([0, 1])).tolist() == [8, 8]
 
 
+def test_sessions_asking_for_the_same_rows_share_one_gather_of_the_codes() -> None:
+    """``codes_of``: one read-only gather per publish for equal rows (the clients of one group); other rows
+    or a new publish gather again."""
+    from server.pose_board import PoseBoard
+
+    board = PoseBoard(4, 2)
+    board.publish_codes(np.arange(3), np.ones(3), np.arange(9, dtype=np.int32).reshape(3, 3), 1)
+    first = board.codes_of(np.array([0, 2]))
+    assert board.codes_of(np.array([0, 2])) is first and not first.flags.writeable
+    assert first.tolist() == [[0, 1, 2], [6, 7, 8]]
+    assert board.codes_of(np.array([1])).tolist() == [[3, 4, 5]]
+    board.publish_codes(np.array([0]), np.ones(1), np.full((1, 3), 5, np.int32), 2)
+    assert board.codes_of(np.array([0, 2])).tolist() == [[5, 5, 5], [6, 7, 8]]
+
+
 def assert_decode_the_board(server: TtesServer, *pairs: Pair) -> None:
     """Each client's decoder holds exactly the board's codes for soldiers 0-9."""
     board = server.board_ref.board
