@@ -9,22 +9,22 @@ kinematic settle (:data:`SETTLE_SECONDS`, eased, deterministic) is appended, the
 lowest, into neither the ground, the arms nor the rifle and sliding no node on the ground
 (:func:`dropped_head`): the cheek comes to rest where it can.
 
-**the legs go limp** (:func:`limp_leg`): each leg's hip, knee, ankle and toe angles that lay its heel
-lowest (the check's ``rest_foot_cm``), into no ground and sliding no leg node on the ground by more than
-:data:`LEG_SLIDE_CM` between any two of :data:`LEG_CHECKS` steps of the settle (a node's run on the ground
-began in the fall and the check judges the run's whole extent); a batched grid and pattern search
-(:data:`LEG_GRID`, :data:`LEG_STEP`: every shape of a step at once, deterministic). Powell over the same
-angles with a 2 cm allowance (tried before) slid thighs, knees and toes 5-14 cm for heels 2-4 cm lower: the
-thigh turns about the hip, it cannot roll along the ground. So the heels come down only a little
-(soldier.fig: 20.3-22.5 -> 18.9-21.5 cm): the physics leaves the ankles pointed to soldier.fig's limit
-(-50 deg) and the legs turned out 25-30 deg, and even at the limits (hips turned out 45 deg, feet everted
-30 deg) the boot props the ankle up: a face-down soldier.fig lies with his heels about 15 cm up at the
-least. The legs are not checked against each other or the rifle (they turn outward, away from each other).
+**the legs are lifted, turned out and laid down** (:mod:`authoring.dead_legs`): each leg's hip, knee,
+ankle and toe angles that lay its heel lowest (the check's ``rest_foot_cm``) within the figure's limits,
+reached through the air (the hip extended first) so that nothing on the ground skids; soldier.fig's
+limits (hip turned out 45 deg, foot everted 30 deg, ankle pointed 50 deg) leave the heels 13-15 cm up.
+A leg that no lift clears **goes limp** where it lies (:func:`limp_leg`): the angles that lay its heel
+lowest, into no ground and sliding no leg node on the ground by more than :data:`LEG_SLIDE_CM` between any
+two of :data:`LEG_CHECKS` steps of the settle (a node's run on the ground began in the fall and the check
+judges the run's whole extent); a batched grid and pattern search (:data:`LEG_GRID`, :data:`LEG_STEP`).
+Powell over the same angles with a 2 cm allowance slid thighs, knees and toes 5-14 cm for heels 2-4 cm
+lower: the thigh turns about the hip, it cannot roll along the ground; so the limp heels came down only a
+little (soldier.fig: 20.3-22.5 -> 18.9-21.5 cm).
 
 Only a body lying on its front (the pelvis' front pointing down, :data:`FACE_DOWN`) settles so. A prone
 death (``propped``) is left propped on its elbows, the head 18-19 cm up even dropped: its chest comes down
 instead (:mod:`authoring.dead_prone`: spine, neck and head, the arms laid anew and lifted clear while they
-move), its legs going limp with it.
+move), its legs turning out with it (a limp leg as the torso comes down).
 
 A body on its back (a death that asks for it, ``arms_fall``) **lets its arms fall** instead (issue 14:
 kfire2dead's forearms stood up 37 cm; an arm tone in the physics made the DI slaves' feet jump, branch
@@ -232,19 +232,25 @@ def limp_leg(body: _Body, side: str) -> np.ndarray:
     nor sliding a node on the ground (checked at :data:`LEG_CHECKS` steps of the settle): the best of
     :data:`LEG_GRID` and the leg's own pose, then a pattern search from it (:data:`LEG_STEP`)."""
     leg = _Leg(body, side)
-    lo, hi = body.kin.lower[leg.idx], body.kin.upper[leg.idx]
     grid = np.array(list(itertools.product(*LEG_GRID)), dtype=np.float64)  # None: nan
     grid = np.where(np.isnan(grid), leg.x0, np.radians(grid))
     grid[:, :2] += leg.x0[:2]
+    return pattern_search(leg, leg.cost, grid)
+
+
+def pattern_search(leg: _Leg, cost: Callable[[np.ndarray], np.ndarray], grid: np.ndarray) -> np.ndarray:
+    """The lowest-``cost`` leg shape: the best of ``grid`` and the leg's own pose (within its limits), then
+    a pattern search from it, each angle :data:`LEG_STEP` either way, halving the step."""
+    lo, hi = leg.kin.lower[leg.idx], leg.kin.upper[leg.idx]
     shapes = np.clip(np.vstack([leg.x0[None], grid]), lo, hi)
-    costs = leg.cost(shapes)
+    costs = cost(shapes)
     k = int(np.argmin(costs))
     best, best_cost = shapes[k], float(costs[k])
     around = np.vstack([np.eye(len(leg.idx)), -np.eye(len(leg.idx))])
     step = LEG_STEP
     while step >= LEG_STEP_MIN:
         shapes = np.clip(best + np.radians(step) * around, lo, hi)
-        costs = leg.cost(shapes)
+        costs = cost(shapes)
         k = int(np.argmin(costs))
         if costs[k] < best_cost - 1e-6:
             best, best_cost = shapes[k], float(costs[k])
@@ -257,9 +263,12 @@ def _leg_dofs(kin) -> np.ndarray:
     return _dofs(kin, tuple(f"{side}_{j}" for side in ("left", "right") for j in LEG_DOFS))
 
 
-def _limp_legs(body: _Body) -> np.ndarray:
-    """Both legs' angles (:func:`_leg_dofs` order) gone limp (:func:`limp_leg`)."""
-    return np.concatenate([limp_leg(body, side) for side in ("left", "right")])
+def _legs_path(body: _Body, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Both legs' angles (:func:`_leg_dofs` order) at ``t`` of the settle, turned out and laid down
+    (:mod:`authoring.dead_legs`; a leg that cannot be lifted clear goes limp at progress ``u``)."""
+    from authoring import dead_legs
+
+    return dead_legs.legs_path(body, t, u)
 
 
 def _face_up(kin, q: np.ndarray, root: np.ndarray) -> bool:
@@ -343,7 +352,7 @@ def limp_target(figs: FigureSet, frames: ClipFrames, arms_fall: bool = False) ->
     target = q.copy()
     if _face_down(body.kin, q, root):
         target[_dofs(body.kin, HEAD_DOFS)] = dropped_head(body)
-        target[_leg_dofs(body.kin)] = _limp_legs(body)
+        target[_leg_dofs(body.kin)] = _legs_path(body, np.ones(1), np.ones(1))[0]
         return target
     if not (arms_fall and _face_up(body.kin, q, root)):
         return None
@@ -385,9 +394,14 @@ def settle(
     n = round((ARM_FALL_SECONDS if up else SETTLE_SECONDS) * frames.fps)
     s = np.arange(1, n + 1) / n
     eased = fall_easing(s) if up else s * s * (3.0 - 2.0 * s)
-    u = np.concatenate([eased, np.ones(round(STILL_SECONDS * frames.fps))])
+    still = np.ones(round(STILL_SECONDS * frames.fps))
+    u = np.concatenate([eased, still])
     last = frames.poses[-1]
-    return _appended(frames, last[None] + u[:, None] * (target - last)[None])
+    poses = last[None] + u[:, None] * (target - last)[None]
+    if not up:  # face down: the legs are lifted, turned out and laid down
+        body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])
+        poses[:, _leg_dofs(body.kin)] = _legs_path(body, np.concatenate([s, still]), u)
+    return _appended(frames, poses)
 
 
 def _lowered(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
@@ -400,10 +414,10 @@ def _lowered(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
     if not _face_down(body.kin, q, root):
         return None
     n = round(SETTLE_SECONDS * frames.fps)
-    legs, i = _limp_legs(body), _leg_dofs(body.kin)
+    t = np.arange(1, n + 1) / n
+    legs = _legs_path(body, t, dead_prone.torso_progress(t))  # a limp leg goes as the torso comes down
     poses = dead_prone.lowered(body, n)
-    u = dead_prone.torso_progress(np.arange(1, n + 1) / n)  # the legs go limp as the torso comes down
-    poses[:, i] = q[i] + u[:, None] * (legs - q[i])
+    poses[:, _leg_dofs(body.kin)] = legs
     return np.concatenate([poses, np.repeat(poses[-1:], round(STILL_SECONDS * frames.fps), axis=0)])
 
 

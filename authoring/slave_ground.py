@@ -53,6 +53,7 @@ LIMB_PASSES = 4  # a part's lowest node moves along it as the limb turns: solve 
 ROOT = "lower_torso.proximal"  # a slave site without a master site of its name moves as this one does
 CONTACT_CM = 1.3  # the master's part this low is on the ground (the quality check's 1.25 cm)
 MARGIN_CM = 0.3  # a part the master holds up is kept this far above the ground at least
+AIR_SHARE = 0.5  # ... and at least this share of the master's height
 ROOT_DOFS = ("tx", "ty", "tz", "rx", "rz")  # the body may go down and roll or pitch onto what it rests on
 SETTLE_SPEED_CM_S = 5.0  # the master lies still: his root moves slower than this for the rest of the clip
 SETTLE_FRAMES = 15  # ... the trunk is lowered onto the ground over this many frames from then
@@ -93,10 +94,12 @@ def _heights(
 
 def _need(master: np.ndarray, slave: np.ndarray) -> np.ndarray:
     """How far (cm, up positive) a slave part should move: to the master's height where his part lies on
-    the ground, fading to just out of the ground (``MARGIN_CM``) where it is up in the air."""
+    the ground, fading to just out of the ground (``MARGIN_CM``) where it is up in the air, and at least
+    :data:`AIR_SHARE` of the master's height there (a dead leg lifted clear to turn, ``dead_legs``: lowered
+    onto the ground with the slave's thigh, DI's foot skidded 9.7 cm as it turned)."""
     on = _fade(master)
     rest = np.maximum(master, 0.0) - slave
-    clear = np.maximum(0.0, MARGIN_CM - slave)
+    clear = np.maximum(0.0, np.maximum(MARGIN_CM, AIR_SHARE * master) - slave)
     return on * rest + (1.0 - on) * clear
 
 

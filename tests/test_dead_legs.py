@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from authoring import dead_settle
+from authoring import dead_legs, dead_settle
 from authoring.body_parts import contact_runs
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
@@ -53,3 +53,23 @@ def test_the_legs_of_a_body_on_his_toes_go_limp(figs: FigureSet) -> None:
     assert pts[..., 1].min() >= -0.05  # nothing into the ground
     runs = contact_runs(pts, CONTACT_HEIGHT_CM)
     assert runs.slide.max(initial=0.0) <= 2.0 * dead_settle.LEG_SLIDE_CM  # the check allows 2 cm a run
+
+
+def test_a_body_on_his_toes_lays_his_legs_turned_out_heels_down(figs: FigureSet) -> None:
+    """The legs are lifted clear, turned out and laid down (authoring/dead_legs.py): heels 21 cm up ->
+    at most the check's 15 cm, within soldier.fig's limits, the feet not in the ground, nothing on the ground
+    sliding and no joint jumping between frames of a 0.8 s settle."""
+    body = _on_his_toes(figs)
+    kin = body.kin
+    t = np.arange(1, 49) / 48.0
+    settled = dead_legs.leg_settle(body, "left")  # the right one is its mirror image
+    leg = settled.leg
+    path = settled.path(t, t * t * (3.0 - 2.0 * t))
+    assert settled.lift is not None  # lifted clear, not the limp settle
+    assert (path >= kin.lower[leg.idx] - 1e-9).all() and (path <= kin.upper[leg.idx] + 1e-9).all()
+    pts, heel = leg._shape(np.vstack([leg.x0, path]), 1.0)
+    assert heel[0] > 18.0 and heel[-1] <= 15.0  # 21.3 -> 14.7 cm
+    assert pts[-1, leg.foot, 1].min() >= -0.05  # the foot lies on the ground, not in it
+    assert pts[..., 1].min() >= -0.05
+    assert contact_runs(pts, CONTACT_HEIGHT_CM).slide.max(initial=0.0) <= dead_legs.LEG_SLIDE_CM
+    assert np.degrees(np.abs(np.diff(path, axis=0))).max() <= 20.0

@@ -11,6 +11,7 @@ import pytest
 
 pytest.importorskip("scipy")
 
+from authoring import slave_ground
 from authoring.body_parts import SegmentHulls
 from authoring.build import BuildContext, lift_off_ground, slave_pair
 from authoring.postures import lowest_point
@@ -118,3 +119,13 @@ def test_a_hull_says_how_deep_a_point_is_and_which_way_is_out() -> None:
     np.testing.assert_allclose(depth, [1.0, 0.5])
     np.testing.assert_allclose(out, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], atol=1e-9)
     assert hulls.depth(pts, globals_)[:2] == (pytest.approx(1.0), 0)
+
+
+def test_a_part_the_master_holds_up_is_not_laid_on_the_ground() -> None:
+    """A dead leg lifted clear to turn (authoring/dead_legs.py): the master's foot 12 cm up while DI's thigh
+    was laid on the ground with it put DI's foot at 1 cm, and it skidded 9.7 cm as it turned."""
+    master, slave = np.array([0.0, 12.0, 12.0]), np.array([0.5, 1.0, 9.0])
+    need = slave_ground._need(master, slave)
+    assert need[0] == pytest.approx(-0.5)  # on the ground: to the master's height
+    assert slave[1] + need[1] >= slave_ground.AIR_SHARE * 12.0 - 1e-9  # up in the air: kept up with his
+    assert need[2] == 0.0  # high enough already: left alone
