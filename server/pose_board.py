@@ -14,6 +14,7 @@ import numpy as np
 
 from protocol.shared_encode import SharedEncodes
 from protocol.update_table import UpdateTable
+from protocol.updates import _cols as _span  # a run of rows as a slice
 from protocol.updates import quantise
 from server.logging import get_logger
 from server.soldier.manager import TickUpdate
@@ -154,9 +155,10 @@ class PoseBoard:
                 rows, q, dofs, positions, orientations = (
                     a[ok] for a in (rows, q, dofs, positions, orientations)
                 )
-            self.dofs[rows] = dofs
-            self.positions[rows] = positions
-            self.orientations[rows] = orientations
+            at = _span(rows)
+            self.dofs[at] = dofs
+            self.positions[at] = positions
+            self.orientations[at] = orientations
             changed += self._store(rows, q, table.table_id)
         self.rows_published += n
         self.rows_changed += changed
@@ -186,11 +188,12 @@ class PoseBoard:
 
     def _store(self, rows: np.ndarray, q: np.ndarray, table_id: int) -> int:
         """Write codes of one table; bump the version of the rows whose codes (or table) changed."""
-        new = ~self.valid[rows] | (self.table_of[rows] != table_id)
-        new |= (self.codes[rows] != q).any(axis=1)
-        self.codes[rows] = q
-        self.table_of[rows] = table_id
-        self.valid[rows] = True
+        at = _span(rows)  # a run of rows (every soldier due, the usual moving crowd): views, not gathers
+        new = ~self.valid[at] | (self.table_of[at] != table_id)
+        new |= (self.codes[at] != q).any(axis=1)
+        self.codes[at] = q
+        self.table_of[at] = table_id
+        self.valid[at] = True
         moved = rows[new] if not new.all() else rows
         self.version[moved] = self.serial
         return len(moved)
