@@ -82,14 +82,15 @@ class WireConverter:
         dofs = update.joints.astype(np.float64)
         if self._t_cols is not None:
             dofs[:, self._t_cols] /= 100.0
-        if len(dofs) and np.abs(dofs).max() > math.pi:  # wrap angles into [-pi, pi) (rarely needed)
+        # wrap angles into [-pi, pi) (rarely needed; max and min: no |dofs| array)
+        if len(dofs) and (dofs.max() > math.pi or dofs.min() < -math.pi):
             wrapped = dofs - (2 * math.pi) * np.floor((dofs + math.pi) / (2 * math.pi))
             if self._t_cols is None:
                 dofs = wrapped
             else:
                 dofs[:, self._r_cols] = wrapped[:, self._r_cols]
         # the axis change of protocol.coords written as a column shuffle: (x, y, z)_P = (x, -z, y)_J / 100
-        f = update.figures.astype(np.float64)
+        f = update.figures  # float32, widened by each column's assignment (no float64 copy of it all)
         positions = np.empty((*f.shape[:-1], 3))
         positions[..., 0] = f[..., 0]
         positions[..., 1] = -f[..., 2]
