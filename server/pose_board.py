@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from protocol.bitpack import scratch
 from protocol.shared_encode import SharedEncodes
 from protocol.update_table import UpdateTable
 from protocol.updates import _cols as _span  # a run of rows as a slice
@@ -143,7 +144,7 @@ class PoseBoard:
             if len(sel) == 0:
                 continue
             part = update if len(sel) == n else update.select(sel)
-            ju = sets[k].converter.convert(part)
+            ju = sets[k].converter.convert(part, reuse=True)  # work buffers: copied below
             table = sets[k].table
             rows = idx[sel]
             dofs, positions, orientations = ju.dofs, ju.positions, ju.orientations
@@ -202,10 +203,12 @@ class PoseBoard:
 def _quantise_rows(
     table: UpdateTable, dofs: np.ndarray, positions: np.ndarray, orientations: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(codes, ok)``: the poses quantised for ``table``; ``ok`` is False for rows that cannot be
-    (non-finite values, zero quaternion), whose codes are 0. The row check runs only when quantising fails."""
+    """``(codes, ok)``: the poses quantised for ``table`` (a work buffer, valid until the next publish);
+    ``ok`` is False for rows that cannot be (non-finite values, zero quaternion), whose codes are 0. The row
+    check runs only when quantising fails."""
+    out = scratch().get("board.codes", (len(dofs), table.layout.nfields), np.int32)  # copied by _store
     try:
-        return quantise(table, dofs, positions, orientations), np.ones(len(dofs), bool)
+        return quantise(table, dofs, positions, orientations, out), np.ones(len(dofs), bool)
     except ValueError:
         norm = np.linalg.norm(orientations, axis=-1)
         ok = np.isfinite(dofs).all(axis=1) & np.isfinite(positions).all(axis=(1, 2))
