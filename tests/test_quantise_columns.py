@@ -120,3 +120,34 @@ def test_a_real_crowd_ticks_the_reference_codes(mix: str) -> None:
     finally:
         for i in idx:
             m.remove_soldier(int(i))
+
+
+def test_work_buffers_never_reach_what_a_caller_keeps() -> None:
+    """The tick reuses its big work arrays (protocol.bitpack.scratch); what a caller keeps is its own: two
+    samples, two conversions and two quantisations share no memory, and ``out=`` gives the same codes."""
+    world = shipped_world()
+    m = world.manager
+    assert m is not None
+    idx = np.array([m.create_soldier(figure="DI.fig", weapon="AK_47.fig", now=0.0) for _ in range(4)])
+    try:
+        first, second = m.snapshot(idx), m.snapshot(idx)
+        assert len(first) == len(second) == len(idx)
+        assert not np.shares_memory(first.joints, second.joints)
+        assert not np.shares_memory(first.figures, second.figures)
+        conv = world.sets[0].converter
+        a, b = conv.convert(first), conv.convert(second)
+        for x, y in ((a.dofs, b.dofs), (a.positions, b.positions), (a.orientations, b.orientations)):
+            assert not np.shares_memory(x, y)
+        table = world.sets[0].table
+        qa = quantise(table, a.dofs, a.positions, a.orientations)
+        qb = quantise(table, b.dofs, b.positions, b.orientations)
+        assert not np.shares_memory(qa, qb)
+        out = np.empty_like(qa)
+        assert quantise(table, a.dofs, a.positions, a.orientations, out) is out
+        np.testing.assert_array_equal(out, qa)
+        reused = conv.convert(first, reuse=True)
+        np.testing.assert_array_equal(reused.dofs, a.dofs)
+        np.testing.assert_array_equal(reused.orientations, a.orientations)
+    finally:
+        for i in idx:
+            m.remove_soldier(int(i))
