@@ -11,9 +11,11 @@ Structure (one trio nursery):
 * soldiers with new requests get an out-of-cycle update as soon as their reader has handled them
   (:meth:`TtesServer.answer_requests`, ``SoldierManager.answer``), so the update that reflects a request does
   not wait for the next tick (issue 16: one-tick latency). The tick and the writers **let the readers in**
-  first (:meth:`TtesServer.let_readers_in`): a request that arrived during the tick's work is applied and
-  answered before the writers encode that tick (its answer goes out with the tick's frames), and one that
-  arrived just before a tick is answered before the tick samples;
+  first (:meth:`TtesServer.let_readers_in`): a request that arrived just before a tick is answered before
+  the tick samples; one that arrived while it sampled is taken up by that tick before it publishes
+  (:meth:`TtesServer.run_tick`: those soldiers sampled again, in the tick's frames); one that arrived during
+  the publish or the writers' encodes is answered before the next writer encodes (its answer goes out with
+  the tick's frames);
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
 * **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
   :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
@@ -47,6 +49,7 @@ from server.listen import bind_tcp
 from server.logging import get_logger
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
+from server.soldier.manager import TickUpdate
 from server.stage_cpu import StageCpu
 from server.startup import ServerWorld
 from server.tls import server_context
@@ -96,6 +99,10 @@ class TtesServer:
         self._requests_seen = 0  # the manager's request and reaction count at the last answer
         self.answers = 0  # out-of-cycle publishes
         self.next_tick = 0.0  # server time of the next scheduled tick (what an answer samples at)
+        self._ticking = False  # between a tick's sampling and its publish: requests are folded into it
+        self._requests_at_tick = 0  # the request count when the tick sampled
+        self._answer_after_tick = False  # soldiers taken up by the tick that it could not show yet
+        self.last_tick_seconds = 0.0  # the last tick's own time (sampling and publish, not the pause)
         self.stopped = trio.Event()
         self.started = False
         self._cancel: trio.CancelScope | None = None
@@ -450,8 +457,12 @@ class TtesServer:
             self.next_tick = next_t - self._t0
             await trio.sleep_until(next_t)
             await self.let_readers_in()  # answers to requests just before the tick go out before it samples
-            self.tick(next_t - self._t0)
+            await self.run_tick(next_t - self._t0)
             next_t += period
+            if self._answer_after_tick:
+                self._answer_after_tick = False
+                self.next_tick = next_t - self._t0
+                self.answer_requests()
             now = trio.current_time()
             if now - next_t > MAX_TICK_BACKLOG * period:  # fell far behind: skip, do not burst
                 skipped = math.floor((now - next_t) / period)
@@ -469,28 +480,93 @@ class TtesServer:
         await trio.lowlevel.checkpoint()
 
     def tick(self, scheduled: float | None = None) -> None:
-        """One server tick: advance + sample every soldier, publish the poses, wake the writers.
+        """One server tick at once: advance + sample every soldier, publish the poses, wake the writers."""
+        update = self.sample_tick(scheduled)
+        if update is not None:
+            self.publish_tick(update)
+
+    async def run_tick(self, scheduled: float | None = None) -> None:
+        """The tick loop's tick: the readers are let in between the sampling and the publish, and the
+        soldiers whose requests they applied meanwhile are sampled again into this tick (folded, not answered
+        after it: issue 16), so a request that lands while the tick samples waits for the sampling only."""
+        update = self.sample_tick(scheduled)
+        if update is None:
+            return
+        spent = self.last_tick_seconds
+        self._ticking = True  # the readers' answers wait: this tick takes them up
+        try:
+            await self.let_readers_in()
+        finally:
+            self._ticking = False
+        self.publish_tick(update)
+        self.last_tick_seconds += spent
+
+    def sample_tick(self, scheduled: float | None = None) -> TickUpdate | None:
+        """A tick's sampling (None: nothing to publish, or a front-end's feed published already).
 
         The manager runs at the tick's *scheduled* time, not the time the loop woke up: wake-up jitter would
         otherwise make a soldier throttled to one update per tick period miss every other tick, and frame
         choice would wobble. (A request taken after the scheduled time moves the tick's time up to it.)"""
         m, board = self.world.manager, self._board()
         if m is None or board is None or not self.world.ready:
-            return
+            return None
+        t0 = time.perf_counter()
         self.ticks += 1
         if self.feed is not None:
             with self.cpu("merge"):
                 changed = self.feed(board, self.ticks)
             self._published(board, changed)
-            return
+            return None
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
         with self.cpu("animate"):
             update = m.tick(now)
+        self._requests_at_tick = self._request_count()
+        self.last_tick_seconds = time.perf_counter() - t0
+        return update
+
+    def publish_tick(self, update: TickUpdate) -> None:
+        """Publish a tick's poses and wake the writers; soldiers with requests taken since it sampled are
+        sampled again at the tick's time (their request's, if later) and published as more of that tick,
+        under its number (a second publish: merging them into the tick's arrays costs more)."""
+        m, board = self.world.manager, self._board()
+        assert m is not None and board is not None
+        t0 = time.perf_counter()
         if self.on_tick is not None:
             self.on_tick(update)
         with self.cpu("quantise"):
             changed = board.publish(update, self.world)
         self._published(board, changed)
+        if self._request_count() != self._requests_at_tick:
+            self._requests_seen = self._request_count()
+            if self.on_publish is None:
+                self._take_up(update.now)
+            else:  # a shard's batches count a tick's publishes: its answer after the tick, as before
+                self._answer_after_tick = True
+        self.last_tick_seconds = time.perf_counter() - t0
+
+    def _take_up(self, now: float) -> None:
+        """The soldiers whose requests were applied while the tick sampled: sampled again at the tick's time
+        ``now`` (their clock: the request's, if later) and published as more of that tick."""
+        m, board = self.world.manager, self._board()
+        assert m is not None and board is not None
+        with self.cpu("animate"):
+            again = m.answer(now, now)  # at the tick's time: its due rule
+        if not len(again):
+            return
+        if self.on_tick is not None:
+            self.on_tick(again)
+        with self.cpu("quantise"):
+            changed = board.publish(again, self.world, again=True)
+        self._published(board, changed)
+        # a start whose first frames are still (a walk off a rest) shows nothing yet at the tick's time:
+        # those soldiers get the answer after the tick, at the next tick's time, as before
+        still = again.indices[board.version[again.indices] != board.serial]
+        m.table.requested[still] = True
+        self._answer_after_tick = len(still) > 0
+
+    def _request_count(self) -> int:
+        m = self.world.manager
+        return int(m.stats["requests"] + m.stats["reactions"]) if m is not None else self._requests_seen
 
     def publish_fed(self) -> None:
         """A front-end's publish as soon as a shard's batch arrives (``feed`` takes it), between its ticks:
@@ -518,9 +594,8 @@ class TtesServer:
 
     def requests_arrived(self) -> None:
         """Requests were taken (from a client, or a shard's from the fabric): answer them between ticks."""
-        m = self.world.manager
-        seen = int(m.stats["requests"] + m.stats["reactions"]) if m is not None else self._requests_seen
-        if seen != self._requests_seen:
+        seen = self._request_count()
+        if seen != self._requests_seen and not self._ticking:
             self._requests_seen = seen
             self.answer_requests()  # by the reader that handled them, before anything else runs
 

@@ -121,13 +121,16 @@ class PoseBoard:
         self._gathered = (self.serial, np.array(rows, copy=True), codes)
         return codes
 
-    def publish(self, update: TickUpdate, world: ServerWorld, *, between: bool = False) -> int:
+    def publish(
+        self, update: TickUpdate, world: ServerWorld, *, between: bool = False, again: bool = False
+    ) -> int:
         """Take one tick's poses (converted and quantised per figure set); returns the number of soldiers
         whose codes changed (0: nothing for any client to send). ``between``: an out-of-cycle update, the
-        next tick's, released early."""
+        next tick's, released early; ``again``: more of the tick just published (the soldiers whose requests
+        arrived while it sampled, ``TtesServer.run_tick``), labelled with its number."""
         self.serial += 1
         if not between:
-            self.ticks += 1
+            self.ticks += 0 if again else 1
             self.tick_serial = self.serial
         self.tick = self.ticks + 1 if between else self.ticks
         n = len(update)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
+import pytest
 import trio
 from test_app_walkthrough import STEP, port_of, vel, watching
 from test_server_support import Client, running_server
@@ -89,20 +90,57 @@ async def test_a_request_that_arrives_at_the_tick_is_applied_before_the_tick_sam
         rest = c.pose(1, 0)[0].copy()
         tick_at = server.next_tick
         kneel = c.conn.send(EntityRequests(make_entity_requests(0, A.KNEEL, W.DEPLOYED)))
-        tick = server.tick
+        tick = server.run_tick
         seen: list[int] = []
 
-        def recording_tick(scheduled: float | None = None) -> None:
+        async def recording_tick(scheduled: float | None = None) -> None:
             seen.append(requests_applied(server))
-            tick(scheduled)
+            await tick(scheduled)
 
-        server.tick = recording_tick  # type: ignore[method-assign]
+        server.run_tick = recording_tick  # type: ignore[method-assign]
         before = requests_applied(server)
         await trio.sleep_until(server._t0 + tick_at)  # wakes with the tick loop
         os.write(c.stream.socket.fileno(), kneel)
         ev = await c.expect(JointUpdates)
         assert seen[0] == before + 1  # applied before the tick sampled
         assert ev.indices.tolist() == [0] and np.abs(ev.dofs[0] - rest).max() > STEP  # already kneeling
+
+
+@pytest.mark.parametrize("walk", [False, True])
+async def test_a_request_that_lands_while_the_tick_samples_goes_out_with_that_tick(
+    autojump_clock: trio.abc.Clock, walk: bool
+) -> None:
+    """Bytes that land while the tick samples are read before it publishes (``TtesServer.run_tick``). A kneel
+    (its clip begins at its first moving frame) is sampled again into that tick and goes out in its frames
+    under its number, not in an answer after them; a walk off a rest, whose first frames are still, shows
+    nothing new at the tick's time, so it is answered right after the tick as before (the next tick's
+    number, in the same write). At the default throttle (the tick's due rule holds)."""
+    async with running_server(throttle=0.04) as server:
+        c = await watching(server)
+        await trio.sleep_until(server._t0 + 1.01)
+        rest = c.pose(1, 0)[0].copy()
+        m, board = server.world.manager, server.board_ref.board
+        rows = (
+            make_entity_requests(0, A.UPRIGHT, W.DEPLOYED, vel(1.4, 0.0), 0.0)
+            if walk
+            else make_entity_requests(0, A.KNEEL, W.DEPLOYED)
+        )
+        request = c.conn.send(EntityRequests(rows))
+        sample = m.tick
+
+        def sampling(now: float):  # type: ignore[no-untyped-def]
+            update = sample(now)
+            os.write(c.stream.socket.fileno(), request)  # lands while the tick samples
+            m.tick = sample
+            return update
+
+        m.tick = sampling
+        answers, before = server.answers, board.ticks
+        with trio.fail_after(1.0 / HZ):  # the write of that tick
+            ev = await c.expect(JointUpdates, lambda e: 0 in e.indices.tolist() and e.tick > before)
+        assert ev.tick == before + 1 + walk and server.answers == answers + walk
+        assert np.abs(ev.dofs[ev.indices.tolist().index(0)] - rest).max() > STEP  # it shows the request
+        assert not m.table.requested[0]
 
 
 async def test_tick_frames_keep_their_tick_when_an_answer_is_published_before_they_are_encoded(
@@ -117,17 +155,17 @@ async def test_tick_frames_keep_their_tick_when_an_answer_is_published_before_th
         await c.drain(1.0)
         board = server.board_ref.board
         server.answers = 0
-        tick = server.tick
+        tick = server.run_tick
 
-        def tick_then_answer(scheduled: float | None = None) -> None:
-            tick(scheduled)  # the writers are woken, not yet run: answer soldier 1 first
+        async def tick_then_answer(scheduled: float | None = None) -> None:
+            await tick(scheduled)  # the writers are woken, not yet run: answer soldier 1 first
             server.next_tick = (scheduled or 0.0) + 1.0 / HZ
             rows = make_entity_requests(1, A.KNEEL, W.DEPLOYED)
             server.world.manager.apply_requests(rows, server.request_time())
             server.answer_requests()
-            server.tick = tick  # type: ignore[method-assign]
+            server.run_tick = tick  # type: ignore[method-assign]
 
-        server.tick = tick_then_answer  # type: ignore[method-assign]
+        server.run_tick = tick_then_answer  # type: ignore[method-assign]
         got: list[tuple[int, list[int]]] = []
         with trio.fail_after(1.0 / HZ):  # the next tick's write
             while len(got) < 2:

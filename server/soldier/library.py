@@ -60,6 +60,7 @@ from server.soldier.root_motion import (
     stance_contact,
     stance_count,
     stance_travel,
+    step_turns,
 )
 from server.soldier.state import CRAWL_NODE, STAND_STOWED, LocoState
 
@@ -286,6 +287,7 @@ class MotionLibrary:
         contacts: list[np.ndarray] = []
         shares: list[np.ndarray] = []
         stances = [1] * len(self.clips)
+        turns: list[np.ndarray | None] = [None] * len(self.clips)
         for cid, info in enumerate(self.clips):
             n = info.nframes
             contacts.append(np.zeros((n, 2)))
@@ -303,8 +305,8 @@ class MotionLibrary:
                 continue
             points = self._feet(kin, cid, sl)
             curves.append(stance_travel(points, self.sources[cid].stride_length))
-            contacts[-1] = stance_contact(points)
-        return TravelTable(curves, contacts, shares, stances)
+            turns[cid], contacts[-1] = step_turns(points)
+        return TravelTable(curves, contacts, shares, stances, turns)
 
     def _feet(self, kin: FigureKinematics, cid: int, sl: slice) -> np.ndarray:
         """The sole points of clip ``cid``'s every stored frame (``root_motion.feet_points``)."""
