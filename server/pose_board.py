@@ -12,8 +12,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from protocol.bitpack import scratch
 from protocol.shared_encode import SharedEncodes
 from protocol.update_table import UpdateTable
+from protocol.updates import _cols as _span  # a run of rows as a slice
 from protocol.updates import quantise
 from server.logging import get_logger
 from server.soldier.manager import TickUpdate
@@ -145,7 +147,7 @@ class PoseBoard:
             if len(sel) == 0:
                 continue
             part = update if len(sel) == n else update.select(sel)
-            ju = sets[k].converter.convert(part)
+            ju = sets[k].converter.convert(part, reuse=True)  # work buffers: copied below
             table = sets[k].table
             rows = idx[sel]
             dofs, positions, orientations = ju.dofs, ju.positions, ju.orientations
@@ -157,9 +159,10 @@ class PoseBoard:
                 rows, q, dofs, positions, orientations = (
                     a[ok] for a in (rows, q, dofs, positions, orientations)
                 )
-            self.dofs[rows] = dofs
-            self.positions[rows] = positions
-            self.orientations[rows] = orientations
+            at = _span(rows)
+            self.dofs[at] = dofs
+            self.positions[at] = positions
+            self.orientations[at] = orientations
             changed += self._store(rows, q, table.table_id)
         self.rows_published += n
         self.rows_changed += changed
@@ -189,11 +192,12 @@ class PoseBoard:
 
     def _store(self, rows: np.ndarray, q: np.ndarray, table_id: int) -> int:
         """Write codes of one table; bump the version of the rows whose codes (or table) changed."""
-        new = ~self.valid[rows] | (self.table_of[rows] != table_id)
-        new |= (self.codes[rows] != q).any(axis=1)
-        self.codes[rows] = q
-        self.table_of[rows] = table_id
-        self.valid[rows] = True
+        at = _span(rows)  # a run of rows (every soldier due, the usual moving crowd): views, not gathers
+        new = ~self.valid[at] | (self.table_of[at] != table_id)
+        new |= (self.codes[at] != q).any(axis=1)
+        self.codes[at] = q
+        self.table_of[at] = table_id
+        self.valid[at] = True
         moved = rows[new] if not new.all() else rows
         self.version[moved] = self.serial
         return len(moved)
@@ -202,10 +206,12 @@ class PoseBoard:
 def _quantise_rows(
     table: UpdateTable, dofs: np.ndarray, positions: np.ndarray, orientations: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(codes, ok)``: the poses quantised for ``table``; ``ok`` is False for rows that cannot be
-    (non-finite values, zero quaternion), whose codes are 0. The row check runs only when quantising fails."""
+    """``(codes, ok)``: the poses quantised for ``table`` (a work buffer, valid until the next publish);
+    ``ok`` is False for rows that cannot be (non-finite values, zero quaternion), whose codes are 0. The row
+    check runs only when quantising fails."""
+    out = scratch().get("board.codes", (len(dofs), table.layout.nfields), np.int32)  # copied by _store
     try:
-        return quantise(table, dofs, positions, orientations), np.ones(len(dofs), bool)
+        return quantise(table, dofs, positions, orientations, out), np.ones(len(dofs), bool)
     except ValueError:
         norm = np.linalg.norm(orientations, axis=-1)
         ok = np.isfinite(dofs).all(axis=1) & np.isfinite(positions).all(axis=(1, 2))

@@ -223,7 +223,7 @@ class TravelTable:
         """Per-frame ``values`` (flat over clips) of ``clip`` at fractional ``frame`` (clamped), blended."""
         clip = np.asarray(clip, np.int64)
         last = np.maximum(self.nframes[clip] - 1, 0)
-        f = np.clip(np.asarray(frame, np.float64), 0.0, last)
+        f = np.minimum(np.maximum(np.asarray(frame, np.float64), 0.0), last)  # np.clip's values, cheaper
         f0 = np.floor(f).astype(np.int64)
         f1 = np.minimum(f0 + 1, last)
         w = (f - f0).reshape((-1,) + (1,) * (values.ndim - 1))
@@ -292,7 +292,14 @@ def offset_at(
 
 def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
     """``(n, 2)`` horizontal vectors of the soldier frame turned by compass degrees (as blend.yaw_rotate)."""
-    a = -np.radians(np.asarray(compass_deg, np.float64))
+    compass_deg = np.asarray(compass_deg, np.float64)
+    turned = np.flatnonzero(compass_deg != 0.0)
+    if len(turned) < len(compass_deg):  # unturned rows as they are (a walking crowd: most, or all, of them)
+        out = np.array(xz, np.float64)
+        if len(turned):
+            out[turned] = yawed(out[turned], compass_deg[turned])
+        return out
+    a = -np.radians(compass_deg)
     c, s = np.cos(a), np.sin(a)
     x, z = xz[:, 0], xz[:, 1]
     return np.stack([c * x + s * z, c * z - s * x], axis=1)

@@ -129,15 +129,16 @@ class Ticking(Events):
         clip = tb.clip[idx]
         clock = tb.clock[idx] if at is None or self._settings.every_frame else np.maximum(tb.clock[idx], at)
         args = (clip, tb.start[idx], tb.direc[idx], tb.dur[idx], clock)
-        if len(lib.sets) == 1 or n == 0:
-            s = lib.sets[0].sample(*args, interpolate=self._settings.interpolate)
+        fset = tb.fset[idx] if len(lib.sets) > 1 and n else np.zeros(1, np.int16)
+        kinds = _kinds(fset)
+        if len(kinds) == 1:  # one figure set (the usual crowd): sampled straight, no per-set gather/scatter
+            s = lib.sets[kinds[0]].sample(*args, interpolate=self._settings.interpolate)
             joints, figures, frames = s.joints, s.figures, s.position
         else:
             joints = np.empty((n, lib.ndof), np.float32)
             figures = np.empty((n, lib.nfig, 7), np.float32)
             frames = np.empty(n, np.float64)
-            fset = tb.fset[idx]
-            for k in np.unique(fset).tolist():
+            for k in kinds:
                 sel = np.flatnonzero(fset == k)
                 s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self._settings.interpolate)
                 joints[sel], figures[sel], frames[sel] = s.joints, s.figures, s.position
@@ -180,3 +181,11 @@ class Ticking(Events):
                 joints[blending], figures[blending] = j, f
                 tb.blend_len[b[u >= 1.0]] = 0.0
         return joints, figures, clip.astype(np.int32), frames
+
+
+def _kinds(fset: np.ndarray) -> list[int]:
+    """The distinct figure sets of ``fset`` (non-empty), ascending: one comparison when all are equal."""
+    lo, hi = int(fset.min()), int(fset.max())
+    if lo == hi:
+        return [lo]
+    return (np.flatnonzero(np.bincount(fset - lo)) + lo).tolist()

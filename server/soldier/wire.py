@@ -16,6 +16,7 @@ import numpy as np
 
 from peabody.model import Figure
 from protocol import coords
+from protocol.bitpack import scratch
 from protocol.events import JointUpdates
 from protocol.update_table import DEFAULT_DOF_BITS, DofRange, FigureEntry, JointEntry, UpdateTable
 from server.soldier.core import TickUpdate
@@ -78,24 +79,35 @@ class WireConverter:
         self._t_cols = np.flatnonzero(self.translational) if self.translational.any() else None
         self._r_cols = np.flatnonzero(~self.translational)
 
-    def convert(self, update: TickUpdate, tick: int | None = None) -> JointUpdates:
-        dofs = update.joints.astype(np.float64)
+    def convert(self, update: TickUpdate, tick: int | None = None, *, reuse: bool = False) -> JointUpdates:
+        """The update in the protocol's units. ``reuse``: its arrays are this thread's work buffers
+        (:func:`protocol.bitpack.scratch`), valid until the next such call: for a caller that copies them at
+        once (the pose board), so a tick does not page-fault megabytes of fresh arrays in."""
+        sc = scratch() if reuse else None
+        shape = update.figures.shape[:-1]
+        if sc is None:
+            dofs = update.joints.astype(np.float64)
+            positions, orientations = np.empty((*shape, 3)), np.empty((*shape, 4))
+        else:
+            dofs = sc.get("wire.dofs", update.joints.shape, np.float64)
+            np.copyto(dofs, update.joints)
+            positions = sc.get("wire.positions", (*shape, 3), np.float64)
+            orientations = sc.get("wire.orientations", (*shape, 4), np.float64)
         if self._t_cols is not None:
             dofs[:, self._t_cols] /= 100.0
-        if len(dofs) and np.abs(dofs).max() > math.pi:  # wrap angles into [-pi, pi) (rarely needed)
+        # wrap angles into [-pi, pi) (rarely needed; max and min: no |dofs| array)
+        if len(dofs) and (dofs.max() > math.pi or dofs.min() < -math.pi):
             wrapped = dofs - (2 * math.pi) * np.floor((dofs + math.pi) / (2 * math.pi))
             if self._t_cols is None:
                 dofs = wrapped
             else:
                 dofs[:, self._r_cols] = wrapped[:, self._r_cols]
         # the axis change of protocol.coords written as a column shuffle: (x, y, z)_P = (x, -z, y)_J / 100
-        f = update.figures.astype(np.float64)
-        positions = np.empty((*f.shape[:-1], 3))
+        f = update.figures  # float32, widened by each column's assignment (no float64 copy of it all)
         positions[..., 0] = f[..., 0]
         positions[..., 1] = -f[..., 2]
         positions[..., 2] = f[..., 1]
         positions /= coords.CM_PER_M
-        orientations = np.empty((*f.shape[:-1], 4))
         orientations[..., 0] = f[..., 3]
         orientations[..., 1] = f[..., 4]
         orientations[..., 2] = -f[..., 6]
