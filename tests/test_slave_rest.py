@@ -23,20 +23,27 @@ from ttes.paths import CHANNELSETS, FIGURES
 
 @pytest.fixture(scope="module")
 def dead():
-    """prfire2dead and its committed DI slave; the slave's last frame with the waist bent 8 degrees
-    forward (the chest lifts off the ground, as DI's did) and lowered back onto the ground."""
+    """prfire2dead and its committed DI slave; the slave's last frame with the waist bent 8 degrees (the
+    way that lifts the trunk off the ground, as DI's was) and lowered back onto the ground."""
     ctx = BuildContext.load(FIGURES)
     figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
     master = load_channelset(CHANNELSETS / "prfire2dead.chset.env", use_cache=False)
     slave = load_channelset(CHANNELSETS / "prfire2dead_low.chset.env", use_cache=False)
     q, loc, stype = _played(slave, figs)
-    pose, at = q[-1].copy(), loc[-1].copy()
     waist = figs.kin[stype].dof_slices["waist"].start + 1
-    pose[waist] -= np.radians(8.0)
-    at[1, 3] -= _lows(figs, stype, pose[None], at[None])["lowest"][0]
+
+    def bent(deg: float) -> tuple[np.ndarray, np.ndarray, float]:
+        pose, at = q[-1].copy(), loc[-1].copy()
+        pose[waist] += np.radians(deg)
+        lows = _lows(figs, stype, pose[None], at[None])
+        at[1, 3] -= lows["lowest"][0]
+        return pose, at, max(lows[p][0] - lows["lowest"][0] for p in TRUNK_PARTS)
+
+    pose, at, _ = max((bent(-8.0), bent(8.0)), key=lambda b: b[2])  # whichever way lifts the trunk
     return figs, master, slave, stype, pose, at
 
 
+@pytest.mark.fuzz  # ~20 s of CPU: the search's SLSQP on a whole DI frame
 def test_the_search_brings_a_floating_trunk_down_and_keeps_the_rest_where_it_lies(dead) -> None:
     figs, _, _, stype, pose, at = dead
     rest = _Rest(figs, stype, pose, at)
@@ -48,15 +55,6 @@ def test_the_search_brings_a_floating_trunk_down_and_keeps_the_rest_where_it_lie
     for part, bound in rest.ceiling.items():  # what rested still rests; no foot, heel or head goes up
         assert after[part] <= bound + slave_rest.BOUND_SLACK_CM
     assert np.abs(x).max() <= slave_rest.MAX_TURN_DEG
-
-
-def test_a_trunk_already_resting_is_left_alone(dead) -> None:
-    figs, _, slave, stype, _, _ = dead
-    q, loc, _ = _played(slave, figs)
-    lows = _lows(figs, stype, q[-1:], loc[-1:])
-    if max(lows[p][0] - lows["lowest"][0] for p in TRUNK_PARTS) > AIM_CM:
-        pytest.skip("the committed slave's trunk is not at rest yet (rebuild the DI deaths)")
-    np.testing.assert_array_equal(search(_Rest(figs, stype, q[-1], loc[-1])), np.zeros(len(PARAMS)))
 
 
 def test_the_change_eases_in_over_the_last_half_second(dead, monkeypatch) -> None:
