@@ -35,6 +35,7 @@ from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
+from authoring.slave_rest import rest_slave_trunk
 from authoring.slaving import MasterSlavePair
 from authoring.transitions import ClipFrames, clip_to_channelset
 from peabody.fk import FigureKinematics
@@ -219,8 +220,17 @@ def slave_one(
     else:
         out = reslave_channelset(chset, pair, name)
     # DI's kneecaps sit higher than the master's and its prone forearms float: put them down where his are;
-    # last, its feet held where his are planted (the body no longer moves under them)
-    for rest in (rest_slave_knees, rest_slave_forearms, tilt_onto_knees, rest_limbs, plant_slave_feet):
+    # its feet held where his are planted (the body no longer moves under them); last, a dead DI's trunk
+    # turned so its pelvis and chest both rest on the ground (its torso is shaped differently)
+    rests = (
+        rest_slave_knees,
+        rest_slave_forearms,
+        tilt_onto_knees,
+        rest_limbs,
+        plant_slave_feet,
+        rest_slave_trunk,
+    )
+    for rest in rests:
         rest(chset, out, ctx.figure_set)
         lift_off_ground(out, ctx.di)
     clear_rifle(out, ctx.figure_set)  # a dropped rifle: out of the body and the ground it now lies on

@@ -1,0 +1,104 @@
+"""A dead DI.fig slave's trunk rests on the ground (authoring/slave_rest.py): its pelvis and its chest or
+belly both come down (issue 14: DI's belly stands out further than soldier.fig's, so a dead DI lay on its
+belly with the pelvis 3-5 cm up, or prone on its pelvis with the chest 2.6-2.8 cm up), eased into the clip,
+while the parts resting on the ground stay there."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+pytest.importorskip("scipy")
+
+from authoring import slave_rest
+from authoring.build import BuildContext
+from authoring.quality_frames import FigureSet
+from authoring.slave_contacts import _played
+from authoring.slave_rest import AIM_CM, EASE_FRAMES, PARAMS, TRUNK_PARTS, _ease, _lows, _Rest, search
+from server.motion.cache import load_channelset
+from ttes.paths import CHANNELSETS, FIGURES
+
+
+@pytest.fixture(scope="module")
+def dead():
+    """prfire2dead and its committed DI slave; the slave's last frame with the waist bent 8 degrees (the
+    way that lifts the trunk off the ground, as DI's was) and lowered back onto the ground."""
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
+    master = load_channelset(CHANNELSETS / "prfire2dead.chset.env", use_cache=False)
+    slave = load_channelset(CHANNELSETS / "prfire2dead_low.chset.env", use_cache=False)
+    q, loc, stype = _played(slave, figs)
+    waist = figs.kin[stype].dof_slices["waist"].start + 1
+
+    def bent(deg: float) -> tuple[np.ndarray, np.ndarray, float]:
+        pose, at = q[-1].copy(), loc[-1].copy()
+        pose[waist] += np.radians(deg)
+        lows = _lows(figs, stype, pose[None], at[None])
+        at[1, 3] -= lows["lowest"][0]
+        return pose, at, max(lows[p][0] - lows["lowest"][0] for p in TRUNK_PARTS)
+
+    pose, at, _ = max((bent(-8.0), bent(8.0)), key=lambda b: b[2])  # whichever way lifts the trunk
+    return figs, master, slave, stype, pose, at
+
+
+@pytest.mark.fuzz  # ~20 s of CPU: the search's SLSQP on a whole DI frame
+def test_the_search_brings_a_floating_trunk_down_and_keeps_the_rest_where_it_lies(dead) -> None:
+    figs, _, _, stype, pose, at = dead
+    rest = _Rest(figs, stype, pose, at)
+    before = rest.lows_on_ground(np.zeros((1, len(PARAMS))))
+    assert max(before[p][0] for p in TRUNK_PARTS) > 2.5  # the check's 2 cm broken
+    x = search(rest)
+    after = {p: v[0] for p, v in rest.lows_on_ground(x[None]).items()}
+    assert max(after[p] for p in TRUNK_PARTS) <= AIM_CM + 0.5
+    for part, bound in rest.ceiling.items():  # what rested still rests; no foot, heel or head goes up
+        assert after[part] <= bound + slave_rest.BOUND_SLACK_CM
+    assert np.abs(x).max() <= slave_rest.MAX_TURN_DEG
+
+
+def test_the_change_eases_in_over_the_last_half_second(dead, monkeypatch) -> None:
+    figs, master, before, stype, _, _ = dead
+    figs_kin = figs.kin[stype]
+    last = _played(before, figs)[0][-1]
+    free = next(  # a spine or leg DOF 4 degrees from its limits (a prone waist lies at its own)
+        k
+        for k, (joint, i) in enumerate(PARAMS)
+        if joint in figs_kin.dof_slices
+        and figs_kin.lower[figs_kin.dof_slices[joint].start + i] + np.radians(4.0)
+        < last[figs_kin.dof_slices[joint].start + i]
+    )
+    found = np.zeros(len(PARAMS))
+    found[[0, free]] = 3.0, -4.0  # a root pitch and a joint's turn, whatever the search would say
+    monkeypatch.setattr(slave_rest, "search", lambda rest: found)
+    slave = copy.deepcopy(before)
+    slave_rest.rest_slave_trunk(master, slave, figs)
+    q0, loc0, _ = _played(before, figs)
+    q1, loc1, _ = _played(slave, figs)
+    changed = np.flatnonzero(np.abs(q1 - q0).max(axis=1) > 1e-6)
+    assert changed[0] >= before.release_frame and changed[-1] == len(q0) - 1
+    change = q1 - q0  # in full (at rest) over the last frames
+    np.testing.assert_allclose(change[-slave_rest.END_HOLD_FRAMES - 1 :] - change[-1], 0.0, atol=1e-6)
+    assert len(q0) - changed[0] >= EASE_FRAMES - 1  # eased over the whole ramp, not a jump at the end
+    rest = _Rest(figs, stype, q0[-1], loc0[-1])
+    want, wloc, drop = rest.placed(found[None])
+    np.testing.assert_allclose(q1[-1], want[0], atol=1e-5)  # the last frame: the change in full, ...
+
+    assert abs(loc1[-1][1, 3] - (wloc[0][1, 3] + drop[0])) < 1e-3  # ... on the ground
+    step = np.abs(np.diff(q1 - q0, axis=0)).max()  # smooth: no frame takes more than its share of 4 degrees
+    assert step < np.radians(4.0) * 2.0 / EASE_FRAMES
+
+
+def test_a_clip_that_keeps_its_rifle_is_left_alone(dead) -> None:
+    figs, master, before, _, _, _ = dead
+    slave = copy.deepcopy(before)
+    slave.release_frame = None
+    np.testing.assert_array_equal(slave_rest.rest_slave_trunk(master, slave, figs), np.zeros(len(PARAMS)))
+    np.testing.assert_array_equal(slave.joint_data, before.joint_data)
+
+
+def test_the_ease_starts_and_ends_at_rest() -> None:
+    w = _ease(100, 40)
+    assert (w[:41] == 0.0).all() and (w[40 + EASE_FRAMES :] == 1.0).all()
+    assert (np.diff(w) >= 0.0).all()
+    assert w[41] < 0.01 and 1.0 - w[40 + EASE_FRAMES - 1] < 0.01  # no speed at either end of the ramp
