@@ -120,14 +120,33 @@ def test_a_prone_death_lays_the_head_down(ctx: BuildContext, name: str) -> None:
     assert lows["head"] <= 10.0  # the check's rest_head_cm (18.6-19.0 cm before the chest came down)
 
 
-def test_a_death_on_his_back_lets_the_arms_fall(ctx: BuildContext) -> None:
-    """Issue 14: kfire2dead's physics left him on his back with both forearms standing up (36.7 cm); the
-    kinematic settle lays them down (the check's rest_arm_cm, limit 25)."""
-    assert deaths.death_specs()["kfire2dead"].arms_fall
-    poses, roots, _, _ = _played(ctx, "kfire2dead")
+@pytest.mark.parametrize(("name", "limit"), [("kfire2dead", 25.0), ("kstow2dead", 10.0)])
+def test_a_death_on_his_back_lets_the_arms_fall(ctx: BuildContext, name: str, limit: float) -> None:
+    """Issue 14: kfire2dead's physics left him on his back with both forearms standing up (36.7 cm), and
+    kstow2dead with his left hand raised over his chest (23.5 cm, posed); the kinematic settle lays them
+    down (the check's rest_arm_cm, limit 25)."""
+    assert deaths.death_specs()[name].arms_fall
+    poses, roots, _, _ = _played(ctx, name)
     lows = part_lows_of(ctx, poses[-1], roots[-1])
     arms = [lows[f"{side}_{p}"] for side in ("left", "right") for p in ("upper_arm", "forearm", "hand")]
-    assert max(arms) <= 25.0
+    assert max(arms) <= limit
+
+
+@pytest.mark.parametrize("name", ["prstow2dead", "prfire2dead"])
+def test_a_prone_deaths_forearms_do_not_skid(ctx: BuildContext, name: str) -> None:
+    """Issue 14: the limp arms of a prone soldier pivoted and slid on the ground as he slumped (5.7-6.1 cm);
+    the forearms are held, place and turn, where they lay (the check: contact slide <= 3 cm)."""
+    from authoring.body_parts import contact_runs
+    from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
+
+    poses, roots, _, _ = _played(ctx, name)
+    figs = FigureSet({"body": ctx.soldier})
+    nodes, segs = figs.nodes("body")
+    arm = np.isin(figs.node_parts("body"), ("left_forearm", "right_forearm"))
+    g = figs.kin["body"].segment_globals(poses, roots)
+    points = np.einsum("fkij,kj->fki", g[:, segs[arm], :3, :], nodes[arm])
+    slide = contact_runs(points, CONTACT_HEIGHT_CM).slide.max(initial=0.0)
+    assert slide <= THRESHOLDS["contact_slide_cm"]
 
 
 def test_a_dead_arm_falls_fastest_late_and_lands_softly() -> None:
