@@ -50,8 +50,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    ground are held where they touched down by re-solving the limb (:func:`authoring.contact_pin.pin_frames`;
    the first and last frames unchanged; the standing deaths, kstow2dead and the two prone deaths: pinned,
    kfire2dead's DI slave's kneeling knee slid 1.3 cm more; a prone death's forearms are held in their turn
-   too, from the rifle's release on: the limp arms pivoted under the slumping body, 5-6 cm; kstow2dead is
-   pinned before its arms fall). Knees, thighs and the trunk still skid (ststow2dead's knee 10 cm: the
+   too, from the rifle's release on: the limp arms pivoted under the slumping body, 5-6 cm). kstow2dead's
+   arms do not fall (:attr:`DeathSpec.arms_fall`): tried, pinned first, its left hand lay at 4.4 cm
+   instead of 23.5 but swung up to 64 cm on the way (the fall is eased in joint angles). Knees, thighs and
+   the trunk still skid (ststow2dead's knee 10 cm: the
    hip pitches further than the thigh reaches). Making every part stick in the physics instead
    (MuJoCo connect constraints to mocap points following a part's lowest node, released 2.5 cm up) held
    every contact under 1.5 cm but changed the falls: from the start, the standing soldier sat down
@@ -168,7 +170,6 @@ DEATHS: tuple[DeathSpec, ...] = (
         sideways=True,
         arm_tone=0.05,
         pinned=True,
-        arms_fall=True,
     ),
     DeathSpec(
         "kfire2dead",
@@ -466,10 +467,6 @@ def _after_physics(
     the ground held where they touched down (steps 5-7 of the module docstring)."""
     soldier, rifle = figures
     frames = plant(frames, soldier)
-    if spec.pinned and spec.arms_fall:  # the limbs held where they landed, then the arms fall (kstow2dead:
-        # pinned after the fall, the still frames appended moved the feet's pins and slid a foot 1.8 cm more)
-        frames = pin_frames(frames, soldier)
-        return dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
     frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
     if not spec.pinned:
