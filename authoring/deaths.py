@@ -48,8 +48,12 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    physics made the DI slaves' feet jump and slide, branch ``legsup14-kfire``).
 7. **the limbs stay where they land** (:attr:`DeathSpec.pinned`): hands, forearms, feet and the head on the
    ground are held where they touched down by re-solving the limb (:func:`authoring.contact_pin.pin_frames`;
-   the first and last frames unchanged; the standing deaths and kstow2dead: pinned, kfire2dead's DI slave's
-   kneeling knee slid 1.3 cm more). Knees, thighs and the trunk still skid (ststow2dead's knee 10 cm: the
+   the first and last frames unchanged; the standing deaths, kstow2dead and the two prone deaths: pinned,
+   kfire2dead's DI slave's kneeling knee slid 1.3 cm more; a prone death's forearms are held in their turn
+   too, from the rifle's release on: the limp arms pivoted under the slumping body, 5-6 cm). kstow2dead's
+   arms do not fall (:attr:`DeathSpec.arms_fall`): tried, pinned first, its left hand lay at 4.4 cm
+   instead of 23.5 but swung up to 64 cm on the way (the fall is eased in joint angles). Knees, thighs and
+   the trunk still skid (ststow2dead's knee 10 cm: the
    hip pitches further than the thigh reaches). Making every part stick in the physics instead
    (MuJoCo connect constraints to mocap points following a part's lowest node, released 2.5 cm up) held
    every contact under 1.5 cm but changed the falls: from the start, the standing soldier sat down
@@ -121,9 +125,12 @@ class DeathSpec:
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
 
 
-def _prone(name: str, start: str, force: float = 80.0, knee_damping: float = 1.0) -> DeathSpec:
+def _prone(
+    name: str, start: str, force: float = 80.0, knee_damping: float = 1.0, pinned: bool = True
+) -> DeathSpec:
     """A death of a soldier lying on his front: hit down on the upper torso, only the head slumping, quick;
-    left propped on his elbows, his chest comes down after the physics."""
+    left propped on his elbows, his chest comes down after the physics (and, ``pinned``, his forearms stay
+    where they lie)."""
     return DeathSpec(
         name,
         start,
@@ -135,6 +142,7 @@ def _prone(name: str, start: str, force: float = 80.0, knee_damping: float = 1.0
         release=0.15,
         knee_damping=knee_damping,
         propped=True,
+        pinned=pinned,
     )
 
 
@@ -176,7 +184,9 @@ DEATHS: tuple[DeathSpec, ...] = (
     ),
     _prone("prstow2dead", "PRONE_STOWED"),
     _prone("prfire2dead", "PRONE_FIRE"),
-    _prone("crawl2dead", "CRAWL", force=120.0, knee_damping=4.0),
+    # crawl2dead not pinned: its forearms still slid 5.1 cm held (the shoulders pass over the elbows) and a
+    # shoulder leapt 24 degrees a frame; its knees and thighs slide 3.2-3.5 cm in the physics
+    _prone("crawl2dead", "CRAWL", force=120.0, knee_damping=4.0, pinned=False),
 )
 SLUMP = "SLUMP"  # the in-between key of a body crumpling onto its knees (authoring.postures)
 UPPER = ("waist", "neck", "head")  # with the vertebrae: what slumps of a kneeling soldier
@@ -446,15 +456,19 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         if still * dt >= REST_SECONDS:
             break
     recorded = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
-    frames = _after_physics(spec, recorded, figures)
-    return DeathClip(frames, int(release_frame if release_frame is not None else len(poses) - 1))
+    release = int(release_frame if release_frame is not None else len(poses) - 1)
+    return DeathClip(_after_physics(spec, recorded, figures, release), release)
 
 
-def _after_physics(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure]) -> ClipFrames:
+def _after_physics(
+    spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], release: int = 0
+) -> ClipFrames:
     """The recorded fall with its skid taken out, settled limp and (:attr:`DeathSpec.pinned`) its limbs on
     the ground held where they touched down (steps 5-7 of the module docstring)."""
     soldier, rifle = figures
     frames = plant(frames, soldier)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
     frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
-    return pin_frames(frames, soldier) if spec.pinned else frames
+    if not spec.pinned:
+        return frames
+    return pin_frames(frames, soldier, spec.propped, release if spec.propped else 0)

@@ -74,3 +74,32 @@ def test_a_stance_is_held_where_it_lifts_off_when_asked() -> None:
     points[:5, 0, 1] = 0.0  # now the stance starts at the first frame: anchored there either way
     first = points[:, 0, 0] + plant_offsets(points, at_lift_off=True)[:, 0]
     np.testing.assert_allclose(first[:16], points[0, 0, 0])
+
+
+def test_a_held_forearm_neither_slides_nor_pivots_on_the_ground() -> None:
+    """``held_turns``: a part that slides and pivots while it lies on the ground (prfire2dead's forearm:
+    28 degrees, 5 cm) is held at its place and turn where it touched down in the start posture, from
+    ``held_from`` on (the hands still held the rifle before), eased out after it lifts off; its ends stay."""
+    from scipy.spatial.transform import Rotation
+
+    from authoring.contact_pin import _held_still, _turned
+
+    n, up, held_from = 40, 20, 3
+    f = np.arange(n)
+    turn = np.radians(30.0) * np.clip(f / up, 0.0, 1.0)
+    site = np.repeat(np.eye(4)[None], n, axis=0)
+    site[:, :3, :3] = Rotation.from_euler("y", turn[:, None]).as_matrix()
+    site[:, 0, 3] = 0.2 * f  # and slides
+    points = np.zeros((n, 1, 3))
+    points[:, 0, 1] = np.where(f <= up, 0.0, 5.0)  # on the ground until it lifts off
+    move, rot = _held_still(site, points, held_from)
+    held = _turned(rot, site[:, :3, :3])
+    np.testing.assert_allclose(
+        site[held_from : up + 1, 0, 3] + move[held_from : up + 1, 0], site[held_from, 0, 3]
+    )
+    np.testing.assert_allclose(
+        held[held_from : up + 1], np.repeat(site[None, held_from, :3, :3], up + 1 - held_from, 0), atol=1e-9
+    )
+    assert not move[: held_from + 1].any() and not rot[: held_from + 1].any()  # none before held_from
+    assert not move[-1].any() and not rot[-1].any()  # none at the last frame
+    assert np.abs(np.diff(move[up:, 0])).max() < 2.0  # eased out after lift-off

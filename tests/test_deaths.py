@@ -130,6 +130,23 @@ def test_a_death_on_his_back_lets_the_arms_fall(ctx: BuildContext) -> None:
     assert max(arms) <= 25.0
 
 
+@pytest.mark.parametrize("name", ["prstow2dead", "prfire2dead"])
+def test_a_prone_deaths_forearms_do_not_skid(ctx: BuildContext, name: str) -> None:
+    """Issue 14: the limp arms of a prone soldier pivoted and slid on the ground as he slumped (5.7-6.1 cm);
+    the forearms are held, place and turn, where they lay (the check: contact slide <= 3 cm)."""
+    from authoring.body_parts import contact_runs
+    from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
+
+    poses, roots, _, _ = _played(ctx, name)
+    figs = FigureSet({"body": ctx.soldier})
+    nodes, segs = figs.nodes("body")
+    arm = np.isin(figs.node_parts("body"), ("left_forearm", "right_forearm"))
+    g = figs.kin["body"].segment_globals(poses, roots)
+    points = np.einsum("fkij,kj->fki", g[:, segs[arm], :3, :], nodes[arm])
+    slide = contact_runs(points, CONTACT_HEIGHT_CM).slide.max(initial=0.0)
+    assert slide <= THRESHOLDS["contact_slide_cm"]
+
+
 def test_a_dead_arm_falls_fastest_late_and_lands_softly() -> None:
     s = np.linspace(0.0, 1.0, 49)
     u = dead_settle.fall_easing(s)
