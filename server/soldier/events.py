@@ -18,6 +18,7 @@ from server.soldier.core import (
     MOVING_EPS,
 )
 from server.soldier.lead_in import LeadIn
+from server.soldier.library import PathStep
 from server.soldier.locomotion import (
     conditions,
     is_fast,
@@ -45,6 +46,45 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         goal = int(self._goal[app, int(tb.weapon[i] == _FIRING)])
         # a posture with variant nodes (DEAD@...): the variant nearest from here (table lookup)
         return int(self.library.goal_node[int(tb.node[i]), goal]) if goal >= 0 else goal
+
+    def _desired_many(self, idx: np.ndarray) -> np.ndarray:
+        """:meth:`_desired` of soldiers ``idx`` (table lookups over arrays)."""
+        tb = self.table
+        app = tb.appearance[idx].astype(np.int64)
+        kind = np.where(tb.speed[idx] > MOVING_EPS, self._move[app], 0).astype(np.int64)
+        goal = self._goal[app, (tb.weapon[idx] == _FIRING).astype(np.int64)].astype(np.int64)
+        variant = self.library.goal_node[tb.node[idx].astype(np.int64), np.maximum(goal, 0)]
+        return np.where(kind != 0, self._base[kind], np.where(goal >= 0, variant, goal)).astype(np.int64)
+
+    def _posture_changes(self, idx: np.ndarray, immediate: np.ndarray) -> np.ndarray:
+        """Which events of soldiers ``idx`` ask a resting soldier for another posture (the common event: its
+        :meth:`_decide` starts a path; :meth:`_start_changes` does them at once)."""
+        desired = self._desired_many(idx)
+        rest = ~immediate & (self.table.mode[idx] == _IDLE)
+        return rest & (desired >= 0) & (desired != self.table.node[idx])
+
+    def _start_changes(self, idx: np.ndarray, t: np.ndarray) -> None:
+        """:meth:`_decide` of resting soldiers asked for another posture, at once: per soldier only the path
+        lookup; the first arcs start in one :meth:`_play_steps`."""
+        tb = self.table
+        tb.dirty[idx] = True
+        tb.root_yaw[idx] = 0.0  # a posture change faces the heading (no turn clips off STAND_STOWED)
+        go: list[int] = []
+        first: list[PathStep] = []
+        for k, (node, goal) in enumerate(
+            zip(tb.node[idx].tolist(), self._desired_many(idx).tolist(), strict=True)
+        ):
+            steps = self.library.path(node, goal)
+            if not steps:
+                self.stats["unreachable"] += 1
+                continue
+            self._paths[int(idx[k])] = [steps, 0]
+            go.append(k)
+            first.append(steps[0])
+        if go:
+            g = idx[go]
+            tb.mode[g] = _TRANSITION
+            self._play_steps(g, first, t[go])
 
     def _on_event(
         self, i: int, t: float, immediate: bool, captured: tuple[np.ndarray, np.ndarray] | None
