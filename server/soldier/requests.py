@@ -223,20 +223,18 @@ class Requests(Ticking):
         ev = np.flatnonzero(event)
         if len(ev):
             self.stats["events"] += len(ev)
-            changes = self._posture_changes(i[ev], imm[ev])
-            if changes.any():
-                self._start_changes(i[ev[changes]], t[ev[changes]])
-                ev = ev[~changes]
             cap = ev[stepping[ev] & ~imm[ev]] if self._settings.blend_time > 0 else ev[:0]
-            captured: dict[int, int] = {}
-            cj = cf = np.zeros(0, np.float32)
+            captured: dict[int, tuple[np.ndarray, np.ndarray]] = {}
             if len(cap):
                 cj, cf, _, _ = self._pose(i[cap])
-                captured = {int(s): k for k, s in enumerate(i[cap])}
+                captured = {int(s): (cj[k], cf[k]) for k, s in enumerate(i[cap])}
+            changes = self._posture_changes(i[ev], imm[ev])
+            if changes.any():
+                self._start_changes(i[ev[changes]], t[ev[changes]], captured)
+                ev = ev[~changes]
             for k in ev.tolist():
                 s = int(i[k])
-                c = captured.get(s)
-                self._on_event(s, float(t[k]), bool(imm[k]), None if c is None else (cj[c], cf[c]))
+                self._on_event(s, float(t[k]), bool(imm[k]), captured.get(s))
 
     def posture_change(self, index: int, posture: str, now: float) -> list[str]:
         """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing
