@@ -74,11 +74,12 @@ class Turning(ManagerCore):
         clip, turn = (self._pivot_clip if speedup != 1.0 else self._nearest_turn)(want)
         if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
             return False
-        rest = 0.0
-        if speedup != 1.0:  # a pivot turns by the clip's turn and a rest too small for another turn clip
-            rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
-            rest = rest if self._pivot_fits(clip, abs(rest)) else 0.0  # else another turn after (_pivot_clip)
-            speedup *= min(1.0, abs(turn) / abs(want))  # turning more, it turns no faster than the clip
+        # the turn turns by the clip's turn and a rest too small for another turn clip (a 58° turn after an
+        # end step: the 45° clip and 13° over its stances; it ended 13° off the heading); else another after
+        rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
+        rest = rest if self._pivot_fits(clip, abs(rest)) else 0.0
+        if speedup != 1.0:  # a pivot: turning more, it turns no faster than the clip
+            speedup *= min(1.0, abs(turn) / abs(want))
         step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, self._home, self._home)
         tb.blend_len[i] = 0.0
         tb.mode[i] = _TRANSITION
