@@ -245,10 +245,11 @@ def turned(run: dict[str, np.ndarray], t0: float, t1: float) -> float:
 def test_a_side_stepping_figure_turns_about_the_foot_that_alone_is_down(
     lib, side: float, turn: float
 ) -> None:
-    """A side-step's feet shuffle flat, never on one sole point alone: it turns while one foot alone is down,
-    about that foot's centre, at most 10° a stance (root_motion.side_turns), and a turn in place finishes
-    the heading after the stop. Every planted point stays within 2 cm (it was 8.9-11.8 cm at 30°, 11.6-17 at
-    45°, 21-31 at 90°: the body turned at 90°/s about the root, twisting both feet)."""
+    """A side-step's feet shuffle flat, never on one sole point alone: below 45° it turns while one foot
+    alone is down, about that foot's centre, at most 10° a stance (root_motion.side_turns); from 45° it
+    stops, pivots (turning.SIDE_REVERSAL_DEG), then side-steps on. Every planted point stays within 2 cm (it
+    was 8.9-11.8 cm at 30°, 11.6-17 at 45°, 21-31 at 90°: the body turned at 90°/s about the root, twisting
+    both feet), and the stop ends near the entity (20-60 cm; turned 10° a stance at 90°, 1.0-1.2 m)."""
     script = [(0.0, 0.0, 0.0), (0.5, 0.3, side), (3.0, 0.3, side, 40.0 + turn), (7.0, 0.0, 0.0)]
     run = drive(lib, script, heading=40.0, until=10.0)
     assert any("sidestep_" in c for c in run["clips"].tolist())
@@ -256,6 +257,7 @@ def test_a_side_stepping_figure_turns_about_the_foot_that_alone_is_down(
     slides = skates(run, 2.5, 10.0)
     assert slides and max(s for s, _ in slides) <= SKATE_CM, sorted(slides)[-3:]
     assert abs(turned(run, 2.9, 10.0) - turn) < 5.0
+    assert np.linalg.norm(run["gap"][-1]) < 70.0
 
 
 @pytest.mark.parametrize("turn", [90.0, -90.0])
