@@ -138,7 +138,8 @@ def test_a_near_reversal_pivots_too_its_rest_turned_about_the_planted_foot(lib, 
 
 def test_a_snap_during_the_pivot_ends_it(lib) -> None:  # type: ignore[no-untyped-def]
     """An ``immediate`` request while the figure pivots: it rests at once; the pivot's extra turn stops (a
-    standing turn in place may follow, as for any standing figure facing away from its heading)."""
+    standing turn in place may follow, as for any standing figure facing away from its heading, with its own
+    rest: what its clip turns too much, -3.3° here, not the pivot's -10°)."""
     m = SoldierManager(lib, throttle=0.0, record_clips=True)
     i = m.create_soldier(now=0.0)
     move(m, i, 0.5, 1.4, 0.0, heading=20.0)
@@ -150,4 +151,9 @@ def test_a_snap_during_the_pivot_ends_it(lib) -> None:  # type: ignore[no-untype
         i, Appearance.UPRIGHT, WeaponState.DEPLOYED, (0, 0, 0), 190.0, (0, 0, 0), True
     )
     m.apply_requests(rows, 6.0)
-    assert m.table.pivot_rest[i] == 0.0 and not m.table.reversing[i]
+    assert not m.table.reversing[i]
+    if "turn_r180" in m.soldier_info(i)["clip"]:  # the standing turn: its clip's 180° less where it faces
+        rest = (180.0 - float(m.table.root_yaw[i]) + 180.0) % 360.0 - 180.0
+        assert m.table.pivot_rest[i] == pytest.approx(rest) and abs(rest) < 10.0
+    else:
+        assert m.table.pivot_rest[i] == 0.0

@@ -16,7 +16,7 @@ from peabody.fk import FigureKinematics
 from peabody.quaternion import to_matrix
 from protocol.entity import Appearance, WeaponState, make_entity_requests
 from server.soldier.manager import REQUEST_OK, SoldierManager
-from server.soldier.root_motion import FRAME_TURN_DEG, feet_points, step_turns
+from server.soldier.root_motion import FRAME_TURN_DEG, SIDE_TURN_DEG, feet_points, side_turns, step_turns
 from tests.test_gait_selection import shipped_library
 
 HZ = 60.0
@@ -30,7 +30,12 @@ def lib():
 
 
 def drive(
-    lib, script: list[tuple[float, ...]], heading: float, until: float, weapon: str = "AK_47.fig"
+    lib,
+    script: list[tuple[float, ...]],
+    heading: float,
+    until: float,
+    weapon: str = "AK_47.fig",
+    appearance: Appearance = Appearance.UPRIGHT,
 ) -> dict[str, np.ndarray]:
     """Play ``(time, speed m/s, compass degrees of the velocity from the heading[, new heading])`` requests;
     return per tick the world positions of the sole points ``(n, feet, points, 2)`` (Performer X east, Y
@@ -54,7 +59,7 @@ def drive(
             a = math.radians(heading + angle)
             vel = speed * np.array([math.sin(a), math.cos(a)])
             rows = make_entity_requests(
-                i, Appearance.UPRIGHT, WeaponState.DEPLOYED, (*vel, 0.0), heading, (*pos, 0.0)
+                i, appearance, WeaponState.DEPLOYED, (*vel, 0.0), heading, (*pos, 0.0)
             )
             assert m.apply_requests(rows, now).tolist() == [REQUEST_OK]
         m.tick(now)
@@ -194,6 +199,18 @@ def test_a_stepping_figure_may_turn_only_while_one_sole_point_alone_is_down() ->
     assert np.allclose(about, points[:, 0, 1][:, [0, 2]])
 
 
+def test_a_side_step_may_turn_only_while_one_foot_alone_is_down() -> None:
+    """Five frames: both feet flat, then the right foot 5 cm up in frames 2-4. It may turn between frames 2-3
+    and 3-4 only (SIDE_TURN_DEG over that stance), about the middle of the left foot."""
+    points = np.zeros((5, 2, 2, 3))  # (frames, feet, heel/ball, XYZ cm)
+    points[..., 2] = [[[10.0, -10.0], [10.0, -10.0]]]
+    points[:, 1, :, 0] = 20.0
+    points[2:, 1, :, 1] = 5.0
+    turn, about = side_turns(points)
+    assert turn.tolist() == [0.0, 0.0, 0.0, SIDE_TURN_DEG / 2, SIDE_TURN_DEG]
+    assert np.allclose(about[2:], [0.0, 0.0])
+
+
 TURNS = [(1.4, a) for a in (30.0, 45.0, 60.0, 90.0, 110.0)] + [(3.5, 45.0), (3.5, 90.0), (3.0, 60.0)]
 
 
@@ -217,3 +234,40 @@ def test_a_heading_change_while_moving_turns_the_body_over_a_few_steps(
     assert not any("turn_" in c for c in run["clips"].tolist()[: int(8.0 * HZ)])
     assert abs((run["yaw"][int(7.9 * HZ)] - run["yaw"][int(3.9 * HZ)] - turn + 180.0) % 360.0 - 180.0) < 15.0
     assert np.linalg.norm(run["gap"][-1]) < 37.0 + 10.0
+
+
+def turned(run: dict[str, np.ndarray], t0: float, t1: float) -> float:
+    """Compass degrees the figure turned in the world from ``t0`` to ``t1`` s (-180..180)."""
+    return float((run["yaw"][int(t1 * HZ)] - run["yaw"][int(t0 * HZ)] + 180.0) % 360.0 - 180.0)
+
+
+@pytest.mark.parametrize(("side", "turn"), [(s, a) for s in (90.0, -90.0) for a in (30.0, -45.0, 90.0)])
+def test_a_side_stepping_figure_turns_about_the_foot_that_alone_is_down(
+    lib, side: float, turn: float
+) -> None:
+    """A side-step's feet shuffle flat, never on one sole point alone: below 45° it turns while one foot
+    alone is down, about that foot's centre, at most 10° a stance (root_motion.side_turns); from 45° it
+    stops, pivots (turning.SIDE_REVERSAL_DEG), then side-steps on. Every planted point stays within 2 cm (it
+    was 8.9-11.8 cm at 30°, 11.6-17 at 45°, 21-31 at 90°: the body turned at 90°/s about the root, twisting
+    both feet), and the stop ends near the entity (20-60 cm; turned 10° a stance at 90°, 1.0-1.2 m)."""
+    script = [(0.0, 0.0, 0.0), (0.5, 0.3, side), (3.0, 0.3, side, 40.0 + turn), (7.0, 0.0, 0.0)]
+    run = drive(lib, script, heading=40.0, until=10.0)
+    assert any("sidestep_" in c for c in run["clips"].tolist())
+    assert yaw_steps(run).max() <= 6.0
+    slides = skates(run, 2.5, 10.0)
+    assert slides and max(s for s, _ in slides) <= SKATE_CM, sorted(slides)[-3:]
+    assert abs(turned(run, 2.9, 10.0) - turn) < 5.0
+    assert np.linalg.norm(run["gap"][-1]) < 70.0
+
+
+@pytest.mark.parametrize("turn", [90.0, -90.0])
+def test_turn_and_stop_in_one_request_ends_facing_the_heading(lib, turn: float) -> None:
+    """Turned 90° and stopped in the same request, the walker turns over the end step, then the turn in place
+    that fits turns the rest, more or less than its clip over its stances (it ended 13° off the heading: the
+    45° clip for a 58° rest). No planted point slides 2 cm, no snap."""
+    script = [(0.0, 0.0, 0.0), (0.5, 1.4, 0.0), (4.0, 0.0, 0.0, 40.0 + turn)]
+    run = drive(lib, script, heading=40.0, until=9.0)
+    assert yaw_steps(run).max() <= 6.0
+    slides = skates(run, 3.5, 9.0)
+    assert slides and max(s for s, _ in slides) <= SKATE_CM, sorted(slides)[-3:]
+    assert abs(turned(run, 0.4, 9.0) - turn) < 3.0  # standing before and after

@@ -56,6 +56,7 @@ from server.soldier.root_motion import (
     feet_points,
     has_feet,
     linear_travel,
+    side_turns,
     single_support_share,
     stance_contact,
     stance_count,
@@ -283,6 +284,8 @@ class MotionLibrary:
         first = self.sets[0]
         sl = first.figure_slice(protofiletype(figure))
         stepping = {int(c) for c in self.loco_clip.ravel() if c >= 0}
+        sides = self.loco_clip[[LocoState.SIDESTEP_L, LocoState.SIDESTEP_R]].ravel()
+        side = {int(c) for c in sides if c >= 0}  # they turn in their single-support stances
         curves: list[np.ndarray] = []
         contacts: list[np.ndarray] = []
         shares: list[np.ndarray] = []
@@ -305,7 +308,7 @@ class MotionLibrary:
                 continue
             points = self._feet(kin, cid, sl)
             curves.append(stance_travel(points, self.sources[cid].stride_length))
-            turns[cid], contacts[-1] = step_turns(points)
+            turns[cid], contacts[-1] = (side_turns if cid in side else step_turns)(points)
         return TravelTable(curves, contacts, shares, stances, turns)
 
     def _feet(self, kin: FigureKinematics, cid: int, sl: slice) -> np.ndarray:

@@ -38,6 +38,9 @@ STEER_FREE_CM = 10.0  # ... once more than this beside it, until it is within an
 STEER_MAX_DEG = 45.0
 LIFT_CM = 1.5  # a sole point this far above the clip's lowest at a frame is up (a foot is down within 1 cm)
 STEPPING = (2, 3)  # state.Mode.LOCO, Mode.CRAWL (plain ints: this module does not import the manager's enums)
+# a side-step's feet shuffle flat, never on one sole point alone: it turns while one foot alone is down, about
+# that foot's centre, which twists its heel and ball ~0.17 cm a degree (issue 16)
+SIDE_TURN_DEG = 10.0  # at most this much per single-support stance (1.7 cm at heel and ball)
 SHARE_FLOOR = 0.05  # a pivot's extra turn in double support, relative to single (no spurt of yaw between)
 FLIGHT_CM = 3.0  # a foot whose lowest sole point is this far above the clip's lowest carries no weight
 FLAT_CM = 1.0  # a carrying foot's sole points this near its lowest are all down: it turns about their middle
@@ -134,10 +137,7 @@ def step_turns(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     down = flat[..., 1] <= flat[..., 1].min() + LIFT_CM  # (n, feet * points)
     either = down[:-1] | down[1:]
     free = either.sum(axis=1) <= 1
-    weight = np.zeros(n - 1)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
-    for a, b in zip(edges[::2], edges[1::2], strict=True):  # each window [a, b) of free intervals
-        weight[a:b] = min(STEP_TURN_DEG / (b - a), FRAME_TURN_DEG)
+    turn = window_turns(free, STEP_TURN_DEG)
     contact = stance_contact(points)
     pivot = np.where(either.any(axis=1), either.argmax(axis=1), flat[:-1, :, 1].argmin(axis=1))
     for k in np.flatnonzero(free).tolist():  # the pivot, over the whole time it is down
@@ -148,7 +148,26 @@ def step_turns(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         while hi < n - 1 and down[hi + 1, p]:
             hi += 1
         contact[lo : hi + 1] = flat[lo : hi + 1, p][:, [0, 2]]
-    return np.concatenate([[0.0], np.cumsum(weight)]), contact
+    return turn, contact
+
+
+def window_turns(free: np.ndarray, degrees: float) -> np.ndarray:
+    """``(n,)`` cumulative degrees by each frame: ``degrees`` spread over each window of consecutive ``free``
+    frame intervals (``(n-1,)``), FRAME_TURN_DEG an interval at most."""
+    weight = np.zeros(len(free))
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):  # each window [a, b) of free intervals
+        weight[a:b] = min(degrees / (b - a), FRAME_TURN_DEG)
+    return np.concatenate([[0.0], np.cumsum(weight)])
+
+
+def side_turns(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(n,)`` cumulative degrees a side-stepping figure may turn by each frame, and ``(n, 2)`` the point
+    (X, Z cm) it turns about: SIDE_TURN_DEG spread over each stance where one foot alone is down
+    (:func:`single_support`), about the middle of that foot's sole points (:func:`stance_contact`). Turned at
+    TURN_RATE about the root through the shuffle, its feet twisted 9-13 cm at a 30° heading change."""
+    single = single_support(points)
+    return window_turns(single[:-1] & single[1:], SIDE_TURN_DEG), stance_contact(points)
 
 
 def stance_travel(points: np.ndarray, stride: float | None = None) -> np.ndarray:
@@ -211,8 +230,8 @@ class TravelTable:
             -1, 2
         )
         self.ahead = self.paced & (self.total[:, 1] < -np.abs(self.total[:, 0]))
-        # a side-step has no such window (its feet shuffle flat): it turns at TURN_RATE, twisting them; an end
-        # step has none either: a forwards one does not turn (a turn in place follows if it must)
+        # a side-step turns in its single-support stances (:func:`side_turns`); an end step has no window: a
+        # forwards one does not turn (a turn in place follows if it must)
         self.paced &= self.ahead | np.array([t is not None and len(t) > 0 and t[-1] > 0 for t in turns], bool)
 
     def at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:

@@ -31,8 +31,12 @@ from server.soldier.core import (
     ManagerCore,
 )
 from server.soldier.library import PathStep
+from server.soldier.state import LocoState
 
 REVERSAL_DEG = 120.0  # a walking figure this far from its new heading stops, pivots and walks away
+# ... a side-stepping one already this far: it turns 10° a stance (root_motion.side_turns), side-stepping
+# meanwhile the old way: a 90° heading change left it 1.0-1.2 m from its entity after the stop
+SIDE_REVERSAL_DEG = 45.0
 BACKWARD_MAX_SPEED = 1.0  # m/s: a velocity straight back faster than people walk backwards is walked forwards
 BACKWARD_HYSTERESIS = 0.2  # m/s: walking away forwards, he faces his velocity down to the limit - this
 # a pivot may turn more or less than its clip, about the flat carrying foot while one foot alone is down: at
@@ -62,7 +66,10 @@ class Turning(ManagerCore):
         loco = mode == _LOCO
         if self.library.turn_clips and loco.any():
             i = idx[loco]
-            self.table.reversing[i] = np.abs(self.table.root_yaw[i]) >= REVERSAL_DEG
+            loco = self.table.loco[i]
+            side = (loco == LocoState.SIDESTEP_L) | (loco == LocoState.SIDESTEP_R)
+            limit = np.where(side, SIDE_REVERSAL_DEG, REVERSAL_DEG)
+            self.table.reversing[i] = np.abs(self.table.root_yaw[i]) >= limit
 
     def _turn(self, i: int, t: float, speedup: float = 1.0) -> bool:
         """A standing soldier whose figure faces away from its heading plays the turn in place that fits
@@ -74,11 +81,12 @@ class Turning(ManagerCore):
         clip, turn = (self._pivot_clip if speedup != 1.0 else self._nearest_turn)(want)
         if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
             return False
-        rest = 0.0
-        if speedup != 1.0:  # a pivot turns by the clip's turn and a rest too small for another turn clip
-            rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
-            rest = rest if self._pivot_fits(clip, abs(rest)) else 0.0  # else another turn after (_pivot_clip)
-            speedup *= min(1.0, abs(turn) / abs(want))  # turning more, it turns no faster than the clip
+        # the turn turns by the clip's turn and a rest too small for another turn clip (a 58° turn after an
+        # end step: the 45° clip and 13° over its stances; it ended 13° off the heading); else another after
+        rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
+        rest = rest if self._pivot_fits(clip, abs(rest)) else 0.0
+        if speedup != 1.0:  # a pivot: turning more, it turns no faster than the clip
+            speedup *= min(1.0, abs(turn) / abs(want))
         step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, self._home, self._home)
         tb.blend_len[i] = 0.0
         tb.mode[i] = _TRANSITION
