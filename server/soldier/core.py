@@ -225,6 +225,24 @@ class ManagerCore:
         root_motion.rebase1(tb, self.library, i)
         self._record(i, t)
 
+    def _play_steps(self, idx: np.ndarray, steps: list[PathStep], t: np.ndarray) -> None:
+        """:meth:`_play_step` of soldiers whose figure faces its heading (``root_yaw`` 0), one step each, at
+        once: what it stores, bit for bit."""
+        tb = self.table
+        root_motion.fold_unturned(tb, self.library, idx, t)
+        tb.stride[idx] = 1.0
+        tb.pivot_rest[idx] = 0.0
+        tb.clip[idx] = [s.clip for s in steps]
+        tb.direc[idx] = [1 if s.forward else -1 for s in steps]
+        tb.start[idx] = t
+        dur = np.maximum([s.duration for s in steps], MIN_CLIP_SECONDS)
+        tb.dur[idx] = dur
+        tb.end[idx] = t + dur
+        root_motion.rebase_exact(tb, self.library, idx)
+        if self._settings.record_clips:
+            for i, ti in zip(idx.tolist(), t.tolist(), strict=True):
+                self._record(i, ti)
+
     def _rest(self, i: int, node: int, t: float) -> None:
         """Show posture ``node``'s pose: its clip held at the frame that is that posture."""
         tb = self.table

@@ -18,6 +18,7 @@ from server.soldier.core import (
     MOVING_EPS,
 )
 from server.soldier.lead_in import LeadIn
+from server.soldier.library import PathStep
 from server.soldier.locomotion import (
     conditions,
     is_fast,
@@ -46,6 +47,56 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         # a posture with variant nodes (DEAD@...): the variant nearest from here (table lookup)
         return int(self.library.goal_node[int(tb.node[i]), goal]) if goal >= 0 else goal
 
+    def _desired_many(self, idx: np.ndarray) -> np.ndarray:
+        """:meth:`_desired` of soldiers ``idx`` (table lookups over arrays)."""
+        tb = self.table
+        app = tb.appearance[idx].astype(np.int64)
+        kind = np.where(tb.speed[idx] > MOVING_EPS, self._move[app], 0).astype(np.int64)
+        goal = self._goal[app, (tb.weapon[idx] == _FIRING).astype(np.int64)].astype(np.int64)
+        variant = self.library.goal_node[tb.node[idx].astype(np.int64), np.maximum(goal, 0)]
+        return np.where(kind != 0, self._base[kind], np.where(goal >= 0, variant, goal)).astype(np.int64)
+
+    def _posture_changes(self, idx: np.ndarray, immediate: np.ndarray) -> np.ndarray:
+        """Which events of soldiers ``idx`` ask a resting soldier for another posture (the common event: its
+        :meth:`_decide` starts a path; :meth:`_start_changes` does them at once)."""
+        desired = self._desired_many(idx)
+        mode = self.table.mode[idx]
+        decides = ~immediate & ((mode == _IDLE) | (mode == _LOCO) | (mode == _CRAWL))
+        return decides & (desired >= 0) & (desired != self.table.node[idx])
+
+    def _start_changes(
+        self, idx: np.ndarray, t: np.ndarray, captured: dict[int, tuple[np.ndarray, np.ndarray]]
+    ) -> None:
+        """:meth:`_on_event` of soldiers asked for another posture, at once: a stepping one's step cancelled
+        (``captured``: the poses to fade from), then per soldier only the path lookup; the first arcs start
+        in one :meth:`_play_steps`."""
+        tb = self.table
+        mode = tb.mode[idx]
+        cancelled = np.flatnonzero((mode == _LOCO) | (mode == _CRAWL))
+        for k in cancelled.tolist():
+            s = int(idx[k])
+            self._cancel_step(s, float(t[k]), captured.get(s))
+        tb.dirty[idx] = True
+        tb.root_yaw[idx] = 0.0  # a posture change faces the heading (no turn clips off STAND_STOWED)
+        go: list[int] = []
+        first: list[PathStep] = []
+        for k, (node, goal) in enumerate(
+            zip(tb.node[idx].tolist(), self._desired_many(idx).tolist(), strict=True)
+        ):
+            steps = self.library.path(node, goal)
+            if not steps:
+                self.stats["unreachable"] += 1
+                if k in set(cancelled.tolist()):  # nowhere to go: rest in the base posture
+                    self._rest(int(idx[k]), node, float(t[k]))
+                continue
+            self._paths[int(idx[k])] = [steps, 0]
+            go.append(k)
+            first.append(steps[0])
+        if go:
+            g = idx[go]
+            tb.mode[g] = _TRANSITION
+            self._play_steps(g, first, t[go])
+
     def _on_event(
         self, i: int, t: float, immediate: bool, captured: tuple[np.ndarray, np.ndarray] | None
     ) -> None:
@@ -58,20 +109,24 @@ class Events(Stepping, Turning, Reactions, LeadIn):
             desired = self._desired(i)
             if desired == int(tb.node[i]) or desired < 0:
                 return  # same base posture: the gait goes on (Figure 5 handles speed and direction)
-            # cancel the step: fade from the pose shown now into whatever starts next
-            if captured is not None:
-                tb.blend_joints[i], tb.blend_figs[i] = captured
-                tb.blend_t0[i] = t
-                tb.blend_len[i] = self._settings.blend_time
-            tb.mode[i] = _IDLE
-            tb.loco[i] = _NONE
-            self._record(i, t, "cancel")
+            self._cancel_step(i, t, captured)
             self._decide(i, t)
             if tb.mode[i] == _IDLE:  # nowhere to go: rest in the base posture
                 self._rest(i, int(tb.node[i]), t)
             return
         if mode == _IDLE:
             self._decide(i, t)
+
+    def _cancel_step(self, i: int, t: float, captured: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Cancel the step: fade from the pose shown now (``captured``) into whatever starts next."""
+        tb = self.table
+        if captured is not None:
+            tb.blend_joints[i], tb.blend_figs[i] = captured
+            tb.blend_t0[i] = t
+            tb.blend_len[i] = self._settings.blend_time
+        tb.mode[i] = _IDLE
+        tb.loco[i] = _NONE
+        self._record(i, t, "cancel")
 
     def _snap(self, i: int, t: float) -> None:
         """``immediate``: jump to the goal posture's pose (no path, no fade)."""

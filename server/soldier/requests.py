@@ -107,6 +107,10 @@ class Requests(Ticking):
             rev = ok[::-1]
             _, first = np.unique(idx[rev], return_index=True)
             ok = np.sort(rev[first])
+        keep = self._changing(idx[ok], app[ok], wpn[ok], imm[ok], vel[ok], hdg[ok], pos[ok])
+        if not keep.any():
+            return status
+        ok = ok[keep]
         i = idx[ok]
         app, wpn, imm, vel, hdg, pos = app[ok], wpn[ok], imm[ok].astype(bool), vel[ok], hdg[ok], pos[ok]
         if not self._settings.every_frame:
@@ -178,6 +182,39 @@ class Requests(Ticking):
         self._skip_lead_in(i[event | hp], t[event | hp])
         return status
 
+    def _changing(
+        self,
+        i: np.ndarray,
+        app: np.ndarray,
+        wpn: np.ndarray,
+        imm: np.ndarray,
+        vel: np.ndarray,
+        hdg: np.ndarray,
+        pos: np.ndarray,
+    ) -> np.ndarray:
+        """The requests that change more than the position: a DIS entity re-sent unchanged (a heartbeat, the
+        common case) only moves its entity, so its position is stored here and the rest of the request path
+        (the clock, clip ends, root offset fold) is left to the next tick, as if it had not come. Rows of
+        soldiers whose figure is off its heading (turning, steering, reversing) or an idle one asked to move
+        go the whole way (their request re-decides something)."""
+        tb = self.table
+        speed = np.hypot(vel[:, 0], vel[:, 1])
+        same = (
+            (imm == 0)
+            & (app == tb.appearance[i])
+            & (wpn == tb.weapon[i])
+            & (hdg == tb.heading[i])
+            & (speed == tb.speed[i])
+            & (coords.vectors_performer_to_jack(vel).astype(np.float32) == tb.velocity[i]).all(1)
+            & tb.has_heading[i]
+            & (tb.root_yaw[i] == 0.0)
+            & ~tb.reversing[i]
+            & ~((tb.mode[i] == _IDLE) & (speed > MOVING_EPS) & (self._move[app] != Movement.NONE))
+        )
+        if same.any():
+            tb.position[i[same]] = coords.points_performer_to_jack(pos[same])
+        return ~same
+
     def _events(
         self, i: np.ndarray, t: np.ndarray, event: np.ndarray, imm: np.ndarray, stepping: np.ndarray
     ) -> None:
@@ -187,15 +224,17 @@ class Requests(Ticking):
         if len(ev):
             self.stats["events"] += len(ev)
             cap = ev[stepping[ev] & ~imm[ev]] if self._settings.blend_time > 0 else ev[:0]
-            captured: dict[int, int] = {}
-            cj = cf = np.zeros(0, np.float32)
+            captured: dict[int, tuple[np.ndarray, np.ndarray]] = {}
             if len(cap):
                 cj, cf, _, _ = self._pose(i[cap])
-                captured = {int(s): k for k, s in enumerate(i[cap])}
+                captured = {int(s): (cj[k], cf[k]) for k, s in enumerate(i[cap])}
+            changes = self._posture_changes(i[ev], imm[ev])
+            if changes.any():
+                self._start_changes(i[ev[changes]], t[ev[changes]], captured)
+                ev = ev[~changes]
             for k in ev.tolist():
                 s = int(i[k])
-                c = captured.get(s)
-                self._on_event(s, float(t[k]), bool(imm[k]), None if c is None else (cj[c], cf[c]))
+                self._on_event(s, float(t[k]), bool(imm[k]), captured.get(s))
 
     def posture_change(self, index: int, posture: str, now: float) -> list[str]:
         """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing

@@ -249,6 +249,17 @@ class TravelTable:
         base = self.start[clip]
         return values[base + f0] * (1.0 - w) + values[base + f1] * w
 
+    def at_exact(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """:meth:`at1` over arrays, bit for bit (``v0 + (v1 - v0) w``, not :meth:`at`'s blend): the grouped
+        event paths store what the per-soldier one stored."""
+        clip = np.asarray(clip, np.int64)
+        last = np.maximum(self.nframes[clip] - 1, 0)
+        f = np.minimum(np.maximum(np.asarray(frame, np.float64), 0.0), last)
+        f0 = np.floor(f).astype(np.int64)
+        base = self.start[clip]
+        v0 = self.data[base + f0]
+        return v0 + (self.data[base + np.minimum(f0 + 1, last)] - v0) * (f - f0)[:, None]
+
     def at1(self, clip: int, frame: float) -> tuple[float, float]:
         """:meth:`at` for one clip and frame in scalar Python (the per-event paths)."""
         last = max(int(self.nframes[clip]) - 1, 0)
@@ -411,6 +422,22 @@ def fold1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> None:
     tb.root_off[i] = (ox + (tx - rx) * s - vx * dt, oz + (tz - rz) * s - vz * dt)
     tb.root_t[i] = t
     tb.root_ref[i] = (tx, tz)
+
+
+def fold_unturned(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray) -> None:
+    """:func:`fold1` of soldiers whose figure faces its heading (``root_yaw`` 0) at once, bit for bit."""
+    travel = lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, t))
+    dt = (t - tb.root_t[idx])[:, None]
+    tb.root_off[idx] = (
+        tb.root_off[idx] + (travel - tb.root_ref[idx]) * tb.stride[idx][:, None] - tb.vlocal[idx] * dt
+    )
+    tb.root_t[idx] = t
+    tb.root_ref[idx] = travel
+
+
+def rebase_exact(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
+    """:func:`rebase1` of soldiers ``idx`` at once, bit for bit."""
+    tb.root_ref[idx] = lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx]))
 
 
 def rebase1(tb: SoldierTable, lib: MotionLibrary, i: int) -> None:

@@ -1,0 +1,109 @@
+"""Property test: a batch of entity requests applied at once (posture-change starts grouped, unchanged
+re-sends skipped) leaves the same soldier table, paths and clip starts as its rows applied one by one through
+the per-soldier event path."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from protocol.coords import points_performer_to_jack
+from protocol.entity import make_entity_requests
+from server.soldier.manager import ClipStart, SoldierManager
+from server.soldier.synthetic import synthetic_motion_library
+from server.soldier.table import _COLUMNS
+
+LIB = synthetic_motion_library()
+SOLDIERS = 5
+HZ = 30.0
+
+row = st.tuples(
+    st.integers(0, SOLDIERS),  # soldier (SOLDIERS: never created)
+    st.integers(1, 5),  # appearance
+    st.integers(0, 2),  # weapon
+    st.sampled_from([0.0, 0.0, 0.5, 1.4, 2.9]),  # speed
+    st.sampled_from([0.0, 0.0, 30.0, 90.0, 180.0, 275.5]),  # heading
+    st.booleans(),  # backward
+    st.integers(0, 12),  # immediate when 0
+)
+
+
+def _rows(batch: list[tuple[int, int, int, float, float, bool, int]]) -> np.ndarray:
+    out = []
+    for idx, app, wpn, speed, heading, back, imm in batch:
+        h = np.radians(heading)
+        s = -speed if back else speed
+        out.append(
+            make_entity_requests(
+                idx, app, wpn, (s * np.sin(h), s * np.cos(h), 0.0), heading, (1, 2, 0), imm == 0
+            )
+        )
+    return np.concatenate(out)
+
+
+def _manager(one_by_one: bool) -> SoldierManager:
+    m = SoldierManager(LIB, throttle=0.0, tick_period=1 / HZ, record_clips=True)
+    if one_by_one:  # the reference: every event through the per-soldier path
+        m._posture_changes = lambda idx, imm: np.zeros(len(idx), bool)  # type: ignore[method-assign]
+    for _ in range(SOLDIERS):
+        m.create_soldier()
+    return m
+
+
+def _assert_same(a: SoldierManager, b: SoldierManager) -> None:
+    for name in (*_COLUMNS, "blend_joints", "blend_figs"):
+        np.testing.assert_array_equal(getattr(a.table, name), getattr(b.table, name), err_msg=name)
+    assert a._paths == b._paths
+
+    def by_soldier(m: SoldierManager) -> list[ClipStart]:
+        return sorted(m.clip_log, key=lambda c: (c.index, c.time))  # stable: each soldier's own order kept
+
+    assert by_soldier(a) == by_soldier(b)
+    timing = ("tick_seconds", "last_tick_seconds")
+    assert {k: v for k, v in a.stats.items() if k not in timing} == {
+        k: v for k, v in b.stats.items() if k not in timing
+    }
+
+
+@settings(deadline=None, max_examples=25)
+@given(st.lists(st.lists(row, min_size=1, max_size=8), min_size=1, max_size=3), st.integers(1, 12))
+def test_batch_applies_as_its_rows_one_by_one(batches, gap: int) -> None:
+    batched, single = _manager(False), _manager(True)
+    tick = 0
+    for batch in batches:
+        rows = _rows(batch)
+        now = (tick + 0.5) / HZ
+        status = batched.apply_requests(rows, now)
+        # when several rows name one soldier the last one wins: the reference applies only that one
+        last = {int(r["index"]): k for k, r in enumerate(rows)}
+        for k in sorted(last.values()):
+            single.apply_requests(rows[k : k + 1], now)
+        assert status.tolist() == [1 if r["index"] >= SOLDIERS else 0 for r in rows]
+        for m in (batched, single):
+            m.stats["requests"] = m.stats["requests_unknown"] = 0  # counted per row, duplicates included
+            m.answer(now, (tick + 1) / HZ)
+        _assert_same(batched, single)
+        for _ in range(gap):  # the soldiers step, change posture, end clips
+            tick += 1
+            batched.tick(tick / HZ)
+            single.tick(tick / HZ)
+        _assert_same(batched, single)
+
+
+def test_an_unchanged_resend_only_moves_the_entity() -> None:
+    m = _manager(False)
+    rows = _rows([(0, 2, 1, 1.4, 90.0, False, 3)])
+    m.apply_requests(rows, 0.1)
+    m.tick(1 / HZ)
+    m.tick(2 / HZ)
+    before = {name: getattr(m.table, name).copy() for name in _COLUMNS}
+    events = m.stats["events"]
+    rows["position"] = (5.0, 6.0, 0.0)
+    m.apply_requests(rows, 2.5 / HZ)
+    assert m.stats["events"] == events
+    assert not m.table.requested[0]
+    for name, was in before.items():
+        if name != "position":
+            np.testing.assert_array_equal(getattr(m.table, name), was, err_msg=name)
+    np.testing.assert_array_equal(m.table.position[0], points_performer_to_jack(np.array([5.0, 6.0, 0.0])))
