@@ -3,24 +3,27 @@
 The ragdoll leaves a face-down body on its toes, the ankles at soldier.fig's pointing limit (-50 deg), the
 heels 19-22 cm up. A dead prone body's legs roll outward (hip external rotation), each foot lying on its
 inner edge, heel low and turned in. Turned so where it lies, a leg rolls its thigh and drags its toes over
-the ground (:func:`authoring.dead_settle.limp_leg` could lower the heels only 1-2 cm that way). So each leg
-is **lifted, turned and laid down**: the shape that lays its heel lowest within the figure's limits, into
-no ground (:func:`turned_leg`, the legs' angles searched freely: hip, knee, ankle, toes), reached on a path
-(:func:`leg_path`) that first extends the hip (the knee and foot rise off the ground, :data:`LIFTS`),
-turns the leg in the air and lowers it into place, so the toes leave the ground and the foot lands, nothing
-skidding. A lift that would still slide a node on the ground (the thigh by the groin rolls) more than
-:data:`LEG_SLIDE_CM` is tried smaller and larger (:data:`LIFTS`); a leg no lift clears keeps the limp
-settle of :func:`authoring.dead_settle.limp_leg`.
+the ground (:func:`authoring.dead_settle.limp_leg` could lower the heels only 1-2 cm that way).
+
+The settle comes after the body has landed, so no leg may rise there (branch heels14b: lifted 4-8 deg of
+hip extension to turn, the lower legs rose ~15 cm a second after ststow2dead landed, a dead man kicking):
+each leg **rolls out with at most a small lift** (:data:`LIFTS`, 0-2 deg of hip extension), the hip's turn
+ahead of the knee and ankle (:data:`LEADS`), to the shape that lays its heel lowest (:func:`turned_leg`, the
+legs' angles searched freely: hip, knee, ankle, toes) **on that path**: no resting point (the heel and knee
+sites, the foot's and kneecap's lowest nodes, as :mod:`authoring.quality_rest` sees them) rising more than
+:data:`RISE_CM` above its lowest so far, no node on the ground sliding more than :data:`LEG_SLIDE_CM`, none
+into the ground. The lift and lead that lay the heel lowest are kept; a leg none of them lays lower than
+the limp settle of :func:`authoring.dead_settle.limp_leg` keeps that.
 
 soldier.fig's limits leave the heels 12.4-15.7 cm up (hip turned out 45 deg, foot everted 30 deg, ankle
-pointed 50 deg, the knee bent so the foot rests on its inner edge; or turned in 40 deg on the outer edge):
-the hip's 45 deg of outward turn keeps the foot off its side. A passive ankle range of 65 deg would give
-11.6-12.9 cm, and that with the hip turned out 60 deg 9.3-10.6 cm (measured on ststow2dead, prstow2dead).
+pointed 50 deg, the knee bent so the foot rests on its inner edge), but reaching that needs the foot lifted
+5-15 cm (heels14); rolled out within 2-3 cm they come to 15-19 cm (ststow2dead).
 """
 
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,56 +32,154 @@ from authoring import dead_settle as ds
 from authoring.body_parts import contact_runs
 from authoring.easing import _smoothstep
 from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
+from authoring.quality_rest import RISE_LIMIT_CM
 
 HIP_FLEX = 1  # of a leg's angles (ds.LEG_DOFS order): the hip's second bends it (negative: the knee rises)
+HIP_TURN = 2  # ... its third turns the leg about the thigh
+HIP_LEAD = 0.5  # of the settle: the hip's turn is done by then (rolled out first, the knee and ankle after)
+LEADS = (HIP_LEAD, 0.75)  # ... each tried
 # degrees, per leg angle: the target search's grid (hip abduction and flexion about the leg's own, None its
 # own angle); the hip turned both ways (soldier.fig: -45 out .. 40 in), the knee bent so the foot lies
 LEG_GRID = ((-8.0, 0.0, 8.0), (-5.0, 0.0, 5.0, 10.0, 15.0), (-45.0, -30.0, 0.0, 20.0, 40.0),
             tuple(float(k) for k in range(0, 41, 4)), (-50.0, -25.0), (-20.0, 0.0, 15.0, 30.0),
             (None, -40.0, 0.0))  # fmt: skip
 STARTS = 6  # the grid's best shapes a pattern search starts from (the hip turned out or in: two valleys)
-LIFTS = (6.0, 7.0, 5.0, 8.0, 4.0)  # degrees of hip extension that lift the leg clear, tried in this order
+# degrees of hip extension that lift the leg clear, each tried (its own target search) for the lowest heel:
+# 2 lifts the foot ~3 cm
+LIFTS = (0.0, 0.5, 1.0, 1.5, 2.0)
+RISE_CM = 2.1  # cm: the most a resting leg point (authoring.quality_rest) may rise above its lowest so far
+REST_SITES = ("foot.heel", "lower_leg.knee")  # as authoring.quality_rest sees them
+# cm: the settle's path (checked finer) stays this far under the check's rest_rise limit: the fall's last
+# bounce may have laid a point up to ~0.8 cm lower than where the physics leaves it (ststow2dead)
+RISE_MARGIN = 0.8
+SEARCH_STEPS = 12  # the path is checked at this many even steps while its target is searched
 FEET_UP_MARGIN = 2.0  # cm: the lifted foot stays this far under the check's feet_up_cm (foot over pelvis)
 LIFT_SPAN = 0.3  # of the settle: the leg rises over the first this much and comes down over the last
-LEG_SLIDE_CM = 1.5  # cm: the most a leg node on the ground may slide over the settle (the check allows 3
-# over a node's whole run on the ground; the thigh by the groin rolls a little as the hip turns)
+LEG_SLIDE_CM = 1.9  # cm: the most a leg node on the ground may slide over the settle (the check allows 2
+# (feet) and 3 over a node's whole run on the ground; the thigh by the groin rolls a little as it turns)
 PATH_STEPS = 48  # the path is checked at this many even steps of the settle
 
 
-def turned_leg(leg: ds._Leg) -> np.ndarray:
-    """The leg's angles that lay its heel lowest (the check's ``rest_foot_cm``), into no ground, the move
-    small: the best of :data:`LEG_GRID`, then a pattern search (no slide counted: :func:`leg_path` lifts
-    the leg clear)."""
+class _Rest:
+    """A leg's resting points as :mod:`authoring.quality_rest` sees them (the heel, toe, ball and knee sites,
+    the foot's and kneecap's lowest nodes): their heights for many shapes at once."""
+
+    def __init__(self, leg: ds._Leg) -> None:
+        kin, body = leg.kin, leg.body
+        side = kin.segment_names[leg.foot_seg].split("_", 1)[0]
+        g = kin.segment_globals(body.q, body.root)
+        sg = kin.site_globals(body.q, body.root)
+        names = [f"{side}_{s}" for s in REST_SITES if f"{side}_{s}" in kin.site_names]
+        self.segs = np.array([kin.segment_names.index(n.split(".", 1)[0]) for n in names])
+        self.local = np.array(
+            [
+                (np.linalg.inv(g[k]) @ sg[kin.site_names.index(n)])[:, 3]
+                for k, n in zip(self.segs, names, strict=True)
+            ]
+        )
+        self.kneecap = body.parts[leg.nodes] == f"{side}_kneecap"
+        self.leg = leg
+
+    def shape(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The leg's nodes ``(m, k, 3)`` and its resting points' heights ``(m, p)`` in shapes ``x``; the heel
+        site first."""
+        leg = self.leg
+        q = np.repeat(leg.body.q[None], len(x), axis=0)
+        q[:, leg.idx] = x
+        g = leg.kin.segment_globals(q, np.repeat(leg.body.root[None], len(x), axis=0))
+        pts = np.einsum("mkij,kj->mki", g[:, leg.body.segs[leg.nodes], :3, :], leg.body.nodes[leg.nodes])
+        sites = np.einsum("mkj,kj->mk", g[:, self.segs, 1, :], self.local)
+        lows = [pts[:, leg.foot, 1].min(axis=1)]
+        if self.kneecap.any():
+            lows.append(pts[:, self.kneecap, 1].min(axis=1))
+        return pts, np.column_stack([sites, *lows])
+
+
+def _shapes_cost(leg: ds._Leg, rest: _Rest) -> Callable[[np.ndarray], np.ndarray]:
+    """The heel's height where the leg lies in shapes ``x`` (the check's ``rest_foot_cm``), into no ground,
+    no resting point higher than it lay by more than :data:`RISE_CM`, the move small."""
+    y0 = rest.shape(leg.x0[None])[1][0]
 
     def cost(x: np.ndarray) -> np.ndarray:
-        pts, heel = leg._shape(x, 1.0)
-        high = np.maximum(heel, pts[:, leg.foot, 1].min(axis=1))
+        pts, ys = rest.shape(x)
+        high = np.maximum(ys[:, 0], pts[:, leg.foot, 1].min(axis=1))
         wrong = np.maximum(0.0, leg.floor - pts[..., 1].min(axis=1))
+        wrong += np.maximum(0.0, (ys - y0).max(axis=1) - RISE_CM)
         return high + ds.PENALTY * wrong + ds.MOVE_COST * np.degrees(np.abs(x - leg.x0)).sum(axis=1)
 
+    return cost
+
+
+def _path_cost(leg: ds._Leg, rest: _Rest, lift: float, lead: float) -> Callable[[np.ndarray], np.ndarray]:
+    """As :func:`_shapes_cost` for the target shapes ``x``, judged over the whole path (:func:`leg_path`
+    with ``lift``, at :data:`SEARCH_STEPS`): no resting point rises more than :data:`RISE_CM` above its
+    lowest so far, no node on the ground slides more than :data:`LEG_SLIDE_CM`, none goes into the ground."""
+    t = np.arange(1, SEARCH_STEPS + 1) / SEARCH_STEPS
+    pts0, y0 = rest.shape(leg.x0[None])
+
+    def cost(x: np.ndarray) -> np.ndarray:
+        m, steps = len(x), len(t)
+        pts, ys = rest.shape(paths(leg, x, t, lift, lead).reshape(m * steps, -1))
+        at = np.concatenate(
+            [np.repeat(pts0[None], m, axis=1), pts.reshape(m, steps, *pts.shape[1:]).transpose(1, 0, 2, 3)]
+        )
+        ys = np.concatenate([np.repeat(y0[None], m, axis=0), ys.reshape(m, steps, -1)], axis=1)
+        wrong = np.maximum(0.0, leg.floor - at[..., 1].min(axis=(0, 2)))
+        slid = [contact_runs(at[:, i], CONTACT_HEIGHT_CM).slide.max(initial=0.0) for i in range(m)]
+        wrong += np.maximum(0.0, np.array(slid) - LEG_SLIDE_CM)
+        wrong += np.maximum(0.0, (ys - np.minimum.accumulate(ys, axis=1)).max(axis=(1, 2)) - RISE_CM)
+        high = np.maximum(ys[:, -1, 0], at[-1][:, leg.foot, 1].min(axis=1))
+        return high + ds.PENALTY * wrong + ds.MOVE_COST * np.degrees(np.abs(x - leg.x0)).sum(axis=1)
+
+    return cost
+
+
+def turned_leg(leg: ds._Leg, lift: float, lead: float = HIP_LEAD, rest: _Rest | None = None) -> np.ndarray:
+    """The leg's angles that lay its heel lowest (the check's ``rest_foot_cm``), into no ground, reached on
+    :func:`leg_path` with ``lift`` no resting point rising more than :data:`RISE_CM` and nothing on the
+    ground sliding: the best of :data:`LEG_GRID` where it lies, then a pattern search over the path."""
+    rest = rest or _Rest(leg)
     grid = np.array(list(itertools.product(*LEG_GRID)), dtype=np.float64)
     grid = np.where(np.isnan(grid), leg.x0, np.radians(grid))
     grid[:, :2] += leg.x0[:2]
     grid = np.clip(grid, leg.kin.lower[leg.idx], leg.kin.upper[leg.idx])
-    starts = grid[np.argsort(cost(grid), kind="stable")[:STARTS]]
+    end_cost = _shapes_cost(leg, rest)
+    starts = [
+        ds.pattern_search(leg, end_cost, x[None])
+        for x in grid[np.argsort(end_cost(grid), kind="stable")[:STARTS]]
+    ]
+    cost = _path_cost(leg, rest, lift, lead)
     shapes = np.array([ds.pattern_search(leg, cost, x[None]) for x in starts])
     return shapes[int(np.argmin(cost(shapes)))]
 
 
-def progress(t: np.ndarray, lift: float) -> tuple[np.ndarray, np.ndarray]:
-    """At ``t`` in [0, 1] of the settle: how far the leg has turned (eased between the lift and the landing)
-    and how far (radians) its hip is extended, up over the first :data:`LIFT_SPAN` and down over the last."""
-    turn = _smoothstep((t - LIFT_SPAN / 2) / (1.0 - LIFT_SPAN))
+def progress(t: np.ndarray, lift: float, lead: float = HIP_LEAD) -> tuple[np.ndarray, np.ndarray]:
+    """At ``t`` in [0, 1] of the settle: how far each of the leg's angles has gone ``(len(t), 7)`` (eased; the
+    hip's turn ahead, done by ``lead`` of the way, so the leg rolls out before the knee bends and
+    the foot everts) and how far (radians) its hip is extended, up over the first :data:`LIFT_SPAN` and
+    down over the last."""
+    turn = np.repeat(_smoothstep(t)[:, None], len(ds.LEG_GRID), axis=1)
+    turn[:, HIP_TURN] = _smoothstep(t / lead)
     up = _smoothstep(np.minimum(t, 1.0 - t) / LIFT_SPAN)
     return turn, np.radians(lift) * up
 
 
-def leg_path(leg: ds._Leg, target: np.ndarray, t: np.ndarray, lift: float) -> np.ndarray:
-    """The leg's angles at ``t`` of the settle: lifted by ``lift`` degrees of hip extension, turned, laid."""
-    turn, up = progress(t, lift)
-    x = leg.x0[None] + turn[:, None] * (target - leg.x0)[None]
-    x[:, HIP_FLEX] -= up
+def paths(
+    leg: ds._Leg, targets: np.ndarray, t: np.ndarray, lift: float, lead: float = HIP_LEAD
+) -> np.ndarray:
+    """The leg's angles ``(m, len(t), 7)`` at ``t`` of the settle to each of ``targets``: lifted by ``lift``
+    degrees of hip extension, rolled out, laid."""
+    turn, up = progress(t, lift, lead)
+    x = leg.x0[None, None] + turn[None] * (targets - leg.x0)[:, None, :]
+    x[..., HIP_FLEX] -= up[None]
     return x
+
+
+def leg_path(
+    leg: ds._Leg, target: np.ndarray, t: np.ndarray, lift: float, lead: float = HIP_LEAD
+) -> np.ndarray:
+    """The leg's angles at ``t`` of the settle to ``target`` (:func:`paths`)."""
+    return paths(leg, target[None], t, lift, lead)[0]
 
 
 def path_faults(leg: ds._Leg, path: np.ndarray) -> tuple[float, float, float]:
@@ -101,27 +202,43 @@ class LegSettle:
     leg: ds._Leg
     target: np.ndarray
     lift: float | None
+    lead: float = HIP_LEAD
 
     def path(self, t: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The leg's angles at ``t`` of the settle (the limp settle at progress ``u``)."""
         if self.lift is None:
             return self.leg.x0[None] + u[:, None] * (self.target - self.leg.x0)[None]
-        return leg_path(self.leg, self.target, t, self.lift)
+        return leg_path(self.leg, self.target, t, self.lift, self.lead)
+
+
+def path_rise(rest: _Rest, path: np.ndarray) -> tuple[float, float]:
+    """Over ``path`` (from the leg's pose where it lies): the most (cm) a resting point rises above its lowest
+    so far, and the check's ``rest_foot_cm`` of the leg at the end."""
+    pts, ys = rest.shape(np.vstack([rest.leg.x0[None], path]))
+    rise = float((ys - np.minimum.accumulate(ys, axis=0)).max())
+    return rise, max(float(ys[-1, 0]), float(pts[-1, rest.leg.foot, 1].min()))
 
 
 def leg_settle(body: ds._Body, side: str) -> LegSettle:
-    """The ``side`` leg turned (:func:`turned_leg`) with the first of :data:`LIFTS` that reaches it sliding
-    no node on the ground more than :data:`LEG_SLIDE_CM`, into no ground, the foot not lifted past the check's
-    ``feet_up_cm``; else the limp settle
+    """The ``side`` leg turned (:func:`turned_leg`) with whichever of :data:`LIFTS` lays its heel lowest,
+    no resting point rising more than :data:`RISE_CM`, no node on the ground sliding more than
+    :data:`LEG_SLIDE_CM`, into no ground; else (or if it lays the heel lower) the limp settle
     (:func:`authoring.dead_settle.limp_leg`)."""
     leg = ds._Leg(body, side)
-    target = turned_leg(leg)
+    rest = _Rest(leg)
     t = np.arange(1, PATH_STEPS + 1) / PATH_STEPS
-    for lift in LIFTS:
-        slide, deep, up = path_faults(leg, leg_path(leg, target, t, lift))
-        if slide <= LEG_SLIDE_CM and deep <= 0.0 and up <= THRESHOLDS["feet_up_cm"] - FEET_UP_MARGIN:
-            return LegSettle(leg, target, lift)
-    return LegSettle(leg, ds.limp_leg(body, side), None)
+    limp = ds.limp_leg(body, side)
+    best = LegSettle(leg, limp, None)
+    best_heel = path_rise(rest, limp[None])[1]
+    for lift, lead in itertools.product(LIFTS, LEADS):
+        target = turned_leg(leg, lift, lead, rest)
+        path = leg_path(leg, target, t, lift, lead)
+        slide, deep, up = path_faults(leg, path)
+        rise, heel = path_rise(rest, path)
+        ok = slide <= LEG_SLIDE_CM and deep <= 0.0 and up <= THRESHOLDS["feet_up_cm"] - FEET_UP_MARGIN
+        if ok and rise <= RISE_LIMIT_CM - RISE_MARGIN and heel < best_heel:
+            best, best_heel = LegSettle(leg, target, lift, lead), heel
+    return best
 
 
 def legs_path(body: ds._Body, t: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from authoring import dead_legs, dead_settle
 from authoring.body_parts import contact_runs
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
+from authoring.quality_rest import RISE_LIMIT_CM
 from peabody.loader import read_figure
 from ttes.paths import FIGURES
 
@@ -55,21 +56,22 @@ def test_the_legs_of_a_body_on_his_toes_go_limp(figs: FigureSet) -> None:
     assert runs.slide.max(initial=0.0) <= 2.0 * dead_settle.LEG_SLIDE_CM  # the check allows 2 cm a run
 
 
-def test_a_body_on_his_toes_lays_his_legs_turned_out_heels_down(figs: FigureSet) -> None:
-    """The legs are lifted clear, turned out and laid down (authoring/dead_legs.py): heels 21 cm up ->
-    at most the check's 15 cm, within soldier.fig's limits, the feet not in the ground, nothing on the ground
-    sliding and no joint jumping between frames of a 0.8 s settle."""
+def test_a_body_on_his_toes_rolls_his_legs_out_without_lifting_them(figs: FigureSet) -> None:
+    """The legs roll out after the body has landed (authoring/dead_legs.py): heels 21 cm up -> lower, within
+    soldier.fig's limits, the feet not in the ground, nothing on the ground sliding, no joint jumping between
+    frames of a 0.8 s settle, and no heel, knee or foot rising more than the check's 3 cm (less the margin for
+    the fall's last bounce) above its lowest so far (heels14b: lifted clear, the feet rose 13-15 cm)."""
     body = _on_his_toes(figs)
     kin = body.kin
     t = np.arange(1, 49) / 48.0
     settled = dead_legs.leg_settle(body, "left")  # the right one is its mirror image
     leg = settled.leg
     path = settled.path(t, t * t * (3.0 - 2.0 * t))
-    assert settled.lift is not None  # lifted clear, not the limp settle
     assert (path >= kin.lower[leg.idx] - 1e-9).all() and (path <= kin.upper[leg.idx] + 1e-9).all()
     pts, heel = leg._shape(np.vstack([leg.x0, path]), 1.0)
-    assert heel[0] > 18.0 and heel[-1] <= 15.0  # 21.3 -> 14.7 cm
-    assert pts[-1, leg.foot, 1].min() >= -0.05  # the foot lies on the ground, not in it
-    assert pts[..., 1].min() >= -0.05
+    assert heel[0] > 20.0 and heel[-1] <= heel[0] - 2.0  # 21.3 -> 18.2 cm (the limp settle wins here)
+    assert pts[..., 1].min() >= -0.05  # nothing into the ground
     assert contact_runs(pts, CONTACT_HEIGHT_CM).slide.max(initial=0.0) <= dead_legs.LEG_SLIDE_CM
     assert np.degrees(np.abs(np.diff(path, axis=0))).max() <= 20.0
+    rise, _ = dead_legs.path_rise(dead_legs._Rest(leg), path)
+    assert rise <= RISE_LIMIT_CM - dead_legs.RISE_MARGIN  # 2.2 cm: the foot rolls onto its side
