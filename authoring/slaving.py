@@ -350,8 +350,7 @@ class MasterSlavePair:
         shoulder's Euler angles jumped 20-28 degrees between frames near their pole while crawling), pulled
         towards the smoothed pose. DOFs no goal moves keep the master's
         angles; the first and last frames stay exactly :meth:`slave_pose`'s (a frame's solution alone), so
-        every clip meeting at a posture node is slaved to the same pose there (a death's, one that lets go at
-        ``release_frame``, faded into the track: :func:`_join_ends`)."""
+        every clip meeting at a posture node is slaved to the same pose there."""
         mk, sk = self.master_kin, self.slave_kin
         q = np.asarray(master_poses, dtype=np.float64)
         loc = np.asarray(master_locations, dtype=np.float64)
@@ -380,9 +379,6 @@ class MasterSlavePair:
         if release_frame is None:  # (a death's arms are flung, then blended into the copied angles)
             out = self._ease_leaps(out, start, goals, slave_loc)
         out = _let_go(out, start, release_frame)
-        if release_frame is None:  # (only the deaths' ends are faded in yet: other clips' data unchanged)
-            out[[0, -1]] = pose[[0, -1]]
-            return out, slave_loc
         return sk.clamp(_join_ends(out, pose)), slave_loc
 
     def _ease_leaps(
