@@ -30,10 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from authoring import crawl, crawl_prone, deaths, gait, postures, reactions, transitions, turns
-from authoring.easing import pin_end
 from authoring.motion import KeyPosture
 from authoring.quality_frames import FigureSet
-from authoring.slave_contacts import rest_slave_forearms, rest_slave_knees, tilt_onto_knees
+from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
 from authoring.slave_rest import rest_slave_trunk

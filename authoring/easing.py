@@ -61,17 +61,6 @@ def _smoothstep(x: np.ndarray) -> np.ndarray:
     return x * x * (3.0 - 2.0 * x)
 
 
-def pin_end(data: np.ndarray, frame: int, value: np.ndarray, frames: int) -> None:
-    """Set ``data[frame]`` (0 or -1) to ``value`` and carry the change into the clip over ``frames`` frames,
-    fading out smoothly (in place), so the end does not jump away from its neighbours."""
-    n = min(frames, len(data) // 2)
-    delta = value - data[frame]
-    fade = 1.0 - _smoothstep(np.arange(n) / n)  # 1 at the end, easing to 0
-    rows = np.arange(n) if frame == 0 else len(data) - 1 - np.arange(n)
-    data[rows] += (fade[:, None] * delta[None, :]).astype(data.dtype)
-    data[frame] = value
-
-
 def warp(n: int, fps: float, ramp_in: float, ramp_out: float) -> np.ndarray:
     """``(n,)`` source times (s) for the frames of a retimed clip of ``n`` frames: the rate ramps up from 0
     over ``ramp_in`` s and down to 0 over the last ``ramp_out`` s (smoothstep), constant in between, and the

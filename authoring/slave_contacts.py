@@ -27,7 +27,6 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from authoring import ik
-from authoring.easing import pin_end
 from authoring.postures import leg, segment_heights
 from authoring.quality_frames import FigureSet, play
 from authoring.rifle_swap import _smooth_above
@@ -373,6 +372,18 @@ def _smooth(offset: np.ndarray) -> np.ndarray:
         [np.repeat(offset[:1], SMOOTH_FRAMES, 0), offset, np.repeat(offset[-1:], SMOOTH_FRAMES, 0)]
     )
     return np.stack([np.convolve(pad[:, j], k, mode="valid") for j in range(offset.shape[1])], axis=1)
+
+
+def pin_end(data: np.ndarray, frame: int, value: np.ndarray, frames: int) -> None:
+    """Set ``data[frame]`` (0 or -1) to ``value`` and carry the change into the clip over ``frames`` frames,
+    fading out smoothly (in place), so the end does not jump away from its neighbours."""
+    n = min(frames, len(data) // 2)
+    delta = value - data[frame]
+    t = np.arange(n) / n
+    fade = 1.0 - t * t * (3.0 - 2.0 * t)  # 1 at the end, easing to 0
+    rows = np.arange(n) if frame == 0 else len(data) - 1 - np.arange(n)
+    data[rows] += (fade[:, None] * delta[None, :]).astype(data.dtype)
+    data[frame] = value
 
 
 def tilt_onto_knees(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:

@@ -51,7 +51,6 @@ from typing import Any
 import numpy as np
 
 from authoring import ik
-from authoring.easing import pin_end
 from authoring.slave_leaps import _gaussian, ease_leaps
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
@@ -379,7 +378,8 @@ class MasterSlavePair:
         if release_frame is None:  # (a death's arms are flung, then blended into the copied angles)
             out = self._ease_leaps(out, start, goals, slave_loc)
         out = _let_go(out, start, release_frame)
-        return sk.clamp(_join_ends(out, pose)), slave_loc
+        out[[0, -1]] = pose[[0, -1]]
+        return out, slave_loc
 
     def _ease_leaps(
         self, poses: np.ndarray, copied: np.ndarray, goals: list[ik.Goal], roots: np.ndarray
@@ -455,22 +455,6 @@ class MasterSlavePair:
         pose, loc = self.slave_pose(self.master_kin.neutral_pose(), self.master.location)
         self.slave_kin.set_pose(pose)
         self.slave.location = loc
-
-
-JOIN_FADE_FRAMES = 12  # a lone-solved end frame's difference from the track fades out over this many frames
-
-
-def _join_ends(tracked: np.ndarray, lone: np.ndarray) -> np.ndarray:
-    """``tracked`` ``(n >= 3, ndof)`` with its first and last frames set to the ``lone`` solves' and the
-    change carried into the clip over :data:`JOIN_FADE_FRAMES` (smoothstep). The track's first step from
-    a lone end still turns a wrist (prfire2dead: 0.066 rad, the DI's fingertips 1.1 cm in one frame, end
-    speed 0.66 m/s where the master's palm moves 0.01 cm), so the difference is taken from the track's next
-    frame (where the track would hold a clip that starts at rest), not from its end frame."""
-    out = tracked.copy()
-    for end, step in ((0, 1), (-1, -1)):
-        out[end] = out[end + step]
-        pin_end(out, end, lone[end], JOIN_FADE_FRAMES)
-    return out
 
 
 RELEASE_FADE_FRAMES = 12  # after the hands let go, the arm goals fade out over this many frames
