@@ -79,3 +79,23 @@ def test_goal_radius_stops_the_pull_inside_the_ball(pair: MasterSlavePair) -> No
     got = sk.site_globals(q, pair.slave.location)[sk.site_names.index("left_palm.palmcenter"), :3, 3]
     dist = np.linalg.norm(got - (site + up))
     assert 0.98 < dist < 1.02 and rep.max_position_error <= 0.02
+
+
+def _first_speed(kin, poses: np.ndarray, locs: np.ndarray, fps: float = 60.0) -> float:
+    """The fastest site's speed (m/s) over a clip's first three frame steps (the check's end speed)."""
+    p = kin.site_globals(poses[:4], locs[:4])[..., :3, 3]
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=-1).max() * fps / 100.0)
+
+
+# issue 14: the prone deaths' master starts at rest (0.46 m/s, its pelvis beginning to fall), but slave_clip's
+# first tracked frame turns the right wrist 0.066 rad from the lone-solved first frame (fingertips 1.1 cm in
+# one frame: prfire2dead 0.66 m/s, prstow2dead 0.54). Fading the lone end into the track (12 frames) gave
+# 0.47 / under 0.5 but took the palms 0.5 cm off the master's (kfire2dead) while fading: not yet fixed
+@pytest.mark.xfail(strict=True, reason="issue 14: slave_clip's first tracked step turns the wrist")
+@pytest.mark.parametrize("clip", ["prstow2dead", "prfire2dead"])
+def test_slave_of_a_master_at_rest_starts_at_rest(pair: MasterSlavePair, clip: str) -> None:
+    q, loc, release = _master(pair, clip)
+    pose, slave_loc = pair.slave_clip(q, loc, release)
+    master = _first_speed(pair.master_kin, q, loc)
+    assert master <= 0.5
+    assert _first_speed(pair.slave_kin, pose, slave_loc) <= max(0.5, master * 1.1)
