@@ -32,7 +32,7 @@ from authoring import dead_settle as ds
 from authoring.body_parts import contact_runs
 from authoring.easing import _smoothstep
 from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
-from authoring.quality_rest import RISE_LIMIT_CM
+from authoring.quality_rest import LEG_SITES, RISE_LIMIT_CM
 
 HIP_FLEX = 1  # of a leg's angles (ds.LEG_DOFS order): the hip's second bends it (negative: the knee rises)
 HIP_TURN = 2  # ... its third turns the leg about the thigh
@@ -48,7 +48,6 @@ STARTS = 6  # the grid's best shapes a pattern search starts from (the hip turne
 # 2 lifts the foot ~3 cm
 LIFTS = (0.0, 0.5, 1.0, 1.5, 2.0)
 RISE_CM = 2.1  # cm: the most a resting leg point (authoring.quality_rest) may rise above its lowest so far
-REST_SITES = ("foot.heel", "lower_leg.knee")  # as authoring.quality_rest sees them
 # cm: the settle's path (checked finer) stays this far under the check's rest_rise limit: the fall's last
 # bounce may have laid a point up to ~0.8 cm lower than where the physics leaves it (ststow2dead)
 RISE_MARGIN = 0.8
@@ -61,7 +60,7 @@ PATH_STEPS = 48  # the path is checked at this many even steps of the settle
 
 
 class _Rest:
-    """A leg's resting points as :mod:`authoring.quality_rest` sees them (the heel, toe, ball and knee sites,
+    """A leg's resting points as :mod:`authoring.quality_rest` sees them (the heel and knee sites,
     the foot's and kneecap's lowest nodes): their heights for many shapes at once."""
 
     def __init__(self, leg: ds._Leg) -> None:
@@ -69,7 +68,7 @@ class _Rest:
         side = kin.segment_names[leg.foot_seg].split("_", 1)[0]
         g = kin.segment_globals(body.q, body.root)
         sg = kin.site_globals(body.q, body.root)
-        names = [f"{side}_{s}" for s in REST_SITES if f"{side}_{s}" in kin.site_names]
+        names = [f"{side}_{s}" for s in LEG_SITES if f"{side}_{s}" in kin.site_names]
         self.segs = np.array([kin.segment_names.index(n.split(".", 1)[0]) for n in names])
         self.local = np.array(
             [

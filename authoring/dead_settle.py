@@ -346,13 +346,13 @@ def _grid_starts(kin, side: str, x0: np.ndarray, cost: Callable[[np.ndarray], fl
 
 def limp_target(figs: FigureSet, frames: ClipFrames, arms_fall: bool = False) -> np.ndarray | None:
     """The limp shape the last frame settles into, or None if the body neither lies on its front nor (if
-    ``arms_fall``) on its back."""
+    ``arms_fall``) on its back. Face down, the legs are left as they are: :func:`settle` lays them along
+    their own path (:func:`_legs_path`), so searching their end here too was done twice."""
     q, root, rifle = frames.poses[-1], frames.roots[-1], frames.rifles[-1]
     body = _Body(figs, q, root, rifle)
     target = q.copy()
     if _face_down(body.kin, q, root):
-        target[_dofs(body.kin, HEAD_DOFS)] = dropped_head(body)
-        target[_leg_dofs(body.kin)] = _legs_path(body, np.ones(1), np.ones(1))[0]
+        target[_dofs(body.kin, HEAD_DOFS)] = dropped_head(body)  # the legs: settle's own path
         return target
     if not (arms_fall and _face_up(body.kin, q, root)):
         return None

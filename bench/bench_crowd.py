@@ -15,10 +15,11 @@ import argparse
 import json
 import os
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.machine import Machine
 
 
 def main() -> int:
@@ -34,8 +35,7 @@ def main() -> int:
     from client_stub.crowd.app import CrowdConfig, run_crowd
 
     width, height = (int(v) for v in args.size.split("x"))
-    t0 = time.perf_counter()
-    load_before = os.getloadavg()
+    machine = Machine()
     runs = []
     plan = [(int(n), "offline") for n in args.soldiers.split(",")]
     if args.server:
@@ -58,9 +58,7 @@ def main() -> int:
         "renderer": "llvmpipe (EGL)",
         "fps": {f"{r['soldiers']}{'' if r['source'] == 'offline' else '_server'}": r["fps"] for r in runs},
         "runs": runs,
-        "cpus": os.cpu_count(),
-        "loadavg_before": [round(x, 2) for x in load_before],
-        "wall_s": round(time.perf_counter() - t0, 1),
+        **machine.facts(),
     }
     if args.json:
         print(json.dumps(out))

@@ -202,14 +202,14 @@ def in_process(
         server.tick(t / 30)
         c1 = time.process_time()
         missing = (rng.random(clients) < late) & (t > 30)
-        misses0, caught0 = (memo.misses, getattr(memo, "caught_up", 0)) if memo is not None else (0, 0)
+        misses0, caught0 = (memo.misses, memo.caught_up) if memo is not None else (0, 0)
         outs = [b"" if miss else s.take_output() for (s, _), miss in zip(pairs, missing, strict=True)]
         c2 = time.process_time()
         if t <= 30:
             continue  # warm-up: the first full updates, soldiers getting under way
         if memo is not None:
             encodes += memo.misses - misses0
-            caught += getattr(memo, "caught_up", 0) - caught0
+            caught += memo.caught_up - caught0
         tick_cpu += c1 - c0
         enc_cpu += c2 - c1
         for (_, c), data in zip(pairs, outs, strict=True):

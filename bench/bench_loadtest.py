@@ -17,10 +17,11 @@ import argparse
 import json
 import os
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.machine import Machine
 
 
 def main() -> int:
@@ -37,8 +38,7 @@ def main() -> int:
 
     from client_stub.loadtest.session import LoadTestConfig, run_loadtest
 
-    load_before = os.getloadavg()
-    t0 = time.perf_counter()
+    machine = Machine()
     cfg = LoadTestConfig(
         soldiers=args.start,
         clients=args.clients,
@@ -72,10 +72,8 @@ def main() -> int:
         "rate_hz": args.rate,
         "clients": args.clients,
         "server_synthetic_library": r["server"]["synthetic"],
-        "cpus": os.cpu_count(),
-        "loadavg_before": [round(x, 2) for x in load_before],
         "stages": stages,
-        "wall_s": round(time.perf_counter() - t0, 1),
+        **machine.facts(),
     }
     if args.json:
         print(json.dumps(out))

@@ -18,12 +18,13 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
+
+from bench.machine import Machine  # noqa: E402
 
 
 def shot(folder: Path | None, n: int, motion: str) -> dict[str, str]:
@@ -45,11 +46,11 @@ def main() -> int:
     from npm_support import TOOLS, npm_dir
 
     where = npm_dir("puppeteer-core")
-    if where is None or not Path("/usr/bin/chromium").is_file():
-        print("bench_web: needs node, npm (puppeteer-core) and /usr/bin/chromium", file=sys.stderr)
+    chromium = os.environ.get("CHROMIUM", "/usr/bin/chromium")  # as drive_web.js and tests/test_web.py
+    if where is None or not Path(chromium).is_file():
+        print(f"bench_web: needs node, npm (puppeteer-core) and {chromium}", file=sys.stderr)
         return 1
-    load_before = os.getloadavg()
-    t0 = time.perf_counter()
+    machine = Machine()
     cmd = [sys.executable, "-m", "ttes", "web", "--with-server", "--port", "0", "--json", "--seconds", "3600"]
     env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
     web = subprocess.Popen(
@@ -83,9 +84,7 @@ def main() -> int:
         "renderer": "headless Chromium, WebGL on SwiftShader (CPU)",
         "size": "800x600",
         "runs": runs,
-        "cpus": os.cpu_count(),
-        "loadavg_before": [round(x, 2) for x in load_before],
-        "wall_s": round(time.perf_counter() - t0, 1),
+        **machine.facts(),
     }
     if args.json:
         print(json.dumps(out))

@@ -395,9 +395,7 @@ class Connection:
         ``shared_encodes`` memo share the encode (:mod:`protocol.shared_encode`).
         """
         encoder = self._update_encoder(table)
-        idx = np.asarray(indices, np.int64).reshape(-1)
-        if len(idx) and (idx.min() < 0 or idx.max() >= self.max_soldiers):
-            raise LocalProtocolError(ErrorCode.BAD_VALUE, f"soldier index outside 0..{self.max_soldiers - 1}")
+        idx = self._soldier_indices(indices)
         keep = self._subscribed[idx]
         if not keep.all():
             idx, codes = idx[keep], np.asarray(codes)[keep]
@@ -426,7 +424,7 @@ class Connection:
         mask = self._subscribed.copy()
         mask[len(allowed) :] = False
         mask[: len(allowed)] &= allowed[: len(mask)]
-        idx = np.asarray(indices, np.int64).reshape(-1)
+        idx = self._soldier_indices(indices)
         keep = mask[idx]
         try:
             payloads = encoder.catch_up(
@@ -438,6 +436,13 @@ class Connection:
         if payloads is None:
             return None
         return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
+
+    def _soldier_indices(self, indices: np.ndarray) -> np.ndarray:
+        """``indices`` as int64, each a soldier this connection can hold (else BAD_VALUE, not IndexError)."""
+        idx = np.asarray(indices, np.int64).reshape(-1)
+        if len(idx) and (idx.min() < 0 or idx.max() >= self.max_soldiers):
+            raise LocalProtocolError(ErrorCode.BAD_VALUE, f"soldier index outside 0..{self.max_soldiers - 1}")
+        return idx
 
     def _update_encoder(self, table: int) -> UpdateEncoder:
         """The server's encoder of ``table``, once JOINT_UPDATES may be sent."""

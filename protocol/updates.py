@@ -474,7 +474,7 @@ class UpdateEncoder:
         if self.version >= 2:
             before = sc.get("enc.before", (len(idx), self._before.shape[1]), np.int32)
             np.take(self._before, idx, axis=0, out=before, mode="clip")
-            rows = self._rows_v2(q, last, before, known, changed, tick)
+            rows = predicted.encode_rows(self._plan.v2, q, last, before, known, changed, tick)
         else:
             rows = self._rows_v1(q, last, changed, known)
         payloads = self._chunks(idx, rows, tick, max_payload)
@@ -486,13 +486,6 @@ class UpdateEncoder:
             self._restart(idx, last, rows, tick)
         self._sent = idx
         return payloads
-
-    def _rows_v2(
-        self, q: np.ndarray, last: np.ndarray, before: np.ndarray, known: np.ndarray, changed: np.ndarray,
-        tick: int,
-    ) -> predicted.Rows:  # fmt: skip
-        """Version 2: per-entry widths of predicted residuals (:func:`predicted.encode_rows`)."""
-        return predicted.encode_rows(self._plan.v2, q, last, before, known, changed, tick)
 
     def _restart(self, idx: np.ndarray, last: np.ndarray, rows: predicted.Rows, tick: int) -> None:
         """Version 2: the prediction state after sending ``rows``: ``before`` is the code each soldier held

@@ -536,8 +536,9 @@ class TtesServer:
         with self.cpu("quantise"):
             changed = board.publish(update, self.world)
         self._published(board, changed)
-        if self._request_count() != self._requests_at_tick:
-            self._requests_seen = self._request_count()
+        seen = self._request_count()
+        if seen != self._requests_at_tick:
+            self._requests_seen = seen
             if self.on_publish is None:
                 self._take_up(update.now)
             else:  # a shard's batches count a tick's publishes: its answer after the tick, as before

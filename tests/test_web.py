@@ -21,6 +21,7 @@ import trio
 import trio.testing
 from npm_support import TOOLS, npm_dir
 
+from client_stub.link.spawn import free_port
 from client_stub.web.site import Site
 from client_stub.web.vendor import vendored
 
@@ -316,14 +317,6 @@ def test_the_page_follows_a_dis_replay_coloured_by_force(tmp_path: Path, browser
         assert ours > 300 and theirs < ours / 10, (force, ours, theirs)
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def _start_server(port: int, ws_port: int, env: dict[str, str]) -> subprocess.Popen[str]:
     cmd = [sys.executable, "-m", "ttes", "server", "--json"]  # the real data: starts in half the time
     cmd += ["--port", str(port), "--ws-port", str(ws_port)]
@@ -338,7 +331,7 @@ def test_the_page_binds_its_soldiers_again_after_a_server_restart(browser: dict[
     """The server goes away (SIGTERM: GOODBYE, close) and comes back on the same ports: the page retries with
     backoff, shakes hands again and binds its soldiers as they were (soldier 0 still asked to kneel)."""
     env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONUNBUFFERED": "1"}
-    port, ws_port = _free_port(), _free_port()
+    port, ws_port = free_port(), free_port()
     server = _start_server(port, ws_port, env)
     cmd = [
         sys.executable,

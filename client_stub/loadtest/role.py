@@ -39,7 +39,7 @@ def server_role(text: str | None) -> dict[str, Any]:
 
 
 def role_line(server: dict[str, Any]) -> str:
-    """The report's line for it: ``front-end of 2 shards (0 up, 1 on 0, gone)``, ``shard 1/2``, ``a single
+    """The report's line for it: ``front-end of 2 shards (0 up; 1 on 0, gone)``, ``shard 1/2``, ``a single
     server``, or ``unknown (no STATUS)``."""
     match server.get("role"):
         case "front-end":

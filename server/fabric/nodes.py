@@ -234,7 +234,7 @@ class FrontNode:
         server.status_note = self.describe
 
     def describe(self) -> str:
-        """The shards as STATUS shows them: ``shards 0 up, 1 on 0 (gone)``."""
+        """The shards as STATUS shows them: ``front-end of 2 shards: 0 up, 1 on 0 (gone)``."""
         parts = []
         for k in range(self.shards):
             where = "up" if self.route[k] == k else f"on {self.route[k]}"

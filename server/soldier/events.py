@@ -73,6 +73,7 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         tb = self.table
         mode = tb.mode[idx]
         cancelled = np.flatnonzero((mode == _LOCO) | (mode == _CRAWL))
+        was_stepping = set(cancelled.tolist())
         for k in cancelled.tolist():
             s = int(idx[k])
             self._cancel_step(s, float(t[k]), captured.get(s))
@@ -86,7 +87,7 @@ class Events(Stepping, Turning, Reactions, LeadIn):
             steps = self.library.path(node, goal)
             if not steps:
                 self.stats["unreachable"] += 1
-                if k in set(cancelled.tolist()):  # nowhere to go: rest in the base posture
+                if k in was_stepping:  # nowhere to go: rest in the base posture
                     self._rest(int(idx[k]), node, float(t[k]))
                 continue
             self._paths[int(idx[k])] = [steps, 0]

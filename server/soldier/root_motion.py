@@ -347,20 +347,19 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
     yaw = tb.root_yaw[idx]
     turning = (yaw != 0.0) & ((tb.mode[idx] == STEPPING[0]) | (tb.mode[idx] == STEPPING[1]))
     turning &= ~tb.reversing[idx]  # a reversing figure stops facing the old way, then pivots
-    if turning.any():
-        dt = np.maximum(np.asarray(t, np.float64) - tb.root_t[idx], 0.0)
-        rate = TURN_RATE * np.maximum(1.0, np.abs(yaw) / 90.0)  # a reversal turns faster (it walks away)
-        clip = tb.clip[idx]
-        was = lib.travel.turn_at(clip, frame_at(tb, lib, idx, tb.root_t[idx]))
-        free = np.minimum(np.abs(lib.travel.turn_at(clip, frames) - was), STEP_TURN_RATE * dt)
+    j = np.flatnonzero(turning)
+    if len(j):  # the turning rows alone (a walking crowd: few of them)
+        ti, fj, yj, oj = idx[j], frames[j], yaw[j], off[j]
+        dt = np.maximum(np.broadcast_to(np.asarray(t, np.float64), idx.shape)[j] - tb.root_t[ti], 0.0)
+        rate = TURN_RATE * np.maximum(1.0, np.abs(yj) / 90.0)  # a reversal turns faster (it walks away)
+        clip = tb.clip[ti]
+        was = lib.travel.turn_at(clip, frame_at(tb, lib, ti, tb.root_t[ti]))
+        free = np.minimum(np.abs(lib.travel.turn_at(clip, fj) - was), STEP_TURN_RATE * dt)
         step = np.where(lib.travel.paced[clip], free, rate * dt)
-        aim = steer(tb, lib, idx, off)
-        new = yaw - np.clip(yaw - aim, -step, step)
-        new = np.where(turning, new, yaw)
-        contact = lib.travel.contact_at(tb.clip[idx], frames)
-        pivot = off + yawed(contact, yaw)
-        off = pivot - yawed(contact, new)
-        tb.root_yaw[idx] = new
+        new = yj - np.clip(yj - steer(tb, lib, ti, oj), -step, step)
+        contact = lib.travel.contact_at(clip, fj)
+        off[j] = oj + yawed(contact, yj) - yawed(contact, new)  # about the sole point carrying the weight
+        tb.root_yaw[ti] = new
     tb.root_off[idx] = off
     tb.root_t[idx] = t
     tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
