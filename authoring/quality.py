@@ -66,6 +66,7 @@ import numpy as np
 from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
+from authoring.quality_rest import RISE_LIMIT_CM, rest_rise
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
 
@@ -94,6 +95,7 @@ THRESHOLDS: dict[str, float] = {
     "joint_limit_violations": 0.0,
     "max_frame_jump_deg": 20.0,
     "feet_up_cm": 20.0,
+    "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     **POSTURE_LIMITS,
 }
 POSTURE_KEYS = tuple(POSTURE_LIMITS)
@@ -215,11 +217,13 @@ def check_clip(
     direction: float | None = None,
     file: str | None = None,
     static_ends: tuple[bool, bool] | None = None,
+    ends_dead: bool = False,
 ) -> dict[str, Any]:
     """All per-clip metrics of one channelset (see the module docstring) and its pass/fail.
 
     ``static_ends``: whether the first and the last frame are static postures (speeds are checked there);
-    default: both for a static clip, neither for a locomotion clip."""
+    default: both for a static clip, neither for a locomotion clip. ``ends_dead``: the clip ends in DEAD, so
+    no leg or arm may rise once the body is down (:mod:`authoring.quality_rest`)."""
     frames = clip if isinstance(clip, ClipFrames) else play(clip, figures)
     cs = frames.channelset
     n = cs.nframes
@@ -333,6 +337,8 @@ def check_clip(
         dof = int(np.flatnonzero(rot)[col])
         joint = next(j for j, sl in kin.dof_slices.items() if sl.start <= dof < sl.stop)
         out["max_frame_jump_where"] = f"{joint}[{at}-{at + 1}]"
+    if ends_dead:
+        out.update(rest_rise(frames, figures))
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
     if locomotion:
         speed, stride = cs.ground_speed, cs.stride_length
@@ -407,6 +413,7 @@ def check_library(
                     "loco": loco,
                     "graphs": [],
                     "ends": [False] * 2,
+                    "dead": False,
                 },
             )
             if gpath.name not in row["graphs"]:
@@ -416,6 +423,7 @@ def check_library(
             ends = info[tokens[arc.channelset]]["ends"]
             ends[0] |= first in still
             ends[1] |= last in still
+            info[tokens[arc.channelset]]["dead"] |= last.split("@")[0] == "DEAD"
         loaded_graphs.append((loaded, tokens))
     played: dict[str, ClipFrames] = {}
     seen: dict[str, dict[str, Any]] = {}
@@ -423,8 +431,9 @@ def check_library(
         figures_for(row["cs"])
         played[key] = play(row["cs"], figset)
         seen[key] = check_clip(
-            played[key], figset, locomotion=row["loco"], file=row["file"], static_ends=tuple(row["ends"])
-        )
+            played[key], figset, locomotion=row["loco"], file=row["file"], static_ends=tuple(row["ends"]),
+            ends_dead=row["dead"],
+        )  # fmt: skip
         seen[key]["graphs"] = row["graphs"]
     continuity: list[dict] = []
     for loaded, tokens in loaded_graphs:

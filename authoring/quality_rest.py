@@ -1,13 +1,16 @@
-"""Resting parts do not rise after rest (issue 14): once a dead body's pelvis and chest are down, no foot,
-heel or knee lifts off where it lay.
+"""Resting parts do not rise after rest (issue 14): once a dead body's pelvis, chest and head are down, no
+foot, heel, knee or arm lifts off where it lay.
 
 A settle that lifted each leg 4-8 deg of hip extension to turn it out (heels 19-22 -> 14-16 cm) raised the
 lower legs ~15 cm a second after the body had landed (ststow2dead, 2.28-2.60 s): a dead man kicking. This
-measures, from the first frame where the pelvis and the chest (or belly) are down (each within
+measures, from the first frame where the pelvis, the chest (or belly) and the head are down (each within
 :data:`DOWN_CM` of its height at the last frame, and staying so), how far each leg point rises above the
-lowest it has been since (``rest_rise_cm``; the heel and knee sites, the lowest nodes of the foot and the
-kneecap). Used by tests/test_quality_rest.py and the leg settle (:mod:`authoring.dead_legs`); not yet a
-limit of ``ttes author check``: the physics' own rebounds in kfire2dead and kstow2dead rise 5.9 and 6.7 cm.
+lowest it has been since (``rest_rise_cm``; the heel and knee sites, the lowest nodes of the foot, the
+kneecap, the upper arm, forearm and hand). ``ttes author check`` holds every clip that ends in DEAD to it
+(:data:`RISE_LIMIT_CM`); the leg settle (:mod:`authoring.dead_legs`) searches within it. kfire2dead's right
+hand, laid over the head by the arm fall, rose 18.6 cm after he lay still: the contact sheet showed it, the
+check did not see it while it measured the legs alone. The head counts for rest: a prone death's arms are laid
+anew while the chest and head come down.
 """
 
 from __future__ import annotations
@@ -18,15 +21,16 @@ import numpy as np
 
 from authoring.quality_frames import ClipFrames, FigureSet
 
-DOWN_CM = 1.0  # cm: the pelvis and chest are down once within this of where they finally lie
-RISE_LIMIT_CM = 3.0  # cm: the most a resting leg point may rise above the lowest it has been since rest
+DOWN_CM = 1.0  # cm: pelvis, chest and head are down once within this of where they finally lie
+RISE_LIMIT_CM = 3.0  # cm: the most a resting leg or arm point may rise above its lowest since rest
 LEG_SITES = ("foot.heel", "lower_leg.knee")
 LEG_PARTS = ("foot", "knee", "kneecap")
-TORSO_PARTS = ("pelvis", "chest", "belly")
+ARM_PARTS = ("upper_arm", "forearm", "hand")
+TORSO_PARTS = ("pelvis", "chest", "belly", "head")
 
 
 def _heights(cf: ClipFrames, figures: FigureSet) -> dict[str, np.ndarray]:
-    """Per frame, the heights (cm) of the torso parts' lowest nodes and the legs' points."""
+    """Per frame, the heights (cm) of the torso's and head's lowest nodes and the legs' and arms' points."""
     body = max(cf.poses, key=lambda k: figures.kin[k].ndof)
     kin = figures.kin[body]
     nodes, segs = figures.nodes(body)
@@ -39,7 +43,7 @@ def _heights(cf: ClipFrames, figures: FigureSet) -> dict[str, np.ndarray]:
         if (parts == name).any():
             out[name] = y[:, parts == name].min(axis=1)
     for side in ("left", "right"):
-        for p in LEG_PARTS:
+        for p in LEG_PARTS + ARM_PARTS:
             if (parts == f"{side}_{p}").any():
                 out[f"{side}_{p}"] = y[:, parts == f"{side}_{p}"].min(axis=1)
         for s in LEG_SITES:
@@ -49,20 +53,21 @@ def _heights(cf: ClipFrames, figures: FigureSet) -> dict[str, np.ndarray]:
 
 
 def rest_frame(h: dict[str, np.ndarray]) -> int | None:
-    """The first frame from which the pelvis and chest (or belly) stay down (None: the body lacks them)."""
+    """The first frame from which the pelvis, chest (or belly) and head stay down (None: the body lacks the
+    pelvis or chest)."""
     torso = [h["pelvis"]] if "pelvis" in h else []
     chest = [h[p] for p in ("chest", "belly") if p in h]
     if not torso or not chest:
         return None
-    low = np.minimum.reduce(chest)
-    up = (torso[0] > torso[0][-1] + DOWN_CM) | (low > low[-1] + DOWN_CM)
+    down = [torso[0], np.minimum.reduce(chest)] + ([h["head"]] if "head" in h else [])
+    up = np.logical_or.reduce([y > y[-1] + DOWN_CM for y in down])
     late = np.flatnonzero(up)
     return 0 if len(late) == 0 else int(late[-1]) + 1
 
 
 def rise_after(h: dict[str, np.ndarray], start: int) -> tuple[float, str | None, int | None]:
-    """From frame ``start`` on: the most (cm) any leg point of ``h`` rises above its lowest since then, which
-    point and at which frame (0.0, None, None if none rises)."""
+    """From frame ``start`` on: the most (cm) any leg or arm point of ``h`` rises above its lowest since
+    then, which point and at which frame (0.0, None, None if none rises)."""
     best: tuple[float, str | None, int | None] = (0.0, None, None)
     for name, y in h.items():
         if name in TORSO_PARTS:
@@ -76,7 +81,7 @@ def rise_after(h: dict[str, np.ndarray], start: int) -> tuple[float, str | None,
 
 
 def rest_rise(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
-    """``rest_frame`` and, after it, the most (cm) any leg point rises above its lowest since then
+    """``rest_frame`` and, after it, the most (cm) any leg or arm point rises above its lowest since then
     (``rest_rise_cm``), which point and at which frame."""
     h = _heights(cf, figures)
     start = rest_frame(h)

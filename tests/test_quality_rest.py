@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from authoring.quality import check_clip
 from authoring.quality_frames import FigureSet, play
 from authoring.quality_rest import RISE_LIMIT_CM, rest_frame, rest_rise, rise_after
 from server.motion.cache import load_channelset
@@ -58,3 +59,13 @@ def test_a_dead_body_s_legs_do_not_rise_after_it_has_landed(clip: str, figures: 
     row = rest_rise(cf, figures)
     assert row["rest_frame"] is not None
     assert row["rest_rise_cm"] <= RISE_LIMIT_CM, row
+
+
+def test_the_check_sees_a_dead_hand_raised_after_he_lies_still(figures: FigureSet) -> None:
+    """kfire2dead's arm fall swings the right hand up over the head 1.2 s after the body lies still (the
+    contact sheet showed it, side view, 2.60 s): `ttes author check` measured the legs alone and missed it."""
+    cf = play(load_channelset(CHANNELSETS / "kfire2dead.chset.env"), figures)
+    row = check_clip(cf, figures, ends_dead=True)
+    assert row["rest_rise_part"] == "right_hand" and row["rest_rise_cm"] > 15.0, row["rest_rise_cm"]
+    assert "rest_rise_cm" in row["failures"]
+    assert "rest_rise_cm" not in check_clip(cf, figures)  # measured only for a clip that ends in DEAD
