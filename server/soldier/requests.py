@@ -226,7 +226,7 @@ class Requests(Ticking):
             cap = ev[stepping[ev] & ~imm[ev]] if self._settings.blend_time > 0 else ev[:0]
             captured: dict[int, tuple[np.ndarray, np.ndarray]] = {}
             if len(cap):
-                cj, cf, _, _ = self._pose(i[cap])
+                cj, cf, _, _ = self._pose(i[cap], folded=True)  # folded to ``t`` above
                 captured = {int(s): (cj[k], cf[k]) for k, s in enumerate(i[cap])}
             changes = self._posture_changes(i[ev], imm[ev])
             if changes.any():

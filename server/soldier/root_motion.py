@@ -285,7 +285,7 @@ class TravelTable:
         """``(n, 2)`` the weight-bearing sole point of ``clip`` at the frame nearest ``frame``."""
         clip = np.asarray(clip, np.int64)
         last = np.maximum(self.nframes[clip] - 1, 0)
-        f = np.clip(np.floor(np.asarray(frame, np.float64) + 0.5).astype(np.int64), 0, last)
+        f = np.minimum(np.maximum(np.floor(np.asarray(frame, np.float64) + 0.5).astype(np.int64), 0), last)
         return self.contact[self.start[clip] + f]
 
 
@@ -299,7 +299,7 @@ def measure(figure: Figure, joints: np.ndarray, placements: np.ndarray) -> np.nd
 def frame_at(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> np.ndarray:
     """The fractional frame each soldier's clip shows at ``t`` (as ``ClipLibrary.sample`` computes it)."""
     clip = tb.clip[idx]
-    u = np.clip((t - tb.start[idx]) / np.maximum(tb.dur[idx], 1e-9), 0.0, 1.0)
+    u = np.minimum(np.maximum((t - tb.start[idx]) / np.maximum(tb.dur[idx], 1e-9), 0.0), 1.0)  # np.clip's
     u = np.where(tb.direc[idx] > 0, u, 1.0 - u)
     return u * np.maximum(lib.clip_nframes[clip] - 1, 0)
 
@@ -332,7 +332,10 @@ def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
     a = -np.radians(compass_deg)
     c, s = np.cos(a), np.sin(a)
     x, z = xz[:, 0], xz[:, 1]
-    return np.stack([c * x + s * z, c * z - s * x], axis=1)
+    out = np.empty((len(a), 2))  # (np.stack's values, without its overhead: called on every answer)
+    out[:, 0] = c * x + s * z
+    out[:, 1] = c * z - s * x
+    return out
 
 
 def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
@@ -356,7 +359,7 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         was = lib.travel.turn_at(clip, frame_at(tb, lib, ti, tb.root_t[ti]))
         free = np.minimum(np.abs(lib.travel.turn_at(clip, fj) - was), STEP_TURN_RATE * dt)
         step = np.where(lib.travel.paced[clip], free, rate * dt)
-        new = yj - np.clip(yj - steer(tb, lib, ti, oj), -step, step)
+        new = yj - np.minimum(np.maximum(yj - steer(tb, lib, ti, oj), -step), step)
         contact = lib.travel.contact_at(clip, fj)
         off[j] = oj + yawed(contact, yj) - yawed(contact, new)  # about the sole point carrying the weight
         tb.root_yaw[ti] = new
@@ -375,7 +378,8 @@ def steer(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, off: np.ndarray
     ahead = lib.travel.ahead[tb.clip[idx]] & (tb.direc[idx] > 0) & (np.abs(v[:, 0]) <= 0.01 * speed)
     side = np.sign(off[:, 0]) * np.maximum(np.abs(off[:, 0]) - STEER_FREE_CM, 0.0)
     aim = -np.degrees(np.arctan2(side, np.maximum(speed * STEER_S, 100.0)))
-    return np.where(ahead & (v[:, 1] < 0.0), np.clip(aim, -STEER_MAX_DEG, STEER_MAX_DEG), 0.0)
+    aim = np.minimum(np.maximum(aim, -STEER_MAX_DEG), STEER_MAX_DEG)
+    return np.where(ahead & (v[:, 1] < 0.0), aim, 0.0)
 
 
 def pivot(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
