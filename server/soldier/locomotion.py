@@ -79,7 +79,7 @@ class Side(IntEnum):
     RIGHT = 2
 
 
-_AHEAD, _LEFT, _RIGHT = int(Side.AHEAD), int(Side.LEFT), int(Side.RIGHT)  # plain ints: np.where takes them fast
+_AHEAD, _LEFT, _RIGHT = int(Side.AHEAD), int(Side.LEFT), int(Side.RIGHT)  # plain ints: np.where is faster
 
 SIDE_OF = np.array(
     [Side.LEFT if s == S.SIDESTEP_L else Side.RIGHT if s == S.SIDESTEP_R else Side.AHEAD for s in S], np.int8
