@@ -590,7 +590,7 @@ class TtesServer:
             return
         with self.cpu("merge"):
             changed = self.feed(board, self.ticks + 1)
-        self._published(board, changed, tick=False)
+        self._published(board, changed)  # the shards' tick frames: the writers let the readers in first
 
     def _published(self, board: PoseBoard, changed: int, tick: bool = True) -> None:
         """After a publish: the shard's hook, then wake the writers; a tick whose poses changed counts once
