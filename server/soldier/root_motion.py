@@ -310,12 +310,16 @@ def offset_at(
     idx: np.ndarray,
     t: np.ndarray | float,
     frames: np.ndarray | None = None,
+    travel_now: np.ndarray | None = None,
 ) -> np.ndarray:
     """``(n, 2)`` root offsets at ``t``: the offset at ``root_t`` plus the clip's own travel since (times the
-    stride scale) minus the entity's dead-reckoned travel since."""
+    stride scale) minus the entity's dead-reckoned travel since (``travel_now``: the clips' travel at
+    ``frames``, if the caller has it)."""
     if frames is None:
         frames = frame_at(tb, lib, idx, t)
-    travel = (lib.travel.at(tb.clip[idx], frames) - tb.root_ref[idx]) * tb.stride[idx][:, None]
+    if travel_now is None:
+        travel_now = lib.travel.at(tb.clip[idx], frames)
+    travel = (travel_now - tb.root_ref[idx]) * tb.stride[idx][:, None]
     dt = np.asarray(t, np.float64) - tb.root_t[idx]
     return tb.root_off[idx] + yawed(travel, tb.root_yaw[idx]) - tb.vlocal[idx] * np.reshape(dt, (-1, 1))
 
@@ -346,9 +350,11 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
     if len(idx) == 0:
         return
     frames = frame_at(tb, lib, idx, t)
-    off = offset_at(tb, lib, idx, t, frames)
+    travel_now = lib.travel.at(tb.clip[idx], frames)
+    off = offset_at(tb, lib, idx, t, frames, travel_now)
     yaw = tb.root_yaw[idx]
-    turning = (yaw != 0.0) & ((tb.mode[idx] == STEPPING[0]) | (tb.mode[idx] == STEPPING[1]))
+    mode = tb.mode[idx]
+    turning = (yaw != 0.0) & ((mode == STEPPING[0]) | (mode == STEPPING[1]))
     turning &= ~tb.reversing[idx]  # a reversing figure stops facing the old way, then pivots
     j = np.flatnonzero(turning)
     if len(j):  # the turning rows alone (a walking crowd: few of them)
@@ -365,7 +371,7 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         tb.root_yaw[ti] = new
     tb.root_off[idx] = off
     tb.root_t[idx] = t
-    tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
+    tb.root_ref[idx] = travel_now
 
 
 def steer(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
@@ -390,16 +396,17 @@ def pivot(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray |
         return
     t = np.minimum(np.asarray(t, np.float64), tb.end[idx])
     frames = frame_at(tb, lib, idx, t)
-    off = offset_at(tb, lib, idx, t, frames)
-    yaw = tb.root_yaw[idx]
     clip = tb.clip[idx]
+    travel_now = lib.travel.at(clip, frames)
+    off = offset_at(tb, lib, idx, t, frames, travel_now)
+    yaw = tb.root_yaw[idx]
     was = lib.travel.share_at(clip, frame_at(tb, lib, idx, tb.root_t[idx]))
     new = yaw + tb.pivot_rest[idx] * (lib.travel.share_at(clip, frames) - was)
-    contact = lib.travel.contact_at(tb.clip[idx], frames)
+    contact = lib.travel.contact_at(clip, frames)
     tb.root_off[idx] = off + yawed(contact, yaw) - yawed(contact, new)
     tb.root_yaw[idx] = new
     tb.root_t[idx] = t
-    tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
+    tb.root_ref[idx] = travel_now
 
 
 def frame_at1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> float:
