@@ -30,7 +30,6 @@ class PendingRequests:
     def __init__(self, world: ServerWorld) -> None:
         self.world = world
         self._held: list[tuple[Session, np.ndarray, np.ndarray]] = []
-        self.batches = 0  # applies that took held requests (for tests and the status)
 
     def __bool__(self) -> bool:
         return bool(self._held)
@@ -48,7 +47,6 @@ class PendingRequests:
         if not self._held:
             return
         held, self._held = self._held, []
-        self.batches += 1
         rows = held[0][2] if len(held) == 1 else np.concatenate([r for _, _, r in held])
         status = self.world.apply_requests(rows)
         at = 0
