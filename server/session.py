@@ -74,6 +74,7 @@ from server.pose_board import BoardRef
 from server.soldier.manager import REQUEST_BAD_VALUE, REQUEST_UNKNOWN_SOLDIER
 
 if TYPE_CHECKING:
+    from server.pending_requests import PendingRequests
     from server.startup import ServerWorld
 
 RECEIVE_BYTES = 65536
@@ -115,6 +116,7 @@ class Session:
         self.tables_sent = False
         self.ready_sent = False
         self.flushed_serial = 0  # the board publish this client's last write covered
+        self.ticked = False  # woken by a tick's publish since the last write (the trio app's writer)
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
@@ -130,6 +132,8 @@ class Session:
         self.writer_done = trio.Event()
         self.offload_jcl = False  # True under the trio app: a JCL frame waits in pending_jcl for the reader
         self.pending_jcl: Jcl | None = None
+        # the trio app's: entity requests wait there, applied with other readers' (issue 16); None: at once
+        self.pending: PendingRequests | None = None
 
     # -- output ------------------------------------------------------------------------------------------
     def notify(self) -> None:
@@ -308,6 +312,12 @@ class Session:
         return max(-self.tokens / rate, 1e-3)
 
     def handle(self, ev: Event) -> None:
+        if self.pending is not None and (self.pending.holds(self) or not isinstance(ev, EntityRequests)):
+            # held requests first: nothing overtakes a request, and one frame's errors (a bad value closes the
+            # session) come before this client's next message is handled, as when each was applied at once
+            self.pending.apply()
+            if self.closing:
+                return
         try:
             self._handle(ev)
         except LocalProtocolError as exc:  # we were about to send something invalid: a bug, report it
@@ -600,20 +610,26 @@ class Session:
         if not len(kept):
             return
         rows = ev.rows if len(kept) == len(ev.rows) else ev.rows[kept]
-        status = self.world.apply_requests(rows)
+        if self.pending is not None:
+            self.pending.hold(self, kept, rows)
+        else:
+            self.requests_done(kept, rows, self.world.apply_requests(rows))
+
+    def requests_done(self, kept: np.ndarray, rows: np.ndarray, status: np.ndarray) -> None:
+        """The errors of request ``rows`` once applied (``kept``: their row numbers in the client's frame)."""
         bad = kept[status == REQUEST_BAD_VALUE]
         if len(bad):
             self.fatal(
                 ErrorCode.BAD_VALUE, f"entity requests row {int(bad[0])}: speed above the server's limit"
             )
             return
-        unknown = kept[status == REQUEST_UNKNOWN_SOLDIER]
-        if len(unknown):
-            row = int(unknown[0])
+        at = np.flatnonzero(status == REQUEST_UNKNOWN_SOLDIER)
+        if len(at):
+            unknown, row = kept[at], int(kept[at[0]])
             self.send(
                 Error(
                     int(ErrorCode.UNKNOWN_SOLDIER),
-                    f"entity requests row {row}: no soldier {int(ev.rows['index'][row])}"
+                    f"entity requests row {row}: no soldier {int(rows['index'][at[0]])}"
                     + (f" ({len(unknown)} rows)" if len(unknown) > 1 else ""),
                 )
             )
