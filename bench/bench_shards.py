@@ -16,6 +16,10 @@ shard → front-end → client), on the synthetic library.
 
     python bench/bench_shards.py [--soldiers 20000] [--clients 2] [--seconds 10] [--fabric zenoh] [--json]
     python bench/bench_shards.py --probe 40 [--fabric dds]
+
+``--trace N`` runs the load with a probe of N soldiers beside it and says where each probe request's time
+went (``bench/trace_legs.py``: the legs client → front-end → fabric → shard → fabric → front-end →
+client, stamped by each process under ``TTES_TRACE``) with each process's CPU per tick by stage.
 """
 
 from __future__ import annotations
@@ -24,10 +28,11 @@ import argparse
 import contextlib
 import json
 import os
+import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +40,7 @@ import trio
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench import trace_legs
 from client_stub.link.client import Client
 from client_stub.link.spawn import ServerProcess, cpu_seconds, free_port
 from client_stub.loadtest.session import LoadTestConfig, run_loadtest
@@ -49,6 +55,7 @@ def main() -> int:
     ap.add_argument("--warmup", type=float, default=3.0)
     ap.add_argument("--fabric", choices=("zenoh", "dds"), default="zenoh")
     ap.add_argument("--probe", type=int, metavar="N", help="request -> update latency of N soldiers")
+    ap.add_argument("--trace", type=int, metavar="N", help="trace N probe soldiers' requests under the load")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     if args.probe:
@@ -58,9 +65,11 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="ttes-shards-") as tmp:
         config = Path(tmp) / "scale.toml"  # room for every soldier, one client id may own them all
         n = args.soldiers + 64
-        config.write_text(f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\n")
+        config.write_text(f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\nreport_interval = 2.0\n")
         common = ["--config", str(config), "--throttle", "0", "--fabric", args.fabric]
-        with cluster(common) as procs:
+        if args.trace:
+            os.environ["TTES_TRACE"], os.environ["TTES_TRACE_BELOW"] = f"{tmp}/trace", str(args.trace + EXTRA)
+        with cluster(common) as procs, probing(procs["front"].port, args.trace, Path(tmp)) as probed:
             cpu0, t0 = {k: p.cpu_seconds() for k, p in procs.items()}, time.monotonic()
             load = os.getloadavg()[0]
             report = run_loadtest(
@@ -77,6 +86,8 @@ def main() -> int:
             )
             wall = time.monotonic() - t0
             cpu = {k: round(100 * (cpu_seconds(p.pid) - cpu0[k]) / wall, 1) for k, p in procs.items()}
+            stages = {k: stage_cpu(p.log_tail(1 << 24)) for k, p in procs.items()}
+            traced = probed(time.monotonic() - args.seconds) if args.trace else {}
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
     keys += ("server_cpu_pct", "client_cpu_pct")  # the front-end's and the load generator's, steady window
@@ -87,6 +98,8 @@ def main() -> int:
         "load": round(load, 2),
         **{k: report.get(k) for k in keys},
         "cpu_pct": cpu,
+        "cpu_ms_per_tick": stages,
+        **traced,
     }
     print(json.dumps(out) if args.json else json.dumps(out, indent=1))
     return 0
@@ -106,6 +119,52 @@ def cluster(flags: list[str]) -> Iterator[dict[str, ServerProcess]]:
     finally:
         for p in procs.values():
             p.stop()
+
+
+EXTRA = 16  # the start-up script's soldiers come first: the probe's are traced below N + EXTRA
+
+
+@contextlib.contextmanager
+def probing(port: int, n: int | None, tmp: Path) -> Iterator[Callable[[float], dict[str, object]]]:
+    """With ``n``: a probe client of n traced soldiers (made first: indices 0..n-1) in its own process,
+    and a function that joins its requests sent since a time with the servers' trace stamps."""
+    if not n:
+        yield lambda since: {}
+        return
+    out = tmp / "probe.txt"
+    cmd = [sys.executable, str(Path(__file__).with_name("trace_legs.py")), str(port), str(n), str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        ready = proc.stdout.readline().split()
+        if ready[:1] != ["ready"] or int(ready[1]) >= n + EXTRA:
+            raise RuntimeError(f"probe client not ready: {ready}")
+
+        def joined(since: float) -> dict[str, object]:
+            probes = [
+                (int(i), float(a), float(b))
+                for i, a, b in (ln.split() for ln in out.read_text().splitlines())
+            ]
+            probes = [p for p in probes if p[1] >= since]
+            return trace_legs.legs(probes, trace_legs.read_stamps(sorted(tmp.glob("trace.*"))))
+
+        yield joined
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+def stage_cpu(log: str) -> dict[str, float]:
+    """The mean of a server's ``cpu_ms_per_tick`` (``animate:3.2,merge:1.1,...``) over its status lines,
+    the first (start-up, creations) left out."""
+    rows = []
+    for line in log.splitlines():
+        field = next((f for f in line.split() if f.startswith("cpu_ms_per_tick=")), None)
+        if "event=status" in line and field:
+            rows.append({k: float(v) for k, v in (kv.split(":") for kv in field.split("=", 1)[1].split(","))})
+    rows = rows[1:] or [{}]
+    keys = sorted({k for r in rows for k in r})
+    return {k: round(float(np.mean([r.get(k, 0.0) for r in rows])), 2) for k in keys} | {"reports": len(rows)}
 
 
 def probe(n: int, fabric: str) -> dict[str, object]:

@@ -53,6 +53,7 @@ from server.soldier.manager import TickUpdate
 from server.stage_cpu import StageCpu
 from server.startup import ServerWorld
 from server.tls import server_context
+from server.trace import TRACE
 from server.websocket import WebSocketStream, origin_allowed
 from server.world.commands import needs_worker
 
@@ -439,6 +440,9 @@ class TtesServer:
                         session.lingering = False
                         return
                     session.bytes_out += len(data)
+                    if TRACE is not None:
+                        TRACE.stamp("sent", session.trace_rows)
+                        session.trace_rows = session.trace_rows[:0]
                 if session.closing and not session.control:
                     return
         except (trio.BrokenResourceError, trio.ClosedResourceError):

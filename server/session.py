@@ -72,6 +72,7 @@ from server.jcl import JclError
 from server.logging import get_logger
 from server.pose_board import BoardRef
 from server.soldier.manager import REQUEST_BAD_VALUE, REQUEST_UNKNOWN_SOLDIER
+from server.trace import TRACE
 
 if TYPE_CHECKING:
     from server.startup import ServerWorld
@@ -130,6 +131,7 @@ class Session:
         self.writer_done = trio.Event()
         self.offload_jcl = False  # True under the trio app: a JCL frame waits in pending_jcl for the reader
         self.pending_jcl: Jcl | None = None
+        self.trace_rows = np.zeros(0, np.int64)  # the traced soldiers of the last encode (server.trace)
 
     # -- output ------------------------------------------------------------------------------------------
     def notify(self) -> None:
@@ -244,6 +246,9 @@ class Session:
         data = b"".join(chunks)
         if data:
             self.batches_out += 1
+        if TRACE is not None:
+            TRACE.stamp("encode", idx)
+            self.trace_rows = idx
         return data
 
     def _may_catch_up(self, since: int, serial: int) -> bool:

@@ -35,6 +35,7 @@ from server.fabric import requests as req
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
+from server.trace import TRACE
 
 if TYPE_CHECKING:
     from server.app import TtesServer
@@ -98,15 +99,19 @@ class ShardNode:
         when it is due (thousands of creations arrive at once when a client creates a crowd)."""
         self.fabric.announce(alive_key(self.sharding.k))
         send, receive = trio.open_memory_channel[bytes](math.inf)
-        self.fabric.subscribe(
-            requests_topic(self.sharding.k),
-            Kind.REQUESTS,
-            lambda data: token.run_sync_soon(send.send_nowait, data),
-        )
+
+        def arrived(data: bytes) -> None:
+            if TRACE is not None:
+                TRACE.stamp("shard_arrive", _request_indices(self._decoded(data)))
+            token.run_sync_soon(send.send_nowait, data)
+
+        self.fabric.subscribe(requests_topic(self.sharding.k), Kind.REQUESTS, arrived)
 
         async def take() -> None:
             async for data in receive:
                 for op in self._decoded(data):
+                    if TRACE is not None:
+                        TRACE.stamp("shard_take", _request_indices([op]))
                     with self.server.cpu("requests"):
                         self.handle(op)
                     await trio.lowlevel.checkpoint()
@@ -130,6 +135,8 @@ class ShardNode:
             return
         k, n = self.sharding.k, self.sharding.n
         codes = board.codes[rows]
+        if TRACE is not None:
+            TRACE.stamp("shard_publish", rows, "tick" if tick else "answer")
         self._put(
             encode_batch(
                 Batch(k, n, self.seq, board.tick, time.monotonic(), rows, board.table_of[rows], codes, key)
@@ -258,6 +265,8 @@ class FrontNode:
 
     def _arrived(self, token: trio.lowlevel.TrioToken, k: int, data: bytes) -> None:
         """On the fabric's thread: queue the batch; the first one waiting asks the loop to publish."""
+        if TRACE is not None:
+            TRACE.stamp("fe_arrive", decode_batch(data).indices)
         with self._pending_lock:
             queue = self._pending.setdefault(k, [])
             waiting = bool(queue)
@@ -281,7 +290,14 @@ class FrontNode:
         if not batches or m is None:
             return 0
         self.batches += len(batches)
-        return merge(board, batches, tick, m.table.alive)
+        changed = merge(board, batches, tick, m.table.alive)
+        if TRACE is not None:
+            TRACE.stamp(
+                "fe_merge",
+                np.concatenate([b.indices for b in batches]),
+                "fed" if tick > self.server.ticks else "tick",
+            )
+        return changed
 
     def _heard(self, b: Batch, now: float) -> None:
         k = b.shard
@@ -347,6 +363,8 @@ class FrontNode:
         self._flush_due = False
         for k, ops in enumerate(self._out):
             if ops:
+                if TRACE is not None:
+                    TRACE.stamp("fe_publish", _request_indices(ops))
                 self._puts[k](req.pack(ops))
                 ops.clear()
 
@@ -364,6 +382,8 @@ class FrontNode:
 
     def requests(self, rows: np.ndarray) -> None:
         idx = rows["index"].astype(np.int64)
+        if TRACE is not None:
+            TRACE.stamp("fe_request", idx)
         self.last[idx] = rows
         self.has_last[idx] = True
         shard = np.asarray(self.route)[Sharding.home(idx, self.shards)]
@@ -372,6 +392,16 @@ class FrontNode:
 
     def react(self, index: int, kind: str) -> None:
         self._send(self._shard_of(index), req.react(index, kind))
+
+
+def _request_indices(ops: list[req.Op]) -> list[int]:
+    """The soldiers the entity requests among ``ops`` are for (a trace's stamps)."""
+    rows = [
+        np.frombuffer(op["rows"], ENTITY_REQUEST_DTYPE) if isinstance(op["rows"], bytes) else op["rows"]
+        for op in ops
+        if op["op"] == "requests"
+    ]
+    return np.concatenate([r["index"] for r in rows]).tolist() if rows else []
 
 
 def merge(board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray) -> int:
