@@ -57,6 +57,7 @@ from server.trace import TRACE
 from server.websocket import WebSocketStream, origin_allowed
 from server.world.commands import needs_worker
 
+READ_TURN_S = 0.004  # a reader's CPU per turn of its client's buffered events (a burst yields between)
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
@@ -402,9 +403,11 @@ class TtesServer:
         its request rate, and while its JCL runs."""
         while not session.closing:
             with self.cpu("requests"):
-                wait = session.resume(self.now())
+                wait = session.resume(self.now(), READ_TURN_S)
                 self.requests_arrived()
-            if session.pending_jcl is not None:
+            if session.more:  # a burst: the tick and the other clients run before its next turn
+                await trio.lowlevel.checkpoint()
+            elif session.pending_jcl is not None:
                 await self.run_jcl(session)
             elif session.output_full:  # the client's answers wait: read on once the writer took them
                 session.drained = trio.Event()

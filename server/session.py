@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hmac
 import math
+import time
 from collections import deque
 from typing import TYPE_CHECKING
 
@@ -131,6 +132,7 @@ class Session:
         self.writer_done = trio.Event()
         self.offload_jcl = False  # True under the trio app: a JCL frame waits in pending_jcl for the reader
         self.pending_jcl: Jcl | None = None
+        self.more = False  # resume stopped at its turn's end with events still buffered
         self.trace_rows = np.zeros(0, np.int64)  # the traced soldiers of the last encode (server.trace)
 
     # -- output ------------------------------------------------------------------------------------------
@@ -286,17 +288,28 @@ class Session:
         self.conn.receive_data(data)
         return self.resume(now)
 
-    def resume(self, now: float | None = None) -> float:
-        """Handle buffered events until the buffer is empty (0.0) or the budget is spent (seconds to wait)."""
+    def resume(self, now: float | None = None, turn_s: float | None = None) -> float:
+        """Handle buffered events until the buffer is empty (0.0) or the budget is spent (seconds to wait).
+
+        ``turn_s``: stop (0.0, ``more`` True) once this much CPU went into the events handled, so a burst
+        (thousands of CREATE_SOLDIER in one read) leaves the loop to the tick and the other clients between
+        its turns; the check is between events (one at least)."""
+        self.more = False
+        end = None if turn_s is None else time.thread_time() + turn_s
+        handled = 0
         while not self.closing and self.pending_jcl is None and not self.output_full:
             if now is not None:
                 wait = self.charge(now)
                 if wait > 0:
                     return wait
+            if end is not None and handled and time.thread_time() >= end:
+                self.more = True
+                return 0.0
             ev = self.conn.next_event()
             if ev is NEED_DATA or ev is PAUSED:
                 return 0.0
             self.handle(ev)  # type: ignore[arg-type]
+            handled += 1
         return 0.0
 
     def charge(self, now: float) -> float:

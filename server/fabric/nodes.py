@@ -19,6 +19,8 @@ the same, so a client of the front-end gets the handshake, tables and FIGURE of 
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import functools
 import math
 import threading
@@ -42,6 +44,7 @@ if TYPE_CHECKING:
 
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
+TURN_S = 0.004  # a shard's turn of fabric requests: CPU seconds before it answers them and lets a tick run
 PENDING_MAX = 64  # a front-end's queue of one shard's batches; beyond, the oldest go (and it asks for a key)
 
 
@@ -95,8 +98,8 @@ class ShardNode:
             self.server.world.remove_soldier(int(i), "another shard's")
 
     def start(self, token: trio.lowlevel.TrioToken) -> None:
-        """Take requests on the trio loop, in order of arrival, one at a time: the tick runs between them
-        when it is due (thousands of creations arrive at once when a client creates a crowd)."""
+        """Take requests on the trio loop in order of arrival, in turns (:meth:`take_turn`): the tick runs
+        between turns when it is due (thousands of creations arrive at once when a client creates a crowd)."""
         self.fabric.announce(alive_key(self.sharding.k))
         send, receive = trio.open_memory_channel[bytes](math.inf)
 
@@ -108,15 +111,34 @@ class ShardNode:
         self.fabric.subscribe(requests_topic(self.sharding.k), Kind.REQUESTS, arrived)
 
         async def take() -> None:
-            async for data in receive:
-                for op in self._decoded(data):
-                    if TRACE is not None:
-                        TRACE.stamp("shard_take", _request_indices([op]))
-                    with self.server.cpu("requests"):
-                        self.handle(op)
-                    await trio.lowlevel.checkpoint()
+            ops: collections.deque[req.Op] = collections.deque()
+            while True:
+                if not ops:
+                    ops.extend(self._decoded(await receive.receive()))
+                with contextlib.suppress(trio.WouldBlock):
+                    while True:  # whatever else has arrived joins this turn
+                        ops.extend(self._decoded(receive.receive_nowait()))
+                with self.server.cpu("requests"):
+                    self.take_turn(ops)
+                await trio.lowlevel.checkpoint()
 
         self.server.spawn(take)
+
+    def take_turn(self, ops: collections.deque[req.Op]) -> int:
+        """Handle queued operations in order for up to ``TURN_S`` of CPU (one at least), then answer them
+        all at once: one answer batch for every request that arrived together (an answer per operation
+        cost a sample, a publish and a batch each, and the later ones waited for the earlier ones').
+        Returns how many were handled; the rest wait for the next turn, after the tick if it is due."""
+        end = time.thread_time() + TURN_S
+        n = 0
+        while ops and (n == 0 or time.thread_time() < end):
+            op = ops.popleft()
+            if TRACE is not None:
+                TRACE.stamp("shard_take", _request_indices([op]))
+            self.handle(op)
+            n += 1
+        self.server.requests_arrived()
+        return n
 
     def publish(self, board: PoseBoard) -> None:
         """After each publish of the board: the soldiers whose codes changed since the previous batch (a
@@ -152,14 +174,14 @@ class ShardNode:
             return []
 
     def handle(self, op: req.Op) -> None:
-        """One request from a front-end (already checked there: a failure here is logged, not answered)."""
+        """One request from a front-end (already checked there: a failure here is logged, not answered;
+        the caller answers: ``TtesServer.requests_arrived``)."""
         try:
             self._apply(op)
         except (ValueError, KeyError, TypeError) as exc:  # a bad operation, or a soldier gone meanwhile
             log.warning("fabric_request_failed", shard=self.sharding.k, op=op.get("op"), error=str(exc))
             return
         self.taken += 1
-        self.server.requests_arrived()
 
     def _apply(self, msg: dict[str, object]) -> None:
         world = self.server.world
