@@ -141,12 +141,11 @@ def probing(port: int, n: int | None, tmp: Path) -> Iterator[Callable[[float], d
             raise RuntimeError(f"probe client not ready: {ready}")
 
         def joined(since: float) -> dict[str, object]:
-            probes = [
-                (int(i), float(a), float(b))
-                for i, a, b in (ln.split() for ln in out.read_text().splitlines())
-            ]
-            probes = [p for p in probes if p[1] >= since]
-            return trace_legs.legs(probes, trace_legs.read_stamps(sorted(tmp.glob("trace.*"))))
+            lines = out.read_text().splitlines() if out.exists() else []
+            probes = [(int(i), float(a), float(b)) for i, a, b in (ln.split() for ln in lines)]
+            window = [p for p in probes if p[1] >= since]
+            stamps = trace_legs.read_stamps(sorted(tmp.glob("trace.*")))
+            return {"probes_all": len(probes), **trace_legs.legs(window, stamps)}
 
         yield joined
     finally:

@@ -429,7 +429,8 @@ class TtesServer:
                 else:  # updates held back by the connection's own throttle: write them when due
                     with trio.move_on_at(self._t0 + session.retry_at):
                         await session.wake.wait()
-                await self.let_readers_in()  # their answers go out in this write
+                if self.feed is None:  # a front-end's readers answer nothing (its shards do): write at once
+                    await self.let_readers_in()  # their answers go out in this write
                 session.wake = trio.Event()
                 with self.cpu("encode"):
                     data = session.take_output(self.now())
