@@ -41,6 +41,7 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
+import numpy as np
 import trio
 
 from protocol.connection import State
@@ -118,7 +119,7 @@ class TtesServer:
         self.on_publish: Callable[[PoseBoard], None] | None = None
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
-        self.feed: Callable[[PoseBoard, int], int] | None = None
+        self.feed: Callable[[PoseBoard, int], np.ndarray] | None = None
         self.status_note: Callable[[], str] | None = (
             None  # appended to STATUS (a shard's or front-end's role)
         )
@@ -522,8 +523,8 @@ class TtesServer:
         self.ticks += 1
         if self.feed is not None:
             with self.cpu("merge"):
-                changed = self.feed(board, self.ticks)
-            self._published(board, changed)
+                rows = self.feed(board, self.ticks)
+            self._published(board, len(rows), rows)
             return None
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
         with self.cpu("animate"):
@@ -584,12 +585,14 @@ class TtesServer:
         if self.feed is None or board is None or not self.world.ready:
             return
         with self.cpu("merge"):
-            changed = self.feed(board, self.ticks + 1)
-        self._published(board, changed)
+            rows = self.feed(board, self.ticks + 1)
+        self._published(board, len(rows), rows)
 
-    def _published(self, board: PoseBoard, changed: int) -> None:
-        """After a publish: the shard's hook, then wake the writers; a tick whose poses changed counts once
-        for the update rate, however many publishes carried it (answers, a front-end's shards)."""
+    def _published(self, board: PoseBoard, changed: int, rows: np.ndarray | None = None) -> None:
+        """After a publish: the shard's hook, then wake the writers (with the ``rows`` changed: only those of
+        clients subscribed to one of them, so a shard's answer goes out at once, not behind the encodes of
+        clients it does not concern); a tick whose poses changed counts once for the update rate, however
+        many publishes carried it (answers, a front-end's shards)."""
         if self.on_publish is not None:
             with self.cpu("fabric"):
                 self.on_publish(board)
@@ -598,7 +601,7 @@ class TtesServer:
                 self._counted_tick = board.tick
                 self._published_ticks += 1
             for s in self.sessions.values():
-                if s.tables_sent:
+                if s.tables_sent and (rows is None or s.conn.subscribes_any(rows)):
                     s.notify()
 
     def requests_arrived(self) -> None:

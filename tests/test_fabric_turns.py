@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import collections
 
+import numpy as np
 import pytest
 import trio
-from test_fabric_inprocess import RUN, WALK, Bus, MemoryFabric, cluster, live
+from test_fabric_inprocess import RUN, WALK, Bus, MemoryFabric, cluster, live, walker
 from test_server_support import Client, make_server
 
 from protocol.entity import make_entity_requests
-from protocol.events import CreateSoldier, Ready, SoldierCreated
+from protocol.events import CreateSoldier, Ready, SoldierCreated, Subscribe
 from server import app
 from server.fabric import poses_topic
 from server.fabric import requests as req
@@ -89,5 +90,30 @@ async def test_a_creation_burst_leaves_the_other_clients_requests_in_between(
         with trio.fail_after(30):
             while sum(len(live(s)) for s in shards) < 10 + burst:
                 await trio.sleep(0.1)
+        await a.aclose()
+        await b.aclose()
+
+
+async def test_a_front_end_wakes_only_the_writers_of_clients_subscribed_to_what_changed(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """A shard's answer for one soldier wakes the writer of the client that watches it, not the others
+    (whose writers would encode nothing, and could run first)."""
+    async with cluster() as (front, _, _, _):
+        a = await walker(front, 11)  # subscribed to 0..11
+        b = await Client.open(front.addresses[0][1], "other", client_id="beta")
+        await b.expect(Ready)
+        await b.send(CreateSoldier(1, "DI.fig", "AK_47.fig", 13))
+        await b.expect(SoldierCreated)
+        await b.send(Subscribe((13,)))
+        await trio.sleep(0.5)
+        board = front.board_ref.board
+        assert board is not None
+        by_name = {s.name: s for s in front.sessions.values()}
+        for rows, woken in (([11], {"ig"}), ([13], {"other"}), ([11, 13], {"ig", "other"})):
+            for s in by_name.values():
+                s.wake = trio.Event()
+            front._published(board, len(rows), np.asarray(rows))
+            assert {n for n, s in by_name.items() if s.wake.is_set()} == woken
         await a.aclose()
         await b.aclose()

@@ -298,9 +298,10 @@ class FrontNode:
         if not waiting:
             token.run_sync_soon(self.server.publish_fed)
 
-    def feed(self, board: PoseBoard, tick: int) -> int:
+    def feed(self, board: PoseBoard, tick: int) -> np.ndarray:
         """Merge the newest batch of every shard that sent one into the board, labelled ``tick`` (as soon as
-        one arrives, and on each tick of the front-end's own loop), and fail silent shards over."""
+        one arrives, and on each tick of the front-end's own loop), and fail silent shards over. Returns
+        the soldiers whose codes changed."""
         now = self.server.now()
         with self._pending_lock:
             pending, self._pending = self._pending, {}
@@ -310,15 +311,18 @@ class FrontNode:
         self._fail_over(now)
         m = self.server.world.manager
         if not batches or m is None:
-            return 0
+            return np.zeros(0, np.int64)
         self.batches += len(batches)
-        changed = merge(board, batches, tick, m.table.alive)
+        rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
+        if merge(board, batches, tick, m.table.alive):
+            changed = rows[
+                (rows < board.capacity)
+                & (board.version[np.minimum(rows, board.capacity - 1)] == board.serial)
+            ]
+        else:
+            changed = rows[:0]
         if TRACE is not None:
-            TRACE.stamp(
-                "fe_merge",
-                np.concatenate([b.indices for b in batches]),
-                "fed" if tick > self.server.ticks else "tick",
-            )
+            TRACE.stamp("fe_merge", rows, "fed" if tick > self.server.ticks else "tick")
         return changed
 
     def _heard(self, b: Batch, now: float) -> None:
