@@ -58,7 +58,9 @@ from server.trace import TRACE
 from server.websocket import WebSocketStream, origin_allowed
 from server.world.commands import needs_worker
 
-READ_TURN_S = 0.004  # a reader's CPU per turn of its client's buffered events (a burst yields between)
+# a front-end reader's CPU per turn of its client's buffered events (a burst yields between); a single
+# server's reader answers what it handled after each turn, so it keeps handling all that is buffered
+READ_TURN_S = 0.004
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
@@ -404,7 +406,7 @@ class TtesServer:
         its request rate, and while its JCL runs."""
         while not session.closing:
             with self.cpu("requests"):
-                wait = session.resume(self.now(), READ_TURN_S)
+                wait = session.resume(self.now(), READ_TURN_S if self.feed is not None else None)
                 self.requests_arrived()
             if session.more:  # a burst: the tick and the other clients run before its next turn
                 await trio.lowlevel.checkpoint()
