@@ -41,10 +41,8 @@ import trio
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench import trace_legs
-from client_stub.link.client import Client
 from client_stub.link.spawn import ServerProcess, cpu_seconds, free_port
 from client_stub.loadtest.session import LoadTestConfig, run_loadtest
-from protocol.entity import Appearance, make_entity_requests
 
 
 def main() -> int:
@@ -183,33 +181,8 @@ def probe(n: int, fabric: str) -> dict[str, object]:
 
 
 async def _probe(port: int, n: int) -> list[float]:
-    arrived: dict[int, float] = {}
-
-    def updates(when: float, tick: int, indices: np.ndarray, size: int, event: object) -> None:
-        for i in indices.tolist():
-            arrived[i] = time.monotonic()
-
-    lat = []
-    async with trio.open_nursery() as nursery:
-        c = Client("probe", on_updates=updates)
-        await c.open(nursery, "127.0.0.1", port, soldierprefix=None)
-        idx = [(await c.create_soldier("DI.fig", "AK_47.fig")).index for _ in range(n)]
-        c.subscribe(idx)
-        await trio.sleep(2.0)  # every soldier's first update, and settled
-        for rep in range(3 * n):
-            i = idx[rep % n]
-            posture = Appearance.KNEEL if (rep // n) % 2 == 0 else Appearance.UPRIGHT
-            arrived.pop(i, None)
-            sent = time.monotonic()
-            c.send_requests(make_entity_requests([i], appearance=posture))
-            with trio.move_on_after(5.0):
-                while i not in arrived:
-                    await trio.sleep(0.001)
-            if i in arrived:
-                lat.append(arrived[i] - sent)
-            await trio.sleep(0.05)
-        await c.aclose()
-        nursery.cancel_scope.cancel()
+    lat: list[float] = []
+    await trace_legs.probe_requests(port, n, 3 * n, lambda i, sent, received: lat.append(received - sent))
     return lat
 
 

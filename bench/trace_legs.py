@@ -13,6 +13,7 @@ import collections
 import sys
 import time
 from bisect import bisect_left
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -85,10 +86,27 @@ def _pairs() -> list[tuple[str, str]]:
 
 def probe_client(port: int, n: int, out: Path) -> None:
     """The probe's process: N soldiers, then one request at a time until killed (one line each)."""
-    trio.run(_probe_client, port, n, out)
+    with out.open("w", buffering=1) as f:
+        trio.run(
+            probe_requests,
+            port,
+            n,
+            10**9,
+            lambda i, sent, received: f.write(f"{i} {sent:.6f} {received:.6f}\n"),
+            lambda idx: print("ready", max(idx), flush=True),
+        )
 
 
-async def _probe_client(port: int, n: int, out: Path) -> None:
+async def probe_requests(
+    port: int,
+    n: int,
+    requests: int,
+    answered: Callable[[int, float, float], object],
+    ready: Callable[[list[int]], object] = lambda idx: None,
+) -> None:
+    """A client of N soldiers (``ready`` with their indices once made) sends ``requests`` posture requests
+    one at a time (kneel, then stand, soldier after soldier) and calls ``answered(index, sent, received)``
+    at each soldier's first update after its request (monotonic clock; none within 5 s: not called)."""
     from client_stub.link.client import Client
     from protocol.entity import Appearance, make_entity_requests
 
@@ -104,21 +122,22 @@ async def _probe_client(port: int, n: int, out: Path) -> None:
         await c.open(nursery, "127.0.0.1", port, soldierprefix=None)
         idx = [(await c.create_soldier("DI.fig", "AK_47.fig")).index for _ in range(n)]
         c.subscribe(idx)
-        print("ready", max(idx), flush=True)
-        await trio.sleep(2.0)
-        with out.open("w", buffering=1) as f:
-            for rep in range(10**9):
-                i = idx[rep % n]
-                posture = Appearance.KNEEL if (rep // n) % 2 == 0 else Appearance.UPRIGHT
-                arrived.pop(i, None)
-                sent = time.monotonic()
-                c.send_requests(make_entity_requests([i], appearance=posture))
-                with trio.move_on_after(5.0):
-                    while i not in arrived:
-                        await trio.sleep(0.001)
-                if i in arrived:
-                    f.write(f"{i} {sent:.6f} {arrived[i]:.6f}\n")
-                await trio.sleep(0.05)
+        ready(idx)
+        await trio.sleep(2.0)  # every soldier's first update, and settled
+        for rep in range(requests):
+            i = idx[rep % n]
+            posture = Appearance.KNEEL if (rep // n) % 2 == 0 else Appearance.UPRIGHT
+            arrived.pop(i, None)
+            sent = time.monotonic()
+            c.send_requests(make_entity_requests([i], appearance=posture))
+            with trio.move_on_after(5.0):
+                while i not in arrived:
+                    await trio.sleep(0.001)
+            if i in arrived:
+                answered(i, sent, arrived[i])
+            await trio.sleep(0.05)
+        await c.aclose()
+        nursery.cancel_scope.cancel()
 
 
 if __name__ == "__main__":
