@@ -31,6 +31,9 @@ class Tracer:
             line = f"{time.monotonic():.6f} {stage} {','.join(map(str, hit.tolist()))}"
             self._file.write(f"{line} {note}\n" if note else line + "\n")
 
+    def close(self) -> None:
+        self._file.close()
+
 
 def from_env() -> Tracer | None:
     prefix = os.environ.get("TTES_TRACE")
