@@ -44,6 +44,7 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
+import numpy as np
 import trio
 
 from protocol.connection import State
@@ -57,9 +58,13 @@ from server.soldier.manager import TickUpdate
 from server.stage_cpu import StageCpu
 from server.startup import ServerWorld
 from server.tls import server_context
+from server.trace import TRACE
 from server.websocket import WebSocketStream, origin_allowed
 from server.world.commands import needs_worker
 
+# a front-end reader's CPU per turn of its client's buffered events (a burst yields between); a single
+# server's reader answers what it handled after each turn, so it keeps handling all that is buffered
+READ_TURN_S = 0.004
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
@@ -121,7 +126,7 @@ class TtesServer:
         self.on_publish: Callable[[PoseBoard], None] | None = None
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
-        self.feed: Callable[[PoseBoard, int], int] | None = None
+        self.feed: Callable[[PoseBoard, int], np.ndarray] | None = None
         self.status_note: Callable[[], str] | None = (
             None  # appended to STATUS (a shard's or front-end's role)
         )
@@ -407,9 +412,11 @@ class TtesServer:
         its request rate, and while its JCL runs."""
         while not session.closing:
             with self.cpu("requests"):
-                wait = session.resume(self.now())
+                wait = session.resume(self.now(), READ_TURN_S if self.feed is not None else None)
             await self.take_requests()
-            if session.pending_jcl is not None:
+            if session.more:  # a burst: the tick and the other clients run before its next turn
+                await trio.lowlevel.checkpoint()
+            elif session.pending_jcl is not None:
                 await self.run_jcl(session)
             elif session.output_full:  # the client's answers wait: read on once the writer took them
                 session.drained = trio.Event()
@@ -433,7 +440,8 @@ class TtesServer:
                         await session.wake.wait()
                 if session.ticked:  # a tick's frames: the readers' answers go out in this write
                     session.ticked = False
-                    await self.let_readers_in()
+                    if self.feed is None:  # a front-end's readers answer nothing (its shards do): at once
+                        await self.let_readers_in()
                     self.apply_held()
                 # (woken by answers alone: written at once, not after the next reader's answer, issue 16)
                 session.wake = trio.Event()
@@ -449,6 +457,9 @@ class TtesServer:
                         session.lingering = False
                         return
                     session.bytes_out += len(data)
+                    if TRACE is not None:
+                        TRACE.stamp("sent", session.trace_rows)
+                        session.trace_rows = session.trace_rows[:0]
                 if session.closing and not session.control:
                     return
         except (trio.BrokenResourceError, trio.ClosedResourceError):
@@ -527,8 +538,8 @@ class TtesServer:
         self.ticks += 1
         if self.feed is not None:
             with self.cpu("merge"):
-                changed = self.feed(board, self.ticks)
-            self._published(board, changed)
+                rows = self.feed(board, self.ticks)
+            self._published(board, len(rows), rows)
             return None
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
         with self.cpu("animate"):
@@ -589,13 +600,17 @@ class TtesServer:
         if self.feed is None or board is None or not self.world.ready:
             return
         with self.cpu("merge"):
-            changed = self.feed(board, self.ticks + 1)
-        self._published(board, changed)  # the shards' tick frames: the writers let the readers in first
+            rows = self.feed(board, self.ticks + 1)
+        self._published(board, len(rows), rows)  # the shards' frames count as a tick's
 
-    def _published(self, board: PoseBoard, changed: int, tick: bool = True) -> None:
-        """After a publish: the shard's hook, then wake the writers; a tick whose poses changed counts once
-        for the update rate, however many publishes carried it (answers, a front-end's shards). A writer woken
-        by a ``tick``'s publish lets the readers in before it writes; one woken by answers alone does not."""
+    def _published(
+        self, board: PoseBoard, changed: int, rows: np.ndarray | None = None, tick: bool = True
+    ) -> None:
+        """After a publish: the shard's hook, then wake the writers (with the ``rows`` changed: only those of
+        clients subscribed to one of them, so a shard's answer goes out at once, not behind the encodes of
+        clients it does not concern); a tick whose poses changed counts once for the update rate, however
+        many publishes carried it (answers, a front-end's shards). A writer woken by a ``tick``'s publish lets
+        the readers in before it writes (a single server's); one woken by answers alone does not."""
         if self.on_publish is not None:
             with self.cpu("fabric"):
                 self.on_publish(board)
@@ -604,7 +619,7 @@ class TtesServer:
                 self._counted_tick = board.tick
                 self._published_ticks += 1
             for s in self.sessions.values():
-                if s.tables_sent:
+                if s.tables_sent and (rows is None or s.conn.subscribes_any(rows)):
                     s.ticked |= tick
                     s.notify()
 

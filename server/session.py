@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hmac
 import math
+import time
 from collections import deque
 from typing import TYPE_CHECKING
 
@@ -72,6 +73,7 @@ from server.jcl import JclError
 from server.logging import get_logger
 from server.pose_board import BoardRef
 from server.soldier.manager import REQUEST_BAD_VALUE, REQUEST_UNKNOWN_SOLDIER
+from server.trace import TRACE
 
 if TYPE_CHECKING:
     from server.pending_requests import PendingRequests
@@ -134,6 +136,8 @@ class Session:
         self.pending_jcl: Jcl | None = None
         # the trio app's: entity requests wait there, applied with other readers' (issue 16); None: at once
         self.pending: PendingRequests | None = None
+        self.more = False  # resume stopped at its turn's end with events still buffered
+        self.trace_rows = np.zeros(0, np.int64)  # the traced soldiers of the last encode (server.trace)
 
     # -- output ------------------------------------------------------------------------------------------
     def notify(self) -> None:
@@ -248,6 +252,9 @@ class Session:
         data = b"".join(chunks)
         if data:
             self.batches_out += 1
+        if TRACE is not None:
+            TRACE.stamp("encode", idx)
+            self.trace_rows = idx
         return data
 
     def _may_catch_up(self, since: int, serial: int) -> bool:
@@ -285,17 +292,28 @@ class Session:
         self.conn.receive_data(data)
         return self.resume(now)
 
-    def resume(self, now: float | None = None) -> float:
-        """Handle buffered events until the buffer is empty (0.0) or the budget is spent (seconds to wait)."""
+    def resume(self, now: float | None = None, turn_s: float | None = None) -> float:
+        """Handle buffered events until the buffer is empty (0.0) or the budget is spent (seconds to wait).
+
+        ``turn_s``: stop (0.0, ``more`` True) once this much CPU went into the events handled, so a burst
+        (thousands of CREATE_SOLDIER in one read) leaves the loop to the tick and the other clients between
+        its turns; the check is between events (one at least)."""
+        self.more = False
+        end = None if turn_s is None else time.thread_time() + turn_s
+        handled = 0
         while not self.closing and self.pending_jcl is None and not self.output_full:
             if now is not None:
                 wait = self.charge(now)
                 if wait > 0:
                     return wait
+            if end is not None and handled and time.thread_time() >= end:
+                self.more = True
+                return 0.0
             ev = self.conn.next_event()
             if ev is NEED_DATA or ev is PAUSED:
                 return 0.0
             self.handle(ev)  # type: ignore[arg-type]
+            handled += 1
         return 0.0
 
     def charge(self, now: float) -> float:
