@@ -17,7 +17,6 @@ from server.soldier.library import MotionLibrary, PathStep
 from server.soldier.locomotion import (
     GAIT_STAY,
     NEXT,
-    SCALED,
     Cond,
 )
 from server.soldier.settings import SoldierSettings
@@ -62,7 +61,6 @@ for _t, _stay in GAIT_STAY.items():
     _GAIT_STAY[_t] = _stay
 _FIRING = int(WeaponState.FIRING)
 _MOVE_CRAWL = int(Movement.CRAWL)
-_SCALED: tuple[bool, ...] = tuple(SCALED.tolist())
 
 
 @dataclass
@@ -259,6 +257,22 @@ class ManagerCore:
         tb.end[i] = t
         tb.dirty[i] = True
         root_motion.rebase1(tb, lib, i)
+
+    def _rest_many(self, idx: np.ndarray, t: np.ndarray) -> None:
+        """:meth:`_rest` of soldiers ``idx`` in their posture nodes, at once (bit for bit)."""
+        tb, lib = self.table, self.library
+        root_motion.fold_exact(tb, lib, idx, t)
+        tb.stride[idx] = 1.0
+        tb.pivot_rest[idx] = 0.0
+        node = tb.node[idx].astype(np.int64)
+        clip = lib.rest_clip[node]
+        tb.clip[idx] = clip
+        tb.direc[idx] = lib.rest_dir[node]
+        tb.dur[idx] = lib.clip_duration[clip]
+        tb.start[idx] = t - tb.dur[idx]
+        tb.end[idx] = t
+        tb.dirty[idx] = True
+        root_motion.rebase_exact(tb, lib, idx)
 
     def _record(self, i: int, t: float, what: str | None = None) -> None:
         if not self._settings.record_clips:

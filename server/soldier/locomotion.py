@@ -168,13 +168,18 @@ def next_states(state: np.ndarray, cond: np.ndarray) -> np.ndarray:
 
 
 def start_state(
-    kind: Movement, backward: bool, fast: bool, can_run: bool = True, side: int = Side.AHEAD
-) -> S:
-    """The first state when a resting soldier starts moving (velocity zero → non-zero)."""
-    if kind == Movement.CRAWL:
-        return S.CRAWL_START
-    if side != Side.AHEAD:
-        return S.SIDESTEP_L if side == Side.LEFT else S.SIDESTEP_R
-    if backward:
-        return S.BWALK_START
-    return S.RUN_START if fast and can_run else S.WALK_START
+    kind: np.ndarray | int,
+    backward: np.ndarray | bool,
+    fast: np.ndarray | bool,
+    can_run: bool = True,
+    side: np.ndarray | int = Side.AHEAD,
+) -> np.ndarray:
+    """The first states when resting soldiers start moving (velocity zero → non-zero), over arrays (or one
+    soldier's scalars: a 0-d array)."""
+    side = np.asarray(side)
+    stand = np.where(
+        side != Side.AHEAD,
+        np.where(side == Side.LEFT, S.SIDESTEP_L, S.SIDESTEP_R),
+        np.where(backward, S.BWALK_START, np.where(np.asarray(fast) & can_run, S.RUN_START, S.WALK_START)),
+    )
+    return np.where(np.asarray(kind) == Movement.CRAWL, S.CRAWL_START, stand).astype(np.int64)

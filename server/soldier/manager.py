@@ -13,8 +13,8 @@ new packet: copy, convert TTES → Jack          ``requests``: :meth:`apply_requ
 compute velocity / heading                     ``requests``: :meth:`apply_requests` (speed, direction)
 transitioning: grab heading, continue          requests only stored; the path's arcs chain in ``tick``;
                                                a changed posture is taken up when the path ends
-posture or weapon different: cancel the step,  ``events``: :meth:`_on_event`, step cancelled (faded), quickest
-start a posture change                         path to the goal posture (:meth:`MotionLibrary.path`)
+posture or weapon different: cancel the step,  ``events``: :meth:`_start_changes`, step cancelled (faded),
+start a posture change                         quickest path to the goal posture (:meth:`MotionLibrary.path`)
 moving and PRONE: continue crawling            ``Mode.CRAWL``: ``stepping``, :mod:`.locomotion`
 moving and STANDING: walk or run               ``Mode.LOCO``: ``stepping``, :mod:`.locomotion`
 only the heading changed: resend last update   ``ticking``: ``TickUpdate.heading_only``
@@ -36,6 +36,8 @@ one stored frame per tick.
 from __future__ import annotations
 
 from typing import Any
+
+import numpy as np
 
 from protocol.entity import Appearance, WeaponState
 from server.soldier import report
@@ -127,7 +129,7 @@ class SoldierManager(Requests):
 
     def goal_node(self, index: int) -> int:
         """The posture node the soldier's last request asks for (-1: none in this graph)."""
-        return self._desired(index)
+        return int(self._desired_many(np.array([index], np.int64))[0])
 
     def soldier_info(self, index: int) -> dict[str, Any]:
         """One soldier's state, for status reports and tests (:func:`server.soldier.report.soldier_info`)."""

@@ -234,9 +234,7 @@ class Requests(Ticking):
             if changes.any():
                 self._start_changes(i[ev[changes]], t[ev[changes]], captured)
                 ev = ev[~changes]
-            for k in ev.tolist():
-                s = int(i[k])
-                self._on_event(s, float(t[k]), bool(imm[k]), captured.get(s))
+            self._on_events(i[ev], t[ev], imm[ev], captured)
 
     def posture_change(self, index: int, posture: str, now: float) -> list[str]:
         """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing

@@ -7,7 +7,6 @@ import numpy as np
 from server.soldier import root_motion
 from server.soldier.core import (
     _CRAWL_CYCLE,
-    _SCALED,
     CATCH_UP_BEHIND_SECONDS,
     CATCH_UP_FASTER,
     CATCH_UP_RUN_CM,
@@ -98,8 +97,10 @@ class Stepping(ManagerCore):
         limit = np.where(IS_RUN[st], CATCH_UP_RUN_CM[1], CATCH_UP_RUN_CM[0])
         return (IS_WALK[st] | IS_RUN[st]) & ~IS_BACKWARD[st] & (behind > limit) & lib.can_run
 
-    def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray) -> None:
-        """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot)."""
+    def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray, exact: bool = False) -> None:
+        """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot).
+        ``exact``: the root offsets folded and rebased as the per-event paths do (:func:`root_motion.fold1`,
+        bit for bit): starts from rest, decided with the soldiers' other events."""
         if len(idx) == 0:
             return
         tb, lib = self.table, self.library
@@ -108,7 +109,7 @@ class Stepping(ManagerCore):
         clip = lib.loco_clip[st, foot]
         direc = lib.loco_dir[st].astype(np.int8)
         direc = np.where((st == _CRAWL_CYCLE) & tb.backward[idx], -direc, direc)
-        root_motion.fold(tb, lib, idx, t)
+        (root_motion.fold_exact if exact else root_motion.fold)(tb, lib, idx, t)
         dur, tb.stride[idx] = self._step_duration(idx, clip, st)
         tb.loco[idx] = st
         tb.foot[idx] = foot
@@ -117,43 +118,7 @@ class Stepping(ManagerCore):
         tb.start[idx] = t
         tb.dur[idx] = dur
         tb.end[idx] = t + dur
-        root_motion.rebase(tb, lib, idx)
+        (root_motion.rebase_exact if exact else root_motion.rebase)(tb, lib, idx)
         if self._settings.record_clips:
             for k in range(len(idx)):
                 self._record(int(idx[k]), float(t[k]))
-
-    def _enter_one(self, i: int, state: int, t: float) -> None:
-        """:meth:`_enter_states` for one soldier in scalar Python (the per-event path, ~10x cheaper)."""
-        tb, lib = self.table, self.library
-        foot = 1 - int(tb.foot[i])
-        clip = int(lib.loco_clip[state, foot])
-        direc = int(lib.loco_dir[state])
-        if state == _CRAWL_CYCLE and tb.backward[i]:
-            direc = -direc
-        root_motion.fold1(tb, lib, i, t)
-        if _SCALED[state]:  # a side-step: the vectorised pacing
-            durs, strides = self._step_duration(np.array([i], np.int64), np.array([clip]), np.array([state]))
-            dur, tb.stride[i] = float(durs[0]), strides[0]
-        else:  # a start step: its recorded pace, hurried when its figure is behind (after a pivot)
-            dur = float(lib.clip_duration[clip]) / self._start_rate(i, state)
-            dur, tb.stride[i] = max(dur, MIN_CLIP_SECONDS), 1.0
-        tb.loco[i] = state
-        tb.foot[i] = foot
-        tb.clip[i] = clip
-        tb.direc[i] = direc
-        tb.start[i] = t
-        tb.dur[i] = dur
-        tb.end[i] = t + dur
-        root_motion.rebase1(tb, lib, i)
-        self._record(i, t)
-
-    def _start_rate(self, i: int, state: int) -> float:
-        """The rate start step ``state`` of soldier ``i`` plays at (root offset folded to now): its recorded
-        one, or HURRY_RATE when the figure is more than HURRY_BEHIND_CM behind its stop lag (a pivot or a
-        posture change left it behind its moving entity)."""
-        rate = float(HURRY_RATE[state])
-        if rate == 1.0:
-            return 1.0
-        (ox, oz), (vx, vz) = self.table.root_off[i].tolist(), self.table.vlocal[i].tolist()
-        along = (ox * vx + oz * vz) / max(float(np.hypot(vx, vz)), 1e-9)
-        return rate if along + float(self._stop_lag[state]) < -HURRY_BEHIND_CM else 1.0
