@@ -514,9 +514,7 @@ def test_heading_offsets_turn_each_graphs_placements(lib) -> None:
     np.testing.assert_allclose(a.figures, b.figures, atol=1e-6)
 
 
-def test_exact_and_blended_state_entry_agree(lib) -> None:
-    """A start decided with the soldiers' events folds its root offset as the per-event paths do (exact);
-    the clip ends' entries blend the travel: the same clips and times."""
+def test_scalar_and_vector_state_entry_agree(lib) -> None:
     from server.soldier.state import LocoState
 
     for speed, backward in [(0.0, False), (0.7, False), (4.0, True), (20.0, False)]:
@@ -528,7 +526,7 @@ def test_exact_and_blended_state_entry_agree(lib) -> None:
         for state in LocoState:
             if state == LocoState.NONE:
                 continue
-            a._enter_states(np.array([i]), np.array([state], np.int8), np.array([1.25]), exact=True)
+            a._enter_one(i, int(state), 1.25)
             b._enter_states(np.array([j]), np.array([state], np.int8), np.array([1.25]))
             for col in ("loco", "foot", "clip", "direc", "start", "dur", "end"):
                 assert getattr(a.table, col)[i] == pytest.approx(getattr(b.table, col)[j]), (state, col)

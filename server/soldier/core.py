@@ -17,6 +17,7 @@ from server.soldier.library import MotionLibrary, PathStep
 from server.soldier.locomotion import (
     GAIT_STAY,
     NEXT,
+    SCALED,
     Cond,
 )
 from server.soldier.settings import SoldierSettings
@@ -61,6 +62,7 @@ for _t, _stay in GAIT_STAY.items():
     _GAIT_STAY[_t] = _stay
 _FIRING = int(WeaponState.FIRING)
 _MOVE_CRAWL = int(Movement.CRAWL)
+_SCALED: tuple[bool, ...] = tuple(SCALED.tolist())
 
 
 @dataclass

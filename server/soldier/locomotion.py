@@ -167,6 +167,27 @@ def next_states(state: np.ndarray, cond: np.ndarray) -> np.ndarray:
     return NEXT[np.asarray(state, np.int64), np.asarray(cond, np.int64)]
 
 
+def _first_state(crawl: bool, side: int, backward: bool, fast: bool) -> S:
+    """The first state when a resting soldier starts moving (velocity zero → non-zero)."""
+    if crawl:
+        return S.CRAWL_START
+    if side != Side.AHEAD:
+        return S.SIDESTEP_L if side == Side.LEFT else S.SIDESTEP_R
+    if backward:
+        return S.BWALK_START
+    return S.RUN_START if fast else S.WALK_START
+
+
+# START[crawl, side, backward, fast]: :func:`_first_state` as a table (a batch's starts: one lookup)
+START = np.array(
+    [
+        [[[_first_state(c, sd, b, f) for f in (False, True)] for b in (False, True)] for sd in Side]
+        for c in (False, True)
+    ],
+    np.int64,
+)
+
+
 def start_state(
     kind: np.ndarray | int,
     backward: np.ndarray | bool,
@@ -174,12 +195,8 @@ def start_state(
     can_run: bool = True,
     side: np.ndarray | int = Side.AHEAD,
 ) -> np.ndarray:
-    """The first states when resting soldiers start moving (velocity zero → non-zero), over arrays (or one
+    """The first states when resting soldiers (Movement ``kind``) start moving, over arrays (or one
     soldier's scalars: a 0-d array)."""
-    side = np.asarray(side)
-    stand = np.where(
-        side != Side.AHEAD,
-        np.where(side == Side.LEFT, S.SIDESTEP_L, S.SIDESTEP_R),
-        np.where(backward, S.BWALK_START, np.where(np.asarray(fast) & can_run, S.RUN_START, S.WALK_START)),
-    )
-    return np.where(np.asarray(kind) == Movement.CRAWL, S.CRAWL_START, stand).astype(np.int64)
+    crawl = np.asarray(kind) == int(Movement.CRAWL)
+    fast = (np.asarray(fast) & can_run).astype(np.int64)
+    return START[crawl.astype(np.int64), np.asarray(side, np.int64), np.asarray(backward, np.int64), fast]

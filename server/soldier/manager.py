@@ -37,8 +37,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from protocol.entity import Appearance, WeaponState
 from server.soldier import report
 from server.soldier.core import (
@@ -129,7 +127,7 @@ class SoldierManager(Requests):
 
     def goal_node(self, index: int) -> int:
         """The posture node the soldier's last request asks for (-1: none in this graph)."""
-        return int(self._desired_many(np.array([index], np.int64))[0])
+        return self._desired(index)
 
     def soldier_info(self, index: int) -> dict[str, Any]:
         """One soldier's state, for status reports and tests (:func:`server.soldier.report.soldier_info`)."""

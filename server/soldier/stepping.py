@@ -7,6 +7,7 @@ import numpy as np
 from server.soldier import root_motion
 from server.soldier.core import (
     _CRAWL_CYCLE,
+    _SCALED,
     CATCH_UP_BEHIND_SECONDS,
     CATCH_UP_FASTER,
     CATCH_UP_RUN_CM,
@@ -60,11 +61,24 @@ class Stepping(ManagerCore):
         hurried start or end (HURRY_RATE: a reversal's end step, a start or end far behind the entity)."""
         tb, lib = self.table, self.library
         st = np.asarray(states, np.int64)
+        error = self._along(idx, tb.root_off[idx]) + self._stop_lag[st]  # cm ahead of where it should be
+        if SCALED[st].any():
+            rate, stride = self._cadence(idx, clip, st, error)
+        else:  # start and end steps, gait changes (a batch's starts): their recorded rate
+            rate = stride = np.ones(len(st))
+        hurry = tb.reversing[idx] | (error < -HURRY_BEHIND_CM)  # stopping to turn back, or metres behind
+        rate = np.where(hurry & (HURRY_RATE[st] > 1.0), HURRY_RATE[st], rate)
+        return np.maximum(lib.clip_duration[clip] / rate, MIN_CLIP_SECONDS), stride
+
+    def _cadence(
+        self, idx: np.ndarray, clip: np.ndarray, st: np.ndarray, error: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_step_duration`'s playback rate and stride scale of the cycles (1 elsewhere), ``error`` cm
+        ahead of the stop lag."""
+        tb, lib = self.table, self.library
         speed = tb.speed[idx]
-        stored = lib.clip_duration[clip]
         gs = lib.clip_ground_speed[clip]
         ok = SCALED[st] & (speed > MOVING_EPS) & (gs > 0)
-        along = self._along(idx, tb.root_off[idx])
         gs = np.where(gs > 0, gs, 1.0)
         cfg = self._settings
         hysteresis = min(cfg.walk_run_hysteresis, 0.5 * cfg.walk_run_threshold)
@@ -74,13 +88,9 @@ class Stepping(ManagerCore):
         top = np.where(IS_WALK[st], WALK_MAX_RATE, MAX_RATE)
         scale = np.clip(ideal / np.clip(ideal, MIN_RATE, top), MIN_STRIDE, MAX_STRIDE)
         stride = np.where(ok & ~leaving, scale, 1.0)
-        error = along + self._stop_lag[st]  # cm ahead of where the figure should be
         seconds = np.where(error < 0.0, CATCH_UP_BEHIND_SECONDS, CATCH_UP_SECONDS)  # behind: closes sooner
         want = speed + np.clip(-error / 100.0 / seconds, -0.5 * speed, CATCH_UP_FASTER * speed)
-        rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, top), 1.0)
-        hurry = tb.reversing[idx] | (error < -HURRY_BEHIND_CM)  # stopping to turn back, or metres behind
-        rate = np.where(hurry & (HURRY_RATE[st] > 1.0), HURRY_RATE[st], rate)
-        return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
+        return np.where(ok, np.clip(want / (gs * stride), MIN_RATE, top), 1.0), stride
 
     def _along(self, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
         """``(n,)`` cm the root offsets ``off`` of soldiers ``idx`` lie ahead along their velocity."""
@@ -99,8 +109,8 @@ class Stepping(ManagerCore):
 
     def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray, exact: bool = False) -> None:
         """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot).
-        ``exact``: the root offsets folded and rebased as the per-event paths do (:func:`root_motion.fold1`,
-        bit for bit): starts from rest, decided with the soldiers' other events."""
+        ``exact``: the root offsets folded and rebased as :meth:`_enter_one` does (:func:`root_motion.fold1`,
+        bit for bit): a group's starts from rest."""
         if len(idx) == 0:
             return
         tb, lib = self.table, self.library
@@ -122,3 +132,39 @@ class Stepping(ManagerCore):
         if self._settings.record_clips:
             for k in range(len(idx)):
                 self._record(int(idx[k]), float(t[k]))
+
+    def _enter_one(self, i: int, state: int, t: float) -> None:
+        """:meth:`_enter_states` for one soldier in scalar Python (a small group's starts: ~10x cheaper)."""
+        tb, lib = self.table, self.library
+        foot = 1 - int(tb.foot[i])
+        clip = int(lib.loco_clip[state, foot])
+        direc = int(lib.loco_dir[state])
+        if state == _CRAWL_CYCLE and tb.backward[i]:
+            direc = -direc
+        root_motion.fold1(tb, lib, i, t)
+        if _SCALED[state]:  # a side-step: the vectorised pacing
+            durs, strides = self._step_duration(np.array([i], np.int64), np.array([clip]), np.array([state]))
+            dur, tb.stride[i] = float(durs[0]), strides[0]
+        else:  # a start step: its recorded pace, hurried when its figure is behind (after a pivot)
+            dur = float(lib.clip_duration[clip]) / self._start_rate(i, state)
+            dur, tb.stride[i] = max(dur, MIN_CLIP_SECONDS), 1.0
+        tb.loco[i] = state
+        tb.foot[i] = foot
+        tb.clip[i] = clip
+        tb.direc[i] = direc
+        tb.start[i] = t
+        tb.dur[i] = dur
+        tb.end[i] = t + dur
+        root_motion.rebase1(tb, lib, i)
+        self._record(i, t)
+
+    def _start_rate(self, i: int, state: int) -> float:
+        """The rate start step ``state`` of soldier ``i`` plays at (root offset folded to now): its recorded
+        one, or HURRY_RATE when the figure is more than HURRY_BEHIND_CM behind its stop lag (a pivot or a
+        posture change left it behind its moving entity)."""
+        rate = float(HURRY_RATE[state])
+        if rate == 1.0:
+            return 1.0
+        (ox, oz), (vx, vz) = self.table.root_off[i].tolist(), self.table.vlocal[i].tolist()
+        along = (ox * vx + oz * vz) / max(float(np.hypot(vx, vz)), 1e-9)
+        return rate if along + float(self._stop_lag[state]) < -HURRY_BEHIND_CM else 1.0
