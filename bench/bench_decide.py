@@ -9,6 +9,7 @@ N soldiers (the shipped library, DI.fig) through:
 * ``start``: every soldier (standing) asked to walk in one batch;
 * ``stop``: every walking soldier asked to stand in one batch, then the ticks that take its end steps' ends
   (the stops decided at clip ends);
+* ``turn``: every soldier, standing with the rifle stowed, turned 90° in one batch (turns in place);
 * ``mix``: the load mix's 10 Hz steps for a few seconds, one batch each (``bench_answer_cost --together``).
 
     python bench/bench_decide.py [--soldiers 10000] [--json]
@@ -51,10 +52,13 @@ def _cpu_ms(func: Any, *args: Any) -> float:
     return 1000.0 * (time.thread_time() - t)
 
 
-def _standing(n: int, speed: float, immediate: bool = False) -> np.ndarray:
-    idx = np.arange(n)
+def _standing(
+    n: int, speed: float, immediate: bool = False, weapon: int = WeaponState.DEPLOYED, heading: float = 0.0
+) -> np.ndarray:
+    h = np.radians(heading)
+    velocity = (speed * np.sin(h), speed * np.cos(h), 0.0)
     return make_entity_requests(
-        idx, Appearance.UPRIGHT, WeaponState.DEPLOYED, (0.0, speed, 0.0), 0.0, (0.0, 0.0, 0.0), immediate
+        np.arange(n), Appearance.UPRIGHT, weapon, velocity, heading, (0.0, 0.0, 0.0), immediate
     )
 
 
@@ -83,6 +87,14 @@ def measure(n: int, mix_seconds: float = 3.0) -> dict[str, Any]:
     ticks = [_cpu_ms(m.tick, k * period) for k in range(tick + 1, tick + 90)]
     out["stop_ticks_ms"] = round(float(np.sum(ticks)), 1)  # the end steps and their ends, 3 s
     out["still_walking"] = int((m.table.speed[:n] > 0).sum() + (m.table.mode[:n] != 0).sum())
+
+    m = _manager(n)
+    m.apply_requests(_standing(n, 0.0, True, WeaponState.STOWED), 0.0)
+    m.apply_requests(_standing(n, 0.0, False, WeaponState.STOWED), 0.01)
+    out["turn_ms"] = round(
+        _cpu_ms(m.apply_requests, _standing(n, 0.0, False, WeaponState.STOWED, 90.0), 0.05), 2
+    )
+    out["turning"] = int((m.table.mode[:n] == 1).sum())  # Mode.TRANSITION: the turn clip
     return out
 
 

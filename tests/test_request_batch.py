@@ -149,3 +149,17 @@ def test_an_unchanged_resend_only_moves_the_entity() -> None:
         if name != "position":
             np.testing.assert_array_equal(getattr(m.table, name), was, err_msg=name)
     np.testing.assert_array_equal(m.table.position[0], points_performer_to_jack(np.array([5.0, 6.0, 0.0])))
+
+
+def test_turns_in_place_grouped_as_one_by_one() -> None:
+    """Standing stowed soldiers whose heading changes turn in place (grouped: ``_turns``), then some walk,
+    side-step or turn again before the turn ends."""
+    still = [(s, 2, 0, 0.0, 0.0, False, 1, 0.0) for s in range(SOLDIERS)]
+    turned = [(s, 2, 0, 0.0, h, False, 1, 0.0) for s, h in enumerate([45.0, 90.0, 180.0, 275.5, 130.0])]
+    moved = [
+        (0, 2, 0, 1.4, 45.0, False, 1, 0.0),
+        (1, 2, 0, 0.5, 90.0, False, 1, 90.0),
+        (2, 2, 0, 0.0, 0.0, False, 1, 0.0),
+    ]
+    for gap in (2, 40):
+        _check(shipped_library(), [still, turned, moved, turned], gap)

@@ -30,16 +30,10 @@ from server.soldier.reactions import Reactions
 from server.soldier.stepping import Stepping
 from server.soldier.turning import REVERSAL_TURN_SPEEDUP, Turning
 
-# soldiers: a smaller group decides one by one in scalar Python (~12 µs a soldier), a larger one grouped
-# by decision in numpy (~0.1 ms a group, whatever its size: a shard's creation burst, a batch of starts)
-GROUP_MIN = 10
-
 
 class Events(Stepping, Turning, Reactions, LeadIn):
     """The Python that runs only on events, grouped by decision over each batch of soldiers: requests that
     change what soldiers do, and (:meth:`_advance`) the clip ends up to each clock."""
-
-    _group_min = GROUP_MIN  # (tests set it per manager: 1 always grouped, a large one always one by one)
 
     def _desired(self, i: int) -> int:
         """:meth:`_desired_many` of one soldier in scalar Python."""

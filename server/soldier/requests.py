@@ -177,8 +177,9 @@ class Requests(Ticking):
             tb.end[r] = tb.start[r] + new_dur
         hp = ~event & (mode == _IDLE) & ~moving & heading_changed
         tb.heading_pending[i[hp]] = True
-        for k in np.flatnonzero(hp & (np.abs(tb.root_yaw[i]) >= MIN_TURN_DEG)).tolist():
-            self._turn(int(i[k]), float(t[k]))
+        turn = hp & (np.abs(tb.root_yaw[i]) >= MIN_TURN_DEG)
+        if turn.any():
+            self._turns(i[turn], t[turn])
         tb.requested[i[event | hp | rescale]] = True  # what :meth:`answer` answers between ticks
         self._events(i, t, event, imm, stepping)
         self._skip_lead_in(i[event | hp], t[event | hp])
