@@ -249,36 +249,32 @@ class ManagerCore:
 
     def _rest(self, i: int, node: int, t: float) -> None:
         """Show posture ``node``'s pose: its clip held at the frame that is that posture."""
-        tb = self.table
-        lib = self.library
+        tb, lib = self.table, self.library
         root_motion.fold1(tb, lib, i, t)  # the offset stays where the last step left it (feet planted)
-        tb.stride[i] = 1.0
-        tb.pivot_rest[i] = 0.0
-        clip = int(lib.rest_clip[node])
         tb.node[i] = node
-        tb.clip[i] = clip
-        tb.direc[i] = lib.rest_dir[node]
-        tb.dur[i] = lib.clip_duration[clip]
-        tb.start[i] = t - tb.dur[i]
-        tb.end[i] = t
-        tb.dirty[i] = True
+        self._hold_rest(i, node, t)
         root_motion.rebase1(tb, lib, i)
 
     def _rest_many(self, idx: np.ndarray, t: np.ndarray) -> None:
         """:meth:`_rest` of soldiers ``idx`` in their posture nodes, at once (bit for bit)."""
         tb, lib = self.table, self.library
         root_motion.fold_exact(tb, lib, idx, t)
-        tb.stride[idx] = 1.0
-        tb.pivot_rest[idx] = 0.0
-        node = tb.node[idx].astype(np.int64)
-        clip = lib.rest_clip[node]
-        tb.clip[idx] = clip
-        tb.direc[idx] = lib.rest_dir[node]
-        tb.dur[idx] = lib.clip_duration[clip]
-        tb.start[idx] = t - tb.dur[idx]
-        tb.end[idx] = t
-        tb.dirty[idx] = True
+        self._hold_rest(idx, tb.node[idx], t)
         root_motion.rebase_exact(tb, lib, idx)
+
+    def _hold_rest(self, i: int | np.ndarray, node: int | np.ndarray, t: float | np.ndarray) -> None:
+        """The columns of soldiers ``i`` (one, or an array) holding posture ``node``'s rest frame from ``t``
+        on (their root offsets folded to ``t``)."""
+        tb, lib = self.table, self.library
+        tb.stride[i] = 1.0
+        tb.pivot_rest[i] = 0.0
+        clip = lib.rest_clip[node]
+        tb.clip[i] = clip
+        tb.direc[i] = lib.rest_dir[node]
+        tb.dur[i] = lib.clip_duration[clip]
+        tb.start[i] = t - tb.dur[i]
+        tb.end[i] = t
+        tb.dirty[i] = True
 
     def _record(self, i: int, t: float, what: str | None = None) -> None:
         if not self._settings.record_clips:
