@@ -168,9 +168,11 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         # a start this far off pivots first, as a reversal; a standing figure turns in place
         turns = (np.abs(tb.root_yaw[idx]) >= MIN_TURN_DEG) | ((kind != 0) & reversing)
         if turns.any():
-            for k in np.flatnonzero(turns).tolist():
+            standing = np.flatnonzero(turns & (kind == 0))
+            turns[standing] = self._turns(idx[standing], t[standing])
+            for k in np.flatnonzero(turns & (kind != 0)).tolist():
                 # a pivot stops, turns, then (its end decides again) walks away
-                turns[k] = self._turn(int(idx[k]), float(t[k]), REVERSAL_TURN_SPEEDUP if kind[k] else 1.0)
+                turns[k] = self._turn(int(idx[k]), float(t[k]), REVERSAL_TURN_SPEEDUP)
             idx, t, kind = idx[~turns], t[~turns], kind[~turns]
         still = idx[(kind == 0) & (tb.node[idx] != self._home)]
         tb.root_yaw[still] = 0.0  # no turn clip here: the figure faces the heading again
