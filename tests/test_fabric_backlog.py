@@ -178,6 +178,8 @@ async def test_a_shard_applies_a_burst_as_one_state_then_the_remove(autojump_clo
             and rows["velocity"][0, 0] == np.float32(0.98)
         )
         assert removed == ("remove", 3)
+        assert shard.status_note is not None and "backlog 0/32768 rows" in shard.status_note()
+        assert "49 coalesced, 0 dropped" in shard.status_note()
         shard.shutdown()
 
 

@@ -29,7 +29,7 @@ from server.logging import get_logger
 log = get_logger("fabric")
 INDICES = 1 << 16  # soldier indices are uint16 in a request row
 ROW_BYTES = ENTITY_REQUEST_DTYPE.itemsize
-MAX_ROWS = 32768  # rows and events queued: two per soldier at the default max_soldiers (16,384)
+MAX_ROWS = 32768  # rows and events queued, at least: a shard's is two per soldier (max_soldiers)
 MAX_BYTES = 8 << 20  # request rows (33 bytes each) and events (their size, estimated) queued
 MERGE_ROWS = 256  # consecutive request rows taken as one batch (a batch costs ~2 ms whatever its size)
 LOG_EVERY_S = 1.0  # a drop is logged at most this often (with the drops since the last log)

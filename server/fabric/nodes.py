@@ -33,7 +33,7 @@ import trio
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from server.fabric import Fabric, Kind, alive_key, poses_topic, requests_topic
 from server.fabric import requests as req
-from server.fabric.backlog import Backlog
+from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
@@ -87,7 +87,8 @@ class ShardNode:
         self._sent_serial = 0  # the board publish the last batch covered
         self.taken = 0  # fabric requests handled
         server.on_publish = self.publish
-        self.backlog = Backlog()  # what arrived and is not taken yet: bounded, requests coalesced per soldier
+        # what arrived and is not taken yet: bounded (two rows per soldier), requests coalesced per soldier
+        self.backlog = Backlog(max_rows=max(MAX_ROWS, 2 * server.config.max_soldiers))
         server.status_note = lambda: (
             f"shard {sharding.k}/{sharding.n}, {self.seq} batches, {self.backlog.describe()}"
         )
