@@ -97,6 +97,15 @@ def test_a_backlog_under_its_byte_bound_drops_the_oldest_rows() -> None:
     assert op["rows"]["index"].tolist() == list(range(20, 30))
 
 
+def test_events_beyond_the_bound_are_kept_and_the_rows_go() -> None:
+    """Events are never dropped: a backlog of events alone over its bound keeps them (and logs it); the
+    rows among them go, the oldest first."""
+    backlog = Backlog(max_rows=10)
+    backlog.put([row(1, 1.0), row(2, 1.0)] + [req.react(3, f"r{k}") for k in range(12)] + [row(4, 1.0)])
+    assert backlog.dropped == 3 and len(backlog) == 12
+    assert [op["kind"] for op in drain(backlog)] == [f"r{k}" for k in range(12)]
+
+
 # -- the order of a soldier's states and events: a model of a shard (the soldier's state: its newest row) --
 _EVENTS = st.one_of(
     st.builds(req.react, st.integers(0, 4), st.just("hit")),
