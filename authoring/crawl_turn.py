@@ -31,18 +31,16 @@ import numpy as np
 
 from authoring import easing, ik
 from authoring.crawl import (
-    CHEST_HOLD,
     ELBOW_SITE,
     LEG_SITES,
     LIFT,
-    PELVIS_DOFS,
-    PELVIS_HOLD,
     _hand_goals,
     _progress,
     _rise,
+    solve_body,
 )
 from authoring.motion import KeyPosture
-from authoring.postures import RIFLE, SOLDIER, SPINE, arm, leg
+from authoring.postures import RIFLE, SOLDIER, arm
 from authoring.transitions import CARRIER, ClipFrames, lift_off_ground, track_solve
 from authoring.turns import _about, _turn_move, ground_move
 from peabody.fk import FigureKinematics
@@ -142,30 +140,12 @@ def record_crawl_turn(
     chest0 = kin.segment_globals(q0, root0)[kin.segment_names.index(CARRIER)]
     chest = _about(pivot, CHEST_FRONT * front + (1.0 - CHEST_FRONT) * back) @ chest0
     chest[:, 1, 3] += ELBOW_LIFT * f_up  # the shoulders rise with the forearms
-    goals: list[ik.Goal] = [
-        ik.Goal(
-            f"{CARRIER}.proximal",
-            chest[:, :3, 3],
-            chest[:, :3, :3],
-            CHEST_HOLD,
-            1,
-            SPINE,
-            orientation_weight=40.0,
-        ),
-        ik.Goal(kin.root_name, roots[:, :3, 3], roots[:, :3, :3], PELVIS_HOLD, 1, ()),
-    ]
-    for side in SIDES:
-        for part, fmt in LEG_SITES.items():
-            site = fmt.format(s=side)
-            track = limb_track(_site(kin, q0, root0, site), pivot, back, b_up, LIFT[part])
-            chain = leg(side) if part == "knee" else (f"{side}_hip", f"{side}_knee", f"{side}_toes")
-            goals.append(ik.Goal(site, track, None, 1.0, 1, chain))
-    rest = np.broadcast_to(q0, (n, kin.ndof)).copy()
-    poses, report = ik.solve(
-        kin, rest, goals, roots, iterations=80, rest_pose=rest, rest_gain=0.1, root_dofs=PELVIS_DOFS
-    )
-    assert report.root_location is not None  # solved with root DOFs: the solve reports where the root went
-    roots = report.root_location
+
+    def legs(side: str, part: str) -> np.ndarray:
+        p0 = _site(kin, q0, root0, LEG_SITES[part].format(s=side))
+        return limb_track(p0, pivot, back, b_up, LIFT[part])
+
+    poses, roots = solve_body(kin, q0, chest, roots, legs)
     # the arms on that body: the palms on the rifle the front carries round, then the elbows on their tracks
     rifles = _about(pivot, front) @ rifle0
     rifles[:, 1, 3] += ELBOW_LIFT * f_up
