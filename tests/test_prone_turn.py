@@ -13,10 +13,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import trio
+from test_server_support import REPO, Client
 
 from peabody.fk import FigureKinematics
 from peabody.quaternion import to_transform
 from protocol.entity import Appearance
+from protocol.events import JointUpdates, Ready, Subscribe
+from server.app import TtesServer
+from server.config import ServerConfig
+from server.startup import ServerWorld
 from tests.test_gait_selection import shipped_library
 from tests.test_root_motion import HZ, drive, in_world
 
@@ -113,3 +119,34 @@ def test_a_crawler_whose_heading_changes_much_stops_turns_and_crawls_on(lib, tur
     assert k / HZ < 5.5  # stopped at the end of the stride it was in
     assert any("crawl_cycle" in c for c in shown[:k]) and any("crawl_cycle" in c for c in shown[k:])
     check_turn(lib, run, 3.9, turn, within=2.0)  # (from mid-crawl: crawling straight on measures 1.3°)
+
+
+async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """The same through a served world (real TCP, trio's autojump clock): an image generator lays soldier 0
+    prone, then turns his entity 90°; the server plays up, the turn and down, and the figure ends facing the
+    heading in the posture it left (the last pose sent is PRONE_STOWED's, the figure's yaw from it 0)."""
+    cfg = ServerConfig(port=0, data_dir=REPO, startup_script="jack-ttes-soldier_low.jcl")
+    cfg = cfg.with_overrides(record_clips=True, report_interval=1000.0)
+    lib = shipped_library()
+    world = ServerWorld(cfg.data_dir, max_soldiers=cfg.max_soldiers, record_clips=True, library=lib)
+    server = TtesServer(cfg, world)
+    async with trio.open_nursery() as nursery:
+        await nursery.start(server.serve)
+        c = await Client.open(server.addresses[0][1], "ig")
+        await c.expect(Ready)
+        await c.send(Subscribe((0,)))
+        await c.expect(JointUpdates)
+        await c.requests(index=0, appearance=Appearance.PRONE, heading=10.0)
+        await c.drain(6.0)
+        rest = c.pose(1, 0)[0].copy()
+        await c.requests(index=0, appearance=Appearance.PRONE, heading=100.0)
+        await c.drain(10.0)
+        m = world.manager
+        shown = [s.clip.split("/")[-1] for s in m.clip_log if s.index == 0]
+        assert shown[-3:] == ["crawl2prstow_low", "crawlturn_r90_low", "crawl2prstow_low"]
+        assert m.table.root_yaw[0] == pytest.approx(0.0, abs=1e-6)
+        np.testing.assert_allclose(c.pose(1, 0)[0], rest, atol=1e-3)
+        await c.aclose()
+        server.shutdown()
