@@ -90,16 +90,28 @@ def check_turn(lib, run: dict[str, np.ndarray], t0: float, turn: float, within: 
     assert abs((yaw[-1] - yaw[0] - turn + 180.0) % 360.0 - 180.0) < within
 
 
-@pytest.mark.parametrize(("turn", "clip"), [(90.0, "crawlturn_r90"), (-90.0, "crawlturn_l90")])
+@pytest.mark.parametrize(
+    ("turn", "clip"),
+    [(90.0, "crawlturn_r90"), (-90.0, "crawlturn_l90"), (-60.0, "crawlturn_l30"), (180.0, "crawlturn_r90")],
+)
 def test_on_forearms_and_knees_a_heading_change_turns_in_place(lib, turn: float, clip: str) -> None:
-    run = drive(lib, [(0.0, 0.0, 0.0), (4.0, 0.0, 0.0, 10.0 + turn)], 10.0, 9.0, appearance=Appearance.CRAWL)
-    assert any(clip in c for c in run["clips"].tolist())
+    """The turns that fit, one after the other: 60° is the 30° twice (the 45° left it 15° off), 180° the
+    90° twice."""
+    until = 5.0 + 3.6 * (1 + (abs(turn) > 90.0))
+    run = drive(
+        lib, [(0.0, 0.0, 0.0), (4.0, 0.0, 0.0, 10.0 + turn)], 10.0, until, appearance=Appearance.CRAWL
+    )
+    assert {c.split("/")[-1] for c in run["clips"].tolist() if "turn" in c} == {f"{clip}_low"}
     check_turn(lib, run, 3.9, turn)
 
 
-@pytest.mark.parametrize("turn", [90.0, -90.0])
+@pytest.mark.parametrize("turn", [90.0, -90.0, 180.0])
 def test_a_prone_soldier_comes_up_turns_and_lies_down_again(lib, turn: float) -> None:
-    run = drive(lib, [(0.0, 0.0, 0.0), (6.0, 0.0, 0.0, 10.0 + turn)], 10.0, 15.0, appearance=Appearance.PRONE)
+    """Once up and down however far he turns (180°: the 90° turn twice on forearms and knees)."""
+    until = 15.0 + 3.6 * (abs(turn) > 90.0)
+    run = drive(
+        lib, [(0.0, 0.0, 0.0), (6.0, 0.0, 0.0, 10.0 + turn)], 10.0, until, appearance=Appearance.PRONE
+    )
     shown = [c.split("/")[-1] for c in run["clips"].tolist()]
     changes = [c for k, c in enumerate(shown) if k and c != shown[k - 1]]
     assert changes[-3:] == [

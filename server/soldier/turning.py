@@ -20,6 +20,7 @@ away and a walking one reverses.
 from __future__ import annotations
 
 import math
+from itertools import combinations_with_replacement
 
 import numpy as np
 
@@ -46,6 +47,8 @@ PIVOT_REST_PER_STANCE_DEG = 9.0
 # a crawling figure this far from its new heading stops, turns in place on forearms and knees and crawls on:
 # turned while crawling (TURN_RATE about the root) its planted forearms and knees slid 14-18 cm at 45-90°
 CRAWL_REVERSAL_DEG = 22.5
+MAX_GROUND_TURNS = 4  # turn clips on the ground one after the other at most (180°: the 90° twice)
+GROUND_TURN_SLACK_DEG = 7.5  # ... chosen by what they leave unturned in steps of this much, then the fewest
 REVERSAL_TURN_SPEEDUP = 2.5  # the pivot plays the 180° turn in place this many times faster (3.4 s -> 1.4 s)
 
 
@@ -95,16 +98,18 @@ class Turning(ManagerCore):
         if not clips:
             return False
         want = -float(tb.root_yaw[i])  # compass degrees to turn
-        standing = node == self._home
-        if not standing:
-            speedup = 1.0
+        if node != self._home:  # on the ground
+            turns = self._ground_turns(node, want)
+            if turns:
+                self._turn_path(i, turns, t)
+            return bool(turns)
         clip, turn = (self._pivot_clip if speedup != 1.0 else self._nearest_turn)(want, clips)
         if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
             return False
         # the turn turns by the clip's turn and a rest too small for another turn clip (a 58° turn after an
         # end step: the 45° clip and 13° over its stances; it ended 13° off the heading); else another after
         rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
-        rest = rest if standing and self._pivot_fits(clip, abs(rest)) else 0.0
+        rest = rest if self._pivot_fits(clip, abs(rest)) else 0.0
         if speedup != 1.0:  # a pivot: turning more, it turns no faster than the clip
             speedup *= min(1.0, abs(turn) / abs(want))
         step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, node, node)
@@ -112,19 +117,38 @@ class Turning(ManagerCore):
         tb.pivot_rest[i] = rest
         return True
 
+    def _ground_turns(self, node: int, want: float) -> tuple[PathStep, ...]:
+        """The turns on the ground at ``node`` (CRAWL), one after the other (the larger first, at their
+        recorded pace, MAX_GROUND_TURNS at most), that come nearest to turning ``want`` compass degrees, what
+        is left judged in steps of GROUND_TURN_SLACK_DEG, then the fewest, then those turning the asked way:
+        180° is the 90° twice (without lying down between), 60° the 30° twice (the 45° left it 15° off), 100°
+        the 90° alone."""
+        lib = self.library
+        clips = lib.node_turns[node]
+        best: tuple[tuple[int, int, int], tuple[tuple[int, float], ...]] = (
+            (round(abs(want) / GROUND_TURN_SLACK_DEG), 0, 0),
+            (),
+        )
+        for k in range(1, MAX_GROUND_TURNS + 1):
+            for combo in combinations_with_replacement(clips, k):
+                left = (want - sum(c[1] for c in combo) + 180.0) % 360.0 - 180.0
+                key = (round(abs(left) / GROUND_TURN_SLACK_DEG), k, sum(c[1] * want < 0 for c in combo))
+                if key < best[0]:
+                    best = (key, combo)
+        order = sorted(best[1], key=lambda c: -abs(c[1]))
+        return tuple(PathStep(c, True, float(lib.clip_duration[c]), node, node) for c, _ in order)
+
     def _turn_via(self, i: int, t: float, via: int) -> bool:
-        """A prone soldier turns on forearms and knees: the path up to ``via`` (CRAWL), the turn there that
-        fits, the path back down (lying prone, forearms and thighs on the ground, he cannot turn on the spot
+        """A prone soldier turns on forearms and knees: the path up to ``via`` (CRAWL), the turns there that
+        fit, the path back down (lying prone, forearms and thighs on the ground, he cannot turn on the spot
         without dragging them)."""
         tb, lib = self.table, self.library
         node = int(tb.node[i])
-        want = -float(tb.root_yaw[i])
-        clip, turn = self._nearest_turn(want, lib.node_turns[via])
+        turns = self._ground_turns(via, -float(tb.root_yaw[i]))
         up, down = lib.path(node, via), lib.path(via, node)
-        if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want) or not up or not down:
+        if not turns or not up or not down:
             return False
-        step = PathStep(clip, True, float(lib.clip_duration[clip]), via, via)
-        self._turn_path(i, (*up, step, *down), t)
+        self._turn_path(i, (*up, *turns, *down), t)
         return True
 
     def _turn_path(self, i: int, steps: tuple[PathStep, ...], t: float) -> None:
