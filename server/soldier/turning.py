@@ -15,6 +15,11 @@ first, then starts (turning the body over the start step twisted the planted foo
 straight back faster than BACKWARD_MAX_SPEED is walked forwards: the figure's frame turns by ``face`` = 180°
 from the heading (the root placement carries it, docs/PROTOCOL.md), so a standing soldier pivots and walks
 away and a walking one reverses.
+
+On the ground the turns in place are those on forearms and knees (CRAWL): a soldier there plays the ones
+that fit, one after the other (:meth:`Turning._ground_turns`); lying prone he comes up onto forearms and
+knees, turns so and lies down again; crawling, CRAWL_REVERSAL_DEG or more from his heading, he stops, turns
+so and crawls on (turned while crawling or at once, his planted forearms, knees and toes slid 13-116 cm).
 """
 
 from __future__ import annotations
