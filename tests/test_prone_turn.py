@@ -2,8 +2,9 @@
 
 On forearms and knees (CRAWL) he plays the turn in place that fits (``crawlturn_*``, authoring/crawl_turn.py);
 lying prone he comes up onto forearms and knees, turns and lies down again; crawling, a large heading change
-stops him, he turns and crawls on (turning.CRAWL_REVERSAL_DEG). Turned about the root instead (prone: at
-once; crawling: at 90°/s) his planted forearms and knees slid 14-18 cm in the world.
+stops him, he turns and crawls on (turning.CRAWL_REVERSAL_DEG), a small one he turns slowly as he crawls.
+Turned about the root instead (prone: at once; crawling: at 90°/s) his planted elbows, knees and toes slid
+13-116 cm in the world.
 
 Measured as tests/test_root_motion.py measures the feet: forward kinematics of the poses the server sends,
 placed at the entity's dead-reckoned position and heading as an image generator would; each contact (elbow,
@@ -162,3 +163,17 @@ async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(
         np.testing.assert_allclose(c.pose(1, 0)[0], rest, atol=1e-3)
         await c.aclose()
         server.shutdown()
+
+
+@pytest.mark.parametrize("turn", [15.0, -20.0])
+def test_a_crawler_whose_heading_changes_little_turns_slowly_as_he_crawls(lib, turn: float) -> None:
+    """Under CRAWL_REVERSAL_DEG he crawls on and turns at root_motion.CRAWL_TURN_RATE (3°/s): every planted
+    contact within 3 cm (at 90°/s about the root the toes slid 20.6 cm at 15°)."""
+    script = [(0.0, 0.0, 0.0), (0.5, 0.3, 0.0), (4.0, 0.3, 0.0, 40.0 + turn), (11.0, 0.0, 0.0)]
+    run = drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
+    assert not any("crawlturn_" in c for c in run["clips"].tolist())
+    world, _ = contacts(lib, run)
+    hits = slides(lib, run, "crawl_")
+    assert hits and max(hits) <= SLIDE_CM, sorted(hits)[-3:]
+    yaw = facing(world)[int(3.9 * HZ) :]
+    assert abs((yaw[-1] - yaw[0] - turn + 180.0) % 360.0 - 180.0) < 2.0  # (straight on: 1.3°)

@@ -50,7 +50,8 @@ BACKWARD_HYSTERESIS = 0.2  # m/s: walking away forwards, he faces his velocity d
 # most this much per such stance (each degree twists that foot's heel and ball ~0.2 cm: 9° -> 1.8 cm)
 PIVOT_REST_PER_STANCE_DEG = 9.0
 # a crawling figure this far from its new heading stops, turns in place on forearms and knees and crawls on:
-# turned while crawling (TURN_RATE about the root) its planted forearms and knees slid 14-18 cm at 45-90°
+# turned while crawling at 90°/s about the root its planted toes and knees slid 13-94 cm at 45-90°; a smaller
+# change it turns while it crawls, at root_motion.CRAWL_TURN_RATE (3°/s: 22.5° in 7.5 s, toes 2.3 cm)
 CRAWL_REVERSAL_DEG = 22.5
 MAX_GROUND_TURNS = 4  # turn clips on the ground one after the other at most (180°: the 90° twice)
 GROUND_TURN_SLACK_DEG = 7.5  # ... chosen by what they leave unturned in steps of this much, then the fewest
