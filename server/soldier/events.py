@@ -168,7 +168,8 @@ class Events(Stepping, Turning, Reactions, LeadIn):
             return  # stopped: the pivot, then (its end decides again) the walk away
         if not kind and abs(tb.root_yaw[i]) >= MIN_TURN_DEG and self._turn(i, t):
             return
-        if not kind and node != self._home:  # no turn clip here: the figure faces the heading again
+        if not kind and node != self._home and not self.library.faces_world[node]:
+            # no turn clip here: the figure faces the heading again
             tb.root_yaw[i] = 0.0
         if kind:
             fast = bool(tb.speed[i] > self._settings.walk_run_threshold)
@@ -216,6 +217,8 @@ class Events(Stepping, Turning, Reactions, LeadIn):
             return
         steps, k = entry
         tb.node[i] = steps[k].end
+        if k + 1 < len(steps) and self._turning(steps[k].clip):  # a prone turn's turn, on forearms and knees
+            self._turned(i, steps[k].clip)
         k += 1
         if k < len(steps):
             entry[1] = k
