@@ -54,9 +54,11 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    kfire2dead's DI slave's kneeling knee slid 1.3 cm more; a prone death's forearms are held in their turn
    too, from the rifle's release on: the limp arms pivoted under the slumping body, 5-6 cm). kstow2dead's
    arms do not fall (:attr:`DeathSpec.arms_fall`): tried, pinned first, its left hand lay at 4.4 cm
-   instead of 23.5 but swung up to 64 cm on the way (the fall is eased in joint angles). Knees, thighs and
-   the trunk still skid (ststow2dead's knee 10 cm: the
-   hip pitches further than the thigh reaches). Making every part stick in the physics instead
+   instead of 23.5 but swung up to 64 cm on the way (the fall is eased in joint angles). ststow2dead's knee
+   on the ground is held before (:attr:`DeathSpec.knees_held`, :mod:`authoring.knee_hold`: the root follows
+   it, the legs keep their feet; it slid 10.3 cm, the hip pitching further than the thigh reaches); the
+   kneeling deaths' knees (tipping sideways, they roll) and the thighs and trunk still skid: held so, a
+   kneeling soldier's tucked foot slid 9-10 cm. Making every part stick in the physics instead
    (MuJoCo connect constraints to mocap points following a part's lowest node, released 2.5 cm up) held
    every contact under 1.5 cm but changed the falls: from the start, the standing soldier sat down
    backwards; from touchdown, he ended bottom-up on his knees (pelvis 24 cm up) and the kneeling ones
@@ -81,6 +83,7 @@ import numpy as np
 
 from authoring import dead_settle
 from authoring.contact_pin import pin_frames
+from authoring.knee_hold import hold_knees
 from authoring.motion import KeyPosture
 from authoring.planted import plant
 from authoring.postures import RIFLE, SOLDIER
@@ -128,6 +131,8 @@ class DeathSpec:
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
     propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
+    knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
+    # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
     kept: tuple[tuple[str, float], ...] = ()  # joints (name suffix, until s) that keep the start posture's
     # shape at kept_tone of their gain, letting go over KEPT_FADE from then on
     kept_tone: float = 0.0
@@ -167,7 +172,9 @@ CRAWL_DEATH = replace(
     kept_tone=0.3,
 )
 DEATHS: tuple[DeathSpec, ...] = (
-    DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0, pinned=True),
+    DeathSpec(
+        "ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0, pinned=True, knees_held=True
+    ),
     DeathSpec(
         "stfire2dead",
         "STAND_FIRE",
@@ -510,12 +517,15 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
 def _after_physics(
     spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], release: int = 0
 ) -> ClipFrames:
-    """The recorded fall with its skid taken out, settled limp and (:attr:`DeathSpec.pinned`) its limbs on
-    the ground held where they touched down (steps 5-7 of the module docstring)."""
+    """The recorded fall with its skid taken out, settled limp, (:attr:`DeathSpec.knees_held`) its knees on
+    the ground held and (:attr:`DeathSpec.pinned`) its limbs on the ground held where they touched down
+    (steps 5-7 of the module docstring)."""
     soldier, rifle = figures
     frames = plant(frames, soldier)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
     frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
+    if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
+        frames = hold_knees(frames, soldier, release)
     if not spec.pinned:
         return frames
     return pin_frames(frames, soldier, spec.propped, release if spec.propped else 0)

@@ -1,14 +1,16 @@
 """Benchmark: the CPU of a tick and of one answer, in-process (no sockets), at N soldiers of the load mix.
 
-What a request waits behind on the server is CPU: the tick's sampling and publish, then each client's
-requests applied and answered (issue 16: both clients' readers run before either writer encodes, so their
-costs add up at every phase of the tick). ``bench_request_latency.py`` measures the latency those costs
-make, but one run on a shared machine varies by more than a millisecond; this measures the costs themselves
-with ``time.thread_time``: per tick ``SoldierManager.tick`` and ``PoseBoard.publish``; per client batch of a
-10 Hz mix step (the load tester's, split over the clients as it splits them) ``apply_requests``, the answer
+What a request waits behind on the server is CPU: the tick's sampling and publish, then the requests applied
+and answered (issue 16). A batch costs about 2 ms whatever its size, so the server applies the requests of
+all clients that sent at one moment as one batch (``server.pending_requests``); ``--together`` measures that
+(one batch per mix step), the default each client's batch on its own (requests that land apart).
+``bench_request_latency.py`` measures the latency those costs make, but one run on a shared machine varies
+by more than a millisecond; this measures the costs themselves with ``time.thread_time``: per tick
+``SoldierManager.tick`` and ``PoseBoard.publish``; per batch of a 10 Hz mix step (the load tester's, split
+over the clients as it splits them, unless ``--together``) ``apply_requests``, the answer
 (``SoldierManager.answer`` at the next tick's time) and its publish.
 
-    python bench/bench_answer_cost.py [--soldiers 5000] [--clients 2] [--seconds 10] [--json]
+    python bench/bench_answer_cost.py [--soldiers 5000] [--clients 2] [--seconds 10] [--together] [--json]
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ STEP_EVERY = 3  # ticks per mix step (10 Hz)
 WARM_S = 1.0  # the first second (the initial requests settling) is not measured
 
 
-def measure(soldiers: int, clients: int, seconds: float) -> dict[str, Any]:
+def measure(soldiers: int, clients: int, seconds: float, together: bool = False) -> dict[str, Any]:
     cfg = ServerConfig(host="127.0.0.1", port=0, tick_hz=TICK_HZ, throttle=0.0)
     server = TtesServer(cfg)
     server.start_world()
@@ -70,15 +72,16 @@ def measure(soldiers: int, clients: int, seconds: float) -> dict[str, Any]:
         t_req = t + 0.5 * period  # between ticks
         clock[0] = t_req
         step = driver.step(t_req)
-        for c in range(clients):
-            part = step.rows[owner[step.rows["index"].astype(np.int64)] == c]
+        own = owner[step.rows["index"].astype(np.int64)]
+        parts = [step.rows] if together else [step.rows[own == c] for c in range(clients)]
+        for part in parts:
             timed("answer_apply", on, m.apply_requests, part, t_req)
             answer = timed("answer_sample", on, m.answer, t_req, t + period)
             timed("answer_publish", on, board.publish, answer, world, between=True)
             if on:
                 rows["rows"].append(len(part))
                 rows["answered"].append(len(answer))
-    out: dict[str, Any] = {"soldiers": soldiers, "clients": clients}
+    out: dict[str, Any] = {"soldiers": soldiers, "clients": clients, "together": together}
     for key, v in ms.items():
         a = np.asarray(v)
         out[key] = {"mean": round(float(a.mean()), 3), "p50": round(float(np.median(a)), 3)}
@@ -98,13 +101,19 @@ def main() -> int:
     ap.add_argument(
         "--seconds", type=float, default=10.0, help="simulated seconds (the first is not measured)"
     )
+    ap.add_argument(
+        "--together",
+        action="store_true",
+        help="all clients' requests of a step as one batch (they landed together)",
+    )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    out = measure(args.soldiers, args.clients, args.seconds)
+    out = measure(args.soldiers, args.clients, args.seconds, args.together)
     if args.json:
         print(json.dumps(out, indent=1))
         return 0
-    print(f"{args.soldiers} soldiers, {args.clients} clients: CPU ms (mean / p50 / p90)")
+    how = " (their requests together)" if args.together else ""
+    print(f"{args.soldiers} soldiers, {args.clients} clients{how}: CPU ms (mean / p50 / p90)")
     for key in ("tick_sample", "tick_publish", "answer_apply", "answer_sample", "answer_publish"):
         r = out[key]
         print(f"  {key:15s} {r['mean']:7.3f} {r['p50']:7.3f} {r['p90']:7.3f}")

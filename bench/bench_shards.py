@@ -12,10 +12,14 @@ quote the load average. Each server's status line has its CPU per tick by stage 
 
 ``--probe N`` measures instead the path a request takes alone: N soldiers, one posture request at a time
 (kneel, then stand), the time until that soldier's next update reaches the client (client → front-end →
-shard → front-end → client), on the synthetic library.
+shard → front-end → client), on the synthetic library, ``--throttle 0`` as the load.
 
     python bench/bench_shards.py [--soldiers 20000] [--clients 2] [--seconds 10] [--fabric zenoh] [--json]
     python bench/bench_shards.py --probe 40 [--fabric dds]
+
+``--trace N`` runs the load with a probe of N soldiers beside it and says where each probe request's time
+went (``bench/trace_legs.py``: the legs client → front-end → fabric → shard → fabric → front-end →
+client, stamped by each process under ``TTES_TRACE``) with each process's CPU per tick by stage.
 """
 
 from __future__ import annotations
@@ -24,10 +28,11 @@ import argparse
 import contextlib
 import json
 import os
+import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -35,10 +40,9 @@ import trio
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from client_stub.link.client import Client
+from bench import trace_legs
 from client_stub.link.spawn import ServerProcess, cpu_seconds, free_port
 from client_stub.loadtest.session import LoadTestConfig, run_loadtest
-from protocol.entity import Appearance, make_entity_requests
 
 
 def main() -> int:
@@ -49,6 +53,7 @@ def main() -> int:
     ap.add_argument("--warmup", type=float, default=3.0)
     ap.add_argument("--fabric", choices=("zenoh", "dds"), default="zenoh")
     ap.add_argument("--probe", type=int, metavar="N", help="request -> update latency of N soldiers")
+    ap.add_argument("--trace", type=int, metavar="N", help="trace N probe soldiers' requests under the load")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     if args.probe:
@@ -58,9 +63,11 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="ttes-shards-") as tmp:
         config = Path(tmp) / "scale.toml"  # room for every soldier, one client id may own them all
         n = args.soldiers + 64
-        config.write_text(f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\n")
+        config.write_text(f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\nreport_interval = 2.0\n")
         common = ["--config", str(config), "--throttle", "0", "--fabric", args.fabric]
-        with cluster(common) as procs:
+        if args.trace:
+            os.environ["TTES_TRACE"], os.environ["TTES_TRACE_BELOW"] = f"{tmp}/trace", str(args.trace + EXTRA)
+        with cluster(common) as procs, probing(procs["front"].port, args.trace, Path(tmp)) as probed:
             cpu0, t0 = {k: p.cpu_seconds() for k, p in procs.items()}, time.monotonic()
             load = os.getloadavg()[0]
             report = run_loadtest(
@@ -77,6 +84,8 @@ def main() -> int:
             )
             wall = time.monotonic() - t0
             cpu = {k: round(100 * (cpu_seconds(p.pid) - cpu0[k]) / wall, 1) for k, p in procs.items()}
+            stages = {k: stage_cpu(p.log_tail(1 << 24)) for k, p in procs.items()}
+            traced = probed(time.monotonic() - args.seconds) if args.trace else {}
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
     keys += ("server_cpu_pct", "client_cpu_pct")  # the front-end's and the load generator's, steady window
@@ -87,6 +96,8 @@ def main() -> int:
         "load": round(load, 2),
         **{k: report.get(k) for k in keys},
         "cpu_pct": cpu,
+        "cpu_ms_per_tick": stages,
+        **traced,
     }
     print(json.dumps(out) if args.json else json.dumps(out, indent=1))
     return 0
@@ -108,8 +119,55 @@ def cluster(flags: list[str]) -> Iterator[dict[str, ServerProcess]]:
             p.stop()
 
 
+EXTRA = 16  # the start-up script's soldiers come first: the probe's are traced below N + EXTRA
+
+
+@contextlib.contextmanager
+def probing(port: int, n: int | None, tmp: Path) -> Iterator[Callable[[float], dict[str, object]]]:
+    """With ``n``: a probe client of n traced soldiers (made first: indices 0..n-1) in its own process,
+    and a function that joins its requests sent since a time with the servers' trace stamps."""
+    if not n:
+        yield lambda since: {}
+        return
+    out = tmp / "probe.txt"
+    cmd = [sys.executable, str(Path(__file__).with_name("trace_legs.py")), str(port), str(n), str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        ready = proc.stdout.readline().split()
+        if ready[:1] != ["ready"] or int(ready[1]) >= n + EXTRA:
+            raise RuntimeError(f"probe client not ready: {ready}")
+
+        def joined(since: float) -> dict[str, object]:
+            lines = out.read_text().splitlines() if out.exists() else []
+            probes = [(int(i), float(a), float(b)) for i, a, b in (ln.split() for ln in lines)]
+            window = [p for p in probes if p[1] >= since]
+            stamps = trace_legs.read_stamps(sorted(tmp.glob("trace.*")))
+            return {"probes_all": len(probes), **trace_legs.legs(window, stamps)}
+
+        yield joined
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+def stage_cpu(log: str) -> dict[str, float]:
+    """The mean of a server's ``cpu_ms_per_tick`` (``animate:3.2,merge:1.1,...``) over its status lines,
+    the first (start-up, creations) left out."""
+    rows = []
+    for line in log.splitlines():
+        field = next((f for f in line.split() if f.startswith("cpu_ms_per_tick=")), None)
+        if "event=status" in line and field:
+            rows.append({k: float(v) for k, v in (kv.split(":") for kv in field.split("=", 1)[1].split(","))})
+    rows = rows[1:] or [{}]
+    keys = sorted({k for r in rows for k in r})
+    return {k: round(float(np.mean([r.get(k, 0.0) for r in rows])), 2) for k in keys} | {"reports": len(rows)}
+
+
 def probe(n: int, fabric: str) -> dict[str, object]:
-    with cluster(["--synthetic", "--fabric", fabric]) as procs:
+    # --throttle 0 as the load's: the synthetic start-up script's 0.04 s held an answer until 23 ms after the
+    # client's last write (16 ms p50 of the path's 9 at load 11, measured alone)
+    with cluster(["--synthetic", "--throttle", "0", "--fabric", fabric]) as procs:
         lat = trio.run(_probe, procs["front"].port, n)
     ms = np.asarray(lat) * 1000
     return {
@@ -123,33 +181,8 @@ def probe(n: int, fabric: str) -> dict[str, object]:
 
 
 async def _probe(port: int, n: int) -> list[float]:
-    arrived: dict[int, float] = {}
-
-    def updates(when: float, tick: int, indices: np.ndarray, size: int, event: object) -> None:
-        for i in indices.tolist():
-            arrived[i] = time.monotonic()
-
-    lat = []
-    async with trio.open_nursery() as nursery:
-        c = Client("probe", on_updates=updates)
-        await c.open(nursery, "127.0.0.1", port, soldierprefix=None)
-        idx = [(await c.create_soldier("DI.fig", "AK_47.fig")).index for _ in range(n)]
-        c.subscribe(idx)
-        await trio.sleep(2.0)  # every soldier's first update, and settled
-        for rep in range(3 * n):
-            i = idx[rep % n]
-            posture = Appearance.KNEEL if (rep // n) % 2 == 0 else Appearance.UPRIGHT
-            arrived.pop(i, None)
-            sent = time.monotonic()
-            c.send_requests(make_entity_requests([i], appearance=posture))
-            with trio.move_on_after(5.0):
-                while i not in arrived:
-                    await trio.sleep(0.001)
-            if i in arrived:
-                lat.append(arrived[i] - sent)
-            await trio.sleep(0.05)
-        await c.aclose()
-        nursery.cancel_scope.cancel()
+    lat: list[float] = []
+    await trace_legs.probe_requests(port, n, 3 * n, lambda i, sent, received: lat.append(received - sent))
     return lat
 
 

@@ -479,6 +479,11 @@ class Connection:
         """Server: indices of the soldiers this client subscribed to."""
         return np.flatnonzero(self._subscribed)
 
+    def subscribes_any(self, indices: np.ndarray) -> bool:
+        """Server: whether this client subscribed to any of the soldiers ``indices``."""
+        idx = indices[indices < len(self._subscribed)]
+        return bool(self._subscribed[idx].any())
+
     def reset_soldiers(self, indices: np.ndarray | list[int] | None = None) -> None:
         """Server: the next update of these soldiers (all if None) is full, e.g. after an index is reused."""
         idx = None if indices is None else np.asarray(indices, np.int64)

@@ -10,12 +10,15 @@ Structure (one trio nursery):
   stays bounded and a stalled client cannot slow anyone else;
 * soldiers with new requests get an out-of-cycle update as soon as their reader has handled them
   (:meth:`TtesServer.answer_requests`, ``SoldierManager.answer``), so the update that reflects a request does
-  not wait for the next tick (issue 16: one-tick latency). The tick and the writers **let the readers in**
-  first (:meth:`TtesServer.let_readers_in`): a request that arrived just before a tick is answered before
-  the tick samples; one that arrived while it sampled is taken up by that tick before it publishes
-  (:meth:`TtesServer.run_tick`: those soldiers sampled again, in the tick's frames); one that arrived during
-  the publish or the writers' encodes is answered before the next writer encodes (its answer goes out with
-  the tick's frames);
+  not wait for the next tick (issue 16: one-tick latency). A session holds its requests and its reader lets
+  the other readers in first (:meth:`TtesServer.take_requests`): the requests of every client that sent at
+  that moment are applied and answered as one batch (:mod:`server.pending_requests`: a batch's cost is mostly
+  fixed). The tick and the writers of a tick's frames **let the readers in** first
+  (:meth:`TtesServer.let_readers_in`) and apply what they hold: a request that arrived just before a tick is
+  answered before the tick samples; one that arrived while it sampled is taken up by that tick before it
+  publishes (:meth:`TtesServer.run_tick`: those soldiers sampled again, in the tick's frames); one that
+  arrived during the publish or the writers' encodes is answered before the next writer encodes (its answer
+  goes out with the tick's frames). A writer woken by answers alone writes them at once;
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
 * **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
   :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
@@ -41,21 +44,27 @@ import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
+import numpy as np
 import trio
 
 from protocol.connection import State
 from server.config import ConfigError, ServerConfig
 from server.listen import bind_tcp
 from server.logging import get_logger
+from server.pending_requests import PendingRequests
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.soldier.manager import TickUpdate
 from server.stage_cpu import StageCpu
 from server.startup import ServerWorld
 from server.tls import server_context
+from server.trace import TRACE
 from server.websocket import WebSocketStream, origin_allowed
 from server.world.commands import needs_worker
 
+# a front-end reader's CPU per turn of its client's buffered events (a burst yields between); a single
+# server's reader answers what it handled after each turn, so it keeps handling all that is buffered
+READ_TURN_S = 0.004
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
@@ -97,6 +106,7 @@ class TtesServer:
         self._counted_tick = -1  # the wire tick last counted in _published_ticks
         self._shutdown = trio.Event()
         self._requests_seen = 0  # the manager's request and reaction count at the last answer
+        self.pending = PendingRequests(self.world)  # requests the readers hold: applied as one batch
         self.answers = 0  # out-of-cycle publishes
         self.next_tick = 0.0  # server time of the next scheduled tick (what an answer samples at)
         self._ticking = False  # between a tick's sampling and its publish: requests are folded into it
@@ -116,7 +126,7 @@ class TtesServer:
         self.on_publish: Callable[[PoseBoard], None] | None = None
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
-        self.feed: Callable[[PoseBoard, int], int] | None = None
+        self.feed: Callable[[PoseBoard, int], np.ndarray] | None = None
         self.status_note: Callable[[], str] | None = (
             None  # appended to STATUS (a shard's or front-end's role)
         )
@@ -332,6 +342,7 @@ class TtesServer:
         self.clients_total += 1
         session = Session(self.world, self.board_ref, self.config, peer)
         session.offload_jcl = True
+        session.pending = self.pending
         session.local = _is_loopback(socket)
         session.full = len(self.sessions) >= self.config.max_clients
         same_host = (
@@ -401,9 +412,11 @@ class TtesServer:
         its request rate, and while its JCL runs."""
         while not session.closing:
             with self.cpu("requests"):
-                wait = session.resume(self.now())
-                self.requests_arrived()
-            if session.pending_jcl is not None:
+                wait = session.resume(self.now(), READ_TURN_S if self.feed is not None else None)
+            await self.take_requests()
+            if session.more:  # a burst: the tick and the other clients run before its next turn
+                await trio.lowlevel.checkpoint()
+            elif session.pending_jcl is not None:
                 await self.run_jcl(session)
             elif session.output_full:  # the client's answers wait: read on once the writer took them
                 session.drained = trio.Event()
@@ -425,7 +438,12 @@ class TtesServer:
                 else:  # updates held back by the connection's own throttle: write them when due
                     with trio.move_on_at(self._t0 + session.retry_at):
                         await session.wake.wait()
-                await self.let_readers_in()  # their answers go out in this write
+                if session.ticked:  # a tick's frames: the readers' answers go out in this write
+                    session.ticked = False
+                    if self.feed is None:  # a front-end's readers answer nothing (its shards do): at once
+                        await self.let_readers_in()
+                    self.apply_held()
+                # (woken by answers alone: written at once, not after the next reader's answer, issue 16)
                 session.wake = trio.Event()
                 with self.cpu("encode"):
                     data = session.take_output(self.now())
@@ -439,6 +457,9 @@ class TtesServer:
                         session.lingering = False
                         return
                     session.bytes_out += len(data)
+                    if TRACE is not None:
+                        TRACE.stamp("sent", session.trace_rows)
+                        session.trace_rows = session.trace_rows[:0]
                 if session.closing and not session.control:
                     return
         except (trio.BrokenResourceError, trio.ClosedResourceError):
@@ -457,6 +478,7 @@ class TtesServer:
             self.next_tick = next_t - self._t0
             await trio.sleep_until(next_t)
             await self.let_readers_in()  # answers to requests just before the tick go out before it samples
+            self.apply_held()
             await self.run_tick(next_t - self._t0)
             next_t += period
             if self._answer_after_tick:
@@ -496,6 +518,8 @@ class TtesServer:
         self._ticking = True  # the readers' answers wait: this tick takes them up
         try:
             await self.let_readers_in()
+            with self.cpu("requests"):
+                self.pending.apply()
         finally:
             self._ticking = False
         self.publish_tick(update)
@@ -514,8 +538,8 @@ class TtesServer:
         self.ticks += 1
         if self.feed is not None:
             with self.cpu("merge"):
-                changed = self.feed(board, self.ticks)
-            self._published(board, changed)
+                rows = self.feed(board, self.ticks)
+            self._published(board, len(rows), rows)
             return None
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
         with self.cpu("animate"):
@@ -576,12 +600,17 @@ class TtesServer:
         if self.feed is None or board is None or not self.world.ready:
             return
         with self.cpu("merge"):
-            changed = self.feed(board, self.ticks + 1)
-        self._published(board, changed)
+            rows = self.feed(board, self.ticks + 1)
+        self._published(board, len(rows), rows)  # the shards' frames count as a tick's
 
-    def _published(self, board: PoseBoard, changed: int) -> None:
-        """After a publish: the shard's hook, then wake the writers; a tick whose poses changed counts once
-        for the update rate, however many publishes carried it (answers, a front-end's shards)."""
+    def _published(
+        self, board: PoseBoard, changed: int, rows: np.ndarray | None = None, tick: bool = True
+    ) -> None:
+        """After a publish: the shard's hook, then wake the writers (with the ``rows`` changed: only those of
+        clients subscribed to one of them, so a shard's answer goes out at once, not behind the encodes of
+        clients it does not concern); a tick whose poses changed counts once for the update rate, however
+        many publishes carried it (answers, a front-end's shards). A writer woken by a ``tick``'s publish lets
+        the readers in before it writes (a single server's); one woken by answers alone does not."""
         if self.on_publish is not None:
             with self.cpu("fabric"):
                 self.on_publish(board)
@@ -590,8 +619,23 @@ class TtesServer:
                 self._counted_tick = board.tick
                 self._published_ticks += 1
             for s in self.sessions.values():
-                if s.tables_sent:
+                if s.tables_sent and (rows is None or s.conn.subscribes_any(rows)):
+                    s.ticked |= tick
                     s.notify()
+
+    async def take_requests(self) -> None:
+        """A reader's requests (held by its session): the other readers with bytes now are let in first, so
+        that the first back applies what they all hold in one batch and answers it once (the cost of a batch
+        is mostly fixed: :mod:`server.pending_requests`)."""
+        if self.pending:
+            await self.let_readers_in()
+        self.apply_held()
+
+    def apply_held(self) -> None:
+        """Apply the requests the sessions hold (one batch) and answer what arrived."""
+        with self.cpu("requests"):
+            self.pending.apply()
+            self.requests_arrived()
 
     def requests_arrived(self) -> None:
         """Requests were taken (from a client, or a shard's from the fabric): answer them between ticks."""
@@ -614,7 +658,7 @@ class TtesServer:
         self.answers += 1
         if self.on_tick is not None:
             self.on_tick(update)
-        self._published(board, board.publish(update, self.world, between=True))
+        self._published(board, board.publish(update, self.world, between=True), tick=False)
 
     # -- owners that left ----------------------------------------------------------------------------------
     def _left(self, session: Session) -> None:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hmac
 import math
+import time
 from collections import deque
 from typing import TYPE_CHECKING
 
@@ -72,8 +73,10 @@ from server.jcl import JclError
 from server.logging import get_logger
 from server.pose_board import BoardRef
 from server.soldier.manager import REQUEST_BAD_VALUE, REQUEST_UNKNOWN_SOLDIER
+from server.trace import TRACE
 
 if TYPE_CHECKING:
+    from server.pending_requests import PendingRequests
     from server.startup import ServerWorld
 
 RECEIVE_BYTES = 65536
@@ -115,6 +118,7 @@ class Session:
         self.tables_sent = False
         self.ready_sent = False
         self.flushed_serial = 0  # the board publish this client's last write covered
+        self.ticked = False  # woken by a tick's publish since the last write (the trio app's writer)
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
@@ -130,6 +134,10 @@ class Session:
         self.writer_done = trio.Event()
         self.offload_jcl = False  # True under the trio app: a JCL frame waits in pending_jcl for the reader
         self.pending_jcl: Jcl | None = None
+        # the trio app's: entity requests wait there, applied with other readers' (issue 16); None: at once
+        self.pending: PendingRequests | None = None
+        self.more = False  # resume stopped at its turn's end with events still buffered
+        self.trace_rows = np.zeros(0, np.int64)  # the traced soldiers of the last encode (server.trace)
 
     # -- output ------------------------------------------------------------------------------------------
     def notify(self) -> None:
@@ -244,6 +252,9 @@ class Session:
         data = b"".join(chunks)
         if data:
             self.batches_out += 1
+        if TRACE is not None:
+            TRACE.stamp("encode", idx)
+            self.trace_rows = idx
         return data
 
     def _may_catch_up(self, since: int, serial: int) -> bool:
@@ -281,17 +292,28 @@ class Session:
         self.conn.receive_data(data)
         return self.resume(now)
 
-    def resume(self, now: float | None = None) -> float:
-        """Handle buffered events until the buffer is empty (0.0) or the budget is spent (seconds to wait)."""
+    def resume(self, now: float | None = None, turn_s: float | None = None) -> float:
+        """Handle buffered events until the buffer is empty (0.0) or the budget is spent (seconds to wait).
+
+        ``turn_s``: stop (0.0, ``more`` True) once this much CPU went into the events handled, so a burst
+        (thousands of CREATE_SOLDIER in one read) leaves the loop to the tick and the other clients between
+        its turns; the check is between events (one at least)."""
+        self.more = False
+        end = None if turn_s is None else time.thread_time() + turn_s
+        handled = 0
         while not self.closing and self.pending_jcl is None and not self.output_full:
             if now is not None:
                 wait = self.charge(now)
                 if wait > 0:
                     return wait
+            if end is not None and handled and time.thread_time() >= end:
+                self.more = True
+                return 0.0
             ev = self.conn.next_event()
             if ev is NEED_DATA or ev is PAUSED:
                 return 0.0
             self.handle(ev)  # type: ignore[arg-type]
+            handled += 1
         return 0.0
 
     def charge(self, now: float) -> float:
@@ -308,6 +330,12 @@ class Session:
         return max(-self.tokens / rate, 1e-3)
 
     def handle(self, ev: Event) -> None:
+        if self.pending is not None and (self.pending.holds(self) or not isinstance(ev, EntityRequests)):
+            # held requests first: nothing overtakes a request, and one frame's errors (a bad value closes the
+            # session) come before this client's next message is handled, as when each was applied at once
+            self.pending.apply()
+            if self.closing:
+                return
         try:
             self._handle(ev)
         except LocalProtocolError as exc:  # we were about to send something invalid: a bug, report it
@@ -600,20 +628,26 @@ class Session:
         if not len(kept):
             return
         rows = ev.rows if len(kept) == len(ev.rows) else ev.rows[kept]
-        status = self.world.apply_requests(rows)
+        if self.pending is not None:
+            self.pending.hold(self, kept, rows)
+        else:
+            self.requests_done(kept, rows, self.world.apply_requests(rows))
+
+    def requests_done(self, kept: np.ndarray, rows: np.ndarray, status: np.ndarray) -> None:
+        """The errors of request ``rows`` once applied (``kept``: their row numbers in the client's frame)."""
         bad = kept[status == REQUEST_BAD_VALUE]
         if len(bad):
             self.fatal(
                 ErrorCode.BAD_VALUE, f"entity requests row {int(bad[0])}: speed above the server's limit"
             )
             return
-        unknown = kept[status == REQUEST_UNKNOWN_SOLDIER]
-        if len(unknown):
-            row = int(unknown[0])
+        at = np.flatnonzero(status == REQUEST_UNKNOWN_SOLDIER)
+        if len(at):
+            unknown, row = kept[at], int(kept[at[0]])
             self.send(
                 Error(
                     int(ErrorCode.UNKNOWN_SOLDIER),
-                    f"entity requests row {row}: no soldier {int(ev.rows['index'][row])}"
+                    f"entity requests row {row}: no soldier {int(rows['index'][at[0]])}"
                     + (f" ({len(unknown)} rows)" if len(unknown) > 1 else ""),
                 )
             )

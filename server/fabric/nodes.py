@@ -19,6 +19,8 @@ the same, so a client of the front-end gets the handshake, tables and FIGURE of 
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import functools
 import math
 import threading
@@ -35,12 +37,14 @@ from server.fabric import requests as req
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
+from server.trace import TRACE
 
 if TYPE_CHECKING:
     from server.app import TtesServer
 
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
+TURN_S = 0.004  # a shard's turn of fabric requests: CPU seconds before it answers them and lets a tick run
 PENDING_MAX = 64  # a front-end's queue of one shard's batches; beyond, the oldest go (and it asks for a key)
 
 
@@ -94,24 +98,47 @@ class ShardNode:
             self.server.world.remove_soldier(int(i), "another shard's")
 
     def start(self, token: trio.lowlevel.TrioToken) -> None:
-        """Take requests on the trio loop, in order of arrival, one at a time: the tick runs between them
-        when it is due (thousands of creations arrive at once when a client creates a crowd)."""
+        """Take requests on the trio loop in order of arrival, in turns (:meth:`take_turn`): the tick runs
+        between turns when it is due (thousands of creations arrive at once when a client creates a crowd)."""
         self.fabric.announce(alive_key(self.sharding.k))
         send, receive = trio.open_memory_channel[bytes](math.inf)
-        self.fabric.subscribe(
-            requests_topic(self.sharding.k),
-            Kind.REQUESTS,
-            lambda data: token.run_sync_soon(send.send_nowait, data),
-        )
+
+        def arrived(data: bytes) -> None:
+            if TRACE is not None:
+                TRACE.stamp("shard_arrive", _request_indices(self._decoded(data)))
+            token.run_sync_soon(send.send_nowait, data)
+
+        self.fabric.subscribe(requests_topic(self.sharding.k), Kind.REQUESTS, arrived)
 
         async def take() -> None:
-            async for data in receive:
-                for op in self._decoded(data):
-                    with self.server.cpu("requests"):
-                        self.handle(op)
-                    await trio.lowlevel.checkpoint()
+            ops: collections.deque[req.Op] = collections.deque()
+            while True:
+                if not ops:
+                    ops.extend(self._decoded(await receive.receive()))
+                with contextlib.suppress(trio.WouldBlock):
+                    while True:  # whatever else has arrived joins this turn
+                        ops.extend(self._decoded(receive.receive_nowait()))
+                with self.server.cpu("requests"):
+                    self.take_turn(ops)
+                await trio.lowlevel.checkpoint()
 
         self.server.spawn(take)
+
+    def take_turn(self, ops: collections.deque[req.Op]) -> int:
+        """Handle queued operations in order for up to ``TURN_S`` of CPU (one at least), then answer them
+        all at once: one answer batch for every request that arrived together (an answer per operation
+        cost a sample, a publish and a batch each, and the later ones waited for the earlier ones').
+        Returns how many were handled; the rest wait for the next turn, after the tick if it is due."""
+        end = time.thread_time() + TURN_S
+        n = 0
+        while ops and (n == 0 or time.thread_time() < end):
+            op = ops.popleft()
+            if TRACE is not None:
+                TRACE.stamp("shard_take", _request_indices([op]))
+            self.handle(op)
+            n += 1
+        self.server.requests_arrived()
+        return n
 
     def publish(self, board: PoseBoard) -> None:
         """After each publish of the board: the soldiers whose codes changed since the previous batch (a
@@ -130,6 +157,8 @@ class ShardNode:
             return
         k, n = self.sharding.k, self.sharding.n
         codes = board.codes[rows]
+        if TRACE is not None:
+            TRACE.stamp("shard_publish", rows, "tick" if tick else "answer")
         self._put(
             encode_batch(
                 Batch(k, n, self.seq, board.tick, time.monotonic(), rows, board.table_of[rows], codes, key)
@@ -145,14 +174,14 @@ class ShardNode:
             return []
 
     def handle(self, op: req.Op) -> None:
-        """One request from a front-end (already checked there: a failure here is logged, not answered)."""
+        """One request from a front-end (already checked there: a failure here is logged, not answered;
+        the caller answers: ``TtesServer.requests_arrived``)."""
         try:
             self._apply(op)
         except (ValueError, KeyError, TypeError) as exc:  # a bad operation, or a soldier gone meanwhile
             log.warning("fabric_request_failed", shard=self.sharding.k, op=op.get("op"), error=str(exc))
             return
         self.taken += 1
-        self.server.requests_arrived()
 
     def _apply(self, msg: dict[str, object]) -> None:
         world = self.server.world
@@ -258,6 +287,8 @@ class FrontNode:
 
     def _arrived(self, token: trio.lowlevel.TrioToken, k: int, data: bytes) -> None:
         """On the fabric's thread: queue the batch; the first one waiting asks the loop to publish."""
+        if TRACE is not None:
+            TRACE.stamp("fe_arrive", decode_batch(data).indices)
         with self._pending_lock:
             queue = self._pending.setdefault(k, [])
             waiting = bool(queue)
@@ -267,9 +298,10 @@ class FrontNode:
         if not waiting:
             token.run_sync_soon(self.server.publish_fed)
 
-    def feed(self, board: PoseBoard, tick: int) -> int:
+    def feed(self, board: PoseBoard, tick: int) -> np.ndarray:
         """Merge the newest batch of every shard that sent one into the board, labelled ``tick`` (as soon as
-        one arrives, and on each tick of the front-end's own loop), and fail silent shards over."""
+        one arrives, and on each tick of the front-end's own loop), and fail silent shards over. Returns
+        the soldiers whose codes changed."""
         now = self.server.now()
         with self._pending_lock:
             pending, self._pending = self._pending, {}
@@ -279,9 +311,19 @@ class FrontNode:
         self._fail_over(now)
         m = self.server.world.manager
         if not batches or m is None:
-            return 0
+            return np.zeros(0, np.int64)
         self.batches += len(batches)
-        return merge(board, batches, tick, m.table.alive)
+        rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
+        if merge(board, batches, tick, m.table.alive):
+            changed = rows[
+                (rows < board.capacity)
+                & (board.version[np.minimum(rows, board.capacity - 1)] == board.serial)
+            ]
+        else:
+            changed = rows[:0]
+        if TRACE is not None:
+            TRACE.stamp("fe_merge", rows, "fed" if tick > self.server.ticks else "tick")
+        return changed
 
     def _heard(self, b: Batch, now: float) -> None:
         k = b.shard
@@ -347,6 +389,8 @@ class FrontNode:
         self._flush_due = False
         for k, ops in enumerate(self._out):
             if ops:
+                if TRACE is not None:
+                    TRACE.stamp("fe_publish", _request_indices(ops))
                 self._puts[k](req.pack(ops))
                 ops.clear()
 
@@ -364,6 +408,8 @@ class FrontNode:
 
     def requests(self, rows: np.ndarray) -> None:
         idx = rows["index"].astype(np.int64)
+        if TRACE is not None:
+            TRACE.stamp("fe_request", idx)
         self.last[idx] = rows
         self.has_last[idx] = True
         shard = np.asarray(self.route)[Sharding.home(idx, self.shards)]
@@ -372,6 +418,16 @@ class FrontNode:
 
     def react(self, index: int, kind: str) -> None:
         self._send(self._shard_of(index), req.react(index, kind))
+
+
+def _request_indices(ops: list[req.Op]) -> list[int]:
+    """The soldiers the entity requests among ``ops`` are for (a trace's stamps)."""
+    rows = [
+        np.frombuffer(op["rows"], ENTITY_REQUEST_DTYPE) if isinstance(op["rows"], bytes) else op["rows"]
+        for op in ops
+        if op["op"] == "requests"
+    ]
+    return np.concatenate([r["index"] for r in rows]).tolist() if rows else []
 
 
 def merge(board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray) -> int:

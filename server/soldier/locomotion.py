@@ -79,6 +79,8 @@ class Side(IntEnum):
     RIGHT = 2
 
 
+_AHEAD, _LEFT, _RIGHT = int(Side.AHEAD), int(Side.LEFT), int(Side.RIGHT)  # plain ints: np.where is faster
+
 SIDE_OF = np.array(
     [Side.LEFT if s == S.SIDESTEP_L else Side.RIGHT if s == S.SIDESTEP_R else Side.AHEAD for s in S], np.int8
 )
@@ -127,7 +129,7 @@ def direction(forward: np.ndarray, left: np.ndarray, can_side: bool = True) -> t
     """
     forward, left = np.asarray(forward, np.float64), np.asarray(left, np.float64)
     sideways = (np.abs(left) > np.abs(forward)) & can_side
-    side = np.where(sideways, np.where(left > 0, Side.LEFT, Side.RIGHT), Side.AHEAD).astype(np.int8)
+    side = np.where(sideways, np.where(left > 0, _LEFT, _RIGHT), _AHEAD).astype(np.int8)
     return forward < 0.0, side
 
 

@@ -37,6 +37,10 @@ from server.soldier.state import (
 from server.soldier.ticking import Ticking
 from server.soldier.turning import facing
 
+# plain ints: numpy compares an IntEnum member slower (these run on every request batch)
+_APP_LOW, _APP_HIGH, _WPN_HIGH = int(Appearance.DEAD), int(Appearance.CRAWL), int(WeaponState.FIRING)
+_MOVE_WALK, _MOVE_NONE, _AHEAD = int(Movement.WALK), int(Movement.NONE), int(Side.AHEAD)
+
 
 class _Columns(NamedTuple):
     """A batch of entity requests' columns: index, appearance, weapon, immediate (int64), velocity,
@@ -73,10 +77,10 @@ class Requests(Ticking):
             pos = np.asarray(rows["position"], np.float64).reshape(n, 3)
             finite = np.isfinite(vel).all(1) & np.isfinite(hdg) & np.isfinite(pos).all(1)
             bad = (
-                (app < Appearance.DEAD)
-                | (app > Appearance.CRAWL)
+                (app < _APP_LOW)
+                | (app > _APP_HIGH)
                 | (wpn < 0)
-                | (wpn > WeaponState.FIRING)
+                | (wpn > _WPN_HIGH)
                 | (imm < 0)
                 | (imm > 1)
                 | ~finite
@@ -124,21 +128,19 @@ class Requests(Ticking):
         left = vel[:, 1] * fwd[:, 0] - vel[:, 0] * fwd[:, 1]  # Performer Z up: (fwd x vel).z
         backward, side = direction(ahead, left, self.library.can_side)
         # the figure's frame: the heading, or about from it to walk a fast velocity straight back forwards
-        walks = moving & (self._move[app] == Movement.WALK) & bool(self.library.turn_clips)  # it can pivot
+        walks = moving & (self._move[app] == _MOVE_WALK) & bool(self.library.turn_clips)  # it can pivot
         face = facing(backward & walks, speed, tb.face[i])
         about = face != 0.0
         ahead, left = np.where(about, -ahead, ahead), np.where(about, -left, left)
         backward, side = direction(ahead, left, self.library.can_side)
         backward &= moving
-        side = np.where(moving, side, Side.AHEAD)
+        side = np.where(moving, side, _AHEAD)
         mode = tb.mode[i]
         changed_pw = (app != tb.appearance[i]) | (wpn != tb.weapon[i])
         heading_changed = hdg + face != tb.heading[i] + tb.face[i]
         speed_changed = speed != tb.speed[i]
         kind = self._move[app]
-        event = (
-            imm | (changed_pw & (mode != _TRANSITION)) | ((mode == _IDLE) & moving & (kind != Movement.NONE))
-        )
+        event = imm | (changed_pw & (mode != _TRANSITION)) | ((mode == _IDLE) & moving & (kind != _MOVE_NONE))
         # the root offset up to now under the old velocity; a turned entity turns a world-fixed offset
         root_motion.fold(tb, self.library, i, t)
         turned = np.where(tb.has_heading[i], hdg + face - tb.heading[i] - tb.face[i], 0.0)
@@ -209,7 +211,7 @@ class Requests(Ticking):
             & tb.has_heading[i]
             & (tb.root_yaw[i] == 0.0)
             & ~tb.reversing[i]
-            & ~((tb.mode[i] == _IDLE) & (speed > MOVING_EPS) & (self._move[app] != Movement.NONE))
+            & ~((tb.mode[i] == _IDLE) & (speed > MOVING_EPS) & (self._move[app] != _MOVE_NONE))
         )
         if same.any():
             tb.position[i[same]] = coords.points_performer_to_jack(pos[same])
@@ -226,7 +228,7 @@ class Requests(Ticking):
             cap = ev[stepping[ev] & ~imm[ev]] if self._settings.blend_time > 0 else ev[:0]
             captured: dict[int, tuple[np.ndarray, np.ndarray]] = {}
             if len(cap):
-                cj, cf, _, _ = self._pose(i[cap])
+                cj, cf, _, _ = self._pose(i[cap], folded=True)  # folded to ``t`` above
                 captured = {int(s): (cj[k], cf[k]) for k, s in enumerate(i[cap])}
             changes = self._posture_changes(i[ev], imm[ev])
             if changes.any():

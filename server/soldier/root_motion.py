@@ -285,7 +285,7 @@ class TravelTable:
         """``(n, 2)`` the weight-bearing sole point of ``clip`` at the frame nearest ``frame``."""
         clip = np.asarray(clip, np.int64)
         last = np.maximum(self.nframes[clip] - 1, 0)
-        f = np.clip(np.floor(np.asarray(frame, np.float64) + 0.5).astype(np.int64), 0, last)
+        f = np.minimum(np.maximum(np.floor(np.asarray(frame, np.float64) + 0.5).astype(np.int64), 0), last)
         return self.contact[self.start[clip] + f]
 
 
@@ -299,7 +299,7 @@ def measure(figure: Figure, joints: np.ndarray, placements: np.ndarray) -> np.nd
 def frame_at(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> np.ndarray:
     """The fractional frame each soldier's clip shows at ``t`` (as ``ClipLibrary.sample`` computes it)."""
     clip = tb.clip[idx]
-    u = np.clip((t - tb.start[idx]) / np.maximum(tb.dur[idx], 1e-9), 0.0, 1.0)
+    u = np.minimum(np.maximum((t - tb.start[idx]) / np.maximum(tb.dur[idx], 1e-9), 0.0), 1.0)  # np.clip's
     u = np.where(tb.direc[idx] > 0, u, 1.0 - u)
     return u * np.maximum(lib.clip_nframes[clip] - 1, 0)
 
@@ -310,12 +310,16 @@ def offset_at(
     idx: np.ndarray,
     t: np.ndarray | float,
     frames: np.ndarray | None = None,
+    travel_now: np.ndarray | None = None,
 ) -> np.ndarray:
     """``(n, 2)`` root offsets at ``t``: the offset at ``root_t`` plus the clip's own travel since (times the
-    stride scale) minus the entity's dead-reckoned travel since."""
+    stride scale) minus the entity's dead-reckoned travel since (``travel_now``: the clips' travel at
+    ``frames``, if the caller has it)."""
     if frames is None:
         frames = frame_at(tb, lib, idx, t)
-    travel = (lib.travel.at(tb.clip[idx], frames) - tb.root_ref[idx]) * tb.stride[idx][:, None]
+    if travel_now is None:
+        travel_now = lib.travel.at(tb.clip[idx], frames)
+    travel = (travel_now - tb.root_ref[idx]) * tb.stride[idx][:, None]
     dt = np.asarray(t, np.float64) - tb.root_t[idx]
     return tb.root_off[idx] + yawed(travel, tb.root_yaw[idx]) - tb.vlocal[idx] * np.reshape(dt, (-1, 1))
 
@@ -332,7 +336,10 @@ def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
     a = -np.radians(compass_deg)
     c, s = np.cos(a), np.sin(a)
     x, z = xz[:, 0], xz[:, 1]
-    return np.stack([c * x + s * z, c * z - s * x], axis=1)
+    out = np.empty((len(a), 2))  # (np.stack's values, without its overhead: called on every answer)
+    out[:, 0] = c * x + s * z
+    out[:, 1] = c * z - s * x
+    return out
 
 
 def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
@@ -343,9 +350,11 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
     if len(idx) == 0:
         return
     frames = frame_at(tb, lib, idx, t)
-    off = offset_at(tb, lib, idx, t, frames)
+    travel_now = lib.travel.at(tb.clip[idx], frames)
+    off = offset_at(tb, lib, idx, t, frames, travel_now)
     yaw = tb.root_yaw[idx]
-    turning = (yaw != 0.0) & ((tb.mode[idx] == STEPPING[0]) | (tb.mode[idx] == STEPPING[1]))
+    mode = tb.mode[idx]
+    turning = (yaw != 0.0) & ((mode == STEPPING[0]) | (mode == STEPPING[1]))
     turning &= ~tb.reversing[idx]  # a reversing figure stops facing the old way, then pivots
     j = np.flatnonzero(turning)
     if len(j):  # the turning rows alone (a walking crowd: few of them)
@@ -356,13 +365,13 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         was = lib.travel.turn_at(clip, frame_at(tb, lib, ti, tb.root_t[ti]))
         free = np.minimum(np.abs(lib.travel.turn_at(clip, fj) - was), STEP_TURN_RATE * dt)
         step = np.where(lib.travel.paced[clip], free, rate * dt)
-        new = yj - np.clip(yj - steer(tb, lib, ti, oj), -step, step)
+        new = yj - np.minimum(np.maximum(yj - steer(tb, lib, ti, oj), -step), step)
         contact = lib.travel.contact_at(clip, fj)
         off[j] = oj + yawed(contact, yj) - yawed(contact, new)  # about the sole point carrying the weight
         tb.root_yaw[ti] = new
     tb.root_off[idx] = off
     tb.root_t[idx] = t
-    tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
+    tb.root_ref[idx] = travel_now
 
 
 def steer(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
@@ -375,7 +384,8 @@ def steer(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, off: np.ndarray
     ahead = lib.travel.ahead[tb.clip[idx]] & (tb.direc[idx] > 0) & (np.abs(v[:, 0]) <= 0.01 * speed)
     side = np.sign(off[:, 0]) * np.maximum(np.abs(off[:, 0]) - STEER_FREE_CM, 0.0)
     aim = -np.degrees(np.arctan2(side, np.maximum(speed * STEER_S, 100.0)))
-    return np.where(ahead & (v[:, 1] < 0.0), np.clip(aim, -STEER_MAX_DEG, STEER_MAX_DEG), 0.0)
+    aim = np.minimum(np.maximum(aim, -STEER_MAX_DEG), STEER_MAX_DEG)
+    return np.where(ahead & (v[:, 1] < 0.0), aim, 0.0)
 
 
 def pivot(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
@@ -386,16 +396,17 @@ def pivot(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray |
         return
     t = np.minimum(np.asarray(t, np.float64), tb.end[idx])
     frames = frame_at(tb, lib, idx, t)
-    off = offset_at(tb, lib, idx, t, frames)
-    yaw = tb.root_yaw[idx]
     clip = tb.clip[idx]
+    travel_now = lib.travel.at(clip, frames)
+    off = offset_at(tb, lib, idx, t, frames, travel_now)
+    yaw = tb.root_yaw[idx]
     was = lib.travel.share_at(clip, frame_at(tb, lib, idx, tb.root_t[idx]))
     new = yaw + tb.pivot_rest[idx] * (lib.travel.share_at(clip, frames) - was)
-    contact = lib.travel.contact_at(tb.clip[idx], frames)
+    contact = lib.travel.contact_at(clip, frames)
     tb.root_off[idx] = off + yawed(contact, yaw) - yawed(contact, new)
     tb.root_yaw[idx] = new
     tb.root_t[idx] = t
-    tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frames)
+    tb.root_ref[idx] = travel_now
 
 
 def frame_at1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> float:

@@ -120,10 +120,12 @@ class Ticking(Events):
         )
 
     def _pose(
-        self, idx: np.ndarray, at: float | None = None
+        self, idx: np.ndarray, at: float | None = None, *, folded: bool = False
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Poses shown by soldiers ``idx`` at their clocks (or at ``at``, if later: an :meth:`answer`): one
-        sample per figure set, heading offsets, cross-fades."""
+        sample per figure set, heading offsets, cross-fades. ``folded``: their root offsets and turns were
+        just brought up to their clocks (a request's, :meth:`apply_requests`): a second fold at the same time
+        turns nothing and moves nothing, so it is not done."""
         tb, lib = self.table, self.library
         n = len(idx)
         clip = tb.clip[idx]
@@ -143,12 +145,13 @@ class Ticking(Events):
                 s = lib.sets[k].sample(*(a[sel] for a in args), interpolate=self._settings.interpolate)
                 joints[sel], figures[sel], frames[sel] = s.joints, s.figures, s.position
         if n:  # the root offset and yaw: every figure of the soldier moves with it (docs/PROTOCOL.md)
-            mode = tb.mode[idx]
-            turning = (tb.root_yaw[idx] != 0.0) & ((mode == _LOCO) | (mode == _CRAWL))
-            root_motion.fold(tb, lib, idx[turning], clock[turning])
-            p = np.flatnonzero(tb.pivot_rest[idx] != 0.0)
-            if len(p):
-                root_motion.pivot(tb, lib, idx[p], clock[p])
+            if not folded:
+                mode = tb.mode[idx]
+                turning = (tb.root_yaw[idx] != 0.0) & ((mode == _LOCO) | (mode == _CRAWL))
+                root_motion.fold(tb, lib, idx[turning], clock[turning])
+                p = np.flatnonzero(tb.pivot_rest[idx] != 0.0)
+                if len(p):
+                    root_motion.pivot(tb, lib, idx[p], clock[p])
             # the figure's yaw and offset from the heading: its frame's (``face``, turning.py) and in it
             face = tb.face[idx]
             yaw = tb.root_yaw[idx] + face

@@ -1,0 +1,119 @@
+"""Issue 21: work comes in bounded turns, so a request is not kept waiting behind a burst — a shard answers
+what arrived together at once (not one answer per operation), and a front-end's reader leaves the loop to
+the others between turns of a client's creation burst. In one process on trio's autojump clock."""
+
+from __future__ import annotations
+
+import collections
+
+import numpy as np
+import pytest
+import trio
+from test_fabric_inprocess import RUN, WALK, Bus, MemoryFabric, cluster, live, walker
+from test_server_support import Client, make_server
+
+from protocol.entity import make_entity_requests
+from protocol.events import CreateSoldier, Ready, SoldierCreated, Subscribe
+from server import app
+from server.fabric import poses_topic
+from server.fabric import requests as req
+from server.fabric.batch import decode_batch
+from server.fabric.nodes import Sharding, ShardNode
+
+
+async def test_a_shard_answers_the_requests_that_arrived_together_in_one_batch(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    bus = Bus()
+    batches = []
+    bus.topics[poses_topic(0)].append(lambda data: batches.append(decode_batch(data)))
+    shard = make_server()
+    node = ShardNode(shard, MemoryFabric(bus), Sharding(0, 1))
+    async with trio.open_nursery() as nursery:
+        await nursery.start(shard.serve)
+        await trio.sleep(0.2)
+        ops = req.decode(
+            req.pack([req.requests(make_entity_requests(index=[i], velocity=WALK)) for i in (1, 2, 3)])
+        )
+        answers, sent = shard.answers, len(batches)
+        assert node.take_turn(collections.deque(ops)) == 3
+        m = shard.world.manager
+        assert m is not None and all(m.soldier_info(i)["speed"] > 1.0 for i in (1, 2, 3))
+        assert shard.answers == answers + 1  # one answer for the three (it was one each)
+        (answer,) = batches[sent:]
+        assert not answer.key and {1, 2, 3} <= set(answer.indices.tolist())
+        shard.shutdown()
+
+
+async def test_a_shards_turn_ends_when_its_cpu_is_spent(
+    autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """At least one operation a turn; the rest wait for the next (after the tick, if it is due)."""
+    monkeypatch.setattr("server.fabric.nodes.TURN_S", 0.0)
+    shard = make_server()
+    node = ShardNode(shard, MemoryFabric(Bus()), Sharding(0, 1))
+    async with trio.open_nursery() as nursery:
+        await nursery.start(shard.serve)
+        await trio.sleep(0.2)
+        ops = collections.deque(
+            req.decode(req.pack([req.create(20 + k, "DI.fig", "AK_47.fig", None) for k in range(3)]))
+        )
+        assert node.take_turn(ops) == 1 and len(ops) == 2
+        assert 20 in live(shard) and 21 not in live(shard)
+        shard.shutdown()
+
+
+async def test_a_creation_burst_leaves_the_other_clients_requests_in_between(
+    autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One client creates a crowd in one write; another's request, sent just after, is taken between the
+    burst's turns, not after all of it (it waited for up to ``control_queue`` creations, 256: 12-14 ms of
+    CPU on this machine; now a turn is ``READ_TURN_S``, here one event per turn)."""
+    monkeypatch.setattr(app, "READ_TURN_S", 0.0)
+    burst = 200
+    async with cluster() as (front, node, shards, _):
+        seen: list[int] = []  # the front-end's soldiers when each request was relayed
+        relay = node.requests
+        monkeypatch.setattr(node, "requests", lambda rows: (seen.append(len(live(front))), relay(rows)))
+        a = await Client.open(front.addresses[0][1], "crowd", client_id="alpha")
+        b = await Client.open(front.addresses[0][1], "ig", client_id="beta")
+        await a.expect(Ready)
+        await b.expect(Ready)
+        await a.send_raw(
+            b"".join(a.conn.send(CreateSoldier(k + 1, "DI.fig", "AK_47.fig")) for k in range(burst))
+        )
+        await b.requests(index=[0], velocity=RUN)
+        with trio.fail_after(30):
+            for _ in range(burst):
+                await a.expect(SoldierCreated)
+        assert len(seen) == 1 and seen[0] < 10 + burst  # taken while the burst was being created
+        with trio.fail_after(30):
+            while sum(len(live(s)) for s in shards) < 10 + burst:
+                await trio.sleep(0.1)
+        await a.aclose()
+        await b.aclose()
+
+
+async def test_a_front_end_wakes_only_the_writers_of_clients_subscribed_to_what_changed(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """A shard's answer for one soldier wakes the writer of the client that watches it, not the others
+    (whose writers would encode nothing, and could run first)."""
+    async with cluster() as (front, _, _, _):
+        a = await walker(front, 11)  # subscribed to 0..11
+        b = await Client.open(front.addresses[0][1], "other", client_id="beta")
+        await b.expect(Ready)
+        await b.send(CreateSoldier(1, "DI.fig", "AK_47.fig", 13))
+        await b.expect(SoldierCreated)
+        await b.send(Subscribe((13,)))
+        await trio.sleep(0.5)
+        board = front.board_ref.board
+        assert board is not None
+        by_name = {s.name: s for s in front.sessions.values()}
+        for rows, woken in (([11], {"ig"}), ([13], {"other"}), ([11, 13], {"ig", "other"})):
+            for s in by_name.values():
+                s.wake = trio.Event()
+            front._published(board, len(rows), np.asarray(rows))
+            assert {n for n, s in by_name.items() if s.wake.is_set()} == woken
+        await a.aclose()
+        await b.aclose()
