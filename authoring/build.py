@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from authoring import crawl, crawl_prone, deaths, gait, postures, reactions, transitions, turns
+from authoring import crawl, crawl_prone, crawl_turn, deaths, gait, postures, reactions, transitions, turns
 from authoring.motion import KeyPosture
 from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
@@ -118,6 +118,9 @@ def clip_jobs() -> list[ClipJob]:
     jobs += [ClipJob(name, "loco", _gait_maker(make)) for name, make in gait.locomotion_clips().items()]
     jobs += [ClipJob(name, "crawl", _gait_maker(make)) for name, make in crawl.crawl_clips().items()]
     jobs += [ClipJob(name, "turn", _moved_maker(make)) for name, make in turns.turn_clips().items()]
+    jobs += [
+        ClipJob(name, "turn", _moved_maker(make)) for name, make in crawl_turn.crawl_turn_clips().items()
+    ]
     jobs += [ClipJob(name, "react", _gait_maker(make)) for name, make in reactions.reaction_clips().items()]
     return jobs
 
@@ -294,7 +297,17 @@ def crawl_graph(suffix: str) -> PostureGraph:
 
 
 def turn_graph(suffix: str) -> PostureGraph:
-    return _container_graph(turns.TURN_NODES, turns.turn_arcs(), suffix)
+    return _container_graph(turn_nodes(), turn_arcs(), suffix)
+
+
+def turn_nodes() -> tuple[str, ...]:
+    """The nodes of the turn graph: standing (STAND_STOWED) and on forearms and knees (CRAWL)."""
+    return (*turns.TURN_NODES, crawl_turn.BASE)
+
+
+def turn_arcs() -> list[tuple[str, str, str, bool]]:
+    """The turn graph's self-loops: the standing turns and side-steps, then the turns on the ground."""
+    return turns.turn_arcs() + crawl_turn.crawl_turn_arcs()
 
 
 def react_graph(suffix: str) -> PostureGraph:
@@ -403,7 +416,7 @@ def _graph_endpoints(kind: str) -> dict[str, list[tuple[str, int]]]:
     elif kind == "loco":
         arcs = gait.loco_arcs()
     elif kind == "turn":
-        arcs = turns.turn_arcs()
+        arcs = turn_arcs()
     elif kind == "react":
         arcs = reactions.react_arcs()
     else:

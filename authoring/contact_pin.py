@@ -21,9 +21,9 @@ limp forearms of a propped soldier still pivoted under him, their nodes sliding 
 A knee or thigh near the ground is not moved by its foot's pin (:attr:`Pin.stays`, more important than
 the foot): held by the hip and knee instead, a knee whose body pitches past its reach (ststow2dead: the
 hip travels 63 cm while the thigh allows 52) went 3 cm into the ground and still slid 5. Knees, thighs
-and the trunk are left as they fall. Where holding a limb would still press the body more than
-:data:`SINK_CM` deeper into the ground (a foot turned about its held toes), that frame's change is taken
-back in part (:func:`_above_ground`).
+and the trunk are left as they fall (:mod:`authoring.knee_hold` moves the root to hold a knee first).
+Where holding a limb would still press the body more than :data:`SINK_CM` deeper into the ground (a foot
+turned about its held toes), that frame's change is taken back in part (:func:`_above_ground`).
 """
 
 from __future__ import annotations
@@ -93,9 +93,10 @@ HEAD = Pin(
 )
 
 
-def pins(kin) -> list[Pin]:
-    """The pins of a figure: both sides' limbs and the head, those whose site and joints it has."""
-    out = [p.sided(side) for side in SIDES for p in PINS] + [HEAD]
+def pins(kin, table: tuple[Pin, ...] = PINS, head: bool = True) -> list[Pin]:
+    """The pins of a figure: both sides' limbs (of ``table``) and the head, those whose site and joints it
+    has."""
+    out = [p.sided(side) for side in SIDES for p in table] + ([HEAD] if head else [])
     return [
         Pin(
             p.parts,
@@ -235,16 +236,19 @@ def pin_contacts(
     ptype: str,
     held_turns: bool = False,
     held_from: int = 0,
+    table: tuple[Pin, ...] = PINS,
+    head: bool = True,
 ) -> tuple[np.ndarray, float]:
     """``pose`` ``(n, ndof)`` (root globals ``loc``) with every limb's contacts held (see the module
-    docstring); returns the poses and the largest move of a site (cm)."""
+    docstring; ``table``, ``head``: which, as :func:`pins`); returns the poses and the largest move of a site
+    (cm)."""
     kin = figures.kin[ptype]
     worst = 0.0
     start = pose
     for _ in range(PASSES):
         goals: list[ik.Goal] = []
         moved = np.zeros(len(pose))
-        for pin in pins(kin):
+        for pin in pins(kin, table, head):
             goal, m = _goal(kin, pose, loc, figures, ptype, pin, held_turns, held_from)
             goals.append(goal)
             moved = np.maximum(moved, m)

@@ -7,7 +7,8 @@ strides can be judged), with the same camera orientation and distance in every t
 what the tile shows: a three-quarter view from the soldier's front left (``quarter``: strides and sliding
 against the checkerboard), or a ``side`` view from his left or a ``front`` view with the eye just above the
 ground (``EYE_HEIGHT``), so that a hovering body shows daylight under it and what touches the ground sits on
-the horizon; several views give each posture one tile per view and each clip one row per view. The camera
+the horizon, or a ``top`` view from above (a turn on the ground); several views give each posture one tile
+per view and each clip one row per view. The camera
 backs off until the body fits. Labels are drawn with Pillow.
 """
 
@@ -32,6 +33,7 @@ VIEWS: dict[str, np.ndarray] = {
     "quarter": CAMERA_DIRECTION,
     "side": np.array([-1.0, 0.0, 0.0]),
     "front": np.array([0.0, 0.0, -1.0]),
+    "top": np.array([0.0, 1.0, 0.08]),  # from above, a little behind him: his front is up (ground turns)
 }
 GROUND_LEVEL_VIEWS = (
     "side",

@@ -272,6 +272,42 @@ def solve_arms(
     return np.concatenate([blend, cyc[1:]])
 
 
+def solve_body(
+    kin: FigureKinematics,
+    q0: np.ndarray,
+    chest: np.ndarray,
+    roots: np.ndarray,
+    legs: Callable[[str, str], np.ndarray],
+) -> tuple[np.ndarray, np.ndarray]:
+    """The body (pelvis, spine, legs) over the frames, one batched IK solve from the posture ``q0``: the chest
+    kept lightly on its frames ``chest`` (the carrier's), the pelvis free to follow the planted knees (it may
+    rise, pitch, yaw and roll: ``PELVIS_DOFS``) but held back towards ``roots`` (moving it is cheap for the
+    solver, and a pelvis that rolls to lift the moving leg twists the planted one), each kneecap and toe tip
+    on its world track ``legs(side, part)``. Returns the poses and the pelvis's frames."""
+    goals: list[ik.Goal] = [
+        ik.Goal(
+            f"{CARRIER}.proximal",
+            chest[:, :3, 3],
+            chest[:, :3, :3],
+            CHEST_HOLD,
+            1,
+            SPINE,
+            orientation_weight=40.0,
+        ),
+        ik.Goal(kin.root_name, roots[:, :3, 3], roots[:, :3, :3], PELVIS_HOLD, 1, ()),
+    ]
+    for side in ("left", "right"):
+        for part, fmt in LEG_SITES.items():
+            chain = leg(side) if part == "knee" else (f"{side}_hip", f"{side}_knee", f"{side}_toes")
+            goals.append(ik.Goal(fmt.format(s=side), legs(side, part), None, 1.0, 1, chain))
+    rest = np.broadcast_to(q0, (len(roots), kin.ndof)).copy()
+    poses, report = ik.solve(
+        kin, rest, goals, roots, iterations=80, rest_pose=rest, rest_gain=0.1, root_dofs=PELVIS_DOFS
+    )
+    assert report.root_location is not None  # solved with root DOFs: the solve reports where the root went
+    return poses, report.root_location
+
+
 def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture) -> tuple[np.ndarray, ...]:
     """Frames of the start clip followed by one cycle: (t, poses, roots, rifles, progression z)."""
     from authoring.postures import arm
@@ -295,33 +331,14 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
     chest[:, :3, :3] = np.stack([V.rot_z(r)[:3, :3] for r in roll]) @ chest0[:3, :3]
     chest[:, 2, 3] += z
     chest[:, 0, 3] += w * SWAY * np.sin(phase)
-    goals: list[ik.Goal] = [
-        ik.Goal(
-            f"{CARRIER}.proximal",
-            chest[:, :3, 3],
-            chest[:, :3, :3],
-            CHEST_HOLD,
-            1,
-            SPINE,
-            orientation_weight=40.0,
-        )
-    ]
-    # the pelvis is free to follow the planted knees, but held back towards its glide (moving it is
-    # cheap for the solver, and a pelvis that rolls to lift the moving leg twists the planted one)
-    goals.append(ik.Goal(kin.root_name, roots[:, :3, 3], roots[:, :3, :3], PELVIS_HOLD, 1, ()))
-    for side in ("left", "right"):
+
+    def legs(side: str, part: str) -> np.ndarray:
         moves = swings(PAIR["knee", side], float(t[-1]))
-        for part, fmt in LEG_SITES.items():
-            site = fmt.format(s=side)
-            track = contact_track(g0[kin.site_names.index(site), :3, 3], t, moves, LIFT[part])
-            chain = leg(side) if part == "knee" else (f"{side}_hip", f"{side}_knee", f"{side}_toes")
-            goals.append(ik.Goal(site, track, None, 1.0, 1, chain))
-    rest = np.broadcast_to(q0, (n, kin.ndof)).copy()
-    poses, report = ik.solve(
-        kin, rest, goals, roots, iterations=80, rest_pose=rest, rest_gain=0.1, root_dofs=PELVIS_DOFS
-    )
-    assert report.root_location is not None  # solved with root DOFs: the solve reports where the root went
-    roots = report.root_location
+        return contact_track(
+            g0[kin.site_names.index(LEG_SITES[part].format(s=side)), :3, 3], t, moves, LIFT[part]
+        )
+
+    poses, roots = solve_body(kin, q0, chest, roots, legs)
     # then the arms on the body: elbows on their tracks, the palms on the rifle the forearms carry
     elbows: dict[str, np.ndarray] = {}
     arm_goals: list[ik.Goal] = []

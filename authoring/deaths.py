@@ -26,9 +26,11 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    their inner sides, heels low) — a soldier who may come to rest on his side (:attr:`DeathSpec.sideways`,
    the kneeling deaths) only as far as he lies on his front (:func:`_face_down`; on his side, the toned
    hip held the upper leg up in the air) — and a standing death's knees straighten (:data:`KNEE_TONE`:
-   bent, they left him bottom-up on his knees);
+   bent, they left him bottom-up on his knees); a crawler keeps his arms propped and his legs drawn a
+   while (:attr:`DeathSpec.kept`: limp, his chest dropped onto his forearms and they slid 5 cm);
 3. **the rifle is let go** at :attr:`DeathSpec.release` (the welds to the palms are switched off; the frame
-   is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`); it collides
+   is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`; a crawler's,
+   cradled across his forearms, forward ahead of his face: :attr:`DeathSpec.toss_to`); it collides
    with the arms and head it touched in the start pose too (:class:`~authoring.ragdoll.Ragdoll`), and a
    rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`);
 4. **the body settles and sleeps**: once the muscle program is over (:attr:`DeathSpec.fade`) and the pelvis
@@ -52,9 +54,11 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    kfire2dead's DI slave's kneeling knee slid 1.3 cm more; a prone death's forearms are held in their turn
    too, from the rifle's release on: the limp arms pivoted under the slumping body, 5-6 cm). kstow2dead's
    arms do not fall (:attr:`DeathSpec.arms_fall`): tried, pinned first, its left hand lay at 4.4 cm
-   instead of 23.5 but swung up to 64 cm on the way (the fall is eased in joint angles). Knees, thighs and
-   the trunk still skid (ststow2dead's knee 10 cm: the
-   hip pitches further than the thigh reaches). Making every part stick in the physics instead
+   instead of 23.5 but swung up to 64 cm on the way (the fall is eased in joint angles). ststow2dead's knee
+   on the ground is held before (:attr:`DeathSpec.knees_held`, :mod:`authoring.knee_hold`: the root follows
+   it, the legs keep their feet; it slid 10.3 cm, the hip pitching further than the thigh reaches); the
+   kneeling deaths' knees (tipping sideways, they roll) and the thighs and trunk still skid: held so, a
+   kneeling soldier's tucked foot slid 9-10 cm. Making every part stick in the physics instead
    (MuJoCo connect constraints to mocap points following a part's lowest node, released 2.5 cm up) held
    every contact under 1.5 cm but changed the falls: from the start, the standing soldier sat down
    backwards; from touchdown, he ended bottom-up on his knees (pelvis 24 cm up) and the kneeling ones
@@ -72,13 +76,14 @@ bytes on the same machine.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from authoring import dead_settle
 from authoring.contact_pin import pin_frames
+from authoring.knee_hold import hold_knees
 from authoring.motion import KeyPosture
 from authoring.planted import plant
 from authoring.postures import RIFLE, SOLDIER
@@ -95,6 +100,7 @@ SLEEP_SPEED = 0.15  # m/s: once the muscles are done and the pelvis is this slow
 SLEEP_DAMPING = 20.0  # asleep: the joints hold the shape they have, damped this many times harder
 SLEEP_RAMP = 0.2  # s, over which the damping rises
 SLEEP_FEET = 0.15  # m: and both feet (centres of mass) this low (asleep, shins up stayed up)
+KEPT_FADE = 0.4  # s: a kept joint lets go of the start shape this slowly
 GET_UP_SECONDS = 10.0  # DEAD@x -> its start posture: the death played backwards (seed 002 Figure 7: 10 s)
 
 
@@ -117,12 +123,19 @@ class DeathSpec:
     knee_damping: float = 1.0  # the knees' damping is this many times stronger until he is down
     arm_tone: float = 0.0  # the fraction of the arms' gain kept when dead (toward the DEAD key's arms)
     toss: float = TOSS  # N, the hands fling the rifle they let go of this hard (he must not land on it)
+    toss_to: tuple[float, float, float] | None = None  # the toss's direction in the pelvis' own frame (x
+    # right, y up the spine, z back); None: to the side, away from the fall
     knee_straighten: float | None = None  # s, a standing death's knees start straightening (None: at fade)
     hip_damping: float = 1.0  # the hips', waist's and lower back's (FALL_STIFF) damping: this many times
     # stronger until he is down
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
     propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
+    knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
+    # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
+    kept: tuple[tuple[str, float], ...] = ()  # joints (name suffix, until s) that keep the start posture's
+    # shape at kept_tone of their gain, letting go over KEPT_FADE from then on
+    kept_tone: float = 0.0
 
 
 def _prone(
@@ -146,8 +159,22 @@ def _prone(
     )
 
 
+# A crawler's arms stay propped (limp, his chest dropped onto them and the elbows splayed, the forearms slid
+# 5-6 cm; held by contact_pin they still slid 4.4: the shoulders passed over the elbows) and his legs drawn
+# until he is down (limp from the start, the knees splayed 3.5 cm); the settle lays the chest down. The
+# rifle he cradled across his forearms is flung forward, ahead of his face (tossed to the side, it stayed
+# under the face and the head rested on it, 11.8 cm up; 40-80 N did not move it off the forearms).
+CRAWL_DEATH = replace(
+    _prone("crawl2dead", "CRAWL", force=120.0, knee_damping=4.0, pinned=False),
+    toss=200.0,
+    toss_to=(0.0, 1.0, 0.3),
+    kept=(*((j, MAX_SECONDS) for j in ("clavicle", "shoulder", "elbow")), ("hip", 0.45), ("knee", 0.45)),
+    kept_tone=0.3,
+)
 DEATHS: tuple[DeathSpec, ...] = (
-    DeathSpec("ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0, pinned=True),
+    DeathSpec(
+        "ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0, pinned=True, knees_held=True
+    ),
     DeathSpec(
         "stfire2dead",
         "STAND_FIRE",
@@ -184,9 +211,7 @@ DEATHS: tuple[DeathSpec, ...] = (
     ),
     _prone("prstow2dead", "PRONE_STOWED"),
     _prone("prfire2dead", "PRONE_FIRE"),
-    # crawl2dead not pinned: its forearms still slid 5.1 cm held (the shoulders pass over the elbows) and a
-    # shoulder leapt 24 degrees a frame; its knees and thighs slide 3.2-3.5 cm in the physics
-    _prone("crawl2dead", "CRAWL", force=120.0, knee_damping=4.0, pinned=False),
+    CRAWL_DEATH,
 )
 SLUMP = "SLUMP"  # the in-between key of a body crumpling onto its knees (authoring.postures)
 UPPER = ("waist", "neck", "head")  # with the vertebrae: what slumps of a kneeling soldier
@@ -313,6 +338,35 @@ def _straightened(spec: DeathSpec, t: float, rolled: float) -> float:
     return _smoothstep((t - spec.knee_straighten) / KNEE_STRAIGHTEN)
 
 
+def _toss_direction(spec: DeathSpec, pelvis: np.ndarray, right: np.ndarray, hit: np.ndarray) -> np.ndarray:
+    """Where the let-go rifle is flung (figure frame, unit): :attr:`DeathSpec.toss_to` in the pelvis' frame,
+    or to the side (the heading frame's left), away from the fall ``hit``, horizontal."""
+    if spec.toss_to is not None:
+        away = pelvis[:3, :3] @ np.array(spec.toss_to)
+        return away / np.linalg.norm(away)
+    away = -right - 0.3 * hit
+    away[1] = 0.0
+    return away / (np.linalg.norm(away) or 1.0)
+
+
+def _keeper(spec: DeathSpec, names: list[str], hold_ref: np.ndarray) -> Callable[..., tuple]:
+    """``(t, ref, gain) -> (ref, gain)``: the :attr:`DeathSpec.kept` joints pulled toward the start posture
+    at :attr:`DeathSpec.kept_tone` until their time, letting go over :data:`KEPT_FADE` (a crawler's arms
+    stay propped, so his forearms do not skid as he slumps; the settle lays his chest down,
+    :mod:`authoring.dead_prone`); the others as they are."""
+    if not spec.kept:
+        return lambda t, ref, g: (ref, g)
+    until = np.array([u for _, u in spec.kept] + [-np.inf])  # the last group: not kept
+    group = np.array([next((i for i, (j, _) in enumerate(spec.kept) if n.endswith(j)), len(spec.kept))
+                      for n in names])  # fmt: skip
+
+    def keep(t: float, ref: np.ndarray, g: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        w = (1.0 - np.array([_smoothstep(u) for u in (t - until) / KEPT_FADE]))[group]
+        return ref + w * (hold_ref - ref), g + w * (spec.kept_tone - g)
+
+    return keep
+
+
 def _smoothstep(u: float) -> float:
     u = min(1.0, max(0.0, u))
     return u * u * (3.0 - 2.0 * u)
@@ -340,6 +394,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     loose = [n.endswith(LOOSE) for n in names]
     legs = [n.endswith(LEGS) for n in names]
     arms = np.array([n.endswith(("clavicle", "shoulder", "elbow")) for n in names])
+    keep = _keeper(spec, names, hold_ref)
     tone = np.where(spine, SPINE_TONE, np.where(loose, np.where(arms, spec.arm_tone, 0.0), TONE))
     # once he is down the legs roll outward (hips, ankles) and, standing deaths only, the knees straighten
     # (straightened, a fallen kneeling soldier's knees drag his feet along the ground)
@@ -360,9 +415,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     hips = model.body("lower_torso").id
     feet = [model.body(f"{side}_foot").id for side in ("left", "right")]
     gun = model.body("rifle").id
-    away = -right - 0.3 * d_fig  # the let-go rifle is tossed to the soldier's left, away from his fall
-    away[1] = 0.0
-    away /= np.linalg.norm(away) or 1.0
+    away = _toss_direction(spec, pelvis, right, d_fig)
     toss_mj = spec.toss * np.array([away[0], -away[2], away[1]])
 
     asleep: list[tuple[float, np.ndarray]] = []  # when he fell asleep, his damping then (:data:`SLEEP_SPEED`)
@@ -391,6 +444,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
                 ref = ref + us * (rolled_ref - dead_ref)
                 g = g + settle * us
             g = g + straighten * _straightened(spec, t, us)
+        ref, g = keep(t, ref, g)
         model.jnt_stiffness[jm.jnt] = gain * g
         model.qpos_spring[jm.qpos] = ref
         damping = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
@@ -463,12 +517,15 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
 def _after_physics(
     spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], release: int = 0
 ) -> ClipFrames:
-    """The recorded fall with its skid taken out, settled limp and (:attr:`DeathSpec.pinned`) its limbs on
-    the ground held where they touched down (steps 5-7 of the module docstring)."""
+    """The recorded fall with its skid taken out, settled limp, (:attr:`DeathSpec.knees_held`) its knees on
+    the ground held and (:attr:`DeathSpec.pinned`) its limbs on the ground held where they touched down
+    (steps 5-7 of the module docstring)."""
     soldier, rifle = figures
     frames = plant(frames, soldier)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
     frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
+    if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
+        frames = hold_knees(frames, soldier, release)
     if not spec.pinned:
         return frames
     return pin_frames(frames, soldier, spec.propped, release if spec.propped else 0)

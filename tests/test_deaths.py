@@ -16,6 +16,7 @@ from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
 
 REPRODUCED = "prfire2dead"  # the shortest simulation
+FOREARMS = ("left_forearm", "right_forearm")
 
 
 @pytest.fixture(scope="module")
@@ -111,10 +112,11 @@ def test_every_death_lets_go_of_the_rifle_and_ends_at_rest(ctx: BuildContext, na
     assert postures.lowest_point(kin, poses[-1], roots[-1]) <= 2.0  # lying on the ground
 
 
-@pytest.mark.parametrize("name", ["prstow2dead", "prfire2dead"])
+@pytest.mark.parametrize("name", ["prstow2dead", "prfire2dead", "crawl2dead"])
 def test_a_prone_death_lays_the_head_down(ctx: BuildContext, name: str) -> None:
     """Issue 14: the physics left the head held up about 30 cm, like a live prone soldier's, and propped on
-    his elbows dropping the head alone left it 18-19 cm up."""
+    his elbows dropping the head alone left it 18-19 cm up; the crawler's head lay on the rifle he had
+    cradled across his forearms (11.8 cm)."""
     poses, roots, _, _ = _played(ctx, name)
     lows = part_lows_of(ctx, poses[-1], roots[-1])
     assert lows["head"] <= 10.0  # the check's rest_head_cm (18.6-19.0 cm before the chest came down)
@@ -130,17 +132,26 @@ def test_a_death_on_his_back_lets_the_arms_fall(ctx: BuildContext) -> None:
     assert max(arms) <= 25.0
 
 
-@pytest.mark.parametrize("name", ["prstow2dead", "prfire2dead"])
-def test_a_prone_deaths_forearms_do_not_skid(ctx: BuildContext, name: str) -> None:
+@pytest.mark.parametrize(
+    ("name", "parts"),
+    [
+        ("prstow2dead", FOREARMS),
+        ("prfire2dead", FOREARMS),
+        ("crawl2dead", (*FOREARMS, "left_kneecap", "right_kneecap", "left_thigh", "right_thigh")),
+    ],
+)
+def test_a_prone_deaths_forearms_do_not_skid(ctx: BuildContext, name: str, parts: tuple[str, ...]) -> None:
     """Issue 14: the limp arms of a prone soldier pivoted and slid on the ground as he slumped (5.7-6.1 cm);
-    the forearms are held, place and turn, where they lay (the check: contact slide <= 3 cm)."""
+    the forearms are held, place and turn, where they lay (the check: contact slide <= 3 cm). The crawler's
+    forearms slid 5.2 cm (his chest dropped onto them), his knees 3.5 and thighs 3.2 (the legs let go at
+    once)."""
     from authoring.body_parts import contact_runs
     from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
 
     poses, roots, _, _ = _played(ctx, name)
     figs = FigureSet({"body": ctx.soldier})
     nodes, segs = figs.nodes("body")
-    arm = np.isin(figs.node_parts("body"), ("left_forearm", "right_forearm"))
+    arm = np.isin(figs.node_parts("body"), parts)
     g = figs.kin["body"].segment_globals(poses, roots)
     points = np.einsum("fkij,kj->fki", g[:, segs[arm], :3, :], nodes[arm])
     slide = contact_runs(points, CONTACT_HEIGHT_CM).slide.max(initial=0.0)

@@ -32,7 +32,8 @@ class Wire:
 
 def shard(key_every: int = 1000) -> tuple[ShardNode, Wire, PoseBoard]:
     wire = Wire()
-    server = SimpleNamespace(world=SimpleNamespace(manager=None))  # what a key request touches: nothing
+    # what a key request touches: nothing; the backlog's bound: max_soldiers
+    server = SimpleNamespace(world=SimpleNamespace(manager=None), config=SimpleNamespace(max_soldiers=8))
     node = ShardNode(server, wire, Sharding(0, 1), key_every=key_every)  # type: ignore[arg-type]
     return node, wire, PoseBoard(3, 2)
 

@@ -4,8 +4,6 @@ the others between turns of a client's creation burst. In one process on trio's 
 
 from __future__ import annotations
 
-import collections
-
 import numpy as np
 import pytest
 import trio
@@ -36,7 +34,8 @@ async def test_a_shard_answers_the_requests_that_arrived_together_in_one_batch(
             req.pack([req.requests(make_entity_requests(index=[i], velocity=WALK)) for i in (1, 2, 3)])
         )
         answers, sent = shard.answers, len(batches)
-        assert node.take_turn(collections.deque(ops)) == 3
+        node.backlog.put(ops)
+        assert node.take_turn() == 1  # the three messages' rows, taken as one batch
         m = shard.world.manager
         assert m is not None and all(m.soldier_info(i)["speed"] > 1.0 for i in (1, 2, 3))
         assert shard.answers == answers + 1  # one answer for the three (it was one each)
@@ -55,10 +54,10 @@ async def test_a_shards_turn_ends_when_its_cpu_is_spent(
     async with trio.open_nursery() as nursery:
         await nursery.start(shard.serve)
         await trio.sleep(0.2)
-        ops = collections.deque(
+        node.backlog.put(
             req.decode(req.pack([req.create(20 + k, "DI.fig", "AK_47.fig", None) for k in range(3)]))
         )
-        assert node.take_turn(ops) == 1 and len(ops) == 2
+        assert node.take_turn() == 1 and len(node.backlog) == 2
         assert 20 in live(shard) and 21 not in live(shard)
         shard.shutdown()
 

@@ -490,7 +490,7 @@ def test_contact_sheet_views_and_clip_pattern(tmp_path: Path, figset: FigureSet,
     assert [c.label for c in clips] == ["b2c.chset.env"] and [p.label for p in postures] == ["B", "C"]
     figs = [FIGURES / t for t in types]
     images = {}
-    for view in ("side", "front"):
+    for view in ("side", "front", "top"):
         try:
             info = render_contact_sheet(figs, clips, tmp_path / f"{view}.png", frames_per_clip=2, tile=64,
                                         views=(view,))  # fmt: skip
@@ -499,11 +499,12 @@ def test_contact_sheet_views_and_clip_pattern(tmp_path: Path, figset: FigureSet,
         images[view] = np.asarray(Image.open(tmp_path / f"{view}.png").convert("RGB")).astype(int)
     assert images["side"].shape == images["front"].shape
     assert np.abs(images["side"] - images["front"]).sum(axis=2).astype(bool).mean() > 0.02  # another picture
+    assert np.abs(images["side"] - images["top"]).sum(axis=2).astype(bool).mean() > 0.02  # from above
     info = render_contact_sheet(figs, clips, tmp_path / "both.png", frames_per_clip=2, tile=64,
                                 views=("side", "front"))  # fmt: skip
     assert info["tiles"] == 4 and info["height"] == images["side"].shape[0] + 64 + 22
     with pytest.raises(ContactSheetError, match="unknown view"):
-        render_contact_sheet(figs, clips, tmp_path / "x.png", views=("top",))
+        render_contact_sheet(figs, clips, tmp_path / "x.png", views=("below",))
     out = tmp_path / "cli.png"
     assert main(["author", "contact-sheet", "--graphs", str(graph), "--out", str(out), "--clips", "a2b",
                  "--view", "both", "--frames", "2", "--tile", "48", "--json"]) == 0  # fmt: skip

@@ -75,14 +75,26 @@ def drive(
     h = np.array(headings)[:, None]
     forward = np.concatenate([np.sin(h), np.cos(h)], axis=1)[:, None, None, :]
     right = np.concatenate([np.cos(h), -np.sin(h)], axis=1)[:, None, None, :]
-    world = np.array(entity)[:, None, None, :] * 100.0 + local[..., 0:1] * right - local[..., 2:3] * forward
+    world = in_world(local, np.array(entity), np.array(headings))
     root = np.array(figures)[:, [0, 2]]  # the figure's offset from the entity (soldier frame)
     gap = root[:, 0:1] * right[:, 0, 0] - root[:, 1:2] * forward[:, 0, 0]  # ... in the world
     faces = np.einsum("nij,j->ni", to_matrix(np.array(figures, np.float64)[:, 3:7]), [0.0, 0.0, -1.0])
     ahead = faces[:, 0:1] * right[:, 0, 0] - faces[:, 2:3] * forward[:, 0, 0]  # the figure's forward, world
     yaw = np.degrees(np.arctan2(ahead[:, 0], ahead[:, 1]))  # compass degrees the figure faces
     return {"world": world, "height": local[..., 1], "clips": np.array(clips), "gap": gap, "yaw": yaw,
-            "placements": np.array(placements), "joints": np.array(poses)}  # fmt: skip
+            "placements": np.array(placements), "joints": np.array(poses), "entity": np.array(entity),
+            "heading": np.array(headings)}  # fmt: skip
+
+
+def in_world(local: np.ndarray, entity: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """World ground positions ``(n, ..., 2)`` (Performer X east, Y north, cm) of points ``local`` ``(n, ...,
+    3)`` in the soldier frame (Jack: X right, -Z ahead) of an entity at ``entity`` ``(n, 2)`` m facing
+    ``heading`` ``(n,)`` radians, as an image generator places them."""
+    extra = (1,) * (local.ndim - 2)
+    h = heading.reshape(-1, *extra, 1)
+    forward = np.concatenate([np.sin(h), np.cos(h)], axis=-1)
+    right = np.concatenate([np.cos(h), -np.sin(h)], axis=-1)
+    return entity.reshape(-1, *extra, 2) * 100.0 + local[..., 0:1] * right - local[..., 2:3] * forward
 
 
 def yaw_steps(run: dict[str, np.ndarray]) -> np.ndarray:

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from authoring import turns
+from authoring import crawl_turn, turns
 from authoring.gait import BaseStance
 from authoring.quality import FigureSet, play
 from server.motion.cache import load_channelset
@@ -49,13 +49,17 @@ def _yaw(m: np.ndarray) -> float:
 
 
 @pytest.mark.parametrize("suffix", SUFFIXES)
-def test_turn_graph_lists_every_clip_as_a_stand_stowed_self_loop(suffix: str):
+def test_turn_graph_lists_every_clip_as_a_self_loop_on_its_posture(suffix: str):
+    """The standing turns and side-steps loop on STAND_STOWED, the turns on the ground on CRAWL."""
     loaded = load_posture_graph(POSTURE_GRAPHS / GRAPHS[suffix])
-    assert loaded.graph.postures == ["STAND_STOWED"]
+    assert loaded.graph.postures == ["STAND_STOWED", "CRAWL"]
     stems = [f.rsplit("/", 1)[-1].removesuffix(f"{suffix}.chset.env") for f in loaded.graph.files]
-    assert stems == list(turns.TURN_CLIPS)
-    loops = {(a.start, a.end, a.forward) for a in loaded.graph.arcs}
-    assert loops == {("STAND_STOWED", "STAND_STOWED", True)}
+    assert stems == [*turns.TURN_CLIPS, *crawl_turn.CRAWL_TURN_CLIPS]
+    loops = {(stems[a.channelset], a.start, a.end, a.forward) for a in loaded.graph.arcs}
+    node = {name: "STAND_STOWED" for name in turns.TURN_CLIPS} | {
+        n: "CRAWL" for n in crawl_turn.CRAWL_TURN_CLIPS
+    }
+    assert loops == {(name, p, p, True) for name, p in node.items()}
     assert sorted(a.channelset for a in loaded.graph.arcs) == list(range(len(stems)))
 
 

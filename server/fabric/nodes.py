@@ -19,7 +19,6 @@ the same, so a client of the front-end gets the handshake, tables and FIGURE of 
 
 from __future__ import annotations
 
-import collections
 import contextlib
 import functools
 import math
@@ -34,6 +33,7 @@ import trio
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from server.fabric import Fabric, Kind, alive_key, poses_topic, requests_topic
 from server.fabric import requests as req
+from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
@@ -87,7 +87,11 @@ class ShardNode:
         self._sent_serial = 0  # the board publish the last batch covered
         self.taken = 0  # fabric requests handled
         server.on_publish = self.publish
-        server.status_note = lambda: f"shard {sharding.k}/{sharding.n}, {self.seq} batches"
+        # what arrived and is not taken yet: bounded (two rows per soldier), requests coalesced per soldier
+        self.backlog = Backlog(max_rows=max(MAX_ROWS, 2 * server.config.max_soldiers))
+        server.status_note = lambda: (
+            f"shard {sharding.k}/{sharding.n}, {self.seq} batches, {self.backlog.describe()}"
+        )
 
     def keep_own(self) -> None:
         """Drop the soldiers of the start-up script that other shards own."""
@@ -101,38 +105,44 @@ class ShardNode:
         """Take requests on the trio loop in order of arrival, in turns (:meth:`take_turn`): the tick runs
         between turns when it is due (thousands of creations arrive at once when a client creates a crowd)."""
         self.fabric.announce(alive_key(self.sharding.k))
-        send, receive = trio.open_memory_channel[bytes](math.inf)
+        send, receive = trio.open_memory_channel[None](1)
+
+        def wake() -> None:
+            with contextlib.suppress(trio.WouldBlock):
+                send.send_nowait(None)
 
         def arrived(data: bytes) -> None:
+            ops = self._decoded(data)
             if TRACE is not None:
-                TRACE.stamp("shard_arrive", _request_indices(self._decoded(data)))
-            token.run_sync_soon(send.send_nowait, data)
+                TRACE.stamp("shard_arrive", _request_indices(ops))
+            if self.backlog.put(ops):
+                token.run_sync_soon(wake)
 
         self.fabric.subscribe(requests_topic(self.sharding.k), Kind.REQUESTS, arrived)
 
         async def take() -> None:
-            ops: collections.deque[req.Op] = collections.deque()
             while True:
-                if not ops:
-                    ops.extend(self._decoded(await receive.receive()))
-                with contextlib.suppress(trio.WouldBlock):
-                    while True:  # whatever else has arrived joins this turn
-                        ops.extend(self._decoded(receive.receive_nowait()))
-                with self.server.cpu("requests"):
-                    self.take_turn(ops)
+                if not self.backlog:
+                    await receive.receive()
+                if self.backlog:
+                    with self.server.cpu("requests"):
+                        self.take_turn()
                 await trio.lowlevel.checkpoint()
 
         self.server.spawn(take)
 
-    def take_turn(self, ops: collections.deque[req.Op]) -> int:
-        """Handle queued operations in order for up to ``TURN_S`` of CPU (one at least), then answer them
-        all at once: one answer batch for every request that arrived together (an answer per operation
-        cost a sample, a publish and a batch each, and the later ones waited for the earlier ones').
+    def take_turn(self) -> int:
+        """Handle the backlog's operations in order for up to ``TURN_S`` of CPU (one at least), then answer
+        them all at once: one answer batch for every request that arrived together (an answer per operation
+        cost a sample, a publish and a batch each, and the later ones waited for the earlier ones'; the
+        backlog hands consecutive request rows over as one batch, each soldier's newest).
         Returns how many were handled; the rest wait for the next turn, after the tick if it is due."""
         end = time.thread_time() + TURN_S
         n = 0
-        while ops and (n == 0 or time.thread_time() < end):
-            op = ops.popleft()
+        while n == 0 or time.thread_time() < end:
+            op = self.backlog.take()
+            if op is None:
+                break
             if TRACE is not None:
                 TRACE.stamp("shard_take", _request_indices([op]))
             self.handle(op)

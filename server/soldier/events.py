@@ -174,7 +174,8 @@ class Events(Stepping, Turning, Reactions, LeadIn):
                 # a pivot stops, turns, then (its end decides again) walks away
                 turns[k] = self._turn(int(idx[k]), float(t[k]), REVERSAL_TURN_SPEEDUP)
             idx, t, kind = idx[~turns], t[~turns], kind[~turns]
-        still = idx[(kind == 0) & (tb.node[idx] != self._home)]
+        node = tb.node[idx]
+        still = idx[(kind == 0) & (node != self._home) & ~self.library.faces_world[node]]
         tb.root_yaw[still] = 0.0  # no turn clip here: the figure faces the heading again
         go = kind != 0
         if go.any():
@@ -204,7 +205,8 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         turned_away = abs(tb.root_yaw[i]) >= MIN_TURN_DEG  # a start this far off pivots first, as a reversal
         if (turned_away or (kind and reversing)) and self._turn(i, t, REVERSAL_TURN_SPEEDUP if kind else 1.0):
             return  # a pivot stops, turns, then (its end decides again) walks away
-        if not kind and node != self._home:  # no turn clip here: the figure faces the heading again
+        if not kind and node != self._home and not self.library.faces_world[node]:
+            # no turn clip here: the figure faces the heading again
             tb.root_yaw[i] = 0.0
         if kind:
             fast = bool(tb.speed[i] > self._settings.walk_run_threshold) and self.library.can_run
@@ -284,6 +286,8 @@ class Events(Stepping, Turning, Reactions, LeadIn):
             return False
         steps, k = entry
         tb.node[i] = steps[k].end
+        if k + 1 < len(steps) and self._turning(steps[k].clip):  # a prone turn's turn, on forearms and knees
+            self._turned(i, steps[k].clip)
         k += 1
         if k < len(steps):
             entry[1] = k

@@ -63,7 +63,7 @@ from server.soldier.root_motion import (
     stance_travel,
     step_turns,
 )
-from server.soldier.state import CRAWL_NODE, STAND_STOWED, LocoState
+from server.soldier.state import CRAWL_NODE, PRONE_NODES, STAND_STOWED, LocoState
 
 GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL, GRAPH_TURN, GRAPH_REACT = 0, 1, 2, 3, 4
 GRAPH_NAMES = ("static", "loco", "crawl", "turn", "react")
@@ -195,12 +195,29 @@ class MotionLibrary:
             [tuple(cs.end_offset) if cs.end_offset is not None else (0.0, 0.0, 0.0) for cs in self.sources],
             np.float64,
         ).reshape(-1, 3)
-        # turns in place from STAND_STOWED: (clip id, compass degrees it turns, clockwise positive)
-        self.turn_clips: list[tuple[int, float]] = [
-            (cid, -float(self.clip_end_offset[cid, 2]))
-            for cid, c in enumerate(infos)
-            if c.graph == GRAPH_TURN and self.clip_end_offset[cid, 2] != 0.0
-        ]
+        # turns in place per posture node (STAND_STOWED; CRAWL, on forearms and knees): (clip id, compass
+        # degrees it turns, clockwise positive)
+        self.node_turns: dict[int, list[tuple[int, float]]] = {}
+        if turn is not None:
+            base = next(k for k, e in enumerate(entries) if e[1] == GRAPH_TURN)
+            for arc in turn.graph.arcs:
+                cid = base + arc.channelset
+                if arc.start == arc.end and arc.start in self._node and self.clip_end_offset[cid, 2] != 0.0:
+                    self.node_turns.setdefault(self._node[arc.start], []).append(
+                        (cid, -float(self.clip_end_offset[cid, 2]))
+                    )
+        # ... standing (the pivots of walking soldiers too)
+        self.turn_clips: list[tuple[int, float]] = self.node_turns.get(self._node.get(STAND_STOWED, -1), [])
+        # a prone soldier turns on forearms and knees: up to CRAWL, the turn there, down again
+        crawl_node = self._node.get(CRAWL_NODE, -1)
+        self.turn_via: dict[int, int] = {
+            self._node[p]: crawl_node
+            for p in PRONE_NODES
+            if p in self._node and crawl_node in self.node_turns
+        }
+        # the nodes whose figure keeps its orientation in the world when its entity turns (turns in place)
+        self.faces_world = np.zeros(len(self.postures), bool)
+        self.faces_world[[*self.node_turns, *self.turn_via]] = True
         self.static_clip = list(range(len(static.graph.files)))  # static clips come first, by token
         self._loco_table(entries)
         # reactions without a posture change: (posture, "recoil" | "flinch") -> clip id (soldier_react.graph)

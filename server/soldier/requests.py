@@ -149,6 +149,7 @@ class Requests(Ticking):
         # a standing figure keeps its orientation in the world (it turns in place, below); a moving one
         # turns with the entity at once
         keeps = (mode == _LOCO) | (mode == _CRAWL) | (tb.node[i] == self._home) | moving
+        keeps |= self.library.faces_world[tb.node[i]]  # (on the ground too: CRAWL, prone)
         tb.root_yaw[i] = np.where(keeps, (tb.root_yaw[i] - turned + 180.0) % 360.0 - 180.0, 0.0)
         # store the request (Jack coordinates)
         tb.appearance[i] = app

@@ -26,7 +26,8 @@ if TYPE_CHECKING:
     from server.soldier.library import MotionLibrary
     from server.soldier.table import SoldierTable
 
-TURN_RATE = 90.0  # degrees/s a crawling figure (or one without sole sites) turns towards its heading
+TURN_RATE = 90.0  # degrees/s a figure without sole sites turns towards its heading
+CRAWL_TURN_RATE = 3.0  # ... a crawling one, about the root (toe tips <= 2.3 cm a stance; more: he stops)
 # a walking or running figure turns at each footfall instead: only while at most one sole point is down (the
 # ball at push-off, or none in a run's flight), about that point, so no planted point slides (issue 16)
 STEP_TURN_DEG = 45.0  # at most this much per such window (one a step): 90° over 2-3 steps, 110° over three
@@ -361,6 +362,7 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         ti, fj, yj, oj = idx[j], frames[j], yaw[j], off[j]
         dt = np.maximum(np.broadcast_to(np.asarray(t, np.float64), idx.shape)[j] - tb.root_t[ti], 0.0)
         rate = TURN_RATE * np.maximum(1.0, np.abs(yj) / 90.0)  # a reversal turns faster (it walks away)
+        rate = np.where(tb.mode[ti] == STEPPING[1], CRAWL_TURN_RATE, rate)
         clip = tb.clip[ti]
         was = lib.travel.turn_at(clip, frame_at(tb, lib, ti, tb.root_t[ti]))
         free = np.minimum(np.abs(lib.travel.turn_at(clip, fj) - was), STEP_TURN_RATE * dt)

@@ -22,6 +22,7 @@ from protocol.entity import Appearance, WeaponState
 
 STAND_STOWED = "STAND_STOWED"
 CRAWL_NODE = "CRAWL"
+PRONE_NODES = ("PRONE_STOWED", "PRONE_FIRE")  # lying prone: a turn goes up to CRAWL and back (turning.py)
 DEAD = "DEAD"
 
 

@@ -15,23 +15,30 @@ first, then starts (turning the body over the start step twisted the planted foo
 straight back faster than BACKWARD_MAX_SPEED is walked forwards: the figure's frame turns by ``face`` = 180°
 from the heading (the root placement carries it, docs/PROTOCOL.md), so a standing soldier pivots and walks
 away and a walking one reverses.
+
+On the ground the turns in place are those on forearms and knees (CRAWL): a soldier there plays the ones
+that fit, one after the other (:meth:`Turning._ground_turns`); lying prone he comes up onto forearms and
+knees, turns so and lies down again; crawling, CRAWL_REVERSAL_DEG or more from his heading, he stops, turns
+so and crawls on (turned while crawling or at once, his planted forearms, knees and toes slid 13-116 cm).
 """
 
 from __future__ import annotations
 
 import math
+from itertools import combinations_with_replacement
 
 import numpy as np
 
 from server.soldier import root_motion
 from server.soldier.core import (
+    _CRAWL,
     _IDLE,
     _LOCO,
     _TRANSITION,
     ManagerCore,
 )
 from server.soldier.library import PathStep
-from server.soldier.state import LocoState
+from server.soldier.state import CRAWL_NODE, LocoState
 
 REVERSAL_DEG = 120.0  # a walking figure this far from its new heading stops, pivots and walks away
 # ... a side-stepping one already this far: it turns 10° a stance (root_motion.side_turns), side-stepping
@@ -42,6 +49,12 @@ BACKWARD_HYSTERESIS = 0.2  # m/s: walking away forwards, he faces his velocity d
 # a pivot may turn more or less than its clip, about the flat carrying foot while one foot alone is down: at
 # most this much per such stance (each degree twists that foot's heel and ball ~0.2 cm: 9° -> 1.8 cm)
 PIVOT_REST_PER_STANCE_DEG = 9.0
+# a crawling figure this far from its new heading stops, turns in place on forearms and knees and crawls on:
+# turned while crawling at 90°/s about the root its planted toes and knees slid 13-94 cm at 45-90°; a smaller
+# change it turns while it crawls, at root_motion.CRAWL_TURN_RATE (3°/s: 22.5° in 7.5 s, toes 2.3 cm)
+CRAWL_REVERSAL_DEG = 22.5
+MAX_GROUND_TURNS = 4  # turn clips on the ground one after the other at most (180°: the 90° twice)
+GROUND_TURN_SLACK_DEG = 7.5  # ... chosen by what they leave unturned in steps of this much, then the fewest
 REVERSAL_TURN_SPEEDUP = 2.5  # the pivot plays the 180° turn in place this many times faster (3.4 s -> 1.4 s)
 
 
@@ -61,24 +74,42 @@ class Turning(ManagerCore):
     def _mark_reversals(self, idx: np.ndarray, mode: np.ndarray) -> None:
         """After requests to soldiers ``idx`` (``mode`` before them): a walking or running one whose figure
         now faces REVERSAL_DEG or more away from his heading reverses (stopping too: he stops facing the old
-        way, then turns in place); one whose heading came back no longer does. Other modes keep the mark (a
-        reversal under way ends in ``_decide``)."""
+        way, then turns in place); a crawling one CRAWL_REVERSAL_DEG or more, where he can turn in place; one
+        whose heading came back no longer does. Other modes keep the mark (a reversal under way ends in
+        ``_decide``)."""
+        lib = self.library
         loco = mode == _LOCO
-        if self.library.turn_clips and loco.any():
+        if lib.turn_clips and loco.any():
             i = idx[loco]
             loco = self.table.loco[i]
             side = (loco == LocoState.SIDESTEP_L) | (loco == LocoState.SIDESTEP_R)
             limit = np.where(side, SIDE_REVERSAL_DEG, REVERSAL_DEG)
             self.table.reversing[i] = np.abs(self.table.root_yaw[i]) >= limit
+        crawl = mode == _CRAWL
+        if lib.has_node(CRAWL_NODE) and lib.node(CRAWL_NODE) in lib.node_turns and crawl.any():
+            i = idx[crawl]
+            self.table.reversing[i] = np.abs(self.table.root_yaw[i]) >= CRAWL_REVERSAL_DEG
 
     def _turn(self, i: int, t: float, speedup: float = 1.0) -> bool:
-        """A standing soldier whose figure faces away from its heading plays the turn in place that fits
-        (``speedup`` times faster than recorded: a reversal's pivot)."""
+        """A resting soldier whose figure faces away from its heading plays the turn in place that fits: a
+        standing one ``speedup`` times faster than recorded (a reversal's pivot), one on forearms and knees
+        at its pace, a prone one up to CRAWL, the turn, and down again (:meth:`_turn_via`)."""
         tb, lib = self.table, self.library
-        if not lib.turn_clips or int(tb.node[i]) != self._home or int(tb.mode[i]) != _IDLE:
+        node = int(tb.node[i])
+        if int(tb.mode[i]) != _IDLE:
+            return False
+        if node in lib.turn_via:
+            return self._turn_via(i, t, lib.turn_via[node])
+        clips = lib.node_turns.get(node)
+        if not clips:
             return False
         want = -float(tb.root_yaw[i])  # compass degrees to turn
-        clip, turn = (self._pivot_clip if speedup != 1.0 else self._nearest_turn)(want)
+        if node != self._home:  # on the ground
+            turns = self._ground_turns(node, want)
+            if turns:
+                self._turn_path(i, turns, t)
+            return bool(turns)
+        clip, turn = (self._pivot_clip if speedup != 1.0 else self._nearest_turn)(want, clips)
         if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
             return False
         # the turn turns by the clip's turn and a rest too small for another turn clip (a 58° turn after an
@@ -87,25 +118,23 @@ class Turning(ManagerCore):
         rest = rest if self._pivot_fits(clip, abs(rest)) else 0.0
         if speedup != 1.0:  # a pivot: turning more, it turns no faster than the clip
             speedup *= min(1.0, abs(turn) / abs(want))
-        step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, self._home, self._home)
-        tb.blend_len[i] = 0.0
-        tb.mode[i] = _TRANSITION
-        self._paths[i] = [(step,), 0]
-        self._play_step(i, step, t)
-        tb.dirty[i] = True
+        step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, node, node)
+        self._turn_path(i, (step,), t)
         tb.pivot_rest[i] = rest
         return True
 
     def _turns(self, idx: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """:meth:`_turn` (not a pivot) of soldiers ``idx`` at times ``t``, grouped (a small group one by
-        one); which of them turn."""
+        """:meth:`_turn` (not a pivot) of soldiers ``idx`` at times ``t``, the standing ones grouped (a small
+        group one by one; those on the ground one by one); which of them turn."""
         if len(idx) < self._group_min:
             return np.array([self._turn(i, ti) for i, ti in zip(idx.tolist(), t.tolist(), strict=True)], bool)
         tb, lib = self.table, self.library
-        turns = (tb.node[idx] == self._home) & (tb.mode[idx] == _IDLE) & bool(lib.turn_clips)
+        ground = np.flatnonzero(tb.node[idx] != self._home)
+        turns = (tb.mode[idx] == _IDLE) & bool(lib.turn_clips)
         clip, off = self._nearest_turns(-tb.root_yaw[idx])
         turns &= off < np.abs(tb.root_yaw[idx])
-        g, t, clip = idx[turns], t[turns], clip[turns]
+        turns[ground] = False
+        g, tg, clip = idx[turns], t[turns], clip[turns]
         rest = (lib.clip_end_offset[clip, 2] - tb.root_yaw[g] + 180.0) % 360.0 - 180.0
         rest = np.where(np.abs(rest) <= PIVOT_REST_PER_STANCE_DEG * lib.travel.stances[clip], rest, 0.0)
         home = self._home
@@ -115,9 +144,11 @@ class Turning(ManagerCore):
         tb.mode[g] = _TRANSITION
         for i, step in zip(g.tolist(), steps, strict=True):
             self._paths[i] = [(step,), 0]
-        self._play_steps(g, steps, t)
+        self._play_steps(g, steps, tg)
         tb.dirty[g] = True
         tb.pivot_rest[g] = rest
+        for k in ground.tolist():  # on the ground: the turns there that fit (or up, turn and down again)
+            turns[k] = self._turn(int(idx[k]), float(t[k]))
         return turns
 
     def _nearest_turns(self, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -131,11 +162,54 @@ class Turning(ManagerCore):
         k = np.where(right.any(axis=1), right.argmax(axis=1), near.argmax(axis=1))
         return clips[k], off[np.arange(len(want)), k]
 
-    def _nearest_turn(self, want: float) -> tuple[int, float]:
-        """The turn clip nearest ``want`` compass degrees; of two as near (180 both ways) the one turning the
-        asked way."""
+    def _ground_turns(self, node: int, want: float) -> tuple[PathStep, ...]:
+        """The turns on the ground at ``node`` (CRAWL), one after the other (the larger first, at their
+        recorded pace, MAX_GROUND_TURNS at most), that come nearest to turning ``want`` compass degrees, what
+        is left judged in steps of GROUND_TURN_SLACK_DEG, then the fewest, then those turning the asked way:
+        180° is the 90° twice (without lying down between), 60° the 30° twice (the 45° left it 15° off), 100°
+        the 90° alone."""
+        lib = self.library
+        clips = lib.node_turns[node]
+        best: tuple[tuple[int, int, int], tuple[tuple[int, float], ...]] = (
+            (round(abs(want) / GROUND_TURN_SLACK_DEG), 0, 0),
+            (),
+        )
+        for k in range(1, MAX_GROUND_TURNS + 1):
+            for combo in combinations_with_replacement(clips, k):
+                left = (want - sum(c[1] for c in combo) + 180.0) % 360.0 - 180.0
+                key = (round(abs(left) / GROUND_TURN_SLACK_DEG), k, sum(c[1] * want < 0 for c in combo))
+                if key < best[0]:
+                    best = (key, combo)
+        order = sorted(best[1], key=lambda c: -abs(c[1]))
+        return tuple(PathStep(c, True, float(lib.clip_duration[c]), node, node) for c, _ in order)
+
+    def _turn_via(self, i: int, t: float, via: int) -> bool:
+        """A prone soldier turns on forearms and knees: the path up to ``via`` (CRAWL), the turns there that
+        fit, the path back down (lying prone, forearms and thighs on the ground, he cannot turn on the spot
+        without dragging them)."""
+        tb, lib = self.table, self.library
+        node = int(tb.node[i])
+        turns = self._ground_turns(via, -float(tb.root_yaw[i]))
+        up, down = lib.path(node, via), lib.path(via, node)
+        if not turns or not up or not down:
+            return False
+        self._turn_path(i, (*up, *turns, *down), t)
+        return True
+
+    def _turn_path(self, i: int, steps: tuple[PathStep, ...], t: float) -> None:
+        """Start the path ``steps`` that turns soldier ``i`` in place."""
+        tb = self.table
+        tb.blend_len[i] = 0.0
+        tb.mode[i] = _TRANSITION
+        self._paths[i] = [steps, 0]
+        self._play_step(i, steps[0], t)
+        tb.dirty[i] = True
+
+    def _nearest_turn(self, want: float, clips: list[tuple[int, float]] | None = None) -> tuple[int, float]:
+        """The turn clip (of ``clips``, the standing ones if None) nearest ``want`` compass degrees; of two as
+        near (180 both ways) the one turning the asked way."""
         return min(
-            self.library.turn_clips,
+            self.library.turn_clips if clips is None else clips,
             key=lambda c: (abs((c[1] - want + 180.0) % 360.0 - 180.0), c[1] * want < 0),
         )
 
@@ -143,7 +217,7 @@ class Turning(ManagerCore):
         """Whether turn ``clip`` may turn ``rest`` degrees more or less than it does, as a pivot."""
         return rest <= PIVOT_REST_PER_STANCE_DEG * float(self.library.travel.stances[clip])
 
-    def _pivot_clip(self, want: float) -> tuple[int, float]:
+    def _pivot_clip(self, want: float, clips: list[tuple[int, float]] | None = None) -> tuple[int, float]:
         """A pivot's turn clip: of those turning the asked way that fit (:meth:`_pivot_fits`) the one whose
         rest (what it turns too much or too little) is least per stance. A 140° reversal: the 180° pivot less
         40° over its five stances (1.6 cm), not the 180° and then a 45° turn back. None fits (118-134°: the
@@ -152,7 +226,8 @@ class Turning(ManagerCore):
         def rest(c: tuple[int, float]) -> float:
             return abs((c[1] - want + 180.0) % 360.0 - 180.0)
 
-        fits = [c for c in self.library.turn_clips if c[1] * want > 0 and self._pivot_fits(c[0], rest(c))]
+        clips = self.library.turn_clips if clips is None else clips
+        fits = [c for c in clips if c[1] * want > 0 and self._pivot_fits(c[0], rest(c))]
         if not fits:
             return self._nearest_turn(want)
         return min(fits, key=lambda c: rest(c) / float(self.library.travel.stances[c[0]]))
@@ -160,12 +235,18 @@ class Turning(ManagerCore):
     def _turn_end(self, i: int, t: float) -> None:
         """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading."""
         tb, lib = self.table, self.library
-        x, z, yaw = lib.clip_end_offset[int(tb.clip[i])]
         if tb.pivot_rest[i] != 0.0:  # the pivot's last bit of turn, about where the figure ends
             root_motion.pivot(tb, lib, np.array([i], np.int64), t)
             tb.pivot_rest[i] = 0.0
+        clip = int(tb.clip[i])
+        self._rest(i, int(tb.node[i]), t)
+        self._turned(i, clip)
+
+    def _turned(self, i: int, clip: int) -> None:
+        """Turn ``clip``'s own move (``end_offset``) joins soldier ``i``'s root offset and yaw (its end)."""
+        tb = self.table
+        x, z, yaw = self.library.clip_end_offset[clip]
         a = -math.radians(float(tb.root_yaw[i]))  # as blend.yaw_rotate turns the clip's placements
-        self._rest(i, self._home, t)
         tb.root_off[i, 0] += math.cos(a) * x + math.sin(a) * z
         tb.root_off[i, 1] += math.cos(a) * z - math.sin(a) * x
         tb.root_yaw[i] = (float(tb.root_yaw[i]) - yaw + 180.0) % 360.0 - 180.0

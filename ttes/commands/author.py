@@ -234,11 +234,11 @@ def _register_contact_sheet(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--view",
-        choices=("quarter", "side", "front", "both"),
+        choices=("quarter", "side", "front", "top", "both"),
         default="quarter",
         help="camera: three-quarter from the front left (default; sliding against the checkerboard), from "
         "his left side or from the front at ground level (daylight under a hovering body), or both side and "
-        "front (one row each)",
+        "front (one row each); top: from above (turns on the ground)",
     )
     p.add_argument("--frames", type=count(1), default=6, help="frames per clip (default 6)")
     p.add_argument("--tile", type=count(32), default=200, help="tile size in pixels (default 200)")

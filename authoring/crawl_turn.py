@@ -1,0 +1,188 @@
+"""Turning in place on forearms and knees (issue 16): CRAWL to CRAWL turned about the belly.
+
+A crawling soldier cannot turn while he crawls: a leopard crawl always has two limbs a metre apart on the
+ground, so a body turning over them drags them. Like a person on the ground he turns on the spot instead,
+about a pivot under the belly (halfway between the elbows and the knees): the front (both forearms, the
+hands and the rifle between them, as the CRAWL posture has them) is lifted a little, carried round the pivot
+by a step of at most ``STEP`` degrees and set down, the knees and toes staying where they are; then the
+knees and toes are lifted and swung round after it while the forearms stay; and so on until the turn is
+done (:func:`part_moves`). Moving the forearms together keeps the rifle in both hands without stretching an
+arm: one forearm stepping sideways alone changed the elbows' distance by 10-12 cm, the other arm could not
+follow and its planted elbow slid 11 cm. A planted limb stays where it is in the world.
+
+The chest turns mostly with the front and the pelvis mostly with the knees (:data:`CHEST_FRONT`,
+:data:`PELVIS_FRONT`); the pelvis is free to rise, pitch, yaw and roll over the planted knees, held back
+towards its turn, and the spine keeps the chest on its own (one batched IK solve of the body, as in
+:mod:`authoring.crawl`); then the arms are tracked frame after frame (palms on the rifle first, then the
+elbows on their tracks), so no joint leaps between IK branches.
+
+Like the standing turns (:mod:`authoring.turns`) these clips really move the soldier: the clip frame is
+CRAWL's, the last frame is CRAWL moved by the ground-plane rigid move recorded as the channelset's
+``end_offset`` (x cm, z cm, yaw deg, + = left).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from authoring import easing, ik
+from authoring.crawl import (
+    ELBOW_SITE,
+    LEG_SITES,
+    LIFT,
+    _hand_goals,
+    _progress,
+    _rise,
+    solve_body,
+)
+from authoring.motion import KeyPosture
+from authoring.postures import RIFLE, SOLDIER, arm
+from authoring.transitions import CARRIER, ClipFrames, lift_off_ground, track_solve
+from authoring.turns import _about, _turn_move, ground_move
+from peabody.fk import FigureKinematics
+
+FPS = 60
+BASE = "CRAWL"
+SIDES = ("left", "right")
+TURN_ANGLES = (30, 45, 90)  # a crawling soldier turns the nearest (another after it if far off)
+STEP = 30.0  # degrees a part turns at most in one move (elbows and knees ~25 cm, the toes ~48 cm)
+MOVE = {"front": 0.4, "back": 0.46}  # s a part takes to move (the crawl's limbs: 0.36 s for 26 cm)
+ELBOW_LIFT = 3.0  # cm the forearms (and the rifle) rise while the front moves
+CHEST_FRONT = 1.0  # share of the front's turn in the chest's (the rest the knees': 0.8 put the right
+# elbow, near the end of its reach in CRAWL, 2-4 cm off its place while it was down)
+PELVIS_FRONT = 0.25  # ... in the pelvis's
+GAP = 0.06  # s all four limbs are down between two moves
+LEAD_IN = 0.25  # s before the first pair lifts (the body sets off)
+SETTLE = 0.4  # s after the last pair lands (the body comes round to the end)
+
+
+def clip_name(direction: str, angle: float) -> str:
+    return f"crawlturn_{direction[0]}{angle:g}"
+
+
+_PLANS = {clip_name(d, a): (d, float(a)) for d in SIDES for a in TURN_ANGLES}
+CRAWL_TURN_CLIPS: tuple[str, ...] = tuple(_PLANS)
+
+
+def crawl_turn_arcs() -> list[tuple[str, str, str, bool]]:
+    """(from, to, clip, forward): every clip is a self-loop on CRAWL (it moves the soldier)."""
+    return [(BASE, BASE, name, True) for name in CRAWL_TURN_CLIPS]
+
+
+def part_moves(direction: str, angle: float) -> tuple[dict[str, list[tuple[float, float, float]]], float]:
+    """Per part (``"front"``: the forearms and the rifle, ``"back"``: the knees and toes) its moves (start
+    s, yaw from, yaw to; degrees, + = left) and the time the last one lands: the front turns a step of at
+    most ``STEP`` degrees, then the back catches up, and again, until the turn is done."""
+    sign = 1.0 if direction == "left" else -1.0
+    steps = math.ceil(angle / STEP - 1e-9)
+    moves: dict[str, list[tuple[float, float, float]]] = {"front": [], "back": []}
+    t = LEAD_IN
+    for k in range(steps):
+        a, b = sign * angle * k / steps, sign * angle * (k + 1) / steps
+        for part in ("front", "back"):
+            moves[part].append((t, a, b))
+            t += MOVE[part] + GAP
+    return moves, t - GAP
+
+
+def part_yaw(
+    t: np.ndarray, moves: list[tuple[float, float, float]], duration: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """A part's yaw (degrees) about the pivot at ``t``, and how far (share of its lift) it is raised: it
+    rises first and turns while clear of the ground (:func:`authoring.crawl._progress`)."""
+    yaw = np.zeros(len(t))
+    up = np.zeros(len(t))
+    for t0, a, b in moves:
+        s = (t - t0) / duration
+        yaw += (b - a) * _progress(s)
+        up = np.maximum(up, _rise(s))
+    return yaw, up
+
+
+def _site(kin: FigureKinematics, q: np.ndarray, root: np.ndarray, site: str) -> np.ndarray:
+    return kin.site_globals(q, root)[kin.site_names.index(site), :3, 3]
+
+
+def pivot_of(kin: FigureKinematics, key: KeyPosture) -> tuple[float, float]:
+    """The ground point (X, Z cm) the soldier turns about: under the belly, halfway between the elbows'
+    middle and the knees' middle, on the pelvis's line."""
+    q, root = key.poses[SOLDIER], key.locations[SOLDIER]
+    z = [_site(kin, q, root, f.format(s=s))[2] for s in SIDES for f in (ELBOW_SITE, LEG_SITES["knee"])]
+    return float(root[0, 3]), float(np.mean(z))
+
+
+def limb_track(
+    p0: np.ndarray, pivot: tuple[float, float], yaw: np.ndarray, up: np.ndarray, lift: float
+) -> np.ndarray:
+    """World track ``(n, 3)`` of a contact at ``p0``: turned ``yaw`` degrees about ``pivot``, raised
+    ``up * lift`` cm."""
+    track = (_about(pivot, yaw) @ np.append(p0, 1.0))[:, :3]
+    track[:, 1] += lift * up
+    return track
+
+
+def record_crawl_turn(
+    kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture, direction: str, angle: float
+) -> tuple[ClipFrames, tuple[float, float, float]]:
+    """The frames of one turn (see the module docstring) and its ``end_offset``."""
+    moves, t_land = part_moves(direction, angle)
+    t_end = round((t_land + SETTLE) * FPS) / FPS
+    n = round(t_end * FPS) + 1
+    t = np.arange(n) / FPS
+    q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
+    pivot = pivot_of(kin, key)
+    (front, f_up), (back, b_up) = (part_yaw(t, moves[p], MOVE[p]) for p in ("front", "back"))
+    roots = _about(pivot, PELVIS_FRONT * front + (1.0 - PELVIS_FRONT) * back) @ root0
+    chest0 = kin.segment_globals(q0, root0)[kin.segment_names.index(CARRIER)]
+    chest = _about(pivot, CHEST_FRONT * front + (1.0 - CHEST_FRONT) * back) @ chest0
+    chest[:, 1, 3] += ELBOW_LIFT * f_up  # the shoulders rise with the forearms
+
+    def legs(side: str, part: str) -> np.ndarray:
+        p0 = _site(kin, q0, root0, LEG_SITES[part].format(s=side))
+        return limb_track(p0, pivot, back, b_up, LIFT[part])
+
+    poses, roots = solve_body(kin, q0, chest, roots, legs)
+    # the arms on that body: the palms on the rifle the front carries round, then the elbows on their tracks
+    rifles = _about(pivot, front) @ rifle0
+    rifles[:, 1, 3] += ELBOW_LIFT * f_up
+    arm_goals = _hand_goals(kin, rkin, key, rifles)
+    for side in SIDES:
+        site = ELBOW_SITE.format(s=side)
+        track = limb_track(_site(kin, q0, root0, site), pivot, front, f_up, ELBOW_LIFT)
+        arm_goals.append(ik.Goal(site, track, None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
+    poses = track_solve(kin, poses, arm_goals, roots, iterations=10, max_dof_step=0.02, forward_only=True)
+    end_offset = _turn_move(pivot, (1.0 if direction == "left" else -1.0) * angle)
+    end = ground_move(*end_offset)
+    poses[0], roots[0], rifles[0] = q0, root0, rifle0
+    poses[-1], roots[-1], rifles[-1] = q0, end @ root0, end @ rifle0
+    lift_off_ground(kin, poses, roots, rifles)
+    return easing.ease_ends(kin, rkin, ClipFrames(poses, roots, rifles, FPS)), end_offset
+
+
+_CACHE: dict[int, dict[str, tuple[ClipFrames, tuple[float, float, float]]]] = {}
+
+
+def _record(ctx: Any, name: str) -> tuple[ClipFrames, tuple[float, float, float]]:
+    """One clip of the build context ``ctx``, recorded once per context."""
+    if id(ctx) not in _CACHE:
+        _CACHE.clear()
+        _CACHE[id(ctx)] = {}
+    clips = _CACHE[id(ctx)]
+    if name not in clips:
+        kin, rkin = FigureKinematics(ctx.soldier), FigureKinematics(ctx.rifle)
+        clips[name] = record_crawl_turn(kin, rkin, ctx.keys[BASE], *_PLANS[name])
+    return clips[name]
+
+
+def crawl_turn_clips() -> dict[str, Callable[[Any], tuple[ClipFrames, tuple[float, float, float]]]]:
+    """Clip name -> generator taking the build context: (frames, end_offset)."""
+    return {name: _clip_of(name) for name in CRAWL_TURN_CLIPS}
+
+
+def _clip_of(name: str) -> Callable[[Any], tuple[ClipFrames, tuple[float, float, float]]]:
+    """One generator per clip (a lambda in a loop would late-bind the name)."""
+    return lambda ctx: _record(ctx, name)

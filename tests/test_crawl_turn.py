@@ -1,0 +1,63 @@
+"""Turns in place on forearms and knees (committed soldier.fig, DI.fig and M16 clips): each ends in CRAWL
+moved by its ``end_offset``, turns the front and the back in alternate moves of at most 30°, and keeps every
+planted elbow, kneecap and toe tip still in the world (issue 16)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from authoring import crawl_turn, turns
+from authoring.quality import FigureSet, play
+from server.motion.cache import load_channelset
+from ttes.paths import CHANNELSETS, FIGURES
+
+SUFFIXES = {"": "soldier.fig", "_low": "DI.fig", "_m16_low": "DI.fig"}
+SLIDE_CM = {"": 0.5, "_low": 3.0, "_m16_low": 3.0}  # the recorded soldier; its slaves: the check's limit
+SITES = [f"{s}_{p}" for s in ("left", "right") for p in ("upper_arm.distal", "lower_leg.knee", "toes.distal")]
+DOWN_CM = 1.0  # a contact this near its lowest height touches the ground
+
+
+@pytest.fixture(scope="module")
+def figures() -> FigureSet:
+    return FigureSet.from_dir(FIGURES, ["soldier.fig", "DI.fig", "AK_47.fig", "M16.fig"])
+
+
+@pytest.mark.parametrize("angle", crawl_turn.TURN_ANGLES)
+def test_the_front_turns_first_and_the_back_catches_up(angle: int) -> None:
+    moves, _ = crawl_turn.part_moves("right", angle)
+    front, back = moves["front"], moves["back"]
+    assert len(front) == len(back) and front[-1][2] == back[-1][2] == -angle
+    for (tf, a, b), (tb, c, d) in zip(front, back, strict=True):
+        assert tf + crawl_turn.MOVE["front"] <= tb  # the knees lift once the forearms are down
+        assert (a, b) == (c, d) and 0.0 < a - b <= crawl_turn.STEP
+
+
+@pytest.mark.parametrize("suffix", SUFFIXES)
+@pytest.mark.parametrize("name", crawl_turn.CRAWL_TURN_CLIPS)
+def test_a_turn_on_the_ground_keeps_its_planted_contacts_and_ends_in_crawl_moved(
+    name: str, suffix: str, figures: FigureSet
+) -> None:
+    cs = load_channelset(CHANNELSETS / f"{name}{suffix}.chset.env")
+    cf = play(cs, figures)
+    body = SUFFIXES[suffix]
+    assert cs.end_offset is not None
+    x, z, yaw = cs.end_offset
+    assert yaw == float(name[11:]) * (1.0 if name[10] == "l" else -1.0)
+    np.testing.assert_allclose(cs.joint_data[-1], cs.joint_data[0], atol=1e-5)
+    move = turns.ground_move(x, z, yaw)
+    for ptype in cf.locations:
+        a, b = cf.locations[ptype][0], cf.locations[ptype][-1]
+        np.testing.assert_allclose(b, move @ a, atol=0.05, err_msg=ptype)
+    kin = figures.kin[body]
+    g = kin.site_globals(cf.poses[body], cf.locations[body])
+    for site in SITES:
+        p = g[:, kin.site_names.index(site), :3, 3]
+        down = np.r_[False, p[:, 1] <= p[:, 1].min() + DOWN_CM, False]
+        for a, b in zip(
+            np.flatnonzero(~down[:-1] & down[1:]), np.flatnonzero(down[:-1] & ~down[1:]), strict=True
+        ):
+            slide = np.linalg.norm(p[a:b, [0, 2]] - p[a, [0, 2]], axis=1).max()
+            assert slide <= SLIDE_CM[suffix], (
+                f"{name}{suffix} {site} slides {slide:.2f} cm in frames {a}..{b}"
+            )

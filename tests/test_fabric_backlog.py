@@ -1,0 +1,239 @@
+"""Issue 21: a shard's backlog of fabric requests is bounded and coalesces each soldier's entity requests
+(latest wins); events (create, remove, react, sync) are never coalesced, dropped or reordered, among
+themselves or against a soldier's requests (``server.fabric.backlog``)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import trio
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_fabric_inprocess import Bus, MemoryFabric
+from test_server_support import make_server
+
+from protocol.entity import Appearance, make_entity_requests
+from server.fabric import requests as req
+from server.fabric.backlog import Backlog
+from server.fabric.nodes import Sharding, ShardNode
+from server.soldier.manager import REQUEST_OK
+
+
+def row(index: int, speed: float) -> req.Op:
+    """One message's requests op as a shard decodes it (``speed``: a marker of which request it is)."""
+    return req.decode(
+        req.pack([req.requests(make_entity_requests(index=[index], velocity=(speed, 0.0, 0.0)))])
+    )[0]
+
+
+def drain(backlog: Backlog) -> list[req.Op]:
+    out = []
+    while (op := backlog.take()) is not None:
+        out.append(op)
+    return out
+
+
+def test_fifty_requests_then_a_remove_are_one_state_then_the_remove() -> None:
+    backlog = Backlog()
+    backlog.put([row(7, 0.01 * k) for k in range(50)] + [req.remove(7)])
+    assert len(backlog) == 2 and backlog.coalesced == 49
+    applied, removed = drain(backlog)
+    assert applied["op"] == "requests" and applied["rows"]["index"].tolist() == [7]
+    assert applied["rows"]["velocity"][0, 0] == np.float32(0.49)  # the newest
+    assert removed == req.remove(7)
+
+
+def test_a_request_after_an_event_of_its_soldier_stays_after_it() -> None:
+    backlog = Backlog()
+    backlog.put([row(7, 1.0), row(8, 1.0), req.react(7, "hit"), row(7, 2.0), row(8, 2.0)])
+    ops = drain(backlog)
+    assert [op["op"] for op in ops] == ["requests", "react", "requests"]
+    first, _, last = ops
+    assert dict(
+        zip(first["rows"]["index"].tolist(), first["rows"]["velocity"][:, 0].tolist(), strict=True)
+    ) == {
+        7: 1.0,
+        8: 2.0,  # no event of 8's between: its newer row took the older one's place
+    }
+    assert last["rows"]["index"].tolist() == [7] and last["rows"]["velocity"][0, 0] == 2.0
+
+
+def test_a_flood_stays_within_the_bound_and_keeps_every_event_and_newest_row() -> None:
+    """Soldiers 0..19 send requests for ever and react every other round: the backlog keeps at most
+    ``max_rows``, drops the oldest superseded rows (counted), keeps every reaction in order and each
+    soldier's newest row."""
+    backlog = Backlog(max_rows=150)
+    reacts = []
+    for k in range(400):
+        i, reacting = k % 20, (k // 20) % 2 == 0 and k < 200
+        backlog.put([row(i, float(k))] + ([req.react(i, f"r{k}")] if reacting else []))
+        reacts += [f"r{k}"] if reacting else []
+        assert len(backlog) <= 150
+    assert backlog.dropped > 0
+    ops = drain(backlog)
+    assert [op["kind"] for op in ops if op["op"] == "react"] == reacts
+    newest = {
+        int(r["index"]): float(r["velocity"][0]) for op in ops if op["op"] == "requests" for r in op["rows"]
+    }
+    assert newest == {k % 20: float(k) for k in range(380, 400)}
+
+
+def test_a_flood_of_requests_alone_is_one_row_per_soldier() -> None:
+    backlog = Backlog(max_rows=100)
+    for k in range(5000):
+        backlog.put([row(k % 50, float(k))])
+        assert len(backlog) <= 50
+    assert backlog.dropped == 0 and backlog.coalesced == 4950
+
+
+def test_a_backlog_under_its_byte_bound_drops_the_oldest_rows() -> None:
+    backlog = Backlog(max_bytes=33 * 10)
+    for k in range(30):
+        backlog.put([row(k, 1.0)])
+        assert backlog.bytes <= 33 * 10
+    assert backlog.dropped == 20
+    (op,) = drain(backlog)
+    assert op["rows"]["index"].tolist() == list(range(20, 30))
+
+
+def test_events_beyond_the_bound_are_kept_and_the_rows_go() -> None:
+    """Events are never dropped: a backlog of events alone over its bound keeps them (and logs it); the
+    rows among them go, the oldest first."""
+    backlog = Backlog(max_rows=10)
+    backlog.put([row(1, 1.0), row(2, 1.0)] + [req.react(3, f"r{k}") for k in range(12)] + [row(4, 1.0)])
+    assert backlog.dropped == 3 and len(backlog) == 12
+    assert [op["kind"] for op in drain(backlog)] == [f"r{k}" for k in range(12)]
+
+
+# -- the order of a soldier's states and events: a model of a shard (the soldier's state: its newest row) --
+_EVENTS = st.one_of(
+    st.builds(req.react, st.integers(0, 4), st.just("hit")),
+    st.builds(req.remove, st.integers(0, 4)),
+    st.builds(lambda i: req.create(i, "DI.fig", "AK_47.fig", None), st.integers(0, 4)),
+    st.just(req.key()),
+    st.just({"op": "sync", "soldiers": [], "rows": np.zeros(0)}),
+)
+_MESSAGE = st.lists(
+    st.one_of(st.lists(st.integers(0, 4), min_size=1, max_size=4), _EVENTS), min_size=1, max_size=5
+)
+
+
+def _model(ops: list[Any]) -> tuple[list[tuple[str, object, object]], dict[int, float]]:
+    """Each event with what it sees when it applies (its soldier's state; a sync's: every soldier's), and
+    the final states."""
+    state: dict[int, float] = {}
+    events = []
+    for op in ops:
+        if op["op"] == "requests":
+            for r in op["rows"]:
+                state[int(r["index"])] = float(r["velocity"][0])
+        else:
+            index = op.get("index")
+            seen = dict(state) if op["op"] == "sync" else state.get(index) if index is not None else None
+            events.append((op["op"], index, seen))
+    return events, state
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(_MESSAGE, st.integers(0, 2)), min_size=1, max_size=25))
+def test_coalesced_events_see_the_states_they_saw_in_order(stream: list[tuple[list[Any], int]]) -> None:
+    """Whatever arrives and however many operations the shard takes between messages, each event applies
+    with every soldier's newest state sent before it, and the final states are the last ones sent."""
+    backlog = Backlog()
+    sent: list[req.Op] = []
+    taken: list[req.Op] = []
+    serial = 0
+    for message, takes in stream:
+        ops = []
+        for item in message:
+            if isinstance(item, list):
+                rows = make_entity_requests(
+                    index=item, velocity=[(serial + j, 0.0, 0.0) for j in range(len(item))]
+                )
+                serial += len(item)
+                ops.append(req.decode(req.pack([req.requests(rows)]))[0])
+            else:
+                ops.append(item)
+        sent += ops
+        backlog.put(ops)
+        for _ in range(takes):
+            if (op := backlog.take()) is not None:
+                taken.append(op)
+    taken += drain(backlog)
+    assert _model(taken) == _model(sent)
+    assert backlog.rows == 0 and backlog.bytes == 0
+
+
+# -- the shard: what it applies ---------------------------------------------------------------------------
+async def test_a_shard_applies_a_burst_as_one_state_then_the_remove(autojump_clock: trio.abc.Clock) -> None:
+    shard = make_server()
+    node = ShardNode(shard, MemoryFabric(Bus()), Sharding(0, 1))
+    async with trio.open_nursery() as nursery:
+        await nursery.start(shard.serve)
+        await trio.sleep(0.2)
+        world = shard.world
+        calls: list[Any] = []
+        apply, remove = world.apply_requests, world.remove_soldier
+        world.apply_requests = lambda rows: (calls.append(("requests", rows.copy())), apply(rows))[1]  # type: ignore[method-assign]
+        world.remove_soldier = lambda i, why="": (calls.append(("remove", i)), remove(i, why))[1]  # type: ignore[method-assign]
+        node.backlog.put([row(3, 0.02 * k) for k in range(50)] + [req.remove(3)])
+        while node.backlog:
+            node.take_turn()
+        (what, rows), removed = calls
+        assert (
+            what == "requests"
+            and rows["index"].tolist() == [3]
+            and rows["velocity"][0, 0] == np.float32(0.98)
+        )
+        assert removed == ("remove", 3)
+        assert shard.status_note is not None and "backlog 0/32768 rows" in shard.status_note()
+        assert "49 coalesced, 0 dropped" in shard.status_note()
+        shard.shutdown()
+
+
+_STATE = st.tuples(
+    st.integers(0, 9),
+    st.sampled_from([Appearance.STAND, Appearance.KNEEL, Appearance.PRONE]),
+    st.floats(-2.0, 2.0, width=32),
+    st.floats(0.0, 359.0, width=32),
+)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.lists(st.lists(_STATE, min_size=1, max_size=6), min_size=1, max_size=12))
+def test_coalesced_requests_leave_the_soldiers_as_every_request_in_order(messages: list[list[Any]]) -> None:
+    """State-only streams: the manager's soldiers end with the same requested state (posture, weapon,
+    velocity, heading, position) whether it applies every message in order or the coalesced backlog."""
+    ops = [
+        req.decode(
+            req.pack(
+                [
+                    req.requests(
+                        make_entity_requests(
+                            index=[s[0] for s in m],
+                            appearance=[int(s[1]) for s in m],
+                            velocity=[(s[2], 0.0, 0.0) for s in m],
+                            heading=[s[3] for s in m],
+                            position=[(s[2], s[3], 0.0) for s in m],
+                        )
+                    )
+                ]
+            )
+        )[0]
+        for m in messages
+    ]
+    every, coalesced = make_server(), make_server()
+    for s in (every, coalesced):
+        s.start_world()
+        s.world.clock = lambda: 1.0
+    for op in ops:  # all valid, as a front-end relays them
+        assert (every.world.apply_requests(op["rows"]) == REQUEST_OK).all()
+    backlog = Backlog()
+    backlog.put(ops)
+    for op in drain(backlog):
+        coalesced.world.apply_requests(op["rows"])
+    a, b = every.world.manager, coalesced.world.manager
+    assert a is not None and b is not None
+    for name in ("appearance", "weapon", "velocity", "heading", "position"):
+        np.testing.assert_array_equal(getattr(a.table, name)[:10], getattr(b.table, name)[:10], err_msg=name)

@@ -1,0 +1,179 @@
+"""A soldier on the ground whose heading changes turns in place on forearms and knees (issue 16).
+
+On forearms and knees (CRAWL) he plays the turn in place that fits (``crawlturn_*``, authoring/crawl_turn.py);
+lying prone he comes up onto forearms and knees, turns and lies down again; crawling, a large heading change
+stops him, he turns and crawls on (turning.CRAWL_REVERSAL_DEG), a small one he turns slowly as he crawls.
+Turned about the root instead (prone: at once; crawling: at 90°/s) his planted elbows, knees and toes slid
+13-116 cm in the world.
+
+Measured as tests/test_root_motion.py measures the feet: forward kinematics of the poses the server sends,
+placed at the entity's dead-reckoned position and heading as an image generator would; each contact (elbow,
+kneecap, tip of the toes) touching the ground must not move more than 3 cm while it stays down."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trio
+from test_server_support import REPO, Client
+
+from peabody.fk import FigureKinematics
+from peabody.quaternion import to_transform
+from protocol.entity import Appearance
+from protocol.events import JointUpdates, Ready, Subscribe
+from server.app import TtesServer
+from server.config import ServerConfig
+from server.startup import ServerWorld
+from tests.test_gait_selection import shipped_library
+from tests.test_root_motion import HZ, drive, in_world
+
+SITES = tuple(
+    f"{s}_{part}" for s in ("left", "right") for part in ("upper_arm.distal", "lower_leg.knee", "toes.distal")
+)
+DOWN_CM = 1.0  # a contact this near its lowest height touches the ground
+SLIDE_CM = 3.0  # the motion check's contact_slide limit
+
+
+@pytest.fixture(scope="module")
+def lib():
+    return shipped_library()
+
+
+def contacts(lib, run: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """World ground positions ``(n, sites, 2)`` (cm) and heights ``(n, sites)`` of the contact sites."""
+    fset = lib.sets[lib.set_index("DI.fig", "AK_47.fig")]
+    kin = FigureKinematics(fset.prototypes[0])
+    joints = run["joints"][:, fset.figure_slice("DI.fig")]
+    roots = np.stack([to_transform(p[:3], p[3:7]) for p in np.asarray(run["placements"][:, 0], np.float64)])
+    g = kin.site_globals(np.asarray(joints, np.float64), roots)
+    local = g[:, [kin.site_names.index(s) for s in SITES]][..., :3, 3]
+    return in_world(local, run["entity"], run["heading"]), local[..., 1]
+
+
+def slides(lib, run: dict[str, np.ndarray], family: str) -> list[float]:
+    """Per planted phase of a contact that begins in a clip of ``family``: how far (cm) it moved, down."""
+    world, height = contacts(lib, run)
+    down = height < height.min(axis=0) + DOWN_CM
+    out = []
+    for c in range(len(SITES)):
+        k = 0
+        while k < len(down):
+            if not down[k, c]:
+                k += 1
+                continue
+            j = k
+            while j + 1 < len(down) and down[j + 1, c]:
+                j += 1
+            if family in run["clips"][k]:
+                track = world[k : j + 1, c]
+                out.append(float(np.linalg.norm(track - track[0], axis=1).max()))
+            k = j + 1
+    return out
+
+
+def facing(world: np.ndarray) -> np.ndarray:
+    """Per tick the compass degrees the figure faces in the world: from the knees' middle to the elbows'
+    (the pelvis of a body lying prone points at the ground, no heading to read from it)."""
+    elbows = world[:, [SITES.index(f"{s}_upper_arm.distal") for s in ("left", "right")]].mean(axis=1)
+    knees = world[:, [SITES.index(f"{s}_lower_leg.knee") for s in ("left", "right")]].mean(axis=1)
+    ahead = elbows - knees
+    return np.degrees(np.arctan2(ahead[:, 0], ahead[:, 1]))
+
+
+def check_turn(lib, run: dict[str, np.ndarray], t0: float, turn: float, within: float = 1.0) -> None:
+    """From ``t0`` (s) on: every planted phase of a turn clip within SLIDE_CM, no snap (6° a tick at most:
+    tests/test_reversal.py), and the figure turned by the entity's ``turn`` (``within`` degrees)."""
+    world, _ = contacts(lib, run)
+    yaw = facing(world)[int(t0 * HZ) :]
+    hits = slides(lib, run, "crawlturn_")
+    assert hits and max(hits) <= SLIDE_CM, sorted(hits)[-3:]
+    assert np.abs((np.diff(yaw) + 180.0) % 360.0 - 180.0).max() <= 6.0
+    assert abs((yaw[-1] - yaw[0] - turn + 180.0) % 360.0 - 180.0) < within
+
+
+@pytest.mark.parametrize(
+    ("turn", "clip"),
+    [(90.0, "crawlturn_r90"), (-90.0, "crawlturn_l90"), (-60.0, "crawlturn_l30"), (180.0, "crawlturn_r90")],
+)
+def test_on_forearms_and_knees_a_heading_change_turns_in_place(lib, turn: float, clip: str) -> None:
+    """The turns that fit, one after the other: 60° is the 30° twice (the 45° left it 15° off), 180° the
+    90° twice."""
+    until = 5.0 + 3.6 * (1 + (abs(turn) > 90.0))
+    run = drive(
+        lib, [(0.0, 0.0, 0.0), (4.0, 0.0, 0.0, 10.0 + turn)], 10.0, until, appearance=Appearance.CRAWL
+    )
+    assert {c.split("/")[-1] for c in run["clips"].tolist() if "turn" in c} == {f"{clip}_low"}
+    check_turn(lib, run, 3.9, turn)
+
+
+@pytest.mark.parametrize("turn", [90.0, -90.0, 180.0])
+def test_a_prone_soldier_comes_up_turns_and_lies_down_again(lib, turn: float) -> None:
+    """Once up and down however far he turns (180°: the 90° turn twice on forearms and knees)."""
+    until = 15.0 + 3.6 * (abs(turn) > 90.0)
+    run = drive(
+        lib, [(0.0, 0.0, 0.0), (6.0, 0.0, 0.0, 10.0 + turn)], 10.0, until, appearance=Appearance.PRONE
+    )
+    shown = [c.split("/")[-1] for c in run["clips"].tolist()]
+    changes = [c for k, c in enumerate(shown) if k and c != shown[k - 1]]
+    assert changes[-3:] == [
+        "crawl2prstow_low",
+        f"crawlturn_{'r' if turn > 0 else 'l'}90_low",
+        "crawl2prstow_low",
+    ]
+    check_turn(lib, run, 5.9, turn)
+
+
+@pytest.mark.parametrize("turn", [90.0, -45.0])
+def test_a_crawler_whose_heading_changes_much_stops_turns_and_crawls_on(lib, turn: float) -> None:
+    script = [(0.0, 0.0, 0.0), (0.5, 0.3, 0.0), (4.0, 0.3, 0.0, 40.0 + turn), (11.0, 0.0, 0.0)]
+    run = drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
+    shown = run["clips"].tolist()
+    k = next(i for i, c in enumerate(shown) if "crawlturn_" in c)
+    assert k / HZ < 5.5  # stopped at the end of the stride it was in
+    assert any("crawl_cycle" in c for c in shown[:k]) and any("crawl_cycle" in c for c in shown[k:])
+    check_turn(lib, run, 3.9, turn, within=2.0)  # (from mid-crawl: crawling straight on measures 1.3°)
+
+
+async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """The same through a served world (real TCP, trio's autojump clock): an image generator lays soldier 0
+    prone, then turns his entity 90°; the server plays up, the turn and down, and the figure ends facing the
+    heading in the posture it left (the last pose sent is PRONE_STOWED's, the figure's yaw from it 0)."""
+    cfg = ServerConfig(port=0, data_dir=REPO, startup_script="jack-ttes-soldier_low.jcl")
+    cfg = cfg.with_overrides(record_clips=True, report_interval=1000.0)
+    lib = shipped_library()
+    world = ServerWorld(cfg.data_dir, max_soldiers=cfg.max_soldiers, record_clips=True, library=lib)
+    server = TtesServer(cfg, world)
+    async with trio.open_nursery() as nursery:
+        await nursery.start(server.serve)
+        c = await Client.open(server.addresses[0][1], "ig")
+        await c.expect(Ready)
+        await c.send(Subscribe((0,)))
+        await c.expect(JointUpdates)
+        await c.requests(index=0, appearance=Appearance.PRONE, heading=10.0)
+        await c.drain(6.0)
+        rest = c.pose(1, 0)[0].copy()
+        await c.requests(index=0, appearance=Appearance.PRONE, heading=100.0)
+        await c.drain(10.0)
+        m = world.manager
+        shown = [s.clip.split("/")[-1] for s in m.clip_log if s.index == 0]
+        assert shown[-3:] == ["crawl2prstow_low", "crawlturn_r90_low", "crawl2prstow_low"]
+        assert m.table.root_yaw[0] == pytest.approx(0.0, abs=1e-6)
+        np.testing.assert_allclose(c.pose(1, 0)[0], rest, atol=1e-3)
+        await c.aclose()
+        server.shutdown()
+
+
+@pytest.mark.parametrize("turn", [15.0, -20.0])
+def test_a_crawler_whose_heading_changes_little_turns_slowly_as_he_crawls(lib, turn: float) -> None:
+    """Under CRAWL_REVERSAL_DEG he crawls on and turns at root_motion.CRAWL_TURN_RATE (3°/s): every planted
+    contact within 3 cm (at 90°/s about the root the toes slid 20.6 cm at 15°)."""
+    script = [(0.0, 0.0, 0.0), (0.5, 0.3, 0.0), (4.0, 0.3, 0.0, 40.0 + turn), (11.0, 0.0, 0.0)]
+    run = drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
+    assert not any("crawlturn_" in c for c in run["clips"].tolist())
+    world, _ = contacts(lib, run)
+    hits = slides(lib, run, "crawl_")
+    assert hits and max(hits) <= SLIDE_CM, sorted(hits)[-3:]
+    yaw = facing(world)[int(3.9 * HZ) :]
+    assert abs((yaw[-1] - yaw[0] - turn + 180.0) % 360.0 - 180.0) < 2.0  # (straight on: 1.3°)
