@@ -20,35 +20,34 @@ from server.soldier.core import (
 from server.soldier.lead_in import LeadIn
 from server.soldier.library import PathStep
 from server.soldier.locomotion import (
+    START,
     conditions,
     is_fast,
     next_states,
     start_state,
 )
 from server.soldier.reactions import Reactions
-from server.soldier.state import (
-    Movement,
-)
 from server.soldier.stepping import Stepping
 from server.soldier.turning import REVERSAL_TURN_SPEEDUP, Turning
 
 
 class Events(Stepping, Turning, Reactions, LeadIn):
-    """Per-soldier Python that runs only on events; :meth:`_advance` takes the clip ends up to each clock."""
+    """The Python that runs only on events, grouped by decision over each batch of soldiers: requests that
+    change what soldiers do, and (:meth:`_advance`) the clip ends up to each clock."""
 
     def _desired(self, i: int) -> int:
-        """Figure 12's goal posture node: the gait's base posture while moving, else the requested posture."""
+        """:meth:`_desired_many` of one soldier in scalar Python."""
         tb = self.table
         app = int(tb.appearance[i])
         kind = int(self._move[app]) if tb.speed[i] > MOVING_EPS else 0
         if kind:
             return int(self._base[kind])
         goal = int(self._goal[app, int(tb.weapon[i] == _FIRING)])
-        # a posture with variant nodes (DEAD@...): the variant nearest from here (table lookup)
         return int(self.library.goal_node[int(tb.node[i]), goal]) if goal >= 0 else goal
 
     def _desired_many(self, idx: np.ndarray) -> np.ndarray:
-        """:meth:`_desired` of soldiers ``idx`` (table lookups over arrays)."""
+        """Figure 12's goal posture nodes of soldiers ``idx``: the gait's base posture while moving, else the
+        requested posture (of one with variant nodes, DEAD@..., the variant nearest from here); -1: none."""
         tb = self.table
         app = tb.appearance[idx].astype(np.int64)
         kind = np.where(tb.speed[idx] > MOVING_EPS, self._move[app], 0).astype(np.int64)
@@ -57,8 +56,8 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         return np.where(kind != 0, self._base[kind], np.where(goal >= 0, variant, goal)).astype(np.int64)
 
     def _posture_changes(self, idx: np.ndarray, immediate: np.ndarray) -> np.ndarray:
-        """Which events of soldiers ``idx`` ask a resting soldier for another posture (the common event: its
-        :meth:`_decide` starts a path; :meth:`_start_changes` does them at once)."""
+        """Which events of soldiers ``idx`` ask a resting or stepping soldier for another posture (the common
+        event: :meth:`_start_changes` does them at once)."""
         desired = self._desired_many(idx)
         mode = self.table.mode[idx]
         decides = ~immediate & ((mode == _IDLE) | (mode == _LOCO) | (mode == _CRAWL))
@@ -67,56 +66,41 @@ class Events(Stepping, Turning, Reactions, LeadIn):
     def _start_changes(
         self, idx: np.ndarray, t: np.ndarray, captured: dict[int, tuple[np.ndarray, np.ndarray]]
     ) -> None:
-        """:meth:`_on_event` of soldiers asked for another posture, at once: a stepping one's step cancelled
-        (``captured``: the poses to fade from), then per soldier only the path lookup; the first arcs start
-        in one :meth:`_play_steps`."""
+        """Soldiers asked for another posture: a stepping one's step cancelled (``captured``: the poses to
+        fade from), then the paths start (:meth:`_decide`); a cancelled one with nowhere to go rests in its
+        base posture."""
         tb = self.table
         mode = tb.mode[idx]
-        cancelled = np.flatnonzero((mode == _LOCO) | (mode == _CRAWL))
-        was_stepping = set(cancelled.tolist())
-        for k in cancelled.tolist():
+        cancelled = (mode == _LOCO) | (mode == _CRAWL)
+        for k in np.flatnonzero(cancelled).tolist():
             s = int(idx[k])
             self._cancel_step(s, float(t[k]), captured.get(s))
-        tb.dirty[idx] = True
-        tb.root_yaw[idx] = 0.0  # a posture change faces the heading (no turn clips off STAND_STOWED)
-        go: list[int] = []
-        first: list[PathStep] = []
-        for k, (node, goal) in enumerate(
-            zip(tb.node[idx].tolist(), self._desired_many(idx).tolist(), strict=True)
-        ):
-            steps = self.library.path(node, goal)
-            if not steps:
-                self.stats["unreachable"] += 1
-                if k in was_stepping:  # nowhere to go: rest in the base posture
-                    self._rest(int(idx[k]), node, float(t[k]))
-                continue
-            self._paths[int(idx[k])] = [steps, 0]
-            go.append(k)
-            first.append(steps[0])
-        if go:
-            g = idx[go]
-            tb.mode[g] = _TRANSITION
-            self._play_steps(g, first, t[go])
+        self._decide(idx, t)
+        for k in np.flatnonzero(cancelled & (tb.mode[idx] == _IDLE)).tolist():
+            self._rest(int(idx[k]), int(tb.node[idx[k]]), float(t[k]))
 
-    def _on_event(
-        self, i: int, t: float, immediate: bool, captured: tuple[np.ndarray, np.ndarray] | None
+    def _on_events(
+        self,
+        idx: np.ndarray,
+        t: np.ndarray,
+        immediate: np.ndarray,
+        captured: dict[int, tuple[np.ndarray, np.ndarray]],
     ) -> None:
+        """The events of soldiers ``idx`` other than the posture changes :meth:`_posture_changes` found:
+        ``immediate`` ones snap, resting ones decide; a stepping one in the same base posture steps on
+        (Figure 5 handles speed and direction)."""
         tb = self.table
-        if immediate:
-            self._snap(i, t)
-            return
-        mode = int(tb.mode[i])
-        if mode in (_LOCO, _CRAWL):
-            desired = self._desired(i)
-            if desired == int(tb.node[i]) or desired < 0:
-                return  # same base posture: the gait goes on (Figure 5 handles speed and direction)
-            self._cancel_step(i, t, captured)
-            self._decide(i, t)
-            if tb.mode[i] == _IDLE:  # nowhere to go: rest in the base posture
-                self._rest(i, int(tb.node[i]), t)
-            return
-        if mode == _IDLE:
-            self._decide(i, t)
+        mode = tb.mode[idx]
+        if immediate.any():
+            self._snap(idx[immediate], t[immediate])
+        stepping = np.flatnonzero(~immediate & ((mode == _LOCO) | (mode == _CRAWL)))
+        if len(stepping):
+            desired = self._desired_many(idx[stepping])
+            j = stepping[(desired >= 0) & (desired != tb.node[idx[stepping]])]
+            if len(j):
+                self._start_changes(idx[j], t[j], captured)
+        idle = ~immediate & (mode == _IDLE)
+        self._decide(idx[idle], t[idle])
 
     def _cancel_step(self, i: int, t: float, captured: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Cancel the step: fade from the pose shown now (``captured``) into whatever starts next."""
@@ -129,8 +113,25 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         tb.loco[i] = _NONE
         self._record(i, t, "cancel")
 
-    def _snap(self, i: int, t: float) -> None:
-        """``immediate``: jump to the goal posture's pose (no path, no fade)."""
+    def _snap(self, idx: np.ndarray, t: np.ndarray) -> None:
+        """``immediate``: jump to the goal postures' poses (no path, no fade), then decide."""
+        tb = self.table
+        if len(idx) < self._group_min:
+            for i, ti in zip(idx.tolist(), t.tolist(), strict=True):
+                self._snap_one(i, ti)
+            return
+        for i in idx.tolist():
+            self._paths.pop(i, None)
+        tb.blend_len[idx] = 0.0
+        tb.mode[idx] = _IDLE
+        tb.loco[idx] = _NONE
+        desired = self._desired_many(idx)
+        tb.node[idx] = np.where(desired >= 0, desired, tb.node[idx])
+        self._rest_many(idx, t)
+        self._decide(idx, t)
+
+    def _snap_one(self, i: int, t: float) -> None:
+        """:meth:`_snap` of one soldier in scalar Python."""
         tb = self.table
         self._paths.pop(i, None)
         tb.blend_len[i] = 0.0
@@ -140,18 +141,56 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         if desired >= 0:
             tb.node[i] = desired
         self._rest(i, int(tb.node[i]), t)
-        self._decide(i, t)
+        self._decide_one(i, t)
 
-    def _decide(self, i: int, t: float) -> None:
-        """A resting soldier: start the posture change or the gait its last request asks for."""
+    def _decide(self, idx: np.ndarray, t: np.ndarray) -> None:
+        """Resting soldiers ``idx`` (at times ``t``): start the posture change or the gait their last requests
+        ask for. Grouped by decision: the paths' first arcs in one :meth:`_play_steps`, the gait starts in one
+        :meth:`_enter_states`; per soldier only the path lookup and a turn in place (a small group: one by
+        one, :meth:`_decide_one`)."""
+        if len(idx) < self._group_min:
+            for i, ti in zip(idx.tolist(), t.tolist(), strict=True):
+                self._decide_one(i, ti)
+            return
+        tb = self.table
+        tb.dirty[idx] = True
+        desired = self._desired_many(idx)
+        here = desired == tb.node[idx]
+        change = (desired >= 0) & ~here
+        if change.any():
+            self._start_paths(idx[change], desired[change], t[change])
+        idx, t = idx[here], t[here]
+        if len(idx) == 0:
+            return
+        kind = np.where(tb.speed[idx] > MOVING_EPS, self._move[tb.appearance[idx]], 0).astype(np.int64)
+        reversing = tb.reversing[idx].copy()
+        tb.reversing[idx] = False
+        # a start this far off pivots first, as a reversal; a standing figure turns in place
+        turns = (np.abs(tb.root_yaw[idx]) >= MIN_TURN_DEG) | ((kind != 0) & reversing)
+        if turns.any():
+            standing = np.flatnonzero(turns & (kind == 0))
+            turns[standing] = self._turns(idx[standing], t[standing])
+            for k in np.flatnonzero(turns & (kind != 0)).tolist():
+                # a pivot stops, turns, then (its end decides again) walks away
+                turns[k] = self._turn(int(idx[k]), float(t[k]), REVERSAL_TURN_SPEEDUP)
+            idx, t, kind = idx[~turns], t[~turns], kind[~turns]
+        node = tb.node[idx]
+        still = idx[(kind == 0) & (node != self._home) & ~self.library.faces_world[node]]
+        tb.root_yaw[still] = 0.0  # no turn clip here: the figure faces the heading again
+        go = kind != 0
+        if go.any():
+            self._start_gaits(idx[go], kind[go], t[go])
+
+    def _decide_one(self, i: int, t: float) -> None:
+        """:meth:`_decide` of one soldier in scalar Python."""
         tb = self.table
         tb.dirty[i] = True
         desired = self._desired(i)
         node = int(tb.node[i])
         if desired < 0:
             return
-        if desired != node:
-            tb.root_yaw[i] = 0.0  # a posture change faces the heading (no turn clips off STAND_STOWED)
+        if desired != node:  # a posture change faces the heading (no turn clips off STAND_STOWED)
+            tb.root_yaw[i] = 0.0
             steps = self.library.path(node, desired)
             if not steps:
                 self.stats["unreachable"] += 1
@@ -164,20 +203,48 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         reversing = bool(tb.reversing[i])
         tb.reversing[i] = False
         turned_away = abs(tb.root_yaw[i]) >= MIN_TURN_DEG  # a start this far off pivots first, as a reversal
-        if kind and (reversing or turned_away) and self._turn(i, t, REVERSAL_TURN_SPEEDUP):
-            return  # stopped: the pivot, then (its end decides again) the walk away
-        if not kind and abs(tb.root_yaw[i]) >= MIN_TURN_DEG and self._turn(i, t):
-            return
+        if (turned_away or (kind and reversing)) and self._turn(i, t, REVERSAL_TURN_SPEEDUP if kind else 1.0):
+            return  # a pivot stops, turns, then (its end decides again) walks away
         if not kind and node != self._home and not self.library.faces_world[node]:
             # no turn clip here: the figure faces the heading again
             tb.root_yaw[i] = 0.0
         if kind:
-            fast = bool(tb.speed[i] > self._settings.walk_run_threshold)
-            state = start_state(
-                Movement(kind), bool(tb.backward[i]), fast, self.library.can_run, int(tb.side[i])
-            )
+            fast = bool(tb.speed[i] > self._settings.walk_run_threshold) and self.library.can_run
+            state = int(START[int(kind == _MOVE_CRAWL), int(tb.side[i]), int(tb.backward[i]), int(fast)])
             tb.mode[i] = _CRAWL if kind == _MOVE_CRAWL else _LOCO
-            self._enter_one(i, int(state), t)
+            self._enter_one(i, state, t)
+
+    def _start_paths(self, idx: np.ndarray, goal: np.ndarray, t: np.ndarray) -> None:
+        """Resting soldiers ``idx`` start the quickest paths to posture nodes ``goal`` (their first arcs at
+        once); a posture change faces the heading (no turn clips off STAND_STOWED)."""
+        tb = self.table
+        tb.root_yaw[idx] = 0.0
+        go: list[int] = []
+        first: list[PathStep] = []
+        for k, (node, g) in enumerate(zip(tb.node[idx].tolist(), goal.tolist(), strict=True)):
+            steps = self.library.path(node, g)
+            if not steps:
+                self.stats["unreachable"] += 1
+                continue
+            self._paths[int(idx[k])] = [steps, 0]
+            go.append(k)
+            first.append(steps[0])
+        if go:
+            g = idx[go]
+            tb.mode[g] = _TRANSITION
+            self._play_steps(g, first, t[go])
+
+    def _start_gaits(self, idx: np.ndarray, kind: np.ndarray, t: np.ndarray) -> None:
+        """Resting soldiers ``idx`` start moving (Movement ``kind``): Figure 5's start states at once."""
+        tb = self.table
+        fast = tb.speed[idx] > self._settings.walk_run_threshold
+        states = start_state(kind, tb.backward[idx], fast, self.library.can_run, tb.side[idx])
+        tb.mode[idx] = np.where(kind == _MOVE_CRAWL, _CRAWL, _LOCO)
+        if len(idx) >= self._group_min:
+            self._enter_states(idx, states, t, exact=True)
+            return
+        for i, state, ti in zip(idx.tolist(), states.tolist(), t.tolist(), strict=True):
+            self._enter_one(i, state, ti)
 
     def _loco_ended(self, idx: np.ndarray) -> None:
         tb = self.table
@@ -202,19 +269,21 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         done = nxt == _NONE
         cont = ~done
         self._enter_states(idx[cont], nxt[cont], t[cont])
-        for k in np.flatnonzero(done).tolist():
-            i = int(idx[k])
-            tb.mode[i] = _IDLE
-            tb.loco[i] = _NONE
-            tb.dirty[i] = True
-            self._decide(i, float(t[k]))
+        if done.any():  # stopped: at rest, then what the last request asks for
+            stopped = idx[done]
+            tb.mode[stopped] = _IDLE
+            tb.loco[stopped] = _NONE
+            tb.dirty[stopped] = True
+            self._decide(stopped, t[done])
 
-    def _transition_end(self, i: int, t: float) -> None:
+    def _transition_end(self, i: int, t: float) -> bool:
+        """The arc of soldier ``i``'s path ended at ``t``: the next arc starts, or (True) the path ended and
+        the soldier rests, to decide what next."""
         tb = self.table
         entry = self._paths.get(i)
         if entry is None:  # cannot happen; keep the soldier consistent anyway
             tb.mode[i] = _IDLE
-            return
+            return False
         steps, k = entry
         tb.node[i] = steps[k].end
         if k + 1 < len(steps) and self._turning(steps[k].clip):  # a prone turn's turn, on forearms and knees
@@ -223,14 +292,19 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         if k < len(steps):
             entry[1] = k
             self._play_step(i, steps[k], t)
-            return
+            return False
         del self._paths[i]
         tb.mode[i] = _IDLE
         if self._turning(int(tb.clip[i])):
             self._turn_end(i, t)
-        self._decide(i, t)
-        if i in self._pending and int(tb.mode[i]) == _IDLE:
-            self._react_pending(i, t)
+        return True
+
+    def _paths_ended(self, idx: np.ndarray, t: np.ndarray) -> None:
+        """Soldiers ``idx`` whose paths ended at ``t`` decide, then play a reaction kept for their rest."""
+        self._decide(idx, t)
+        for i, ti in zip(idx.tolist(), t.tolist(), strict=True):
+            if i in self._pending and int(self.table.mode[i]) == _IDLE:
+                self._react_pending(i, ti)
 
     def _advance(self, cand: np.ndarray) -> None:
         """Handle every clip end up to each soldier's clock, in time order per soldier."""
@@ -245,5 +319,8 @@ class Events(Stepping, Turning, Reactions, LeadIn):
             stepping = cand[(mode == _LOCO) | (mode == _CRAWL)]
             if len(stepping):
                 self._loco_ended(stepping)
-            for i in cand[mode == _TRANSITION].tolist():
-                self._transition_end(i, float(tb.end[i]))
+            transition = cand[mode == _TRANSITION]
+            ends = tb.end[transition].copy()
+            rest = [k for k, i in enumerate(transition.tolist()) if self._transition_end(i, float(ends[k]))]
+            if rest:
+                self._paths_ended(transition[rest], ends[rest])

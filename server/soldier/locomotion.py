@@ -167,14 +167,36 @@ def next_states(state: np.ndarray, cond: np.ndarray) -> np.ndarray:
     return NEXT[np.asarray(state, np.int64), np.asarray(cond, np.int64)]
 
 
-def start_state(
-    kind: Movement, backward: bool, fast: bool, can_run: bool = True, side: int = Side.AHEAD
-) -> S:
+def _first_state(crawl: bool, side: int, backward: bool, fast: bool) -> S:
     """The first state when a resting soldier starts moving (velocity zero → non-zero)."""
-    if kind == Movement.CRAWL:
+    if crawl:
         return S.CRAWL_START
     if side != Side.AHEAD:
         return S.SIDESTEP_L if side == Side.LEFT else S.SIDESTEP_R
     if backward:
         return S.BWALK_START
-    return S.RUN_START if fast and can_run else S.WALK_START
+    return S.RUN_START if fast else S.WALK_START
+
+
+# START[crawl, side, backward, fast]: :func:`_first_state` as a table (a batch's starts: one lookup)
+START = np.array(
+    [
+        [[[_first_state(c, sd, b, f) for f in (False, True)] for b in (False, True)] for sd in Side]
+        for c in (False, True)
+    ],
+    np.int64,
+)
+
+
+def start_state(
+    kind: np.ndarray | int,
+    backward: np.ndarray | bool,
+    fast: np.ndarray | bool,
+    can_run: bool = True,
+    side: np.ndarray | int = Side.AHEAD,
+) -> np.ndarray:
+    """The first states when resting soldiers (Movement ``kind``) start moving, over arrays (or one
+    soldier's scalars: a 0-d array)."""
+    crawl = np.asarray(kind) == int(Movement.CRAWL)
+    fast = (np.asarray(fast) & can_run).astype(np.int64)
+    return START[crawl.astype(np.int64), np.asarray(side, np.int64), np.asarray(backward, np.int64), fast]

@@ -13,8 +13,8 @@ new packet: copy, convert TTES → Jack          ``requests``: :meth:`apply_requ
 compute velocity / heading                     ``requests``: :meth:`apply_requests` (speed, direction)
 transitioning: grab heading, continue          requests only stored; the path's arcs chain in ``tick``;
                                                a changed posture is taken up when the path ends
-posture or weapon different: cancel the step,  ``events``: :meth:`_on_event`, step cancelled (faded), quickest
-start a posture change                         path to the goal posture (:meth:`MotionLibrary.path`)
+posture or weapon different: cancel the step,  ``events``: :meth:`_start_changes`, step cancelled (faded),
+start a posture change                         quickest path to the goal posture (:meth:`MotionLibrary.path`)
 moving and PRONE: continue crawling            ``Mode.CRAWL``: ``stepping``, :mod:`.locomotion`
 moving and STANDING: walk or run               ``Mode.LOCO``: ``stepping``, :mod:`.locomotion`
 only the heading changed: resend last update   ``ticking``: ``TickUpdate.heading_only``

@@ -178,8 +178,9 @@ class Requests(Ticking):
             tb.end[r] = tb.start[r] + new_dur
         hp = ~event & (mode == _IDLE) & ~moving & heading_changed
         tb.heading_pending[i[hp]] = True
-        for k in np.flatnonzero(hp & (np.abs(tb.root_yaw[i]) >= MIN_TURN_DEG)).tolist():
-            self._turn(int(i[k]), float(t[k]))
+        turn = hp & (np.abs(tb.root_yaw[i]) >= MIN_TURN_DEG)
+        if turn.any():
+            self._turns(i[turn], t[turn])
         tb.requested[i[event | hp | rescale]] = True  # what :meth:`answer` answers between ticks
         self._events(i, t, event, imm, stepping)
         self._skip_lead_in(i[event | hp], t[event | hp])
@@ -235,9 +236,7 @@ class Requests(Ticking):
             if changes.any():
                 self._start_changes(i[ev[changes]], t[ev[changes]], captured)
                 ev = ev[~changes]
-            for k in ev.tolist():
-                s = int(i[k])
-                self._on_event(s, float(t[k]), bool(imm[k]), captured.get(s))
+            self._on_events(i[ev], t[ev], imm[ev], captured)
 
     def posture_change(self, index: int, posture: str, now: float) -> list[str]:
         """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing

@@ -436,6 +436,17 @@ def fold1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> None:
     tb.root_ref[i] = (tx, tz)
 
 
+def fold_exact(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray) -> None:
+    """:func:`fold1` of soldiers ``idx`` at once, bit for bit: a turned figure's rows through :func:`fold`,
+    the rest through :func:`fold_unturned`."""
+    turned = tb.root_yaw[idx] != 0.0
+    if turned.any():
+        fold(tb, lib, idx[turned], t[turned])
+        idx, t = idx[~turned], t[~turned]
+    if len(idx):
+        fold_unturned(tb, lib, idx, t)
+
+
 def fold_unturned(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray) -> None:
     """:func:`fold1` of soldiers whose figure faces its heading (``root_yaw`` 0) at once, bit for bit."""
     travel = lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, t))

@@ -61,11 +61,24 @@ class Stepping(ManagerCore):
         hurried start or end (HURRY_RATE: a reversal's end step, a start or end far behind the entity)."""
         tb, lib = self.table, self.library
         st = np.asarray(states, np.int64)
+        error = self._along(idx, tb.root_off[idx]) + self._stop_lag[st]  # cm ahead of where it should be
+        if SCALED[st].any():
+            rate, stride = self._cadence(idx, clip, st, error)
+        else:  # start and end steps, gait changes (a batch's starts): their recorded rate
+            rate = stride = np.ones(len(st))
+        hurry = tb.reversing[idx] | (error < -HURRY_BEHIND_CM)  # stopping to turn back, or metres behind
+        rate = np.where(hurry & (HURRY_RATE[st] > 1.0), HURRY_RATE[st], rate)
+        return np.maximum(lib.clip_duration[clip] / rate, MIN_CLIP_SECONDS), stride
+
+    def _cadence(
+        self, idx: np.ndarray, clip: np.ndarray, st: np.ndarray, error: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_step_duration`'s playback rate and stride scale of the cycles (1 elsewhere), ``error`` cm
+        ahead of the stop lag."""
+        tb, lib = self.table, self.library
         speed = tb.speed[idx]
-        stored = lib.clip_duration[clip]
         gs = lib.clip_ground_speed[clip]
         ok = SCALED[st] & (speed > MOVING_EPS) & (gs > 0)
-        along = self._along(idx, tb.root_off[idx])
         gs = np.where(gs > 0, gs, 1.0)
         cfg = self._settings
         hysteresis = min(cfg.walk_run_hysteresis, 0.5 * cfg.walk_run_threshold)
@@ -75,13 +88,9 @@ class Stepping(ManagerCore):
         top = np.where(IS_WALK[st], WALK_MAX_RATE, MAX_RATE)
         scale = np.clip(ideal / np.clip(ideal, MIN_RATE, top), MIN_STRIDE, MAX_STRIDE)
         stride = np.where(ok & ~leaving, scale, 1.0)
-        error = along + self._stop_lag[st]  # cm ahead of where the figure should be
         seconds = np.where(error < 0.0, CATCH_UP_BEHIND_SECONDS, CATCH_UP_SECONDS)  # behind: closes sooner
         want = speed + np.clip(-error / 100.0 / seconds, -0.5 * speed, CATCH_UP_FASTER * speed)
-        rate = np.where(ok, np.clip(want / (gs * stride), MIN_RATE, top), 1.0)
-        hurry = tb.reversing[idx] | (error < -HURRY_BEHIND_CM)  # stopping to turn back, or metres behind
-        rate = np.where(hurry & (HURRY_RATE[st] > 1.0), HURRY_RATE[st], rate)
-        return np.maximum(stored / rate, MIN_CLIP_SECONDS), stride
+        return np.where(ok, np.clip(want / (gs * stride), MIN_RATE, top), 1.0), stride
 
     def _along(self, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
         """``(n,)`` cm the root offsets ``off`` of soldiers ``idx`` lie ahead along their velocity."""
@@ -98,8 +107,10 @@ class Stepping(ManagerCore):
         limit = np.where(IS_RUN[st], CATCH_UP_RUN_CM[1], CATCH_UP_RUN_CM[0])
         return (IS_WALK[st] | IS_RUN[st]) & ~IS_BACKWARD[st] & (behind > limit) & lib.can_run
 
-    def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray) -> None:
-        """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot)."""
+    def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray, exact: bool = False) -> None:
+        """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot).
+        ``exact``: the root offsets folded and rebased as :meth:`_enter_one` does (:func:`root_motion.fold1`,
+        bit for bit): a group's starts from rest."""
         if len(idx) == 0:
             return
         tb, lib = self.table, self.library
@@ -108,7 +119,7 @@ class Stepping(ManagerCore):
         clip = lib.loco_clip[st, foot]
         direc = lib.loco_dir[st].astype(np.int8)
         direc = np.where((st == _CRAWL_CYCLE) & tb.backward[idx], -direc, direc)
-        root_motion.fold(tb, lib, idx, t)
+        (root_motion.fold_exact if exact else root_motion.fold)(tb, lib, idx, t)
         dur, tb.stride[idx] = self._step_duration(idx, clip, st)
         tb.loco[idx] = st
         tb.foot[idx] = foot
@@ -117,13 +128,13 @@ class Stepping(ManagerCore):
         tb.start[idx] = t
         tb.dur[idx] = dur
         tb.end[idx] = t + dur
-        root_motion.rebase(tb, lib, idx)
+        (root_motion.rebase_exact if exact else root_motion.rebase)(tb, lib, idx)
         if self._settings.record_clips:
             for k in range(len(idx)):
                 self._record(int(idx[k]), float(t[k]))
 
     def _enter_one(self, i: int, state: int, t: float) -> None:
-        """:meth:`_enter_states` for one soldier in scalar Python (the per-event path, ~10x cheaper)."""
+        """:meth:`_enter_states` for one soldier in scalar Python (a small group's starts: ~10x cheaper)."""
         tb, lib = self.table, self.library
         foot = 1 - int(tb.foot[i])
         clip = int(lib.loco_clip[state, foot])

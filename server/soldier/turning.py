@@ -123,6 +123,45 @@ class Turning(ManagerCore):
         tb.pivot_rest[i] = rest
         return True
 
+    def _turns(self, idx: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """:meth:`_turn` (not a pivot) of soldiers ``idx`` at times ``t``, the standing ones grouped (a small
+        group one by one; those on the ground one by one); which of them turn."""
+        if len(idx) < self._group_min:
+            return np.array([self._turn(i, ti) for i, ti in zip(idx.tolist(), t.tolist(), strict=True)], bool)
+        tb, lib = self.table, self.library
+        ground = np.flatnonzero(tb.node[idx] != self._home)
+        turns = (tb.mode[idx] == _IDLE) & bool(lib.turn_clips)
+        clip, off = self._nearest_turns(-tb.root_yaw[idx])
+        turns &= off < np.abs(tb.root_yaw[idx])
+        turns[ground] = False
+        g, tg, clip = idx[turns], t[turns], clip[turns]
+        rest = (lib.clip_end_offset[clip, 2] - tb.root_yaw[g] + 180.0) % 360.0 - 180.0
+        rest = np.where(np.abs(rest) <= PIVOT_REST_PER_STANCE_DEG * lib.travel.stances[clip], rest, 0.0)
+        home = self._home
+        durations = lib.clip_duration[clip].tolist()
+        steps = [PathStep(c, True, d, home, home) for c, d in zip(clip.tolist(), durations, strict=True)]
+        tb.blend_len[g] = 0.0
+        tb.mode[g] = _TRANSITION
+        for i, step in zip(g.tolist(), steps, strict=True):
+            self._paths[i] = [(step,), 0]
+        self._play_steps(g, steps, tg)
+        tb.dirty[g] = True
+        tb.pivot_rest[g] = rest
+        for k in ground.tolist():  # on the ground: the turns there that fit (or up, turn and down again)
+            turns[k] = self._turn(int(idx[k]), float(t[k]))
+        return turns
+
+    def _nearest_turns(self, want: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_nearest_turn` of ``want`` compass degrees each: the clips, and how far each turns from
+        ``want``."""
+        clips = np.array([c for c, _ in self.library.turn_clips] or [0], np.int64)
+        degs = np.array([d for _, d in self.library.turn_clips] or [0.0], np.float64)
+        off = np.abs((degs[None, :] - want[:, None] + 180.0) % 360.0 - 180.0)
+        near = off == off.min(axis=1, keepdims=True)
+        right = near & ~(degs[None, :] * want[:, None] < 0)  # of two as near the one turning the asked way
+        k = np.where(right.any(axis=1), right.argmax(axis=1), near.argmax(axis=1))
+        return clips[k], off[np.arange(len(want)), k]
+
     def _ground_turns(self, node: int, want: float) -> tuple[PathStep, ...]:
         """The turns on the ground at ``node`` (CRAWL), one after the other (the larger first, at their
         recorded pace, MAX_GROUND_TURNS at most), that come nearest to turning ``want`` compass degrees, what
