@@ -50,11 +50,12 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    ground are held where they touched down by re-solving the limb (:func:`authoring.contact_pin.pin_frames`;
    the first and last frames unchanged; the standing deaths, kstow2dead and the two prone deaths: pinned,
    kfire2dead's DI slave's kneeling knee slid 1.3 cm more; a prone death's forearms are held in their turn
-   too, from the rifle's release on: the limp arms pivoted under the slumping body, 5-6 cm). kstow2dead's
-   arms do not fall (:attr:`DeathSpec.arms_fall`): tried, pinned first, its left hand lay at 4.4 cm
-   instead of 23.5 but swung up to 64 cm on the way (the fall is eased in joint angles). Knees, thighs and
-   the trunk still skid (ststow2dead's knee 10 cm: the
-   hip pitches further than the thigh reaches). Making every part stick in the physics instead
+   too, from the rifle's release on: the limp arms pivoted under the slumping body, 5-6 cm). kstow2dead is
+   pinned before its arms fall (pinned after, the still frames appended moved the feet's pins: a foot slid
+   1.8 cm more); each arm falls to its own side along a way that lifts no part of it
+   (:mod:`authoring.dead_arms`; its left forearm lay raised over the chest at 23.5 cm). Knees, thighs and
+   the trunk still skid (ststow2dead's knee 10 cm: the hip pitches further than the thigh reaches). Making
+   every part stick in the physics instead
    (MuJoCo connect constraints to mocap points following a part's lowest node, released 2.5 cm up) held
    every contact under 1.5 cm but changed the falls: from the start, the standing soldier sat down
    backwards; from touchdown, he ended bottom-up on his knees (pelvis 24 cm up) and the kneeling ones
@@ -170,6 +171,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         sideways=True,
         arm_tone=0.05,
         pinned=True,
+        arms_fall=True,
     ),
     DeathSpec(
         "kfire2dead",
@@ -467,6 +469,9 @@ def _after_physics(
     the ground held where they touched down (steps 5-7 of the module docstring)."""
     soldier, rifle = figures
     frames = plant(frames, soldier)
+    if spec.pinned and spec.arms_fall:  # held where they landed first, then the arms fall (kstow2dead: pinned
+        # after the fall, the still frames appended moved the feet's pins and slid a foot 1.8 cm more)
+        return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
     frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
     if not spec.pinned:
