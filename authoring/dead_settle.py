@@ -32,8 +32,12 @@ kfire2dead's forearms stood up 37 cm; an arm tone in the physics made the DI sla
 (:func:`fallen_arm`: its highest part's lowest node, as the check measures, plus a little of its nodes' mean
 height), into neither the ground, the rest of the body nor the rifle and sliding no node on the ground;
 from the arm's own pose and the best shapes of a coarse grid (:data:`ARM_GRID`), both arms in either order
-(:data:`SIDE_ORDERS`). The fall accelerates like a dropped limb and lands softly (:func:`fall_easing`).
-Half on his side, the top arm reaches the ground only past the head, its elbow on the body (17.5 cm).
+(:data:`SIDE_ORDERS`). On his back, a hand falls to its own side (:meth:`_Arm.astray`) and a shape whose
+straight way (in the angles) lifts a part of the arm is wrong (kstow2dead's left forearm, laid from over the
+chest on the far side, rose 40 cm). The fall accelerates like a dropped limb and lands softly
+(:func:`fall_easing`), each arm along a way bent through a control pose so that no part of it rises
+(:mod:`authoring.dead_arms`: kfire2dead's right hand swung up 18.6 cm over the head, eased straight). Half
+on his side, the top arm reaches the ground only past the head, its elbow on the body (17.5 cm).
 """
 
 from __future__ import annotations
@@ -60,6 +64,7 @@ HEAD_DOFS = ("vt4", "vt3", "vt2", "vt1", "neck", "head")  # the upper back gives
 ARM_PARTS = ("_forearm", "_hand", "_upper_arm")  # what the head may come to rest on, but not go into
 FACE_UP = 0.3  # cosine: the pelvis' front points up at least this much (kfire2dead: half on his side)
 ARM_DOFS = ("clavicle", "shoulder", "elbow", "wrist")
+SUPINE = 0.7  # the shoulders' line at least this level: on his back, an arm's own side is clear
 ARM_FALL_SECONDS = 0.8  # s: a dead arm drops to the ground
 ARM_CLEARANCE = 0.3  # cm: an arm's lowest node stops this far above the ground
 FALL_POWER = 1.8  # the fall's easing: smoothstep(s ** FALL_POWER), fast late, landing softly
@@ -126,6 +131,8 @@ class _Body:
         self.rifle_points = np.einsum("kij,kj->ki", rg[rsegs, :3, :], rnodes)
         self.points = self.heights(q)[1]
         self.planted = self.points[:, 1] <= CONTACT_HEIGHT_CM
+        self.shoulders, self.leftward = _body_axes(self.kin, q, root)
+        self.way_checked = False  # a fallen arm's search weighs how far its way lifts it
 
     def heights(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         g = self.kin.segment_globals(q, self.root)
@@ -139,6 +146,17 @@ class _Body:
         still = self.planted & (p[:, 1] <= CONTACT_HEIGHT_CM)
         slid = np.hypot(*(p[still] - self.points[still])[:, [0, 2]].T)
         return max(0.0, base - float(p[:, 1].min())) + max(0.0, float(slid.max(initial=0.0)) - SLIDE_CM)
+
+
+def _body_axes(kin, q: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The point between the shoulders and the body's left (horizontal, unit; zero unless he lies on his
+    back: :data:`SUPINE`)."""
+    s = kin.site_globals(q, root)[:, :3, 3]
+    left, right = (s[kin.site_names.index(f"{side}_upper_arm.proximal")] for side in ("left", "right"))
+    flat = (left - right) * np.array([1.0, 0.0, 1.0])
+    norm = float(np.linalg.norm(flat))
+    side = flat / norm if norm >= SUPINE * float(np.linalg.norm(left - right)) else np.zeros(3)
+    return (left + right) / 2.0, side
 
 
 def dropped_head(body: _Body) -> np.ndarray:
@@ -291,6 +309,7 @@ class _Arm:
         self.hulls = SegmentHulls.build(body.nodes, body.segs, arm_segs)
         self.lower = np.array([str(p) in (f"{side}_hand", f"{side}_forearm") for p in parts])
         self.limb = [parts == f"{side}{part}" for part in ARM_PARTS]
+        self.hand = parts == f"{side}_hand"
         self.x0 = body.q[self.idx]
         p0, self.inside0 = self.into(self.x0)  # what lay that deep (or that low) already is not counted
         self.clearance = min(ARM_CLEARANCE, float(p0[self.arm, 1].min())) if clearance is None else clearance
@@ -313,8 +332,19 @@ class _Arm:
         p, inside = self.into(x)
         low = float(p[self.arm, 1].min())
         wrong = max(0.0, self.clearance - low) + max(0.0, inside - self.inside0)
-        wrong += self.body.misplaced(self.pose(x))
+        wrong += self.body.misplaced(self.pose(x)) + self.astray(p)
+        if self.body.way_checked:  # its way down lifts no part of it (authoring.dead_arms)
+            from authoring import dead_arms
+
+            wrong += max(0.0, dead_arms.straight_rise(self, x) - dead_arms.RISE_OK_CM)
         return max(float(p[m, 1].min()) for m in self.limb), float(p[self.arm, 1].mean()), wrong
+
+    def astray(self, p: np.ndarray) -> float:
+        """cm the hand lies across the body's middle, on his back: a dead arm falls to its own side
+        (kstow2dead's left forearm, over the chest, laid on the far side rose 40 cm on its way)."""
+        hand = p[self.hand].mean(axis=0)
+        across = float(np.dot(self.body.shoulders - hand, self.body.leftward))
+        return max(0.0, across if self.side == "left" else -across)
 
     def cost(self, x: np.ndarray) -> float:
         high, mean, wrong = self.terms(x)
@@ -363,6 +393,8 @@ def _fallen_arms(figs: FigureSet, frames: ClipFrames, order: tuple[str, str]) ->
     """Both arms fallen, the first of ``order`` first and the second against it where it lies: the higher
     arm's highest part (cm, as the check sees it) and the pose."""
     body = _Body(figs, frames.poses[-1], frames.roots[-1], frames.rifles[-1])
+    body.way_checked = bool(body.leftward.any())  # on his back (half on his side, checked, kfire2dead's top
+    # arm's lowest shapes lay over the head only, and it stayed 27 cm up: its way is bent afterwards instead)
     target = body.q.copy()
     for side in order:
         target[_dofs(body.kin, tuple(f"{side}_{j}" for j in ARM_DOFS))] = fallen_arm(body, side)
@@ -398,10 +430,28 @@ def settle(
     u = np.concatenate([eased, still])
     last = frames.poses[-1]
     poses = last[None] + u[:, None] * (target - last)[None]
+    if up:  # each arm falls down and out along its own path in space (authoring.dead_arms)
+        poses[:n] = _arms_path(figs, frames, target, eased)
     if not up:  # face down: the legs are lifted, turned out and laid down
         body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])
         poses[:, _leg_dofs(body.kin)] = _legs_path(body, np.concatenate([s, still]), u)
     return _appended(frames, poses)
+
+
+def _arms_path(figs: FigureSet, frames: ClipFrames, target: np.ndarray, eased: np.ndarray) -> np.ndarray:
+    """Poses at the fall's progress ``eased``: each arm's angles along a way bent so that it does not rise
+    (:mod:`authoring.dead_arms`)."""
+    from authoring import dead_arms
+
+    last = frames.poses[-1]
+    body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])
+    poses = last[None] + eased[:, None] * (target - last)[None]
+    for side in ("left", "right"):
+        arm = _Arm(body, side)
+        x1 = target[arm.idx]
+        c = dead_arms.control_pose(arm, x1, _minimise)
+        poses[:, arm.idx] = dead_arms.bent(arm.x0, c, x1, eased)
+    return poses
 
 
 def _lowered(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:

@@ -52,9 +52,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    ground are held where they touched down by re-solving the limb (:func:`authoring.contact_pin.pin_frames`;
    the first and last frames unchanged; the standing deaths, kstow2dead and the two prone deaths: pinned,
    kfire2dead's DI slave's kneeling knee slid 1.3 cm more; a prone death's forearms are held in their turn
-   too, from the rifle's release on: the limp arms pivoted under the slumping body, 5-6 cm). kstow2dead's
-   arms do not fall (:attr:`DeathSpec.arms_fall`): tried, pinned first, its left hand lay at 4.4 cm
-   instead of 23.5 but swung up to 64 cm on the way (the fall is eased in joint angles). ststow2dead's knee
+   too, from the rifle's release on: the limp arms pivoted under the slumping body, 5-6 cm). kstow2dead is
+   pinned before its arms fall (pinned after, the still frames appended moved the feet's pins: a foot slid
+   1.8 cm more); each arm falls to its own side along a way that lifts no part of it
+   (:mod:`authoring.dead_arms`; its left forearm lay raised over the chest at 23.5 cm). ststow2dead's knee
    on the ground is held before (:attr:`DeathSpec.knees_held`, :mod:`authoring.knee_hold`: the root follows
    it, the legs keep their feet; it slid 10.3 cm, the hip pitching further than the thigh reaches); the
    kneeling deaths' knees (tipping sideways, they roll) and the thighs and trunk still skid: held so, a
@@ -197,6 +198,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         sideways=True,
         arm_tone=0.05,
         pinned=True,
+        arms_fall=True,
     ),
     DeathSpec(
         "kfire2dead",
@@ -522,6 +524,9 @@ def _after_physics(
     (steps 5-7 of the module docstring)."""
     soldier, rifle = figures
     frames = plant(frames, soldier)
+    if spec.pinned and spec.arms_fall:  # held where they landed first, then the arms fall (kstow2dead: pinned
+        # after the fall, the still frames appended moved the feet's pins and slid a foot 1.8 cm more)
+        return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
     frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)

@@ -1,0 +1,59 @@
+"""A dead arm falls down, never up (authoring/dead_arms.py, issue 14): its way is bent through a control pose
+so that no part of it rises, within the joint limits; the kneeling deaths' arms lie down without rising after
+the body is still."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from authoring import dead_arms
+from authoring.quality import check_clip
+from authoring.quality_frames import FigureSet, play
+from authoring.quality_postures import rest_endpoint
+from authoring.quality_rest import RISE_LIMIT_CM
+from server.motion.cache import load_channelset
+from ttes.paths import FIGURES
+
+CHANNELSETS = Path(__file__).resolve().parents[1] / "channelsets"
+# the highest arm part's lowest node (cm) at the end: kstow2dead's left forearm stood over the chest at 23.5;
+# kfire2dead lies half on his side, the top arm's upper arm on the body (17.5)
+REST_ARM_CM = {"kstow2dead": 12.0, "kfire2dead": 18.0}
+
+
+def test_a_rise_is_measured_above_the_lowest_before() -> None:
+    lows = np.array([[10.0, 20.0], [8.0, 21.0], [9.5, 15.0], [4.0, 14.0]])
+    assert dead_arms.rises(lows) == pytest.approx(1.5)  # the first part: 8 -> 9.5
+    assert dead_arms.rises(np.minimum.accumulate(lows, axis=0)) == 0.0
+
+
+@given(st.lists(st.floats(-1.0, 1.0), min_size=9, max_size=9), st.integers(0, 2**31 - 1))
+def test_a_bent_way_stays_within_the_limits_and_ends_where_asked(c: list[float], seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    lo, hi = -np.ones(9), np.ones(9)
+    x0, x1 = rng.uniform(lo, hi), rng.uniform(lo, hi)
+    way = dead_arms.bent(x0, np.array(c), x1, np.linspace(0.0, 1.0, 17))
+    assert np.allclose(way[0], x0) and np.allclose(way[-1], x1)
+    assert (way >= lo - 1e-12).all() and (way <= hi + 1e-12).all()
+    assert np.abs(np.diff(way, axis=0)).max() <= 2.0 * 2.0 / 16 + 1e-9  # smooth: no leap between steps
+
+
+@pytest.fixture(scope="module")
+def figures() -> FigureSet:
+    return FigureSet.from_dir(FIGURES, ["soldier.fig", "AK_47.fig"])
+
+
+@pytest.mark.parametrize("clip", sorted(REST_ARM_CM))
+def test_a_kneeling_death_s_arms_lie_down_without_rising(clip: str, figures: FigureSet) -> None:
+    """kfire2dead's right hand swung up over the head 1.2 s after he lay still (rest_rise 18.6 cm);
+    kstow2dead ended with the left forearm raised over the chest (rest_arm 23.5 cm)."""
+    cf = play(load_channelset(CHANNELSETS / f"{clip}.chset.env"), figures)
+    row = check_clip(cf, figures, ends_dead=True)
+    assert row["rest_rise_cm"] <= RISE_LIMIT_CM, (row["rest_rise_part"], row["rest_rise_cm"])
+    assert row["end_speed_m_s"] <= 0.5
+    rest = rest_endpoint(cf, cf.channelset.nframes - 1, figures, "DEAD")
+    assert rest["rest_arm_cm"] <= REST_ARM_CM[clip], (rest["rest_arm"], rest["rest_arm_cm"])
