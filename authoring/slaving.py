@@ -146,6 +146,7 @@ ARM_CHAINS = tuple(
     tuple(f"{side}_{j}" for j in ("clavicle", "shoulder", "elbow", "wrist")) for side in ("left", "right")
 )
 EASE_ITERATIONS, EASE_DOF_STEP, EASE_REST_GAIN, EASE_DAMPING = 60, 0.01, 0.5, 3.0
+START_EASE_FRAMES = 12  # a death's solved offset from the copied angles eased in over its first 0.2 s
 
 
 @dataclass
@@ -379,7 +380,39 @@ class MasterSlavePair:
             out = self._ease_leaps(out, start, goals, slave_loc)
         out = _let_go(out, start, release_frame)
         out[[0, -1]] = pose[[0, -1]]
+        if release_frame is not None:  # (a death starts from rest: the master's body is still there)
+            out = self._ease_start(out, start, goals, slave_loc)
         return out, slave_loc
+
+    def _ease_start(
+        self, poses: np.ndarray, copied: np.ndarray, goals: list[ik.Goal], roots: np.ndarray
+    ) -> np.ndarray:
+        """A death's first :data:`START_EASE_FRAMES` frames: the tracks' offset from the ``copied`` angles
+        eased in from the first frame's (smoothstep; the master's own motion kept as it is), the palms put
+        back on their goals (:meth:`_palms_back`). The tracks leave the lone-solved first frame at once: an
+        elbow goal out of reach drifts the arm in the palm's null space at every solve (8 polish passes
+        still turn the prone deaths' wrist 0.08 rad, the track's first step 0.063 rad: the DI's fingertips
+        1.1 cm in one frame, 0.63 m/s where the master starts at 0.46)."""
+        m = min(START_EASE_FRAMES, len(poses) // 2)
+        u = np.arange(m)[:, None] / m
+        eased = poses.copy()
+        offset = poses[:m] - copied[:m]
+        eased[:m] = copied[:m] + offset[0] + u * u * (3.0 - 2.0 * u) * (offset - offset[0])
+        return self._palms_back(eased, np.arange(1, m), goals, roots)
+
+    def _palms_back(
+        self, poses: np.ndarray, rows: np.ndarray, goals: list[ik.Goal], roots: np.ndarray
+    ) -> np.ndarray:
+        """``poses`` with the palms of ``rows`` put back on their goals in small, heavily damped steps held
+        near the given poses (the elbow goals, often out of reach, would keep pulling the arms)."""
+        held = [g.rows(rows) for g in goals if g.site in RIFLE_HOLDS]
+        opts: dict[str, Any] = {"tolerance": 0.02}
+        opts.update(self.ik_options)
+        opts.update(iterations=EASE_ITERATIONS, max_dof_step=EASE_DOF_STEP, rest_gain=EASE_REST_GAIN)
+        opts.update(damping=EASE_DAMPING)
+        out = poses.copy()
+        out[rows], _ = ik.solve(self.slave_kin, poses[rows], held, roots[rows], rest_pose=poses[rows], **opts)
+        return out
 
     def _ease_leaps(
         self, poses: np.ndarray, copied: np.ndarray, goals: list[ik.Goal], roots: np.ndarray
@@ -392,16 +425,7 @@ class MasterSlavePair:
         rows = np.flatnonzero(np.any(eased != poses, axis=1))
         if not len(rows):
             return poses
-        # the palms only: the elbow goals, often out of reach, would keep pulling the arms
-        held = [g.rows(rows) for g in goals if g.site in RIFLE_HOLDS]
-        opts: dict[str, Any] = {"tolerance": 0.02}
-        opts.update(self.ik_options)
-        opts.update(iterations=EASE_ITERATIONS, max_dof_step=EASE_DOF_STEP, rest_gain=EASE_REST_GAIN)
-        opts.update(damping=EASE_DAMPING)
-        eased[rows], _ = ik.solve(
-            self.slave_kin, eased[rows], held, roots[rows], rest_pose=eased[rows], **opts
-        )
-        return eased
+        return self._palms_back(eased, rows, goals, roots)
 
     def _polish(self, poses: np.ndarray, goals: list[ik.Goal], roots: np.ndarray) -> np.ndarray:
         """Lone solves ``poses`` ``(..., ndof)`` carried on by the tracking's own small-step solve until it

@@ -102,3 +102,19 @@ def test_the_ease_starts_and_ends_at_rest() -> None:
     assert (w[:41] == 0.0).all() and (w[40 + EASE_FRAMES :] == 1.0).all()
     assert (np.diff(w) >= 0.0).all()
     assert w[41] < 0.01 and 1.0 - w[40 + EASE_FRAMES - 1] < 0.01  # no speed at either end of the ramp
+
+
+def test_a_search_ending_past_a_bound_keeps_the_share_of_its_move_within_it() -> None:
+    """SLSQP stopping past a bound (kfire2dead's DI: its hands 2 cm up, the pelvis brought from 3.3 to 2.4 cm
+    on the way) kept nothing of its move: the largest share of it that keeps the bounds is kept."""
+    trunk = len(TRUNK_PARTS)
+
+    def heights(x: np.ndarray) -> np.ndarray:  # the trunk comes down, a hand rises 1 cm per degree
+        return np.c_[np.repeat(3.0 - x[:, :1], trunk, 1), x[:, :1]]
+
+    best, move = np.zeros(len(PARAMS)), np.eye(len(PARAMS))[0] * 2.0
+    kept = slave_rest._kept_share(best, move, heights, np.array([1.0]))
+    assert heights(kept[None])[0, trunk] <= 1.0 + slave_rest.BOUND_SLACK_CM
+    assert kept[0] >= 1.0  # no less than the bound allows (to a 1/20 step)
+    np.testing.assert_array_equal(slave_rest._kept_share(best, move, heights, np.array([5.0])), move)
+    np.testing.assert_array_equal(slave_rest._kept_share(best, move, heights, np.array([-1.0])), best)
