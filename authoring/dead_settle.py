@@ -47,6 +47,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from authoring import dead_arms
 from authoring.body_parts import SegmentHulls
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
@@ -334,8 +335,6 @@ class _Arm:
         wrong = max(0.0, self.clearance - low) + max(0.0, inside - self.inside0)
         wrong += self.body.misplaced(self.pose(x)) + self.astray(p)
         if self.body.way_checked:  # its way down lifts no part of it (authoring.dead_arms)
-            from authoring import dead_arms
-
             wrong += max(0.0, dead_arms.straight_rise(self, x) - dead_arms.RISE_OK_CM)
         return max(float(p[m, 1].min()) for m in self.limb), float(p[self.arm, 1].mean()), wrong
 
@@ -430,7 +429,7 @@ def settle(
     u = np.concatenate([eased, still])
     last = frames.poses[-1]
     poses = last[None] + u[:, None] * (target - last)[None]
-    if up:  # each arm falls down and out along its own path in space (authoring.dead_arms)
+    if up:  # each arm falls down and out along a way bent in the angles (authoring.dead_arms)
         poses[:n] = _arms_path(figs, frames, target, eased)
     if not up:  # face down: the legs are lifted, turned out and laid down
         body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])
@@ -441,8 +440,6 @@ def settle(
 def _arms_path(figs: FigureSet, frames: ClipFrames, target: np.ndarray, eased: np.ndarray) -> np.ndarray:
     """Poses at the fall's progress ``eased``: each arm's angles along a way bent so that it does not rise
     (:mod:`authoring.dead_arms`)."""
-    from authoring import dead_arms
-
     last = frames.poses[-1]
     body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])
     poses = last[None] + eased[:, None] * (target - last)[None]

@@ -526,6 +526,7 @@ def _after_physics(
     frames = plant(frames, soldier)
     if spec.pinned and spec.arms_fall:  # held where they landed first, then the arms fall (kstow2dead: pinned
         # after the fall, the still frames appended moved the feet's pins and slid a foot 1.8 cm more)
+        assert not (spec.knees_held or spec.propped), f"{spec.name}: knees held or propped, and arms falling"
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
     frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)

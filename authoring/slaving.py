@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from authoring import ik
+from authoring.easing import _smoothstep
 from authoring.slave_leaps import _gaussian, ease_leaps
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
@@ -381,24 +382,25 @@ class MasterSlavePair:
         out = _let_go(out, start, release_frame)
         out[[0, -1]] = pose[[0, -1]]
         if release_frame is not None:  # (a death starts from rest: the master's body is still there)
-            out = self._ease_start(out, start, goals, slave_loc)
+            out = self._ease_start(out, start, goals, slave_loc, release_frame)
         return out, slave_loc
 
     def _ease_start(
-        self, poses: np.ndarray, copied: np.ndarray, goals: list[ik.Goal], roots: np.ndarray
+        self, poses: np.ndarray, copied: np.ndarray, goals: list[ik.Goal], roots: np.ndarray, release: int
     ) -> np.ndarray:
         """A death's first :data:`START_EASE_FRAMES` frames: the tracks' offset from the ``copied`` angles
         eased in from the first frame's (smoothstep; the master's own motion kept as it is), the palms put
-        back on their goals (:meth:`_palms_back`). The tracks leave the lone-solved first frame at once: an
-        elbow goal out of reach drifts the arm in the palm's null space at every solve (8 polish passes
-        still turn the prone deaths' wrist 0.08 rad, the track's first step 0.063 rad: the DI's fingertips
-        1.1 cm in one frame, 0.63 m/s where the master starts at 0.46)."""
+        back on their goals (:meth:`_palms_back`) while the hands still hold the rifle (before frame
+        ``release``: after it, :func:`_let_go` fades them into the copied angles). The tracks leave the
+        lone-solved first frame at once: an elbow goal out of reach drifts the arm in the palm's null space
+        at every solve (8 polish passes still turn the prone deaths' wrist 0.08 rad, the track's first step
+        0.063 rad: the DI's fingertips 1.1 cm in one frame, 0.63 m/s where the master starts at 0.46)."""
         m = min(START_EASE_FRAMES, len(poses) // 2)
-        u = np.arange(m)[:, None] / m
-        eased = poses.copy()
+        u = np.arange(1, m)[:, None] / m
+        eased = poses.copy()  # (the first frame stays slave_pose's exactly)
         offset = poses[:m] - copied[:m]
-        eased[:m] = copied[:m] + offset[0] + u * u * (3.0 - 2.0 * u) * (offset - offset[0])
-        return self._palms_back(eased, np.arange(1, m), goals, roots)
+        eased[1:m] = copied[1:m] + offset[0] + _smoothstep(u) * (offset[1:] - offset[0])
+        return self._palms_back(eased, np.arange(1, min(m, release)), goals, roots)
 
     def _palms_back(
         self, poses: np.ndarray, rows: np.ndarray, goals: list[ik.Goal], roots: np.ndarray

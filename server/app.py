@@ -55,7 +55,7 @@ from server.pending_requests import PendingRequests
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.soldier.manager import TickUpdate
-from server.stage_cpu import StageCpu
+from server.stage_cpu import TURN_CPU_S, StageCpu
 from server.startup import ServerWorld
 from server.tls import server_context
 from server.trace import TRACE
@@ -64,7 +64,7 @@ from server.world.commands import needs_worker
 
 # a front-end reader's CPU per turn of its client's buffered events (a burst yields between); a single
 # server's reader answers what it handled after each turn, so it keeps handling all that is buffered
-READ_TURN_S = 0.004
+READ_TURN_S = TURN_CPU_S
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
@@ -388,6 +388,8 @@ class TtesServer:
                     session.drop(session.drop_reason or "closed")
         if session.conn.state is State.HANDSHAKE and not session.closing:
             session.drop("no HELLO in time", dropped=True)
+        if self.pending.holds(session):  # requests in the HELLO's packet: answered now, not at the next tick
+            await self.take_requests()
         frame_started: float | None = None  # when the frame now received in part began arriving
         while not session.closing:
             deadline = math.inf if frame_started is None else frame_started + self.config.frame_timeout

@@ -9,8 +9,8 @@ in (``TtesServer.take_requests``), and the first to come back applies what they 
 (:meth:`apply`) and answers it once. Arrival order is kept (the last row per soldier wins, as in one batch),
 and anything else a client sends (a REACT, a REMOVE_SOLDIER, a JCL frame, its next requests) applies the held
 requests first (``Session.handle``), so nothing overtakes a request and a frame's errors come before the
-client's next message is handled. The tick and the writers apply what is held before they
-sample or encode, so holding never delays a request past the point where it was applied before.
+client's next message is handled. The tick, and a writer woken by a tick's publish, apply what is held
+before they sample or encode, so holding never delays a request past the point where it was applied before.
 """
 
 from __future__ import annotations

@@ -14,6 +14,11 @@ import time
 from collections import defaultdict
 from collections.abc import Iterator
 
+# CPU seconds a loop gives one turn of queued work before it lets the tick and the other tasks run (a
+# front-end reader's buffered events, a shard's fabric requests): a burst of thousands then costs the
+# tick at most this much, and a turn is still long enough for a batch's fixed cost to be paid once
+TURN_CPU_S = 0.004
+
 
 class StageCpu:
     """Accumulates the loop thread's CPU seconds per stage between two reports."""

@@ -61,15 +61,15 @@ def test_a_request_after_an_event_of_its_soldier_stays_after_it() -> None:
 
 def test_a_flood_stays_within_the_bound_and_keeps_every_event_and_newest_row() -> None:
     """Soldiers 0..19 send requests for ever and react every other round: the backlog keeps at most
-    ``max_rows``, drops the oldest superseded rows (counted), keeps every reaction in order and each
+    ``max_rows`` request rows (the events besides), drops the oldest superseded rows (counted), keeps every reaction in order and each
     soldier's newest row."""
-    backlog = Backlog(max_rows=150)
+    backlog = Backlog(max_rows=40)
     reacts = []
     for k in range(400):
         i, reacting = k % 20, (k // 20) % 2 == 0 and k < 200
         backlog.put([row(i, float(k))] + ([req.react(i, f"r{k}")] if reacting else []))
         reacts += [f"r{k}"] if reacting else []
-        assert len(backlog) <= 150
+        assert len(backlog) - backlog.events <= 40
     assert backlog.dropped > 0
     ops = drain(backlog)
     assert [op["kind"] for op in ops if op["op"] == "react"] == reacts
@@ -97,13 +97,16 @@ def test_a_backlog_under_its_byte_bound_drops_the_oldest_rows() -> None:
     assert op["rows"]["index"].tolist() == list(range(20, 30))
 
 
-def test_events_beyond_the_bound_are_kept_and_the_rows_go() -> None:
-    """Events are never dropped: a backlog of events alone over its bound keeps them (and logs it); the
-    rows among them go, the oldest first."""
+def test_events_beyond_the_bound_are_kept_and_do_not_push_the_rows_out() -> None:
+    """Events are never dropped: a backlog of events alone over its bound keeps them (and logs it), and
+    the bound is on the request rows, so the rows among them stay (a backlog full of events dropped every
+    new row on arrival: the newest state, found in review)."""
     backlog = Backlog(max_rows=10)
     backlog.put([row(1, 1.0), row(2, 1.0)] + [req.react(3, f"r{k}") for k in range(12)] + [row(4, 1.0)])
-    assert backlog.dropped == 3 and len(backlog) == 12
-    assert [op["kind"] for op in drain(backlog)] == [f"r{k}" for k in range(12)]
+    assert backlog.dropped == 0 and len(backlog) == 15 and backlog.events == 12
+    ops = drain(backlog)
+    assert [op["kind"] for op in ops if op["op"] == "react"] == [f"r{k}" for k in range(12)]
+    assert [r["index"] for op in ops if op["op"] == "requests" for r in op["rows"]] == [1, 2, 4]
 
 
 # -- the order of a soldier's states and events: a model of a shard (the soldier's state: its newest row) --

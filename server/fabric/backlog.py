@@ -59,6 +59,8 @@ class Backlog:
         self._open = np.zeros(INDICES, bool)  # its newest row may take a newer one: no event for it since
         self.rows = 0  # request rows and events queued
         self.bytes = 0
+        self.events = 0  # of which events (never dropped: the bounds are on the rows)
+        self.event_bytes = 0
         self.coalesced = 0  # rows that replaced a queued row of their soldier
         self.dropped = 0  # rows dropped from a full backlog
         self._logged_drops, self._logged_at = 0, -np.inf
@@ -84,9 +86,14 @@ class Backlog:
                     self._put_rows(op["rows"])
                 else:
                     self._put_event(op)
-            if self.rows > self.max_rows or self.bytes > self.max_bytes:
+            if self._over():
                 self._trim()
         return empty
+
+    def _over(self) -> bool:
+        """Whether the request rows are over the bounds (events, never dropped, do not count: a backlog
+        full of them would otherwise drop every new row, the newest state, on arrival)."""
+        return self.rows - self.events > self.max_rows or self.bytes - self.event_bytes > self.max_bytes
 
     def take(self) -> req.Op | None:
         """The oldest operation: an event, or the request rows at the head (up to ``merge_rows`` whole
@@ -97,7 +104,10 @@ class Backlog:
             head = self._items.popleft()
             if not isinstance(head, _Block):
                 self.rows -= 1
-                self.bytes -= _event_bytes(head)
+                self.events -= 1
+                size = _event_bytes(head)
+                self.bytes -= size
+                self.event_bytes -= size
                 return head
             blocks = [head]
             n = len(head.rows)
@@ -150,8 +160,11 @@ class Backlog:
         else:  # a sync (or a malformed event): no row crosses it
             self._open[:] = False
         self._items.append(op)
+        size = _event_bytes(op)
         self.rows += 1
-        self.bytes += _event_bytes(op)
+        self.bytes += size
+        self.events += 1
+        self.event_bytes += size
 
     def _release(self, block: _Block) -> None:
         """Forget a block taken or emptied: its soldiers' newer rows start a new block."""
@@ -169,12 +182,15 @@ class Backlog:
         before = self.dropped
         for superseded_only in (True, False):
             for block in [b for b in self._items if isinstance(b, _Block)]:
-                if self.rows <= self.max_rows and self.bytes <= self.max_bytes:
+                if not self._over():
                     break
                 self._drop(block, superseded_only)
-        self._items = collections.deque(b for b in self._items if not isinstance(b, _Block) or len(b.rows))
         dropped = self.dropped - before
-        over = self.rows > self.max_rows or self.bytes > self.max_bytes
+        if dropped:
+            self._items = collections.deque(
+                b for b in self._items if not isinstance(b, _Block) or len(b.rows)
+            )
+        over = self.events > self.max_rows or self.event_bytes > self.max_bytes
         now = time.monotonic()
         if now - self._logged_at >= LOG_EVERY_S:
             log.warning(
@@ -191,7 +207,8 @@ class Backlog:
         idx = block.rows["index"].astype(np.int64)
         newest = self._latest_block[idx] == block.id
         drop = ~newest if superseded_only else np.ones(len(idx), bool)
-        excess = max(self.rows - self.max_rows, -(-(self.bytes - self.max_bytes) // ROW_BYTES))
+        rows, size = self.rows - self.events, self.bytes - self.event_bytes
+        excess = max(rows - self.max_rows, -(-(size - self.max_bytes) // ROW_BYTES))
         drop &= np.cumsum(drop) <= excess  # the oldest of them, as many as it takes
         if not drop.any():
             return

@@ -37,6 +37,7 @@ from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
+from server.stage_cpu import TURN_CPU_S
 from server.trace import TRACE
 
 if TYPE_CHECKING:
@@ -44,7 +45,7 @@ if TYPE_CHECKING:
 
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
-TURN_S = 0.004  # a shard's turn of fabric requests: CPU seconds before it answers them and lets a tick run
+TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
 PENDING_MAX = 64  # a front-end's queue of one shard's batches; beyond, the oldest go (and it asks for a key)
 
 

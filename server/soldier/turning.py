@@ -229,7 +229,7 @@ class Turning(ManagerCore):
         clips = self.library.turn_clips if clips is None else clips
         fits = [c for c in clips if c[1] * want > 0 and self._pivot_fits(c[0], rest(c))]
         if not fits:
-            return self._nearest_turn(want)
+            return self._nearest_turn(want, clips)
         return min(fits, key=lambda c: rest(c) / float(self.library.travel.stances[c[0]]))
 
     def _turn_end(self, i: int, t: float) -> None:
