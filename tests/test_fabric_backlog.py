@@ -61,8 +61,8 @@ def test_a_request_after_an_event_of_its_soldier_stays_after_it() -> None:
 
 def test_a_flood_stays_within_the_bound_and_keeps_every_event_and_newest_row() -> None:
     """Soldiers 0..19 send requests for ever and react every other round: the backlog keeps at most
-    ``max_rows`` request rows (the events besides), drops the oldest superseded rows (counted), keeps every reaction in order and each
-    soldier's newest row."""
+    ``max_rows`` request rows (the events besides), drops the oldest superseded rows (counted), keeps
+    every reaction in order and each soldier's newest row."""
     backlog = Backlog(max_rows=40)
     reacts = []
     for k in range(400):
