@@ -15,6 +15,7 @@ from peabody.loader import read_figure
 from ttes.paths import FIGURES
 
 N, DOWN, UP = 50, 10, 40  # frames; the knees skid from DOWN to UP
+RELEASE = (DOWN + UP) // 2  # the hands let go of the rifle halfway through the skid
 SKID_CM = 6.0  # this far forward (ststow2dead's knee: 10.3 cm, kstow2dead's 5.9)
 KNEEL_DEG = 120.0  # knees bent this far, hips straight: kneeling upright, the feet off the ground
 
@@ -48,7 +49,7 @@ def test_a_skidding_knee_is_held_and_the_body_pivots_over_it(skid: tuple[FigureS
     kin = figs.kin["body"]
     knees = ("left_knee", "left_kneecap", "right_knee", "right_kneecap")
     assert _slide(figs, frames, knees) > SKID_CM - 0.5  # the constructed fall skids on its knees
-    held = hold_knees(frames, figs.figures["body"], release=DOWN)
+    held = hold_knees(frames, figs.figures["body"], release=RELEASE)
     assert _slide(figs, held, knees) < THRESHOLDS["contact_slide_cm"]
     assert _slide(figs, held, ("left_foot", "right_foot")) < THRESHOLDS["foot_skate_cm"]
     assert np.all(held.poses >= kin.lower - 1e-9) and np.all(held.poses <= kin.upper + 1e-9)
@@ -56,4 +57,10 @@ def test_a_skidding_knee_is_held_and_the_body_pivots_over_it(skid: tuple[FigureS
     np.testing.assert_allclose(held.poses[0], frames.poses[0], atol=1e-6)  # the start posture is kept
     np.testing.assert_allclose(held.roots[0], frames.roots[0], atol=1e-9)
     # the rifle goes with the root while it is held, and is left where the hands let go of it after
-    np.testing.assert_allclose(held.rifles[DOWN:, :3, 3], frames.rifles[DOWN:, :3, 3], atol=1e-9)
+    moved = held.roots[:, :3, 3] - frames.roots[:, :3, 3]
+    rifle_moved = held.rifles[:, :3, 3] - frames.rifles[:, :3, 3]
+    assert np.abs(moved[RELEASE]).max() > 1.0  # the root was moved back by then (else this proves nothing)
+    np.testing.assert_allclose(rifle_moved[: RELEASE + 1], moved[: RELEASE + 1], atol=1e-9)
+    np.testing.assert_allclose(
+        rifle_moved[RELEASE:], np.broadcast_to(moved[RELEASE], (N - RELEASE, 3)), atol=1e-9
+    )
