@@ -23,6 +23,7 @@ CRAWL's, the last frame is CRAWL moved by the ground-plane rigid move recorded a
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from typing import Any
@@ -163,26 +164,12 @@ def record_crawl_turn(
     return easing.ease_ends(kin, rkin, ClipFrames(poses, roots, rifles, FPS)), end_offset
 
 
-_CACHE: dict[int, dict[str, tuple[ClipFrames, tuple[float, float, float]]]] = {}
-
-
-def _record(ctx: Any, name: str) -> tuple[ClipFrames, tuple[float, float, float]]:
-    """One clip of the build context ``ctx``, recorded once per context."""
-    if id(ctx) not in _CACHE:
-        _CACHE.clear()
-        _CACHE[id(ctx)] = {}
-    clips = _CACHE[id(ctx)]
-    if name not in clips:
-        kin, rkin = FigureKinematics(ctx.soldier), FigureKinematics(ctx.rifle)
-        clips[name] = record_crawl_turn(kin, rkin, ctx.keys[BASE], *_PLANS[name])
-    return clips[name]
+def _record(name: str, ctx: Any) -> tuple[ClipFrames, tuple[float, float, float]]:
+    """One clip of the build context ``ctx`` (each clip is recorded once a build: nothing to share)."""
+    kin, rkin = FigureKinematics(ctx.soldier), FigureKinematics(ctx.rifle)
+    return record_crawl_turn(kin, rkin, ctx.keys[BASE], *_PLANS[name])
 
 
 def crawl_turn_clips() -> dict[str, Callable[[Any], tuple[ClipFrames, tuple[float, float, float]]]]:
     """Clip name -> generator taking the build context: (frames, end_offset)."""
-    return {name: _clip_of(name) for name in CRAWL_TURN_CLIPS}
-
-
-def _clip_of(name: str) -> Callable[[Any], tuple[ClipFrames, tuple[float, float, float]]]:
-    """One generator per clip (a lambda in a loop would late-bind the name)."""
-    return lambda ctx: _record(ctx, name)
+    return {name: functools.partial(_record, name) for name in CRAWL_TURN_CLIPS}

@@ -24,6 +24,7 @@ so and crawls on (turned while crawling or at once, his planted forearms, knees 
 
 from __future__ import annotations
 
+import functools
 import math
 from itertools import combinations_with_replacement
 
@@ -63,6 +64,23 @@ def facing(backward: np.ndarray, speed: np.ndarray, face: np.ndarray) -> np.ndar
     forwards when it is faster than people walk backwards (``face``: the soldiers' present ones)."""
     limit = np.where(face != 0.0, BACKWARD_MAX_SPEED - BACKWARD_HYSTERESIS, BACKWARD_MAX_SPEED)
     return np.where(backward & (speed > limit), 180.0, 0.0)
+
+
+@functools.lru_cache(maxsize=16)
+def _ground_combos(
+    clips: tuple[tuple[int, float], ...],
+) -> tuple[list[tuple[tuple[int, float], ...]], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every run of 1..MAX_GROUND_TURNS of turn ``clips`` (clip, compass degrees) of one node, after ``()``
+    (no turn), in the order :meth:`Turning._ground_turns` prefers on a tie (its stable sort keeps the first):
+    the runs, their degrees, their lengths and how many of their clips turn by negative and by positive
+    degrees; computed once per node, not for every soldier that turns (~0.2 ms of Python each)."""
+    runs = (c for k in range(1, MAX_GROUND_TURNS + 1) for c in combinations_with_replacement(clips, k))
+    combos: list[tuple[tuple[int, float], ...]] = [(), *runs]
+    total = np.array([sum(d for _, d in c) for c in combos], np.float64)
+    count = np.array([len(c) for c in combos], np.int64)
+    negative = np.array([sum(d < 0 for _, d in c) for c in combos], np.int64)
+    positive = np.array([sum(d > 0 for _, d in c) for c in combos], np.int64)
+    return combos, total, count, negative, positive
 
 
 class Turning(ManagerCore):
@@ -169,18 +187,12 @@ class Turning(ManagerCore):
         180° is the 90° twice (without lying down between), 60° the 30° twice (the 45° left it 15° off), 100°
         the 90° alone."""
         lib = self.library
-        clips = lib.node_turns[node]
-        best: tuple[tuple[int, int, int], tuple[tuple[int, float], ...]] = (
-            (round(abs(want) / GROUND_TURN_SLACK_DEG), 0, 0),
-            (),
-        )
-        for k in range(1, MAX_GROUND_TURNS + 1):
-            for combo in combinations_with_replacement(clips, k):
-                left = (want - sum(c[1] for c in combo) + 180.0) % 360.0 - 180.0
-                key = (round(abs(left) / GROUND_TURN_SLACK_DEG), k, sum(c[1] * want < 0 for c in combo))
-                if key < best[0]:
-                    best = (key, combo)
-        order = sorted(best[1], key=lambda c: -abs(c[1]))
+        combos, total, count, negative, positive = _ground_combos(tuple(lib.node_turns[node]))
+        left = (want - total + 180.0) % 360.0 - 180.0
+        left[0] = want  # (no turn at all)
+        wrong = negative if want > 0 else positive if want < 0 else np.zeros_like(count)
+        best = combos[int(np.lexsort((wrong, count, np.round(np.abs(left) / GROUND_TURN_SLACK_DEG)))[0])]
+        order = sorted(best, key=lambda c: -abs(c[1]))
         return tuple(PathStep(c, True, float(lib.clip_duration[c]), node, node) for c, _ in order)
 
     def _turn_via(self, i: int, t: float, via: int) -> bool:
