@@ -94,6 +94,7 @@ def main() -> int:
         "probes_over_1s",
         "probes_superseded",
         "probes_over_1s_superseded",
+        "probes_over_1s_sent_s",
     )
     keys += ("server_cpu_pct", "client_cpu_pct")  # the front-end's and the load generator's, steady window
     out = {

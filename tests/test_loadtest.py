@@ -159,6 +159,7 @@ def test_a_probe_superseded_before_its_answer_is_counted_apart() -> None:
     s = summarise(tr.arrays(4.0), RATE, 0.5, 3.5, 1)
     assert s["latency_samples"] == 2 and s["probes_superseded"] == 1
     assert s["probes_over_1s"] == 1 and s["probes_over_1s_superseded"] == 1
+    assert s["probes_over_1s_sent_s"] == [0.5]  # sent at 1.0, the window from 0.5
     tr.activity(3.5, np.array([0]), np.array([False]), np.array([True]))  # probed again: not superseded
     tr.batch(3.55, 0, 106, np.array([0]), 100)
     assert summarise(tr.arrays(4.0), RATE, 3.4, 3.9, 1)["probes_superseded"] == 0

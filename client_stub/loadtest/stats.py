@@ -309,6 +309,7 @@ def summarise(
     lsel = (arr["latency_time"] >= t0) & (arr["latency_time"] < t1)
     lat = arr["latency"][lsel]
     sup = arr["latency_superseded"][lsel] if "latency_superseded" in arr else np.zeros(len(lat), bool)
+    sent_at = arr["latency_time"][lsel] - lat
     psel = (arr["probe_sent"] >= t0) & (arr["probe_sent"] < t1 - 2 * SETTLE_S)
     req = arr["requests"]
     rsel = (req[:, 0] >= t0) & (req[:, 0] < t1) if len(req) else np.zeros(0, bool)
@@ -336,6 +337,8 @@ def summarise(
         "probes_superseded": int(sup.sum()),
         "probes_over_1s": int((lat > 1.0).sum()),
         "probes_over_1s_superseded": int((sup & (lat > 1.0)).sum()),
+        # when they were sent (s into the window, the first 50): a burst is a stall, a spread is lost answers
+        "probes_over_1s_sent_s": np.round(np.sort(sent_at[lat > 1.0] - t0)[:50], 2).tolist(),
         "bytes_per_update": _round(fbytes / frows, 2) if frows else None,
         "bytes_per_s": _round(fbytes / dur, 0),
         "frames_per_s": _round(int(fsel.sum()) / dur, 1),
