@@ -244,6 +244,43 @@ def test_a_change_of_activity_is_kept_behind_a_queued_one(messages: list[list[An
         assert all(a in rest for a in seq)  # in the order sent
 
 
+@settings(max_examples=150, deadline=None)
+@given(
+    st.lists(st.lists(st.one_of(_ACTIVITY, _EVENTS), min_size=1, max_size=4), min_size=1, max_size=30),
+    st.integers(0, 3),
+)
+def test_a_full_backlog_of_activities_keeps_its_books(messages: list[list[Any]], every: int) -> None:
+    """Activity changes, events and a bound of 6 rows: within the bound after each message, no batch
+    with two rows of one soldier, and nothing left on the books once drained."""
+    backlog = Backlog(max_rows=6)
+    for k, message in enumerate(messages):
+        ops = [
+            item
+            if isinstance(item, dict)
+            else req.decode(
+                req.pack(
+                    [
+                        req.requests(
+                            make_entity_requests(
+                                index=[item[0]], appearance=int(item[1]), velocity=(0.0, item[2], 0.0)
+                            )
+                        )
+                    ]
+                )
+            )[0]
+            for item in message
+        ]
+        backlog.put(ops)
+        assert len(backlog) - backlog.events <= 6
+        if every and k % every == 0:
+            backlog.take()
+    for op in drain(backlog):
+        if op["op"] == "requests":
+            assert len(np.unique(op["rows"]["index"])) == len(op["rows"])
+    assert backlog.rows == backlog.bytes == 0 and not backlog._queued.any() and not backlog._blocks
+    assert not backlog._starts
+
+
 def backlog_soldiers(backlog: Backlog) -> list[int]:
     return [i for item in backlog._items if not isinstance(item, dict) for i in item.rows["index"].tolist()]
 
