@@ -88,6 +88,14 @@ def main() -> int:
             traced = probed(time.monotonic() - args.seconds) if args.trace else {}
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
+    keys += (
+        "latency_samples",
+        "latency_ms_max",
+        "probes_over_1s",
+        "probes_superseded",
+        "probes_over_1s_superseded",
+        "probes_over_1s_sent_s",
+    )
     keys += ("server_cpu_pct", "client_cpu_pct")  # the front-end's and the load generator's, steady window
     out = {
         "soldiers": args.soldiers,

@@ -4,6 +4,7 @@ themselves or against a soldier's requests (``server.fabric.backlog``)."""
 
 from __future__ import annotations
 
+import collections
 from typing import Any
 
 import numpy as np
@@ -15,7 +16,7 @@ from test_server_support import make_server
 
 from protocol.entity import Appearance, make_entity_requests
 from server.fabric import requests as req
-from server.fabric.backlog import Backlog
+from server.fabric.backlog import Backlog, activity
 from server.fabric.nodes import Sharding, ShardNode
 from server.soldier.manager import REQUEST_OK
 
@@ -36,11 +37,11 @@ def drain(backlog: Backlog) -> list[req.Op]:
 
 def test_fifty_requests_then_a_remove_are_one_state_then_the_remove() -> None:
     backlog = Backlog()
-    backlog.put([row(7, 0.01 * k) for k in range(50)] + [req.remove(7)])
+    backlog.put([row(7, 1 + 0.01 * k) for k in range(50)] + [req.remove(7)])  # walking, speeds differ
     assert len(backlog) == 2 and backlog.coalesced == 49
     applied, removed = drain(backlog)
     assert applied["op"] == "requests" and applied["rows"]["index"].tolist() == [7]
-    assert applied["rows"]["velocity"][0, 0] == np.float32(0.49)  # the newest
+    assert applied["rows"]["velocity"][0, 0] == np.float32(1 + 0.01 * 49)  # the newest
     assert removed == req.remove(7)
 
 
@@ -57,6 +58,28 @@ def test_a_request_after_an_event_of_its_soldier_stays_after_it() -> None:
         8: 2.0,  # no event of 8's between: its newer row took the older one's place
     }
     assert last["rows"]["index"].tolist() == [7] and last["rows"]["velocity"][0, 0] == 2.0
+
+
+def posture(index: int, appearance: int, heading: float = 0.0) -> req.Op:
+    rows = make_entity_requests(index=[index], appearance=appearance, heading=heading)
+    return req.decode(req.pack([req.requests(rows)]))[0]
+
+
+def test_a_request_that_changes_what_its_soldier_does_is_applied_not_overwritten() -> None:
+    """Kneel, then stand again within one turn (issue 21's tail): coalesced, the kneel never showed and a
+    client waited for the soldier's next change (seconds). Both apply, in order, in batches of their own
+    (in one batch the last row per soldier wins); a newer heading of the same posture still coalesces."""
+    backlog = Backlog()
+    backlog.put(
+        [posture(7, Appearance.KNEEL), posture(8, Appearance.KNEEL), posture(8, Appearance.KNEEL, 90)]
+    )
+    backlog.put([posture(7, Appearance.UPRIGHT), posture(9, Appearance.PRONE)])
+    assert backlog.coalesced == 1 and len(backlog) == 4
+    first, second = drain(backlog)
+    assert first["rows"]["index"].tolist() == [7, 8] and first["rows"]["heading"].tolist() == [0.0, 90.0]
+    assert first["rows"]["appearance"].tolist() == [Appearance.KNEEL] * 2
+    assert second["rows"]["index"].tolist() == [7, 9]
+    assert second["rows"]["appearance"].tolist() == [Appearance.UPRIGHT, Appearance.PRONE]
 
 
 def test_a_flood_stays_within_the_bound_and_keeps_every_event_and_newest_row() -> None:
@@ -82,7 +105,7 @@ def test_a_flood_stays_within_the_bound_and_keeps_every_event_and_newest_row() -
 def test_a_flood_of_requests_alone_is_one_row_per_soldier() -> None:
     backlog = Backlog(max_rows=100)
     for k in range(5000):
-        backlog.put([row(k % 50, float(k))])
+        backlog.put([row(k % 50, float(k + 1))])  # one activity (moving), speeds differ
         assert len(backlog) <= 50
     assert backlog.dropped == 0 and backlog.coalesced == 4950
 
@@ -168,6 +191,111 @@ def test_coalesced_events_see_the_states_they_saw_in_order(stream: list[tuple[li
     assert backlog.rows == 0 and backlog.bytes == 0
 
 
+_ACTIVITY = st.tuples(
+    st.integers(0, 3),
+    st.sampled_from([Appearance.UPRIGHT, Appearance.KNEEL]),
+    st.sampled_from([0.0, 1.5]),
+    st.integers(0, 1),
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.lists(_ACTIVITY, min_size=1, max_size=4), min_size=1, max_size=20), st.integers(0, 3))
+def test_a_change_of_activity_is_kept_behind_a_queued_one(messages: list[list[Any]], every: int) -> None:
+    """State-only streams, taken now and then: a row that arrives while its soldier has a row of another
+    activity queued is applied after it, never over it, so each soldier passes through its activities in
+    the order sent, the first and the last of them included; only a third activity while two rows are
+    queued takes the newer one's place (a soldier's backlog is at most two rows). No batch holds two rows
+    of one soldier (the last would win)."""
+    backlog = Backlog()
+    sent: list[np.ndarray] = []
+    taken: list[np.ndarray] = []
+    for k, message in enumerate(messages):
+        ops = [
+            req.decode(
+                req.pack(
+                    [
+                        req.requests(
+                            make_entity_requests(
+                                index=[i],
+                                appearance=int(a),
+                                velocity=(0.0, v, 0.0),
+                                heading=float(k),
+                                immediate=bool(im),
+                            )
+                        )
+                    ]
+                )
+            )[0]
+            for i, a, v, im in message
+        ]
+        sent += [op["rows"] for op in ops]
+        backlog.put(ops)
+        assert all(n <= 2 for n in collections.Counter(backlog_soldiers(backlog)).values())
+        if every and k % every == 0 and (op := backlog.take()) is not None:
+            taken.append(op["rows"])
+    taken += [op["rows"] for op in drain(backlog)]
+    assert all(len(np.unique(rows["index"])) == len(rows) for rows in taken)
+    applied, asked = path(taken), path(sent)
+    assert applied.keys() == asked.keys()
+    for i, seq in applied.items():
+        assert seq[0] == asked[i][0] and seq[-1] == asked[i][-1]
+        rest = iter(asked[i])
+        assert all(a in rest for a in seq)  # in the order sent
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    st.lists(st.lists(st.one_of(_ACTIVITY, _EVENTS), min_size=1, max_size=4), min_size=1, max_size=30),
+    st.integers(0, 3),
+)
+def test_a_full_backlog_of_activities_keeps_its_books(messages: list[list[Any]], every: int) -> None:
+    """Activity changes, events and a bound of 6 rows: within the bound after each message, no batch
+    with two rows of one soldier, and nothing left on the books once drained."""
+    backlog = Backlog(max_rows=6)
+    for k, message in enumerate(messages):
+        ops = [
+            item
+            if isinstance(item, dict)
+            else req.decode(
+                req.pack(
+                    [
+                        req.requests(
+                            make_entity_requests(
+                                index=[item[0]], appearance=int(item[1]), velocity=(0.0, item[2], 0.0)
+                            )
+                        )
+                    ]
+                )
+            )[0]
+            for item in message
+        ]
+        backlog.put(ops)
+        assert len(backlog) - backlog.events <= 6
+        if every and k % every == 0:
+            backlog.take()
+    for op in drain(backlog):
+        if op["op"] == "requests":
+            assert len(np.unique(op["rows"]["index"])) == len(op["rows"])
+    assert backlog.rows == backlog.bytes == 0 and not backlog._queued.any() and not backlog._blocks
+    assert not backlog._starts
+
+
+def backlog_soldiers(backlog: Backlog) -> list[int]:
+    return [i for item in backlog._items if not isinstance(item, dict) for i in item.rows["index"].tolist()]
+
+
+def path(batches: list[np.ndarray]) -> dict[int, list[int]]:
+    """Each soldier's activities in the order of ``batches``, repeats as one."""
+    out: dict[int, list[int]] = {}
+    for rows in batches:
+        for i, a in zip(rows["index"].tolist(), activity(rows).tolist(), strict=True):
+            seen = out.setdefault(i, [])
+            if not seen or seen[-1] != a:
+                seen.append(a)
+    return out
+
+
 # -- the shard: what it applies ---------------------------------------------------------------------------
 async def test_a_shard_applies_a_burst_as_one_state_then_the_remove(autojump_clock: trio.abc.Clock) -> None:
     shard = make_server()
@@ -180,14 +308,14 @@ async def test_a_shard_applies_a_burst_as_one_state_then_the_remove(autojump_clo
         apply, remove = world.apply_requests, world.remove_soldier
         world.apply_requests = lambda rows: (calls.append(("requests", rows.copy())), apply(rows))[1]  # type: ignore[method-assign]
         world.remove_soldier = lambda i, why="": (calls.append(("remove", i)), remove(i, why))[1]  # type: ignore[method-assign]
-        node.backlog.put([row(3, 0.02 * k) for k in range(50)] + [req.remove(3)])
+        node.backlog.put([row(3, 1 + 0.02 * k) for k in range(50)] + [req.remove(3)])
         while node.backlog:
             node.take_turn()
         (what, rows), removed = calls
         assert (
             what == "requests"
             and rows["index"].tolist() == [3]
-            and rows["velocity"][0, 0] == np.float32(0.98)
+            and rows["velocity"][0, 0] == np.float32(1 + 0.02 * 49)
         )
         assert removed == ("remove", 3)
         assert shard.status_note is not None and "backlog 0/32768 rows" in shard.status_note()
@@ -240,3 +368,25 @@ def test_coalesced_requests_leave_the_soldiers_as_every_request_in_order(message
     assert a is not None and b is not None
     for name in ("appearance", "weapon", "velocity", "heading", "position"):
         np.testing.assert_array_equal(getattr(a.table, name)[:10], getattr(b.table, name)[:10], err_msg=name)
+
+
+async def test_a_kneel_undone_within_the_shards_turn_still_shows(autojump_clock: trio.abc.Clock) -> None:
+    """A standing soldier asked to kneel and, in the same message, to stand: a single server applies a
+    client's frames one by one and the soldier dips; the shard coalesced them (the last row won: nothing
+    changed, nothing was sent), so a load test's probe of the kneel waited seconds for the soldier's next
+    change (issue 21's 20,000-soldier tail). Now the shard applies both, and its pose changes."""
+    shard = make_server()
+    node = ShardNode(shard, MemoryFabric(Bus()), Sharding(0, 1), key_every=10**9)
+    async with trio.open_nursery() as nursery:
+        await nursery.start(shard.serve)
+        await trio.sleep(2.0)  # the start-up script's soldiers stand at rest
+        board = shard.board_ref.board
+        assert board is not None
+        before = int(board.version[3])
+        await trio.sleep(0.5)
+        assert board.version[3] == before
+        node.backlog.put([posture(3, Appearance.KNEEL), posture(3, Appearance.UPRIGHT)])
+        node.take_turn()
+        await trio.sleep(0.2)
+        assert board.version[3] > before
+        shard.shutdown()

@@ -146,6 +146,25 @@ def test_expected_follows_the_servers_throttle() -> None:
     assert summarise(thinned, RATE, 1.0, 2.0, 1)["delivered_pct"] == pytest.approx(100 / 3, abs=0.01)
 
 
+def test_a_probe_superseded_before_its_answer_is_counted_apart() -> None:
+    """Slot 0 is probed (kneel) and asked to stand again 0.1 s later: its next update, 2 s on, may reflect
+    either or neither (a server that applies both in one turn shows nothing), so a tail of them is told
+    from a slow server (issue 21); slot 1's probe, answered in 40 ms, is not superseded."""
+    tr = Tracker(RATE, 1)
+    tr.grow(2, np.zeros(2, np.int64))
+    tr.activity(1.0, np.array([0, 1]), np.array([False, False]), np.array([True, True]))
+    tr.batch(1.04, 0, 31, np.array([1]), 100)
+    tr.activity(1.1, np.array([0]), np.array([False]), np.array([False]))  # superseded: no new probe
+    tr.batch(3.1, 0, 93, np.array([0]), 100)
+    s = summarise(tr.arrays(4.0), RATE, 0.5, 3.5, 1)
+    assert s["latency_samples"] == 2 and s["probes_superseded"] == 1
+    assert s["probes_over_1s"] == 1 and s["probes_over_1s_superseded"] == 1
+    assert s["probes_over_1s_sent_s"] == [0.5]  # sent at 1.0, the window from 0.5
+    tr.activity(3.5, np.array([0]), np.array([False]), np.array([True]))  # probed again: not superseded
+    tr.batch(3.55, 0, 106, np.array([0]), 100)
+    assert summarise(tr.arrays(4.0), RATE, 3.4, 3.9, 1)["probes_superseded"] == 0
+
+
 def test_steady_movers_start_after_the_grace_ticks() -> None:
     tr = Tracker(RATE, 1)
     tr.grow(1, np.zeros(1, np.int64))

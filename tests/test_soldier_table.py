@@ -72,3 +72,34 @@ def test_matches_a_set_model(ops: list[tuple[bool, int]]) -> None:
             t.free(victim)
             model.remove(victim)
         assert t.live.tolist() == sorted(model) and t.count == len(model)
+
+
+@given(st.lists(st.tuples(st.integers(0, 2), st.integers(0, 40)), max_size=120))
+def test_indices_taken_by_number_match_a_set_model(ops: list[tuple[int, int]]) -> None:
+    """A shard takes every index by number (its front-end's): the lowest free index stays the lowest one
+    not live, and the heap that finds it stays within twice the capacity however often a soldier is
+    removed and made again by number (its stale entries are skipped, then dropped)."""
+    t = SoldierTable(2, 1, capacity=1, max_soldiers=41)
+    model: set[int] = set()
+    for kind, k in ops:
+        free = sorted(set(range(41)) - model)
+        if kind == 0 and free:
+            i = t.allocate()
+            assert i == free[0]
+            model.add(i)
+        elif kind == 1 and free:
+            model.add(t.allocate(free[k % len(free)]))
+        elif kind == 2 and model:
+            victim = sorted(model)[k % len(model)]
+            t.free(victim)
+            model.remove(victim)
+        assert t.live.tolist() == sorted(model) and t.count == len(model)
+        assert len(t._free) <= 2 * t.capacity
+
+
+def test_a_soldier_made_again_by_number_does_not_grow_the_free_heap() -> None:
+    t = SoldierTable(1, 1, capacity=64, max_soldiers=64)
+    for _ in range(1000):
+        t.allocate(5)
+        t.free(5)
+    assert len(t._free) <= 2 * t.capacity and t.allocate() == 0

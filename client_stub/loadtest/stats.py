@@ -16,7 +16,11 @@ that tick's grid time; received = rows of steady movers whose tick's grid time i
 arriving more than one period after its grid time is *late* (the server fell behind real time).
 
 Latency is measured on *probes*: requests to a soldier that was at rest (no update for ``settle`` seconds),
-so the first update that arrives for it is the one that reflects the request.
+so the first update that arrives for it is the one that reflects the request. A probe whose soldier was
+asked to do something else again before that update came is *superseded*: its update may reflect the later
+request, or none (asked to kneel, then to stand again: a server that applies both in one turn may show
+nothing). Such probes are counted apart (``probes_superseded``, and among those answered over a second,
+``probes_over_1s_superseded``) so that a tail of them is told from a slow server (issue 21).
 
 All methods are vectorised per batch; :func:`summarise` and :func:`series` are pure functions of the
 recorded arrays, so tests can check the arithmetic on hand-made inputs.
@@ -57,6 +61,7 @@ class Recording:
     probe_sent: list[np.ndarray] = field(default_factory=list)
     latency_time: list[np.ndarray] = field(default_factory=list)
     latency: list[np.ndarray] = field(default_factory=list)
+    latency_superseded: list[np.ndarray] = field(default_factory=list)  # the answered probe was superseded
     # CPU samples: time, server CPU seconds (nan if unknown), load generator CPU seconds
     cpu: list[tuple[float, float, float]] = field(default_factory=list)
     requests_sent: list[tuple[float, float]] = field(default_factory=list)
@@ -80,6 +85,7 @@ class Recording:
             "probe_sent": cat(self.probe_sent, np.float64),
             "latency_time": cat(self.latency_time, np.float64),
             "latency": cat(self.latency, np.float64),
+            "latency_superseded": cat(self.latency_superseded, np.bool_),
             "cpu": np.asarray(self.cpu, np.float64).reshape(-1, 3),
             "requests": np.asarray(self.requests_sent, np.float64).reshape(-1, 2),
         }
@@ -100,6 +106,7 @@ class Tracker:
         self.steady_from = np.zeros(0)  # start of the open episode (inf: not a steady mover now)
         self.last_rx = np.zeros((0, nconn))  # last arrival of an update, per connection
         self.probe_at = np.zeros((0, nconn))  # pending probe send time (nan: none)
+        self.superseded = np.zeros((0, nconn), bool)  # its soldier's activity changed again since
         self.owner = np.zeros(0, np.int64)  # subscribing connection, -1 = all
 
     def grow(self, n: int, owner: np.ndarray) -> None:
@@ -109,6 +116,7 @@ class Tracker:
         self.steady_from = np.concatenate([self.steady_from, np.full(k, np.inf)])
         self.last_rx = np.concatenate([self.last_rx, np.full((k, self.nconn), -np.inf)])
         self.probe_at = np.concatenate([self.probe_at, np.full((k, self.nconn), np.nan)])
+        self.superseded = np.concatenate([self.superseded, np.zeros((k, self.nconn), bool)])
         self.owner = np.concatenate([self.owner, np.asarray(owner, np.int64)])
         self.n = n
 
@@ -142,6 +150,7 @@ class Tracker:
             return
         self._close(slots, t)
         self.steady_from[slots[moving]] = t + self.grace
+        self.superseded[slots] |= ~np.isnan(self.probe_at[slots])
         p = slots[probe]
         if len(p):
             self.rec.probe_sent.append(np.full(len(p), t))
@@ -149,6 +158,7 @@ class Tracker:
             for c in range(self.nconn):
                 sel = (cols == c) | (cols < 0)
                 self.probe_at[p[sel], c] = t
+                self.superseded[p[sel], c] = False
 
     def settled(self, t: float, slots: np.ndarray) -> np.ndarray:
         """(len(slots),) bool: no update for ``SETTLE_S`` on any subscriber and no probe pending."""
@@ -175,6 +185,7 @@ class Tracker:
         if answered.any():
             rec.latency_time.append(np.full(int(answered.sum()), t))
             rec.latency.append(t - sent[answered])
+            rec.latency_superseded.append(self.superseded[slots[answered], conn])
             self.probe_at[slots[answered], conn] = np.nan
 
     def arrays(self, t: float) -> dict[str, np.ndarray]:
@@ -297,6 +308,8 @@ def summarise(
     frows = int(arr["frame_rows"][fsel].sum())
     lsel = (arr["latency_time"] >= t0) & (arr["latency_time"] < t1)
     lat = arr["latency"][lsel]
+    sup = arr["latency_superseded"][lsel] if "latency_superseded" in arr else np.zeros(len(lat), bool)
+    sent_at = arr["latency_time"][lsel] - lat
     psel = (arr["probe_sent"] >= t0) & (arr["probe_sent"] < t1 - 2 * SETTLE_S)
     req = arr["requests"]
     rsel = (req[:, 0] >= t0) & (req[:, 0] < t1) if len(req) else np.zeros(0, bool)
@@ -321,6 +334,11 @@ def summarise(
         "latency_ms_max": _round(float(lat.max() * 1000.0), 2) if len(lat) else None,
         "latency_samples": len(lat),
         "probes_sent": int(psel.sum()),
+        "probes_superseded": int(sup.sum()),
+        "probes_over_1s": int((lat > 1.0).sum()),
+        "probes_over_1s_superseded": int((sup & (lat > 1.0)).sum()),
+        # when they were sent (s into the window, the first 50): a burst is a stall, a spread is lost answers
+        "probes_over_1s_sent_s": np.round(np.sort(sent_at[lat > 1.0] - t0)[:50], 2).tolist(),
         "bytes_per_update": _round(fbytes / frows, 2) if frows else None,
         "bytes_per_s": _round(fbytes / dur, 0),
         "frames_per_s": _round(int(fsel.sum()) / dur, 1),

@@ -6,9 +6,16 @@ heading, position): a newer one for a soldier supersedes an older one not applie
 (``SoldierManager.apply_requests``: the last row per soldier wins). So a soldier's new row overwrites its
 queued one in place (taken as early as the old one was), unless an *event* for it (create, remove, react)
 or a sync came in between: events are never coalesced, dropped or reordered, among themselves or against
-a soldier's rows (a remove after a request stays after it). Without events the rows are at most one per
-soldier; when the backlog is full anyway (``max_rows`` rows and events, ``max_bytes``), the oldest rows
-that a later row of their soldier supersedes go first, then the oldest rows: counted and logged.
+a soldier's rows (a remove after a request stays after it).
+
+A row overwrites only a row of the same *activity* (:func:`activity`: posture, weapon, moving or still,
+not ``immediate``): a newer heading, speed or position of what the soldier does. A row that changes what
+it does (kneel, then stand again) is kept and applied on its own, after the older one, as a single server
+applies a client's frames one by one (issue 21: coalesced, a kneel undone within one turn never showed,
+and the request waited for the soldier's next change, seconds). Without events and activity changes the
+rows are at most one per soldier; when the backlog is full anyway (``max_rows`` rows and events,
+``max_bytes``), the oldest rows that a later row of their soldier supersedes go first, then the oldest
+rows: counted and logged.
 
 Filled on the fabric's thread (:meth:`Backlog.put`), taken on the shard's loop (:meth:`Backlog.take`).
 """
@@ -25,6 +32,7 @@ import numpy as np
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from server.fabric import requests as req
 from server.logging import get_logger
+from server.soldier.core import MOVING_EPS
 
 log = get_logger("fabric")
 INDICES = 1 << 16  # soldier indices are uint16 in a request row
@@ -41,6 +49,9 @@ class _Block:
 
     id: int
     rows: np.ndarray
+    repeats: bool = (
+        False  # it starts a batch: its soldiers may have rows in older blocks (the last would win)
+    )
 
 
 class Backlog:
@@ -57,6 +68,9 @@ class Backlog:
         self._latest_block = np.full(INDICES, -1, np.int64)  # the block of each soldier's newest queued row
         self._latest_row = np.zeros(INDICES, np.int64)
         self._open = np.zeros(INDICES, bool)  # its newest row may take a newer one: no event for it since
+        self._activity = np.zeros(INDICES, np.int32)  # the activity of its newest row (:func:`activity`)
+        self._queued = np.zeros(INDICES, np.int32)  # its rows queued
+        self._starts: list[int] = []  # the blocks that start a batch (``repeats``), in order
         self.rows = 0  # request rows and events queued
         self.bytes = 0
         self.events = 0  # of which events (never dropped: the bounds are on the rows)
@@ -114,6 +128,7 @@ class Backlog:
             while (
                 self._items
                 and isinstance(nxt := self._items[0], _Block)
+                and not nxt.repeats
                 and n + len(nxt.rows) <= self.merge_rows
             ):
                 self._items.popleft()
@@ -132,22 +147,47 @@ class Backlog:
                 keep = np.sort(len(idx) - 1 - first)
                 self.coalesced += len(idx) - len(keep)
                 rows, idx = rows[keep], idx[keep]
-        hit = self._open[idx]
+        act = activity(rows)
+        # the newest row takes a row of its activity, or any once the soldier has an older row queued
+        hit = self._open[idx] & ((self._activity[idx] == act) | (self._queued[idx] > 1))
         if hit.any():
             at_block, at_row = self._latest_block[idx[hit]], self._latest_row[idx[hit]]
             for b in np.unique(at_block).tolist():
                 mine = at_block == b
                 self._blocks[b].rows[at_row[mine]] = rows[hit][mine]
+            self._activity[idx[hit]] = act[hit]
             self.coalesced += int(hit.sum())
-            rows, idx = rows[~hit], idx[~hit]
+            rows, idx, act = rows[~hit], idx[~hit], act[~hit]
         if not len(rows):
             return
-        copy = np.array(rows, ENTITY_REQUEST_DTYPE)  # the message's rows are read-only
-        block = _Block(self._next_id, copy)
-        self._next_id += 1
-        self._blocks[block.id] = block
-        self._items.append(block)
-        self._latest_block[idx], self._latest_row[idx], self._open[idx] = block.id, np.arange(len(idx)), True
+        rows = np.array(rows, ENTITY_REQUEST_DTYPE)  # the message's rows are read-only
+        # a soldier with a row of another activity queued: its row goes to the next batch after that row's
+        # (the first block after it that starts a batch), the others' to a new block at the end
+        last = self._latest_block[idx]
+        again = self._open[idx]
+        at = np.searchsorted(self._starts, last[again], side="right")
+        after = np.full(len(idx), self._next_id)
+        after[again] = np.asarray([*self._starts, self._next_id])[at]
+        for b in np.unique(after).tolist():
+            mine = after == b
+            self._append(b, rows[mine], idx[mine], act[mine], repeats=bool(again[mine].any()))
+
+    def _append(self, b: int, rows: np.ndarray, idx: np.ndarray, act: np.ndarray, repeats: bool) -> None:
+        """Queue rows in block ``b``, or in a new block at the end if there is none (``repeats``: one that
+        starts a batch)."""
+        block = self._blocks.get(b)
+        if block is None:
+            block = _Block(b, rows[:0], repeats)
+            self._next_id += 1
+            self._blocks[b] = block
+            self._items.append(block)
+            if repeats:
+                self._starts.append(b)
+        start = len(block.rows)
+        block.rows = np.concatenate([block.rows, rows]) if start else rows
+        self._latest_block[idx], self._latest_row[idx], self._open[idx] = b, start + np.arange(len(idx)), True
+        self._activity[idx] = act
+        self._queued[idx] += 1  # (a soldier has one row in a message, and in a block)
         self.rows += len(idx)
         self.bytes += len(idx) * ROW_BYTES
 
@@ -168,11 +208,12 @@ class Backlog:
 
     def _release(self, block: _Block) -> None:
         """Forget a block taken or emptied: its soldiers' newer rows start a new block."""
-        del self._blocks[block.id]
+        self._forget(block)
         idx = block.rows["index"].astype(np.int64)
         mine = idx[self._latest_block[idx] == block.id]
         self._latest_block[mine] = -1
         self._open[mine] = False
+        np.subtract.at(self._queued, idx, 1)
         self.rows -= len(idx)
         self.bytes -= len(idx) * ROW_BYTES
 
@@ -215,6 +256,7 @@ class Backlog:
         gone = idx[drop & newest]
         self._latest_block[gone] = -1
         self._open[gone] = False
+        np.subtract.at(self._queued, idx[drop], 1)
         n = int(drop.sum())
         self.dropped += n
         self.rows -= n
@@ -224,7 +266,24 @@ class Backlog:
         still = self._latest_block[kept] == block.id
         self._latest_row[kept[still]] = np.flatnonzero(still)
         if not len(block.rows):
-            del self._blocks[block.id]
+            self._forget(block)
+
+    def _forget(self, block: _Block) -> None:
+        del self._blocks[block.id]
+        if block.repeats:
+            self._starts.remove(block.id)
+
+
+def activity(rows: np.ndarray) -> np.ndarray:
+    """What each request row asks its soldier to do, as one number: posture, weapon, moving or still, and
+    ``immediate``. Rows of one activity differ in heading, speed or position only: the newer says all."""
+    speed = np.hypot(rows["velocity"][:, 0], rows["velocity"][:, 1])  # Performer: Z up
+    return (
+        rows["appearance"].astype(np.int32)
+        | rows["weapon"].astype(np.int32) << 8
+        | (speed > MOVING_EPS).astype(np.int32) << 16
+        | (rows["immediate"] != 0).astype(np.int32) << 17
+    )
 
 
 def _event_bytes(op: req.Op) -> int:

@@ -176,7 +176,8 @@ def format_result(r: dict) -> str:
             f"  all soldier updates/s   {f('all_updates_per_s')} "
             f"(nominal N x rate = {f('nominal_updates_per_s')})",
             f"  latency request->update p50 {f('latency_ms_p50', ' ms')}, p99 {f('latency_ms_p99', ' ms')}, "
-            f"max {f('latency_ms_max', ' ms')} ({f('latency_samples')} probes)",
+            f"max {f('latency_ms_max', ' ms')} ({f('latency_samples')} probes; "
+            f"{f('probes_over_1s')} over 1 s, {f('probes_over_1s_superseded')} of them superseded)",
             f"  tick->arrival p50 {f('delivery_ms_p50', ' ms')}, p99 {f('delivery_ms_p99', ' ms')}; "
             f"dropped {f('dropped_updates')}, late {f('late_updates')} ({f('late_pct', '%')})",
             f"  bytes per update        {f('bytes_per_update')} ({f('bytes_per_s')} bytes/s)",
