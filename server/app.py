@@ -15,8 +15,9 @@ Structure (one trio nursery):
   that moment are applied and answered as one batch (:mod:`server.pending_requests`: a batch's cost is mostly
   fixed). The tick and the writers of a tick's frames **let the readers in** first
   (:meth:`TtesServer.let_readers_in`) and apply what they hold: a request that arrived just before a tick is
-  answered before the tick samples; one that arrived while it sampled is taken up by that tick before it
-  publishes (:meth:`TtesServer.run_tick`: those soldiers sampled again, in the tick's frames); one that
+  answered (and written) before the tick samples; one that arrived while it sampled is answered by that tick
+  first (:meth:`TtesServer.run_tick`: those soldiers sampled again, published and written as the tick's
+  first frames, before the rest of the tick is quantised and encoded); one that
   arrived during the publish or the writers' encodes is answered before the next writer encodes (its answer
   goes out with the tick's frames). A writer woken by answers alone writes them at once;
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
@@ -441,7 +442,7 @@ class TtesServer:
                     with trio.move_on_at(self._t0 + session.retry_at):
                         await session.wake.wait()
                 if session.ticked:  # a tick's frames: the readers' answers go out in this write
-                    session.ticked = False
+                    session.ticked = session.more_of_tick = False
                     if self.feed is None:  # a front-end's readers answer nothing (its shards do): at once
                         await self.let_readers_in()
                     self.apply_held()
@@ -480,7 +481,11 @@ class TtesServer:
             self.next_tick = next_t - self._t0
             await trio.sleep_until(next_t)
             await self.let_readers_in()  # answers to requests just before the tick go out before it samples
+            answers = self.answers
             self.apply_held()
+            if self.answers != answers:  # their writers write them before the tick samples, not after
+                await self.let_readers_in()
+                self.apply_held()
             await self.run_tick(next_t - self._t0)
             next_t += period
             if self._answer_after_tick:
@@ -511,21 +516,57 @@ class TtesServer:
 
     async def run_tick(self, scheduled: float | None = None) -> None:
         """The tick loop's tick: the readers are let in between the sampling and the publish, and the
-        soldiers whose requests they applied meanwhile are sampled again into this tick (folded, not answered
-        after it: issue 16), so a request that lands while the tick samples waits for the sampling only."""
+        soldiers whose requests they applied meanwhile are sampled again at the tick's time and published
+        first, as the tick's first frames (:meth:`_answer_first`): their writers send them before the rest of
+        the tick is quantised and encoded, so a request that lands while the tick samples waits for the
+        sampling only (issue 16). Requests taken after that are folded into the tick's publish
+        (:meth:`publish_tick`)."""
         update = self.sample_tick(scheduled)
         if update is None:
             return
         spent = self.last_tick_seconds
         self._ticking = True  # the readers' answers wait: this tick takes them up
+        first = False
         try:
             await self.let_readers_in()
             with self.cpu("requests"):
                 self.pending.apply()
+            if self.on_publish is None:  # a shard's batches count a tick's publishes: no first publish
+                first = await self._answer_first(update)
+                spent += self.last_tick_seconds
         finally:
             self._ticking = False
-        self.publish_tick(update)
+        self.publish_tick(update, first)
         self.last_tick_seconds += spent
+
+    async def _answer_first(self, update: TickUpdate) -> bool:
+        """The soldiers whose requests were applied while the tick sampled: sampled again at the tick's time
+        and published as the tick's first frames (under its number; False: nothing to publish). ``update``
+        then carries their new poses, so the tick's publish finds them unchanged and sends them no second
+        time; their writers write them now, each before it encodes the rest of the tick."""
+        self.last_tick_seconds = 0.0
+        seen = self._request_count()
+        if seen == self._requests_at_tick:
+            return False
+        self._requests_at_tick = self._requests_seen = seen
+        m, board = self.world.manager, self._board()
+        assert m is not None and board is not None
+        t0 = time.perf_counter()
+        with self.cpu("animate"):
+            again = m.answer(update.now, update.now)  # at the tick's time: its due rule
+        if not len(again):
+            return False
+        if self.on_tick is not None:
+            self.on_tick(again)
+        with self.cpu("quantise"):
+            changed = board.publish(again, self.world)
+            update.take(again)
+        self._answer_still(again)
+        self.last_tick_seconds = time.perf_counter() - t0
+        if changed:
+            self._published(board, changed, again.indices, tick=False, more=True)
+            await self.let_readers_in()  # their writers write them (the readers hold what they take)
+        return True
 
     def sample_tick(self, scheduled: float | None = None) -> TickUpdate | None:
         """A tick's sampling (None: nothing to publish, or a front-end's feed published already).
@@ -550,17 +591,18 @@ class TtesServer:
         self.last_tick_seconds = time.perf_counter() - t0
         return update
 
-    def publish_tick(self, update: TickUpdate) -> None:
+    def publish_tick(self, update: TickUpdate, again: bool = False) -> None:
         """Publish a tick's poses and wake the writers; soldiers with requests taken since it sampled are
         sampled again at the tick's time (their request's, if later) and published as more of that tick,
-        under its number (a second publish: merging them into the tick's arrays costs more)."""
+        under its number (a second publish: merging them into the tick's arrays costs more). ``again``: the
+        tick published its first frames already (:meth:`_answer_first`)."""
         m, board = self.world.manager, self._board()
         assert m is not None and board is not None
         t0 = time.perf_counter()
         if self.on_tick is not None:
             self.on_tick(update)
         with self.cpu("quantise"):
-            changed = board.publish(update, self.world)
+            changed = board.publish(update, self.world, again=again)
         self._published(board, changed)
         seen = self._request_count()
         if seen != self._requests_at_tick:
@@ -585,11 +627,17 @@ class TtesServer:
         with self.cpu("quantise"):
             changed = board.publish(again, self.world, again=True)
         self._published(board, changed)
-        # a start whose first frames are still (a walk off a rest) shows nothing yet at the tick's time:
-        # those soldiers get the answer after the tick, at the next tick's time, as before
+        self._answer_still(again)
+
+    def _answer_still(self, again: TickUpdate) -> None:
+        """After a publish of ``again``: a start whose first frames are still (a walk off a rest) shows
+        nothing yet at the tick's time: those soldiers get the answer after the tick, at the next tick's
+        time, as before."""
+        m, board = self.world.manager, self._board()
+        assert m is not None and board is not None
         still = again.indices[board.version[again.indices] != board.serial]
         m.table.requested[still] = True
-        self._answer_after_tick = len(still) > 0
+        self._answer_after_tick |= len(still) > 0
 
     def _request_count(self) -> int:
         m = self.world.manager
@@ -606,13 +654,19 @@ class TtesServer:
         self._published(board, len(rows), rows)  # the shards' frames count as a tick's
 
     def _published(
-        self, board: PoseBoard, changed: int, rows: np.ndarray | None = None, tick: bool = True
+        self,
+        board: PoseBoard,
+        changed: int,
+        rows: np.ndarray | None = None,
+        tick: bool = True,
+        more: bool = False,
     ) -> None:
         """After a publish: the shard's hook, then wake the writers (with the ``rows`` changed: only those of
         clients subscribed to one of them, so a shard's answer goes out at once, not behind the encodes of
         clients it does not concern); a tick whose poses changed counts once for the update rate, however
         many publishes carried it (answers, a front-end's shards). A writer woken by a ``tick``'s publish lets
-        the readers in before it writes (a single server's); one woken by answers alone does not."""
+        the readers in before it writes (a single server's); one woken by answers alone does not. ``more``:
+        a tick's first frames, the rest to follow (``Session.more_of_tick``: not held by the throttle)."""
         if self.on_publish is not None:
             with self.cpu("fabric"):
                 self.on_publish(board)
@@ -623,6 +677,7 @@ class TtesServer:
             for s in self.sessions.values():
                 if s.tables_sent and (rows is None or s.conn.subscribes_any(rows)):
                     s.ticked |= tick
+                    s.more_of_tick |= more
                     s.notify()
 
     async def take_requests(self) -> None:

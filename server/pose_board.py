@@ -127,7 +127,8 @@ class PoseBoard:
         """Take one tick's poses (converted and quantised per figure set); returns the number of soldiers
         whose codes changed (0: nothing for any client to send). ``between``: an out-of-cycle update, the
         next tick's, released early; ``again``: more of the tick just published (the soldiers whose requests
-        arrived while it sampled, ``TtesServer.run_tick``), labelled with its number."""
+        arrived while it sampled, or the rest of the tick after them, ``TtesServer.run_tick``), labelled
+        with its number."""
         self.serial += 1
         if not between:
             self.ticks += 0 if again else 1

@@ -119,6 +119,7 @@ class Session:
         self.ready_sent = False
         self.flushed_serial = 0  # the board publish this client's last write covered
         self.ticked = False  # woken by a tick's publish since the last write (the trio app's writer)
+        self.more_of_tick = False  # woken by a tick's first publish of answered soldiers only (take_output)
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
@@ -182,13 +183,16 @@ class Session:
     def take_output(self, now: float | None = None) -> bytes:
         """Everything to write now: queued control bytes, then the latest joint updates (latest-wins), held
         back while this connection's own throttle says so (``retry_at``: when they are due; ``now`` None:
-        never held)."""
+        never held). A write of ``more_of_tick`` alone (soldiers answered as a tick's first publish,
+        ``TtesServer.run_tick``) is neither held nor counted: the rest of that tick follows in a moment, and
+        the manager's throttle already applied to those soldiers (not so to a client's own throttle)."""
         out = b"".join(self.control)
         self.control.clear()
         self.retry_at = None
         if self.closing or self.conn.state is not State.OPEN or not self.tables_sent:
             return out
-        if now is not None:
+        more, self.more_of_tick = self.more_of_tick and self.throttle is None, False
+        if now is not None and not more:
             due = self.last_updates_at + self.own_throttle() - 0.5 / self.config.tick_hz
             if now < due - 1e-9:
                 # the tick at which they are due wakes the writer; this is for when no tick publishes:
@@ -196,7 +200,7 @@ class Session:
                 self.retry_at = due + 0.75 / self.config.tick_hz
                 return out
         data = self._joint_updates()
-        if data and now is not None:
+        if data and now is not None and not more:
             self.last_updates_at = now
         return out + data
 

@@ -110,6 +110,23 @@ class TickUpdate:
             tick=self.tick,
         )
 
+    def take(self, other: TickUpdate) -> None:
+        """Overwrite the rows of the soldiers that ``other`` (a later sample of some of them) holds too."""
+        at = np.searchsorted(self.indices, other.indices)
+        hit = at < len(self.indices)
+        hit[hit] = self.indices[at[hit]] == other.indices[hit]
+        dst, src = at[hit], np.flatnonzero(hit)
+        for mine, theirs in (
+            (self.joints, other.joints),
+            (self.figures, other.figures),
+            (self.heading_only, other.heading_only),
+            (self.clips, other.clips),
+            (self.frames, other.frames),
+            (self.headings, other.headings),
+        ):
+            if len(mine) == len(self.indices) and len(theirs) == len(other.indices):
+                mine[dst] = theirs[src]
+
 
 @dataclass(frozen=True)
 class ClipStart:
