@@ -217,12 +217,10 @@ class Turning(ManagerCore):
         tb, lib = self.table, self.library
         node = int(tb.node[i])
         turns = self._ground_turns(via, -float(tb.root_yaw[i]))
-        up, down = (
-            tuple(replace(s, duration=s.duration / PRONE_TURN_RATE) for s in lib.path(a, b))
-            for a, b in ((node, via), (via, node))
-        )
+        up, down = lib.path(node, via), lib.path(via, node)
         if not turns or not up or not down:
             return False
+        up, down = (tuple(replace(s, duration=s.duration / PRONE_TURN_RATE) for s in p) for p in (up, down))
         self._turn_path(i, (*up, *turns, *down), t)
         return True
 
