@@ -165,6 +165,20 @@ def test_a_crawler_whose_heading_changes_much_stops_turns_on_the_move_and_crawls
     assert abs(gap[-1]) <= STOP_CM
 
 
+def test_a_crawler_reversing_turns_on_the_spot_then_on_the_move(lib) -> None:
+    """180°: the 90° on the spot, then the 90° carried forward (two turns carried forward, each along the
+    way it turns to, ended 75 cm beside his entity's path: 136 cm from it, 89 after the stop; 201 cm when
+    both were on the spot at the recorded pace)."""
+    script = [(0.0, 0.0, 0.0), (0.5, 0.3, 0.0), (4.0, 0.3, 0.0, 220.0), (11.0, 0.0, 0.0)]
+    run = drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
+    shown = [c.split("/")[-1] for c in run["clips"].tolist()]
+    turns = [c for k, c in enumerate(shown) if (not k or c != shown[k - 1]) and "_r90" in c]
+    assert turns == ["crawlturn_r90_low", "crawlarc_r90_low"]
+    check_turn(lib, run, 3.9, 180.0, within=2.0, family="_r90_")
+    turned = max(i for i, c in enumerate(shown) if "crawlarc_" in c) + 1
+    assert np.hypot(*run["gap"][turned]) <= 100.0 and np.hypot(*run["gap"][-1]) <= 50.0
+
+
 async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(
     autojump_clock: trio.abc.Clock,
 ) -> None:
