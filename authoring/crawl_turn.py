@@ -16,6 +16,10 @@ towards its turn, and the spine keeps the chest on its own (one batched IK solve
 :mod:`authoring.crawl`); then the arms are tracked frame after frame (palms on the rifle first, then the
 elbows on their tracks), so no joint leaps between IK branches.
 
+A crawler turns so too, but on the move (``crawlarc_*``, :data:`ARC_ADVANCE`): each move also carries its
+part forward, along the heading it turns to, as a crawl stride would, so that the pivot under the belly moves
+with the entity (turned on the spot he ended 1.3 m behind a crawling entity and caught up over 5 s).
+
 Like the standing turns (:mod:`authoring.turns`) these clips really move the soldier: the clip frame is
 CRAWL's, the last frame is CRAWL moved by the ground-plane rigid move recorded as the channelset's
 ``end_offset`` (x cm, z cm, yaw deg, + = left).
@@ -38,12 +42,13 @@ from authoring.crawl import (
     _hand_goals,
     _progress,
     _rise,
+    _smooth,
     solve_body,
 )
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, arm
 from authoring.transitions import CARRIER, ClipFrames, lift_off_ground, track_solve
-from authoring.turns import _about, _turn_move, ground_move
+from authoring.turns import _about
 from peabody.fk import FigureKinematics
 
 FPS = 60
@@ -59,13 +64,21 @@ PELVIS_FRONT = 0.25  # ... in the pelvis's
 GAP = 0.06  # s all four limbs are down between two moves
 LEAD_IN = 0.25  # s before the first pair lifts (the body sets off)
 SETTLE = 0.4  # s after the last pair lands (the body comes round to the end)
+# cm a crawler's turn (crawlarc_*) carries each part forward per move, along the heading it turns to (a crawl
+# stride: 26 cm): 60 cm over a 90° turn, about what a 0.3 m/s entity crawls while the server plays it (2.2 s)
+ARC_ADVANCE = 20.0
+# share of the front's advance in the chest's and the pelvis's (the chest carried with the front and the
+# pelvis 0.25 of it stretched the trunk 15 cm: the arms fell short, forearms slid 3.3-4.4 cm, palms 3 cm)
+ADVANCE_FRONT = 0.5
 
 
-def clip_name(direction: str, angle: float) -> str:
-    return f"crawlturn_{direction[0]}{angle:g}"
+def clip_name(direction: str, angle: float, advance: float = 0.0) -> str:
+    return f"crawl{'arc' if advance else 'turn'}_{direction[0]}{angle:g}"
 
 
-_PLANS = {clip_name(d, a): (d, float(a)) for d in SIDES for a in TURN_ANGLES}
+_PLANS = {
+    clip_name(d, a, adv): (d, float(a), adv) for adv in (0.0, ARC_ADVANCE) for d in SIDES for a in TURN_ANGLES
+}
 CRAWL_TURN_CLIPS: tuple[str, ...] = tuple(_PLANS)
 
 
@@ -91,17 +104,33 @@ def part_moves(direction: str, angle: float) -> tuple[dict[str, list[tuple[float
 
 
 def part_yaw(
-    t: np.ndarray, moves: list[tuple[float, float, float]], duration: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """A part's yaw (degrees) about the pivot at ``t``, and how far (share of its lift) it is raised: it
-    rises first and turns while clear of the ground (:func:`authoring.crawl._progress`)."""
+    t: np.ndarray, moves: list[tuple[float, float, float]], duration: float, advance: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A part's yaw (degrees) about the pivot at ``t``, how far (share of its lift) it is raised, and
+    ``(n, 2)`` how far (X, Z cm) it is carried: ``advance`` cm a move along the heading it turns to. It
+    rises first and moves while clear of the ground (:func:`authoring.crawl._progress`)."""
     yaw = np.zeros(len(t))
     up = np.zeros(len(t))
+    carried = np.zeros((len(t), 2))
     for t0, a, b in moves:
         s = (t - t0) / duration
         yaw += (b - a) * _progress(s)
         up = np.maximum(up, _rise(s))
-    return yaw, up
+        carried += advance * _progress(s)[:, None] * _ahead(b)
+    return yaw, up, carried
+
+
+def _ahead(yaw: float) -> np.ndarray:
+    """(X, Z) of the clip's forward (-Z) turned ``yaw`` degrees."""
+    return (_about((0.0, 0.0), np.array([yaw]))[0, :3, :3] @ [0.0, 0.0, -1.0])[[0, 2]]
+
+
+def _carried(pivot: tuple[float, float], yaw: np.ndarray, carried: np.ndarray) -> np.ndarray:
+    """``(n, 4, 4)`` ground moves: turned ``yaw`` degrees about ``pivot``, then carried ``carried`` (X, Z)."""
+    m = _about(pivot, yaw)
+    m[:, 0, 3] += carried[:, 0]
+    m[:, 2, 3] += carried[:, 1]
+    return m
 
 
 def _site(kin: FigureKinematics, q: np.ndarray, root: np.ndarray, site: str) -> np.ndarray:
@@ -116,48 +145,66 @@ def pivot_of(kin: FigureKinematics, key: KeyPosture) -> tuple[float, float]:
     return float(root[0, 3]), float(np.mean(z))
 
 
-def limb_track(
-    p0: np.ndarray, pivot: tuple[float, float], yaw: np.ndarray, up: np.ndarray, lift: float
-) -> np.ndarray:
-    """World track ``(n, 3)`` of a contact at ``p0``: turned ``yaw`` degrees about ``pivot``, raised
+def limb_track(p0: np.ndarray, moves: np.ndarray, up: np.ndarray, lift: float) -> np.ndarray:
+    """World track ``(n, 3)`` of a contact at ``p0``: moved by the ground ``moves`` ``(n, 4, 4)``, raised
     ``up * lift`` cm."""
-    track = (_about(pivot, yaw) @ np.append(p0, 1.0))[:, :3]
+    track = (moves @ np.append(p0, 1.0))[:, :3]
     track[:, 1] += lift * up
     return track
 
 
 def record_crawl_turn(
-    kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture, direction: str, angle: float
+    kin: FigureKinematics,
+    rkin: FigureKinematics,
+    key: KeyPosture,
+    direction: str,
+    angle: float,
+    advance: float = 0.0,
 ) -> tuple[ClipFrames, tuple[float, float, float]]:
-    """The frames of one turn (see the module docstring) and its ``end_offset``."""
+    """The frames of one turn (see the module docstring), each move carrying its part ``advance`` cm
+    forward, and its ``end_offset``."""
     moves, t_land = part_moves(direction, angle)
     t_end = round((t_land + SETTLE) * FPS) / FPS
     n = round(t_end * FPS) + 1
     t = np.arange(n) / FPS
     q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
     pivot = pivot_of(kin, key)
-    (front, f_up), (back, b_up) = (part_yaw(t, moves[p], MOVE[p]) for p in ("front", "back"))
-    roots = _about(pivot, PELVIS_FRONT * front + (1.0 - PELVIS_FRONT) * back) @ root0
+    (front, f_up, f_on), (back, b_up, b_on) = (
+        part_yaw(t, moves[p], MOVE[p], advance) for p in ("front", "back")
+    )
+
+    def mix(share: float) -> np.ndarray:  # the body between the parts: ``share`` of the front's turn
+        on = ADVANCE_FRONT * f_on + (1.0 - ADVANCE_FRONT) * b_on
+        return _carried(pivot, share * front + (1.0 - share) * back, on)
+
+    roots = mix(PELVIS_FRONT) @ root0
     chest0 = kin.segment_globals(q0, root0)[kin.segment_names.index(CARRIER)]
-    chest = _about(pivot, CHEST_FRONT * front + (1.0 - CHEST_FRONT) * back) @ chest0
+    chest = mix(CHEST_FRONT) @ chest0
     chest[:, 1, 3] += ELBOW_LIFT * f_up  # the shoulders rise with the forearms
+    front_moves, back_moves = _carried(pivot, front, f_on), _carried(pivot, back, b_on)
 
     def legs(side: str, part: str) -> np.ndarray:
         p0 = _site(kin, q0, root0, LEG_SITES[part].format(s=side))
-        return limb_track(p0, pivot, back, b_up, LIFT[part])
+        return limb_track(p0, back_moves, b_up, LIFT[part])
 
     poses, roots = solve_body(kin, q0, chest, roots, legs)
     # the arms on that body: the palms on the rifle the front carries round, then the elbows on their tracks
-    rifles = _about(pivot, front) @ rifle0
+    rifles = front_moves @ rifle0
     rifles[:, 1, 3] += ELBOW_LIFT * f_up
     arm_goals = _hand_goals(kin, rkin, key, rifles)
     for side in SIDES:
         site = ELBOW_SITE.format(s=side)
-        track = limb_track(_site(kin, q0, root0, site), pivot, front, f_up, ELBOW_LIFT)
+        track = limb_track(_site(kin, q0, root0, site), front_moves, f_up, ELBOW_LIFT)
         arm_goals.append(ik.Goal(site, track, None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
     poses = track_solve(kin, poses, arm_goals, roots, iterations=10, max_dof_step=0.02, forward_only=True)
-    end_offset = _turn_move(pivot, (1.0 if direction == "left" else -1.0) * angle)
-    end = ground_move(*end_offset)
+    if advance:  # all limbs down, the body still: the arms settle into CRAWL's own solution (carried
+        # forward, the left clavicle came to rest 1 cm off it and leapt there in the last frames, 0.33 m/s;
+        # turned on the spot they end on it)
+        settle = _smooth((t - t_land) / SETTLE)[:, None]
+        poses = (1.0 - settle) * poses + settle * q0
+    yaw = (1.0 if direction == "left" else -1.0) * angle
+    end = _carried(pivot, np.array([yaw]), b_on[-1:])[0]
+    end_offset = (float(end[0, 3]), float(end[2, 3]), yaw)
     poses[0], roots[0], rifles[0] = q0, root0, rifle0
     poses[-1], roots[-1], rifles[-1] = q0, end @ root0, end @ rifle0
     lift_off_ground(kin, poses, roots, rifles)

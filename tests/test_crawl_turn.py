@@ -1,6 +1,7 @@
 """Turns in place on forearms and knees (committed soldier.fig, DI.fig and M16 clips): each ends in CRAWL
 moved by its ``end_offset``, turns the front and the back in alternate moves of at most 30°, and keeps every
-planted elbow, kneecap and toe tip still in the world (issue 16)."""
+planted elbow, kneecap and toe tip still in the world (issue 16). A crawler's turns (``crawlarc_*``) do so
+too, carried forward ARC_ADVANCE cm a move along the heading they turn to."""
 
 from __future__ import annotations
 
@@ -14,6 +15,10 @@ from ttes.paths import CHANNELSETS, FIGURES
 
 SUFFIXES = {"": "soldier.fig", "_low": "DI.fig", "_m16_low": "DI.fig"}
 SLIDE_CM = {"": 0.5, "_low": 3.0, "_m16_low": 3.0}  # the recorded soldier; its slaves: the check's limit
+# ... the recorded soldier's turns carried forward: the hips, carried 10 cm over the planted knees while the
+# front moves, pull them 0.8-1.4 cm (halfway between the parts; with the knees' share, 0.25, the trunk
+# stretched and the forearms slid 3 cm)
+ARC_SLIDE_CM = 1.5
 SITES = [f"{s}_{p}" for s in ("left", "right") for p in ("upper_arm.distal", "lower_leg.knee", "toes.distal")]
 DOWN_CM = 1.0  # a contact this near its lowest height touches the ground
 
@@ -43,7 +48,8 @@ def test_a_turn_on_the_ground_keeps_its_planted_contacts_and_ends_in_crawl_moved
     body = SUFFIXES[suffix]
     assert cs.end_offset is not None
     x, z, yaw = cs.end_offset
-    assert yaw == float(name[11:]) * (1.0 if name[10] == "l" else -1.0)
+    side, angle = name.split("_")[1][0], float(name.split("_")[1][1:])
+    assert yaw == angle * (1.0 if side == "l" else -1.0)
     np.testing.assert_allclose(cs.joint_data[-1], cs.joint_data[0], atol=1e-5)
     move = turns.ground_move(x, z, yaw)
     for ptype in cf.locations:
@@ -58,6 +64,17 @@ def test_a_turn_on_the_ground_keeps_its_planted_contacts_and_ends_in_crawl_moved
             np.flatnonzero(~down[:-1] & down[1:]), np.flatnonzero(down[:-1] & ~down[1:]), strict=True
         ):
             slide = np.linalg.norm(p[a:b, [0, 2]] - p[a, [0, 2]], axis=1).max()
-            assert slide <= SLIDE_CM[suffix], (
-                f"{name}{suffix} {site} slides {slide:.2f} cm in frames {a}..{b}"
-            )
+            limit = ARC_SLIDE_CM if name.startswith("crawlarc_") and not suffix else SLIDE_CM[suffix]
+            assert slide <= limit, f"{name}{suffix} {site} slides {slide:.2f} cm in frames {a}..{b}"
+
+
+@pytest.mark.parametrize("angle", crawl_turn.TURN_ANGLES)
+def test_a_crawlers_turn_carries_him_forward_along_the_headings_it_turns_to(angle: int) -> None:
+    """The end of ``crawlarc_r*`` is that of ``crawlturn_r*`` carried ARC_ADVANCE cm a move along the
+    heading each move turns to (the soldier recorded: its end_offset is the clip's own)."""
+    arc = load_channelset(CHANNELSETS / f"crawlarc_r{angle}.chset.env").end_offset
+    spot = load_channelset(CHANNELSETS / f"crawlturn_r{angle}.chset.env").end_offset
+    assert arc is not None and spot is not None and arc[2] == spot[2]
+    moves, _ = crawl_turn.part_moves("right", angle)
+    ahead = sum(np.array([np.sin(np.radians(-b)), -np.cos(np.radians(-b))]) for _, _, b in moves["back"])
+    np.testing.assert_allclose(np.subtract(arc[:2], spot[:2]), crawl_turn.ARC_ADVANCE * ahead, atol=1e-3)

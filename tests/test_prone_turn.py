@@ -1,8 +1,9 @@
 """A soldier on the ground whose heading changes turns in place on forearms and knees (issue 16).
 
 On forearms and knees (CRAWL) he plays the turn in place that fits (``crawlturn_*``, authoring/crawl_turn.py);
-lying prone he comes up onto forearms and knees, turns and lies down again; crawling, a large heading change
-stops him, he turns and crawls on (turning.CRAWL_REVERSAL_DEG), a small one he turns slowly as he crawls.
+lying prone he comes up onto forearms and knees, turns and lies down again (90° in under 4 s); crawling, a
+large heading change stops him, he turns with the turns that carry him forward (``crawlarc_*``: he keeps up
+with his entity) and crawls on (turning.CRAWL_REVERSAL_DEG), a small one he turns slowly as he crawls.
 Turned about the root instead (prone: at once; crawling: at 90°/s) his planted elbows, knees and toes slid
 13-116 cm in the world.
 
@@ -32,6 +33,8 @@ SITES = tuple(
 )
 DOWN_CM = 1.0  # a contact this near its lowest height touches the ground
 SLIDE_CM = 3.0  # the motion check's contact_slide limit
+CATCH_CM = 15.0  # a crawler 1 s after his turn trails his entity at most this much more than crawling on
+STOP_CM = 25.0  # ... and ends this near it when it stops (14 cm before there were turns on the ground)
 
 
 @pytest.fixture(scope="module")
@@ -80,12 +83,15 @@ def facing(world: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(ahead[:, 0], ahead[:, 1]))
 
 
-def check_turn(lib, run: dict[str, np.ndarray], t0: float, turn: float, within: float = 1.0) -> None:
-    """From ``t0`` (s) on: every planted phase of a turn clip within SLIDE_CM, no snap (6° a tick at most:
-    tests/test_reversal.py), and the figure turned by the entity's ``turn`` (``within`` degrees)."""
+def check_turn(
+    lib, run: dict[str, np.ndarray], t0: float, turn: float, within: float = 1.0, family: str = "crawlturn_"
+) -> None:
+    """From ``t0`` (s) on: every planted phase of a turn clip (of ``family``) within SLIDE_CM, no snap (6° a
+    tick at most: tests/test_reversal.py), and the figure turned by the entity's ``turn`` (``within``
+    degrees)."""
     world, _ = contacts(lib, run)
     yaw = facing(world)[int(t0 * HZ) :]
-    hits = slides(lib, run, "crawlturn_")
+    hits = slides(lib, run, family)
     assert hits and max(hits) <= SLIDE_CM, sorted(hits)[-3:]
     assert np.abs((np.diff(yaw) + 180.0) % 360.0 - 180.0).max() <= 6.0
     assert abs((yaw[-1] - yaw[0] - turn + 180.0) % 360.0 - 180.0) < within
@@ -106,9 +112,17 @@ def test_on_forearms_and_knees_a_heading_change_turns_in_place(lib, turn: float,
     check_turn(lib, run, 3.9, turn)
 
 
+def settled(run: dict[str, np.ndarray]) -> float:
+    """The time (s) the figure last moved: its joints or its placement changed since the tick before."""
+    shown = np.concatenate([run["joints"], run["placements"].reshape(len(run["joints"]), -1)], axis=1)
+    return float(np.flatnonzero(np.abs(np.diff(shown, axis=0)).max(axis=1) > 1e-6)[-1] + 1) / HZ
+
+
 @pytest.mark.parametrize("turn", [90.0, -90.0, 180.0])
 def test_a_prone_soldier_comes_up_turns_and_lies_down_again(lib, turn: float) -> None:
-    """Once up and down however far he turns (180°: the 90° turn twice on forearms and knees)."""
+    """Once up and down however far he turns (180°: the 90° turn twice on forearms and knees), briskly:
+    90° in under 4 s (up and down at turning.PRONE_TURN_RATE, the turn at GROUND_TURN_RATE; 6.7 s at the
+    recorded pace)."""
     until = 15.0 + 3.6 * (abs(turn) > 90.0)
     run = drive(
         lib, [(0.0, 0.0, 0.0), (6.0, 0.0, 0.0, 10.0 + turn)], 10.0, until, appearance=Appearance.PRONE
@@ -121,17 +135,48 @@ def test_a_prone_soldier_comes_up_turns_and_lies_down_again(lib, turn: float) ->
         "crawl2prstow_low",
     ]
     check_turn(lib, run, 5.9, turn)
+    if abs(turn) == 90.0:
+        assert settled(run) - 6.0 <= 4.0
+
+
+def behind(run: dict[str, np.ndarray]) -> np.ndarray:
+    """Per tick how far (cm) the figure lies behind its entity along the entity's heading."""
+    h = run["heading"]
+    return -(run["gap"] * np.stack([np.sin(h), np.cos(h)], axis=1)).sum(axis=1)
 
 
 @pytest.mark.parametrize("turn", [90.0, -45.0])
-def test_a_crawler_whose_heading_changes_much_stops_turns_and_crawls_on(lib, turn: float) -> None:
+def test_a_crawler_whose_heading_changes_much_stops_turns_on_the_move_and_crawls_on(lib, turn: float) -> None:
+    """He turns with the turns that carry him forward (``crawlarc_*``), not those on the spot; 1 s after
+    the turn he is within CATCH_CM of the trail he had crawling straight (24 cm: the stop lag), and a stop
+    ends near the entity (turned on the spot at the recorded pace: 131 cm behind after the turn, 122 cm 1 s
+    later, 63 cm after the stop; 14 cm before there were turns on the ground)."""
     script = [(0.0, 0.0, 0.0), (0.5, 0.3, 0.0), (4.0, 0.3, 0.0, 40.0 + turn), (11.0, 0.0, 0.0)]
     run = drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
     shown = run["clips"].tolist()
-    k = next(i for i, c in enumerate(shown) if "crawlturn_" in c)
+    k = next(i for i, c in enumerate(shown) if "crawlarc_" in c)
     assert k / HZ < 5.5  # stopped at the end of the stride it was in
+    assert not any("crawlturn_" in c for c in shown)
     assert any("crawl_cycle" in c for c in shown[:k]) and any("crawl_cycle" in c for c in shown[k:])
-    check_turn(lib, run, 3.9, turn, within=2.0)  # (from mid-crawl: crawling straight on measures 1.3°)
+    check_turn(lib, run, 3.9, turn, within=2.0, family="crawlarc_")  # (crawling straight on: 1.3°)
+    gap = behind(run)
+    turned = max(i for i, c in enumerate(shown) if "crawlarc_" in c) + 1
+    assert gap[turned + int(HZ)] <= gap[int(3.9 * HZ)] + CATCH_CM
+    assert abs(gap[-1]) <= STOP_CM
+
+
+def test_a_crawler_reversing_turns_on_the_spot_then_on_the_move(lib) -> None:
+    """180°: the 90° on the spot, then the 90° carried forward (two turns carried forward, each along the
+    way it turns to, ended 75 cm beside his entity's path: 136 cm from it, 89 after the stop; 201 cm when
+    both were on the spot at the recorded pace)."""
+    script = [(0.0, 0.0, 0.0), (0.5, 0.3, 0.0), (4.0, 0.3, 0.0, 220.0), (11.0, 0.0, 0.0)]
+    run = drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
+    shown = [c.split("/")[-1] for c in run["clips"].tolist()]
+    turns = [c for k, c in enumerate(shown) if (not k or c != shown[k - 1]) and "_r90" in c]
+    assert turns == ["crawlturn_r90_low", "crawlarc_r90_low"]
+    check_turn(lib, run, 3.9, 180.0, within=2.0, family="_r90_")
+    turned = max(i for i, c in enumerate(shown) if "crawlarc_" in c) + 1
+    assert np.hypot(*run["gap"][turned]) <= 100.0 and np.hypot(*run["gap"][-1]) <= 50.0
 
 
 async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(

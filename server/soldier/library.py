@@ -67,6 +67,7 @@ from server.soldier.state import CRAWL_NODE, PRONE_NODES, STAND_STOWED, LocoStat
 
 GRAPH_STATIC, GRAPH_LOCO, GRAPH_CRAWL, GRAPH_TURN, GRAPH_REACT = 0, 1, 2, 3, 4
 GRAPH_NAMES = ("static", "loco", "crawl", "turn", "react")
+ARC_PREFIX = "crawlarc_"  # turn clips that carry the figure forward (a crawler turns on the move)
 
 # m/s per clip family, used when a locomotion clip has no stride/ground-speed data and no measurable travel
 DEFAULT_GROUND_SPEED: dict[str, float] = {
@@ -198,12 +199,16 @@ class MotionLibrary:
         # turns in place per posture node (STAND_STOWED; CRAWL, on forearms and knees): (clip id, compass
         # degrees it turns, clockwise positive)
         self.node_turns: dict[int, list[tuple[int, float]]] = {}
+        # ... and those that carry the figure forward as they turn (ARC_PREFIX: a crawler's, on the move)
+        self.node_arcs: dict[int, list[tuple[int, float]]] = {}
         if turn is not None:
             base = next(k for k, e in enumerate(entries) if e[1] == GRAPH_TURN)
             for arc in turn.graph.arcs:
                 cid = base + arc.channelset
                 if arc.start == arc.end and arc.start in self._node and self.clip_end_offset[cid, 2] != 0.0:
-                    self.node_turns.setdefault(self._node[arc.start], []).append(
+                    moving = clip_stem(turn.graph.files[arc.channelset]).startswith(ARC_PREFIX)
+                    into = self.node_arcs if moving else self.node_turns
+                    into.setdefault(self._node[arc.start], []).append(
                         (cid, -float(self.clip_end_offset[cid, 2]))
                     )
         # ... standing (the pivots of walking soldiers too)

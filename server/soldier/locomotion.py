@@ -89,10 +89,11 @@ GAIT_CHANGES = frozenset({S.WALK2RUN, S.RUN2WALK})
 # start and end steps and the gait changes play at their recorded rate (natural timing: the root offset
 # keeps their feet planted while the entity moves at another speed), the cycles follow the ground speed
 SCALED = np.array([s not in END_STATES | START_STATES | GAIT_CHANGES and s != S.NONE for s in S], bool)
-# ... except in a hurry: the end step of a walk or run that reverses, and a start step whose figure is
-# metres behind its entity (after a pivot), play at the gait's upper cadence (a person stopping to turn back,
-# or setting off after the turn, steps quicker; the root offset keeps the feet planted at any rate)
-HURRY_STATES = frozenset({S.WALK_START, S.WALK_END, S.RUN_START, S.RUN_END})
+# ... except in a hurry: the end step of a walk, run or crawl that reverses (a crawler turns on the ground),
+# and a start step whose figure is metres behind its entity (after a pivot or a turn on the ground), play at
+# the gait's upper cadence (a person stopping to turn back, or setting off after the turn, steps quicker; the
+# root offset keeps the feet planted at any rate)
+HURRY_STATES = frozenset({S.WALK_START, S.WALK_END, S.RUN_START, S.RUN_END, S.CRAWL_START, S.CRAWL_END})
 
 # (clip base name, footed, direction) per state; CRAWL_END plays crawl_start backwards
 CLIP_OF: dict[S, tuple[str, bool, int]] = {
