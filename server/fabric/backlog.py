@@ -11,12 +11,13 @@ soldier's rows (a remove after a request stays after it).
 Events are dropped only where the shard would end the same (events21: a peer flooding reactions or
 create/remove cycles grew a shard's memory without bound). A reaction (a transient) drops its soldier's
 queued one, and stays where it arrived; a key drops when one is queued (it asks for the same batch); a
-remove drops its soldier's create queued since the last sync, with the reaction queued since (the soldier
-lived and died in the backlog: the front-end removed it already, and merges no poses of a soldier it
-lacks; its rows stay, and the shard rejects them); a create after a queued create, or a remove after a
-queued remove, would fail on the shard. So between two syncs a soldier has at most one reaction and two
-creates or removes (a remove, then a create) queued: events are bounded by the soldier indices (uint16),
-whatever a peer sends, and syncs come from the front-end's own joins and failovers. Events over the
+remove drops its soldier's create queued right after a remove of it since the last sync (so the create
+succeeds), with the reaction queued since (the soldier lived and died in the backlog: the front-end
+removed it already, and merges no poses of a soldier it lacks; its rows stay, and the shard rejects
+them); a create after a queued create, or a remove after a queued remove, would fail on the shard. So
+between two syncs a soldier has at most one reaction and three creates or removes queued (create, remove,
+create): events are bounded by the soldier indices (uint16), whatever a peer sends, and syncs come from
+the front-end's own joins and failovers. Events over the
 bounds drop the oldest reactions; the rest is logged. Dropped events are counted (``events_dropped``).
 
 A row overwrites only a row of the same *activity* (:func:`activity`: posture, weapon, moving or still,
@@ -57,7 +58,8 @@ LOG_EVERY_S = 1.0  # a drop is logged at most this often (with the drops since t
 @dataclass(eq=False)
 class _Event:
     """An event queued (``queued`` False once taken or dropped: it stays in the queue, skipped, until the
-    queue is compacted); ``prev``: its soldier's create or remove queued before it (:attr:`Backlog._life`)."""
+    queue is compacted); ``prev``: its soldier's create or remove queued right before it, since the last
+    sync (:attr:`Backlog._life`), taken since or not."""
 
     op: req.Op
     serial: int
@@ -256,16 +258,18 @@ class Backlog:
 
     def _cancels(self, index: int, kind: str) -> bool:
         """Whether a create or remove of ``index`` goes without being queued: a remove cancels the soldier's
-        create queued (with the reaction queued since; the soldier lived and died in the backlog, and the
-        front-end, which removed it already, would merge none of its poses), and a create after a queued
-        create, or a remove after a queued remove, would fail on the shard anyway."""
+        create queued right after a remove of it (so the create succeeds: the soldier lived and died in the
+        backlog, and the front-end, which removed it already, would merge none of its poses), with the
+        reaction queued since; a create after a queued create, or a remove after a queued remove, would
+        fail on the shard anyway (the front-end checked the create's figure and weapon: its own manager
+        created the soldier from the same data)."""
         last = self._life.get(index)
         if last is None or not last.queued:
             return False
         if last.op["op"] == kind:
             self.events_dropped += 1
             return True
-        if kind == "create":
+        if kind == "create" or last.prev is None:  # the create may fail: the soldier may be on the shard
             return False
         self._drop_event(last)
         reaction = self._reaction.get(index)
