@@ -56,7 +56,7 @@ def measure(soldiers: int, messages: int, merge_rows: int | None = None) -> dict
     assert m is not None
     driver = MixDriver(soldiers)
     m.apply_requests(driver.initial(), 0.0)
-    node = ShardNode(server, _NoFabric(), Sharding(0, 1))  # type: ignore[arg-type]
+    node = ShardNode(server, _NoFabric(), Sharding(0, 1))
     data = [req.pack([req.requests(driver.step(0.1 * (k + 1)).rows)]) for k in range(messages)]
     sent_rows = sum(len(req.decode(d)[0]["rows"]) for d in data)
     clock[0] = 0.1 * messages

@@ -46,7 +46,7 @@ def measure(soldiers: int, seconds: float, depth: int, seed: int = 1) -> dict[st
     server.now = lambda: clock[0]  # type: ignore[method-assign]
     first = [world.create_soldier("DI.fig", "AK_47.fig") for _ in range(soldiers)]
     index = np.asarray(first, np.int64)  # slot -> soldier
-    node = ShardNode(server, _NoFabric(), Sharding(0, 1))  # type: ignore[arg-type]
+    node = ShardNode(server, _NoFabric(), Sharding(0, 1))
     driver = MixDriver(soldiers, seed=seed)
     tracker = Tracker(TICK_HZ, 1)
     tracker.grow(soldiers, np.zeros(soldiers, np.int64))

@@ -17,7 +17,7 @@ from test_server_support import make_server
 from protocol.entity import Appearance, make_entity_requests
 from server.fabric import requests as req
 from server.fabric.backlog import Backlog, activity
-from server.fabric.nodes import Sharding, ShardNode
+from server.fabric.nodes import PENDING_MAX, FrontNode, Sharding, ShardNode
 from server.soldier.manager import REQUEST_OK
 
 
@@ -85,7 +85,7 @@ def test_a_request_that_changes_what_its_soldier_does_is_applied_not_overwritten
 def test_a_flood_stays_within_the_bound_and_keeps_every_event_and_newest_row() -> None:
     """Soldiers 0..19 send requests for ever and react every other round: the backlog keeps at most
     ``max_rows`` request rows (the events besides), drops the oldest superseded rows (counted), keeps
-    every reaction in order and each soldier's newest row."""
+    each soldier's newest reaction (a newer one replaces a queued one: events21) and newest row."""
     backlog = Backlog(max_rows=40)
     reacts = []
     for k in range(400):
@@ -95,7 +95,8 @@ def test_a_flood_stays_within_the_bound_and_keeps_every_event_and_newest_row() -
         assert len(backlog) - backlog.events <= 40
     assert backlog.dropped > 0
     ops = drain(backlog)
-    assert [op["kind"] for op in ops if op["op"] == "react"] == reacts
+    assert [op["kind"] for op in ops if op["op"] == "react"] == reacts[-20:]
+    assert backlog.events_dropped == len(reacts) - 20
     newest = {
         int(r["index"]): float(r["velocity"][0]) for op in ops if op["op"] == "requests" for r in op["rows"]
     }
@@ -125,11 +126,144 @@ def test_events_beyond_the_bound_are_kept_and_do_not_push_the_rows_out() -> None
     the bound is on the request rows, so the rows among them stay (a backlog full of events dropped every
     new row on arrival: the newest state, found in review)."""
     backlog = Backlog(max_rows=10)
-    backlog.put([row(1, 1.0), row(2, 1.0)] + [req.react(3, f"r{k}") for k in range(12)] + [row(4, 1.0)])
+    creates = [req.create(10 + k, "DI.fig", "AK_47.fig", None) for k in range(12)]
+    backlog.put([row(1, 1.0), row(2, 1.0), *creates, row(4, 1.0)])
     assert backlog.dropped == 0 and len(backlog) == 15 and backlog.events == 12
     ops = drain(backlog)
-    assert [op["kind"] for op in ops if op["op"] == "react"] == [f"r{k}" for k in range(12)]
+    assert [op for op in ops if op["op"] == "create"] == creates
     assert [r["index"] for op in ops if op["op"] == "requests" for r in op["rows"]] == [1, 2, 4]
+
+
+def test_a_flood_of_reactions_keeps_one_per_soldier_the_last() -> None:
+    """100,000 reactions for 10 soldiers between the shard's turns (a peer relaying a client that floods
+    them, events21): a reaction replaces its soldier's queued one, so the backlog holds at most one per
+    soldier (and a few dropped ones awaiting compaction), and the last one of each soldier applies."""
+    backlog = Backlog()
+    for m in range(1000):
+        backlog.put([req.react(k % 10, f"r{m * 100 + k}") for k in range(100)])
+        assert backlog.events == len(backlog) == 10 and len(backlog._items) <= 2 * 64 + 10
+        if m % 97 == 0:
+            backlog.take()
+    assert backlog.events_dropped == 100_000 - 10 - 11  # 11 taken on the way
+    assert [op["kind"] for op in drain(backlog)] == [f"r{99_990 + k}" for k in range(10)]
+    assert backlog.rows == backlog.bytes == 0 and not backlog._reaction
+
+
+def test_reactions_keep_their_place_among_their_soldiers_states() -> None:
+    """A newer reaction goes where it arrived, after the states sent before it; the older one goes: the
+    events left are in the order sent."""
+    backlog = Backlog()
+    backlog.put([req.react(1, "a"), posture(1, Appearance.KNEEL), req.react(2, "b"), req.react(1, "c")])
+    ops = drain(backlog)
+    assert [(op["op"], op.get("kind")) for op in ops] == [("requests", None), ("react", "b"), ("react", "c")]
+
+
+def test_events_over_the_bound_drop_the_oldest_reactions_first(caplog: Any) -> None:
+    backlog = Backlog(max_rows=10)
+    creates = [req.create(100 + k, "DI.fig", "AK_47.fig", None) for k in range(6)]
+    backlog.put([req.react(k, f"r{k}") for k in range(8)] + creates)
+    assert backlog.events == 10 and backlog.events_dropped == 4
+    assert "fabric_backlog_full" in caplog.text
+    ops = drain(backlog)
+    assert [op.get("kind") for op in ops if op["op"] == "react"] == ["r4", "r5", "r6", "r7"]
+    assert [op for op in ops if op["op"] == "create"] == creates
+
+
+def test_a_create_then_its_remove_cancel_and_the_rest_stays_in_order() -> None:
+    """A soldier created (after a remove of it) and removed while both wait in the backlog lived and died
+    unseen (the front-end removed it already and merges none of its poses): both go, with its reaction
+    queued since; its rows stay (a shard rejects rows of a soldier it lacks). A create with no remove
+    before it stays (it might fail: the shard might have the soldier). A create after a queued create, or
+    a remove after a queued remove, fails on a shard, and goes too; a sync in between keeps them."""
+    backlog = Backlog()
+    c5, r5 = req.create(5, "DI.fig", "AK_47.fig", None), req.remove(5)
+    backlog.put([req.remove(5), req.react(4, "x"), c5, row(5, 1.0), req.react(5, "y"), r5])
+    assert backlog.events == 2 and backlog.events_dropped == 3
+    assert [op["op"] for op in drain(backlog)] == ["remove", "react", "requests"]
+    backlog.put([c5, r5])
+    assert [op["op"] for op in drain(backlog)] == ["create", "remove"]
+    c6 = req.create(6, "DI.fig", "AK_47.fig", None)
+    sync = {"op": "sync", "soldiers": [], "rows": np.zeros(0, np.uint8)}
+    backlog.put([c6, dict(c6), sync, req.remove(6), req.remove(6)])
+    assert [op["op"] for op in drain(backlog)] == ["create", "sync", "remove"]
+
+
+def test_a_flood_of_creations_and_removals_is_bounded_per_soldier() -> None:
+    """Whatever a peer sends between two syncs, a soldier has at most one reaction and three creates or
+    removes (create, remove, create) queued, and the backlog one key: its events are bounded by the
+    soldier indices (65,536), not by how long the flood lasts. Here 50 soldiers, 200,000 events."""
+    rng = np.random.default_rng(21)
+    backlog = Backlog()
+    kinds = rng.integers(0, 4, 200_000)
+    who = rng.integers(0, 50, 200_000)
+    for start in range(0, 200_000, 500):
+        ops = []
+        part = slice(start, start + 500)
+        for kind, i in zip(kinds[part].tolist(), who[part].tolist(), strict=True):
+            ops.append(
+                req.create(i, "DI.fig", "AK_47.fig", None)
+                if kind == 0
+                else req.remove(i)
+                if kind == 1
+                else req.react(i, "flinch")
+                if kind == 2
+                else req.key()
+            )
+        backlog.put(ops)
+        assert backlog.events <= 4 * 50 + 1 and len(backlog._items) <= 2 * (4 * 50 + 1) + 64
+    assert backlog.events_dropped > 190_000
+
+
+def test_a_shard_ends_as_if_it_applied_every_create_and_remove(caplog: Any) -> None:
+    """A peer cycling a soldier's creation, request, reaction and removal (1,000 times) and creating one
+    more: through the backlog the shard ends with the soldiers, and the states, of one that applied every
+    operation, and none of what it takes fails (the first cycle stays: its create follows no remove)."""
+    walk = make_entity_requests(index=[21], velocity=(1.0, 0.0, 0.0))
+    ops = [
+        op
+        for _ in range(1000)
+        for op in (
+            req.create(20, "DI.fig", "AK_47.fig", None),
+            req.decode(req.pack([req.requests(walk.copy())]))[0],
+            req.react(20, "flinch"),
+            req.remove(20),
+        )
+    ] + [req.create(21, "DI.fig", "AK_47.fig", None), req.decode(req.pack([req.requests(walk)]))[0]]
+    every, backlogged = make_server(), make_server()
+    for s in (every, backlogged):
+        s.start_world()
+        s.world.clock = lambda: 1.0
+    every_node = ShardNode(every, MemoryFabric(Bus()), Sharding(0, 1))
+    for op in ops:
+        every_node.handle(op)
+    node = ShardNode(backlogged, MemoryFabric(Bus()), Sharding(0, 1))
+    node.backlog.put(ops)
+    assert node.backlog.events == 3 and node.backlog.events_dropped == 2998
+    caplog.clear()
+    while (op := node.backlog.take()) is not None:
+        node.handle(op)
+    assert "fabric_request_failed" not in caplog.text
+    a, b = every.world.manager, backlogged.world.manager
+    assert a is not None and b is not None
+    assert a.table.live.tolist() == b.table.live.tolist() == [*range(10), 21]
+    for name in ("appearance", "weapon", "velocity", "heading", "position"):
+        np.testing.assert_array_equal(getattr(a.table, name)[:22], getattr(b.table, name)[:22], err_msg=name)
+
+
+def test_a_front_ends_queue_of_a_shards_batches_is_bounded() -> None:
+    """The other side of the fabric: a front-end whose loop is far behind keeps at most ``PENDING_MAX`` of
+    each shard's batches (the oldest go; the seq gap asks for a key), and asks its loop once."""
+    node = FrontNode(make_server(), MemoryFabric(Bus()), 2)
+    woken: list[object] = []
+
+    class Token:
+        def run_sync_soon(self, fn: object, *args: object) -> None:
+            woken.append(fn)
+
+    for k in range(10_000):
+        node._arrived(Token(), k % 2, b"batch %d" % k)  # type: ignore[arg-type]
+    assert {k: len(q) for k, q in node._pending.items()} == {0: PENDING_MAX, 1: PENDING_MAX}
+    assert node._pending[1][-1] == b"batch 9999" and len(woken) == 2
 
 
 # -- the order of a soldier's states and events: a model of a shard (the soldier's state: its newest row) --
@@ -137,19 +271,19 @@ _EVENTS = st.one_of(
     st.builds(req.react, st.integers(0, 4), st.just("hit")),
     st.builds(req.remove, st.integers(0, 4)),
     st.builds(lambda i: req.create(i, "DI.fig", "AK_47.fig", None), st.integers(0, 4)),
-    st.just(req.key()),
-    st.just({"op": "sync", "soldiers": [], "rows": np.zeros(0)}),
+    st.builds(req.key),
+    st.builds(lambda: {"op": "sync", "soldiers": [], "rows": np.zeros(0)}),
 )
 _MESSAGE = st.lists(
     st.one_of(st.lists(st.integers(0, 4), min_size=1, max_size=4), _EVENTS), min_size=1, max_size=5
 )
 
 
-def _model(ops: list[Any]) -> tuple[list[tuple[str, object, object]], dict[int, float]]:
-    """Each event with what it sees when it applies (its soldier's state; a sync's: every soldier's), and
-    the final states."""
+def _model(ops: list[Any]) -> tuple[dict[int, tuple[str, object, object]], dict[int, float]]:
+    """Each event (by identity) with what it sees when it applies (its soldier's state; a sync's: every
+    soldier's), in order, and the final states."""
     state: dict[int, float] = {}
-    events = []
+    events = {}
     for op in ops:
         if op["op"] == "requests":
             for r in op["rows"]:
@@ -157,15 +291,42 @@ def _model(ops: list[Any]) -> tuple[list[tuple[str, object, object]], dict[int, 
         else:
             index = op.get("index")
             seen = dict(state) if op["op"] == "sync" else state.get(index) if index is not None else None
-            events.append((op["op"], index, seen))
+            events[id(op)] = (op["op"], index, seen)
     return events, state
+
+
+def _lives(ops: list[Any]) -> dict[tuple[int, int], list[str]]:
+    """Each soldier's creates and removes that a shard told them in order applies (a create of a soldier it
+    has, or a remove of one it has not, fails), per stretch between syncs, a create then its remove as
+    nothing (the soldier lived and died unseen: the backlog may cancel them)."""
+    lives: dict[tuple[int, int], list[str]] = {}
+    live: set[int] = set()
+    syncs = 0
+    for op in ops:
+        syncs += op["op"] == "sync"
+        i = op.get("index")
+        if op["op"] not in ("create", "remove") or (op["op"] == "create") == (i in live):
+            continue
+        life = lives.setdefault((i, syncs), [])
+        if op["op"] == "create":
+            live.add(i)
+            life.append("create")
+        else:
+            live.discard(i)
+            if life and life[-1] == "create":
+                life.pop()
+            else:
+                life.append("remove")
+    return {k: life for k, life in lives.items() if life}
 
 
 @settings(max_examples=150, deadline=None)
 @given(st.lists(st.tuples(_MESSAGE, st.integers(0, 2)), min_size=1, max_size=25))
 def test_coalesced_events_see_the_states_they_saw_in_order(stream: list[tuple[list[Any], int]]) -> None:
-    """Whatever arrives and however many operations the shard takes between messages, each event applies
-    with every soldier's newest state sent before it, and the final states are the last ones sent."""
+    """Whatever arrives and however many operations the shard takes between messages, the events taken
+    are among those sent, in order, each applies with every soldier's newest state sent before it, the
+    final states are the last ones sent, a shard applies the same creates and removes (a create then its
+    remove aside), and each soldier's last reaction applies (unless a remove of it came after)."""
     backlog = Backlog()
     sent: list[req.Op] = []
     taken: list[req.Op] = []
@@ -187,7 +348,18 @@ def test_coalesced_events_see_the_states_they_saw_in_order(stream: list[tuple[li
             if (op := backlog.take()) is not None:
                 taken.append(op)
     taken += drain(backlog)
-    assert _model(taken) == _model(sent)
+    applied, asked = _model(taken), _model(sent)
+    assert applied[1] == asked[1]
+    assert list(applied[0]) == [id(op) for op in sent if id(op) in applied[0]]  # in the order sent
+    assert all(asked[0][k] == seen for k, seen in applied[0].items())
+    assert _lives(taken) == _lives(sent)  # the same creates and removes, as the shard applies them
+    last: dict[int, int] = {}  # each soldier's last reaction sent, unless a remove of it came after
+    for op in sent:
+        if op["op"] == "react":
+            last[op["index"]] = id(op)
+        elif op["op"] == "remove":
+            last.pop(op["index"], None)
+    assert set(last.values()) <= applied[0].keys()
     assert backlog.rows == 0 and backlog.bytes == 0
 
 

@@ -5,8 +5,20 @@ between arriving and being taken). An entity request is a DIS-like *state* (post
 heading, position): a newer one for a soldier supersedes an older one not applied yet, as within one batch
 (``SoldierManager.apply_requests``: the last row per soldier wins). So a soldier's new row overwrites its
 queued one in place (taken as early as the old one was), unless an *event* for it (create, remove, react)
-or a sync came in between: events are never coalesced, dropped or reordered, among themselves or against
-a soldier's rows (a remove after a request stays after it).
+or a sync came in between: events are never coalesced or reordered, among themselves or against a
+soldier's rows (a remove after a request stays after it).
+
+Events are dropped only where the shard would end the same (events21: a peer flooding reactions or
+create/remove cycles grew a shard's memory without bound). A reaction (a transient) drops its soldier's
+queued one, and stays where it arrived; a key drops when one is queued (it asks for the same batch); a
+remove drops its soldier's create queued right after a remove of it since the last sync (so the create
+succeeds), with the reaction queued since (the soldier lived and died in the backlog: the front-end
+removed it already, and merges no poses of a soldier it lacks; its rows stay, and the shard rejects
+them); a create after a queued create, or a remove after a queued remove, would fail on the shard. So
+between two syncs a soldier has at most one reaction and three creates or removes queued (create, remove,
+create): events are bounded by the soldier indices (uint16), whatever a peer sends, and syncs come from
+the front-end's own joins and failovers. Events over the
+bounds drop the oldest reactions; the rest is logged. Dropped events are counted (``events_dropped``).
 
 A row overwrites only a row of the same *activity* (:func:`activity`: posture, weapon, moving or still,
 not ``immediate``): a newer heading, speed or position of what the soldier does. A row that changes what
@@ -43,6 +55,18 @@ MERGE_ROWS = 256  # consecutive request rows taken as one batch (a batch costs ~
 LOG_EVERY_S = 1.0  # a drop is logged at most this often (with the drops since the last log)
 
 
+@dataclass(eq=False)
+class _Event:
+    """An event queued (``queued`` False once taken or dropped: it stays in the queue, skipped, until the
+    queue is compacted); ``prev``: its soldier's create or remove queued right before it, since the last
+    sync (:attr:`Backlog._life`), taken since or not."""
+
+    op: req.Op
+    serial: int
+    queued: bool = True
+    prev: _Event | None = None
+
+
 @dataclass
 class _Block:
     """Request rows queued together (one message's, less those that went to older rows)."""
@@ -62,7 +86,7 @@ class Backlog:
     ) -> None:
         self.max_rows, self.max_bytes, self.merge_rows = max_rows, max_bytes, merge_rows
         self._lock = threading.Lock()
-        self._items: collections.deque[_Block | req.Op] = collections.deque()
+        self._items: collections.deque[_Block | _Event] = collections.deque()
         self._blocks: dict[int, _Block] = {}
         self._next_id = 0
         self._latest_block = np.full(INDICES, -1, np.int64)  # the block of each soldier's newest queued row
@@ -77,7 +101,14 @@ class Backlog:
         self.event_bytes = 0
         self.coalesced = 0  # rows that replaced a queued row of their soldier
         self.dropped = 0  # rows dropped from a full backlog
+        self.events_dropped = 0  # events dropped: superseded reactions and keys, cancelled creations
+        self._serial = 0  # of the events queued
+        self._dead = 0  # events dropped but still in ``_items`` (skipped when taken)
+        self._reaction: dict[int, _Event] = {}  # each soldier's reaction queued, the oldest first
+        self._life: dict[int, _Event] = {}  # each soldier's newest create or remove queued since a sync
+        self._key: _Event | None = None  # a key queued
         self._logged_drops, self._logged_at = 0, -np.inf
+        self._logged_event_drops = 0
 
     def __bool__(self) -> bool:
         return bool(self._items)
@@ -88,7 +119,7 @@ class Backlog:
     def describe(self) -> str:
         return (
             f"backlog {self.rows}/{self.max_rows} rows {self.bytes >> 10}/{self.max_bytes >> 10} KiB, "
-            f"{self.coalesced} coalesced, {self.dropped} dropped"
+            f"{self.coalesced} coalesced, {self.dropped} dropped, {self.events_dropped} events dropped"
         )
 
     def put(self, ops: list[req.Op]) -> bool:
@@ -100,7 +131,7 @@ class Backlog:
                     self._put_rows(op["rows"])
                 else:
                     self._put_event(op)
-            if self._over():
+            if self._over() or self._events_over():
                 self._trim()
         return empty
 
@@ -109,20 +140,22 @@ class Backlog:
         full of them would otherwise drop every new row, the newest state, on arrival)."""
         return self.rows - self.events > self.max_rows or self.bytes - self.event_bytes > self.max_bytes
 
+    def _events_over(self) -> bool:
+        return self.events > self.max_rows or self.event_bytes > self.max_bytes
+
     def take(self) -> req.Op | None:
         """The oldest operation: an event, or the request rows at the head (up to ``merge_rows`` whole
         blocks of them, the first whatever its size) as one ``requests`` operation; None when empty."""
         with self._lock:
+            while self._items and isinstance(self._items[0], _Event) and not self._items[0].queued:
+                self._items.popleft()  # dropped
+                self._dead -= 1
             if not self._items:
                 return None
             head = self._items.popleft()
-            if not isinstance(head, _Block):
-                self.rows -= 1
-                self.events -= 1
-                size = _event_bytes(head)
-                self.bytes -= size
-                self.event_bytes -= size
-                return head
+            if isinstance(head, _Event):
+                self._unqueue(head)
+                return head.op
             blocks = [head]
             n = len(head.rows)
             while (
@@ -192,19 +225,100 @@ class Backlog:
         self.bytes += len(idx) * ROW_BYTES
 
     def _put_event(self, op: req.Op) -> None:
-        index = op.get("index")
-        if op["op"] == "key":
-            pass  # no soldier's
-        elif isinstance(index, int) and 0 <= index < INDICES:
+        index = _soldier(op)
+        kind = op["op"]
+        if kind == "key":
+            if self._key is not None:  # the queued one asks for the same key batch, no earlier
+                self.events_dropped += 1
+                return
+        elif index is not None:
+            if kind in ("create", "remove") and self._cancels(index, kind):
+                return
             self._open[index] = False  # its next row goes after the event
         else:  # a sync (or a malformed event): no row crosses it
             self._open[:] = False
-        self._items.append(op)
+            self._life.clear()  # it may create any soldier
+        event = _Event(op, self._serial)
+        self._serial += 1
+        if kind == "key":
+            self._key = event
+        elif index is not None and kind == "react":
+            if (old := self._reaction.pop(index, None)) is not None:
+                self._drop_event(old)  # a transient: the newer one says what the soldier reacts to now
+            self._reaction[index] = event
+        elif index is not None and kind in ("create", "remove"):
+            event.prev = self._life.get(index)
+            self._life[index] = event
+        self._items.append(event)
         size = _event_bytes(op)
         self.rows += 1
         self.bytes += size
         self.events += 1
         self.event_bytes += size
+
+    def _cancels(self, index: int, kind: str) -> bool:
+        """Whether a create or remove of ``index`` goes without being queued: a remove cancels the soldier's
+        create queued right after a remove of it (so the create succeeds: the soldier lived and died in the
+        backlog, and the front-end, which removed it already, would merge none of its poses), with the
+        reaction queued since; a create after a queued create, or a remove after a queued remove, would
+        fail on the shard anyway (the front-end checked the create's figure and weapon: its own manager
+        created the soldier from the same data)."""
+        last = self._life.get(index)
+        if last is None or not last.queued:
+            return False
+        if last.op["op"] == kind:
+            self.events_dropped += 1
+            return True
+        if kind == "create" or last.prev is None:  # the create may fail: the soldier may be on the shard
+            return False
+        self._drop_event(last)
+        reaction = self._reaction.get(index)
+        if reaction is not None and reaction.serial > last.serial:
+            del self._reaction[index]
+            self._drop_event(reaction)
+        self.events_dropped += 1  # the remove
+        return True
+
+    def _unqueue(self, event: _Event) -> None:
+        """Take an event off the books (taken, or dropped)."""
+        event.queued = False
+        index = _soldier(event.op)
+        if index is not None and self._reaction.get(index) is event:
+            del self._reaction[index]
+        if index is not None and self._life.get(index) is event:
+            prev = event.prev
+            if prev is not None and prev.queued:
+                self._life[index] = prev
+            else:
+                del self._life[index]
+        if self._key is event:
+            self._key = None
+        size = _event_bytes(event.op)
+        self.rows -= 1
+        self.bytes -= size
+        self.events -= 1
+        self.event_bytes -= size
+
+    def _drop_event(self, event: _Event) -> None:
+        """Drop a queued event: it stays in the queue, skipped, until over half the queue is such."""
+        self._unqueue(event)
+        self.events_dropped += 1
+        self._dead += 1
+        if self._dead > 64 and 2 * self._dead > len(self._items):
+            self._compact()
+
+    def _compact(self) -> None:
+        """Forget the dropped events, but one between two blocks: it keeps them apart (a block after an
+        event may hold rows of soldiers the block before it holds too)."""
+        items: collections.deque[_Block | _Event] = collections.deque()
+        dead = 0
+        for x in self._items:
+            if isinstance(x, _Event) and not x.queued:
+                if not items or not isinstance(items[-1], _Block):
+                    continue
+                dead += 1
+            items.append(x)
+        self._items, self._dead = items, dead
 
     def _release(self, block: _Block) -> None:
         """Forget a block taken or emptied: its soldiers' newer rows start a new block."""
@@ -219,8 +333,11 @@ class Backlog:
 
     def _trim(self) -> None:
         """Drop rows, the oldest first, until the backlog is within its bounds: first the rows a later row
-        of their soldier supersedes, then any. Events stay (a backlog of events alone is logged)."""
-        before = self.dropped
+        of their soldier supersedes, then any; and while the events alone are over the bounds, the oldest
+        reactions (transients). Other events stay (a backlog of them over the bounds is logged)."""
+        before, events_before = self.dropped, self.events_dropped
+        while self._events_over() and self._reaction:
+            self._drop_event(self._reaction.pop(next(iter(self._reaction))))
         for superseded_only in (True, False):
             for block in [b for b in self._items if isinstance(b, _Block)]:
                 if not self._over():
@@ -238,11 +355,14 @@ class Backlog:
                 "fabric_backlog_full",
                 dropped=self.dropped - self._logged_drops,
                 dropped_now=dropped,
+                events_dropped=self.events_dropped - self._logged_event_drops,
+                events_dropped_now=self.events_dropped - events_before,
                 rows=self.rows,
                 bytes=self.bytes,
                 events_over_bound=over,
             )
             self._logged_drops, self._logged_at = self.dropped, now
+            self._logged_event_drops = self.events_dropped
 
     def _drop(self, block: _Block, superseded_only: bool) -> None:
         idx = block.rows["index"].astype(np.int64)
@@ -284,6 +404,12 @@ def activity(rows: np.ndarray) -> np.ndarray:
         | (speed > MOVING_EPS).astype(np.int32) << 16
         | (rows["immediate"] != 0).astype(np.int32) << 17
     )
+
+
+def _soldier(op: req.Op) -> int | None:
+    """The soldier an event is for; None for a key, a sync (or a malformed event)."""
+    index = op.get("index")
+    return index if isinstance(index, int) and 0 <= index < INDICES and op["op"] != "key" else None
 
 
 def _event_bytes(op: req.Op) -> int:
