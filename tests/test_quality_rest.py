@@ -129,3 +129,13 @@ def test_the_check_sees_a_dead_hand_raised_after_he_lies_still(figures: FigureSe
     assert rise_after({**h, "right_hand": lifted}, start)[:2] == (pytest.approx(18.0, abs=1.0), "right_hand")
     assert "rest_rise_cm" in check_clip(cf, figures, ends_dead=True)
     assert "rest_rise_cm" not in check_clip(cf, figures)  # measured only for a clip that ends in DEAD
+
+
+def test_kfire2dead_s_arms_land_with_the_body(figures: FigureSet) -> None:
+    """kfire2dead's top arm stayed raised 1.5 s after the trunk lay still and came down at 3.03 s: its arms
+    now fall as the body lands (authoring/dead_settle.py), and the check measures it for DEAD clips only."""
+    cf = play(load_channelset(CHANNELSETS / "kfire2dead.chset.env"), figures)
+    row = check_clip(cf, figures, ends_dead=True)
+    assert row["limb_rest_lag_s"] <= LAG_LIMIT_S, row["limb_rest_lag_where"]
+    assert row["rest_rise_cm"] <= RISE_LIMIT_CM
+    assert "limb_rest_lag_s" not in check_clip(cf, figures)
