@@ -60,16 +60,19 @@ def straight_rise(arm: Any, x1: np.ndarray) -> float:
 
 def path_cost(arm: Any, x0: np.ndarray, x1: np.ndarray) -> Callable[[np.ndarray], float]:
     """The cost of a control pose ``c`` of ``arm`` (an :class:`authoring.dead_settle._Arm`): the most any
-    part rises on the way, plus :data:`PENALTY` per cm the forearm and hand go into the rest of the body or
+    part rises on the way, plus :data:`PENALTY` per cm the forearm and hand go into the rest of the body
+    (beyond how deep they lay at ``x0``, measured alike: the arm's own ``inside0`` counts the rifle too) or
     (beyond where the arm lay) the ground, plus :data:`BEND_COST` per degree of bend."""
     u = np.arange(CHECKS + 1) / CHECKS
     mid = (x0 + x1) / 2.0
     floor = min(0.0, float(arm.body.points[arm.arm, 1].min()))
+    g0, p0, _ = _way(arm, x0, x0, x0, np.zeros(1))
+    inside0, _, _ = arm.rest.depth(p0[:, arm.lower], g0)
 
     def cost(c: np.ndarray) -> float:
         g, p, lows = _way(arm, x0, c, x1, u)
         inside, _, _ = arm.rest.depth(p[:, arm.lower], g)
-        wrong = max(0.0, inside - arm.inside0) + max(0.0, floor - float(lows.min()))
+        wrong = max(0.0, inside - inside0) + max(0.0, floor - float(lows.min()))
         return rises(lows) + PENALTY * wrong + BEND_COST * float(np.degrees(np.abs(c - mid)).sum())
 
     return cost

@@ -37,7 +37,10 @@ straight way (in the angles) lifts a part of the arm is wrong (kstow2dead's left
 chest on the far side, rose 40 cm). The fall accelerates like a dropped limb and lands softly
 (:func:`fall_easing`), each arm along a way bent through a control pose so that no part of it rises
 (:mod:`authoring.dead_arms`: kfire2dead's right hand swung up 18.6 cm over the head, eased straight). Half
-on his side, the top arm reaches the ground only past the head, its elbow on the body (17.5 cm).
+on his side, the top arm reaches the ground only past the head, its elbow on the body (17.5 cm). The arms
+fall as the body lands (:func:`_arms_fall`: from the frame it is down, as the check's ``limb_rest_lag_s``
+sees it, in :data:`ARM_FALL_SECONDS`), over the physics' last frames: appended after them, kfire2dead's arm
+hung in the air 1.5 s after he lay still (the asleep ragdoll's damped joints hold it) and was then lowered.
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ from authoring import dead_arms
 from authoring.body_parts import SegmentHulls
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
+from authoring.quality_rest import NEAR_CM, TORSO_PARTS, rest_frame
 from authoring.transitions import ClipFrames
 from peabody.model import Figure
 
@@ -66,7 +70,8 @@ ARM_PARTS = ("_forearm", "_hand", "_upper_arm")  # what the head may come to res
 FACE_UP = 0.3  # cosine: the pelvis' front points up at least this much (kfire2dead: half on his side)
 ARM_DOFS = ("clavicle", "shoulder", "elbow", "wrist")
 SUPINE = 0.7  # the shoulders' line at least this level: on his back, an arm's own side is clear
-ARM_FALL_SECONDS = 0.8  # s: a dead arm drops to the ground
+ARM_FALL_SECONDS = 0.4  # s: a dead arm drops to the ground as the body lands (a limp arm swinging down
+# from the shoulder: 0.3-0.4 s); kfire2dead: 0.8 s, after the physics, 1.5 s after he lay still
 ARM_CLEARANCE = 0.3  # cm: an arm's lowest node stops this far above the ground
 FALL_POWER = 1.8  # the fall's easing: smoothstep(s ** FALL_POWER), fast late, landing softly
 # degrees: the clavicle's two, the shoulder's three and the elbow's first angles tried for a fallen arm (a
@@ -126,7 +131,7 @@ class _Body:
         self.kin = figs.kin["body"]
         self.nodes, self.segs = figs.nodes("body")
         self.parts = figs.node_parts("body")
-        self.q, self.root = q, root
+        self.q, self.root, self.rifle = q, root, rifle
         rnodes, rsegs = figs.nodes("rifle")
         rg = figs.kin["rifle"].segment_globals(np.zeros(figs.kin["rifle"].ndof), rifle)
         self.rifle_points = np.einsum("kij,kj->ki", rg[rsegs, :3, :], rnodes)
@@ -373,25 +378,28 @@ def _grid_starts(kin, side: str, x0: np.ndarray, cost: Callable[[np.ndarray], fl
     return [x for _, _, x in sorted(shapes, key=lambda t: t[:2])[:ARM_STARTS]]
 
 
-def limp_target(figs: FigureSet, frames: ClipFrames, arms_fall: bool = False) -> np.ndarray | None:
-    """The limp shape the last frame settles into, or None if the body neither lies on its front nor (if
-    ``arms_fall``) on its back. Face down, the legs are left as they are: :func:`settle` lays them along
-    their own path (:func:`_legs_path`), so searching their end here too was done twice."""
+def limp_target(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
+    """The limp shape the last frame of a body on its front settles into (the head dropped), or None if it
+    does not lie on its front. The legs are left as they are: :func:`settle` lays them along their own path
+    (:func:`_legs_path`), so searching their end here too was done twice."""
     q, root, rifle = frames.poses[-1], frames.roots[-1], frames.rifles[-1]
     body = _Body(figs, q, root, rifle)
-    target = q.copy()
-    if _face_down(body.kin, q, root):
-        target[_dofs(body.kin, HEAD_DOFS)] = dropped_head(body)  # the legs: settle's own path
-        return target
-    if not (arms_fall and _face_up(body.kin, q, root)):
+    if not _face_down(body.kin, q, root):
         return None
-    return min((_fallen_arms(figs, frames, order) for order in SIDE_ORDERS), key=lambda t: t[0])[1]
+    target = q.copy()
+    target[_dofs(body.kin, HEAD_DOFS)] = dropped_head(body)
+    return target
 
 
-def _fallen_arms(figs: FigureSet, frames: ClipFrames, order: tuple[str, str]) -> tuple[float, np.ndarray]:
-    """Both arms fallen, the first of ``order`` first and the second against it where it lies: the higher
-    arm's highest part (cm, as the check sees it) and the pose."""
-    body = _Body(figs, frames.poses[-1], frames.roots[-1], frames.rifles[-1])
+def _fallen(figs: FigureSet, body: _Body) -> np.ndarray:
+    """The pose of ``body`` (on his back) with both arms fallen: the lower of :data:`SIDE_ORDERS`."""
+    return min((_fallen_arms(figs, body, order) for order in SIDE_ORDERS), key=lambda t: t[0])[1]
+
+
+def _fallen_arms(figs: FigureSet, start: _Body, order: tuple[str, str]) -> tuple[float, np.ndarray]:
+    """Both arms of ``start``'s body fallen, the first of ``order`` first and the second against it where it
+    lies: the higher arm's highest part (cm, as the check sees it) and the pose."""
+    body = _Body(figs, start.q, start.root, start.rifle)
     body.way_checked = bool(body.leftward.any())  # on his back (half on his side, checked, kfire2dead's top
     # arm's lowest shapes lay over the head only, and it stayed 27 cm up: its way is bent afterwards instead)
     target = body.q.copy()
@@ -413,42 +421,67 @@ def settle(
 ) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
     with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
-    (:mod:`authoring.dead_prone`)."""
+    (:mod:`authoring.dead_prone`); a body on its back (``arms_fall``) lets its arms fall as it lands
+    (:func:`_arms_fall`)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
     lowered = _lowered(figs, frames) if propped else None
     if lowered is not None:
         return _appended(frames, lowered)
-    target = limp_target(figs, frames, arms_fall)
+    kin, last = figs.kin["body"], frames.poses[-1]
+    if arms_fall and not _face_down(kin, last, frames.roots[-1]) and _face_up(kin, last, frames.roots[-1]):
+        return _arms_fall(figs, frames)
+    target = limp_target(figs, frames)
     if target is None:
         return frames
-    up = arms_fall and not _face_down(figs.kin["body"], frames.poses[-1], frames.roots[-1])
-    n = round((ARM_FALL_SECONDS if up else SETTLE_SECONDS) * frames.fps)
+    n = round(SETTLE_SECONDS * frames.fps)
     s = np.arange(1, n + 1) / n
-    eased = fall_easing(s) if up else s * s * (3.0 - 2.0 * s)
     still = np.ones(round(STILL_SECONDS * frames.fps))
-    u = np.concatenate([eased, still])
-    last = frames.poses[-1]
+    u = np.concatenate([s * s * (3.0 - 2.0 * s), still])
     poses = last[None] + u[:, None] * (target - last)[None]
-    if up:  # each arm falls down and out along a way bent in the angles (authoring.dead_arms)
-        poses[:n] = _arms_path(figs, frames, target, eased)
-    if not up:  # face down: the legs are lifted, turned out and laid down
-        body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])
-        poses[:, _leg_dofs(body.kin)] = _legs_path(body, np.concatenate([s, still]), u)
+    body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])  # the legs: lifted, turned out, laid down
+    poses[:, _leg_dofs(body.kin)] = _legs_path(body, np.concatenate([s, still]), u)
     return _appended(frames, poses)
 
 
-def _arms_path(figs: FigureSet, frames: ClipFrames, target: np.ndarray, eased: np.ndarray) -> np.ndarray:
-    """Poses at the fall's progress ``eased``: each arm's angles along a way bent so that it does not rise
-    (:mod:`authoring.dead_arms`)."""
-    last = frames.poses[-1]
-    body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])
-    poses = last[None] + eased[:, None] * (target - last)[None]
+def down_frame(figs: FigureSet, frames: ClipFrames) -> int:
+    """The first frame from which the body is down, as the check sees it (``limb_rest_lag_s``: the pelvis,
+    chest or belly and head within :data:`authoring.quality_rest.NEAR_CM` of where they finally lie); the
+    last frame if it never is."""
+    kin = figs.kin["body"]
+    nodes, segs = figs.nodes("body")
+    parts = figs.node_parts("body")
+    y = np.einsum("nkj,kj->nk", kin.segment_globals(frames.poses, frames.roots)[:, segs, 1, :], nodes)
+    heights = {p: y[:, parts == p].min(axis=1) for p in TORSO_PARTS if (parts == p).any()}
+    k = rest_frame(heights, NEAR_CM)
+    return len(frames.poses) - 1 if k is None else k
+
+
+def _arms_fall(figs: FigureSet, frames: ClipFrames) -> ClipFrames:
+    """A body on its back lets its arms fall as it lands: from the frame it is down (:func:`down_frame`)
+    each arm falls, in :data:`ARM_FALL_SECONDS`, to the shape :func:`fallen_arm` lays it in (found on the
+    last frame's body with the arms as they were then), along a way bent so that no part of it rises
+    (:mod:`authoring.dead_arms`), the physics' own arm motion fading out of it; the rest of the body goes on
+    as the physics has it, and the clip ends still (:data:`STILL_SECONDS` after the arms land, or where the
+    physics ended). Started after the physics had ended (1.5 s after he lay still), kfire2dead's top arm was
+    held up in the air and lowered: a dead man holding up his arm."""
+    kin = figs.kin["body"]
+    k0 = down_frame(figs, frames)
+    arms = _dofs(kin, tuple(f"{side}_{j}" for side in ("left", "right") for j in ARM_DOFS))
+    n = round(ARM_FALL_SECONDS * frames.fps)
+    extra = max(0, k0 + n + round(STILL_SECONDS * frames.fps) + 1 - len(frames.poses))
+    out = _appended(frames, np.repeat(frames.poses[-1:], extra, axis=0))
+    held = out.poses[-1].copy()
+    held[arms] = out.poses[k0, arms]  # the arms as they were when he came down
+    body = _Body(figs, held, out.roots[-1], out.rifles[-1])
+    target = _fallen(figs, body)
+    u = np.concatenate([fall_easing(np.arange(1, n + 1) / n), np.ones(len(out.poses) - k0 - 1 - n)])
+    poses = out.poses.copy()
     for side in ("left", "right"):
         arm = _Arm(body, side)
         x1 = target[arm.idx]
         c = dead_arms.control_pose(arm, x1, _minimise)
-        poses[:, arm.idx] = dead_arms.bent(arm.x0, c, x1, eased)
-    return poses
+        poses[k0 + 1 :, arm.idx] = dead_arms.bent(out.poses[k0 + 1 :, arm.idx], c, x1, u)
+    return ClipFrames(poses, out.roots, out.rifles, out.fps)
 
 
 def _lowered(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:

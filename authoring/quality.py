@@ -31,6 +31,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``FACE_DOWN_COS``), how far the higher foot's lowest node is above the pelvis' lowest node: a body falling
   or lying face down with its shins straight up (a ragdoll's knees whipping) reads as a scorpion, not a
   soldier; prone, crawling and dead bodies keep their feet down (not judged if the chest never faces down).
+* a clip that ends in DEAD (:mod:`~authoring.quality_rest`): ``rest_rise_cm``, how far a limb rises once
+  the body is down, and ``limb_rest_lag_s``, how long after the body the last limb part comes to rest.
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
   recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
   cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
@@ -66,7 +68,7 @@ import numpy as np
 from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
-from authoring.quality_rest import RISE_LIMIT_CM, rest_rise
+from authoring.quality_rest import LAG_LIMIT_S, RISE_LIMIT_CM, rest_lag, rest_rise
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
 
@@ -96,6 +98,7 @@ THRESHOLDS: dict[str, float] = {
     "max_frame_jump_deg": 20.0,
     "feet_up_cm": 20.0,
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
+    "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
     **POSTURE_LIMITS,
 }
 POSTURE_KEYS = tuple(POSTURE_LIMITS)
@@ -339,6 +342,7 @@ def check_clip(
         out["max_frame_jump_where"] = f"{joint}[{at}-{at + 1}]"
     if ends_dead:
         out.update(rest_rise(frames, figures))
+        out.update(rest_lag(frames, figures))
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
     if locomotion:
         speed, stride = cs.ground_speed, cs.stride_length
@@ -463,7 +467,7 @@ def where_detail(row: Mapping[str, Any], key: str) -> str | None:
         return _part_frames(row, key.removesuffix("_cm"))
     if key.startswith("rest_"):
         return row.get(f"{key.removesuffix('_cm')}_where")
-    base = key.removesuffix("_cm").removesuffix("_m_s").removesuffix("_deg")
+    base = key.removesuffix("_cm").removesuffix("_m_s").removesuffix("_deg").removesuffix("_s")
     return row.get(f"{base}_where")
 
 

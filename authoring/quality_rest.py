@@ -11,6 +11,14 @@ kneecap, the upper arm, forearm and hand). ``ttes author check`` holds every cli
 hand, laid over the head by the arm fall, rose 18.6 cm after he lay still: the contact sheet showed it, the
 check did not see it while it measured the legs alone. The head counts for rest: a prone death's arms are laid
 anew while the chest and head come down.
+
+A limb may also stay up long after the body and come down late without ever rising: kfire2dead's top arm was
+held raised 1.5 s after the trunk lay still, then lowered (a dead man holding up his arm). ``limb_rest_lag_s``
+is the time from the body being down (pelvis, chest or belly, head: :func:`rest_frame`; a prone body's
+chest and head come down in its settle) to the last limb part (upper arm, forearm, hand,
+thigh, shin, foot) coming to rest; a part is at rest from the first frame after which its centroid stays
+within :data:`NEAR_CM` of its final height and slower than :data:`STILL_M_S` (:func:`limb_rest_lag`,
+:data:`LAG_LIMIT_S`: a limb falls with the body).
 """
 
 from __future__ import annotations
@@ -27,6 +35,10 @@ LEG_SITES = ("foot.heel", "lower_leg.knee")
 LEG_PARTS = ("foot", "knee", "kneecap")
 ARM_PARTS = ("upper_arm", "forearm", "hand")
 TORSO_PARTS = ("pelvis", "chest", "belly", "head")
+LAG_LIMIT_S = 0.5  # s: the most a limb part may come to rest after the trunk
+NEAR_CM = 3.0  # cm: a part is at rest within this of its final height ...
+STILL_M_S = 0.1  # m/s: ... and slower than this (its centroid)
+LIMBS = ("upper_arm", "forearm", "hand", "thigh", "knee", "foot")  # knee: the shin (authoring.body_parts)
 
 
 def _heights(cf: ClipFrames, figures: FigureSet) -> dict[str, np.ndarray]:
@@ -52,15 +64,15 @@ def _heights(cf: ClipFrames, figures: FigureSet) -> dict[str, np.ndarray]:
     return out
 
 
-def rest_frame(h: dict[str, np.ndarray]) -> int | None:
-    """The first frame from which the pelvis, chest (or belly) and head stay down (None: the body lacks the
-    pelvis or chest)."""
+def rest_frame(h: dict[str, np.ndarray], near: float = DOWN_CM) -> int | None:
+    """The first frame from which the pelvis, chest (or belly) and head stay down, within ``near`` (cm) of
+    where they finally lie (None: the body lacks the pelvis or chest)."""
     torso = [h["pelvis"]] if "pelvis" in h else []
     chest = [h[p] for p in ("chest", "belly") if p in h]
     if not torso or not chest:
         return None
     down = [torso[0], np.minimum.reduce(chest)] + ([h["head"]] if "head" in h else [])
-    up = np.logical_or.reduce([y > y[-1] + DOWN_CM for y in down])
+    up = np.logical_or.reduce([y > y[-1] + near for y in down])
     late = np.flatnonzero(up)
     return 0 if len(late) == 0 else int(late[-1]) + 1
 
@@ -92,3 +104,49 @@ def rest_rise(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
     rise, part, frame = rise_after(h, start)
     row.update(rest_rise_cm=round(rise, 3), rest_rise_part=part, rest_rise_frame=frame)
     return row
+
+
+def _centroids(cf: ClipFrames, figures: FigureSet) -> dict[str, np.ndarray]:
+    """Per frame, the centroid (cm, world) of each limb part's nodes ``(n, 3)``."""
+    body = max(cf.poses, key=lambda k: figures.kin[k].ndof)
+    kin = figures.kin[body]
+    nodes, segs = figures.nodes(body)
+    parts = figures.node_parts(body)
+    g = kin.segment_globals(cf.poses[body], cf.locations[body])
+    out: dict[str, np.ndarray] = {}
+    for name in (f"{side}_{p}" for side in ("left", "right") for p in LIMBS):
+        m = parts == name
+        if m.any():
+            out[name] = np.einsum("nkij,kj->ni", g[:, segs[m], :3, :], nodes[m]) / int(m.sum())
+    return out
+
+
+def settled_from(pos: np.ndarray, fps: float) -> int:
+    """The first frame from which a part at ``pos`` ``(n, 3)`` (cm) stays within :data:`NEAR_CM` of its
+    final height and slower than :data:`STILL_M_S`."""
+    speed = np.linalg.norm(np.gradient(pos, axis=0), axis=1) * fps / 100.0 if len(pos) > 1 else np.zeros(1)
+    moving = (np.abs(pos[:, 1] - pos[-1, 1]) > NEAR_CM) | (speed > STILL_M_S)
+    late = np.flatnonzero(moving)
+    return 0 if len(late) == 0 else int(late[-1]) + 1
+
+
+def limb_rest_lag(limbs: dict[str, np.ndarray], trunk: int | None, fps: float) -> dict[str, Any]:
+    """How long (s) after frame ``trunk`` (the trunk is down) the last limb part at ``limbs`` (name:
+    centroids ``(n, 3)``) comes to rest (:func:`settled_from`; 0 if none rests after it), which part and
+    at which frame."""
+    row: dict[str, Any] = {"limb_rest_lag_s": None, "limb_rest_lag_part": None, "limb_rest_lag_where": None}
+    if trunk is None or not limbs:
+        return row
+    part, frame = max(((k, settled_from(v, fps)) for k, v in limbs.items()), key=lambda kv: kv[1])
+    lag = max(0.0, (frame - trunk) / fps)
+    row.update(limb_rest_lag_s=round(lag, 3), limb_rest_lag_part=part if lag > 0 else None)
+    row["limb_rest_lag_where"] = f"{part} at rest frame {frame}, trunk {trunk}" if lag > 0 else None
+    return row
+
+
+def rest_lag(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
+    """:func:`limb_rest_lag` of a played clip, from the frame its body is down (:func:`rest_frame`, within
+    :data:`NEAR_CM`: as near as a limb at rest; a slave's body lowered the last 2 cm at the end hid its arm
+    held up)."""
+    trunk = rest_frame(_heights(cf, figures), NEAR_CM)
+    return limb_rest_lag(_centroids(cf, figures), trunk, cf.channelset.fps)

@@ -1,6 +1,7 @@
 """Resting parts do not rise after rest (authoring/quality_rest.py, issue 14): once a dead body's pelvis and
 chest are down, no foot, heel or knee lifts more than 3 cm off where it lay; the committed face-down deaths
-that authoring/dead_legs.py turns out keep to it."""
+that authoring/dead_legs.py turns out keep to it. Nor does a limb come to rest long after the body
+(``limb_rest_lag_s``): kfire2dead's top arm was held up 1.5 s after he lay still, then lowered."""
 
 from __future__ import annotations
 
@@ -9,9 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from authoring.quality import check_clip
+from authoring.quality import THRESHOLDS, check_clip, summarise
 from authoring.quality_frames import FigureSet, play
-from authoring.quality_rest import RISE_LIMIT_CM, _heights, rest_frame, rest_rise, rise_after
+from authoring.quality_rest import (
+    LAG_LIMIT_S,
+    RISE_LIMIT_CM,
+    _heights,
+    limb_rest_lag,
+    rest_frame,
+    rest_rise,
+    rise_after,
+    settled_from,
+)
 from server.motion.cache import load_channelset
 from ttes.paths import FIGURES
 
@@ -34,6 +44,51 @@ def test_a_leg_kicked_up_after_the_body_landed_is_seen() -> None:
     assert rise_after(h, start) == (14.0, "left_foot", 7)
     h["left_foot"] = np.minimum(foot, 1.0)  # laid still: the fall's own drop is no rise
     assert rise_after(h, start) == (0.0, None, None)
+
+
+FPS = 60.0
+
+
+def _part(y: np.ndarray) -> np.ndarray:
+    """A part's centroid (cm) at heights ``y``, still horizontally."""
+    return np.stack([np.zeros_like(y), y, np.zeros_like(y)], axis=1)
+
+
+def _fall(top: float, bottom: float, first: int, frames: int, n: int) -> np.ndarray:
+    """Heights: ``top`` until ``first``, eased to ``bottom`` over ``frames``, then still (``n`` in all)."""
+    s = np.clip((np.arange(n) - first) / frames, 0.0, 1.0)
+    return top + (bottom - top) * s * s * (3.0 - 2.0 * s)
+
+
+def test_an_arm_held_up_2_s_after_the_trunk_rests_fails() -> None:
+    """A constructed death: the trunk lands at 0.5 s; the hand is held 30 cm up until 2.5 s, then lowered
+    (kfire2dead's top arm): it rests 2.3 s after the trunk, though it never rises."""
+    n = 240
+    trunk = {"pelvis": _fall(40.0, 1.0, 0, 30, n), "chest": _fall(60.0, 0.5, 0, 30, n)}
+    held = _part(_fall(30.0, 2.0, 150, 18, n))
+    assert rise_after({**trunk, "right_hand": held[:, 1]}, 30)[0] == 0.0  # rest_rise does not see it
+    start = rest_frame(trunk, 3.0)
+    assert start is not None and start <= 30
+    row = limb_rest_lag({"right_hand": held, "left_hand": _part(_fall(50.0, 1.0, 0, 30, n))}, start, FPS)
+    assert row["limb_rest_lag_s"] > LAG_LIMIT_S
+    assert row["limb_rest_lag_s"] == pytest.approx((settled_from(held, FPS) - start) / FPS, abs=1e-3)
+    assert row["limb_rest_lag_part"] == "right_hand"
+    assert summarise([{"name": "x", **row}], [])["thresholds"]["limb_rest_lag_s"]["failing"] == 1
+
+
+def test_an_arm_that_lands_with_the_body_passes() -> None:
+    """The same death, the hand falling with the body and landing 0.2 s after it: it passes; a hand still
+    sliding along the ground (0.3 m/s) at its final height does not come to rest."""
+    n = 240
+    trunk = {"pelvis": _fall(40.0, 1.0, 0, 30, n), "chest": _fall(60.0, 0.5, 0, 30, n)}
+    start = rest_frame(trunk, 3.0)
+    hand = _part(_fall(30.0, 2.0, 10, 32, n))
+    row = limb_rest_lag({"right_hand": hand}, start, FPS)
+    assert row["limb_rest_lag_s"] <= LAG_LIMIT_S
+    sliding = hand.copy()
+    sliding[:200, 0] = np.arange(200) * 0.5  # cm per frame: 0.3 m/s until 3.3 s
+    assert limb_rest_lag({"right_hand": sliding}, start, FPS)["limb_rest_lag_s"] > LAG_LIMIT_S
+    assert THRESHOLDS["limb_rest_lag_s"] == LAG_LIMIT_S
 
 
 @pytest.fixture(scope="module")
@@ -74,3 +129,13 @@ def test_the_check_sees_a_dead_hand_raised_after_he_lies_still(figures: FigureSe
     assert rise_after({**h, "right_hand": lifted}, start)[:2] == (pytest.approx(18.0, abs=1.0), "right_hand")
     assert "rest_rise_cm" in check_clip(cf, figures, ends_dead=True)
     assert "rest_rise_cm" not in check_clip(cf, figures)  # measured only for a clip that ends in DEAD
+
+
+def test_kfire2dead_s_arms_land_with_the_body(figures: FigureSet) -> None:
+    """kfire2dead's top arm stayed raised 1.5 s after the trunk lay still and came down at 3.03 s: its arms
+    now fall as the body lands (authoring/dead_settle.py), and the check measures it for DEAD clips only."""
+    cf = play(load_channelset(CHANNELSETS / "kfire2dead.chset.env"), figures)
+    row = check_clip(cf, figures, ends_dead=True)
+    assert row["limb_rest_lag_s"] <= LAG_LIMIT_S, row["limb_rest_lag_where"]
+    assert row["rest_rise_cm"] <= RISE_LIMIT_CM
+    assert "limb_rest_lag_s" not in check_clip(cf, figures)
