@@ -69,10 +69,7 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 8. **a kneeling soldier's legs roll off the ground** (:attr:`DeathSpec.legs_lift`, last): a foot or knee
    that would skid more than a centimetre lifts clearly off the ground until it comes to rest, carried by
    the leg's own joints (:mod:`authoring.leg_lift`; kstow2dead's and kfire2dead's feet slid 4.8-4.9 cm,
-   their kneeling knees 5.9-6.1); then (:attr:`DeathSpec.turns_planted`) the body's turn on the ground is
-   taken out as its drift was (:func:`authoring.planted.plant_turns`, the rifle with him: landing on his
-   side he turned as he skid, kfire2dead's thigh 7.4 cm, belly 4; the rifle left lying went 1.1 cm into
-   him).
+   their kneeling knees 5.9-6.1).
 
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph
@@ -95,7 +92,7 @@ from authoring.contact_pin import pin_frames
 from authoring.knee_hold import hold_knees
 from authoring.leg_lift import lifted
 from authoring.motion import KeyPosture
-from authoring.planted import plant, plant_turns
+from authoring.planted import plant
 from authoring.postures import RIFLE, SOLDIER
 from authoring.transitions import FPS, ClipFrames
 from peabody.model import Figure
@@ -141,7 +138,6 @@ class DeathSpec:
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
     propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
     legs_lift: bool = False  # kneeling: a leg part that would skid on the ground lifts instead (leg_lift)
-    turns_planted: bool = False  # last, the body's turn on the ground is taken out too (planted.plant_turns)
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
     # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
@@ -211,7 +207,6 @@ DEATHS: tuple[DeathSpec, ...] = (
         pinned=True,
         arms_fall=True,
         legs_lift=True,
-        turns_planted=True,
     ),
     DeathSpec(
         "kfire2dead",
@@ -224,7 +219,6 @@ DEATHS: tuple[DeathSpec, ...] = (
         knee_damping=4.0,
         arms_fall=True,
         legs_lift=True,
-        turns_planted=True,
     ),
     _prone("prstow2dead", "PRONE_STOWED"),
     _prone("prfire2dead", "PRONE_FIRE"),
@@ -537,10 +531,9 @@ def _after_physics(
     """The recorded fall with its skid taken out, settled limp, (:attr:`DeathSpec.knees_held`) its knees on
     the ground held and (:attr:`DeathSpec.pinned`) its limbs on the ground held where they touched down
     (steps 5-7 of the module docstring), then (:attr:`DeathSpec.legs_lift`) its feet and knees that would
-    skid lifted and its turn on the ground taken out (step 8)."""
+    skid lifted (step 8)."""
     frames = _held(spec, plant(frames, figures[0]), figures, release)
-    frames = lifted(frames, figures[0]) if spec.legs_lift else frames
-    return plant_turns(frames, figures[0]) if spec.turns_planted else frames
+    return lifted(frames, figures[0]) if spec.legs_lift else frames
 
 
 def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], release: int) -> ClipFrames:

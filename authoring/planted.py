@@ -8,11 +8,6 @@ moved: per part the mean motion of its mesh nodes that touched the ground (the c
 this frame and the one before, averaged over those parts, accumulated from the first frame (which stays
 where it is). The whole figure moves as one (root and rifle), so no pose changes: where the body skids as a
 whole the skid is gone, where one part drags against the others it is only shared out.
-
-A body landing on its side also turns on the ground as it skids (kfire2dead: its thigh slid 7.4 cm, belly
-4 and chest 3.1 after the drift was out). :func:`plant_turns` takes out the turn about the vertical too: per
-frame the rigid motion in the ground plane (a turn and a shift, least squares, each part weighing alike)
-that carries the nodes on the ground in this frame and the one before back onto where they were.
 """
 
 from __future__ import annotations
@@ -53,43 +48,3 @@ def plant(frames: ClipFrames, soldier: Figure) -> ClipFrames:
     roots[:, :3, 3] += shift
     rifles[:, :3, 3] += shift
     return ClipFrames(frames.poses, roots, rifles, frames.fps)
-
-
-def ground_steps(points: np.ndarray, touching: np.ndarray, parts: np.ndarray) -> np.ndarray:
-    """``(n, 3, 3)`` per frame the rigid motion of the ground plane (homogeneous, on ``(x, z, 1)``) that
-    carries the nodes touching in this frame and the one before (``points`` ``(n, k, 3)``, ``touching``
-    ``(n, k)``, ``parts`` ``(k,)``) back onto where they were: least squares (Kabsch), each part weighing
-    alike; none where fewer than 3 nodes touch in both."""
-    steps = np.repeat(np.eye(3)[None], len(points), axis=0)
-    for f in range(1, len(points)):
-        both = touching[f] & touching[f - 1]
-        if both.sum() < 3:
-            continue
-        a, b = points[f, both][:, [0, 2]], points[f - 1, both][:, [0, 2]]
-        _, inverse, count = np.unique(parts[both], return_inverse=True, return_counts=True)
-        w = 1.0 / count[inverse]
-        w /= w.sum()
-        ca, cb = w @ a, w @ b
-        u, _, vt = np.linalg.svd(((a - ca) * w[:, None]).T @ (b - cb))
-        turn = vt.T @ np.diag([1.0, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
-        steps[f, :2, :2] = turn
-        steps[f, :2, 2] = cb - turn @ ca
-    return steps
-
-
-def plant_turns(frames: ClipFrames, soldier: Figure) -> ClipFrames:
-    """``frames`` with the shift and the turn on the ground of the parts on it taken out (see the module
-    docstring), accumulated from the first frame; the rifle goes with the body (a dropped one too: the
-    arms were laid beside it where it lies)."""
-    figs = FigureSet({"body": soldier})
-    nodes, segs = figs.nodes("body")
-    g = figs.kin["body"].segment_globals(frames.poses, frames.roots)
-    points = np.einsum("fkij,kj->fki", g[:, segs, :3, :], nodes)
-    steps = ground_steps(points, points[..., 1] <= CONTACT_HEIGHT_CM, figs.node_parts("body"))
-    moves = np.repeat(np.eye(4)[None], len(steps), axis=0)
-    plane = np.eye(3)
-    for f in range(len(steps)):
-        plane = plane @ steps[f]
-        moves[f][np.ix_([0, 2], [0, 2])] = plane[:2, :2]
-        moves[f][[0, 2], 3] = plane[:2, 2]
-    return ClipFrames(frames.poses, moves @ frames.roots, moves @ frames.rifles, frames.fps)

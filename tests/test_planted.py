@@ -5,12 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from authoring.body_parts import contact_runs
-from authoring.planted import ground_drift, plant, plant_turns
+from authoring.planted import ground_drift, plant
 from authoring.postures import lowest_point
-from authoring.quality import CONTACT_HEIGHT_CM
-from authoring.quality_frames import FigureSet
-from authoring.slave_feet import part_points
 from authoring.transitions import ClipFrames
 from peabody.fk import FigureKinematics
 from peabody.loader import read_figure
@@ -56,30 +52,3 @@ def test_the_drift_is_shared_out_over_the_parts_not_the_nodes() -> None:
     np.testing.assert_allclose(ground_drift(points, touching, parts), np.array([[0, 0, 0], [0.5, 0, 0]]))
     touching[0, 4] = False
     np.testing.assert_allclose(ground_drift(points, touching, parts)[1], [1.0, 0, 0])
-
-
-def _yaw(deg: float) -> np.ndarray:
-    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
-    return np.array([[c, 0.0, s, 0.0], [0.0, 1.0, 0.0, 0.0], [-s, 0.0, c, 0.0], [0.0, 0.0, 0.0, 1.0]])
-
-
-def test_a_body_turning_as_it_skids_on_the_ground_stays_put(soldier) -> None:
-    """Standing on both feet, the body turns 20 degrees about a point off to his side and skids: the shift
-    is taken out by plant, the turn only by plant_turns (kfire2dead landing on his side)."""
-    clip = _standing(soldier, 30, np.zeros(3))
-    pivot = np.eye(4)
-    pivot[0, 3] = 25.0
-    turn = np.array([pivot @ _yaw(20.0 * min(f / 20, 1.0)) @ np.linalg.inv(pivot) for f in range(30)])
-    clip = ClipFrames(clip.poses, turn @ clip.roots, turn @ clip.rifles, clip.fps)
-    figs = FigureSet({"body": soldier})
-
-    def slide(frames: ClipFrames) -> float:
-        points = part_points(frames.poses, frames.roots, figs, "body", ("left_foot", "right_foot"))
-        return float(contact_runs(points, CONTACT_HEIGHT_CM).slide.max())
-
-    assert slide(plant(clip, soldier)) > 3.0  # the drift alone does not hold the feet
-    out = plant_turns(clip, soldier)
-    assert slide(out) < 0.1
-    np.testing.assert_allclose(out.roots, np.repeat(clip.roots[:1], 30, axis=0), atol=1e-6)
-    np.testing.assert_allclose(out.rifles, out.roots, atol=1e-9)  # the rifle goes along
-    np.testing.assert_array_equal(out.poses, clip.poses)
