@@ -67,6 +67,11 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    on their sides with an arm up (52-60 cm): the muscle program that lays a body out needs its knees to
    slide (issue 14, branch ``dfall14``).
 
+8. **a kneeling soldier's legs roll off the ground** (:attr:`DeathSpec.legs_lift`, last): a foot or knee
+   that would skid more than a centimetre lifts clearly off the ground until it comes to rest, carried by
+   the leg's own joints (:mod:`authoring.leg_lift`; kstow2dead's and kfire2dead's feet slid 4.8-4.9 cm,
+   their kneeling knees 5.9-6.1).
+
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph
 (:func:`dead_node`), and getting up from it replays that very death backwards (:data:`GET_UP_SECONDS`).
@@ -86,6 +91,7 @@ import numpy as np
 from authoring import dead_settle
 from authoring.contact_pin import pin_frames
 from authoring.knee_hold import hold_knees
+from authoring.leg_lift import lifted
 from authoring.motion import KeyPosture
 from authoring.planted import plant
 from authoring.postures import RIFLE, SOLDIER
@@ -132,6 +138,7 @@ class DeathSpec:
     # stronger until he is down
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
     propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
+    legs_lift: bool = False  # kneeling: a leg part that would skid on the ground lifts instead (leg_lift)
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
     # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
@@ -200,6 +207,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         arm_tone=0.05,
         pinned=True,
         arms_fall=True,
+        legs_lift=True,
     ),
     DeathSpec(
         "kfire2dead",
@@ -211,6 +219,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         sideways=True,
         knee_damping=4.0,
         arms_fall=True,
+        legs_lift=True,
     ),
     _prone("prstow2dead", "PRONE_STOWED"),
     _prone("prfire2dead", "PRONE_FIRE"),
@@ -522,9 +531,15 @@ def _after_physics(
 ) -> ClipFrames:
     """The recorded fall with its skid taken out, settled limp, (:attr:`DeathSpec.knees_held`) its knees on
     the ground held and (:attr:`DeathSpec.pinned`) its limbs on the ground held where they touched down
-    (steps 5-7 of the module docstring)."""
+    (steps 5-7 of the module docstring), then (:attr:`DeathSpec.legs_lift`) its feet and knees that would
+    skid lifted (step 8)."""
+    frames = _held(spec, plant(frames, figures[0]), figures, release)
+    return lifted(frames, figures[0]) if spec.legs_lift else frames
+
+
+def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], release: int) -> ClipFrames:
+    """The planted fall settled and its contacts held (:func:`_after_physics` but the legs' lift)."""
     soldier, rifle = figures
-    frames = plant(frames, soldier)
     if spec.pinned and spec.arms_fall:  # held where they landed first, then the arms fall (kstow2dead: pinned
         # after the fall, the still frames appended moved the feet's pins and slid a foot 1.8 cm more)
         assert not (spec.knees_held or spec.propped), f"{spec.name}: knees held or propped, and arms falling"

@@ -49,6 +49,6 @@ def test_the_drift_is_shared_out_over_the_parts_not_the_nodes() -> None:
     points[1, :4] += [1.0, -0.5, 0.0]  # "a": four nodes slide 1 cm (and sink a little)
     touching = np.array([[True] * 4 + [True], [True] * 4 + [True]])
     parts = np.array(["a", "a", "a", "a", "b"])  # "b": one node stays
-    np.testing.assert_allclose(ground_drift(points, touching, parts), [[0, 0, 0], [0.5, 0, 0]])
+    np.testing.assert_allclose(ground_drift(points, touching, parts), np.array([[0, 0, 0], [0.5, 0, 0]]))
     touching[0, 4] = False
     np.testing.assert_allclose(ground_drift(points, touching, parts)[1], [1.0, 0, 0])

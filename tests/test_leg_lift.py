@@ -1,0 +1,70 @@
+"""A leg part that would skid on the ground lifts off instead, and lands once where it comes to rest
+(authoring.leg_lift)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from authoring.body_parts import contact_runs
+from authoring.leg_lift import SLIDE_BUDGET_CM, lift_windows, lifted
+from authoring.postures import lowest_point
+from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
+from authoring.quality_frames import FigureSet
+from authoring.slave_feet import part_points
+from authoring.transitions import ClipFrames
+from peabody.loader import read_figure
+from ttes.paths import FIGURES
+
+N, SKID_FROM, SKID_TO = 60, 15, 35  # frames; the body skids between these
+SKID_CM = 6.0  # this far sideways (kfire2dead's tucked toes: 7 cm in 4 frames, kstow2dead's knee 5.9)
+FEET = ("left_foot", "right_foot")
+
+
+def test_the_window_runs_from_the_slide_to_where_the_node_comes_to_rest() -> None:
+    x = np.r_[np.zeros(10), np.linspace(0.0, 5.0, 11), np.full(9, 5.0)]  # still, slides 5 cm, still
+    points = np.zeros((30, 1, 3))
+    points[:, 0, 0] = x
+    points[:3, 0, 1] = 10.0  # touches down at frame 3
+    window = lift_windows(points)
+    first, last = np.flatnonzero(window)[[0, -1]]
+    assert x[first] > SLIDE_BUDGET_CM >= x[first - 1]  # lifts once it has slid the budget ...
+    assert x[last] < 5.0 - SLIDE_BUDGET_CM <= x[last + 1]  # ... and lands within it of its rest
+    assert window[first : last + 1].all()
+    assert not lift_windows(points[:12]).any()  # a node that slides less stays down
+
+
+@pytest.fixture(scope="module")
+def skid() -> tuple[FigureSet, ClipFrames]:
+    """soldier.fig standing, his feet flat on the ground, the whole body skidding SKID_CM sideways."""
+    figs = FigureSet({"body": read_figure(FIGURES / "soldier.fig")})
+    kin = figs.kin["body"]
+    pose = np.zeros(kin.ndof)
+    root = np.eye(4)
+    root[1, 3] -= float(lowest_point(kin, pose, root))
+    roots = np.repeat(root[None], N, axis=0)
+    roots[:, 0, 3] += SKID_CM * np.clip((np.arange(N) - SKID_FROM) / (SKID_TO - SKID_FROM), 0.0, 1.0)
+    return figs, ClipFrames(np.repeat(pose[None], N, axis=0), roots, roots.copy(), 60.0)
+
+
+def _slide(figs: FigureSet, frames: ClipFrames, parts: tuple[str, ...]) -> float:
+    points = part_points(frames.poses, frames.roots, figs, "body", parts)
+    return float(contact_runs(points, CONTACT_HEIGHT_CM).slide.max(initial=0.0))
+
+
+def test_skidding_feet_lift_off_and_land_once_where_they_rest(skid: tuple[FigureSet, ClipFrames]) -> None:
+    figs, frames = skid
+    kin = figs.kin["body"]
+    assert _slide(figs, frames, FEET) > SKID_CM - 0.5  # the constructed fall drags its feet
+    out = lifted(frames, figs.figures["body"])
+    assert _slide(figs, out, FEET) < THRESHOLDS["foot_skate_cm"]
+    for foot in FEET:
+        low = part_points(out.poses, out.roots, figs, "body", (foot,))[..., 1].min(axis=1)
+        down = low <= CONTACT_HEIGHT_CM
+        assert (~down[SKID_FROM + 5 : SKID_TO - 5]).all()  # off the ground while the body skids ...
+        assert down[-1] and (np.diff(down.astype(int)) > 0).sum() == 1  # ... lands once and stays
+        assert low.min() > -THRESHOLDS["ground_penetration_cm"]
+    assert np.all(out.poses >= kin.lower - 1e-9) and np.all(out.poses <= kin.upper + 1e-9)
+    assert np.degrees(np.abs(np.diff(out.poses, axis=0))).max() < THRESHOLDS["max_frame_jump_deg"]
+    np.testing.assert_allclose(out.poses[[0, -1]], frames.poses[[0, -1]], atol=1e-6)  # start and rest kept
+    np.testing.assert_array_equal(out.roots, frames.roots)  # the body goes as it fell: legs only
