@@ -31,6 +31,7 @@ import numpy as np
 
 from authoring import crawl, crawl_prone, crawl_turn, deaths, gait, postures, reactions, transitions, turns
 from authoring.motion import KeyPosture
+from authoring.passive_range import passive_figure
 from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
@@ -161,7 +162,11 @@ def _moved(frames: ClipFrames, end_offset: tuple[float, float, float]) -> Clip:
 
 
 def _death(spec: deaths.DeathSpec, ctx: BuildContext) -> Clip:
-    clip = deaths.simulate(spec, ctx.keys, (ctx.soldier, ctx.rifle))
+    """A simulated death; one that rolls its legs into their passive range
+    (:attr:`deaths.DeathSpec.legs_roll`) is recorded on soldier.fig with its legs' passive range
+    (:mod:`authoring.passive_range`)."""
+    body = ctx.soldier if spec.legs_roll is None else passive_figure(ctx.soldier)
+    clip = deaths.simulate(spec, ctx.keys, (body, ctx.rifle))
     return Clip(clip.frames, release_frame=clip.release_frame)
 
 

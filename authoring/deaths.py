@@ -142,6 +142,10 @@ class DeathSpec:
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
     # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
+    # s: the hips and ankles roll out over this after :attr:`fade` into the dead legs' passive range
+    # (:data:`PASSIVE_ROLL`, :mod:`authoring.passive_range`), while the legs still move as he lands; None:
+    # to :data:`ROLLED_LEGS` over :data:`KNEE_STRAIGHTEN` (a crawler's thighs, rolled sooner, slid 6-8 cm)
+    legs_roll: float | None = None
     kept: tuple[tuple[str, float], ...] = ()  # joints (name suffix, until s) that keep the start posture's
     # shape at kept_tone of their gain, letting go over KEPT_FADE from then on
     kept_tone: float = 0.0
@@ -180,9 +184,23 @@ CRAWL_DEATH = replace(
     kept=(*((j, MAX_SECONDS) for j in ("clavicle", "shoulder", "elbow")), ("hip", 0.45), ("knee", 0.45)),
     kept_tone=0.3,
 )
+# s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
+# ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands
+# (10.1/11.4 cm; 18.3/20.0 to the active range over 1 s), the thighs sliding no further
+LEGS_ROLL = 0.5
+# s: stfire2dead's (heels 15.4 -> 15.1 cm and its knee's rebound 3.9 -> 2.5 cm; over 0.6 s its left foot slid
+# 6.3 cm as he landed, over 0.7 s the heel lay at 19.4: the fall is chaotic in these, each was measured)
+STFIRE_LEGS_ROLL = 0.8
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
-        "ststow2dead", "STAND_STOWED", 120.0, (0.0, -0.3, -1.0), toss=80.0, pinned=True, knees_held=True
+        "ststow2dead",
+        "STAND_STOWED",
+        120.0,
+        (0.0, -0.3, -1.0),
+        toss=80.0,
+        pinned=True,
+        knees_held=True,
+        legs_roll=LEGS_ROLL,
     ),
     DeathSpec(
         "stfire2dead",
@@ -195,6 +213,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         hip_damping=13.0,
         arm_tone=0.08,
         pinned=True,
+        legs_roll=STFIRE_LEGS_ROLL,
     ),
     DeathSpec(
         "kstow2dead",
@@ -285,22 +304,29 @@ def _gain(joint: str) -> float:
 
 # degrees: the legs' tone pulls them straight and the feet pointed (heels low on the ground)
 LIMP_LEGS = {"knee": (0.0,), "ankle": (-50.0, 0.0)}
-# degrees: once he is down, the legs roll outward at the hips (external rotation) and the feet evert, so a
-# body on its front lies with its feet on their inner sides and its heels low, as real bodies lie
+# degrees: once he is down, the legs roll outward at the hips (external rotation) and the feet evert and
+# point, so a body on its front lies with its feet on their inner sides and its heels low, as real bodies
+# lie
 ROLLED_LEGS = {"knee": (5.0,), "ankle": (-50.0, 30.0)}
 HIP_ROLL = -45.0  # the hips' third DOF (about the thigh); negative turns the toes out
+# degrees: a death that rolls its legs sooner (DeathSpec.legs_roll) rolls them into the passive range
+PASSIVE_ROLL = {"ankle": -60.0, "hip": -60.0}
 FACE_DOWN = (0.2, 0.6)  # the pelvis' front pointing down this much (cosine): from on his side to on his front
 
 
-def limp_pose(kin, dead: np.ndarray, rolled: bool = False) -> np.ndarray:
+def limp_pose(kin, dead: np.ndarray, rolled: bool = False, passive: bool = False) -> np.ndarray:
     """The shape the faint tone of a dead body pulls toward: the DEAD key's, legs straight and feet pointed
-    (so a body on its front lies with its heels low); ``rolled``: the legs rolled outward too."""
+    (so a body on its front lies with its heels low); ``rolled``: the legs rolled outward too (``passive``:
+    into the passive range, :data:`PASSIVE_ROLL`)."""
     q = np.array(dead, dtype=np.float64)
     for side in ("left", "right"):
         for j, deg in (ROLLED_LEGS if rolled else LIMP_LEGS).items():
             q[kin.dof_slices[f"{side}_{j}"]] = np.radians(deg)
         if rolled:
-            q[kin.dof_slices[f"{side}_hip"].stop - 1] = np.radians(HIP_ROLL)
+            hip = PASSIVE_ROLL["hip"] if passive else HIP_ROLL
+            q[kin.dof_slices[f"{side}_hip"].stop - 1] = np.radians(hip)
+        if rolled and passive:
+            q[kin.dof_slices[f"{side}_ankle"].start] = np.radians(PASSIVE_ROLL["ankle"])
     return q
 
 
@@ -399,12 +425,13 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     hold_ref = first.poses[SOLDIER][jm.dof]
     lo, hi = doll.kin.lower[jm.dof], doll.kin.upper[jm.dof]
     dead_ref = np.clip(limp_pose(doll.kin, dead.poses[SOLDIER])[jm.dof], lo, hi)
-    rolled_ref = np.clip(limp_pose(doll.kin, dead.poses[SOLDIER], rolled=True)[jm.dof], lo, hi)
+    rolled = limp_pose(doll.kin, dead.poses[SOLDIER], rolled=True, passive=spec.legs_roll is not None)
+    rolled_ref = np.clip(rolled[jm.dof], lo, hi)
     slump_ref = np.clip(slump_pose(doll.kin, spec, keys)[jm.dof], lo, hi)
     knees = np.array([n.endswith("knee") for n in names])
     trunk = np.array([n.endswith(FALL_STIFF) or n.startswith(FALL_STIFF) for n in names])
     loose = [n.endswith(LOOSE) for n in names]
-    legs = [n.endswith(LEGS) for n in names]
+    legs = np.array([n.endswith(LEGS) for n in names])
     arms = np.array([n.endswith(("clavicle", "shoulder", "elbow")) for n in names])
     keep = _keeper(spec, names, hold_ref)
     tone = np.where(spine, SPINE_TONE, np.where(loose, np.where(arms, spec.arm_tone, 0.0), TONE))
@@ -450,11 +477,13 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             ref = slump_ref + u * (dead_ref - slump_ref)
             g = spec.slump_gain + np.where(knees, uk, u) * (tone - spec.slump_gain)
             us = _smoothstep((t - spec.fade) / KNEE_STRAIGHTEN)
+            ur = us if spec.legs_roll is None else _smoothstep((t - spec.fade) / spec.legs_roll)
             if us > 0.0 and spec.sideways:  # only on his front (on his side, the upper leg would rise)
-                us *= _face_down(doll)
+                front = _face_down(doll)
+                us, ur = us * front, ur * front
             if us > 0.0:
-                ref = ref + us * (rolled_ref - dead_ref)
-                g = g + settle * us
+                ref = ref + np.where(legs, ur, us) * (rolled_ref - dead_ref)
+                g = g + settle * ur
             g = g + straighten * _straightened(spec, t, us)
         ref, g = keep(t, ref, g)
         model.jnt_stiffness[jm.jnt] = gain * g

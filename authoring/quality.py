@@ -26,7 +26,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
 * ``end_speed_m_s`` — at each end of the clip that is a static posture (both ends of a static-graph clip, the
   base-posture ends of locomotion clips), the fastest site (body and rifle) over the first/last
   ``END_FRAMES`` frames: things ease in and out, deaths end at rest.
-* ``joint_limit_violations`` (float32 slack allowed) and ``max_frame_jump_deg`` (pops, IK flips).
+* ``joint_limit_violations`` (float32 slack allowed; a clip that ends in DEAD: its legs' passive range,
+  :mod:`authoring.passive_range`) and ``max_frame_jump_deg`` (pops, IK flips).
 * ``feet_up_cm`` — while the chest faces the ground (the upper torso's front pointing down, cosine at least
   ``FACE_DOWN_COS``), how far the higher foot's lowest node is above the pelvis' lowest node: a body falling
   or lying face down with its shins straight up (a ragdoll's knees whipping) reads as a scorpion, not a
@@ -66,6 +67,7 @@ from typing import Any
 import numpy as np
 
 from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
+from authoring.passive_range import passive_limits
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from authoring.quality_rest import LAG_LIMIT_S, RISE_LIMIT_CM, rest_lag, rest_rise
@@ -325,8 +327,9 @@ def check_clip(
         out["end_speed_where"] = f"{site} ({end} frames)"
     else:
         out["end_speed_m_s"] = None
-    # joint limits and pops
-    viol = (q < kin.lower - LIMIT_SLACK) | (q > kin.upper + LIMIT_SLACK)
+    # joint limits and pops; a dead body's legs go to their passive range (authoring.passive_range)
+    lower, upper = passive_limits(kin) if ends_dead else (kin.lower, kin.upper)
+    viol = (q < lower - LIMIT_SLACK) | (q > upper + LIMIT_SLACK)
     out["joint_limit_violations"] = int(viol.sum())
     if viol.any():
         bad = np.flatnonzero(viol.any(axis=0))
