@@ -19,6 +19,15 @@ ground but not on it, the slave's is kept at least as high (:func:`lift_to_maste
 down where the master's does not. Stances whose offset stays under ``MIN_PLANT_CM`` are left alone (the
 foot slides less than that), and so are locomotion clips (recorded in place: a planted foot there moves
 with the ground, and their slaves' feet do not slide).
+
+A death's slave (from a stand) has its feet turned after the release by
+:func:`~authoring.slave_ground.rest_limbs`, which lays every part at the master's height: a foot rolling onto
+its side under the falling body turned 11 degrees further than his and its toes bent, and the loosely held
+orientation let the nodes straddling the turn slide 3 cm apart (ststow2dead, frames 47-59). So there the
+foot and toes turn as the master's do while his foot is planted (their turn relative to his taken once, at
+touchdown), and the foot's own nodes are then held by the offsets above. A slave that starts kneeling or
+prone keeps the loose hold (its legs were posed otherwise than his by
+:func:`~authoring.slave_contacts.rest_slave_knees`; turned as his, a kneeling hip jumped 25-30 degrees).
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ from authoring.quality_frames import FigureSet
 from authoring.rifle_swap import _smooth_above
 from authoring.slave_contacts import SIDES, _played
 from authoring.transitions import track_solve
+from peabody import quaternion
 from peabody.fk import FigureKinematics
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -47,6 +57,10 @@ TRACK_ITERATIONS = 20  # per frame of the legs' tracking ...
 TRACK_DOF_STEP = 0.01  # ... in steps of at most this (rad): a joint turns at most 11 degrees a frame
 FOOT_TURN_CM = 5.0  # a radian of the foot's turn weighs as much as this much move (held loosely: a
 # kneeling leg's ankle at its limits cannot keep the foot's exact orientation as the foot moves)
+FOOT_HOLD_TURN_CM = 40.0  # a dying slave's planted foot turns as the master's: held firmly
+TURN_RAMP_FRAMES = 10  # ... easing out over this many frames once his foot is off the ground
+KNEE_SIGMA_FRAMES = 4.0  # ... and out as the knee comes down, smoothed over the clip (at least as far)
+START_FRAMES = 6  # ... that turn fades in over a clip's first frames (its first is a shared posture node)
 FOOT_PASSES = 2  # the contact nodes change a little as the foot moves: measure and solve again
 
 
@@ -96,18 +110,27 @@ def plant_offsets(
             track -= track[-1] * (1.0 if a > 0 else np.linspace(0.0, 1.0, b - a + 1)[:, None])
         if np.linalg.norm(track, axis=1).max() >= MIN_PLANT_CM:
             out[a : b + 1] = track
+    _ease_gaps(out, runs)
+    out[[0, -1]] = 0.0
+    return out
+
+
+def _ease_gaps(values: np.ndarray, runs: list[tuple[int, int]]) -> None:
+    """Between the ``runs`` (and before the first, after the last), ease ``values`` ``(n, ...)`` in place
+    (smoothstep) from one run's last value to the next one's first (none beyond the clip's ends)."""
+    n = len(values)
     gaps = [(-1, runs[0][0] if runs else n)] + [
         (b, runs[i + 1][0] if i + 1 < len(runs) else n) for i, (_, b) in enumerate(runs)
     ]
     for last, nxt in gaps:
         if nxt - last < 2:
             continue
-        lo = out[last] if last >= 0 else np.zeros(3)
-        hi = out[nxt] if nxt < n else np.zeros(3)
+        lo = values[last] if last >= 0 else np.zeros_like(values[0])
+        hi = values[nxt] if nxt < n else np.zeros_like(values[0])
         u = (np.arange(last + 1, nxt) - last) / (nxt - last)
-        out[last + 1 : nxt] = lo + (u * u * (3.0 - 2.0 * u))[:, None] * (hi - lo)
-    out[[0, -1]] = 0.0
-    return out
+        values[last + 1 : nxt] = lo + (u * u * (3.0 - 2.0 * u)).reshape(-1, *[1] * (values.ndim - 1)) * (
+            hi - lo
+        )
 
 
 def part_points(
@@ -129,6 +152,56 @@ def lift_to_master(slave_low: np.ndarray, master_low: np.ndarray) -> np.ndarray:
     return _smooth_above(need, LIFT_SIGMA_FRAMES) if need.any() else need
 
 
+def _stance_weight(stance: np.ndarray) -> np.ndarray:
+    """Per frame how much of the master's foot turn a dying slave's foot takes: all of it in his stances,
+    easing out over ``TURN_RAMP_FRAMES`` off the ground, none at the clip's first frame (a posture node every
+    clip there agrees on)."""
+    n = len(stance)
+    down = np.flatnonzero(stance)
+    if not len(down):
+        return np.zeros(n)
+    gap = np.abs(np.arange(n)[:, None] - down[None, :]).min(axis=1)
+    w = np.clip(1.0 - gap / TURN_RAMP_FRAMES, 0.0, 1.0)
+    u = np.clip(np.arange(n) / START_FRAMES, 0.0, 1.0)
+    return np.minimum(w * w * (3.0 - 2.0 * w), u * u * (3.0 - 2.0 * u))
+
+
+def _anchored(master: np.ndarray, slave: np.ndarray, stance: np.ndarray) -> np.ndarray:
+    """Per frame the orientation ``(n, 3, 3)`` a slave segment should have to turn as the master's does
+    (``master``, ``slave``: ``(n, 4, 4)`` globals): its turn relative to his is taken once, at the
+    touchdown of each stance (the nearest stance's off the ground), and kept through the stance, so a foot
+    that the slaving put a little otherwise than his is not turned to his at once."""
+    m, sl = master[:, :3, :3], slave[:, :3, :3]
+    runs = _runs(stance)
+    if not runs:
+        return sl.copy()
+    starts = np.array([a for a, _ in runs])
+    mids = np.array([(a + b) / 2.0 for a, b in runs])
+    near = np.abs(np.arange(len(m))[:, None] - mids[None, :]).argmin(axis=1)
+    rel = m[starts].transpose(0, 2, 1) @ sl[starts]
+    return m @ rel[near]
+
+
+def _turns(foot: np.ndarray, target: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Per frame the world turn ``(n, 3, 3)`` that brings the slave's segment ``foot`` ``(n, 4, 4)`` ``w``
+    of the way to the orientation ``target`` ``(n, 3, 3)``."""
+    full = quaternion.from_matrix(target @ foot[:, :3, :3].transpose(0, 2, 1))
+    ident = np.broadcast_to(np.array([1.0, 0.0, 0.0, 0.0]), full.shape)
+    return quaternion.to_matrix(quaternion.slerp(ident, full, w))
+
+
+def _ground_to_master(
+    low: np.ndarray, master_low: np.ndarray, stance: np.ndarray, w: np.ndarray
+) -> np.ndarray:
+    """Per frame how far ``(n,)`` to raise a dying slave's foot so that its lowest node is not below the
+    master's while his is on the ground (eased between stances) or near it (:func:`lift_to_master`). Never
+    lowered: pushing a DI foot that floats 2.6 cm down to his height jumped the hip 30 degrees in a frame
+    (kstow2dead)."""
+    dy = np.where(stance, np.maximum(np.maximum(master_low, 0.0) - low, 0.0), 0.0)
+    _ease_gaps(dy, _runs(stance))
+    return np.where(stance, dy, np.maximum(dy, lift_to_master(low, master_low))) * w
+
+
 def _leg_goal(
     kin: FigureKinematics,
     pose: np.ndarray,
@@ -137,26 +210,71 @@ def _leg_goal(
     ptype: str,
     master_foot: np.ndarray,
     side: str,
-) -> tuple[ik.Goal, np.ndarray]:
-    """One leg's goal (the foot moved by its planting offset and lift, its orientation kept) and the move
+    master_turn: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[list[ik.Goal], np.ndarray]:
+    """One leg's goals (the foot moved by its planting offset and lift, its orientation kept) and the move
     per frame. A knee or thigh on the ground carries the leg too: the move fades out as it comes down
-    (holding the foot where the hip moves over a knee on the ground slid the knee 4-6 cm instead)."""
+    (holding the foot where the hip moves over a knee on the ground slid the knee 4-6 cm instead).
+
+    With ``master_turn`` (a death: the master's foot and toes segment globals, each ``(n, 4, 4)``) the
+    foot and toes are also turned as the master's while his foot is planted, raised where it sinks below:
+    :func:`~authoring.slave_ground.rest_limbs` had turned a DI foot rolling onto its side 11 degrees further
+    than his and bent its toes, and kept loosely that turn slid it 3 cm (ststow2dead). Its own nodes then
+    roll without slipping (:func:`plant_offsets`)."""
     sites = kin.site_globals(pose, loc)
     foot_pts = part_points(pose, loc, figures, ptype, (f"{side}_foot",))
     master_low = master_foot[..., 1].min(axis=1)
-    move = plant_offsets(foot_pts, master_low <= CONTACT_HEIGHT_CM)
-    move[:, 1] = lift_to_master(foot_pts[..., 1].min(axis=1), master_low)
+    stance = master_low <= CONTACT_HEIGHT_CM
+    u = _knee_free(pose, loc, figures, ptype, side)
+    heel = sites[:, kin.site_names.index(f"{side}_foot.heel")]
+    at, turn = heel[:, :3, 3], heel[:, :3, :3]
+    extra: list[ik.Goal] = []
+    if master_turn is None:
+        move = plant_offsets(foot_pts, stance)
+        move[:, 1] = lift_to_master(foot_pts[..., 1].min(axis=1), master_low)
+        move *= u[:, None]
+    else:
+        # a knee coming down fast let the toes go in 3 frames (40 degrees in one): eased over more
+        u = 1.0 - _smooth_above(1.0 - u, KNEE_SIGMA_FRAMES)
+        w = _stance_weight(stance) * u
+        segs = kin.segment_globals(pose, loc)
+        foot, toes = (segs[:, kin.segment_names.index(f"{side}_{seg}")] for seg in ("foot", "toes"))
+        rot = _turns(foot, _anchored(master_turn[0], foot, stance), w)
+        origin = foot[:, :3, 3]
+        foot_pts = np.einsum("fij,fkj->fki", rot, foot_pts - origin[:, None]) + origin[:, None]
+        at = np.einsum("fij,fj->fi", rot, at - origin) + origin
+        turn = rot @ turn
+        dy = _ground_to_master(foot_pts[..., 1].min(axis=1), master_low, stance, w)
+        foot_pts[..., 1] += dy[:, None]
+        move = plant_offsets(foot_pts, stance) * u[:, None]
+        move[:, 1] = dy
+        toes_turn = _turns(toes, _anchored(master_turn[1], toes, stance), w) @ toes[:, :3, :3]
+        extra.append(
+            ik.Goal(f"{side}_toes.distal", None, toes_turn, 1.0, 2, (f"{side}_toes",), FOOT_HOLD_TURN_CM)
+        )
+    target = at + move
+    goal = ik.Goal(
+        f"{side}_foot.heel",
+        target,
+        turn,
+        1.0,
+        2,
+        leg(side),
+        FOOT_TURN_CM if master_turn is None else FOOT_HOLD_TURN_CM,
+    )
+    return [goal, *extra], np.linalg.norm(target - heel[:, :3, 3], axis=1)
+
+
+def _knee_free(pose: np.ndarray, loc: np.ndarray, figures: FigureSet, ptype: str, side: str) -> np.ndarray:
+    """Per frame 0 where the leg's knee or thigh is on the ground (it carries the leg), easing to 1 where
+    it is ``KNEE_FREE_CM`` up."""
     leg_pts = part_points(
         pose, loc, figures, ptype, tuple(f"{side}_{p}" for p in ("knee", "kneecap", "thigh"))
     )
-    if leg_pts.shape[1]:
-        u = np.clip((leg_pts[..., 1].min(axis=1) - KNEE_DOWN_CM) / (KNEE_FREE_CM - KNEE_DOWN_CM), 0.0, 1.0)
-        move *= (u * u * (3.0 - 2.0 * u))[:, None]
-    heel = sites[:, kin.site_names.index(f"{side}_foot.heel")]
-    goal = ik.Goal(
-        f"{side}_foot.heel", heel[:, :3, 3] + move, heel[:, :3, :3], 1.0, 2, leg(side), FOOT_TURN_CM
-    )
-    return goal, np.linalg.norm(move, axis=1)
+    if not leg_pts.shape[1]:
+        return np.ones(len(pose))
+    u = np.clip((leg_pts[..., 1].min(axis=1) - KNEE_DOWN_CM) / (KNEE_FREE_CM - KNEE_DOWN_CM), 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
 
 
 def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
@@ -167,6 +285,19 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
         return np.zeros(len(q))
     mq, mloc, mtype = _played(master, figures)
     master_feet = {side: part_points(mq, mloc, figures, mtype, (f"{side}_foot",)) for side in SIDES}
+    turns: dict[str, tuple[np.ndarray, np.ndarray] | None] = dict.fromkeys(SIDES)
+    knelt = any(_knee_free(q[:1], loc[:1], figures, stype, side)[0] < 1.0 for side in SIDES)
+    if getattr(slave, "release_frame", None) is not None and not knelt:
+        # a death from a stand: rest_limbs turned the feet on the ground. Kneeling or prone at the start, the
+        # slave's legs are posed otherwise than his (rest_slave_knees): turned as his, a kneeling DI's hip
+        # jumped 25-30 degrees in a frame (kstow2dead), so those keep the loose hold
+        mkin = figures.kin[mtype]
+        mseg = mkin.segment_globals(mq, mloc)
+
+        def seg(name: str) -> np.ndarray:
+            return mseg[:, mkin.segment_names.index(name)]
+
+        turns = {side: (seg(f"{side}_foot"), seg(f"{side}_toes")) for side in SIDES}
     kin = figures.kin[stype]
     pose = q
     total = np.zeros(len(q))
@@ -174,8 +305,8 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
         goals: list[ik.Goal] = []
         worst = np.zeros(len(q))
         for side in SIDES:
-            goal, moved = _leg_goal(kin, pose, loc, figures, stype, master_feet[side], side)
-            goals.append(goal)
+            leg_goals, moved = _leg_goal(kin, pose, loc, figures, stype, master_feet[side], side, turns[side])
+            goals += leg_goals
             worst = np.maximum(worst, moved)
         if not (worst > MIN_SHIFT_CM).any():
             break

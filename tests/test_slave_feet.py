@@ -16,6 +16,7 @@ from authoring.quality import check_clip
 from authoring.quality_frames import FigureSet
 from authoring.slave_feet import plant_offsets, plant_slave_feet
 from server.motion.cache import load_channelset
+from server.motion.channelset import Channelset
 from ttes.paths import CHANNELSETS, FIGURES
 
 
@@ -81,3 +82,44 @@ def test_crawl2prstow_slave_left_foot_stays_planted() -> None:
     assert after["contact_slides"]["left_foot"] <= 2.0
     assert after["ground_penetration_cm"] <= 1.0
     assert after["max_frame_jump_deg"] <= max(20.0, before["max_frame_jump_deg"])
+
+
+def _foot_turn_deg(cs: Channelset, figs: FigureSet, side: str) -> np.ndarray:
+    """Per frame the orientation ``(n, 3, 3)`` of ``side``'s foot segment in the world, as played."""
+    from authoring.slave_contacts import _played
+
+    q, loc, ptype = _played(cs, figs)
+    kin = figs.kin[ptype]
+    return kin.segment_globals(q, loc)[:, kin.segment_names.index(f"{side}_foot"), :3, :3]
+
+
+def test_a_dying_slaves_foot_turned_on_the_ground_turns_as_the_masters() -> None:
+    """Issue 14 (slavefeet14): rest_limbs turned the DI's left foot, rolling onto its side under the falling
+    body, 11 degrees further than the master's (and bent its toes), and the loosely held plant let its nodes
+    slide 3.2 cm where the master's slid 1.3. Constructed here: the slave's left ankle turned away by up to
+    0.35 rad and its toes bent 0.6 rad over frames 30-58 while the master's foot is planted (frames 0-59)."""
+    from server.motion.binding import bind_channelset
+
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
+    master = load_channelset(CHANNELSETS / "ststow2dead.chset.env", use_cache=False)
+    slave = load_channelset(CHANNELSETS / "ststow2dead_low.chset.env", use_cache=False)
+    bf = bind_channelset(slave, [ctx.di]).figures[0]
+    ramp = np.clip((np.arange(slave.nframes) - 30) / 28.0, 0.0, 1.0) * (np.arange(slave.nframes) < 59)
+    for joint, turn in (("left_ankle", 0.35), ("left_toes", -0.6)):  # as rest_limbs turned and bent them
+        dofs = figs.kin["DI.fig"].dof_slices[joint]
+        cols = bf.src[np.isin(bf.dst, np.arange(dofs.start, dofs.stop))]
+        slave.joint_data[:, cols] += (turn * ramp[:, None]).astype(slave.joint_data.dtype)
+    before = check_clip(copy.deepcopy(slave), figs)
+    assert before["contact_slides"]["left_foot"] > 2.0
+    plant_slave_feet(master, slave, figs)
+    lift_off_ground(slave, ctx.di)
+    after = check_clip(slave, figs, ends_dead=True)
+    mine, his = _foot_turn_deg(slave, figs, "left"), _foot_turn_deg(master, figs, "left")
+    cos = (np.einsum("fij,fij->f", mine, his)[10:59] - 1.0) / 2.0
+    assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 3.0  # planted: turned as his
+    assert after["contact_slides"]["left_foot"] <= 1.5
+    assert after["foot_skate_cm"] <= 2.0
+    assert after["max_frame_jump_deg"] <= 20.0
+    first = load_channelset(CHANNELSETS / "ststow2dead_low.chset.env", use_cache=False).joint_data[0]
+    assert np.allclose(slave.joint_data[0], first, atol=1e-3)  # a posture node: left as it was
