@@ -417,12 +417,18 @@ def fall_easing(s: np.ndarray) -> np.ndarray:
 
 
 def settle(
-    frames: ClipFrames, soldier: Figure, rifle: Figure, arms_fall: bool = False, propped: bool = False
+    frames: ClipFrames,
+    soldier: Figure,
+    rifle: Figure,
+    arms_fall: bool = False,
+    propped: bool = False,
+    legs: bool = True,
 ) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
     with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
     (:mod:`authoring.dead_prone`); a body on its back (``arms_fall``) lets its arms fall as it lands
-    (:func:`_arms_fall`)."""
+    (:func:`_arms_fall`). ``legs`` False: the legs stay as the physics laid them
+    (``DeathSpec.legs_settle``)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
     lowered = _lowered(figs, frames) if propped else None
     if lowered is not None:
@@ -439,7 +445,8 @@ def settle(
     u = np.concatenate([s * s * (3.0 - 2.0 * s), still])
     poses = last[None] + u[:, None] * (target - last)[None]
     body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])  # the legs: lifted, turned out, laid down
-    poses[:, _leg_dofs(body.kin)] = _legs_path(body, np.concatenate([s, still]), u)
+    leg_dofs = _leg_dofs(body.kin)
+    poses[:, leg_dofs] = _legs_path(body, np.concatenate([s, still]), u) if legs else last[leg_dofs]
     return _appended(frames, poses)
 
 

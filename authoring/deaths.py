@@ -146,6 +146,10 @@ class DeathSpec:
     # (:data:`PASSIVE_ROLL`, :mod:`authoring.passive_range`), while the legs still move as he lands; None:
     # to :data:`ROLLED_LEGS` over :data:`KNEE_STRAIGHTEN` (a crawler's thighs, rolled sooner, slid 6-8 cm)
     legs_roll: float | None = None
+    # the settle lays the legs again after the physics (dead_settle.settle's ``legs``); False: they stay as
+    # the physics laid them (ststow2dead, rolled as he landed: laid again, his right foot moved from 0.5 s
+    # after he lay still, limb_rest_lag 1.13 s; stfire2dead keeps it: without, its heels rest 21.5 cm up)
+    legs_settle: bool = True
     kept: tuple[tuple[str, float], ...] = ()  # joints (name suffix, until s) that keep the start posture's
     # shape at kept_tone of their gain, letting go over KEPT_FADE from then on
     kept_tone: float = 0.0
@@ -201,6 +205,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         pinned=True,
         knees_held=True,
         legs_roll=LEGS_ROLL,
+        legs_settle=False,
     ),
     DeathSpec(
         "stfire2dead",
@@ -574,7 +579,9 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         assert not (spec.knees_held or spec.propped), f"{spec.name}: knees held or propped, and arms falling"
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped)
+    frames = dead_settle.settle(
+        frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle
+    )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:
