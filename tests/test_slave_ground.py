@@ -52,9 +52,10 @@ def test_the_dead_slave_lies_as_low_as_his_master(fallen) -> None:
     # branch, 3.03 on the master with the dead settle (the DI's pelvis sits higher on its belly)
     assert _height(figs, slave, "pelvis")[-1] <= 3.5
     assert min(_height(figs, slave, p)[-1] for p in ("belly", "chest")) <= 2.0
-    for side in ("left", "right"):  # the feet come down with the body, about as high as the master's (the
-        # master's legs now lie as the physics rolled them, DeathSpec.legs_settle: the slave's right foot 2.0004
-        # cm above his at this stage, within DI's active range; the finished slave's heels: rest_foot)
+    # the feet come down with the body, about as high as the master's (his legs now lie as the physics
+    # rolled them, DeathSpec.legs_settle: the slave's right foot 2.0004 cm above his at this stage, within
+    # DI's active range; the finished slave's heels: the check's rest_foot)
+    for side in ("left", "right"):
         assert _height(figs, slave, "foot", side)[-1] <= _height(figs, master, "foot", side)[-1] + 2.5
     f = play(slave, figs)
     assert lowest_point(figs.kin["DI.fig"], f.poses["DI.fig"], f.locations["DI.fig"]).min() > -1.0
