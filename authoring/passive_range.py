@@ -22,6 +22,7 @@ Published passive ranges of motion (healthy adults, goniometer), not exceeded he
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterator, Mapping
 
 import numpy as np
 
@@ -37,28 +38,30 @@ PASSIVE_DEG: dict[str, dict[int, float]] = {
 SIDES = ("left", "right")
 
 
+def _widened(dof_slices: Mapping[str, object]) -> Iterator[tuple[str, int, float]]:
+    """(joint name, DOF index in the joint, passive lower limit in radians) of :data:`PASSIVE_DEG` for each
+    leg joint ``dof_slices`` has (a figure without them: none)."""
+    for joint, dofs in PASSIVE_DEG.items():
+        for side in SIDES:
+            if f"{side}_{joint}" in dof_slices:
+                for i, lo in dofs.items():
+                    yield f"{side}_{joint}", i, float(np.radians(lo))
+
+
 def passive_figure(figure: Figure) -> Figure:
     """A copy of ``figure`` whose legs may go to :data:`PASSIVE_DEG` (wider only; a figure without those
     joints is copied unchanged): a dead body's."""
     out = copy.deepcopy(figure)
-    for joint, dofs in PASSIVE_DEG.items():
-        for side in SIDES:
-            j = out.joints.get(f"{side}_{joint}")
-            if j is None:
-                continue
-            for i, lo in dofs.items():
-                j.dofs[i].lower = min(j.dofs[i].lower, float(np.radians(lo)))
+    for name, i, lo in _widened(out.joints):
+        dof = out.joints[name].dofs[i]
+        dof.lower = min(dof.lower, lo)
     return out
 
 
 def passive_limits(kin: FigureKinematics) -> tuple[np.ndarray, np.ndarray]:
     """The joint limits (radians, per DOF) of :func:`passive_figure` of ``kin``'s figure."""
     lower = kin.lower.copy()
-    for joint, dofs in PASSIVE_DEG.items():
-        for side in SIDES:
-            sl = kin.dof_slices.get(f"{side}_{joint}")
-            if sl is None:
-                continue
-            for i, lo in dofs.items():
-                lower[sl.start + i] = min(lower[sl.start + i], float(np.radians(lo)))
+    for name, i, lo in _widened(kin.dof_slices):
+        k = kin.dof_slices[name].start + i
+        lower[k] = min(lower[k], lo)
     return lower, kin.upper.copy()

@@ -28,7 +28,7 @@ from server.soldier.locomotion import (
 )
 from server.soldier.reactions import Reactions
 from server.soldier.stepping import Stepping
-from server.soldier.turning import REVERSAL_TURN_SPEEDUP, Turning
+from server.soldier.turning import Turning
 
 
 class Events(Stepping, Turning, Reactions, LeadIn):
@@ -172,7 +172,7 @@ class Events(Stepping, Turning, Reactions, LeadIn):
             turns[standing] = self._turns(idx[standing], t[standing])
             for k in np.flatnonzero(turns & (kind != 0)).tolist():
                 # a pivot stops, turns, then (its end decides again) walks away
-                turns[k] = self._turn(int(idx[k]), float(t[k]), REVERSAL_TURN_SPEEDUP)
+                turns[k] = self._turn(int(idx[k]), float(t[k]), moving=True)
             idx, t, kind = idx[~turns], t[~turns], kind[~turns]
         node = tb.node[idx]
         still = idx[(kind == 0) & (node != self._home) & ~self.library.faces_world[node]]
@@ -203,7 +203,7 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         reversing = bool(tb.reversing[i])
         tb.reversing[i] = False
         turned_away = abs(tb.root_yaw[i]) >= MIN_TURN_DEG  # a start this far off pivots first, as a reversal
-        if (turned_away or (kind and reversing)) and self._turn(i, t, REVERSAL_TURN_SPEEDUP if kind else 1.0):
+        if (turned_away or (kind and reversing)) and self._turn(i, t, moving=bool(kind)):
             return  # a pivot stops, turns, then (its end decides again) walks away
         if not kind and node != self._home and not self.library.faces_world[node]:
             # no turn clip here: the figure faces the heading again

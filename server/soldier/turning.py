@@ -116,11 +116,12 @@ class Turning(ManagerCore):
             i = idx[crawl]
             self.table.reversing[i] = np.abs(self.table.root_yaw[i]) >= CRAWL_REVERSAL_DEG
 
-    def _turn(self, i: int, t: float, speedup: float = 1.0) -> bool:
-        """A resting soldier whose figure faces away from its heading plays the turn in place that fits: a
-        standing one ``speedup`` times faster than recorded (a reversal's pivot), one on forearms and knees
-        at GROUND_TURN_RATE (one that crawls on after it, ``speedup`` not 1: those that carry him forward),
-        a prone one up to CRAWL, the turn, and down again (:meth:`_turn_via`)."""
+    def _turn(self, i: int, t: float, moving: bool = False) -> bool:
+        """A resting soldier whose figure faces away from its heading plays the turn in place that fits:
+        standing, the nearest turn (``moving``, one that walks off after it: the pivot, REVERSAL_TURN_SPEEDUP
+        times faster than recorded), on forearms and knees those that fit at GROUND_TURN_RATE (``moving``,
+        one that crawls on: those that carry him forward), prone up to CRAWL, the turn, and down again
+        (:meth:`_turn_via`)."""
         tb, lib = self.table, self.library
         node = int(tb.node[i])
         if int(tb.mode[i]) != _IDLE:
@@ -132,19 +133,20 @@ class Turning(ManagerCore):
             return False
         want = -float(tb.root_yaw[i])  # compass degrees to turn
         if node != self._home:  # on the ground
-            turns = self._ground_turns(node, want, speedup != 1.0)
+            turns = self._ground_turns(node, want, moving)
             if turns:
                 self._turn_path(i, turns, t)
             return bool(turns)
-        clip, turn = (self._pivot_clip if speedup != 1.0 else self._nearest_turn)(want, clips)
+        clip, turn = (self._pivot_clip if moving else self._nearest_turn)(want, clips)
         if abs((turn - want + 180.0) % 360.0 - 180.0) >= abs(want):
             return False
         # the turn turns by the clip's turn and a rest too small for another turn clip (a 58° turn after an
         # end step: the 45° clip and 13° over its stances; it ended 13° off the heading); else another after
         rest = (float(lib.clip_end_offset[clip, 2]) - float(tb.root_yaw[i]) + 180.0) % 360.0 - 180.0
         rest = rest if self._pivot_fits(clip, abs(rest)) else 0.0
-        if speedup != 1.0:  # a pivot: turning more, it turns no faster than the clip
-            speedup *= min(1.0, abs(turn) / abs(want))
+        speedup = 1.0
+        if moving:  # a pivot: turning more, it turns no faster than the clip
+            speedup = REVERSAL_TURN_SPEEDUP * min(1.0, abs(turn) / abs(want))
         step = PathStep(clip, True, float(lib.clip_duration[clip]) / speedup, node, node)
         self._turn_path(i, (step,), t)
         tb.pivot_rest[i] = rest
