@@ -128,10 +128,12 @@ class TtesServer:
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
         self.feed: Callable[[PoseBoard, int], np.ndarray] | None = None
+        self.relay_out: Callable[[], None] | None = None  # a front-end's: send what was relayed, now
         self.status_note: Callable[[], str] | None = (
             None  # appended to STATUS (a shard's or front-end's role)
         )
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
+        self._encode_turn = trio.Lock()  # a front-end's writers encode one at a time (_encode)
         self._loop_thread = threading.get_ident()
         self._trio_token: trio.lowlevel.TrioToken | None = None
         self.world.in_loop = self._in_loop
@@ -447,9 +449,7 @@ class TtesServer:
                         await self.let_readers_in()
                     self.apply_held()
                 # (woken by answers alone: written at once, not after the next reader's answer, issue 16)
-                session.wake = trio.Event()
-                with self.cpu("encode"):
-                    data = session.take_output(self.now())
+                data = await self._encode(session)
                 session.drained.set()
                 if data:
                     with trio.move_on_after(timeout) as cs:
@@ -472,6 +472,26 @@ class TtesServer:
             session.writer_done.set()
             if not session.lingering:
                 scope.cancel()
+
+    async def _encode(self, session: Session) -> bytes:
+        """What ``session``'s writer writes now. A front-end's writers take turns, each letting the readers
+        and the shards' batches in before its encode and sending the requests they relay: a request or an
+        answer that arrives during one client's encode waits for that encode only, not for every woken
+        client's (issue 21: a shard's batch woke both clients' writers, and their ~3.5 ms encodes ran back
+        to back before any socket was read, the relayed requests sent after both)."""
+        if self.feed is None:
+            return self._encode_now(session)
+        async with self._encode_turn:
+            await self.let_readers_in()
+            self.apply_held()  # the requests they hold go to their shards before this encode, not after
+            if self.relay_out is not None:
+                self.relay_out()
+            return self._encode_now(session)
+
+    def _encode_now(self, session: Session) -> bytes:
+        session.wake = trio.Event()  # a publish from here on wakes it again
+        with self.cpu("encode"):
+            return session.take_output(self.now())
 
     # -- ticks and reports -------------------------------------------------------------------------------
     async def _tick_loop(self) -> None:
