@@ -39,6 +39,7 @@ from __future__ import annotations
 import errno
 import ipaddress
 import math
+import os
 import signal
 import threading
 import time
@@ -56,7 +57,7 @@ from server.pending_requests import PendingRequests
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.soldier.manager import TickUpdate
-from server.stage_cpu import TURN_CPU_S, StageCpu
+from server.stage_cpu import TURN_CPU_S, DeafSpans, StageCpu
 from server.startup import ServerWorld
 from server.tls import server_context
 from server.trace import TRACE
@@ -68,6 +69,8 @@ from server.world.commands import needs_worker
 READ_TURN_S = TURN_CPU_S
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
+# TTES_FRONT_TURNS=0: a front-end's woken writers encode back to back, as before (_encode; a bench's A/B)
+FRONT_TURNS = os.environ.get("TTES_FRONT_TURNS") != "0"
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
 log = get_logger("app")
 
@@ -123,6 +126,7 @@ class TtesServer:
         self._bound_ws: list[Any] = []  # and the WebSocket port's
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
         self.cpu = StageCpu()  # the loop's CPU per stage, in the status log line
+        self.deaf = DeafSpans() if os.environ.get("TTES_DEAF") == "1" else None  # a bench's: loop_deaf_ms
         # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
         self.on_publish: Callable[[PoseBoard], None] | None = None
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
@@ -251,6 +255,8 @@ class TtesServer:
         self._clock_started = True
         self._loop_thread = threading.get_ident()
         self._trio_token = trio.lowlevel.current_trio_token()
+        if self.deaf is not None:
+            trio.lowlevel.add_instrument(self.deaf)
         check_exposure(self.config)
         self.start_world()
         self.bind()
@@ -479,7 +485,7 @@ class TtesServer:
         answer that arrives during one client's encode waits for that encode only, not for every woken
         client's (issue 21: a shard's batch woke both clients' writers, and their ~3.5 ms encodes ran back
         to back before any socket was read, the relayed requests sent after both)."""
-        if self.feed is None:
+        if self.feed is None or not FRONT_TURNS:
             return self._encode_now(session)
         async with self._encode_turn:
             await self.let_readers_in()
@@ -819,6 +825,7 @@ class TtesServer:
             mean_tick_us=round(st.get("mean_tick_us", 0.0), 1),
             modes=st.get("modes", {}),
             cpu_ms_per_tick=self.cpu.report(self.ticks),
+            **({} if self.deaf is None else {"loop_deaf_ms": self.deaf.report()}),
         )
 
 
