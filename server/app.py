@@ -39,6 +39,7 @@ from __future__ import annotations
 import errno
 import ipaddress
 import math
+import os
 import signal
 import threading
 import time
@@ -56,7 +57,7 @@ from server.pending_requests import PendingRequests
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.soldier.manager import TickUpdate
-from server.stage_cpu import TURN_CPU_S, StageCpu
+from server.stage_cpu import TURN_CPU_S, DeafSpans, StageCpu
 from server.startup import ServerWorld
 from server.tls import server_context
 from server.trace import TRACE
@@ -68,6 +69,8 @@ from server.world.commands import needs_worker
 READ_TURN_S = TURN_CPU_S
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
+# TTES_FRONT_TURNS=0: a front-end's woken writers encode back to back, as before (_encode; a bench's A/B)
+FRONT_TURNS = os.environ.get("TTES_FRONT_TURNS") != "0"
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
 log = get_logger("app")
 
@@ -123,15 +126,18 @@ class TtesServer:
         self._bound_ws: list[Any] = []  # and the WebSocket port's
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
         self.cpu = StageCpu()  # the loop's CPU per stage, in the status log line
+        self.deaf = DeafSpans() if os.environ.get("TTES_DEAF") == "1" else None  # a bench's: loop_deaf_ms
         # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
         self.on_publish: Callable[[PoseBoard], None] | None = None
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
         self.feed: Callable[[PoseBoard, int], np.ndarray] | None = None
+        self.relay_out: Callable[[], None] | None = None  # a front-end's: send what was relayed, now
         self.status_note: Callable[[], str] | None = (
             None  # appended to STATUS (a shard's or front-end's role)
         )
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
+        self._encode_turn = trio.Lock()  # a front-end's writers encode one at a time (_encode)
         self._loop_thread = threading.get_ident()
         self._trio_token: trio.lowlevel.TrioToken | None = None
         self.world.in_loop = self._in_loop
@@ -249,6 +255,8 @@ class TtesServer:
         self._clock_started = True
         self._loop_thread = threading.get_ident()
         self._trio_token = trio.lowlevel.current_trio_token()
+        if self.deaf is not None:
+            trio.lowlevel.add_instrument(self.deaf)
         check_exposure(self.config)
         self.start_world()
         self.bind()
@@ -447,9 +455,7 @@ class TtesServer:
                         await self.let_readers_in()
                     self.apply_held()
                 # (woken by answers alone: written at once, not after the next reader's answer, issue 16)
-                session.wake = trio.Event()
-                with self.cpu("encode"):
-                    data = session.take_output(self.now())
+                data = await self._encode(session)
                 session.drained.set()
                 if data:
                     with trio.move_on_after(timeout) as cs:
@@ -472,6 +478,26 @@ class TtesServer:
             session.writer_done.set()
             if not session.lingering:
                 scope.cancel()
+
+    async def _encode(self, session: Session) -> bytes:
+        """What ``session``'s writer writes now. A front-end's writers take turns, each letting the readers
+        and the shards' batches in before its encode and sending the requests they relay: a request or an
+        answer that arrives during one client's encode waits for that encode only, not for every woken
+        client's (issue 21: a shard's batch woke both clients' writers, and their ~3.5 ms encodes ran back
+        to back before any socket was read, the relayed requests sent after both)."""
+        if self.feed is None or not FRONT_TURNS:
+            return self._encode_now(session)
+        async with self._encode_turn:
+            await self.let_readers_in()
+            self.apply_held()  # the requests they hold go to their shards before this encode, not after
+            if self.relay_out is not None:
+                self.relay_out()
+            return self._encode_now(session)
+
+    def _encode_now(self, session: Session) -> bytes:
+        session.wake = trio.Event()  # a publish from here on wakes it again
+        with self.cpu("encode"):
+            return session.take_output(self.now())
 
     # -- ticks and reports -------------------------------------------------------------------------------
     async def _tick_loop(self) -> None:
@@ -799,6 +825,7 @@ class TtesServer:
             mean_tick_us=round(st.get("mean_tick_us", 0.0), 1),
             modes=st.get("modes", {}),
             cpu_ms_per_tick=self.cpu.report(self.ticks),
+            **({} if self.deaf is None else {"loop_deaf_ms": self.deaf.report()}),
         )
 
 
