@@ -498,8 +498,12 @@ class TtesServer:
         if not data:
             return True
         timeout = self.config.write_timeout
-        with trio.move_on_after(timeout) as cs:
-            await stream.send_all(data)
+        session.sending = True
+        try:
+            with trio.move_on_after(timeout) as cs:
+                await stream.send_all(data)
+        finally:
+            session.sending = False
         if cs.cancelled_caught:
             log.warning("client_stalled", session=session.id, name=session.name, seconds=timeout)
             session.drop(f"write stalled for {timeout:g} s", dropped=True)
@@ -743,18 +747,18 @@ class TtesServer:
                 self.answer_requests()  # by the reader that handled them, before anything else runs
 
     def _answer_in_tick(self) -> bool:
-        """While writers still owe the last tick's frames (its encodes, after its publish), and nothing was
-        answered as the next tick's since: the soldiers whose requests changed what they show are sampled at
-        once (at their request's time, the tick's due rule) and published as more of that tick, under its
-        number, so a writer that owes the tick writes them before it encodes the tick
-        (:meth:`_write_answers_first`) and one that wrote it writes them at once (issue 16: they waited
-        for every encode of the tick). A start whose first frames are still is answered between ticks, at
-        the next tick's time. False: not in that phase (the caller answers between ticks)."""
+        """While writers still owe the last tick's frames (its encodes, after its publish; not one that waits
+        for its socket) and nothing was answered as the next tick's since: the soldiers whose requests changed
+        what they show are sampled at once (at their request's time, the tick's due rule) and published as
+        more of that tick, under its number, so a writer that owes the tick writes them before it encodes the
+        tick (:meth:`_tick_output`) and one that wrote it writes them at once (issue 16: they waited for every
+        encode of the tick). A start whose first frames are still is answered between ticks, at the next
+        tick's time. False: not in that phase (the caller answers between ticks)."""
         m, board = self.world.manager, self._board()
         if m is None or board is None or self.feed is not None or self.on_publish is not None:
             return False
-        if board.tick != board.ticks or not any(s.ticked for s in self.sessions.values()):
-            return False
+        if board.tick != board.ticks or not any(s.ticked and not s.sending for s in self.sessions.values()):
+            return False  # (a writer stuck on its socket owes the tick too long to hold answers in it)
         with self.cpu("animate"):
             again = m.answer(self._tick_now, self._tick_now)  # at the tick's time: its due rule
         if len(again):

@@ -121,6 +121,7 @@ class Session:
         self.ticked = False  # woken by a tick's publish since the last write (the trio app's writer)
         self.more_of_tick = False  # woken by a tick's first publish of answered soldiers only (take_output)
         self.early: tuple[int, np.ndarray] | None = None  # (board serial, rows) written ahead of a tick
+        self.sending = False  # the writer waits for the socket to take a write (the trio app's writer)
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
