@@ -18,8 +18,10 @@ Structure (one trio nursery):
   answered (and written) before the tick samples; one that arrived while it sampled is answered by that tick
   first (:meth:`TtesServer.run_tick`: those soldiers sampled again, published and written as the tick's
   first frames, before the rest of the tick is quantised and encoded); one that
-  arrived during the publish or the writers' encodes is answered before the next writer encodes (its answer
-  goes out with the tick's frames). A writer woken by answers alone writes them at once;
+  arrived during the publish or the writers' encodes is answered as more of the tick before the next writer
+  encodes (:meth:`TtesServer._answer_in_tick`: the writers of a tick encode it one at a time, each after
+  letting the readers in), and each writer writes its client's answered soldiers before it encodes the rest
+  of the tick (:meth:`TtesServer._tick_output`). A writer woken by answers alone writes them at once;
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
 * **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
   :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
@@ -116,6 +118,9 @@ class TtesServer:
         self._ticking = False  # between a tick's sampling and its publish: requests are folded into it
         self._requests_at_tick = 0  # the request count when the tick sampled
         self._answer_after_tick = False  # soldiers taken up by the tick that it could not show yet
+        self._tick_serial = 0  # the board's serial after the last tick's publish (its encodes follow)
+        self._tick_now = 0.0  # the last tick's time
+        self._encode_turn = trio.Lock()  # writers encode one at a time (_tick_output; a front-end's: _encode)
         self.last_tick_seconds = 0.0  # the last tick's own time (sampling and publish, not the pause)
         self.stopped = trio.Event()
         self.started = False
@@ -137,7 +142,6 @@ class TtesServer:
             None  # appended to STATUS (a shard's or front-end's role)
         )
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
-        self._encode_turn = trio.Lock()  # a front-end's writers encode one at a time (_encode)
         self._loop_thread = threading.get_ident()
         self._trio_token: trio.lowlevel.TrioToken | None = None
         self.world.in_loop = self._in_loop
@@ -441,7 +445,6 @@ class TtesServer:
     async def _writer(self, session: Session, stream: trio.abc.Stream, scope: trio.CancelScope) -> None:
         """Write control bytes and the latest poses whenever woken; exits (cancelling the session) when the
         session is closing and flushed, the peer is gone, or one write stalls for ``write_timeout``."""
-        timeout = self.config.write_timeout
         try:
             while True:
                 if session.retry_at is None:
@@ -449,26 +452,20 @@ class TtesServer:
                 else:  # updates held back by the connection's own throttle: write them when due
                     with trio.move_on_at(self._t0 + session.retry_at):
                         await session.wake.wait()
-                if session.ticked:  # a tick's frames: the readers' answers go out in this write
-                    session.ticked = session.more_of_tick = False
-                    if self.feed is None:  # a front-end's readers answer nothing (its shards do): at once
-                        await self.let_readers_in()
-                    self.apply_held()
-                # (woken by answers alone: written at once, not after the next reader's answer, issue 16)
-                data = await self._encode(session)
-                session.drained.set()
-                if data:
-                    with trio.move_on_after(timeout) as cs:
-                        await stream.send_all(data)
-                    if cs.cancelled_caught:
-                        log.warning("client_stalled", session=session.id, name=session.name, seconds=timeout)
-                        session.drop(f"write stalled for {timeout:g} s", dropped=True)
-                        session.lingering = False
+                if session.ticked and self.feed is None:  # a tick's frames: the readers' answers go with them
+                    tick_data = await self._tick_output(session, stream)
+                    if tick_data is None:
                         return
-                    session.bytes_out += len(data)
-                    if TRACE is not None:
-                        TRACE.stamp("sent", session.trace_rows)
-                        session.trace_rows = session.trace_rows[:0]
+                    data = tick_data
+                else:  # woken by answers alone (written at once, not after the next reader's answer), or a
+                    # front-end's tick (its readers answer nothing, its shards do: at once, in turns: _encode)
+                    if session.ticked:
+                        session.ticked = session.more_of_tick = False
+                        self.apply_held()
+                    data = await self._encode(session)
+                session.drained.set()
+                if not await self._send(session, stream, data):
+                    return
                 if session.closing and not session.control:
                     return
         except (trio.BrokenResourceError, trio.ClosedResourceError):
@@ -498,6 +495,51 @@ class TtesServer:
         session.wake = trio.Event()  # a publish from here on wakes it again
         with self.cpu("encode"):
             return session.take_output(self.now())
+
+    async def _tick_output(self, session: Session, stream: trio.abc.Stream) -> bytes | None:
+        """A single server's writer woken by a tick: its client's frames of the tick (None: a write stalled).
+
+        The writers of a tick encode it one at a time (``_encode_turn``), each after letting the readers in:
+        a request that landed during another writer's encode is then applied and answered as more of the
+        tick (:meth:`_answer_in_tick`) before this one encodes, and this client's answered soldiers are
+        written first, on their own (outside the turn: a stalled client holds no other writer up), before
+        it encodes the tick's other rows (issue 16: such a request waited for every encode of the tick and
+        then for its own)."""
+        while True:
+            async with self._encode_turn:
+                session.more_of_tick = False
+                await self.let_readers_in()
+                self.apply_held()  # (while this writer owes the tick: answered as more of it)
+                with self.cpu("encode"):
+                    early = session.take_answers(self._tick_serial)
+                    if not early:
+                        session.ticked = False
+                        session.wake = trio.Event()
+                        return session.take_output(self.now())
+            if not await self._send(session, stream, early):
+                return None
+
+    async def _send(self, session: Session, stream: trio.abc.Stream, data: bytes) -> bool:
+        """Write ``data`` (nothing: nothing to do); False: the write stalled and the session is dropped."""
+        if not data:
+            return True
+        timeout = self.config.write_timeout
+        session.sending = True
+        try:
+            with trio.move_on_after(timeout) as cs:
+                await stream.send_all(data)
+        finally:
+            session.sending = False
+        if cs.cancelled_caught:
+            log.warning("client_stalled", session=session.id, name=session.name, seconds=timeout)
+            session.drop(f"write stalled for {timeout:g} s", dropped=True)
+            session.lingering = False
+            return False
+        session.bytes_out += len(data)
+        if TRACE is not None:
+            TRACE.stamp("sent", session.trace_rows)
+            session.trace_rows = session.trace_rows[:0]
+        return True
 
     # -- ticks and reports -------------------------------------------------------------------------------
     async def _tick_loop(self) -> None:
@@ -637,6 +679,7 @@ class TtesServer:
                 self._take_up(update.now)
             else:  # a shard's batches count a tick's publishes: its answer after the tick, as before
                 self._answer_after_tick = True
+        self._tick_serial, self._tick_now = board.serial, update.now
         self.last_tick_seconds = time.perf_counter() - t0
 
     def _take_up(self, now: float) -> None:
@@ -721,11 +764,40 @@ class TtesServer:
             self.requests_arrived()
 
     def requests_arrived(self) -> None:
-        """Requests were taken (from a client, or a shard's from the fabric): answer them between ticks."""
+        """Requests were taken (from a client, or a shard's from the fabric): answer them as more of the tick
+        whose encodes are under way (:meth:`_answer_in_tick`), else between ticks."""
         seen = self._request_count()
         if seen != self._requests_seen and not self._ticking:
             self._requests_seen = seen
-            self.answer_requests()  # by the reader that handled them, before anything else runs
+            if not self._answer_in_tick():
+                self.answer_requests()  # by the reader that handled them, before anything else runs
+
+    def _answer_in_tick(self) -> bool:
+        """While writers still owe the last tick's frames (its encodes, after its publish; not one that waits
+        for its socket) and nothing was answered as the next tick's since: the soldiers whose requests changed
+        what they show are sampled at once (at their request's time, the tick's due rule) and published as
+        more of that tick, under its number, so a writer that owes the tick writes them before it encodes the
+        tick (:meth:`_tick_output`) and one that wrote it writes them at once (issue 16: they waited for every
+        encode of the tick). A start whose first frames are still is answered between ticks, at the next
+        tick's time. False: not in that phase (the caller answers between ticks)."""
+        m, board = self.world.manager, self._board()
+        if m is None or board is None or self.feed is not None or self.on_publish is not None:
+            return False
+        if board.tick != board.ticks or not any(s.ticked and not s.sending for s in self.sessions.values()):
+            return False  # (a writer stuck on its socket owes the tick too long to hold answers in it)
+        with self.cpu("animate"):
+            again = m.answer(self._tick_now, self._tick_now)  # at the tick's time: its due rule
+        if len(again):
+            if self.on_tick is not None:
+                self.on_tick(again)
+            with self.cpu("quantise"):
+                changed = board.publish(again, self.world, again=True)
+            self._published(board, changed, again.indices, tick=False, more=True)
+            self._answer_still(again)
+            if self._answer_after_tick:  # shows nothing yet: the next tick's time will
+                self._answer_after_tick = False
+                self.answer_requests()
+        return True
 
     def answer_requests(self) -> None:
         """Between ticks: publish the next tick's update early for the soldiers whose requests changed what
