@@ -80,15 +80,22 @@ def _ground_combos(
 ) -> tuple[list[tuple[tuple[int, float], ...]], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every run of 1..MAX_GROUND_TURNS of turn ``clips`` (clip, compass degrees) of one node, after ``()``
     (no turn), in the order :meth:`Turning._ground_turns` prefers on a tie (its stable sort keeps the first):
-    the runs, their degrees, their lengths and how many of their clips turn by negative and by positive
-    degrees; computed once per node, not for every soldier that turns (~0.2 ms of Python each)."""
+    the runs, their degrees, their lengths (a clip turning against the run's own way counts twice: 160°
+    is the 90°, 45° and 30° arcs, not the U-turn and the 30° back) and how many of their clips turn by
+    negative and by positive degrees; computed once per node, not for every soldier that turns (~0.2 ms
+    of Python each)."""
     runs = (c for k in range(1, MAX_GROUND_TURNS + 1) for c in combinations_with_replacement(clips, k))
-    combos: list[tuple[tuple[int, float], ...]] = [(), *runs]
+    # never the long way round (-150°: the U-turn and 30° more the other way, 210°)
+    combos: list[tuple[tuple[int, float], ...]] = [
+        (),
+        *(c for c in runs if abs(sum(d for _, d in c)) <= 180.0),
+    ]
     total = np.array([sum(d for _, d in c) for c in combos], np.float64)
     count = np.array([len(c) for c in combos], np.int64)
     negative = np.array([sum(d < 0 for _, d in c) for c in combos], np.int64)
     positive = np.array([sum(d > 0 for _, d in c) for c in combos], np.int64)
-    return combos, total, count, negative, positive
+    back = np.where(total < 0, positive, np.where(total > 0, negative, 0))  # turning against the rest
+    return combos, total, count + back, negative, positive
 
 
 class Turning(ManagerCore):
@@ -197,7 +204,8 @@ class Turning(ManagerCore):
         ``want`` compass degrees, what is left judged in steps of GROUND_TURN_SLACK_DEG, then the fewest, then
         those turning the asked way: 180° is the 90° twice (without lying down between), 60° the 30° twice
         (the 45° left it 15° off), 100° the 90° alone. ``moving``: of the turns that carry him forward, where
-        the node has them (a crawler keeps up with his entity)."""
+        the node has them (a crawler keeps up with his entity; 180°: the U-turn carried along the new
+        heading)."""
         lib = self.library
         clips = lib.node_arcs.get(node) if moving else None
         combos, total, count, negative, positive = _ground_combos(tuple(clips or lib.node_turns[node]))
