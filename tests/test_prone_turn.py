@@ -200,9 +200,7 @@ def test_a_crawlers_u_turn_swings_his_body_no_faster_than_recorded(lib) -> None:
     moves faster than LIMB_M_S), from the request through the crawl on."""
     script = [(0.0, Appearance.CRAWL, 0.0, 40.0), (0.5, Appearance.CRAWL, 0.3, 40.0)]
     script.append((4.0, Appearance.CRAWL, 0.3, 220.0))
-    world, clips = scenario(lib, script, 11.0)
-    turn, move = swings(world)
-    k = int(3.9 * STUB_HZ)
+    _, clips, turn, move, k = swung(lib, script, 11.0, 3.9)
     assert "crawlarc_r180_low" in "".join(clips[k:]) and "crawl_cycle" in clips[-1]
     assert turn[k:].max() <= SWING_DEG_S and move[k:].max() <= LIMB_M_S, (turn[k:].max(), move[k:].max())
 
@@ -363,6 +361,16 @@ def swings(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return turn * STUB_HZ, move * STUB_HZ
 
 
+def swung(
+    lib, script: list[tuple[float, Appearance, float, float]], until: float, t0: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """:func:`scenario` and its :func:`swings`: the world positions, the clips, the body's turn and the
+    limbs' speed per tick, and the tick of ``t0`` s (judged from there on)."""
+    world, clips = scenario(lib, script, until)
+    turn, move = swings(world)
+    return world, clips, turn, move, int(t0 * STUB_HZ)
+
+
 def test_a_prone_soldiers_turn_and_crawl_start_swing_his_body_no_faster_than_recorded(lib) -> None:
     """Issue 16 (the lead's recording, camera from the east): after a prone turn the lie-down swung the body
     55° and flung a foot out within 3 frames, as if the turn were counted twice. Up and down play at their
@@ -370,9 +378,7 @@ def test_a_prone_soldiers_turn_and_crawl_start_swing_his_body_no_faster_than_rec
     comes up to crawl on without a spin."""
     script = [(0.0, Appearance.PRONE, 0.0, 10.0), (6.0, Appearance.PRONE, 0.0, 100.0)]
     script.append((11.0, Appearance.CRAWL, 0.3, 100.0))
-    world, clips = scenario(lib, script, 13.5)
-    turn, move = swings(world)
-    k = int(5.9 * STUB_HZ)
+    world, clips, turn, move, k = swung(lib, script, 13.5, 5.9)
     assert "crawlturn_r90_low" in "".join(clips[k:]) and "crawl_cycle" in clips[-1]
     worst = int(np.argmax(turn[k:] / SWING_DEG_S + move[k:] / LIMB_M_S)) + k
     assert turn[k:].max() <= SWING_DEG_S and move[k:].max() <= LIMB_M_S, (
