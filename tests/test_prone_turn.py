@@ -174,19 +174,21 @@ def test_a_crawler_whose_heading_changes_much_stops_turns_on_the_move_and_crawls
 REVERSAL_CM = 30.0  # a crawler's U-turn ends this near his entity (the 90° arcs end 16-39 cm from it)
 
 
-def reversal(lib) -> dict[str, np.ndarray]:
-    """A crawler at 0.3 m/s whose entity turns back the way it came at 4 s, stopping at 11 s."""
-    script = [(0.0, 0.0, 0.0), (0.5, 0.3, 0.0), (4.0, 0.3, 0.0, 220.0), (11.0, 0.0, 0.0)]
+def reversal(lib, speed: float = 0.3) -> dict[str, np.ndarray]:
+    """A crawler at ``speed`` m/s whose entity turns back the way it came at 4 s, stopping at 11 s."""
+    script = [(0.0, 0.0, 0.0), (0.5, speed, 0.0), (4.0, speed, 0.0, 220.0), (11.0, 0.0, 0.0)]
     return drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
 
 
-def test_a_crawler_reversing_comes_round_carried_along_his_new_heading(lib) -> None:
+@pytest.mark.parametrize("speed", [0.3, 0.2])
+def test_a_crawler_reversing_comes_round_carried_along_his_new_heading(lib, speed: float) -> None:
     """180°: the U-turn whose every move carries him along the new heading (``crawlarc_r180``), the way his
-    entity now crawls: he ends it within REVERSAL_CM of his entity and the stop too (the 90° on the spot
-    and the 90° arc after it: 90 cm from it, 75 cm beside its path, 35 cm after the stop; both arcs
-    carried forward, each along the way it turns to: 136 cm, 89 after the stop; both on the spot at the
-    recorded pace: 201 cm)."""
-    run = reversal(lib)
+    entity now crawls, played slower for a slower entity: he ends it within REVERSAL_CM of his entity and
+    the stop too (0.3 m/s, the 90° on the spot and the 90° arc after it: 90 cm from it, 75 cm beside its
+    path, 35 cm after the stop; both arcs carried forward, each along the way it turns to: 136 cm, 89
+    after the stop; both on the spot at the recorded pace: 201 cm; 0.2 m/s: 61 cm, and the U-turn at
+    GROUND_TURN_RATE 25 cm ahead)."""
+    run = reversal(lib, speed)
     shown = [c.split("/")[-1] for c in run["clips"].tolist()]
     assert sorted({c for c in shown if "turn_" in c or "arc_" in c}) == ["crawlarc_r180_low"]
     check_turn(lib, run, 3.9, 180.0, within=2.0, family="crawlarc_")

@@ -41,6 +41,7 @@ from server.soldier.core import (
     _LOCO,
     _TRANSITION,
     MAX_RATE,
+    MIN_RATE,
     ManagerCore,
 )
 from server.soldier.library import PathStep
@@ -140,7 +141,7 @@ class Turning(ManagerCore):
             return False
         want = -float(tb.root_yaw[i])  # compass degrees to turn
         if node != self._home:  # on the ground
-            turns = self._ground_turns(node, want, moving)
+            turns = self._ground_turns(node, want, moving, float(np.hypot(*tb.vlocal[i])))
             if turns:
                 self._turn_path(i, turns, t)
             return bool(turns)
@@ -198,14 +199,16 @@ class Turning(ManagerCore):
         k = np.where(right.any(axis=1), right.argmax(axis=1), near.argmax(axis=1))
         return clips[k], off[np.arange(len(want)), k]
 
-    def _ground_turns(self, node: int, want: float, moving: bool = False) -> tuple[PathStep, ...]:
+    def _ground_turns(
+        self, node: int, want: float, moving: bool = False, speed: float = 0.0
+    ) -> tuple[PathStep, ...]:
         """The turns on the ground at ``node`` (CRAWL), one after the other (the larger first, each
         GROUND_TURN_RATE times faster than recorded, MAX_GROUND_TURNS at most), that come nearest to turning
         ``want`` compass degrees, what is left judged in steps of GROUND_TURN_SLACK_DEG, then the fewest, then
         those turning the asked way: 180° is the 90° twice (without lying down between), 60° the 30° twice
         (the 45° left it 15° off), 100° the 90° alone. ``moving``: of the turns that carry him forward, where
         the node has them (a crawler keeps up with his entity; 180°: the U-turn carried along the new
-        heading)."""
+        heading, played no faster than keeps pace with an entity at ``speed`` cm/s: :meth:`_arc_rate`)."""
         lib = self.library
         clips = lib.node_arcs.get(node) if moving else None
         combos, total, count, negative, positive = _ground_combos(tuple(clips or lib.node_turns[node]))
@@ -218,9 +221,25 @@ class Turning(ManagerCore):
             # turns to, and a U-turn of arcs ends beside his entity's path (180°: 75 cm aside, 20 ahead)
             spot = {d: c for c, d in lib.node_turns[node]}
             order = [spot.get(d, c) for c, d in sorted(best, key=lambda c: -abs(c[1]))[:-1]] + order[-1:]
+        rates = [GROUND_TURN_RATE] * len(order)
+        if clips and len(order) == 1:
+            rates = [self._arc_rate(order[0], speed)]
         return tuple(
-            PathStep(c, True, float(lib.clip_duration[c]) / GROUND_TURN_RATE, node, node) for c in order
+            PathStep(c, True, float(lib.clip_duration[c]) / r, node, node)
+            for c, r in zip(order, rates, strict=True)
         )
+
+    def _arc_rate(self, clip: int, speed: float) -> float:
+        """How much faster than recorded a crawler's turn ``clip`` plays: GROUND_TURN_RATE, or slower (down
+        to MIN_RATE) for an entity at ``speed`` cm/s that the turn's carry along its end heading would
+        overtake (a U-turn at 0.2 m/s ended 25 cm ahead of his entity, 33 after the stop)."""
+        x, z, yaw = self.library.clip_end_offset[clip].tolist()
+        a = math.radians(yaw)
+        along = -x * math.sin(a) - z * math.cos(a)  # cm the turn carries him along the heading it ends on
+        if speed <= 0.0 or along <= 0.0:
+            return GROUND_TURN_RATE
+        pace = float(self.library.clip_duration[clip]) * speed / along
+        return min(max(pace, MIN_RATE), GROUND_TURN_RATE)
 
     def _turn_via(self, i: int, t: float, via: int) -> bool:
         """A prone soldier turns on forearms and knees: the path up to ``via`` (CRAWL), the turns there that
