@@ -21,7 +21,8 @@ that fit, one after the other (:meth:`Turning._ground_turns`), at GROUND_TURN_RA
 onto forearms and knees, turns so and lies down again, up and down at the recorded pace (the way down swings
 his body ~55° onto PRONE_STOWED, which lies at an angle to the line of fire: twice as fast it spun in three
 frames); crawling, CRAWL_REVERSAL_DEG or more from his heading, he stops, turns with the turns that carry
-him forward as they turn (``node_arcs``: he keeps up with his entity) and crawls on (turned while crawling
+him forward as they turn (``node_arcs``: he keeps up with his entity; reversing, the U-turn that carries him
+along his new heading, at his entity's pace: :meth:`Turning._arc_rate`) and crawls on (turned while crawling
 or at once, his planted forearms, knees and toes slid 13-116 cm; turned on the spot at the recorded pace,
 he ended 1.3 m behind his entity).
 """
