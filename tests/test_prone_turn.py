@@ -207,16 +207,17 @@ def test_a_crawlers_u_turn_swings_his_body_no_faster_than_recorded(lib) -> None:
     assert turn[k:].max() <= SWING_DEG_S and move[k:].max() <= LIMB_M_S, (turn[k:].max(), move[k:].max())
 
 
-@pytest.mark.parametrize("want", [180.0, -180.0, 175.0, -175.0, 160.0, -150.0])
+@pytest.mark.parametrize("want", [180.0, -180.0, 175.0, -165.0, 160.0, -150.0])
 def test_a_crawler_reversing_either_way_plays_the_u_turn_a_near_reversal_the_arcs_that_fit(
     lib, want: float
 ) -> None:
-    """The U-turn (to his right: either way serves a reversal) when it fits best; 160° the 90°, 45° and 30°
-    arcs, not the U-turn and a 30° arc back (a clip turning against the others counts twice)."""
+    """The U-turn (to his right: either way serves a reversal) from 165° (the rest he turns as he crawls
+    on); 160° the 90°, 45° and 30° arcs, not the U-turn and a 30° arc back (a clip turning against the
+    others counts twice); -150° not the U-turn and 30° more (never the long way round)."""
     m = SoldierManager(lib, throttle=0.0)
     steps = m._ground_turns(lib.node(CRAWL_NODE), want, moving=True)
     shown = [lib.clip_names[s.clip].split("/")[-1] for s in steps]
-    if abs(want) > 170.0:
+    if abs(want) >= 165.0:
         assert shown == ["crawlarc_r180_low"]
     else:
         assert "crawlarc_r180_low" not in shown and len(shown) == 3, shown

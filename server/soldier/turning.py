@@ -63,6 +63,10 @@ PIVOT_REST_PER_STANCE_DEG = 9.0
 CRAWL_REVERSAL_DEG = 22.5
 MAX_GROUND_TURNS = 4  # turn clips on the ground one after the other at most (180°: the 90° twice)
 GROUND_TURN_SLACK_DEG = 7.5  # ... chosen by what they leave unturned in steps of this much, then the fewest
+# a crawler whose heading changes by this much less than 180° plays the U-turn too and turns the rest as he
+# crawls on (root_motion.CRAWL_TURN_RATE, under CRAWL_REVERSAL_DEG): 165° as the 90° and 45° on the spot
+# and the 30° arc left him 125 cm from his entity, 76 after the stop
+U_TURN_SLACK_DEG = 15.0
 # a turn on the ground plays this much faster than recorded: the crawl's upper cadence (core.MAX_RATE; a
 # forearm's 25 cm in 0.25 s, the crawl's 26 in 0.225 s); a 90° turn in 2.2 s instead of 3.5
 GROUND_TURN_RATE = MAX_RATE
@@ -212,6 +216,10 @@ class Turning(ManagerCore):
         heading, played no faster than keeps pace with an entity at ``speed`` cm/s: :meth:`_arc_rate`)."""
         lib = self.library
         clips = lib.node_arcs.get(node) if moving else None
+        u_turn = [c for c, d in clips or () if abs(d) == 180.0]
+        if u_turn and abs(want) >= 180.0 - U_TURN_SLACK_DEG:  # the rest he turns as he crawls on
+            c = u_turn[0]
+            return (PathStep(c, True, float(lib.clip_duration[c]) / self._arc_rate(c, speed), node, node),)
         combos, total, count, negative, positive = _ground_combos(tuple(clips or lib.node_turns[node]))
         left = (want - total + 180.0) % 360.0 - 180.0
         left[0] = want  # (no turn at all)
