@@ -32,7 +32,7 @@ import numpy as np
 from authoring import crawl, crawl_prone, crawl_turn, deaths, gait, postures, reactions, transitions, turns
 from authoring.motion import KeyPosture
 from authoring.passive_range import passive_figure, past_live_limits
-from authoring.quality_frames import FigureSet
+from authoring.quality_frames import FigureSet, play
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
@@ -263,10 +263,9 @@ def slaving_context(ctx: BuildContext, name: str, master: Channelset) -> BuildCo
     passive ones: its knee jumped 20 degrees in a frame, its foot skated 3.8 cm)."""
     if name not in deaths.death_specs():
         return ctx
-    bf = bind_channelset(master, [ctx.soldier]).figures[0]
-    poses = np.tile(bf.neutral.astype(np.float64), (master.nframes, 1))
-    poses[:, bf.dst] = master.joint_data[:, bf.src]
-    return ctx.passive() if past_live_limits(FigureKinematics(ctx.soldier), poses) else ctx
+    body = protofiletype(ctx.soldier)
+    poses = play(master, ctx.figure_set).poses[body]
+    return ctx.passive() if past_live_limits(ctx.figure_set.kin[body], poses) else ctx
 
 
 def slave_pair(ctx: BuildContext) -> MasterSlavePair:
