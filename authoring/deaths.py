@@ -153,6 +153,10 @@ class DeathSpec:
     kept: tuple[tuple[str, float], ...] = ()  # joints (name suffix, until s) that keep the start posture's
     # shape at kept_tone of their gain, letting go over KEPT_FADE from then on
     kept_tone: float = 0.0
+    # a crawler's trunk comes down about his thighs after the physics, before the chest and head settle
+    # (dead_settle.settle's ``sunk``, :mod:`authoring.dead_crawl`): his kept arms held the pelvis and belly
+    # 4-5 cm up
+    sunk: bool = False
 
 
 def _prone(
@@ -187,6 +191,7 @@ CRAWL_DEATH = replace(
     toss_to=(0.0, 1.0, 0.3),
     kept=(*((j, MAX_SECONDS) for j in ("clavicle", "shoulder", "elbow")), ("hip", 0.45), ("knee", 0.45)),
     kept_tone=0.3,
+    sunk=True,
 )
 # s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
 # ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands
@@ -579,7 +584,9 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         assert not (spec.knees_held or spec.propped), f"{spec.name}: knees held or propped, and arms falling"
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle)
+    frames = dead_settle.settle(
+        frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle, sunk=spec.sunk
+    )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:
