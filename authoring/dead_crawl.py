@@ -113,16 +113,15 @@ def held_spine(kin, q: np.ndarray, root: np.ndarray, held: np.ndarray, iteration
 
 
 def planted_leg(body: ds._Body, side: str, q: np.ndarray, root: np.ndarray) -> np.ndarray:
-    """``q`` with the ``side`` leg's :data:`LEG` angles that keep its foot's nodes on the ground where they
-    lie (the body at ``root``), into no ground (a compass search from the angles of ``q``)."""
+    """``q`` with the ``side`` leg's :data:`LEG` angles that keep its foot's lowest nodes (on the ground, or
+    off it) where they lie, the body at ``root``: into no ground and sliding no leg node on the ground by more
+    than :data:`SLIDE_CM` (a compass search from the angles of ``q``)."""
     from authoring.dead_prone import search
 
     kin = body.kin
     idx = ds._dofs(kin, tuple(f"{side}_{j}" for j in LEG))
-    foot = np.isin(body.parts, (f"{side}_foot",))
-    keep = foot & body.planted
-    if not keep.any():
-        return q
+    foot = body.parts == f"{side}_foot"
+    keep = foot & (body.points[:, 1] <= body.points[foot, 1].min() + CONTACT_HEIGHT_CM)  # what it lies on
     leg = np.array([str(p).startswith(side) and str(p).endswith(LEG_PARTS) for p in body.parts])
     start = body.points[keep]
     down, down0 = body.planted[leg], body.points[leg][body.planted[leg]]
