@@ -45,10 +45,11 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 6. **a face-down body goes limp**: a short kinematic settle drops the head and turns the legs out (heels
    lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
    left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
-   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`); a body on its back
-   (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way, as it lands, over the
-   physics' last frames (a faint arm tone in the physics made the DI slaves' feet jump and slide, branch
-   ``legsup14-kfire``; after the physics, the arm hung in the air 1.5 s after he lay still).
+   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`), a crawler's pelvis and
+   belly first, turned down about his thighs (:attr:`DeathSpec.sunk`, :mod:`authoring.dead_crawl`); a
+   body on its back (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way, as it
+   lands, over the physics' last frames (a faint arm tone in the physics made the DI slaves' feet jump and
+   slide, branch ``legsup14-kfire``; after the physics, the arm hung in the air 1.5 s after he lay still).
 7. **the limbs stay where they land** (:attr:`DeathSpec.pinned`): hands, forearms, feet and the head on the
    ground are held where they touched down by re-solving the limb (:func:`authoring.contact_pin.pin_frames`;
    the first and last frames unchanged; the standing deaths, kstow2dead and the two prone deaths: pinned,
