@@ -45,10 +45,11 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 6. **a face-down body goes limp**: a short kinematic settle drops the head and turns the legs out (heels
    lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
    left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
-   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`); a body on its back
-   (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way, as it lands, over the
-   physics' last frames (a faint arm tone in the physics made the DI slaves' feet jump and slide, branch
-   ``legsup14-kfire``; after the physics, the arm hung in the air 1.5 s after he lay still).
+   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`), a crawler's pelvis and
+   belly first, turned down about his thighs (:attr:`DeathSpec.sunk`, :mod:`authoring.dead_crawl`); a
+   body on its back (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way, as it
+   lands, over the physics' last frames (a faint arm tone in the physics made the DI slaves' feet jump and
+   slide, branch ``legsup14-kfire``; after the physics, the arm hung in the air 1.5 s after he lay still).
 7. **the limbs stay where they land** (:attr:`DeathSpec.pinned`): hands, forearms, feet and the head on the
    ground are held where they touched down by re-solving the limb (:func:`authoring.contact_pin.pin_frames`;
    the first and last frames unchanged; the standing deaths, kstow2dead and the two prone deaths: pinned,
@@ -153,6 +154,10 @@ class DeathSpec:
     kept: tuple[tuple[str, float], ...] = ()  # joints (name suffix, until s) that keep the start posture's
     # shape at kept_tone of their gain, letting go over KEPT_FADE from then on
     kept_tone: float = 0.0
+    # a crawler's trunk comes down about his thighs after the physics, before the chest and head settle
+    # (dead_settle.settle's ``sunk``, :mod:`authoring.dead_crawl`): his kept arms held the pelvis and belly
+    # 4-5 cm up
+    sunk: bool = False
 
 
 def _prone(
@@ -187,6 +192,7 @@ CRAWL_DEATH = replace(
     toss_to=(0.0, 1.0, 0.3),
     kept=(*((j, MAX_SECONDS) for j in ("clavicle", "shoulder", "elbow")), ("hip", 0.45), ("knee", 0.45)),
     kept_tone=0.3,
+    sunk=True,
 )
 # s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
 # ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands
@@ -579,7 +585,9 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         assert not (spec.knees_held or spec.propped), f"{spec.name}: knees held or propped, and arms falling"
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle)
+    frames = dead_settle.settle(
+        frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle, sunk=spec.sunk
+    )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:
