@@ -41,7 +41,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    :data:`REST_SECONDS` (or after :data:`MAX_SECONDS`); the clip keeps those still frames, so the last frame
    is at rest;
 5. **the skid is taken out**: the ragdoll's parts slide over the ground as he falls, and the recorded frames
-   are moved back by their drift (:func:`authoring.planted.plant`);
+   are moved back by their drift (:func:`authoring.planted.plant`); kfire2dead's thigh, on which he lands,
+   skids in the physics itself (its contact flickers), and the mean drift shared that out to the others:
+   its frames are moved so that each part's worst slide is least instead (:attr:`DeathSpec.plant_worst`,
+   :func:`authoring.planted.plant_least_worst`);
 6. **a face-down body goes limp**: a short kinematic settle drops the head and turns the legs out (heels
    lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
    left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
@@ -94,7 +97,7 @@ from authoring.contact_pin import pin_frames
 from authoring.knee_hold import hold_knees
 from authoring.leg_lift import lifted
 from authoring.motion import KeyPosture
-from authoring.planted import plant
+from authoring.planted import plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
 from authoring.transitions import FPS, ClipFrames
 from peabody.model import Figure
@@ -140,6 +143,10 @@ class DeathSpec:
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
     propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
     legs_lift: bool = False  # kneeling: a leg part that would skid on the ground lifts instead (leg_lift)
+    # the skid taken out so that each part's worst slide is least, not the mean drift (kfire2dead: the thigh
+    # he lands on skids in the physics, 7.37 -> 3.92 cm; kstow2dead's thigh 4.51 -> 2.53 but then its arms'
+    # fall slid the chest 5.87: planted.plant_least_worst)
+    plant_worst: bool = False
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
     # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
@@ -250,6 +257,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         knee_damping=4.0,
         arms_fall=True,
         legs_lift=True,
+        plant_worst=True,
     ),
     _prone("prstow2dead", "PRONE_STOWED"),
     _prone("prfire2dead", "PRONE_FIRE"),
@@ -573,7 +581,8 @@ def _after_physics(
     the ground held and (:attr:`DeathSpec.pinned`) its limbs on the ground held where they touched down
     (steps 5-7 of the module docstring), then (:attr:`DeathSpec.legs_lift`) its feet and knees that would
     skid lifted (step 8)."""
-    frames = _held(spec, plant(frames, figures[0]), figures, release)
+    planted = plant_least_worst if spec.plant_worst else plant
+    frames = _held(spec, planted(frames, figures[0]), figures, release)
     return lifted(frames, figures[0]) if spec.legs_lift else frames
 
 
