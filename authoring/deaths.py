@@ -154,7 +154,7 @@ class DeathSpec:
     # (:data:`PASSIVE_ROLL`, :mod:`authoring.passive_range`), while the legs still move as he lands; None:
     # to :data:`ROLLED_LEGS` over :data:`KNEE_STRAIGHTEN` (a crawler's thighs, rolled sooner, slid 6-8 cm)
     legs_roll: float | None = None
-    # the settle lays the legs again after the physics (dead_settle.settle's ``legs``); False: they stay as
+    # the settle lays the legs again as he lands (dead_settle.settle's ``legs``); False: they stay as
     # the physics laid them (ststow2dead, rolled as he landed: laid again, his right foot moved from 0.5 s
     # after he lay still, limb_rest_lag 1.13 s; stfire2dead keeps it: without, its heels rest 21.5 cm up)
     legs_settle: bool = True
