@@ -31,8 +31,8 @@ import numpy as np
 
 from authoring import crawl, crawl_prone, crawl_turn, deaths, gait, postures, reactions, transitions, turns
 from authoring.motion import KeyPosture
-from authoring.passive_range import passive_figure
-from authoring.quality_frames import FigureSet
+from authoring.passive_range import passive_figure, past_live_limits
+from authoring.quality_frames import FigureSet, play
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
@@ -66,6 +66,7 @@ class BuildContext:
     m16: Figure
     _keys: dict[str, KeyPosture] = field(default_factory=dict)
     _figure_set: FigureSet | None = None
+    _passive: BuildContext | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def load(cls, figures_dir: Path) -> BuildContext:
@@ -89,6 +90,14 @@ class BuildContext:
         if not self._keys:
             self._keys.update(postures.build_postures(self.soldier, self.rifle))
         return self._keys
+
+    def passive(self) -> BuildContext:
+        """This context with soldier.fig and DI.fig widened to their legs' passive range
+        (:func:`passive_figure`; made once): the figures a death's slave is solved on (issue 14)."""
+        if self._passive is None:
+            soldier, di = passive_figure(self.soldier), passive_figure(self.di)
+            self._passive = BuildContext(soldier, self.rifle, di, self.m16, self._keys)
+        return self._passive
 
 
 @dataclass(frozen=True)
@@ -243,6 +252,20 @@ def slave_one(
         lift_off_ground(out, ctx.di)
     clear_rifle(out, ctx.figure_set)  # a dropped rifle: out of the body and the ground it now lies on
     return out
+
+
+def slaving_context(ctx: BuildContext, name: str, master: Channelset) -> BuildContext:
+    """The figures clip ``name``'s slaves are solved on: those of :meth:`BuildContext.passive` (a passive
+    master and a passive slave) for a death (it ends in DEAD) whose ``master`` clip takes a leg past the
+    live limits (:attr:`deaths.DeathSpec.legs_roll`: with its ankles and hips clamped to the active range
+    the DI's heels stayed 15.2 cm up where the master's lie 11.4): the slave follows the master's legs into
+    the passive range. Every other clip keeps the live figures (a kneeling death's slave solved on the
+    passive ones: its knee jumped 20 degrees in a frame, its foot skated 3.8 cm)."""
+    if name not in deaths.death_specs():
+        return ctx
+    body = protofiletype(ctx.soldier)
+    poses = play(master, ctx.figure_set).poses[body]
+    return ctx.passive() if past_live_limits(ctx.figure_set.kin[body], poses) else ctx
 
 
 def slave_pair(ctx: BuildContext) -> MasterSlavePair:
@@ -528,7 +551,8 @@ def build(
     chdir.mkdir(parents=True, exist_ok=True)
     hi: dict[str, Channelset] = {}
     slaved: dict[str, dict[str, Channelset]] = {fs: {} for fs in ("DI", "M16") if figure in (fs, "all")}
-    pair = slave_pair(ctx) if slaved else None
+    pairs: dict[int, MasterSlavePair] = {}  # per figures slaved on (slaving_context)
+    slaved_on: dict[str, BuildContext] = {}
     bar = _progress(jobs, progress)
     for job in bar:
         if hasattr(bar, "set_postfix_str"):
@@ -539,9 +563,13 @@ def build(
             hi[job.name] = parse_channelsets(
                 format_channelset(record(job, ctx)), str(chdir / f"{job.name}.chset.env")
             )[0]
-        if pair is not None:
+        if slaved:
+            on = slaved_on[job.name] = slaving_context(ctx, job.name, hi[job.name])
+            if id(on) not in pairs:
+                pairs[id(on)] = slave_pair(on)
+            pair = pairs[id(on)]
             for fs, out in slaved.items():
-                out[job.name] = slave_one(hi[job.name], pair, ctx, fs, f"{job.name}{SUFFIXES[fs]}.chset")
+                out[job.name] = slave_one(hi[job.name], pair, on, fs, f"{job.name}{SUFFIXES[fs]}.chset")
     for fs, out in slaved.items():
 
         def committed(name: str, fs: str = fs) -> Channelset | None:
@@ -549,8 +577,8 @@ def build(
             return load_channelset(path, use_cache=False) if path.is_file() else None
 
         snap_endpoints(out, committed)
-        for chset in out.values():  # a snapped end faded into a joint at its limit can pass it by a hair
-            clamp_to_limits(chset, ctx.di)
+        for name, chset in out.items():  # a snapped end faded into a joint at its limit can pass it by a hair
+            clamp_to_limits(chset, slaved_on[name].di)
     written: list[Path] = []
     for name in (j.name for j in jobs):
         if figure in ("soldier", "all"):

@@ -18,7 +18,11 @@ elbows on their tracks), so no joint leaps between IK branches.
 
 A crawler turns so too, but on the move (``crawlarc_*``, :data:`ARC_ADVANCE`): each move also carries its
 part forward, along the heading it turns to, as a crawl stride would, so that the pivot under the belly moves
-with the entity (turned on the spot he ended 1.3 m behind a crawling entity and caught up over 5 s).
+with the entity (turned on the spot he ended 1.3 m behind a crawling entity and caught up over 5 s). A
+crawler whose entity reverses (``crawlarc_r180``, :data:`U_TURN`) comes round so too, each move carrying him
+along the new heading, the way his entity now crawls, little while he faces away from it and more as he
+comes round (:func:`part_yaw`): he edges back, sidles, then crawls along it as he turns (the 90° on the spot
+and the 90° arc after it left him 90 cm from his entity, 75 cm beside its path).
 
 Like the standing turns (:mod:`authoring.turns`) these clips really move the soldier: the clip frame is
 CRAWL's, the last frame is CRAWL moved by the ground-plane rigid move recorded as the channelset's
@@ -55,6 +59,10 @@ FPS = 60
 BASE = "CRAWL"
 SIDES = ("left", "right")
 TURN_ANGLES = (30, 45, 90)  # a crawling soldier turns the nearest (another after it if far off)
+# ... a crawler's turns: the U-turn too, carried along its end heading, to his right alone (either way
+# serves a reversal; to his left, the rifle across his body, his right forearm slid 30 cm: the right elbow,
+# at its reach, could not follow the shoulders carried sideways away from it; DI 4.2 cm, M16 7.4)
+U_TURN = "crawlarc_r180"
 STEP = 30.0  # degrees a part turns at most in one move (elbows and knees ~25 cm, the toes ~48 cm)
 MOVE = {"front": 0.4, "back": 0.46}  # s a part takes to move (the crawl's limbs: 0.36 s for 26 cm)
 ELBOW_LIFT = 3.0  # cm the forearms (and the rifle) rise while the front moves
@@ -70,6 +78,11 @@ ARC_ADVANCE = 20.0
 # share of the front's advance in the chest's and the pelvis's (the chest carried with the front and the
 # pelvis 0.25 of it stretched the trunk 15 cm: the arms fell short, forearms slid 3.3-4.4 cm, palms 3 cm)
 ADVANCE_FRONT = 0.5
+# a U-turn's moves carry him ARC_ADVANCE on average, in proportion to this + the cosine of the angle between
+# the way the part turns to and the end heading: 13.5 cm the first move (facing away), 25 the last. 20 cm
+# each pushed his right upper arm 1.1 cm into the rifle as he edged back; 10.5-28 cm (2 + cos) pulled a
+# planted knee 1.6 cm as he came round (3 + cos: 0.7 and 1.5)
+U_TURN_EVEN = 3.0
 
 
 def clip_name(direction: str, angle: float, advance: float = 0.0) -> str:
@@ -79,6 +92,7 @@ def clip_name(direction: str, angle: float, advance: float = 0.0) -> str:
 _PLANS = {
     clip_name(d, a, adv): (d, float(a), adv) for adv in (0.0, ARC_ADVANCE) for d in SIDES for a in TURN_ANGLES
 }
+_PLANS[U_TURN] = ("right", 180.0, ARC_ADVANCE)
 CRAWL_TURN_CLIPS: tuple[str, ...] = tuple(_PLANS)
 
 
@@ -104,19 +118,28 @@ def part_moves(direction: str, angle: float) -> tuple[dict[str, list[tuple[float
 
 
 def part_yaw(
-    t: np.ndarray, moves: list[tuple[float, float, float]], duration: float, advance: float = 0.0
+    t: np.ndarray,
+    moves: list[tuple[float, float, float]],
+    duration: float,
+    advance: float = 0.0,
+    along: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A part's yaw (degrees) about the pivot at ``t``, how far (share of its lift) it is raised, and
-    ``(n, 2)`` how far (X, Z cm) it is carried: ``advance`` cm a move along the heading it turns to. It
-    rises first and moves while clear of the ground (:func:`authoring.crawl._progress`)."""
+    ``(n, 2)`` how far (X, Z cm) it is carried: ``advance`` cm a move along the heading it turns to (or
+    along the heading ``along`` degrees, every move). It rises first and moves while clear of the ground
+    (:func:`authoring.crawl._progress`)."""
     yaw = np.zeros(len(t))
     up = np.zeros(len(t))
     carried = np.zeros((len(t), 2))
-    for t0, a, b in moves:
+    share = np.ones(len(moves))
+    if along is not None:  # less while he faces away from it, more as he comes round to it
+        share = U_TURN_EVEN + np.cos(np.radians([along - b for _, _, b in moves]))
+        share *= len(moves) / share.sum()
+    for (t0, a, b), w in zip(moves, share.tolist(), strict=True):
         s = (t - t0) / duration
         yaw += (b - a) * _progress(s)
         up = np.maximum(up, _rise(s))
-        carried += advance * _progress(s)[:, None] * _ahead(b)
+        carried += w * advance * _progress(s)[:, None] * _ahead(b if along is None else along)
     return yaw, up, carried
 
 
@@ -169,8 +192,10 @@ def record_crawl_turn(
     t = np.arange(n) / FPS
     q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
     pivot = pivot_of(kin, key)
+    yaw = (1.0 if direction == "left" else -1.0) * angle
+    along = yaw if angle > max(TURN_ANGLES) else None  # a U-turn: every move along the end heading
     (front, f_up, f_on), (back, b_up, b_on) = (
-        part_yaw(t, moves[p], MOVE[p], advance) for p in ("front", "back")
+        part_yaw(t, moves[p], MOVE[p], advance, along) for p in ("front", "back")
     )
 
     def mix(share: float) -> np.ndarray:  # the body between the parts: ``share`` of the front's turn
@@ -202,7 +227,6 @@ def record_crawl_turn(
         # turned on the spot they end on it)
         settle = _smooth((t - t_land) / SETTLE)[:, None]
         poses = (1.0 - settle) * poses + settle * q0
-    yaw = (1.0 if direction == "left" else -1.0) * angle
     end = _carried(pivot, np.array([yaw]), b_on[-1:])[0]
     end_offset = (float(end[0, 3]), float(end[2, 3]), yaw)
     poses[0], roots[0], rifles[0] = q0, root0, rifle0

@@ -60,6 +60,7 @@ from peabody.model import Figure
 
 SETTLE_SECONDS = 0.8  # s, eased: the body goes limp after the physics has settled
 STILL_SECONDS = 0.1  # s: then lies still (the clip ends at rest)
+LEGS_LAND_SECONDS = 0.4  # s: the legs are laid as the body lands (a limp leg flopping: 0.3-0.4 s, as an arm)
 FACE_DOWN = 0.5  # cosine: the pelvis' front points down at least this much
 HEAD_CLEARANCE = 0.3  # cm: the head's lowest node stops this far above the ground
 SLIDE_CM = 2.0  # cm: a node on the ground before and after may move this far (the check: feet 2, others 3)
@@ -423,13 +424,19 @@ def settle(
     arms_fall: bool = False,
     propped: bool = False,
     legs: bool = True,
+    sunk: bool = False,
 ) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
     with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
     (:mod:`authoring.dead_prone`); a body on its back (``arms_fall``) lets its arms fall as it lands
-    (:func:`_arms_fall`). ``legs`` False: the legs stay as the physics laid them
-    (``DeathSpec.legs_settle``)."""
+    (:func:`_arms_fall`). A face-down body's legs are laid as it lands (:func:`_legs_land`); ``legs`` False:
+    they stay as the physics laid them (``DeathSpec.legs_settle``); ``sunk``: a crawler's trunk comes down
+    about his thighs first (:mod:`authoring.dead_crawl`)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
+    if sunk:
+        from authoring import dead_crawl
+
+        frames = dead_crawl.sunk(figs, frames)
     lowered = _lowered(figs, frames) if propped else None
     if lowered is not None:
         return _appended(frames, lowered)
@@ -444,10 +451,29 @@ def settle(
     still = np.ones(round(STILL_SECONDS * frames.fps))
     u = np.concatenate([s * s * (3.0 - 2.0 * s), still])
     poses = last[None] + u[:, None] * (target - last)[None]
-    body = _Body(figs, last, frames.roots[-1], frames.rifles[-1])  # the legs: lifted, turned out, laid down
+    leg_dofs = _leg_dofs(kin)
+    poses[:, leg_dofs] = last[leg_dofs]
+    out = _appended(frames, poses)
+    return _legs_land(figs, out, down_frame(figs, frames), len(frames.poses) - 1) if legs else out
+
+
+def _legs_land(figs: FigureSet, frames: ClipFrames, k0: int, end: int) -> ClipFrames:
+    """The legs of a face-down body lifted, turned out and laid down (:func:`_legs_path`, found on the
+    physics' last frame ``end``) as it lands: from the frame it is down (``k0``, :func:`down_frame`) in
+    :data:`LEGS_LAND_SECONDS`, the physics' own leg motion kept under it (appended after the physics, the
+    feet moved 1.2 s after the trunk lay still: stfire2dead's ``limb_rest_lag_s`` 1.18)."""
+    last = frames.poses[end]
+    body = _Body(figs, last, frames.roots[end], frames.rifles[end])
     leg_dofs = _leg_dofs(body.kin)
-    poses[:, leg_dofs] = _legs_path(body, np.concatenate([s, still]), u) if legs else last[leg_dofs]
-    return _appended(frames, poses)
+    n = round(LEGS_LAND_SECONDS * frames.fps)
+    k0 = min(k0, len(frames.poses) - 1 - n)  # laid by the end of the clip
+    s = np.arange(1, n + 1) / n
+    path = _legs_path(body, s, s * s * (3.0 - 2.0 * s))
+    k = len(frames.poses) - k0 - 1
+    shift = np.vstack([path, np.repeat(path[-1:], max(0, k - n), axis=0)])[:k] - last[leg_dofs]
+    poses = frames.poses.copy()
+    poses[k0 + 1 :, leg_dofs] += shift
+    return ClipFrames(poses, frames.roots, frames.rifles, frames.fps)
 
 
 def down_frame(figs: FigureSet, frames: ClipFrames) -> int:

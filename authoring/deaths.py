@@ -41,14 +41,18 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    :data:`REST_SECONDS` (or after :data:`MAX_SECONDS`); the clip keeps those still frames, so the last frame
    is at rest;
 5. **the skid is taken out**: the ragdoll's parts slide over the ground as he falls, and the recorded frames
-   are moved back by their drift (:func:`authoring.planted.plant`);
+   are moved back by their drift (:func:`authoring.planted.plant`); kfire2dead's thigh, on which he lands,
+   skids in the physics itself (its contact flickers), and the mean drift shared that out to the others:
+   its frames are moved so that each part's worst slide is least instead (:attr:`DeathSpec.plant_worst`,
+   :func:`authoring.planted.plant_least_worst`);
 6. **a face-down body goes limp**: a short kinematic settle drops the head and turns the legs out (heels
    lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
    left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
-   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`); a body on its back
-   (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way, as it lands, over the
-   physics' last frames (a faint arm tone in the physics made the DI slaves' feet jump and slide, branch
-   ``legsup14-kfire``; after the physics, the arm hung in the air 1.5 s after he lay still).
+   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`), a crawler's pelvis and
+   belly first, turned down about his thighs (:attr:`DeathSpec.sunk`, :mod:`authoring.dead_crawl`); a
+   body on its back (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way, as it
+   lands, over the physics' last frames (a faint arm tone in the physics made the DI slaves' feet jump and
+   slide, branch ``legsup14-kfire``; after the physics, the arm hung in the air 1.5 s after he lay still).
 7. **the limbs stay where they land** (:attr:`DeathSpec.pinned`): hands, forearms, feet and the head on the
    ground are held where they touched down by re-solving the limb (:func:`authoring.contact_pin.pin_frames`;
    the first and last frames unchanged; the standing deaths, kstow2dead and the two prone deaths: pinned,
@@ -99,7 +103,7 @@ from authoring.easing import eased_in
 from authoring.knee_hold import hold_knees
 from authoring.leg_lift import lifted
 from authoring.motion import KeyPosture
-from authoring.planted import plant
+from authoring.planted import plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
 from authoring.transitions import FPS, ClipFrames
 from peabody.model import Figure
@@ -145,6 +149,10 @@ class DeathSpec:
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
     propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
     legs_lift: bool = False  # kneeling: a leg part that would skid on the ground lifts instead (leg_lift)
+    # the skid taken out so that each part's worst slide is least, not the mean drift (kfire2dead: the thigh
+    # he lands on skids in the physics, 7.37 -> 3.92 cm; kstow2dead's thigh 4.51 -> 2.53 but then its arms'
+    # fall slid the chest 5.87: planted.plant_least_worst)
+    plant_worst: bool = False
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
     # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
@@ -152,7 +160,7 @@ class DeathSpec:
     # (:data:`PASSIVE_ROLL`, :mod:`authoring.passive_range`), while the legs still move as he lands; None:
     # to :data:`ROLLED_LEGS` over :data:`KNEE_STRAIGHTEN` (a crawler's thighs, rolled sooner, slid 6-8 cm)
     legs_roll: float | None = None
-    # the settle lays the legs again after the physics (dead_settle.settle's ``legs``); False: they stay as
+    # the settle lays the legs again as he lands (dead_settle.settle's ``legs``); False: they stay as
     # the physics laid them (ststow2dead, rolled as he landed: laid again, his right foot moved from 0.5 s
     # after he lay still, limb_rest_lag 1.13 s; stfire2dead keeps it: without, its heels rest 21.5 cm up)
     legs_settle: bool = True
@@ -163,6 +171,10 @@ class DeathSpec:
     # recorded). A prone death's first frames moved at 0.46 m/s (the toes leaving the ground, the hip) and
     # its DI/M16 slaves' at 0.57-0.67, over the check's end_speed
     start_ease: float = 0.0
+    # a crawler's trunk comes down about his thighs after the physics, before the chest and head settle
+    # (dead_settle.settle's ``sunk``, :mod:`authoring.dead_crawl`): his kept arms held the pelvis and belly
+    # 4-5 cm up
+    sunk: bool = False
 
 
 def _prone(
@@ -203,6 +215,7 @@ CRAWL_DEATH = replace(
     toss_to=(0.0, 1.0, 0.3),
     kept=(*((j, MAX_SECONDS) for j in ("clavicle", "shoulder", "elbow")), ("hip", 0.45), ("knee", 0.45)),
     kept_tone=0.3,
+    sunk=True,
 )
 # s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
 # ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands
@@ -267,6 +280,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         knee_damping=4.0,
         arms_fall=True,
         legs_lift=True,
+        plant_worst=True,
     ),
     _prone("prstow2dead", "PRONE_STOWED"),  # not eased: see PRONE_START_EASE
     _prone_dead("prfire2dead", "PRONE_FIRE"),
@@ -600,7 +614,8 @@ def _after_physics(
     the ground held and (:attr:`DeathSpec.pinned`) its limbs on the ground held where they touched down
     (steps 5-7 of the module docstring), then (:attr:`DeathSpec.legs_lift`) its feet and knees that would
     skid lifted (step 8)."""
-    frames = _held(spec, plant(frames, figures[0]), figures, release)
+    planted = plant_least_worst if spec.plant_worst else plant
+    frames = _held(spec, planted(frames, figures[0]), figures, release)
     return lifted(frames, figures[0]) if spec.legs_lift else frames
 
 
@@ -612,7 +627,9 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         assert not (spec.knees_held or spec.propped), f"{spec.name}: knees held or propped, and arms falling"
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle)
+    frames = dead_settle.settle(
+        frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle, sunk=spec.sunk
+    )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:

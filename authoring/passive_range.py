@@ -65,3 +65,10 @@ def passive_limits(kin: FigureKinematics) -> tuple[np.ndarray, np.ndarray]:
         k = kin.dof_slices[name].start + i
         lower[k] = min(lower[k], lo)
     return lower, kin.upper.copy()
+
+
+def past_live_limits(kin: FigureKinematics, poses: np.ndarray, slack: float = 1e-4) -> bool:
+    """Whether ``poses`` ``(n, ndof)`` of ``kin``'s (live) figure take a leg past its own limits into the
+    passive range anywhere (``slack`` radians: the files' float32 rounding of a joint at its limit)."""
+    dofs = [kin.dof_slices[name].start + i for name, i, _ in _widened(kin.dof_slices)]
+    return bool((poses[:, dofs] < kin.lower[dofs] - slack).any())

@@ -85,6 +85,7 @@ def main() -> int:
             wall = time.monotonic() - t0
             cpu = {k: round(100 * (cpu_seconds(p.pid) - cpu0[k]) / wall, 1) for k, p in procs.items()}
             stages = {k: stage_cpu(p.log_tail(1 << 24)) for k, p in procs.items()}
+            deaf = {k: stage_cpu(p.log_tail(1 << 24), "loop_deaf_ms") for k, p in procs.items()}
             traced = probed(time.monotonic() - args.seconds) if args.trace else {}
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
@@ -105,6 +106,7 @@ def main() -> int:
         **{k: report.get(k) for k in keys},
         "cpu_pct": cpu,
         "cpu_ms_per_tick": stages,
+        **({"loop_deaf_ms": deaf} if os.environ.get("TTES_DEAF") == "1" else {}),
         **traced,
     }
     print(json.dumps(out) if args.json else json.dumps(out, indent=1))
@@ -159,12 +161,13 @@ def probing(port: int, n: int | None, tmp: Path) -> Iterator[Callable[[float], d
         proc.wait(10)
 
 
-def stage_cpu(log: str) -> dict[str, float]:
+def stage_cpu(log: str, name: str = "cpu_ms_per_tick") -> dict[str, float]:
     """The mean of a server's ``cpu_ms_per_tick`` (``animate:3.2,merge:1.1,...``) over its status lines,
-    the first (start-up, creations) left out."""
+    the first (start-up, creations) left out; ``name``: another such field (``loop_deaf_ms``: with
+    ``TTES_DEAF=1`` in the environment, ``server.stage_cpu.DeafSpans``)."""
     rows = []
     for line in log.splitlines():
-        field = next((f for f in line.split() if f.startswith("cpu_ms_per_tick=")), None)
+        field = next((f for f in line.split() if f.startswith(name + "=")), None)
         if "event=status" in line and field:
             rows.append({k: float(v) for k, v in (kv.split(":") for kv in field.split("=", 1)[1].split(","))})
     rows = rows[1:] or [{}]

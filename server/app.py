@@ -18,8 +18,10 @@ Structure (one trio nursery):
   answered (and written) before the tick samples; one that arrived while it sampled is answered by that tick
   first (:meth:`TtesServer.run_tick`: those soldiers sampled again, published and written as the tick's
   first frames, before the rest of the tick is quantised and encoded); one that
-  arrived during the publish or the writers' encodes is answered before the next writer encodes (its answer
-  goes out with the tick's frames). A writer woken by answers alone writes them at once;
+  arrived during the publish or the writers' encodes is answered as more of the tick before the next writer
+  encodes (:meth:`TtesServer._answer_in_tick`: the writers of a tick encode it one at a time, each after
+  letting the readers in), and each writer writes its client's answered soldiers before it encodes the rest
+  of the tick (:meth:`TtesServer._tick_output`). A writer woken by answers alone writes them at once;
 * a **status loop** sends STATUS every report interval (``set_ttes_report_interval``) and logs it;
 * **shutdown** (SIGINT/SIGTERM via ``trio.open_signal_receiver`` in :func:`run_server`, or
   :meth:`TtesServer.shutdown`): stop accepting, send GOODBYE to every client, let the writers flush briefly,
@@ -39,6 +41,7 @@ from __future__ import annotations
 import errno
 import ipaddress
 import math
+import os
 import signal
 import threading
 import time
@@ -56,7 +59,7 @@ from server.pending_requests import PendingRequests
 from server.pose_board import BoardRef, PoseBoard
 from server.session import Session
 from server.soldier.manager import TickUpdate
-from server.stage_cpu import TURN_CPU_S, StageCpu
+from server.stage_cpu import TURN_CPU_S, DeafSpans, StageCpu
 from server.startup import ServerWorld
 from server.tls import server_context
 from server.trace import TRACE
@@ -68,6 +71,8 @@ from server.world.commands import needs_worker
 READ_TURN_S = TURN_CPU_S
 FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush its last bytes
 SHUTDOWN_GRACE_S = 1.0
+# TTES_FRONT_TURNS=0: a front-end's woken writers encode back to back, as before (_encode; a bench's A/B)
+FRONT_TURNS = os.environ.get("TTES_FRONT_TURNS") != "0"
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
 log = get_logger("app")
 
@@ -113,6 +118,9 @@ class TtesServer:
         self._ticking = False  # between a tick's sampling and its publish: requests are folded into it
         self._requests_at_tick = 0  # the request count when the tick sampled
         self._answer_after_tick = False  # soldiers taken up by the tick that it could not show yet
+        self._tick_serial = 0  # the board's serial after the last tick's publish (its encodes follow)
+        self._tick_now = 0.0  # the last tick's time
+        self._encode_turn = trio.Lock()  # writers encode one at a time (_tick_output; a front-end's: _encode)
         self.last_tick_seconds = 0.0  # the last tick's own time (sampling and publish, not the pause)
         self.stopped = trio.Event()
         self.started = False
@@ -123,11 +131,13 @@ class TtesServer:
         self._bound_ws: list[Any] = []  # and the WebSocket port's
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
         self.cpu = StageCpu()  # the loop's CPU per stage, in the status log line
+        self.deaf = DeafSpans() if os.environ.get("TTES_DEAF") == "1" else None  # a bench's: loop_deaf_ms
         # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
         self.on_publish: Callable[[PoseBoard], None] | None = None
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
         self.feed: Callable[[PoseBoard, int], np.ndarray] | None = None
+        self.relay_out: Callable[[], None] | None = None  # a front-end's: send what was relayed, now
         self.status_note: Callable[[], str] | None = (
             None  # appended to STATUS (a shard's or front-end's role)
         )
@@ -249,6 +259,8 @@ class TtesServer:
         self._clock_started = True
         self._loop_thread = threading.get_ident()
         self._trio_token = trio.lowlevel.current_trio_token()
+        if self.deaf is not None:
+            trio.lowlevel.add_instrument(self.deaf)
         check_exposure(self.config)
         self.start_world()
         self.bind()
@@ -433,7 +445,6 @@ class TtesServer:
     async def _writer(self, session: Session, stream: trio.abc.Stream, scope: trio.CancelScope) -> None:
         """Write control bytes and the latest poses whenever woken; exits (cancelling the session) when the
         session is closing and flushed, the peer is gone, or one write stalls for ``write_timeout``."""
-        timeout = self.config.write_timeout
         try:
             while True:
                 if session.retry_at is None:
@@ -441,28 +452,20 @@ class TtesServer:
                 else:  # updates held back by the connection's own throttle: write them when due
                     with trio.move_on_at(self._t0 + session.retry_at):
                         await session.wake.wait()
-                if session.ticked:  # a tick's frames: the readers' answers go out in this write
-                    session.ticked = session.more_of_tick = False
-                    if self.feed is None:  # a front-end's readers answer nothing (its shards do): at once
-                        await self.let_readers_in()
-                    self.apply_held()
-                # (woken by answers alone: written at once, not after the next reader's answer, issue 16)
-                session.wake = trio.Event()
-                with self.cpu("encode"):
-                    data = session.take_output(self.now())
-                session.drained.set()
-                if data:
-                    with trio.move_on_after(timeout) as cs:
-                        await stream.send_all(data)
-                    if cs.cancelled_caught:
-                        log.warning("client_stalled", session=session.id, name=session.name, seconds=timeout)
-                        session.drop(f"write stalled for {timeout:g} s", dropped=True)
-                        session.lingering = False
+                if session.ticked and self.feed is None:  # a tick's frames: the readers' answers go with them
+                    tick_data = await self._tick_output(session, stream)
+                    if tick_data is None:
                         return
-                    session.bytes_out += len(data)
-                    if TRACE is not None:
-                        TRACE.stamp("sent", session.trace_rows)
-                        session.trace_rows = session.trace_rows[:0]
+                    data = tick_data
+                else:  # woken by answers alone (written at once, not after the next reader's answer), or a
+                    # front-end's tick (its readers answer nothing, its shards do: at once, in turns: _encode)
+                    if session.ticked:
+                        session.ticked = session.more_of_tick = False
+                        self.apply_held()
+                    data = await self._encode(session)
+                session.drained.set()
+                if not await self._send(session, stream, data):
+                    return
                 if session.closing and not session.control:
                     return
         except (trio.BrokenResourceError, trio.ClosedResourceError):
@@ -472,6 +475,71 @@ class TtesServer:
             session.writer_done.set()
             if not session.lingering:
                 scope.cancel()
+
+    async def _encode(self, session: Session) -> bytes:
+        """What ``session``'s writer writes now. A front-end's writers take turns, each letting the readers
+        and the shards' batches in before its encode and sending the requests they relay: a request or an
+        answer that arrives during one client's encode waits for that encode only, not for every woken
+        client's (issue 21: a shard's batch woke both clients' writers, and their ~3.5 ms encodes ran back
+        to back before any socket was read, the relayed requests sent after both)."""
+        if self.feed is None or not FRONT_TURNS:
+            return self._encode_now(session)
+        async with self._encode_turn:
+            await self.let_readers_in()
+            self.apply_held()  # the requests they hold go to their shards before this encode, not after
+            if self.relay_out is not None:
+                self.relay_out()
+            return self._encode_now(session)
+
+    def _encode_now(self, session: Session) -> bytes:
+        session.wake = trio.Event()  # a publish from here on wakes it again
+        with self.cpu("encode"):
+            return session.take_output(self.now())
+
+    async def _tick_output(self, session: Session, stream: trio.abc.Stream) -> bytes | None:
+        """A single server's writer woken by a tick: its client's frames of the tick (None: a write stalled).
+
+        The writers of a tick encode it one at a time (``_encode_turn``), each after letting the readers in:
+        a request that landed during another writer's encode is then applied and answered as more of the
+        tick (:meth:`_answer_in_tick`) before this one encodes, and this client's answered soldiers are
+        written first, on their own (outside the turn: a stalled client holds no other writer up), before
+        it encodes the tick's other rows (issue 16: such a request waited for every encode of the tick and
+        then for its own)."""
+        while True:
+            async with self._encode_turn:
+                session.more_of_tick = False
+                await self.let_readers_in()
+                self.apply_held()  # (while this writer owes the tick: answered as more of it)
+                with self.cpu("encode"):
+                    early = session.take_answers(self._tick_serial)
+                    if not early:
+                        session.ticked = False
+                        session.wake = trio.Event()
+                        return session.take_output(self.now())
+            if not await self._send(session, stream, early):
+                return None
+
+    async def _send(self, session: Session, stream: trio.abc.Stream, data: bytes) -> bool:
+        """Write ``data`` (nothing: nothing to do); False: the write stalled and the session is dropped."""
+        if not data:
+            return True
+        timeout = self.config.write_timeout
+        session.sending = True
+        try:
+            with trio.move_on_after(timeout) as cs:
+                await stream.send_all(data)
+        finally:
+            session.sending = False
+        if cs.cancelled_caught:
+            log.warning("client_stalled", session=session.id, name=session.name, seconds=timeout)
+            session.drop(f"write stalled for {timeout:g} s", dropped=True)
+            session.lingering = False
+            return False
+        session.bytes_out += len(data)
+        if TRACE is not None:
+            TRACE.stamp("sent", session.trace_rows)
+            session.trace_rows = session.trace_rows[:0]
+        return True
 
     # -- ticks and reports -------------------------------------------------------------------------------
     async def _tick_loop(self) -> None:
@@ -611,6 +679,7 @@ class TtesServer:
                 self._take_up(update.now)
             else:  # a shard's batches count a tick's publishes: its answer after the tick, as before
                 self._answer_after_tick = True
+        self._tick_serial, self._tick_now = board.serial, update.now
         self.last_tick_seconds = time.perf_counter() - t0
 
     def _take_up(self, now: float) -> None:
@@ -695,11 +764,40 @@ class TtesServer:
             self.requests_arrived()
 
     def requests_arrived(self) -> None:
-        """Requests were taken (from a client, or a shard's from the fabric): answer them between ticks."""
+        """Requests were taken (from a client, or a shard's from the fabric): answer them as more of the tick
+        whose encodes are under way (:meth:`_answer_in_tick`), else between ticks."""
         seen = self._request_count()
         if seen != self._requests_seen and not self._ticking:
             self._requests_seen = seen
-            self.answer_requests()  # by the reader that handled them, before anything else runs
+            if not self._answer_in_tick():
+                self.answer_requests()  # by the reader that handled them, before anything else runs
+
+    def _answer_in_tick(self) -> bool:
+        """While writers still owe the last tick's frames (its encodes, after its publish; not one that waits
+        for its socket) and nothing was answered as the next tick's since: the soldiers whose requests changed
+        what they show are sampled at once (at their request's time, the tick's due rule) and published as
+        more of that tick, under its number, so a writer that owes the tick writes them before it encodes the
+        tick (:meth:`_tick_output`) and one that wrote it writes them at once (issue 16: they waited for every
+        encode of the tick). A start whose first frames are still is answered between ticks, at the next
+        tick's time. False: not in that phase (the caller answers between ticks)."""
+        m, board = self.world.manager, self._board()
+        if m is None or board is None or self.feed is not None or self.on_publish is not None:
+            return False
+        if board.tick != board.ticks or not any(s.ticked and not s.sending for s in self.sessions.values()):
+            return False  # (a writer stuck on its socket owes the tick too long to hold answers in it)
+        with self.cpu("animate"):
+            again = m.answer(self._tick_now, self._tick_now)  # at the tick's time: its due rule
+        if len(again):
+            if self.on_tick is not None:
+                self.on_tick(again)
+            with self.cpu("quantise"):
+                changed = board.publish(again, self.world, again=True)
+            self._published(board, changed, again.indices, tick=False, more=True)
+            self._answer_still(again)
+            if self._answer_after_tick:  # shows nothing yet: the next tick's time will
+                self._answer_after_tick = False
+                self.answer_requests()
+        return True
 
     def answer_requests(self) -> None:
         """Between ticks: publish the next tick's update early for the soldiers whose requests changed what
@@ -799,6 +897,7 @@ class TtesServer:
             mean_tick_us=round(st.get("mean_tick_us", 0.0), 1),
             modes=st.get("modes", {}),
             cpu_ms_per_tick=self.cpu.report(self.ticks),
+            **({} if self.deaf is None else {"loop_deaf_ms": self.deaf.report()}),
         )
 
 

@@ -71,7 +71,7 @@ from protocol.shared_encode import KEEP
 from server.config import ServerConfig
 from server.jcl import JclError
 from server.logging import get_logger
-from server.pose_board import BoardRef
+from server.pose_board import BoardRef, PoseBoard
 from server.soldier.manager import REQUEST_BAD_VALUE, REQUEST_UNKNOWN_SOLDIER
 from server.trace import TRACE
 
@@ -120,6 +120,8 @@ class Session:
         self.flushed_serial = 0  # the board publish this client's last write covered
         self.ticked = False  # woken by a tick's publish since the last write (the trio app's writer)
         self.more_of_tick = False  # woken by a tick's first publish of answered soldiers only (take_output)
+        self.early: tuple[int, np.ndarray] | None = None  # (board serial, rows) written ahead of a tick
+        self.sending = False  # the writer waits for the socket to take a write (the trio app's writer)
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
@@ -216,6 +218,30 @@ class Session:
         """The soldiers of ``indices`` whose updates this client may receive (``Owners.visible``)."""
         return self.world.owners.visible(indices, self.client_id, self.role)
 
+    def take_answers(self, after: int) -> bytes:
+        """The subscribed soldiers whose codes changed at a publish after ``after`` (and after this client's
+        last write): soldiers answered as more of a tick since its publish (``TtesServer._answer_in_tick``),
+        encoded on their own so that the writer sends them before it encodes the rest of the tick (issue 16);
+        nothing once a publish was labelled with the next tick (its rows follow the tick's).
+        The next write does not send them again unless they change again. Not for a connection with a
+        throttle of its own (its one write per period carries them)."""
+        board = self.board_ref.board
+        if board is None or self.throttle is not None or self.closing or self.conn.state is not State.OPEN:
+            return b""
+        if board.tick != board.ticks:  # answered as the next tick's since: they follow the tick's rows
+            return b""
+        sub = self.conn.subscribed
+        if not self.tables_sent or len(sub) == 0:
+            return b""
+        sub = self.may_see(sub[sub < board.capacity])
+        early = self.early
+        since = max(after, self.flushed_serial, 0 if early is None else early[0])
+        idx = sub[board.valid[sub] & (board.version[sub] > since) & ~self.force[sub]]
+        if len(idx) == 0:
+            return b""
+        self.early = (board.serial, idx if early is None else np.union1d(early[1], idx))
+        return self._encode_rows(board, idx, sub, since, False)
+
     def _joint_updates(self) -> bytes:
         """The subscribed soldiers whose codes changed since the last write (or that are owed a full update),
         encoded from the board's shared codes: this client only diffs and packs, it never re-quantises.
@@ -228,15 +254,25 @@ class Session:
         sub = self.conn.subscribed
         since = self.flushed_serial
         self.flushed_serial = board.serial
+        early, self.early = self.early, None
         if len(sub) == 0:
             return b""
         sub = self.may_see(sub[sub < board.capacity])
         due = board.valid[sub] & ((board.version[sub] > since) | self.force[sub])
+        if early is not None:  # written ahead of the rest of the tick (take_answers), not changed since
+            due &= ~(np.isin(sub, early[1]) & (board.version[sub] <= early[0]))
         idx = sub[due]
         if len(idx) == 0:
             return b""
-        late = self._may_catch_up(since, board.serial) and not self.force[idx].any()
+        late = early is None and self._may_catch_up(since, board.serial) and not self.force[idx].any()
         self.force[idx] = False
+        return self._encode_rows(board, idx, sub, since, late)
+
+    def _encode_rows(
+        self, board: PoseBoard, idx: np.ndarray, sub: np.ndarray, since: int, late: bool
+    ) -> bytes:
+        """JOINT_UPDATES of soldiers ``idx`` (``sub``: those this client may see; ``late``: catch up through
+        the shared memo's encodes of the publishes after ``since``)."""
         tables = board.table_of[idx]
         ticks = board.labels(idx)  # the tick's rows, then the rows answered since (the next tick's), in order
         chunks = []

@@ -78,3 +78,15 @@ def test_a_crawlers_turn_carries_him_forward_along_the_headings_it_turns_to(angl
     moves, _ = crawl_turn.part_moves("right", angle)
     ahead = sum(np.array([np.sin(np.radians(-b)), -np.cos(np.radians(-b))]) for _, _, b in moves["back"])
     np.testing.assert_allclose(np.subtract(arc[:2], spot[:2]), crawl_turn.ARC_ADVANCE * ahead, atol=1e-3)
+
+
+def test_a_crawlers_u_turn_carries_him_along_the_heading_it_ends_on() -> None:
+    """``crawlarc_r180`` ends as the 90° on the spot twice (about the same pivot) carried ARC_ADVANCE cm a
+    move along the end heading (back along the way he came: +Z), not along each move's own."""
+    arc = load_channelset(CHANNELSETS / "crawlarc_r180.chset.env").end_offset
+    spot = load_channelset(CHANNELSETS / "crawlturn_r90.chset.env").end_offset
+    assert arc is not None and spot is not None and arc[2] == -180.0
+    moves, _ = crawl_turn.part_moves("right", 180.0)
+    twice = turns.ground_move(*spot) @ turns.ground_move(*spot)
+    carried = crawl_turn.ARC_ADVANCE * len(moves["back"])
+    np.testing.assert_allclose(arc[:2], (twice[0, 3], twice[2, 3] + carried), atol=1e-3)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -126,13 +128,15 @@ def test_a_prone_death_lays_the_head_down(ctx: BuildContext, name: str) -> None:
 
 
 @pytest.mark.xfail(
-    reason="issue 14: stfire2dead's pelvis rests on its rifle (branch restc14-wip)", strict=False
+    reason="issue 14: stfire2dead's pelvis rests on its rifle (branches restc14-wip, stfire14-wip)",
+    strict=False,
 )
 def test_a_standing_death_does_not_lie_on_his_rifle(ctx: BuildContext) -> None:
     """Issue 14: stfire2dead's rifle, tossed to his left, ends under his belly and pelvis (4.6 cm thick), his
-    pelvis propped 4.8 cm up on it (DEAD@stfire rest_contact_cm 4.85). Tossed to his right (toss_to (1, -0.7,
-    0)) it lies clear and the trunk rests on the ground (0.78 cm), but the right thigh then skids 3.9 cm as he
-    lands (the limit is 3)."""
+    pelvis propped 4.8 cm up on it (DEAD@stfire rest_contact_cm 4.78). Tossed to his right, a little down and
+    back (toss_to (1, -0.5, 0.2), branch stfire14-wip) it lies flat 32 cm clear and the trunk rests 1.7 cm up,
+    but his feet stay on their toes, heels 22.4 cm up (15.1 tossed left): no leg settle lays them lower
+    without lifting a leg 2-3 cm after he is down (stfire14)."""
     poses, roots, rifles, _ = _played(ctx, "stfire2dead")
     lows = part_lows_of(ctx, poses[-1], roots[-1])
     assert max(lows["pelvis"], min(lows["belly"], lows["chest"])) <= 2.0  # the check's rest_contact_cm
@@ -146,6 +150,38 @@ def test_a_standing_death_does_not_lie_on_his_rifle(ctx: BuildContext) -> None:
     gun = np.einsum("kij,kj->ki", gg[gun_segs, :3], gun_nodes)
     near = np.linalg.norm(gun[:, None, [0, 2]] - trunk[None, :, [0, 2]], axis=-1).min(axis=1) < 2.0
     assert not near.any()  # no part of the rifle under the pelvis or the belly
+
+
+def test_a_face_down_deaths_legs_are_laid_as_he_lands(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 14: the settle laid stfire2dead's legs after the physics had ended, his feet moving 1.2 s after
+    his trunk lay still (limb_rest_lag_s 1.18). Laid from the frame he is down (``k0``), the legs reach the
+    settle's last shape in LEGS_LAND_SECONDS, the physics' own leg motion kept under it, the rest unmoved."""
+    n, k0, end = 60, 20, 45  # frames, down at 20, the physics ends at 45 (still after that)
+    rng = np.random.default_rng(3)
+    poses = np.cumsum(rng.normal(0.0, 0.01, (n, 80)), axis=0)
+    poses[end:] = poses[end]
+    roots = np.repeat(np.eye(4)[None], n, axis=0)
+    frames = ClipFrames(poses, roots, roots.copy(), 60.0)
+    legs = np.array([3, 4, 10, 11])
+    target = poses[end, legs] + 0.5
+    steps = round(dead_settle.LEGS_LAND_SECONDS * 60.0)
+    calls: list[np.ndarray] = []
+
+    def path(body: object, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+        calls.append(t)
+        return poses[end, legs][None] + u[:, None] * (target - poses[end, legs])[None]
+
+    monkeypatch.setattr(dead_settle, "_Body", lambda *a: SimpleNamespace(kin=None))
+    monkeypatch.setattr(dead_settle, "_leg_dofs", lambda kin: legs)
+    monkeypatch.setattr(dead_settle, "_legs_path", path)
+    out = dead_settle._legs_land(None, frames, k0, end)  # type: ignore[arg-type]
+    assert len(calls[0]) == steps
+    np.testing.assert_array_equal(out.poses[: k0 + 1], poses[: k0 + 1])  # before he is down: as it was
+    others = np.setdiff1d(np.arange(80), legs)
+    np.testing.assert_array_equal(out.poses[:, others], poses[:, others])
+    np.testing.assert_allclose(out.poses[k0 + steps :, legs][-1], target)  # laid by the end
+    moved = out.poses[k0 + steps :, legs] - poses[k0 + steps :, legs]
+    np.testing.assert_allclose(moved, np.broadcast_to(target - poses[end, legs], moved.shape))
 
 
 def test_a_death_on_his_back_lets_the_arms_fall(ctx: BuildContext) -> None:

@@ -4,6 +4,8 @@ the others between turns of a client's creation burst. In one process on trio's 
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import trio
@@ -11,12 +13,13 @@ from test_fabric_inprocess import RUN, WALK, Bus, MemoryFabric, cluster, live, w
 from test_server_support import Client, make_server
 
 from protocol.entity import make_entity_requests
-from protocol.events import CreateSoldier, Ready, SoldierCreated, Subscribe
+from protocol.events import CreateSoldier, EntityRequests, Ready, SoldierCreated, Subscribe
 from server import app
 from server.fabric import poses_topic
 from server.fabric import requests as req
 from server.fabric.batch import decode_batch
 from server.fabric.nodes import Sharding, ShardNode
+from server.session import Session
 
 
 async def test_a_shard_answers_the_requests_that_arrived_together_in_one_batch(
@@ -116,3 +119,48 @@ async def test_a_front_end_wakes_only_the_writers_of_clients_subscribed_to_what_
             assert {n for n, s in by_name.items() if s.wake.is_set()} == woken
         await a.aclose()
         await b.aclose()
+
+
+@pytest.mark.parametrize("turns", [True, False])
+async def test_a_request_that_arrives_during_one_clients_encode_is_relayed_before_the_next_ones(
+    autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch, turns: bool
+) -> None:
+    """A shard's batch wakes two clients' writers; a third client's request that arrives while the first
+    encodes goes to its shard before the second encode (it waited for both: ~3.5 ms each at 20,000, as
+    it still does with ``TTES_FRONT_TURNS=0``, the bench's A/B switch)."""
+    monkeypatch.setattr(app, "FRONT_TURNS", turns)
+    async with cluster() as (front, node, _, _):
+        a = await walker(front, 11)  # subscribed to 0..11; 11 walks (shard 1)
+        b = await Client.open(front.addresses[0][1], "other", client_id="beta")
+        c = await Client.open(front.addresses[0][1], "asker", client_id="gamma")
+        for client, index in ((b, 13), (c, 15)):
+            await client.expect(Ready)
+            await client.send(CreateSoldier(1, "DI.fig", "AK_47.fig", index))
+            await client.expect(SoldierCreated)
+        await b.send(Subscribe((13,)))
+        await b.requests(index=[13], velocity=WALK)  # 11 and 13 in each of shard 1's batches: both woken
+        await trio.sleep(0.5)
+        order: list[str] = []
+        request = c.conn.send(EntityRequests(make_entity_requests(index=[15], velocity=RUN)))
+        relay, take_output = node.requests, Session.take_output
+
+        def relayed(rows: np.ndarray) -> None:
+            order.append("relay")
+            relay(rows)
+
+        def encoding(self: Session, now: float | None = None) -> bytes:
+            data = take_output(self, now)
+            if self.name in ("ig", "other") and data and len(order) < 3:
+                if not order:  # the first encode of the pair: c's request arrives meanwhile
+                    os.write(c.stream.socket.fileno(), request)  # in the kernel's buffer at once
+                order.append("encode")
+            return data
+
+        monkeypatch.setattr(node, "requests", relayed)
+        monkeypatch.setattr(Session, "take_output", encoding)
+        with trio.fail_after(5):
+            while len(order) < 3:
+                await trio.sleep(0.01)
+        assert order == (["encode", "relay", "encode"] if turns else ["encode", "encode", "relay"])
+        for client in (a, b, c):
+            await client.aclose()

@@ -146,3 +146,22 @@ def test_lead_in_fractions_count_the_still_frames_each_way() -> None:
     # ramp: frames 0-2 equal, frame 3 moves 0.1 rad: 3 of 10 intervals; backwards frames 10-7 equal, 6 moves
     np.testing.assert_allclose(lead[0], [0.3, 0.4])
     np.testing.assert_array_equal(lead[1:], 0.0)
+
+
+def test_every_request_of_the_load_mix_moves_the_joints_when_answered_at_its_own_time(rig_of) -> None:
+    """Asked at the very time its answer samples (a request that lands while the tick samples is answered
+    in that tick's first frames, at the tick's time; a late tick samples at the request's): each resting
+    activity of the mix -> each other activity already moves a joint by a wire step, as an image generator
+    draws it, not only the root offset. Walk and run starts (their first frame still) showed nothing new
+    then and waited for the next tick."""
+    pairs = [(a, b) for a, b in itertools.product(Activity, Activity) if a != b and not MOVING[a]]
+    rig = rig_of(len(pairs))
+    rig.m.apply_requests(requests(rig.idx, [a for a, _ in pairs]), 0.0)
+    rig.ticks(SETTLE)
+    rows = np.array(rig.idx)
+    before = rig.board.codes[rows].copy()
+    rig.request_and_answer(requests(rig.idx, [b for _, b in pairs]), phase=1.0)
+    ndofs = rig.board.ndofs
+    moved = (rig.board.codes[rows, :ndofs] != before[:, :ndofs]).any(axis=1)
+    late = [f"{a.name}->{b.name}" for (a, b), ok in zip(pairs, moved, strict=True) if not ok]
+    assert late == []

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from authoring.planted import ground_drift, plant
+from authoring.planted import ground_drift, least_worst_shift, plant
 from authoring.postures import lowest_point
 from authoring.transitions import ClipFrames
 from peabody.fk import FigureKinematics
@@ -52,3 +52,35 @@ def test_the_drift_is_shared_out_over_the_parts_not_the_nodes() -> None:
     np.testing.assert_allclose(ground_drift(points, touching, parts), np.array([[0, 0, 0], [0.5, 0, 0]]))
     touching[0, 4] = False
     np.testing.assert_allclose(ground_drift(points, touching, parts)[1], [1.0, 0, 0])
+
+
+def _slide(points: np.ndarray, shift: np.ndarray, node: int) -> float:
+    """How far (cm, horizontal) one node moves over the frames, the body shifted by ``shift``."""
+    xz = (points[:, node] + shift)[:, [0, 2]]
+    return float(np.linalg.norm(xz - xz[0], axis=1).max())
+
+
+def test_a_dragged_foot_does_not_skid_the_thigh_that_lies_still() -> None:
+    """A thigh lies still while a foot drags 7.2 cm (kstow2dead: the mean drift slid the thigh 3.1 -> 4.5 cm):
+    the mean shares the skid out (3.6 cm each), the least worst keeps the thigh put and leaves the foot to
+    the legs' lift."""
+    n = 10
+    points = np.zeros((n, 2, 3))
+    points[:, 1, 0] = 0.8 * np.arange(n)  # the foot drags along x
+    parts = np.array(["left_thigh", "left_foot"])
+    mean = -np.cumsum(ground_drift(points, np.ones((n, 2), dtype=bool), parts), axis=0)
+    assert _slide(points, mean, 0) == pytest.approx(3.6)
+    shift = least_worst_shift(points, parts)
+    assert _slide(points, shift, 0) < 0.05
+    np.testing.assert_array_equal(shift[:, 1], 0.0)  # along the ground only
+
+
+def test_two_trunk_parts_share_their_relative_skid_evenly() -> None:
+    """The chest drags 4 cm against the belly: neither slides more than half of it, and the correction moves
+    no more than it must (none before the drag)."""
+    n = 12
+    points = np.zeros((n, 2, 3))
+    points[2:, 1, 2] = np.minimum(0.4 * np.arange(1, n - 1), 4.0)  # the chest drags along z from frame 2
+    shift = least_worst_shift(points, np.array(["belly", "chest"]))
+    assert max(_slide(points, shift, 0), _slide(points, shift, 1)) == pytest.approx(2.0, abs=0.05)
+    np.testing.assert_allclose(shift[:2], 0.0, atol=1e-9)

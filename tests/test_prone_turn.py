@@ -14,6 +14,8 @@ kneecap, tip of the toes) touching the ground must not move more than 3 cm while
 from __future__ import annotations
 
 import math
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 
 import numpy as np
 import pytest
@@ -27,6 +29,7 @@ from protocol.events import JointUpdates, Ready, Subscribe
 from server.app import TtesServer
 from server.config import ServerConfig
 from server.soldier.manager import REQUEST_OK, SoldierManager
+from server.soldier.state import CRAWL_NODE
 from server.startup import ServerWorld
 from tests.test_gait_selection import shipped_library
 from tests.test_root_motion import HZ, drive, in_world
@@ -168,26 +171,62 @@ def test_a_crawler_whose_heading_changes_much_stops_turns_on_the_move_and_crawls
     assert abs(gap[-1]) <= STOP_CM
 
 
-def test_a_crawler_reversing_turns_on_the_spot_then_on_the_move(lib) -> None:
-    """180°: the 90° on the spot, then the 90° carried forward (two turns carried forward, each along the
-    way it turns to, ended 75 cm beside his entity's path: 136 cm from it, 89 after the stop; 201 cm when
-    both were on the spot at the recorded pace)."""
-    script = [(0.0, 0.0, 0.0), (0.5, 0.3, 0.0), (4.0, 0.3, 0.0, 220.0), (11.0, 0.0, 0.0)]
-    run = drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
+REVERSAL_CM = 30.0  # a crawler's U-turn ends this near his entity (the 90° arcs end 16-39 cm from it)
+
+
+def reversal(lib, speed: float = 0.3) -> dict[str, np.ndarray]:
+    """A crawler at ``speed`` m/s whose entity turns back the way it came at 4 s, stopping at 11 s."""
+    script = [(0.0, 0.0, 0.0), (0.5, speed, 0.0), (4.0, speed, 0.0, 220.0), (11.0, 0.0, 0.0)]
+    return drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
+
+
+@pytest.mark.parametrize("speed", [0.3, 0.2])
+def test_a_crawler_reversing_comes_round_carried_along_his_new_heading(lib, speed: float) -> None:
+    """180°: the U-turn whose every move carries him along the new heading (``crawlarc_r180``), the way his
+    entity now crawls, played slower for a slower entity: he ends it within REVERSAL_CM of his entity and
+    the stop too (0.3 m/s, the 90° on the spot and the 90° arc after it: 90 cm from it, 75 cm beside its
+    path, 35 cm after the stop; both arcs carried forward, each along the way it turns to: 136 cm, 89
+    after the stop; both on the spot at the recorded pace: 201 cm; 0.2 m/s: 61 cm, and the U-turn at
+    GROUND_TURN_RATE 25 cm ahead)."""
+    run = reversal(lib, speed)
     shown = [c.split("/")[-1] for c in run["clips"].tolist()]
-    turns = [c for k, c in enumerate(shown) if (not k or c != shown[k - 1]) and "_r90" in c]
-    assert turns == ["crawlturn_r90_low", "crawlarc_r90_low"]
-    check_turn(lib, run, 3.9, 180.0, within=2.0, family="_r90_")
+    assert sorted({c for c in shown if "turn_" in c or "arc_" in c}) == ["crawlarc_r180_low"]
+    check_turn(lib, run, 3.9, 180.0, within=2.0, family="crawlarc_")
     turned = max(i for i, c in enumerate(shown) if "crawlarc_" in c) + 1
-    assert np.hypot(*run["gap"][turned]) <= 100.0 and np.hypot(*run["gap"][-1]) <= 50.0
+    gap = np.hypot(run["gap"][:, 0], run["gap"][:, 1])
+    assert gap[turned] <= REVERSAL_CM and gap[-1] <= REVERSAL_CM, (gap[turned], gap[-1])
 
 
-async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(
-    autojump_clock: trio.abc.Clock,
+def test_a_crawlers_u_turn_swings_his_body_no_faster_than_recorded(lib) -> None:
+    """The U-turn seen at the stub's 30 Hz: no pop (the body turns at most SWING_DEG_S, no head or limb
+    moves faster than LIMB_M_S), from the request through the crawl on."""
+    script = [(0.0, Appearance.CRAWL, 0.0, 40.0), (0.5, Appearance.CRAWL, 0.3, 40.0)]
+    script.append((4.0, Appearance.CRAWL, 0.3, 220.0))
+    _, clips, turn, move, k = swung(lib, script, 11.0, 3.9)
+    assert "crawlarc_r180_low" in "".join(clips[k:]) and "crawl_cycle" in clips[-1]
+    assert turn[k:].max() <= SWING_DEG_S and move[k:].max() <= LIMB_M_S, (turn[k:].max(), move[k:].max())
+
+
+@pytest.mark.parametrize("want", [180.0, -180.0, 175.0, -165.0, 160.0, -150.0])
+def test_a_crawler_reversing_either_way_plays_the_u_turn_a_near_reversal_the_arcs_that_fit(
+    lib, want: float
 ) -> None:
-    """The same through a served world (real TCP, trio's autojump clock): an image generator lays soldier 0
-    prone, then turns his entity 90°; the server plays up, the turn and down, and the figure ends facing the
-    heading in the posture it left (the last pose sent is PRONE_STOWED's, the figure's yaw from it 0)."""
+    """The U-turn (to his right: either way serves a reversal) from 165° (the rest he turns as he crawls
+    on); 160° the 90°, 45° and 30° arcs, not the U-turn and a 30° arc back (a clip turning against the
+    others counts twice); -150° not the U-turn and 30° more (never the long way round)."""
+    m = SoldierManager(lib, throttle=0.0)
+    steps = m._ground_turns(lib.node(CRAWL_NODE), want, moving=True)
+    shown = [lib.clip_names[s.clip].split("/")[-1] for s in steps]
+    if abs(want) >= 165.0:
+        assert shown == ["crawlarc_r180_low"]
+    else:
+        assert "crawlarc_r180_low" not in shown and len(shown) == 3, shown
+
+
+@asynccontextmanager
+async def served() -> AsyncIterator[tuple[TtesServer, ServerWorld, Client]]:
+    """A served world of the shipped library (clips recorded) and an image generator subscribed to soldier
+    0 over TCP."""
     cfg = ServerConfig(port=0, data_dir=REPO, startup_script="jack-ttes-soldier_low.jcl")
     cfg = cfg.with_overrides(record_clips=True, report_interval=1000.0)
     lib = shipped_library()
@@ -199,6 +238,18 @@ async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(
         await c.expect(Ready)
         await c.send(Subscribe((0,)))
         await c.expect(JointUpdates)
+        yield server, world, c
+        await c.aclose()
+        server.shutdown()
+
+
+async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """The same through a served world (real TCP, trio's autojump clock): an image generator lays soldier 0
+    prone, then turns his entity 90°; the server plays up, the turn and down, and the figure ends facing the
+    heading in the posture it left (the last pose sent is PRONE_STOWED's, the figure's yaw from it 0)."""
+    async with served() as (_, world, c):
         await c.requests(index=0, appearance=Appearance.PRONE, heading=10.0)
         await c.drain(6.0)
         rest = c.pose(1, 0)[0].copy()
@@ -209,8 +260,34 @@ async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(
         assert shown[-3:] == ["crawl2prstow_low", "crawlturn_r90_low", "crawl2prstow_low"]
         assert m.table.root_yaw[0] == pytest.approx(0.0, abs=1e-6)
         np.testing.assert_allclose(c.pose(1, 0)[0], rest, atol=1e-3)
-        await c.aclose()
-        server.shutdown()
+
+
+async def test_over_the_wire_a_crawler_reversing_ends_his_u_turn_on_his_entity(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """The U-turn through a served world (real TCP, trio's autojump clock): an image generator crawls
+    soldier 0 at 0.3 m/s, then sends his entity back the way it came; the figure's placement the client
+    holds when the U-turn ends is within REVERSAL_CM of the entity (the 90° on the spot then the 90° arc:
+    90 cm)."""
+    ahead = 0.3 * np.array([math.sin(math.radians(40.0)), math.cos(math.radians(40.0)), 0.0])
+    async with served() as (server, world, c):
+        await c.requests(index=0, appearance=Appearance.CRAWL, heading=40.0)
+        await c.drain(3.0)
+        t0 = trio.current_time()
+        await c.requests(index=0, appearance=Appearance.CRAWL, heading=40.0, velocity=tuple(ahead))
+        await c.drain(3.5)
+        at = tuple(ahead * (trio.current_time() - t0))
+        await c.requests(
+            index=0, appearance=Appearance.CRAWL, heading=220.0, velocity=tuple(-ahead), position=at
+        )
+        m = world.manager
+        while not (turn := [s for s in m.clip_log if s.index == 0 and "crawlarc_" in s.clip]):
+            await c.drain(0.1)
+        assert [s.clip.split("/")[-1] for s in turn] == ["crawlarc_r180_low"]
+        await c.drain(turn[0].time + turn[0].duration - server.now() + 0.05)
+        assert "crawlarc_" not in m.clip_log[-1].clip  # the U-turn ended, he crawls on
+        place = c.pose(1, 0)[1][0]
+        assert math.hypot(place[0], place[2]) <= REVERSAL_CM, place
 
 
 @pytest.mark.parametrize("turn", [15.0, -20.0])
@@ -287,6 +364,16 @@ def swings(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return turn * STUB_HZ, move * STUB_HZ
 
 
+def swung(
+    lib, script: list[tuple[float, Appearance, float, float]], until: float, t0: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """:func:`scenario` and its :func:`swings`: the world positions, the clips, the body's turn and the
+    limbs' speed per tick, and the tick of ``t0`` s (judged from there on)."""
+    world, clips = scenario(lib, script, until)
+    turn, move = swings(world)
+    return world, clips, turn, move, int(t0 * STUB_HZ)
+
+
 def test_a_prone_soldiers_turn_and_crawl_start_swing_his_body_no_faster_than_recorded(lib) -> None:
     """Issue 16 (the lead's recording, camera from the east): after a prone turn the lie-down swung the body
     55° and flung a foot out within 3 frames, as if the turn were counted twice. Up and down play at their
@@ -294,9 +381,7 @@ def test_a_prone_soldiers_turn_and_crawl_start_swing_his_body_no_faster_than_rec
     comes up to crawl on without a spin."""
     script = [(0.0, Appearance.PRONE, 0.0, 10.0), (6.0, Appearance.PRONE, 0.0, 100.0)]
     script.append((11.0, Appearance.CRAWL, 0.3, 100.0))
-    world, clips = scenario(lib, script, 13.5)
-    turn, move = swings(world)
-    k = int(5.9 * STUB_HZ)
+    world, clips, turn, move, k = swung(lib, script, 13.5, 5.9)
     assert "crawlturn_r90_low" in "".join(clips[k:]) and "crawl_cycle" in clips[-1]
     worst = int(np.argmax(turn[k:] / SWING_DEG_S + move[k:] / LIMB_M_S)) + k
     assert turn[k:].max() <= SWING_DEG_S and move[k:].max() <= LIMB_M_S, (

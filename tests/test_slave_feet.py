@@ -123,3 +123,26 @@ def test_a_dying_slaves_foot_turned_on_the_ground_turns_as_the_masters() -> None
     assert after["max_frame_jump_deg"] <= 20.0
     first = load_channelset(CHANNELSETS / "ststow2dead_low.chset.env", use_cache=False).joint_data[0]
     assert np.allclose(slave.joint_data[0], first, atol=1e-3)  # a posture node: left as it was
+
+
+def test_a_frame_of_a_stance_takes_its_own_touchdowns_turn() -> None:
+    """stfire2dead's DI: a long stance (frames 52-160) after a short one (30-45): by the stances' middles, its
+    first frames took the short one's turn and the toes jumped 32 degrees in a frame; each stance frame now
+    keeps the turn taken at its own touchdown, a frame off the ground the nearest stance's."""
+    from authoring.slave_feet import _anchored
+
+    n = 161
+    turn = np.radians(np.linspace(0.0, 80.0, n))  # the master's foot keeps turning about y
+    c, s = np.cos(turn), np.sin(turn)
+    master = np.tile(np.eye(4), (n, 1, 1))
+    master[:, 0, 0], master[:, 0, 2], master[:, 2, 0], master[:, 2, 2] = c, s, -s, c
+    slave = master.copy()
+    slave[:30, :3, :3] = np.eye(3)  # put otherwise than his before the first touchdown ...
+    slave[46:, :3, :3] = np.eye(3)  # ... and after the first stance
+    stance = np.zeros(n, bool)
+    stance[30:46] = stance[52:161] = True
+    got = _anchored(master, slave, stance)
+    own = master[52, :3, :3].T @ slave[52, :3, :3]
+    np.testing.assert_allclose(got[52:], master[52:, :3, :3] @ own, atol=1e-12)  # from its touchdown on
+    np.testing.assert_allclose(got[30:46], master[30:46, :3, :3], atol=1e-12)  # the first: as his
+    np.testing.assert_allclose(got[46:49], master[46:49, :3, :3], atol=1e-12)  # just off it: its own still

@@ -270,6 +270,7 @@ class FrontNode:
         self.failovers = 0
         self.keys = 0  # key batches heard
         server.feed = self.feed
+        server.relay_out = self._flush
         server.world.relay = self
         server.status_note = self.describe
 

@@ -9,9 +9,13 @@ the clip's first, in the direction played, by at least one quantisation step of 
 in some field (a joint DOF, a figure's root position or quaternion component), so that its code on the wire
 differs. The frames skipped each differ from the start by less than that step: the figure does not jump,
 and the clip ends as much earlier. Clips that chain at the end of another (the next arc of a path, the next
-step of a gait) play whole: they are not starts. Nor do gait starts skip: they hold at most one frame under
-a step, and a start step one frame short slid the planted foot of a walk start 0.45 cm more (the stub's
-scenario measure, 0.59 -> 1.04 cm).
+step of a gait) play whole: they are not starts.
+
+Gait starts (a walk, run or crawl off a rest) skip too: their first frame is still (one frame under a step),
+so a request sampled at its own time (one that lands while the tick samples, answered in that tick's first
+frames; a tick that runs late) showed nothing new and waited for the next tick. Their travel keeps counting
+from the first frame (the root offset is not rebased): the root carries what the skipped frame travelled,
+so the planted foot stays put (rebased, it slid 0.45 cm more; the stub's scenario measure 0.59 -> 0.64 cm).
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ import numpy as np
 from protocol.update_table import JointEntry, UpdateTable
 from server.motion.sampling import ClipLibrary
 from server.soldier import root_motion
-from server.soldier.core import _TRANSITION, ManagerCore
+from server.soldier.core import _IDLE, _TRANSITION, ManagerCore
 from server.soldier.wire import update_table_for
 
 CM_PER_M = 100.0
@@ -82,7 +86,7 @@ class LeadIn(ManagerCore):
         tb = self.table
         if self._settings.every_frame or not len(idx):
             return
-        started = (tb.start[idx] == t) & (tb.mode[idx] == _TRANSITION)
+        started = (tb.start[idx] == t) & (tb.mode[idx] != _IDLE)
         i = idx[started]
         if not len(i):
             return
@@ -90,7 +94,9 @@ class LeadIn(ManagerCore):
         shift = share * tb.dur[i]
         tb.start[i] -= shift
         tb.end[i] -= shift
-        root_motion.rebase(tb, self.library, i)
+        # a gait start's travel keeps counting from its first frame: the root carries what the skipped frame
+        # travelled and the planted foot stays where it stood
+        root_motion.rebase(tb, self.library, i[tb.mode[i] == _TRANSITION])
         if self._settings.record_clips:
             self._note_skips(dict(zip(i.tolist(), shift.tolist(), strict=True)))
 

@@ -21,7 +21,8 @@ that fit, one after the other (:meth:`Turning._ground_turns`), at GROUND_TURN_RA
 onto forearms and knees, turns so and lies down again, up and down at the recorded pace (the way down swings
 his body ~55° onto PRONE_STOWED, which lies at an angle to the line of fire: twice as fast it spun in three
 frames); crawling, CRAWL_REVERSAL_DEG or more from his heading, he stops, turns with the turns that carry
-him forward as they turn (``node_arcs``: he keeps up with his entity) and crawls on (turned while crawling
+him forward as they turn (``node_arcs``: he keeps up with his entity; reversing, the U-turn that carries him
+along his new heading, at his entity's pace: :meth:`Turning._arc_rate`) and crawls on (turned while crawling
 or at once, his planted forearms, knees and toes slid 13-116 cm; turned on the spot at the recorded pace,
 he ended 1.3 m behind his entity).
 """
@@ -41,6 +42,7 @@ from server.soldier.core import (
     _LOCO,
     _TRANSITION,
     MAX_RATE,
+    MIN_RATE,
     ManagerCore,
 )
 from server.soldier.library import PathStep
@@ -61,6 +63,10 @@ PIVOT_REST_PER_STANCE_DEG = 9.0
 CRAWL_REVERSAL_DEG = 22.5
 MAX_GROUND_TURNS = 4  # turn clips on the ground one after the other at most (180°: the 90° twice)
 GROUND_TURN_SLACK_DEG = 7.5  # ... chosen by what they leave unturned in steps of this much, then the fewest
+# a crawler whose heading changes by this much less than 180° plays the U-turn too and turns the rest as he
+# crawls on (root_motion.CRAWL_TURN_RATE, under CRAWL_REVERSAL_DEG): 165° as the 90° and 45° on the spot
+# and the 30° arc left him 125 cm from his entity, 76 after the stop
+U_TURN_SLACK_DEG = 15.0
 # a turn on the ground plays this much faster than recorded: the crawl's upper cadence (core.MAX_RATE; a
 # forearm's 25 cm in 0.25 s, the crawl's 26 in 0.225 s); a 90° turn in 2.2 s instead of 3.5
 GROUND_TURN_RATE = MAX_RATE
@@ -80,15 +86,22 @@ def _ground_combos(
 ) -> tuple[list[tuple[tuple[int, float], ...]], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every run of 1..MAX_GROUND_TURNS of turn ``clips`` (clip, compass degrees) of one node, after ``()``
     (no turn), in the order :meth:`Turning._ground_turns` prefers on a tie (its stable sort keeps the first):
-    the runs, their degrees, their lengths and how many of their clips turn by negative and by positive
-    degrees; computed once per node, not for every soldier that turns (~0.2 ms of Python each)."""
+    the runs, their degrees, their lengths (a clip turning against the run's own way counts twice: 160°
+    is the 90°, 45° and 30° arcs, not the U-turn and the 30° back) and how many of their clips turn by
+    negative and by positive degrees; computed once per node, not for every soldier that turns (~0.2 ms
+    of Python each)."""
     runs = (c for k in range(1, MAX_GROUND_TURNS + 1) for c in combinations_with_replacement(clips, k))
-    combos: list[tuple[tuple[int, float], ...]] = [(), *runs]
+    # never the long way round (-150°: the U-turn and 30° more the other way, 210°)
+    combos: list[tuple[tuple[int, float], ...]] = [
+        (),
+        *(c for c in runs if abs(sum(d for _, d in c)) <= 180.0),
+    ]
     total = np.array([sum(d for _, d in c) for c in combos], np.float64)
     count = np.array([len(c) for c in combos], np.int64)
     negative = np.array([sum(d < 0 for _, d in c) for c in combos], np.int64)
     positive = np.array([sum(d > 0 for _, d in c) for c in combos], np.int64)
-    return combos, total, count, negative, positive
+    back = np.where(total < 0, positive, np.where(total > 0, negative, 0))  # turning against the rest
+    return combos, total, count + back, negative, positive
 
 
 class Turning(ManagerCore):
@@ -133,7 +146,7 @@ class Turning(ManagerCore):
             return False
         want = -float(tb.root_yaw[i])  # compass degrees to turn
         if node != self._home:  # on the ground
-            turns = self._ground_turns(node, want, moving)
+            turns = self._ground_turns(node, want, moving, float(np.hypot(*tb.vlocal[i])))
             if turns:
                 self._turn_path(i, turns, t)
             return bool(turns)
@@ -191,15 +204,22 @@ class Turning(ManagerCore):
         k = np.where(right.any(axis=1), right.argmax(axis=1), near.argmax(axis=1))
         return clips[k], off[np.arange(len(want)), k]
 
-    def _ground_turns(self, node: int, want: float, moving: bool = False) -> tuple[PathStep, ...]:
+    def _ground_turns(
+        self, node: int, want: float, moving: bool = False, speed: float = 0.0
+    ) -> tuple[PathStep, ...]:
         """The turns on the ground at ``node`` (CRAWL), one after the other (the larger first, each
         GROUND_TURN_RATE times faster than recorded, MAX_GROUND_TURNS at most), that come nearest to turning
         ``want`` compass degrees, what is left judged in steps of GROUND_TURN_SLACK_DEG, then the fewest, then
         those turning the asked way: 180° is the 90° twice (without lying down between), 60° the 30° twice
         (the 45° left it 15° off), 100° the 90° alone. ``moving``: of the turns that carry him forward, where
-        the node has them (a crawler keeps up with his entity)."""
+        the node has them (a crawler keeps up with his entity; 180°: the U-turn carried along the new
+        heading, played no faster than keeps pace with an entity at ``speed`` cm/s: :meth:`_arc_rate`)."""
         lib = self.library
         clips = lib.node_arcs.get(node) if moving else None
+        u_turn = [c for c, d in clips or () if abs(d) == 180.0]
+        if u_turn and abs(want) >= 180.0 - U_TURN_SLACK_DEG:  # the rest he turns as he crawls on
+            c = u_turn[0]
+            return (PathStep(c, True, float(lib.clip_duration[c]) / self._arc_rate(c, speed), node, node),)
         combos, total, count, negative, positive = _ground_combos(tuple(clips or lib.node_turns[node]))
         left = (want - total + 180.0) % 360.0 - 180.0
         left[0] = want  # (no turn at all)
@@ -210,9 +230,25 @@ class Turning(ManagerCore):
             # turns to, and a U-turn of arcs ends beside his entity's path (180°: 75 cm aside, 20 ahead)
             spot = {d: c for c, d in lib.node_turns[node]}
             order = [spot.get(d, c) for c, d in sorted(best, key=lambda c: -abs(c[1]))[:-1]] + order[-1:]
+        rates = [GROUND_TURN_RATE] * len(order)
+        if clips and len(order) == 1:
+            rates = [self._arc_rate(order[0], speed)]
         return tuple(
-            PathStep(c, True, float(lib.clip_duration[c]) / GROUND_TURN_RATE, node, node) for c in order
+            PathStep(c, True, float(lib.clip_duration[c]) / r, node, node)
+            for c, r in zip(order, rates, strict=True)
         )
+
+    def _arc_rate(self, clip: int, speed: float) -> float:
+        """How much faster than recorded a crawler's turn ``clip`` plays: GROUND_TURN_RATE, or slower (down
+        to MIN_RATE) for an entity at ``speed`` cm/s that the turn's carry along its end heading would
+        overtake (a U-turn at 0.2 m/s ended 25 cm ahead of his entity, 33 after the stop)."""
+        x, z, yaw = self.library.clip_end_offset[clip].tolist()
+        a = math.radians(yaw)
+        along = -x * math.sin(a) - z * math.cos(a)  # cm the turn carries him along the heading it ends on
+        if speed <= 0.0 or along <= 0.0:
+            return GROUND_TURN_RATE
+        pace = float(self.library.clip_duration[clip]) * speed / along
+        return min(max(pace, MIN_RATE), GROUND_TURN_RATE)
 
     def _turn_via(self, i: int, t: float, via: int) -> bool:
         """A prone soldier turns on forearms and knees: the path up to ``via`` (CRAWL), the turns there that
