@@ -76,6 +76,11 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    the leg's own joints (:mod:`authoring.leg_lift`; kstow2dead's and kfire2dead's feet slid 4.8-4.9 cm,
    their kneeling knees 5.9-6.1).
 
+9. **prfire2dead leaves its posture from rest** (:attr:`DeathSpec.start_ease`, last): the finished clip
+   is retimed so that it starts from standstill (:func:`authoring.easing.eased_in`, lengthened by half the
+   ramp): its first frames moved at 0.46 m/s (a toe, the hip, as the hit ramped in) and its DI/M16 slaves'
+   at 0.57-0.67 m/s, over the check's end_speed (:data:`PRONE_START_EASE`).
+
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph
 (:func:`dead_node`), and getting up from it replays that very death backwards (:data:`GET_UP_SECONDS`).
@@ -94,6 +99,7 @@ import numpy as np
 
 from authoring import dead_settle
 from authoring.contact_pin import pin_frames
+from authoring.easing import eased_in
 from authoring.knee_hold import hold_knees
 from authoring.leg_lift import lifted
 from authoring.motion import KeyPosture
@@ -161,6 +167,10 @@ class DeathSpec:
     kept: tuple[tuple[str, float], ...] = ()  # joints (name suffix, until s) that keep the start posture's
     # shape at kept_tone of their gain, letting go over KEPT_FADE from then on
     kept_tone: float = 0.0
+    # s: the recorded fall leaves its start posture from rest over this (authoring.easing.eased_in; 0: as
+    # recorded). A prone death's first frames moved at 0.46 m/s (the toes leaving the ground, the hip) and
+    # its DI/M16 slaves' at 0.57-0.67, over the check's end_speed
+    start_ease: float = 0.0
     # a crawler's trunk comes down about his thighs after the physics, before the chest and head settle
     # (dead_settle.settle's ``sunk``, :mod:`authoring.dead_crawl`): his kept arms held the pelvis and belly
     # 4-5 cm up
@@ -188,6 +198,12 @@ def _prone(
     )
 
 
+def _prone_dead(name: str, start: str) -> DeathSpec:
+    """A prone death (:func:`_prone`) whose fall leaves the prone posture from rest
+    (:data:`PRONE_START_EASE`)."""
+    return replace(_prone(name, start), start_ease=PRONE_START_EASE)
+
+
 # A crawler's arms stay propped (limp, his chest dropped onto them and the elbows splayed, the forearms slid
 # 5-6 cm; held by contact_pin they still slid 4.4: the shoulders passed over the elbows) and his legs drawn
 # until he is down (limp from the start, the knees splayed 3.5 cm); the settle lays the chest down. The
@@ -208,6 +224,13 @@ LEGS_ROLL = 0.5
 # s: stfire2dead's (heels 15.4 -> 15.1 cm and its knee's rebound 3.9 -> 2.5 cm; over 0.6 s its left foot slid
 # 6.3 cm as he landed, over 0.7 s the heel lay at 19.4: the fall is chaotic in these, each was measured)
 STFIRE_LEGS_ROLL = 0.8
+# s: prfire2dead leaves its posture from rest over this (DeathSpec.start_ease): its first frames 0.46 ->
+# 0.14 m/s, its DI/M16 slaves' 0.57/0.67 -> 0.32/0.29 (over 0.25 s with its ankles rolled, branch
+# proneheels14-wip: 0.08, slaves 0.27/0.23, but the DI slave's belly slid 8.1 cm). prstow2dead is not
+# eased: eased, its master's right forearm lay still over the first frames while its DI slave's swept
+# 5.8 cm along the ground (the slave's own start ease, authoring.slaving START_EASE_FRAMES; the master
+# moving, that forearm was lifted off the ground by then)
+PRONE_START_EASE = 0.1
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "ststow2dead",
@@ -259,8 +282,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         legs_lift=True,
         plant_worst=True,
     ),
-    _prone("prstow2dead", "PRONE_STOWED"),
-    _prone("prfire2dead", "PRONE_FIRE"),
+    _prone("prstow2dead", "PRONE_STOWED"),  # not eased: see PRONE_START_EASE
+    _prone_dead("prfire2dead", "PRONE_FIRE"),
     CRAWL_DEATH,
 )
 SLUMP = "SLUMP"  # the in-between key of a body crumpling onto its knees (authoring.postures)
@@ -571,7 +594,17 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             break
     recorded = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
     release = int(release_frame if release_frame is not None else len(poses) - 1)
-    return DeathClip(_after_physics(spec, recorded, figures, release), release)
+    return _eased(spec, DeathClip(_after_physics(spec, recorded, figures, release), release))
+
+
+def _eased(spec: DeathSpec, clip: DeathClip) -> DeathClip:
+    """``clip`` leaving its start posture from rest (:attr:`DeathSpec.start_ease`), its release frame the
+    first that plays the recorded one or later."""
+    if spec.start_ease <= 0.0:
+        return clip
+    frames, times = eased_in(clip.frames, spec.start_ease)
+    release = int(np.searchsorted(times * frames.fps, clip.release_frame - 1e-6))
+    return DeathClip(frames, release)
 
 
 def _after_physics(

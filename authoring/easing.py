@@ -98,6 +98,17 @@ def retime(clip: F, times: np.ndarray) -> F:
     )
 
 
+def eased_in(clip: F, ramp: float) -> tuple[F, np.ndarray]:
+    """``clip`` leaving its first frame from rest: played through a warp whose rate rises from 0 over
+    ``ramp`` s (smoothstep) and is 1 after it, the clip lengthened by the time the ramp loses (``ramp / 2``),
+    so nothing after it plays faster (a recorded fall: :func:`ease_ends` speeds up its middle); and the
+    source times (s) of its frames."""
+    n = len(clip.poses)
+    extra = round(ramp * clip.fps / 2.0)
+    times = warp(n + extra, clip.fps, ramp, 0.0) * ((n - 1) / (n + extra - 1))
+    return retime(clip, times), times
+
+
 def ease_ends(
     kin: FigureKinematics,
     rkin: FigureKinematics,

@@ -68,3 +68,18 @@ def test_ease_ends_leaves_a_clip_at_rest_alone(kins):
     only_start = easing.ease_ends(kin, rkin, sliding_clip(kin), end=False)
     v = easing.site_speeds(kin, rkin, only_start)
     assert v[:3].max() <= easing.END_SPEED and v[-1] > 1.0
+
+
+def test_eased_in_leaves_from_rest_and_keeps_the_speed_after(kins):
+    """A recorded fall leaves its start posture from rest (prone deaths: 0.46 m/s over the first frames, the
+    DI/M16 slaves 0.57-0.67); lengthened by half the ramp instead of played faster after it."""
+    kin, rkin = kins
+    clip = sliding_clip(kin, n=121)
+    eased, times = easing.eased_in(clip, 0.25)
+    assert len(eased.poses) == 121 + round(0.25 * 60.0 / 2.0) and len(times) == len(eased.poses)
+    v = easing.site_speeds(kin, rkin, eased)
+    assert easing.end_speeds(kin, rkin, clip)[0] > 1.0 and v[:3].max() <= 0.15  # from rest
+    np.testing.assert_allclose(v[30:], 1.5, rtol=0.02)  # after the ramp: the recorded speed, 150 cm/s
+    for a, b in ((eased.poses, clip.poses), (eased.roots, clip.roots), (eased.rifles, clip.rifles)):
+        np.testing.assert_allclose(a[[0, -1]], b[[0, -1]], atol=1e-9)  # the start and the end as recorded
+    assert times[0] == 0.0 and times[-1] == pytest.approx(120 / 60.0) and np.all(np.diff(times) > 0)
