@@ -15,7 +15,7 @@ from test_server_support import Client, make_server
 from protocol.entity import make_entity_requests
 from protocol.events import CreateSoldier, EntityRequests, Ready, SoldierCreated, Subscribe
 from server import app
-from server.fabric import poses_topic
+from server.fabric import poses_topic, requests_topic
 from server.fabric import requests as req
 from server.fabric.batch import decode_batch
 from server.fabric.nodes import Sharding, ShardNode
@@ -164,3 +164,43 @@ async def test_a_request_that_arrives_during_one_clients_encode_is_relayed_befor
         assert order == (["encode", "relay", "encode"] if turns else ["encode", "encode", "relay"])
         for client in (a, b, c):
             await client.aclose()
+
+
+async def test_a_request_that_arrives_while_a_shard_ticks_is_sampled_by_that_tick(
+    autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A shard's tick lets its requests in between advancing the soldiers and sampling them (its loop is
+    not deaf for the whole sampling): a request that arrives meanwhile is in that tick's own batch, not in
+    an answer after it."""
+    bus = Bus()
+    batches = []
+    bus.topics[poses_topic(0)].append(lambda data: batches.append(decode_batch(data)))
+    shard = make_server()
+    node = ShardNode(shard, MemoryFabric(bus), Sharding(0, 1))
+    m = shard.world.manager
+    assert m is not None
+    arm = []
+    advance = m._advance
+
+    def advance_then_arrive(idx: np.ndarray) -> None:  # a request reaches the fabric while the tick samples
+        advance(idx)
+        if arm and m.ticks > arm[0]:  # the tick's advance
+            arm.clear()
+            for put in bus.topics[requests_topic(0)]:
+                put(req.pack([req.requests(make_entity_requests(index=[1], velocity=RUN))]))
+
+    monkeypatch.setattr(m, "_advance", advance_then_arrive)
+    async with trio.open_nursery() as nursery:
+        await nursery.start(shard.serve)
+        node.start(trio.lowlevel.current_trio_token())
+        await trio.sleep(0.2)
+        answers, sent = shard.answers, len(batches)
+        arm.append(m.ticks)
+        while arm:
+            await trio.sleep(0.001)
+        await trio.sleep(0.3 / shard.config.tick_hz)  # the tick's end (and an answer after it)
+        assert not arm and m.soldier_info(1)["speed"] > 3.0
+        tick = batches[sent]
+        assert 1 in tick.indices.tolist()  # the tick's own batch carries it
+        assert shard.answers == answers and not m.table.requested[1]  # and no answer after the tick
+        shard.shutdown()

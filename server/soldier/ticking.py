@@ -29,6 +29,14 @@ class Ticking(Events):
         off that grid) and its pose may have changed (playing a clip, cross-fading, a new resting
         pose, or a pending heading-only change).
         """
+        self.tick_advance_rows(self.tick_start(now))
+        return self.tick_emit(now)
+
+    def tick_start(self, now: float) -> np.ndarray:
+        """A tick's first step: every live soldier's clock set to ``now``; returns those whose clip ends by
+        then, to be advanced (:meth:`tick_advance_rows`, in pieces if the caller likes: a shard lets its
+        requests in between, and a request brings its soldier up to date itself) before :meth:`tick_emit`
+        samples them."""
         t0 = time.perf_counter()
         self.ticks += 1
         tb = self.table
@@ -39,7 +47,26 @@ class Ticking(Events):
                 tb.clock[live] += tb.dur[live] / np.maximum(nfr - 1, 1)
             else:
                 tb.clock[live] = now
-            self._advance(live)
+        ending = live[(tb.mode[live] != _IDLE) & (tb.clock[live] >= tb.end[live])]  # _advance's first test
+        dt = time.perf_counter() - t0
+        self.stats["tick_seconds"] += dt
+        self.stats["last_tick_seconds"] = dt
+        return ending
+
+    def tick_advance_rows(self, rows: np.ndarray) -> None:
+        """Handle the clip ends up to their clocks of those of ``rows`` still live (:meth:`tick_start`)."""
+        t0 = time.perf_counter()
+        self._advance(rows[self.table.live_mask(rows)])
+        dt = time.perf_counter() - t0
+        self.stats["tick_seconds"] += dt
+        self.stats["last_tick_seconds"] += dt
+
+    def tick_emit(self, now: float) -> TickUpdate:
+        """A tick's second half: the poses of the soldiers due at ``now``."""
+        t0 = time.perf_counter()
+        tb = self.table
+        live = tb.live
+        if len(live):
             active = (
                 (tb.mode[live] != _IDLE)
                 | tb.dirty[live]
@@ -53,7 +80,7 @@ class Ticking(Events):
         tb.tick_sent[due] = now
         dt = time.perf_counter() - t0
         self.stats["tick_seconds"] += dt
-        self.stats["last_tick_seconds"] = dt
+        self.stats["last_tick_seconds"] += dt
         return out
 
     def answer(self, now: float, at: float | None = None) -> TickUpdate:
