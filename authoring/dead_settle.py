@@ -424,19 +424,13 @@ def settle(
     arms_fall: bool = False,
     propped: bool = False,
     legs: bool = True,
-    sunk: bool = False,
 ) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
     with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
     (:mod:`authoring.dead_prone`); a body on its back (``arms_fall``) lets its arms fall as it lands
     (:func:`_arms_fall`). A face-down body's legs are laid as it lands (:func:`_legs_land`); ``legs`` False:
-    they stay as the physics laid them (``DeathSpec.legs_settle``); ``sunk``: a crawler's trunk comes down
-    about his thighs first (:mod:`authoring.dead_crawl`)."""
+    they stay as the physics laid them (``DeathSpec.legs_settle``)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
-    if sunk:
-        from authoring import dead_crawl
-
-        frames = dead_crawl.sunk(figs, frames)
     lowered = _lowered(figs, frames) if propped else None
     if lowered is not None:
         return _appended(frames, lowered)

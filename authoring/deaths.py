@@ -97,7 +97,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from authoring import dead_settle
+from authoring import dead_crawl, dead_settle
 from authoring.contact_pin import pin_frames
 from authoring.easing import eased_in
 from authoring.knee_hold import hold_knees
@@ -105,6 +105,7 @@ from authoring.leg_lift import lifted
 from authoring.motion import KeyPosture
 from authoring.planted import plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
+from authoring.quality_frames import FigureSet
 from authoring.transitions import FPS, ClipFrames
 from peabody.model import Figure
 
@@ -172,8 +173,7 @@ class DeathSpec:
     # its DI/M16 slaves' at 0.57-0.67, over the check's end_speed
     start_ease: float = 0.0
     # a crawler's trunk comes down about his thighs after the physics, before the chest and head settle
-    # (dead_settle.settle's ``sunk``, :mod:`authoring.dead_crawl`): his kept arms held the pelvis and belly
-    # 4-5 cm up
+    # (:func:`authoring.dead_crawl.sunk`): his kept arms held the pelvis and belly 4-5 cm up
     sunk: bool = False
 
 
@@ -626,10 +626,10 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         # after the fall, the still frames appended moved the feet's pins and slid a foot 1.8 cm more)
         assert not (spec.knees_held or spec.propped), f"{spec.name}: knees held or propped, and arms falling"
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
+    if spec.sunk:  # a crawler's trunk comes down about his thighs first
+        frames = dead_crawl.sunk(FigureSet({"body": soldier, "rifle": rifle}), frames)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(
-        frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle, sunk=spec.sunk
-    )
+    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle)
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:
