@@ -370,11 +370,11 @@ def test_role_reads_every_front_end_status_the_front_end_writes(shards: list[tup
     from types import SimpleNamespace
 
     from client_stub.loadtest.role import role_line, server_role
-    from server.fabric.nodes import FrontNode
+    from server.fabric.nodes import FrontNode, Sharding
 
     n = len(shards)
     route = [k if home else (k + 1) % n for k, (home, _) in enumerate(shards)]
-    node = SimpleNamespace(shards=n, route=route, present=[p for _, p in shards])
+    node = SimpleNamespace(shards=n, route=route, present=[p for _, p in shards], front=Sharding(0, 1))
     text = "3 soldiers, 1 clients, 30.0 Hz, tick 12 us mean; " + FrontNode.describe(node)  # type: ignore[arg-type]
     r = server_role(text)
     assert r["role"] == "front-end" and r["status"] == text
