@@ -94,7 +94,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             print(f"{n} shards + {m} front-ends ready in {ready_s:.1f} s", file=sys.stderr, flush=True)
             load0 = os.getloadavg()[0]
             gens = generators(args, servers, procs_n, Path(tmp))
-            samples = watch(servers, gens, Path(tmp) / "gate")
+            try:
+                samples = watch(servers, gens, Path(tmp) / "gate")
+            finally:  # (interrupted: timeout -s INT)
+                for g in gens:
+                    if g.poll() is None:
+                        g.kill()
             reports = [_report(Path(tmp), j) for j in range(procs_n)]
             logs = {k: p.log_tail(1 << 26) for k, p in servers.items()}
     books = {k: log.count("fabric_books_failed") for k, log in logs.items() if k.startswith("front")}
