@@ -134,6 +134,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "fabric_bytes_per_s": fabric,
         "cpu_ms_per_tick": {k: stages(r) for k, r in rows.items()},
         "books_failed": books,
+        # at the window's end: every front-end should know every soldier, each shard its own; mirrored:
+        # the soldiers a front-end knows from the others (ttes/fronts)
+        "soldiers_known": {k: int(r[-1].get("soldiers", -1)) for k, r in rows.items() if r},
+        "mirrored": {k: int(r[-1]["mirrored"]) for k, r in rows.items() if r and "mirrored" in r[-1]},
         "per_generator": [{k: v for k, v in r.items() if k != "latency_s"} for r in reports],
         "failed": failed,
     }
