@@ -302,8 +302,8 @@ class FrontNode:
         server.status_note = self.describe
 
     def describe(self) -> str:
-        """The shards as STATUS shows them: ``front-end of 2 shards: 0 up, 1 on 0 (gone)``, and which front-end
-        this is of several: `` (front-end 1 of 2)``."""
+        """The shards as STATUS shows them: ``front-end of 2 shards: 0 up, 1 on 0 (gone)``, and which
+        front-end this is of several: `` (front-end 1 of 2)``."""
         parts = []
         for k in range(self.shards):
             where = "up" if self.route[k] == k else f"on {self.route[k]}"
