@@ -143,6 +143,7 @@ class TtesServer:
         self.status_note: Callable[[], str] | None = (
             None  # appended to STATUS (a shard's or front-end's role)
         )
+        self.status_fields: Callable[[], dict[str, object]] | None = None  # added to the log's status line
         self._jcl_lock = trio.Lock()  # one JCL frame at a time (its loads run in a worker thread)
         self._loop_thread = threading.get_ident()
         self._trio_token: trio.lowlevel.TrioToken | None = None
@@ -946,6 +947,7 @@ class TtesServer:
             modes=st.get("modes", {}),
             cpu_ms_per_tick=self.cpu.report(self.ticks),
             **({} if self.deaf is None else {"loop_deaf_ms": self.deaf.report()}),
+            **({} if self.status_fields is None else self.status_fields()),
         )
 
 

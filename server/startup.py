@@ -69,6 +69,11 @@ class Relay(Protocol):
     shards animate. The front's own manager keeps the books (which soldiers live, their tables and owners,
     the requests' checks); it is never ticked."""
 
+    def allot(self, index: int | None) -> int | None:
+        """The index a new soldier takes (None: the table's lowest free one): with several front-ends each
+        allots from its own share of the index space; ValueError for an index another front-end allots."""
+        ...
+
     def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None: ...
 
     def removed(self, index: int) -> None: ...
@@ -155,6 +160,8 @@ class ServerWorld:
         (None: shared); ValueError (the owner's cap, no free index)/KeyError."""
         self.owners.check_cap(owner)
         self.ensure_library()
+        if self.relay is not None:
+            index = self.relay.allot(index)
         i = self.soldiers.create(figure, weapon, index, name, self.clock())
         self.owners.add(i, owner)
         if self.relay is not None:

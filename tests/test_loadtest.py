@@ -370,11 +370,11 @@ def test_role_reads_every_front_end_status_the_front_end_writes(shards: list[tup
     from types import SimpleNamespace
 
     from client_stub.loadtest.role import role_line, server_role
-    from server.fabric.nodes import FrontNode
+    from server.fabric.nodes import FrontNode, Sharding
 
     n = len(shards)
     route = [k if home else (k + 1) % n for k, (home, _) in enumerate(shards)]
-    node = SimpleNamespace(shards=n, route=route, present=[p for _, p in shards])
+    node = SimpleNamespace(shards=n, route=route, present=[p for _, p in shards], front=Sharding(0, 1))
     text = "3 soldiers, 1 clients, 30.0 Hz, tick 12 us mean; " + FrontNode.describe(node)  # type: ignore[arg-type]
     r = server_role(text)
     assert r["role"] == "front-end" and r["status"] == text
@@ -399,3 +399,23 @@ def test_role_never_raises_on_any_status_text(text: str) -> None:
 
     r = server_role(text)
     assert r["role"] in ("front-end", "shard", "server") and isinstance(role_line(r), str)
+
+
+async def test_generators_in_step_say_ready_then_wait_for_the_gate(autojump_clock, tmp_path) -> None:
+    """bench/bench_scaleout.py's generators: each says its soldiers exist, and none warms up before the
+    bench opens the gate (once all are ready), so that they all measure the same window."""
+    from client_stub.loadtest.session import _gate
+
+    ready, gate = tmp_path / "gen0.ready", tmp_path / "gate"
+    passed: list[float] = []
+
+    async def generator() -> None:
+        await _gate(str(ready), str(gate))
+        passed.append(trio.current_time())
+
+    async with trio.open_nursery() as nursery:
+        nursery.start_soon(generator)
+        await trio.sleep(5.0)
+        assert ready.exists() and not passed
+        gate.touch()
+    assert passed and passed[0] >= 5.0

@@ -78,6 +78,10 @@ class LoadTestConfig:
     max_p99_ms: float = DIS_LATENCY_MS
     latency_metric: str = "request"  # request: request -> update (p99); delivery: server tick -> arrival
     credentials: Credentials = field(default_factory=Credentials)  # token / TLS for every connection
+    # several generators in step (bench/bench_scaleout.py): once the soldiers exist, write ready_file and
+    # wait until the file gate exists before the warm-up
+    ready_file: str = ""
+    gate: str = ""
 
     def check(self) -> None:
         if self.soldiers < 1 or self.clients < 1:
@@ -327,6 +331,7 @@ async def _run(
                 out = await _ramp(cfg, session)
             else:
                 await session.grow(cfg.soldiers)
+                await _gate(cfg.ready_file, cfg.gate)
                 start = session.now() + cfg.warmup_s
                 await session.drive(start + cfg.seconds)
                 end = session.now()
@@ -349,6 +354,16 @@ async def _run(
     out["server_tables"] = sorted(session.tables)
     out["mode"] = "decode" if cfg.decode else "tap"
     return out
+
+
+async def _gate(ready_file: str, gate: str) -> None:
+    """With several load generators in processes of their own (``bench/bench_scaleout.py``): say this one's
+    soldiers exist (``ready_file``), then wait (its links still reading) until the file ``gate`` exists, so
+    that every generator warms up and measures in the same window."""
+    if ready_file:
+        Path(ready_file).touch()
+    while gate and not Path(gate).exists():
+        await trio.sleep(0.05)
 
 
 async def _ramp(cfg: LoadTestConfig, session: LoadSession) -> dict[str, Any]:

@@ -37,6 +37,11 @@ def requests_topic(shard: int) -> str:
     return f"ttes/requests/{shard}"
 
 
+def fronts_topic() -> str:
+    """Where front-ends tell each other the soldiers they create and remove (``ttes front --front K/M``)."""
+    return "ttes/fronts"
+
+
 def alive_key(shard: int) -> str:
     return f"ttes/alive/{shard}"
 

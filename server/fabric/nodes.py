@@ -31,10 +31,11 @@ import numpy as np
 import trio
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
-from server.fabric import Fabric, Kind, alive_key, poses_topic, requests_topic
+from server.fabric import Fabric, Kind, alive_key, fronts_topic, poses_topic, requests_topic
 from server.fabric import requests as req
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import Batch, decode_batch, encode_batch
+from server.fabric.fronts import IndexShare
 from server.logging import get_logger
 from server.pose_board import PoseBoard
 from server.stage_cpu import TURN_CPU_S
@@ -93,6 +94,8 @@ class ShardNode:
         server.status_note = lambda: (
             f"shard {sharding.k}/{sharding.n}, {self.seq} batches, {self.backlog.describe()}"
         )
+        self.bytes_out = 0  # the batches' bytes (one copy: the fabric sends one to each front-end)
+        server.status_fields = lambda: {"fabric_bytes": self.bytes_out, "mono": round(time.monotonic(), 3)}
 
     def keep_own(self) -> None:
         """Drop the soldiers of the start-up script that other shards own."""
@@ -170,11 +173,11 @@ class ShardNode:
         codes = board.codes[rows]
         if TRACE is not None:
             TRACE.stamp("shard_publish", rows, "tick" if tick else "answer")
-        self._put(
-            encode_batch(
-                Batch(k, n, self.seq, board.tick, time.monotonic(), rows, board.table_of[rows], codes, key)
-            )
+        data = encode_batch(
+            Batch(k, n, self.seq, board.tick, time.monotonic(), rows, board.table_of[rows], codes, key)
         )
+        self._put(data)
+        self.bytes_out += len(data)
         self.seq += 1
 
     def _decoded(self, data: bytes) -> list[req.Op]:
@@ -246,11 +249,35 @@ class FrontNode:
     fabric (its process died: the fabric's presence says so at once) or silent for ``hung_s`` (no batch: a
     process that hangs; a busy one is only late). A shard heard for the first time, or again after a
     restart (its batch count went back), gets a sync of its own soldiers: creations sent before it listened
-    are not lost. A shard that comes back takes its soldiers back from the one that stood in."""
+    are not lost. A shard that comes back takes its soldiers back from the one that stood in.
 
-    def __init__(self, server: TtesServer, fabric: Fabric, shards: int, *, hung_s: float = 5.0) -> None:
+    Front-end ``front`` = K/M of several allots indices from its own share (:mod:`server.fabric.fronts`) and
+    tells the others on ``ttes/fronts`` what it creates and removes; it keeps their creations and removals
+    in its books as its own (not relayed: the front-end that made them did)."""
+
+    def __init__(
+        self,
+        server: TtesServer,
+        fabric: Fabric,
+        shards: int,
+        *,
+        front: Sharding = Sharding(0, 1),
+        hung_s: float = 5.0,
+    ) -> None:
         self.server, self.fabric, self.shards = server, fabric, shards
+        self.front = front
         self.hung_s = hung_s
+        several = front.n > 1
+        self.share = IndexShare(front.k, front.n, shards, server.config.max_soldiers) if several else None
+        self._books = fabric.publisher(fronts_topic(), Kind.REQUESTS) if several else None
+        self._books_out: list[req.Op] = []  # this front-end's creations and removals, for the others
+        self.mirrored = 0  # the other front-ends' creations and removals kept in the books here
+        self.bytes_in = 0  # the shards' batches' bytes
+        server.status_fields = lambda: {
+            "fabric_bytes": self.bytes_in,
+            "mirrored": self.mirrored,
+            "mono": round(time.monotonic(), 3),
+        }
         self.present = [False] * shards  # on the fabric now (its presence)
         self._puts = [fabric.publisher(requests_topic(k), Kind.REQUESTS) for k in range(shards)]
         self._out: list[list[req.Op]] = [[] for _ in range(shards)]  # per shard, sent at the loop's next turn
@@ -275,15 +302,23 @@ class FrontNode:
         server.status_note = self.describe
 
     def describe(self) -> str:
-        """The shards as STATUS shows them: ``front-end of 2 shards: 0 up, 1 on 0 (gone)``."""
+        """The shards as STATUS shows them: ``front-end of 2 shards: 0 up, 1 on 0 (gone)``, and which
+        front-end this is of several: `` (front-end 1 of 2)``."""
         parts = []
         for k in range(self.shards):
             where = "up" if self.route[k] == k else f"on {self.route[k]}"
             parts.append(f"{k} {where}" + ("" if self.present[k] else " (gone)"))
-        return f"front-end of {self.shards} shards: " + ", ".join(parts)
+        several = f" (front-end {self.front.k} of {self.front.n})" if self.front.n > 1 else ""
+        return f"front-end of {self.shards} shards: " + ", ".join(parts) + several
 
     def start(self, token: trio.lowlevel.TrioToken) -> None:
         self._token = token
+        if self.share is not None:
+
+            def told(data: bytes) -> None:  # from the fabric's thread to the loop
+                token.run_sync_soon(self.mirror, data)
+
+            self.fabric.subscribe(fronts_topic(), Kind.REQUESTS, told)
         for k in range(self.shards):
             self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._arrived, token, k))
             self.fabric.watch(alive_key(k), functools.partial(self._watched, token, k))
@@ -301,6 +336,7 @@ class FrontNode:
         """On the fabric's thread: queue the batch; the first one waiting asks the loop to publish."""
         if TRACE is not None:
             TRACE.stamp("fe_arrive", decode_batch(data).indices)
+        self.bytes_in += len(data)  # a bench's count: an increment lost between fabric threads is noise
         with self._pending_lock:
             queue = self._pending.setdefault(k, [])
             waiting = bool(queue)
@@ -391,6 +427,15 @@ class FrontNode:
     def _send(self, shard: int, op: req.Op) -> None:
         """Queue an operation for ``shard``: what one turn of the loop queued goes as one message."""
         self._out[shard].append(op)
+        self._flush_soon()
+
+    def _book(self, op: req.Op) -> None:
+        """Queue a creation or removal for the other front-ends (with several), sent as ``_send``'s."""
+        if self._books is not None:
+            self._books_out.append({**op, "front": self.front.k})
+            self._flush_soon()
+
+    def _flush_soon(self) -> None:
         if self._token is None:
             self._flush()
         elif not self._flush_due:
@@ -405,18 +450,67 @@ class FrontNode:
                     TRACE.stamp("fe_publish", _request_indices(ops))
                 self._puts[k](req.pack(ops))
                 ops.clear()
+        if self._books is not None and self._books_out:
+            self._books(req.pack(self._books_out))
+            self._books_out.clear()
+
+    def mirror(self, data: bytes) -> None:
+        """On the loop: another front-end's creations and removals, kept in the books here as its own (its
+        clients see them; the shards heard of them from that front-end, so nothing is relayed)."""
+        try:
+            ops = [op for op in req.decode(data) if op.get("front") != self.front.k]
+        except ValueError as exc:
+            log.warning("fabric_books_refused", front=self.front.k, error=str(exc))
+            return
+        world = self.server.world
+        world.relay = None
+        try:
+            for op in ops:
+                self._mirror_one(op)
+        finally:
+            world.relay = self
+
+    def _mirror_one(self, op: req.Op) -> None:
+        world = self.server.world
+        try:
+            i = int(op["index"])
+            if op["op"] == "create":
+                world.create_soldier(str(op["figure"]), str(op["weapon"]), i, owner=op["owner"])
+                self.has_last[i] = False
+            elif op["op"] == "remove":
+                world.remove_soldier(i, f"removed through front-end {op['front']}")
+                if self.share is not None:
+                    self.share.freed(i)
+        except (ValueError, KeyError, TypeError) as exc:
+            log.warning("fabric_books_failed", front=self.front.k, op=op.get("op"), error=str(exc))
+            return
+        self.mirrored += 1
 
     def _shard_of(self, index: int) -> int:
         return self.route[int(Sharding.home(index, self.shards))]
 
     # -- the world's Relay ---------------------------------------------------------------------------------
+    def allot(self, index: int | None) -> int | None:
+        if self.share is None:
+            return index
+        m = self.server.world.manager
+        return self.share.allot(index, m.table.is_live if m is not None else lambda i: False)
+
     def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
         self.has_last[index] = False
-        self._send(self._shard_of(index), req.create(index, figure, weapon, owner))
+        if self.share is not None:
+            self.share.taken(index)
+        op = req.create(index, figure, weapon, owner)
+        self._send(self._shard_of(index), op)
+        self._book(op)
 
     def removed(self, index: int) -> None:
         self.has_last[index] = False
-        self._send(self._shard_of(index), req.remove(index))
+        if self.share is not None:
+            self.share.freed(index)
+        op = req.remove(index)
+        self._send(self._shard_of(index), op)
+        self._book(op)
 
     def requests(self, rows: np.ndarray) -> None:
         idx = rows["index"].astype(np.int64)

@@ -20,4 +20,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--shards", type=count(1, 256), required=True, help="how many shards (ttes server --shard K/N)"
     )
+    p.add_argument(
+        "--front",
+        metavar="K/M",
+        default="0/1",
+        help="this is front-end K of M in front of the same shards: it allots soldier indices from its own "
+        "share and tells the others what it creates (default 0/1: the only one)",
+    )
     add_fabric_options(p)

@@ -193,6 +193,7 @@ def _fabric_node(
 
     try:
         sharding = Sharding.parse(shard) if shard is not None else None
+        front = Sharding.parse(getattr(args, "front", None) or "0/1")
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     fabric = open_fabric(FabricConfig(args.fabric, args.fabric_listen, tuple(args.fabric_connect)))
@@ -200,8 +201,8 @@ def _fabric_node(
         node = ShardNode(server, fabric, sharding)
         node.keep_own()
         return (lambda: node.start(trio.lowlevel.current_trio_token())), fabric.close
-    front = FrontNode(server, fabric, int(shards or 1))
-    return (lambda: front.start(trio.lowlevel.current_trio_token())), fabric.close
+    node_f = FrontNode(server, fabric, int(shards or 1), front=front)
+    return (lambda: node_f.start(trio.lowlevel.current_trio_token())), fabric.close
 
 
 def _first_leaf(exc: BaseException) -> BaseException:
