@@ -63,6 +63,9 @@ TURN_ANGLES = (30, 45, 90)  # a crawling soldier turns the nearest (another afte
 # serves a reversal; to his left, the rifle across his body, his right forearm slid 30 cm: the right elbow,
 # at its reach, could not follow the shoulders carried sideways away from it; DI 4.2 cm, M16 7.4)
 U_TURN = "crawlarc_r180"
+# ... and the shorter ones, built the same way (a 135-165° reversal: turned on the spot and then the arcs he
+# ended 108 cm from his entity at 150°; the U-turn and the rest turned crawling on, 34 cm at 165°)
+U_TURN_ANGLES = (135, 150, 165, 180)
 STEP = 30.0  # degrees a part turns at most in one move (elbows and knees ~25 cm, the toes ~48 cm)
 MOVE = {"front": 0.4, "back": 0.46}  # s a part takes to move (the crawl's limbs: 0.36 s for 26 cm)
 ELBOW_LIFT = 3.0  # cm the forearms (and the rifle) rise while the front moves
@@ -92,7 +95,7 @@ def clip_name(direction: str, angle: float, advance: float = 0.0) -> str:
 _PLANS = {
     clip_name(d, a, adv): (d, float(a), adv) for adv in (0.0, ARC_ADVANCE) for d in SIDES for a in TURN_ANGLES
 }
-_PLANS[U_TURN] = ("right", 180.0, ARC_ADVANCE)
+_PLANS.update({clip_name("right", a, ARC_ADVANCE): ("right", float(a), ARC_ADVANCE) for a in U_TURN_ANGLES})
 CRAWL_TURN_CLIPS: tuple[str, ...] = tuple(_PLANS)
 
 

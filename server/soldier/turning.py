@@ -63,10 +63,14 @@ PIVOT_REST_PER_STANCE_DEG = 9.0
 CRAWL_REVERSAL_DEG = 22.5
 MAX_GROUND_TURNS = 4  # turn clips on the ground one after the other at most (180°: the 90° twice)
 GROUND_TURN_SLACK_DEG = 7.5  # ... chosen by what they leave unturned in steps of this much, then the fewest
-# a crawler whose heading changes by this much less than 180° plays the U-turn too and turns the rest as he
-# crawls on (root_motion.CRAWL_TURN_RATE, under CRAWL_REVERSAL_DEG): 165° as the 90° and 45° on the spot
-# and the 30° arc left him 125 cm from his entity, 76 after the stop
+# a crawler whose heading changes by this much or less from a U-turn's (crawlarc_r135..r180) plays it and
+# turns the rest as he crawls on (root_motion.CRAWL_TURN_RATE, under CRAWL_REVERSAL_DEG): 165° as the 90° and
+# 45° on the spot and the 30° arc left him 125 cm from his entity, 76 after the stop (150°: 108 and 52)
 U_TURN_SLACK_DEG = 15.0
+# ... for a change of at least this much (half-way from the 90° arc to the shortest U-turn, 135°): 120° as the
+# 135° U-turn and 15° crawling on ended the turn 42 cm from his entity but 57 after the stop (the crawl does
+# not steer back sideways), the 90° on the spot and the 30° arc 87 and 16
+U_TURN_MIN_DEG = 127.5
 # a turn on the ground plays this much faster than recorded: the crawl's upper cadence (core.MAX_RATE; a
 # forearm's 25 cm in 0.25 s, the crawl's 26 in 0.225 s); a 90° turn in 2.2 s instead of 3.5
 GROUND_TURN_RATE = MAX_RATE
@@ -216,11 +220,12 @@ class Turning(ManagerCore):
         heading, played no faster than keeps pace with an entity at ``speed`` cm/s: :meth:`_arc_rate`)."""
         lib = self.library
         clips = lib.node_arcs.get(node) if moving else None
-        u_turn = [c for c, d in clips or () if abs(d) == 180.0]
-        if u_turn and abs(want) >= 180.0 - U_TURN_SLACK_DEG:  # the rest he turns as he crawls on
-            c = u_turn[0]
+        c = self._u_turn(clips or [], want)
+        if c is not None:  # the rest he turns as he crawls on
             return (PathStep(c, True, float(lib.clip_duration[c]) / self._arc_rate(c, speed), node, node),)
-        combos, total, count, negative, positive = _ground_combos(tuple(clips or lib.node_turns[node]))
+        # the U-turns alone or not at all (the 135° one was 127° as the 90° and the 30° arc are 120°)
+        turns = tuple(c for c in clips or lib.node_turns[node] if abs(c[1]) <= 90.0)
+        combos, total, count, negative, positive = _ground_combos(turns)
         left = (want - total + 180.0) % 360.0 - 180.0
         left[0] = want  # (no turn at all)
         wrong = negative if want > 0 else positive if want < 0 else np.zeros_like(count)
@@ -237,6 +242,18 @@ class Turning(ManagerCore):
             PathStep(c, True, float(lib.clip_duration[c]) / r, node, node)
             for c, r in zip(order, rates, strict=True)
         )
+
+    @staticmethod
+    def _u_turn(arcs: list[tuple[int, float]], want: float) -> int | None:
+        """Of a crawler's turns that carry him forward (``arcs``: clip, compass degrees) the U-turn (more than
+        90°) nearest ``want`` compass degrees (U_TURN_MIN_DEG or more), if it is within U_TURN_SLACK_DEG of
+        it (the 180° one serves either way; the shorter ones turn to his right alone: to his left the right
+        forearm slid 31 cm)."""
+        off = [(abs((d - want + 180.0) % 360.0 - 180.0), c) for c, d in arcs if abs(d) > 90.0]
+        near = min(off, default=None)
+        if near is None or near[0] > U_TURN_SLACK_DEG or abs(want) < U_TURN_MIN_DEG:
+            return None
+        return near[1]
 
     def _arc_rate(self, clip: int, speed: float) -> float:
         """How much faster than recorded a crawler's turn ``clip`` plays: GROUND_TURN_RATE, or slower (down
