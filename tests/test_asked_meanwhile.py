@@ -28,7 +28,8 @@ def shown(lib, script: list[tuple[float, Appearance, float]], until: float) -> l
     with the time it began."""
     m = SoldierManager(lib, throttle=0.0, record_clips=True)
     i = m.create_soldier(figure="DI.fig", weapon="AK_47.fig", now=0.0)
-    pos, vel, last, out = np.zeros(2), np.zeros(2), 0.0, []
+    out: list[tuple[float, str]] = []
+    pos, vel, last = np.zeros(2), np.zeros(2), 0.0
     pending = list(script)
     for k in range(int(until * HZ) + 1):
         now = k / HZ

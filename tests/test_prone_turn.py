@@ -218,13 +218,27 @@ def test_a_crawler_turning_nearly_back_comes_round_with_the_shorter_u_turn(
     assert gap[turned] <= U_TURN_CM and gap[-1] <= REVERSAL_CM, (gap[turned], gap[-1])
 
 
-def test_a_crawlers_u_turn_swings_his_body_no_faster_than_recorded(lib) -> None:
+def test_a_fast_crawler_reversing_comes_round_with_the_u_turn_carrying_him_further(lib) -> None:
+    """0.45 m/s: the U-turn of more, quicker moves (``crawlarc_r180_far``: 143.5 cm in 4.2 s at
+    GROUND_TURN_RATE), within U_TURN_CM of his entity when it ends and REVERSAL_CM after the stop (the
+    U-turn's 103.5 cm: 48 cm behind it, 28 after the stop)."""
+    run = reversal(lib, 0.45)
+    shown = [c.split("/")[-1] for c in run["clips"].tolist()]
+    assert sorted({c for c in shown if "turn_" in c or "arc_" in c}) == ["crawlarc_r180_far_low"]
+    check_turn(lib, run, 3.9, 180.0, within=2.0, family="crawlarc_")
+    turned = max(i for i, c in enumerate(shown) if "crawlarc_" in c) + 1
+    gap = np.hypot(run["gap"][:, 0], run["gap"][:, 1])
+    assert gap[turned] <= U_TURN_CM and gap[-1] <= REVERSAL_CM, (gap[turned], gap[-1])
+
+
+@pytest.mark.parametrize(("speed", "clip"), [(0.3, "crawlarc_r180_low"), (0.45, "crawlarc_r180_far_low")])
+def test_a_crawlers_u_turn_swings_his_body_no_faster_than_recorded(lib, speed: float, clip: str) -> None:
     """The U-turn seen at the stub's 30 Hz: no pop (the body turns at most SWING_DEG_S, no head or limb
     moves faster than LIMB_M_S), from the request through the crawl on."""
-    script = [(0.0, Appearance.CRAWL, 0.0, 40.0), (0.5, Appearance.CRAWL, 0.3, 40.0)]
-    script.append((4.0, Appearance.CRAWL, 0.3, 220.0))
+    script = [(0.0, Appearance.CRAWL, 0.0, 40.0), (0.5, Appearance.CRAWL, speed, 40.0)]
+    script.append((4.0, Appearance.CRAWL, speed, 220.0))
     _, clips, turn, move, k = swung(lib, script, 11.0, 3.9)
-    assert "crawlarc_r180_low" in "".join(clips[k:]) and "crawl_cycle" in clips[-1]
+    assert clip in "".join(clips[k:]) and "crawl_cycle" in clips[-1]
     assert turn[k:].max() <= SWING_DEG_S and move[k:].max() <= LIMB_M_S, (turn[k:].max(), move[k:].max())
 
 
