@@ -13,8 +13,10 @@ the same, so a client of the front-end gets the handshake, tables and FIGURE of 
   the requests for its soldiers from ``requests/K`` on the trio loop;
 * a front-end queues each shard's batches as they arrive and merges them in order (from the newest key
   batch among them) into its board (``PoseBoard.publish_codes``, one scatter), and its sessions encode
-  from there as always. Its own manager keeps the books (who lives, tables, owners, the requests' checks)
-  and never animates; what its clients ask goes to the owning shard (``ServerWorld.relay``).
+  from there as always; only the soldiers its clients watch go onto the board, the others' newest codes
+  wait in a plain array until a client subscribes to them (:mod:`server.fabric.watch`). Its own manager
+  keeps the books (who lives, tables, owners, the requests' checks) and never animates; what its clients
+  ask goes to the owning shard (``ServerWorld.relay``).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from server.fabric import requests as req
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.fabric.fronts import IndexShare
+from server.fabric.watch import Watch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
 from server.stage_cpu import TURN_CPU_S
@@ -295,6 +298,8 @@ class FrontNode:
         self.skipped = 0  # lost on the fabric (or dropped from a full queue)
         self.failovers = 0
         self.keys = 0  # key batches heard
+        self.watching = Watch(n)  # what its clients subscribe to; the others' codes wait there
+        server.board_ref.on_watch = self.watch
         server.feed = self.feed
         server.relay_out = self._flush
         server.world.relay = self
@@ -360,9 +365,12 @@ class FrontNode:
         if not batches or m is None:
             return np.zeros(0, np.int64)
         self.batches += len(batches)
+        if self.watching.stale:
+            subscribed = (s.conn.subscribed for s in self.server.sessions.values())
+            self.watching.recount(subscribed, board, m.table.alive)
         rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
         before = board.serial
-        answered = merge(board, batches, tick, m.table.alive)
+        answered = merge(board, batches, tick, m.table.alive, self.watching)
         self.server.answered = answered  # their clients' writers write them first (TtesServer._encode)
         self.server.answered_after = board.serial - 1 if len(answered) else board.serial
         changed = rows[
@@ -371,6 +379,16 @@ class FrontNode:
         if TRACE is not None:
             TRACE.stamp("fe_merge", rows, "fed" if tick > self.server.ticks else "tick")
         return changed
+
+    def watch(self, indices: np.ndarray | None) -> None:
+        """A client subscribed to ``indices`` (None: one unsubscribed, or left): the held codes of those
+        no client watched go onto the board now, before its writer encodes (:mod:`server.fabric.watch`)."""
+        if indices is None:
+            self.watching.stale = True
+            return
+        m = self.server.world.manager
+        if m is not None:
+            self.watching.watch(indices, self.server.board_ref.board, m.table.alive)
 
     def _heard(self, b: Batch, now: float) -> None:
         k = b.shard
@@ -476,8 +494,10 @@ class FrontNode:
             if op["op"] == "create":
                 world.create_soldier(str(op["figure"]), str(op["weapon"]), i, owner=op["owner"])
                 self.has_last[i] = False
+                self.watching.forget(i)
             elif op["op"] == "remove":
                 world.remove_soldier(i, f"removed through front-end {op['front']}")
+                self.watching.forget(i)
                 if self.share is not None:
                     self.share.freed(i)
         except (ValueError, KeyError, TypeError) as exc:
@@ -497,6 +517,7 @@ class FrontNode:
 
     def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
         self.has_last[index] = False
+        self.watching.forget(index)
         if self.share is not None:
             self.share.taken(index)
         op = req.create(index, figure, weapon, owner)
@@ -505,6 +526,7 @@ class FrontNode:
 
     def removed(self, index: int) -> None:
         self.has_last[index] = False
+        self.watching.forget(index)
         if self.share is not None:
             self.share.freed(index)
         op = req.remove(index)
@@ -535,10 +557,13 @@ def _request_indices(ops: list[req.Op]) -> list[int]:
     return np.concatenate([r["index"] for r in rows]).tolist() if rows else []
 
 
-def merge(board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray) -> np.ndarray:
+def merge(
+    board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray, watch: Watch | None = None
+) -> np.ndarray:
     """Merge shards' batches (each shard's in the order sent) into ``board``, labelled ``tick``: per shard
     from its newest key batch on (a key holds every soldier it animates), the newest codes of each soldier,
-    of the soldiers still ``alive`` here (not removed meanwhile). The rows whose newest codes came in a
+    of the soldiers still ``alive`` here (not removed meanwhile); with ``watch``, only of the soldiers a
+    client watches (``watch`` keeps the others'). The rows whose newest codes came in a
     shard's *answer* are published last, on their own: the writers of their clients write them before they
     encode the tick's rows that came with them (``TtesServer._encode``). Returns those rows."""
     used: list[Batch] = []
@@ -546,6 +571,8 @@ def merge(board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray) 
         own = [b for b in batches if b.shard == k]
         keys = [i for i, b in enumerate(own) if b.key]
         used += own[keys[-1] :] if keys else own
+    if watch is not None:
+        used = [watch.split(b) for b in used]
     rows = np.concatenate([b.indices for b in used]).astype(np.int64)
     tables = np.concatenate([b.tables for b in used])
     codes = np.concatenate([b.codes for b in used])
