@@ -33,9 +33,10 @@ class Watch:
         self.rows_held = 0  # rows kept here rather than merged (a bench's count)
 
     def split(self, b: Batch) -> Batch:
-        """Keep the codes of ``b``'s rows (every row: one scatter of whole rows costs less than picking out
-        the unwatched ones), held for those no client watches; return the batch of the watched rows (and of
-        indices beyond this front-end's count: the merge drops them)."""
+        """Keep the codes of ``b``'s rows, held for those no client watches (every row of a batch that has
+        any unwatched: one scatter of whole rows costs less than picking out the unwatched ones; none of a
+        batch whose rows are all watched, a single front-end's usual case), and return the batch of the
+        watched rows (and of indices beyond this front-end's count: the merge drops them)."""
         idx = b.indices
         if not len(idx):  # (its codes may be 0 wide: a shard before its first quantise)
             return b
@@ -44,6 +45,8 @@ class Watch:
         every = bool(inside.all())
         rows = idx if every else idx[inside]
         near = self.watched[rows]
+        if every and near.all():  # a watched soldier is never held (watch() clears it): nothing to keep
+            return b
         if self.codes.shape[1] != nf:
             self.codes = np.zeros((n, nf), np.uint16)
             self.held[:] = False
@@ -52,8 +55,6 @@ class Watch:
         self.tables[rows] = b.tables if every else b.tables[inside]
         self.held[rows] = ~near
         self.rows_held += len(rows) - int(np.count_nonzero(near))
-        if every and near.all():
-            return b
         if not every:
             near = ~inside
             near[inside] = self.watched[rows]
