@@ -481,12 +481,8 @@ class Connection:
 
     def subscribes_any(self, indices: np.ndarray) -> bool:
         """Server: whether this client subscribed to any of the soldiers ``indices``."""
-        return bool(len(self.subscribed_among(indices)))
-
-    def subscribed_among(self, indices: np.ndarray) -> np.ndarray:
-        """Server: the soldiers of ``indices`` this client subscribed to."""
         idx = indices[indices < len(self._subscribed)]
-        return idx[self._subscribed[idx]]
+        return bool(self._subscribed[idx].any())
 
     def reset_soldiers(self, indices: np.ndarray | list[int] | None = None) -> None:
         """Server: the next update of these soldiers (all if None) is full, e.g. after an index is reused."""

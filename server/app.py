@@ -75,8 +75,6 @@ SHUTDOWN_GRACE_S = 1.0
 FRONT_TURNS = os.environ.get("TTES_FRONT_TURNS") != "0"
 # clip ends a shard's tick handles between two looks at its CPU (each piece's passes cost a fixed part)
 ADVANCE_ROWS = 500
-# how long a front-end writer keeps its turn while it writes its client's answers before the rest (_encode)
-HOLD_TURN_S = 0.002
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
 log = get_logger("app")
 
@@ -123,13 +121,8 @@ class TtesServer:
         self._requests_at_tick = 0  # the request count when the tick sampled
         self._answer_after_tick = False  # soldiers taken up by the tick that it could not show yet
         self._tick_serial = 0  # the board's serial after the last tick's publish (its encodes follow)
-        # a front-end's: its last merge's rows from shards' answers, published after serial answered_after
-        # (after the tick's rows that came with them): their clients' writers write them first (_encode)
-        self.answered: np.ndarray = np.zeros(0, np.int64)
-        self.answered_after = 0
         self._tick_now = 0.0  # the last tick's time
-        # writers encode one at a time (_tick_output; a front-end's: _encode, whose turn another task may end)
-        self._encode_turn = trio.Semaphore(1)
+        self._encode_turn = trio.Lock()  # writers encode one at a time (_tick_output; a front-end's: _encode)
         self.last_tick_seconds = 0.0  # the last tick's own time (sampling and publish, not the pause)
         self.stopped = trio.Event()
         self.started = False
@@ -474,10 +467,7 @@ class TtesServer:
                     if session.ticked:
                         session.ticked = session.more_of_tick = False
                         self.apply_held()
-                    fed_data = await self._encode(session, stream)
-                    if fed_data is None:
-                        return
-                    data = fed_data
+                    data = await self._encode(session)
                 session.drained.set()
                 if not await self._send(session, stream, data):
                     return
@@ -491,65 +481,20 @@ class TtesServer:
             if not session.lingering:
                 scope.cancel()
 
-    async def _encode(self, session: Session, stream: trio.abc.Stream) -> bytes | None:
-        """What ``session``'s writer writes now (None: a write stalled). A front-end's writers take turns,
-        each letting the readers and the shards' batches in before its encode and sending the requests they
-        relay: a request or an answer that arrives during one client's encode waits for that encode only, not
-        for every woken client's (issue 21: a shard's batch woke both clients' writers, and their ~3.5 ms
-        encodes ran back to back before any socket was read, the relayed requests sent after both)."""
+    async def _encode(self, session: Session) -> bytes:
+        """What ``session``'s writer writes now. A front-end's writers take turns, each letting the readers
+        and the shards' batches in before its encode and sending the requests they relay: a request or an
+        answer that arrives during one client's encode waits for that encode only, not for every woken
+        client's (issue 21: a shard's batch woke both clients' writers, and their ~3.5 ms encodes ran back
+        to back before any socket was read, the relayed requests sent after both)."""
         if self.feed is None or not FRONT_TURNS:
             return self._encode_now(session)
-        turn = _Turn(self._encode_turn)
-        try:
-            await turn.take()
-            await self._turn_starts()
-            early = self._fed_answers(session)
-            if early:
-                if not await self._send_in_turn(session, stream, early, turn):
-                    return None
-                if not turn.held:  # the write took long: the others' turns went first
-                    await turn.take()
-                    await self._turn_starts()
+        async with self._encode_turn:
+            await self.let_readers_in()
+            self.apply_held()  # the requests they hold go to their shards before this encode, not after
+            if self.relay_out is not None:
+                self.relay_out()
             return self._encode_now(session)
-        finally:
-            turn.give_up()
-
-    async def _turn_starts(self) -> None:
-        """A front-end writer's turn: the readers and the shards' batches are let in, and the requests they
-        hold applied and sent to their shards, before this encode (not after)."""
-        await self.let_readers_in()
-        self.apply_held()
-        if self.relay_out is not None:
-            self.relay_out()
-
-    def _fed_answers(self, session: Session) -> bytes:
-        """The soldiers of shards' answers that the last merge published after a tick's rows that came with
-        them (``answered``): encoded on their own, written before this client's encode of those rows, which
-        they waited for (issue 21: ~3.5 ms of CPU at 20,000). b"": none for this client, or it owes nothing
-        published before them (one encode then costs less than two)."""
-        board = self.board_ref.board
-        if board is None or self.answered_after >= board.serial or not len(self.answered):
-            return b""
-        if session.flushed_serial >= self.answered_after:
-            return b""
-        with self.cpu("encode"):
-            return session.take_answers(self.answered_after, self.answered)
-
-    async def _send_in_turn(
-        self, session: Session, stream: trio.abc.Stream, data: bytes, turn: _Turn
-    ) -> bool:
-        """Write ``data`` keeping the writer's turn, so that it encodes the rest of the tick next, unless the
-        write takes longer than ``HOLD_TURN_S`` (a client that reads slowly holds no other writer up)."""
-        async with trio.open_nursery() as nursery:
-
-            async def give_up_later() -> None:
-                await trio.sleep(HOLD_TURN_S)
-                turn.give_up()
-
-            nursery.start_soon(give_up_later)
-            sent = await self._send(session, stream, data)
-            nursery.cancel_scope.cancel()
-        return sent
 
     def _encode_now(self, session: Session) -> bytes:
         session.wake = trio.Event()  # a publish from here on wakes it again
@@ -1006,24 +951,6 @@ class TtesServer:
             **({} if self.deaf is None else {"loop_deaf_ms": self.deaf.report()}),
             **({} if self.status_fields is None else self.status_fields()),
         )
-
-
-class _Turn:
-    """A writer's hold on the writers' turn (``TtesServer._encode_turn``): taken, and given up once,
-    by its writer or by the timer that ends a turn held through a slow write."""
-
-    def __init__(self, turns: trio.Semaphore) -> None:
-        self.turns = turns
-        self.held = False
-
-    async def take(self) -> None:
-        await self.turns.acquire()
-        self.held = True
-
-    def give_up(self) -> None:
-        if self.held:
-            self.held = False
-            self.turns.release()
 
 
 def check_exposure(config: ServerConfig) -> None:

@@ -218,12 +218,11 @@ class Session:
         """The soldiers of ``indices`` whose updates this client may receive (``Owners.visible``)."""
         return self.world.owners.visible(indices, self.client_id, self.role)
 
-    def take_answers(self, after: int, among: np.ndarray | None = None) -> bytes:
-        """The subscribed soldiers (of ``among``, if given) whose codes changed at a publish after ``after``
-        (and after this client's last write): soldiers answered as more of a tick since its publish
-        (``TtesServer._answer_in_tick``; a front-end's: its shards' answers), encoded on their own so that the
-        writer sends them before it encodes the rest of the tick (issue 16); nothing once a publish was
-        labelled with the next tick (its rows follow the tick's).
+    def take_answers(self, after: int) -> bytes:
+        """The subscribed soldiers whose codes changed at a publish after ``after`` (and after this client's
+        last write): soldiers answered as more of a tick since its publish (``TtesServer._answer_in_tick``),
+        encoded on their own so that the writer sends them before it encodes the rest of the tick (issue 16);
+        nothing once a publish was labelled with the next tick (its rows follow the tick's).
         The next write does not send them again unless they change again. Not for a connection with a
         throttle of its own (its one write per period carries them)."""
         board = self.board_ref.board
@@ -231,7 +230,7 @@ class Session:
             return b""
         if board.tick != board.ticks:  # answered as the next tick's since: they follow the tick's rows
             return b""
-        sub = self.conn.subscribed if among is None else self.conn.subscribed_among(among)
+        sub = self.conn.subscribed
         if not self.tables_sent or len(sub) == 0:
             return b""
         sub = self.may_see(sub[sub < board.capacity])

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from protocol.entity import make_entity_requests
 from server.fabric import requests as req
 from server.fabric.batch import Batch, decode_batch, encode_batch
-from server.fabric.nodes import Sharding, merge
+from server.fabric.nodes import Sharding
 from server.pose_board import PoseBoard
 
 
@@ -25,44 +25,6 @@ def test_a_batch_survives_the_fabric() -> None:
     assert (b.shard, b.shards, b.seq, b.tick, b.sent) == (1, 2, 7, 9, 12.5)
     assert b.indices.tolist() == [1, 3, 5] and b.tables.tolist() == [2, 2, 2]
     assert np.array_equal(b.codes, _batch().codes)
-
-
-@pytest.mark.parametrize(("key", "answer"), [(False, False), (True, False), (False, True)])
-def test_a_batch_says_whether_it_is_a_key_and_whether_an_answer(key: bool, answer: bool) -> None:
-    b = _batch()
-    got = decode_batch(encode_batch(Batch(1, 2, 7, 9, 12.5, b.indices, b.tables, b.codes, key, answer)))
-    assert (got.key, got.answer) == (key, answer)
-
-
-def test_a_merge_publishes_the_answers_after_the_tick_rows_that_came_with_them() -> None:
-    """A shard's answer and a tick batch found waiting together: the tick's rows are published first, then
-    the rows whose newest codes came in an answer (their clients' writers write them first); a row of an
-    answer that a later tick batch carries again is the tick's."""
-    board, alive = PoseBoard(50, 2), np.ones(8, bool)
-    codes = np.ones((2, 64), np.int32)
-
-    def batch(seq: int, rows: list[int], answer: bool, shard: int = 1) -> Batch:
-        return Batch(
-            shard,
-            2,
-            seq,
-            9,
-            0.0,
-            np.array(rows),
-            np.full(len(rows), 1),
-            codes[: len(rows)] + seq,
-            False,
-            answer,
-        )
-
-    answered = merge(
-        board, [batch(0, [1, 3], False), batch(1, [5], True), batch(0, [0, 2], False, 0)], 4, alive
-    )
-    assert answered.tolist() == [5] and board.serial == 2 and board.tick == 4
-    assert board.version[[0, 1, 2, 3, 5]].tolist() == [1, 1, 1, 1, 2]  # the answer's row last
-    answered = merge(board, [batch(2, [5], True), batch(3, [5, 7], False)], 5, alive)
-    assert answered.tolist() == [] and board.serial == 3  # the tick batch after it carries it: one publish
-    assert merge(board, [batch(4, [3], True)], 6, alive).tolist() == [3] and board.serial == 4
 
 
 def test_codes_beyond_16_bits_are_refused() -> None:

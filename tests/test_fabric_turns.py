@@ -5,7 +5,6 @@ the others between turns of a client's creation burst. In one process on trio's 
 from __future__ import annotations
 
 import os
-from typing import Any
 
 import numpy as np
 import pytest
@@ -20,7 +19,6 @@ from server.fabric import poses_topic, requests_topic
 from server.fabric import requests as req
 from server.fabric.batch import decode_batch
 from server.fabric.nodes import Sharding, ShardNode
-from server.pose_board import PoseBoard
 from server.session import Session
 
 
@@ -206,54 +204,3 @@ async def test_a_request_that_arrives_while_a_shard_ticks_is_sampled_by_that_tic
         assert 1 in tick.indices.tolist()  # the tick's own batch carries it
         assert shard.answers == answers and not m.table.requested[1]  # and no answer after the tick
         shard.shutdown()
-
-
-async def test_a_shards_answer_that_arrives_with_its_tick_batch_is_written_before_the_ticks_rows(
-    autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """A front-end that finds a shard's answer and a tick batch waiting together merges them in one turn,
-    but the answer's client writes the answered soldier on its own first, then encodes the tick's rows:
-    the answer waited for that client's encode of the whole tick (~3 ms at 20,000, issue 21). It keeps its
-    turn meanwhile: another client woken by the tick encodes before or after both, not in between."""
-    bus = Bus()
-    async with cluster(bus) as (front, _, _, _):
-        a = await walker(front, 11)  # subscribed to 0..11; 11 walks: in each of shard 1's tick batches
-        b = await Client.open(front.addresses[0][1], "other", client_id="beta")
-        await b.expect(Ready)
-        await b.send(CreateSoldier(1, "DI.fig", "AK_47.fig", 13))
-        await b.expect(SoldierCreated)
-        await b.send(Subscribe((13,)))
-        await b.requests(index=[13], velocity=WALK)  # 11 and 13 in each of shard 1's tick batches
-        await trio.sleep(0.5)
-        topic = bus.topics[poses_topic(1)]
-        handlers = list(topic)  # the front-end's
-        held: list[bytes] = []
-        topic[:] = [held.append]  # shard 1's batches wait, then come together
-        with trio.fail_after(1):
-            while not held:  # just after a tick batch: the request lands between ticks
-                await trio.sleep(0.001)
-        await a.requests(index=[1], velocity=RUN)
-        with trio.fail_after(1):
-            while not any(1 in decode_batch(d).indices for d in held):
-                await trio.sleep(0.001)
-        assert decode_batch(held[-1]).indices.tolist() == [1]  # shard 1's answer, after its tick batches
-        encodes: list[tuple[str, list[int]]] = []
-        encode_rows = Session._encode_rows
-
-        def encoding(self: Session, board: PoseBoard, idx: np.ndarray, *args: Any) -> bytes:
-            encodes.append((self.name, sorted(idx.tolist())))
-            return encode_rows(self, board, idx, *args)
-
-        monkeypatch.setattr(Session, "_encode_rows", encoding)
-        topic[:] = handlers
-        for data in held:  # what arrived meanwhile, at once: tick batches, then the answer
-            for handler in handlers:
-                handler(data)
-        with trio.fail_after(5):
-            while len(encodes) < 3:
-                await trio.sleep(0.001)
-        ig = [i for i, (name, _) in enumerate(encodes) if name == "ig"]
-        assert encodes[ig[0]][1] == [1] and 11 in encodes[ig[1]][1]  # the answer alone, then the tick's rows
-        assert ig[1] == ig[0] + 1 and ("other", [13]) in encodes[:3]  # in one turn
-        await a.aclose()
-        await b.aclose()

@@ -4,9 +4,7 @@ The codes are the pose board's (``PoseBoard.codes``: the update table's field va
 docs/PROTOCOL.md §7), sent as uint16 with the soldiers' indices (uint32) and table ids (uint8). A front-end
 merges them into its own board and encodes them for its clients with the shared encoding: nothing is
 re-quantised on the way. A *key* batch carries every soldier the shard animates; the others only the
-soldiers whose codes changed since the shard's previous batch (the front-end's board keeps the rest). An
-*answer* batch is a shard's publish between its ticks (the soldiers whose requests it took): a front-end
-writes those rows first when a tick batch arrived with them (``nodes.merge``).
+soldiers whose codes changed since the shard's previous batch (the front-end's board keeps the rest).
 """
 
 from __future__ import annotations
@@ -16,9 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MAGIC = b"TTB3"  # TTB2: its last byte was the key flag alone
-# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, flags (KEY, ANSWER)
-KEY, ANSWER = 1, 2
+MAGIC = b"TTB2"
+# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, key
 _HEAD = struct.Struct("<4sHHIIdIIB")
 
 
@@ -33,7 +30,6 @@ class Batch:
     tables: np.ndarray  # (n,) update table ids
     codes: np.ndarray  # (n, F) field codes
     key: bool = True  # every soldier of the shard (else: those changed since its previous batch)
-    answer: bool = False  # published between the shard's ticks: the soldiers whose requests it took
 
 
 def encode_batch(batch: Batch) -> bytes:
@@ -41,8 +37,7 @@ def encode_batch(batch: Batch) -> bytes:
     nf = batch.codes.shape[1] if batch.codes.ndim == 2 else 0
     if n and (batch.codes.min() < 0 or batch.codes.max() > 0xFFFF):
         raise ValueError("codes beyond 16 bits")
-    flags = KEY * batch.key | ANSWER * batch.answer
-    head = _HEAD.pack(MAGIC, batch.shard, batch.shards, batch.seq, batch.tick, batch.sent, n, nf, flags)
+    head = _HEAD.pack(MAGIC, batch.shard, batch.shards, batch.seq, batch.tick, batch.sent, n, nf, batch.key)
     return b"".join(
         (
             head,
@@ -57,13 +52,11 @@ def decode_batch(data: bytes) -> Batch:
     """The batch of ``data`` (arrays are read-only views of it); ValueError if it is not one."""
     if len(data) < _HEAD.size:
         raise ValueError(f"a batch of {len(data)} bytes")
-    magic, shard, shards, seq, tick, sent, n, nf, flags = _HEAD.unpack_from(data)
+    magic, shard, shards, seq, tick, sent, n, nf, key = _HEAD.unpack_from(data)
     if magic != MAGIC or len(data) != _HEAD.size + n * (5 + 2 * nf):
         raise ValueError(f"not a batch (magic {magic!r}, {len(data)} bytes for {n} x {nf})")
     at = _HEAD.size
     indices = np.frombuffer(data, "<u4", n, at)
     tables = np.frombuffer(data, "u1", n, at + 4 * n)
     codes = np.frombuffer(data, "<u2", n * nf, at + 5 * n).reshape(n, nf)
-    return Batch(
-        shard, shards, seq, tick, sent, indices, tables, codes, bool(flags & KEY), bool(flags & ANSWER)
-    )
+    return Batch(shard, shards, seq, tick, sent, indices, tables, codes, bool(key))

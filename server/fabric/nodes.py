@@ -176,8 +176,9 @@ class ShardNode:
         codes = board.codes[rows]
         if TRACE is not None:
             TRACE.stamp("shard_publish", rows, "tick" if tick else "answer")
-        sent, tables = time.monotonic(), board.table_of[rows]
-        data = encode_batch(Batch(k, n, self.seq, board.tick, sent, rows, tables, codes, key, not tick))
+        data = encode_batch(
+            Batch(k, n, self.seq, board.tick, time.monotonic(), rows, board.table_of[rows], codes, key)
+        )
         self._put(data)
         self.bytes_out += len(data)
         self.seq += 1
@@ -369,13 +370,13 @@ class FrontNode:
             subscribed = (s.conn.subscribed for s in self.server.sessions.values())
             self.watching.recount(subscribed, board, m.table.alive)
         rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
-        before = board.serial
-        answered = merge(board, batches, tick, m.table.alive, self.watching)
-        self.server.answered = answered  # their clients' writers write them first (TtesServer._encode)
-        self.server.answered_after = board.serial - 1 if len(answered) else board.serial
-        changed = rows[
-            (rows < board.capacity) & (board.version[np.minimum(rows, board.capacity - 1)] > before)
-        ]
+        if merge(board, batches, tick, m.table.alive, self.watching):
+            changed = rows[
+                (rows < board.capacity)
+                & (board.version[np.minimum(rows, board.capacity - 1)] == board.serial)
+            ]
+        else:
+            changed = rows[:0]
         if TRACE is not None:
             TRACE.stamp("fe_merge", rows, "fed" if tick > self.server.ticks else "tick")
         return changed
@@ -559,13 +560,12 @@ def _request_indices(ops: list[req.Op]) -> list[int]:
 
 def merge(
     board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray, watch: Watch | None = None
-) -> np.ndarray:
-    """Merge shards' batches (each shard's in the order sent) into ``board``, labelled ``tick``: per shard
-    from its newest key batch on (a key holds every soldier it animates), the newest codes of each soldier,
-    of the soldiers still ``alive`` here (not removed meanwhile); with ``watch``, only of the soldiers a
-    client watches (``watch`` keeps the others'). The rows whose newest codes came in a
-    shard's *answer* are published last, on their own: the writers of their clients write them before they
-    encode the tick's rows that came with them (``TtesServer._encode``). Returns those rows."""
+) -> int:
+    """Merge shards' batches (each shard's in the order sent) into ``board`` as one publish labelled
+    ``tick``: per shard from its newest key batch on (a key holds every soldier it animates), the newest
+    codes of each soldier, of the soldiers still ``alive`` here (not removed meanwhile); with ``watch``,
+    only of the soldiers a client watches (``watch`` keeps the others'). Returns the soldiers whose codes
+    changed (``PoseBoard.publish_codes``)."""
     used: list[Batch] = []
     for k in dict.fromkeys(b.shard for b in batches):
         own = [b for b in batches if b.shard == k]
@@ -576,15 +576,11 @@ def merge(
     rows = np.concatenate([b.indices for b in used]).astype(np.int64)
     tables = np.concatenate([b.tables for b in used])
     codes = np.concatenate([b.codes for b in used])
-    answer = np.concatenate([np.full(len(b.indices), b.answer) for b in used])
     if len(used) > len({b.shard for b in used}):  # a shard's later batch wins for the rows both carry
         _, first = np.unique(rows[::-1], return_index=True)
         newest = len(rows) - 1 - first
-        rows, tables, codes, answer = rows[newest], tables[newest], codes[newest], answer[newest]
+        rows, tables, codes = rows[newest], tables[newest], codes[newest]
     live = (rows < len(alive)) & alive[np.minimum(rows, len(alive) - 1)]
-    codes = codes.astype(np.int32)
-    answered = live & answer
-    split = answered.any() and not answered[live].all()
-    for part in [live & ~answer, answered] if split else [live]:  # the tick's rows, then the answers'
-        board.publish_codes(rows[part], tables[part], codes[part], tick)
-    return rows[answered]
+    if not live.all():
+        rows, tables, codes = rows[live], tables[live], codes[live]
+    return board.publish_codes(rows, tables, codes.astype(np.int32), tick)
