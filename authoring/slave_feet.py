@@ -62,6 +62,7 @@ FOOT_HOLD_TURN_CM = 40.0  # a dying slave's planted foot turns as the master's: 
 TURN_RAMP_FRAMES = 10  # ... easing out over this many frames once his foot is off the ground
 KNEE_SIGMA_FRAMES = 4.0  # ... and out as the knee comes down, smoothed over the clip (at least as far)
 START_FRAMES = 6  # ... that turn fades in over a clip's first frames (its first is a shared posture node)
+LYING_ROOT_CM = 45.0  # a dying slave whose pelvis starts lower lies (prone 14.5 cm, crawling 39; kneeling 53)
 FOOT_PASSES = 2  # the contact nodes change a little as the foot moves: measure and solve again
 
 
@@ -309,7 +310,9 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
     master_feet = {side: part_points(mq, mloc, figures, mtype, (f"{side}_foot",)) for side in SIDES}
     turns: dict[str, tuple[np.ndarray, np.ndarray] | None] = dict.fromkeys(SIDES)
     knelt = any(_knee_free(q[:1], loc[:1], figures, stype, side)[0] < 1.0 for side in SIDES)
-    dying = getattr(slave, "release_frame", None) is not None
+    # a death from a stand or a kneel; lying at the start (prone, crawl) the held foot pushed the DI's prone
+    # start to 1.13 m/s and the rifle 1.9 cm into its upper arm
+    dying = getattr(slave, "release_frame", None) is not None and float(loc[0, 1, 3]) >= LYING_ROOT_CM
     if getattr(slave, "release_frame", None) is not None and not knelt:
         # a death from a stand: rest_limbs turned the feet on the ground. Kneeling or prone at the start, the
         # slave's legs are posed otherwise than his (rest_slave_knees): turned as his, a kneeling DI's hip
