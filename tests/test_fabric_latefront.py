@@ -1,0 +1,86 @@
+"""Issue 21: a front-end that starts (or restarts) after soldiers were created through the others learns
+every one of them from the shards, as real processes on 127.0.0.1 (Zenoh).
+
+Front-ends 0/2 and 1/2 before two shards; a client creates soldiers through each and removes one of the
+start-up script's; front-end 1/2 dies and a new one starts on its endpoint. The new one asks each shard for
+its soldiers (figure, weapon, owner, table): its observers see them all, the soldiers created through the
+dead one obey their owner when it comes back through the new one, and the new one allots no index that
+is live.
+"""
+
+from __future__ import annotations
+
+import trio
+from test_fabric_cluster import WALK, _soldiers_of
+from test_fabric_fronts import START, two_fronts
+from test_server_support import Client
+
+from client_stub.link.spawn import ServerProcess
+from protocol.events import CreateSoldier, JointUpdates, Ready, RemoveSoldier, SoldierCreated, Subscribe
+
+EACH = 6
+GONE = 3  # a start-up soldier removed before the new front-end starts (its own start-up script makes it)
+
+
+async def _create(c: Client, n: int, *, walk: bool) -> list[int]:
+    for rid in range(1, n + 1):
+        await c.send(CreateSoldier(rid, "DI.fig", "AK_47.fig", None))
+    made = sorted(e.index for e in [await c.expect(SoldierCreated) for _ in range(n)])
+    if walk:
+        await c.requests(index=made, velocity=WALK)
+    return made
+
+
+async def _moving(port: int, soldiers: list[int], frames: int = 3) -> None:
+    """An observer sees each of ``soldiers`` change in ``frames`` updates (a still soldier is sent once)."""
+    obs = await Client.open(port, "obs", role="observer")
+    await obs.expect(Ready)
+    await obs.send(Subscribe(tuple(soldiers)))
+    seen = dict.fromkeys(soldiers, 0)
+    with trio.fail_after(30):  # a deadline, not a timing
+        while min(seen.values()) < frames:
+            for i in (await obs.expect(JointUpdates)).indices.tolist():
+                if i in seen:
+                    seen[i] += 1
+    await obs.aclose()
+
+
+async def test_a_restarted_front_end_learns_every_soldier_from_the_shards() -> None:
+    with two_fronts() as (fronts, shards):
+        for front in fronts:  # both shards heard (a removal sent before a shard listens is lost)
+            await _moving(front.port, list(range(2)), frames=1)
+        alpha = await Client.open(fronts[0].port, "ig", client_id="alpha")
+        await alpha.expect(Ready)
+        walkers = await _create(alpha, EACH, walk=True)
+        beta = await Client.open(fronts[1].port, "ig", client_id="beta")
+        await beta.expect(Ready)
+        still = await _create(beta, EACH, walk=False)  # through the front-end that dies
+        op = await Client.open(fronts[0].port, "op", role="operator")
+        await op.expect(Ready)
+        await op.send(RemoveSoldier(GONE))
+        await op.aclose()
+        every = sorted({*range(START), *walkers, *still} - {GONE})
+        with trio.fail_after(30):
+            while await _soldiers_of(shards[0].port) + await _soldiers_of(shards[1].port) != [
+                i for k in range(2) for i in every if i % 2 == k
+            ]:
+                await trio.sleep(0.1)
+        await beta.aclose()
+        fronts[1].proc.kill()
+        fronts[1].stop()
+        args = fronts[1].cmd[fronts[1].cmd.index("--json") + 1 :]  # the same front-end 1/2 again
+        with ServerProcess(args, command="front") as late:
+            late.wait_ready()
+            have: list[int] = []
+            with trio.move_on_after(20):  # a deadline, not a timing
+                while (have := await _soldiers_of(late.port)) != every:
+                    await trio.sleep(0.1)
+            assert have == every
+            beta = await Client.open(late.port, "ig", client_id="beta")
+            await beta.expect(Ready)
+            await beta.requests(index=still, velocity=WALK)  # its own soldiers obey it through the new one
+            more = await _create(beta, 2, walk=True)
+            assert not set(more) & set(every)  # no live index allotted again
+            await _moving(late.port, [*walkers, *still, *more])
+            await beta.aclose()
+        await alpha.aclose()
