@@ -5,17 +5,18 @@ Front-ends 0/2 and 1/2 before two shards; a client creates soldiers through each
 start-up script's; front-end 1/2 dies and a new one starts on its endpoint. The new one asks each shard for
 its soldiers (figure, weapon, owner, table): its observers see them all, the soldiers created through the
 dead one obey their owner when it comes back through the new one, and the new one allots no index that
-is live.
+is live. And a front-end serves the browser's WebSocket transport (``--ws-port``) as a server does.
 """
 
 from __future__ import annotations
 
 import trio
+from test_app_websocket import ws_client
 from test_fabric_cluster import WALK, _soldiers_of
 from test_fabric_fronts import START, two_fronts
-from test_server_support import Client
+from test_server_support import Client, synthetic_dir
 
-from client_stub.link.spawn import ServerProcess
+from client_stub.link.spawn import ServerProcess, free_port
 from protocol.events import CreateSoldier, JointUpdates, Ready, RemoveSoldier, SoldierCreated, Subscribe
 
 EACH = 6
@@ -84,3 +85,26 @@ async def test_a_restarted_front_end_learns_every_soldier_from_the_shards() -> N
             await _moving(late.port, [*walkers, *still, *more])
             await beta.aclose()
         await alpha.aclose()
+
+
+async def test_a_front_end_serves_websocket_clients() -> None:
+    d = synthetic_dir()
+    data = ["--data-dir", str(d.path), "--startup-script", d.startup_script]
+    end = f"127.0.0.1:{free_port()}"
+    with (
+        ServerProcess(
+            [*data, "--shards", "1", "--ws-port", "0", "--fabric-listen", end], command="front"
+        ) as f,
+        ServerProcess([*data, "--shard", "0/1", "--fabric-connect", end]) as shard,
+    ):
+        f.wait_ready()
+        shard.wait_ready()
+        ws = await ws_client(int(f.ready["websocket"][0].rsplit(":", 1)[1]))
+        await ws.expect(Ready)
+        (made,) = await _create(ws, 1, walk=True)  # animated by the shard, seen through the WebSocket
+        await ws.send(Subscribe((made,)))
+        seen = 0
+        with trio.fail_after(30):  # a deadline, not a timing
+            while seen < 3:  # it walks: its pose changes frame after frame
+                seen += made in (await ws.expect(JointUpdates)).indices.tolist()
+        await ws.aclose()
