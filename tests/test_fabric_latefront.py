@@ -10,6 +10,7 @@ is live. And a front-end serves the browser's WebSocket transport (``--ws-port``
 
 from __future__ import annotations
 
+import pytest
 import trio
 from test_app_websocket import ws_client
 from test_fabric_cluster import WALK, _soldiers_of
@@ -18,6 +19,9 @@ from test_server_support import Client, synthetic_dir
 
 from client_stub.link.spawn import ServerProcess, free_port
 from protocol.events import CreateSoldier, JointUpdates, Ready, RemoveSoldier, SoldierCreated, Subscribe
+from server.fabric.fronts import answer, decode_answer, reconcile
+
+pytest.importorskip("zenoh")
 
 EACH = 6
 GONE = 3  # a start-up soldier removed before the new front-end starts (its own start-up script makes it)
@@ -108,3 +112,16 @@ async def test_a_front_end_serves_websocket_clients() -> None:
             while seen < 3:  # it walks: its pose changes frame after frame
                 seen += made in (await ws.expect(JointUpdates)).indices.tolist()
         await ws.aclose()
+
+
+def test_the_books_take_the_shards_soldiers_but_not_over_what_a_front_end_knows() -> None:
+    a, b = ("DI.fig", "AK_47.fig"), ("M16.fig", "M16_rifle.fig")
+    books_here = {0: (0, *a, None), 1: (1, *a, None), 4: (4, *a, "x"), 6: (6, *b, "y"), 7: (7, *a, None)}
+    scope = {0, 4, 6, 7}  # what the answering shard animates of these (1 is another shard's)
+    told = [(0, *a, None), (2, *a, "z"), (6, *a, "y"), (8, *b, None), (1, *b, None)]
+    drop, add = reconcile(books_here, scope, told, known={7, 8})
+    # 4 gone from the shard, 6 and 1 replaced (other figures), 7 and 8 known here better than the answer
+    assert drop == [4, 6, 1] and add == [(2, *a, "z"), (6, *a, "y"), (1, *b, None)]
+    assert decode_answer(answer(1, 0, told))["soldiers"] == told
+    with pytest.raises(ValueError, match="books"):
+        decode_answer(b"\x93\x01")
