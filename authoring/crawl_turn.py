@@ -63,6 +63,15 @@ TURN_ANGLES = (30, 45, 90)  # a crawling soldier turns the nearest (another afte
 # serves a reversal; to his left, the rifle across his body, his right forearm slid 30 cm: the right elbow,
 # at its reach, could not follow the shoulders carried sideways away from it; DI 4.2 cm, M16 7.4)
 U_TURN = "crawlarc_r180"
+# ... and the shorter ones, built the same way (a 135-165° reversal: turned on the spot and then the arcs he
+# ended 108 cm from his entity at 150°; the U-turn and the rest turned crawling on, 34 cm at 165°)
+U_TURN_ANGLES = (135, 150, 165, 180)
+# ... and a U-turn for a faster entity, carrying him further as fast: more, shorter moves, each as quick in
+# degrees a second (143.5 cm in 4.2 s at the server's GROUND_TURN_RATE; 0.45 m/s: the U-turn's 103.5 cm in
+# 4 s left him 48 cm behind, played faster his body would swing over 360°/s; 25-30 cm a move, his arms fell
+# 9-13 cm short; moves at 0.7 of MOVE swung his body at 365°/s)
+U_TURN_FAR = "crawlarc_r180_far"
+U_TURN_FAR_STEP, U_TURN_FAR_TEMPO = 22.5, 0.75  # degrees a move at most, share of MOVE it takes
 STEP = 30.0  # degrees a part turns at most in one move (elbows and knees ~25 cm, the toes ~48 cm)
 MOVE = {"front": 0.4, "back": 0.46}  # s a part takes to move (the crawl's limbs: 0.36 s for 26 cm)
 ELBOW_LIFT = 3.0  # cm the forearms (and the rifle) rise while the front moves
@@ -89,10 +98,17 @@ def clip_name(direction: str, angle: float, advance: float = 0.0) -> str:
     return f"crawl{'arc' if advance else 'turn'}_{direction[0]}{angle:g}"
 
 
-_PLANS = {
-    clip_name(d, a, adv): (d, float(a), adv) for adv in (0.0, ARC_ADVANCE) for d in SIDES for a in TURN_ANGLES
+# clip -> (direction, degrees, advance cm a move, degrees a move at most, share of MOVE a move takes)
+_PLANS: dict[str, tuple[str, float, float, float, float]] = {
+    clip_name(d, a, adv): (d, float(a), adv, STEP, 1.0)
+    for adv in (0.0, ARC_ADVANCE)
+    for d in SIDES
+    for a in TURN_ANGLES
 }
-_PLANS[U_TURN] = ("right", 180.0, ARC_ADVANCE)
+_PLANS.update(
+    {clip_name("right", a, ARC_ADVANCE): ("right", float(a), ARC_ADVANCE, STEP, 1.0) for a in U_TURN_ANGLES}
+)
+_PLANS[U_TURN_FAR] = ("right", 180.0, ARC_ADVANCE, U_TURN_FAR_STEP, U_TURN_FAR_TEMPO)
 CRAWL_TURN_CLIPS: tuple[str, ...] = tuple(_PLANS)
 
 
@@ -101,19 +117,22 @@ def crawl_turn_arcs() -> list[tuple[str, str, str, bool]]:
     return [(BASE, BASE, name, True) for name in CRAWL_TURN_CLIPS]
 
 
-def part_moves(direction: str, angle: float) -> tuple[dict[str, list[tuple[float, float, float]]], float]:
+def part_moves(
+    direction: str, angle: float, step: float = STEP, tempo: float = 1.0
+) -> tuple[dict[str, list[tuple[float, float, float]]], float]:
     """Per part (``"front"``: the forearms and the rifle, ``"back"``: the knees and toes) its moves (start
-    s, yaw from, yaw to; degrees, + = left) and the time the last one lands: the front turns a step of at
-    most ``STEP`` degrees, then the back catches up, and again, until the turn is done."""
+    s, yaw from, yaw to; degrees, + = left) and the time the last one lands: the front turns a ``step`` of at
+    most ``STEP`` degrees, then the back catches up, and again, until the turn is done; each move takes
+    ``tempo`` times its MOVE."""
     sign = 1.0 if direction == "left" else -1.0
-    steps = math.ceil(angle / STEP - 1e-9)
+    steps = math.ceil(angle / step - 1e-9)
     moves: dict[str, list[tuple[float, float, float]]] = {"front": [], "back": []}
     t = LEAD_IN
     for k in range(steps):
         a, b = sign * angle * k / steps, sign * angle * (k + 1) / steps
         for part in ("front", "back"):
             moves[part].append((t, a, b))
-            t += MOVE[part] + GAP
+            t += MOVE[part] * tempo + GAP
     return moves, t - GAP
 
 
@@ -183,10 +202,12 @@ def record_crawl_turn(
     direction: str,
     angle: float,
     advance: float = 0.0,
+    step: float = STEP,
+    tempo: float = 1.0,
 ) -> tuple[ClipFrames, tuple[float, float, float]]:
     """The frames of one turn (see the module docstring), each move carrying its part ``advance`` cm
-    forward, and its ``end_offset``."""
-    moves, t_land = part_moves(direction, angle)
+    forward (its moves of ``step`` degrees at most, at ``tempo`` times MOVE), and its ``end_offset``."""
+    moves, t_land = part_moves(direction, angle, step, tempo)
     t_end = round((t_land + SETTLE) * FPS) / FPS
     n = round(t_end * FPS) + 1
     t = np.arange(n) / FPS
@@ -195,7 +216,7 @@ def record_crawl_turn(
     yaw = (1.0 if direction == "left" else -1.0) * angle
     along = yaw if angle > max(TURN_ANGLES) else None  # a U-turn: every move along the end heading
     (front, f_up, f_on), (back, b_up, b_on) = (
-        part_yaw(t, moves[p], MOVE[p], advance, along) for p in ("front", "back")
+        part_yaw(t, moves[p], MOVE[p] * tempo, advance, along) for p in ("front", "back")
     )
 
     def mix(share: float) -> np.ndarray:  # the body between the parts: ``share`` of the front's turn

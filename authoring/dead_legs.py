@@ -15,6 +15,14 @@ sites, the foot's and kneecap's lowest nodes, as :mod:`authoring.quality_rest` s
 into the ground. The lift and lead that lay the heel lowest are kept; a leg none of them lays lower than
 the limp settle of :func:`authoring.dead_settle.limp_leg` keeps that.
 
+A leg laid **while the body is still landing** (:func:`authoring.dead_settle._legs_land`: from the frame
+the trunk is down within 3 cm, before the check's rest frame, when the pelvis, chest and head are down
+within 1 cm) may rise before that rest frame (``free``, the settle's progress then): it also tries
+:data:`LANDING_LIFTS`, its rise judged from then on, and of the shapes that lay the heel about as low
+(:data:`HEEL_TIE_CM`) the one sliding least. stfire2dead's rifle thrown clear of him left his toes dug in,
+heels 21-24 cm up, that no lift of 2 degrees or less laid lower (branch stfire14-wip): a leg flopping over
+as he lands, lifted 6 degrees, lays them 11.3 cm up.
+
 soldier.fig's limits leave the heels 12.4-15.7 cm up (hip turned out 45 deg, foot everted 30 deg, ankle
 pointed 50 deg, the knee bent so the foot rests on its inner edge), but reaching that needs the foot lifted
 5-15 cm (heels14); rolled out within 2-3 cm they come to 15-19 cm (ststow2dead).
@@ -47,6 +55,13 @@ STARTS = 6  # the grid's best shapes a pattern search starts from (the hip turne
 # degrees of hip extension that lift the leg clear, each tried (its own target search) for the lowest heel:
 # 2 lifts the foot ~3 cm
 LIFTS = (0.0, 0.5, 1.0, 1.5, 2.0)
+# degrees: also tried for a leg laid while the body is still landing (dead_settle._legs_land), lifted and
+# turned before the trunk is down (the check's rest_rise_cm judges from then on)
+LANDING_LIFTS = (4.0, 6.0)
+# cm: of the shapes laid while he lands that lay the heel this near the lowest, the one whose nodes slide
+# least (the check judges a thigh's whole run on the ground, the fall's own slide under the settle with it:
+# stfire2dead's left thigh 3.16 cm with the first of them, 2.66 with the least sliding)
+HEEL_TIE_CM = 0.5
 RISE_CM = 2.1  # cm: the most a resting leg point (authoring.quality_rest) may rise above its lowest so far
 # cm: the settle's path (checked finer) stays this far under the check's rest_rise limit: the fall's last
 # bounce may have laid a point up to ~0.8 cm lower than where the physics leaves it (ststow2dead)
@@ -109,11 +124,15 @@ def _shapes_cost(leg: ds._Leg, rest: _Rest) -> Callable[[np.ndarray], np.ndarray
     return cost
 
 
-def _path_cost(leg: ds._Leg, rest: _Rest, lift: float, lead: float) -> Callable[[np.ndarray], np.ndarray]:
+def _path_cost(
+    leg: ds._Leg, rest: _Rest, lift: float, lead: float, free: float = 0.0
+) -> Callable[[np.ndarray], np.ndarray]:
     """As :func:`_shapes_cost` for the target shapes ``x``, judged over the whole path (:func:`leg_path`
     with ``lift``, at :data:`SEARCH_STEPS`): no resting point rises more than :data:`RISE_CM` above its
-    lowest so far, no node on the ground slides more than :data:`LEG_SLIDE_CM`, none goes into the ground."""
+    lowest so far from progress ``free`` on (before it the body is still landing), no node on the ground
+    slides more than :data:`LEG_SLIDE_CM`, none goes into the ground."""
     t = np.arange(1, SEARCH_STEPS + 1) / SEARCH_STEPS
+    judged = np.concatenate([[0.0], t]) >= free
     pts0, y0 = rest.shape(leg.x0[None])
 
     def cost(x: np.ndarray) -> np.ndarray:
@@ -126,17 +145,21 @@ def _path_cost(leg: ds._Leg, rest: _Rest, lift: float, lead: float) -> Callable[
         wrong = np.maximum(0.0, leg.floor - at[..., 1].min(axis=(0, 2)))
         slid = [contact_runs(at[:, i], CONTACT_HEIGHT_CM).slide.max(initial=0.0) for i in range(m)]
         wrong += np.maximum(0.0, np.array(slid) - LEG_SLIDE_CM)
-        wrong += np.maximum(0.0, (ys - np.minimum.accumulate(ys, axis=1)).max(axis=(1, 2)) - RISE_CM)
+        after = ys[:, judged]
+        wrong += np.maximum(0.0, (after - np.minimum.accumulate(after, axis=1)).max(axis=(1, 2)) - RISE_CM)
         high = np.maximum(ys[:, -1, 0], at[-1][:, leg.foot, 1].min(axis=1))
         return high + ds.PENALTY * wrong + ds.MOVE_COST * np.degrees(np.abs(x - leg.x0)).sum(axis=1)
 
     return cost
 
 
-def turned_leg(leg: ds._Leg, lift: float, lead: float = HIP_LEAD, rest: _Rest | None = None) -> np.ndarray:
+def turned_leg(
+    leg: ds._Leg, lift: float, lead: float = HIP_LEAD, rest: _Rest | None = None, free: float = 0.0
+) -> np.ndarray:
     """The leg's angles that lay its heel lowest (the check's ``rest_foot_cm``), into no ground, reached on
-    :func:`leg_path` with ``lift`` no resting point rising more than :data:`RISE_CM` and nothing on the
-    ground sliding: the best of :data:`LEG_GRID` where it lies, then a pattern search over the path."""
+    :func:`leg_path` with ``lift`` no resting point rising more than :data:`RISE_CM` (from progress ``free``
+    on) and nothing on the ground sliding: the best of :data:`LEG_GRID` where it lies, then a pattern search
+    over the path."""
     rest = rest or _Rest(leg)
     grid = np.array(list(itertools.product(*LEG_GRID)), dtype=np.float64)
     grid = np.where(np.isnan(grid), leg.x0, np.radians(grid))
@@ -147,7 +170,7 @@ def turned_leg(leg: ds._Leg, lift: float, lead: float = HIP_LEAD, rest: _Rest | 
         ds.pattern_search(leg, end_cost, x[None])
         for x in grid[np.argsort(end_cost(grid), kind="stable")[:STARTS]]
     ]
-    cost = _path_cost(leg, rest, lift, lead)
+    cost = _path_cost(leg, rest, lift, lead, free)
     shapes = np.array([ds.pattern_search(leg, cost, x[None]) for x in starts])
     return shapes[int(np.argmin(cost(shapes)))]
 
@@ -210,37 +233,48 @@ class LegSettle:
         return leg_path(self.leg, self.target, t, self.lift, self.lead)
 
 
-def path_rise(rest: _Rest, path: np.ndarray) -> tuple[float, float]:
-    """Over ``path`` (from the leg's pose where it lies): the most (cm) a resting point rises above its lowest
-    so far, and the check's ``rest_foot_cm`` of the leg at the end."""
+def path_rise(rest: _Rest, path: np.ndarray, skip: int = 0) -> tuple[float, float]:
+    """Over ``path`` (from the leg's pose where it lies; its first ``skip`` steps, the body still landing,
+    not judged): the most (cm) a resting point rises above its lowest so far, and the check's
+    ``rest_foot_cm`` of the leg at the end."""
     pts, ys = rest.shape(np.vstack([rest.leg.x0[None], path]))
-    rise = float((ys - np.minimum.accumulate(ys, axis=0)).max())
+    after = ys[skip:]
+    rise = float((after - np.minimum.accumulate(after, axis=0)).max())
     return rise, max(float(ys[-1, 0]), float(pts[-1, rest.leg.foot, 1].min()))
 
 
-def leg_settle(body: ds._Body, side: str) -> LegSettle:
+def leg_settle(body: ds._Body, side: str, free: float = 0.0) -> LegSettle:
     """The ``side`` leg turned (:func:`turned_leg`) with whichever of :data:`LIFTS` lays its heel lowest,
-    no resting point rising more than :data:`RISE_CM`, no node on the ground sliding more than
-    :data:`LEG_SLIDE_CM`, into no ground; else (or if it lays the heel lower) the limp settle
-    (:func:`authoring.dead_settle.limp_leg`)."""
+    no resting point rising more than :data:`RISE_CM` (from progress ``free`` on: before it the body is
+    still landing, and a leg lifted while he lands also tries :data:`LANDING_LIFTS`), no node on the ground
+    sliding more than :data:`LEG_SLIDE_CM`, into no ground; else (or if it lays the heel lower) the limp
+    settle (:func:`authoring.dead_settle.limp_leg`)."""
     leg = ds._Leg(body, side)
     rest = _Rest(leg)
     t = np.arange(1, PATH_STEPS + 1) / PATH_STEPS
+    skip = int(np.searchsorted(np.concatenate([[0.0], t]), free))
     limp = ds.limp_leg(body, side)
     best = LegSettle(leg, limp, None)
     best_heel = path_rise(rest, limp[None])[1]
-    for lift, lead in itertools.product(LIFTS, LEADS):
-        target = turned_leg(leg, lift, lead, rest)
+    landing = free >= LIFT_SPAN
+    found: list[tuple[float, float, LegSettle]] = []
+    for lift, lead in itertools.product(LIFTS + (LANDING_LIFTS if landing else ()), LEADS):
+        target = turned_leg(leg, lift, lead, rest, free)
         path = leg_path(leg, target, t, lift, lead)
         slide, deep, up = path_faults(leg, path)
-        rise, heel = path_rise(rest, path)
+        rise, heel = path_rise(rest, path, skip)
         ok = slide <= LEG_SLIDE_CM and deep <= 0.0 and up <= THRESHOLDS["feet_up_cm"] - FEET_UP_MARGIN
         if ok and rise <= RISE_LIMIT_CM - RISE_MARGIN and heel < best_heel:
-            best, best_heel = LegSettle(leg, target, lift, lead), heel
-    return best
+            found.append((heel, slide, LegSettle(leg, target, lift, lead)))
+    if not found:
+        return best
+    if not landing:  # the first of the lowest
+        return min(found, key=lambda f: f[0])[2]
+    low = min(h for h, _, _ in found) + HEEL_TIE_CM
+    return min(((s, i, x) for i, (h, s, x) in enumerate(found) if h <= low), key=lambda f: f[:2])[2]
 
 
-def legs_path(body: ds._Body, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+def legs_path(body: ds._Body, t: np.ndarray, u: np.ndarray, free: float = 0.0) -> np.ndarray:
     """Both legs' angles (:func:`authoring.dead_settle._leg_dofs` order) at ``t`` of the settle (a limp
-    leg at progress ``u``)."""
-    return np.hstack([leg_settle(body, side).path(t, u) for side in ("left", "right")])
+    leg at progress ``u``), a rise before progress ``free`` not judged (:func:`leg_settle`)."""
+    return np.hstack([leg_settle(body, side, free).path(t, u) for side in ("left", "right")])

@@ -54,13 +54,15 @@ from authoring import dead_arms
 from authoring.body_parts import SegmentHulls
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
-from authoring.quality_rest import NEAR_CM, TORSO_PARTS, rest_frame
+from authoring.quality_rest import DOWN_CM, NEAR_CM, TORSO_PARTS, rest_frame
 from authoring.transitions import ClipFrames
 from peabody.model import Figure
 
 SETTLE_SECONDS = 0.8  # s, eased: the body goes limp after the physics has settled
 STILL_SECONDS = 0.1  # s: then lies still (the clip ends at rest)
 LEGS_LAND_SECONDS = 0.4  # s: the legs are laid as the body lands (a limp leg flopping: 0.3-0.4 s, as an arm)
+LANDED_MARGIN = 2  # frames: a leg laid as he lands may rise until this long before the trunk is down (the
+# check's rest_rise_cm from its rest frame: the pins after the settle may move the head a little)
 FACE_DOWN = 0.5  # cosine: the pelvis' front points down at least this much
 HEAD_CLEARANCE = 0.3  # cm: the head's lowest node stops this far above the ground
 SLIDE_CM = 2.0  # cm: a node on the ground before and after may move this far (the check: feet 2, others 3)
@@ -288,12 +290,13 @@ def _leg_dofs(kin) -> np.ndarray:
     return _dofs(kin, tuple(f"{side}_{j}" for side in ("left", "right") for j in LEG_DOFS))
 
 
-def _legs_path(body: _Body, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+def _legs_path(body: _Body, t: np.ndarray, u: np.ndarray, free: float = 0.0) -> np.ndarray:
     """Both legs' angles (:func:`_leg_dofs` order) at ``t`` of the settle, turned out and laid down
-    (:mod:`authoring.dead_legs`; a leg that cannot be lifted clear goes limp at progress ``u``)."""
+    (:mod:`authoring.dead_legs`; a leg that cannot be lifted clear goes limp at progress ``u``; a leg point
+    may rise before ``free``, the body still landing)."""
     from authoring import dead_legs
 
-    return dead_legs.legs_path(body, t, u)
+    return dead_legs.legs_path(body, t, u, free)
 
 
 def _face_up(kin, q: np.ndarray, root: np.ndarray) -> bool:
@@ -455,14 +458,18 @@ def _legs_land(figs: FigureSet, frames: ClipFrames, k0: int, end: int) -> ClipFr
     """The legs of a face-down body lifted, turned out and laid down (:func:`_legs_path`, found on the
     physics' last frame ``end``) as it lands: from the frame it is down (``k0``, :func:`down_frame`) in
     :data:`LEGS_LAND_SECONDS`, the physics' own leg motion kept under it (appended after the physics, the
-    feet moved 1.2 s after the trunk lay still: stfire2dead's ``limb_rest_lag_s`` 1.18)."""
+    feet moved 1.2 s after the trunk lay still: stfire2dead's ``limb_rest_lag_s`` 1.18). Until
+    :data:`LANDED_MARGIN` frames before the check's rest frame (the pelvis, chest and head down within
+    :data:`~authoring.quality_rest.DOWN_CM`) a leg may rise (:func:`authoring.dead_legs.leg_settle`'s
+    ``free``)."""
     last = frames.poses[end]
     body = _Body(figs, last, frames.roots[end], frames.rifles[end])
     leg_dofs = _leg_dofs(body.kin)
     n = round(LEGS_LAND_SECONDS * frames.fps)
     k0 = min(k0, len(frames.poses) - 1 - n)  # laid by the end of the clip
     s = np.arange(1, n + 1) / n
-    path = _legs_path(body, s, s * s * (3.0 - 2.0 * s))
+    landed = _rest_frame(figs, frames, DOWN_CM) - LANDED_MARGIN  # the check's rest_rise_cm judges from then
+    path = _legs_path(body, s, s * s * (3.0 - 2.0 * s), min(1.0, max(0.0, (landed - k0) / n)))
     k = len(frames.poses) - k0 - 1
     shift = np.vstack([path, np.repeat(path[-1:], max(0, k - n), axis=0)])[:k] - last[leg_dofs]
     poses = frames.poses.copy()
@@ -474,12 +481,18 @@ def down_frame(figs: FigureSet, frames: ClipFrames) -> int:
     """The first frame from which the body is down, as the check sees it (``limb_rest_lag_s``: the pelvis,
     chest or belly and head within :data:`authoring.quality_rest.NEAR_CM` of where they finally lie); the
     last frame if it never is."""
+    return _rest_frame(figs, frames, NEAR_CM)
+
+
+def _rest_frame(figs: FigureSet, frames: ClipFrames, near: float) -> int:
+    """The first frame from which the pelvis, chest or belly and head stay within ``near`` (cm) of where
+    they finally lie (:func:`authoring.quality_rest.rest_frame`); the last frame if they never do."""
     kin = figs.kin["body"]
     nodes, segs = figs.nodes("body")
     parts = figs.node_parts("body")
     y = np.einsum("nkj,kj->nk", kin.segment_globals(frames.poses, frames.roots)[:, segs, 1, :], nodes)
     heights = {p: y[:, parts == p].min(axis=1) for p in TORSO_PARTS if (parts == p).any()}
-    k = rest_frame(heights, NEAR_CM)
+    k = rest_frame(heights, near)
     return len(frames.poses) - 1 if k is None else k
 
 

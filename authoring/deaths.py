@@ -231,6 +231,11 @@ STFIRE_LEGS_ROLL = 0.8
 # 5.8 cm along the ground (the slave's own start ease, authoring.slaving START_EASE_FRAMES; the master
 # moving, that forearm was lifted off the ground by then)
 PRONE_START_EASE = 0.1
+# stfire2dead's rifle is flung to his right, a little down and back (pelvis frame): to his left, away from the
+# fall (the default), he turned onto it and lay with his pelvis on it, 4.8 cm up; to his right it lies flat
+# 32 cm clear of him and the trunk rests 1.7 cm up (right and down (1, -0.7, 0): his thighs skid 5.7 cm as
+# he lands; back, or left and back, it ends under him again; at 100 N it rests tilted 38 cm up against him)
+STFIRE_TOSS = (1.0, -0.5, 0.2)
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "ststow2dead",
@@ -255,6 +260,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         arm_tone=0.08,
         pinned=True,
         legs_roll=STFIRE_LEGS_ROLL,
+        toss_to=STFIRE_TOSS,
     ),
     DeathSpec(
         "kstow2dead",

@@ -14,7 +14,9 @@ there, its orientation kept loosely (heel-toe rolling is kept: a node the foot r
 tracked frame after frame in small steps. A node that touches down stays there; between stances the offset
 eases back to none, and it is none at a clip's first and last frames (every clip meeting at a posture node
 agrees there). A leg whose knee or thigh is on the ground is left as slaved (holding its foot too slid the
-knee). Where the master's foot is near the
+knee), except in a death on the foot he falls onto and lies on to the end (:func:`_last_rest`): kstow2dead's
+DI, its left knee down, slid that foot 3.0 cm under his at rest while its trunk was lowered onto the
+ground (1.1 cm held, its knee 1.4 -> 0.6). Where the master's foot is near the
 ground but not on it, the slave's is kept at least as high (:func:`lift_to_master`), so it does not touch
 down where the master's does not. Stances whose offset stays under ``MIN_PLANT_CM`` are left alone (the
 foot slides less than that), and so are locomotion clips (recorded in place: a planted foot there moves
@@ -42,7 +44,6 @@ from authoring.rifle_swap import _smooth_above
 from authoring.slave_contacts import SIDES, _played
 from authoring.transitions import track_solve
 from peabody import quaternion
-from peabody.fk import FigureKinematics
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
@@ -166,6 +167,22 @@ def _stance_weight(stance: np.ndarray) -> np.ndarray:
     return np.minimum(w * w * (3.0 - 2.0 * w), u * u * (3.0 - 2.0 * u))
 
 
+def _last_rest(stance: np.ndarray) -> np.ndarray:
+    """Per frame 1 over the master's last stance if it lasts to the clip's end and starts after its first
+    frame (the foot he dies lying on), easing in (smoothstep) from the end of the stance before it."""
+    n = len(stance)
+    runs = _runs(stance)
+    out = np.zeros(n)
+    if not runs or runs[-1][1] != n - 1 or runs[-1][0] == 0:
+        return out
+    a = runs[-1][0]
+    lo = runs[-2][1] if len(runs) > 1 else 0
+    out[a:] = 1.0
+    u = (np.arange(lo + 1, a) - lo) / max(a - lo, 1)
+    out[lo + 1 : a] = u * u * (3.0 - 2.0 * u)
+    return out
+
+
 def _anchored(master: np.ndarray, slave: np.ndarray, stance: np.ndarray) -> np.ndarray:
     """Per frame the orientation ``(n, 3, 3)`` a slave segment should have to turn as the master's does
     (``master``, ``slave``: ``(n, 4, 4)`` globals): its turn relative to his is taken once, at the
@@ -206,7 +223,6 @@ def _ground_to_master(
 
 
 def _leg_goal(
-    kin: FigureKinematics,
     pose: np.ndarray,
     loc: np.ndarray,
     figures: FigureSet,
@@ -214,6 +230,7 @@ def _leg_goal(
     master_foot: np.ndarray,
     side: str,
     master_turn: tuple[np.ndarray, np.ndarray] | None = None,
+    dying: bool = False,
 ) -> tuple[list[ik.Goal], np.ndarray]:
     """One leg's goals (the foot moved by its planting offset and lift, its orientation kept) and the move
     per frame. A knee or thigh on the ground carries the leg too: the move fades out as it comes down
@@ -223,7 +240,9 @@ def _leg_goal(
     foot and toes are also turned as the master's while his foot is planted, raised where it sinks below:
     :func:`~authoring.slave_ground.rest_limbs` had turned a DI foot rolling onto its side 11 degrees further
     than his and bent its toes, and kept loosely that turn slid it 3 cm (ststow2dead). Its own nodes then
-    roll without slipping (:func:`plant_offsets`)."""
+    roll without slipping (:func:`plant_offsets`). ``dying``: a death, whose foot he lies on is held even
+    with the knee down (:func:`_last_rest`)."""
+    kin = figures.kin[ptype]
     sites = kin.site_globals(pose, loc)
     foot_pts = part_points(pose, loc, figures, ptype, (f"{side}_foot",))
     master_low = master_foot[..., 1].min(axis=1)
@@ -235,7 +254,7 @@ def _leg_goal(
     if master_turn is None:
         move = plant_offsets(foot_pts, stance)
         move[:, 1] = lift_to_master(foot_pts[..., 1].min(axis=1), master_low)
-        move *= u[:, None]
+        move *= (np.maximum(u, _last_rest(stance)) if dying else u)[:, None]
     else:
         # a knee coming down fast let the toes go in 3 frames (40 degrees in one): eased over more
         u = 1.0 - _smooth_above(1.0 - u, KNEE_SIGMA_FRAMES)
@@ -290,6 +309,7 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
     master_feet = {side: part_points(mq, mloc, figures, mtype, (f"{side}_foot",)) for side in SIDES}
     turns: dict[str, tuple[np.ndarray, np.ndarray] | None] = dict.fromkeys(SIDES)
     knelt = any(_knee_free(q[:1], loc[:1], figures, stype, side)[0] < 1.0 for side in SIDES)
+    dying = getattr(slave, "release_frame", None) is not None
     if getattr(slave, "release_frame", None) is not None and not knelt:
         # a death from a stand: rest_limbs turned the feet on the ground. Kneeling or prone at the start, the
         # slave's legs are posed otherwise than his (rest_slave_knees): turned as his, a kneeling DI's hip
@@ -308,7 +328,9 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
         goals: list[ik.Goal] = []
         worst = np.zeros(len(q))
         for side in SIDES:
-            leg_goals, moved = _leg_goal(kin, pose, loc, figures, stype, master_feet[side], side, turns[side])
+            leg_goals, moved = _leg_goal(
+                pose, loc, figures, stype, master_feet[side], side, turns[side], dying
+            )
             goals += leg_goals
             worst = np.maximum(worst, moved)
         if not (worst > MIN_SHIFT_CM).any():

@@ -26,6 +26,8 @@ import contextlib
 import json
 import math
 import os
+import random
+import socket
 import subprocess
 import sys
 import tempfile
@@ -38,12 +40,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from client_stub.link.spawn import ServerProcess, cpu_seconds, free_port
+from client_stub.link.spawn import ServerProcess, SpawnError, cpu_seconds, free_port
 from server.config import MAX_SOLDIERS_LIMIT
 
 HEADROOM = (
     512  # indices beyond the load's: the start-up script's soldiers and the front-ends' shares' rounding
 )
+PORT_TRIES = 3  # cluster starts when a front-end's fabric port was taken meanwhile
 
 
 def main() -> int:
@@ -153,32 +156,67 @@ def _report(tmp: Path, j: int) -> dict[str, Any]:
 
 @contextlib.contextmanager
 def cluster(flags: list[str], shards: int, fronts: int) -> Iterator[dict[str, ServerProcess]]:
-    """``fronts`` front-ends (each connects to those before it) and ``shards`` shards connected to all."""
-    ends = [f"127.0.0.1:{free_port()}" for _ in range(fronts)]
-    procs: dict[str, ServerProcess] = {}
+    """``fronts`` front-ends (each connects to those before it) and ``shards`` shards connected to all.
+    A front-end whose fabric port was taken meanwhile (the port is picked free, then released, and another
+    process's connection may get it: "Address already in use") is started again on a new port, all of
+    them with it (the later ones and the shards connect to it)."""
+    for attempt in range(PORT_TRIES):
+        procs: dict[str, ServerProcess] = {}
+        try:
+            _start(procs, flags, shards, [f"127.0.0.1:{fabric_port()}" for _ in range(fronts)])
+        except SpawnError as exc:
+            for p in procs.values():
+                p.stop()
+            if "Address already in use" not in str(exc) or attempt + 1 == PORT_TRIES:
+                raise
+            print(f"a fabric port was taken meanwhile: starting again ({exc!s:.200})", file=sys.stderr)
+            continue
+        try:
+            yield procs
+        finally:
+            for p in procs.values():
+                p.stop()
+        return
+
+
+def _start(procs: dict[str, ServerProcess], flags: list[str], shards: int, ends: list[str]) -> None:
+    for k, end in enumerate(ends):
+        joins = [a for e in ends[:k] for a in ("--fabric-connect", e)]
+        args = [
+            *flags,
+            "--shards",
+            str(shards),
+            "--front",
+            f"{k}/{len(ends)}",
+            "--fabric-listen",
+            end,
+            *joins,
+        ]
+        procs[f"front{k}"] = ServerProcess(args, command="front", timeout=300.0)
+    joins = [a for e in ends for a in ("--fabric-connect", e)]
+    for k in range(shards):
+        procs[f"shard{k}"] = ServerProcess([*flags, "--shard", f"{k}/{shards}", *joins], timeout=300.0)
+    for p in procs.values():
+        p.wait_ready()
+
+
+def fabric_port() -> int:
+    """A free port below the kernel's range of ephemeral ports where it can tell (outgoing connections of
+    the servers then never take it between its pick and the front-end's listen), else any free port."""
     try:
-        for k, end in enumerate(ends):
-            joins = [a for e in ends[:k] for a in ("--fabric-connect", e)]
-            args = [
-                *flags,
-                "--shards",
-                str(shards),
-                "--front",
-                f"{k}/{fronts}",
-                "--fabric-listen",
-                end,
-                *joins,
-            ]
-            procs[f"front{k}"] = ServerProcess(args, command="front", timeout=300.0)
-        joins = [a for e in ends for a in ("--fabric-connect", e)]
-        for k in range(shards):
-            procs[f"shard{k}"] = ServerProcess([*flags, "--shard", f"{k}/{shards}", *joins], timeout=300.0)
-        for p in procs.values():
-            p.wait_ready()
-        yield procs
-    finally:
-        for p in procs.values():
-            p.stop()
+        low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return free_port()
+    rng = random.Random()
+    for _ in range(100):
+        port = rng.randrange(max(1024, low // 2), low)
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    return free_port()
 
 
 def generators(

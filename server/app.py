@@ -380,6 +380,8 @@ class TtesServer:
                 n.cancel_scope.cancel()
         finally:
             self.sessions.pop(session.id, None)
+            if self.board_ref.on_watch is not None:  # a front-end: what it watched may be watched no more
+                self.board_ref.on_watch(None)
             self._left(session)
             with trio.CancelScope(shield=True):
                 await trio.aclose_forcefully(stream)

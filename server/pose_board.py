@@ -8,6 +8,7 @@ stalled client never holds more than one batch.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -229,5 +230,8 @@ class BoardRef:
 
     def __init__(self) -> None:
         self.board: PoseBoard | None = None
+        # a front-end's: told what a client subscribes to (None: a client unsubscribed or left), so that the
+        # soldiers no client watched are brought onto the board before its writer encodes them
+        self.on_watch: Callable[[np.ndarray | None], None] | None = None
         # TTES_SHARED_ENCODES=0: every client encodes on its own (the A/B switch of bench/bench_fanout.py)
         self.encodes = None if os.environ.get("TTES_SHARED_ENCODES") == "0" else SharedEncodes()

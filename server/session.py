@@ -423,8 +423,8 @@ class Session:
             idx = np.asarray(ev.indices, np.int64) if ev.indices else self.conn.subscribed
             self.force[idx] = True
             self.notify()
-        elif isinstance(ev, Unsubscribe):
-            pass  # the connection forgets them; subscribing again starts with a full update
+        elif isinstance(ev, Unsubscribe):  # the connection forgets them; subscribing again: a full update
+            self._watch(None)
         elif isinstance(ev, EntityRequests):
             self._requests(ev)
         elif isinstance(ev, React):
@@ -581,7 +581,12 @@ class Session:
                 )
             )
         self.force[indices] = True
+        self._watch(indices)  # a front-end: their current poses onto its board first
         self.notify()
+
+    def _watch(self, indices: np.ndarray | None) -> None:
+        if self.board_ref.on_watch is not None:
+            self.board_ref.on_watch(indices)
 
     def _jcl(self, ev: Jcl) -> None:
         if self.offload_jcl:  # the reader runs it off the tick (TtesServer.run_jcl) before reading on

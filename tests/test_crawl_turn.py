@@ -17,8 +17,9 @@ SUFFIXES = {"": "soldier.fig", "_low": "DI.fig", "_m16_low": "DI.fig"}
 SLIDE_CM = {"": 0.5, "_low": 3.0, "_m16_low": 3.0}  # the recorded soldier; its slaves: the check's limit
 # ... the recorded soldier's turns carried forward: the hips, carried 10 cm over the planted knees while the
 # front moves, pull them 0.8-1.4 cm (halfway between the parts; with the knees' share, 0.25, the trunk
-# stretched and the forearms slid 3 cm)
-ARC_SLIDE_CM = 1.5
+# stretched and the forearms slid 3 cm); the 135° and 150° U-turns' left knee 1.78 and 1.57 cm as he comes
+# round (the check's contact_slide 1.57 and 1.50 of 3)
+ARC_SLIDE_CM = 1.8
 SITES = [f"{s}_{p}" for s in ("left", "right") for p in ("upper_arm.distal", "lower_leg.knee", "toes.distal")]
 DOWN_CM = 1.0  # a contact this near its lowest height touches the ground
 

@@ -75,3 +75,17 @@ def test_a_body_on_his_toes_rolls_his_legs_out_without_lifting_them(figs: Figure
     assert np.degrees(np.abs(np.diff(path, axis=0))).max() <= 20.0
     rise, _ = dead_legs.path_rise(dead_legs._Rest(leg), path)
     assert rise <= RISE_LIMIT_CM - dead_legs.RISE_MARGIN  # 2.2 cm: the foot rolls onto its side
+
+
+def test_a_rise_before_the_body_is_down_is_not_judged(figs: FigureSet) -> None:
+    """A leg laid while the body is still landing (dead_settle._legs_land) may lift before the check's rest
+    frame: path_rise judges the path from step ``skip`` on. The leg lifted 6 degrees and put back down rises
+    over the first LIFT_SPAN of the way and only comes down after it."""
+    leg = dead_settle._Leg(_on_his_toes(figs), "left")
+    rest = dead_legs._Rest(leg)
+    t = np.arange(1, 49) / 48.0
+    path = dead_legs.leg_path(leg, leg.x0, t, 6.0)
+    rise, heel = dead_legs.path_rise(rest, path)
+    assert rise > RISE_LIMIT_CM  # lifted 6 degrees of hip extension: the foot rises ~9 cm
+    skip = int(np.searchsorted(np.concatenate([[0.0], t]), dead_legs.LIFT_SPAN))
+    assert dead_legs.path_rise(rest, path, skip) == (pytest.approx(0.0, abs=0.05), heel)  # from the top

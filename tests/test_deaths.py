@@ -127,16 +127,11 @@ def test_a_prone_death_lays_the_head_down(ctx: BuildContext, name: str) -> None:
     assert lows["head"] <= 10.0  # the check's rest_head_cm (18.6-19.0 cm before the chest came down)
 
 
-@pytest.mark.xfail(
-    reason="issue 14: stfire2dead's pelvis rests on its rifle (branches restc14-wip, stfire14-wip)",
-    strict=False,
-)
 def test_a_standing_death_does_not_lie_on_his_rifle(ctx: BuildContext) -> None:
-    """Issue 14: stfire2dead's rifle, tossed to his left, ends under his belly and pelvis (4.6 cm thick), his
+    """Issue 14: stfire2dead's rifle, tossed to his left, ended under his belly and pelvis (4.6 cm thick), his
     pelvis propped 4.8 cm up on it (DEAD@stfire rest_contact_cm 4.78). Tossed to his right, a little down and
-    back (toss_to (1, -0.5, 0.2), branch stfire14-wip) it lies flat 32 cm clear and the trunk rests 1.7 cm up,
-    but his feet stay on their toes, heels 22.4 cm up (15.1 tossed left): no leg settle lays them lower
-    without lifting a leg 2-3 cm after he is down (stfire14)."""
+    back (deaths.STFIRE_TOSS) it lies flat 32 cm clear and the trunk rests 1.7 cm up (his heels, 22.4 cm up
+    then, are laid as he lands: test_passive_range)."""
     poses, roots, rifles, _ = _played(ctx, "stfire2dead")
     lows = part_lows_of(ctx, poses[-1], roots[-1])
     assert max(lows["pelvis"], min(lows["belly"], lows["chest"])) <= 2.0  # the check's rest_contact_cm
@@ -167,15 +162,21 @@ def test_a_face_down_deaths_legs_are_laid_as_he_lands(monkeypatch: pytest.Monkey
     steps = round(dead_settle.LEGS_LAND_SECONDS * 60.0)
     calls: list[np.ndarray] = []
 
-    def path(body: object, t: np.ndarray, u: np.ndarray) -> np.ndarray:
+    frees: list[float] = []
+
+    def path(body: object, t: np.ndarray, u: np.ndarray, free: float) -> np.ndarray:
         calls.append(t)
+        frees.append(free)
         return poses[end, legs][None] + u[:, None] * (target - poses[end, legs])[None]
 
     monkeypatch.setattr(dead_settle, "_Body", lambda *a: SimpleNamespace(kin=None))
     monkeypatch.setattr(dead_settle, "_leg_dofs", lambda kin: legs)
     monkeypatch.setattr(dead_settle, "_legs_path", path)
+    monkeypatch.setattr(dead_settle, "_rest_frame", lambda figs, fr, near: k0 + 10)  # the head down at 30
     out = dead_settle._legs_land(None, frames, k0, end)  # type: ignore[arg-type]
     assert len(calls[0]) == steps
+    # a leg point may rise until shortly before the check's rest frame (the trunk and head down), not after
+    assert frees == [pytest.approx((10 - dead_settle.LANDED_MARGIN) / steps)]
     np.testing.assert_array_equal(out.poses[: k0 + 1], poses[: k0 + 1])  # before he is down: as it was
     others = np.setdiff1d(np.arange(80), legs)
     np.testing.assert_array_equal(out.poses[:, others], poses[:, others])

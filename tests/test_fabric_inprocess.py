@@ -8,6 +8,7 @@ from collections import defaultdict
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 
+import numpy as np
 import trio
 from test_server_support import Client, make_server
 
@@ -185,6 +186,8 @@ async def test_a_late_front_end_gets_every_soldier_from_a_key_batch(autojump_clo
             a, b = front.board_ref.board, late.board_ref.board
             assert a is not None and b is not None
             still = list(range(10))  # the start-up script's soldiers, standing
+            assert late.board_ref.on_watch is not None
+            late.board_ref.on_watch(np.arange(10))  # as a client's subscription: held codes onto its board
             assert b.valid[still].all() and (a.codes[still] == b.codes[still]).all()
             assert node.keys > 2  # after the first batches of each shard, keys only when a sync asked
             late.shutdown()

@@ -174,9 +174,13 @@ def test_a_crawler_whose_heading_changes_much_stops_turns_on_the_move_and_crawls
 REVERSAL_CM = 30.0  # a crawler's U-turn ends this near his entity (the 90° arcs end 16-39 cm from it)
 
 
-def reversal(lib, speed: float = 0.3) -> dict[str, np.ndarray]:
-    """A crawler at ``speed`` m/s whose entity turns back the way it came at 4 s, stopping at 11 s."""
-    script = [(0.0, 0.0, 0.0), (0.5, speed, 0.0), (4.0, speed, 0.0, 220.0), (11.0, 0.0, 0.0)]
+U_TURN_CM = 20.0  # ... a 135-165° one (to his right: the shorter U-turns) this near when the turn ends
+
+
+def reversal(lib, speed: float = 0.3, turn: float = 180.0) -> dict[str, np.ndarray]:
+    """A crawler at ``speed`` m/s whose entity turns ``turn`` degrees (180: back the way it came) at 4 s,
+    stopping at 11 s."""
+    script = [(0.0, 0.0, 0.0), (0.5, speed, 0.0), (4.0, speed, 0.0, 40.0 + turn), (11.0, 0.0, 0.0)]
     return drive(lib, script, 40.0, 14.0, appearance=Appearance.CRAWL)
 
 
@@ -197,30 +201,66 @@ def test_a_crawler_reversing_comes_round_carried_along_his_new_heading(lib, spee
     assert gap[turned] <= REVERSAL_CM and gap[-1] <= REVERSAL_CM, (gap[turned], gap[-1])
 
 
-def test_a_crawlers_u_turn_swings_his_body_no_faster_than_recorded(lib) -> None:
+@pytest.mark.parametrize(("turn", "clip"), [(150.0, "r150"), (135.0, "r135"), (165.0, "r165")])
+def test_a_crawler_turning_nearly_back_comes_round_with_the_shorter_u_turn(
+    lib, turn: float, clip: str
+) -> None:
+    """135-165° to his right: the U-turn of that angle, carried along the new heading as the 180° one is;
+    he ends it within U_TURN_CM of his entity and the stop within REVERSAL_CM (150°: the 90° and 30° on
+    the spot and the 30° arc, 108 cm and 52 after the stop; 165°: the 180° U-turn and 15° crawling on, 34
+    and 48; 135°: the 90° on the spot and the 45° arc, 82 and 11)."""
+    run = reversal(lib, 0.3, turn)
+    shown = [c.split("/")[-1] for c in run["clips"].tolist()]
+    assert sorted({c for c in shown if "turn_" in c or "arc_" in c}) == [f"crawlarc_{clip}_low"]
+    check_turn(lib, run, 3.9, turn, within=2.0, family="crawlarc_")
+    turned = max(i for i, c in enumerate(shown) if "crawlarc_" in c) + 1
+    gap = np.hypot(run["gap"][:, 0], run["gap"][:, 1])
+    assert gap[turned] <= U_TURN_CM and gap[-1] <= REVERSAL_CM, (gap[turned], gap[-1])
+
+
+def test_a_fast_crawler_reversing_comes_round_with_the_u_turn_carrying_him_further(lib) -> None:
+    """0.45 m/s: the U-turn of more, quicker moves (``crawlarc_r180_far``: 143.5 cm in 4.2 s at
+    GROUND_TURN_RATE), within U_TURN_CM of his entity when it ends and REVERSAL_CM after the stop (the
+    U-turn's 103.5 cm: 48 cm behind it, 28 after the stop)."""
+    run = reversal(lib, 0.45)
+    shown = [c.split("/")[-1] for c in run["clips"].tolist()]
+    assert sorted({c for c in shown if "turn_" in c or "arc_" in c}) == ["crawlarc_r180_far_low"]
+    check_turn(lib, run, 3.9, 180.0, within=2.0, family="crawlarc_")
+    turned = max(i for i, c in enumerate(shown) if "crawlarc_" in c) + 1
+    gap = np.hypot(run["gap"][:, 0], run["gap"][:, 1])
+    assert gap[turned] <= U_TURN_CM and gap[-1] <= REVERSAL_CM, (gap[turned], gap[-1])
+
+
+@pytest.mark.parametrize(("speed", "clip"), [(0.3, "crawlarc_r180_low"), (0.45, "crawlarc_r180_far_low")])
+def test_a_crawlers_u_turn_swings_his_body_no_faster_than_recorded(lib, speed: float, clip: str) -> None:
     """The U-turn seen at the stub's 30 Hz: no pop (the body turns at most SWING_DEG_S, no head or limb
     moves faster than LIMB_M_S), from the request through the crawl on."""
-    script = [(0.0, Appearance.CRAWL, 0.0, 40.0), (0.5, Appearance.CRAWL, 0.3, 40.0)]
-    script.append((4.0, Appearance.CRAWL, 0.3, 220.0))
+    script = [(0.0, Appearance.CRAWL, 0.0, 40.0), (0.5, Appearance.CRAWL, speed, 40.0)]
+    script.append((4.0, Appearance.CRAWL, speed, 220.0))
     _, clips, turn, move, k = swung(lib, script, 11.0, 3.9)
-    assert "crawlarc_r180_low" in "".join(clips[k:]) and "crawl_cycle" in clips[-1]
+    assert clip in "".join(clips[k:]) and "crawl_cycle" in clips[-1]
     assert turn[k:].max() <= SWING_DEG_S and move[k:].max() <= LIMB_M_S, (turn[k:].max(), move[k:].max())
 
 
-@pytest.mark.parametrize("want", [180.0, -180.0, 175.0, -165.0, 160.0, -150.0])
+@pytest.mark.parametrize(
+    ("want", "clip"),
+    [(180.0, "r180"), (-180.0, "r180"), (175.0, "r180"), (-165.0, "r180"), (160.0, "r165"), (150.0, "r150"),
+     (140.0, "r135"), (128.0, "r135"), (120.0, None), (-150.0, None)],
+)  # fmt: skip
 def test_a_crawler_reversing_either_way_plays_the_u_turn_a_near_reversal_the_arcs_that_fit(
-    lib, want: float
+    lib, want: float, clip: str | None
 ) -> None:
-    """The U-turn (to his right: either way serves a reversal) from 165° (the rest he turns as he crawls
-    on); 160° the 90°, 45° and 30° arcs, not the U-turn and a 30° arc back (a clip turning against the
-    others counts twice); -150° not the U-turn and 30° more (never the long way round)."""
+    """The nearest U-turn (the 180° one either way, the shorter ones to his right alone) within
+    U_TURN_SLACK_DEG from U_TURN_MIN_DEG on (the rest he turns as he crawls on; 128°: not the 90° and the
+    30° arc); 120° the 90° on the spot and the 30° arc; -150° the 90° and 30° on the spot and the 30° arc
+    (not the U-turn and 30° more: never the long way round)."""
     m = SoldierManager(lib, throttle=0.0)
     steps = m._ground_turns(lib.node(CRAWL_NODE), want, moving=True)
     shown = [lib.clip_names[s.clip].split("/")[-1] for s in steps]
-    if abs(want) >= 165.0:
-        assert shown == ["crawlarc_r180_low"]
+    if clip is not None:
+        assert shown == [f"crawlarc_{clip}_low"]
     else:
-        assert "crawlarc_r180_low" not in shown and len(shown) == 3, shown
+        assert not any(c[len("crawlarc_") + 1 :].startswith("1") for c in shown) and len(shown) > 1, shown
 
 
 @asynccontextmanager
@@ -262,14 +302,20 @@ async def test_over_the_wire_a_prone_soldier_turns_on_forearms_and_knees(
         np.testing.assert_allclose(c.pose(1, 0)[0], rest, atol=1e-3)
 
 
+def _velocity(heading: float) -> np.ndarray:
+    """A 0.3 m/s crawler's velocity (east, north, up) along compass ``heading``."""
+    return 0.3 * np.array([math.sin(math.radians(heading)), math.cos(math.radians(heading)), 0.0])
+
+
+@pytest.mark.parametrize(("turn", "clip", "near"), [(180.0, "r180", REVERSAL_CM), (150.0, "r150", U_TURN_CM)])
 async def test_over_the_wire_a_crawler_reversing_ends_his_u_turn_on_his_entity(
-    autojump_clock: trio.abc.Clock,
+    autojump_clock: trio.abc.Clock, turn: float, clip: str, near: float
 ) -> None:
     """The U-turn through a served world (real TCP, trio's autojump clock): an image generator crawls
-    soldier 0 at 0.3 m/s, then sends his entity back the way it came; the figure's placement the client
-    holds when the U-turn ends is within REVERSAL_CM of the entity (the 90° on the spot then the 90° arc:
-    90 cm)."""
-    ahead = 0.3 * np.array([math.sin(math.radians(40.0)), math.cos(math.radians(40.0)), 0.0])
+    soldier 0 at 0.3 m/s, then sends his entity back the way it came (or 150° round); the figure's
+    placement the client holds when the U-turn ends is within ``near`` of the entity (180°: the 90° on the
+    spot then the 90° arc, 90 cm; 150°: the 90° and 30° on the spot and the 30° arc, 108 cm)."""
+    ahead = _velocity(40.0)
     async with served() as (server, world, c):
         await c.requests(index=0, appearance=Appearance.CRAWL, heading=40.0)
         await c.drain(3.0)
@@ -277,17 +323,16 @@ async def test_over_the_wire_a_crawler_reversing_ends_his_u_turn_on_his_entity(
         await c.requests(index=0, appearance=Appearance.CRAWL, heading=40.0, velocity=tuple(ahead))
         await c.drain(3.5)
         at = tuple(ahead * (trio.current_time() - t0))
-        await c.requests(
-            index=0, appearance=Appearance.CRAWL, heading=220.0, velocity=tuple(-ahead), position=at
-        )
+        back, heading = tuple(_velocity(40.0 + turn)), 40.0 + turn
+        await c.requests(index=0, appearance=Appearance.CRAWL, heading=heading, velocity=back, position=at)
         m = world.manager
-        while not (turn := [s for s in m.clip_log if s.index == 0 and "crawlarc_" in s.clip]):
+        while not (arcs := [s for s in m.clip_log if s.index == 0 and "crawlarc_" in s.clip]):
             await c.drain(0.1)
-        assert [s.clip.split("/")[-1] for s in turn] == ["crawlarc_r180_low"]
-        await c.drain(turn[0].time + turn[0].duration - server.now() + 0.05)
+        assert [s.clip.split("/")[-1] for s in arcs] == [f"crawlarc_{clip}_low"]
+        await c.drain(arcs[0].time + arcs[0].duration - server.now() + 0.05)
         assert "crawlarc_" not in m.clip_log[-1].clip  # the U-turn ended, he crawls on
         place = c.pose(1, 0)[1][0]
-        assert math.hypot(place[0], place[2]) <= REVERSAL_CM, place
+        assert math.hypot(place[0], place[2]) <= near, place
 
 
 @pytest.mark.parametrize("turn", [15.0, -20.0])

@@ -146,3 +146,35 @@ def test_a_frame_of_a_stance_takes_its_own_touchdowns_turn() -> None:
     np.testing.assert_allclose(got[52:], master[52:, :3, :3] @ own, atol=1e-12)  # from its touchdown on
     np.testing.assert_allclose(got[30:46], master[30:46, :3, :3], atol=1e-12)  # the first: as his
     np.testing.assert_allclose(got[46:49], master[46:49, :3, :3], atol=1e-12)  # just off it: its own still
+
+
+def test_a_knelt_dying_slaves_foot_stays_on_the_ground_where_his_rests() -> None:
+    """Issue 14 (kneelrest14): kstow2dead's DI lies with its left knee down, so the leg was left as slaved,
+    and where rest_limbs lowered its trunk after the master lay still (frames 106-130) the foot on the
+    ground slid 3.0 cm under his, at rest. Constructed here: the slave's body dragged 2 cm along the
+    ground over frames 100-125 while the master rests; the foot he dies lying on stays put."""
+    from authoring.slave_feet import _last_rest
+
+    stance = np.zeros(20, bool)
+    stance[:5] = stance[12:] = True  # kneeling on it, then the foot he lies on
+    hold = _last_rest(stance)
+    assert np.allclose(hold[12:], 1.0) and np.allclose(hold[:5], 0.0)
+    assert np.all(np.diff(hold[4:13]) >= 0.0)  # eased in while the foot is off the ground
+    stance[:] = True
+    assert not _last_rest(stance).any()  # kneeling on it from the first frame: not a foot he fell onto
+
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
+    master = load_channelset(CHANNELSETS / "kstow2dead.chset.env", use_cache=False)
+    slave = load_channelset(CHANNELSETS / "kstow2dead_low.chset.env", use_cache=False)
+    u = np.clip((np.arange(slave.nframes) - 100) / 25.0, 0.0, 1.0)
+    drag = u * u * (3.0 - 2.0 * u) * 2.0
+    slave.fig_pos[:, :, 0] += drag[:, None].astype(slave.fig_pos.dtype)
+    before = check_clip(copy.deepcopy(slave), figs, ends_dead=True)
+    assert before["contact_slides"]["left_foot"] > 2.0
+    plant_slave_feet(master, slave, figs)
+    lift_off_ground(slave, ctx.di)
+    after = check_clip(slave, figs, ends_dead=True)
+    assert after["contact_slides"]["left_foot"] <= 1.5
+    assert after["contact_slides"]["left_knee"] <= 2.0  # the knee, left as slaved, dragged (0.6 -> 1.4)
+    assert after["max_frame_jump_deg"] <= 20.0

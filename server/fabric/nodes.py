@@ -13,8 +13,10 @@ the same, so a client of the front-end gets the handshake, tables and FIGURE of 
   the requests for its soldiers from ``requests/K`` on the trio loop;
 * a front-end queues each shard's batches as they arrive and merges them in order (from the newest key
   batch among them) into its board (``PoseBoard.publish_codes``, one scatter), and its sessions encode
-  from there as always. Its own manager keeps the books (who lives, tables, owners, the requests' checks)
-  and never animates; what its clients ask goes to the owning shard (``ServerWorld.relay``).
+  from there as always; only the soldiers its clients watch go onto the board, the others' newest codes
+  wait in a plain array until a client subscribes to them (:mod:`server.fabric.watch`). Its own manager
+  keeps the books (who lives, tables, owners, the requests' checks) and never animates; what its clients
+  ask goes to the owning shard (``ServerWorld.relay``).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from server.fabric import requests as req
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import Batch, decode_batch, encode_batch
 from server.fabric.fronts import IndexShare, Soldier
+from server.fabric.watch import Watch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
 from server.stage_cpu import TURN_CPU_S
@@ -313,6 +316,8 @@ class FrontNode:
         self.skipped = 0  # lost on the fabric (or dropped from a full queue)
         self.failovers = 0
         self.keys = 0  # key batches heard
+        self.watching = Watch(n)  # what its clients subscribe to; the others' codes wait there
+        server.board_ref.on_watch = self.watch
         server.feed = self.feed
         server.relay_out = self._flush
         server.world.relay = self
@@ -383,8 +388,11 @@ class FrontNode:
         if not batches or m is None:
             return np.zeros(0, np.int64)
         self.batches += len(batches)
+        if self.watching.stale:
+            subscribed = (s.conn.subscribed for s in self.server.sessions.values())
+            self.watching.recount(subscribed, board, m.table.alive)
         rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
-        if merge(board, batches, tick, m.table.alive):
+        if merge(board, batches, tick, m.table.alive, self.watching):
             changed = rows[
                 (rows < board.capacity)
                 & (board.version[np.minimum(rows, board.capacity - 1)] == board.serial)
@@ -394,6 +402,16 @@ class FrontNode:
         if TRACE is not None:
             TRACE.stamp("fe_merge", rows, "fed" if tick > self.server.ticks else "tick")
         return changed
+
+    def watch(self, indices: np.ndarray | None) -> None:
+        """A client subscribed to ``indices`` (None: one unsubscribed, or left): the held codes of those
+        no client watched go onto the board now, before its writer encodes (:mod:`server.fabric.watch`)."""
+        if indices is None:
+            self.watching.stale = True
+            return
+        m = self.server.world.manager
+        if m is not None:
+            self.watching.watch(indices, self.server.board_ref.board, m.table.alive)
 
     def _heard(self, b: Batch, now: float) -> None:
         k = b.shard
@@ -529,9 +547,11 @@ class FrontNode:
             if op["op"] == "create":
                 world.create_soldier(str(op["figure"]), str(op["weapon"]), i, owner=op["owner"])
                 self.has_last[i] = False
+                self.watching.forget(i)
             elif op["op"] == "remove":
                 world.remove_soldier(i, f"removed through front-end {op['front']}")
                 self.made[i] = False
+                self.watching.forget(i)
                 if self.share is not None:
                     self.share.freed(i)
         except (ValueError, KeyError, TypeError) as exc:
@@ -569,6 +589,7 @@ class FrontNode:
         try:
             for i in drop:
                 world.remove_soldier(i, f"not in shard {k}")
+                self.watching.forget(i)
                 if self.share is not None:
                     self.share.freed(i)
             for i, figure, weapon, owner in add:
@@ -584,6 +605,7 @@ class FrontNode:
             log.warning("fabric_books_failed", front=self.front.k, soldier=index, error=str(exc))
             return
         self.has_last[index] = False
+        self.watching.forget(index)
 
     def _shard_of(self, index: int) -> int:
         return self.route[int(Sharding.home(index, self.shards))]
@@ -603,6 +625,7 @@ class FrontNode:
         self._touch(index)
         self.has_last[index] = False
         self.made[index] = True
+        self.watching.forget(index)
         if self.share is not None:
             self.share.taken(index)
         op = req.create(index, figure, weapon, owner)
@@ -612,6 +635,7 @@ class FrontNode:
     def removed(self, index: int) -> None:
         self._touch(index)
         self.has_last[index] = self.made[index] = False
+        self.watching.forget(index)
         if self.share is not None:
             self.share.freed(index)
         op = req.remove(index)
@@ -650,16 +674,21 @@ def _request_indices(ops: list[req.Op]) -> list[int]:
     return np.concatenate([r["index"] for r in rows]).tolist() if rows else []
 
 
-def merge(board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray) -> int:
+def merge(
+    board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray, watch: Watch | None = None
+) -> int:
     """Merge shards' batches (each shard's in the order sent) into ``board`` as one publish labelled
     ``tick``: per shard from its newest key batch on (a key holds every soldier it animates), the newest
-    codes of each soldier, of the soldiers still ``alive`` here (not removed meanwhile). Returns the
-    soldiers whose codes changed (``PoseBoard.publish_codes``)."""
+    codes of each soldier, of the soldiers still ``alive`` here (not removed meanwhile); with ``watch``,
+    only of the soldiers a client watches (``watch`` keeps the others'). Returns the soldiers whose codes
+    changed (``PoseBoard.publish_codes``)."""
     used: list[Batch] = []
     for k in dict.fromkeys(b.shard for b in batches):
         own = [b for b in batches if b.shard == k]
         keys = [i for i, b in enumerate(own) if b.key]
         used += own[keys[-1] :] if keys else own
+    if watch is not None:
+        used = [watch.split(b) for b in used]
     rows = np.concatenate([b.indices for b in used]).astype(np.int64)
     tables = np.concatenate([b.tables for b in used])
     codes = np.concatenate([b.codes for b in used])

@@ -63,10 +63,14 @@ PIVOT_REST_PER_STANCE_DEG = 9.0
 CRAWL_REVERSAL_DEG = 22.5
 MAX_GROUND_TURNS = 4  # turn clips on the ground one after the other at most (180°: the 90° twice)
 GROUND_TURN_SLACK_DEG = 7.5  # ... chosen by what they leave unturned in steps of this much, then the fewest
-# a crawler whose heading changes by this much less than 180° plays the U-turn too and turns the rest as he
-# crawls on (root_motion.CRAWL_TURN_RATE, under CRAWL_REVERSAL_DEG): 165° as the 90° and 45° on the spot
-# and the 30° arc left him 125 cm from his entity, 76 after the stop
+# a crawler whose heading changes by this much or less from a U-turn's (crawlarc_r135..r180) plays it and
+# turns the rest as he crawls on (root_motion.CRAWL_TURN_RATE, under CRAWL_REVERSAL_DEG): 165° as the 90° and
+# 45° on the spot and the 30° arc left him 125 cm from his entity, 76 after the stop (150°: 108 and 52)
 U_TURN_SLACK_DEG = 15.0
+# ... for a change of at least this much (half-way from the 90° arc to the shortest U-turn, 135°): 120° as the
+# 135° U-turn and 15° crawling on ended the turn 42 cm from his entity but 57 after the stop (the crawl does
+# not steer back sideways), the 90° on the spot and the 30° arc 87 and 16
+U_TURN_MIN_DEG = 127.5
 # a turn on the ground plays this much faster than recorded: the crawl's upper cadence (core.MAX_RATE; a
 # forearm's 25 cm in 0.25 s, the crawl's 26 in 0.225 s); a 90° turn in 2.2 s instead of 3.5
 GROUND_TURN_RATE = MAX_RATE
@@ -146,7 +150,8 @@ class Turning(ManagerCore):
             return False
         want = -float(tb.root_yaw[i])  # compass degrees to turn
         if node != self._home:  # on the ground
-            turns = self._ground_turns(node, want, moving, float(np.hypot(*tb.vlocal[i])))
+            ahead = -float(tb.root_off[i, 1])  # cm the figure is ahead of its entity (-Z: ahead)
+            turns = self._ground_turns(node, want, moving, float(np.hypot(*tb.vlocal[i])), ahead)
             if turns:
                 self._turn_path(i, turns, t)
             return bool(turns)
@@ -205,7 +210,7 @@ class Turning(ManagerCore):
         return clips[k], off[np.arange(len(want)), k]
 
     def _ground_turns(
-        self, node: int, want: float, moving: bool = False, speed: float = 0.0
+        self, node: int, want: float, moving: bool = False, speed: float = 0.0, ahead: float = 0.0
     ) -> tuple[PathStep, ...]:
         """The turns on the ground at ``node`` (CRAWL), one after the other (the larger first, each
         GROUND_TURN_RATE times faster than recorded, MAX_GROUND_TURNS at most), that come nearest to turning
@@ -213,14 +218,16 @@ class Turning(ManagerCore):
         those turning the asked way: 180° is the 90° twice (without lying down between), 60° the 30° twice
         (the 45° left it 15° off), 100° the 90° alone. ``moving``: of the turns that carry him forward, where
         the node has them (a crawler keeps up with his entity; 180°: the U-turn carried along the new
-        heading, played no faster than keeps pace with an entity at ``speed`` cm/s: :meth:`_arc_rate`)."""
+        heading, played no faster than keeps pace with an entity at ``speed`` cm/s: :meth:`_arc_rate`; the
+        figure ``ahead`` cm ahead of it: :meth:`_u_turn`)."""
         lib = self.library
         clips = lib.node_arcs.get(node) if moving else None
-        u_turn = [c for c, d in clips or () if abs(d) == 180.0]
-        if u_turn and abs(want) >= 180.0 - U_TURN_SLACK_DEG:  # the rest he turns as he crawls on
-            c = u_turn[0]
+        c = self._u_turn(clips or [], want, speed, ahead)
+        if c is not None:  # the rest he turns as he crawls on
             return (PathStep(c, True, float(lib.clip_duration[c]) / self._arc_rate(c, speed), node, node),)
-        combos, total, count, negative, positive = _ground_combos(tuple(clips or lib.node_turns[node]))
+        # the U-turns alone or not at all (the 135° one was 127° as the 90° and the 30° arc are 120°)
+        turns = tuple(c for c in clips or lib.node_turns[node] if abs(c[1]) <= 90.0)
+        combos, total, count, negative, positive = _ground_combos(turns)
         left = (want - total + 180.0) % 360.0 - 180.0
         left[0] = want  # (no turn at all)
         wrong = negative if want > 0 else positive if want < 0 else np.zeros_like(count)
@@ -238,13 +245,38 @@ class Turning(ManagerCore):
             for c, r in zip(order, rates, strict=True)
         )
 
+    def _u_turn(
+        self, arcs: list[tuple[int, float]], want: float, speed: float = 0.0, ahead: float = 0.0
+    ) -> int | None:
+        """Of a crawler's turns that carry him forward (``arcs``: clip, compass degrees) the U-turn (more than
+        90°) nearest ``want`` compass degrees (U_TURN_MIN_DEG or more), if it is within U_TURN_SLACK_DEG of
+        it (the 180° one serves either way; the shorter ones turn to his right alone: to his left the right
+        forearm slid 31 cm); of two as near the one that ends nearest an entity at ``speed`` cm/s, the figure
+        ``ahead`` cm ahead of it along its new heading (a crawler trailing it before it reversed: 18 cm at
+        0.3 m/s); 0.45 m/s: the one carrying him further, ``crawlarc_r180_far``."""
+        off = [(abs((d - want + 180.0) % 360.0 - 180.0), c) for c, d in arcs if abs(d) > 90.0]
+        near = min(off, default=None)
+        if near is None or near[0] > U_TURN_SLACK_DEG or abs(want) < U_TURN_MIN_DEG:
+            return None
+        ties = [c for o, c in off if o == near[0]]
+
+        def short(c: int) -> float:  # cm he ends behind his entity (rounded: of two as near, the first)
+            went = speed * float(self.library.clip_duration[c]) / self._arc_rate(c, speed)
+            return round(abs(went - self._carry(c) - ahead), 1)
+
+        return min(ties, key=short)
+
+    def _carry(self, clip: int) -> float:
+        """cm turn ``clip`` carries a crawler along the heading it ends on."""
+        x, z, yaw = self.library.clip_end_offset[clip].tolist()
+        a = math.radians(yaw)
+        return -x * math.sin(a) - z * math.cos(a)
+
     def _arc_rate(self, clip: int, speed: float) -> float:
         """How much faster than recorded a crawler's turn ``clip`` plays: GROUND_TURN_RATE, or slower (down
         to MIN_RATE) for an entity at ``speed`` cm/s that the turn's carry along its end heading would
         overtake (a U-turn at 0.2 m/s ended 25 cm ahead of his entity, 33 after the stop)."""
-        x, z, yaw = self.library.clip_end_offset[clip].tolist()
-        a = math.radians(yaw)
-        along = -x * math.sin(a) - z * math.cos(a)  # cm the turn carries him along the heading it ends on
+        along = self._carry(clip)
         if speed <= 0.0 or along <= 0.0:
             return GROUND_TURN_RATE
         pace = float(self.library.clip_duration[clip]) * speed / along
