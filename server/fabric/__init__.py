@@ -42,6 +42,11 @@ def fronts_topic() -> str:
     return "ttes/fronts"
 
 
+def books_topic() -> str:
+    """Where a shard answers a front-end's ``books`` with the soldiers it animates (a late front-end)."""
+    return "ttes/books"
+
+
 def alive_key(shard: int) -> str:
     return f"ttes/alive/{shard}"
 

@@ -6,12 +6,28 @@ with N shards, index ``i`` is front-end ``(i // N) % M``'s, so each front-end's 
 the shards (``i % N``) and two front-ends creating soldiers at once never pick the same index. The
 start-up script's soldiers are created before the share applies, at the same indices in every process.
 An index asked for by number must be in the front-end's share (another front-end could allot it).
+
+A front-end that starts late, or restarts, learns the soldiers from the shards: the first time it hears a
+shard it sends it a sync of the soldiers it created itself (they may have gone before the shard listened)
+and ``books`` (:mod:`server.fabric.requests`); the shard answers on ``ttes/books`` with every soldier it
+animates (index, figure, weapon, owner; the table follows from figure and weapon), the truth: the
+front-end takes them into its books (not relayed) and drops the ones the shard lacks (a start-up soldier
+removed since), except those it created or removed itself or was told of by another front-end: it knows
+better than the shard, whose answer may predate them or which missed them before it listened
+(:func:`reconcile`). Until a shard
+answers, the front-end allots no index that the shard's batches carried and its books lack (its own
+soldiers before a restart; with one front-end, which allots the table's lowest free index, it creates none).
 """
 
 from __future__ import annotations
 
 import heapq
 from collections.abc import Callable
+from typing import Any
+
+import msgpack
+
+Soldier = tuple[int, str, str, "str | None"]  # index, figure, weapon, owner
 
 
 class IndexShare:
@@ -44,3 +60,34 @@ class IndexShare:
     def freed(self, index: int) -> None:
         if self.mine(index):
             heapq.heappush(self._free, int(index))
+
+
+def answer(shard: int, front: int, soldiers: list[Soldier]) -> bytes:
+    """A shard's answer to front-end ``front``'s ``books``: every soldier it animates."""
+    return bytes(msgpack.packb({"shard": shard, "front": front, "soldiers": [list(s) for s in soldiers]}))
+
+
+def decode_answer(data: bytes) -> dict[str, Any]:
+    """The answer with ``soldiers`` as a list of :data:`Soldier`; ValueError if it is not one."""
+    try:
+        msg = msgpack.unpackb(data)
+        msg["soldiers"] = [
+            (int(i), str(f), str(w), None if o is None else str(o)) for i, f, w, o in msg["soldiers"]
+        ]
+        msg["shard"], msg["front"] = int(msg["shard"]), int(msg["front"])
+    except (ValueError, TypeError, KeyError, msgpack.UnpackException) as exc:
+        raise ValueError(f"not a books answer: {exc}") from exc
+    return msg
+
+
+def reconcile(
+    books: dict[int, Soldier], scope: set[int], told: list[Soldier], known: set[int]
+) -> tuple[list[int], list[Soldier]]:
+    """What a front-end changes in its books from a shard's answer: ``(drop, add)``. ``books``: its
+    soldiers; ``scope``: those of them the shard animates; ``known``: the soldiers it created or removed,
+    or was told of, which the answer does not change. A soldier the books hold otherwise is replaced."""
+    theirs = {s[0]: s for s in told}
+    drop = [i for i in sorted(scope) if i not in known and theirs.get(i) != books[i]]
+    drop += [i for i in theirs if i not in known and i not in scope and i in books and books[i] != theirs[i]]
+    add = [s for i, s in theirs.items() if i not in known and books.get(i) != s]
+    return drop, add

@@ -33,11 +33,12 @@ import numpy as np
 import trio
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
-from server.fabric import Fabric, Kind, alive_key, fronts_topic, poses_topic, requests_topic
+from server.fabric import Fabric, Kind, alive_key, books_topic, fronts_topic, poses_topic, requests_topic
+from server.fabric import fronts as books
 from server.fabric import requests as req
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import Batch, decode_batch, encode_batch
-from server.fabric.fronts import IndexShare
+from server.fabric.fronts import IndexShare, Soldier
 from server.fabric.watch import Watch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
@@ -85,6 +86,7 @@ class ShardNode:
     ) -> None:
         self.server, self.fabric, self.sharding = server, fabric, sharding
         self._put = fabric.publisher(poses_topic(sharding.k), Kind.POSES)
+        self._answer = fabric.publisher(books_topic(), Kind.REQUESTS)  # its soldiers, to a late front-end
         self.seq = 0
         self.key_every = key_every
         self.key_due = True  # the first batch is a key
@@ -203,6 +205,9 @@ class ShardNode:
     def _apply(self, msg: dict[str, object]) -> None:
         world = self.server.world
         op = msg["op"]
+        if op == "books":
+            self._answer_books(int(msg["front"]))  # type: ignore[call-overload]
+            return
         if op == "create":
             owner = msg["owner"]
             world.create_soldier(
@@ -224,6 +229,14 @@ class ShardNode:
             self.key_due = True  # the front-end that sent it may lack soldiers no batch carried since
         elif op == "key":
             self.key_due = True
+
+    def _answer_books(self, front: int) -> None:
+        """Every soldier this shard animates, for front-end ``front`` that has just heard it."""
+        m = self.server.world.manager
+        assert m is not None
+        soldiers = _soldiers(self.server, m.table.live)
+        self._answer(books.answer(self.sharding.k, front, soldiers))
+        log.info("fabric_books_answered", shard=self.sharding.k, front=front, soldiers=len(soldiers))
 
     def _sync(self, msg: dict[str, object]) -> None:
         """Animate every soldier of the sync that is not here yet, from its last request; with ``replay``
@@ -295,6 +308,10 @@ class FrontNode:
         n = server.config.max_soldiers
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request, for a sync
         self.has_last = np.zeros(n, bool)
+        self.made = np.zeros(n, bool)  # created here (not the start-up script's, not another front-end's)
+        self._asked: set[int] = set()  # shards asked for their books, not answered yet
+        self.known = np.zeros(n, bool)  # created or removed here, or told so by a front-end: not learned
+        self._unknown: dict[int, set[int]] = {}  # shard asked -> its batches' soldiers not in the books
         self.batches = 0  # merged
         self.skipped = 0  # lost on the fabric (or dropped from a full queue)
         self.failovers = 0
@@ -324,6 +341,11 @@ class FrontNode:
                 token.run_sync_soon(self.mirror, data)
 
             self.fabric.subscribe(fronts_topic(), Kind.REQUESTS, told)
+
+        def answered(data: bytes) -> None:
+            token.run_sync_soon(self.learn, data)
+
+        self.fabric.subscribe(books_topic(), Kind.REQUESTS, answered)
         for k in range(self.shards):
             self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._arrived, token, k))
             self.fabric.watch(alive_key(k), functools.partial(self._watched, token, k))
@@ -393,7 +415,8 @@ class FrontNode:
 
     def _heard(self, b: Batch, now: float) -> None:
         k = b.shard
-        back = self.heard_at[k] == -math.inf or b.seq < self.last_seq[k] or self.route[k] != k
+        first = self.heard_at[k] == -math.inf
+        back = first or b.seq < self.last_seq[k] or self.route[k] != k
         lost = 0 if back else max(0, b.seq - self.last_seq[k] - 1)
         self.skipped += lost
         if b.key:
@@ -410,7 +433,33 @@ class FrontNode:
                 for i in self._homed(k).tolist():
                     self._send(stood_in, req.remove(i))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
-            self._sync(k, [k], replay=stood_in != k)
+            self._sync(k, [k], replay=stood_in != k, made=first)
+        m = self.server.world.manager
+        if m is None:
+            return
+        # this front-end may be late, or have missed another's message: it learns from the shard
+        if k not in self._asked and (first or (b.key and self._differs(k, b.indices))):
+            self._asked.add(k)
+            self._send(k, req.books(self.front.k))
+        if k in self._asked:  # until it answers, no index it animates is allotted here
+            alive = m.table.alive
+            self._unknown.setdefault(k, set()).update(
+                b.indices[~alive[np.minimum(b.indices, len(alive) - 1)]].tolist()
+            )
+
+    def _differs(self, k: int, indices: np.ndarray) -> bool:
+        """Whether shard ``k``'s key batch (every soldier it animates) carries a soldier the books lack, or
+        lacks one they hold, of those no front-end told this one of (a message lost before a link came up)."""
+        m = self.server.world.manager
+        assert m is not None
+        alive, known = m.table.alive, self.known
+        idx = np.asarray(indices, np.int64)
+        idx = idx[idx < len(alive)]
+        if (~alive[idx] & ~known[idx]).any():
+            return True
+        live = m.table.live
+        scope = live[(np.asarray(self.route)[Sharding.home(live, self.shards)] == k) & ~known[live]]
+        return not np.isin(scope, idx).all()
 
     def _fail_over(self, now: float) -> None:
         alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
@@ -430,15 +479,17 @@ class FrontNode:
         live = m.table.live if m is not None else np.zeros(0, np.int64)
         return live[Sharding.home(live, self.shards) == k]
 
-    def _sync(self, shard: int, homes: list[int], *, replay: bool = False) -> None:
+    def _sync(self, shard: int, homes: list[int], *, replay: bool = False, made: bool = False) -> None:
+        """``made``: only the soldiers created here (a shard heard for the first time: this front-end's
+        creations may have gone before it listened; the start-up script's it has, the others' their makers
+        sync, and a late front-end's books are not the truth: it learns them from the answer to ``books``)."""
         m = self.server.world.manager
         if m is None:
             return
         idx = np.concatenate([self._homed(h) for h in homes])
-        keys = m.library.set_keys
-        soldiers = [
-            (i, *keys[int(m.table.fset[i])], self.server.world.owners.owner_of(i)) for i in idx.tolist()
-        ]
+        if made:
+            idx = idx[self.made[idx]]
+        soldiers = _soldiers(self.server, idx)
         have = idx[self.has_last[idx]]
         self._send(shard, req.sync(soldiers, self.last[have], replay=replay))
 
@@ -492,12 +543,14 @@ class FrontNode:
         world = self.server.world
         try:
             i = int(op["index"])
+            self._touch(i)
             if op["op"] == "create":
                 world.create_soldier(str(op["figure"]), str(op["weapon"]), i, owner=op["owner"])
                 self.has_last[i] = False
                 self.watching.forget(i)
             elif op["op"] == "remove":
                 world.remove_soldier(i, f"removed through front-end {op['front']}")
+                self.made[i] = False
                 self.watching.forget(i)
                 if self.share is not None:
                     self.share.freed(i)
@@ -506,18 +559,72 @@ class FrontNode:
             return
         self.mirrored += 1
 
+    def _touch(self, index: int) -> None:
+        """Soldier ``index`` was created or removed here, or a front-end told so: this front-end knows
+        better than a shard's answer (which may predate it, or the shard missed it before it listened)."""
+        self.known[index] = True
+
+    def learn(self, data: bytes) -> None:
+        """On the loop: a shard's answer to this front-end's ``books`` (sent after a sync of the soldiers
+        made here): the shard's soldiers are the truth, kept in the books here (not relayed: the shard has
+        them, and the front-end that made them told the others), and those it lacks go."""
+        try:
+            msg = books.decode_answer(data)
+        except ValueError as exc:
+            log.warning("fabric_books_refused", front=self.front.k, error=str(exc))
+            return
+        k = msg["shard"]
+        if msg["front"] != self.front.k or k not in self._asked:
+            return
+        self._asked.discard(k)
+        self._unknown.pop(k, None)
+        m = self.server.world.manager
+        assert m is not None
+        live = m.table.live
+        mine = {s[0]: s for s in _soldiers(self.server, live)}
+        scope = {i for i in live.tolist() if self._shard_of(i) == k}
+        drop, add = books.reconcile(mine, scope, msg["soldiers"], set(np.flatnonzero(self.known).tolist()))
+        world = self.server.world
+        world.relay = None
+        try:
+            for i in drop:
+                world.remove_soldier(i, f"not in shard {k}")
+                self.watching.forget(i)
+                if self.share is not None:
+                    self.share.freed(i)
+            for i, figure, weapon, owner in add:
+                self._learn_one(i, figure, weapon, owner)
+        finally:
+            world.relay = self
+        log.info("fabric_books_learned", front=self.front.k, shard=k, dropped=len(drop), learned=len(add))
+
+    def _learn_one(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
+        try:
+            self.server.world.create_soldier(figure, weapon, index, owner=owner)
+        except (ValueError, KeyError) as exc:
+            log.warning("fabric_books_failed", front=self.front.k, soldier=index, error=str(exc))
+            return
+        self.has_last[index] = False
+        self.watching.forget(index)
+
     def _shard_of(self, index: int) -> int:
         return self.route[int(Sharding.home(index, self.shards))]
 
     # -- the world's Relay ---------------------------------------------------------------------------------
     def allot(self, index: int | None) -> int | None:
+        unknown = set().union(*self._unknown.values())  # live in a shard that has not answered yet
+        if unknown and (index in unknown or (index is None and self.share is None)):
+            raise ValueError("front-end still learning the soldiers from the shards")
         if self.share is None:
             return index
         m = self.server.world.manager
-        return self.share.allot(index, m.table.is_live if m is not None else lambda i: False)
+        live = m.table.is_live if m is not None else lambda i: False
+        return self.share.allot(index, lambda i: live(i) or i in unknown)
 
     def created(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
+        self._touch(index)
         self.has_last[index] = False
+        self.made[index] = True
         self.watching.forget(index)
         if self.share is not None:
             self.share.taken(index)
@@ -526,7 +633,8 @@ class FrontNode:
         self._book(op)
 
     def removed(self, index: int) -> None:
-        self.has_last[index] = False
+        self._touch(index)
+        self.has_last[index] = self.made[index] = False
         self.watching.forget(index)
         if self.share is not None:
             self.share.freed(index)
@@ -546,6 +654,14 @@ class FrontNode:
 
     def react(self, index: int, kind: str) -> None:
         self._send(self._shard_of(index), req.react(index, kind))
+
+
+def _soldiers(server: TtesServer, indices: np.ndarray) -> list[Soldier]:
+    """(index, figure, weapon, owner) of each of ``indices`` (live soldiers): what a sync or books carries."""
+    m = server.world.manager
+    assert m is not None
+    keys, owners = m.library.set_keys, server.world.owners
+    return [(i, *keys[int(m.table.fset[i])], owners.owner_of(i)) for i in np.asarray(indices).tolist()]
 
 
 def _request_indices(ops: list[req.Op]) -> list[int]:

@@ -9,8 +9,10 @@ already by the front-end), ``react`` (index, kind) and ``sync``: every soldier t
 restarted or takes over another's soldiers (failover) needs to animate them (``replay``: the shard's own
 soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
 soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for
-one too. The topic is reliable:
-ownership and requests are never lost once a shard listens, and a sync covers the time before.
+one too; ``books`` (front): answer on ``ttes/books`` with every soldier the shard animates, for
+front-end ``front`` that has just heard the shard for the first time (:mod:`server.fabric.fronts`). The
+topic is reliable: ownership and requests are never lost once a shard listens, and a sync covers the time
+before.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
 
-OPS = ("create", "remove", "requests", "react", "sync", "key")
+OPS = ("create", "remove", "requests", "react", "sync", "key", "books")
 Op = dict[str, Any]
 
 
@@ -51,6 +53,10 @@ def sync(soldiers: list[tuple[int, str, str, str | None]], last: np.ndarray, *, 
 
 def key() -> Op:
     return {"op": "key"}
+
+
+def books(front: int) -> Op:
+    return {"op": "books", "front": front}
 
 
 def pack(ops: list[Op]) -> bytes:
