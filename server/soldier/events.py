@@ -289,22 +289,15 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         if k + 1 < len(steps) and self._turning(steps[k].clip):  # a prone turn's turn, on forearms and knees
             self._turned(i, steps[k].clip)
         k += 1
-        if k < len(steps) and not self._asked_elsewhere(i, steps[-1].end):
+        if k < len(steps):
             entry[1] = k
             self._play_step(i, steps[k], t)
             return False
         del self._paths[i]
         tb.mode[i] = _IDLE
-        if k == len(steps) and self._turning(int(tb.clip[i])):  # (a turn mid-path has turned him already)
+        if self._turning(int(tb.clip[i])):
             self._turn_end(i, t)
         return True
-
-    def _asked_elsewhere(self, i: int, end: int) -> bool:
-        """Whether soldier ``i``, on a path to posture node ``end``, has since been asked for another posture:
-        his path ends at the posture it has reached, and he goes on from there (asked to crawl while he went
-        down from standing to prone through CRAWL, he lay down and came up again before he crawled: 3.2 s;
-        asked to die so, he dies from CRAWL). The arc under way plays to its end."""
-        return 0 <= self._desired(i) != end
 
     def _paths_ended(self, idx: np.ndarray, t: np.ndarray) -> None:
         """Soldiers ``idx`` whose paths ended at ``t`` decide, then play a reaction kept for their rest."""
