@@ -10,6 +10,7 @@ is live. And a front-end serves the browser's WebSocket transport (``--ws-port``
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import trio
 from test_app_websocket import ws_client
@@ -19,7 +20,7 @@ from test_server_support import Client, synthetic_dir
 
 from client_stub.link.spawn import ServerProcess, free_port
 from protocol.events import CreateSoldier, JointUpdates, Ready, RemoveSoldier, SoldierCreated, Subscribe
-from server.fabric.fronts import answer, decode_answer, reconcile
+from server.fabric.fronts import answer, answer_scope, decode_answer, reconcile
 
 pytest.importorskip("zenoh")
 
@@ -125,3 +126,12 @@ def test_the_books_take_the_shards_soldiers_but_not_over_what_a_front_end_knows(
     assert decode_answer(answer(1, 0, told))["soldiers"] == told
     with pytest.raises(ValueError, match="books"):
         decode_answer(b"\x93\x01")
+
+
+def test_a_books_answer_drops_only_the_soldiers_homed_and_animated_on_its_shard() -> None:
+    """Shard 1 failed over to shard 0 after shard 0 answered: its soldiers (odd indices) are not in the
+    answer, and must not be dropped for it (they were, on failover, in a CI run)."""
+    live = np.arange(10)
+    assert answer_scope(live, [0, 0], 0) == {0, 2, 4, 6, 8}
+    assert answer_scope(live, [0, 1], 1) == {1, 3, 5, 7, 9}
+    assert answer_scope(live, [0, 0], 1) == set()  # shard 1's own answer, failed over: none of them

@@ -26,6 +26,7 @@ from collections.abc import Callable
 from typing import Any
 
 import msgpack
+import numpy as np
 
 Soldier = tuple[int, str, str, "str | None"]  # index, figure, weapon, owner
 
@@ -78,6 +79,16 @@ def decode_answer(data: bytes) -> dict[str, Any]:
     except (ValueError, TypeError, KeyError, msgpack.UnpackException) as exc:
         raise ValueError(f"not a books answer: {exc}") from exc
     return msg
+
+
+def answer_scope(live: np.ndarray, route: list[int], k: int) -> set[int]:
+    """The live soldiers (``live``) a books answer of shard ``k`` may drop: those homed on ``k`` (index modulo
+    the shards, ``len(route)``) and animated there (``route``: each shard's animating shard). One failed
+    over to ``k`` after it answered is missing from the answer: counting it in, the front-end removed a
+    killed shard's soldiers (test_a_killed_shards_soldiers_go_on_in_the_survivor)."""
+    live = np.asarray(live, np.int64)
+    home = live % len(route)
+    return set(live[(home == k) & (np.asarray(route)[home] == k)].tolist())
 
 
 def reconcile(

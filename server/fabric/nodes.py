@@ -582,10 +582,7 @@ class FrontNode:
         assert m is not None
         live = m.table.live
         mine = {s[0]: s for s in _soldiers(self.server, live)}
-        # only the soldiers homed on k and animated there can go: one failed over to k after it answered
-        # is missing from the answer (test_a_killed_shards_soldiers_go_on_in_the_survivor lost shard 1's)
-        home = Sharding.home(live, self.shards)
-        scope = set(live[(home == k) & (np.asarray(self.route)[home] == k)].tolist())
+        scope = books.answer_scope(live, self.route, k)
         drop, add = books.reconcile(mine, scope, msg["soldiers"], set(np.flatnonzero(self.known).tolist()))
         world = self.server.world
         world.relay = None
