@@ -57,6 +57,7 @@ from authoring.quality_frames import FigureSet
 from authoring.quality_rest import DOWN_CM, NEAR_CM, TORSO_PARTS, rest_frame
 from authoring.transitions import ClipFrames
 from peabody.model import Figure
+from server.soldier.blend import smoothstep
 
 SETTLE_SECONDS = 0.8  # s, eased: the body goes limp after the physics has settled
 STILL_SECONDS = 0.1  # s: then lies still (the clip ends at rest)
@@ -469,7 +470,7 @@ def _legs_land(figs: FigureSet, frames: ClipFrames, k0: int, end: int) -> ClipFr
     k0 = min(k0, len(frames.poses) - 1 - n)  # laid by the end of the clip
     s = np.arange(1, n + 1) / n
     landed = _rest_frame(figs, frames, DOWN_CM) - LANDED_MARGIN  # the check's rest_rise_cm judges from then
-    path = _legs_path(body, s, s * s * (3.0 - 2.0 * s), min(1.0, max(0.0, (landed - k0) / n)))
+    path = _legs_path(body, s, smoothstep(s), min(1.0, max(0.0, (landed - k0) / n)))
     k = len(frames.poses) - k0 - 1
     shift = np.vstack([path, np.repeat(path[-1:], max(0, k - n), axis=0)])[:k] - last[leg_dofs]
     poses = frames.poses.copy()

@@ -46,6 +46,7 @@ from authoring.transitions import track_solve
 from peabody import quaternion
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
+from server.soldier.blend import smoothstep
 
 MERGE_GAP_FRAMES = 3  # a foot off the ground this briefly is still in its stance (a flickering contact)
 MIN_SHIFT_CM = 0.05  # a foot moved less than this is left as it is
@@ -179,8 +180,7 @@ def _last_rest(stance: np.ndarray) -> np.ndarray:
     a = runs[-1][0]
     lo = runs[-2][1] if len(runs) > 1 else 0
     out[a:] = 1.0
-    u = (np.arange(lo + 1, a) - lo) / max(a - lo, 1)
-    out[lo + 1 : a] = u * u * (3.0 - 2.0 * u)
+    out[lo + 1 : a] = smoothstep((np.arange(lo + 1, a) - lo) / max(a - lo, 1))
     return out
 
 

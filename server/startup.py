@@ -155,17 +155,21 @@ class ServerWorld:
         index: int | None = None,
         name: str | None = None,
         owner: str | None = None,
+        *,
+        relay: bool = True,
     ) -> int:
         """A new soldier of figure/weapon *types* (``"DI.fig"``, ``"AK_47.fig"``) owned by client ``owner``
-        (None: shared); ValueError (the owner's cap, no free index)/KeyError."""
+        (None: shared); ValueError (the owner's cap, no free index)/KeyError. ``relay=False``: a front-end
+        keeps in its books a soldier that a shard or another front-end already has (not relayed)."""
         self.owners.check_cap(owner)
         self.ensure_library()
-        if self.relay is not None:
-            index = self.relay.allot(index)
+        relayed = self.relay if relay else None
+        if relayed is not None:
+            index = relayed.allot(index)
         i = self.soldiers.create(figure, weapon, index, name, self.clock())
         self.owners.add(i, owner)
-        if self.relay is not None:
-            self.relay.created(i, figure, weapon, owner)
+        if relayed is not None:
+            relayed.created(i, figure, weapon, owner)
         self.events.soldier_created(i)
         return i
 
@@ -189,11 +193,11 @@ class ServerWorld:
         self.soldiers.figures_of[name] = (figure, weapon) if weapon else (figure,)
         log.info("soldier_state_created", soldier=name, index=i, figure=figure, weapon=weapon)
 
-    def remove_soldier(self, index: int, reason: str = "removed") -> None:
+    def remove_soldier(self, index: int, reason: str = "removed", *, relay: bool = True) -> None:
         self.soldiers.remove(index)
         self.events.soldier_removed(index, reason)  # before the owner is forgotten: who could see it
         self.owners.discard(index)
-        if self.relay is not None:
+        if relay and self.relay is not None:
             self.relay.removed(index)
 
     def apply_requests(self, rows: np.ndarray) -> np.ndarray:

@@ -531,33 +531,35 @@ class FrontNode:
         except ValueError as exc:
             log.warning("fabric_books_refused", front=self.front.k, error=str(exc))
             return
-        world = self.server.world
-        world.relay = None
-        try:
-            for op in ops:
-                self._mirror_one(op)
-        finally:
-            world.relay = self
+        for op in ops:
+            self._mirror_one(op)
 
     def _mirror_one(self, op: req.Op) -> None:
-        world = self.server.world
         try:
             i = int(op["index"])
             self._touch(i)
             if op["op"] == "create":
-                world.create_soldier(str(op["figure"]), str(op["weapon"]), i, owner=op["owner"])
-                self.has_last[i] = False
-                self.watching.forget(i)
+                self._kept(i, str(op["figure"]), str(op["weapon"]), op["owner"])
             elif op["op"] == "remove":
-                world.remove_soldier(i, f"removed through front-end {op['front']}")
-                self.made[i] = False
-                self.watching.forget(i)
-                if self.share is not None:
-                    self.share.freed(i)
+                self._let_go(i, f"removed through front-end {op['front']}")
         except (ValueError, KeyError, TypeError) as exc:
             log.warning("fabric_books_failed", front=self.front.k, op=op.get("op"), error=str(exc))
             return
         self.mirrored += 1
+
+    def _kept(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
+        """Keep in the books a soldier a shard or another front-end already has (not relayed again)."""
+        self.server.world.create_soldier(figure, weapon, index, owner=owner, relay=False)
+        self.has_last[index] = False
+        self.watching.forget(index)
+
+    def _let_go(self, index: int, reason: str) -> None:
+        """Drop from the books a soldier removed elsewhere (not relayed again); its index is free."""
+        self.server.world.remove_soldier(index, reason, relay=False)
+        self.made[index] = False
+        self.watching.forget(index)
+        if self.share is not None:
+            self.share.freed(index)
 
     def _touch(self, index: int) -> None:
         """Soldier ``index`` was created or removed here, or a front-end told so: this front-end knows
@@ -584,28 +586,14 @@ class FrontNode:
         mine = {s[0]: s for s in _soldiers(self.server, live)}
         scope = books.answer_scope(live, self.route, k)
         drop, add = books.reconcile(mine, scope, msg["soldiers"], set(np.flatnonzero(self.known).tolist()))
-        world = self.server.world
-        world.relay = None
-        try:
-            for i in drop:
-                world.remove_soldier(i, f"not in shard {k}")
-                self.watching.forget(i)
-                if self.share is not None:
-                    self.share.freed(i)
-            for i, figure, weapon, owner in add:
-                self._learn_one(i, figure, weapon, owner)
-        finally:
-            world.relay = self
+        for i in drop:
+            self._let_go(i, f"not in shard {k}")
+        for i, figure, weapon, owner in add:
+            try:
+                self._kept(i, figure, weapon, owner)
+            except (ValueError, KeyError) as exc:
+                log.warning("fabric_books_failed", front=self.front.k, soldier=i, error=str(exc))
         log.info("fabric_books_learned", front=self.front.k, shard=k, dropped=len(drop), learned=len(add))
-
-    def _learn_one(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
-        try:
-            self.server.world.create_soldier(figure, weapon, index, owner=owner)
-        except (ValueError, KeyError) as exc:
-            log.warning("fabric_books_failed", front=self.front.k, soldier=index, error=str(exc))
-            return
-        self.has_last[index] = False
-        self.watching.forget(index)
 
     def _shard_of(self, index: int) -> int:
         return self.route[int(Sharding.home(index, self.shards))]
