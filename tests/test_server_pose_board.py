@@ -291,3 +291,31 @@ def test_a_late_writer_with_answers_between_ticks_decodes_the_board_in_tick_orde
     for p in (a, b):
         ticks = [u.tick for u in p.updates]
         assert ticks == sorted(ticks), ticks
+
+
+def test_a_codes_only_board_sends_every_client_the_same_bytes() -> None:
+    """A shard's board keeps the codes alone (``TtesServer.codes_only``: no float poses written at each
+    publish, issue 21): the same ticks give the same codes, versions and client bytes as a board that keeps
+    the poses, from before the board exists or switched after."""
+    servers = [make_server(throttle=0.0) for _ in range(3)]
+    servers[1].codes_only()  # before the world: the board is made without poses
+    for s in servers:
+        s.start_world()
+        walk(s, [0, 1, 2, 5, 8], 1.4)
+        walk(s, [4], 4.0)
+    servers[2].codes_only()  # after: the board drops its poses
+    pairs = [Pair(s, "a") for s in servers]
+    for p in pairs:
+        p.subscribe(tuple(range(10)))
+    for k in range(1, 25):
+        for s in servers:
+            s.tick(k / 30)
+        sent = [p.flush() for p in pairs]
+        assert sent[0] and sent[1] == sent[0] and sent[2] == sent[0]
+    boards = [s.board_ref.board for s in servers]
+    keep, *bare = boards
+    assert keep is not None and len(keep.dofs) >= 10
+    for b in bare:
+        assert b is not None and not b.poses and len(b.dofs) == len(b.positions) == len(b.orientations) == 0
+        for name in ("codes", "version", "valid", "table_of"):
+            np.testing.assert_array_equal(getattr(b, name)[:10], getattr(keep, name)[:10])
