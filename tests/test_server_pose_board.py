@@ -7,6 +7,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_server_support import make_server
 
 from protocol.connection import CLIENT, NEED_DATA, PAUSED, SERVER, Connection
@@ -319,3 +321,37 @@ def test_a_codes_only_board_sends_every_client_the_same_bytes() -> None:
         assert b is not None and not b.poses and len(b.dofs) == len(b.positions) == len(b.orientations) == 0
         for name in ("codes", "version", "valid", "table_of"):
             np.testing.assert_array_equal(getattr(b, name)[:10], getattr(keep, name)[:10])
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 40), width=st.integers(1, 70), seed=st.integers(0, 2**32 - 1))
+def test_rows_differ_is_any_of_the_rows_comparisons(n: int, width: int, seed: int) -> None:
+    """``_rows_differ`` (the board's changed-codes test, word by word) is ``(a != b).any(axis=1)``, for any
+    field count (a multiple of 8 or not) and rows that differ in one field, several or none."""
+    from server.pose_board import _rows_differ
+
+    rng = np.random.default_rng(seed)
+    a = rng.integers(0, 4, (n, width)).astype(np.int32)
+    b = a.copy()
+    hit = rng.random((n, width)) < rng.choice([0.0, 0.02, 0.5])
+    b[hit] += 1
+    np.testing.assert_array_equal(_rows_differ(a, b), (a != b).any(axis=1))
+
+
+def test_codes_of_one_table_or_several_are_stored_alike() -> None:
+    """``publish_codes``: a batch of one update table (stored whole) and one of two tables (stored table by
+    table) take the same codes, tables and versions."""
+    from server.pose_board import PoseBoard
+
+    rows = np.array([3, 0, 5, 2])
+    codes = np.arange(4 * 9, dtype=np.int32).reshape(4, 9)
+    one, two = PoseBoard(4, 2), PoseBoard(4, 2)
+    assert one.publish_codes(rows, np.array([1, 1, 1, 1]), codes, 7) == 4
+    assert two.publish_codes(rows, np.array([1, 2, 1, 2]), codes, 7) == 4
+    np.testing.assert_array_equal(one.codes[rows], codes)
+    np.testing.assert_array_equal(two.codes[rows], codes)
+    assert two.table_of[rows].tolist() == [1, 2, 1, 2] and one.table_of[rows].tolist() == [1] * 4
+    codes[2, 8] += 1  # soldier 5 moved; soldier 2 changes table on ``one``
+    assert one.publish_codes(rows, np.array([1, 1, 1, 2]), codes, 8) == 2
+    assert two.publish_codes(rows, np.array([1, 2, 1, 2]), codes, 8) == 1
+    assert one.version[rows].tolist() == [1, 1, 2, 2] and two.version[rows].tolist() == [1, 1, 2, 1]
