@@ -3,7 +3,8 @@
 
 * a removal sent before a shard listened reaches it with the front-end's sync (the shard animated a ghost);
 * a front-end that starts while a shard is failed over learns from the stand-in's answer where that shard's
-  soldiers live, and sends their requests there (not to the dead shard's topic);
+  soldiers live, and sends their requests there (not to the dead shard's topic); when the shard comes
+  back, it takes every one of them back, not only those created through this front-end;
 * a front-end that learned the soldiers from the shards learns their last requests too: its fail-over
   hands them on walking, not standing.
 """
@@ -157,6 +158,10 @@ async def test_a_front_end_started_while_a_shard_is_failed_over_routes_to_the_st
         alpha = await Client.open(late.port, "ig", client_id="alpha")
         await alpha.expect(Ready)
         await alpha.requests(index=[ODD], velocity=WALK)  # to shard 0, the stand-in
+        await _moving(late.port, [ODD], frames=10)
+        back = c.shard(1)  # takes every one of its soldiers back from the stand-in, walking on
+        assert await _until_soldiers(back.port, [1, 3, 5, 7, 9, ODD]) == [1, 3, 5, 7, 9, ODD]
+        assert await _until_soldiers(c.shards[0].port, [0, 2, 4, 6, 8]) == [0, 2, 4, 6, 8]
         await _moving(late.port, [ODD], frames=10)
         await alpha.aclose()
 
