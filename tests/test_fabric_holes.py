@@ -16,6 +16,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+import test_fabric_inprocess as inprocess
 import trio
 from test_fabric_cluster import WALK, _soldiers_of
 from test_fabric_latefront import _moving
@@ -23,7 +24,15 @@ from test_server_support import Client, synthetic_dir
 
 from client_stub.link.spawn import ServerProcess, free_port
 from protocol.entity import ENTITY_REQUEST_DTYPE
-from protocol.events import CreateSoldier, JointUpdates, Ready, RemoveSoldier, SoldierCreated, Subscribe
+from protocol.events import (
+    CreateSoldier,
+    JointUpdates,
+    Ready,
+    RemoveSoldier,
+    SoldierCreated,
+    SoldierRemoved,
+    Subscribe,
+)
 from server.fabric import requests as req
 from server.fabric.fronts import answer, decode_answer, gone, learned_last, stand_ins
 
@@ -187,3 +196,25 @@ async def test_a_late_front_ends_fail_over_hands_on_the_last_requests_it_learned
             while seen < 10:
                 seen += ODD in (await obs.expect(JointUpdates)).indices.tolist()
         await obs.aclose()
+
+
+async def test_a_hung_shard_that_resumes_lets_go_of_a_soldier_removed_while_it_was_away(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """In one process (test_fabric_inprocess's fabric): shard 1 hangs, the walker goes to shard 0 and is
+    removed there; shard 1, which still has it, resumes: the sync that takes its soldiers back removes it."""
+    async with inprocess.cluster() as (front, node, shards, fabrics):
+        c = await inprocess.walker(front, ODD)
+        await inprocess.moving(c, ODD, 3)
+        fabrics[1].closed = True  # it publishes nothing more, yet its presence stays
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[0]):
+                await trio.sleep(0.1)
+        await c.send(RemoveSoldier(ODD))
+        await c.expect(SoldierRemoved)
+        fabrics[1].closed = False  # it resumes, with the walker it had
+        with trio.fail_after(30):
+            while node.route != [0, 1] or ODD in inprocess.live(shards[1]):
+                await trio.sleep(0.1)
+        assert ODD not in inprocess.live(shards[0])
+        await c.aclose()
