@@ -266,7 +266,7 @@ class ShardNode:
         assert isinstance(told, list)
         gone = [int(i) for i in told if m.table.is_live(int(i))]
         for i in gone:
-            world.remove_soldier(i, "removed by a front-end before this shard listened")
+            world.remove_soldier(i, "removed through a front-end while this shard did not hear it")
             self.has_last[i] = False
         new = []
         for index, figure, weapon, owner in soldiers:
