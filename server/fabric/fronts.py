@@ -14,7 +14,10 @@ animates (index, figure, weapon, owner; the table follows from figure and weapon
 front-end takes them into its books (not relayed) and drops the ones the shard lacks (a start-up soldier
 removed since), except those it created or removed itself or was told of by another front-end: it knows
 better than the shard, whose answer may predate them or which missed them before it listened
-(:func:`reconcile`). Until a shard
+(:func:`reconcile`). It keeps the answer's last request of each soldier it has none of, which its
+fail-over hands on (:func:`learned_last`). Soldiers of another shard in the answer are a stand-in's: the
+front-end never heard their shard, failed over before it started, and sends their requests to the
+stand-in (:func:`stand_ins`). A sync carries the soldiers removed too (:func:`gone`). Until a shard
 answers, the front-end allots no index that the shard's batches carried and its books lack (its own
 soldiers before a restart; with one front-end, which allots the table's lowest free index, it creates none).
 """
@@ -27,6 +30,8 @@ from typing import Any
 
 import msgpack
 import numpy as np
+
+from protocol.entity import ENTITY_REQUEST_DTYPE
 
 Soldier = tuple[int, str, str, "str | None"]  # index, figure, weapon, owner
 
@@ -63,20 +68,26 @@ class IndexShare:
             heapq.heappush(self._free, int(index))
 
 
-def answer(shard: int, front: int, soldiers: list[Soldier]) -> bytes:
-    """A shard's answer to front-end ``front``'s ``books``: every soldier it animates."""
-    return bytes(msgpack.packb({"shard": shard, "front": front, "soldiers": [list(s) for s in soldiers]}))
+def answer(shard: int, front: int, soldiers: list[Soldier], last: np.ndarray | None = None) -> bytes:
+    """A shard's answer to front-end ``front``'s ``books``: every soldier it animates, and the last request
+    of those that had one (``ENTITY_REQUEST_DTYPE`` rows)."""
+    rows = np.zeros(0, ENTITY_REQUEST_DTYPE) if last is None else last
+    rows = np.ascontiguousarray(rows, ENTITY_REQUEST_DTYPE)
+    msg = {"shard": shard, "front": front, "soldiers": [list(s) for s in soldiers], "rows": rows.tobytes()}
+    return bytes(msgpack.packb(msg))
 
 
 def decode_answer(data: bytes) -> dict[str, Any]:
-    """The answer with ``soldiers`` as a list of :data:`Soldier`; ValueError if it is not one."""
+    """The answer with ``soldiers`` as a list of :data:`Soldier` and ``rows`` as requests; ValueError if it
+    is not one."""
     try:
         msg = msgpack.unpackb(data)
         msg["soldiers"] = [
             (int(i), str(f), str(w), None if o is None else str(o)) for i, f, w, o in msg["soldiers"]
         ]
         msg["shard"], msg["front"] = int(msg["shard"]), int(msg["front"])
-    except (ValueError, TypeError, KeyError, msgpack.UnpackException) as exc:
+        msg["rows"] = np.frombuffer(msg.get("rows", b""), ENTITY_REQUEST_DTYPE)
+    except (ValueError, TypeError, KeyError, AttributeError, msgpack.UnpackException) as exc:
         raise ValueError(f"not a books answer: {exc}") from exc
     return msg
 
@@ -102,3 +113,30 @@ def reconcile(
     drop += [i for i in theirs if i not in known and i not in scope and i in books and books[i] != theirs[i]]
     add = [s for i, s in theirs.items() if i not in known and books.get(i) != s]
     return drop, add
+
+
+def stand_ins(told: list[Soldier], shard: int, shards: int, heard: list[bool]) -> dict[int, int]:
+    """The shards whose soldiers ``shard``'s answer carries (home index modulo ``shards``) and which this
+    front-end never heard: failed over to ``shard`` before it started, their requests go there
+    (home -> ``shard``). A shard heard has its own route (it comes back, or this front-end failed it over)."""
+    homes = {s[0] % shards for s in told} - {shard}
+    return {h: shard for h in sorted(homes) if not heard[h]}
+
+
+def learned_last(rows: np.ndarray, live: np.ndarray, has_last: np.ndarray) -> np.ndarray:
+    """The answer's last requests (``rows``) a front-end keeps for its fail-overs: those of soldiers live
+    in its books (``live``: mask by index) with no last request of their own (a request sent through this
+    front-end is as new as the shard's or newer)."""
+    idx = rows["index"].astype(np.int64)
+    ok = (idx < len(live)) & (idx < len(has_last))
+    ok[ok] = live[idx[ok]] & ~has_last[idx[ok]]
+    return rows[ok]
+
+
+def gone(known: np.ndarray, live: np.ndarray, homes: list[int], shards: int) -> np.ndarray:
+    """The soldiers homed on ``homes`` that a front-end removed, or was told were removed (``known`` and not
+    ``live``: masks by index): a sync carries them, for a shard that listened after the removal went (its
+    start-up script made them again, or it kept them while it was failed over)."""
+    idx = np.flatnonzero(known)
+    idx = idx[(idx >= len(live)) | ~live[np.minimum(idx, len(live) - 1)]] if len(live) else idx
+    return idx[np.isin(idx % shards, homes)]

@@ -42,6 +42,7 @@ from server.fabric.fronts import IndexShare, Soldier
 from server.fabric.watch import Watch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
+from server.soldier import REQUEST_OK
 from server.stage_cpu import TURN_CPU_S
 from server.trace import TRACE
 
@@ -93,6 +94,9 @@ class ShardNode:
         self._since_key = 0  # tick batches since the last key
         self._sent_serial = 0  # the board publish the last batch covered
         self.taken = 0  # fabric requests handled
+        n = server.config.max_soldiers
+        self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request taken, for a books answer
+        self.has_last = np.zeros(n, bool)
         server.on_publish = self.publish
         # what arrived and is not taken yet: bounded (two rows per soldier), requests coalesced per soldier
         self.backlog = Backlog(max_rows=max(MAX_ROWS, 2 * server.config.max_soldiers))
@@ -210,18 +214,20 @@ class ShardNode:
             return
         if op == "create":
             owner = msg["owner"]
-            world.create_soldier(
+            index = world.create_soldier(
                 str(msg["figure"]),
                 str(msg["weapon"]),
                 int(msg["index"]),  # type: ignore[call-overload]
                 owner=str(owner) if owner is not None else None,
             )
+            self.has_last[index] = False
         elif op == "remove":
             world.remove_soldier(int(msg["index"]), "removed by a front-end")  # type: ignore[call-overload]
+            self.has_last[int(msg["index"])] = False  # type: ignore[call-overload]
         elif op == "requests":
             rows = msg["rows"]
             assert isinstance(rows, np.ndarray)
-            world.apply_requests(rows)
+            self._applied(rows)
         elif op == "react":
             world.react(int(msg["index"]), str(msg["kind"]))  # type: ignore[call-overload]
         elif op == "sync":
@@ -234,26 +240,45 @@ class ShardNode:
         """Every soldier this shard animates, for front-end ``front`` that has just heard it."""
         m = self.server.world.manager
         assert m is not None
-        soldiers = _soldiers(self.server, m.table.live)
-        self._answer(books.answer(self.sharding.k, front, soldiers))
+        live = m.table.live
+        soldiers = _soldiers(self.server, live)
+        last = self.last[live[self.has_last[live]]]
+        self._answer(books.answer(self.sharding.k, front, soldiers, last))
         log.info("fabric_books_answered", shard=self.sharding.k, front=front, soldiers=len(soldiers))
 
+    def _applied(self, rows: np.ndarray) -> None:
+        """Apply requests, and keep those taken as their soldiers' last (what a books answer carries)."""
+        taken = rows[self.server.world.apply_requests(rows) == REQUEST_OK]
+        self.last[taken["index"]] = taken
+        self.has_last[taken["index"]] = True
+
     def _sync(self, msg: dict[str, object]) -> None:
-        """Animate every soldier of the sync that is not here yet, from its last request; with ``replay``
-        (soldiers coming home after a stand-in animated them) replay the last request of every one."""
+        """Remove the soldiers gone that are here (a removal sent before this shard listened; start-up
+        soldiers its script made again), animate every soldier of the sync that is not here yet, from its
+        last request; with ``replay`` (soldiers coming home after a stand-in animated them) replay the last
+        request of every one."""
         world, m = self.server.world, self.server.world.manager
         assert m is not None
         soldiers = msg["soldiers"]
         rows = msg["rows"]
         assert isinstance(soldiers, list) and isinstance(rows, np.ndarray)
+        told = msg.get("gone") or []
+        assert isinstance(told, list)
+        gone = [int(i) for i in told if m.table.is_live(int(i))]
+        for i in gone:
+            world.remove_soldier(i, "removed through a front-end while this shard did not hear it")
+            self.has_last[i] = False
         new = []
         for index, figure, weapon, owner in soldiers:
             if not m.table.is_live(index):
                 world.create_soldier(figure, weapon, index, owner=owner)
+                self.has_last[index] = False
                 new.append(index)
-        log.info("fabric_sync", shard=self.sharding.k, soldiers=len(soldiers), created=len(new))
+        log.info(
+            "fabric_sync", shard=self.sharding.k, soldiers=len(soldiers), created=len(new), removed=len(gone)
+        )
         if len(rows):
-            world.apply_requests(rows if msg.get("replay") else rows[np.isin(rows["index"], new)])
+            self._applied(rows if msg.get("replay") else rows[np.isin(rows["index"], new)])
 
 
 class FrontNode:
@@ -433,7 +458,8 @@ class FrontNode:
                 for i in self._homed(k).tolist():
                     self._send(stood_in, req.remove(i))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
-            self._sync(k, [k], replay=stood_in != k, made=first)
+            # from a stand-in (perhaps learned from its answer: this front-end started meanwhile), all of them
+            self._sync(k, [k], replay=stood_in != k, made=first and stood_in == k)
         m = self.server.world.manager
         if m is None:
             return
@@ -491,7 +517,8 @@ class FrontNode:
             idx = idx[self.made[idx]]
         soldiers = _soldiers(self.server, idx)
         have = idx[self.has_last[idx]]
-        self._send(shard, req.sync(soldiers, self.last[have], replay=replay))
+        gone = books.gone(self.known, m.table.alive, homes, self.shards).tolist()
+        self._send(shard, req.sync(soldiers, self.last[have], replay=replay, gone=gone))
 
     def _send(self, shard: int, op: req.Op) -> None:
         """Queue an operation for ``shard``: what one turn of the loop queued goes as one message."""
@@ -582,6 +609,10 @@ class FrontNode:
         self._unknown.pop(k, None)
         m = self.server.world.manager
         assert m is not None
+        heard = [at > -math.inf for at in self.heard_at]
+        for home, stand_in in books.stand_ins(msg["soldiers"], k, self.shards, heard).items():
+            self.route[home] = stand_in  # failed over before this front-end started
+            log.warning("fabric_stand_in_learned", shard=home, to=stand_in)
         live = m.table.live
         mine = {s[0]: s for s in _soldiers(self.server, live)}
         scope = books.answer_scope(live, self.route, k)
@@ -593,6 +624,9 @@ class FrontNode:
                 self._kept(i, figure, weapon, owner)
             except (ValueError, KeyError) as exc:
                 log.warning("fabric_books_failed", front=self.front.k, soldier=i, error=str(exc))
+        last = books.learned_last(msg["rows"], m.table.alive, self.has_last)
+        self.last[last["index"]] = last  # what a fail-over of this front-end hands on
+        self.has_last[last["index"]] = True
         log.info("fabric_books_learned", front=self.front.k, shard=k, dropped=len(drop), learned=len(add))
 
     def _shard_of(self, index: int) -> int:

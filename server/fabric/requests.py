@@ -3,16 +3,16 @@
 A message is a msgpack list of operations (a front-end sends what one turn of its loop produced as one
 message: a client creating a crowd makes thousands), each a map with ``op`` first: ``create`` (index,
 figure, weapon, owner: the front-end allocates indices, so the one client-visible index space stays one),
-``remove`` (index), ``requests`` (rows of ``protocol.entity.ENTITY_REQUEST_DTYPE`` as bytes, checked
-already by the front-end), ``react`` (index, kind) and ``sync``: every soldier the shard is to animate
-(index, figure, weapon, owner) with the last request of each that had one: what a shard that joined late,
-restarted or takes over another's soldiers (failover) needs to animate them (``replay``: the shard's own
-soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
-soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for
-one too; ``books`` (front): answer on ``ttes/books`` with every soldier the shard animates, for
-front-end ``front`` that has just heard the shard for the first time (:mod:`server.fabric.fronts`). The
-topic is reliable: ownership and requests are never lost once a shard listens, and a sync covers the time
-before.
+``remove`` (index), ``requests`` (rows of ``protocol.entity.ENTITY_REQUEST_DTYPE`` as bytes, checked already
+by the front-end), ``react`` (index, kind) and ``sync``: every soldier the shard is to animate (index,
+figure, weapon, owner) with the last request of each that had one, and the soldiers gone (removed through a
+front-end, perhaps before the shard listened: the shard removes those it has): what a shard that joined
+late, restarted or takes over another's soldiers (failover) needs to animate them (``replay``: the shard's
+own soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
+soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for one
+too; ``books`` (front): answer on ``ttes/books`` with every soldier the shard animates, for front-end
+``front`` that has just heard the shard for the first time (:mod:`server.fabric.fronts`). The topic is
+reliable: ownership and requests are never lost once a shard listens, and a sync covers the time before.
 """
 
 from __future__ import annotations
@@ -44,11 +44,24 @@ def react(index: int, kind: str) -> Op:
     return {"op": "react", "index": index, "kind": kind}
 
 
-def sync(soldiers: list[tuple[int, str, str, str | None]], last: np.ndarray, *, replay: bool = False) -> Op:
+def sync(
+    soldiers: list[tuple[int, str, str, str | None]],
+    last: np.ndarray,
+    *,
+    replay: bool = False,
+    gone: list[int] | None = None,
+) -> Op:
     """``soldiers``: (index, figure, weapon, owner) each; ``last``: the last requests of those with one;
-    ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in)."""
+    ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in); ``gone``:
+    soldiers removed, which the shard removes if it has them."""
     rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
-    return {"op": "sync", "soldiers": [list(s) for s in soldiers], "rows": rows, "replay": replay}
+    return {
+        "op": "sync",
+        "soldiers": [list(s) for s in soldiers],
+        "rows": rows,
+        "replay": replay,
+        "gone": list(gone or []),
+    }
 
 
 def key() -> Op:

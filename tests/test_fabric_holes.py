@@ -1,0 +1,220 @@
+"""Issue 21: the holes a cluster had in what its front-ends and shards agree on, as real processes on
+127.0.0.1 (Zenoh): a front-end and two shards, started, killed and restarted one by one.
+
+* a removal sent before a shard listened reaches it with the front-end's sync (the shard animated a ghost);
+* a front-end that starts while a shard is failed over learns from the stand-in's answer where that shard's
+  soldiers live, and sends their requests there (not to the dead shard's topic); when the shard comes
+  back, it takes every one of them back, not only those created through this front-end;
+* a front-end that learned the soldiers from the shards learns their last requests too: its fail-over
+  hands them on walking, not standing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+import test_fabric_inprocess as inprocess
+import trio
+from test_fabric_cluster import WALK, _soldiers_of
+from test_fabric_latefront import _moving
+from test_server_support import Client, synthetic_dir
+
+from client_stub.link.spawn import ServerProcess, free_port
+from protocol.entity import ENTITY_REQUEST_DTYPE
+from protocol.events import (
+    CreateSoldier,
+    JointUpdates,
+    Ready,
+    RemoveSoldier,
+    SoldierCreated,
+    SoldierRemoved,
+    Subscribe,
+)
+from server.fabric import requests as req
+from server.fabric.fronts import answer, decode_answer, gone, learned_last, stand_ins
+
+pytest.importorskip("zenoh")
+
+
+def test_a_sync_carries_the_soldiers_removed_of_its_homes() -> None:
+    known = np.zeros(12, bool)
+    known[[3, 4, 6, 11]] = True  # removed here (3, 6, 11), or created here (4)
+    live = np.zeros(10, bool)  # the table may be narrower than the index space
+    live[[0, 1, 2, 4, 5]] = True
+    assert gone(known, live, [1], 2).tolist() == [3, 11]
+    assert gone(known, live, [0, 1], 2).tolist() == [3, 6, 11]
+    assert gone(known, live, [0], 3).tolist() == [3, 6]
+    op = req.decode(req.pack([req.sync([], np.zeros(0, ENTITY_REQUEST_DTYPE), gone=[3, 11])]))[0]
+    assert op["gone"] == [3, 11]
+
+
+def test_an_answer_with_another_shards_soldiers_names_a_stand_in_for_a_shard_never_heard() -> None:
+    di = ("DI.fig", "AK_47.fig")
+    told = [(0, *di, None), (3, *di, "a"), (4, *di, None)]
+    assert stand_ins(told, 0, 2, [True, False]) == {1: 0}
+    assert stand_ins(told, 0, 2, [True, True]) == {}  # heard: it comes back, or failed over here
+    assert stand_ins(told, 1, 3, [False, False, False]) == {0: 1}  # 3 and 0 homed on 0; 4 is shard 1's
+
+
+def test_a_front_end_keeps_the_answers_last_requests_of_its_soldiers_without_one() -> None:
+    rows = np.zeros(4, ENTITY_REQUEST_DTYPE)
+    rows["index"] = [1, 3, 5, 11]
+    rows["velocity"][:, 1] = 1.4
+    live = np.zeros(10, bool)
+    live[[1, 3, 5]] = True
+    has_last = np.zeros(12, bool)
+    has_last[3] = True  # asked through this front-end: as new as the shard's
+    assert learned_last(rows, live, has_last)["index"].tolist() == [1, 5]
+    msg = decode_answer(answer(1, 0, [(1, "DI.fig", "AK_47.fig", None)], rows))
+    assert msg["rows"].tobytes() == rows.tobytes()
+    assert not len(decode_answer(answer(1, 0, []))["rows"])
+
+
+ODD = 11  # a soldier created on shard 1 (index 11 modulo 2)
+
+
+class Cluster:
+    """A front-end (``ttes front --shards 2``) and shards started one by one; all stopped on exit."""
+
+    def __init__(self) -> None:
+        d = synthetic_dir()
+        self.data = ["--data-dir", str(d.path), "--startup-script", d.startup_script]
+        self.endpoint = f"127.0.0.1:{free_port()}"
+        self.shards: dict[int, ServerProcess] = {}
+        self.front = self._front()
+
+    def _front(self) -> ServerProcess:
+        p = ServerProcess([*self.data, "--shards", "2", "--fabric-listen", self.endpoint], command="front")
+        p.wait_ready()
+        return p
+
+    def shard(self, k: int) -> ServerProcess:
+        p = ServerProcess([*self.data, "--shard", f"{k}/2", "--fabric-connect", self.endpoint])
+        self.shards[k] = p
+        p.wait_ready()
+        return p
+
+    def kill(self, p: ServerProcess) -> None:
+        p.proc.kill()
+        p.proc.wait()
+        p.stop()
+
+    def restart_front(self) -> ServerProcess:
+        self.kill(self.front)
+        self.front = self._front()  # the same endpoint: the shards connect to it again
+        return self.front
+
+    def stop(self) -> None:
+        for p in (self.front, *self.shards.values()):
+            p.stop()
+
+
+@contextlib.contextmanager
+def cluster() -> Iterator[Cluster]:
+    c = Cluster()
+    try:
+        yield c
+    finally:
+        c.stop()
+
+
+async def _until_soldiers(port: int, want: list[int], deadline: float = 60) -> list[int]:
+    """The soldiers a server's READY lists, once they are ``want`` or at the deadline (not a timing)."""
+    have: list[int] = []
+    with trio.move_on_after(deadline):
+        while (have := await _soldiers_of(port)) != want:
+            await trio.sleep(0.2)
+    return have
+
+
+async def _walker(port: int) -> Client:
+    """Client ``alpha`` with soldier ``ODD`` walking (on shard 1)."""
+    c = await Client.open(port, "ig", client_id="alpha")
+    await c.expect(Ready)
+    await c.send(CreateSoldier(1, "DI.fig", "AK_47.fig", ODD))
+    assert (await c.expect(SoldierCreated)).index == ODD
+    await c.requests(index=[ODD], velocity=WALK)
+    return c
+
+
+async def test_a_removal_sent_before_a_shard_listened_reaches_it() -> None:
+    with cluster() as c:
+        c.shard(0)
+        await _moving(c.front.port, [0], frames=1)  # shard 0 heard
+        op = await Client.open(c.front.port, "op", role="operator")
+        await op.expect(Ready)
+        await op.send(RemoveSoldier(3))  # a start-up soldier of shard 1, which does not listen yet
+        await op.aclose()
+        shard1 = c.shard(1)  # its start-up script makes soldier 3 again
+        await _moving(c.front.port, [1], frames=1)  # shard 1 heard: the front-end synced it
+        assert await _until_soldiers(shard1.port, [1, 5, 7, 9]) == [1, 5, 7, 9]
+
+
+async def test_a_front_end_started_while_a_shard_is_failed_over_routes_to_the_stand_in() -> None:
+    with cluster() as c:
+        c.shard(0)
+        c.shard(1)
+        alpha = await _walker(c.front.port)
+        await alpha.requests(index=[ODD], velocity=(0.0, 0.0, 0.0))  # it stands
+        c.kill(c.shards[1])
+        assert await _until_soldiers(c.shards[0].port, [*range(10), ODD]) == [*range(10), ODD]
+        await alpha.aclose()
+        late = c.restart_front()  # it never hears shard 1: shard 0 animates its soldiers
+        assert await _until_soldiers(late.port, [*range(10), ODD]) == [*range(10), ODD]
+        alpha = await Client.open(late.port, "ig", client_id="alpha")
+        await alpha.expect(Ready)
+        await alpha.requests(index=[ODD], velocity=WALK)  # to shard 0, the stand-in
+        await _moving(late.port, [ODD], frames=10)
+        back = c.shard(1)  # takes every one of its soldiers back from the stand-in, walking on
+        assert await _until_soldiers(back.port, [1, 3, 5, 7, 9, ODD]) == [1, 3, 5, 7, 9, ODD]
+        assert await _until_soldiers(c.shards[0].port, [0, 2, 4, 6, 8]) == [0, 2, 4, 6, 8]
+        await _moving(late.port, [ODD], frames=10)
+        await alpha.aclose()
+
+
+async def test_a_late_front_ends_fail_over_hands_on_the_last_requests_it_learned() -> None:
+    with cluster() as c:
+        c.shard(0)
+        c.shard(1)
+        alpha = await _walker(c.front.port)
+        await _moving(c.front.port, [ODD], frames=3)
+        late = c.restart_front()  # learns ODD walking from shard 1, with its last request
+        assert await _until_soldiers(late.port, [*range(10), ODD]) == [*range(10), ODD]
+        await _moving(late.port, [ODD], frames=3)
+        with contextlib.suppress(trio.BrokenResourceError, trio.ClosedResourceError):
+            await alpha.aclose()
+        c.kill(c.shards[1])
+        assert await _until_soldiers(c.shards[0].port, [*range(10), ODD]) == [*range(10), ODD]
+        obs = await Client.open(late.port, "obs", role="observer")
+        await obs.expect(Ready)
+        await obs.send(Subscribe((ODD,)))
+        seen = 0
+        with trio.fail_after(60):  # a deadline, not a timing: a soldier standing is sent once
+            while seen < 10:
+                seen += ODD in (await obs.expect(JointUpdates)).indices.tolist()
+        await obs.aclose()
+
+
+async def test_a_hung_shard_that_resumes_lets_go_of_a_soldier_removed_while_it_was_away(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """In one process (test_fabric_inprocess's fabric): shard 1 hangs, the walker goes to shard 0 and is
+    removed there; shard 1, which still has it, resumes: the sync that takes its soldiers back removes it."""
+    async with inprocess.cluster() as (front, node, shards, fabrics):
+        c = await inprocess.walker(front, ODD)
+        await inprocess.moving(c, ODD, 3)
+        fabrics[1].closed = True  # it publishes nothing more, yet its presence stays
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[0]):
+                await trio.sleep(0.1)
+        await c.send(RemoveSoldier(ODD))
+        await c.expect(SoldierRemoved)
+        fabrics[1].closed = False  # it resumes, with the walker it had
+        with trio.fail_after(30):
+            while node.route != [0, 1] or ODD in inprocess.live(shards[1]):
+                await trio.sleep(0.1)
+        assert ODD not in inprocess.live(shards[0])
+        await c.aclose()
