@@ -100,6 +100,7 @@ async def cluster(
         front_node.start(token)
         for k in range(2):
             shard, fabric = make_server(), MemoryFabric(bus)
+            shard.codes_only()  # as `ttes server --shard` makes it
             node = ShardNode(shard, fabric, Sharding(k, 2), key_every=key_every)
             await nursery.start(shard.serve)
             node.keep_own()
