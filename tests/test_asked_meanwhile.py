@@ -144,6 +144,22 @@ def test_killed_on_his_way_down_he_dies_from_where_he_is(lib) -> None:
     assert "crawl2prstow_low" not in clips and clips[-1].endswith("2dead_low"), clips
 
 
+def test_a_man_asked_to_stand_while_he_falls_dead_falls_first(lib) -> None:
+    """UPRIGHT asked 0.5 s into his death: the fall is never turned back half-way (the graph has it the other
+    way, DEAD -> STAND_STOWED, for a dead man asked to stand); he falls exactly as if not asked, lies dead,
+    then gets up the same way."""
+    dies = [(0.0, Appearance.UPRIGHT, 0.0), (0.5, Appearance.DEAD, 0.0)]
+    asked = played(lib, [*dies, (1.0, Appearance.UPRIGHT, 0.0)], 15.0)
+    unasked = played(lib, dies, 15.0)
+    lies = next(n for n, r in enumerate(unasked) if r[2].startswith("DEAD"))  # his death clip has ended
+    fall = [n for n, r in enumerate(unasked[:lies]) if r[1].endswith("2dead_low")]
+    assert len(fall) > 2.0 * HZ, len(fall)
+    assert np.array_equal(np.array([asked[n][3] for n in fall]), np.array([unasked[n][3] for n in fall])), (
+        "the fall was changed by a request made while he fell"
+    )
+    assert asked[-1][2] == "STAND_STOWED", asked[-1][2]
+
+
 async def wire_stand(asked: bool) -> tuple[float, float, list[str]]:
     """Soldier 0 of a served world told to go prone, and (``asked``) 1 s later to stand: how soon he stands
     (inf: not in 3 s), the most a joint the image generator receives turns between two updates meanwhile,

@@ -67,7 +67,10 @@ class Replanning(ManagerCore):
 
     def _way_back(self, step: PathStep) -> PathStep | None:
         """The arc ``step`` the other way (its clip backwards), if the graph has it (a turn, a reaction or a
-        clip played on request has none: they play to their end)."""
+        clip played on request has none: they play to their end). A fall to DEAD plays to its end too: a
+        trainee must never see a man half-killed get up again (once dead, DEAD's arcs replay it backwards)."""
+        if self.library.postures[step.end].startswith("DEAD"):
+            return None
         back = self.library.path(step.end, step.start)
         if not back or len(back) != 1 or back[0].clip != step.clip or back[0].forward == step.forward:
             return None
