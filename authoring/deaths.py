@@ -159,6 +159,10 @@ class DeathSpec:
     # once his legs are lifted, he is shifted and turned about the vertical so that each part's worst slide
     # is least (kfire2dead's trunk, 3.3-3.7 cm: planted.least_worst_turned)
     turn_worst: bool = False
+    # the slaves' trunk rest holds a foot near the ground whose knee is up where it was (slave_rest
+    # feet_held): kfire2dead's DI, its trunk turned to rest, lowered its hovering right foot onto the ground
+    # while it moved (skate 0.32 -> 4.06 cm once he was turned least-worst)
+    slave_feet_held: bool = False
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
     # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
@@ -293,6 +297,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         legs_lift=True,
         plant_worst=True,
         turn_worst=True,
+        slave_feet_held=True,
     ),
     _prone("prstow2dead", "PRONE_STOWED"),  # not eased: see PRONE_START_EASE
     _prone_dead("prfire2dead", "PRONE_FIRE"),

@@ -368,3 +368,5 @@ def test_the_kneeling_fire_death_is_turned_least_worst_once_his_legs_are_lifted(
     deaths._after_physics(spec, "frames", (None, None))  # type: ignore[arg-type]
     assert done == ["plant_least_worst", "_held", "lifted", "least_worst_turned"]
     assert [d.name for d in deaths.DEATHS if d.turn_worst] == ["kfire2dead"]
+    # ... and its slaves' trunk rest holds the foot they hover (slave_rest feet_held; kneeldeath14)
+    assert [d.name for d in deaths.DEATHS if d.slave_feet_held] == ["kfire2dead"]
