@@ -25,6 +25,7 @@ from __future__ import annotations
 import fnmatch
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -238,14 +239,17 @@ def slave_one(
         out = reslave_channelset(chset, pair, name)
     # DI's kneecaps sit higher than the master's and its prone forearms float: put them down where his are;
     # its feet held where his are planted (the body no longer moves under them); last, a dead DI's trunk
-    # turned so its pelvis and chest both rest on the ground (its torso is shaped differently)
+    # turned so its pelvis and chest both rest on the ground (its torso is shaped differently), holding a
+    # foot it hovers over the ground where the death asks (DeathSpec.slave_feet_held)
+    spec = deaths.death_specs().get(chset.name.removesuffix(".chset"))
+    trunk = partial(rest_slave_trunk, feet_held=True) if spec and spec.slave_feet_held else rest_slave_trunk
     rests = (
         rest_slave_knees,
         rest_slave_forearms,
         tilt_onto_knees,
         rest_limbs,
         plant_slave_feet,
-        rest_slave_trunk,
+        trunk,
     )
     for rest in rests:
         rest(chset, out, ctx.figure_set)

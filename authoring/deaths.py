@@ -74,7 +74,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 8. **a kneeling soldier's legs roll off the ground** (:attr:`DeathSpec.legs_lift`, last): a foot or knee
    that would skid more than a centimetre lifts clearly off the ground until it comes to rest, carried by
    the leg's own joints (:mod:`authoring.leg_lift`; kstow2dead's and kfire2dead's feet slid 4.8-4.9 cm,
-   their kneeling knees 5.9-6.1).
+   their kneeling knees 5.9-6.1); then kfire2dead, whose trunk still spins on the ground as he lands (belly
+   3.3, chest 3.7 cm), is shifted and turned about the vertical as a whole so that each part's worst slide
+   is least (:attr:`DeathSpec.turn_worst`, :func:`authoring.planted.least_worst_turned`: 5 degrees at most);
 
 9. **prfire2dead leaves its posture from rest** (:attr:`DeathSpec.start_ease`, last): the finished clip
    is retimed so that it starts from standstill (:func:`authoring.easing.eased_in`, lengthened by half the
@@ -103,7 +105,7 @@ from authoring.easing import eased_in
 from authoring.knee_hold import hold_knees
 from authoring.leg_lift import lifted
 from authoring.motion import KeyPosture
-from authoring.planted import plant, plant_least_worst
+from authoring.planted import least_worst_turned, plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
 from authoring.quality_frames import FigureSet
 from authoring.transitions import FPS, ClipFrames
@@ -154,6 +156,13 @@ class DeathSpec:
     # he lands on skids in the physics, 7.37 -> 3.92 cm; kstow2dead's thigh 4.51 -> 2.53 but then its arms'
     # fall slid the chest 5.87: planted.plant_least_worst)
     plant_worst: bool = False
+    # once his legs are lifted, he is shifted and turned about the vertical so that each part's worst slide
+    # is least (kfire2dead's trunk, 3.3-3.7 cm: planted.least_worst_turned)
+    turn_worst: bool = False
+    # the slaves' trunk rest holds a foot near the ground whose knee is up where it was (slave_rest
+    # feet_held): kfire2dead's DI, its trunk turned to rest, lowered its hovering right foot onto the ground
+    # while it moved (skate 0.32 -> 4.06 cm once he was turned least-worst)
+    slave_feet_held: bool = False
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
     # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
@@ -287,6 +296,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_fall=True,
         legs_lift=True,
         plant_worst=True,
+        turn_worst=True,
+        slave_feet_held=True,
     ),
     _prone("prstow2dead", "PRONE_STOWED"),  # not eased: see PRONE_START_EASE
     _prone_dead("prfire2dead", "PRONE_FIRE"),
@@ -622,7 +633,8 @@ def _after_physics(
     skid lifted (step 8)."""
     planted = plant_least_worst if spec.plant_worst else plant
     frames = _held(spec, planted(frames, figures[0]), figures, release)
-    return lifted(frames, figures[0]) if spec.legs_lift else frames
+    frames = lifted(frames, figures[0]) if spec.legs_lift else frames
+    return least_worst_turned(frames, figures[0]) if spec.turn_worst else frames
 
 
 def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], release: int) -> ClipFrames:

@@ -11,6 +11,11 @@ foot, heel or the head rises past the check's bound (SLSQP); then the change is 
 second before the clip's last frames, where the body lies still (eased in from where the master's root
 stops, the last frame's turn about the last frame's ground point met a body still falling: it sank, was
 lifted 3 cm and its chest slid 9 cm). The build's ``lift_off_ground`` runs after it.
+
+With ``feet_held`` (a death's :attr:`~authoring.deaths.DeathSpec.slave_feet_held`) a foot near the ground
+whose knee is up is held where it was through the change, its leg solved to carry it (:func:`_hold_feet`),
+instead of only bounding its slide at the last frame: kfire2dead's DI, its right foot hovering 1.2-1.9 cm
+over the ground, was lowered onto it by the trunk's turn while still moving and skated 4.1 cm.
 """
 
 from __future__ import annotations
@@ -20,9 +25,13 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize
 
+from authoring import ik
+from authoring.postures import leg
 from authoring.quality_frames import FigureSet
-from authoring.slave_contacts import _played
+from authoring.slave_contacts import SIDES, _played
+from authoring.slave_feet import KNEE_DOWN_CM, NEAR_CM, part_points
 from authoring.slave_ground import PART_SITES, _write
+from authoring.transitions import track_solve
 from peabody.fk import FigureKinematics
 from server.motion.channelset import Channelset
 
@@ -42,6 +51,9 @@ BOUND_SLACK_CM = 0.25
 KEPT_SHARES = 20  # a search ending past a bound keeps the largest share (1/20 steps) of its move within them
 EASE_FRAMES = 30  # the change eases in over this many frames (0.5 s) near the clip's end, where the body lies
 END_HOLD_FRAMES = 4  # still, and is in full this many frames before the end (a death ends at rest)
+HOLD_ITERATIONS = 20  # a held foot's leg is tracked frame after frame (slave_feet's tracking) ...
+HOLD_DOF_STEP = 0.01  # ... in steps of at most this (rad)
+HOLD_TURN_CM = 40.0  # a radian of a held foot's turn weighs this much move: held firmly
 # the searched parameters: a root turn about world x or z through the ground under the trunk, or a DOF
 PARAMS = (
     ("root", 0),
@@ -223,9 +235,54 @@ def _ease(n: int, start: int) -> np.ndarray:
     return u * u * (3.0 - 2.0 * u)
 
 
-def rest_slave_trunk(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
+def _held_feet(
+    q: np.ndarray, loc: np.ndarray, figures: FigureSet, ptype: str, frames: np.ndarray
+) -> tuple[str, ...]:
+    """The feet (``left_foot``, ...) that come within ``NEAR_CM`` of the ground in ``frames`` while their
+    knee stays off it (above ``KNEE_DOWN_CM``: a knee on the ground carries the leg, and holding its foot
+    slid the knee)."""
+    out = []
+    for side in SIDES:
+        foot = part_points(q[frames], loc[frames], figures, ptype, (f"{side}_foot",))[..., 1].min(axis=1)
+        parts = tuple(f"{side}_{p}" for p in ("knee", "kneecap", "thigh"))
+        knee = part_points(q[frames], loc[frames], figures, ptype, parts)[..., 1].min(axis=1)
+        if foot.min() <= NEAR_CM and knee.min() > KNEE_DOWN_CM:
+            out.append(f"{side}_foot")
+    return tuple(out)
+
+
+def _hold_feet(
+    figures: FigureSet,
+    ptype: str,
+    before: tuple[np.ndarray, np.ndarray],
+    after: tuple[np.ndarray, np.ndarray],
+    feet: tuple[str, ...],
+    frames: np.ndarray,
+) -> np.ndarray:
+    """``after``'s poses with the ``feet``' legs solved (in ``frames``) to put each foot's heel site where
+    it is in ``before`` (position and turn; each a ``(poses, root globals)`` pair)."""
+    kin = figures.kin[ptype]
+    sites = kin.site_globals(before[0][frames], before[1][frames])
+    goals = []
+    for foot in feet:
+        side = foot.removesuffix("_foot")
+        heel = sites[:, kin.site_names.index(f"{side}_foot.heel")]
+        goals.append(
+            ik.Goal(f"{side}_foot.heel", heel[:, :3, 3], heel[:, :3, :3], 1.0, 2, leg(side), HOLD_TURN_CM)
+        )
+    poses = after[0].copy()
+    poses[frames] = track_solve(
+        kin, after[0][frames], goals, after[1][frames], iterations=HOLD_ITERATIONS, max_dof_step=HOLD_DOF_STEP
+    )
+    return poses
+
+
+def rest_slave_trunk(
+    master: Channelset, slave: Channelset, figures: FigureSet, feet_held: bool = False
+) -> np.ndarray:
     """Turn a dead slave's body and lumbar so its pelvis and chest or belly rest on the ground at the end
-    (``slave``'s joint and body channels, in place; a clip without a ``release_frame`` is left alone).
+    (``slave``'s joint and body channels, in place; a clip without a ``release_frame`` is left alone); with
+    ``feet_held`` a foot near the ground whose knee is up stays where it was (:func:`_hold_feet`).
     Returns the parameters found (degrees, in :data:`PARAMS` order)."""
     release = getattr(slave, "release_frame", None)
     if release is None:
@@ -233,10 +290,11 @@ def rest_slave_trunk(master: Channelset, slave: Channelset, figures: FigureSet) 
     q, loc, stype = _played(slave, figures)
     n = len(q)
     rest = _Rest(figures, stype, q[-1], loc[-1])
+    w = _ease(n, max(release, n - 1 - EASE_FRAMES - END_HOLD_FRAMES))
+    held = _held_feet(q, loc, figures, stype, np.flatnonzero(w > 0)) if feet_held else ()
     x = search(rest)
     if not np.any(x):
         return x
-    w = _ease(n, max(release, n - 1 - EASE_FRAMES - END_HOLD_FRAMES))
     poses, moved = q.copy(), np.tile(np.eye(4), (n, 1, 1))
     drop0 = float(rest.placed(np.zeros((1, len(PARAMS))))[2][0])  # the last frame lies on the ground: ~0
     for f in np.flatnonzero(w > 0):
@@ -244,5 +302,7 @@ def rest_slave_trunk(master: Channelset, slave: Channelset, figures: FigureSet) 
         poses[f] = q[f] + (pose[0] - q[-1])
         moved[f] = at[0] @ np.linalg.inv(loc[-1])  # the root's turn about the pivot (world) ...
         moved[f, 1, 3] += drop[0] - (1.0 - w[f]) * drop0  # ... and the drop onto the ground, eased in
+    if held:
+        poses = _hold_feet(figures, stype, (q, loc), (poses, moved @ loc), held, np.flatnonzero(w > 0))
     _write(slave, figures, stype, poses, moved)
     return x

@@ -345,3 +345,28 @@ def test_a_prone_death_leaves_its_posture_from_rest(ctx: BuildContext) -> None:
     poses, roots, _, _ = _played(ctx, "prfire2dead")
     sites = FigureKinematics(ctx.soldier).site_globals(poses[:4], roots[:4])[..., :3, 3]
     assert (np.linalg.norm(np.diff(sites, axis=0), axis=-1) * 60.0 / 100.0).max() <= 0.25  # m/s
+
+
+def test_the_kneeling_fire_death_is_turned_least_worst_once_his_legs_are_lifted(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Issue 14 (kneelrest14): kfire2dead's trunk spins as he lands (belly 3.3, chest 3.7, upper arm 3.4 cm
+    after the least-worst shift): the finished fall is shifted and turned about the vertical last, after the
+    legs' lift (each step here only records that it ran, in order); no other death is turned."""
+    done: list[str] = []
+
+    def step(name: str):
+        def run(frames, *args, **kwargs):
+            done.append(name)
+            return frames
+
+        return run
+
+    for name in ("plant", "plant_least_worst", "_held", "lifted", "least_worst_turned"):
+        monkeypatch.setattr(deaths, name, step(name))
+    spec = deaths.death_specs()["kfire2dead"]
+    deaths._after_physics(spec, "frames", (None, None))  # type: ignore[arg-type]
+    assert done == ["plant_least_worst", "_held", "lifted", "least_worst_turned"]
+    assert [d.name for d in deaths.DEATHS if d.turn_worst] == ["kfire2dead"]
+    # ... and its slaves' trunk rest holds the foot they hover (slave_rest feet_held; kneeldeath14)
+    assert [d.name for d in deaths.DEATHS if d.slave_feet_held] == ["kfire2dead"]

@@ -84,3 +84,38 @@ def test_two_trunk_parts_share_their_relative_skid_evenly() -> None:
     shift = least_worst_shift(points, np.array(["belly", "chest"]))
     assert max(_slide(points, shift, 0), _slide(points, shift, 1)) == pytest.approx(2.0, abs=0.05)
     np.testing.assert_allclose(shift[:2], 0.0, atol=1e-9)
+
+
+def test_a_body_spinning_on_the_ground_is_turned_back() -> None:
+    """kfire2dead (kneelrest14): as he lands on his side his trunk spins about the vertical, belly and chest
+    skidding opposite ways (3.3 and 3.7 cm after the least worst shift): no shift helps both; a turn about
+    the vertical does (none at the first frame, at most WORST_TURN_STEP a frame)."""
+    from authoring.planted import WORST_TURN_STEP, _turned
+
+    n = 24
+    spin = np.radians(0.3) * np.clip(np.arange(n) - 2, 0, 20)  # 6 degrees from frame 2 on
+    points = np.zeros((n, 2, 3))
+    points[:, 0, 0], points[:, 0, 2] = 30.0 * np.cos(spin), -30.0 * np.sin(spin)  # the belly ...
+    points[:, 1] = -points[:, 0]  # ... and the chest, opposite it
+    parts = np.array(["belly", "chest"])
+    shift = least_worst_shift(points, parts)
+    assert max(_slide(points, shift, 0), _slide(points, shift, 1)) > 3.0
+    turned = least_worst_shift(points, parts, np.zeros(2))
+    back = _turned(points, turned, np.zeros(2))
+    none = np.zeros((n, 3))
+    assert max(_slide(back, none, 0), _slide(back, none, 1)) < 0.2
+    assert turned[0, 1] == 0.0
+    assert np.abs(np.diff(turned[:, 1])).max() <= WORST_TURN_STEP + 1e-9
+
+
+def test_a_turned_clip_keeps_its_first_frame_and_its_rifle_on_him(soldier) -> None:
+    """least_worst_turned moves the whole figure (root and rifle) and leaves the first frame, a posture node,
+    where it was; a body standing still is left still."""
+    from authoring.planted import least_worst_turned
+
+    clip = _standing(soldier, 8, np.array([0.0, 0.0, 0.0]))
+    clip.rifles[:, :3, 3] += [5.0, 90.0, -10.0]
+    out = least_worst_turned(clip, soldier)
+    np.testing.assert_allclose(out.roots, clip.roots, atol=1e-9)
+    np.testing.assert_allclose(out.rifles, clip.rifles, atol=1e-9)
+    np.testing.assert_array_equal(out.poses, clip.poses)

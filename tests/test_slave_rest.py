@@ -118,3 +118,31 @@ def test_a_search_ending_past_a_bound_keeps_the_share_of_its_move_within_it() ->
     assert kept[0] >= 1.0  # no less than the bound allows (to a 1/20 step)
     np.testing.assert_array_equal(slave_rest._kept_share(best, move, heights, np.array([5.0])), move)
     np.testing.assert_array_equal(slave_rest._kept_share(best, move, heights, np.array([-1.0])), best)
+
+
+def test_a_hovering_foot_whose_knee_is_up_is_held_through_the_turn(monkeypatch) -> None:
+    """Issue 14 (kneeldeath14): kfire2dead's DI hovers its right foot 1.2-1.9 cm over the ground while its
+    left knee lies on it; the trunk's turn to rest lowered that foot onto the ground while it still moved
+    (skate 0.32 -> 4.06 cm). With ``feet_held`` the foot's heel stays where it was through the change (the
+    leg carries it); the left foot, its knee down, is left to the search's bounds."""
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
+    master = load_channelset(CHANNELSETS / "kfire2dead.chset.env", use_cache=False)
+    before = load_channelset(CHANNELSETS / "kfire2dead_low.chset.env", use_cache=False)
+    found = np.zeros(len(PARAMS))
+    found[0] = 3.5  # the root pitch the search finds for it (3.4-3.6 degrees)
+    monkeypatch.setattr(slave_rest, "search", lambda rest: found)
+    q0, loc0, stype = _played(before, figs)
+    kin = figs.kin[stype]
+    heel = kin.site_names.index("right_foot.heel")
+    moved = {}
+    for held in (False, True):
+        slave = copy.deepcopy(before)
+        slave_rest.rest_slave_trunk(master, slave, figs, feet_held=held)
+        q1, loc1, _ = _played(slave, figs)
+        a, b = (kin.site_globals(q, loc)[:, heel, :3, 3] for q, loc in ((q0, loc0), (q1, loc1)))
+        moved[held] = np.linalg.norm(b - a, axis=1).max()
+    w = _ease(len(q0), len(q0) - 1 - EASE_FRAMES - slave_rest.END_HOLD_FRAMES)
+    assert slave_rest._held_feet(q0, loc0, figs, stype, np.flatnonzero(w > 0)) == ("right_foot",)
+    assert moved[False] > 1.0, moved
+    assert moved[True] < 0.3, moved  # of 1.5 cm, as the leg tracking holds it (0.24)
