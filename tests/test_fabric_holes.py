@@ -35,7 +35,7 @@ from protocol.events import (
 )
 from server.fabric import requests as req
 from server.fabric.batch import Batch
-from server.fabric.fronts import Fences, answer, decode_answer, gone, learned_last, stand_ins
+from server.fabric.fronts import Fences, answer, decode_answer, gone, learned_last, rerouted, stand_ins
 
 pytest.importorskip("zenoh")
 
@@ -81,6 +81,17 @@ def test_the_rows_of_an_index_created_again_wait_for_the_shards_fence() -> None:
     fences.mark([3], 0)
     assert fences.fence(0) == 2 and fences.waiting == 1
     assert fences.clean(_rows(0, [], (0, 2))).indices.tolist() == [] and fences.waiting == 0  # no rows: done
+
+
+def test_a_shard_down_hands_its_own_and_the_homes_it_stood_in_for_to_the_least_busy_survivor() -> None:
+    route = [0, 1, 0, 3]  # 2 failed over to 0
+    assert rerouted(route, [0, 1, 2, 3], [True] * 4) == [] and route == [0, 1, 0, 3]
+    assert rerouted(route, [1, 3], [True] * 4) == [(0, 1, [0, 2])] and route == [1, 1, 1, 3]
+    assert rerouted(route, [3], [True] * 4) == [(1, 3, [0, 1, 2])] and route == [3, 3, 3, 3]
+    assert rerouted(route, [], [True] * 4) == [] and route == [3, 3, 3, 3]  # none left to take them
+    route = [0, 1, 2]
+    assert rerouted(route, [2], [True, False, True]) == [(0, 2, [0])]  # 1 never heard: not failed over
+    assert rerouted(route, [0], [True, True, True]) == [(1, 0, [1]), (2, 0, [0, 2])] and route == [0, 0, 0]
 
 
 def test_an_answer_with_another_shards_soldiers_names_a_stand_in_for_a_shard_never_heard() -> None:
@@ -279,4 +290,48 @@ async def test_an_index_removed_and_created_again_shows_none_of_the_old_soldiers
             while ODD not in inprocess.live(shards[1]):
                 await trio.sleep(0.1)
         await c.expect(JointUpdates, lambda u: ODD in u.indices.tolist(), timeout=30)
+        await c.aclose()
+
+
+async def test_a_shards_walker_walks_on_when_its_stand_in_dies_too(autojump_clock: trio.abc.Clock) -> None:
+    """In one process, three shards: shard 2 dies and its walker goes on in shard 0, which then dies too:
+    the walker goes on in shard 1, the one left (on main shard 2 stayed routed to the dead shard 0)."""
+    async with inprocess.cluster(shards_n=3) as (front, node, shards, fabrics):
+        c = await inprocess.walker(front, ODD)  # 11: home shard 2
+        await inprocess.moving(c, ODD, 3)
+        fabrics[2].close()
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[0]):
+                await trio.sleep(0.1)
+        assert node.route == [0, 1, 0]
+        fabrics[0].close()
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[1]):
+                await trio.sleep(0.1)
+        assert node.route == [1, 1, 1]
+        await inprocess.moving(c, ODD, 3)  # walking, from its last request
+        await c.aclose()
+
+
+async def test_a_hung_stand_in_that_resumes_lets_go_of_the_soldiers_it_stood_in_for(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Shard 2 dies and its walker goes on in shard 0, which hangs: the walker goes to shard 1; shard 0
+    resumes with the walker it had, and the sync that gives it its own soldiers back removes the walker."""
+    async with inprocess.cluster(shards_n=3) as (front, node, shards, fabrics):
+        c = await inprocess.walker(front, ODD)
+        await inprocess.moving(c, ODD, 3)
+        fabrics[2].close()
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[0]):
+                await trio.sleep(0.1)
+        fabrics[0].closed = True  # it publishes nothing more, yet its presence stays
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[1]):
+                await trio.sleep(0.1)
+        fabrics[0].closed = False
+        with trio.fail_after(30):
+            while node.route != [0, 1, 1] or ODD in inprocess.live(shards[0]):
+                await trio.sleep(0.1)
+        await inprocess.moving(c, ODD, 3)
         await c.aclose()

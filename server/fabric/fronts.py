@@ -151,6 +151,23 @@ def gone(known: np.ndarray, live: np.ndarray, homes: list[int], shards: int) -> 
     return idx[np.isin(idx % shards, homes)]
 
 
+def rerouted(route: list[int], alive: list[int], heard: list[bool]) -> list[tuple[int, int, list[int]]]:
+    """The fail-overs due, as ``(down, survivor, homes)``, ``route`` changed to match: each shard heard
+    once and down now (not in ``alive``) that animates soldiers — its own, or as a stand-in another's: the
+    homes routed to it (a stand-in that dies too) — hands them all to the living shard that animates the
+    fewest homes. None while no shard lives."""
+    out: list[tuple[int, int, list[int]]] = []
+    for down in range(len(route)):
+        homes = [h for h, r in enumerate(route) if r == down]
+        if not alive or down in alive or not heard[down] or not homes:
+            continue
+        survivor = min(alive, key=lambda s: sum(r == s for r in route))
+        for h in homes:
+            route[h] = survivor
+        out.append((down, survivor, homes))
+    return out
+
+
 class Fences:
     """Front-end ``front``'s fences: for each index it created or removed (or synced elsewhere), the shard
     whose batches may carry it and the fence that shard must have taken first (issue 21 (d): the index

@@ -356,6 +356,7 @@ class FrontNode:
         self._asked: set[int] = set()  # shards asked for their books, not answered yet
         self.known = np.zeros(n, bool)  # created or removed here, or told so by a front-end: not learned
         self._unknown: dict[int, set[int]] = {}  # shard asked -> its batches' soldiers not in the books
+        self._stood_for: dict[int, set[int]] = {}  # shard failed over -> the other homes it animated
         self.batches = 0  # merged
         self.skipped = 0  # lost on the fabric (or dropped from a full queue)
         self.failovers = 0
@@ -479,8 +480,11 @@ class FrontNode:
                 for i in self._homed(k).tolist():
                     self._send(stood_in, req.remove(i))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
+            # it stood in for other shards before it went (hung): their soldiers live elsewhere now
+            moved = [h for h in self._stood_for.pop(k, set()) if self.route[h] != k]
+            drop = np.concatenate([self._homed(h) for h in moved]) if moved else None
             # from a stand-in (perhaps learned from its answer: this front-end started meanwhile), all of them
-            self._sync(k, [k], replay=stood_in != k, made=first and stood_in == k)
+            self._sync(k, [k], replay=stood_in != k, made=first and stood_in == k, drop=drop)
         m = self.server.world.manager
         if m is None:
             return
@@ -510,15 +514,13 @@ class FrontNode:
 
     def _fail_over(self, now: float) -> None:
         alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
-        for k in range(self.shards):
-            if self.route[k] == k and self.heard_at[k] > -math.inf and k not in alive and alive:
-                survivor = min(alive, key=lambda s: sum(r == s for r in self.route))
-                self.route[k] = survivor
-                self.failovers += 1
-                log.warning(
-                    "fabric_failover", shard=k, to=survivor, silent_s=round(now - self.heard_at[k], 3)
-                )
-                self._sync(survivor, [k])
+        heard = [at > -math.inf for at in self.heard_at]
+        for k, survivor, homes in books.rerouted(self.route, alive, heard):
+            self.failovers += 1
+            silent_s = round(now - self.heard_at[k], 3)
+            log.warning("fabric_failover", shard=k, to=survivor, homes=homes, silent_s=silent_s)
+            self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
+            self._sync(survivor, homes)
 
     def _homed(self, k: int) -> np.ndarray:
         """The live soldiers whose home is shard ``k``."""
@@ -526,10 +528,19 @@ class FrontNode:
         live = m.table.live if m is not None else np.zeros(0, np.int64)
         return live[Sharding.home(live, self.shards) == k]
 
-    def _sync(self, shard: int, homes: list[int], *, replay: bool = False, made: bool = False) -> None:
+    def _sync(
+        self,
+        shard: int,
+        homes: list[int],
+        *,
+        replay: bool = False,
+        made: bool = False,
+        drop: np.ndarray | None = None,
+    ) -> None:
         """``made``: only the soldiers created here (a shard heard for the first time: this front-end's
         creations may have gone before it listened; the start-up script's it has, the others' their makers
-        sync, and a late front-end's books are not the truth: it learns them from the answer to ``books``)."""
+        sync, and a late front-end's books are not the truth: it learns them from the answer to ``books``).
+        ``drop``: soldiers of other homes the shard is to let go of (it stood in for them, and hung)."""
         m = self.server.world.manager
         if m is None:
             return
@@ -539,6 +550,7 @@ class FrontNode:
         soldiers = _soldiers(self.server, idx)
         have = idx[self.has_last[idx]]
         gone = books.gone(self.known, m.table.alive, homes, self.shards).tolist()
+        gone += [] if drop is None else drop.tolist()
         self._send(shard, req.sync(soldiers, self.last[have], replay=replay, gone=gone))
         self.fences.moved(homes, self.shards, shard)
 
