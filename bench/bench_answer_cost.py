@@ -30,15 +30,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from client_stub.loadtest.mix import MixDriver
 from server.app import TtesServer
 from server.config import ServerConfig
+from server.pose_board import PoseBoard
+from server.soldier.manager import SoldierManager
 
 TICK_HZ = 30.0
 STEP_EVERY = 3  # ticks per mix step (10 Hz)
 WARM_S = 1.0  # the first second (the initial requests settling) is not measured
 
 
-def measure(soldiers: int, clients: int, seconds: float, together: bool = False) -> dict[str, Any]:
-    cfg = ServerConfig(host="127.0.0.1", port=0, tick_hz=TICK_HZ, throttle=0.0)
-    server = TtesServer(cfg)
+def mix_world(server: TtesServer, soldiers: int) -> tuple[SoldierManager, PoseBoard, MixDriver, list[float]]:
+    """``server``'s world started with ``soldiers`` of the load mix, their first requests applied at 0, on
+    a clock the caller sets (``clock[0]``, simulated seconds): ``(manager, board, mix, clock)``."""
     server.start_world()
     world = server.world
     clock = [0.0]
@@ -49,6 +51,14 @@ def measure(soldiers: int, clients: int, seconds: float, together: bool = False)
     assert m is not None and board is not None
     driver = MixDriver(soldiers)
     m.apply_requests(driver.initial(), 0.0)
+    return m, board, driver, clock
+
+
+def measure(soldiers: int, clients: int, seconds: float, together: bool = False) -> dict[str, Any]:
+    cfg = ServerConfig(host="127.0.0.1", port=0, tick_hz=TICK_HZ, throttle=0.0)
+    server = TtesServer(cfg)
+    m, board, driver, clock = mix_world(server, soldiers)
+    world = server.world
     owner = np.arange(soldiers) * clients // soldiers  # each client created a contiguous share
     ms: dict[str, list[float]] = {}
     rows: dict[str, list[int]] = {"rows": [], "answered": []}

@@ -136,6 +136,7 @@ class TtesServer:
         self.deaf = DeafSpans() if os.environ.get("TTES_DEAF") == "1" else None  # a bench's: loop_deaf_ms
         # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
         self.on_publish: Callable[[PoseBoard], None] | None = None
+        self.board_poses = True  # the board keeps the Jack-unit poses beside the codes (:meth:`codes_only`)
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
         self.feed: Callable[[PoseBoard, int], np.ndarray] | None = None
@@ -171,8 +172,15 @@ class TtesServer:
     def _board(self) -> PoseBoard | None:
         if self.board_ref.board is None and self.world.library is not None:
             table = self.world.sets[0].table
-            self.board_ref.board = PoseBoard(table.ndofs, table.nfigures)
+            self.board_ref.board = PoseBoard(table.ndofs, table.nfigures, poses=self.board_poses)
         return self.board_ref.board
+
+    def codes_only(self) -> None:
+        """The board keeps the codes alone (a shard's: its batches carry codes and nothing reads the poses;
+        ``PoseBoard.drop_poses``); what clients receive is the same."""
+        self.board_poses = False
+        if self.board_ref.board is not None:
+            self.board_ref.board.drop_poses()
 
     def _on_ready(self, caller: object | None) -> None:
         self._board()

@@ -100,6 +100,7 @@ async def cluster(
         front_node.start(token)
         for k in range(shards_n):
             shard, fabric = make_server(), MemoryFabric(bus)
+            shard.codes_only()  # as `ttes server --shard` makes it
             node = ShardNode(shard, fabric, Sharding(k, shards_n), key_every=key_every)
             await nursery.start(shard.serve)
             node.keep_own()

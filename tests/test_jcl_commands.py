@@ -193,9 +193,9 @@ def test_posture_change_drives_the_soldier_of_the_bound_graph(world) -> None:
     w.run_jcl('posture_change("s1/ptrans", "PRONE_FIRE");')
     said = json.loads(reports[-1])
     assert said["soldier"] == "s1" and said["path"][-1] == "PRONE_FIRE" and said["goal"] == "PRONE_FIRE"
-    w.run_jcl('posture_change("s1/ptrans", "KNEEL_FIRE");')  # mid-transition: the path plays on first
+    w.run_jcl('posture_change("s1/ptrans", "KNEEL_FIRE");')  # mid-transition: re-planned from the arc playing
     said = json.loads(reports[-1])
-    assert said["path"][-1] == "PRONE_FIRE" and said["goal"] == "KNEEL_FIRE"
+    assert said["path"][-1] == "KNEEL_FIRE" and said["goal"] == "KNEEL_FIRE"
     w.run_jcl('posture_change("s1/ptrans", "PRONE_FIRE");')
     m = w.manager
     assert m is not None

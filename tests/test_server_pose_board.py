@@ -7,6 +7,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_server_support import make_server
 
 from protocol.connection import CLIENT, NEED_DATA, PAUSED, SERVER, Connection
@@ -291,3 +293,65 @@ def test_a_late_writer_with_answers_between_ticks_decodes_the_board_in_tick_orde
     for p in (a, b):
         ticks = [u.tick for u in p.updates]
         assert ticks == sorted(ticks), ticks
+
+
+def test_a_codes_only_board_sends_every_client_the_same_bytes() -> None:
+    """A shard's board keeps the codes alone (``TtesServer.codes_only``: no float poses written at each
+    publish, issue 21): the same ticks give the same codes, versions and client bytes as a board that keeps
+    the poses, from before the board exists or switched after."""
+    servers = [make_server(throttle=0.0) for _ in range(3)]
+    servers[1].codes_only()  # before the world: the board is made without poses
+    for s in servers:
+        s.start_world()
+        walk(s, [0, 1, 2, 5, 8], 1.4)
+        walk(s, [4], 4.0)
+    servers[2].codes_only()  # after: the board drops its poses
+    pairs = [Pair(s, "a") for s in servers]
+    for p in pairs:
+        p.subscribe(tuple(range(10)))
+    for k in range(1, 25):
+        for s in servers:
+            s.tick(k / 30)
+        sent = [p.flush() for p in pairs]
+        assert sent[0] and sent[1] == sent[0] and sent[2] == sent[0]
+    boards = [s.board_ref.board for s in servers]
+    keep, *bare = boards
+    assert keep is not None and len(keep.dofs) >= 10
+    for b in bare:
+        assert b is not None and not b.poses and len(b.dofs) == len(b.positions) == len(b.orientations) == 0
+        for name in ("codes", "version", "valid", "table_of"):
+            np.testing.assert_array_equal(getattr(b, name)[:10], getattr(keep, name)[:10])
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 40), width=st.integers(1, 70), seed=st.integers(0, 2**32 - 1))
+def test_rows_differ_is_any_of_the_rows_comparisons(n: int, width: int, seed: int) -> None:
+    """``_rows_differ`` (the board's changed-codes test, word by word) is ``(a != b).any(axis=1)``, for any
+    field count (a multiple of 8 or not) and rows that differ in one field, several or none."""
+    from server.pose_board import _rows_differ
+
+    rng = np.random.default_rng(seed)
+    a = rng.integers(0, 4, (n, width)).astype(np.int32)
+    b = a.copy()
+    hit = rng.random((n, width)) < rng.choice([0.0, 0.02, 0.5])
+    b[hit] += 1
+    np.testing.assert_array_equal(_rows_differ(a, b), (a != b).any(axis=1))
+
+
+def test_codes_of_one_table_or_several_are_stored_alike() -> None:
+    """``publish_codes``: a batch of one update table (stored whole) and one of two tables (stored table by
+    table) take the same codes, tables and versions."""
+    from server.pose_board import PoseBoard
+
+    rows = np.array([3, 0, 5, 2])
+    codes = np.arange(4 * 9, dtype=np.int32).reshape(4, 9)
+    one, two = PoseBoard(4, 2), PoseBoard(4, 2)
+    assert one.publish_codes(rows, np.array([1, 1, 1, 1]), codes, 7) == 4
+    assert two.publish_codes(rows, np.array([1, 2, 1, 2]), codes, 7) == 4
+    np.testing.assert_array_equal(one.codes[rows], codes)
+    np.testing.assert_array_equal(two.codes[rows], codes)
+    assert two.table_of[rows].tolist() == [1, 2, 1, 2] and one.table_of[rows].tolist() == [1] * 4
+    codes[2, 8] += 1  # soldier 5 moved; soldier 2 changes table on ``one``
+    assert one.publish_codes(rows, np.array([1, 1, 1, 2]), codes, 8) == 2
+    assert two.publish_codes(rows, np.array([1, 2, 1, 2]), codes, 8) == 1
+    assert one.version[rows].tolist() == [1, 1, 2, 2] and two.version[rows].tolist() == [1, 1, 2, 1]

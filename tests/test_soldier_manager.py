@@ -97,12 +97,14 @@ def test_prone_fire_from_standing_takes_the_quickest_path_and_chains_exactly(lib
     assert info["mode"] == "IDLE" and info["posture"] == "PRONE_FIRE"
 
 
-def test_transition_continues_and_a_new_posture_waits_for_its_end(lib) -> None:
+def test_transition_arc_continues_and_the_path_goes_on_to_the_new_posture(lib) -> None:
     m, i = manager(lib)
     request(m, i, 0.0, KNEEL)
     run(m, 0.0, 0.5)
-    request(m, i, 0.5, PRONE)  # Figure 12: transitioning soldiers only take the new heading
-    assert m.soldier_info(i)["path"] == ["KNEEL_STOWED"]
+    # a path re-plans from the arc playing (server.soldier.replanning); Figure 12's soldier took only the new
+    # heading and went on to his first goal. Here the arc's end is on the quickest way
+    request(m, i, 0.5, PRONE)
+    assert m.soldier_info(i)["path"] == ["KNEEL_STOWED", "CRAWL", "PRONE_STOWED"]
     run(m, 0.5, 4.0)
     s = round(skipped(m, i), 9)
     assert starts(m, i) == [
@@ -532,18 +534,19 @@ def test_scalar_and_vector_state_entry_agree(lib) -> None:
                 assert getattr(a.table, col)[i] == pytest.approx(getattr(b.table, col)[j]), (state, col)
 
 
-def test_moving_during_a_transition_walks_after_it_and_immediate_overrides(lib) -> None:
+def test_moving_during_a_transition_turns_it_back_then_walks_and_immediate_overrides(lib) -> None:
     m, i = manager(lib)
     request(m, i, 0.0, UP, FIRING)  # ststow2stfire, 0.8 s
-    request(m, i, 0.2, UP, WeaponState.DEPLOYED, speed=1.4)  # taken up when the transition ends
-    assert m.soldier_info(i)["mode"] == "TRANSITION"
+    request(m, i, 0.2, UP, WeaponState.DEPLOYED, speed=1.4)  # the arc back is quicker than on and back
+    assert m.soldier_info(i)["mode"] == "TRANSITION" and m.soldier_info(i)["path"] == ["STAND_STOWED"]
     run(m, 0.0, 2.0)
     s = round(skipped(m, i), 9)
     assert starts(m, i)[:3] == [
         ("ststow2stfire", 0.0),
-        ("ststow2stfire", round(0.8 - s, 9)),
-        ("walk_start_l", round(1.6 - s, 9)),
+        ("ststow2stfire", 0.2),  # backwards from the frame shown: as long as it played (the lead-in skipped)
+        ("walk_start_l", round(0.4 + s, 9)),
     ]
+    assert [f for _, f in seq(m, i)[:2]] == [True, False]
     request(m, i, 2.0, KNEEL)  # cancel the step: a posture change starts
     assert m.soldier_info(i)["mode"] == "TRANSITION"
     request(m, i, 2.1, PRONE, immediate=True)

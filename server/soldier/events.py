@@ -27,23 +27,18 @@ from server.soldier.locomotion import (
     start_state,
 )
 from server.soldier.reactions import Reactions
+from server.soldier.replanning import Replanning
 from server.soldier.stepping import Stepping
 from server.soldier.turning import Turning
 
 
-class Events(Stepping, Turning, Reactions, LeadIn):
+class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
     """The Python that runs only on events, grouped by decision over each batch of soldiers: requests that
     change what soldiers do, and (:meth:`_advance`) the clip ends up to each clock."""
 
     def _desired(self, i: int) -> int:
         """:meth:`_desired_many` of one soldier in scalar Python."""
-        tb = self.table
-        app = int(tb.appearance[i])
-        kind = int(self._move[app]) if tb.speed[i] > MOVING_EPS else 0
-        if kind:
-            return int(self._base[kind])
-        goal = int(self._goal[app, int(tb.weapon[i] == _FIRING)])
-        return int(self.library.goal_node[int(tb.node[i]), goal]) if goal >= 0 else goal
+        return self._goal_from(i, int(self.table.node[i]))
 
     def _desired_many(self, idx: np.ndarray) -> np.ndarray:
         """Figure 12's goal posture nodes of soldiers ``idx``: the gait's base posture while moving, else the
@@ -87,8 +82,8 @@ class Events(Stepping, Turning, Reactions, LeadIn):
         captured: dict[int, tuple[np.ndarray, np.ndarray]],
     ) -> None:
         """The events of soldiers ``idx`` other than the posture changes :meth:`_posture_changes` found:
-        ``immediate`` ones snap, resting ones decide; a stepping one in the same base posture steps on
-        (Figure 5 handles speed and direction)."""
+        ``immediate`` ones snap, resting ones decide, one playing a path re-plans it (:meth:`_replan`); a
+        stepping one in the same base posture steps on (Figure 5 handles speed and direction)."""
         tb = self.table
         mode = tb.mode[idx]
         if immediate.any():
@@ -101,6 +96,9 @@ class Events(Stepping, Turning, Reactions, LeadIn):
                 self._start_changes(idx[j], t[j], captured)
         idle = ~immediate & (mode == _IDLE)
         self._decide(idx[idle], t[idle])
+        path = ~immediate & (mode == _TRANSITION)
+        if path.any():
+            self._replan(idx[path], t[path])
 
     def _cancel_step(self, i: int, t: float, captured: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Cancel the step: fade from the pose shown now (``captured``) into whatever starts next."""

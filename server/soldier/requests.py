@@ -140,7 +140,10 @@ class Requests(Ticking):
         heading_changed = hdg + face != tb.heading[i] + tb.face[i]
         speed_changed = speed != tb.speed[i]
         kind = self._move[app]
-        event = imm | (changed_pw & (mode != _TRANSITION)) | ((mode == _IDLE) & moving & (kind != _MOVE_NONE))
+        # one playing a path asked for another posture, or to move or stop, re-plans it (replanning.py)
+        replans = (mode == _TRANSITION) & (changed_pw | (moving != (tb.speed[i] > MOVING_EPS)))
+        event = imm | (changed_pw & (mode != _TRANSITION)) | replans
+        event |= (mode == _IDLE) & moving & (kind != _MOVE_NONE)
         # the root offset up to now under the old velocity; a turned entity turns a world-fixed offset
         root_motion.fold(tb, self.library, i, t)
         turned = np.where(tb.has_heading[i], hdg + face - tb.heading[i] - tb.face[i], 0.0)
@@ -183,7 +186,8 @@ class Requests(Ticking):
             self._turns(i[turn], t[turn])
         tb.requested[i[event | hp | rescale]] = True  # what :meth:`answer` answers between ticks
         self._events(i, t, event, imm, stepping)
-        self._skip_lead_in(i[event | hp], t[event | hp])
+        starts = (event & ~replans) | hp  # (a re-planned arc goes on from the frame it shows)
+        self._skip_lead_in(i[starts], t[starts])
         return status
 
     def _changing(
@@ -240,9 +244,9 @@ class Requests(Ticking):
 
     def posture_change(self, index: int, posture: str, now: float) -> list[str]:
         """``posture_change``: the soldier goes to ``posture`` along the quickest path, exactly as a standing
-        still request for that posture would take it (heading and position kept; a soldier in a transition
-        finishes it first). Returns the postures of the path playing now; KeyError for an unknown soldier or
-        posture."""
+        still request for that posture would take it (heading and position kept; one playing a path re-plans
+        it from the arc playing: :mod:`server.soldier.replanning`). Returns the postures of the path playing
+        now; KeyError for an unknown soldier or posture."""
         if not self.table.is_live(index):
             raise KeyError(f"no soldier {index}")
         appearance, weapon = request_for(posture)

@@ -198,6 +198,7 @@ def _fabric_node(
         raise UsageError(str(exc)) from None
     fabric = open_fabric(FabricConfig(args.fabric, args.fabric_listen, tuple(args.fabric_connect)))
     if sharding is not None:
+        server.codes_only()  # its batches carry codes: the board's float poses would be written for nothing
         node = ShardNode(server, fabric, sharding)
         node.keep_own()
         return (lambda: node.start(trio.lowlevel.current_trio_token())), fabric.close
