@@ -60,6 +60,16 @@ def test_a_request_after_an_event_of_its_soldier_stays_after_it() -> None:
     assert last["rows"]["index"].tolist() == [7] and last["rows"]["velocity"][0, 0] == 2.0
 
 
+def test_a_fence_stays_after_its_messages_creation_and_lets_rows_pass() -> None:
+    backlog = Backlog()
+    backlog.put([row(7, 1.0), req.create(9, "DI.fig", "AK_47.fig", None), req.fence(0, 3)])
+    backlog.put([row(7, 2.0), req.remove(9), req.fence(0, 4)])
+    ops = drain(backlog)
+    assert [op["op"] for op in ops] == ["requests", "create", "fence", "remove", "fence"]
+    assert ops[0]["rows"]["velocity"][0, 0] == 2.0  # the newer row took the older one's place
+    assert backlog.events_dropped == 0  # the create and remove cancel nothing across a fence
+
+
 def posture(index: int, appearance: int, heading: float = 0.0) -> req.Op:
     rows = make_entity_requests(index=[index], appearance=appearance, heading=heading)
     return req.decode(req.pack([req.requests(rows)]))[0]

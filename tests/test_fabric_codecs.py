@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import msgpack
 import numpy as np
 import pytest
@@ -25,6 +27,13 @@ def test_a_batch_survives_the_fabric() -> None:
     assert (b.shard, b.shards, b.seq, b.tick, b.sent) == (1, 2, 7, 9, 12.5)
     assert b.indices.tolist() == [1, 3, 5] and b.tables.tolist() == [2, 2, 2]
     assert np.array_equal(b.codes, _batch().codes)
+    assert b.fences == ()
+
+
+def test_a_batch_carries_each_front_ends_fence() -> None:
+    fenced = decode_batch(encode_batch(dataclasses.replace(_batch(), fences=(0, 7, 2**32 - 1))))
+    assert fenced.fences == (0, 7, 2**32 - 1) and fenced.indices.tolist() == [1, 3, 5]
+    assert np.array_equal(fenced.codes, _batch().codes)
 
 
 def test_codes_beyond_16_bits_are_refused() -> None:

@@ -34,7 +34,8 @@ from protocol.events import (
     Subscribe,
 )
 from server.fabric import requests as req
-from server.fabric.fronts import answer, decode_answer, gone, learned_last, stand_ins
+from server.fabric.batch import Batch
+from server.fabric.fronts import Fences, answer, decode_answer, gone, learned_last, rerouted, stand_ins
 
 pytest.importorskip("zenoh")
 
@@ -49,6 +50,48 @@ def test_a_sync_carries_the_soldiers_removed_of_its_homes() -> None:
     assert gone(known, live, [0], 3).tolist() == [3, 6]
     op = req.decode(req.pack([req.sync([], np.zeros(0, ENTITY_REQUEST_DTYPE), gone=[3, 11])]))[0]
     assert op["gone"] == [3, 11]
+
+
+def _rows(shard: int, indices: list[int], fences: tuple[int, ...]) -> Batch:
+    n = len(indices)
+    codes = np.arange(n * 2, dtype=np.uint16).reshape(n, 2)
+    return Batch(
+        shard, 2, 0, 0, 0.0, np.array(indices, np.uint32), np.ones(n, np.uint8), codes, False, fences
+    )
+
+
+def test_the_rows_of_an_index_created_again_wait_for_the_shards_fence() -> None:
+    fences = Fences(1, 12, 2)  # front-end 1
+    assert fences.clean(b := _rows(1, [3, 5], ())) is b  # nothing waits: the batch as it came
+    fences.mark([5], 1)
+    fences.mark([7, 5], 1)  # one message: one fence
+    assert fences.fence(0) is None and fences.fence(1) == 1 and fences.fence(1) is None
+    fences.mark([9], 1)  # the next message's
+    assert fences.fence(1) == 2
+    assert fences.clean(_rows(1, [3, 5, 7, 9], (9,))).indices.tolist() == [3]  # front-end 0's fence
+    assert fences.clean(_rows(0, [5], (0, 1))).indices.tolist() == []  # another shard's rows
+    kept = fences.clean(_rows(1, [5, 9, 11], (0, 1)))  # shard 1 took the first message, not the second
+    assert kept.indices.tolist() == [5, 11] and kept.codes.tolist() == [[0, 1], [4, 5]]
+    assert fences.clean(_rows(1, [5, 7, 9], (0, 1))).indices.tolist() == [5, 7]
+    assert fences.waiting == 1 and fences.dropped == 6
+    fences.moved([1], 2, 0)  # shard 1 failed over to 0: index 9 waits for shard 0's fence
+    assert fences.fence(0) == 1
+    assert fences.clean(_rows(1, [9], (0, 2))).indices.tolist() == []
+    assert fences.clean(_rows(0, [9], (0, 1))).indices.tolist() == [9] and fences.waiting == 0
+    fences.mark([3], 0)
+    assert fences.fence(0) == 2 and fences.waiting == 1
+    assert fences.clean(_rows(0, [], (0, 2))).indices.tolist() == [] and fences.waiting == 0  # no rows: done
+
+
+def test_a_shard_down_hands_its_own_and_the_homes_it_stood_in_for_to_the_least_busy_survivor() -> None:
+    route = [0, 1, 0, 3]  # 2 failed over to 0
+    assert rerouted(route, [0, 1, 2, 3], [True] * 4) == [] and route == [0, 1, 0, 3]
+    assert rerouted(route, [1, 3], [True] * 4) == [(0, 1, [0, 2])] and route == [1, 1, 1, 3]
+    assert rerouted(route, [3], [True] * 4) == [(1, 3, [0, 1, 2])] and route == [3, 3, 3, 3]
+    assert rerouted(route, [], [True] * 4) == [] and route == [3, 3, 3, 3]  # none left to take them
+    route = [0, 1, 2]
+    assert rerouted(route, [2], [True, False, True]) == [(0, 2, [0])]  # 1 never heard: not failed over
+    assert rerouted(route, [0], [True, True, True]) == [(1, 0, [1]), (2, 0, [0, 2])] and route == [0, 0, 0]
 
 
 def test_an_answer_with_another_shards_soldiers_names_a_stand_in_for_a_shard_never_heard() -> None:
@@ -217,4 +260,78 @@ async def test_a_hung_shard_that_resumes_lets_go_of_a_soldier_removed_while_it_w
             while node.route != [0, 1] or ODD in inprocess.live(shards[1]):
                 await trio.sleep(0.1)
         assert ODD not in inprocess.live(shards[0])
+        await c.aclose()
+
+
+async def test_an_index_removed_and_created_again_shows_none_of_the_old_soldiers_codes(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """In one process: the walker is removed and a soldier created again at its index while shard 1 has
+    not heard either (its requests held): the shard's batches still carry the old walker (and another, whose
+    updates go on), and the client gets none of the old walker's codes for the new soldier (on main it got
+    them every tick: [7, 8, 9, ...]); once the shard hears, the new soldier's pose arrives."""
+    async with inprocess.cluster() as (front, node, shards, _):
+        c = await inprocess.walker(front, ODD)
+        await c.requests(index=[ODD - 2], velocity=WALK)  # a start-up soldier of shard 1 walks too
+        await inprocess.moving(c, ODD, 3)
+        held: list[bytes] = []
+        put, node._puts[1] = node._puts[1], held.append  # the fabric is slow to shard 1
+        await c.send(RemoveSoldier(ODD))
+        await c.expect(SoldierRemoved)
+        await c.send(CreateSoldier(2, "DI.fig", "AK_47.fig", ODD))
+        assert (await c.expect(SoldierCreated)).index == ODD
+        updates = [e for e in await c.drain(2.0) if isinstance(e, JointUpdates)]
+        assert [u for u in updates if ODD - 2 in u.indices.tolist()], "shard 1's batches come"
+        assert not [u.tick for u in updates if ODD in u.indices.tolist()]
+        node._puts[1] = put
+        for data in held:
+            put(data)
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[1]):
+                await trio.sleep(0.1)
+        await c.expect(JointUpdates, lambda u: ODD in u.indices.tolist(), timeout=30)
+        await c.aclose()
+
+
+async def test_a_shards_walker_walks_on_when_its_stand_in_dies_too(autojump_clock: trio.abc.Clock) -> None:
+    """In one process, three shards: shard 2 dies and its walker goes on in shard 0, which then dies too:
+    the walker goes on in shard 1, the one left (on main shard 2 stayed routed to the dead shard 0)."""
+    async with inprocess.cluster(shards_n=3) as (front, node, shards, fabrics):
+        c = await inprocess.walker(front, ODD)  # 11: home shard 2
+        await inprocess.moving(c, ODD, 3)
+        fabrics[2].close()
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[0]):
+                await trio.sleep(0.1)
+        assert node.route == [0, 1, 0]
+        fabrics[0].close()
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[1]):
+                await trio.sleep(0.1)
+        assert node.route == [1, 1, 1]
+        await inprocess.moving(c, ODD, 3)  # walking, from its last request
+        await c.aclose()
+
+
+async def test_a_hung_stand_in_that_resumes_lets_go_of_the_soldiers_it_stood_in_for(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Shard 2 dies and its walker goes on in shard 0, which hangs: the walker goes to shard 1; shard 0
+    resumes with the walker it had, and the sync that gives it its own soldiers back removes the walker."""
+    async with inprocess.cluster(shards_n=3) as (front, node, shards, fabrics):
+        c = await inprocess.walker(front, ODD)
+        await inprocess.moving(c, ODD, 3)
+        fabrics[2].close()
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[0]):
+                await trio.sleep(0.1)
+        fabrics[0].closed = True  # it publishes nothing more, yet its presence stays
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(shards[1]):
+                await trio.sleep(0.1)
+        fabrics[0].closed = False
+        with trio.fail_after(30):
+            while node.route != [0, 1, 1] or ODD in inprocess.live(shards[0]):
+                await trio.sleep(0.1)
+        await inprocess.moving(c, ODD, 3)
         await c.aclose()

@@ -88,20 +88,20 @@ class MemoryFabric:
 
 @contextlib.asynccontextmanager
 async def cluster(
-    bus: Bus | None = None, key_every: int = KEY_EVERY
+    bus: Bus | None = None, key_every: int = KEY_EVERY, shards_n: int = 2
 ) -> AsyncIterator[tuple[TtesServer, FrontNode, list[TtesServer], list[MemoryFabric]]]:
     bus = bus or Bus()
     token = trio.lowlevel.current_trio_token()
     front = make_server()
-    front_node = FrontNode(front, MemoryFabric(bus), 2)
+    front_node = FrontNode(front, MemoryFabric(bus), shards_n)
     shards, fabrics = [], []
     async with trio.open_nursery() as nursery:
         await nursery.start(front.serve)
         front_node.start(token)
-        for k in range(2):
+        for k in range(shards_n):
             shard, fabric = make_server(), MemoryFabric(bus)
             shard.codes_only()  # as `ttes server --shard` makes it
-            node = ShardNode(shard, fabric, Sharding(k, 2), key_every=key_every)
+            node = ShardNode(shard, fabric, Sharding(k, shards_n), key_every=key_every)
             await nursery.start(shard.serve)
             node.keep_own()
             node.start(token)

@@ -231,6 +231,8 @@ class Backlog:
             if self._key is not None:  # the queued one asks for the same key batch, no earlier
                 self.events_dropped += 1
                 return
+        elif kind == "fence":  # it follows its message's creations and removals; rows may pass it
+            pass
         elif index is not None:
             if kind in ("create", "remove") and self._cancels(index, kind):
                 return

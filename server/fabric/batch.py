@@ -5,6 +5,9 @@ docs/PROTOCOL.md §7), sent as uint16 with the soldiers' indices (uint32) and ta
 merges them into its own board and encodes them for its clients with the shared encoding: nothing is
 re-quantised on the way. A *key* batch carries every soldier the shard animates; the others only the
 soldiers whose codes changed since the shard's previous batch (the front-end's board keeps the rest).
+Its ``fences`` say which of each front-end's requests messages the shard had taken when it sent the batch
+(:class:`server.fabric.fronts.Fences`: a front-end drops the rows of an index it removed or created again
+from the batches sent before the shard heard of it).
 """
 
 from __future__ import annotations
@@ -14,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MAGIC = b"TTB2"
-# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, key
-_HEAD = struct.Struct("<4sHHIIdIIB")
+MAGIC = b"TTB3"
+# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, key, fronts (uint32 fences follow)
+_HEAD = struct.Struct("<4sHHIIdIIBB")
 
 
 @dataclass(frozen=True)
@@ -30,6 +33,7 @@ class Batch:
     tables: np.ndarray  # (n,) update table ids
     codes: np.ndarray  # (n, F) field codes
     key: bool = True  # every soldier of the shard (else: those changed since its previous batch)
+    fences: tuple[int, ...] = ()  # per front-end, the newest fence it sent that the shard had taken (0: none)
 
 
 def encode_batch(batch: Batch) -> bytes:
@@ -37,10 +41,14 @@ def encode_batch(batch: Batch) -> bytes:
     nf = batch.codes.shape[1] if batch.codes.ndim == 2 else 0
     if n and (batch.codes.min() < 0 or batch.codes.max() > 0xFFFF):
         raise ValueError("codes beyond 16 bits")
-    head = _HEAD.pack(MAGIC, batch.shard, batch.shards, batch.seq, batch.tick, batch.sent, n, nf, batch.key)
+    nb = len(batch.fences)
+    head = _HEAD.pack(
+        MAGIC, batch.shard, batch.shards, batch.seq, batch.tick, batch.sent, n, nf, batch.key, nb
+    )
     return b"".join(
         (
             head,
+            np.asarray(batch.fences, "<u4").tobytes(),
             np.ascontiguousarray(batch.indices, "<u4").tobytes(),
             np.ascontiguousarray(batch.tables, "u1").tobytes(),
             np.ascontiguousarray(batch.codes, "<u2").tobytes(),
@@ -52,11 +60,12 @@ def decode_batch(data: bytes) -> Batch:
     """The batch of ``data`` (arrays are read-only views of it); ValueError if it is not one."""
     if len(data) < _HEAD.size:
         raise ValueError(f"a batch of {len(data)} bytes")
-    magic, shard, shards, seq, tick, sent, n, nf, key = _HEAD.unpack_from(data)
-    if magic != MAGIC or len(data) != _HEAD.size + n * (5 + 2 * nf):
+    magic, shard, shards, seq, tick, sent, n, nf, key, nb = _HEAD.unpack_from(data)
+    if magic != MAGIC or len(data) != _HEAD.size + 4 * nb + n * (5 + 2 * nf):
         raise ValueError(f"not a batch (magic {magic!r}, {len(data)} bytes for {n} x {nf})")
-    at = _HEAD.size
+    fences = tuple(np.frombuffer(data, "<u4", nb, _HEAD.size).tolist())
+    at = _HEAD.size + 4 * nb
     indices = np.frombuffer(data, "<u4", n, at)
     tables = np.frombuffer(data, "u1", n, at + 4 * n)
     codes = np.frombuffer(data, "<u2", n * nf, at + 5 * n).reshape(n, nf)
-    return Batch(shard, shards, seq, tick, sent, indices, tables, codes, bool(key))
+    return Batch(shard, shards, seq, tick, sent, indices, tables, codes, bool(key), fences)

@@ -20,11 +20,19 @@ front-end never heard their shard, failed over before it started, and sends thei
 stand-in (:func:`stand_ins`). A sync carries the soldiers removed too (:func:`gone`). Until a shard
 answers, the front-end allots no index that the shard's batches carried and its books lack (its own
 soldiers before a restart; with one front-end, which allots the table's lowest free index, it creates none).
+
+A shard's batch sent before it heard of a removal and re-creation at an index carries the old soldier's
+codes there, and the front-end's books say the index lives: the front-end ends each message to a shard
+that creates or removes soldiers with a *fence* (a serial per shard), a batch carries the newest fence
+of each front-end the shard had taken, and until one carries the fence, the rows of those indices are
+dropped (:class:`Fences`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -32,6 +40,7 @@ import msgpack
 import numpy as np
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
+from server.fabric.batch import Batch
 
 Soldier = tuple[int, str, str, "str | None"]  # index, figure, weapon, owner
 
@@ -140,3 +149,89 @@ def gone(known: np.ndarray, live: np.ndarray, homes: list[int], shards: int) -> 
     idx = np.flatnonzero(known)
     idx = idx[(idx >= len(live)) | ~live[np.minimum(idx, len(live) - 1)]] if len(live) else idx
     return idx[np.isin(idx % shards, homes)]
+
+
+def rerouted(route: list[int], alive: list[int], heard: list[bool]) -> list[tuple[int, int, list[int]]]:
+    """The fail-overs due, as ``(down, survivor, homes)``, ``route`` changed to match: each shard heard
+    once and down now (not in ``alive``) that animates soldiers — its own, or as a stand-in another's: the
+    homes routed to it (a stand-in that dies too) — hands them all to the living shard that animates the
+    fewest homes. None while no shard lives."""
+    out: list[tuple[int, int, list[int]]] = []
+    for down in range(len(route)):
+        homes = [h for h, r in enumerate(route) if r == down]
+        if not alive or down in alive or not heard[down] or not homes:
+            continue
+        survivor = min(alive, key=lambda s: sum(r == s for r in route))
+        for h in homes:
+            route[h] = survivor
+        out.append((down, survivor, homes))
+    return out
+
+
+class Fences:
+    """Front-end ``front``'s fences: for each index it created or removed (or synced elsewhere), the shard
+    whose batches may carry it and the fence that shard must have taken first (issue 21 (d): the index
+    removed and created again within a tick showed the old soldier's codes for a tick)."""
+
+    def __init__(self, front: int, n: int, shards: int) -> None:
+        self.front = front
+        self.shard = np.full(n, -1, np.int64)  # the shard the index's rows wait for (-1: none)
+        self.serial = np.zeros(n, np.int64)  # the fence of that shard they wait for
+        self.next = [1] * shards  # per shard sent to, the serial of its next fence
+        self.due = [False] * shards  # a fence ends the next message to it
+        self._marked: list[deque[tuple[int, np.ndarray]]] = [deque() for _ in range(shards)]  # per shard
+        self.waiting = 0
+        self.dropped = 0  # rows dropped (a test's count)
+
+    def mark(self, indices: np.ndarray | list[int], shard: int) -> None:
+        """The soldiers at ``indices`` were created or removed (or synced) by an operation queued for
+        ``shard`` now: their rows count from the batch that carries the fence ending that message."""
+        idx = np.unique(np.asarray(indices, np.int64))
+        if not len(idx):
+            return
+        self.waiting += int(np.count_nonzero(self.shard[idx] < 0))
+        self.shard[idx], self.serial[idx] = shard, self.next[shard]
+        self.due[shard] = True
+        self._marked[shard].append((self.next[shard], idx))
+
+    def moved(self, homes: list[int], shards: int, shard: int) -> None:
+        """Shards ``homes``' soldiers are synced to ``shard`` now (a fail-over, a shard back): those
+        waiting wait for ``shard``'s fence (another shard's never comes, or its rows are a stand-in's)."""
+        idx = np.flatnonzero(self.shard >= 0) if self.waiting else np.zeros(0, np.int64)
+        self.mark(idx[np.isin(idx % shards, homes)], shard)
+
+    def fence(self, shard: int) -> int | None:
+        """The serial of the fence that ends the message to ``shard`` sent now (None: none is due)."""
+        if not self.due[shard]:
+            return None
+        self.due[shard] = False
+        self.next[shard] += 1
+        return self.next[shard] - 1
+
+    def clean(self, b: Batch) -> Batch:
+        """``b`` without the rows of the indices waiting for a fence it does not carry (or from another
+        shard than the one they wait for); the indices whose fence it carries wait no more (the shard sends
+        the rows of soldiers it created before a fence again after it)."""
+        if not self.waiting:
+            return b
+        self._acked(b)
+        if not self.waiting or not len(b.indices):
+            return b
+        idx = np.asarray(b.indices, np.int64)
+        inside = idx < len(self.shard)
+        wait = np.zeros(len(idx), bool)
+        wait[inside] = self.shard[idx[inside]] >= 0
+        if not wait.any():
+            return b
+        self.dropped += int(np.count_nonzero(wait))
+        return dataclasses.replace(b, indices=b.indices[~wait], tables=b.tables[~wait], codes=b.codes[~wait])
+
+    def _acked(self, b: Batch) -> None:
+        """The indices marked for ``b``'s shard up to the fence it carries wait no more."""
+        ack = b.fences[self.front] if self.front < len(b.fences) else 0
+        marked = self._marked[b.shard] if b.shard < len(self._marked) else deque()
+        while marked and marked[0][0] <= ack:
+            idx = marked.popleft()[1]
+            idx = idx[(self.shard[idx] == b.shard) & (self.serial[idx] <= ack)]
+            self.shard[idx] = -1
+            self.waiting -= len(idx)

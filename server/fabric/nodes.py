@@ -22,6 +22,7 @@ the same, so a client of the front-end gets the handshake, tables and FIGURE of 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import math
 import threading
@@ -38,7 +39,7 @@ from server.fabric import fronts as books
 from server.fabric import requests as req
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import Batch, decode_batch, encode_batch
-from server.fabric.fronts import IndexShare, Soldier
+from server.fabric.fronts import Fences, IndexShare, Soldier
 from server.fabric.watch import Watch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
@@ -97,6 +98,9 @@ class ShardNode:
         n = server.config.max_soldiers
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request taken, for a books answer
         self.has_last = np.zeros(n, bool)
+        self.fences: list[int] = []  # per front-end, the newest fence taken (its batches carry them)
+        self._born: list[int] = []  # soldiers created since the last fence
+        self._again: list[int] = []  # soldiers whose rows the next batch carries (born before a fence)
         server.on_publish = self.publish
         # what arrived and is not taken yet: bounded (two rows per soldier), requests coalesced per soldier
         self.backlog = Backlog(max_rows=max(MAX_ROWS, 2 * server.config.max_soldiers))
@@ -175,6 +179,10 @@ class ShardNode:
         else:
             rows = np.flatnonzero(board.valid & (board.version > self._sent_serial))
             self._since_key += tick
+        if self._again:  # a batch before the fence carried them: the front-end dropped those rows
+            again = np.asarray(self._again, np.int64)
+            rows = np.union1d(rows, again[(again < len(board.valid)) & board.valid[again]])
+            self._again.clear()
         self._sent_serial = board.serial
         if not tick and not len(rows):
             return
@@ -182,9 +190,8 @@ class ShardNode:
         codes = board.codes[rows]
         if TRACE is not None:
             TRACE.stamp("shard_publish", rows, "tick" if tick else "answer")
-        data = encode_batch(
-            Batch(k, n, self.seq, board.tick, time.monotonic(), rows, board.table_of[rows], codes, key)
-        )
+        batch = Batch(k, n, self.seq, board.tick, time.monotonic(), rows, board.table_of[rows], codes, key)
+        data = encode_batch(dataclasses.replace(batch, fences=tuple(self.fences)))
         self._put(data)
         self.bytes_out += len(data)
         self.seq += 1
@@ -221,6 +228,7 @@ class ShardNode:
                 owner=str(owner) if owner is not None else None,
             )
             self.has_last[index] = False
+            self._born.append(index)
         elif op == "remove":
             world.remove_soldier(int(msg["index"]), "removed by a front-end")  # type: ignore[call-overload]
             self.has_last[int(msg["index"])] = False  # type: ignore[call-overload]
@@ -235,6 +243,16 @@ class ShardNode:
             self.key_due = True  # the front-end that sent it may lack soldiers no batch carried since
         elif op == "key":
             self.key_due = True
+        elif op == "fence":
+            self._fenced(int(msg["front"]), int(msg["serial"]))  # type: ignore[call-overload]
+
+    def _fenced(self, front: int, serial: int) -> None:
+        """A front-end's message ends: the batches from now on carry its fence (and the rows of the soldiers
+        created since the last fence, which a batch sent between their creation and the fence carried)."""
+        self.fences += [0] * (front + 1 - len(self.fences))
+        self.fences[front] = max(self.fences[front], serial)
+        self._again += self._born
+        self._born.clear()
 
     def _answer_books(self, front: int) -> None:
         """Every soldier this shard animates, for front-end ``front`` that has just heard it."""
@@ -274,6 +292,7 @@ class ShardNode:
                 world.create_soldier(figure, weapon, index, owner=owner)
                 self.has_last[index] = False
                 new.append(index)
+        self._born += new
         log.info(
             "fabric_sync", shard=self.sharding.k, soldiers=len(soldiers), created=len(new), removed=len(gone)
         )
@@ -337,11 +356,13 @@ class FrontNode:
         self._asked: set[int] = set()  # shards asked for their books, not answered yet
         self.known = np.zeros(n, bool)  # created or removed here, or told so by a front-end: not learned
         self._unknown: dict[int, set[int]] = {}  # shard asked -> its batches' soldiers not in the books
+        self._stood_for: dict[int, set[int]] = {}  # shard failed over -> the other homes it animated
         self.batches = 0  # merged
         self.skipped = 0  # lost on the fabric (or dropped from a full queue)
         self.failovers = 0
         self.keys = 0  # key batches heard
         self.watching = Watch(n)  # what its clients subscribe to; the others' codes wait there
+        self.fences = Fences(front.k, n, shards)  # indices created or removed here: rows wait for a fence
         server.board_ref.on_watch = self.watch
         server.feed = self.feed
         server.relay_out = self._flush
@@ -413,6 +434,7 @@ class FrontNode:
         if not batches or m is None:
             return np.zeros(0, np.int64)
         self.batches += len(batches)
+        batches = [self.fences.clean(b) for b in batches]  # (after _heard: a sync there moves the fences)
         if self.watching.stale:
             subscribed = (s.conn.subscribed for s in self.server.sessions.values())
             self.watching.recount(subscribed, board, m.table.alive)
@@ -458,8 +480,11 @@ class FrontNode:
                 for i in self._homed(k).tolist():
                     self._send(stood_in, req.remove(i))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
+            # it stood in for other shards before it went (hung): their soldiers live elsewhere now
+            moved = [h for h in self._stood_for.pop(k, set()) if self.route[h] != k]
+            drop = np.concatenate([self._homed(h) for h in moved]) if moved else None
             # from a stand-in (perhaps learned from its answer: this front-end started meanwhile), all of them
-            self._sync(k, [k], replay=stood_in != k, made=first and stood_in == k)
+            self._sync(k, [k], replay=stood_in != k, made=first and stood_in == k, drop=drop)
         m = self.server.world.manager
         if m is None:
             return
@@ -489,15 +514,13 @@ class FrontNode:
 
     def _fail_over(self, now: float) -> None:
         alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
-        for k in range(self.shards):
-            if self.route[k] == k and self.heard_at[k] > -math.inf and k not in alive and alive:
-                survivor = min(alive, key=lambda s: sum(r == s for r in self.route))
-                self.route[k] = survivor
-                self.failovers += 1
-                log.warning(
-                    "fabric_failover", shard=k, to=survivor, silent_s=round(now - self.heard_at[k], 3)
-                )
-                self._sync(survivor, [k])
+        heard = [at > -math.inf for at in self.heard_at]
+        for k, survivor, homes in books.rerouted(self.route, alive, heard):
+            self.failovers += 1
+            silent_s = round(now - self.heard_at[k], 3)
+            log.warning("fabric_failover", shard=k, to=survivor, homes=homes, silent_s=silent_s)
+            self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
+            self._sync(survivor, homes)
 
     def _homed(self, k: int) -> np.ndarray:
         """The live soldiers whose home is shard ``k``."""
@@ -505,10 +528,19 @@ class FrontNode:
         live = m.table.live if m is not None else np.zeros(0, np.int64)
         return live[Sharding.home(live, self.shards) == k]
 
-    def _sync(self, shard: int, homes: list[int], *, replay: bool = False, made: bool = False) -> None:
+    def _sync(
+        self,
+        shard: int,
+        homes: list[int],
+        *,
+        replay: bool = False,
+        made: bool = False,
+        drop: np.ndarray | None = None,
+    ) -> None:
         """``made``: only the soldiers created here (a shard heard for the first time: this front-end's
         creations may have gone before it listened; the start-up script's it has, the others' their makers
-        sync, and a late front-end's books are not the truth: it learns them from the answer to ``books``)."""
+        sync, and a late front-end's books are not the truth: it learns them from the answer to ``books``).
+        ``drop``: soldiers of other homes the shard is to let go of (it stood in for them, and hung)."""
         m = self.server.world.manager
         if m is None:
             return
@@ -518,7 +550,9 @@ class FrontNode:
         soldiers = _soldiers(self.server, idx)
         have = idx[self.has_last[idx]]
         gone = books.gone(self.known, m.table.alive, homes, self.shards).tolist()
+        gone += [] if drop is None else drop.tolist()
         self._send(shard, req.sync(soldiers, self.last[have], replay=replay, gone=gone))
+        self.fences.moved(homes, self.shards, shard)
 
     def _send(self, shard: int, op: req.Op) -> None:
         """Queue an operation for ``shard``: what one turn of the loop queued goes as one message."""
@@ -541,6 +575,8 @@ class FrontNode:
     def _flush(self) -> None:
         self._flush_due = False
         for k, ops in enumerate(self._out):
+            if ops and (serial := self.fences.fence(k)) is not None:
+                ops.append(req.fence(self.front.k, serial))
             if ops:
                 if TRACE is not None:
                     TRACE.stamp("fe_publish", _request_indices(ops))
@@ -652,6 +688,7 @@ class FrontNode:
             self.share.taken(index)
         op = req.create(index, figure, weapon, owner)
         self._send(self._shard_of(index), op)
+        self.fences.mark([index], self._shard_of(index))
         self._book(op)
 
     def removed(self, index: int) -> None:
@@ -662,6 +699,7 @@ class FrontNode:
             self.share.freed(index)
         op = req.remove(index)
         self._send(self._shard_of(index), op)
+        self.fences.mark([index], self._shard_of(index))
         self._book(op)
 
     def requests(self, rows: np.ndarray) -> None:

@@ -11,8 +11,10 @@ late, restarted or takes over another's soldiers (failover) needs to animate the
 own soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
 soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for one
 too; ``books`` (front): answer on ``ttes/books`` with every soldier the shard animates, for front-end
-``front`` that has just heard the shard for the first time (:mod:`server.fabric.fronts`). The topic is
-reliable: ownership and requests are never lost once a shard listens, and a sync covers the time before.
+``front`` that has just heard the shard for the first time (:mod:`server.fabric.fronts`); ``fence``
+(front, serial): the end of a message that created or removed soldiers, echoed in the batches
+(:class:`~server.fabric.fronts.Fences`). The topic is reliable: ownership and requests are never lost
+once a shard listens, and a sync covers the time before.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import numpy as np
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
 
-OPS = ("create", "remove", "requests", "react", "sync", "key", "books")
+OPS = ("create", "remove", "requests", "react", "sync", "key", "books", "fence")
 Op = dict[str, Any]
 
 
@@ -66,6 +68,12 @@ def sync(
 
 def key() -> Op:
     return {"op": "key"}
+
+
+def fence(front: int, serial: int) -> Op:
+    """The end of front-end ``front``'s message that created or removed soldiers: the shard's batches
+    carry the newest serial taken (:class:`server.fabric.fronts.Fences`)."""
+    return {"op": "fence", "front": front, "serial": serial}
 
 
 def books(front: int) -> Op:
