@@ -164,6 +164,7 @@ class DeathSpec:
     # while it moved (skate 0.32 -> 4.06 cm once he was turned least-worst)
     slave_feet_held: bool = False
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
+    slave_arm_out: bool = False  # the DI slave's arms in the ground go out sideways (slave_ground.rest_limbs)
     knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
     # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
     # s: the hips and ankles roll out over this after :attr:`fade` into the dead legs' passive range
@@ -225,6 +226,7 @@ CRAWL_DEATH = replace(
     kept=(*((j, MAX_SECONDS) for j in ("clavicle", "shoulder", "elbow")), ("hip", 0.45), ("knee", 0.45)),
     kept_tone=0.3,
     sunk=True,
+    slave_arm_out=True,
 )
 # s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
 # ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands

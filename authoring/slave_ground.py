@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from authoring import ik
+from authoring import deaths, ik
 from authoring.quality_frames import FigureSet, play
 from authoring.slave_contacts import _fade, _played, _smooth, part_heights
 from peabody import quaternion
@@ -50,6 +50,7 @@ PART_SITES: dict[str, tuple[str, ...]] = {
 TRUNK = ("pelvis", "belly", "chest")
 HIPS = ("left_thigh", "right_thigh")  # turn with the pelvis: the body is not lowered through them either
 LIMB_PASSES = 4  # a part's lowest node moves along it as the limb turns: solve again for what is left
+CHEST = "upper_torso.sternum"  # an arm goes out sideways away from this (_sideways)
 ROOT = "lower_torso.proximal"  # a slave site without a master site of its name moves as this one does
 CONTACT_CM = 1.3  # the master's part this low is on the ground (the quality check's 1.25 cm)
 MARGIN_CM = 0.3  # a part the master holds up is kept this far above the ground at least
@@ -131,18 +132,24 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
         return {p: w * _need(m_h[p], s_h[p]) for p in parts if p in s_h and p in m_h}
 
     limbs = tuple(p for p in parts if p not in TRUNK)
-    planted = _plants(_positions(kin, q, loc), _positions(figures.kin[mtype], mq, mloc), m_h, release)
+    unsolved, m_at = _positions(kin, q, loc), _positions(figures.kin[mtype], mq, mloc)
     settle = w * _settled(mloc, float(master.fps))
+    arm_out = _arm_out(master)
+    planted = _plants(unsolved, m_at, m_h, release)
     # once the master lies still, the trunk (the body rolls or pitches onto what the master rests on); the
     # limbs throughout; last, the limbs again unplanted: a part that its plant kept in the ground comes out
-    stages = [(TRUNK, ROOT_DOFS, planted), (limbs, (), planted)] * LIMB_PASSES + [(limbs, (), {})]
-    for k, (group, root_dofs, plants) in enumerate(stages):
+    stages = [(TRUNK, ROOT_DOFS, True), (limbs, (), True)] * LIMB_PASSES + [(limbs, (), False)]
+    for k, (group, root_dofs, planting) in enumerate(stages):
         if k % 2 == 0 and k < len(stages) - 1:
             loc[:, 1, 3] += settle * _trunk_drop(m_h, _heights(pose, loc, figures, stype, TRUNK + HIPS))
+        plants = planted if planting else {}
+        if arm_out and planting and group is limbs:  # a part landing as the trunk settles: from the solve
+            plants = _plants(unsolved, m_at, m_h, release, (_positions(kin, pose, loc), settle > 0))
         scale = settle if group is TRUNK else 1.0
         need = {p: v * scale for p, v in needs(pose, loc).items() if p in group}
+        goals = _goals(kin, pose[sub], loc[sub], need, sub, plants, arm_out)
         solved, report = ik.solve(
-            kin, pose[sub], _goals(kin, pose[sub], loc[sub], need, sub, plants), loc[sub], iterations=40,
+            kin, pose[sub], goals, loc[sub], iterations=40,
             damping=2.0, rest_pose=pose[sub], rest_gain=0.05, tolerance=0.05, max_dof_step=0.05,
             root_dofs=root_dofs,
         )  # fmt: skip
@@ -155,6 +162,12 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     _write(slave, figures, stype, pose, loc @ np.linalg.inv(q_loc))
     left = needs(pose, loc)
     return np.max(np.abs(np.stack(list(left.values()))), axis=0)
+
+
+def _arm_out(master: Channelset) -> bool:
+    """Whether this death's slave moves its arms out of the ground sideways (``DeathSpec.slave_arm_out``)."""
+    spec = deaths.death_specs().get(master.name.split(".", 1)[0])
+    return spec is not None and spec.slave_arm_out
 
 
 def _settled(root: np.ndarray, fps: float) -> np.ndarray:
@@ -195,12 +208,19 @@ def _trunk_drop(master: dict[str, np.ndarray], slave: dict[str, np.ndarray]) -> 
 
 
 def _plants(
-    slave: dict[str, np.ndarray], master: dict[str, np.ndarray], heights: dict[str, np.ndarray], release: int
+    slave: dict[str, np.ndarray],
+    master: dict[str, np.ndarray],
+    heights: dict[str, np.ndarray],
+    release: int,
+    solved: tuple[dict[str, np.ndarray], np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
     """Per site of :data:`PART_SITES`, where it goes (x, z; NaN where free) while the master's part is on
     the ground (``CONTACT_CM``): from where it was as the contact began (or at the release) it moves as
     the master's site of the same name moves (his root where he has none), so the slave's contacts slide
-    no more than his. ``slave``/``master``: ``(n, 3)`` positions per site name."""
+    no more than his. ``slave``/``master``: ``(n, 3)`` positions per site name. ``solved``: the positions
+    the solve so far has and the frames the trunk settles in; a contact beginning there starts from the
+    solve (from the unsolved slave, 3-5 cm off once the trunk went down, the solve jumped there as the part
+    landed and the smoothing made the jump a slide: DI crawl2dead right hand 6.3 cm)."""
     out: dict[str, np.ndarray] = {}
     n = len(heights[next(iter(heights))])
     for part, names in PART_SITES.items():
@@ -214,7 +234,8 @@ def _plants(
             for a, b in zip(edges[::2], edges[1::2], strict=True):
                 a = max(int(a), release)
                 if a < b:
-                    track[a:b] = slave[site][a] + ref[a:b] - ref[a]
+                    at = solved[0] if solved is not None and solved[1][a] else slave
+                    track[a:b] = at[site][a] + ref[a:b] - ref[a]
             out[site] = track
     return out
 
@@ -234,10 +255,12 @@ def _goals(
     need: dict[str, np.ndarray],
     rows: np.ndarray,
     planted: dict[str, np.ndarray],
+    arm_out: bool = False,
 ) -> list[ik.Goal]:
     """One goal per site of :data:`PART_SITES` of the parts in ``need``: where it is in ``pose`` (the frames
     ``rows`` of the clip), moved up or down by the largest need of the parts it carries (so a wrist lifts
-    both forearm and hand out of the ground)."""
+    both forearm and hand out of the ground). ``arm_out``: an arm site going up also goes as far out
+    sideways, away from the chest (:func:`_sideways`)."""
     sites = kin.site_globals(pose, loc)
     moves: dict[str, np.ndarray] = {}
     for part, move in need.items():
@@ -250,8 +273,21 @@ def _goals(
         hold = planted[site][rows] if site in planted else np.full((len(rows), 3), np.nan)
         keep = ~np.isnan(hold[:, 0])
         at[keep, 0], at[keep, 2] = hold[keep, 0], hold[keep, 2]
+        if arm_out and site.split("_", 1)[-1].startswith(("upper_arm", "lower_arm")):
+            at += _sideways(at, sites[:, kin.site_names.index(CHEST), :3, 3], move)
         goals.append(ik.Goal(site, at, None, 1.0, 1, _chain(site)))
     return goals
+
+
+def _sideways(at: np.ndarray, chest: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """How far ``(n, 3)`` to move arm sites ``at`` out of the ground sideways: horizontally away from the
+    ``chest`` as far as they go ``up``. A DI forearm or upper arm lying in the ground under its chest (the
+    crawler's, 2-7 cm) cannot come up by the arm alone, its shoulder is on the chest: out beside it, it
+    lies on the ground, the chest lands on the ground and not on it."""
+    out = at - chest
+    out[:, 1] = 0.0
+    out /= np.maximum(np.linalg.norm(out, axis=1), 1e-9)[:, None]
+    return out * np.maximum(up, 0.0)[:, None]
 
 
 def _write(slave: Channelset, figures: FigureSet, stype: str, pose: np.ndarray, moved: np.ndarray) -> None:

@@ -132,3 +132,35 @@ def test_a_part_the_master_holds_up_is_not_laid_on_the_ground() -> None:
     assert need[0] == pytest.approx(-0.5)  # on the ground: to the master's height
     assert slave[1] + need[1] >= slave_ground.AIR_SHARE * 12.0 - 1e-9  # up in the air: kept up with his
     assert need[2] == 0.0  # high enough already: left alone
+
+
+def test_a_part_landing_as_the_trunk_settles_is_held_where_the_solve_has_it() -> None:
+    """DI crawl2dead (issue 14): a hand landing once the trunk went down was held where the unsolved slave
+    had it, 3-5 cm off; the solve jumped there and the smoothing made the jump a 6.3 cm slide."""
+    n, release = 6, 0
+    heights = {"right_hand": np.array([5.0, 5.0, 0.0, 0.0, 0.0, 5.0])}  # the master's hand lands at frame 2
+    unsolved = {s: np.zeros((n, 3)) for s in slave_ground.PART_SITES["right_hand"]}
+    solved = {s: np.tile([4.0, 0.0, -3.0], (n, 1)) for s in unsolved}
+    master = {slave_ground.ROOT: np.zeros((n, 3))}
+    for settling, start in ((np.zeros(n, bool), [0.0, 0.0]), (np.ones(n, bool), [4.0, -3.0])):
+        planted = slave_ground._plants(unsolved, master, heights, release, (solved, settling))
+        hold = planted["right_lower_arm.distal"]
+        assert np.isnan(hold[:2]).all() and np.isnan(hold[5]).all()
+        np.testing.assert_allclose(hold[2:5][:, [0, 2]], [start] * 3)  # held still from where it landed
+
+
+def test_an_arm_in_the_ground_goes_out_sideways_from_the_chest() -> None:
+    """DI crawl2dead's forearm lay 2-7 cm in the ground under its chest and the arm could not lift it (its
+    shoulder is on the chest): it goes out horizontally, away from the chest, as far as it must go up."""
+    at = np.array([[10.0, -3.0, 0.0], [0.0, -1.0, -5.0], [3.0, 2.0, 4.0]])
+    chest = np.array([[0.0, 10.0, 0.0], [0.0, 10.0, 0.0], [0.0, 10.0, 0.0]])
+    out = slave_ground._sideways(at, chest, np.array([3.0, 1.0, -2.0]))
+    np.testing.assert_allclose(out, [[3.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]])
+
+
+def test_only_the_crawlers_slave_moves_its_arms_out_sideways() -> None:
+    """The sideways move is the crawl death's own setting: the other deaths' slaves rebuild unchanged (DI
+    ststow2dead's feet skated 2.35 cm with it, its head rested 6.3 cm up)."""
+    from authoring import deaths
+
+    assert [d.name for d in deaths.DEATHS if d.slave_arm_out] == ["crawl2dead"]
