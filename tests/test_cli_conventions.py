@@ -93,6 +93,8 @@ def test_options_that_do_not_go_together_are_usage_errors() -> None:
     assert r.returncode == 2 and "tick_hz" in r.stderr
     r = ttes("web", "--with-server", "--server", "127.0.0.1:7001")
     assert r.returncode == 2 and "--with-server or --server" in r.stderr
+    r = ttes("front", "--shards", "1", "--front", "0/300", "--port", "0")
+    assert r.returncode == 2 and "--front 0/300: at most 255 front-ends" in r.stderr
 
 
 @pytest.mark.parametrize(

@@ -36,6 +36,17 @@ def test_a_batch_carries_each_front_ends_fence() -> None:
     assert np.array_equal(fenced.codes, _batch().codes)
 
 
+@pytest.mark.parametrize(
+    ("front", "serial"), [(255, 1), (-1, 1), (10**9, 1), ("0", 1), (0, 2**32), (0, -1), (0, 1.5), (0, None)]
+)
+def test_a_fence_a_batch_cannot_carry_is_refused_when_it_arrives(front: object, serial: object) -> None:
+    """A fence's front-end sizes the shard's list of fences and is counted in a byte of every batch, its
+    serial travels as uint32: out of range, the shard would grow the list or fail to publish at all."""
+    with pytest.raises(ValueError, match="fence"):
+        req.decode(req.pack([{"op": "fence", "front": front, "serial": serial}]))
+    assert req.decode(req.pack([req.fence(254, 2**32 - 1)])) == [req.fence(254, 2**32 - 1)]
+
+
 def test_codes_beyond_16_bits_are_refused() -> None:
     b = _batch()
     with pytest.raises(ValueError, match="16 bits"):

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 MAGIC = b"TTB3"
+MAX_FRONTS = 255  # front-ends whose fences a batch carries: their count is one byte of the header
+FENCE_MAX = 2**32 - 1  # a fence serial travels as uint32
 # magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, key, fronts (uint32 fences follow)
 _HEAD = struct.Struct("<4sHHIIdIIBB")
 

@@ -25,6 +25,7 @@ import msgpack
 import numpy as np
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
+from server.fabric.batch import FENCE_MAX, MAX_FRONTS
 
 OPS = ("create", "remove", "requests", "react", "sync", "key", "books", "fence")
 Op = dict[str, Any]
@@ -103,4 +104,10 @@ def _checked(op: object) -> Op:
             op["rows"] = np.frombuffer(op["rows"], ENTITY_REQUEST_DTYPE)
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"fabric {op['op']} without rows: {exc}") from exc
+    if op["op"] == "fence":  # its numbers size the shard's list of fences and travel in every batch
+        front, serial = op.get("front"), op.get("serial")
+        if not (isinstance(front, int) and 0 <= front < MAX_FRONTS):
+            raise ValueError(f"fabric fence of front-end {front!r:.20} (0 to {MAX_FRONTS - 1})")
+        if not (isinstance(serial, int) and 0 <= serial <= FENCE_MAX):
+            raise ValueError(f"fabric fence serial {serial!r:.20} (0 to {FENCE_MAX})")
     return op

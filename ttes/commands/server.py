@@ -189,11 +189,16 @@ def _fabric_node(
     import trio
 
     from server.fabric import FabricConfig, open_fabric
+    from server.fabric.batch import MAX_FRONTS
     from server.fabric.nodes import FrontNode, Sharding, ShardNode
 
     try:
         sharding = Sharding.parse(shard) if shard is not None else None
         front = Sharding.parse(getattr(args, "front", None) or "0/1")
+        if front.n > MAX_FRONTS:
+            raise ValueError(
+                f"--front {args.front}: at most {MAX_FRONTS} front-ends (a batch's fence count is a byte)"
+            )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     fabric = open_fabric(FabricConfig(args.fabric, args.fabric_listen, tuple(args.fabric_connect)))
