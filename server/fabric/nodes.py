@@ -99,8 +99,10 @@ class ShardNode:
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request taken, for a books answer
         self.has_last = np.zeros(n, bool)
         self.fences: list[int] = []  # per front-end, the newest fence taken (its batches carry them)
-        self._born: list[int] = []  # soldiers created since the last fence
-        self._again: list[int] = []  # soldiers whose rows the next batch carries (born before a fence)
+        # soldiers created since the last fence, and those whose rows the next batch carries (born before a
+        # fence): sets, so creations that no fence follows (a sync's) grow them no further than the soldiers
+        self._born: set[int] = set()
+        self._again: set[int] = set()
         server.on_publish = self.publish
         # what arrived and is not taken yet: bounded (two rows per soldier), requests coalesced per soldier
         self.backlog = Backlog(max_rows=max(MAX_ROWS, 2 * server.config.max_soldiers))
@@ -180,7 +182,7 @@ class ShardNode:
             rows = np.flatnonzero(board.valid & (board.version > self._sent_serial))
             self._since_key += tick
         if self._again:  # a batch before the fence carried them: the front-end dropped those rows
-            again = np.asarray(self._again, np.int64)
+            again = np.fromiter(self._again, np.int64, len(self._again))
             rows = np.union1d(rows, again[(again < len(board.valid)) & board.valid[again]])
             self._again.clear()
         self._sent_serial = board.serial
@@ -228,7 +230,7 @@ class ShardNode:
                 owner=str(owner) if owner is not None else None,
             )
             self.has_last[index] = False
-            self._born.append(index)
+            self._born.add(index)
         elif op == "remove":
             world.remove_soldier(int(msg["index"]), "removed by a front-end")  # type: ignore[call-overload]
             self.has_last[int(msg["index"])] = False  # type: ignore[call-overload]
@@ -251,7 +253,7 @@ class ShardNode:
         created since the last fence, which a batch sent between their creation and the fence carried)."""
         self.fences += [0] * (front + 1 - len(self.fences))
         self.fences[front] = max(self.fences[front], serial)
-        self._again += self._born
+        self._again |= self._born
         self._born.clear()
 
     def _answer_books(self, front: int) -> None:
@@ -292,7 +294,7 @@ class ShardNode:
                 world.create_soldier(figure, weapon, index, owner=owner)
                 self.has_last[index] = False
                 new.append(index)
-        self._born += new
+        self._born.update(new)
         log.info(
             "fabric_sync", shard=self.sharding.k, soldiers=len(soldiers), created=len(new), removed=len(gone)
         )
