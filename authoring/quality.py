@@ -28,6 +28,12 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``END_FRAMES`` frames: things ease in and out, deaths end at rest.
 * ``joint_limit_violations`` (float32 slack allowed; a clip that ends in DEAD: its legs' passive range,
   :mod:`authoring.passive_range`) and ``max_frame_jump_deg`` (pops, IK flips).
+* ``max_frame_flick_deg`` (any joint) and ``ankle_flick_deg`` (the ankles): the largest one-frame flick, a
+  frame's turn of a joint angle that differs from *both* neighbouring frames' turns by this much (the smaller
+  of the two second differences). A swing over a few frames, however fast, scores its change of speed
+  (kfire2dead's ankle, 25 degrees in 3 frames: 3); a joint that jumps in one frame and stays, or jumps there
+  and back, scores the jump: a held prone foot's ankle turning 11 degrees in a frame while the legs lie still
+  (diskate14) stays under the 20-degree ``max_frame_jump_deg``.
 * ``feet_up_cm`` — while the chest faces the ground (the upper torso's front pointing down, cosine at least
   ``FACE_DOWN_COS``), how far the higher foot's lowest node is above the pelvis' lowest node: a body falling
   or lying face down with its shins straight up (a ragdoll's knees whipping) reads as a scorpion, not a
@@ -98,6 +104,8 @@ THRESHOLDS: dict[str, float] = {
     "end_speed_m_s": 0.5,
     "joint_limit_violations": 0.0,
     "max_frame_jump_deg": 20.0,
+    "max_frame_flick_deg": 15.0,  # any joint: a one-frame flick (see frame_flicks)
+    "ankle_flick_deg": 8.0,  # ... an ankle's (a foot twitching at 60 fps)
     "feet_up_cm": 20.0,
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
@@ -170,6 +178,31 @@ def feet_up(kin, segg: np.ndarray, heights: np.ndarray, parts: np.ndarray) -> di
     f, side = np.unravel_index(int(np.argmax(feet[frames])), (len(frames), 2))
     at = int(frames[f])
     return {"feet_up_cm": round(float(feet[at, side]), 3), "feet_up_where": f"{FOOT_PARTS[side]}[{at}]"}
+
+
+def frame_flicks(q: np.ndarray, rot: np.ndarray, dof_slices: Mapping[str, slice]) -> dict[str, Any]:
+    """The largest one-frame flick (degrees) of the rotational DOFs ``rot`` of poses ``q`` ``(n, ndof)``,
+    over every joint (``max_frame_flick_deg``) and the ankles (``ankle_flick_deg``), with where: at frame
+    ``t`` the smaller of ``|turn(t) - turn(t-1)|`` and ``|turn(t) - turn(t+1)|``, ``turn(t) = q[t+1] - q[t]``
+    (a jump in a still joint scores the jump, a steady or smoothly changing turn little)."""
+    turn = np.degrees(np.diff(q, axis=0))
+    flick = np.zeros((0, q.shape[1]))
+    if len(turn) > 2:
+        flick = np.minimum(np.abs(turn[1:-1] - turn[:-2]), np.abs(turn[1:-1] - turn[2:]))
+    flick[:, ~rot] = 0.0
+    ankles = np.zeros(q.shape[1], dtype=bool)
+    for joint, sl in dof_slices.items():
+        ankles[sl] = joint.endswith("ankle")
+    out: dict[str, Any] = {}
+    for key, cols in (("max_frame_flick", np.ones_like(ankles)), ("ankle_flick", ankles)):
+        part = np.where(cols, flick, 0.0)
+        out[f"{key}_deg"] = round(float(part.max(initial=0.0)), 3)
+        out[f"{key}_where"] = None
+        if part.size and part.max() > 0.0:
+            at, dof = (int(v) for v in np.unravel_index(int(np.argmax(part)), part.shape))
+            joint = next(j for j, sl in dof_slices.items() if sl.start <= dof < sl.stop)
+            out[f"{key}_where"] = f"{joint}[{at + 1}-{at + 2}]"
+    return out
 
 
 def ground_shift(cs: Channelset, locomotion: bool, direction: float | None = None) -> np.ndarray:
@@ -343,6 +376,7 @@ def check_clip(
         dof = int(np.flatnonzero(rot)[col])
         joint = next(j for j, sl in kin.dof_slices.items() if sl.start <= dof < sl.stop)
         out["max_frame_jump_where"] = f"{joint}[{at}-{at + 1}]"
+    out.update(frame_flicks(q, rot, kin.dof_slices))
     if ends_dead:
         out.update(rest_rise(frames, figures))
         out.update(rest_lag(frames, figures))

@@ -29,12 +29,20 @@ orientation let the nodes straddling the turn slide 3 cm apart (ststow2dead, fra
 foot and toes turn as the master's do while his foot is planted (their turn relative to his taken once, at
 touchdown), and the foot's own nodes are then held by the offsets above. A slave that starts kneeling or
 prone keeps the loose hold (its legs were posed otherwise than his by
-:func:`~authoring.slave_contacts.rest_slave_knees`; turned as his, a kneeling hip jumped 25-30 degrees).
+:func:`~authoring.slave_contacts.rest_slave_knees`; turned as his, a kneeling hip jumped 25-30 degrees),
+and where its knee or thigh is on the ground, its knee and ankle alone hold the foot from the slave's own
+touchdown (:func:`_lying_leg`; the thigh, and so the knee on the ground, held as slaved): left as slaved
+there, rest_limbs' leg stage swung a prone DI's toes 2-3 cm along the ground and back. The hold's change to
+those knees and ankles is smoothed over the clip (:func:`_smoothed_lower_legs`): its targets step where the
+foot touches down, and the tracking turned an ankle 11 degrees in one frame there (a flick).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from authoring import ik
 from authoring.postures import leg
@@ -44,6 +52,7 @@ from authoring.rifle_swap import _smooth_above
 from authoring.slave_contacts import SIDES, _played
 from authoring.transitions import track_solve
 from peabody import quaternion
+from peabody.fk import FigureKinematics
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 from server.soldier.blend import smoothstep
@@ -64,6 +73,9 @@ TURN_RAMP_FRAMES = 10  # ... easing out over this many frames once his foot is o
 KNEE_SIGMA_FRAMES = 4.0  # ... and out as the knee comes down, smoothed over the clip (at least as far)
 START_FRAMES = 6  # ... that turn fades in over a clip's first frames (its first is a shared posture node)
 LYING_ROOT_CM = 45.0  # a dying slave whose pelvis starts lower lies (prone 14.5 cm, crawling 39; kneeling 53)
+LYING_SITES = ("toe", "ball", "heel", "lateral", "medial")  # a lying leg's foot held by the one it rests on
+LYING_SIGMA_FRAMES = 2.0  # a lying leg's knee and ankle change from the hold smoothed over the clip: its
+# targets jump where the foot touches down and the tracker turned the ankle 11 degrees in one frame (a flick)
 FOOT_PASSES = 2  # the contact nodes change a little as the foot moves: measure and solve again
 
 
@@ -84,6 +96,7 @@ def plant_offsets(
     planted: np.ndarray | None = None,
     contact_cm: float = CONTACT_HEIGHT_CM,
     at_lift_off: bool = False,
+    spread_end: bool = False,
 ) -> np.ndarray:
     """Per frame the ground offset ``(n, 3)`` (y = 0) that holds a foot's contacts where they touched down.
 
@@ -93,7 +106,9 @@ def plant_offsets(
     mean ground move of the nodes below ``contact_cm`` in both frames, starting from none at touchdown (or,
     for a stance that reaches the clip's last frame, ending at none there; a stance over the whole clip
     spreads what is left evenly; ``at_lift_off``: every stance after the first frame ends at none, so the
-    part is held where it lifts off, where the rest of the fall put it). Between stances it eases
+    part is held where it lifts off, where the rest of the fall put it; ``spread_end``: a stance reaching
+    the clip's last frame starts from none too, what is left there spread evenly over it, so a foot that
+    touches down in a clip's first frames is not pulled there at once). Between stances it eases
     (smoothstep) from one stance's last value to the next one's first; it is none at the first and last
     frames."""
     n = len(points)
@@ -110,7 +125,8 @@ def plant_offsets(
     for a, b in runs:
         track = np.cumsum(move[a : b + 1], axis=0) - move[a]  # none at touchdown
         if b == n - 1 or (at_lift_off and a > 0):
-            track -= track[-1] * (1.0 if a > 0 else np.linspace(0.0, 1.0, b - a + 1)[:, None])
+            whole = a > 0 and not (spread_end and b == n - 1)
+            track -= track[-1] * (1.0 if whole else np.linspace(0.0, 1.0, b - a + 1)[:, None])
         if np.linalg.norm(track, axis=1).max() >= MIN_PLANT_CM:
             out[a : b + 1] = track
     _ease_gaps(out, runs)
@@ -288,6 +304,106 @@ def _leg_goal(
     return [goal, *extra], np.linalg.norm(target - heel[:, :3, 3], axis=1)
 
 
+def _lying_leg(
+    pose: np.ndarray,
+    loc: np.ndarray,
+    figures: FigureSet,
+    ptype: str,
+    master_foot: np.ndarray,
+    side: str,
+    leg_goal: ik.Goal,
+    thigh: np.ndarray,
+) -> tuple[list[ik.Goal], np.ndarray]:
+    """A dying slave's lying leg (prone, crawling or kneeling at the start): where its knee or thigh is on
+    the ground, the leg's own hold (``leg_goal``, :func:`_leg_goal`) is off and the knee and ankle alone hold
+    the foot (:func:`_lower_leg_goals`), from the slave's own touchdown in each of the master's stances
+    (:func:`_from_touchdown`), lifted as there and out of the ground. Left as slaved there,
+    :func:`~authoring.slave_ground.rest_limbs`' leg stage swung a prone DI's toes 2.2 cm along the ground and
+    back (prfire2dead, frames 19-42) where his stayed. Returns the goals and the move per frame."""
+    kin = figures.kin[ptype]
+    foot_pts = part_points(pose, loc, figures, ptype, (f"{side}_foot",))
+    low = foot_pts[..., 1].min(axis=1)
+    master_low = master_foot[..., 1].min(axis=1)
+    down = _from_touchdown(master_low <= CONTACT_HEIGHT_CM, low <= CONTACT_HEIGHT_CM)
+    move = plant_offsets(foot_pts, down, spread_end=True)
+    move[:, 1] = np.maximum(lift_to_master(low, master_low), -low)  # (turned about the ankle: not into it)
+    lying = 1.0 - _knee_free(pose, loc, figures, ptype, side)
+    sites = kin.site_globals(pose, loc)
+    held = _lower_leg_goals(kin, sites, side, foot_pts, down, move, lying)
+    # off the ground the foot keeps its turn too (held by its sites' places alone, a DI foot in the air
+    # before touchdown swung its ankle 14 degrees a frame): fading out about the stances
+    first = np.flatnonzero(down)
+    aloft = lying * (1.0 - _stance_weight(down)) * (np.arange(len(down)) < (first[0] if len(first) else 0))
+    heel = sites[:, kin.site_names.index(f"{side}_foot.heel")]
+    held.append(
+        ik.Goal(
+            f"{side}_foot.heel",
+            None,
+            heel[:, :3, :3],
+            aloft,
+            2,
+            (f"{side}_knee", f"{side}_ankle"),
+            FOOT_HOLD_TURN_CM,
+        )
+    )
+    # the thigh stays as slaved (``thigh``: its distal site's globals before the hold): with no goal on the
+    # hip where the knee is down, the tracking carried a hip turn made where it lifted on through the
+    # crawl (M16 crawl2dead: 2-3 degrees, the thigh touched down as the body dragged, 5.1 cm)
+    site = f"{side}_upper_leg.distal"
+    held.append(
+        ik.Goal(site, thigh[:, :3, 3], thigh[:, :3, :3], lying, 2, (f"{side}_hip",), FOOT_HOLD_TURN_CM)
+    )
+    return [replace(leg_goal, weight=1.0 - lying), *held], np.linalg.norm(move, axis=1) * lying
+
+
+def _from_touchdown(stance: np.ndarray, down: np.ndarray) -> np.ndarray:
+    """Per frame whether a slave's foot is held: in each of the master's stances, from the first frame the
+    slave's own foot is ``down`` on. (Held only where it is down, a foot flickering about the contact
+    height started a new stance at each touch, each from none: crawl2dead's DI foot slid back 3 cm.)"""
+    out = np.zeros_like(stance)
+    for a, b in _runs(stance):
+        touch = np.flatnonzero(down[a : b + 1])
+        if len(touch):
+            out[a + touch[0] : b + 1] = True
+    return out
+
+
+def _at(kin: FigureKinematics, sites: np.ndarray, site: str) -> np.ndarray:
+    return sites[:, kin.site_names.index(site), :3, 3]
+
+
+def _lower_leg_goals(
+    kin: FigureKinematics,
+    sites: np.ndarray,
+    side: str,
+    foot_pts: np.ndarray,
+    down: np.ndarray,
+    move: np.ndarray,
+    weight: np.ndarray,
+) -> list[ik.Goal]:
+    """A lying leg's foot held by its knee and ankle alone (``weight`` per frame: where the knee or thigh
+    is on the ground): the foot sites nearest the nodes it rests on (``foot_pts`` below the contact height
+    in the ``down`` frames; a prone foot turned out rests on its edge, one dug in on its toe), each weighted
+    by its share of them, moved by the planting offset ``move`` ``(n, 3)``; the knee stays put."""
+    names = [f"{side}_foot.{s}" for s in LYING_SITES]
+    at = np.stack([_at(kin, sites, name) for name in names], axis=1)  # (n, s, 3)
+    on = (foot_pts[..., 1] <= CONTACT_HEIGHT_CM) & down[:, None]
+    nearest = np.linalg.norm(foot_pts[:, :, None, :] - at[:, None, :, :], axis=-1).argmin(axis=2)  # (n, k)
+    share = (on[..., None] & (nearest[..., None] == np.arange(len(names)))).sum(axis=1).astype(np.float64)
+    rows = np.flatnonzero(on.any(axis=1))
+    if not len(rows):
+        share[:, 0] = 1.0
+    else:  # a frame without a node down takes the nearest frame's (the hold eases there anyway)
+        near = rows[np.abs(np.arange(len(share))[:, None] - rows[None, :]).argmin(axis=1)]
+        share = share[near] / share[near].sum(axis=1, keepdims=True)
+    joints = (f"{side}_knee", f"{side}_ankle")
+    return [
+        ik.Goal(name, at[:, k] + move, None, weight * share[:, k], 2, joints)
+        for k, name in enumerate(names)
+        if share[:, k].max() > 0.0
+    ]
+
+
 def _knee_free(pose: np.ndarray, loc: np.ndarray, figures: FigureSet, ptype: str, side: str) -> np.ndarray:
     """Per frame 0 where the leg's knee or thigh is on the ground (it carries the leg), easing to 1 where
     it is ``KNEE_FREE_CM`` up."""
@@ -298,6 +414,22 @@ def _knee_free(pose: np.ndarray, loc: np.ndarray, figures: FigureSet, ptype: str
         return np.ones(len(pose))
     u = np.clip((leg_pts[..., 1].min(axis=1) - KNEE_DOWN_CM) / (KNEE_FREE_CM - KNEE_DOWN_CM), 0.0, 1.0)
     return u * u * (3.0 - 2.0 * u)
+
+
+def _smoothed_lower_legs(kin: FigureKinematics, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """``after`` with each knee's and ankle's change from ``before`` (poses ``(n, ndof)``) smoothed over the
+    clip (Gaussian, ``LYING_SIGMA_FRAMES``), none at its first frame (a posture node every clip there
+    agrees on): a step of the hold's targets becomes a turn over a few frames, not a one-frame flick."""
+    out = after.copy()
+    for side in SIDES:
+        for joint in (f"{side}_knee", f"{side}_ankle"):
+            sl = kin.dof_slices[joint]
+            change = gaussian_filter1d(
+                after[:, sl] - before[:, sl], LYING_SIGMA_FRAMES, axis=0, mode="nearest"
+            )
+            change *= smoothstep(np.clip(np.arange(len(out)) / START_FRAMES, 0.0, 1.0))[:, None]
+            out[:, sl] = before[:, sl] + change
+    return out
 
 
 def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
@@ -324,7 +456,9 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
             return mseg[:, mkin.segment_names.index(name)]
 
         turns = {side: (seg(f"{side}_foot"), seg(f"{side}_toes")) for side in SIDES}
+    lying = getattr(slave, "release_frame", None) is not None and knelt and loc[0, 1, 3] < LYING_ROOT_CM
     kin = figures.kin[stype]
+    thighs = kin.site_globals(q, loc)  # the thighs as slaved (a lying leg keeps its thigh)
     pose = q
     total = np.zeros(len(q))
     for _ in range(FOOT_PASSES):
@@ -334,6 +468,12 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
             leg_goals, moved = _leg_goal(
                 pose, loc, figures, stype, master_feet[side], side, turns[side], dying
             )
+            if lying:
+                thigh = thighs[:, kin.site_names.index(f"{side}_upper_leg.distal")]
+                leg_goals[:1], held = _lying_leg(
+                    pose, loc, figures, stype, master_feet[side], side, leg_goals[0], thigh
+                )
+                moved = np.maximum(moved, held)
             goals += leg_goals
             worst = np.maximum(worst, moved)
         if not (worst > MIN_SHIFT_CM).any():
@@ -342,6 +482,8 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
         # tracked frame after frame in small steps: solved frame by frame alone, a kneeling leg's hip and
         # ankle swapped between their limits as the foot moved 2 cm (kstow2dead: 50 degrees in one frame)
         pose = track_solve(kin, pose, goals, loc, iterations=TRACK_ITERATIONS, max_dof_step=TRACK_DOF_STEP)
+    if lying and total.any():
+        pose = _smoothed_lower_legs(kin, q, pose)
     if total.any():
         bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
         slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)

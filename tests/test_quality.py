@@ -303,6 +303,33 @@ def test_joint_limit_violations_and_pops(figset: FigureSet, holding) -> None:
     assert set(row["failures"]) >= {"joint_limit_violations", "max_frame_jump_deg"}
 
 
+def test_a_one_frame_ankle_flick_fails_where_a_fast_swing_does_not(figset: FigureSet, holding) -> None:
+    """Issue 14 (diskate14b): a held prone DI foot's ankle turned 10.8 degrees in one frame and stayed
+    (prstow2dead_low frames 14-15), under the 20-degree ``max_frame_jump_deg``: the flick limit sees it.
+    The same ankle swung 25 degrees at an even speed over 3 frames is no flick."""
+    kin = figset.kin["DI.fig"]
+    ankle = kin.dof_slices["left_ankle"].start + 1
+    poses, body, rifle = _standing(figset, holding)
+    poses[15:, ankle] += np.radians(11.0)  # jumps in one frame (14 -> 15) and stays
+    row = check_clip(_clip("flick.chset", figset, poses, body, rifle), figset)
+    assert row["max_frame_jump_deg"] < THRESHOLDS["max_frame_jump_deg"]
+    assert row["ankle_flick_deg"] == pytest.approx(11.0, abs=1e-3)
+    assert row["ankle_flick_where"] == "left_ankle[14-15]"
+    assert "ankle_flick_deg" in row["failures"]
+    assert "max_frame_flick_deg" not in row["failures"]  # 11 is no flick for a shoulder or a wrist
+    poses, body, rifle = _standing(figset, holding)
+    poses[10:, ankle] += np.radians(np.clip(np.arange(N - 10) / 3.0, 0.0, 1.0) * 25.0)  # 8.3 a frame
+    row = check_clip(_clip("swing.chset", figset, poses, body, rifle), figset)
+    assert row["ankle_flick_deg"] < 1e-3
+    assert not any("flick" in f for f in row["failures"])
+    poses, body, rifle = _standing(figset, holding)
+    poses[20, kin.dof_slices["neck"].start] += np.radians(16.0)  # there and back: a twitch of any joint
+    row = check_clip(_clip("twitch.chset", figset, poses, body, rifle), figset)
+    assert row["max_frame_flick_deg"] == pytest.approx(16.0, abs=1e-3)
+    assert row["max_frame_flick_where"] == "neck[19-20]"  # its first frame
+    assert {"max_frame_flick_deg"} <= set(row["failures"])
+
+
 def _library(tmp_path: Path, figset: FigureSet, holding, gap_deg: float) -> Path:
     """A two-arc graph A -> B -> C; the second clip starts ``gap_deg`` away from where the first ends."""
     kin = figset.kin["DI.fig"]

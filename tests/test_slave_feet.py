@@ -178,3 +178,34 @@ def test_a_knelt_dying_slaves_foot_stays_on_the_ground_where_his_rests() -> None
     assert after["contact_slides"]["left_foot"] <= 1.5
     assert after["contact_slides"]["left_knee"] <= 2.0  # the knee, left as slaved, dragged (0.6 -> 1.4)
     assert after["max_frame_jump_deg"] <= 20.0
+
+
+def test_a_dying_prone_slaves_foot_is_held_by_its_knee_and_ankle() -> None:
+    """Issue 14 (diskate14): a prone death's DI legs lie on the ground (knee and thigh down), where the
+    plant had left the foot as slaved, and rest_limbs' leg stage swung its toes 2.2 cm forward and back
+    along the ground (prfire2dead_low frames 19-42, 2.74 cm). Constructed here: the left hip swung by up
+    to 0.05 rad over frames 18-42 (the toes slid 4.8 cm), the thigh on the ground; the toes stay put, held
+    by the knee and ankle alone (the hip, and so the knee on the ground, left as they are)."""
+    from server.motion.binding import bind_channelset
+
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
+    master = load_channelset(CHANNELSETS / "prfire2dead.chset.env", use_cache=False)
+    slave = load_channelset(CHANNELSETS / "prfire2dead_low.chset.env", use_cache=False)
+    bf = bind_channelset(slave, [ctx.di]).figures[0]
+    dofs = figs.kin["DI.fig"].dof_slices["left_hip"]
+    cols = bf.src[np.isin(bf.dst, np.arange(dofs.start, dofs.stop))]
+    swing = 0.05 * np.sin(np.pi * np.clip((np.arange(slave.nframes) - 18) / 24.0, 0.0, 1.0))
+    slave.joint_data[:, cols[0]] += swing.astype(slave.joint_data.dtype)
+    hips = slave.joint_data[:, cols].copy()
+    before = check_clip(copy.deepcopy(slave), figs)
+    assert before["contact_slides"]["left_foot"] > 2.0
+    plant_slave_feet(master, slave, figs)
+    lift_off_ground(slave, ctx.di)
+    after = check_clip(slave, figs, ends_dead=True)
+    assert after["contact_slides"]["left_foot"] <= 1.0
+    assert after["foot_skate_cm"] <= 2.0
+    assert after["contact_slides"]["left_thigh"] <= before["contact_slides"]["left_thigh"] + 0.5
+    assert after["max_frame_jump_deg"] <= max(20.0, before["max_frame_jump_deg"])
+    assert after["ankle_flick_deg"] <= 8.0  # diskate14b: no one-frame turn of the held ankle
+    np.testing.assert_allclose(slave.joint_data[18:43, cols], hips[18:43], atol=0.01)  # the hip as it was

@@ -152,6 +152,8 @@ CHECK_COLUMNS = (  # (metric, header, width, format)
     ("rifle_pitch_jump_deg", "r.ptch", 6, ".1f"),
     ("end_speed_m_s", "v.end", 6, ".2f"),
     ("max_frame_jump_deg", "jump", 6, ".1f"),
+    ("max_frame_flick_deg", "flick", 6, ".1f"),
+    ("ankle_flick_deg", "a.flck", 6, ".1f"),
     ("feet_up_cm", "feetup", 6, ".1f"),
 )
 
