@@ -5,6 +5,10 @@ docs/PROTOCOL.md §7), sent as uint16 with the soldiers' indices (uint32) and ta
 merges them into its own board and encodes them for its clients with the shared encoding: nothing is
 re-quantised on the way. A *key* batch carries every soldier the shard animates; the others only the
 soldiers whose codes changed since the shard's previous batch (the front-end's board keeps the rest).
+
+A batch holds the soldiers of one block of indices (``block``; its ``seq`` counts that block's batches,
+so a front-end that hears some blocks sees the gaps of those) or none: a tick's *pulse* (``PULSE``, its
+``seq`` counts the shard's ticks), which every front-end hears whatever its clients watch.
 """
 
 from __future__ import annotations
@@ -14,9 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MAGIC = b"TTB2"
-# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, key
-_HEAD = struct.Struct("<4sHHIIdIIB")
+MAGIC = b"TTB4"
+PULSE = 0xFFFF  # the block of a shard's tick pulse (no soldiers)
+# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, key, block
+_HEAD = struct.Struct("<4sHHIIdIIBH")
 
 
 @dataclass(frozen=True)
@@ -30,6 +35,7 @@ class Batch:
     tables: np.ndarray  # (n,) update table ids
     codes: np.ndarray  # (n, F) field codes
     key: bool = True  # every soldier of the shard (else: those changed since its previous batch)
+    block: int = 0  # the index block of its soldiers (PULSE: a tick's pulse)
 
 
 def encode_batch(batch: Batch) -> bytes:
@@ -37,7 +43,8 @@ def encode_batch(batch: Batch) -> bytes:
     nf = batch.codes.shape[1] if batch.codes.ndim == 2 else 0
     if n and (batch.codes.min() < 0 or batch.codes.max() > 0xFFFF):
         raise ValueError("codes beyond 16 bits")
-    head = _HEAD.pack(MAGIC, batch.shard, batch.shards, batch.seq, batch.tick, batch.sent, n, nf, batch.key)
+    b = batch
+    head = _HEAD.pack(MAGIC, b.shard, b.shards, b.seq, b.tick, b.sent, n, nf, b.key, b.block)
     return b"".join(
         (
             head,
@@ -52,11 +59,11 @@ def decode_batch(data: bytes) -> Batch:
     """The batch of ``data`` (arrays are read-only views of it); ValueError if it is not one."""
     if len(data) < _HEAD.size:
         raise ValueError(f"a batch of {len(data)} bytes")
-    magic, shard, shards, seq, tick, sent, n, nf, key = _HEAD.unpack_from(data)
+    magic, shard, shards, seq, tick, sent, n, nf, key, block = _HEAD.unpack_from(data)
     if magic != MAGIC or len(data) != _HEAD.size + n * (5 + 2 * nf):
         raise ValueError(f"not a batch (magic {magic!r}, {len(data)} bytes for {n} x {nf})")
     at = _HEAD.size
     indices = np.frombuffer(data, "<u4", n, at)
     tables = np.frombuffer(data, "u1", n, at + 4 * n)
     codes = np.frombuffer(data, "<u2", n * nf, at + 5 * n).reshape(n, nf)
-    return Batch(shard, shards, seq, tick, sent, indices, tables, codes, bool(key))
+    return Batch(shard, shards, seq, tick, sent, indices, tables, codes, bool(key), block)
