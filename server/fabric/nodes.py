@@ -67,7 +67,8 @@ if TYPE_CHECKING:
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
 TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
-PENDING_MAX = 64  # a front-end's queue of one shard's batches; beyond, the oldest go (and it asks for a key)
+PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batch a block heard); beyond, the
+# oldest go (and it asks for a key)
 
 
 @dataclass(frozen=True)
@@ -355,6 +356,7 @@ class FrontNode:
         self._block_seq: dict[tuple[int, int], int] = {}  # (shard, block) -> its last batch's seq
         self._key_wanted: set[tuple[int, int]] = set()  # heard since lately, no key of it come yet
         self.rows_decoded = np.zeros(self.blocks, np.int64)  # per block: the rows the fabric brought here
+        self.pending_max = PENDING_MAX * (1 + self.blocks)  # messages: PENDING_MAX ticks of every block
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request, for a sync
         self.has_last = np.zeros(n, bool)
         self.made = np.zeros(n, bool)  # created here (not the start-up script's, not another front-end's)
@@ -450,7 +452,7 @@ class FrontNode:
             queue = self._pending.setdefault(k, [])
             waiting = bool(queue)
             queue.append(data)
-            if len(queue) > PENDING_MAX:  # the loop is far behind: the seq gap asks for a key
+            if len(queue) > self.pending_max:  # the loop is far behind: the seq gap asks for a key
                 del queue[0]
         if not waiting:
             token.run_sync_soon(self.server.publish_fed)
