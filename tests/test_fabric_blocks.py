@@ -8,10 +8,10 @@ to every shard's pulse): here blocks of 16, the client's soldiers 10..39 in bloc
 from __future__ import annotations
 
 import trio
-from test_fabric_inprocess import WALK, cluster, moving
+from test_fabric_inprocess import cluster, crowd, moving
 from test_server_support import Client
 
-from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, Subscribe, Unsubscribe
+from protocol.events import JointUpdates, Ready, Subscribe, Unsubscribe
 from server.fabric.nodes import FrontNode
 
 BLOCK = 16
@@ -29,15 +29,7 @@ async def _learned(node: FrontNode) -> None:
 
 async def test_a_front_end_hears_only_the_blocks_its_clients_watch(autojump_clock: trio.abc.Clock) -> None:
     async with cluster(block=BLOCK) as (front, node, shards, _):
-        c = await Client.open(front.addresses[0][1], "ig", client_id="alpha")
-        await c.expect(Ready)
-        for rid in range(MADE):
-            await c.send(CreateSoldier(rid + 1, "DI.fig", "AK_47.fig", None))
-        made = sorted([(await c.expect(SoldierCreated)).index for _ in range(MADE)])
-        assert made == list(range(10, 10 + MADE))
-        await c.send(Subscribe(WATCHED))
-        await c.requests(index=made, velocity=WALK)  # every block's batches carry walkers each tick
-        await moving(c, 10, 3)
+        c = await crowd(front, MADE, WATCHED)
         await _learned(node)
         await moving(c, 10, 3)
         assert set(node._subs) == {(0, 0), (1, 0)}

@@ -132,6 +132,21 @@ async def walker(front: TtesServer, index: int) -> Client:
     return c
 
 
+async def crowd(front: TtesServer, count: int, watched: tuple[int, ...]) -> Client:
+    """A client that creates ``count`` soldiers (10 on: the start-up script's are 0..9), watches
+    ``watched`` and walks them all (their updates are coming)."""
+    c = await Client.open(front.addresses[0][1], "ig", client_id="alpha")
+    await c.expect(Ready)
+    for rid in range(count):
+        await c.send(CreateSoldier(rid + 1, "DI.fig", "AK_47.fig", None))
+    made = sorted([(await c.expect(SoldierCreated)).index for _ in range(count)])
+    assert made == list(range(10, 10 + count))
+    await c.send(Subscribe(watched))
+    await c.requests(index=made, velocity=WALK)
+    await moving(c, 10, 3)
+    return c
+
+
 async def moving(c: Client, index: int, updates: int = 10) -> list[int]:
     """The ticks of the next ``updates`` joint updates of ``index`` (they keep coming while it walks)."""
     ticks = []
