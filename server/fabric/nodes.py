@@ -402,6 +402,11 @@ class FrontNode:
             self.fabric.watch(alive_key(k), functools.partial(self._watched, token, k))
         self._resubscribe()
 
+    def _block_rows(self, k: int, b: int) -> np.ndarray:
+        """The indices of block ``b`` whose home is shard ``k`` (what shard ``k`` publishes there)."""
+        rows = np.arange(b * self.block, min((b + 1) * self.block, len(self.watching.held)))
+        return rows[Sharding.home(rows, self.shards) == k]
+
     def _wanted(self, blocks: np.ndarray) -> set[tuple[int, int]]:
         """The (shard, block) topics to hear: the blocks its clients watch (and ``blocks``) of every shard
         (a survivor publishes a failed shard's soldiers), every block of a shard asked for its books."""
@@ -415,18 +420,20 @@ class FrontNode:
     def _resubscribe(self, blocks: np.ndarray | None = None) -> None:
         """Hear the wanted topics (:meth:`_wanted`), no others. A topic heard anew asks its shard for a key
         (its still soldiers come in no other batch), and the codes kept of its soldiers from before are
-        dropped (batches went by unheard: they are stale)."""
+        dropped (batches went by unheard: they are stale); a topic no longer heard leaves its soldiers'
+        rows of the board unknown (none is sent to a client that subscribes later before the key's)."""
         if self._token is None:
             return
         want = self._wanted(np.zeros(0, np.int64) if blocks is None else blocks)
+        board = self.server.board_ref.board
         for stream in sorted(set(self._subs) - want):
             self._subs.pop(stream)()
             self._key_wanted.discard(stream)
+            if board is not None:  # no client watches them: their rows would go stale there
+                board.unknown(self._block_rows(*stream))
         new = sorted(want - set(self._subs))
         for k, b in new:
-            lo = b * self.block
-            held = np.arange(lo, min(lo + self.block, len(self.watching.held)))
-            self.watching.held[held[Sharding.home(held, self.shards) == k]] = False
+            self.watching.held[self._block_rows(k, b)] = False
             arrived = functools.partial(self._arrived, self._token, k)
             self._subs[(k, b)] = self.fabric.subscribe(poses_topic(k, b), Kind.POSES, arrived)
             self._key_wanted.add((k, b))
