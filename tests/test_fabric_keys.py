@@ -155,4 +155,8 @@ def test_a_tick_goes_as_one_batch_per_block_on_its_topic_and_a_pulse() -> None:
     keys = [(b.block, b.seq, b.key) for b in batches]
     assert keys == [(0, 0, True), (1, 0, True), (2, 0, True), (0, 1, False), (1, 1, False), (2, 1, False)]
     pulses = [decode_batch(p) for p in wire.pulses]
-    assert [(p.block, p.seq, p.tick, len(p.indices)) for p in pulses] == [(PULSE, 0, 1, 0), (PULSE, 1, 2, 0)]
+    # a key tick's pulse names every soldier (no codes): a front-end checks its books against it
+    assert [(p.block, p.seq, p.tick, len(p.indices), p.key) for p in pulses] == [
+        (PULSE, 0, 1, N, True),
+        (PULSE, 1, 2, 0, False),
+    ]

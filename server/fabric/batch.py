@@ -7,8 +7,9 @@ re-quantised on the way. A *key* batch carries every soldier the shard animates;
 soldiers whose codes changed since the shard's previous batch (the front-end's board keeps the rest).
 
 A batch holds the soldiers of one block of indices (``block``; its ``seq`` counts that block's batches,
-so a front-end that hears some blocks sees the gaps of those) or none: a tick's *pulse* (``PULSE``, its
-``seq`` counts the shard's ticks), which every front-end hears whatever its clients watch.
+so a front-end that hears some blocks sees the gaps of those) or a tick's *pulse* (``PULSE``, its ``seq``
+counts the shard's ticks; a key tick's names every soldier the shard animates, without codes), which every
+front-end hears whatever its clients watch.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ class Batch:
 def encode_batch(batch: Batch) -> bytes:
     n = len(batch.indices)
     nf = batch.codes.shape[1] if batch.codes.ndim == 2 else 0
-    if n and (batch.codes.min() < 0 or batch.codes.max() > 0xFFFF):
+    if batch.codes.size and (batch.codes.min() < 0 or batch.codes.max() > 0xFFFF):
         raise ValueError("codes beyond 16 bits")
     b = batch
     head = _HEAD.pack(MAGIC, b.shard, b.shards, b.seq, b.tick, b.sent, n, nf, b.key, b.block)

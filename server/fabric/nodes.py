@@ -207,10 +207,12 @@ class ShardNode:
         for a, z in itertools.pairwise(cuts):
             if z > a:
                 self._publish_block(board, int(blocks[a]), rows[a:z], key)
-        if tick:  # it lives, whatever blocks a front-end hears
-            k, n, none = self.sharding.k, self.sharding.n, np.zeros(0, np.int64)
-            empty = none.reshape(0, 0)
-            pulse = Batch(k, n, self.seq, board.tick, time.monotonic(), none, none, empty, False, PULSE)
+        if tick:  # it lives, whatever blocks a front-end hears; a key's names every soldier (no codes)
+            k, n, who = self.sharding.k, self.sharding.n, rows if key else rows[:0]
+            empty = np.zeros((len(who), 0), np.uint16)
+            pulse = Batch(
+                k, n, self.seq, board.tick, time.monotonic(), who, board.table_of[who], empty, key, PULSE
+            )
             self._sent(self._pulse, encode_batch(pulse))
             self.seq += 1
 
@@ -528,9 +530,6 @@ class FrontNode:
         m = self.server.world.manager
         if m is None:
             return
-        # this front-end may have missed another's message: it learns from the shard
-        if k not in self._asked and b.key and self._differs(k, b.indices, b.block):
-            self._ask_books(k)
         if k in self._asked:  # until it answers, no index it animates is allotted here
             alive = m.table.alive
             self._unknown.setdefault(k, set()).update(
@@ -557,13 +556,22 @@ class FrontNode:
                     self._send(stood_in, req.remove(i))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
             self._sync(k, [k], replay=stood_in != k, made=first)
-        if first and k not in self._asked and self.server.world.manager is not None:
-            self._ask_books(k)  # this front-end may be late: it learns the soldiers from the shard
+        m = self.server.world.manager
+        if m is None:
+            return
+        # this front-end may be late, or have missed another's message: it learns from the shard (a key
+        # pulse names every soldier the shard animates, whatever blocks this front-end hears)
+        if k not in self._asked and (first or (b.key and self._differs(k, b.indices))):
+            self._ask_books(k)
+        if k in self._asked:  # until it answers, no index it animates is allotted here
+            alive = m.table.alive
+            self._unknown.setdefault(k, set()).update(
+                b.indices[~alive[np.minimum(b.indices, len(alive) - 1)]].tolist()
+            )
 
-    def _differs(self, k: int, indices: np.ndarray, block: int) -> bool:
-        """Whether shard ``k``'s key batch of ``block`` (every soldier it animates there) carries a soldier
-        the books lack, or lacks one they hold, of those no front-end told this one of (a message lost
-        before a link came up)."""
+    def _differs(self, k: int, indices: np.ndarray) -> bool:
+        """Whether shard ``k``'s key pulse (every soldier it animates) carries a soldier the books lack, or
+        lacks one they hold, of those no front-end told this one of (a message lost before a link came up)."""
         m = self.server.world.manager
         assert m is not None
         alive, known = m.table.alive, self.known
@@ -572,7 +580,6 @@ class FrontNode:
         if (~alive[idx] & ~known[idx]).any():
             return True
         live = m.table.live
-        live = live[live // self.block == block]
         scope = live[(np.asarray(self.route)[Sharding.home(live, self.shards)] == k) & ~known[live]]
         return not np.isin(scope, idx).all()
 
