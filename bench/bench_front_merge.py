@@ -7,6 +7,10 @@ random codes; the update table's 64 fields) and every 30th tick a key batch of a
 Its clients watch ``--watched`` soldiers (e.g. 4 clients x 2,000 of 32,000). Thread CPU, so a loaded
 machine disturbs it little. Also the cost of a subscription to ``--subscribe`` unwatched soldiers.
 
+``blocks``: the same ticks as a shard sends them since blocktopic21, one batch per ``--block`` of indices
+(on the block's topic), of which the front-end hears and decodes only the blocks its clients watch (the
+watched soldiers are the lowest indices, as one front-end's share); with the bytes per tick it receives.
+
     python bench/bench_front_merge.py --soldiers 32000 48000 --shards 2 --watched 8000 --rounds 3
 """
 
@@ -31,8 +35,11 @@ from server.pose_board import PoseBoard
 FIELDS = 64
 
 
-def stream(soldiers: int, shards: int, moving: float, ticks: int, seed: int) -> list[list[bytes]]:
-    """Each tick's batches (one per shard), as the shards send them."""
+def stream(
+    soldiers: int, shards: int, moving: float, ticks: int, seed: int, block: int = 0, heard: int = 0
+) -> list[list[bytes]]:
+    """Each tick's batches (one per shard; with ``block``, one per shard and block of indices, of the
+    blocks below index ``heard`` only: those a front-end hears), as the shards send them."""
     rng = np.random.default_rng(seed)
     out = []
     for t in range(ticks):
@@ -44,7 +51,14 @@ def stream(soldiers: int, shards: int, moving: float, ticks: int, seed: int) -> 
                 idx = idx[rng.random(len(idx)) < moving]
             codes = rng.integers(0, 4096, (len(idx), FIELDS), dtype=np.uint16)
             tables = np.ones(len(idx), np.uint8)
-            tick.append(encode_batch(Batch(k, shards, t, t, 0.0, idx, tables, codes, key)))
+            if not block:
+                tick.append(encode_batch(Batch(k, shards, t, t, 0.0, idx, tables, codes, key)))
+                continue
+            for b in range(-(-heard // block)):
+                at = (idx >= b * block) & (idx < (b + 1) * block)
+                if at.any():
+                    part = Batch(k, shards, t, t, 0.0, idx[at], tables[at], codes[at], key, b)
+                    tick.append(encode_batch(part))
         out.append(tick)
     return out
 
@@ -83,21 +97,32 @@ def main() -> int:
     ap.add_argument("--ticks", type=int, default=60)
     ap.add_argument("--rounds", type=int, default=3, help="before/after pairs, alternated")
     ap.add_argument("--subscribe", type=int, default=2000)
+    ap.add_argument("--block", type=int, default=4096, help="soldier indices per pose topic")
     args = ap.parse_args()
     results = []
     for n in args.soldiers:
         batches = stream(n, args.shards, args.moving, args.ticks, seed=n)
+        blocked = stream(
+            n, args.shards, args.moving, args.ticks, seed=n, block=args.block, heard=args.watched
+        )
         row: dict[str, object] = {"soldiers": n, "shards": args.shards, "watched": args.watched}
-        before, after = [], []
+        before, after, blocks = [], [], []
         for _ in range(args.rounds):
             ms, rows_all = run(batches, n, None)
             before.append(round(ms, 2))
             ms, rows_watched = run(batches, n, args.watched)
             after.append(round(ms, 2))
+            ms, _ = run(blocked, n, args.watched)
+            blocks.append(round(ms, 2))
         sub = subscribe_ms(batches, n, args.watched, args.subscribe)
         row |= {
             "merge_ms_per_tick_before": before,
             "merge_ms_per_tick_after": after,
+            f"merge_ms_per_tick_blocks_{args.block}": blocks,
+            "bytes_per_tick_whole_blocks": [
+                sum(map(len, batches[1])),
+                sum(map(len, blocked[1])),
+            ],
             "rows_published_per_tick": [rows_all // args.ticks, rows_watched // args.ticks],
             f"subscribe_{args.subscribe}_ms": round(sub, 2),
             "load": round(os.getloadavg()[0], 1),

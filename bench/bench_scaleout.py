@@ -10,7 +10,10 @@ generator measured: delivered % of steady-mover updates (all generators' togethe
 p50/p99 (all their samples), each process's CPU (% of a core: front-ends, shards, generators), each
 server's CPU per tick by stage (its status lines), and the bytes the processes moved through system calls
 and the fabric's bytes per second (each shard's batches, one copy: Zenoh sends one to each front-end; and
-what each front-end received), from the servers' status lines. A progress line on stderr every 2 s.
+what each front-end received: ``fabric_in_bytes_per_s``, only the index blocks its clients watch, and
+``fabric_blocks``, the (shard, block) topics it heard at the end), from the servers' status lines. A
+progress line on stderr every 2 s. ``--fabric dds`` runs it on Cyclone DDS; ``--fabric-block`` sets the
+soldier indices per pose topic (``ttes server --fabric-block``).
 
 A soldier index is 16 bits on the client protocol (docs/PROTOCOL.md: ``max_soldiers`` <= 65,536), so one
 cluster serves at most 65,536 soldiers, the start-up script's included.
@@ -42,6 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from client_stub.link.spawn import ServerProcess, SpawnError, cpu_seconds, free_port
 from server.config import MAX_SOLDIERS_LIMIT
+from server.fabric import BLOCK
 
 HEADROOM = (
     512  # indices beyond the load's: the start-up script's soldiers and the front-ends' shares' rounding
@@ -62,6 +66,8 @@ def main() -> int:
     ap.add_argument("--warmup", type=float, default=5.0)
     ap.add_argument("--timeout", type=float, default=300.0, help="a generator's limit to create its soldiers")
     ap.add_argument("--out", type=Path, help="write the JSON here too")
+    ap.add_argument("--fabric", choices=("zenoh", "dds"), default="zenoh", help="fabric engine")
+    ap.add_argument("--fabric-block", type=int, help="soldier indices per pose topic (default: the server's)")
     ap.add_argument("--worker", nargs=2, metavar=("PORT", "OUT"), help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument("--gate", default="", help=argparse.SUPPRESS)
@@ -82,15 +88,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     procs_n = args.procs or max(m, min(args.clients, 4))
     if not 1 <= m <= procs_n <= args.clients <= args.soldiers:
         raise SystemExit("need 1 <= fronts <= procs <= clients <= soldiers")
-    # each front-end allots from its share (1/M of the indices): room for its generators' soldiers
-    cap = min(args.soldiers + args.soldiers // 16 + HEADROOM, MAX_SOLDIERS_LIMIT)
+    # each front-end allots from its share (every M-th block of indices): room for its generators' soldiers
     per_front = np.bincount(np.arange(procs_n) % m, _split(args.soldiers, procs_n), m)
-    if args.soldiers + HEADROOM > cap or per_front.max() > (cap - HEADROOM) // m:
-        raise SystemExit(f"{args.soldiers} soldiers: the client protocol's index is 16 bits ({cap} at most)")
+    cap = max_soldiers(args.soldiers, per_front, args.fabric_block or BLOCK)
     with tempfile.TemporaryDirectory(prefix="ttes-scaleout-") as tmp:
         config = Path(tmp) / "scale.toml"
         config.write_text(f"max_soldiers = {cap}\nmax_soldiers_per_client = {cap}\nreport_interval = 1.0\n")
-        flags = ["--config", str(config), "--throttle", "0"]
+        flags = ["--config", str(config), "--throttle", "0", "--fabric", args.fabric]
+        flags += ["--fabric-block", str(args.fabric_block)] if args.fabric_block else []
         started = time.monotonic()
         with cluster(flags, n, m) as servers:
             ready_s = time.monotonic() - started
@@ -135,6 +140,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         **cpu_rates(samples, window),
         "fabric_out_bytes_per_s": sum(v for k, v in fabric.items() if k.startswith("shard")),
         "fabric_bytes_per_s": fabric,
+        "fabric_in_bytes_per_s": {k: v for k, v in fabric.items() if k.startswith("front")},
+        "fabric_blocks": {
+            k: int(r[-1]["fabric_blocks"]) for k, r in rows.items() if r and "fabric_blocks" in r[-1]
+        },
         "cpu_ms_per_tick": {k: stages(r) for k, r in rows.items()},
         "books_failed": books,
         # at the window's end: every front-end should know every soldier, each shard its own; mirrored:
@@ -144,6 +153,22 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "per_generator": [{k: v for k, v in r.items() if k != "latency_s"} for r in reports],
         "failed": failed,
     }
+
+
+def max_soldiers(soldiers: int, per_front: np.ndarray, block: int) -> int:
+    """The cluster's ``max_soldiers``: room for the soldiers, the start-up script's and, in each front-end's
+    share of the index blocks, its generators' (a share is the blocks ``k, k + M, ...`` below it; the
+    start-up script's soldiers are in block 0, front-end 0's)."""
+    m = len(per_front)
+    cap = min(soldiers + soldiers // 16 + HEADROOM, MAX_SOLDIERS_LIMIT)
+    need = per_front + np.eye(1, m, dtype=int)[0] * HEADROOM
+    while True:
+        shares = np.bincount((np.arange(cap) // block) % m, minlength=m)
+        if soldiers + HEADROOM <= cap and (need <= shares).all():
+            return cap
+        if cap == MAX_SOLDIERS_LIMIT:
+            raise SystemExit(f"{soldiers} soldiers: the client protocol's index is 16 bits ({cap} at most)")
+        cap = min(cap + block // 4, MAX_SOLDIERS_LIMIT)
 
 
 def _report(tmp: Path, j: int) -> dict[str, Any]:

@@ -117,6 +117,12 @@ class PoseBoard:
             self.valid[index] = False
             self.table_of[index] = -1
 
+    def unknown(self, rows: np.ndarray) -> None:
+        """These soldiers' poses are not known here any more (a front-end stopped hearing their block, its
+        rows go stale): none is sent until the next publish of it brings it."""
+        rows = np.asarray(rows, np.int64)
+        self.valid[rows[rows < self.capacity]] = False
+
     def labels(self, indices: np.ndarray) -> np.ndarray:
         """The wire tick of each soldier's pose on the board: the tick loop's last tick, or the next tick for
         a soldier answered since (an out-of-cycle publish)."""

@@ -261,8 +261,9 @@ def test_a_shard_ends_as_if_it_applied_every_create_and_remove(caplog: Any) -> N
 
 
 def test_a_front_ends_queue_of_a_shards_batches_is_bounded() -> None:
-    """The other side of the fabric: a front-end whose loop is far behind keeps at most ``PENDING_MAX`` of
-    each shard's batches (the oldest go; the seq gap asks for a key), and asks its loop once."""
+    """The other side of the fabric: a front-end whose loop is far behind keeps at most ``PENDING_MAX`` ticks
+    of each shard's batches (a pulse and a batch of each block; the oldest go; the seq gap asks for a key),
+    and asks its loop once."""
     node = FrontNode(make_server(), MemoryFabric(Bus()), 2)
     woken: list[object] = []
 
@@ -270,10 +271,11 @@ def test_a_front_ends_queue_of_a_shards_batches_is_bounded() -> None:
         def run_sync_soon(self, fn: object, *args: object) -> None:
             woken.append(fn)
 
-    for k in range(10_000):
+    for k in range(100_000):
         node._arrived(Token(), k % 2, b"batch %d" % k)  # type: ignore[arg-type]
-    assert {k: len(q) for k, q in node._pending.items()} == {0: PENDING_MAX, 1: PENDING_MAX}
-    assert node._pending[1][-1] == b"batch 9999" and len(woken) == 2
+    most = PENDING_MAX * (1 + node.blocks)
+    assert {k: len(q) for k, q in node._pending.items()} == {0: most, 1: most}
+    assert node._pending[1][-1] == b"batch 99999" and len(woken) == 2
 
 
 # -- the order of a soldier's states and events: a model of a shard (the soldier's state: its newest row) --

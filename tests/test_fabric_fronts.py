@@ -88,7 +88,7 @@ async def test_two_front_ends_create_at_once_without_collision_and_both_see_all(
 
 
 def test_each_front_end_allots_its_own_share_spread_over_the_shards() -> None:
-    shares = [IndexShare(k, 2, 3, 24) for k in range(2)]
+    shares = [IndexShare(k, 2, 3, 24) for k in range(2)]  # blocks of 3 indices
     live: set[int] = {0, 1}  # the start-up script's
     got: list[list[int]] = [[], []]
     for _ in range(5):
@@ -97,7 +97,7 @@ def test_each_front_end_allots_its_own_share_spread_over_the_shards() -> None:
             share.taken(i)
             live.add(i)
             got[k].append(i)
-    assert got == [[2, 6, 7, 8, 12], [3, 4, 5, 9, 10]]  # blocks of 3 (one per shard), alternating
+    assert got == [[2, 6, 7, 8, 12], [3, 4, 5, 9, 10]]  # blocks of 3 (one soldier per shard), alternating
     assert sorted(i % 3 for i in got[0][1:4]) == [0, 1, 2]
     live.discard(4)  # removed
     shares[1].freed(4)

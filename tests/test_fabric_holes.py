@@ -56,7 +56,7 @@ def _rows(shard: int, indices: list[int], fences: tuple[int, ...]) -> Batch:
     n = len(indices)
     codes = np.arange(n * 2, dtype=np.uint16).reshape(n, 2)
     return Batch(
-        shard, 2, 0, 0, 0.0, np.array(indices, np.uint32), np.ones(n, np.uint8), codes, False, fences
+        shard, 2, 0, 0, 0.0, np.array(indices, np.uint32), np.ones(n, np.uint8), codes, False, fences=fences
     )
 
 

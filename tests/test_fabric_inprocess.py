@@ -25,7 +25,7 @@ from protocol.events import (
     UpdateTableMsg,
 )
 from server.app import TtesServer
-from server.fabric import Handler, Kind, Presence
+from server.fabric import BLOCK, Handler, Kind, Presence, Unsubscribe
 from server.fabric.nodes import KEY_EVERY, FrontNode, Sharding, ShardNode
 
 WALK = (0.0, 1.4, 0.0)
@@ -60,9 +60,15 @@ class MemoryFabric:
 
         return put
 
-    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
+    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> Unsubscribe:
         self.bus.topics[topic].append(on_message)
         self.mine.append((topic, on_message))
+
+        def unsubscribe() -> None:
+            self.bus.topics[topic].remove(on_message)
+            self.mine.remove((topic, on_message))
+
+        return unsubscribe
 
     def announce(self, key: str) -> None:
         self.announced.append(key)
@@ -88,12 +94,12 @@ class MemoryFabric:
 
 @contextlib.asynccontextmanager
 async def cluster(
-    bus: Bus | None = None, key_every: int = KEY_EVERY, shards_n: int = 2
+    bus: Bus | None = None, key_every: int = KEY_EVERY, shards_n: int = 2, block: int = BLOCK
 ) -> AsyncIterator[tuple[TtesServer, FrontNode, list[TtesServer], list[MemoryFabric]]]:
     bus = bus or Bus()
     token = trio.lowlevel.current_trio_token()
     front = make_server()
-    front_node = FrontNode(front, MemoryFabric(bus), shards_n)
+    front_node = FrontNode(front, MemoryFabric(bus), shards_n, block=block)
     shards, fabrics = [], []
     async with trio.open_nursery() as nursery:
         await nursery.start(front.serve)
@@ -101,7 +107,7 @@ async def cluster(
         for k in range(shards_n):
             shard, fabric = make_server(), MemoryFabric(bus)
             shard.codes_only()  # as `ttes server --shard` makes it
-            node = ShardNode(shard, fabric, Sharding(k, shards_n), key_every=key_every)
+            node = ShardNode(shard, fabric, Sharding(k, shards_n), key_every=key_every, block=block)
             await nursery.start(shard.serve)
             node.keep_own()
             node.start(token)
@@ -124,6 +130,21 @@ async def walker(front: TtesServer, index: int) -> Client:
     assert (await c.expect(SoldierCreated)).index == index
     await c.send(Subscribe(tuple(range(12))))
     await c.requests(index=[index], velocity=WALK)
+    return c
+
+
+async def crowd(front: TtesServer, count: int, watched: tuple[int, ...]) -> Client:
+    """A client that creates ``count`` soldiers (10 on: the start-up script's are 0..9), watches
+    ``watched`` and walks them all (their updates are coming)."""
+    c = await Client.open(front.addresses[0][1], "ig", client_id="alpha")
+    await c.expect(Ready)
+    for rid in range(count):
+        await c.send(CreateSoldier(rid + 1, "DI.fig", "AK_47.fig", None))
+    made = sorted([(await c.expect(SoldierCreated)).index for _ in range(count)])
+    assert made == list(range(10, 10 + count))
+    await c.send(Subscribe(watched))
+    await c.requests(index=made, velocity=WALK)
+    await moving(c, 10, 3)
     return c
 
 
@@ -170,7 +191,8 @@ async def test_the_front_end_checks_requests_and_leaves_the_animation_to_the_sha
 
 async def test_a_late_front_end_gets_every_soldier_from_a_key_batch(autojump_clock: trio.abc.Clock) -> None:
     """Batches carry only what changed and the shards' periodic keys are off: a front-end that comes late
-    gets the soldiers that stand still too, from the key its first sync asks for, as the first has them."""
+    gets the soldiers that stand still too, from the key its subscription to their block asks for, as the
+    first has them."""
     bus = Bus()
     async with cluster(bus, key_every=10**9) as (front, node, _, _):
         c = await walker(front, 11)
@@ -180,6 +202,8 @@ async def test_a_late_front_end_gets_every_soldier_from_a_key_batch(autojump_clo
         async with trio.open_nursery() as nursery:
             await nursery.start(late.serve)
             late_node.start(trio.lowlevel.current_trio_token())
+            assert late.board_ref.on_watch is not None
+            late.board_ref.on_watch(np.arange(10))  # as a client's subscription: it hears their block
             with trio.fail_after(30):
                 while late_node.keys < 2:  # one per shard
                     await trio.sleep(0.1)
@@ -187,8 +211,6 @@ async def test_a_late_front_end_gets_every_soldier_from_a_key_batch(autojump_clo
             a, b = front.board_ref.board, late.board_ref.board
             assert a is not None and b is not None
             still = list(range(10))  # the start-up script's soldiers, standing
-            assert late.board_ref.on_watch is not None
-            late.board_ref.on_watch(np.arange(10))  # as a client's subscription: held codes onto its board
             assert b.valid[still].all() and (a.codes[still] == b.codes[still]).all()
             assert node.keys > 2  # after the first batches of each shard, keys only when a sync asked
             late.shutdown()

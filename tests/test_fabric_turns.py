@@ -27,7 +27,7 @@ async def test_a_shard_answers_the_requests_that_arrived_together_in_one_batch(
 ) -> None:
     bus = Bus()
     batches = []
-    bus.topics[poses_topic(0)].append(lambda data: batches.append(decode_batch(data)))
+    bus.topics[poses_topic(0, 0)].append(lambda data: batches.append(decode_batch(data)))  # block 0
     shard = make_server()
     node = ShardNode(shard, MemoryFabric(bus), Sharding(0, 1))
     async with trio.open_nursery() as nursery:
@@ -174,7 +174,7 @@ async def test_a_request_that_arrives_while_a_shard_ticks_is_sampled_by_that_tic
     an answer after it."""
     bus = Bus()
     batches = []
-    bus.topics[poses_topic(0)].append(lambda data: batches.append(decode_batch(data)))
+    bus.topics[poses_topic(0, 0)].append(lambda data: batches.append(decode_batch(data)))  # block 0
     shard = make_server()
     node = ShardNode(shard, MemoryFabric(bus), Sharding(0, 1))
     m = shard.world.manager

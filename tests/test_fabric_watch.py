@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 import trio
-from test_fabric_inprocess import WALK, cluster, moving
+from test_fabric_inprocess import cluster, crowd, moving
 from test_server_support import Client
 
-from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, Subscribe, Unsubscribe
+from protocol.events import JointUpdates, Ready, Subscribe, Unsubscribe
 from server.fabric.batch import Batch
 from server.fabric.nodes import merge
 from server.fabric.watch import Watch
@@ -26,15 +26,7 @@ async def test_only_watched_rows_reach_the_board_and_a_late_subscriber_gets_the_
     autojump_clock: trio.abc.Clock,
 ) -> None:
     async with cluster() as (front, node, shards, _):
-        c = await Client.open(front.addresses[0][1], "ig", client_id="alpha")
-        await c.expect(Ready)
-        for rid in range(MADE):
-            await c.send(CreateSoldier(rid + 1, "DI.fig", "AK_47.fig", None))
-        made = sorted([(await c.expect(SoldierCreated)).index for _ in range(MADE)])
-        assert made == list(range(10, 10 + MADE))
-        await c.send(Subscribe(WATCHED))
-        await c.requests(index=made, velocity=WALK)
-        await moving(c, 10, 3)
+        c = await crowd(front, MADE, WATCHED)
         board = front.board_ref.board
         assert board is not None
         serial, rows, batches = board.serial, board.rows_published, node.batches

@@ -1,8 +1,11 @@
 """The publish/subscribe fabric between shards and front-ends (issue 21), behind one small interface.
 
-A shard (``ttes server --shard K/N``) publishes each tick's quantised codes on ``poses/K`` and takes the
-requests for its soldiers from ``requests/K``; a front-end (``ttes front``) subscribes to every shard's poses
-and publishes its clients' requests to the owning shard. The engine is an existing one, chosen by name:
+A shard (``ttes server --shard K/N``) publishes each tick's quantised codes as one batch per block of
+soldier indices on ``poses/K/B`` (block B: indices ``B * block`` up to the next block, :data:`BLOCK`), a
+header-only *pulse* on ``poses/K`` (it lives, and which tick), and takes the requests for its soldiers from
+``requests/K``; a front-end (``ttes front``) subscribes to every shard's pulse and to the blocks its
+clients watch (the wire and the decode cost what is watched, not every soldier), and publishes its
+clients' requests to the owning shard. The engine is an existing one, chosen by name:
 Eclipse Zenoh (``zenoh``, the default: see docs/SCALING.md for the measurements) or Eclipse Cyclone DDS
 (``dds``). Each adapter imports its library when it is opened, never at import time of ``ttes server``
 (the ``[fabric]`` extra; an import-linter contract keeps the libraries inside their adapters).
@@ -20,6 +23,7 @@ from typing import Protocol
 
 ENGINES = ("zenoh", "dds")
 DEFAULT_PORT = 7447
+BLOCK = 4096  # soldier indices per pose topic (``--fabric-block``: shards and front-ends must agree)
 
 
 class Kind(enum.Enum):
@@ -29,8 +33,9 @@ class Kind(enum.Enum):
     REQUESTS = "requests"  # reliable, keep-all: requests, creations and removals (ownership) all arrive
 
 
-def poses_topic(shard: int) -> str:
-    return f"ttes/poses/{shard}"
+def poses_topic(shard: int, block: int | None = None) -> str:
+    """Shard ``shard``'s batches of soldier index block ``block``; its pulse without a block."""
+    return f"ttes/poses/{shard}" if block is None else f"ttes/poses/{shard}/{block}"
 
 
 def requests_topic(shard: int) -> str:
@@ -53,6 +58,7 @@ def alive_key(shard: int) -> str:
 
 Handler = Callable[[bytes], None]  # called on the fabric's own thread, once per message
 Presence = Callable[[bool], None]  # called on the fabric's own thread: present (True) or gone (False)
+Unsubscribe = Callable[[], None]  # ends a subscription (a message already in flight may still come)
 
 
 class Fabric(Protocol):
@@ -64,8 +70,9 @@ class Fabric(Protocol):
         """A function that publishes one message (bytes) on ``topic``."""
         ...
 
-    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
-        """Call ``on_message`` (on the fabric's thread) with every message published on ``topic``."""
+    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> Unsubscribe:
+        """Call ``on_message`` (on the fabric's thread) with every message published on ``topic``, until
+        the returned function is called."""
         ...
 
     def announce(self, key: str) -> None:

@@ -8,6 +8,11 @@ soldiers whose codes changed since the shard's previous batch (the front-end's b
 Its ``fences`` say which of each front-end's requests messages the shard had taken when it sent the batch
 (:class:`server.fabric.fronts.Fences`: a front-end drops the rows of an index it removed or created again
 from the batches sent before the shard heard of it).
+
+A batch holds the soldiers of one block of indices (``block``; its ``seq`` counts that block's batches,
+so a front-end that hears some blocks sees the gaps of those) or a tick's *pulse* (``PULSE``, its ``seq``
+counts the shard's ticks; a key tick's names every soldier the shard animates, without codes), which every
+front-end hears whatever its clients watch.
 """
 
 from __future__ import annotations
@@ -17,11 +22,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MAGIC = b"TTB3"
+MAGIC = b"TTB5"
+PULSE = 0xFFFF  # the block of a shard's tick pulse (no soldiers)
 MAX_FRONTS = 255  # front-ends whose fences a batch carries: their count is one byte of the header
 FENCE_MAX = 2**32 - 1  # a fence serial travels as uint32
-# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, key, fronts (uint32 fences follow)
-_HEAD = struct.Struct("<4sHHIIdIIBB")
+# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, key, block, fronts (uint32 fences
+# follow)
+_HEAD = struct.Struct("<4sHHIIdIIBHB")
 
 
 @dataclass(frozen=True)
@@ -35,18 +42,17 @@ class Batch:
     tables: np.ndarray  # (n,) update table ids
     codes: np.ndarray  # (n, F) field codes
     key: bool = True  # every soldier of the shard (else: those changed since its previous batch)
+    block: int = 0  # the index block of its soldiers (PULSE: a tick's pulse)
     fences: tuple[int, ...] = ()  # per front-end, the newest fence it sent that the shard had taken (0: none)
 
 
 def encode_batch(batch: Batch) -> bytes:
     n = len(batch.indices)
     nf = batch.codes.shape[1] if batch.codes.ndim == 2 else 0
-    if n and (batch.codes.min() < 0 or batch.codes.max() > 0xFFFF):
+    if batch.codes.size and (batch.codes.min() < 0 or batch.codes.max() > 0xFFFF):
         raise ValueError("codes beyond 16 bits")
-    nb = len(batch.fences)
-    head = _HEAD.pack(
-        MAGIC, batch.shard, batch.shards, batch.seq, batch.tick, batch.sent, n, nf, batch.key, nb
-    )
+    b = batch
+    head = _HEAD.pack(MAGIC, b.shard, b.shards, b.seq, b.tick, b.sent, n, nf, b.key, b.block, len(b.fences))
     return b"".join(
         (
             head,
@@ -62,7 +68,7 @@ def decode_batch(data: bytes) -> Batch:
     """The batch of ``data`` (arrays are read-only views of it); ValueError if it is not one."""
     if len(data) < _HEAD.size:
         raise ValueError(f"a batch of {len(data)} bytes")
-    magic, shard, shards, seq, tick, sent, n, nf, key, nb = _HEAD.unpack_from(data)
+    magic, shard, shards, seq, tick, sent, n, nf, key, block, nb = _HEAD.unpack_from(data)
     if magic != MAGIC or len(data) != _HEAD.size + 4 * nb + n * (5 + 2 * nf):
         raise ValueError(f"not a batch (magic {magic!r}, {len(data)} bytes for {n} x {nf})")
     fences = tuple(np.frombuffer(data, "<u4", nb, _HEAD.size).tolist())
@@ -70,4 +76,4 @@ def decode_batch(data: bytes) -> Batch:
     indices = np.frombuffer(data, "<u4", n, at)
     tables = np.frombuffer(data, "u1", n, at + 4 * n)
     codes = np.frombuffer(data, "<u2", n * nf, at + 5 * n).reshape(n, nf)
-    return Batch(shard, shards, seq, tick, sent, indices, tables, codes, bool(key), fences)
+    return Batch(shard, shards, seq, tick, sent, indices, tables, codes, bool(key), block, fences)

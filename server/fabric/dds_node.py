@@ -1,8 +1,10 @@
 """The fabric on Eclipse Cyclone DDS: unicast peers on a configured domain (no multicast).
 
 A topic carries opaque bytes (``sequence<octet>``, the fastest type of the Python binding); '/' in a topic
-name becomes '_'. Quality of service per :class:`~server.fabric.Kind`: poses best-effort keep-last-1,
-requests reliable keep-all.
+name becomes '_'. A shard's pose blocks are topics of their own (``ttes_poses_K_B``), like Zenoh's keys: a
+front-end's reader of a block it no longer watches is deleted, and no sample of it reaches the process.
+Quality of service per :class:`~server.fabric.Kind`: poses best-effort keep-last-1, requests reliable
+keep-all.
 """
 
 # no "from __future__ import annotations": cyclonedds resolves the IDL field types at class creation
@@ -20,7 +22,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from server.fabric import FabricConfig, Handler, Kind, Presence
+from server.fabric import FabricConfig, Handler, Kind, Presence, Unsubscribe
 
 if TYPE_CHECKING:
     Octets = bytes  # what the fields hold at run time (see _octets_as_bytes)
@@ -97,7 +99,7 @@ class DdsFabric:
         self._keep.append(writer)
         return lambda data: writer.write(Blob(data))
 
-    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
+    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> Unsubscribe:
         def available(reader: DataReader) -> None:
             for sample in reader.take(N=64):
                 if isinstance(sample, Blob):  # not an InvalidSample (a writer's disposal)
@@ -110,6 +112,13 @@ class DdsFabric:
             listener=Listener(on_data_available=available),
         )
         self._keep.append(reader)
+
+        def unsubscribe() -> None:
+            if reader in self._keep:
+                self._keep.remove(reader)
+                reader.__del__()  # deletes the reader now (the binding's __del__ then finds it gone)
+
+        return unsubscribe
 
     def announce(self, key: str) -> None:
         """A writer with automatic liveliness on the key's own topic: its lease lapses when we die."""

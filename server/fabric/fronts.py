@@ -2,8 +2,10 @@
 one index space, and tells the others on ``ttes/fronts`` what it created and removed.
 
 A front-end allots indices as a single server does, lowest free first, but only the indices of its share:
-with N shards, index ``i`` is front-end ``(i // N) % M``'s, so each front-end's soldiers spread evenly over
-the shards (``i % N``) and two front-ends creating soldiers at once never pick the same index. The
+index ``i`` is front-end ``(i // B) % M``'s, B the fabric's block of indices (a pose topic's,
+``--fabric-block``): the soldiers its clients make, and watch, are in blocks of its own, the only pose
+topics it needs; they spread evenly over the shards (``i % N``) and two front-ends creating soldiers at
+once never pick the same index. The
 start-up script's soldiers are created before the share applies, at the same indices in every process.
 An index asked for by number must be in the front-end's share (another front-end could allot it).
 
@@ -46,14 +48,14 @@ Soldier = tuple[int, str, str, "str | None"]  # index, figure, weapon, owner
 
 
 class IndexShare:
-    """Front-end ``k`` of ``m``'s free indices below ``max_soldiers`` among ``shards`` shards."""
+    """Front-end ``k`` of ``m``'s free indices below ``max_soldiers``, in blocks of ``block``."""
 
-    def __init__(self, k: int, m: int, shards: int, max_soldiers: int) -> None:
-        self.k, self.m, self.shards = k, m, shards
+    def __init__(self, k: int, m: int, block: int, max_soldiers: int) -> None:
+        self.k, self.m, self.block = k, m, block
         self._free = [i for i in range(max_soldiers) if self.mine(i)]  # ascending: a heap
 
     def mine(self, index: int) -> bool:
-        return (int(index) // self.shards) % self.m == self.k
+        return (int(index) // self.block) % self.m == self.k
 
     def allot(self, index: int | None, live: Callable[[int], bool]) -> int:
         """``index`` if it is in this share, else the lowest free one of the share (not taken until

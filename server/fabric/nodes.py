@@ -7,23 +7,27 @@ the same soldiers everywhere (a shard then drops the ones that are not its own),
 the same, so a client of the front-end gets the handshake, tables and FIGURE of a single server.
 
 * a shard publishes, after each publish of its pose board, the soldiers whose codes changed since its
-  previous batch as one batch (:mod:`server.fabric.batch`), and every soldier it holds in a *key* batch
-  every ``key_every`` ticks and when a front-end asks (a sync, or a ``key`` request after a lost batch):
-  the merge and the wire cost what moves, and a lost batch costs at most until the next key; it takes
-  the requests for its soldiers from ``requests/K`` on the trio loop;
-* a front-end queues each shard's batches as they arrive and merges them in order (from the newest key
-  batch among them) into its board (``PoseBoard.publish_codes``, one scatter), and its sessions encode
-  from there as always; only the soldiers its clients watch go onto the board, the others' newest codes
-  wait in a plain array until a client subscribes to them (:mod:`server.fabric.watch`). Its own manager
-  keeps the books (who lives, tables, owners, the requests' checks) and never animates; what its clients
-  ask goes to the owning shard (``ServerWorld.relay``).
+  previous batch as one batch per block of indices on the block's topic (:mod:`server.fabric.batch`),
+  and every soldier it holds in *key* batches every ``key_every`` ticks and when a front-end asks (a
+  sync, a ``key`` request after a lost batch or a new subscription): the merge and the wire cost what
+  moves, and a lost batch costs at most until the next key; each tick, a pulse (no soldiers) says it
+  lives; it takes the requests for its soldiers from ``requests/K`` on the trio loop;
+* a front-end hears every shard's pulse and the blocks its clients watch (all of a shard's while it
+  learns the shard's soldiers, below; a block it starts to hear asks for a key, and what it kept of the
+  block from before is dropped as stale), queues each shard's batches as they arrive and merges them in
+  order (from the newest key batch of each block among them) into its board
+  (``PoseBoard.publish_codes``, one scatter), and its sessions encode from there as always; only the
+  soldiers its clients watch go onto the board, the others' newest codes wait in a plain array until a
+  client subscribes to them (:mod:`server.fabric.watch`). Its own manager keeps the books (who lives,
+  tables, owners, the requests' checks) and never animates; what its clients ask goes to the owning
+  shard (``ServerWorld.relay``).
 """
 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import functools
+import itertools
 import math
 import threading
 import time
@@ -34,11 +38,22 @@ import numpy as np
 import trio
 
 from protocol.entity import ENTITY_REQUEST_DTYPE
-from server.fabric import Fabric, Kind, alive_key, books_topic, fronts_topic, poses_topic, requests_topic
+from server.fabric import (
+    BLOCK,
+    Fabric,
+    Handler,
+    Kind,
+    Unsubscribe,
+    alive_key,
+    books_topic,
+    fronts_topic,
+    poses_topic,
+    requests_topic,
+)
 from server.fabric import fronts as books
 from server.fabric import requests as req
 from server.fabric.backlog import MAX_ROWS, Backlog
-from server.fabric.batch import Batch, decode_batch, encode_batch
+from server.fabric.batch import PULSE, Batch, decode_batch, encode_batch
 from server.fabric.fronts import Fences, IndexShare, Soldier
 from server.fabric.watch import Watch
 from server.logging import get_logger
@@ -53,7 +68,8 @@ if TYPE_CHECKING:
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
 TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
-PENDING_MAX = 64  # a front-end's queue of one shard's batches; beyond, the oldest go (and it asks for a key)
+PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batch a block heard); beyond, the
+# oldest go (and it asks for a key)
 
 
 @dataclass(frozen=True)
@@ -84,12 +100,21 @@ class ShardNode:
     """A shard's link: its batches out on ``poses/K``, its requests in from ``requests/K``."""
 
     def __init__(
-        self, server: TtesServer, fabric: Fabric, sharding: Sharding, *, key_every: int = KEY_EVERY
+        self,
+        server: TtesServer,
+        fabric: Fabric,
+        sharding: Sharding,
+        *,
+        key_every: int = KEY_EVERY,
+        block: int = BLOCK,
     ) -> None:
         self.server, self.fabric, self.sharding = server, fabric, sharding
-        self._put = fabric.publisher(poses_topic(sharding.k), Kind.POSES)
+        self._pulse = fabric.publisher(poses_topic(sharding.k), Kind.POSES)
+        self._puts: dict[int, Handler] = {}  # per index block, declared at its first batch
         self._answer = fabric.publisher(books_topic(), Kind.REQUESTS)  # its soldiers, to a late front-end
-        self.seq = 0
+        self.block = block
+        self.seq = 0  # ticks published (the pulse's count)
+        self.block_seq: dict[int, int] = {}  # per index block, its batches
         self.key_every = key_every
         self.key_due = True  # the first batch is a key
         self._since_key = 0  # tick batches since the last key
@@ -107,7 +132,7 @@ class ShardNode:
         # what arrived and is not taken yet: bounded (two rows per soldier), requests coalesced per soldier
         self.backlog = Backlog(max_rows=max(MAX_ROWS, 2 * server.config.max_soldiers))
         server.status_note = lambda: (
-            f"shard {sharding.k}/{sharding.n}, {self.seq} batches, {self.backlog.describe()}"
+            f"shard {sharding.k}/{sharding.n}, {self.seq} ticks, {self.backlog.describe()}"
         )
         self.bytes_out = 0  # the batches' bytes (one copy: the fabric sends one to each front-end)
         server.status_fields = lambda: {"fabric_bytes": self.bytes_out, "mono": round(time.monotonic(), 3)}
@@ -188,15 +213,47 @@ class ShardNode:
         self._sent_serial = board.serial
         if not tick and not len(rows):
             return
-        k, n = self.sharding.k, self.sharding.n
-        codes = board.codes[rows]
         if TRACE is not None:
             TRACE.stamp("shard_publish", rows, "tick" if tick else "answer")
-        batch = Batch(k, n, self.seq, board.tick, time.monotonic(), rows, board.table_of[rows], codes, key)
-        data = encode_batch(dataclasses.replace(batch, fences=tuple(self.fences)))
-        self._put(data)
+        blocks = rows // self.block  # (rows ascending: each block's rows are consecutive)
+        cuts = [0, *(np.flatnonzero(np.diff(blocks)) + 1).tolist(), len(rows)]
+        for a, z in itertools.pairwise(cuts):
+            if z > a:
+                self._publish_block(board, int(blocks[a]), rows[a:z], key)
+        if tick:  # it lives, whatever blocks a front-end hears; a key's names every soldier (no codes)
+            k, n, who = self.sharding.k, self.sharding.n, rows if key else rows[:0]
+            empty = np.zeros((len(who), 0), np.uint16)
+            pulse = Batch(
+                k,
+                n,
+                self.seq,
+                board.tick,
+                time.monotonic(),
+                who,
+                board.table_of[who],
+                empty,
+                key,
+                PULSE,
+                tuple(self.fences),
+            )
+            self._sent(self._pulse, encode_batch(pulse))
+            self.seq += 1
+
+    def _publish_block(self, board: PoseBoard, block: int, rows: np.ndarray, key: bool) -> None:
+        if block not in self._puts:
+            self._puts[block] = self.fabric.publisher(poses_topic(self.sharding.k, block), Kind.POSES)
+        seq = self.block_seq.get(block, 0)
+        self.block_seq[block] = seq + 1
+        k, n = self.sharding.k, self.sharding.n
+        codes, tables = board.codes[rows], board.table_of[rows]
+        batch = Batch(
+            k, n, seq, board.tick, time.monotonic(), rows, tables, codes, key, block, tuple(self.fences)
+        )
+        self._sent(self._puts[block], encode_batch(batch))
+
+    def _sent(self, put: Handler, data: bytes) -> None:
+        put(data)
         self.bytes_out += len(data)
-        self.seq += 1
 
     def _decoded(self, data: bytes) -> list[req.Op]:
         try:
@@ -325,19 +382,22 @@ class FrontNode:
         *,
         front: Sharding = Sharding(0, 1),
         hung_s: float = 5.0,
+        block: int = BLOCK,
     ) -> None:
         self.server, self.fabric, self.shards = server, fabric, shards
         self.front = front
         self.hung_s = hung_s
-        several = front.n > 1
-        self.share = IndexShare(front.k, front.n, shards, server.config.max_soldiers) if several else None
-        self._books = fabric.publisher(fronts_topic(), Kind.REQUESTS) if several else None
+        self.block = block
+        n = server.config.max_soldiers
+        self.share = IndexShare(front.k, front.n, block, n) if front.n > 1 else None
+        self._books = fabric.publisher(fronts_topic(), Kind.REQUESTS) if front.n > 1 else None
         self._books_out: list[req.Op] = []  # this front-end's creations and removals, for the others
         self.mirrored = 0  # the other front-ends' creations and removals kept in the books here
         self.bytes_in = 0  # the shards' batches' bytes
         server.status_fields = lambda: {
             "fabric_bytes": self.bytes_in,
             "mirrored": self.mirrored,
+            "fabric_blocks": len(self._subs),
             "mono": round(time.monotonic(), 3),
         }
         self.present = [False] * shards  # on the fabric now (its presence)
@@ -349,9 +409,14 @@ class FrontNode:
         self._pending_lock = threading.Lock()  # appended on the fabric's thread, taken on the loop
         self.key_asked = [False] * shards  # a key batch asked for after a lost batch, not come yet
         self.route = list(range(shards))
-        self.heard_at = [-math.inf] * shards  # server time of each shard's last batch
-        self.last_seq = [-1] * shards
-        n = server.config.max_soldiers
+        self.heard_at = [-math.inf] * shards  # server time of each shard's last pulse
+        self.last_seq = [-1] * shards  # of its pulses (ticks)
+        self.blocks = -(-n // block)  # index blocks: a shard's pose topics
+        self._subs: dict[tuple[int, int], Unsubscribe] = {}  # (shard, block) heard
+        self._block_seq: dict[tuple[int, int], int] = {}  # (shard, block) -> its last batch's seq
+        self._key_wanted: set[tuple[int, int]] = set()  # heard since lately, no key of it come yet
+        self.rows_decoded = np.zeros(self.blocks, np.int64)  # per block: the rows the fabric brought here
+        self.pending_max = PENDING_MAX * (1 + self.blocks)  # messages: PENDING_MAX ticks of every block
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request, for a sync
         self.has_last = np.zeros(n, bool)
         self.made = np.zeros(n, bool)  # created here (not the start-up script's, not another front-end's)
@@ -397,6 +462,46 @@ class FrontNode:
         for k in range(self.shards):
             self.fabric.subscribe(poses_topic(k), Kind.POSES, functools.partial(self._arrived, token, k))
             self.fabric.watch(alive_key(k), functools.partial(self._watched, token, k))
+        self._resubscribe()
+
+    def _block_rows(self, k: int, b: int) -> np.ndarray:
+        """The indices of block ``b`` whose home is shard ``k`` (what shard ``k`` publishes there)."""
+        rows = np.arange(b * self.block, min((b + 1) * self.block, len(self.watching.held)))
+        return rows[Sharding.home(rows, self.shards) == k]
+
+    def _wanted(self, blocks: np.ndarray) -> set[tuple[int, int]]:
+        """The (shard, block) topics to hear: the blocks its clients watch (and ``blocks``) of every shard
+        (a survivor publishes a failed shard's soldiers), every block of a shard asked for its books."""
+        watched = np.flatnonzero(self.watching.watched) // self.block
+        every = np.union1d(watched, blocks).tolist()
+        want = {(k, b) for k in range(self.shards) for b in every if 0 <= b < self.blocks}
+        for k in self._asked:  # until it answers, its batches say which indices it animates (allot)
+            want.update((k, b) for b in range(self.blocks))
+        return want
+
+    def _resubscribe(self, blocks: np.ndarray | None = None) -> None:
+        """Hear the wanted topics (:meth:`_wanted`), no others. A topic heard anew asks its shard for a key
+        (its still soldiers come in no other batch), and the codes kept of its soldiers from before are
+        dropped (batches went by unheard: they are stale); a topic no longer heard leaves its soldiers'
+        rows of the board unknown (none is sent to a client that subscribes later before the key's)."""
+        if self._token is None:
+            return
+        want = self._wanted(np.zeros(0, np.int64) if blocks is None else blocks)
+        board = self.server.board_ref.board
+        for stream in sorted(set(self._subs) - want):
+            self._subs.pop(stream)()
+            self._key_wanted.discard(stream)
+            if board is not None:  # no client watches them: their rows would go stale there
+                board.unknown(self._block_rows(*stream))
+        new = sorted(want - set(self._subs))
+        for k, b in new:
+            self.watching.held[self._block_rows(k, b)] = False
+            arrived = functools.partial(self._arrived, self._token, k)
+            self._subs[(k, b)] = self.fabric.subscribe(poses_topic(k, b), Kind.POSES, arrived)
+            self._key_wanted.add((k, b))
+        for k in sorted({k for k, _ in new}):
+            self.key_asked[k] = True
+            self._send(k, req.key())
 
     def _watched(self, token: trio.lowlevel.TrioToken, k: int, present: bool) -> None:
         token.run_sync_soon(self._presence, k, present)  # from the fabric's thread to the loop
@@ -416,7 +521,7 @@ class FrontNode:
             queue = self._pending.setdefault(k, [])
             waiting = bool(queue)
             queue.append(data)
-            if len(queue) > PENDING_MAX:  # the loop is far behind: the seq gap asks for a key
+            if len(queue) > self.pending_max:  # the loop is far behind: the seq gap asks for a key
                 del queue[0]
         if not waiting:
             token.run_sync_soon(self.server.publish_fed)
@@ -430,16 +535,20 @@ class FrontNode:
             pending, self._pending = self._pending, {}
         batches = [decode_batch(data) for k in sorted(pending) for data in pending[k]]
         for b in batches:
+            if b.block < self.blocks:
+                self.rows_decoded[b.block] += len(b.indices)
             self._heard(b, now)
         self._fail_over(now)
         m = self.server.world.manager
+        if m is not None and self.watching.stale:
+            subscribed = (s.conn.subscribed for s in self.server.sessions.values())
+            self.watching.recount(subscribed, board, m.table.alive)
+            self._resubscribe()
+        batches = [b for b in batches if b.block != PULSE]
         if not batches or m is None:
             return np.zeros(0, np.int64)
         self.batches += len(batches)
         batches = [self.fences.clean(b) for b in batches]  # (after _heard: a sync there moves the fences)
-        if self.watching.stale:
-            subscribed = (s.conn.subscribed for s in self.server.sessions.values())
-            self.watching.recount(subscribed, board, m.table.alive)
         rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
         if merge(board, batches, tick, m.table.alive, self.watching):
             changed = rows[
@@ -458,22 +567,47 @@ class FrontNode:
         if indices is None:
             self.watching.stale = True
             return
+        self._resubscribe(np.unique(np.asarray(indices, np.int64) // self.block))  # before: held codes go
         m = self.server.world.manager
         if m is not None:
             self.watching.watch(indices, self.server.board_ref.board, m.table.alive)
 
     def _heard(self, b: Batch, now: float) -> None:
-        k = b.shard
-        first = self.heard_at[k] == -math.inf
-        back = first or b.seq < self.last_seq[k] or self.route[k] != k
-        lost = 0 if back else max(0, b.seq - self.last_seq[k] - 1)
+        if b.block == PULSE:
+            self._pulse(b, now)
+            return
+        k, stream = b.shard, (b.shard, b.block)
+        last = self._block_seq.get(stream, b.seq - 1)
+        lost = max(0, b.seq - last - 1)  # (a restarted shard's seq goes back: nothing lost)
+        self._block_seq[stream] = b.seq
         self.skipped += lost
         if b.key:
             self.keys += 1
             self.key_asked[k] = False
-        elif lost and not self.key_asked[k]:  # its rows that changed in the lost batch are stale until a key
-            self.key_asked[k] = True
+            self._key_wanted.discard(stream)
+        elif (lost or stream in self._key_wanted) and not self.key_asked[k]:
+            self.key_asked[k] = True  # the rows that changed in a lost batch are stale until a key
             self._send(self.route[k], req.key())
+        m = self.server.world.manager
+        if m is None:
+            return
+        if k in self._asked:  # until it answers, no index it animates is allotted here
+            alive = m.table.alive
+            self._unknown.setdefault(k, set()).update(
+                b.indices[~alive[np.minimum(b.indices, len(alive) - 1)]].tolist()
+            )
+
+    def _ask_books(self, k: int) -> None:
+        self._asked.add(k)
+        self._send(k, req.books(self.front.k))
+        self._resubscribe()
+
+    def _pulse(self, b: Batch, now: float) -> None:
+        """Shard ``b.shard``'s tick: it lives; heard for the first time, or back (a restart: its count went
+        back; or it had failed over), it gets a sync."""
+        k = b.shard
+        first = self.heard_at[k] == -math.inf
+        back = first or b.seq < self.last_seq[k] or self.route[k] != k
         self.last_seq[k], self.heard_at[k] = b.seq, now
         if back:
             stood_in = self.route[k]
@@ -490,10 +624,10 @@ class FrontNode:
         m = self.server.world.manager
         if m is None:
             return
-        # this front-end may be late, or have missed another's message: it learns from the shard
+        # this front-end may be late, or have missed another's message: it learns from the shard (a key
+        # pulse names every soldier the shard animates, whatever blocks this front-end hears)
         if k not in self._asked and (first or (b.key and self._differs(k, b.indices))):
-            self._asked.add(k)
-            self._send(k, req.books(self.front.k))
+            self._ask_books(k)
         if k in self._asked:  # until it answers, no index it animates is allotted here
             alive = m.table.alive
             self._unknown.setdefault(k, set()).update(
@@ -501,7 +635,7 @@ class FrontNode:
             )
 
     def _differs(self, k: int, indices: np.ndarray) -> bool:
-        """Whether shard ``k``'s key batch (every soldier it animates) carries a soldier the books lack, or
+        """Whether shard ``k``'s key pulse (every soldier it animates) carries a soldier the books lack, or
         lacks one they hold, of those no front-end told this one of (a message lost before a link came up)."""
         m = self.server.world.manager
         assert m is not None
@@ -645,6 +779,7 @@ class FrontNode:
             return
         self._asked.discard(k)
         self._unknown.pop(k, None)
+        self._resubscribe()  # its blocks no client watches: heard no more
         m = self.server.world.manager
         assert m is not None
         heard = [at > -math.inf for at in self.heard_at]
@@ -740,13 +875,15 @@ def merge(
     board: PoseBoard, batches: list[Batch], tick: int, alive: np.ndarray, watch: Watch | None = None
 ) -> int:
     """Merge shards' batches (each shard's in the order sent) into ``board`` as one publish labelled
-    ``tick``: per shard from its newest key batch on (a key holds every soldier it animates), the newest
-    codes of each soldier, of the soldiers still ``alive`` here (not removed meanwhile); with ``watch``,
-    only of the soldiers a client watches (``watch`` keeps the others'). Returns the soldiers whose codes
-    changed (``PoseBoard.publish_codes``)."""
+    ``tick``: per shard and block from its newest key batch on (a key holds every soldier it animates
+    there), the newest codes of each soldier, of the soldiers still ``alive`` here (not removed meanwhile);
+    with ``watch``, only of the soldiers a client watches (``watch`` keeps the others'). Returns the
+    soldiers whose codes changed (``PoseBoard.publish_codes``; none without batches: no publish)."""
+    if not batches:
+        return 0
     used: list[Batch] = []
-    for k in dict.fromkeys(b.shard for b in batches):
-        own = [b for b in batches if b.shard == k]
+    for k in dict.fromkeys((b.shard, b.block) for b in batches):
+        own = [b for b in batches if (b.shard, b.block) == k]
         keys = [i for i, b in enumerate(own) if b.key]
         used += own[keys[-1] :] if keys else own
     if watch is not None:
@@ -754,7 +891,7 @@ def merge(
     rows = np.concatenate([b.indices for b in used]).astype(np.int64)
     tables = np.concatenate([b.tables for b in used])
     codes = np.concatenate([b.codes for b in used])
-    if len(used) > len({b.shard for b in used}):  # a shard's later batch wins for the rows both carry
+    if len(used) > len({(b.shard, b.block) for b in used}):  # a later batch wins for the rows both carry
         _, first = np.unique(rows[::-1], return_index=True)
         newest = len(rows) - 1 - first
         rows, tables, codes = rows[newest], tables[newest], codes[newest]

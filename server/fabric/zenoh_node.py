@@ -7,7 +7,7 @@ from typing import Any
 
 import zenoh
 
-from server.fabric import FabricConfig, Handler, Kind, Presence
+from server.fabric import FabricConfig, Handler, Kind, Presence, Unsubscribe
 
 
 class ZenohFabric:
@@ -35,9 +35,17 @@ class ZenohFabric:
         self._keep.append(pub)
         return pub.put
 
-    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> None:
+    def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> Unsubscribe:
         del kind  # the publisher sets the quality of service
-        self._keep.append(self.session.declare_subscriber(topic, lambda s: on_message(s.payload.to_bytes())))
+        sub = self.session.declare_subscriber(topic, lambda s: on_message(s.payload.to_bytes()))
+        self._keep.append(sub)
+
+        def unsubscribe() -> None:
+            if sub in self._keep:
+                self._keep.remove(sub)
+                sub.undeclare()
+
+        return unsubscribe
 
     def announce(self, key: str) -> None:
         self._keep.append(self.session.liveliness().declare_token(key))

@@ -15,7 +15,8 @@ import sys
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from ttes.arguments import UsageError, host, listen_port, non_negative, positive
+from server.fabric import BLOCK
+from ttes.arguments import UsageError, count, host, listen_port, non_negative, positive
 
 if TYPE_CHECKING:
     from server.app import TtesServer
@@ -44,6 +45,14 @@ def add_fabric_options(p: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         help="fabric endpoint to connect to (repeatable; a shard connects to its front-ends)",
+    )
+    p.add_argument(
+        "--fabric-block",
+        metavar="N",
+        type=count(1, 65536),
+        default=BLOCK,
+        help="soldier indices per pose topic: a front-end hears the blocks its clients watch "
+        f"(default {BLOCK}; shards and front-ends must agree)",
     )
 
 
@@ -204,10 +213,10 @@ def _fabric_node(
     fabric = open_fabric(FabricConfig(args.fabric, args.fabric_listen, tuple(args.fabric_connect)))
     if sharding is not None:
         server.codes_only()  # its batches carry codes: the board's float poses would be written for nothing
-        node = ShardNode(server, fabric, sharding)
+        node = ShardNode(server, fabric, sharding, block=args.fabric_block)
         node.keep_own()
         return (lambda: node.start(trio.lowlevel.current_trio_token())), fabric.close
-    node_f = FrontNode(server, fabric, int(shards or 1), front=front)
+    node_f = FrontNode(server, fabric, int(shards or 1), front=front, block=args.fabric_block)
     return (lambda: node_f.start(trio.lowlevel.current_trio_token())), fabric.close
 
 
