@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from server.soldier import root_motion
 from server.soldier.core import (
     _CRAWL,
     _FIRING,
@@ -284,7 +285,9 @@ class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
             return False
         steps, k = entry
         tb.node[i] = steps[k].end
-        if k + 1 < len(steps) and self._turning(steps[k].clip):  # a prone turn's turn, on forearms and knees
+        if k + 1 < len(steps) and self._turning(steps[k].clip):  # a prone turn's turn, on forearms and knees,
+            # or a pivot a posture request re-planned: its last share of turn too, before its own joins
+            root_motion.fold1(tb, self.library, i, t)
             self._turned(i, steps[k].clip)
         k += 1
         if k < len(steps):

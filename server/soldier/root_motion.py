@@ -347,9 +347,14 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
     """Bring the offsets up to ``t``: before a clip, the velocity or the stride scale changes, and while a
     stepping figure turns towards the heading (:func:`steer`), about the sole point carrying its weight: a
     walking or running one by what :func:`step_turns` allows between the frames shown then and now (at most
-    STEP_TURN_RATE), a crawling one at TURN_RATE."""
+    STEP_TURN_RATE), a crawling one at TURN_RATE. A pivot's extra turn (:func:`pivot`) comes first: a request
+    mid-pivot folds to its time, and the share turned since the last update was lost (issue 16: asked to
+    kneel mid-pivot at 10 Hz he knelt 5.6° off his heading, then snapped to it)."""
     if len(idx) == 0:
         return
+    p = np.flatnonzero(tb.pivot_rest[idx] != 0.0)
+    if len(p):
+        pivot(tb, lib, idx[p], np.broadcast_to(np.asarray(t, np.float64), idx.shape)[p])
     frames = frame_at(tb, lib, idx, t)
     travel_now = lib.travel.at(tb.clip[idx], frames)
     off = offset_at(tb, lib, idx, t, frames, travel_now)
@@ -422,7 +427,7 @@ def frame_at1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> float:
 def fold1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> None:
     """:func:`fold` for one soldier in scalar Python (a request or a clip change of one soldier)."""
     yaw = float(tb.root_yaw[i])
-    if yaw != 0.0:  # turning about a contact point: the vectorised path
+    if yaw != 0.0 or tb.pivot_rest[i] != 0.0:  # turning about a contact point: the vectorised path
         fold(tb, lib, np.array([i], np.int64), t)
         return
     tx, tz = lib.travel.at1(int(tb.clip[i]), frame_at1(tb, lib, i, t))
@@ -439,7 +444,7 @@ def fold1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> None:
 def fold_exact(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray) -> None:
     """:func:`fold1` of soldiers ``idx`` at once, bit for bit: a turned figure's rows through :func:`fold`,
     the rest through :func:`fold_unturned`."""
-    turned = tb.root_yaw[idx] != 0.0
+    turned = (tb.root_yaw[idx] != 0.0) | (tb.pivot_rest[idx] != 0.0)
     if turned.any():
         fold(tb, lib, idx[turned], t[turned])
         idx, t = idx[~turned], t[~turned]
