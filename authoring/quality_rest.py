@@ -14,8 +14,9 @@ anew while the chest and head come down.
 
 A limb may also stay up long after the body and come down late without ever rising: kfire2dead's top arm was
 held raised 1.5 s after the trunk lay still, then lowered (a dead man holding up his arm). ``limb_rest_lag_s``
-is the time from the body being down (pelvis, chest or belly, head: :func:`rest_frame`; a prone body's
-chest and head come down in its settle) to the last limb part (upper arm, forearm, hand,
+is the time from the body being down and still (pelvis, chest or belly, head: :func:`rest_frame`, and their
+centroids at rest as a limb's, :func:`trunk_rest`; a prone body's chest and head come down in its settle) to
+the last limb part (upper arm, forearm, hand,
 thigh, shin, foot) coming to rest; a part is at rest from the first frame after which its centroid stays
 within :data:`NEAR_CM` of its final height and slower than :data:`STILL_M_S` (:func:`limb_rest_lag`,
 :data:`LAG_LIMIT_S`: a limb falls with the body).
@@ -106,15 +107,18 @@ def rest_rise(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
     return row
 
 
-def _centroids(cf: ClipFrames, figures: FigureSet) -> dict[str, np.ndarray]:
-    """Per frame, the centroid (cm, world) of each limb part's nodes ``(n, 3)``."""
+def _centroids(
+    cf: ClipFrames, figures: FigureSet, names: tuple[str, ...] | None = None
+) -> dict[str, np.ndarray]:
+    """Per frame, the centroid (cm, world) of each limb part's nodes ``(n, 3)`` (or of parts ``names``)."""
     body = max(cf.poses, key=lambda k: figures.kin[k].ndof)
     kin = figures.kin[body]
     nodes, segs = figures.nodes(body)
     parts = figures.node_parts(body)
     g = kin.segment_globals(cf.poses[body], cf.locations[body])
     out: dict[str, np.ndarray] = {}
-    for name in (f"{side}_{p}" for side in ("left", "right") for p in LIMBS):
+    limbs = tuple(f"{side}_{p}" for side in ("left", "right") for p in LIMBS)
+    for name in names if names is not None else limbs:
         m = parts == name
         if m.any():
             out[name] = np.einsum("nkij,kj->ni", g[:, segs[m], :3, :], nodes[m]) / int(m.sum())
@@ -148,5 +152,16 @@ def rest_lag(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
     """:func:`limb_rest_lag` of a played clip, from the frame its body is down (:func:`rest_frame`, within
     :data:`NEAR_CM`: as near as a limb at rest; a slave's body lowered the last 2 cm at the end hid its arm
     held up)."""
-    trunk = rest_frame(_heights(cf, figures), NEAR_CM)
-    return limb_rest_lag(_centroids(cf, figures), trunk, cf.channelset.fps)
+    fps = cf.channelset.fps
+    trunk = trunk_rest(rest_frame(_heights(cf, figures), NEAR_CM), _centroids(cf, figures, TORSO_PARTS), fps)
+    return limb_rest_lag(_centroids(cf, figures), trunk, fps)
+
+
+def trunk_rest(down: int | None, torso: dict[str, np.ndarray], fps: float) -> int | None:
+    """The frame from which the trunk rests: down (``down``, :func:`rest_frame`) and its parts at rest as a
+    limb is (:func:`settled_from` of the centroids ``torso``). A body rolling over onto its back keeps its
+    lowest points on the ground while it rolls and carries its limbs along: kstow2dead's right foot came to
+    rest 0.53 s after he was down, 4 frames after he stopped rolling (frames 82-110: 55 degrees, 9 cm)."""
+    if down is None or not torso:
+        return down
+    return max(down, *(settled_from(c, fps) for c in torso.values()))

@@ -21,6 +21,7 @@ from authoring.quality_rest import (
     rest_rise,
     rise_after,
     settled_from,
+    trunk_rest,
 )
 from server.motion.cache import load_channelset
 from ttes.paths import FIGURES
@@ -58,6 +59,24 @@ def _fall(top: float, bottom: float, first: int, frames: int, n: int) -> np.ndar
     """Heights: ``top`` until ``first``, eased to ``bottom`` over ``frames``, then still (``n`` in all)."""
     s = np.clip((np.arange(n) - first) / frames, 0.0, 1.0)
     return top + (bottom - top) * s * s * (3.0 - 2.0 * s)
+
+
+def test_a_foot_carried_by_a_body_still_rolling_over_is_not_late() -> None:
+    """A constructed death: the body is down at 0.5 s (its lowest points on the ground) but rolls onto its
+    back until 1.5 s, its pelvis centroid swinging 20 cm sideways and carrying the foot along (kstow2dead):
+    the trunk rests when it stops rolling, and the foot with it is not late. Held up after that, it is."""
+    n = 180
+    roll = _fall(0.0, 20.0, 30, 60, n)
+    pelvis = np.stack([roll, np.full(n, 10.0), np.zeros(n)], axis=1)
+    foot = np.stack([roll + 80.0, np.full(n, 5.0), np.zeros(n)], axis=1)
+    start = trunk_rest(30, {"pelvis": pelvis}, FPS)
+    assert start == settled_from(pelvis, FPS) and start > 60
+    assert limb_rest_lag({"right_foot": foot}, 30, FPS)["limb_rest_lag_s"] > LAG_LIMIT_S  # judged from "down"
+    assert limb_rest_lag({"right_foot": foot}, start, FPS)["limb_rest_lag_s"] == 0.0
+    held = foot.copy()
+    held[:, 1] = _fall(30.0, 5.0, 150, 18, n)
+    assert limb_rest_lag({"right_foot": held}, start, FPS)["limb_rest_lag_s"] > LAG_LIMIT_S
+    assert trunk_rest(None, {"pelvis": pelvis}, FPS) is None and trunk_rest(30, {}, FPS) == 30
 
 
 def test_an_arm_held_up_2_s_after_the_trunk_rests_fails() -> None:
