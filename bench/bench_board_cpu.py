@@ -4,8 +4,7 @@ publish (quantise) and a front-end's merge and encodes, on N soldiers of the loa
 The soldiers tick at 30 Hz of simulated time with the load mix's requests (``client_stub.loadtest.mix``);
 their codes go out as two shards' batches (even and odd indices, as ``Sharding.home`` splits them, through
 ``encode_batch``/``decode_batch``), which a front-end's board merges one at a time (``nodes.merge``), and
-after each of them two clients, each subscribed to half the soldiers, encode what changed (``--once``: after
-both, as a front-end whose batches arrived within one turn). Thread CPU
+after each of them two clients, each subscribed to half the soldiers, encode what changed. Thread CPU
 (``time.thread_time``), so a loaded machine disturbs it little; for an A/B run it on both trees, alternated.
 ``sha`` digests every client byte, ``codes`` the shards' codes and versions: equal on two trees, the
 clients received the same. The shards' numbers are for all N soldiers (both shards' together). For an
@@ -40,7 +39,7 @@ from server.session import Session
 WARM = 30  # ticks not measured: the first full updates, the mix getting under way
 
 
-def measure(soldiers: int, ticks: int, once: bool = False) -> dict[str, object]:
+def measure(soldiers: int, ticks: int) -> dict[str, object]:
     n = soldiers
     cfg = ServerConfig(port=0, throttle=0.0, max_soldiers=n + 64, max_soldiers_per_client=n + 64)
     server = TtesServer(cfg.with_overrides(max_requests_per_s=1e9))
@@ -68,16 +67,12 @@ def measure(soldiers: int, ticks: int, once: bool = False) -> dict[str, object]:
         codes.update(board.version[:n].tobytes())
         rows = np.arange(n) if k % 30 == 1 else np.flatnonzero(board.version[:n] == board.serial)
         merged = encoded = 0.0
-        batches = []
         for shard in (0, 1):
             r = rows[rows % 2 == shard]
             tables, quantised = board.table_of[r].astype(np.uint8), board.codes[r].astype(np.uint16)
-            batches.append(
-                decode_batch(encode_batch(Batch(shard, 2, k, k, 0.0, r, tables, quantised, k % 30 == 1)))
-            )
-        for turn in [batches] if once else [[b] for b in batches]:
+            batch = decode_batch(encode_batch(Batch(shard, 2, k, k, 0.0, r, tables, quantised, k % 30 == 1)))
             a = time.thread_time()
-            merge(front.board, turn, k, alive)
+            merge(front.board, [batch], k, alive)
             b = time.thread_time()
             written = [s.take_output() for s in sessions]
             encoded += time.thread_time() - b
@@ -110,9 +105,8 @@ def main() -> int:
     ap.add_argument("--soldiers", type=int, default=20000)
     ap.add_argument("--ticks", type=int, default=90, help="measured ticks (after 30 of warm-up)")
     ap.add_argument("--json", action="store_true")
-    ap.add_argument("--once", action="store_true", help="merge both shards' batches, then encode once")
     args = ap.parse_args()
-    out = measure(args.soldiers, args.ticks, args.once)
+    out = measure(args.soldiers, args.ticks)
     print(json.dumps(out) if args.json else json.dumps(out, indent=1))
     return 0
 

@@ -141,9 +141,6 @@ class TtesServer:
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
         self.feed: Callable[[PoseBoard, int], np.ndarray] | None = None
         self.relay_out: Callable[[], None] | None = None  # a front-end's: send what was relayed, now
-        # a front-end's: of the soldiers ``feed`` changed, those whose clients to wake now (the others held
-        # until every shard's tick is in: a client encoded once a tick, not once per shard's batch)
-        self.hold: Callable[[np.ndarray], np.ndarray] | None = None
         self.status_note: Callable[[], str] | None = (
             None  # appended to STATUS (a shard's or front-end's role)
         )
@@ -510,11 +507,7 @@ class TtesServer:
     def _encode_now(self, session: Session) -> bytes:
         session.wake = trio.Event()  # a publish from here on wakes it again
         with self.cpu("encode"):
-            sent = session.flushed_serial
-            data = session.take_output(self.now())
-        if session.flushed_serial != sent:  # joint updates encoded (the status line's ``encodes`` a tick)
-            self.cpu.counts["encodes"] += 1
-        return data
+            return session.take_output(self.now())
 
     async def _tick_output(self, session: Session, stream: trio.abc.Stream) -> bytes | None:
         """A single server's writer woken by a tick: its client's frames of the tick (None: a write stalled).
@@ -716,8 +709,6 @@ class TtesServer:
         if self.feed is not None:
             with self.cpu("merge"):
                 rows = self.feed(board, self.ticks)
-                if self.hold is not None:
-                    rows = self.hold(rows)
             self._published(board, len(rows), rows)
             return None
         now = self.now() if scheduled is None else max(scheduled, self._last_stamp)
@@ -788,8 +779,6 @@ class TtesServer:
             return
         with self.cpu("merge"):
             rows = self.feed(board, self.ticks + 1)
-            if self.hold is not None:
-                rows = self.hold(rows)
         self._published(board, len(rows), rows)  # the shards' frames count as a tick's
 
     def _published(

@@ -28,7 +28,6 @@ class StageCpu:
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = defaultdict(float)
-        self.counts: dict[str, int] = defaultdict(int)  # events per tick, reported with the stages
         self._process = time.process_time()
         self._ticks = 0
 
@@ -46,10 +45,8 @@ class StageCpu:
         n = max(1, ticks - self._ticks)
         now = time.process_time()
         out = {k: round(1000 * v / n, 2) for k, v in sorted(self.seconds.items())}
-        out.update({k: round(v / n, 2) for k, v in sorted(self.counts.items())})
         out["process"] = round(1000 * (now - self._process) / n, 2)
         self.seconds.clear()
-        self.counts.clear()
         self._process, self._ticks = now, ticks
         return out
 

@@ -29,7 +29,6 @@ import contextlib
 import functools
 import itertools
 import math
-import os
 import threading
 import time
 from dataclasses import dataclass
@@ -69,8 +68,6 @@ if TYPE_CHECKING:
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
 TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
-# TTES_FRONT_HOLD=0: a front-end wakes its clients' writers at every shard's batch (a bench's A/B)
-HOLD = os.environ.get("TTES_FRONT_HOLD") != "0"
 PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batch a block heard); beyond, the
 # oldest go (and it asks for a key)
 
@@ -432,17 +429,10 @@ class FrontNode:
         self.failovers = 0
         self.keys = 0  # key batches heard
         self.watching = Watch(n)  # what its clients subscribe to; the others' codes wait there
-        self.asked = np.zeros(n, bool)  # a request, creation or reaction relayed, its first rows not come
-        self._held: list[np.ndarray] = []  # soldiers merged, their clients not woken yet (:meth:`hold`)
-        self._held_since = math.inf  # server time of the oldest held
-        self._ticked: set[int] = set()  # shards whose tick's pulse came since the writers were last woken
-        self.hold_s = 1.5 / server.config.tick_hz  # a shard later than this: the writers go without it
         self.fences = Fences(front.k, n, shards)  # indices created or removed here: rows wait for a fence
         server.board_ref.on_watch = self.watch
         server.feed = self.feed
         server.relay_out = self._flush
-        if HOLD:
-            server.hold = self.hold
         server.world.relay = self
         server.status_note = self.describe
 
@@ -571,29 +561,6 @@ class FrontNode:
             TRACE.stamp("fe_merge", rows, "fed" if tick > self.server.ticks else "tick")
         return changed
 
-    def hold(self, rows: np.ndarray) -> np.ndarray:
-        """Of the soldiers a merge changed (``rows``, after :meth:`feed`), those whose clients' writers to
-        wake now: all held so far once every animating shard's tick came (its pulse) since the last wake,
-        at once when one of them answers what was relayed here (a request, creation or reaction: the first
-        rows after it wait for no other shard's batch), or once the oldest was held ``hold_s`` (a shard
-        late or gone). Else none: the shards' batches of one tick wake each client's writer once, not once
-        per shard (issue 21: each batch cost every client an encode). Their codes are on the board already:
-        a writer woken meanwhile (an answer) sends them too."""
-        now = self.server.now()
-        if len(rows):
-            self._held.append(rows)
-            self._held_since = min(self._held_since, now)
-        if not self._held:
-            return rows[:0]
-        answer = bool(len(rows)) and bool(self.asked[rows].any())
-        if not (answer or self._ticked >= set(self.route) or now - self._held_since >= self.hold_s):
-            return rows[:0]
-        out = np.concatenate(self._held) if len(self._held) > 1 else self._held[0]
-        self.asked[out] = False
-        self._held, self._held_since = [], math.inf
-        self._ticked.clear()
-        return out
-
     def watch(self, indices: np.ndarray | None) -> None:
         """A client subscribed to ``indices`` (None: one unsubscribed, or left): the held codes of those
         no client watched go onto the board now, before its writer encodes (:mod:`server.fabric.watch`)."""
@@ -639,7 +606,6 @@ class FrontNode:
         """Shard ``b.shard``'s tick: it lives; heard for the first time, or back (a restart: its count went
         back; or it had failed over), it gets a sync."""
         k = b.shard
-        self._ticked.add(k)
         first = self.heard_at[k] == -math.inf
         back = first or b.seq < self.last_seq[k] or self.route[k] != k
         self.last_seq[k], self.heard_at[k] = b.seq, now
@@ -858,7 +824,6 @@ class FrontNode:
         if self.share is not None:
             self.share.taken(index)
         op = req.create(index, figure, weapon, owner)
-        self.asked[index] = True
         self._send(self._shard_of(index), op)
         self.fences.mark([index], self._shard_of(index))
         self._book(op)
@@ -880,13 +845,11 @@ class FrontNode:
             TRACE.stamp("fe_request", idx)
         self.last[idx] = rows
         self.has_last[idx] = True
-        self.asked[idx] = True
         shard = np.asarray(self.route)[Sharding.home(idx, self.shards)]
         for k in np.unique(shard).tolist():
             self._send(k, req.requests(rows[shard == k]))
 
     def react(self, index: int, kind: str) -> None:
-        self.asked[index] = True
         self._send(self._shard_of(index), req.react(index, kind))
 
 
