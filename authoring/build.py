@@ -483,8 +483,31 @@ def snap_endpoints(
         ref_clip, ref_frame = (first, ends[0][1]) if first is not None else (chsets[have[0][0]], have[0][1])
         ref = ref_clip.joint_data[ref_frame].copy()
         for c, f in have:
+            cols, frames = _head_held(chsets[c], c, f)
+            solved = chsets[c].joint_data[:, cols].astype(np.float64)
             _snap_end(chsets[c].joint_data, f, ref)
+            if frames:
+                held = hold_in(solved, ref[cols], frames)
+                chsets[c].joint_data[:, cols] = held.astype(chsets[c].joint_data.dtype)
             _snap_rifle(chsets[c], f, ref_clip, ref_frame)
+
+
+def _head_held(cs: Channelset, clip: str, frame: int) -> tuple[list[int], int]:
+    """The joint columns of ``cs``'s neck and head and over how many frames they blend from their start
+    pose into ``clip`` (:attr:`authoring.deaths.DeathSpec.slave_head_held`; 0: not held)."""
+    spec = deaths.death_specs().get(clip)
+    if frame != 0 or spec is None or not spec.slave_head_held:
+        return [], 0
+    cols = [c.column + k for c in cs.joint_channels() if c.name in deaths.HEAD for k in range(c.width)]
+    return cols, spec.slave_head_held
+
+
+def hold_in(solved: np.ndarray, start: np.ndarray, frames: int) -> np.ndarray:
+    """``solved`` ``(n, k)`` starting still at ``start``: blended from it into ``solved`` over ``frames``
+    (smoothstep), so the first frames barely move whatever ``solved`` does there."""
+    t = np.clip(np.arange(len(solved)) / frames, 0.0, 1.0)[:, None]
+    s = t * t * (3.0 - 2.0 * t)
+    return (1.0 - s) * start[None, :] + s * solved
 
 
 def clamp_to_limits(chset: Channelset, body: Figure) -> None:

@@ -171,6 +171,9 @@ class DeathSpec:
     # the slave's feet are held where its own feet land in the master's last stance (slave_feet): laid by
     # the root alone, ststow2dead's DI trunk took its feet along after they landed (3.1 cm)
     slave_feet_landed: bool = False
+    # frames: the slaves' neck and head keep their start posture's pose (the node's, which the build snaps
+    # their first frame to) and blend into the solved fall over this many (authoring.build.snap_endpoints)
+    slave_head_held: int = 0
     knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
     # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
     # s: the hips and ankles roll out over this after :attr:`fade` into the dead legs' passive range
@@ -248,6 +251,11 @@ STFIRE_LEGS_ROLL = 0.8
 # 5.8 cm along the ground (the slave's own start ease, authoring.slaving START_EASE_FRAMES; the master
 # moving, that forearm was lifted off the ground by then)
 PRONE_START_EASE = 0.1
+# frames: prstow2dead's slaves hold their head at the start (DeathSpec.slave_head_held). The M16 slave's solve
+# starts its neck 6.5 degrees off the PRONE_STOWED node's and swings it there over its first 10 frames; its
+# first frame snapped and that change faded out over 12 frames, the head left at 0.59 m/s (0.62 faded over 24;
+# held over 24: 0.49, the DI slave's 0.46 -> 0.45; it catches up at 1.6 m/s 0.2-0.3 s in, as it falls later)
+PRSTOW_HEAD_HELD = 24
 # stfire2dead's rifle is flung to his right, a little down and back (pelvis frame): to his left, away from the
 # fall (the default), he turned onto it and lay with his pelvis on it, 4.8 cm up; to his right it lies flat
 # 32 cm clear of him and the trunk rests 1.7 cm up (right and down (1, -0.7, 0): his thighs skid 5.7 cm as
@@ -310,7 +318,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         turn_worst=True,
         slave_feet_held=True,
     ),
-    _prone("prstow2dead", "PRONE_STOWED"),  # not eased: see PRONE_START_EASE
+    replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD),  # not eased: see
+    # PRONE_START_EASE
     _prone_dead("prfire2dead", "PRONE_FIRE"),
     CRAWL_DEATH,
 )

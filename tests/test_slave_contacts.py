@@ -12,7 +12,14 @@ import pytest
 
 pytest.importorskip("scipy")
 
-from authoring.build import SNAP_FADE_FRAMES, BuildContext, _snap_end, lift_off_ground, slave_pair
+from authoring.build import (
+    SNAP_FADE_FRAMES,
+    BuildContext,
+    _snap_end,
+    hold_in,
+    lift_off_ground,
+    slave_pair,
+)
 from authoring.quality import check_clip
 from authoring.quality_frames import FigureSet, play
 from authoring.slave_contacts import (
@@ -120,6 +127,24 @@ def test_a_snapped_endpoint_fades_into_the_clip() -> None:
     np.testing.assert_allclose(data[-1], [1.0, -2.0])
     assert np.abs(np.diff(data, axis=0)).max() < 0.25  # no jump at the end: spread over SNAP_FADE_FRAMES
     assert not data[: 30 - SNAP_FADE_FRAMES].any()
+
+
+def test_a_held_start_blends_into_what_was_solved() -> None:
+    """A slave's neck solved 6.5 degrees off its start posture's and swinging there over its first frames
+    (prstow2dead's M16): held at the start pose, it leaves it from rest and follows the solve once blended."""
+    solved = np.radians(np.c_[6.5 - np.minimum(np.arange(40), 10) * 0.65, np.zeros(40)])
+    held = hold_in(solved, np.zeros(2), 24)
+    np.testing.assert_allclose(held[0], 0.0)
+    assert np.degrees(np.abs(np.diff(held[:4], axis=0))).max() < 0.3  # faded (12 frames): 0.4-1.0 per frame
+    np.testing.assert_allclose(held[24:], solved[24:])
+
+
+def test_the_m16_prone_stowed_death_leaves_its_posture_from_rest() -> None:
+    """Issue 14: prstow2dead's M16 slave's head left PRONE_STOWED at 0.59 m/s (its neck solved 6.5 degrees
+    off the node's pose, snapped and faded over 12 frames), its DI's at 0.46; deaths.PRSTOW_HEAD_HELD."""
+    figs = FigureSet.from_dir(FIGURES, ["DI.fig", "M16.fig"])
+    clip = load_channelset(CHANNELSETS / "prstow2dead_m16_low.chset.env", use_cache=False)
+    assert check_clip(clip, figs)["end_speeds_m_s"]["first"] <= 0.5  # the check's end_speed limit
 
 
 @pytest.fixture(scope="module")
