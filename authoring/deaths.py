@@ -165,6 +165,12 @@ class DeathSpec:
     slave_feet_held: bool = False
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     slave_arm_out: bool = False  # the DI slave's arms in the ground go out sideways (slave_ground.rest_limbs)
+    # the slave's trunk is laid by its root alone (slave_ground.rest_limbs): with its spine in the torso's
+    # goals, ststow2dead's DI belly asked 0.4 cm down moved 3 and the trunk swung (head slid 8.15 cm)
+    slave_trunk_rigid: bool = False
+    # the slave's feet are held where its own feet land in the master's last stance (slave_feet): laid by
+    # the root alone, ststow2dead's DI trunk took its feet along after they landed (3.1 cm)
+    slave_feet_landed: bool = False
     # frames: the slaves' neck and head keep their start posture's pose (the node's, which the build snaps
     # their first frame to) and blend into the solved fall over this many (authoring.build.snap_endpoints)
     slave_head_held: int = 0
@@ -266,6 +272,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         knees_held=True,
         legs_roll=LEGS_ROLL,
         legs_settle=False,
+        slave_arm_out=True,
+        slave_trunk_rigid=True,
+        slave_feet_landed=True,
     ),
     DeathSpec(
         "stfire2dead",

@@ -44,7 +44,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from authoring import ik
+from authoring import deaths, ik
 from authoring.postures import leg
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
@@ -59,6 +59,7 @@ from server.soldier.blend import smoothstep
 
 MERGE_GAP_FRAMES = 3  # a foot off the ground this briefly is still in its stance (a flickering contact)
 MIN_SHIFT_CM = 0.05  # a foot moved less than this is left as it is
+LANDING_EASE_FRAMES = 6  # a foot held where it lands (_held_from_landing): its offset before eases out
 MIN_PLANT_CM = 1.0  # a stance whose offset stays below this is left as slaved (it slides less than that)
 NEAR_CM = 6.0  # the master's foot this near the ground: the slave's is kept at least as high
 LIFT_SIGMA_FRAMES = 2.0  # the lift is smoothed over the clip (at or above the need)
@@ -247,7 +248,7 @@ def _leg_goal(
     master_foot: np.ndarray,
     side: str,
     master_turn: tuple[np.ndarray, np.ndarray] | None = None,
-    dying: bool = False,
+    death: str = "",
 ) -> tuple[list[ik.Goal], np.ndarray]:
     """One leg's goals (the foot moved by its planting offset and lift, its orientation kept) and the move
     per frame. A knee or thigh on the ground carries the leg too: the move fades out as it comes down
@@ -257,8 +258,9 @@ def _leg_goal(
     foot and toes are also turned as the master's while his foot is planted, raised where it sinks below:
     :func:`~authoring.slave_ground.rest_limbs` had turned a DI foot rolling onto its side 11 degrees further
     than his and bent its toes, and kept loosely that turn slid it 3 cm (ststow2dead). Its own nodes then
-    roll without slipping (:func:`plant_offsets`). ``dying``: a death, whose foot he lies on is held even
-    with the knee down (:func:`_last_rest`)."""
+    roll without slipping (:func:`plant_offsets`). ``death``: ``"dying"``, a death, whose foot he lies on
+    is held even with the knee down (:func:`_last_rest`); ``"landed"``, also held where the slave's own foot
+    lands in his last stance (:func:`_held_from_landing`)."""
     kin = figures.kin[ptype]
     sites = kin.site_globals(pose, loc)
     foot_pts = part_points(pose, loc, figures, ptype, (f"{side}_foot",))
@@ -271,7 +273,7 @@ def _leg_goal(
     if master_turn is None:
         move = plant_offsets(foot_pts, stance)
         move[:, 1] = lift_to_master(foot_pts[..., 1].min(axis=1), master_low)
-        move *= (np.maximum(u, _last_rest(stance)) if dying else u)[:, None]
+        move *= (np.maximum(u, _last_rest(stance)) if death else u)[:, None]
     else:
         # a knee coming down fast let the toes go in 3 frames (40 degrees in one): eased over more
         u = 1.0 - _smooth_above(1.0 - u, KNEE_SIGMA_FRAMES)
@@ -286,6 +288,8 @@ def _leg_goal(
         dy = _ground_to_master(foot_pts[..., 1].min(axis=1), master_low, stance, w)
         foot_pts[..., 1] += dy[:, None]
         move = plant_offsets(foot_pts, stance) * u[:, None]
+        if death == "landed":
+            move = _held_from_landing(foot_pts, stance, move)
         move[:, 1] = dy
         toes_turn = _turns(toes, _anchored(master_turn[1], toes, stance), w) @ toes[:, :3, :3]
         extra.append(
@@ -302,6 +306,30 @@ def _leg_goal(
         FOOT_TURN_CM if master_turn is None else FOOT_HOLD_TURN_CM,
     )
     return [goal, *extra], np.linalg.norm(target - heel[:, :3, 3], axis=1)
+
+
+def _held_from_landing(foot_pts: np.ndarray, stance: np.ndarray, move: np.ndarray) -> np.ndarray:
+    """The planting offset ``move`` ``(n, 3)`` of a foot (nodes ``foot_pts`` ``(n, k, 3)``) changed so that
+    in the master's last stance (:func:`_last_rest`) it stays where the slave's own foot lands
+    (:func:`_from_touchdown`): its nodes on the ground do not move from there on, to the clip's end; the
+    offset before eases out over ``LANDING_EASE_FRAMES`` up to the landing. Held from his touchdown and
+    brought back to where it lies at the end (:func:`plant_offsets`), the foot's knee on the ground let it
+    go: a DI foot laid by its root alone skated 3.1 cm after landing (ststow2dead); held there instead at
+    once, it landed on the dropped rifle (2 cm in). Unchanged where the slave's foot never lands."""
+    below = foot_pts[..., 1] <= CONTACT_HEIGHT_CM
+    down = np.asarray(below.any(axis=1))
+    landed = np.flatnonzero(_from_touchdown(stance, down) & (_last_rest(stance) >= 1.0))
+    if not len(landed):
+        return move
+    first = int(landed[0])
+    out = move * smoothstep(np.clip((first - np.arange(len(move))) / LANDING_EASE_FRAMES, 0.0, 1.0))[:, None]
+    both = below[1:] & below[:-1]
+    step = np.where(both[..., None], foot_pts[1:] - foot_pts[:-1], 0.0).sum(axis=1)
+    step /= np.maximum(both.sum(axis=1), 1)[:, None]
+    out[first + 1 :] = -np.cumsum(step[first:], axis=0)
+    out[first, :] = 0.0
+    out[:, 1] = 0.0
+    return out
 
 
 def _lying_leg(
@@ -457,6 +485,9 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
 
         turns = {side: (seg(f"{side}_foot"), seg(f"{side}_toes")) for side in SIDES}
     lying = getattr(slave, "release_frame", None) is not None and knelt and loc[0, 1, 3] < LYING_ROOT_CM
+    spec = deaths.death_specs().get(master.name.split(".", 1)[0])
+    landed = turns["left"] is not None and spec is not None and spec.slave_feet_landed
+    death = ("landed" if landed else "dying") if dying else ""
     kin = figures.kin[stype]
     thighs = kin.site_globals(q, loc)  # the thighs as slaved (a lying leg keeps its thigh)
     pose = q
@@ -466,7 +497,7 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
         worst = np.zeros(len(q))
         for side in SIDES:
             leg_goals, moved = _leg_goal(
-                pose, loc, figures, stype, master_feet[side], side, turns[side], dying
+                pose, loc, figures, stype, master_feet[side], side, turns[side], death
             )
             if lying:
                 thigh = thighs[:, kin.site_names.index(f"{side}_upper_leg.distal")]

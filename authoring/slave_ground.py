@@ -134,7 +134,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     limbs = tuple(p for p in parts if p not in TRUNK)
     unsolved, m_at = _positions(kin, q, loc), _positions(figures.kin[mtype], mq, mloc)
     settle = w * _settled(mloc, float(master.fps))
-    arm_out = _arm_out(master)
+    arm_out, rigid = _arm_out(master), _trunk_rigid(master)
     planted = _plants(unsolved, m_at, m_h, release)
     # once the master lies still, the trunk (the body rolls or pitches onto what the master rests on); the
     # limbs throughout; last, the limbs again unplanted: a part that its plant kept in the ground comes out
@@ -147,7 +147,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
             plants = _plants(unsolved, m_at, m_h, release, (_positions(kin, pose, loc), settle > 0))
         scale = settle if group is TRUNK else 1.0
         need = {p: v * scale for p, v in needs(pose, loc).items() if p in group}
-        goals = _goals(kin, pose[sub], loc[sub], need, sub, plants, arm_out)
+        goals = _goals(kin, pose[sub], loc[sub], need, sub, plants, arm_out, rigid)
         solved, report = ik.solve(
             kin, pose[sub], goals, loc[sub], iterations=40,
             damping=2.0, rest_pose=pose[sub], rest_gain=0.05, tolerance=0.05, max_dof_step=0.05,
@@ -168,6 +168,12 @@ def _arm_out(master: Channelset) -> bool:
     """Whether this death's slave moves its arms out of the ground sideways (``DeathSpec.slave_arm_out``)."""
     spec = deaths.death_specs().get(master.name.split(".", 1)[0])
     return spec is not None and spec.slave_arm_out
+
+
+def _trunk_rigid(master: Channelset) -> bool:
+    """Whether this death's slave trunk is laid by its root alone (``DeathSpec.slave_trunk_rigid``)."""
+    spec = deaths.death_specs().get(master.name.split(".", 1)[0])
+    return spec is not None and spec.slave_trunk_rigid
 
 
 def _settled(root: np.ndarray, fps: float) -> np.ndarray:
@@ -256,11 +262,13 @@ def _goals(
     rows: np.ndarray,
     planted: dict[str, np.ndarray],
     arm_out: bool = False,
+    rigid: bool = False,
 ) -> list[ik.Goal]:
     """One goal per site of :data:`PART_SITES` of the parts in ``need``: where it is in ``pose`` (the frames
     ``rows`` of the clip), moved up or down by the largest need of the parts it carries (so a wrist lifts
     both forearm and hand out of the ground). ``arm_out``: an arm site going up also goes as far out
-    sideways, away from the chest (:func:`_sideways`)."""
+    sideways, away from the chest (:func:`_sideways`). ``rigid``: the torso sites' goals move the root alone,
+    not the spine."""
     sites = kin.site_globals(pose, loc)
     moves: dict[str, np.ndarray] = {}
     for part, move in need.items():
@@ -275,7 +283,8 @@ def _goals(
         at[keep, 0], at[keep, 2] = hold[keep, 0], hold[keep, 2]
         if arm_out and site.split("_", 1)[-1].startswith(("upper_arm", "lower_arm")):
             at += _sideways(at, sites[:, kin.site_names.index(CHEST), :3, 3], move)
-        goals.append(ik.Goal(site, at, None, 1.0, 1, _chain(site)))
+        chain = () if rigid and site.split(".")[0].endswith("_torso") else _chain(site)
+        goals.append(ik.Goal(site, at, None, 1.0, 1, chain))
     return goals
 
 

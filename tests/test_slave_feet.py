@@ -209,3 +209,37 @@ def test_a_dying_prone_slaves_foot_is_held_by_its_knee_and_ankle() -> None:
     assert after["max_frame_jump_deg"] <= max(20.0, before["max_frame_jump_deg"])
     assert after["ankle_flick_deg"] <= 8.0  # diskate14b: no one-frame turn of the held ankle
     np.testing.assert_allclose(slave.joint_data[18:43, cols], hips[18:43], atol=0.01)  # the hip as it was
+
+
+def test_a_foot_landing_in_the_last_stance_is_held_where_it_lands() -> None:
+    """Issue 14: the master's foot rests from frame 10 to the end; the slave's lands at frame 15 and its
+    trunk, laid by the root, drags it 3 cm on: held from where it lands, not from his touchdown."""
+    from authoring.slave_feet import _held_from_landing
+
+    n = 40
+    pts = _foot(n)
+    pts[:15, :, 1] = 3.0  # in the air (above the contact height) until frame 15
+    pts[:, :, 0] += np.concatenate([np.linspace(-4.0, 0.0, 15), np.linspace(0.0, 3.0, n - 15)])[:, None]
+    stance = np.arange(n) >= 10
+    move = plant_offsets(pts, stance) * (np.arange(n) < 12)[:, None]  # its knee down from 12: let go
+    assert _slide(pts + move[:, None, :]) > 2.5
+    held = _held_from_landing(pts, stance, move)
+    assert _slide(pts + held[:, None, :]) < 1e-9
+    assert np.allclose(held[15], 0.0)  # from where it lands
+    assert np.allclose(held[:9], move[:9])  # before, as held before, eased out up to the landing
+    assert np.abs(np.diff(held[12:], axis=0)).max() < 1.0  # no jump at the landing
+    never = pts.copy()
+    never[..., 1] = 3.0
+    assert np.array_equal(_held_from_landing(never, stance, move), move)
+
+
+def test_ststow2dead_di_slave_lies_on_the_ground_with_its_feet_still() -> None:
+    """Issue 14: DI ststow2dead's head slid 8.15 cm (its trunk swung by the spine), laid by the root alone its
+    feet skated 3.1 cm after they landed; both within the check's limits now."""
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
+    slave = load_channelset(CHANNELSETS / "ststow2dead_low.chset.env", use_cache=False)
+    out = check_clip(slave, figs, ends_dead=True)
+    assert out["contact_slide_cm"] <= 3.0
+    assert out["foot_skate_cm"] <= 2.0
+    assert out["rifle_in_body_cm"] <= 1.0

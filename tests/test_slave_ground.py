@@ -158,9 +158,12 @@ def test_an_arm_in_the_ground_goes_out_sideways_from_the_chest() -> None:
     np.testing.assert_allclose(out, [[3.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, 0.0]])
 
 
-def test_only_the_crawlers_slave_moves_its_arms_out_sideways() -> None:
-    """The sideways move is the crawl death's own setting: the other deaths' slaves rebuild unchanged (DI
-    ststow2dead's feet skated 2.35 cm with it, its head rested 6.3 cm up)."""
+def test_only_the_crawlers_and_ststow2dead_slaves_move_their_arms_out_sideways() -> None:
+    """The sideways move is the crawl death's own setting and ststow2dead's, there with its trunk laid by the
+    root alone and its feet held where they land (alone, DI ststow2dead's feet skated 2.35 cm with it, its
+    head rested 6.3 cm up): the other deaths' slaves rebuild unchanged."""
     from authoring import deaths
 
-    assert [d.name for d in deaths.DEATHS if d.slave_arm_out] == ["crawl2dead"]
+    assert {d.name for d in deaths.DEATHS if d.slave_arm_out} == {"crawl2dead", "ststow2dead"}
+    both = {d.name for d in deaths.DEATHS if d.slave_trunk_rigid or d.slave_feet_landed}
+    assert both == {"ststow2dead"}
