@@ -69,6 +69,7 @@ def test_the_slave_of_a_rolled_death_lies_with_its_heels_down_rolling_no_sooner_
     cf = play(load_channelset(CHANNELSETS / f"{slave}.chset.env", use_cache=False), figs)
     assert rest_endpoint(cf, len(cf.poses["DI.fig"]) - 1, figs, "DEAD")["rest_foot_cm"] <= 15.0
     mk, sk = figs.kin["soldier.fig"], figs.kin["DI.fig"]
+    rolled = 0
     for joint, i in (("ankle", 0), ("hip", 2)):
         for side in ("left", "right"):
             m, s = (k.dof_slices[f"{side}_{joint}"].start + i for k in (mk, sk))
@@ -77,4 +78,8 @@ def test_the_slave_of_a_rolled_death_lies_with_its_heels_down_rolling_no_sooner_
             assert q.min() >= lo - 1e-6
             past = np.flatnonzero(q < sk.lower[s] - 1e-4)
             his = np.flatnonzero(master.poses["soldier.fig"][:, m] < mk.lower[m] - 1e-4)
-            assert len(past) and past[0] >= his[0]
+            assert not len(past) or past[0] >= his[0]
+            rolled += bool(len(past))
+    # ststowfoot14 holds the slave's right foot where it lands: its ankle stays 2.5 degrees inside the live
+    # range, the other three joints roll past it, no sooner than the master's
+    assert rolled >= 3
