@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import trio
 
-from protocol.entity import Appearance, WeaponState, make_entity_requests
+from protocol.entity import Appearance
 from protocol.events import JointUpdates
-from server.soldier.manager import REQUEST_OK, SoldierManager
+from tests.soldier_script import driven
 from tests.test_gait_selection import shipped_library
 from tests.test_prone_turn import served
 
@@ -40,19 +40,8 @@ def played(
     """Play ``(time, posture, speed m/s along HEADING)`` requests to a standing DI soldier at HZ; per update
     the time, the clip shown, where he is (``CRAWLING``/``WALKING`` while he steps, else his posture) and his
     joints (radians)."""
-    m = SoldierManager(lib, throttle=0.0, record_clips=True)
-    i = m.create_soldier(figure="DI.fig", weapon="AK_47.fig", now=0.0)
-    pos, vel, out = np.zeros(2), np.zeros(2), []
-    pending = list(script)
-    for k in range(int(until * HZ) + 1):
-        now = k / HZ
-        pos = pos + vel / HZ if k else pos
-        while pending and pending[0][0] <= now + 1e-9:
-            _, app, v = pending.pop(0)
-            vel = ahead(v)
-            rows = make_entity_requests(i, app, WeaponState.DEPLOYED, (*vel, 0.0), HEADING, (*pos, 0.0))
-            assert m.apply_requests(rows, now).tolist() == [REQUEST_OK]
-        m.tick(now)
+    out = []
+    for now, m, i, _, _ in driven(lib, [(t, app, v, HEADING) for t, app, v in script], until, HZ):
         up, info = m.snapshot([i]), m.soldier_info(i)
         where = {"CRAWL": "CRAWLING", "LOCO": "WALKING"}.get(info["mode"], info["posture"])
         where = where if info["mode"] in ("IDLE", "CRAWL", "LOCO") else "PATH"

@@ -12,15 +12,13 @@ import math
 import numpy as np
 import pytest
 
-from protocol.entity import Appearance, WeaponState, make_entity_requests
-from server.soldier.manager import REQUEST_OK, SoldierManager
+from protocol.entity import Appearance
+from tests.soldier_script import Script, driven
 from tests.test_gait_selection import shipped_library
 
 HEADING = 40.0
 BACK = HEADING + 140.0  # a reversal: the 180° pivot less 40° (pivot_rest) over its stances
 TOL_DEG = 2.0
-
-Script = list[tuple[float, Appearance, float, float]]  # (time, posture, speed m/s, compass heading)
 
 
 @pytest.fixture(scope="module")
@@ -37,18 +35,8 @@ def yaw(q: np.ndarray) -> float:
 def run(lib, script: Script, until: float, hz: float) -> list[tuple[float, str, str, float]]:
     """Play ``script`` to a standing DI soldier updated ``hz`` times a second; per update the time, the clip
     shown, his posture (``PATH`` while a path plays) and the yaw of his root as sent."""
-    m = SoldierManager(lib, throttle=0.0, record_clips=True)
-    i = m.create_soldier(figure="DI.fig", weapon="AK_47.fig", now=0.0)
-    pos, vel, out, pending = np.zeros(2), np.zeros(2), [], list(script)
-    for k in range(int(until * hz) + 1):
-        now = k / hz
-        pos = pos + vel / hz if k else pos
-        while pending and pending[0][0] <= now + 1e-9:
-            _, app, v, hd = pending.pop(0)
-            vel = v * np.array([math.sin(math.radians(hd)), math.cos(math.radians(hd))])
-            rows = make_entity_requests(i, app, WeaponState.DEPLOYED, (*vel, 0.0), hd, (*pos, 0.0))
-            assert m.apply_requests(rows, now).tolist() == [REQUEST_OK]
-        m.tick(now)
+    out = []
+    for now, m, i, _, _ in driven(lib, script, until, hz):
         up, info = m.snapshot([i]), m.soldier_info(i)
         where = info["posture"] if info["mode"] == "IDLE" else info["mode"]
         clip = lib.clip_names[int(up.clips[0])].split("/")[-1]

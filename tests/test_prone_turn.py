@@ -24,13 +24,14 @@ from test_server_support import REPO, Client
 
 from peabody.fk import FigureKinematics
 from peabody.quaternion import to_transform
-from protocol.entity import Appearance, WeaponState, make_entity_requests
+from protocol.entity import Appearance
 from protocol.events import JointUpdates, Ready, Subscribe
 from server.app import TtesServer
 from server.config import ServerConfig
-from server.soldier.manager import REQUEST_OK, SoldierManager
+from server.soldier.manager import SoldierManager
 from server.soldier.state import CRAWL_NODE
 from server.startup import ServerWorld
+from tests.soldier_script import driven
 from tests.test_gait_selection import shipped_library
 from tests.test_root_motion import HZ, drive, in_world
 
@@ -371,26 +372,15 @@ def scenario(
     """Play ``(time, posture, speed m/s ahead, heading)`` requests to a DI soldier at STUB_HZ, as the
     stub's scenario recording does; per tick the world positions (cm) of BODY then LIMBS and the clip
     shown."""
-    m = SoldierManager(lib, throttle=0.0, record_clips=True)
-    i = m.create_soldier(figure="DI.fig", weapon="AK_47.fig", now=0.0)
     fset = lib.sets[lib.set_index("DI.fig", "AK_47.fig")]
     kin, sl = FigureKinematics(fset.prototypes[0]), fset.figure_slice("DI.fig")
-    pos, vel, heading, pending = np.zeros(2), np.zeros(2), 0.0, sorted(script)
     joints, roots, entity, headings, clips = [], [], [], [], []
-    for k in range(int(until * STUB_HZ) + 1):
-        now = k / STUB_HZ
-        pos = pos + vel / STUB_HZ if k else pos
-        while pending and pending[0][0] <= now + 1e-9:
-            _, posture, speed, heading = pending.pop(0)
-            vel = speed * np.array([math.sin(math.radians(heading)), math.cos(math.radians(heading))])
-            rows = make_entity_requests(i, posture, WeaponState.DEPLOYED, (*vel, 0.0), heading, (*pos, 0.0))
-            assert m.apply_requests(rows, now).tolist() == [REQUEST_OK]
-        m.tick(now)
+    for _, m, i, pos, heading in driven(lib, script, until, STUB_HZ):
         up = m.snapshot([i])
         joints.append(up.joints[0, sl])
         p = np.asarray(up.figures[0, 0], np.float64)
         roots.append(to_transform(p[:3], p[3:7]))
-        entity.append(pos.copy())
+        entity.append(pos)
         headings.append(heading)
         clips.append(lib.clip_names[int(up.clips[0])])
     g = kin.site_globals(np.asarray(joints, np.float64), np.stack(roots))
