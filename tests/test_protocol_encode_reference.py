@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_protocol_updates import small_tables
 
+from protocol import predicted
 from protocol.update_table import UpdateTable, example_di_table
 from protocol.updates import UpdateDecoder, UpdateEncoder
 
@@ -100,3 +101,13 @@ def test_nothing_changed_sends_nothing(version: int) -> None:
     idx = np.arange(8)
     assert new.encode_codes(idx, codes, 5, 1 << 16) == ref.encode_codes(idx, codes, 5, 1 << 16)
     assert new.encode_codes(idx, codes, 6, 1 << 16) == ref.encode_codes(idx, codes, 6, 1 << 16) == []
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 300), st.integers(1, 80))
+def test_transpose_is_numpys(seed: int, n: int, f: int) -> None:
+    """The residuals' transposed copy (four fields at a time where it can) equals ``a.T``."""
+    a = np.random.default_rng(seed).integers(-(1 << 31), 1 << 31, (n, f)).astype(np.int32)
+    out = np.empty((f, n), np.int32)
+    predicted.transpose(a, out)
+    assert np.array_equal(out, a.T)
