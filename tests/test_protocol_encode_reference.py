@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from test_protocol_updates import small_tables
 
 from protocol import predicted
-from protocol.update_table import UpdateTable, example_di_table
+from protocol.update_table import DofRange, FigureEntry, JointEntry, UpdateTable, example_di_table
 from protocol.updates import UpdateDecoder, UpdateEncoder
 
 DI = example_di_table()
@@ -91,6 +91,22 @@ def test_a_di_crowd_encodes_to_the_frozen_bytes(
 ) -> None:
     """Hundreds of DI soldiers, frames split at 1,500 and 65,535 bytes too."""
     _same_stream(DI, 600, seed, ["next", "next", *steps], max_payload, version)
+
+
+_JOINTS = [
+    JointEntry(f"j{i}", tuple(DofRange("R", -1.0, 1.0, 10 + i % 7) for _ in range(3))) for i in range(30)
+]
+WIDE = UpdateTable(4, "wide.fig", "", (*_JOINTS, FigureEntry("f", -2.0, 2.0, 16, 12)))
+
+
+@settings(max_examples=6, deadline=None)
+@given(st.integers(0, 2**32 - 1), STEPS, st.sampled_from([1, 2]))
+def test_a_table_wider_than_64_fields_encodes_to_the_frozen_bytes(
+    seed: int, steps: list[str], version: int
+) -> None:
+    """97 fields: the diff spans two 64-bit words per soldier."""
+    assert WIDE.layout.nfields > 64
+    _same_stream(WIDE, 300, seed, ["next", *steps], 4000, version)
 
 
 @pytest.mark.parametrize("version", [1, 2])
