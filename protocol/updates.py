@@ -18,6 +18,7 @@ version 2 (per-entry widths, predicted deltas) is :mod:`protocol.predicted`, cho
 from __future__ import annotations
 
 import struct
+import sys
 from collections.abc import Sequence
 
 import numpy as np
@@ -565,7 +566,9 @@ class UpdateEncoder:
             a, b = bounds[f], bounds[f + 1]
             starts[a:b] += frame_word[f] * 64 - fbits[a]
         words = place_groups(rows.groups, starts, int(frame_word[-1]))
-        body = words.byteswap(inplace=True).view(np.uint8).data  # big-endian in place, sliced uncopied
+        if sys.byteorder == "little":  # the wire's words are big-endian: swapped in place, sliced uncopied
+            words.byteswap(inplace=True)
+        body = words.view(np.uint8).data
         index = idx.astype(">u2").tobytes()
         nib_at = np.concatenate([[0], np.cumsum(rows.nibble_count)])
         out: list[bytes] = []
