@@ -4,11 +4,12 @@ its own samples (a front-end writing to a topic it reads hung in ``write``), and
 from __future__ import annotations
 
 import queue
+import random
 import time
 
 import pytest
 
-from server.fabric import FabricConfig, Kind
+from server.fabric import DDS_DOMAIN_MAX, FabricConfig, Kind
 
 pytest.importorskip("cyclonedds")
 
@@ -24,9 +25,10 @@ def _heard(fabric: DdsFabric, topic: str) -> queue.Queue[bytes]:
 
 
 def test_a_node_hears_its_domain_not_itself_nor_another_domain() -> None:
-    config = FabricConfig("dds", "127.0.0.1:7400")
+    mine = random.randrange(1, DDS_DOMAIN_MAX)  # not another run's on this host
+    config = FabricConfig("dds", "127.0.0.1:7400", domain=mine)
     a, b = DdsFabric(config), DdsFabric(config)
-    other = DdsFabric(FabricConfig("dds", "127.0.0.1:7400", domain=7))
+    other = DdsFabric(FabricConfig("dds", "127.0.0.1:7400", domain=mine + 1))
     try:
         topic = "ttes/test/dds"
         at_a, at_b, at_other = _heard(a, topic), _heard(b, topic), _heard(other, topic)
