@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 import numpy as np
 import trio
@@ -72,7 +73,7 @@ def velocity(speed: float, heading: float) -> tuple[float, float, float]:
     return (speed * math.sin(a), speed * math.cos(a), 0.0)
 
 
-async def play(server: TtesServer, c: Client) -> dict[str, np.ndarray]:
+async def play(server: TtesServer, c: Client) -> dict[str, Any]:
     """Send SCRIPT's requests (server time) for soldier 0 as an image generator dead-reckoning its entity
     would; half a tick after each tick, the tick's time, the entity's position (m) and heading (radians)
     then, and soldier 0's and the reference's decoded ``(dofs, positions, orientations)`` as they stand."""
@@ -102,10 +103,11 @@ async def play(server: TtesServer, c: Client) -> dict[str, np.ndarray]:
             "poses": poses, "refs": refs}  # fmt: skip
 
 
-def jack(world: ServerWorld, decoded: list) -> tuple[np.ndarray, np.ndarray]:
+def jack(world: ServerWorld, decoded: list[Any]) -> tuple[np.ndarray, np.ndarray]:
     """Decoded wire poses ``(dofs, positions, orientations)`` back in Jack units, as a client posing the
     figure does (docs/PROTOCOL.md §7): the soldier figure's joints ``(n, dofs)`` (radians, cm) and its root
     placement ``(n, 7)`` (cm, quaternion w, x, y, z; Jack axes)."""
+    assert world.manager is not None
     lib = world.manager.library
     fset = lib.sets[lib.set_index("DI.fig", "AK_47.fig")]
     kinds = [d.kind for j in fset.prototypes[0].joints.values() for d in j.dofs]
@@ -116,9 +118,10 @@ def jack(world: ServerWorld, decoded: list) -> tuple[np.ndarray, np.ndarray]:
     return joints, np.concatenate([pos, quat], axis=1)
 
 
-def sole_points(world: ServerWorld, run: dict) -> tuple[np.ndarray, np.ndarray]:
+def sole_points(world: ServerWorld, run: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """World ground positions ``(n, feet, points, 2)`` (cm) and heights ``(n, feet, points)`` of soldier
     0's sole points, from the decoded poses placed at the dead-reckoned entity."""
+    assert world.manager is not None
     lib = world.manager.library
     fset = lib.sets[lib.set_index("DI.fig", "AK_47.fig")]
     local = feet_points(FigureKinematics(fset.prototypes[0]), *jack(world, run["poses"]))
@@ -154,14 +157,14 @@ async def test_served_a_pivot_asked_to_kneel_keeps_its_feet_and_kneels_facing_hi
     and at rest."""
     async with served() as (server, world, c):
         run = await play(server, c)
-        shown = [s.clip.split("/")[-1] for s in world.manager.clip_log if s.index == 0]
+        m = world.manager
+        assert m is not None
+        shown = [s.clip.split("/")[-1] for s in m.clip_log if s.index == 0]
         assert "turn_r180_low" in shown and "ststow2kstow_low" in shown, shown
         pts, height = sole_points(world, run)
         slides = stance_slides(pts, height)
         assert slides and max(slides) <= SKATE_CM, sorted(slides)[-3:]
-        knelt = [s for s in world.manager.clip_log if s.index == 0 and s.clip.endswith("ststow2kstow_low")][
-            -1
-        ]
+        knelt = [s for s in m.clip_log if s.index == 0 and s.clip.endswith("ststow2kstow_low")][-1]
         k = int(np.searchsorted(run["t"], knelt.time + knelt.duration - 1e-6)) - 1  # the kneel's last pose
         faces = [yaw(q) for q in jack(world, run["poses"])[1][:, 3:7]]
         ref = yaw(jack(world, run["refs"][-1:])[1][0, 3:7])
