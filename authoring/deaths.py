@@ -171,6 +171,10 @@ class DeathSpec:
     # the slave's feet are held where its own feet land in the master's last stance (slave_feet): laid by
     # the root alone, ststow2dead's DI trunk took its feet along after they landed (3.1 cm)
     slave_feet_landed: bool = False
+    # the slave's hands and forearms on the ground keep their place and turn where they come to rest, last
+    # (authoring.slave_arms): stfire2dead's DI left hand rolled under rest_limbs' frame-by-frame solve as its
+    # trunk settled, its nodes sliding 4.0 cm where the master's lay still
+    slave_arms_pinned: bool = False
     # frames: the slaves' neck and head keep their start posture's pose (the node's, which the build snaps
     # their first frame to) and blend into the solved fall over this many (authoring.build.snap_endpoints)
     slave_head_held: int = 0
@@ -289,6 +293,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         pinned=True,
         legs_roll=STFIRE_LEGS_ROLL,
         toss_to=STFIRE_TOSS,
+        slave_arms_pinned=True,
     ),
     DeathSpec(
         "kstow2dead",
