@@ -241,10 +241,13 @@ def slave_one(
     # DI's kneecaps sit higher than the master's and its prone forearms float: put them down where his are;
     # its feet held where his are planted (the body no longer moves under them); last, a dead DI's trunk
     # turned so its pelvis and chest both rest on the ground (its torso is shaped differently), holding a
-    # foot it hovers over the ground where the death asks (DeathSpec.slave_feet_held); then, where it asks
+    # foot it hovers over the ground and sliding its resting parts as far as the death asks
+    # (DeathSpec.slave_feet_held, slave_rest_slide_cm); then, where it asks
     # (DeathSpec.slave_arms_pinned), its hands and forearms on the ground held still where they come to rest
     spec = deaths.death_specs().get(chset.name.removesuffix(".chset"))
-    trunk = partial(rest_slave_trunk, feet_held=True) if spec and spec.slave_feet_held else rest_slave_trunk
+    trunk: Callable[[Channelset, Channelset, FigureSet], object] = rest_slave_trunk
+    if spec and (spec.slave_feet_held or spec.slave_rest_slide_cm is not None):
+        trunk = partial(rest_slave_trunk, feet_held=spec.slave_feet_held, slide_cm=spec.slave_rest_slide_cm)
     rests: tuple[Callable[[Channelset, Channelset, FigureSet], object], ...] = (
         rest_slave_knees,
         rest_slave_forearms,
