@@ -163,6 +163,10 @@ class DeathSpec:
     # feet_held): kfire2dead's DI, its trunk turned to rest, lowered its hovering right foot onto the ground
     # while it moved (skate 0.32 -> 4.06 cm once he was turned least-worst)
     slave_feet_held: bool = False
+    # cm: how far the slaves' trunk rest may move a part resting on the ground (slave_rest; None: its
+    # SLIDE_CM, 0.8): kfire2dead's DI pelvis, bridged between its belly and left thigh on the ground, came
+    # down only to 2.34 cm (the check's rest limit 2) with the hands, knee, thigh and foot held to 0.8
+    slave_rest_slide_cm: float | None = None
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     slave_arm_out: bool = False  # the DI slave's arms in the ground go out sideways (slave_ground.rest_limbs)
     # the slave's trunk is laid by its root alone (slave_ground.rest_limbs): with its spine in the torso's
@@ -171,6 +175,10 @@ class DeathSpec:
     # the slave's feet are held where its own feet land in the master's last stance (slave_feet): laid by
     # the root alone, ststow2dead's DI trunk took its feet along after they landed (3.1 cm)
     slave_feet_landed: bool = False
+    # the slave's hands and forearms on the ground keep their place and turn where they come to rest, last
+    # (authoring.slave_arms): stfire2dead's DI left hand rolled under rest_limbs' frame-by-frame solve as its
+    # trunk settled, its nodes sliding 4.0 cm where the master's lay still
+    slave_arms_pinned: bool = False
     # frames: the slaves' neck and head keep their start posture's pose (the node's, which the build snaps
     # their first frame to) and blend into the solved fall over this many (authoring.build.snap_endpoints)
     slave_head_held: int = 0
@@ -261,6 +269,9 @@ PRSTOW_HEAD_HELD = 24
 # 32 cm clear of him and the trunk rests 1.7 cm up (right and down (1, -0.7, 0): his thighs skid 5.7 cm as
 # he lands; back, or left and back, it ends under him again; at 100 N it rests tilted 38 cm up against him)
 STFIRE_TOSS = (1.0, -0.5, 0.2)
+# cm: kfire2dead's slaves' trunk rest may slide a resting part this far (DeathSpec.slave_rest_slide_cm): their
+# pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds)
+KFIRE_REST_SLIDE = 1.5
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "ststow2dead",
@@ -289,6 +300,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         pinned=True,
         legs_roll=STFIRE_LEGS_ROLL,
         toss_to=STFIRE_TOSS,
+        slave_arms_pinned=True,
     ),
     DeathSpec(
         "kstow2dead",
@@ -317,6 +329,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         plant_worst=True,
         turn_worst=True,
         slave_feet_held=True,
+        slave_rest_slide_cm=KFIRE_REST_SLIDE,
     ),
     replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD),  # not eased: see
     # PRONE_START_EASE
