@@ -74,9 +74,12 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 8. **a kneeling soldier's legs roll off the ground** (:attr:`DeathSpec.legs_lift`, last): a foot or knee
    that would skid more than a centimetre lifts clearly off the ground until it comes to rest, carried by
    the leg's own joints (:mod:`authoring.leg_lift`; kstow2dead's and kfire2dead's feet slid 4.8-4.9 cm,
-   their kneeling knees 5.9-6.1); then kfire2dead, whose trunk still spins on the ground as he lands (belly
-   3.3, chest 3.7 cm), is shifted and turned about the vertical as a whole so that each part's worst slide
-   is least (:attr:`DeathSpec.turn_worst`, :func:`authoring.planted.least_worst_turned`: 5 degrees at most);
+   their kneeling knees 5.9-6.1); kstow2dead's legs' change by the pin and the lift is smoothed where it
+   flicks (:attr:`DeathSpec.legs_eased`, :func:`authoring.leg_lift.eased_legs`: the right foot's pin let its
+   stretched knee go 19 degrees in one frame); then kfire2dead, whose trunk still spins on the ground as he
+   lands (belly 3.3, chest 3.7 cm), and kstow2dead (its left thigh 4.5, chest 4.5 cm) are shifted and turned
+   about the vertical as a whole so that each part's worst slide is least (:attr:`DeathSpec.turn_worst`,
+   :func:`authoring.planted.least_worst_turned`: 5 degrees at most);
 
 9. **prfire2dead leaves its posture from rest** (:attr:`DeathSpec.start_ease`, last): the finished clip
    is retimed so that it starts from standstill (:func:`authoring.easing.eased_in`, lengthened by half the
@@ -103,7 +106,7 @@ from authoring import dead_crawl, dead_settle
 from authoring.contact_pin import pin_frames
 from authoring.easing import eased_in
 from authoring.knee_hold import hold_knees
-from authoring.leg_lift import lifted
+from authoring.leg_lift import eased_legs, lifted
 from authoring.motion import KeyPosture
 from authoring.planted import least_worst_turned, plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
@@ -156,6 +159,10 @@ class DeathSpec:
     # he lands on skids in the physics, 7.37 -> 3.92 cm; kstow2dead's thigh 4.51 -> 2.53 but then its arms'
     # fall slid the chest 5.87: planted.plant_least_worst)
     plant_worst: bool = False
+    # frames (Gaussian sigma): the legs' change by the pins and the lift smoothed over the clip
+    # (leg_lift.eased_legs): kstow2dead's right foot's pin stretched the knee as the leg came down and let
+    # it go 19 degrees in a frame, its lift turned an ankle 10 degrees for one frame (flicks)
+    legs_eased: float = 0.0
     # once his legs are lifted, he is shifted and turned about the vertical so that each part's worst slide
     # is least (kfire2dead's trunk, 3.3-3.7 cm: planted.least_worst_turned)
     turn_worst: bool = False
@@ -167,6 +174,11 @@ class DeathSpec:
     # SLIDE_CM, 0.8): kfire2dead's DI pelvis, bridged between its belly and left thigh on the ground, came
     # down only to 2.34 cm (the check's rest limit 2) with the hands, knee, thigh and foot held to 0.8
     slave_rest_slide_cm: float | None = None
+    # the slaves hold a foot where it is on the ground in each of the master's stances even where its knee
+    # is down too (slave_feet.plant_slave_feet; else only in his last stance): kstow2dead's DI, its left knee
+    # down, dragged that foot 9.5 cm (frames 52-64) once the master's right hip no longer flicked at frame 61
+    # (the flick had lifted the whole DI 2-3 cm off the ground there, build.lift_off_ground)
+    slave_feet_knelt: bool = False
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     slave_arm_out: bool = False  # the DI slave's arms in the ground go out sideways (slave_ground.rest_limbs)
     # the slave's trunk is laid by its root alone (slave_ground.rest_limbs): with its spine in the torso's
@@ -272,6 +284,12 @@ STFIRE_TOSS = (1.0, -0.5, 0.2)
 # cm: kfire2dead's slaves' trunk rest may slide a resting part this far (DeathSpec.slave_rest_slide_cm): their
 # pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds)
 KFIRE_REST_SLIDE = 1.5
+# frames: kstow2dead's legs' flicking change by the pin and the lift smoothed (DeathSpec.legs_eased): the
+# worst flick 18.7 degrees (right knee) -> 7.5 (the left wrist's, untouched), the ankles' 12.7 -> 1.9, its
+# DI/M16 slaves' ankle 16.6 -> 2.6; turned least-worst last too (DeathSpec.turn_worst), its left thigh's slide
+# as he lands 4.51 -> 2.02 cm and the chest's 4.48 -> 3.00 (plant_worst got the thigh 2.53 but its arms' fall
+# then slid the chest 5.87)
+KSTOW_LEGS_EASED = 1.5
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "ststow2dead",
@@ -314,6 +332,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         pinned=True,
         arms_fall=True,
         legs_lift=True,
+        legs_eased=KSTOW_LEGS_EASED,
+        turn_worst=True,
+        slave_feet_knelt=True,
     ),
     DeathSpec(
         "kfire2dead",
@@ -664,9 +685,10 @@ def _after_physics(
     the ground held and (:attr:`DeathSpec.pinned`) its limbs on the ground held where they touched down
     (steps 5-7 of the module docstring), then (:attr:`DeathSpec.legs_lift`) its feet and knees that would
     skid lifted (step 8)."""
-    planted = plant_least_worst if spec.plant_worst else plant
-    frames = _held(spec, planted(frames, figures[0]), figures, release)
+    planted = (plant_least_worst if spec.plant_worst else plant)(frames, figures[0])
+    frames = _held(spec, planted, figures, release)
     frames = lifted(frames, figures[0]) if spec.legs_lift else frames
+    frames = eased_legs(planted, frames, figures[0], spec.legs_eased) if spec.legs_eased else frames
     return least_worst_turned(frames, figures[0]) if spec.turn_worst else frames
 
 

@@ -273,7 +273,8 @@ def _leg_goal(
     if master_turn is None:
         move = plant_offsets(foot_pts, stance)
         move[:, 1] = lift_to_master(foot_pts[..., 1].min(axis=1), master_low)
-        move *= (np.maximum(u, _last_rest(stance)) if death else u)[:, None]
+        if death != "kneeling":  # (a death whose slaves hold every stance: DeathSpec.slave_feet_knelt)
+            move *= (np.maximum(u, _last_rest(stance)) if death else u)[:, None]
     else:
         # a knee coming down fast let the toes go in 3 frames (40 degrees in one): eased over more
         u = 1.0 - _smooth_above(1.0 - u, KNEE_SIGMA_FRAMES)
@@ -490,6 +491,8 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
     spec = deaths.death_specs().get(master.name.split(".", 1)[0])
     landed = turns["left"] is not None and spec is not None and spec.slave_feet_landed
     death = ("landed" if landed else "dying") if dying else ""
+    if dying and spec is not None and spec.slave_feet_knelt:
+        death = "kneeling"
     kin = figures.kin[stype]
     thighs = kin.site_globals(q, loc)  # the thighs as slaved (a lying leg keeps its thigh)
     pose = q
