@@ -49,7 +49,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
    left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
    and lifted clear of the ground while they move (:mod:`authoring.dead_prone`), a crawler's pelvis and
-   belly first, turned down about his thighs (:attr:`DeathSpec.sunk`, :mod:`authoring.dead_crawl`); a
+   belly first, turned down about his thighs (:attr:`DeathSpec.sunk`, :mod:`authoring.dead_crawl`), and its
+   feet go slack, the ankles pointing into their passive range before the legs roll, the shins on the
+   ground (:attr:`DeathSpec.slack_feet`: he lay on his toes, heels 16-21 cm up); a
    body on its back (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way, as it
    lands, over the physics' last frames (a faint arm tone in the physics made the DI slaves' feet jump and
    slide, branch ``legsup14-kfire``; after the physics, the arm hung in the air 1.5 s after he lay still).
@@ -108,6 +110,7 @@ from authoring.easing import eased_in
 from authoring.knee_hold import hold_knees
 from authoring.leg_lift import eased_legs, lifted
 from authoring.motion import KeyPosture
+from authoring.passive_range import passive_figure
 from authoring.planted import least_worst_turned, plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
 from authoring.quality_frames import FigureSet
@@ -214,6 +217,11 @@ class DeathSpec:
     # a crawler's trunk comes down about his thighs after the physics, before the chest and head settle
     # (:func:`authoring.dead_crawl.sunk`): his kept arms held the pelvis and belly 4-5 cm up
     sunk: bool = False
+    # a prone death's feet go slack after he has landed (issue 14: the ragdoll left him on his toes, heels
+    # 16-21 cm up): the settle points the ankles into their passive range and straightens the knees before
+    # the legs roll (:data:`authoring.dead_legs.FEET_LEADS`), the shins staying on the ground; after the
+    # physics, on the figure with the legs' passive range (:mod:`authoring.passive_range`)
+    slack_feet: bool = False
 
 
 def _prone(
@@ -234,6 +242,7 @@ def _prone(
         knee_damping=knee_damping,
         propped=True,
         pinned=pinned,
+        slack_feet=True,
     )
 
 
@@ -701,8 +710,18 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
     if spec.sunk:  # a crawler's trunk comes down about his thighs first
         frames = dead_crawl.sunk(FigureSet({"body": soldier, "rifle": rifle}), frames)
+    if spec.slack_feet:  # settled and pinned past a live soldier's ankles (authoring.passive_range)
+        soldier = passive_figure(soldier)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle)
+    frames = dead_settle.settle(
+        frames,
+        soldier,
+        rifle,
+        spec.arms_fall,
+        spec.propped,
+        legs=spec.legs_settle,
+        slack_feet=spec.slack_feet,
+    )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:
