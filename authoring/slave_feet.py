@@ -44,7 +44,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from authoring import deaths, ik
+from authoring import ik
 from authoring.postures import leg
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
@@ -485,6 +485,8 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
 
         turns = {side: (seg(f"{side}_foot"), seg(f"{side}_toes")) for side in SIDES}
     lying = getattr(slave, "release_frame", None) is not None and knelt and loc[0, 1, 3] < LYING_ROOT_CM
+    from authoring import deaths  # here: deaths imports contact_pin, which imports this module
+
     spec = deaths.death_specs().get(master.name.split(".", 1)[0])
     landed = turns["left"] is not None and spec is not None and spec.slave_feet_landed
     death = ("landed" if landed else "dying") if dying else ""
