@@ -268,8 +268,11 @@ CRAWL_DEATH = replace(
 )
 # s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
 # ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands
-# (10.1/11.4 cm; 18.3/20.0 to the active range over 1 s), the thighs sliding no further
-LEGS_ROLL = 0.5
+# (10.1/11.4 cm; 18.3/20.0 to the active range over 1 s), the thighs sliding no further. Over 0.5 s the right
+# hip was still rolling out as he landed on that thigh (frames 83-97): its nodes slid 3.30 cm over the
+# ground; over 0.4 s the roll is done sooner, 2.78 (0.35: thigh 2.46 but the head 3.38 as he settles; 0.45:
+# head 3.55 and an ankle flick of 8.5 degrees: the fall is chaotic in these, each was measured)
+LEGS_ROLL = 0.4
 # s: stfire2dead's (heels 15.4 -> 15.1 cm and its knee's rebound 3.9 -> 2.5 cm; over 0.6 s its left foot slid
 # 6.3 cm as he landed, over 0.7 s the heel lay at 19.4: the fall is chaotic in these, each was measured)
 STFIRE_LEGS_ROLL = 0.8
