@@ -240,9 +240,14 @@ def slave_one(
     # DI's kneecaps sit higher than the master's and its prone forearms float: put them down where his are;
     # its feet held where his are planted (the body no longer moves under them); last, a dead DI's trunk
     # turned so its pelvis and chest both rest on the ground (its torso is shaped differently), holding a
-    # foot it hovers over the ground where the death asks (DeathSpec.slave_feet_held)
+    # foot it hovers over the ground (DeathSpec.slave_feet_held) or an arm lying there at the end
+    # (DeathSpec.slave_arms_held) where the death asks
     spec = deaths.death_specs().get(chset.name.removesuffix(".chset"))
-    trunk = partial(rest_slave_trunk, feet_held=True) if spec and spec.slave_feet_held else rest_slave_trunk
+    trunk = partial(
+        rest_slave_trunk,
+        feet_held=bool(spec and spec.slave_feet_held),
+        arms_held=bool(spec and spec.slave_arms_held),
+    )
     rests = (
         rest_slave_knees,
         rest_slave_forearms,
