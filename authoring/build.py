@@ -241,13 +241,16 @@ def slave_one(
     # DI's kneecaps sit higher than the master's and its prone forearms float: put them down where his are;
     # its feet held where his are planted (the body no longer moves under them); last, a dead DI's trunk
     # turned so its pelvis and chest both rest on the ground (its torso is shaped differently), holding a
-    # foot it hovers over the ground and sliding its resting parts as far as the death asks
-    # (DeathSpec.slave_feet_held, slave_rest_slide_cm); then, where it asks
-    # (DeathSpec.slave_arms_pinned), its hands and forearms on the ground held still where they come to rest
+    # foot it hovers over the ground (DeathSpec.slave_feet_held), sliding its resting parts as far as the
+    # death asks (slave_rest_slide_cm) or holding an arm lying there at the end (slave_arms_held); then,
+    # where it asks (slave_arms_pinned), its hands and forearms on the ground held still where they rest
     spec = deaths.death_specs().get(chset.name.removesuffix(".chset"))
-    trunk: Callable[[Channelset, Channelset, FigureSet], object] = rest_slave_trunk
-    if spec and (spec.slave_feet_held or spec.slave_rest_slide_cm is not None):
-        trunk = partial(rest_slave_trunk, feet_held=spec.slave_feet_held, slide_cm=spec.slave_rest_slide_cm)
+    trunk: Callable[[Channelset, Channelset, FigureSet], object] = partial(
+        rest_slave_trunk,
+        feet_held=bool(spec and spec.slave_feet_held),
+        slide_cm=spec.slave_rest_slide_cm if spec else None,
+        arms_held=bool(spec and spec.slave_arms_held),
+    )
     rests: tuple[Callable[[Channelset, Channelset, FigureSet], object], ...] = (
         rest_slave_knees,
         rest_slave_forearms,

@@ -182,6 +182,10 @@ class DeathSpec:
     # down, dragged that foot 9.5 cm (frames 52-64) once the master's right hip no longer flicked at frame 61
     # (the flick had lifted the whole DI 2-3 cm off the ground there, build.lift_off_ground)
     slave_feet_knelt: bool = False
+    # the slaves' trunk rest holds an upper arm or forearm lying on the ground at the end where it lands
+    # (slave_rest arms_held): prfire2dead's DI/M16, the trunk lowered under a right arm still swinging in,
+    # touched down and swept it 3.8/4.2 cm along the ground
+    slave_arms_held: bool = False
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     slave_arm_out: bool = False  # the DI slave's arms in the ground go out sideways (slave_ground.rest_limbs)
     # the slave's trunk is laid by its root alone (slave_ground.rest_limbs): with its spine in the torso's
@@ -366,7 +370,7 @@ DEATHS: tuple[DeathSpec, ...] = (
     ),
     replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD),  # not eased: see
     # PRONE_START_EASE
-    _prone_dead("prfire2dead", "PRONE_FIRE"),
+    replace(_prone_dead("prfire2dead", "PRONE_FIRE"), slave_arms_held=True),
     CRAWL_DEATH,
 )
 SLUMP = "SLUMP"  # the in-between key of a body crumpling onto its knees (authoring.postures)

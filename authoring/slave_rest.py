@@ -21,6 +21,11 @@ A death may let the resting parts slide further than ``SLIDE_CM``
 (:attr:`~authoring.deaths.DeathSpec.slave_rest_slide_cm`): kfire2dead's DI pelvis lies bridged between its
 belly and left thigh, and with its hands, knee, thigh and foot held to 0.8 cm the search brought it down
 only to 2.34 cm (1.54 at 1.5 cm).
+
+With ``arms_held`` (:attr:`~authoring.deaths.DeathSpec.slave_arms_held`) an upper arm or forearm lying on
+the ground at the end is held where it lands there (:func:`_hold_arms`): prfire2dead's DI and M16, the
+trunk lowered under a right arm still swinging in beside the body (the master's settle lays it anew, and
+the slave's spine still turns), touched down 0.2 s before the end and swept 3.8-4.2 cm along the ground.
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ from authoring.postures import leg
 from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import SIDES, _played
 from authoring.slave_feet import KNEE_DOWN_CM, NEAR_CM, part_points
-from authoring.slave_ground import PART_SITES, _write
+from authoring.slave_ground import PART_SITES, _chain, _write
 from authoring.transitions import track_solve
 from peabody.fk import FigureKinematics
 from server.motion.channelset import Channelset
@@ -59,6 +64,9 @@ END_HOLD_FRAMES = 4  # still, and is in full this many frames before the end (a 
 HOLD_ITERATIONS = 20  # a held foot's leg is tracked frame after frame (slave_feet's tracking) ...
 HOLD_DOF_STEP = 0.01  # ... in steps of at most this (rad)
 HOLD_TURN_CM = 40.0  # a radian of a held foot's turn weighs this much move: held firmly
+ARM_PARTS = tuple(f"{s}_{p}" for s in SIDES for p in ("upper_arm", "forearm"))  # held where they land ...
+ARM_DOWN_CM = 1.25  # ... lying this low (the check's contact height) from then to the last frame ...
+ARM_HELD_SITES = ("lower_arm.proximal", "lower_arm.distal")  # ... by the elbow and the wrist
 # the searched parameters: a root turn about world x or z through the ground under the trunk, or a DOF
 PARAMS = (
     ("root", 0),
@@ -284,17 +292,68 @@ def _hold_feet(
     return poses
 
 
+def _landed_arms(
+    q: np.ndarray, loc: np.ndarray, figures: FigureSet, ptype: str, frames: np.ndarray
+) -> dict[str, int]:
+    """Per side (``left``, ``right``) whose upper arm or forearm (:data:`ARM_PARTS`) lands on the ground
+    (``ARM_DOWN_CM``) within ``frames`` and lies there to the last of them: the frame it lands (the
+    earlier of the two). A part already lying there at the first of ``frames`` is left to the search's
+    bounds."""
+    lows = _lows(figures, ptype, q[frames], loc[frames])
+    out: dict[str, int] = {}
+    for part in ARM_PARTS:
+        down = lows.get(part, np.full(len(frames), np.inf)) <= ARM_DOWN_CM
+        up = np.flatnonzero(~down)
+        if not down[-1] or not len(up):
+            continue
+        side = part.split("_", 1)[0]
+        out[side] = min(out.get(side, len(q)), int(frames[up[-1] + 1]))
+    return out
+
+
+def _hold_arms(
+    kin: FigureKinematics, poses: np.ndarray, locs: np.ndarray, landed: dict[str, int]
+) -> np.ndarray:
+    """``poses`` with each ``landed`` side's arm (clavicle to wrist) keeping from the frame it lands on
+    (:func:`_landed_arms`) the angles it lands with, and its clavicle, shoulder and elbow solved to keep its
+    elbow and wrist where they are as it lands, within about a centimetre (prfire2dead's DI/M16 upper arm
+    still slides 1.4 cm): the slave's spine still turns there (its trunk laid onto the ground) and carried
+    the shoulder 3 cm. Held only along the ground (their heights as the kept angles
+    put them), the elbow went into it and the build's lift raised the whole body 0.7-0.9 cm; solved from the
+    slaved pose with the elbow alone held, tracked frame after frame, the redundant arm swung its hand
+    17 cm."""
+    out = poses.copy()
+    rows = np.arange(min(landed.values()), len(poses))
+    goals = []
+    for side, f in landed.items():
+        chain = _chain(f"{side}_upper_arm.deltoid")
+        for joint in chain:
+            out[f:, kin.dof_slices[joint]] = poses[f, kin.dof_slices[joint]]
+        sites = kin.site_globals(out[rows], locs[rows])[..., :3, 3]
+        for site in (f"{side}_{s}" for s in ARM_HELD_SITES):
+            at = sites[:, kin.site_names.index(site)]
+            at[rows > f] = at[rows == f]
+            goals.append(ik.Goal(site, at, None, (rows >= f).astype(np.float64), 1, chain[:-1]))
+    out[rows], _ = ik.solve(
+        kin, out[rows], goals, locs[rows], iterations=40,
+        damping=2.0, rest_pose=out[rows], rest_gain=0.05, tolerance=0.05, max_dof_step=0.05,
+    )  # fmt: skip
+    return out
+
+
 def rest_slave_trunk(
     master: Channelset,
     slave: Channelset,
     figures: FigureSet,
     feet_held: bool = False,
     slide_cm: float | None = None,
+    arms_held: bool = False,
 ) -> np.ndarray:
     """Turn a dead slave's body and lumbar so its pelvis and chest or belly rest on the ground at the end
     (``slave``'s joint and body channels, in place; a clip without a ``release_frame`` is left alone); with
     ``feet_held`` a foot near the ground whose knee is up stays where it was (:func:`_hold_feet`);
-    ``slide_cm``: how far a resting part's sites may move along the ground (None: :data:`SLIDE_CM`).
+    ``slide_cm``: how far a resting part's sites may move along the ground (None: :data:`SLIDE_CM`); with
+    ``arms_held`` an arm part lying on the ground at the end stays where it lands (:func:`_hold_arms`).
     Returns the parameters found (degrees, in :data:`PARAMS` order)."""
     release = getattr(slave, "release_frame", None)
     if release is None:
@@ -316,5 +375,8 @@ def rest_slave_trunk(
         moved[f, 1, 3] += drop[0] - (1.0 - w[f]) * drop0  # ... and the drop onto the ground, eased in
     if held:
         poses = _hold_feet(figures, stype, (q, loc), (poses, moved @ loc), held, np.flatnonzero(w > 0))
+    landed = _landed_arms(poses, moved @ loc, figures, stype, np.flatnonzero(w > 0)) if arms_held else {}
+    if landed:
+        poses = _hold_arms(figures.kin[stype], poses, moved @ loc, landed)
     _write(slave, figures, stype, poses, moved)
     return x

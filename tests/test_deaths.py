@@ -375,3 +375,5 @@ def test_the_kneeling_fire_death_is_turned_least_worst_once_his_legs_are_lifted(
     assert [d.name for d in deaths.DEATHS if d.slave_feet_knelt] == ["kstow2dead"]
     # ... and its slaves' trunk rest holds the foot they hover (slave_rest feet_held; kneeldeath14)
     assert [d.name for d in deaths.DEATHS if d.slave_feet_held] == ["kfire2dead"]
+    # ... and prfire2dead's alone the arm that lands as their trunk settles (slave_rest arms_held; prfire-s13)
+    assert [d.name for d in deaths.DEATHS if d.slave_arms_held] == ["prfire2dead"]

@@ -16,6 +16,7 @@ from authoring import slave_rest
 from authoring.build import BuildContext
 from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import _played
+from authoring.slave_ground import _write
 from authoring.slave_rest import AIM_CM, EASE_FRAMES, PARAMS, TRUNK_PARTS, _ease, _lows, _Rest, search
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
@@ -169,3 +170,43 @@ def test_kfire2dead_slaves_rest_their_pelvis_on_the_ground(suffix: str) -> None:
     lows = part_lows(play(slave, figs), slave.nframes - 1, figs)
     assert lows["pelvis"] <= 2.0  # the check's rest_contact_cm
     assert lows["chest|belly"] <= 2.0
+
+
+def test_an_arm_landing_as_the_trunk_settles_is_held_where_it_lands(monkeypatch) -> None:
+    """Issue 14 (prfire-s13): prfire2dead's DI slave touched its right upper arm down 0.2 s before the end
+    while the arm still swung in (as the master's settle lays it) and its spine still turned, and swept it
+    3.8 cm along the ground. Here the committed slave's right shoulder turns 6 degrees more after the arm
+    lands. With ``arms_held`` the arm keeps the angles it lands with and its elbow and wrist are held
+    where they are as it lands; nothing before the landing changes."""
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
+    master = load_channelset(CHANNELSETS / "prfire2dead.chset.env", use_cache=False)
+    before = load_channelset(CHANNELSETS / "prfire2dead_low.chset.env", use_cache=False)
+    q0, _, stype = _played(before, figs)
+    kin = figs.kin[stype]
+    n, end = len(q0), len(q0) - 1 - slave_rest.END_HOLD_FRAMES
+    turned = q0.copy()
+    u = np.clip((np.arange(n) - (end - 10)) / 10.0, 0.0, 1.0)
+    turned[:, kin.dof_slices["right_shoulder"].start] += np.radians(6.0) * u * u * (3.0 - 2.0 * u)
+    _write(before, figs, stype, turned, np.tile(np.eye(4), (n, 1, 1)))
+    found = np.zeros(len(PARAMS))
+    found[0] = 0.5  # a small root pitch: what is held is the arm's own sweep
+    monkeypatch.setattr(slave_rest, "search", lambda rest: found)
+    elbow = kin.site_names.index("right_lower_arm.proximal")
+    w = _ease(n, n - 1 - EASE_FRAMES - slave_rest.END_HOLD_FRAMES)
+    swept, landed, poses = {}, {}, {}
+    for held in (False, True):
+        slave = copy.deepcopy(before)
+        slave_rest.rest_slave_trunk(master, slave, figs, arms_held=held)
+        q1, loc1, _ = _played(slave, figs)
+        landed[held] = slave_rest._landed_arms(q1, loc1, figs, stype, np.flatnonzero(w > 0))
+        f = landed[held]["right"]
+        elbows = kin.site_globals(q1[f:], loc1[f:])[:, elbow, :3, 3][:, [0, 2]]
+        swept[held] = np.linalg.norm(elbows - elbows[0], axis=1).max()
+        poses[held] = q1
+    assert landed[False] == landed[True] and "right" in landed[True]
+    f = landed[True]["right"]
+    assert f < end
+    np.testing.assert_array_equal(poses[True][:f], poses[False][:f])
+    assert swept[False] > 2.5, swept  # 2.7 cm
+    assert swept[True] < 1.5, swept  # 1.3: the solve leaves the elbow about a centimetre off (as built)
