@@ -39,6 +39,7 @@ from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_kn
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
 from authoring.slave_rest import rest_slave_trunk
+from authoring.slave_slack import slack_slave_feet
 from authoring.slaving import MasterSlavePair
 from authoring.transitions import ClipFrames, clip_to_channelset
 from peabody.fk import FigureKinematics
@@ -261,6 +262,8 @@ def slave_one(
     )
     if spec and spec.slave_arms_pinned:
         rests += (pin_slave_arms,)
+    if spec and spec.slave_feet_slack:  # last: the feet go slack as his, from where the slave's lay
+        rests += (slack_slave_feet,)
     for rest in rests:
         rest(chset, out, ctx.figure_set)
         lift_off_ground(out, ctx.di)

@@ -226,6 +226,9 @@ class DeathSpec:
     # the legs roll (:data:`authoring.dead_legs.FEET_LEADS`), the shins staying on the ground; after the
     # physics, on the figure with the legs' passive range (:mod:`authoring.passive_range`)
     slack_feet: bool = False
+    # the slaves' ankles and toes take the master's angles as his feet go slack (authoring.slave_slack):
+    # solved to his foot's points, crawl2dead's DI lay on its toes curled to their limit, heels 19.3 cm up
+    slave_feet_slack: bool = False
 
 
 def _prone(
@@ -269,6 +272,7 @@ CRAWL_DEATH = replace(
     kept_tone=0.3,
     sunk=True,
     slave_arm_out=True,
+    slave_feet_slack=True,
 )
 # s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
 # ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands
