@@ -35,7 +35,7 @@ KNEE_SIGMA_FRAMES = 3.0  # ... the least that lifts it out, smoothed over the cl
 def slack_progress(angles: np.ndarray) -> np.ndarray:
     """Per frame how far ``(n,)`` the master's feet (``angles`` ``(n, k)``, radians) have gone slack: 0 up to
     the end of his last still spell (``STILL_FRAMES`` or more) before his feet's last move, then the share of
-    that move's angle change (summed over the joints) done, 1 from its end. None where his feet never rest
+    that move's angle change (summed over the joints) done, 1 from its end. All 0 where his feet never rest
     and then move."""
     n = len(angles)
     change = np.degrees(np.abs(np.diff(angles, axis=0))).sum(axis=1)  # change[i]: into frame i + 1
