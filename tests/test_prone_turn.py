@@ -204,17 +204,16 @@ def test_a_crawler_reversing_comes_round_carried_along_his_new_heading(lib, spee
 
 @pytest.mark.parametrize(
     ("turn", "clip"),
-    [(150.0, "r150"), (135.0, "r135"), (165.0, "r165"), (-165.0, "l165"), (-150.0, "l165")],
+    [(150.0, "r150"), (135.0, "r135"), (165.0, "r165"), (-165.0, "l165")],
 )
 def test_a_crawler_turning_nearly_back_comes_round_with_the_shorter_u_turn(
     lib, turn: float, clip: str
 ) -> None:
-    """135-165° to his right, 150-165° to his left: the U-turn of that angle (to his left the 165° one, the
-    rest turned crawling on), carried along the new heading as the 180° one is;
-    he ends it within U_TURN_CM of his entity and the stop within REVERSAL_CM (150°: the 90° and 30° on
-    the spot and the 30° arc, 108 cm and 52 after the stop; 165°: the 180° U-turn and 15° crawling on, 34
-    and 48; 135°: the 90° on the spot and the 45° arc, 82 and 11; to his left, before crawlarc_l165,
-    -150°: the 90° and 30° on the spot and the 30° arc, -165°: the 180° U-turn the long way round)."""
+    """135-165° to his right, 165° to his left: the U-turn of that angle, carried along the new heading as the
+    180° one is; he ends it within U_TURN_CM of his entity and the stop within REVERSAL_CM (150°: the 90° and
+    30° on the spot and the 30° arc, 108 cm and 52 after the stop; 165°: the 180° U-turn and 15° crawling on,
+    34 and 48; 135°: the 90° on the spot and the 45° arc, 82 and 11; to his left, before crawlarc_l165, -150°:
+    the 90° and 30° on the spot and the 30° arc, -165°: the 180° U-turn the long way round)."""
     run = reversal(lib, 0.3, turn)
     shown = [c.split("/")[-1] for c in run["clips"].tolist()]
     assert sorted({c for c in shown if "turn_" in c or "arc_" in c}) == [f"crawlarc_{clip}_low"]
