@@ -34,6 +34,7 @@ from authoring import crawl, crawl_prone, crawl_turn, deaths, gait, postures, re
 from authoring.motion import KeyPosture
 from authoring.passive_range import passive_figure, past_live_limits
 from authoring.quality_frames import FigureSet, play
+from authoring.slave_arms import pin_slave_arms
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
@@ -240,10 +241,14 @@ def slave_one(
     # DI's kneecaps sit higher than the master's and its prone forearms float: put them down where his are;
     # its feet held where his are planted (the body no longer moves under them); last, a dead DI's trunk
     # turned so its pelvis and chest both rest on the ground (its torso is shaped differently), holding a
-    # foot it hovers over the ground where the death asks (DeathSpec.slave_feet_held)
+    # foot it hovers over the ground and sliding its resting parts as far as the death asks
+    # (DeathSpec.slave_feet_held, slave_rest_slide_cm); then, where it asks
+    # (DeathSpec.slave_arms_pinned), its hands and forearms on the ground held still where they come to rest
     spec = deaths.death_specs().get(chset.name.removesuffix(".chset"))
-    trunk = partial(rest_slave_trunk, feet_held=True) if spec and spec.slave_feet_held else rest_slave_trunk
-    rests = (
+    trunk: Callable[[Channelset, Channelset, FigureSet], object] = rest_slave_trunk
+    if spec and (spec.slave_feet_held or spec.slave_rest_slide_cm is not None):
+        trunk = partial(rest_slave_trunk, feet_held=spec.slave_feet_held, slide_cm=spec.slave_rest_slide_cm)
+    rests: tuple[Callable[[Channelset, Channelset, FigureSet], object], ...] = (
         rest_slave_knees,
         rest_slave_forearms,
         tilt_onto_knees,
@@ -251,6 +256,8 @@ def slave_one(
         plant_slave_feet,
         trunk,
     )
+    if spec and spec.slave_arms_pinned:
+        rests += (pin_slave_arms,)
     for rest in rests:
         rest(chset, out, ctx.figure_set)
         lift_off_ground(out, ctx.di)

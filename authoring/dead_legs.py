@@ -23,6 +23,11 @@ within 1 cm) may rise before that rest frame (``free``, the settle's progress th
 heels 21-24 cm up, that no lift of 2 degrees or less laid lower (branch stfire14-wip): a leg flopping over
 as he lands, lifted 6 degrees, lays them 11.3 cm up.
 
+A prone death's feet **go slack** (``slack_feet``, :attr:`authoring.deaths.DeathSpec.slack_feet`, on the
+figure with the legs' passive range): besides those paths, each leg tries one on the ground (no lift) whose
+knee, ankle pointing and toes go first (:data:`FEET_LEADS`), the toes lifting as the shin comes down, and
+only then rolls out; lifted or rolled first, the toes dug in stop the shin.
+
 soldier.fig's limits leave the heels 12.4-15.7 cm up (hip turned out 45 deg, foot everted 30 deg, ankle
 pointed 50 deg, the knee bent so the foot rests on its inner edge), but reaching that needs the foot lifted
 5-15 cm (heels14); rolled out within 2-3 cm they come to 15-19 cm (ststow2dead).
@@ -44,8 +49,14 @@ from authoring.quality_rest import LEG_SITES, RISE_LIMIT_CM
 
 HIP_FLEX = 1  # of a leg's angles (ds.LEG_DOFS order): the hip's second bends it (negative: the knee rises)
 HIP_TURN = 2  # ... its third turns the leg about the thigh
+FEET = (3, 4, 6)  # ... the knee, the ankle's pointing and the toes: what goes slack first (FEET_LEADS)
 HIP_LEAD = 0.5  # of the settle: the hip's turn is done by then (rolled out first, the knee and ankle after)
 LEADS = (HIP_LEAD, 0.75)  # ... each tried
+# of the settle: a prone death's feet go slack first (dead_settle.settle's ``slack_feet``): the knee, the
+# ankle and toes are done by then, each tried, the hip's turn (with its other angles) starting FEET_OVERLAP of
+# it in
+FEET_LEADS = (0.4, 0.6)
+FEET_OVERLAP = 0.5
 # degrees, per leg angle: the target search's grid (hip abduction and flexion about the leg's own, None its
 # own angle); the hip turned both ways (soldier.fig: -45 out .. 40 in), the knee bent so the foot lies
 LEG_GRID = ((-8.0, 0.0, 8.0), (-5.0, 0.0, 5.0, 10.0, 15.0), (-45.0, -30.0, 0.0, 20.0, 40.0),
@@ -125,7 +136,7 @@ def _shapes_cost(leg: ds._Leg, rest: _Rest) -> Callable[[np.ndarray], np.ndarray
 
 
 def _path_cost(
-    leg: ds._Leg, rest: _Rest, lift: float, lead: float, free: float = 0.0
+    leg: ds._Leg, rest: _Rest, lift: float, lead: float, free: float = 0.0, feet: float = 0.0
 ) -> Callable[[np.ndarray], np.ndarray]:
     """As :func:`_shapes_cost` for the target shapes ``x``, judged over the whole path (:func:`leg_path`
     with ``lift``, at :data:`SEARCH_STEPS`): no resting point rises more than :data:`RISE_CM` above its
@@ -137,7 +148,7 @@ def _path_cost(
 
     def cost(x: np.ndarray) -> np.ndarray:
         m, steps = len(x), len(t)
-        pts, ys = rest.shape(paths(leg, x, t, lift, lead).reshape(m * steps, -1))
+        pts, ys = rest.shape(paths(leg, x, t, lift, lead, feet).reshape(m * steps, -1))
         at = np.concatenate(
             [np.repeat(pts0[None], m, axis=1), pts.reshape(m, steps, *pts.shape[1:]).transpose(1, 0, 2, 3)]
         )
@@ -154,7 +165,12 @@ def _path_cost(
 
 
 def turned_leg(
-    leg: ds._Leg, lift: float, lead: float = HIP_LEAD, rest: _Rest | None = None, free: float = 0.0
+    leg: ds._Leg,
+    lift: float,
+    lead: float = HIP_LEAD,
+    rest: _Rest | None = None,
+    free: float = 0.0,
+    feet: float = 0.0,
 ) -> np.ndarray:
     """The leg's angles that lay its heel lowest (the check's ``rest_foot_cm``), into no ground, reached on
     :func:`leg_path` with ``lift`` no resting point rising more than :data:`RISE_CM` (from progress ``free``
@@ -170,38 +186,43 @@ def turned_leg(
         ds.pattern_search(leg, end_cost, x[None])
         for x in grid[np.argsort(end_cost(grid), kind="stable")[:STARTS]]
     ]
-    cost = _path_cost(leg, rest, lift, lead, free)
+    cost = _path_cost(leg, rest, lift, lead, free, feet)
     shapes = np.array([ds.pattern_search(leg, cost, x[None]) for x in starts])
     return shapes[int(np.argmin(cost(shapes)))]
 
 
-def progress(t: np.ndarray, lift: float, lead: float = HIP_LEAD) -> tuple[np.ndarray, np.ndarray]:
+def progress(
+    t: np.ndarray, lift: float, lead: float = HIP_LEAD, feet: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """At ``t`` in [0, 1] of the settle: how far each of the leg's angles has gone ``(len(t), 7)`` (eased; the
     hip's turn ahead, done by ``lead`` of the way, so the leg rolls out before the knee bends and
     the foot everts) and how far (radians) its hip is extended, up over the first :data:`LIFT_SPAN` and
     down over the last."""
     turn = np.repeat(_smoothstep(t)[:, None], len(ds.LEG_GRID), axis=1)
     turn[:, HIP_TURN] = _smoothstep(t / lead)
+    if feet > 0.0:  # the feet go slack first (the toes lifting as the shin comes down), then the leg rolls
+        turn[:, : FEET[0]] = _smoothstep((t - feet * FEET_OVERLAP) / (1.0 - feet * FEET_OVERLAP))[:, None]
+        turn[:, FEET] = _smoothstep(t / feet)[:, None]
     up = _smoothstep(np.minimum(t, 1.0 - t) / LIFT_SPAN)
     return turn, np.radians(lift) * up
 
 
 def paths(
-    leg: ds._Leg, targets: np.ndarray, t: np.ndarray, lift: float, lead: float = HIP_LEAD
+    leg: ds._Leg, targets: np.ndarray, t: np.ndarray, lift: float, lead: float = HIP_LEAD, feet: float = 0.0
 ) -> np.ndarray:
     """The leg's angles ``(m, len(t), 7)`` at ``t`` of the settle to each of ``targets``: lifted by ``lift``
     degrees of hip extension, rolled out, laid."""
-    turn, up = progress(t, lift, lead)
+    turn, up = progress(t, lift, lead, feet)
     x = leg.x0[None, None] + turn[None] * (targets - leg.x0)[:, None, :]
     x[..., HIP_FLEX] -= up[None]
     return x
 
 
 def leg_path(
-    leg: ds._Leg, target: np.ndarray, t: np.ndarray, lift: float, lead: float = HIP_LEAD
+    leg: ds._Leg, target: np.ndarray, t: np.ndarray, lift: float, lead: float = HIP_LEAD, feet: float = 0.0
 ) -> np.ndarray:
     """The leg's angles at ``t`` of the settle to ``target`` (:func:`paths`)."""
-    return paths(leg, target[None], t, lift, lead)[0]
+    return paths(leg, target[None], t, lift, lead, feet)[0]
 
 
 def path_faults(leg: ds._Leg, path: np.ndarray) -> tuple[float, float, float]:
@@ -225,12 +246,13 @@ class LegSettle:
     target: np.ndarray
     lift: float | None
     lead: float = HIP_LEAD
+    feet: float = 0.0  # the knee, ankle and toes go slack first, done by this of the settle (0: with the hip)
 
     def path(self, t: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The leg's angles at ``t`` of the settle (the limp settle at progress ``u``)."""
         if self.lift is None:
             return self.leg.x0[None] + u[:, None] * (self.target - self.leg.x0)[None]
-        return leg_path(self.leg, self.target, t, self.lift, self.lead)
+        return leg_path(self.leg, self.target, t, self.lift, self.lead, self.feet)
 
 
 def path_rise(rest: _Rest, path: np.ndarray, skip: int = 0) -> tuple[float, float]:
@@ -243,7 +265,7 @@ def path_rise(rest: _Rest, path: np.ndarray, skip: int = 0) -> tuple[float, floa
     return rise, max(float(ys[-1, 0]), float(pts[-1, rest.leg.foot, 1].min()))
 
 
-def leg_settle(body: ds._Body, side: str, free: float = 0.0) -> LegSettle:
+def leg_settle(body: ds._Body, side: str, free: float = 0.0, slack_feet: bool = False) -> LegSettle:
     """The ``side`` leg turned (:func:`turned_leg`) with whichever of :data:`LIFTS` lays its heel lowest,
     no resting point rising more than :data:`RISE_CM` (from progress ``free`` on: before it the body is
     still landing, and a leg lifted while he lands also tries :data:`LANDING_LIFTS`), no node on the ground
@@ -258,14 +280,17 @@ def leg_settle(body: ds._Body, side: str, free: float = 0.0) -> LegSettle:
     best_heel = path_rise(rest, limp[None])[1]
     landing = free >= LIFT_SPAN
     found: list[tuple[float, float, LegSettle]] = []
-    for lift, lead in itertools.product(LIFTS + (LANDING_LIFTS if landing else ()), LEADS):
-        target = turned_leg(leg, lift, lead, rest, free)
-        path = leg_path(leg, target, t, lift, lead)
+    lifts = LIFTS + (LANDING_LIFTS if landing else ())
+    tries = [(lift, lead, 0.0) for lift, lead in itertools.product(lifts, LEADS)]
+    tries += [(0.0, 1.0, feet) for feet in (FEET_LEADS if slack_feet else ())]  # on the ground, slack first
+    for lift, lead, feet in tries:
+        target = turned_leg(leg, lift, lead, rest, free, feet)
+        path = leg_path(leg, target, t, lift, lead, feet)
         slide, deep, up = path_faults(leg, path)
         rise, heel = path_rise(rest, path, skip)
         ok = slide <= LEG_SLIDE_CM and deep <= 0.0 and up <= THRESHOLDS["feet_up_cm"] - FEET_UP_MARGIN
         if ok and rise <= RISE_LIMIT_CM - RISE_MARGIN and heel < best_heel:
-            found.append((heel, slide, LegSettle(leg, target, lift, lead)))
+            found.append((heel, slide, LegSettle(leg, target, lift, lead, feet)))
     if not found:
         return best
     if not landing:  # the first of the lowest
@@ -274,7 +299,9 @@ def leg_settle(body: ds._Body, side: str, free: float = 0.0) -> LegSettle:
     return min(((s, i, x) for i, (h, s, x) in enumerate(found) if h <= low), key=lambda f: f[:2])[2]
 
 
-def legs_path(body: ds._Body, t: np.ndarray, u: np.ndarray, free: float = 0.0) -> np.ndarray:
+def legs_path(
+    body: ds._Body, t: np.ndarray, u: np.ndarray, free: float = 0.0, slack_feet: bool = False
+) -> np.ndarray:
     """Both legs' angles (:func:`authoring.dead_settle._leg_dofs` order) at ``t`` of the settle (a limp
     leg at progress ``u``), a rise before progress ``free`` not judged (:func:`leg_settle`)."""
-    return np.hstack([leg_settle(body, side, free).path(t, u) for side in ("left", "right")])
+    return np.hstack([leg_settle(body, side, free, slack_feet).path(t, u) for side in ("left", "right")])

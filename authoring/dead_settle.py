@@ -291,13 +291,15 @@ def _leg_dofs(kin) -> np.ndarray:
     return _dofs(kin, tuple(f"{side}_{j}" for side in ("left", "right") for j in LEG_DOFS))
 
 
-def _legs_path(body: _Body, t: np.ndarray, u: np.ndarray, free: float = 0.0) -> np.ndarray:
+def _legs_path(
+    body: _Body, t: np.ndarray, u: np.ndarray, free: float = 0.0, slack_feet: bool = False
+) -> np.ndarray:
     """Both legs' angles (:func:`_leg_dofs` order) at ``t`` of the settle, turned out and laid down
     (:mod:`authoring.dead_legs`; a leg that cannot be lifted clear goes limp at progress ``u``; a leg point
     may rise before ``free``, the body still landing)."""
     from authoring import dead_legs
 
-    return dead_legs.legs_path(body, t, u, free)
+    return dead_legs.legs_path(body, t, u, free, slack_feet)
 
 
 def _face_up(kin, q: np.ndarray, root: np.ndarray) -> bool:
@@ -428,6 +430,7 @@ def settle(
     arms_fall: bool = False,
     propped: bool = False,
     legs: bool = True,
+    slack_feet: bool = False,
 ) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
     with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
@@ -435,7 +438,7 @@ def settle(
     (:func:`_arms_fall`). A face-down body's legs are laid as it lands (:func:`_legs_land`); ``legs`` False:
     they stay as the physics laid them (``DeathSpec.legs_settle``)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
-    lowered = _lowered(figs, frames) if propped else None
+    lowered = _lowered(figs, frames, slack_feet) if propped else None
     if lowered is not None:
         return _appended(frames, lowered)
     kin, last = figs.kin["body"], frames.poses[-1]
@@ -525,7 +528,7 @@ def _arms_fall(figs: FigureSet, frames: ClipFrames) -> ClipFrames:
     return ClipFrames(poses, out.roots, out.rifles, out.fps)
 
 
-def _lowered(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
+def _lowered(figs: FigureSet, frames: ClipFrames, slack_feet: bool = False) -> np.ndarray | None:
     """The settle poses of a face-down body left propped on its arms (:mod:`authoring.dead_prone`), then
     still; None if it is not."""
     from authoring import dead_prone
@@ -536,7 +539,8 @@ def _lowered(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
         return None
     n = round(SETTLE_SECONDS * frames.fps)
     t = np.arange(1, n + 1) / n
-    legs = _legs_path(body, t, dead_prone.torso_progress(t))  # a limp leg goes as the torso comes down
+    legs = _legs_path(body, t, dead_prone.torso_progress(t), slack_feet=slack_feet)  # a limp leg goes as the
+    # torso comes down
     poses = dead_prone.lowered(body, n)
     poses[:, _leg_dofs(body.kin)] = legs
     return np.concatenate([poses, np.repeat(poses[-1:], round(STILL_SECONDS * frames.fps), axis=0)])

@@ -49,7 +49,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
    left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
    and lifted clear of the ground while they move (:mod:`authoring.dead_prone`), a crawler's pelvis and
-   belly first, turned down about his thighs (:attr:`DeathSpec.sunk`, :mod:`authoring.dead_crawl`); a
+   belly first, turned down about his thighs (:attr:`DeathSpec.sunk`, :mod:`authoring.dead_crawl`), and its
+   feet go slack, the ankles pointing into their passive range before the legs roll, the shins on the
+   ground (:attr:`DeathSpec.slack_feet`: he lay on his toes, heels 16-21 cm up); a
    body on its back (:attr:`DeathSpec.arms_fall`) lets its arms fall to the ground the same way, as it
    lands, over the physics' last frames (a faint arm tone in the physics made the DI slaves' feet jump and
    slide, branch ``legsup14-kfire``; after the physics, the arm hung in the air 1.5 s after he lay still).
@@ -74,9 +76,12 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 8. **a kneeling soldier's legs roll off the ground** (:attr:`DeathSpec.legs_lift`, last): a foot or knee
    that would skid more than a centimetre lifts clearly off the ground until it comes to rest, carried by
    the leg's own joints (:mod:`authoring.leg_lift`; kstow2dead's and kfire2dead's feet slid 4.8-4.9 cm,
-   their kneeling knees 5.9-6.1); then kfire2dead, whose trunk still spins on the ground as he lands (belly
-   3.3, chest 3.7 cm), is shifted and turned about the vertical as a whole so that each part's worst slide
-   is least (:attr:`DeathSpec.turn_worst`, :func:`authoring.planted.least_worst_turned`: 5 degrees at most);
+   their kneeling knees 5.9-6.1); kstow2dead's legs' change by the pin and the lift is smoothed where it
+   flicks (:attr:`DeathSpec.legs_eased`, :func:`authoring.leg_lift.eased_legs`: the right foot's pin let its
+   stretched knee go 19 degrees in one frame); then kfire2dead, whose trunk still spins on the ground as he
+   lands (belly 3.3, chest 3.7 cm), and kstow2dead (its left thigh 4.5, chest 4.5 cm) are shifted and turned
+   about the vertical as a whole so that each part's worst slide is least (:attr:`DeathSpec.turn_worst`,
+   :func:`authoring.planted.least_worst_turned`: 5 degrees at most);
 
 9. **prfire2dead leaves its posture from rest** (:attr:`DeathSpec.start_ease`, last): the finished clip
    is retimed so that it starts from standstill (:func:`authoring.easing.eased_in`, lengthened by half the
@@ -103,8 +108,9 @@ from authoring import dead_crawl, dead_settle
 from authoring.contact_pin import pin_frames
 from authoring.easing import eased_in
 from authoring.knee_hold import hold_knees
-from authoring.leg_lift import lifted
+from authoring.leg_lift import eased_legs, lifted
 from authoring.motion import KeyPosture
+from authoring.passive_range import passive_figure
 from authoring.planted import least_worst_turned, plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
 from authoring.quality_frames import FigureSet
@@ -156,6 +162,10 @@ class DeathSpec:
     # he lands on skids in the physics, 7.37 -> 3.92 cm; kstow2dead's thigh 4.51 -> 2.53 but then its arms'
     # fall slid the chest 5.87: planted.plant_least_worst)
     plant_worst: bool = False
+    # frames (Gaussian sigma): the legs' change by the pins and the lift smoothed over the clip
+    # (leg_lift.eased_legs): kstow2dead's right foot's pin stretched the knee as the leg came down and let
+    # it go 19 degrees in a frame, its lift turned an ankle 10 degrees for one frame (flicks)
+    legs_eased: float = 0.0
     # once his legs are lifted, he is shifted and turned about the vertical so that each part's worst slide
     # is least (kfire2dead's trunk, 3.3-3.7 cm: planted.least_worst_turned)
     turn_worst: bool = False
@@ -163,6 +173,15 @@ class DeathSpec:
     # feet_held): kfire2dead's DI, its trunk turned to rest, lowered its hovering right foot onto the ground
     # while it moved (skate 0.32 -> 4.06 cm once he was turned least-worst)
     slave_feet_held: bool = False
+    # cm: how far the slaves' trunk rest may move a part resting on the ground (slave_rest; None: its
+    # SLIDE_CM, 0.8): kfire2dead's DI pelvis, bridged between its belly and left thigh on the ground, came
+    # down only to 2.34 cm (the check's rest limit 2) with the hands, knee, thigh and foot held to 0.8
+    slave_rest_slide_cm: float | None = None
+    # the slaves hold a foot where it is on the ground in each of the master's stances even where its knee
+    # is down too (slave_feet.plant_slave_feet; else only in his last stance): kstow2dead's DI, its left knee
+    # down, dragged that foot 9.5 cm (frames 52-64) once the master's right hip no longer flicked at frame 61
+    # (the flick had lifted the whole DI 2-3 cm off the ground there, build.lift_off_ground)
+    slave_feet_knelt: bool = False
     pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
     slave_arm_out: bool = False  # the DI slave's arms in the ground go out sideways (slave_ground.rest_limbs)
     # the slave's trunk is laid by its root alone (slave_ground.rest_limbs): with its spine in the torso's
@@ -171,6 +190,10 @@ class DeathSpec:
     # the slave's feet are held where its own feet land in the master's last stance (slave_feet): laid by
     # the root alone, ststow2dead's DI trunk took its feet along after they landed (3.1 cm)
     slave_feet_landed: bool = False
+    # the slave's hands and forearms on the ground keep their place and turn where they come to rest, last
+    # (authoring.slave_arms): stfire2dead's DI left hand rolled under rest_limbs' frame-by-frame solve as its
+    # trunk settled, its nodes sliding 4.0 cm where the master's lay still
+    slave_arms_pinned: bool = False
     # frames: the slaves' neck and head keep their start posture's pose (the node's, which the build snaps
     # their first frame to) and blend into the solved fall over this many (authoring.build.snap_endpoints)
     slave_head_held: int = 0
@@ -194,6 +217,11 @@ class DeathSpec:
     # a crawler's trunk comes down about his thighs after the physics, before the chest and head settle
     # (:func:`authoring.dead_crawl.sunk`): his kept arms held the pelvis and belly 4-5 cm up
     sunk: bool = False
+    # a prone death's feet go slack after he has landed (issue 14: the ragdoll left him on his toes, heels
+    # 16-21 cm up): the settle points the ankles into their passive range and straightens the knees before
+    # the legs roll (:data:`authoring.dead_legs.FEET_LEADS`), the shins staying on the ground; after the
+    # physics, on the figure with the legs' passive range (:mod:`authoring.passive_range`)
+    slack_feet: bool = False
 
 
 def _prone(
@@ -214,6 +242,7 @@ def _prone(
         knee_damping=knee_damping,
         propped=True,
         pinned=pinned,
+        slack_feet=True,
     )
 
 
@@ -239,8 +268,11 @@ CRAWL_DEATH = replace(
 )
 # s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
 # ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands
-# (10.1/11.4 cm; 18.3/20.0 to the active range over 1 s), the thighs sliding no further
-LEGS_ROLL = 0.5
+# (10.1/11.4 cm; 18.3/20.0 to the active range over 1 s), the thighs sliding no further. Over 0.5 s the right
+# hip was still rolling out as he landed on that thigh (frames 83-97): its nodes slid 3.30 cm over the
+# ground; over 0.4 s the roll is done sooner, 2.78 (0.35: thigh 2.46 but the head 3.38 as he settles; 0.45:
+# head 3.55 and an ankle flick of 8.5 degrees: the fall is chaotic in these, each was measured)
+LEGS_ROLL = 0.4
 # s: stfire2dead's (heels 15.4 -> 15.1 cm and its knee's rebound 3.9 -> 2.5 cm; over 0.6 s its left foot slid
 # 6.3 cm as he landed, over 0.7 s the heel lay at 19.4: the fall is chaotic in these, each was measured)
 STFIRE_LEGS_ROLL = 0.8
@@ -261,6 +293,15 @@ PRSTOW_HEAD_HELD = 24
 # 32 cm clear of him and the trunk rests 1.7 cm up (right and down (1, -0.7, 0): his thighs skid 5.7 cm as
 # he lands; back, or left and back, it ends under him again; at 100 N it rests tilted 38 cm up against him)
 STFIRE_TOSS = (1.0, -0.5, 0.2)
+# cm: kfire2dead's slaves' trunk rest may slide a resting part this far (DeathSpec.slave_rest_slide_cm): their
+# pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds)
+KFIRE_REST_SLIDE = 1.5
+# frames: kstow2dead's legs' flicking change by the pin and the lift smoothed (DeathSpec.legs_eased): the
+# worst flick 18.7 degrees (right knee) -> 7.5 (the left wrist's, untouched), the ankles' 12.7 -> 1.9, its
+# DI/M16 slaves' ankle 16.6 -> 2.6; turned least-worst last too (DeathSpec.turn_worst), its left thigh's slide
+# as he lands 4.51 -> 2.02 cm and the chest's 4.48 -> 3.00 (plant_worst got the thigh 2.53 but its arms' fall
+# then slid the chest 5.87)
+KSTOW_LEGS_EASED = 1.5
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "ststow2dead",
@@ -289,6 +330,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         pinned=True,
         legs_roll=STFIRE_LEGS_ROLL,
         toss_to=STFIRE_TOSS,
+        slave_arms_pinned=True,
     ),
     DeathSpec(
         "kstow2dead",
@@ -302,6 +344,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         pinned=True,
         arms_fall=True,
         legs_lift=True,
+        legs_eased=KSTOW_LEGS_EASED,
+        turn_worst=True,
+        slave_feet_knelt=True,
     ),
     DeathSpec(
         "kfire2dead",
@@ -317,6 +362,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         plant_worst=True,
         turn_worst=True,
         slave_feet_held=True,
+        slave_rest_slide_cm=KFIRE_REST_SLIDE,
     ),
     replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD),  # not eased: see
     # PRONE_START_EASE
@@ -651,9 +697,10 @@ def _after_physics(
     the ground held and (:attr:`DeathSpec.pinned`) its limbs on the ground held where they touched down
     (steps 5-7 of the module docstring), then (:attr:`DeathSpec.legs_lift`) its feet and knees that would
     skid lifted (step 8)."""
-    planted = plant_least_worst if spec.plant_worst else plant
-    frames = _held(spec, planted(frames, figures[0]), figures, release)
+    planted = (plant_least_worst if spec.plant_worst else plant)(frames, figures[0])
+    frames = _held(spec, planted, figures, release)
     frames = lifted(frames, figures[0]) if spec.legs_lift else frames
+    frames = eased_legs(planted, frames, figures[0], spec.legs_eased) if spec.legs_eased else frames
     return least_worst_turned(frames, figures[0]) if spec.turn_worst else frames
 
 
@@ -666,8 +713,18 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
     if spec.sunk:  # a crawler's trunk comes down about his thighs first
         frames = dead_crawl.sunk(FigureSet({"body": soldier, "rifle": rifle}), frames)
+    if spec.slack_feet:  # settled and pinned past a live soldier's ankles (authoring.passive_range)
+        soldier = passive_figure(soldier)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(frames, soldier, rifle, spec.arms_fall, spec.propped, legs=spec.legs_settle)
+    frames = dead_settle.settle(
+        frames,
+        soldier,
+        rifle,
+        spec.arms_fall,
+        spec.propped,
+        legs=spec.legs_settle,
+        slack_feet=spec.slack_feet,
+    )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:

@@ -11,7 +11,9 @@ A knee's place is set by the root, not by a limb, so it cannot be held by re-sol
    motion of the knee nodes on the ground (:func:`authoring.planted.ground_drift` over the knees alone),
    accumulated from the first frame and kept after the knees lift (the body lands a little short of where
    it fell; nothing is eased back, which would slide the trunk he lands on); the rifle moves with the root
-   while the hands hold it;
+   while the hands hold it, and after they let go as long as it is still moving (:data:`RIFLE_STILL`):
+   left where they let go of it, the flung rifle kept its place while the body moved back under it
+   (ststow2dead: 8.2 cm, and his right toes landed 1.5 cm inside it); once it lies still, it stays;
 2. **the legs keep their contacts**: moved with the root, the feet would slide back (the toes 10-14 cm), so
    each leg is re-solved frame by frame (:func:`authoring.contact_pin.pin_contacts` with :data:`LEG_PINS`):
    a grounded knee held where it is by the hip alone, so the knee, ankle and toes are free to keep the foot
@@ -36,7 +38,9 @@ from peabody.model import Figure
 SIDES = ("left", "right")
 DRIFT_HEIGHT_CM = 0.6  # knee nodes this low carry the body: their mean motion is taken out (at the check's
 # contact height, 1.25, the kneecap rolling over the ground left ststow2dead's knee at 3.3 cm; 0.6: 3.1)
-PASSES = 2  # root shift and leg solve, measured and done again (ststow2dead's knee: 4.8 cm after one)
+PASSES = 3  # root shift and leg solve, measured and done again (ststow2dead's knee: 4.8 cm after one, 3.23
+# after two, 2.96 after three)
+RIFLE_STILL = 0.05  # m/s: a let-go rifle slower than this lies still and is not moved with the body
 # the foot's pin as contact_pin's; the knee's held by the hip alone (contact_pin's uses hip and knee, which
 # leaves the foot only the ankle and toes: it cannot follow the root back)
 LEG_PINS: tuple[Pin, ...] = (
@@ -58,11 +62,15 @@ def knee_drift(frames: ClipFrames, figures: FigureSet) -> np.ndarray:
 
 def _shifted(frames: ClipFrames, offset: np.ndarray, release: int) -> ClipFrames:
     """``frames`` with the root moved by ``offset`` ``(n, 3)``; the rifle with it up to the frame the hands
-    let go of it (``release``) and by that frame's offset after."""
+    let go of it (``release``) and after that by the offset's change over the frames it still moves in
+    (faster than :data:`RIFLE_STILL`): a rifle lying still is not dragged along."""
     roots, rifles = np.array(frames.roots), np.array(frames.rifles)
     roots[:, :3, 3] += offset
-    held = np.minimum(np.arange(len(offset)), max(release, 0))
-    rifles[:, :3, 3] += offset[held]
+    where = rifles[:, :3, 3]
+    speed = np.linalg.norm(np.diff(where, axis=0, prepend=where[:1]), axis=1) * frames.fps / 100.0
+    follows = (np.arange(len(offset)) <= release) | (speed > RIFLE_STILL)
+    step = np.diff(offset, axis=0, prepend=np.zeros((1, 3)))
+    rifles[:, :3, 3] += np.cumsum(step * follows[:, None], axis=0)
     return ClipFrames(frames.poses, roots, rifles, frames.fps)
 
 

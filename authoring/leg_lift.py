@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from authoring import ik
 from authoring.body_parts import contact_runs
@@ -45,6 +46,8 @@ TURN_CM = 5.0  # a radian of a lifted site's turn weighs as much as this much mo
 IK_ITERATIONS = 40
 PASSES = 3  # each leg lifted, measured and lifted again (a lifted part's new nodes on the ground)
 STEP_DEG = 10.0  # a joint's turn between two frames, lifted: at most this or the fall's own
+LEG_JOINTS = ("hip", "knee", "ankle", "toes")
+EASE_FLICK_DEG = 4.0  # eased_legs: a leg's change that flicks this much is smoothed there
 
 
 @dataclass(frozen=True)
@@ -142,3 +145,32 @@ def _no_leaps(fall: np.ndarray, lifted_poses: np.ndarray) -> np.ndarray:
             lift[f] - out[f - 1], -room[f - 1] - step[f - 1], room[f - 1] - step[f - 1]
         )
     return fall + out
+
+
+def eased_legs(fall: ClipFrames, held: ClipFrames, soldier: Figure, sigma: float) -> ClipFrames:
+    """``held`` (``fall`` pinned and lifted) with its legs' change from ``fall`` smoothed (Gaussian,
+    ``sigma`` frames) where that change flicks (a frame's turn differing by :data:`EASE_FLICK_DEG` from both
+    its neighbours', as the check measures): a pin that lets a leg go in one frame, or a lift that turns an
+    ankle for a single frame, becomes a turn over a few frames (kstow2dead: the right foot's pin stretched
+    the knee to 2 degrees as the leg came down and gave it back 19 degrees in a frame, its lift turned the
+    hip and ankle 10 degrees for one frame). Elsewhere, and at the first and last frames, as held (smoothed
+    throughout, the slaves' legs, solved from his, dragged a foot 9.6 cm: their kneeling rest is
+    sensitive to every millimetre of the master's legs)."""
+    kin = FigureSet({"body": soldier}).kin["body"]
+    before, poses = np.asarray(fall.poses), np.array(held.poses)
+    cols = np.zeros(kin.ndof, dtype=bool)
+    for side in SIDES:
+        for joint in LEG_JOINTS:
+            cols[kin.dof_slices[f"{side}_{joint}"]] = True
+    change = poses[:, cols] - before[:, cols]
+    turn = np.degrees(np.diff(change, axis=0))
+    flicks = np.zeros(change.shape, dtype=bool)  # the frames either side of a flicking turn
+    flicks[1:-2] = np.minimum(np.abs(turn[1:-1] - turn[:-2]), np.abs(turn[1:-1] - turn[2:])) > EASE_FLICK_DEG
+    flicks[1:] |= flicks[:-1]
+    where = np.stack([_smooth_above(f * 1.0, sigma) for f in flicks.T], axis=1)
+    where = np.clip(where, 0.0, 1.0)
+    where[[0, -1]] = 0.0
+    smooth = gaussian_filter1d(change, sigma, axis=0, mode="nearest")
+    eased = before[:, cols] + change + where * (smooth - change)
+    poses[:, cols] = np.where(where > 0.0, np.clip(eased, kin.lower[cols], kin.upper[cols]), poses[:, cols])
+    return ClipFrames(poses, held.roots, held.rifles, held.fps)

@@ -44,7 +44,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from authoring import deaths, ik
+from authoring import ik
 from authoring.postures import leg
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
@@ -273,7 +273,8 @@ def _leg_goal(
     if master_turn is None:
         move = plant_offsets(foot_pts, stance)
         move[:, 1] = lift_to_master(foot_pts[..., 1].min(axis=1), master_low)
-        move *= (np.maximum(u, _last_rest(stance)) if death else u)[:, None]
+        if death != "kneeling":  # (a death whose slaves hold every stance: DeathSpec.slave_feet_knelt)
+            move *= (np.maximum(u, _last_rest(stance)) if death else u)[:, None]
     else:
         # a knee coming down fast let the toes go in 3 frames (40 degrees in one): eased over more
         u = 1.0 - _smooth_above(1.0 - u, KNEE_SIGMA_FRAMES)
@@ -485,9 +486,13 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
 
         turns = {side: (seg(f"{side}_foot"), seg(f"{side}_toes")) for side in SIDES}
     lying = getattr(slave, "release_frame", None) is not None and knelt and loc[0, 1, 3] < LYING_ROOT_CM
+    from authoring import deaths  # here: deaths -> contact_pin -> slave_feet (a cycle at import time)
+
     spec = deaths.death_specs().get(master.name.split(".", 1)[0])
     landed = turns["left"] is not None and spec is not None and spec.slave_feet_landed
     death = ("landed" if landed else "dying") if dying else ""
+    if dying and spec is not None and spec.slave_feet_knelt:
+        death = "kneeling"
     kin = figures.kin[stype]
     thighs = kin.site_globals(q, loc)  # the thighs as slaved (a lying leg keeps its thigh)
     pose = q

@@ -16,6 +16,11 @@ With ``feet_held`` (a death's :attr:`~authoring.deaths.DeathSpec.slave_feet_held
 whose knee is up is held where it was through the change, its leg solved to carry it (:func:`_hold_feet`),
 instead of only bounding its slide at the last frame: kfire2dead's DI, its right foot hovering 1.2-1.9 cm
 over the ground, was lowered onto it by the trunk's turn while still moving and skated 4.1 cm.
+
+A death may let the resting parts slide further than ``SLIDE_CM``
+(:attr:`~authoring.deaths.DeathSpec.slave_rest_slide_cm`): kfire2dead's DI pelvis lies bridged between its
+belly and left thigh, and with its hands, knee, thigh and foot held to 0.8 cm the search brought it down
+only to 2.34 cm (1.54 at 1.5 cm).
 """
 
 from __future__ import annotations
@@ -101,7 +106,9 @@ def _turn(axis: int, deg: np.ndarray) -> np.ndarray:
 class _Rest:
     """The last frame of a dead slave and the candidates of the search around it."""
 
-    def __init__(self, figures: FigureSet, ptype: str, pose: np.ndarray, loc: np.ndarray) -> None:
+    def __init__(
+        self, figures: FigureSet, ptype: str, pose: np.ndarray, loc: np.ndarray, slide_cm: float = SLIDE_CM
+    ) -> None:
         self.figures, self.ptype, self.pose, self.loc = figures, ptype, pose, loc
         kin = figures.kin[ptype]
         self.dofs = [[kin.dof_slices[j].start + k for j in _joints(kin, name)] for name, k in PARAMS]
@@ -124,7 +131,7 @@ class _Rest:
                        for p in resting if p in PART_SITES}  # fmt: skip
         self.slides = {p: idx for p, idx in self.slides.items() if idx}
         self.site_at = kin.site_globals(pose[None], loc[None])[0, :, :3, 3]
-        self.ceiling |= {f"{p}:slide": SLIDE_CM for p in self.slides}
+        self.ceiling |= {f"{p}:slide": slide_cm for p in self.slides}
 
     def _node_heights(self, poses: np.ndarray, locs: np.ndarray) -> np.ndarray:
         kin = self.figures.kin[self.ptype]
@@ -278,18 +285,23 @@ def _hold_feet(
 
 
 def rest_slave_trunk(
-    master: Channelset, slave: Channelset, figures: FigureSet, feet_held: bool = False
+    master: Channelset,
+    slave: Channelset,
+    figures: FigureSet,
+    feet_held: bool = False,
+    slide_cm: float | None = None,
 ) -> np.ndarray:
     """Turn a dead slave's body and lumbar so its pelvis and chest or belly rest on the ground at the end
     (``slave``'s joint and body channels, in place; a clip without a ``release_frame`` is left alone); with
-    ``feet_held`` a foot near the ground whose knee is up stays where it was (:func:`_hold_feet`).
+    ``feet_held`` a foot near the ground whose knee is up stays where it was (:func:`_hold_feet`);
+    ``slide_cm``: how far a resting part's sites may move along the ground (None: :data:`SLIDE_CM`).
     Returns the parameters found (degrees, in :data:`PARAMS` order)."""
     release = getattr(slave, "release_frame", None)
     if release is None:
         return np.zeros(len(PARAMS))
     q, loc, stype = _played(slave, figures)
     n = len(q)
-    rest = _Rest(figures, stype, q[-1], loc[-1])
+    rest = _Rest(figures, stype, q[-1], loc[-1], SLIDE_CM if slide_cm is None else slide_cm)
     w = _ease(n, max(release, n - 1 - EASE_FRAMES - END_HOLD_FRAMES))
     held = _held_feet(q, loc, figures, stype, np.flatnonzero(w > 0)) if feet_held else ()
     x = search(rest)

@@ -7,6 +7,8 @@ the root bobbing ±2 cm and yawing ±5°), 30% stand idle. Reports µs per batch
 moving and idle soldier. ``quantise_us_per_batch`` is the float-to-code share of encode, which a server can do
 once per tick for every client (``UpdateEncoder.encode_codes``). Times are medians of this process's CPU time
 (robust on a shared machine); the ``*_wall_*`` fields are wall-clock medians. ``--json``: one JSON object.
+``--front K``: also a front-end's encode (issue 21): K encoders, each its own 8,000-soldier crowd
+(``--front-soldiers``), CPU per tick of all K encodes.
 """
 
 from __future__ import annotations
@@ -112,6 +114,33 @@ def run(ticks: int, protocol: int = PROTOCOL_VERSION) -> dict[str, object]:
     }
 
 
+def front_case(
+    encoders: int, soldiers: int, ticks: int, protocol: int = PROTOCOL_VERSION
+) -> dict[str, object]:
+    """A front-end's encode: ``encoders`` clients in different states, each sent its own crowd of
+    ``soldiers`` (70 % moving, the rest idle) as codes already quantised (``encode_codes``, 65,535-byte
+    payloads), every tick. Median process CPU per tick of all the encodes (after the full first tick)."""
+    table = example_di_table()
+    idx = np.arange(soldiers)
+    crowds = [Crowd(soldiers, seed=s) for s in range(encoders)]
+    codes = [[quantise(table, *c.pose(k)) for k in range(ticks + 1)] for c in crowds]
+    encs = [UpdateEncoder(table, soldiers, version=protocol) for _ in range(encoders)]
+    for enc, cs in zip(encs, codes, strict=True):
+        enc.encode_codes(idx, cs[0], 0, 0xFFFF)
+    per_tick = []
+    for k in range(1, ticks + 1):
+        c0 = time.process_time()
+        for enc, cs in zip(encs, codes, strict=True):
+            enc.encode_codes(idx, cs[k], k, 0xFFFF)
+        per_tick.append((time.process_time() - c0) * 1e6)
+    return {
+        "front_encoders": encoders,
+        "front_soldiers": soldiers,
+        "front_encode_us_per_tick": round(statistics.median(per_tick)),
+        "front_encode_us_per_tick_min": round(min(per_tick)),
+    }
+
+
 def connection_round_trip(table: object, crowd: Crowd, ticks: int) -> float:
     """Median µs for server.send(JointUpdates) + client.receive_data/next_event over the same batches."""
     client, server = Connection(CLIENT), Connection(SERVER, max_frame=1 << 22, max_soldiers=N)
@@ -141,8 +170,12 @@ def main() -> int:
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     ap.add_argument("--ticks", type=int, default=20)
     ap.add_argument("--protocol", type=int, default=PROTOCOL_VERSION, choices=(1, 2), help="update format")
+    ap.add_argument("--front", type=int, default=0, metavar="K", help="also K encoders of their own crowds")
+    ap.add_argument("--front-soldiers", type=int, default=8000, help="soldiers of each --front encoder")
     args = ap.parse_args()
     r = run(args.ticks, args.protocol)
+    if args.front:
+        r |= front_case(args.front, args.front_soldiers, args.ticks, args.protocol)
     if args.json:
         print(json.dumps(r))
         return 0
@@ -160,6 +193,11 @@ def main() -> int:
     print(f"  bytes per moving soldier {r['bytes_per_moving_soldier']:>7}")
     print(f"  bytes per idle soldier   {r['bytes_per_idle_soldier']:>7}")
     print(f"  decoder reconstructs the encoder's codes exactly: {r['exact_reconstruction']}")
+    if args.front:
+        print(
+            f"  front-end: {r['front_encoders']} encoders x {r['front_soldiers']} soldiers, encode "
+            f"{r['front_encode_us_per_tick']} µs/tick (CPU, median; min {r['front_encode_us_per_tick_min']})"
+        )
     return 0
 
 

@@ -18,6 +18,7 @@ version 2 (per-entry widths, predicted deltas) is :mod:`protocol.predicted`, cho
 from __future__ import annotations
 
 import struct
+import sys
 from collections.abc import Sequence
 
 import numpy as np
@@ -203,15 +204,21 @@ class _Plan:
         self.member = np.packbits(member, axis=1).view(">u8").astype(np.uint64)  # (E, nwords)
         self.v2 = predicted.Columns(lay, self.cols, self.g)
 
-    def changed(self, diff: np.ndarray) -> np.ndarray:
-        """(n, E) bool: entries with at least one changed field, from the (n, F) bool ``diff``."""
+    def diff_words(self, diff: np.ndarray) -> np.ndarray:
+        """(n, nwords) uint64: the (n, F) bool ``diff`` packed, a row's changed fields as bits."""
         n = diff.shape[0]
+        nbytes = (diff.shape[1] + 7) >> 3
+        if nbytes == self.nwords * 8:
+            return np.packbits(diff, axis=1).view(">u8").astype(np.uint64)
         packed = np.zeros((n, self.nwords * 8), np.uint8)
-        packed[:, : (diff.shape[1] + 7) >> 3] = np.packbits(diff, axis=1)
-        rows = packed.view(">u8").astype(np.uint64)  # (n, nwords)
+        packed[:, :nbytes] = np.packbits(diff, axis=1)
+        return packed.view(">u8").astype(np.uint64)
+
+    def changed(self, words: np.ndarray) -> np.ndarray:
+        """(n, E) bool: entries with at least one changed field, from :meth:`diff_words`."""
         if self.nwords == 1:
-            return (rows & self.member[:, 0]) != 0
-        return ((rows[:, None, :] & self.member) != 0).any(axis=2)
+            return (words & self.member[:, 0]) != 0
+        return ((words[:, None, :] & self.member) != 0).any(axis=2)
 
     def widths(self, absolute: np.ndarray, k: np.ndarray, incl: np.ndarray) -> np.ndarray:
         """(n, cols) uint8 field widths: the field's width (mode 0) or k (delta, not qidx); 0 if absent."""
@@ -462,15 +469,21 @@ class UpdateEncoder:
         known = self._known[idx]
         sc = scratch()  # gathers into reused buffers (idx is checked: clip gathers unbuffered)
         last = np.take(self._last, idx, axis=0, out=sc.get("enc.last", q.shape, np.int32), mode="clip")
-        changed = plan.changed(q != last)
-        if not known.all():
-            changed[~known] = True
-        send = changed.any(axis=1)
-        if not send.all():
-            if not send.any():
+        words = plan.diff_words(q != last)
+        send = (words[:, 0] != 0) if plan.nwords == 1 else (words != 0).any(axis=1)
+        send |= ~known
+        if not send.all():  # idle soldiers: gather the rest by index (cheaper than boolean masks of rows)
+            sel = np.flatnonzero(send)
+            if not len(sel):
                 self._sent = idx[:0]
                 return []
-            idx, q, last, changed, known = (a[send] for a in (idx, q, last, changed, known))
+            shape = (len(sel), q.shape[1])
+            q = np.take(q, sel, axis=0, out=sc.get("enc.q", shape, np.int32), mode="clip")
+            last = np.take(last, sel, axis=0, out=sc.get("enc.sent_last", shape, np.int32), mode="clip")
+            idx, known, words = idx[sel], known[sel], words[sel]
+        changed = plan.changed(words)
+        if not known.all():
+            changed[~known] = True
         if self.version >= 2:
             before = sc.get("enc.before", (len(idx), self._before.shape[1]), np.int32)
             np.take(self._before, idx, axis=0, out=before, mode="clip")
@@ -552,7 +565,10 @@ class UpdateEncoder:
         for f in range(1, len(bounds) - 1):  # each frame's body starts a word
             a, b = bounds[f], bounds[f + 1]
             starts[a:b] += frame_word[f] * 64 - fbits[a]
-        body = place_groups(rows.groups, starts, int(frame_word[-1])).astype(">u8").tobytes()
+        words = place_groups(rows.groups, starts, int(frame_word[-1]))
+        if sys.byteorder == "little":  # the wire's words are big-endian: swapped in place, sliced uncopied
+            words.byteswap(inplace=True)
+        body = words.view(np.uint8).data
         index = idx.astype(">u2").tobytes()
         nib_at = np.concatenate([[0], np.cumsum(rows.nibble_count)])
         out: list[bytes] = []
@@ -563,11 +579,15 @@ class UpdateEncoder:
             if self.version >= 2:
                 widths = predicted.pack_nibbles(rows.nibbles[nib_at[a] : nib_at[b]])
             out.append(
-                UPDATE_HEADER.pack(self.table.table_id, tick & 0xFFFFFFFF, b - a)
-                + index[2 * a : 2 * b]
-                + np.packbits(rows.header[a:b].reshape(-1)).tobytes()
-                + widths
-                + body[at : at + ((int(frame_bits[f]) + 7) >> 3)]
+                b"".join(
+                    (
+                        UPDATE_HEADER.pack(self.table.table_id, tick & 0xFFFFFFFF, b - a),
+                        index[2 * a : 2 * b],
+                        np.packbits(rows.header[a:b].reshape(-1)).tobytes(),
+                        widths,
+                        body[at : at + ((int(frame_bits[f]) + 7) >> 3)],
+                    )
+                )
             )
         return out
 

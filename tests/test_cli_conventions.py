@@ -95,6 +95,10 @@ def test_options_that_do_not_go_together_are_usage_errors() -> None:
     assert r.returncode == 2 and "--with-server or --server" in r.stderr
     r = ttes("front", "--shards", "1", "--front", "0/300", "--port", "0")
     assert r.returncode == 2 and "--front 0/300: at most 255 front-ends" in r.stderr
+    r = ttes("front", "--shards", "1", "--fabric-domain", "3", "--port", "0")  # Zenoh has no domains
+    assert r.returncode == 2 and "--fabric-domain 3: a DDS domain, and --fabric is zenoh" in r.stderr
+    r = ttes("server", "--shard", "0/2", "--fabric", "dds", "--fabric-domain", "233", "--port", "0")
+    assert r.returncode == 2 and "233 is outside 0..232" in r.stderr
 
 
 @pytest.mark.parametrize(

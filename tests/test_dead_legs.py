@@ -8,6 +8,7 @@ import pytest
 
 from authoring import dead_legs, dead_settle
 from authoring.body_parts import contact_runs
+from authoring.passive_range import passive_figure
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
 from authoring.quality_rest import RISE_LIMIT_CM
@@ -89,3 +90,40 @@ def test_a_rise_before_the_body_is_down_is_not_judged(figs: FigureSet) -> None:
     assert rise > RISE_LIMIT_CM  # lifted 6 degrees of hip extension: the foot rises ~9 cm
     skip = int(np.searchsorted(np.concatenate([[0.0], t]), dead_legs.LIFT_SPAN))
     assert dead_legs.path_rise(rest, path, skip) == (pytest.approx(0.0, abs=0.05), heel)  # from the top
+
+
+def test_slack_feet_go_before_the_leg_rolls() -> None:
+    """A prone death's feet go slack first (dead_legs.FEET_LEADS): the knee, the ankle's pointing and the toes
+    are done by ``feet`` of the settle, the hip (its turn too) has not moved before FEET_OVERLAP of that; with
+    no ``feet`` the path is the old one (every other death's settle unchanged)."""
+    t = np.linspace(0.0, 1.0, 49)
+    feet = dead_legs.FEET_LEADS[0]
+    turn, up = dead_legs.progress(t, 0.0, 1.0, feet)
+    assert (turn[t >= feet][:, list(dead_legs.FEET)] == 1.0).all()
+    assert (turn[t <= feet * dead_legs.FEET_OVERLAP][:, : dead_legs.FEET[0]] == 0.0).all()
+    assert (turn[:, : dead_legs.FEET[0]] <= turn[:, list(dead_legs.FEET)].min(axis=1)[:, None]).all()
+    assert not up.any()
+    old, _ = dead_legs.progress(t, 1.0, dead_legs.HIP_LEAD)
+    assert np.array_equal(old, dead_legs.progress(t, 1.0, dead_legs.HIP_LEAD, 0.0)[0])
+
+
+def test_slack_feet_lay_the_heels_lower_the_shins_on_the_ground(figs: FigureSet) -> None:
+    """A prone death's feet go slack (DeathSpec.slack_feet, issue 14: a dead man lay on his toes, heels
+    16-21 cm up): on the passive range the heel comes under the product owner's 15 cm (the live limits: 18.2,
+    above), the knee staying on the ground (branch proneheels14: the shins rose 12-15 cm, a frog kick),
+    nothing on the ground sliding, nothing into it."""
+    passive = FigureSet({"body": passive_figure(figs.figures["body"]), "rifle": figs.figures["rifle"]})
+    body = _on_his_toes(passive)
+    kin = body.kin
+    t = np.arange(1, 49) / 48.0
+    settled = dead_legs.leg_settle(body, "left", slack_feet=True)
+    leg = settled.leg
+    path = settled.path(t, t * t * (3.0 - 2.0 * t))
+    assert (path >= kin.lower[leg.idx] - 1e-9).all() and (path <= kin.upper[leg.idx] + 1e-9).all()
+    pts, heel = leg._shape(np.vstack([leg.x0, path]), 1.0)
+    assert heel[0] > 20.0 and heel[-1] < 15.0  # 21.3 -> 14.9 cm
+    assert pts[..., 1].min() >= -0.05  # nothing into the ground
+    assert contact_runs(pts, CONTACT_HEIGHT_CM).slide.max(initial=0.0) <= dead_legs.LEG_SLIDE_CM
+    assert np.degrees(np.abs(np.diff(path, axis=0))).max() <= 8.0  # the check's ankle_flick_deg
+    knee = leg.body.parts[leg.nodes] == "left_kneecap"
+    assert pts[:, knee, 1].min(axis=1).max() - pts[0, knee, 1].min() <= dead_legs.RISE_CM

@@ -1,4 +1,5 @@
-"""Issue 21: two front-ends in front of the same two shards, as real processes on 127.0.0.1 (Zenoh).
+"""Issue 21: two front-ends in front of the same two shards, as real processes on 127.0.0.1 (Zenoh, and
+Cyclone DDS: there the second front-end once hung writing to ``ttes/fronts``, ``server.fabric.dds_node``).
 
 Two clients create soldiers at once, each through its own front-end: every soldier gets an index of its
 own (each front-end allots from its share, ``ttes front --front K/M``), lives in its own shard alone, and
@@ -9,6 +10,7 @@ them all, and the updates of a soldier created through the other front-end.
 from __future__ import annotations
 
 import contextlib
+import random
 from collections.abc import Iterator
 
 import pytest
@@ -18,6 +20,7 @@ from test_server_support import Client, synthetic_dir
 
 from client_stub.link.spawn import ServerProcess, free_port
 from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, Subscribe
+from server.fabric import DDS_DOMAIN_MAX
 from server.fabric.fronts import IndexShare
 
 pytest.importorskip("zenoh")
@@ -27,10 +30,12 @@ EACH = 24  # soldiers each client creates
 
 
 @contextlib.contextmanager
-def two_fronts() -> Iterator[tuple[list[ServerProcess], list[ServerProcess]]]:
+def two_fronts(fabric: str = "zenoh") -> Iterator[tuple[list[ServerProcess], list[ServerProcess]]]:
     """Front-ends 0/2 and 1/2 (the second connects to the first), then 2 shards connected to both."""
     d = synthetic_dir()
-    data = ["--data-dir", str(d.path), "--startup-script", d.startup_script]
+    data = ["--data-dir", str(d.path), "--startup-script", d.startup_script, "--fabric", fabric]
+    if fabric == "dds":  # a domain of its own: DDS nodes of another run on this host would join this one
+        data += ["--fabric-domain", str(random.randrange(1, DDS_DOMAIN_MAX + 1))]
     ends = [f"127.0.0.1:{free_port()}" for _ in range(2)]
     procs: list[ServerProcess] = []
     try:
@@ -60,8 +65,11 @@ async def _create(port: int, client_id: str, out: dict[str, list[int]]) -> None:
     await c.aclose()
 
 
-async def test_two_front_ends_create_at_once_without_collision_and_both_see_all() -> None:
-    with two_fronts() as (fronts, shards):
+@pytest.mark.parametrize("fabric", ["zenoh", "dds"])
+async def test_two_front_ends_create_at_once_without_collision_and_both_see_all(fabric: str) -> None:
+    if fabric == "dds":
+        pytest.importorskip("cyclonedds")
+    with two_fronts(fabric) as (fronts, shards):
         made: dict[str, list[int]] = {}
         async with trio.open_nursery() as nursery:
             for front, cid in zip(fronts, ("alpha", "beta"), strict=True):

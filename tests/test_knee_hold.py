@@ -56,11 +56,29 @@ def test_a_skidding_knee_is_held_and_the_body_pivots_over_it(skid: tuple[FigureS
     assert np.degrees(np.abs(np.diff(held.poses, axis=0))).max() < 20.0  # no joint leaps
     np.testing.assert_allclose(held.poses[0], frames.poses[0], atol=1e-6)  # the start posture is kept
     np.testing.assert_allclose(held.roots[0], frames.roots[0], atol=1e-9)
-    # the rifle goes with the root while it is held, and is left where the hands let go of it after
+    # the rifle goes with the root while it is held (after: test_a_let_go_rifle_moves_with_the_body_...)
     moved = held.roots[:, :3, 3] - frames.roots[:, :3, 3]
     rifle_moved = held.rifles[:, :3, 3] - frames.rifles[:, :3, 3]
     assert np.abs(moved[RELEASE]).max() > 1.0  # the root was moved back by then (else this proves nothing)
     np.testing.assert_allclose(rifle_moved[: RELEASE + 1], moved[: RELEASE + 1], atol=1e-9)
+
+
+FLIGHT = 8  # frames the let-go rifle still flies on after the release
+
+
+def test_a_let_go_rifle_moves_with_the_body_until_it_lies_still(skid: tuple[FigureSet, ClipFrames]) -> None:
+    """The root moved back under a rifle still in flight would carry the body into where it lands
+    (ststow2dead: his right toes 1.5 cm inside it): it goes along until it lies still, then stays."""
+    figs, frames = skid
+    rifles = np.repeat(frames.rifles[:1], N, axis=0)
+    rifles[:, 0, 3] += 3.0 * np.minimum(np.arange(N), RELEASE + FLIGHT)  # 1.8 m/s sideways, then still
+    flung = ClipFrames(frames.poses, frames.roots, rifles, frames.fps)
+    held = hold_knees(flung, figs.figures["body"], release=RELEASE)
+    moved = held.roots[:, :3, 3] - frames.roots[:, :3, 3]
+    rifle_moved = held.rifles[:, :3, 3] - rifles[:, :3, 3]
+    landed = RELEASE + FLIGHT
+    assert np.abs(moved[-1] - moved[RELEASE]).max() > 1.0  # the root moves on after the release
+    np.testing.assert_allclose(rifle_moved[: landed + 1], moved[: landed + 1], atol=1e-9)
     np.testing.assert_allclose(
-        rifle_moved[RELEASE:], np.broadcast_to(moved[RELEASE], (N - RELEASE, 3)), atol=1e-9
+        rifle_moved[landed:], np.broadcast_to(moved[landed], (N - landed, 3)), atol=1e-9
     )

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from authoring.body_parts import contact_runs
-from authoring.leg_lift import SLIDE_BUDGET_CM, lift_windows, lifted
+from authoring.leg_lift import SLIDE_BUDGET_CM, eased_legs, lift_windows, lifted
 from authoring.postures import lowest_point
-from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
+from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS, frame_flicks
 from authoring.quality_frames import FigureSet
 from authoring.slave_feet import part_points
 from authoring.transitions import ClipFrames
@@ -68,3 +68,29 @@ def test_skidding_feet_lift_off_and_land_once_where_they_rest(skid: tuple[Figure
     assert np.degrees(np.abs(np.diff(out.poses, axis=0))).max() < THRESHOLDS["max_frame_jump_deg"]
     np.testing.assert_allclose(out.poses[[0, -1]], frames.poses[[0, -1]], atol=1e-6)  # start and rest kept
     np.testing.assert_array_equal(out.roots, frames.roots)  # the body goes as it fell: legs only
+
+
+def test_a_leg_let_go_in_one_frame_turns_over_a_few(skid: tuple[FigureSet, ClipFrames]) -> None:
+    """Issue 14 (kstow2dead): a pin that stretched the right knee and gave it back 19 degrees in one frame,
+    and a lift that turned an ankle 10 degrees for a single frame, flicked; eased, the legs' change from
+    the fall turns over a few frames, everything else (and the first and last frames) as held."""
+    figs, fall = skid
+    kin = figs.kin["body"]
+    knee, ankle = kin.dof_slices["right_knee"].start, kin.dof_slices["left_ankle"].start
+    held = np.array(fall.poses)
+    held[20:40, knee] += np.radians(np.linspace(0.0, 20.0, 20))  # stretched slowly, let go at once
+    held[30, ankle] += np.radians(10.0)  # one frame's twitch
+    held[:, kin.dof_slices["waist"]] += np.radians(5.0)  # not a leg: left as held
+    rot = np.ones(kin.ndof, dtype=bool)
+    flicks = frame_flicks(np.asarray(held), rot, kin.dof_slices)
+    assert flicks["max_frame_flick_deg"] > THRESHOLDS["max_frame_flick_deg"]
+    assert flicks["ankle_flick_deg"] > THRESHOLDS["ankle_flick_deg"]
+    pinned = ClipFrames(held, fall.roots, fall.rifles, fall.fps)
+    out = eased_legs(fall, pinned, figs.figures["body"], 2.0)
+    flicks = frame_flicks(np.asarray(out.poses), rot, kin.dof_slices)
+    assert flicks["max_frame_flick_deg"] < THRESHOLDS["max_frame_flick_deg"] / 2
+    assert flicks["ankle_flick_deg"] < THRESHOLDS["ankle_flick_deg"] / 2
+    np.testing.assert_allclose(out.poses[[0, -1]], held[[0, -1]], atol=1e-12)
+    waist = kin.dof_slices["waist"]
+    np.testing.assert_array_equal(out.poses[:, waist], held[:, waist])
+    assert abs(np.degrees(out.poses[32, knee] - held[32, knee])) < 0.5  # away from the jumps: as held

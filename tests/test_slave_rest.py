@@ -146,3 +146,26 @@ def test_a_hovering_foot_whose_knee_is_up_is_held_through_the_turn(monkeypatch) 
     assert slave_rest._held_feet(q0, loc0, figs, stype, np.flatnonzero(w > 0)) == ("right_foot",)
     assert moved[False] > 1.0, moved
     assert moved[True] < 0.3, moved  # of 1.5 cm, as the leg tracking holds it (0.24)
+
+
+def test_only_kfire2dead_slaves_rest_sliding_further() -> None:
+    """The resting parts' slide bound is kfire2dead's own setting (DeathSpec.slave_rest_slide_cm): the
+    other deaths' slaves rebuild unchanged."""
+    from authoring import deaths
+
+    assert {d.name for d in deaths.DEATHS if d.slave_rest_slide_cm is not None} == {"kfire2dead"}
+
+
+@pytest.mark.parametrize("suffix", ["_low", "_m16_low"])
+def test_kfire2dead_slaves_rest_their_pelvis_on_the_ground(suffix: str) -> None:
+    """Issue 14: the DI/M16 kfire2dead slaves' pelvis rested 2.34 cm up at DEAD@kfire (the check's limit 2),
+    bridged between the belly and the left thigh on the ground."""
+    from authoring.quality_frames import play
+    from authoring.quality_postures import part_lows
+
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"DI.fig": ctx.di, "AK_47.fig": ctx.rifle, "M16.fig": ctx.m16})
+    slave = load_channelset(CHANNELSETS / f"kfire2dead{suffix}.chset.env", use_cache=False)
+    lows = part_lows(play(slave, figs), slave.nframes - 1, figs)
+    assert lows["pelvis"] <= 2.0  # the check's rest_contact_cm
+    assert lows["chest|belly"] <= 2.0

@@ -86,6 +86,9 @@ class Fabric(Protocol):
     def close(self) -> None: ...
 
 
+DDS_DOMAIN_MAX = 232  # the highest DDS domain id (DDSI-RTPS 2.x port mapping: 7400 + 250 * domain < 65536)
+
+
 @dataclass(frozen=True)
 class FabricConfig:
     """Where this node listens and whom it connects to: unicast endpoints ``host:port``, no multicast.

@@ -5,6 +5,13 @@ name becomes '_'. A shard's pose blocks are topics of their own (``ttes_poses_K_
 front-end's reader of a block it no longer watches is deleted, and no sample of it reaches the process.
 Quality of service per :class:`~server.fabric.Kind`: poses best-effort keep-last-1, requests reliable
 keep-all.
+
+A node never hears its own samples (``IgnoreLocal.Participant``): a front-end both writes and reads
+``ttes/fronts``, and Cyclone delivers a local sample synchronously inside ``write``, which waits for the
+reader's listener while the binding holds the interpreter lock; a listener already running on DDS's receive
+thread (another front-end's sample) waits for that lock, so the front-end hung for good
+(``bench_scaleout.py --fabric dds --fronts 2``: the second front-end's clients created no soldiers). What a
+node wrote to itself it dropped anyway.
 """
 
 # no "from __future__ import annotations": cyclonedds resolves the IDL field types at class creation
@@ -67,8 +74,17 @@ def unicast_xml(config: FabricConfig) -> str:
 
 
 _QOS = {
-    Kind.POSES: Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1), Policy.Durability.Volatile),
-    Kind.REQUESTS: Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepAll),
+    Kind.POSES: Qos(
+        Policy.Reliability.BestEffort,
+        Policy.History.KeepLast(1),
+        Policy.Durability.Volatile,
+        Policy.IgnoreLocal.Participant,
+    ),
+    Kind.REQUESTS: Qos(
+        Policy.Reliability.Reliable(duration(seconds=1)),
+        Policy.History.KeepAll,
+        Policy.IgnoreLocal.Participant,
+    ),
 }
 
 

@@ -13,13 +13,15 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from server.fabric import BLOCK
+from server.fabric import BLOCK, DDS_DOMAIN_MAX, FabricConfig
 from ttes.arguments import UsageError, count, host, listen_port, non_negative, positive
 
 if TYPE_CHECKING:
     from server.app import TtesServer
+    from server.fabric.nodes import Sharding
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -53,6 +55,13 @@ def add_fabric_options(p: argparse.ArgumentParser) -> None:
         default=BLOCK,
         help="soldier indices per pose topic: a front-end hears the blocks its clients watch "
         f"(default {BLOCK}; shards and front-ends must agree)",
+    )
+    p.add_argument(
+        "--fabric-domain",
+        metavar="ID",
+        type=count(0, DDS_DOMAIN_MAX),
+        help="Cyclone DDS domain id (default 0): clusters on one network in different domains never "
+        "hear each other; --fabric dds only",
     )
 
 
@@ -132,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
         )
     except ConfigError as exc:
         raise UsageError(str(exc)) from None
+    plan = _fabric_plan(args)
     tmp = None
     if args.synthetic:
         from server.startup import write_synthetic_data_dir
@@ -148,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
         server = TtesServer(cfg)
         server.bind()  # a port in use fails here, at once and naming host:port, before the data loads
         server.start_world()  # a bad script or data dir fails here, before accepting
-        start_fabric, close_fabric = _fabric_node(server, args)
+        start_fabric, close_fabric = _fabric_node(server, plan, args.fabric_block)
 
         def listening(s: TtesServer) -> None:
             start_fabric()
@@ -187,19 +197,23 @@ def run(args: argparse.Namespace) -> int:
             tmp.cleanup()
 
 
-def _fabric_node(
-    server: TtesServer, args: argparse.Namespace
-) -> tuple[Callable[[], None], Callable[[], None]]:
-    """Join the fabric as a shard (``--shard``) or a front-end (``ttes front``); returns what starts taking
-    messages (call it on the trio loop once serving) and what leaves the fabric (no-ops: a plain server)."""
+@dataclass(frozen=True)
+class _FabricPlan:
+    """What ``--shard``/``ttes front`` asked for, checked before the data loads (a usage error at once)."""
+
+    sharding: Sharding | None  # this shard (None: a front-end)
+    front: Sharding  # which front-end of how many
+    shards: int
+    config: FabricConfig
+
+
+def _fabric_plan(args: argparse.Namespace) -> _FabricPlan | None:
+    """The node this process joins the fabric as, or None (a plain server); a bad value: UsageError."""
     shard, shards = getattr(args, "shard", None), getattr(args, "shards", None)
     if shard is None and shards is None:
-        return (lambda: None), (lambda: None)
-    import trio
-
-    from server.fabric import FabricConfig, open_fabric
+        return None
     from server.fabric.batch import MAX_FRONTS
-    from server.fabric.nodes import FrontNode, Sharding, ShardNode
+    from server.fabric.nodes import Sharding
 
     try:
         sharding = Sharding.parse(shard) if shard is not None else None
@@ -210,13 +224,35 @@ def _fabric_node(
             )
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    fabric = open_fabric(FabricConfig(args.fabric, args.fabric_listen, tuple(args.fabric_connect)))
-    if sharding is not None:
+    domain = getattr(args, "fabric_domain", None)
+    if domain is not None and args.fabric != "dds":
+        raise UsageError(
+            f"--fabric-domain {domain}: a DDS domain, and --fabric is {args.fabric} "
+            "(Zenoh's nodes meet at their --fabric-listen/--fabric-connect endpoints)"
+        )
+    config = FabricConfig(args.fabric, args.fabric_listen, tuple(args.fabric_connect), domain or 0)
+    return _FabricPlan(sharding, front, int(shards or 1), config)
+
+
+def _fabric_node(
+    server: TtesServer, plan: _FabricPlan | None, block: int
+) -> tuple[Callable[[], None], Callable[[], None]]:
+    """Join the fabric as a shard (``--shard``) or a front-end (``ttes front``); returns what starts taking
+    messages (call it on the trio loop once serving) and what leaves the fabric (no-ops: a plain server)."""
+    if plan is None:
+        return (lambda: None), (lambda: None)
+    import trio
+
+    from server.fabric import open_fabric
+    from server.fabric.nodes import FrontNode, ShardNode
+
+    fabric = open_fabric(plan.config)
+    if plan.sharding is not None:
         server.codes_only()  # its batches carry codes: the board's float poses would be written for nothing
-        node = ShardNode(server, fabric, sharding, block=args.fabric_block)
+        node = ShardNode(server, fabric, plan.sharding, block=block)
         node.keep_own()
         return (lambda: node.start(trio.lowlevel.current_trio_token())), fabric.close
-    node_f = FrontNode(server, fabric, int(shards or 1), front=front, block=args.fabric_block)
+    node_f = FrontNode(server, fabric, plan.shards, front=plan.front, block=block)
     return (lambda: node_f.start(trio.lowlevel.current_trio_token())), fabric.close
 
 
