@@ -97,3 +97,16 @@ def test_a_crawlers_u_turn_carries_him_along_the_heading_it_ends_on() -> None:
     twice = turns.ground_move(*spot) @ turns.ground_move(*spot)
     carried = crawl_turn.ARC_ADVANCE * len(moves["back"])
     np.testing.assert_allclose(arc[:2], (twice[0, 3], twice[2, 3] + carried), atol=1e-3)
+
+
+@pytest.mark.parametrize("suffix", SUFFIXES)
+@pytest.mark.parametrize("name", [f"crawlarc_l{a}" for a in crawl_turn.LEFT_U_TURN_ANGLES])
+def test_a_u_turn_to_his_left_passes_the_check_on_every_figure(name: str, suffix: str) -> None:
+    """Every limit of ``ttes author check`` holds for the U-turn to his left and its DI/M16 slaves (issue 16:
+    the pelvis carried a whole move ahead of the knees to the end, the DI's belly lay on the ground and slid
+    6.1 cm, its hips popped up 20.4 degrees in a frame as the knees made their last move)."""
+    from authoring.quality import check_clip
+
+    cs = load_channelset(CHANNELSETS / f"{name}{suffix}.chset.env")
+    row = check_clip(cs, FigureSet.from_dir(FIGURES, sorted({c.protofiletype for c in cs.channels})))
+    assert row["failures"] == [], {k: row[k] for k in row["failures"]}
