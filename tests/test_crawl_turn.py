@@ -21,8 +21,8 @@ SLIDE_CM = {"": 0.5, "_low": 3.0, "_m16_low": 3.0}  # the recorded soldier; its 
 # round (the check's contact_slide 1.57 and 1.50 of 3)
 ARC_SLIDE_CM = 1.8
 # ... the U-turns to his left (crawl_turn.LEFT_U_TURN_AHEAD: the body carried with the forearms, the right
-# elbow near its reach): the right elbow 1.90 cm at 165° as the knees make their last move; the check's
-# contact_slide (its forearm's mesh) is 2.81 of 3
+# elbow near its reach): the right elbow 1.90 cm at 165° as the knees made their last move with the pelvis
+# carried a whole move ahead (the check's contact_slide 2.81 of 3); with LEFT_U_TURN_PELVIS_AHEAD 1.19
 LEFT_U_TURN_SLIDE_CM = 3.0
 SITES = [f"{s}_{p}" for s in ("left", "right") for p in ("upper_arm.distal", "lower_leg.knee", "toes.distal")]
 DOWN_CM = 1.0  # a contact this near its lowest height touches the ground
