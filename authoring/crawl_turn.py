@@ -34,7 +34,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -59,13 +59,32 @@ FPS = 60
 BASE = "CRAWL"
 SIDES = ("left", "right")
 TURN_ANGLES = (30, 45, 90)  # a crawling soldier turns the nearest (another after it if far off)
-# ... a crawler's turns: the U-turn too, carried along its end heading, to his right alone (either way
-# serves a reversal; to his left, the rifle across his body, his right forearm slid 30 cm: the right elbow,
-# at its reach, could not follow the shoulders carried sideways away from it; DI 4.2 cm, M16 7.4)
+# ... a crawler's turns: the U-turn too, carried along its end heading, to his right (either way serves a
+# reversal)
 U_TURN = "crawlarc_r180"
 # ... and the shorter ones, built the same way (a 135-165° reversal: turned on the spot and then the arcs he
-# ended 108 cm from his entity at 150°; the U-turn and the rest turned crawling on, 34 cm at 165°)
+# ended 108 cm from his entity at 150°; the U-turn and the rest turned crawling on, 34 cm at 165°), to his
+# right, and the 165° one to his left
 U_TURN_ANGLES = (135, 150, 165, 180)
+LEFT_U_TURN_ANGLES = (165,)
+# share of the front's carry in the chest's and the pelvis's on a U-turn to his left: the body follows the
+# forearms, not the knees. The rifle across his body, his right elbow is near its reach in CRAWL: with
+# ADVANCE_FRONT the knees' moves carried the shoulders away from it to his left and the planted right forearm
+# slid 31 cm at 150°, the palms left the rifle 2.7 cm; 0.8: 7.0 cm; 1.0: 2.8 cm at 165° (the check's 3 cm),
+# 3.0 at 150°, 3.5 at 135°, as the knees make their last move: those two are not built yet (the chest
+# carried 1.1-1.2 of the front's: 4.4-4.5 cm; chest and pelvis 1.2-1.4: the right forearm 2.2-2.5 but the
+# pelvis dragged the left thigh 4-8 cm)
+LEFT_U_TURN_AHEAD = 1.0
+# ... and in the pelvis's alone, each pair of moves (its front move and the knees' after it): carried with
+# the forearms a whole move ahead of the knees, the DI slave's pelvis pulled its thighs flat, its belly lay on
+# the ground and slid 6.1 cm and its hips popped up (20.4 degrees in a frame) as the knees made their last
+# move; its right knee slid 5.8 cm as the fifth front move carried the pelvis. Less in the last two pairs (the
+# soldier's right elbow no longer at its reach as he comes round) and a little less in the first (at 1.0 the
+# DI's right wrist flicked 15.2 degrees there). Sensitive, the DI's left wrist above all: 0.5 throughout, the
+# soldier's right forearm slid 4.3 cm in the fourth pair; 0.75 throughout, 3.5 cm in the last; 0.6 in the
+# last, the DI's hips popped 24 degrees; in the fifth 0.5, 0.55, 0.6: its left wrist flicked 15.1, 18.5, 15.1
+# degrees; 0.7: the M16 slave's right forearm slid 4.1 cm
+LEFT_U_TURN_PELVIS_AHEAD = (0.75, 1.0, 1.0, 1.0, 0.45, 0.5)
 # ... and a U-turn for a faster entity, carrying him further as fast: more, shorter moves, each as quick in
 # degrees a second (143.5 cm in 4.2 s at the server's GROUND_TURN_RATE; 0.45 m/s: the U-turn's 103.5 cm in
 # 4 s left him 48 cm behind, played faster his body would swing over 360°/s; 25-30 cm a move, his arms fell
@@ -98,17 +117,36 @@ def clip_name(direction: str, angle: float, advance: float = 0.0) -> str:
     return f"crawl{'arc' if advance else 'turn'}_{direction[0]}{angle:g}"
 
 
-# clip -> (direction, degrees, advance cm a move, degrees a move at most, share of MOVE a move takes)
-_PLANS: dict[str, tuple[str, float, float, float, float]] = {
-    clip_name(d, a, adv): (d, float(a), adv, STEP, 1.0)
+class Plan(NamedTuple):
+    """How one turn on the ground is recorded."""
+
+    direction: str  # "left" or "right"
+    angle: float  # degrees
+    advance: float = 0.0  # cm a move carries its part forward
+    step: float = STEP  # degrees a move turns at most
+    tempo: float = 1.0  # share of MOVE a move takes
+    ahead: float = ADVANCE_FRONT  # share of the front's carry in the chest's and the pelvis's
+    pelvis_ahead: tuple[float, ...] | None = None  # ... in the pelvis's, each pair of moves (None: ``ahead``)
+
+
+_PLANS: dict[str, Plan] = {
+    clip_name(d, a, adv): Plan(d, float(a), adv)
     for adv in (0.0, ARC_ADVANCE)
     for d in SIDES
     for a in TURN_ANGLES
 }
 _PLANS.update(
-    {clip_name("right", a, ARC_ADVANCE): ("right", float(a), ARC_ADVANCE, STEP, 1.0) for a in U_TURN_ANGLES}
+    {clip_name("right", a, ARC_ADVANCE): Plan("right", float(a), ARC_ADVANCE) for a in U_TURN_ANGLES}
 )
-_PLANS[U_TURN_FAR] = ("right", 180.0, ARC_ADVANCE, U_TURN_FAR_STEP, U_TURN_FAR_TEMPO)
+_PLANS[U_TURN_FAR] = Plan("right", 180.0, ARC_ADVANCE, U_TURN_FAR_STEP, U_TURN_FAR_TEMPO)
+_PLANS.update(
+    {
+        clip_name("left", a, ARC_ADVANCE): Plan(
+            "left", float(a), ARC_ADVANCE, ahead=LEFT_U_TURN_AHEAD, pelvis_ahead=LEFT_U_TURN_PELVIS_AHEAD
+        )
+        for a in LEFT_U_TURN_ANGLES
+    }
+)
 CRAWL_TURN_CLIPS: tuple[str, ...] = tuple(_PLANS)
 
 
@@ -196,17 +234,13 @@ def limb_track(p0: np.ndarray, moves: np.ndarray, up: np.ndarray, lift: float) -
 
 
 def record_crawl_turn(
-    kin: FigureKinematics,
-    rkin: FigureKinematics,
-    key: KeyPosture,
-    direction: str,
-    angle: float,
-    advance: float = 0.0,
-    step: float = STEP,
-    tempo: float = 1.0,
+    kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture, plan: Plan
 ) -> tuple[ClipFrames, tuple[float, float, float]]:
-    """The frames of one turn (see the module docstring), each move carrying its part ``advance`` cm
-    forward (its moves of ``step`` degrees at most, at ``tempo`` times MOVE), and its ``end_offset``."""
+    """The frames of one turn (see the module docstring) by ``plan``: each move carrying its part
+    ``plan.advance`` cm forward (its moves of ``plan.step`` degrees at most, at ``plan.tempo`` times MOVE;
+    the chest and the pelvis carried ``plan.ahead`` of the front's carry and the rest of the knees', the
+    pelvis ``plan.pelvis_ahead`` a pair of moves where given), and its ``end_offset``."""
+    direction, angle, advance, step, tempo, ahead, pelvis_ahead = plan
     moves, t_land = part_moves(direction, angle, step, tempo)
     t_end = round((t_land + SETTLE) * FPS) / FPS
     n = round(t_end * FPS) + 1
@@ -219,13 +253,19 @@ def record_crawl_turn(
         part_yaw(t, moves[p], MOVE[p] * tempo, advance, along) for p in ("front", "back")
     )
 
-    def mix(share: float) -> np.ndarray:  # the body between the parts: ``share`` of the front's turn
-        on = ADVANCE_FRONT * f_on + (1.0 - ADVANCE_FRONT) * b_on
+    def mix(share: float, carry: float | np.ndarray) -> np.ndarray:
+        # the body between the parts: ``share`` of the front's turn, ``carry`` of its carry
+        on = carry * f_on + (1.0 - carry) * b_on
         return _carried(pivot, share * front + (1.0 - share) * back, on)
 
-    roots = mix(PELVIS_FRONT) @ root0
+    pelvis_carry: float | np.ndarray = ahead
+    if pelvis_ahead is not None:  # each pair's from its front move on (the parts level before it)
+        starts = np.array([t0 for t0, _, _ in moves["front"]])
+        pair = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(starts) - 1)
+        pelvis_carry = np.asarray(pelvis_ahead)[pair][:, None]
+    roots = mix(PELVIS_FRONT, pelvis_carry) @ root0
     chest0 = kin.segment_globals(q0, root0)[kin.segment_names.index(CARRIER)]
-    chest = mix(CHEST_FRONT) @ chest0
+    chest = mix(CHEST_FRONT, ahead) @ chest0
     chest[:, 1, 3] += ELBOW_LIFT * f_up  # the shoulders rise with the forearms
     front_moves, back_moves = _carried(pivot, front, f_on), _carried(pivot, back, b_on)
 
@@ -259,7 +299,7 @@ def record_crawl_turn(
 def _record(name: str, ctx: Any) -> tuple[ClipFrames, tuple[float, float, float]]:
     """One clip of the build context ``ctx`` (each clip is recorded once a build: nothing to share)."""
     kin, rkin = FigureKinematics(ctx.soldier), FigureKinematics(ctx.rifle)
-    return record_crawl_turn(kin, rkin, ctx.keys[BASE], *_PLANS[name])
+    return record_crawl_turn(kin, rkin, ctx.keys[BASE], _PLANS[name])
 
 
 def crawl_turn_clips() -> dict[str, Callable[[Any], tuple[ClipFrames, tuple[float, float, float]]]]:

@@ -20,6 +20,10 @@ SLIDE_CM = {"": 0.5, "_low": 3.0, "_m16_low": 3.0}  # the recorded soldier; its 
 # stretched and the forearms slid 3 cm); the 135° and 150° U-turns' left knee 1.78 and 1.57 cm as he comes
 # round (the check's contact_slide 1.57 and 1.50 of 3)
 ARC_SLIDE_CM = 1.8
+# ... the U-turns to his left (crawl_turn.LEFT_U_TURN_AHEAD: the body carried with the forearms, the right
+# elbow near its reach): the right elbow 1.90 cm at 165° as the knees made their last move with the pelvis
+# carried a whole move ahead (the check's contact_slide 2.81 of 3); with LEFT_U_TURN_PELVIS_AHEAD 1.19
+LEFT_U_TURN_SLIDE_CM = 3.0
 SITES = [f"{s}_{p}" for s in ("left", "right") for p in ("upper_arm.distal", "lower_leg.knee", "toes.distal")]
 DOWN_CM = 1.0  # a contact this near its lowest height touches the ground
 
@@ -66,6 +70,8 @@ def test_a_turn_on_the_ground_keeps_its_planted_contacts_and_ends_in_crawl_moved
         ):
             slide = np.linalg.norm(p[a:b, [0, 2]] - p[a, [0, 2]], axis=1).max()
             limit = ARC_SLIDE_CM if name.startswith("crawlarc_") and not suffix else SLIDE_CM[suffix]
+            if name.startswith("crawlarc_l1") and not suffix:
+                limit = LEFT_U_TURN_SLIDE_CM
             assert slide <= limit, f"{name}{suffix} {site} slides {slide:.2f} cm in frames {a}..{b}"
 
 
@@ -91,3 +97,16 @@ def test_a_crawlers_u_turn_carries_him_along_the_heading_it_ends_on() -> None:
     twice = turns.ground_move(*spot) @ turns.ground_move(*spot)
     carried = crawl_turn.ARC_ADVANCE * len(moves["back"])
     np.testing.assert_allclose(arc[:2], (twice[0, 3], twice[2, 3] + carried), atol=1e-3)
+
+
+@pytest.mark.parametrize("suffix", SUFFIXES)
+@pytest.mark.parametrize("name", [f"crawlarc_l{a}" for a in crawl_turn.LEFT_U_TURN_ANGLES])
+def test_a_u_turn_to_his_left_passes_the_check_on_every_figure(name: str, suffix: str) -> None:
+    """Every limit of ``ttes author check`` holds for the U-turn to his left and its DI/M16 slaves (issue 16:
+    the pelvis carried a whole move ahead of the knees to the end, the DI's belly lay on the ground and slid
+    6.1 cm, its hips popped up 20.4 degrees in a frame as the knees made their last move)."""
+    from authoring.quality import check_clip
+
+    cs = load_channelset(CHANNELSETS / f"{name}{suffix}.chset.env")
+    row = check_clip(cs, FigureSet.from_dir(FIGURES, sorted({c.protofiletype for c in cs.channels})))
+    assert row["failures"] == [], {k: row[k] for k in row["failures"]}

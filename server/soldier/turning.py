@@ -63,9 +63,10 @@ PIVOT_REST_PER_STANCE_DEG = 9.0
 CRAWL_REVERSAL_DEG = 22.5
 MAX_GROUND_TURNS = 4  # turn clips on the ground one after the other at most (180°: the 90° twice)
 GROUND_TURN_SLACK_DEG = 7.5  # ... chosen by what they leave unturned in steps of this much, then the fewest
-# a crawler whose heading changes by this much or less from a U-turn's (crawlarc_r135..r180) plays it and
-# turns the rest as he crawls on (root_motion.CRAWL_TURN_RATE, under CRAWL_REVERSAL_DEG): 165° as the 90° and
-# 45° on the spot and the 30° arc left him 125 cm from his entity, 76 after the stop (150°: 108 and 52)
+# a crawler whose heading changes by this much or less from a U-turn's (crawlarc_r135..r180, l135..l165) plays
+# it and turns the rest as he crawls on (root_motion.CRAWL_TURN_RATE, under CRAWL_REVERSAL_DEG): 165° as the
+# 90° and 45° on the spot and the 30° arc left him 125 cm from his entity, 76 after the stop (150°: 108 and
+# 52)
 U_TURN_SLACK_DEG = 15.0
 # ... for a change of at least this much (half-way from the 90° arc to the shortest U-turn, 135°): 120° as the
 # 135° U-turn and 15° crawling on ended the turn 42 cm from his entity but 57 after the stop (the crawl does
@@ -249,11 +250,11 @@ class Turning(ManagerCore):
         self, arcs: list[tuple[int, float]], want: float, speed: float = 0.0, ahead: float = 0.0
     ) -> int | None:
         """Of a crawler's turns that carry him forward (``arcs``: clip, compass degrees) the U-turn (more than
-        90°) nearest ``want`` compass degrees (U_TURN_MIN_DEG or more), if it is within U_TURN_SLACK_DEG of
-        it (the 180° one serves either way; the shorter ones turn to his right alone: to his left the right
-        forearm slid 31 cm); of two as near the one that ends nearest an entity at ``speed`` cm/s, the figure
-        ``ahead`` cm ahead of it along its new heading (a crawler trailing it before it reversed: 18 cm at
-        0.3 m/s); 0.45 m/s: the one carrying him further, ``crawlarc_r180_far``."""
+        90°) nearest ``want`` compass degrees (U_TURN_MIN_DEG or more), if it is within U_TURN_SLACK_DEG of it
+        (the 180° one serves either way, the shorter ones each way); of two as near the one that ends nearest
+        an entity at ``speed`` cm/s, the figure ``ahead`` cm ahead of it along its new heading (a crawler
+        trailing it before it reversed: 18 cm at 0.3 m/s); 0.45 m/s: the one carrying him further,
+        ``crawlarc_r180_far``."""
         off = [(abs((d - want + 180.0) % 360.0 - 180.0), c) for c, d in arcs if abs(d) > 90.0]
         near = min(off, default=None)
         if near is None or near[0] > U_TURN_SLACK_DEG or abs(want) < U_TURN_MIN_DEG:
