@@ -38,6 +38,10 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``FACE_DOWN_COS``), how far the higher foot's lowest node is above the pelvis' lowest node: a body falling
   or lying face down with its shins straight up (a ragdoll's knees whipping) reads as a scorpion, not a
   soldier; prone, crawling and dead bodies keep their feet down (not judged if the chest never faces down).
+* ``lying_feet_up_cm`` — a clip that starts lying face down (the chest facing the ground and the pelvis within
+  ``LYING_PELVIS_CM`` of it): the same height while he lies so. A man shot while prone has no fall to fling
+  his legs: his lower legs lifting 13-17 cm as his chest came down (branch proneheels-s13) read as a kick
+  and passed ``feet_up_cm``; every clip on main that starts lying keeps them within 4 cm.
 * a clip that ends in DEAD (:mod:`~authoring.quality_rest`): ``rest_rise_cm``, how far a limb rises once
   the body is down, and ``limb_rest_lag_s``, how long after the body the last limb part comes to rest.
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
@@ -107,6 +111,7 @@ THRESHOLDS: dict[str, float] = {
     "max_frame_flick_deg": 15.0,  # any joint: a one-frame flick (see frame_flicks)
     "ankle_flick_deg": 8.0,  # ... an ankle's (a foot twitching at 60 fps)
     "feet_up_cm": 20.0,
+    "lying_feet_up_cm": 6.0,  # ... and of a clip that starts lying face down (no fall flings the legs)
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
     **POSTURE_LIMITS,
@@ -121,6 +126,7 @@ GAIT_LIMITS: dict[str, dict[str, tuple[float, float] | None]] = {
 }
 STEPS_PER_CYCLE_CLIP = {"crawl": 2}  # gait.py cuts one step per cycle clip; crawl.py one full cycle
 FACE_DOWN_COS = 0.5  # the chest's front points down at least this much (cosine): he lies face down
+LYING_PELVIS_CM = 3.0  # face down, the pelvis' lowest node this low: he lies on the ground
 CONTACT_HEIGHT_CM = 1.25  # a 1 cm skim is contact; a toe leaving the ground at 2 cm is not
 END_FRAMES = 3  # frames over which an end's speed is measured
 LIMIT_SLACK = 1e-4  # rad / cm: float32 rounding of recorded angles
@@ -174,10 +180,18 @@ def feet_up(kin, segg: np.ndarray, heights: np.ndarray, parts: np.ndarray) -> di
         return {"feet_up_cm": None}
     pelvis = heights[:, parts == "pelvis"].min(axis=1)
     feet = np.stack([heights[:, parts == f].min(axis=1) for f in FOOT_PARTS], axis=1) - pelvis[:, None]
-    frames = np.flatnonzero(down)
+    out = _highest_foot("feet_up", feet, np.flatnonzero(down))
+    lying = down & (pelvis <= LYING_PELVIS_CM)
+    if lying[0]:  # he starts lying face down: no fall flings his legs up
+        out.update(_highest_foot("lying_feet_up", feet, np.flatnonzero(lying)))
+    return out
+
+
+def _highest_foot(key: str, feet: np.ndarray, frames: np.ndarray) -> dict[str, Any]:
+    """``{key}_cm`` and ``{key}_where``: the highest of ``feet`` ``(n, 2)`` over ``frames``."""
     f, side = np.unravel_index(int(np.argmax(feet[frames])), (len(frames), 2))
     at = int(frames[f])
-    return {"feet_up_cm": round(float(feet[at, side]), 3), "feet_up_where": f"{FOOT_PARTS[side]}[{at}]"}
+    return {f"{key}_cm": round(float(feet[at, side]), 3), f"{key}_where": f"{FOOT_PARTS[side]}[{at}]"}
 
 
 def frame_flicks(q: np.ndarray, rot: np.ndarray, dof_slices: Mapping[str, slice]) -> dict[str, Any]:

@@ -51,6 +51,27 @@ def test_a_face_down_body_with_its_shins_up_fails(figset: FigureSet) -> None:
     assert back["feet_up_cm"] is None and "feet_up_cm" not in back["failures"]
 
 
+def test_a_body_that_starts_lying_keeps_its_feet_down(figset: FigureSet) -> None:
+    """proneheels-s13's prone deaths lifted both lower legs 13-17 cm as the chest came down (feet_up_cm: 20
+    passed it): a man shot while lying has no fall to fling them. Knees bending from 0 to 20 degrees lift
+    the feet about 15 cm; lying still passes; the same lift in a clip that starts standing is not judged."""
+    kin = figset.kin["DI.fig"]
+    poses, body, rifle = _floored(figset, *_face_down(figset), lift=-6.0)  # his toes in: the pelvis down
+    lifted = poses.copy()
+    for side in ("left", "right"):
+        lifted[:, kin.dof_slices[f"{side}_knee"].start] = np.radians(np.linspace(0.0, 20.0, len(poses)))
+    still = check_clip(_clip("still.chset", figset, poses, body, rifle), figset)
+    assert still["lying_feet_up_cm"] < 1.0 and "lying_feet_up_cm" not in still["failures"]
+    kick = check_clip(_clip("kick.chset", figset, lifted, body, rifle), figset)
+    assert 6.0 < kick["lying_feet_up_cm"] < 20.0, kick["lying_feet_up_cm"]
+    assert "lying_feet_up_cm" in kick["failures"] and "feet_up_cm" not in kick["failures"]
+    assert kick["lying_feet_up_where"].startswith(("left_foot[", "right_foot["))
+    raised = body.copy()  # the same body held 50 cm up in the first frames: he does not start lying
+    raised[:3, 1, 3] += 50.0
+    falling = check_clip(_clip("fall.chset", figset, lifted, raised, rifle), figset)
+    assert falling.get("lying_feet_up_cm") is None
+
+
 def test_a_dead_body_lies_slack(tmp_path: Path, figset: FigureSet, capsys) -> None:
     """A head held up (the prone deaths' on a hand, 18 cm) or an arm raised (kfire2dead's forearms pointing
     up) at DEAD fails; a body lying flat passes."""
