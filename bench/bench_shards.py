@@ -55,9 +55,8 @@ def main() -> int:
     ap.add_argument(
         "--fabric-block",
         type=int,
-        default=65536,
-        help="soldier indices per pose topic (default 65,536: one front-end hears every block, so one a "
-        "shard; at 4,096 it delivered 94-97 %% against 99 %%, docs/SCALING.md)",
+        help="soldier indices per pose topic (default: the servers'; the one front-end watches every "
+        "block, so it hears each shard whole, one batch a tick, whatever the block: docs/SCALING.md)",
     )
     ap.add_argument("--probe", type=int, metavar="N", help="request -> update latency of N soldiers")
     ap.add_argument("--trace", type=int, metavar="N", help="trace N probe soldiers' requests under the load")
@@ -72,7 +71,7 @@ def main() -> int:
         n = args.soldiers + 64
         config.write_text(f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\nreport_interval = 2.0\n")
         common = ["--config", str(config), "--throttle", "0", "--fabric", args.fabric]
-        common += ["--fabric-block", str(args.fabric_block)]
+        common += ["--fabric-block", str(args.fabric_block)] if args.fabric_block else []
         if args.trace:
             os.environ["TTES_TRACE"], os.environ["TTES_TRACE_BELOW"] = f"{tmp}/trace", str(args.trace + EXTRA)
         with cluster(common) as procs, probing(procs["front"].port, args.trace, Path(tmp)) as probed:
