@@ -200,3 +200,19 @@ def test_a_stream_that_gains_a_subscriber_starts_with_a_key() -> None:
     last = wire.since(0)[-2:]
     assert [(b.block, b.key) for b in last] == [(WHOLE, True), (1, True)]
     assert last[1].indices.tolist() == list(range(16, 32))
+
+
+def test_a_whole_batch_and_a_block_batch_of_a_soldier_leave_the_later_codes() -> None:
+    """A front-end that changes from a shard's blocks to its whole stream (or back) may merge both kinds
+    at once: in the order they arrived, whatever stream each came on."""
+    rows = np.arange(N)
+
+    def batch(block: int, tick: int, value: int, n: int = N) -> Batch:
+        codes = np.full((n, F), value, np.uint16)
+        return Batch(0, 1, tick, tick, 0.0, rows[:n], np.ones(n, np.uint8), codes, False, block)
+
+    board = PoseBoard(3, 2)
+    merge(board, [batch(0, 1, 1, 16), batch(WHOLE, 2, 2), batch(0, 3, 3, 16)], 3, ALIVE)
+    assert (board.codes[:16] == 3).all() and (board.codes[16:N] == 2).all()
+    merge(board, [batch(0, 4, 4, 16), batch(WHOLE, 5, 5)], 5, ALIVE)
+    assert (board.codes[:N] == 5).all()

@@ -511,8 +511,8 @@ class FrontNode:
         every = np.union1d(watched, blocks)
         every = every[(every >= 0) & (every < self.blocks)]
         m = self.server.world.manager
-        held = np.unique(m.table.live // self.block) if m is not None else every[:0]
-        whole = bool(len(every)) and bool(np.isin(held, every).all())
+        occupied = np.unique(m.table.live // self.block) if m is not None else every[:0]
+        whole = bool(len(every)) and bool(np.isin(occupied, every).all())
         want = set()
         for k in range(self.shards):
             if whole or k in self._asked:
