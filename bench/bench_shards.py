@@ -93,6 +93,7 @@ def main() -> int:
             cpu = {k: round(100 * (cpu_seconds(p.pid) - cpu0[k]) / wall, 1) for k, p in procs.items()}
             stages = {k: stage_cpu(p.log_tail(1 << 24)) for k, p in procs.items()}
             deaf = {k: stage_cpu(p.log_tail(1 << 24), "loop_deaf_ms") for k, p in procs.items()}
+            streams = last_field(procs["front"].log_tail(1 << 24), "fabric_blocks")
             traced = probed(time.monotonic() - args.seconds) if args.trace else {}
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
@@ -113,6 +114,7 @@ def main() -> int:
         **{k: report.get(k) for k in keys},
         "cpu_pct": cpu,
         "cpu_ms_per_tick": stages,
+        "front_streams_heard": streams,  # (shard, block or whole) pose topics: 2 = each shard whole
         **({"loop_deaf_ms": deaf} if os.environ.get("TTES_DEAF") == "1" else {}),
         **traced,
     }
@@ -166,6 +168,15 @@ def probing(port: int, n: int | None, tmp: Path) -> Iterator[Callable[[float], d
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def last_field(log: str, name: str) -> str | None:
+    """The value of ``name=`` in a server's last status line (None without one)."""
+    for line in reversed(log.splitlines()):
+        field = next((f for f in line.split() if f.startswith(name + "=")), None)
+        if "event=status" in line and field:
+            return field.split("=", 1)[1]
+    return None
 
 
 def stage_cpu(log: str, name: str = "cpu_ms_per_tick") -> dict[str, float]:
