@@ -9,7 +9,12 @@ receive latency p50/p99 (ms, one host's monotonic clock), CPU ms per tick of a p
 and of the subscriber (receive + decode + merge, per tick of both shards), batches lost (after a warm-up),
 and the adapter's code size (lines of ``server/fabric/*_node.py``).
 
+``--block N``: each tick as one batch per block of N soldier indices on the block's topic (what a shard
+sends a front-end that hears its blocks), against one batch a tick (0, the default: a front-end that hears
+the shard whole) — the per-message cost of the per-block batches.
+
     python bench/bench_fabric.py [--soldiers 10000] [--seconds 10] [--hz 30] [--engines zenoh,dds] [--json]
+    python bench/bench_fabric.py --soldiers 20000 --engines zenoh --block 4096
 """
 
 from __future__ import annotations
@@ -45,8 +50,8 @@ def _config(engine: str, port: int, listen: bool) -> FabricConfig:
 
 def publisher(args: argparse.Namespace) -> dict[str, object]:
     fab = open_fabric(_config(args.engine, args.port, listen=False))
-    put = fab.publisher(poses_topic(args.shard), Kind.POSES)
     n = args.soldiers // 2
+    puts = [fab.publisher(poses_topic(args.shard, b), Kind.POSES) for b in range(_blocks(args))]
     rng = np.random.default_rng(args.shard)
     base = rng.integers(0, 4096, (n, NFIELDS), dtype=np.uint16)
     idx = np.arange(n, dtype=np.uint32) * 2 + args.shard
@@ -60,12 +65,18 @@ def publisher(args: argparse.Namespace) -> dict[str, object]:
         if seq == WARM_TICKS:
             cpu0 = time.process_time()
         codes = (base + np.uint16(seq)) & np.uint16(0x0FFF)
-        put(encode_batch(Batch(args.shard, 2, seq, seq, time.monotonic(), idx, tables, codes)))
+        part = idx // args.block if args.block else np.zeros(n, np.int64)
+        for b, put in enumerate(puts):
+            at = part == b
+            put(
+                encode_batch(Batch(args.shard, 2, seq, seq, time.monotonic(), idx[at], tables[at], codes[at]))
+            )
         next_t += period
     cpu = time.process_time() - cpu0
     time.sleep(1.0)
     fab.close()
-    return {"published": total - WARM_TICKS, "cpu_ms_per_tick": 1000 * cpu / (total - WARM_TICKS)}
+    published = (total - WARM_TICKS) * len(puts)  # messages
+    return {"published": published, "cpu_ms_per_tick": 1000 * cpu / (total - WARM_TICKS)}
 
 
 def subscriber(args: argparse.Namespace) -> dict[str, object]:
@@ -90,12 +101,13 @@ def subscriber(args: argparse.Namespace) -> dict[str, object]:
             cpu[1] = time.process_time()
 
     for k in (0, 1):
-        fab.subscribe(poses_topic(k), Kind.POSES, on_batch)
+        for b in range(_blocks(args)):
+            fab.subscribe(poses_topic(k, b), Kind.POSES, on_batch)
     print("ready", flush=True)
     sys.stdin.readline()  # the parent says when the publishers are done
     fab.close()
     ms = np.asarray(lat) * 1000
-    ticks = max(1, sum(got)) / 2
+    ticks = max(1, sum(got)) / 2 / _blocks(args)
     return {
         "received": got,
         "latency_ms_p50": float(np.percentile(ms, 50)) if len(ms) else None,
@@ -105,6 +117,11 @@ def subscriber(args: argparse.Namespace) -> dict[str, object]:
     }
 
 
+def _blocks(args: argparse.Namespace) -> int:
+    """Pose topics a shard publishes a tick on: its blocks of ``--block`` indices, or one."""
+    return -(-(args.soldiers + 2) // args.block) if args.block else 1
+
+
 def _code_lines(path: str) -> int:
     lines = (ROOT / path).read_text().splitlines()
     return sum(1 for ln in lines if ln.strip() and not ln.strip().startswith("#"))
@@ -112,7 +129,7 @@ def _code_lines(path: str) -> int:
 
 def run_engine(args: argparse.Namespace, engine: str, port: int) -> dict[str, object]:
     me = [sys.executable, __file__, "--engine", engine, "--port", str(port), "--soldiers", str(args.soldiers)]
-    me += ["--seconds", str(args.seconds), "--hz", str(args.hz)]
+    me += ["--seconds", str(args.seconds), "--hz", str(args.hz), "--block", str(args.block)]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     sub = subprocess.Popen(
         [*me, "--role", "sub"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env
@@ -154,6 +171,7 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--hz", type=float, default=30.0)
     ap.add_argument("--engines", default="zenoh,dds")
+    ap.add_argument("--block", type=int, default=0, help="soldier indices a batch (0: one batch a tick)")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--role", choices=("sub", "pub"), help=argparse.SUPPRESS)
     ap.add_argument("--engine", help=argparse.SUPPRESS)
@@ -163,7 +181,8 @@ def main() -> int:
     if args.role:
         print(json.dumps((publisher if args.role == "pub" else subscriber)(args)), flush=True)
         return 0
-    results = {"soldiers": args.soldiers, "hz": args.hz, "seconds": args.seconds, "load": os.getloadavg()[0]}
+    results = {"soldiers": args.soldiers, "hz": args.hz, "seconds": args.seconds, "block": args.block}
+    results["load"] = os.getloadavg()[0]
     for k, engine in enumerate(args.engines.split(",")):
         results[engine] = run_engine(args, engine, args.port + 10 * k)
         if not args.json:

@@ -35,7 +35,7 @@ from server.fabric.nodes import Sharding, ShardNode
 class _NoFabric:
     engine = "none"
 
-    def publisher(self, topic: str, kind: object) -> Any:
+    def publisher(self, topic: str, kind: object, on_match: object = None) -> Any:
         return lambda data: None
 
     def subscribe(self, *args: object) -> None: ...

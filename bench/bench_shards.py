@@ -55,9 +55,8 @@ def main() -> int:
     ap.add_argument(
         "--fabric-block",
         type=int,
-        default=65536,
-        help="soldier indices per pose topic (default 65,536: one front-end hears every block, so one a "
-        "shard; at 4,096 it delivered 94-97 %% against 99 %%, docs/SCALING.md)",
+        help="soldier indices per pose topic (default: the servers'; the one front-end watches every "
+        "block, so it hears each shard whole, one batch a tick, whatever the block: docs/SCALING.md)",
     )
     ap.add_argument("--probe", type=int, metavar="N", help="request -> update latency of N soldiers")
     ap.add_argument("--trace", type=int, metavar="N", help="trace N probe soldiers' requests under the load")
@@ -72,7 +71,7 @@ def main() -> int:
         n = args.soldiers + 64
         config.write_text(f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\nreport_interval = 2.0\n")
         common = ["--config", str(config), "--throttle", "0", "--fabric", args.fabric]
-        common += ["--fabric-block", str(args.fabric_block)]
+        common += ["--fabric-block", str(args.fabric_block)] if args.fabric_block else []
         if args.trace:
             os.environ["TTES_TRACE"], os.environ["TTES_TRACE_BELOW"] = f"{tmp}/trace", str(args.trace + EXTRA)
         with cluster(common) as procs, probing(procs["front"].port, args.trace, Path(tmp)) as probed:
@@ -94,6 +93,7 @@ def main() -> int:
             cpu = {k: round(100 * (cpu_seconds(p.pid) - cpu0[k]) / wall, 1) for k, p in procs.items()}
             stages = {k: stage_cpu(p.log_tail(1 << 24)) for k, p in procs.items()}
             deaf = {k: stage_cpu(p.log_tail(1 << 24), "loop_deaf_ms") for k, p in procs.items()}
+            streams = last_field(procs["front"].log_tail(1 << 24), "fabric_blocks")
             traced = probed(time.monotonic() - args.seconds) if args.trace else {}
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
@@ -114,6 +114,7 @@ def main() -> int:
         **{k: report.get(k) for k in keys},
         "cpu_pct": cpu,
         "cpu_ms_per_tick": stages,
+        "front_streams_heard": streams,  # (shard, block or whole) pose topics: 2 = each shard whole
         **({"loop_deaf_ms": deaf} if os.environ.get("TTES_DEAF") == "1" else {}),
         **traced,
     }
@@ -167,6 +168,15 @@ def probing(port: int, n: int | None, tmp: Path) -> Iterator[Callable[[float], d
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def last_field(log: str, name: str) -> str | None:
+    """The value of ``name=`` in a server's last status line (None without one)."""
+    for line in reversed(log.splitlines()):
+        field = next((f for f in line.split() if f.startswith(name + "=")), None)
+        if "event=status" in line and field:
+            return field.split("=", 1)[1]
+    return None
 
 
 def stage_cpu(log: str, name: str = "cpu_ms_per_tick") -> dict[str, float]:

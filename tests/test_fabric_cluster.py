@@ -52,8 +52,12 @@ async def _soldiers_of(port: int) -> list[int]:
     return sorted(i for i, _ in ready.soldiers)
 
 
-async def test_requests_reach_their_shard_and_both_shards_reach_one_client() -> None:
-    with cluster() as (front, *shards):
+@pytest.mark.parametrize("fabric", ["zenoh", "dds"])
+async def test_requests_reach_their_shard_and_both_shards_reach_one_client(fabric: str) -> None:
+    """On both engines (each tells a shard which of its pose topics a front-end hears)."""
+    if fabric == "dds":
+        pytest.importorskip("cyclonedds")
+    with cluster(fabric=fabric) as (front, *shards):
         c = await Client.open(front.port, "ig", client_id="alpha")
         ready = await c.expect(Ready)
         assert sorted(i for i, _ in ready.soldiers) == list(range(10))  # the start-up script's, as one server

@@ -39,6 +39,12 @@ class Bus:
     topics: dict[str, list[Handler]] = field(default_factory=lambda: defaultdict(list))
     present: set[str] = field(default_factory=set)
     watchers: dict[str, list[Presence]] = field(default_factory=lambda: defaultdict(list))
+    matchers: dict[str, list[Presence]] = field(default_factory=lambda: defaultdict(list))  # publishers'
+
+    def matched(self, topic: str) -> None:
+        """A topic gained its first subscriber or lost its last: its publishers' matching listeners hear."""
+        for on_match in self.matchers[topic]:
+            on_match(bool(self.topics[topic]))
 
 
 class MemoryFabric:
@@ -52,21 +58,28 @@ class MemoryFabric:
         self.announced: list[str] = []
         self.closed = False
 
-    def publisher(self, topic: str, kind: Kind) -> Handler:
+    def publisher(self, topic: str, kind: Kind, on_match: Presence | None = None) -> Handler:
         def put(data: bytes) -> None:
             if not self.closed:
                 for handler in list(self.bus.topics[topic]):
                     handler(data)
 
+        if on_match is not None:
+            self.bus.matchers[topic].append(on_match)
+            on_match(bool(self.bus.topics[topic]))
         return put
 
     def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> Unsubscribe:
         self.bus.topics[topic].append(on_message)
         self.mine.append((topic, on_message))
+        if len(self.bus.topics[topic]) == 1:
+            self.bus.matched(topic)
 
         def unsubscribe() -> None:
             self.bus.topics[topic].remove(on_message)
             self.mine.remove((topic, on_message))
+            if not self.bus.topics[topic]:
+                self.bus.matched(topic)
 
         return unsubscribe
 
@@ -86,6 +99,8 @@ class MemoryFabric:
         self.closed = True
         for topic, handler in self.mine:
             self.bus.topics[topic].remove(handler)
+            if not self.bus.topics[topic]:
+                self.bus.matched(topic)
         for key in self.announced:
             self.bus.present.discard(key)
             for watcher in self.bus.watchers[key]:

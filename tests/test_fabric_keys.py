@@ -11,7 +11,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from server.fabric import BLOCK, Kind, poses_topic
+from server.fabric import BLOCK, WHOLE, Kind, Presence, poses_topic
 from server.fabric.batch import PULSE, Batch, decode_batch
 from server.fabric.nodes import Sharding, ShardNode, merge
 from server.pose_board import PoseBoard
@@ -20,18 +20,24 @@ N, F = 40, 64
 
 
 class Wire:
-    """A fabric node that keeps what its shard publishes: blocks' batches (and their topics), pulses."""
+    """A fabric node that keeps what its shard publishes: blocks' batches (and their topics), pulses. Some
+    front-end hears each block alone (``whole``: one hears the whole shard, none a block)."""
 
     engine = "memory"
 
-    def __init__(self) -> None:
+    def __init__(self, whole: bool = False) -> None:
         self.sent: list[bytes] = []
         self.topics: list[str] = []
         self.pulses: list[bytes] = []
+        self.whole = whole
+        self.matching: dict[str, Presence] = {}
 
-    def publisher(self, topic: str, kind: Kind) -> Any:
+    def publisher(self, topic: str, kind: Kind, on_match: Presence | None = None) -> Any:
         if topic == poses_topic(0):
             return self.pulses.append
+        if on_match is not None:
+            self.matching[topic] = on_match
+            on_match((topic == poses_topic(0, WHOLE)) == self.whole)
 
         def put(data: bytes) -> None:
             self.sent.append(data)
@@ -43,8 +49,10 @@ class Wire:
         return [decode_batch(d) for d in self.sent[n:]]
 
 
-def shard(key_every: int = 1000, block: int = BLOCK) -> tuple[ShardNode, Wire, PoseBoard]:
-    wire = Wire()
+def shard(
+    key_every: int = 1000, block: int = BLOCK, whole: bool = False
+) -> tuple[ShardNode, Wire, PoseBoard]:
+    wire = Wire(whole)
     # what a key request touches: nothing; the backlog's bound: max_soldiers
     server = SimpleNamespace(world=SimpleNamespace(manager=None), config=SimpleNamespace(max_soldiers=8))
     node = ShardNode(server, wire, Sharding(0, 1), key_every=key_every, block=block)  # type: ignore[arg-type]
@@ -160,3 +168,51 @@ def test_a_tick_goes_as_one_batch_per_block_on_its_topic_and_a_pulse() -> None:
         (PULSE, 0, 1, N, True),
         (PULSE, 1, 2, 0, False),
     ]
+
+
+def test_a_shard_heard_whole_sends_one_batch_a_tick_and_nothing_nobody_hears() -> None:
+    """A front-end that hears every block subscribes to the whole shard: the shard sends its tick as one
+    batch on ``poses/0/all`` and no block batch, as no front-end hears one alone (issue 21: a single
+    front-end paid for a batch per block, 94-97 % delivered against 99 % with one a shard)."""
+    rng = np.random.default_rng(4)
+    node, wire, board = shard(block=16, whole=True)
+    for t in (1, 2):
+        tick(node, board, rng, t, 1.0)
+    assert wire.topics == [poses_topic(0, WHOLE)] * 2
+    batches = wire.since(0)
+    assert [(b.block, b.seq, b.key, b.indices.tolist()) for b in batches] == [
+        (WHOLE, 0, True, list(range(N))),
+        (WHOLE, 1, False, list(range(N))),
+    ]
+    wire.matching[poses_topic(0, WHOLE)](False)  # it went: nobody hears anything but the pulse
+    tick(node, board, rng, 3, 1.0)
+    assert len(wire.sent) == 2 and len(wire.pulses) == 3
+
+
+def test_a_stream_that_gains_a_subscriber_starts_with_a_key() -> None:
+    """Its still soldiers come in no other batch: the shard's next tick is a key, whoever asked for one."""
+    rng = np.random.default_rng(5)
+    node, wire, board = shard(block=16, whole=True)
+    for t in (1, 2):
+        tick(node, board, rng, t, 0.1)
+    wire.matching[poses_topic(0, 1)](True)  # a second front-end hears block 1 alone
+    tick(node, board, rng, 3, 0.1)
+    last = wire.since(0)[-2:]
+    assert [(b.block, b.key) for b in last] == [(WHOLE, True), (1, True)]
+    assert last[1].indices.tolist() == list(range(16, 32))
+
+
+def test_a_whole_batch_and_a_block_batch_of_a_soldier_leave_the_later_codes() -> None:
+    """A front-end that changes from a shard's blocks to its whole stream (or back) may merge both kinds
+    at once: in the order they arrived, whatever stream each came on."""
+    rows = np.arange(N)
+
+    def batch(block: int, tick: int, value: int, n: int = N) -> Batch:
+        codes = np.full((n, F), value, np.uint16)
+        return Batch(0, 1, tick, tick, 0.0, rows[:n], np.ones(n, np.uint8), codes, False, block)
+
+    board = PoseBoard(3, 2)
+    merge(board, [batch(0, 1, 1, 16), batch(WHOLE, 2, 2), batch(0, 3, 3, 16)], 3, ALIVE)
+    assert (board.codes[:16] == 3).all() and (board.codes[16:N] == 2).all()
+    merge(board, [batch(0, 4, 4, 16), batch(WHOLE, 5, 5)], 5, ALIVE)
+    assert (board.codes[:N] == 5).all()

@@ -1,11 +1,14 @@
 """The publish/subscribe fabric between shards and front-ends (issue 21), behind one small interface.
 
-A shard (``ttes server --shard K/N``) publishes each tick's quantised codes as one batch per block of
-soldier indices on ``poses/K/B`` (block B: indices ``B * block`` up to the next block, :data:`BLOCK`), a
-header-only *pulse* on ``poses/K`` (it lives, and which tick), and takes the requests for its soldiers from
-``requests/K``; a front-end (``ttes front``) subscribes to every shard's pulse and to the blocks its
-clients watch (the wire and the decode cost what is watched, not every soldier), and publishes its
-clients' requests to the owning shard. The engine is an existing one, chosen by name:
+A shard (``ttes server --shard K/N``) publishes each tick's quantised codes as one batch on ``poses/K/all``
+while some front-end hears the whole shard, and one batch per block of soldier indices on ``poses/K/B``
+(block B: indices ``B * block`` up to the next block, :data:`BLOCK`) for each block some front-end hears
+alone (the fabric tells a publisher whether its topic has subscribers: nothing goes where nobody
+listens); each tick a header-only *pulse* on ``poses/K`` (it lives, and which tick); it takes the requests
+for its soldiers from ``requests/K``. A front-end (``ttes front``) subscribes to every shard's pulse and to
+the blocks its clients watch, or to the whole shard when they watch every block that holds a soldier (one
+batch a shard a tick: the same rows in the fewest messages), and publishes its clients' requests to the
+owning shard. The engine is an existing one, chosen by name:
 Eclipse Zenoh (``zenoh``, the default: see docs/SCALING.md for the measurements) or Eclipse Cyclone DDS
 (``dds``). Each adapter imports its library when it is opened, never at import time of ``ttes server``
 (the ``[fabric]`` extra; an import-linter contract keeps the libraries inside their adapters).
@@ -17,6 +20,7 @@ batch is superseded by the next tick's, never queued), requests are reliable and
 from __future__ import annotations
 
 import enum
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -24,6 +28,7 @@ from typing import Protocol
 ENGINES = ("zenoh", "dds")
 DEFAULT_PORT = 7447
 BLOCK = 4096  # soldier indices per pose topic (``--fabric-block``: shards and front-ends must agree)
+WHOLE = 0xFFFE  # the stream of a shard's whole batches (``poses/K/all``), beside its blocks 0, 1, ...
 
 
 class Kind(enum.Enum):
@@ -34,8 +39,11 @@ class Kind(enum.Enum):
 
 
 def poses_topic(shard: int, block: int | None = None) -> str:
-    """Shard ``shard``'s batches of soldier index block ``block``; its pulse without a block."""
-    return f"ttes/poses/{shard}" if block is None else f"ttes/poses/{shard}/{block}"
+    """Shard ``shard``'s batches of soldier index block ``block`` (:data:`WHOLE`: of all its soldiers);
+    its pulse without a block."""
+    if block is None:
+        return f"ttes/poses/{shard}"
+    return f"ttes/poses/{shard}/all" if block == WHOLE else f"ttes/poses/{shard}/{block}"
 
 
 def requests_topic(shard: int) -> str:
@@ -61,13 +69,32 @@ Presence = Callable[[bool], None]  # called on the fabric's own thread: present 
 Unsubscribe = Callable[[], None]  # ends a subscription (a message already in flight may still come)
 
 
+class Changes:
+    """Calls ``on_change`` with a state only when it differs from the last one told (an adapter's matching:
+    the state at declaration and its listener's changes may come in either order, from two threads)."""
+
+    def __init__(self, on_change: Presence) -> None:
+        self.on_change = on_change
+        self.state: bool | None = None
+        self.lock = threading.Lock()
+
+    def __call__(self, state: bool) -> None:
+        with self.lock:  # (told inside: two changes are told in the order they were made)
+            if state != self.state:
+                self.state = state
+                self.on_change(state)
+
+
 class Fabric(Protocol):
     """One process's node on the fabric."""
 
     engine: str
 
-    def publisher(self, topic: str, kind: Kind) -> Handler:
-        """A function that publishes one message (bytes) on ``topic``."""
+    def publisher(self, topic: str, kind: Kind, on_match: Presence | None = None) -> Handler:
+        """A function that publishes one message (bytes) on ``topic``. With ``on_match``: called (on the
+        fabric's thread, or at once for the state at declaration) with True when the topic has gained a
+        subscriber on the fabric, False when its last one has gone (Zenoh's matching status, DDS's
+        publication-matched status): a shard publishes no pose stream nobody hears."""
         ...
 
     def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> Unsubscribe:

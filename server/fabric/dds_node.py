@@ -29,7 +29,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from server.fabric import FabricConfig, Handler, Kind, Presence, Unsubscribe
+from server.fabric import Changes, FabricConfig, Handler, Kind, Presence, Unsubscribe
 
 if TYPE_CHECKING:
     Octets = bytes  # what the fields hold at run time (see _octets_as_bytes)
@@ -110,8 +110,14 @@ class DdsFabric:
             self._topics[name] = Topic(self.participant, name.replace("/", "_"), Blob)
         return self._topics[name]
 
-    def publisher(self, topic: str, kind: Kind) -> Handler:
-        writer = DataWriter(self.participant, self._topic(topic), qos=_QOS[kind])
+    def publisher(self, topic: str, kind: Kind, on_match: Presence | None = None) -> Handler:
+        listener = None
+        if on_match is not None:
+            told = Changes(on_match)
+            listener = Listener(on_publication_matched=lambda _w, status: told(status.current_count > 0))
+        writer = DataWriter(self.participant, self._topic(topic), qos=_QOS[kind], listener=listener)
+        if on_match is not None:
+            told(writer.get_publication_matched_status().current_count > 0)  # readers matched already
         self._keep.append(writer)
         return lambda data: writer.write(Blob(data))
 

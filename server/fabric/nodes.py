@@ -40,6 +40,7 @@ import trio
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from server.fabric import (
     BLOCK,
+    WHOLE,
     Fabric,
     Handler,
     Kind,
@@ -110,11 +111,17 @@ class ShardNode:
     ) -> None:
         self.server, self.fabric, self.sharding = server, fabric, sharding
         self._pulse = fabric.publisher(poses_topic(sharding.k), Kind.POSES)
-        self._puts: dict[int, Handler] = {}  # per index block, declared at its first batch
+        # the streams some front-end hears (set on the fabric's thread: replaced whole, under the lock), and
+        # whether one gained a subscriber since the last publish (it needs a key)
+        self._match_lock = threading.Lock()
+        self.heard: frozenset[int] = frozenset()
+        self._fresh = False
+        self._puts: dict[int, Handler] = {}  # per stream: WHOLE now, an index block at its first batch
+        self._declare(WHOLE)
         self._answer = fabric.publisher(books_topic(), Kind.REQUESTS)  # its soldiers, to a late front-end
         self.block = block
         self.seq = 0  # ticks published (the pulse's count)
-        self.block_seq: dict[int, int] = {}  # per index block, its batches
+        self.block_seq: dict[int, int] = {}  # per stream (WHOLE or an index block), its batches
         self.key_every = key_every
         self.key_due = True  # the first batch is a key
         self._since_key = 0  # tick batches since the last key
@@ -199,6 +206,10 @@ class ShardNode:
         tick's batch goes even when none did: it says the shard lives), or at a tick due for a key, every
         soldier. An answer between ticks sends only what it changed, and nothing if that is nothing."""
         tick = board.tick == board.ticks
+        if self._fresh:  # a stream gained a subscriber: its still soldiers come in no other batch
+            with self._match_lock:
+                self._fresh = False
+            self.key_due = True
         key = tick and (self.key_due or self._since_key + 1 >= self.key_every)
         if key:
             rows = np.flatnonzero(board.valid)
@@ -215,10 +226,12 @@ class ShardNode:
             return
         if TRACE is not None:
             TRACE.stamp("shard_publish", rows, "tick" if tick else "answer")
+        if len(rows) and WHOLE in self.heard:  # a front-end hears every block: one batch for it
+            self._publish_block(board, WHOLE, rows, key)
         blocks = rows // self.block  # (rows ascending: each block's rows are consecutive)
         cuts = [0, *(np.flatnonzero(np.diff(blocks)) + 1).tolist(), len(rows)]
         for a, z in itertools.pairwise(cuts):
-            if z > a:
+            if z > a and self._declare(int(blocks[a])) in self.heard:  # some front-end hears it alone
                 self._publish_block(board, int(blocks[a]), rows[a:z], key)
         if tick:  # it lives, whatever blocks a front-end hears; a key's names every soldier (no codes)
             k, n, who = self.sharding.k, self.sharding.n, rows if key else rows[:0]
@@ -239,9 +252,23 @@ class ShardNode:
             self._sent(self._pulse, encode_batch(pulse))
             self.seq += 1
 
+    def _declare(self, stream: int) -> int:
+        """The publisher of ``stream`` (WHOLE or an index block), declared at its first use with a matching
+        listener: the stream is published while some front-end hears it (:attr:`heard`)."""
+        if stream not in self._puts:
+            topic = poses_topic(self.sharding.k, stream)
+            on_match = functools.partial(self._matched, stream)
+            self._puts[stream] = self.fabric.publisher(topic, Kind.POSES, on_match=on_match)
+        return stream
+
+    def _matched(self, stream: int, present: bool) -> None:
+        """On the fabric's thread: ``stream`` has a subscriber now (its next batch is a key), or none. (At
+        its declaration, before its first batch, no key: none of its rows went before, so all go now.)"""
+        with self._match_lock:
+            self.heard = self.heard | {stream} if present else self.heard - {stream}
+            self._fresh = self._fresh or (present and stream in self._puts)
+
     def _publish_block(self, board: PoseBoard, block: int, rows: np.ndarray, key: bool) -> None:
-        if block not in self._puts:
-            self._puts[block] = self.fabric.publisher(poses_topic(self.sharding.k, block), Kind.POSES)
         seq = self.block_seq.get(block, 0)
         self.block_seq[block] = seq + 1
         k, n = self.sharding.k, self.sharding.n
@@ -464,41 +491,62 @@ class FrontNode:
             self.fabric.watch(alive_key(k), functools.partial(self._watched, token, k))
         self._resubscribe()
 
-    def _block_rows(self, k: int, b: int) -> np.ndarray:
-        """The indices of block ``b`` whose home is shard ``k`` (what shard ``k`` publishes there)."""
-        rows = np.arange(b * self.block, min((b + 1) * self.block, len(self.watching.held)))
-        return rows[Sharding.home(rows, self.shards) == k]
+    def _covered(self, k: int, streams: set[tuple[int, int]]) -> np.ndarray:
+        """Which indices whose home is shard ``k`` the streams of ``streams`` (shard, block) bring (a
+        mask): WHOLE all of them, a block its own."""
+        n = len(self.watching.held)
+        mine = Sharding.home(np.arange(n), self.shards) == k
+        heard = {b for s, b in streams if s == k}
+        if WHOLE in heard:
+            return mine
+        return mine & np.isin(np.arange(n) // self.block, list(heard))
 
     def _wanted(self, blocks: np.ndarray) -> set[tuple[int, int]]:
-        """The (shard, block) topics to hear: the blocks its clients watch (and ``blocks``) of every shard
-        (a survivor publishes a failed shard's soldiers), every block of a shard asked for its books."""
+        """The (shard, stream) topics to hear: of every shard (a survivor publishes a failed shard's
+        soldiers), the blocks its clients watch (and ``blocks``), or WHOLE when they cover every block that
+        holds a soldier (the same rows, one batch a shard a tick: each message costs the shard, the fabric
+        and this loop); WHOLE for a shard asked for its books (until it answers, its batches say which
+        indices it animates: allot)."""
         watched = np.flatnonzero(self.watching.watched) // self.block
-        every = np.union1d(watched, blocks).tolist()
-        want = {(k, b) for k in range(self.shards) for b in every if 0 <= b < self.blocks}
-        for k in self._asked:  # until it answers, its batches say which indices it animates (allot)
-            want.update((k, b) for b in range(self.blocks))
+        every = np.union1d(watched, blocks)
+        every = every[(every >= 0) & (every < self.blocks)]
+        m = self.server.world.manager
+        occupied = np.unique(m.table.live // self.block) if m is not None else every[:0]
+        whole = bool(len(every)) and bool(np.isin(occupied, every).all())
+        want = set()
+        for k in range(self.shards):
+            if whole or k in self._asked:
+                want.add((k, WHOLE))
+            else:
+                want.update((k, int(b)) for b in every)
         return want
 
     def _resubscribe(self, blocks: np.ndarray | None = None) -> None:
-        """Hear the wanted topics (:meth:`_wanted`), no others. A topic heard anew asks its shard for a key
-        (its still soldiers come in no other batch), and the codes kept of its soldiers from before are
-        dropped (batches went by unheard: they are stale); a topic no longer heard leaves its soldiers'
-        rows of the board unknown (none is sent to a client that subscribes later before the key's)."""
+        """Hear the wanted topics (:meth:`_wanted`), no others (the new ones first: a shard publishes a
+        stream while someone hears it). A topic heard anew asks its shard for a key (its still soldiers
+        come in no other batch; the shard sends one too when a stream gains a subscriber), and the codes
+        kept of the soldiers it newly brings are dropped (batches went by unheard: they are stale); the
+        soldiers no topic brings any more are left unknown on the board (none is sent to a client that
+        subscribes later before the key's)."""
         if self._token is None:
             return
         want = self._wanted(np.zeros(0, np.int64) if blocks is None else blocks)
+        old = set(self._subs)
+        new, gone = sorted(want - old), sorted(old - want)
         board = self.server.board_ref.board
-        for stream in sorted(set(self._subs) - want):
-            self._subs.pop(stream)()
-            self._key_wanted.discard(stream)
+        for k in sorted({k for k, _ in (*new, *gone)}):
+            before, after = self._covered(k, old), self._covered(k, want)
+            self.watching.held[after & ~before] = False
             if board is not None:  # no client watches them: their rows would go stale there
-                board.unknown(self._block_rows(*stream))
-        new = sorted(want - set(self._subs))
+                board.unknown(np.flatnonzero(before & ~after))
         for k, b in new:
-            self.watching.held[self._block_rows(k, b)] = False
             arrived = functools.partial(self._arrived, self._token, k)
             self._subs[(k, b)] = self.fabric.subscribe(poses_topic(k, b), Kind.POSES, arrived)
             self._key_wanted.add((k, b))
+        for stream in gone:
+            self._subs.pop(stream)()
+            self._key_wanted.discard(stream)
+            self._block_seq.pop(stream, None)  # (heard again later: its seq went on meanwhile)
         for k in sorted({k for k, _ in new}):
             self.key_asked[k] = True
             self._send(k, req.key())
@@ -537,6 +585,9 @@ class FrontNode:
         for b in batches:
             if b.block < self.blocks:
                 self.rows_decoded[b.block] += len(b.indices)
+            elif b.block == WHOLE:
+                per_block = np.bincount(b.indices // self.block, minlength=self.blocks)
+                self.rows_decoded += per_block[: self.blocks]
             self._heard(b, now)
         self._fail_over(now)
         m = self.server.world.manager
@@ -881,17 +932,19 @@ def merge(
     soldiers whose codes changed (``PoseBoard.publish_codes``; none without batches: no publish)."""
     if not batches:
         return 0
-    used: list[Batch] = []
-    for k in dict.fromkeys((b.shard, b.block) for b in batches):
-        own = [b for b in batches if (b.shard, b.block) == k]
-        keys = [i for i, b in enumerate(own) if b.key]
-        used += own[keys[-1] :] if keys else own
+    start = {(b.shard, b.block): i for i, b in enumerate(batches) if b.key}  # each stream's newest key
+    used = [b for i, b in enumerate(batches) if i >= start.get((b.shard, b.block), 0)]  # in arrival order
+    streams = {(b.shard, b.block) for b in used}
+    # a later batch wins for the rows both carry: a stream's batches, or a shard's WHOLE beside its blocks
+    # (a front-end that changed from one to the other)
+    whole = {k for k, s in streams if s == WHOLE}
+    again = len(used) > len(streams) or any(s != WHOLE and k in whole for k, s in streams)
     if watch is not None:
         used = [watch.split(b) for b in used]
     rows = np.concatenate([b.indices for b in used]).astype(np.int64)
     tables = np.concatenate([b.tables for b in used])
     codes = np.concatenate([b.codes for b in used])
-    if len(used) > len({(b.shard, b.block) for b in used}):  # a later batch wins for the rows both carry
+    if again:
         _, first = np.unique(rows[::-1], return_index=True)
         newest = len(rows) - 1 - first
         rows, tables, codes = rows[newest], tables[newest], codes[newest]

@@ -7,7 +7,7 @@ from typing import Any
 
 import zenoh
 
-from server.fabric import FabricConfig, Handler, Kind, Presence, Unsubscribe
+from server.fabric import Changes, FabricConfig, Handler, Kind, Presence, Unsubscribe
 
 
 class ZenohFabric:
@@ -24,7 +24,7 @@ class ZenohFabric:
         self.session = zenoh.open(conf)
         self._keep: list[Any] = []
 
-    def publisher(self, topic: str, kind: Kind) -> Handler:
+    def publisher(self, topic: str, kind: Kind, on_match: Presence | None = None) -> Handler:
         poses = kind is Kind.POSES
         pub = self.session.declare_publisher(
             topic,
@@ -33,6 +33,11 @@ class ZenohFabric:
             express=poses,  # do not batch a pose batch behind others: latency over throughput
         )
         self._keep.append(pub)
+        if on_match is not None:
+            told = Changes(on_match)
+            self._keep.append(pub.declare_matching_listener(lambda status: told(status.matching)))
+            status: Any = pub.matching_status  # (a MatchingStatus: zenoh 1.10's stub says bool)
+            told(status.matching)  # the state now; the listener tells its changes
         return pub.put
 
     def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> Unsubscribe:

@@ -53,8 +53,8 @@ def add_fabric_options(p: argparse.ArgumentParser) -> None:
         metavar="N",
         type=count(1, 65536),
         default=BLOCK,
-        help="soldier indices per pose topic: a front-end hears the blocks its clients watch "
-        f"(default {BLOCK}; shards and front-ends must agree)",
+        help="soldier indices per pose topic: a front-end hears the blocks its clients watch, or each "
+        f"shard whole when they watch every block (default {BLOCK}; shards and front-ends must agree)",
     )
     p.add_argument(
         "--fabric-domain",
