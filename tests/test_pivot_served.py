@@ -31,7 +31,7 @@ from server.soldier.root_motion import feet_points
 from server.startup import ServerWorld
 from tests.test_gait_selection import shipped_library
 from tests.test_pivot_asked import BACK, HEADING, TOL_DEG, off, yaw
-from tests.test_root_motion import CONTACT_CM, SKATE_CM, in_world
+from tests.test_root_motion import CONTACT_CM, SKATE_CM, in_world, touchdowns
 
 TICK_HZ = 10.0
 SPEED = 1.4  # m/s
@@ -130,21 +130,10 @@ def sole_points(world: ServerWorld, run: dict[str, Any]) -> tuple[np.ndarray, np
 
 def stance_slides(world_pts: np.ndarray, height: np.ndarray) -> list[float]:
     """Per touchdown of a sole point: how far (cm) it moved in the world while it stayed down."""
-    down = height < height.min() + CONTACT_CM
     out = []
-    for f in range(down.shape[1]):
-        for p in range(down.shape[2]):
-            k = 0
-            while k < len(down):
-                if not down[k, f, p]:
-                    k += 1
-                    continue
-                j = k
-                while j + 1 < len(down) and down[j + 1, f, p]:
-                    j += 1
-                track = world_pts[k : j + 1, f, p]
-                out.append(float(np.linalg.norm(track - track[0], axis=1).max()))
-                k = j + 1
+    for f, p, k, j in touchdowns(height < height.min() + CONTACT_CM):
+        track = world_pts[k : j + 1, f, p]
+        out.append(float(np.linalg.norm(track - track[0], axis=1).max()))
     return out
 
 

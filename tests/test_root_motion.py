@@ -8,6 +8,7 @@ a sole point (heel or ball) touching the ground must not move more than 2 cm whi
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -102,13 +103,9 @@ def yaw_steps(run: dict[str, np.ndarray]) -> np.ndarray:
     return np.abs((np.diff(run["yaw"]) + 180.0) % 360.0 - 180.0)
 
 
-def skates(run: dict[str, np.ndarray], t0: float = 0.0, t1: float = math.inf) -> list[tuple[float, str]]:
-    """Per touchdown of a sole point beginning between ``t0`` and ``t1`` s: how far it moved (cm) while it
-    stayed down, and the clip it began in."""
-    world, height = run["world"], run["height"]
-    ground = height.min()
-    down = height < ground + CONTACT_CM
-    out = []
+def touchdowns(down: np.ndarray) -> Iterator[tuple[int, int, int, int]]:
+    """Each touchdown of a sole point in ``down`` ``(frames, feet, points)``: (foot, point, first frame, last
+    frame) of a run of frames in which it stays down."""
     for f in range(down.shape[1]):
         for p in range(down.shape[2]):
             k = 0
@@ -119,10 +116,19 @@ def skates(run: dict[str, np.ndarray], t0: float = 0.0, t1: float = math.inf) ->
                 j = k
                 while j + 1 < len(down) and down[j + 1, f, p]:
                     j += 1
-                track = world[k : j + 1, f, p]
-                if t0 <= k / HZ < t1:
-                    out.append((float(np.linalg.norm(track - track[0], axis=1).max()), str(run["clips"][k])))
+                yield f, p, k, j
                 k = j + 1
+
+
+def skates(run: dict[str, np.ndarray], t0: float = 0.0, t1: float = math.inf) -> list[tuple[float, str]]:
+    """Per touchdown of a sole point beginning between ``t0`` and ``t1`` s: how far it moved (cm) while it
+    stayed down, and the clip it began in."""
+    world, height = run["world"], run["height"]
+    out = []
+    for f, p, k, j in touchdowns(height < height.min() + CONTACT_CM):
+        track = world[k : j + 1, f, p]
+        if t0 <= k / HZ < t1:
+            out.append((float(np.linalg.norm(track - track[0], axis=1).max()), str(run["clips"][k])))
     return out
 
 
