@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import queue
 import random
-import resource
-import threading
 import time
 
 import pytest
@@ -47,32 +45,3 @@ def test_a_node_hears_its_domain_not_itself_nor_another_domain() -> None:
     finally:
         for f in (a, b, other):
             f.close()
-
-
-SAMPLE = 1_330_036  # a shard's whole batch at 10,000 soldiers
-IN_FLIGHT = 4  # its buffers alive at once on the receive thread (reassembly, the binding's copies)
-
-
-def test_a_dds_node_keeps_freed_sample_buffers() -> None:
-    """A thread that fills and frees a few sample-sized buffers a tick, as Cyclone's receive thread does,
-    page-faults only in the first tick: glibc trimmed its arena every tick (the faults were two thirds of
-    a DDS subscriber's CPU, and its socket overflowed: issue 21)."""
-    node = DdsFabric(FabricConfig("dds", "127.0.0.1:7400", domain=random.randrange(1, DDS_DOMAIN_MAX)))
-    faults: list[int] = []
-
-    def receive() -> None:
-        for _ in range(8):
-            before = resource.getrusage(resource.RUSAGE_THREAD).ru_minflt
-            held = [b"\x01" * SAMPLE for _ in range(IN_FLIGHT)]  # written: each page touched
-            del held
-            faults.append(resource.getrusage(resource.RUSAGE_THREAD).ru_minflt - before)
-
-    try:
-        thread = threading.Thread(target=receive)
-        thread.start()
-        thread.join()
-    finally:
-        node.close()
-    pages = IN_FLIGHT * SAMPLE // resource.getpagesize()
-    assert faults[0] > pages // 2  # fresh memory faults in (else this test measures nothing)
-    assert max(faults[1:]) < pages // 10, faults
