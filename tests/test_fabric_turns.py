@@ -183,7 +183,7 @@ async def test_a_request_that_arrives_while_a_shard_ticks_is_sampled_by_that_tic
     node = ShardNode(shard, MemoryFabric(bus), Sharding(0, 1))
     m = shard.world.manager
     assert m is not None
-    arm = []
+    arm: list[int] = []
     advance = m._advance
 
     def advance_then_arrive(idx: np.ndarray) -> None:  # a request reaches the fabric while the tick samples
