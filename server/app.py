@@ -510,15 +510,15 @@ class TtesServer:
             self.apply_held()  # the requests they hold go to their shards before this encode, not after
             if self.relay_out is not None:
                 self.relay_out()
-            data = self._encode_now(session)
-            if self.encoded is not None:
-                self.encoded(session)
-            return data
+            return self._encode_now(session)
 
     def _encode_now(self, session: Session) -> bytes:
         session.wake = trio.Event()  # a publish from here on wakes it again
         with self.cpu("encode"):
-            return session.take_output(self.now())
+            data = session.take_output(self.now())
+        if self.encoded is not None:
+            self.encoded(session)
+        return data
 
     async def _tick_output(self, session: Session, stream: trio.abc.Stream) -> bytes | None:
         """A single server's writer woken by a tick: its client's frames of the tick (None: a write stalled).
