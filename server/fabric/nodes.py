@@ -65,6 +65,7 @@ from server.trace import TRACE
 
 if TYPE_CHECKING:
     from server.app import TtesServer
+    from server.session import Session
 
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
@@ -201,11 +202,12 @@ class ShardNode:
         self.server.requests_arrived()
         return n
 
-    def publish(self, board: PoseBoard) -> None:
+    def publish(self, board: PoseBoard, tick: bool = True) -> None:
         """After each publish of the board: the soldiers whose codes changed since the previous batch (a
         tick's batch goes even when none did: it says the shard lives), or at a tick due for a key, every
-        soldier. An answer between ticks sends only what it changed, and nothing if that is nothing."""
-        tick = board.tick == board.ticks
+        soldier. An answer (between ticks, or a tick's first frames: not ``tick``) sends only what it
+        changed, and nothing if that is nothing."""
+        tick = tick and board.tick == board.ticks
         if self._fresh:  # a stream gained a subscriber: its still soldiers come in no other batch
             with self._match_lock:
                 self._fresh = False
@@ -227,12 +229,12 @@ class ShardNode:
         if TRACE is not None:
             TRACE.stamp("shard_publish", rows, "tick" if tick else "answer")
         if len(rows) and WHOLE in self.heard:  # a front-end hears every block: one batch for it
-            self._publish_block(board, WHOLE, rows, key)
+            self._publish_block(board, WHOLE, rows, key, not tick)
         blocks = rows // self.block  # (rows ascending: each block's rows are consecutive)
         cuts = [0, *(np.flatnonzero(np.diff(blocks)) + 1).tolist(), len(rows)]
         for a, z in itertools.pairwise(cuts):
             if z > a and self._declare(int(blocks[a])) in self.heard:  # some front-end hears it alone
-                self._publish_block(board, int(blocks[a]), rows[a:z], key)
+                self._publish_block(board, int(blocks[a]), rows[a:z], key, not tick)
         if tick:  # it lives, whatever blocks a front-end hears; a key's names every soldier (no codes)
             k, n, who = self.sharding.k, self.sharding.n, rows if key else rows[:0]
             empty = np.zeros((len(who), 0), np.uint16)
@@ -268,13 +270,14 @@ class ShardNode:
             self.heard = self.heard | {stream} if present else self.heard - {stream}
             self._fresh = self._fresh or (present and stream in self._puts)
 
-    def _publish_block(self, board: PoseBoard, block: int, rows: np.ndarray, key: bool) -> None:
+    def _publish_block(self, board: PoseBoard, block: int, rows: np.ndarray, key: bool, answer: bool) -> None:
         seq = self.block_seq.get(block, 0)
         self.block_seq[block] = seq + 1
         k, n = self.sharding.k, self.sharding.n
         codes, tables = board.codes[rows], board.table_of[rows]
+        fences = tuple(self.fences)
         batch = Batch(
-            k, n, seq, board.tick, time.monotonic(), rows, tables, codes, key, block, tuple(self.fences)
+            k, n, seq, board.tick, time.monotonic(), rows, tables, codes, key, block, fences, answer
         )
         self._sent(self._puts[block], encode_batch(batch))
 
@@ -456,6 +459,11 @@ class FrontNode:
         self.failovers = 0
         self.keys = 0  # key batches heard
         self.watching = Watch(n)  # what its clients subscribe to; the others' codes wait there
+        # ticks' batches that arrived with answers, merged after the answers' clients encoded them
+        # (:meth:`_answers_first`), and those clients' sessions (ids) until they have
+        self._held: list[Batch] = []
+        self._answering: set[int] = set()
+        server.encoded = self._encoded
         self.fences = Fences(front.k, n, shards)  # indices created or removed here: rows wait for a fence
         server.board_ref.on_watch = self.watch
         server.feed = self.feed
@@ -595,8 +603,19 @@ class FrontNode:
             subscribed = (s.conn.subscribed for s in self.server.sessions.values())
             self.watching.recount(subscribed, board, m.table.alive)
             self._resubscribe()
-        batches = [b for b in batches if b.block != PULSE]
+        batches = [*self._held, *(b for b in batches if b.block != PULSE)]
+        self._held = []
         if not batches or m is None:
+            self._answering.clear()
+            return np.zeros(0, np.int64)
+        holding = bool(self._answering)  # (its answers' clients have not encoded: more answers, no ticks)
+        if tick > self.server.ticks and self.server.answers_first:  # a publish between its ticks
+            first, held = self._answers_first(batches)
+            if held and (first or holding):
+                batches, self._held = first, held
+        if not self._held:
+            self._answering.clear()
+        if not batches:
             return np.zeros(0, np.int64)
         self.batches += len(batches)
         batches = [self.fences.clean(b) for b in batches]  # (after _heard: a sync there moves the fences)
@@ -609,8 +628,43 @@ class FrontNode:
         else:
             changed = rows[:0]
         if TRACE is not None:
-            TRACE.stamp("fe_merge", rows, "fed" if tick > self.server.ticks else "tick")
+            note = "first" if self._held else "fed" if tick > self.server.ticks else "tick"
+            TRACE.stamp("fe_merge", rows, note)  # (first: answers merged before ticks held)
+        if self._held and not holding:  # the clients the answers woke encode them before the ticks merge
+            woken = self._woken(changed)
+            for s in woken:  # the tick's rows follow at once: not held back by the server's throttle
+                s.more_of_tick = True  # (Session.take_output), as a single server's tick's first frames
+            self._answering = {s.id for s in woken}
+            if not self._answering and self._token is not None:
+                self._token.run_sync_soon(self.server.publish_fed)
         return changed
+
+    def _answers_first(self, batches: list[Batch]) -> tuple[list[Batch], list[Batch]]:
+        """``(now, held)``: the answers among ``batches`` to merge now, before the ticks' batches that came
+        with them (issue 21: a client whose answer was merged with a tick waited for the encode of that
+        tick's rows, its own client's and the others'), and the rest: each shard's answers that came before
+        its first tick's batch here (a shard's batches merge in order); while a shard stands in for another,
+        all now (their rows may overlap)."""
+        if self.route != list(range(self.shards)):
+            return batches, []
+        now: list[Batch] = []
+        held: list[Batch] = []
+        for b in batches:
+            (now if b.answer and not any(h.shard == b.shard for h in held) else held).append(b)
+        return now, held
+
+    def _woken(self, rows: np.ndarray) -> list[Session]:
+        """The sessions whose writers a publish of ``rows`` wakes (``TtesServer._published``)."""
+        sessions = self.server.sessions.values()
+        return [s for s in sessions if s.tables_sent and len(rows) and s.conn.subscribes_any(rows)]
+
+    def _encoded(self, session: Session) -> None:
+        """A writer encoded: once every client the held ticks' answers woke has, the ticks merge (at the
+        loop's next turn: the writer sends first)."""
+        if self._answering:
+            self._answering.discard(session.id)
+            if not self._answering and self._held and self._token is not None:
+                self._token.run_sync_soon(self.server.publish_fed)
 
     def watch(self, indices: np.ndarray | None) -> None:
         """A client subscribed to ``indices`` (None: one unsubscribed, or left): the held codes of those
