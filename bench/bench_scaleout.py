@@ -45,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from client_stub.link.spawn import ServerProcess, SpawnError, cpu_seconds, free_port
 from server.config import MAX_SOLDIERS_LIMIT
-from server.fabric import BLOCK
+from server.fabric import BLOCK, engine_flags
 
 HEADROOM = (
     512  # indices beyond the load's: the start-up script's soldiers and the front-ends' shares' rounding
@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="ttes-scaleout-") as tmp:
         config = Path(tmp) / "scale.toml"
         config.write_text(f"max_soldiers = {cap}\nmax_soldiers_per_client = {cap}\nreport_interval = 1.0\n")
-        flags = ["--config", str(config), "--throttle", "0", "--fabric", args.fabric]
+        flags = ["--config", str(config), "--throttle", "0", *engine_flags(args.fabric)]
         flags += ["--fabric-block", str(args.fabric_block)] if args.fabric_block else []
         started = time.monotonic()
         with cluster(flags, n, m) as servers:

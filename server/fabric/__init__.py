@@ -20,6 +20,7 @@ batch is superseded by the next tick's, never queued), requests are reliable and
 from __future__ import annotations
 
 import enum
+import random
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -114,6 +115,16 @@ class Fabric(Protocol):
 
 
 DDS_DOMAIN_MAX = 232  # the highest DDS domain id (DDSI-RTPS 2.x port mapping: 7400 + 250 * domain < 65536)
+
+
+def engine_flags(engine: str) -> list[str]:
+    """The ``ttes server`` / ``ttes front`` flags of a run of its own on ``engine``: for DDS a random domain,
+    since DDS nodes of another run on this host (the same loopback peers) would join this one (the tests'
+    and the benches' clusters: a DDS bench failed 3 of 6 runs with "server closed the connection" while
+    another run used domain 0)."""
+    if engine != "dds":
+        return ["--fabric", engine]
+    return ["--fabric", engine, "--fabric-domain", str(random.randrange(1, DDS_DOMAIN_MAX + 1))]
 
 
 @dataclass(frozen=True)
