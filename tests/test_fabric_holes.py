@@ -35,7 +35,15 @@ from protocol.events import (
 )
 from server.fabric import requests as req
 from server.fabric.batch import Batch
-from server.fabric.fronts import Fences, answer, decode_answer, gone, learned_last, rerouted, stand_ins
+from server.fabric.fronts import (
+    Fences,
+    answer,
+    decode_answer,
+    gone,
+    learned_last,
+    rerouted,
+    stand_ins,
+)
 
 pytest.importorskip("zenoh")
 
@@ -335,3 +343,82 @@ async def test_a_hung_stand_in_that_resumes_lets_go_of_the_soldiers_it_stood_in_
                 await trio.sleep(0.1)
         await inprocess.moving(c, ODD, 3)
         await c.aclose()
+
+
+GRACE = 12.0  # the default orphan_grace: a gone client id's soldiers wait this long for it
+
+
+async def _client(front: inprocess.TtesServer, client_id: str = "alpha") -> Client:
+    c = await Client.open(front.addresses[0][1], "ig", client_id=client_id)
+    await c.expect(Ready)
+    return c
+
+
+async def _made(c: Client, rid: int = 1) -> int:
+    """A soldier created through ``c``'s front-end (the lowest free index of that front-end's share)."""
+    await c.send(CreateSoldier(rid, "DI.fig", "AK_47.fig", None))
+    return int((await c.expect(SoldierCreated)).index)
+
+
+def _everywhere(c: inprocess.Fronts, index: int) -> list[bool]:
+    """Whether soldier ``index`` lives in each front-end's books and in its shard."""
+    return [index in inprocess.live(s) for s in (*c.servers, c.shards[index % len(c.shards)])]
+
+
+async def test_a_client_id_still_connected_to_another_front_end_keeps_its_soldiers(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Client id alpha is connected to both front-ends and leaves the one it created its soldier through:
+    the soldier stays past the grace (on main each front-end counted only its own connections, and the
+    soldier went 12 s later), and goes once alpha has left the other front-end too, after its grace."""
+    async with inprocess.fronts() as c:
+        here, there = await _client(c.servers[0]), await _client(c.servers[1])
+        index = await _made(here)
+        await trio.sleep(1)
+        assert _everywhere(c, index) == [True, True, True]
+        await here.aclose()
+        await trio.sleep(3 * GRACE)
+        assert _everywhere(c, index) == [True, True, True]
+        await there.aclose()
+        await trio.sleep(GRACE / 2)
+        assert _everywhere(c, index) == [True, True, True]  # its grace runs
+        await trio.sleep(GRACE)
+        assert _everywhere(c, index) == [False, False, False]
+
+
+async def test_a_client_id_that_comes_back_through_another_front_end_keeps_its_soldiers(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Alpha leaves front-end 0 and reconnects through front-end 1 within the grace: its soldier stays; when
+    front-end 1 goes from the fabric (its process died), alpha's connection went with it: the grace runs."""
+    async with inprocess.fronts() as c:
+        here = await _client(c.servers[0])
+        index = await _made(here)
+        await here.aclose()
+        await trio.sleep(GRACE / 2)
+        there = await _client(c.servers[1])
+        await trio.sleep(3 * GRACE)
+        assert _everywhere(c, index) == [True, True, True]
+        c.fabrics[1].close()
+        await trio.sleep(GRACE / 2)
+        assert _everywhere(c, index)[::2] == [True, True]
+        await trio.sleep(GRACE)
+        assert _everywhere(c, index)[::2] == [False, False]  # front-end 0 removed it, in the shard too
+        await there.aclose()
+
+
+async def test_the_orphans_of_a_front_end_gone_are_removed_by_another(autojump_clock: trio.abc.Clock) -> None:
+    """Alpha's soldier was made through front-end 1, which dies with alpha's connection: front-end 0 removes
+    the soldier after the grace (on main none did: the shard animated it for good)."""
+    async with inprocess.fronts() as c:
+        there = await _client(c.servers[1])
+        index = await _made(there)
+        assert index // 4096 % 2 == 1  # front-end 1's share
+        await trio.sleep(1)
+        assert _everywhere(c, index) == [True, True, True]
+        c.fabrics[1].close()
+        await trio.sleep(GRACE / 2)
+        assert _everywhere(c, index)[::2] == [True, True]
+        await trio.sleep(GRACE)
+        assert _everywhere(c, index)[::2] == [False, False]
+        await there.aclose()

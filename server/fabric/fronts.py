@@ -170,6 +170,62 @@ def rerouted(route: list[int], alive: list[int], heard: list[bool]) -> list[tupl
     return out
 
 
+class Elsewhere:
+    """Front-end ``k`` of ``m``'s view of the others: which are on the fabric, and their open connections of
+    each client id (each tells its own on ``ttes/fronts``). An id's soldiers wait for it while it is
+    connected to any front-end (an IG that leaves one front-end still connected to another, or that
+    reconnects through another); of a gone id's soldiers each front-end removes those of its share, and
+    those of a front-end not on the fabric the lowest present one removes: one removal of each."""
+
+    def __init__(self, k: int, m: int, block: int) -> None:
+        self.k, self.block = k, block
+        self.present = [j == k for j in range(m)]
+        self.counts: dict[int, dict[str, int]] = {j: {} for j in range(m) if j != k}
+        self.told: dict[str, int] = {}  # this front-end's own counts, as last told the others
+
+    def total(self, client_id: str) -> int:
+        """The id's connections to the other front-ends."""
+        return sum(c.get(client_id, 0) for c in self.counts.values())
+
+    def own(self, client_id: str, connected: int) -> dict[str, int] | None:
+        """This front-end's count of ``client_id`` to tell the others (None: unchanged), from the id's
+        connections counted here (``connected``: its own and the others')."""
+        n = connected - self.total(client_id)
+        if n == self.told.get(client_id, 0):
+            return None
+        if n:
+            self.told[client_id] = n
+        else:
+            self.told.pop(client_id, None)
+        return {client_id: n}
+
+    def step(self, front: int, client_id: str, n: int) -> int:
+        """Move front-end ``front``'s count of ``client_id`` one connection towards ``n``: +1 (joined), -1
+        (left) or 0 (it is ``n``); counted first, so that :meth:`own` stays as it was."""
+        counts = self.counts.get(front)
+        if counts is None:
+            return 0
+        was = counts.get(client_id, 0)
+        if was == n:
+            return 0
+        step = 1 if n > was else -1
+        if was + step:
+            counts[client_id] = was + step
+        else:
+            del counts[client_id]
+        return step
+
+    def removes(self, indices: list[int]) -> list[int]:
+        """Of a gone id's soldiers, those this front-end removes."""
+        m = len(self.present)
+        first = self.present.index(True)
+        return [
+            i
+            for i in indices
+            if (j := (i // self.block) % m) == self.k or (not self.present[j] and first == self.k)
+        ]
+
+
 class Fences:
     """Front-end ``front``'s fences: for each index it created or removed (or synced elsewhere), the shard
     whose batches may carry it and the fence that shard must have taken first (issue 21 (d): the index

@@ -47,6 +47,7 @@ from server.fabric import (
     Unsubscribe,
     alive_key,
     books_topic,
+    front_alive_key,
     fronts_topic,
     poses_topic,
     requests_topic,
@@ -419,6 +420,10 @@ class FrontNode:
         self.share = IndexShare(front.k, front.n, block, n) if front.n > 1 else None
         self._books = fabric.publisher(fronts_topic(), Kind.REQUESTS) if front.n > 1 else None
         self._books_out: list[req.Op] = []  # this front-end's creations and removals, for the others
+        # the others' presence and connections of client ids: an id's soldiers wait while it is connected
+        self.elsewhere = books.Elsewhere(front.k, front.n, block) if front.n > 1 else None
+        if self.elsewhere is not None:
+            server.world.owners.on_connections = self._connections
         self.mirrored = 0  # the other front-ends' creations and removals kept in the books here
         self.bytes_in = 0  # the shards' batches' bytes
         server.status_fields = lambda: {
@@ -481,6 +486,10 @@ class FrontNode:
                 token.run_sync_soon(self.mirror, data)
 
             self.fabric.subscribe(fronts_topic(), Kind.REQUESTS, told)
+            self.fabric.announce(front_alive_key(self.front.k))
+            for j in range(self.front.n):
+                if j != self.front.k:
+                    self.fabric.watch(front_alive_key(j), functools.partial(self._front_watched, token, j))
 
         def answered(data: bytes) -> None:
             token.run_sync_soon(self.learn, data)
@@ -786,6 +795,10 @@ class FrontNode:
 
     def _mirror_one(self, op: req.Op) -> None:
         try:
+            if op["op"] == "clients":
+                for cid, n in op["counts"].items():
+                    self._count(int(op["front"]), cid, n)
+                return
             i = int(op["index"])
             self._touch(i)
             if op["op"] == "create":
@@ -796,6 +809,42 @@ class FrontNode:
             log.warning("fabric_books_failed", front=self.front.k, op=op.get("op"), error=str(exc))
             return
         self.mirrored += 1
+
+    def _front_watched(self, token: trio.lowlevel.TrioToken, j: int, present: bool) -> None:
+        token.run_sync_soon(self._front_presence, j, present)  # from the fabric's thread to the loop
+
+    def _front_presence(self, j: int, present: bool) -> None:
+        """Front-end ``j`` came (it may have missed what this one told: its connections go again) or went
+        (its clients' connections went with it; the orphans of its share may be this one's to remove)."""
+        assert self.elsewhere is not None
+        self.elsewhere.present[j] = present
+        log.info("fabric_front_presence", front=j, present=present)
+        if present:
+            if self.elsewhere.told:
+                self._book(req.clients(dict(self.elsewhere.told)))
+            return
+        for cid in list(self.elsewhere.counts[j]):
+            self._count(j, cid, 0)
+        self.server.orphans_check()
+
+    def _connections(self, client_id: str) -> None:
+        """The owners' hook: ``client_id``'s connections changed; tell the others this front-end's own."""
+        assert self.elsewhere is not None
+        own = self.elsewhere.own(client_id, self.server.world.owners.connected.get(client_id, 0))
+        if own is not None:
+            self._book(req.clients(own))
+
+    def _count(self, front: int, client_id: str, n: int) -> None:
+        """Front-end ``front`` has ``n`` connections of ``client_id``: join or leave it here as many times."""
+        assert self.elsewhere is not None
+        while step := self.elsewhere.step(front, client_id, n):
+            if step > 0:
+                self.server.world.owners.join(client_id)
+            else:
+                self.server.client_left(client_id)
+
+    def orphans(self, indices: list[int]) -> list[int]:
+        return indices if self.elsewhere is None else self.elsewhere.removes(indices)
 
     def _kept(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
         """Keep in the books a soldier a shard or another front-end already has (not relayed again)."""
@@ -852,6 +901,8 @@ class FrontNode:
         self.last[last["index"]] = last  # what a fail-over of this front-end hands on
         self.has_last[last["index"]] = True
         log.info("fabric_books_learned", front=self.front.k, shard=k, dropped=len(drop), learned=len(add))
+        if self.elsewhere is not None:  # soldiers of ids gone while it was away: their grace starts now
+            self.server.orphans_check()
 
     def _shard_of(self, index: int) -> int:
         return self.route[int(Sharding.home(index, self.shards))]

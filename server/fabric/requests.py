@@ -13,8 +13,9 @@ soldier, not only the changed ones) at the next tick, for a front-end that lost 
 too; ``books`` (front): answer on ``ttes/books`` with every soldier the shard animates, for front-end
 ``front`` that has just heard the shard for the first time (:mod:`server.fabric.fronts`); ``fence``
 (front, serial): the end of a message that created or removed soldiers, echoed in the batches
-(:class:`~server.fabric.fronts.Fences`). The topic is reliable: ownership and requests are never lost
-once a shard listens, and a sync covers the time before.
+(:class:`~server.fabric.fronts.Fences`); on ``ttes/fronts`` only, ``clients`` (counts): a front-end's
+connections of client ids. The topic is reliable: ownership and requests are never lost once a shard
+listens, and a sync covers the time before.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import numpy as np
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from server.fabric.batch import FENCE_MAX, MAX_FRONTS
 
-OPS = ("create", "remove", "requests", "react", "sync", "key", "books", "fence")
+OPS = ("create", "remove", "requests", "react", "sync", "key", "books", "fence", "clients")
 Op = dict[str, Any]
 
 
@@ -81,6 +82,12 @@ def books(front: int) -> Op:
     return {"op": "books", "front": front}
 
 
+def clients(counts: dict[str, int]) -> Op:
+    """A front-end's open connections of each client id named (0: none now), for the other front-ends on
+    ``ttes/fronts``: an id's soldiers wait for it while it is connected to any of them."""
+    return {"op": "clients", "counts": counts}
+
+
 def pack(ops: list[Op]) -> bytes:
     return bytes(msgpack.packb(ops))
 
@@ -104,6 +111,12 @@ def _checked(op: object) -> Op:
             op["rows"] = np.frombuffer(op["rows"], ENTITY_REQUEST_DTYPE)
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"fabric {op['op']} without rows: {exc}") from exc
+    if op["op"] == "clients":
+        counts = op.get("counts")
+        if not isinstance(counts, dict) or not all(
+            isinstance(c, str) and isinstance(n, int) and n >= 0 for c, n in counts.items()
+        ):
+            raise ValueError(f"fabric clients without counts: {counts!r:.80}")
     if op["op"] == "fence":  # its numbers size the shard's list of fences and travel in every batch
         front, serial = op.get("front"), op.get("serial")
         if not (isinstance(front, int) and 0 <= front < MAX_FRONTS):
