@@ -38,6 +38,7 @@ from server.fabric.batch import Batch
 from server.fabric.fronts import (
     Fences,
     answer,
+    answer_scope,
     decode_answer,
     gone,
     learned_last,
@@ -108,6 +109,9 @@ def test_an_answer_with_another_shards_soldiers_names_a_stand_in_for_a_shard_nev
     assert stand_ins(told, 0, 2, [True, False]) == {1: 0}
     assert stand_ins(told, 0, 2, [True, True]) == {}  # heard: it comes back, or failed over here
     assert stand_ins(told, 1, 3, [False, False, False]) == {0: 1}  # 3 and 0 homed on 0; 4 is shard 1's
+    assert stand_ins([], 0, 3, [True, False, False], homes=[2]) == {2: 0}  # it says so: soldiers or none
+    assert answer_scope(np.arange(10), [0, 0], 0, stand_in=[1]) == set(range(10))
+    assert decode_answer(answer(0, 0, [], homes=[2]))["homes"] == [2]
 
 
 def test_a_front_end_keeps_the_answers_last_requests_of_its_soldiers_without_one() -> None:
@@ -422,3 +426,37 @@ async def test_the_orphans_of_a_front_end_gone_are_removed_by_another(autojump_c
         await trio.sleep(GRACE)
         assert _everywhere(c, index)[::2] == [False, False]
         await there.aclose()
+
+
+async def test_a_front_end_started_while_a_shard_without_soldiers_is_failed_over_routes_to_the_stand_in(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Shard 1's soldiers are removed, shard 1 dies and is failed over to shard 0 with none; the front-end
+    dies and a new one starts: shard 0's answer names no soldier of shard 1, yet the new front-end sends a
+    soldier created at shard 1's index to shard 0, which animates it (on main it went to shard 1's topic,
+    which nobody hears: the soldier never moved)."""
+    async with inprocess.fronts(fronts_n=1) as c:
+        op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
+        await op.expect(Ready)
+        for i in (1, 3, 5, 7, 9):
+            await op.send(RemoveSoldier(i))
+            await op.expect(SoldierRemoved)
+        await op.aclose()
+        with trio.fail_after(30):
+            while inprocess.live(c.shards[1]):
+                await trio.sleep(0.1)
+        c.shard_fabrics[1].close()
+        with trio.fail_after(30):
+            while c.nodes[0].route != [0, 0]:
+                await trio.sleep(0.1)
+        c.fabrics[0].close()  # the front-end dies
+        c.servers[0].shutdown()
+        late = await c.start_front(inprocess.Sharding(0, 1))
+        with trio.fail_after(30):  # shard 0 answered its books
+            while c.nodes[1].heard_at[0] < 0 or c.nodes[1]._asked:
+                await trio.sleep(0.1)
+        walker = await inprocess.walker(late, ODD)
+        await inprocess.moving(walker, ODD, 3)
+        assert ODD in inprocess.live(c.shards[0]) and c.nodes[1].route == [0, 0]
+        assert inprocess.live(late) == [0, 2, 4, 6, 8, ODD]  # and none of shard 1's removed start-up soldiers
+        await walker.aclose()

@@ -35,7 +35,7 @@ from __future__ import annotations
 import dataclasses
 import heapq
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import msgpack
@@ -79,12 +79,20 @@ class IndexShare:
             heapq.heappush(self._free, int(index))
 
 
-def answer(shard: int, front: int, soldiers: list[Soldier], last: np.ndarray | None = None) -> bytes:
-    """A shard's answer to front-end ``front``'s ``books``: every soldier it animates, and the last request
-    of those that had one (``ENTITY_REQUEST_DTYPE`` rows)."""
+def answer(
+    shard: int, front: int, soldiers: list[Soldier], last: np.ndarray | None = None, homes: Sequence[int] = ()
+) -> bytes:
+    """A shard's answer to front-end ``front``'s ``books``: every soldier it animates, the last request of
+    those that had one (``ENTITY_REQUEST_DTYPE`` rows), and the other shards it stands in for (``homes``)."""
     rows = np.zeros(0, ENTITY_REQUEST_DTYPE) if last is None else last
     rows = np.ascontiguousarray(rows, ENTITY_REQUEST_DTYPE)
-    msg = {"shard": shard, "front": front, "soldiers": [list(s) for s in soldiers], "rows": rows.tobytes()}
+    msg = {
+        "shard": shard,
+        "front": front,
+        "soldiers": [list(s) for s in soldiers],
+        "rows": rows.tobytes(),
+        "homes": list(homes),
+    }
     return bytes(msgpack.packb(msg))
 
 
@@ -98,19 +106,22 @@ def decode_answer(data: bytes) -> dict[str, Any]:
         ]
         msg["shard"], msg["front"] = int(msg["shard"]), int(msg["front"])
         msg["rows"] = np.frombuffer(msg.get("rows", b""), ENTITY_REQUEST_DTYPE)
+        msg["homes"] = [int(h) for h in msg.get("homes", [])]
     except (ValueError, TypeError, KeyError, AttributeError, msgpack.UnpackException) as exc:
         raise ValueError(f"not a books answer: {exc}") from exc
     return msg
 
 
-def answer_scope(live: np.ndarray, route: list[int], k: int) -> set[int]:
+def answer_scope(live: np.ndarray, route: list[int], k: int, stand_in: Sequence[int] = ()) -> set[int]:
     """The live soldiers (``live``) a books answer of shard ``k`` may drop: those homed on ``k`` (index modulo
-    the shards, ``len(route)``) and animated there (``route``: each shard's animating shard). One failed
-    over to ``k`` after it answered is missing from the answer: counting it in, the front-end removed a
-    killed shard's soldiers (test_a_killed_shards_soldiers_go_on_in_the_survivor)."""
+    the shards, ``len(route)``) and animated there (``route``: each shard's animating shard), and those of
+    the shards it stands in for by this answer (``stand_in``: this front-end never heard them; the removed
+    start-up soldiers of a shard failed over stayed on as ghosts). One failed over to ``k`` by this
+    front-end after it answered is missing from the answer: counting it in, the front-end removed a killed
+    shard's soldiers (test_a_killed_shards_soldiers_go_on_in_the_survivor)."""
     live = np.asarray(live, np.int64)
     home = live % len(route)
-    return set(live[(home == k) & (np.asarray(route)[home] == k)].tolist())
+    return set(live[((home == k) & (np.asarray(route)[home] == k)) | np.isin(home, list(stand_in))].tolist())
 
 
 def reconcile(
@@ -126,12 +137,15 @@ def reconcile(
     return drop, add
 
 
-def stand_ins(told: list[Soldier], shard: int, shards: int, heard: list[bool]) -> dict[int, int]:
-    """The shards whose soldiers ``shard``'s answer carries (home index modulo ``shards``) and which this
-    front-end never heard: failed over to ``shard`` before it started, their requests go there
-    (home -> ``shard``). A shard heard has its own route (it comes back, or this front-end failed it over)."""
-    homes = {s[0] % shards for s in told} - {shard}
-    return {h: shard for h in sorted(homes) if not heard[h]}
+def stand_ins(
+    told: list[Soldier], shard: int, shards: int, heard: list[bool], homes: Sequence[int] = ()
+) -> dict[int, int]:
+    """The shards ``shard``'s answer says it stands in for (``homes``, or whose soldiers it carries: home
+    index modulo ``shards``) and which this front-end never heard: failed over to ``shard`` before it
+    started, their requests go there (home -> ``shard``); a shard with no soldiers too (its creations went
+    to its dead topic). A shard heard has its own route (it comes back, or this front-end failed it over)."""
+    theirs = ({s[0] % shards for s in told} | {h for h in homes if 0 <= h < shards}) - {shard}
+    return {h: shard for h in sorted(theirs) if not heard[h]}
 
 
 def learned_last(rows: np.ndarray, live: np.ndarray, has_last: np.ndarray) -> np.ndarray:

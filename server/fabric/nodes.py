@@ -132,6 +132,7 @@ class ShardNode:
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request taken, for a books answer
         self.has_last = np.zeros(n, bool)
         self.fences: list[int] = []  # per front-end, the newest fence taken (its batches carry them)
+        self.stands_in: set[int] = set()  # the other shards whose soldiers it animates (a fail-over's)
         # soldiers created since the last fence, and those whose rows the next batch carries (born before a
         # fence): sets, so creations that no fence follows (a sync's) grow them no further than the soldiers
         self._born: set[int] = set()
@@ -326,10 +327,13 @@ class ShardNode:
         elif op == "react":
             world.react(int(msg["index"]), str(msg["kind"]))  # type: ignore[call-overload]
         elif op == "sync":
+            self._homes(msg)
             self._sync(msg)
             self.key_due = True  # the front-end that sent it may lack soldiers no batch carried since
         elif op == "key":
             self.key_due = True
+        elif op == "homes":
+            self._homes(msg)
         elif op == "fence":
             self._fenced(int(msg["front"]), int(msg["serial"]))  # type: ignore[call-overload]
 
@@ -348,8 +352,16 @@ class ShardNode:
         live = m.table.live
         soldiers = _soldiers(self.server, live)
         last = self.last[live[self.has_last[live]]]
-        self._answer(books.answer(self.sharding.k, front, soldiers, last))
+        homes = sorted(self.stands_in)
+        self._answer(books.answer(self.sharding.k, front, soldiers, last, homes))
         log.info("fabric_books_answered", shard=self.sharding.k, front=front, soldiers=len(soldiers))
+
+    def _homes(self, msg: dict[str, object]) -> None:
+        """The shards whose soldiers this one animates from now on, when the message says (a late
+        front-end's ``books`` learns them even of a shard failed over with none)."""
+        homes = msg.get("homes")
+        if isinstance(homes, list):
+            self.stands_in = {int(h) for h in homes} - {self.sharding.k}
 
     def _applied(self, rows: np.ndarray) -> None:
         """Apply requests, and keep those taken as their soldiers' last (what a books answer carries)."""
@@ -675,6 +687,7 @@ class FrontNode:
             if stood_in != k:  # it stood in for k: k's soldiers go home
                 for i in self._homed(k).tolist():
                     self._send(stood_in, req.remove(i))
+                self._send(stood_in, req.homes(self._animated_by(stood_in)))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
             # it stood in for other shards before it went (hung): their soldiers live elsewhere now
             moved = [h for h in self._stood_for.pop(k, set()) if self.route[h] != k]
@@ -747,8 +760,13 @@ class FrontNode:
         have = idx[self.has_last[idx]]
         gone = books.gone(self.known, m.table.alive, homes, self.shards).tolist()
         gone += [] if drop is None else drop.tolist()
-        self._send(shard, req.sync(soldiers, self.last[have], replay=replay, gone=gone))
+        animates = None if made else self._animated_by(shard)  # (a shard heard first: the stand-in knows)
+        self._send(shard, req.sync(soldiers, self.last[have], replay=replay, gone=gone, homes=animates))
         self.fences.moved(homes, self.shards, shard)
+
+    def _animated_by(self, shard: int) -> list[int]:
+        """The homes routed to ``shard``: its own, and those it stands in for."""
+        return [h for h, r in enumerate(self.route) if r == shard]
 
     def _send(self, shard: int, op: req.Op) -> None:
         """Queue an operation for ``shard``: what one turn of the loop queued goes as one message."""
@@ -883,12 +901,13 @@ class FrontNode:
         m = self.server.world.manager
         assert m is not None
         heard = [at > -math.inf for at in self.heard_at]
-        for home, stand_in in books.stand_ins(msg["soldiers"], k, self.shards, heard).items():
+        learned = books.stand_ins(msg["soldiers"], k, self.shards, heard, msg["homes"])
+        for home, stand_in in learned.items():
             self.route[home] = stand_in  # failed over before this front-end started
             log.warning("fabric_stand_in_learned", shard=home, to=stand_in)
         live = m.table.live
         mine = {s[0]: s for s in _soldiers(self.server, live)}
-        scope = books.answer_scope(live, self.route, k)
+        scope = books.answer_scope(live, self.route, k, list(learned))
         drop, add = books.reconcile(mine, scope, msg["soldiers"], set(np.flatnonzero(self.known).tolist()))
         for i in drop:
             self._let_go(i, f"not in shard {k}")

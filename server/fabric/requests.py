@@ -10,12 +10,13 @@ front-end, perhaps before the shard listened: the shard removes those it has): w
 late, restarted or takes over another's soldiers (failover) needs to animate them (``replay``: the shard's
 own soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
 soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for one
-too; ``books`` (front): answer on ``ttes/books`` with every soldier the shard animates, for front-end
-``front`` that has just heard the shard for the first time (:mod:`server.fabric.fronts`); ``fence``
-(front, serial): the end of a message that created or removed soldiers, echoed in the batches
-(:class:`~server.fabric.fronts.Fences`); on ``ttes/fronts`` only, ``clients`` (counts): a front-end's
-connections of client ids. The topic is reliable: ownership and requests are never lost once a shard
-listens, and a sync covers the time before.
+too; ``homes`` (shards): the homes it animates now (a fail-over's stand-in, told again when one goes
+home; a sync carries them too); ``books`` (front): answer on ``ttes/books`` with every soldier the shard
+animates, for front-end ``front`` that has just heard the shard for the first time
+(:mod:`server.fabric.fronts`); ``fence`` (front, serial): the end of a message that created or removed
+soldiers, echoed in the batches (:class:`~server.fabric.fronts.Fences`); on ``ttes/fronts`` only,
+``clients`` (counts): a front-end's connections of client ids. The topic is reliable: ownership and
+requests are never lost once a shard listens, and a sync covers the time before.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ import numpy as np
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from server.fabric.batch import FENCE_MAX, MAX_FRONTS
 
-OPS = ("create", "remove", "requests", "react", "sync", "key", "books", "fence", "clients")
+OPS = ("create", "remove", "requests", "react", "sync", "key", "books", "fence", "clients", "homes")
 Op = dict[str, Any]
 
 
@@ -54,18 +55,26 @@ def sync(
     *,
     replay: bool = False,
     gone: list[int] | None = None,
+    homes: list[int] | None = None,
 ) -> Op:
     """``soldiers``: (index, figure, weapon, owner) each; ``last``: the last requests of those with one;
     ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in); ``gone``:
-    soldiers removed, which the shard removes if it has them."""
+    soldiers removed, which the shard removes if it has them; ``homes``: as :func:`homes` (None: kept)."""
     rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
-    return {
+    op = {
         "op": "sync",
         "soldiers": [list(s) for s in soldiers],
         "rows": rows,
         "replay": replay,
         "gone": list(gone or []),
     }
+    return op if homes is None else {**op, "homes": list(homes)}
+
+
+def homes(shards: list[int]) -> Op:
+    """The shards whose soldiers the shard animates from now on (its own, and those it stands in for): its
+    answer to a late front-end's ``books`` names them, soldiers or none."""
+    return {"op": "homes", "homes": list(shards)}
 
 
 def key() -> Op:
