@@ -92,6 +92,14 @@ def test_the_rows_of_an_index_created_again_wait_for_the_shards_fence() -> None:
     assert fences.clean(_rows(0, [], (0, 2))).indices.tolist() == [] and fences.waiting == 0  # no rows: done
 
 
+def test_the_rows_of_an_index_another_front_end_created_again_wait_for_its_fence() -> None:
+    fences = Fences(1, 12, 2)  # front-end 1 mirrors front-end 0's creation at 5, which ends with fence 3
+    assert fences.wait([5], 0, 1, 3) and fences.due == [False, False]  # no fence of its own is due
+    assert fences.clean(_rows(1, [3, 5], (2, 9))).indices.tolist() == [3]  # front-end 0's fence 2 only
+    assert fences.clean(_rows(0, [5], (3, 0))).indices.tolist() == []  # shard 0's fence says nothing
+    assert fences.clean(_rows(1, [5], (3,))).indices.tolist() == [5] and fences.waiting == 0
+
+
 def test_a_shard_down_hands_its_own_and_the_homes_it_stood_in_for_to_the_least_busy_survivor() -> None:
     route = [0, 1, 0, 3]  # 2 failed over to 0
     assert rerouted(route, [0, 1, 2, 3], [True] * 4) == [] and route == [0, 1, 0, 3]
@@ -460,3 +468,39 @@ async def test_a_front_end_started_while_a_shard_without_soldiers_is_failed_over
         assert ODD in inprocess.live(c.shards[0]) and c.nodes[1].route == [0, 0]
         assert inprocess.live(late) == [0, 2, 4, 6, 8, ODD]  # and none of shard 1's removed start-up soldiers
         await walker.aclose()
+
+
+async def test_a_front_end_that_mirrors_an_index_created_again_shows_none_of_the_old_soldiers_codes(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Two front-ends: the walker is removed and created again at its index through front-end 0 while shard 1
+    has not heard either; an observer of front-end 1, which only mirrors both, gets none of the old walker's
+    codes for the new soldier (on main it had no fence for them and got them every tick), and the new
+    soldier's pose once the shard hears."""
+    async with inprocess.fronts() as c:
+        made = await inprocess.walker(c.servers[0], ODD)
+        await made.requests(index=[ODD - 2], velocity=WALK)  # a start-up soldier of shard 1 walks too
+        obs = await Client.open(c.servers[1].addresses[0][1], "obs", role="observer")
+        await obs.expect(Ready)
+        await obs.send(Subscribe((ODD - 2, ODD)))
+        await inprocess.moving(obs, ODD, 3)
+        held: list[bytes] = []
+        node = c.nodes[0]
+        put, node._puts[1] = node._puts[1], held.append  # the fabric is slow from front-end 0 to shard 1
+        await made.send(RemoveSoldier(ODD))
+        await made.expect(SoldierRemoved)
+        await obs.expect(SoldierRemoved)
+        await made.send(CreateSoldier(2, "DI.fig", "AK_47.fig", ODD))
+        assert (await made.expect(SoldierCreated)).index == ODD
+        with trio.fail_after(30):  # front-end 1 mirrors the creation
+            while ODD not in inprocess.live(c.servers[1]):
+                await trio.sleep(0.01)
+        updates = [e for e in await obs.drain(2.0) if isinstance(e, JointUpdates)]
+        assert [u for u in updates if ODD - 2 in u.indices.tolist()], "shard 1's batches come"
+        assert not [u.tick for u in updates if ODD in u.indices.tolist()]
+        node._puts[1] = put
+        for data in held:
+            put(data)
+        await obs.expect(JointUpdates, lambda u: ODD in u.indices.tolist(), timeout=30)
+        await made.aclose()
+        await obs.aclose()

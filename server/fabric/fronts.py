@@ -243,28 +243,38 @@ class Elsewhere:
 class Fences:
     """Front-end ``front``'s fences: for each index it created or removed (or synced elsewhere), the shard
     whose batches may carry it and the fence that shard must have taken first (issue 21 (d): the index
-    removed and created again within a tick showed the old soldier's codes for a tick)."""
+    removed and created again within a tick showed the old soldier's codes for a tick); for an index another
+    front-end created or removed (mirrored), that front-end's fence, which it names on ``ttes/fronts``."""
 
     def __init__(self, front: int, n: int, shards: int) -> None:
         self.front = front
         self.shard = np.full(n, -1, np.int64)  # the shard the index's rows wait for (-1: none)
         self.serial = np.zeros(n, np.int64)  # the fence of that shard they wait for
+        self.by = np.zeros(n, np.int64)  # the front-end whose fence it is
         self.next = [1] * shards  # per shard sent to, the serial of its next fence
         self.due = [False] * shards  # a fence ends the next message to it
-        self._marked: list[deque[tuple[int, np.ndarray]]] = [deque() for _ in range(shards)]  # per shard
+        # per (front-end, shard): the indices marked, in the order of their fences
+        self._marked: dict[tuple[int, int], deque[tuple[int, np.ndarray]]] = {}
         self.waiting = 0
         self.dropped = 0  # rows dropped (a test's count)
 
     def mark(self, indices: np.ndarray | list[int], shard: int) -> None:
         """The soldiers at ``indices`` were created or removed (or synced) by an operation queued for
         ``shard`` now: their rows count from the batch that carries the fence ending that message."""
+        if self.wait(indices, self.front, shard, self.next[shard]):
+            self.due[shard] = True
+
+    def wait(self, indices: np.ndarray | list[int], front: int, shard: int, serial: int) -> bool:
+        """The soldiers at ``indices`` were created or removed by front-end ``front``'s message to ``shard``
+        that ends with fence ``serial``: their rows count from the batch that carries it. False: none."""
         idx = np.unique(np.asarray(indices, np.int64))
-        if not len(idx):
-            return
+        idx = idx[(idx >= 0) & (idx < len(self.shard))]
+        if not len(idx) or not 0 <= shard < len(self.next):
+            return False
         self.waiting += int(np.count_nonzero(self.shard[idx] < 0))
-        self.shard[idx], self.serial[idx] = shard, self.next[shard]
-        self.due[shard] = True
-        self._marked[shard].append((self.next[shard], idx))
+        self.shard[idx], self.serial[idx], self.by[idx] = shard, serial, front
+        self._marked.setdefault((front, shard), deque()).append((serial, idx))
+        return True
 
     def moved(self, homes: list[int], shards: int, shard: int) -> None:
         """Shards ``homes``' soldiers are synced to ``shard`` now (a fail-over, a shard back): those
@@ -299,11 +309,13 @@ class Fences:
         return dataclasses.replace(b, indices=b.indices[~wait], tables=b.tables[~wait], codes=b.codes[~wait])
 
     def _acked(self, b: Batch) -> None:
-        """The indices marked for ``b``'s shard up to the fence it carries wait no more."""
-        ack = b.fences[self.front] if self.front < len(b.fences) else 0
-        marked = self._marked[b.shard] if b.shard < len(self._marked) else deque()
-        while marked and marked[0][0] <= ack:
-            idx = marked.popleft()[1]
-            idx = idx[(self.shard[idx] == b.shard) & (self.serial[idx] <= ack)]
-            self.shard[idx] = -1
-            self.waiting -= len(idx)
+        """The indices marked for ``b``'s shard up to the fences it carries wait no more."""
+        for (front, shard), marked in self._marked.items():
+            if shard != b.shard:
+                continue
+            ack = b.fences[front] if front < len(b.fences) else 0
+            while marked and marked[0][0] <= ack:
+                idx = marked.popleft()[1]
+                idx = idx[(self.shard[idx] == shard) & (self.by[idx] == front) & (self.serial[idx] <= ack)]
+                self.shard[idx] = -1
+                self.waiting -= len(idx)

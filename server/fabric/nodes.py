@@ -779,6 +779,13 @@ class FrontNode:
             self._books_out.append({**op, "front": self.front.k})
             self._flush_soon()
 
+    def _book_fenced(self, op: req.Op, index: int) -> None:
+        """A creation or removal sent to its shard now: its rows wait for the fence that ends the message,
+        here and, told which, on the other front-ends (they mirror it and have no fence of their own)."""
+        shard = self._shard_of(index)
+        self.fences.mark([index], shard)
+        self._book({**op, "shard": shard, "fence": int(self.fences.serial[index])})
+
     def _flush_soon(self) -> None:
         if self._token is None:
             self._flush()
@@ -823,6 +830,8 @@ class FrontNode:
                 self._kept(i, str(op["figure"]), str(op["weapon"]), op["owner"])
             elif op["op"] == "remove":
                 self._let_go(i, f"removed through front-end {op['front']}")
+            if "fence" in op:  # the shard's batches carry the old soldier's rows until they carry this
+                self.fences.wait([i], int(op["front"]), int(op["shard"]), int(op["fence"]))
         except (ValueError, KeyError, TypeError) as exc:
             log.warning("fabric_books_failed", front=self.front.k, op=op.get("op"), error=str(exc))
             return
@@ -946,8 +955,7 @@ class FrontNode:
             self.share.taken(index)
         op = req.create(index, figure, weapon, owner)
         self._send(self._shard_of(index), op)
-        self.fences.mark([index], self._shard_of(index))
-        self._book(op)
+        self._book_fenced(op, index)
 
     def removed(self, index: int) -> None:
         self._touch(index)
@@ -957,8 +965,7 @@ class FrontNode:
             self.share.freed(index)
         op = req.remove(index)
         self._send(self._shard_of(index), op)
-        self.fences.mark([index], self._shard_of(index))
-        self._book(op)
+        self._book_fenced(op, index)
 
     def requests(self, rows: np.ndarray) -> None:
         idx = rows["index"].astype(np.int64)
