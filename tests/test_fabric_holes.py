@@ -504,3 +504,44 @@ async def test_a_front_end_that_mirrors_an_index_created_again_shows_none_of_the
         await obs.expect(JointUpdates, lambda u: ODD in u.indices.tolist(), timeout=30)
         await made.aclose()
         await obs.aclose()
+
+
+async def test_the_settings_an_operator_changes_through_a_front_end_reach_the_shards(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """An operator's JCL that changes server-wide settings, and the front-end's own (``--throttle``,
+    ``--report-interval``), reach the shards that animate the soldiers (on main only the front-end's world,
+    which animates none, changed); a shard heard later gets them with its sync."""
+    async with inprocess.fronts(fronts_n=1) as c:
+        op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
+        await op.expect(Ready)
+        await op.jcl("set_ttes_heading_offset(10, 20, 30);", 1)
+        await op.jcl("set_ttes_blend_time(0.5);", 2)
+        c.servers[0].world.set_throttle(0.25)
+        c.servers[0].world.set_report_interval(7.0)
+        await trio.sleep(1)
+        for shard in c.shards:
+            s = shard.world.settings
+            assert (s.heading_offsets, s.blend_time, s.throttle) == ((10.0, 20.0, 30.0), 0.5, 0.25)
+            assert shard.world.report_interval == 7.0 and s.tick_period == 1 / 30
+        c.shards[0].world.soldiers.configure(throttle=0.5)  # (its sync says the front-end's again)
+        c.shard_fabrics[1].close()  # shard 1 dies: shard 0 stands in for it, synced
+        with trio.fail_after(30):
+            while c.nodes[0].route != [0, 0]:
+                await trio.sleep(0.1)
+        await trio.sleep(1)
+        assert c.shards[0].world.settings.throttle == 0.25
+        await op.aclose()
+
+
+async def test_the_settings_changed_through_one_front_end_reach_the_other(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Its syncs (a fail-over) would hand the shards its old settings otherwise."""
+    async with inprocess.fronts() as c:
+        op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
+        await op.expect(Ready)
+        await op.jcl("set_ttes_blend_time(0.5);", 1)
+        await trio.sleep(1)
+        assert [s.world.settings.blend_time for s in (*c.servers, *c.shards)] == [0.5] * 4
+        await op.aclose()

@@ -54,6 +54,7 @@ from server.fabric import (
 )
 from server.fabric import fronts as books
 from server.fabric import requests as req
+from server.fabric import settings as shared
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import PULSE, Batch, decode_batch, encode_batch
 from server.fabric.fronts import Fences, IndexShare, Soldier
@@ -334,6 +335,8 @@ class ShardNode:
             self.key_due = True
         elif op == "homes":
             self._homes(msg)
+        elif op == "settings":
+            shared.apply(world, msg["values"])  # type: ignore[arg-type]
         elif op == "fence":
             self._fenced(int(msg["front"]), int(msg["serial"]))  # type: ignore[call-overload]
 
@@ -449,6 +452,8 @@ class FrontNode:
         self._out: list[list[req.Op]] = [[] for _ in range(shards)]  # per shard, sent at the loop's next turn
         self._token: trio.lowlevel.TrioToken | None = None
         self._flush_due = False
+        # the settings last sent to every shard (server.fabric.settings): sent again when they change
+        self._told = (server.world.settings, server.world.report_interval)
         self._pending: dict[int, list[bytes]] = {}  # shard -> its batches not merged yet, in arrival order
         self._pending_lock = threading.Lock()  # appended on the fabric's thread, taken on the loop
         self.key_asked = [False] * shards  # a key batch asked for after a lost batch, not come yet
@@ -611,6 +616,7 @@ class FrontNode:
                 self.rows_decoded += per_block[: self.blocks]
             self._heard(b, now)
         self._fail_over(now)
+        self._settings_told()
         m = self.server.world.manager
         if m is not None and self.watching.stale:
             subscribed = (s.conn.subscribed for s in self.server.sessions.values())
@@ -731,6 +737,17 @@ class FrontNode:
             self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
             self._sync(survivor, homes)
 
+    def _settings_told(self) -> None:
+        """The server-wide settings changed (an operator's JCL): every shard takes them, and every other
+        front-end (its syncs carry them too)."""
+        world = self.server.world
+        if world.settings is not self._told[0] or world.report_interval != self._told[1]:
+            self._told = (world.settings, world.report_interval)  # (a new value when one changes)
+            op = req.settings(shared.of(world))
+            for k in range(self.shards):
+                self._send(k, op)
+            self._book(op)
+
     def _homed(self, k: int) -> np.ndarray:
         """The live soldiers whose home is shard ``k``."""
         m = self.server.world.manager
@@ -761,6 +778,7 @@ class FrontNode:
         gone = books.gone(self.known, m.table.alive, homes, self.shards).tolist()
         gone += [] if drop is None else drop.tolist()
         animates = None if made else self._animated_by(shard)  # (a shard heard first: the stand-in knows)
+        self._send(shard, req.settings(shared.of(self.server.world)))
         self._send(shard, req.sync(soldiers, self.last[have], replay=replay, gone=gone, homes=animates))
         self.fences.moved(homes, self.shards, shard)
 
@@ -823,6 +841,10 @@ class FrontNode:
             if op["op"] == "clients":
                 for cid, n in op["counts"].items():
                     self._count(int(op["front"]), cid, n)
+                return
+            if op["op"] == "settings":  # the shards have them from that front-end
+                shared.apply(self.server.world, op["values"])
+                self._told = (self.server.world.settings, self.server.world.report_interval)
                 return
             i = int(op["index"])
             self._touch(i)

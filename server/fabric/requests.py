@@ -11,7 +11,8 @@ late, restarted or takes over another's soldiers (failover) needs to animate the
 own soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
 soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for one
 too; ``homes`` (shards): the homes it animates now (a fail-over's stand-in, told again when one goes
-home; a sync carries them too); ``books`` (front): answer on ``ttes/books`` with every soldier the shard
+home; a sync carries them too); ``settings`` (values): the front-end's server-wide settings (when they
+change, and before each sync); ``books`` (front): answer on ``ttes/books`` with every soldier the shard
 animates, for front-end ``front`` that has just heard the shard for the first time
 (:mod:`server.fabric.fronts`); ``fence`` (front, serial): the end of a message that created or removed
 soldiers, echoed in the batches (:class:`~server.fabric.fronts.Fences`); on ``ttes/fronts`` only,
@@ -29,7 +30,19 @@ import numpy as np
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from server.fabric.batch import FENCE_MAX, MAX_FRONTS
 
-OPS = ("create", "remove", "requests", "react", "sync", "key", "books", "fence", "clients", "homes")
+OPS = (
+    "create",
+    "remove",
+    "requests",
+    "react",
+    "sync",
+    "key",
+    "books",
+    "fence",
+    "clients",
+    "homes",
+    "settings",
+)
 Op = dict[str, Any]
 
 
@@ -69,6 +82,12 @@ def sync(
         "gone": list(gone or []),
     }
     return op if homes is None else {**op, "homes": list(homes)}
+
+
+def settings(values: dict[str, Any]) -> Op:
+    """The front-end's server-wide settings (:func:`server.fabric.settings.of`): the shards animate, so an
+    operator's JCL and the front-end's own ``--throttle`` apply there."""
+    return {"op": "settings", "values": values}
 
 
 def homes(shards: list[int]) -> Op:
