@@ -120,6 +120,7 @@ def test_an_answer_with_another_shards_soldiers_names_a_stand_in_for_a_shard_nev
     assert stand_ins([], 0, 3, [True, False, False], homes=[2]) == {2: 0}  # it says so: soldiers or none
     assert answer_scope(np.arange(10), [0, 0], 0, stand_in=[1]) == set(range(10))
     assert decode_answer(answer(0, 0, [], homes=[2]))["homes"] == [2]
+    assert decode_answer(answer(0, 0, [(3, *di, None)], gens=[4]))["gens"] == [4]  # (generations: a sync's)
 
 
 def test_a_front_end_keeps_the_answers_last_requests_of_its_soldiers_without_one() -> None:
@@ -544,4 +545,45 @@ async def test_the_settings_changed_through_one_front_end_reach_the_other(
         await op.jcl("set_ttes_blend_time(0.5);", 1)
         await trio.sleep(1)
         assert [s.world.settings.blend_time for s in (*c.servers, *c.shards)] == [0.5] * 4
+        await op.aclose()
+
+
+async def test_a_sync_does_not_remove_a_soldier_created_again_that_its_front_end_has_not_heard_of(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Front-end 1 removes the walker; front-end 0 creates a soldier again at its index, and shard 1 (which
+    has it) restarts before front-end 1 hears of the creation: front-end 1's sync says the index was removed,
+    yet the shard keeps the new soldier (on main it removed it: every front-end showed a soldier that no
+    shard animated)."""
+    async with inprocess.fronts() as c:
+        made = await inprocess.walker(c.servers[0], ODD)
+        op = await Client.open(c.servers[1].addresses[0][1], "op", role="operator")
+        await op.expect(Ready)
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.servers[1]):
+                await trio.sleep(0.01)
+        await op.send(RemoveSoldier(ODD))
+        await op.expect(SoldierRemoved)
+        with trio.fail_after(30):
+            while ODD in inprocess.live(c.shards[1]) or ODD in inprocess.live(c.servers[0]):
+                await trio.sleep(0.01)
+        held: list[bytes] = []
+        told = c.nodes[0]._books
+        assert told is not None
+        c.nodes[0]._books = held.append  # front-end 1 hears front-end 0 late
+        await made.send(CreateSoldier(2, "DI.fig", "AK_47.fig", ODD))
+        assert (await made.expect(SoldierCreated)).index == ODD
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.shards[1]):
+                await trio.sleep(0.01)
+        await trio.sleep(1)
+        c.shard_nodes[1].seq = 0  # shard 1 restarts (its count goes back): both front-ends sync it
+        await trio.sleep(1)
+        c.nodes[0]._books = told
+        for data in held:
+            told(data)
+        await made.requests(index=[ODD], velocity=WALK)
+        await inprocess.moving(made, ODD, 3)
+        assert ODD in inprocess.live(c.shards[1]) and ODD in inprocess.live(c.servers[1])
+        await made.aclose()
         await op.aclose()

@@ -120,6 +120,7 @@ class Fronts:
     fabrics: list[MemoryFabric] = field(default_factory=list)  # the front-ends'
     shards: list[TtesServer] = field(default_factory=list)
     shard_fabrics: list[MemoryFabric] = field(default_factory=list)
+    shard_nodes: list[ShardNode] = field(default_factory=list)
 
     async def start_front(self, front: Sharding) -> TtesServer:
         """Front-end ``front`` (K/M) started now (a late one, or one of several at the start)."""
@@ -156,6 +157,7 @@ async def fronts(
             shard_node.start(token)
             c.shards.append(shard)
             c.shard_fabrics.append(fabric)
+            c.shard_nodes.append(shard_node)
         yield c
         for s in (*c.servers, *c.shards):
             s.shutdown()

@@ -80,10 +80,16 @@ class IndexShare:
 
 
 def answer(
-    shard: int, front: int, soldiers: list[Soldier], last: np.ndarray | None = None, homes: Sequence[int] = ()
+    shard: int,
+    front: int,
+    soldiers: list[Soldier],
+    last: np.ndarray | None = None,
+    homes: Sequence[int] = (),
+    gens: Sequence[int] = (),
 ) -> bytes:
     """A shard's answer to front-end ``front``'s ``books``: every soldier it animates, the last request of
-    those that had one (``ENTITY_REQUEST_DTYPE`` rows), and the other shards it stands in for (``homes``)."""
+    those that had one (``ENTITY_REQUEST_DTYPE`` rows), the other shards it stands in for (``homes``) and the
+    generation of each soldier (``gens``: :func:`server.fabric.requests.sync`)."""
     rows = np.zeros(0, ENTITY_REQUEST_DTYPE) if last is None else last
     rows = np.ascontiguousarray(rows, ENTITY_REQUEST_DTYPE)
     msg = {
@@ -92,6 +98,7 @@ def answer(
         "soldiers": [list(s) for s in soldiers],
         "rows": rows.tobytes(),
         "homes": list(homes),
+        "gens": list(gens),
     }
     return bytes(msgpack.packb(msg))
 
@@ -107,6 +114,7 @@ def decode_answer(data: bytes) -> dict[str, Any]:
         msg["shard"], msg["front"] = int(msg["shard"]), int(msg["front"])
         msg["rows"] = np.frombuffer(msg.get("rows", b""), ENTITY_REQUEST_DTYPE)
         msg["homes"] = [int(h) for h in msg.get("homes", [])]
+        msg["gens"] = [int(g) for g in msg.get("gens", [])]
     except (ValueError, TypeError, KeyError, AttributeError, msgpack.UnpackException) as exc:
         raise ValueError(f"not a books answer: {exc}") from exc
     return msg

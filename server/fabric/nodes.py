@@ -134,6 +134,7 @@ class ShardNode:
         self.has_last = np.zeros(n, bool)
         self.fences: list[int] = []  # per front-end, the newest fence taken (its batches carry them)
         self.stands_in: set[int] = set()  # the other shards whose soldiers it animates (a fail-over's)
+        self.gen = np.zeros(n, np.int64)  # each soldier's generation (requests.sync): 0, the script's
         # soldiers created since the last fence, and those whose rows the next batch carries (born before a
         # fence): sets, so creations that no fence follows (a sync's) grow them no further than the soldiers
         self._born: set[int] = set()
@@ -317,6 +318,7 @@ class ShardNode:
                 owner=str(owner) if owner is not None else None,
             )
             self.has_last[index] = False
+            self.gen[index] = int(msg.get("gen") or 0)  # type: ignore[call-overload]
             self._born.add(index)
         elif op == "remove":
             world.remove_soldier(int(msg["index"]), "removed by a front-end")  # type: ignore[call-overload]
@@ -355,8 +357,8 @@ class ShardNode:
         live = m.table.live
         soldiers = _soldiers(self.server, live)
         last = self.last[live[self.has_last[live]]]
-        homes = sorted(self.stands_in)
-        self._answer(books.answer(self.sharding.k, front, soldiers, last, homes))
+        homes, gens = sorted(self.stands_in), self.gen[live].tolist()
+        self._answer(books.answer(self.sharding.k, front, soldiers, last, homes, gens))
         log.info("fabric_books_answered", shard=self.sharding.k, front=front, soldiers=len(soldiers))
 
     def _homes(self, msg: dict[str, object]) -> None:
@@ -382,17 +384,27 @@ class ShardNode:
         soldiers = msg["soldiers"]
         rows = msg["rows"]
         assert isinstance(soldiers, list) and isinstance(rows, np.ndarray)
-        told = msg.get("gone") or []
+        told, told_gens = msg.get("gone") or [], msg.get("gone_gens")
         assert isinstance(told, list)
-        gone = [int(i) for i in told if m.table.is_live(int(i))]
+        # a removal removes the soldier created before it, not one created again since (through another
+        # front-end that the sender had not heard of)
+        after: list[float] = [math.inf] * len(told)  # (a sync without generations: every one)
+        if isinstance(told_gens, list) and len(told_gens) == len(told):
+            after = [float(g) for g in told_gens]
+        gone = [
+            int(i) for i, g in zip(told, after, strict=True) if m.table.is_live(int(i)) and self.gen[i] < g
+        ]
         for i in gone:
             world.remove_soldier(i, "removed through a front-end while this shard did not hear it")
             self.has_last[i] = False
         new = []
-        for index, figure, weapon, owner in soldiers:
+        gens = msg.get("gens")
+        gens = gens if isinstance(gens, list) and len(gens) == len(soldiers) else [0] * len(soldiers)
+        for (index, figure, weapon, owner), gen in zip(soldiers, gens, strict=True):
             if not m.table.is_live(index):
                 world.create_soldier(figure, weapon, index, owner=owner)
                 self.has_last[index] = False
+                self.gen[index] = int(gen)
                 new.append(index)
         self._born.update(new)
         log.info(
@@ -469,6 +481,7 @@ class FrontNode:
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request, for a sync
         self.has_last = np.zeros(n, bool)
         self.made = np.zeros(n, bool)  # created here (not the start-up script's, not another front-end's)
+        self.gen = np.zeros(n, np.int64)  # each index's creations and removals heard of (requests.sync)
         self._asked: set[int] = set()  # shards asked for their books, not answered yet
         self.known = np.zeros(n, bool)  # created or removed here, or told so by a front-end: not learned
         self._unknown: dict[int, set[int]] = {}  # shard asked -> its batches' soldiers not in the books
@@ -692,7 +705,7 @@ class FrontNode:
             self.route[k] = k
             if stood_in != k:  # it stood in for k: k's soldiers go home
                 for i in self._homed(k).tolist():
-                    self._send(stood_in, req.remove(i))
+                    self._send(stood_in, req.remove(i, int(self.gen[i])))
                 self._send(stood_in, req.homes(self._animated_by(stood_in)))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
             # it stood in for other shards before it went (hung): their soldiers live elsewhere now
@@ -775,11 +788,25 @@ class FrontNode:
             idx = idx[self.made[idx]]
         soldiers = _soldiers(self.server, idx)
         have = idx[self.has_last[idx]]
-        gone = books.gone(self.known, m.table.alive, homes, self.shards).tolist()
-        gone += [] if drop is None else drop.tolist()
+        removed = books.gone(self.known, m.table.alive, homes, self.shards)
+        elsewhere = np.zeros(0, np.int64) if drop is None else np.asarray(drop, np.int64)
+        gone = [*removed.tolist(), *elsewhere.tolist()]
+        gone_gens = [*self.gen[removed].tolist(), *(self.gen[elsewhere] + 1).tolist()]  # (those live on)
         animates = None if made else self._animated_by(shard)  # (a shard heard first: the stand-in knows)
         self._send(shard, req.settings(shared.of(self.server.world)))
-        self._send(shard, req.sync(soldiers, self.last[have], replay=replay, gone=gone, homes=animates))
+        gens = self.gen[idx].tolist()
+        self._send(
+            shard,
+            req.sync(
+                soldiers,
+                self.last[have],
+                replay=replay,
+                gone=gone,
+                homes=animates,
+                gens=gens,
+                gone_gens=gone_gens,
+            ),
+        )
         self.fences.moved(homes, self.shards, shard)
 
     def _animated_by(self, shard: int) -> list[int]:
@@ -848,6 +875,7 @@ class FrontNode:
                 return
             i = int(op["index"])
             self._touch(i)
+            self.gen[i] = max(int(self.gen[i]), int(op.get("gen") or 0))
             if op["op"] == "create":
                 self._kept(i, str(op["figure"]), str(op["weapon"]), op["owner"])
             elif op["op"] == "remove":
@@ -947,6 +975,9 @@ class FrontNode:
                 self._kept(i, figure, weapon, owner)
             except (ValueError, KeyError) as exc:
                 log.warning("fabric_books_failed", front=self.front.k, soldier=i, error=str(exc))
+        if len(msg["gens"]) == len(msg["soldiers"]):  # its soldiers' generations, if newer
+            idx = np.array([s[0] for s in msg["soldiers"]], np.int64)
+            np.maximum.at(self.gen, idx, np.array(msg["gens"], np.int64))
         last = books.learned_last(msg["rows"], m.table.alive, self.has_last)
         self.last[last["index"]] = last  # what a fail-over of this front-end hands on
         self.has_last[last["index"]] = True
@@ -975,7 +1006,8 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.taken(index)
-        op = req.create(index, figure, weapon, owner)
+        self.gen[index] += 1
+        op = req.create(index, figure, weapon, owner, int(self.gen[index]))
         self._send(self._shard_of(index), op)
         self._book_fenced(op, index)
 
@@ -985,7 +1017,8 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.freed(index)
-        op = req.remove(index)
+        self.gen[index] += 1
+        op = req.remove(index, int(self.gen[index]))
         self._send(self._shard_of(index), op)
         self._book_fenced(op, index)
 

@@ -46,12 +46,13 @@ OPS = (
 Op = dict[str, Any]
 
 
-def create(index: int, figure: str, weapon: str, owner: str | None) -> Op:
-    return {"op": "create", "index": index, "figure": figure, "weapon": weapon, "owner": owner}
+def create(index: int, figure: str, weapon: str, owner: str | None, gen: int = 0) -> Op:
+    """``gen``: the index's generation (:func:`sync`)."""
+    return {"op": "create", "index": index, "figure": figure, "weapon": weapon, "owner": owner, "gen": gen}
 
 
-def remove(index: int) -> Op:
-    return {"op": "remove", "index": index}
+def remove(index: int, gen: int = 0) -> Op:
+    return {"op": "remove", "index": index, "gen": gen}
 
 
 def requests(rows: np.ndarray) -> Op:
@@ -69,10 +70,15 @@ def sync(
     replay: bool = False,
     gone: list[int] | None = None,
     homes: list[int] | None = None,
+    gens: list[int] | None = None,
+    gone_gens: list[int] | None = None,
 ) -> Op:
     """``soldiers``: (index, figure, weapon, owner) each; ``last``: the last requests of those with one;
     ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in); ``gone``:
-    soldiers removed, which the shard removes if it has them; ``homes``: as :func:`homes` (None: kept)."""
+    soldiers removed, which the shard removes if it has them; ``homes``: as :func:`homes` (None: kept);
+    ``gens`` and ``gone_gens``: the generation of each soldier and of each removal (an index's creations and
+    removals count up, through every front-end: a removal removes only a soldier created before it, not
+    one created again through another front-end that the sender has not heard of yet)."""
     rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
     op = {
         "op": "sync",
@@ -81,6 +87,10 @@ def sync(
         "replay": replay,
         "gone": list(gone or []),
     }
+    if gens is not None:
+        op["gens"] = list(gens)
+    if gone_gens is not None:
+        op["gone_gens"] = list(gone_gens)
     return op if homes is None else {**op, "homes": list(homes)}
 
 
