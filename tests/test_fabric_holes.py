@@ -222,6 +222,7 @@ async def test_a_front_end_started_while_a_shard_is_failed_over_routes_to_the_st
         c.shard(0)
         c.shard(1)
         alpha = await _walker(c.front.port)
+        await _moving(c.front.port, [ODD], frames=2)  # shard 1 heard (else no fail-over: under load, flaky)
         await alpha.requests(index=[ODD], velocity=(0.0, 0.0, 0.0))  # it stands
         c.kill(c.shards[1])
         assert await _until_soldiers(c.shards[0].port, [*range(10), ODD]) == [*range(10), ODD]
