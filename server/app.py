@@ -38,6 +38,7 @@ its start and duration (``SoldierManager.soldier_info``), or the clips it starte
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import ipaddress
 import math
@@ -896,8 +897,10 @@ class TtesServer:
             self._orphans_wait(cid, owners.orphaned(cid, now, grace))
 
     def _orphans_wait(self, client_id: str, deadline: float | None) -> None:
-        if deadline is not None and self._nursery is not None and not self._shutdown.is_set():
-            log.info("owner_gone", client_id=client_id, grace=self.config.orphan_grace)
+        if deadline is None or self._nursery is None or self._shutdown.is_set():
+            return
+        log.info("owner_gone", client_id=client_id, grace=self.config.orphan_grace)
+        with contextlib.suppress(RuntimeError):  # stopped: its nursery is closed (a front-end told late)
             self._nursery.start_soon(self._expire_orphans, deadline)
 
     async def _expire_orphans(self, deadline: float) -> None:
