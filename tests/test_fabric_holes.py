@@ -588,3 +588,27 @@ async def test_a_sync_does_not_remove_a_soldier_created_again_that_its_front_end
         assert ODD in inprocess.live(c.shards[1]) and ODD in inprocess.live(c.servers[1])
         await made.aclose()
         await op.aclose()
+
+
+async def test_a_front_end_fails_a_shard_over_when_another_does(autojump_clock: trio.abc.Clock) -> None:
+    """Shard 1 hangs; front-end 0 fails it over after its 5 s, front-end 1 (whose loop heard its last pulse
+    later: here a longer limit) has not yet: it follows front-end 0's fail-over, so a request for the standing
+    walker sent through front-end 1 goes to the stand-in and the walker walks (on main it went to the hung
+    shard until front-end 1's own limit: the walker stood)."""
+    async with inprocess.fronts() as c:
+        c.nodes[1].hung_s = 60.0
+        made = await inprocess.walker(c.servers[0], ODD)
+        await made.requests(index=[ODD], velocity=(0.0, 0.0, 0.0))  # it stands
+        there = await _client(c.servers[1])
+        await there.send(Subscribe((ODD,)))
+        await trio.sleep(1)
+        c.shard_fabrics[1].closed = True  # it publishes nothing more, yet its presence stays
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.shards[0]):
+                await trio.sleep(0.1)
+        await there.drain(3.0)  # it stands in shard 0 (a standing soldier is sent once)
+        await there.requests(index=[ODD], velocity=WALK)
+        await inprocess.moving(there, ODD, 10)
+        assert c.nodes[1].route == [0, 0]
+        await made.aclose()
+        await there.aclose()

@@ -71,6 +71,7 @@ if TYPE_CHECKING:
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
 TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
+FOLLOW_S = 1.0  # a shard another front-end failed over, unheard here this long, is failed over here too
 PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batch a block heard); beyond, the
 # oldest go (and it asks for a key)
 
@@ -744,11 +745,32 @@ class FrontNode:
         alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
         heard = [at > -math.inf for at in self.heard_at]
         for k, survivor, homes in books.rerouted(self.route, alive, heard):
-            self.failovers += 1
-            silent_s = round(now - self.heard_at[k], 3)
-            log.warning("fabric_failover", shard=k, to=survivor, homes=homes, silent_s=silent_s)
-            self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
-            self._sync(survivor, homes)
+            self._failed(k, survivor, homes, now)
+            self._book(req.failover(k, survivor, homes))  # the others follow (each decides on its own clock)
+
+    def _failed(self, k: int, survivor: int, homes: list[int], now: float) -> None:
+        """Shard ``k``'s soldiers of ``homes`` are routed to ``survivor`` now: it gets them by sync."""
+        self.failovers += 1
+        silent_s = round(now - self.heard_at[k], 3)
+        log.warning("fabric_failover", shard=k, to=survivor, homes=homes, silent_s=silent_s)
+        self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
+        self._sync(survivor, homes)
+
+    def follow(self, down: int, to: int) -> None:
+        """Another front-end failed shard ``down`` over to ``to``: fail it over here too, unless this one
+        heard it within ``FOLLOW_S`` (two front-ends routed a hung shard's requests differently for up to
+        the hung limit, each deciding on its own clock; one that hears the shard keeps it: a take-back would
+        take its soldiers from the stand-in the other front-end routes to)."""
+        now = self.server.now()
+        if not (0 <= down < self.shards and 0 <= to < self.shards) or down == to:
+            return
+        if self.present[down] and now - self.heard_at[down] < FOLLOW_S:
+            return
+        homes = [h for h, r in enumerate(self.route) if r == down]
+        if homes:
+            for h in homes:
+                self.route[h] = to
+            self._failed(down, to, homes, now)
 
     def _settings_told(self) -> None:
         """The server-wide settings changed (an operator's JCL): every shard takes them, and every other
@@ -868,6 +890,9 @@ class FrontNode:
             if op["op"] == "clients":
                 for cid, n in op["counts"].items():
                     self._count(int(op["front"]), cid, n)
+                return
+            if op["op"] == "failover":
+                self.follow(int(op["down"]), int(op["to"]))
                 return
             if op["op"] == "settings":  # the shards have them from that front-end
                 shared.apply(self.server.world, op["values"])

@@ -16,8 +16,8 @@ change, and before each sync); ``books`` (front): answer on ``ttes/books`` with 
 animates, for front-end ``front`` that has just heard the shard for the first time
 (:mod:`server.fabric.fronts`); ``fence`` (front, serial): the end of a message that created or removed
 soldiers, echoed in the batches (:class:`~server.fabric.fronts.Fences`); on ``ttes/fronts`` only,
-``clients`` (counts): a front-end's connections of client ids. The topic is reliable: ownership and
-requests are never lost once a shard listens, and a sync covers the time before.
+``clients`` (counts): a front-end's connections of client ids, ``failover`` (down, to, homes). The topic
+is reliable: ownership and requests are never lost once a shard listens, and a sync covers the time before.
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ OPS = (
     "clients",
     "homes",
     "settings",
+    "failover",
 )
 Op = dict[str, Any]
 
@@ -98,6 +99,12 @@ def settings(values: dict[str, Any]) -> Op:
     """The front-end's server-wide settings (:func:`server.fabric.settings.of`): the shards animate, so an
     operator's JCL and the front-end's own ``--throttle`` apply there."""
     return {"op": "settings", "values": values}
+
+
+def failover(down: int, to: int, homes: list[int]) -> Op:
+    """On ``ttes/fronts``: a front-end failed shard ``down`` over to ``to`` (``homes``: the shards whose
+    soldiers went): the others follow unless they heard ``down`` lately (``FrontNode.follow``)."""
+    return {"op": "failover", "down": down, "to": to, "homes": list(homes)}
 
 
 def homes(shards: list[int]) -> Op:
