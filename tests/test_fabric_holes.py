@@ -33,6 +33,7 @@ from protocol.events import (
     SoldierRemoved,
     Subscribe,
 )
+from server.fabric import Handler
 from server.fabric import requests as req
 from server.fabric.batch import Batch
 from server.fabric.fronts import (
@@ -285,6 +286,19 @@ async def test_a_hung_shard_that_resumes_lets_go_of_a_soldier_removed_while_it_w
         await c.aclose()
 
 
+async def _none_of_the_old_soldiers_codes(
+    c: Client, node: inprocess.FrontNode, put: Handler, held: list[bytes]
+) -> None:
+    """While shard 1 has not heard the removal and re-creation of ``ODD`` (``node``'s messages to it are
+    ``held``), ``c`` gets shard 1's batches (``ODD - 2`` walks) and no row of ``ODD``; then they go."""
+    updates = [e for e in await c.drain(2.0) if isinstance(e, JointUpdates)]
+    assert [u for u in updates if ODD - 2 in u.indices.tolist()], "shard 1's batches come"
+    assert not [u.tick for u in updates if ODD in u.indices.tolist()]
+    node._puts[1] = put
+    for data in held:
+        put(data)
+
+
 async def test_an_index_removed_and_created_again_shows_none_of_the_old_soldiers_codes(
     autojump_clock: trio.abc.Clock,
 ) -> None:
@@ -302,12 +316,7 @@ async def test_an_index_removed_and_created_again_shows_none_of_the_old_soldiers
         await c.expect(SoldierRemoved)
         await c.send(CreateSoldier(2, "DI.fig", "AK_47.fig", ODD))
         assert (await c.expect(SoldierCreated)).index == ODD
-        updates = [e for e in await c.drain(2.0) if isinstance(e, JointUpdates)]
-        assert [u for u in updates if ODD - 2 in u.indices.tolist()], "shard 1's batches come"
-        assert not [u.tick for u in updates if ODD in u.indices.tolist()]
-        node._puts[1] = put
-        for data in held:
-            put(data)
+        await _none_of_the_old_soldiers_codes(c, node, put, held)
         with trio.fail_after(30):
             while ODD not in inprocess.live(shards[1]):
                 await trio.sleep(0.1)
@@ -497,12 +506,7 @@ async def test_a_front_end_that_mirrors_an_index_created_again_shows_none_of_the
         with trio.fail_after(30):  # front-end 1 mirrors the creation
             while ODD not in inprocess.live(c.servers[1]):
                 await trio.sleep(0.01)
-        updates = [e for e in await obs.drain(2.0) if isinstance(e, JointUpdates)]
-        assert [u for u in updates if ODD - 2 in u.indices.tolist()], "shard 1's batches come"
-        assert not [u.tick for u in updates if ODD in u.indices.tolist()]
-        node._puts[1] = put
-        for data in held:
-            put(data)
+        await _none_of_the_old_soldiers_codes(obs, node, put, held)
         await obs.expect(JointUpdates, lambda u: ODD in u.indices.tolist(), timeout=30)
         await made.aclose()
         await obs.aclose()
