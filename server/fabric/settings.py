@@ -1,10 +1,11 @@
 """The server-wide settings a front-end hands its shards (issue 21: JCL changed the front-end's world only).
 
 A front-end animates nothing: its soldier settings (``set_ttes_heading_offset``, ``set_ttes_blend_time``,
-``set_ttes_walk_run_threshold``, ``set_channelset_parameters``, ``set_ttes_clip_recording``: an operator's
-JCL; ``--throttle`` and the start-up script's throttle) and its report interval are the cluster's, and go to
-every shard when they change and before each sync (a shard heard late, back, or standing in). The tick
-period stays each process's own.
+``set_ttes_walk_run_threshold``, ``set_channelset_parameters``: an operator's JCL; ``--throttle`` and the
+start-up script's throttle) and its report interval are the cluster's, and go to every shard when they
+change and before each sync (a shard heard late, back, or standing in). The tick period stays each
+process's own, and so does clip recording (a debugging aid: ``report_ttes_clips`` reads it where the
+soldiers animate, a shard's own config).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from server.soldier.settings import SoldierSettings
 if TYPE_CHECKING:
     from server.startup import ServerWorld
 
-OWN = frozenset({"tick_period"})  # each process's own (its tick)
+OWN = frozenset({"tick_period", "record_clips"})  # each process's own (its tick; what it records)
 SHARED = tuple(f.name for f in dataclasses.fields(SoldierSettings) if f.name not in OWN)
 
 
