@@ -616,3 +616,21 @@ async def test_a_front_end_fails_a_shard_over_when_another_does(autojump_clock: 
         assert c.nodes[1].route == [0, 0]
         await made.aclose()
         await there.aclose()
+
+
+async def test_an_anonymous_clients_soldiers_go_after_its_grace_whatever_the_other_front_ends_serve(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """A client without an id gets its connection's (``~anon-`` and the session's number, per process):
+    another front-end's client of the same number is another client, and keeps nothing alive here."""
+    async with inprocess.fronts() as c:
+        here = await _client(c.servers[0], "")
+        assert here.accept is not None and here.accept.client_id.startswith("~anon-")
+        index = await _made(here)
+        # front-end 1's process has a session of the same number (here, in one process, they are numbered
+        # apart): it tells its connection (a front-end of this code does not), which counts for nothing here
+        told = {**req.clients({here.accept.client_id: 1}), "front": 1}
+        c.nodes[0].mirror(req.pack([told]))
+        await here.aclose()
+        await trio.sleep(GRACE * 1.5)
+        assert _everywhere(c, index) == [False, False, False]

@@ -64,6 +64,7 @@ from server.pose_board import PoseBoard
 from server.soldier import REQUEST_OK
 from server.stage_cpu import TURN_CPU_S
 from server.trace import TRACE
+from server.world.owners import ANONYMOUS
 
 if TYPE_CHECKING:
     from server.app import TtesServer
@@ -887,9 +888,10 @@ class FrontNode:
 
     def _mirror_one(self, op: req.Op) -> None:
         try:
-            if op["op"] == "clients":
+            if op["op"] == "clients":  # (an anonymous id is one connection's there, another client here)
                 for cid, n in op["counts"].items():
-                    self._count(int(op["front"]), cid, n)
+                    if not cid.startswith(ANONYMOUS):
+                        self._count(int(op["front"]), cid, n)
                 return
             if op["op"] == "failover":
                 self.follow(int(op["down"]), int(op["to"]))
@@ -932,6 +934,8 @@ class FrontNode:
     def _connections(self, client_id: str) -> None:
         """The owners' hook: ``client_id``'s connections changed; tell the others this front-end's own."""
         assert self.elsewhere is not None
+        if client_id.startswith(ANONYMOUS):  # one connection's (numbered per process): not theirs
+            return
         own = self.elsewhere.own(client_id, self.server.world.owners.connected.get(client_id, 0))
         if own is not None:
             self._book(req.clients(own))

@@ -24,6 +24,7 @@ from collections.abc import Callable
 import numpy as np
 
 SHARED = -1  # owner code of a soldier no client owns (the start-up script's)
+ANONYMOUS = "~anon-"  # + a session number: a client that gave no id (one connection of one process)
 FULL_SIGHT = frozenset({"observer", "operator"})
 
 
