@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
 import test_fabric_inprocess as inprocess
 import trio
 from test_fabric_cluster import WALK, _soldiers_of
+from test_fabric_fronts import two_fronts
 from test_fabric_latefront import _moving
 from test_server_support import Client, synthetic_dir
 
@@ -634,3 +636,29 @@ async def test_an_anonymous_clients_soldiers_go_after_its_grace_whatever_the_oth
         await here.aclose()
         await trio.sleep(GRACE * 1.5)
         assert _everywhere(c, index) == [False, False, False]
+
+
+@pytest.mark.parametrize("fabric", ["zenoh", "dds"])
+async def test_two_front_end_processes_keep_a_client_ids_soldiers_while_it_is_connected_to_either(
+    tmp_path: Path, fabric: str
+) -> None:
+    """As real processes on both engines (each front-end announces itself and tells the other its
+    connections), with a grace of 1 s: alpha leaves the front-end its soldier was made through and stays on
+    the other; the soldier stays for 3 graces, and goes once alpha has left both."""
+    if fabric == "dds":
+        pytest.importorskip("cyclonedds")
+    config = tmp_path / "grace.toml"
+    config.write_text("orphan_grace = 1.0\n", encoding="utf-8")
+    with two_fronts(fabric, front_args=("--config", str(config))) as (fronts, _):
+        here = await Client.open(fronts[0].port, "ig", client_id="alpha")
+        await here.expect(Ready)
+        there = await Client.open(fronts[1].port, "ig", client_id="alpha")
+        await there.expect(Ready)
+        index = await _made(here)
+        assert await _until_soldiers(fronts[1].port, [*range(10), index]) == [*range(10), index]
+        await here.aclose()
+        await trio.sleep(3.0)  # (real time: three graces)
+        assert await _soldiers_of(fronts[0].port) == [*range(10), index]
+        await there.aclose()
+        assert await _until_soldiers(fronts[0].port, [*range(10)]) == [*range(10)]
+        assert await _until_soldiers(fronts[1].port, [*range(10)]) == [*range(10)]
