@@ -38,6 +38,7 @@ its start and duration (``SoldierManager.soldier_info``), or the clips it starte
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import ipaddress
 import math
@@ -917,9 +918,26 @@ class TtesServer:
         if not session.joined:
             return
         session.joined = False
-        deadline = self.world.owners.leave(session.client_id, self.now(), self.config.orphan_grace)
-        if deadline is not None and self._nursery is not None and not self._shutdown.is_set():
-            log.info("owner_gone", client_id=session.client_id, grace=self.config.orphan_grace)
+        self.client_left(session.client_id)
+
+    def client_left(self, client_id: str) -> None:
+        """A connection of ``client_id`` closed (here, or on another front-end: ``server.fabric``)."""
+        self._orphans_wait(
+            client_id, self.world.owners.leave(client_id, self.now(), self.config.orphan_grace)
+        )
+
+    def orphans_check(self) -> None:
+        """Start the grace of every id that owns soldiers and has no connection and none yet (a front-end
+        that held its connections is gone, or handed the removal of its share's orphans to this one)."""
+        owners, now, grace = self.world.owners, self.now(), self.config.orphan_grace
+        for cid in owners.owning():
+            self._orphans_wait(cid, owners.orphaned(cid, now, grace))
+
+    def _orphans_wait(self, client_id: str, deadline: float | None) -> None:
+        if deadline is None or self._nursery is None or self._shutdown.is_set():
+            return
+        log.info("owner_gone", client_id=client_id, grace=self.config.orphan_grace)
+        with contextlib.suppress(RuntimeError):  # stopped: its nursery is closed (a front-end told late)
             self._nursery.start_soon(self._expire_orphans, deadline)
 
     async def _expire_orphans(self, deadline: float) -> None:
@@ -931,6 +949,8 @@ class TtesServer:
         owners = self.world.owners
         for cid in owners.expired(self.now()):
             gone = owners.soldiers_of(cid)
+            if self.world.relay is not None:  # a front-end of several removes its own share's
+                gone = self.world.relay.orphans(gone)
             for i in gone:
                 self.world.remove_soldier(i, f"owner {cid} gone for {self.config.orphan_grace:g} s")
             log.info("orphans_removed", client_id=cid, soldiers=len(gone))

@@ -65,6 +65,11 @@ def alive_key(shard: int) -> str:
     return f"ttes/alive/{shard}"
 
 
+def front_alive_key(front: int) -> str:
+    """Front-end ``front`` of several is on the fabric (the others count its clients' connections)."""
+    return f"ttes/alive/front/{front}"
+
+
 Handler = Callable[[bytes], None]  # called on the fabric's own thread, once per message
 Presence = Callable[[bool], None]  # called on the fabric's own thread: present (True) or gone (False)
 Unsubscribe = Callable[[], None]  # ends a subscription (a message already in flight may still come)

@@ -47,12 +47,14 @@ from server.fabric import (
     Unsubscribe,
     alive_key,
     books_topic,
+    front_alive_key,
     fronts_topic,
     poses_topic,
     requests_topic,
 )
 from server.fabric import fronts as books
 from server.fabric import requests as req
+from server.fabric import settings as shared
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import PULSE, Batch, decode_batch, encode_batch
 from server.fabric.fronts import Fences, IndexShare, Soldier
@@ -62,6 +64,7 @@ from server.pose_board import PoseBoard
 from server.soldier import REQUEST_OK
 from server.stage_cpu import TURN_CPU_S
 from server.trace import TRACE
+from server.world.owners import ANONYMOUS
 
 if TYPE_CHECKING:
     from server.app import TtesServer
@@ -70,6 +73,7 @@ if TYPE_CHECKING:
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
 TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
+FOLLOW_S = 1.0  # a shard another front-end failed over, unheard here this long, is failed over here too
 PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batch a block heard); beyond, the
 # oldest go (and it asks for a key)
 
@@ -132,6 +136,8 @@ class ShardNode:
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request taken, for a books answer
         self.has_last = np.zeros(n, bool)
         self.fences: list[int] = []  # per front-end, the newest fence taken (its batches carry them)
+        self.stands_in: set[int] = set()  # the other shards whose soldiers it animates (a fail-over's)
+        self.gen = np.zeros(n, np.int64)  # each soldier's generation (requests.sync): 0, the script's
         # soldiers created since the last fence, and those whose rows the next batch carries (born before a
         # fence): sets, so creations that no fence follows (a sync's) grow them no further than the soldiers
         self._born: set[int] = set()
@@ -317,6 +323,7 @@ class ShardNode:
                 owner=str(owner) if owner is not None else None,
             )
             self.has_last[index] = False
+            self.gen[index] = int(msg.get("gen") or 0)  # type: ignore[call-overload]
             self._born.add(index)
         elif op == "remove":
             world.remove_soldier(int(msg["index"]), "removed by a front-end")  # type: ignore[call-overload]
@@ -328,10 +335,15 @@ class ShardNode:
         elif op == "react":
             world.react(int(msg["index"]), str(msg["kind"]))  # type: ignore[call-overload]
         elif op == "sync":
+            self._homes(msg)
             self._sync(msg)
             self.key_due = True  # the front-end that sent it may lack soldiers no batch carried since
         elif op == "key":
             self.key_due = True
+        elif op == "homes":
+            self._homes(msg)
+        elif op == "settings":
+            shared.apply(world, msg["values"])  # type: ignore[arg-type]
         elif op == "fence":
             self._fenced(int(msg["front"]), int(msg["serial"]))  # type: ignore[call-overload]
 
@@ -350,8 +362,16 @@ class ShardNode:
         live = m.table.live
         soldiers = _soldiers(self.server, live)
         last = self.last[live[self.has_last[live]]]
-        self._answer(books.answer(self.sharding.k, front, soldiers, last))
+        homes, gens = sorted(self.stands_in), self.gen[live].tolist()
+        self._answer(books.answer(self.sharding.k, front, soldiers, last, homes, gens))
         log.info("fabric_books_answered", shard=self.sharding.k, front=front, soldiers=len(soldiers))
+
+    def _homes(self, msg: dict[str, object]) -> None:
+        """The shards whose soldiers this one animates from now on, when the message says (a late
+        front-end's ``books`` learns them even of a shard failed over with none)."""
+        homes = msg.get("homes")
+        if isinstance(homes, list):
+            self.stands_in = {int(h) for h in homes} - {self.sharding.k}
 
     def _applied(self, rows: np.ndarray) -> None:
         """Apply requests, and keep those taken as their soldiers' last (what a books answer carries)."""
@@ -369,17 +389,27 @@ class ShardNode:
         soldiers = msg["soldiers"]
         rows = msg["rows"]
         assert isinstance(soldiers, list) and isinstance(rows, np.ndarray)
-        told = msg.get("gone") or []
+        told, told_gens = msg.get("gone") or [], msg.get("gone_gens")
         assert isinstance(told, list)
-        gone = [int(i) for i in told if m.table.is_live(int(i))]
+        # a removal removes the soldier created before it, not one created again since (through another
+        # front-end that the sender had not heard of)
+        after: list[float] = [math.inf] * len(told)  # (a sync without generations: every one)
+        if isinstance(told_gens, list) and len(told_gens) == len(told):
+            after = [float(g) for g in told_gens]
+        gone = [
+            int(i) for i, g in zip(told, after, strict=True) if m.table.is_live(int(i)) and self.gen[i] < g
+        ]
         for i in gone:
             world.remove_soldier(i, "removed through a front-end while this shard did not hear it")
             self.has_last[i] = False
         new = []
-        for index, figure, weapon, owner in soldiers:
+        gens = msg.get("gens")
+        gens = gens if isinstance(gens, list) and len(gens) == len(soldiers) else [0] * len(soldiers)
+        for (index, figure, weapon, owner), gen in zip(soldiers, gens, strict=True):
             if not m.table.is_live(index):
                 world.create_soldier(figure, weapon, index, owner=owner)
                 self.has_last[index] = False
+                self.gen[index] = int(gen)
                 new.append(index)
         self._born.update(new)
         log.info(
@@ -422,6 +452,10 @@ class FrontNode:
         self.share = IndexShare(front.k, front.n, block, n) if front.n > 1 else None
         self._books = fabric.publisher(fronts_topic(), Kind.REQUESTS) if front.n > 1 else None
         self._books_out: list[req.Op] = []  # this front-end's creations and removals, for the others
+        # the others' presence and connections of client ids: an id's soldiers wait while it is connected
+        self.elsewhere = books.Elsewhere(front.k, front.n, block) if front.n > 1 else None
+        if self.elsewhere is not None:
+            server.world.owners.on_connections = self._connections
         self.mirrored = 0  # the other front-ends' creations and removals kept in the books here
         self.bytes_in = 0  # the shards' batches' bytes
         server.status_fields = lambda: {
@@ -435,6 +469,8 @@ class FrontNode:
         self._out: list[list[req.Op]] = [[] for _ in range(shards)]  # per shard, sent at the loop's next turn
         self._token: trio.lowlevel.TrioToken | None = None
         self._flush_due = False
+        # the settings last sent to every shard (server.fabric.settings): sent again when they change
+        self._told = (server.world.settings, server.world.report_interval)
         self._pending: dict[int, list[bytes]] = {}  # shard -> its batches not merged yet, in arrival order
         self._pending_lock = threading.Lock()  # appended on the fabric's thread, taken on the loop
         self.key_asked = [False] * shards  # a key batch asked for after a lost batch, not come yet
@@ -450,6 +486,7 @@ class FrontNode:
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request, for a sync
         self.has_last = np.zeros(n, bool)
         self.made = np.zeros(n, bool)  # created here (not the start-up script's, not another front-end's)
+        self.gen = np.zeros(n, np.int64)  # each index's creations and removals heard of (requests.sync)
         self._asked: set[int] = set()  # shards asked for their books, not answered yet
         self.known = np.zeros(n, bool)  # created or removed here, or told so by a front-end: not learned
         self._unknown: dict[int, set[int]] = {}  # shard asked -> its batches' soldiers not in the books
@@ -489,6 +526,10 @@ class FrontNode:
                 token.run_sync_soon(self.mirror, data)
 
             self.fabric.subscribe(fronts_topic(), Kind.REQUESTS, told)
+            self.fabric.announce(front_alive_key(self.front.k))
+            for j in range(self.front.n):
+                if j != self.front.k:
+                    self.fabric.watch(front_alive_key(j), functools.partial(self._front_watched, token, j))
 
         def answered(data: bytes) -> None:
             token.run_sync_soon(self.learn, data)
@@ -598,6 +639,7 @@ class FrontNode:
                 self.rows_decoded += per_block[: self.blocks]
             self._heard(b, now)
         self._fail_over(now)
+        self._settings_told()
         m = self.server.world.manager
         if m is not None and self.watching.stale:
             subscribed = (s.conn.subscribed for s in self.server.sessions.values())
@@ -719,7 +761,8 @@ class FrontNode:
             self.route[k] = k
             if stood_in != k:  # it stood in for k: k's soldiers go home
                 for i in self._homed(k).tolist():
-                    self._send(stood_in, req.remove(i))
+                    self._send(stood_in, req.remove(i, int(self.gen[i])))
+                self._send(stood_in, req.homes(self._animated_by(stood_in)))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
             # it stood in for other shards before it went (hung): their soldiers live elsewhere now
             moved = [h for h in self._stood_for.pop(k, set()) if self.route[h] != k]
@@ -757,11 +800,43 @@ class FrontNode:
         alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
         heard = [at > -math.inf for at in self.heard_at]
         for k, survivor, homes in books.rerouted(self.route, alive, heard):
-            self.failovers += 1
-            silent_s = round(now - self.heard_at[k], 3)
-            log.warning("fabric_failover", shard=k, to=survivor, homes=homes, silent_s=silent_s)
-            self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
-            self._sync(survivor, homes)
+            self._failed(k, survivor, homes, now)
+            self._book(req.failover(k, survivor, homes))  # the others follow (each decides on its own clock)
+
+    def _failed(self, k: int, survivor: int, homes: list[int], now: float) -> None:
+        """Shard ``k``'s soldiers of ``homes`` are routed to ``survivor`` now: it gets them by sync."""
+        self.failovers += 1
+        silent_s = round(now - self.heard_at[k], 3)
+        log.warning("fabric_failover", shard=k, to=survivor, homes=homes, silent_s=silent_s)
+        self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
+        self._sync(survivor, homes)
+
+    def follow(self, down: int, to: int) -> None:
+        """Another front-end failed shard ``down`` over to ``to``: fail it over here too, unless this one
+        heard it within ``FOLLOW_S`` (two front-ends routed a hung shard's requests differently for up to
+        the hung limit, each deciding on its own clock; one that hears the shard keeps it: a take-back would
+        take its soldiers from the stand-in the other front-end routes to)."""
+        now = self.server.now()
+        if not (0 <= down < self.shards and 0 <= to < self.shards) or down == to:
+            return
+        if self.present[down] and now - self.heard_at[down] < FOLLOW_S:
+            return
+        homes = [h for h, r in enumerate(self.route) if r == down]
+        if homes:
+            for h in homes:
+                self.route[h] = to
+            self._failed(down, to, homes, now)
+
+    def _settings_told(self) -> None:
+        """The server-wide settings changed (an operator's JCL): every shard takes them, and every other
+        front-end (its syncs carry them too)."""
+        world = self.server.world
+        if world.settings is not self._told[0] or world.report_interval != self._told[1]:
+            self._told = (world.settings, world.report_interval)  # (a new value when one changes)
+            op = req.settings(shared.of(world))
+            for k in range(self.shards):
+                self._send(k, op)
+            self._book(op)
 
     def _homed(self, k: int) -> np.ndarray:
         """The live soldiers whose home is shard ``k``."""
@@ -790,10 +865,30 @@ class FrontNode:
             idx = idx[self.made[idx]]
         soldiers = _soldiers(self.server, idx)
         have = idx[self.has_last[idx]]
-        gone = books.gone(self.known, m.table.alive, homes, self.shards).tolist()
-        gone += [] if drop is None else drop.tolist()
-        self._send(shard, req.sync(soldiers, self.last[have], replay=replay, gone=gone))
+        removed = books.gone(self.known, m.table.alive, homes, self.shards)
+        elsewhere = np.zeros(0, np.int64) if drop is None else np.asarray(drop, np.int64)
+        gone = [*removed.tolist(), *elsewhere.tolist()]
+        gone_gens = [*self.gen[removed].tolist(), *(self.gen[elsewhere] + 1).tolist()]  # (those live on)
+        animates = None if made else self._animated_by(shard)  # (a shard heard first: the stand-in knows)
+        self._send(shard, req.settings(shared.of(self.server.world)))
+        gens = self.gen[idx].tolist()
+        self._send(
+            shard,
+            req.sync(
+                soldiers,
+                self.last[have],
+                replay=replay,
+                gone=gone,
+                homes=animates,
+                gens=gens,
+                gone_gens=gone_gens,
+            ),
+        )
         self.fences.moved(homes, self.shards, shard)
+
+    def _animated_by(self, shard: int) -> list[int]:
+        """The homes routed to ``shard``: its own, and those it stands in for."""
+        return [h for h, r in enumerate(self.route) if r == shard]
 
     def _send(self, shard: int, op: req.Op) -> None:
         """Queue an operation for ``shard``: what one turn of the loop queued goes as one message."""
@@ -805,6 +900,13 @@ class FrontNode:
         if self._books is not None:
             self._books_out.append({**op, "front": self.front.k})
             self._flush_soon()
+
+    def _book_fenced(self, op: req.Op, index: int) -> None:
+        """A creation or removal sent to its shard now: its rows wait for the fence that ends the message,
+        here and, told which, on the other front-ends (they mirror it and have no fence of their own)."""
+        shard = self._shard_of(index)
+        self.fences.mark([index], shard)
+        self._book({**op, "shard": shard, "fence": int(self.fences.serial[index])})
 
     def _flush_soon(self) -> None:
         if self._token is None:
@@ -840,16 +942,69 @@ class FrontNode:
 
     def _mirror_one(self, op: req.Op) -> None:
         try:
+            if op["op"] == "clients":  # (an anonymous id is one connection's there, another client here)
+                for cid, n in op["counts"].items():
+                    if not cid.startswith(ANONYMOUS):
+                        self._count(int(op["front"]), cid, n)
+                return
+            if op["op"] == "failover":
+                self.follow(int(op["down"]), int(op["to"]))
+                return
+            if op["op"] == "settings":  # the shards have them from that front-end
+                shared.apply(self.server.world, op["values"])
+                self._told = (self.server.world.settings, self.server.world.report_interval)
+                return
             i = int(op["index"])
             self._touch(i)
+            self.gen[i] = max(int(self.gen[i]), int(op.get("gen") or 0))
             if op["op"] == "create":
                 self._kept(i, str(op["figure"]), str(op["weapon"]), op["owner"])
             elif op["op"] == "remove":
                 self._let_go(i, f"removed through front-end {op['front']}")
+            if "fence" in op:  # the shard's batches carry the old soldier's rows until they carry this
+                self.fences.wait([i], int(op["front"]), int(op["shard"]), int(op["fence"]))
         except (ValueError, KeyError, TypeError) as exc:
             log.warning("fabric_books_failed", front=self.front.k, op=op.get("op"), error=str(exc))
             return
         self.mirrored += 1
+
+    def _front_watched(self, token: trio.lowlevel.TrioToken, j: int, present: bool) -> None:
+        token.run_sync_soon(self._front_presence, j, present)  # from the fabric's thread to the loop
+
+    def _front_presence(self, j: int, present: bool) -> None:
+        """Front-end ``j`` came (it may have missed what this one told: its connections go again) or went
+        (its clients' connections went with it; the orphans of its share may be this one's to remove)."""
+        assert self.elsewhere is not None
+        self.elsewhere.present[j] = present
+        log.info("fabric_front_presence", front=j, present=present)
+        if present:
+            if self.elsewhere.told:
+                self._book(req.clients(dict(self.elsewhere.told)))
+            return
+        for cid in list(self.elsewhere.counts[j]):
+            self._count(j, cid, 0)
+        self.server.orphans_check()
+
+    def _connections(self, client_id: str) -> None:
+        """The owners' hook: ``client_id``'s connections changed; tell the others this front-end's own."""
+        assert self.elsewhere is not None
+        if client_id.startswith(ANONYMOUS):  # one connection's (numbered per process): not theirs
+            return
+        own = self.elsewhere.own(client_id, self.server.world.owners.connected.get(client_id, 0))
+        if own is not None:
+            self._book(req.clients(own))
+
+    def _count(self, front: int, client_id: str, n: int) -> None:
+        """Front-end ``front`` has ``n`` connections of ``client_id``: join or leave it here as many times."""
+        assert self.elsewhere is not None
+        while step := self.elsewhere.step(front, client_id, n):
+            if step > 0:
+                self.server.world.owners.join(client_id)
+            else:
+                self.server.client_left(client_id)
+
+    def orphans(self, indices: list[int]) -> list[int]:
+        return indices if self.elsewhere is None else self.elsewhere.removes(indices)
 
     def _kept(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
         """Keep in the books a soldier a shard or another front-end already has (not relayed again)."""
@@ -888,12 +1043,13 @@ class FrontNode:
         m = self.server.world.manager
         assert m is not None
         heard = [at > -math.inf for at in self.heard_at]
-        for home, stand_in in books.stand_ins(msg["soldiers"], k, self.shards, heard).items():
+        learned = books.stand_ins(msg["soldiers"], k, self.shards, heard, msg["homes"])
+        for home, stand_in in learned.items():
             self.route[home] = stand_in  # failed over before this front-end started
             log.warning("fabric_stand_in_learned", shard=home, to=stand_in)
         live = m.table.live
         mine = {s[0]: s for s in _soldiers(self.server, live)}
-        scope = books.answer_scope(live, self.route, k)
+        scope = books.answer_scope(live, self.route, k, list(learned))
         drop, add = books.reconcile(mine, scope, msg["soldiers"], set(np.flatnonzero(self.known).tolist()))
         for i in drop:
             self._let_go(i, f"not in shard {k}")
@@ -902,10 +1058,15 @@ class FrontNode:
                 self._kept(i, figure, weapon, owner)
             except (ValueError, KeyError) as exc:
                 log.warning("fabric_books_failed", front=self.front.k, soldier=i, error=str(exc))
+        if len(msg["gens"]) == len(msg["soldiers"]):  # its soldiers' generations, if newer
+            idx = np.array([s[0] for s in msg["soldiers"]], np.int64)
+            np.maximum.at(self.gen, idx, np.array(msg["gens"], np.int64))
         last = books.learned_last(msg["rows"], m.table.alive, self.has_last)
         self.last[last["index"]] = last  # what a fail-over of this front-end hands on
         self.has_last[last["index"]] = True
         log.info("fabric_books_learned", front=self.front.k, shard=k, dropped=len(drop), learned=len(add))
+        if self.elsewhere is not None:  # soldiers of ids gone while it was away: their grace starts now
+            self.server.orphans_check()
 
     def _shard_of(self, index: int) -> int:
         return self.route[int(Sharding.home(index, self.shards))]
@@ -928,10 +1089,10 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.taken(index)
-        op = req.create(index, figure, weapon, owner)
+        self.gen[index] += 1
+        op = req.create(index, figure, weapon, owner, int(self.gen[index]))
         self._send(self._shard_of(index), op)
-        self.fences.mark([index], self._shard_of(index))
-        self._book(op)
+        self._book_fenced(op, index)
 
     def removed(self, index: int) -> None:
         self._touch(index)
@@ -939,10 +1100,10 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.freed(index)
-        op = req.remove(index)
+        self.gen[index] += 1
+        op = req.remove(index, int(self.gen[index]))
         self._send(self._shard_of(index), op)
-        self.fences.mark([index], self._shard_of(index))
-        self._book(op)
+        self._book_fenced(op, index)
 
     def requests(self, rows: np.ndarray) -> None:
         idx = rows["index"].astype(np.int64)
