@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 
 import msgpack
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 from protocol.entity import make_entity_requests
 from server.fabric import requests as req
 from server.fabric.batch import Batch, decode_batch, encode_batch
+from server.fabric.fronts import addressee, answer, decode_answer
 from server.fabric.nodes import Sharding
 from server.pose_board import PoseBoard
 
@@ -69,6 +71,36 @@ def test_any_bytes_decode_to_requests_or_a_value_error(data: bytes) -> None:
     except ValueError:
         return
     assert all(op["op"] in req.OPS for op in ops)
+
+
+@given(
+    st.binary(max_size=200)
+    | st.builds(
+        msgpack.packb,
+        st.dictionaries(
+            st.sampled_from(["shard", "front", "body"]),
+            st.integers(-(2**63), 2**63 - 1) | st.binary(max_size=40) | st.none(),
+        ),
+    )
+)
+def test_any_bytes_decode_to_a_books_answer_or_a_value_error(data: bytes) -> None:
+    for decode in (addressee, decode_answer):
+        with contextlib.suppress(ValueError):
+            decode(data)
+
+
+def test_a_books_answer_names_its_shard_and_front_end_without_its_body() -> None:
+    """Every front-end hears every answer; only the one it is for unpacks the soldiers (addressee)."""
+    data = answer(1, 4, [(7, "DI.fig", "AK_47.fig", "alpha")], gens=[2])
+    assert addressee(data) == (1, 4)
+    assert isinstance(msgpack.unpackb(data)["body"], bytes)  # packed apart
+    msg = decode_answer(data)
+    assert (msg["shard"], msg["front"], msg["soldiers"], msg["gens"]) == (
+        1,
+        4,
+        [(7, "DI.fig", "AK_47.fig", "alpha")],
+        [2],
+    )
 
 
 def test_requests_and_syncs_survive_the_fabric() -> None:

@@ -1030,12 +1030,12 @@ class FrontNode:
         made here): the shard's soldiers are the truth, kept in the books here (not relayed: the shard has
         them, and the front-end that made them told the others), and those it lacks go."""
         try:
+            k, front = books.addressee(data)
+            if front != self.front.k or k not in self._asked:  # (another front-end's: its body stays packed)
+                return
             msg = books.decode_answer(data)
         except ValueError as exc:
             log.warning("fabric_books_refused", front=self.front.k, error=str(exc))
-            return
-        k = msg["shard"]
-        if msg["front"] != self.front.k or k not in self._asked:
             return
         self._asked.discard(k)
         self._unknown.pop(k, None)
