@@ -94,8 +94,9 @@ LEFT_U_TURN_PELVIS_AHEAD = {
     150.0: (0.75, 1.0, 1.0, 1.0, 0.45),
     135.0: (0.75, 1.0, 1.0, 0.45, 0.5),
 }
-# ... the U-turns to his left whose DI/M16 slaves have their wrists eased where they flick (slave_wrists)
-LEFT_U_TURN_WRISTS_EASED = (135,)
+# ... the U-turns to his left whose DI/M16 slaves have their wrists eased where they flick (slave_wrists): the
+# DI's left wrist 15.85 -> 12.0 degrees at 135°, 14.3 -> 9.0 at 150° (the palm 0.58 and 0.50 cm off the rifle)
+LEFT_U_TURN_WRISTS_EASED = (135, 150)
 # ... and a U-turn for a faster entity, carrying him further as fast: more, shorter moves, each as quick in
 # degrees a second (143.5 cm in 4.2 s at the server's GROUND_TURN_RATE; 0.45 m/s: the U-turn's 103.5 cm in
 # 4 s left him 48 cm behind, played faster his body would swing over 360°/s; 25-30 cm a move, his arms fell

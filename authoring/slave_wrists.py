@@ -1,4 +1,4 @@
-"""The slave's wrists eased where they flick and the master's do not (issue 16, ``crawlarc_l135``).
+"""The slave's wrists eased where they flick and the master's do not (issue 16, ``crawlarc_l135/l150``).
 
 On a U-turn to his left the DI's left wrist holds the rifle's handguard at its joint limits (-70, -35
 degrees): the slaving's frame-after-frame track pushes it off them and back, one frame out and in again
