@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from authoring.quality import one_frame_flicks
 from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import _played
 from authoring.slave_leaps import _gaussian, _window
@@ -28,12 +29,10 @@ SIGMA_FRAMES = 1.0  # the wrist's angles are smoothed over this many frames (Gau
 
 
 def flicks(poses: np.ndarray) -> np.ndarray:
-    """Per frame and DOF ``(n, k)`` the one-frame flick (radians) of ``poses`` ``(n, k)``: the smaller of
-    ``|turn(t) - turn(t-1)|`` and ``|turn(t) - turn(t+1)|`` (0 at the ends)."""
+    """Per frame and DOF ``(n, k)`` the one-frame flick (radians) of ``poses`` ``(n, k)``
+    (:func:`authoring.quality.one_frame_flicks`; 0 at the ends)."""
     out = np.zeros_like(poses)
-    turn = np.diff(poses, axis=0)
-    if len(turn) > 2:
-        out[1:-2] = np.minimum(np.abs(turn[1:-1] - turn[:-2]), np.abs(turn[1:-1] - turn[2:]))
+    out[1:-2] = one_frame_flicks(np.diff(poses, axis=0))
     return out
 
 

@@ -664,7 +664,8 @@ class TtesServer:
                 end = time.thread_time() + TURN_CPU_S
         await self._let_fabric_in()
         t0 = time.perf_counter()
-        self._asked_in_tick = np.flatnonzero(m.table.requested)  # (tick_emit clears the flags it samples)
+        if self.answers_first:  # (tick_emit clears the flags it samples)
+            self._asked_in_tick = np.flatnonzero(m.table.requested)
         with self.cpu("animate"):
             update = m.tick_emit(now)
         self.last_tick_seconds = spent + time.perf_counter() - t0

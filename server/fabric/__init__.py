@@ -146,7 +146,12 @@ class FabricConfig:
 
 
 def open_fabric(config: FabricConfig) -> Fabric:
-    """A node on the configured engine (ModuleNotFoundError without the ``[fabric]`` extra)."""
+    """A node on the configured engine (ModuleNotFoundError without the ``[fabric]`` extra). The process
+    keeps freed memory from then on (:mod:`server.fabric.heap`: each tick's whole-batch buffers page-faulted
+    anew, on either engine)."""
+    from server.fabric.heap import keep_freed_memory
+
+    keep_freed_memory()
     if config.engine == "zenoh":
         from server.fabric.zenoh_node import ZenohFabric
 

@@ -30,7 +30,6 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from server.fabric import Changes, FabricConfig, Handler, Kind, Presence, Unsubscribe
-from server.fabric.heap import keep_freed_memory
 
 if TYPE_CHECKING:
     Octets = bytes  # what the fields hold at run time (see _octets_as_bytes)
@@ -102,7 +101,6 @@ class DdsFabric:
 
     def __init__(self, config: FabricConfig) -> None:
         os.environ.setdefault("CYCLONEDDS_URI", unicast_xml(config))
-        keep_freed_memory()  # each large sample's buffers would page-fault anew (server.fabric.heap)
         self.participant = DomainParticipant(config.domain)
         self._topics: dict[str, Topic] = {}
         self._keep: list[Any] = []

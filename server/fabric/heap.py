@@ -7,9 +7,9 @@ top exceeds its trim threshold (twice the largest block freed so far, 2.7 MB her
 were mapped, zeroed and page-faulted again: two thirds of the subscriber's CPU (``perf``: page faults,
 ``clear_page``, ``madvise``); the receive thread fell behind, the socket dropped datagrams, and each lost
 datagram lost its whole sample (issue 21, docs/SCALING.md). A Zenoh shard's put of a whole batch paid the
-same faults on the publishing side (3.1 ms a tick, 1.0-1.2 without them); both engines' nodes call this.
-Raising both thresholds keeps up to :data:`TRIM` of freed memory an arena, and blocks up to :data:`MMAP` in
-the heap. Nothing to do on a C library without ``mallopt`` (a no-op on musl).
+same faults on the publishing side (3.1 ms a tick, 1.0-1.2 without them); :func:`server.fabric.open_fabric`
+calls this for either engine. Raising both thresholds keeps up to :data:`TRIM` of freed memory an arena, and
+blocks up to :data:`MMAP` in the heap. Nothing to do on a C library without ``mallopt`` (a no-op on musl).
 """
 
 from __future__ import annotations

@@ -791,7 +791,10 @@ class FrontNode:
         """Whether shard ``k``'s key pulse differs from the books (:meth:`_differs`), as its last one did."""
         differs = self._differs(k, indices)
         again = differs and k in self._differed
-        self._differed = self._differed | {k} if differs else self._differed - {k}
+        if differs:
+            self._differed.add(k)
+        else:
+            self._differed.discard(k)
         return again
 
     def _differs(self, k: int, indices: np.ndarray) -> bool:

@@ -8,7 +8,6 @@ from typing import Any
 import zenoh
 
 from server.fabric import Changes, FabricConfig, Handler, Kind, Presence, Unsubscribe
-from server.fabric.heap import keep_freed_memory
 
 
 class ZenohFabric:
@@ -17,7 +16,6 @@ class ZenohFabric:
     engine = "zenoh"
 
     def __init__(self, config: FabricConfig) -> None:
-        keep_freed_memory()  # a whole batch's buffers would page-fault anew each tick (server.fabric.heap)
         conf = zenoh.Config()
         conf.insert_json5("mode", '"peer"')
         conf.insert_json5("scouting/multicast/enabled", "false")
