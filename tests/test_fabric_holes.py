@@ -28,6 +28,7 @@ from client_stub.link.spawn import ServerProcess, free_port
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from protocol.events import (
     CreateSoldier,
+    Error,
     JointUpdates,
     Ready,
     RemoveSoldier,
@@ -48,6 +49,7 @@ from server.fabric.fronts import (
     rerouted,
     stand_ins,
 )
+from server.session import Session
 
 pytest.importorskip("zenoh")
 
@@ -623,8 +625,8 @@ async def test_a_front_end_fails_a_shard_over_when_another_does(autojump_clock: 
 async def test_an_anonymous_clients_soldiers_go_after_its_grace_whatever_the_other_front_ends_serve(
     autojump_clock: trio.abc.Clock,
 ) -> None:
-    """A client without an id gets its connection's (``~anon-`` and the session's number, per process):
-    another front-end's client of the same number is another client, and keeps nothing alive here."""
+    """A client without an id gets its connection's (``~anon-``, its server's mark and the session's
+    number): a connection of that id told by another front-end keeps nothing alive here."""
     async with inprocess.fronts() as c:
         here = await _client(c.servers[0], "")
         assert here.accept is not None and here.accept.client_id.startswith("~anon-")
@@ -636,6 +638,33 @@ async def test_an_anonymous_clients_soldiers_go_after_its_grace_whatever_the_oth
         await here.aclose()
         await trio.sleep(GRACE * 1.5)
         assert _everywhere(c, index) == [False, False, False]
+
+
+async def test_anonymous_clients_of_two_front_end_processes_are_two_clients(
+    autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each process numbers its sessions from 1 (a restarted front-end too): on main the first anonymous
+    client of front-end 0 and the first of front-end 1 were both ``~anon-1``, one owner in every front-end's
+    books, so the client of front-end 1 could remove (and drive) the soldier the other made. Their ids differ
+    now, and it may not."""
+    async with inprocess.fronts() as c:
+        first = Session._ids
+        here = await _client(c.servers[0], "")
+        index = await _made(here)
+        monkeypatch.setattr(Session, "_ids", first)  # front-end 1's process numbers its sessions from 1 too
+        there = await _client(c.servers[1], "")
+        assert here.accept is not None and there.accept is not None
+        assert here.accept.client_id.startswith("~anon-") and there.accept.client_id.startswith("~anon-")
+        assert here.accept.client_id != there.accept.client_id
+        with trio.fail_after(30):
+            while index not in inprocess.live(c.servers[1]):
+                await trio.sleep(0.01)
+        await there.send(RemoveSoldier(index))
+        await there.expect(Error)
+        await trio.sleep(1)
+        assert _everywhere(c, index) == [True, True, True]
+        await here.aclose()
+        await there.aclose()
 
 
 @pytest.mark.parametrize("fabric", ["zenoh", "dds"])

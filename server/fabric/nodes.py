@@ -957,7 +957,7 @@ class FrontNode:
 
     def _mirror_one(self, op: req.Op) -> None:
         try:
-            if op["op"] == "clients":  # (an anonymous id is one connection's there, another client here)
+            if op["op"] == "clients":  # (an anonymous id is one connection's, never connected here)
                 for cid, n in op["counts"].items():
                     if not cid.startswith(ANONYMOUS):
                         self._count(int(op["front"]), cid, n)
@@ -1003,7 +1003,7 @@ class FrontNode:
     def _connections(self, client_id: str) -> None:
         """The owners' hook: ``client_id``'s connections changed; tell the others this front-end's own."""
         assert self.elsewhere is not None
-        if client_id.startswith(ANONYMOUS):  # one connection's (numbered per process): not theirs
+        if client_id.startswith(ANONYMOUS):  # one connection's, of this server: nothing to the others
             return
         own = self.elsewhere.own(client_id, self.server.world.owners.connected.get(client_id, 0))
         if own is not None:
