@@ -557,6 +557,33 @@ async def test_the_settings_changed_through_one_front_end_reach_the_other(
         await op.aclose()
 
 
+async def test_a_front_end_that_starts_later_keeps_the_settings_an_operator_changed_before(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """An operator changes the blend time through front-end 0; front-end 1 restarts (a front-end that starts
+    later): its first syncs handed the shards its start-up settings on main, undoing the operator's change
+    (blend time 0.5 -> 0.2 in both shards). The change has a stamp newer than any start-up settings: the
+    shards keep it, and the new front-end learns it from their answers."""
+    async with inprocess.fronts() as c:
+        op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
+        await op.expect(Ready)
+        await op.jcl("set_ttes_blend_time(0.5);", 1)
+        await trio.sleep(1)
+        assert [s.world.settings.blend_time for s in (*c.servers, *c.shards)] == [0.5] * 4
+        c.fabrics[1].close()  # front-end 1 dies and starts again
+        c.servers[1].shutdown()
+        late = await c.start_front(inprocess.Sharding(1, 2))
+        with trio.fail_after(30):  # both shards answered its books
+            while c.nodes[2].heard_at[0] < 0 or c.nodes[2].heard_at[1] < 0 or c.nodes[2]._asked:
+                await trio.sleep(0.1)
+        await trio.sleep(1)
+        assert [s.world.settings.blend_time for s in (c.servers[0], late, *c.shards)] == [0.5] * 4
+        await op.jcl("set_ttes_blend_time(0.3);", 2)  # a later change still reaches every one
+        await trio.sleep(1)
+        assert [s.world.settings.blend_time for s in (c.servers[0], late, *c.shards)] == [0.3] * 4
+        await op.aclose()
+
+
 async def test_a_sync_does_not_remove_a_soldier_created_again_that_its_front_end_has_not_heard_of(
     autojump_clock: trio.abc.Clock,
 ) -> None:

@@ -137,6 +137,7 @@ class ShardNode:
         self.has_last = np.zeros(n, bool)
         self.fences: list[int] = []  # per front-end, the newest fence taken (its batches carry them)
         self.stands_in: set[int] = set()  # the other shards whose soldiers it animates (a fail-over's)
+        self.settings_stamp = shared.OWN_STAMP  # of the settings it holds: older ones are not taken
         self.gen = np.zeros(n, np.int64)  # each soldier's generation (requests.sync): 0, the script's
         # soldiers created since the last fence, and those whose rows the next batch carries (born before a
         # fence): sets, so creations that no fence follows (a sync's) grow them no further than the soldiers
@@ -343,7 +344,10 @@ class ShardNode:
         elif op == "homes":
             self._homes(msg)
         elif op == "settings":
-            shared.apply(world, msg["values"])  # type: ignore[arg-type]
+            stamp = shared.stamp_of(msg)
+            if stamp >= self.settings_stamp:  # (a later front-end's start-up settings are older)
+                shared.apply(world, msg["values"])  # type: ignore[arg-type]
+                self.settings_stamp = stamp
         elif op == "fence":
             self._fenced(int(msg["front"]), int(msg["serial"]))  # type: ignore[call-overload]
 
@@ -363,7 +367,8 @@ class ShardNode:
         soldiers = _soldiers(self.server, live)
         last = self.last[live[self.has_last[live]]]
         homes, gens = sorted(self.stands_in), self.gen[live].tolist()
-        self._answer(books.answer(self.sharding.k, front, soldiers, last, homes, gens))
+        values, stamp = shared.of(self.server.world), self.settings_stamp
+        self._answer(books.answer(self.sharding.k, front, soldiers, last, homes, gens, values, stamp))
         log.info("fabric_books_answered", shard=self.sharding.k, front=front, soldiers=len(soldiers))
 
     def _homes(self, msg: dict[str, object]) -> None:
@@ -469,8 +474,10 @@ class FrontNode:
         self._out: list[list[req.Op]] = [[] for _ in range(shards)]  # per shard, sent at the loop's next turn
         self._token: trio.lowlevel.TrioToken | None = None
         self._flush_due = False
-        # the settings last sent to every shard (server.fabric.settings): sent again when they change
+        # the settings last sent to every shard (server.fabric.settings): sent again when they change, with
+        # a newer stamp than those held here
         self._told = (server.world.settings, server.world.report_interval)
+        self.settings_stamp = shared.START
         self._pending: dict[int, list[bytes]] = {}  # shard -> its batches not merged yet, in arrival order
         self._pending_lock = threading.Lock()  # appended on the fabric's thread, taken on the loop
         self.key_asked = [False] * shards  # a key batch asked for after a lost batch, not come yet
@@ -848,10 +855,23 @@ class FrontNode:
         world = self.server.world
         if world.settings is not self._told[0] or world.report_interval != self._told[1]:
             self._told = (world.settings, world.report_interval)  # (a new value when one changes)
-            op = req.settings(shared.of(world))
+            self.settings_stamp = shared.stamp(self.settings_stamp, self.front.k)
+            op = self._settings_op()
             for k in range(self.shards):
                 self._send(k, op)
             self._book(op)
+
+    def _settings_op(self) -> req.Op:
+        return req.settings(shared.of(self.server.world), self.settings_stamp)
+
+    def _settings_learned(self, values: dict[str, object], stamp: shared.Stamp) -> None:
+        """Settings another front-end told, or a shard's answer carried: taken if newer than those here (the
+        shards have them already, or the newer ones from here)."""
+        if stamp <= self.settings_stamp:
+            return
+        shared.apply(self.server.world, values)
+        self._told = (self.server.world.settings, self.server.world.report_interval)
+        self.settings_stamp = stamp
 
     def _homed(self, k: int) -> np.ndarray:
         """The live soldiers whose home is shard ``k``."""
@@ -885,7 +905,7 @@ class FrontNode:
         gone = [*removed.tolist(), *elsewhere.tolist()]
         gone_gens = [*self.gen[removed].tolist(), *(self.gen[elsewhere] + 1).tolist()]  # (those live on)
         animates = None if made else self._animated_by(shard)  # (a shard heard first: the stand-in knows)
-        self._send(shard, req.settings(shared.of(self.server.world)))
+        self._send(shard, self._settings_op())  # (the shard keeps newer ones: a change made elsewhere)
         gens = self.gen[idx].tolist()
         self._send(
             shard,
@@ -966,8 +986,7 @@ class FrontNode:
                 self.follow(int(op["down"]), int(op["to"]))
                 return
             if op["op"] == "settings":  # the shards have them from that front-end
-                shared.apply(self.server.world, op["values"])
-                self._told = (self.server.world.settings, self.server.world.report_interval)
+                self._settings_learned(op["values"], shared.stamp_of(op))
                 return
             i = int(op["index"])
             self._touch(i)
@@ -995,6 +1014,8 @@ class FrontNode:
         if present:
             if self.elsewhere.told:
                 self._book(req.clients(dict(self.elsewhere.told)))
+            if self.settings_stamp > shared.START:  # (an operator's change: it may have started since)
+                self._book(self._settings_op())
             return
         for cid in list(self.elsewhere.counts[j]):
             self._count(j, cid, 0)
@@ -1080,6 +1101,8 @@ class FrontNode:
         self.last[last["index"]] = last  # what a fail-over of this front-end hands on
         self.has_last[last["index"]] = True
         log.info("fabric_books_learned", front=self.front.k, shard=k, dropped=len(drop), learned=len(add))
+        if isinstance(msg.get("settings"), dict):  # an operator's change made before it started
+            self._settings_learned(msg["settings"], shared.stamp_of(msg))
         if self.elsewhere is not None:  # soldiers of ids gone while it was away: their grace starts now
             self.server.orphans_check()
 

@@ -11,9 +11,9 @@ late, restarted or takes over another's soldiers (failover) needs to animate the
 own soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
 soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for one
 too; ``homes`` (shards): the homes it animates now (a fail-over's stand-in, told again when one goes
-home; a sync carries them too); ``settings`` (values): the front-end's server-wide settings (when they
-change, and before each sync); ``books`` (front): answer on ``ttes/books`` with every soldier the shard
-animates, for front-end ``front`` that has just heard the shard for the first time
+home; a sync carries them too); ``settings`` (values, stamp): the front-end's server-wide settings (when
+they change, and before each sync; the newest stamp wins); ``books`` (front): answer on ``ttes/books``
+with every soldier the shard animates, for front-end ``front`` that has just heard the shard first
 (:mod:`server.fabric.fronts`); ``fence`` (front, serial): the end of a message that created or removed
 soldiers, echoed in the batches (:class:`~server.fabric.fronts.Fences`); on ``ttes/fronts`` only,
 ``clients`` (counts): a front-end's connections of client ids, ``failover`` (down, to, homes). The topic
@@ -95,10 +95,11 @@ def sync(
     return op if homes is None else {**op, "homes": list(homes)}
 
 
-def settings(values: dict[str, Any]) -> Op:
+def settings(values: dict[str, Any], stamp: tuple[int, int] = (0, -1)) -> Op:
     """The front-end's server-wide settings (:func:`server.fabric.settings.of`): the shards animate, so an
-    operator's JCL and the front-end's own ``--throttle`` apply there."""
-    return {"op": "settings", "values": values}
+    operator's JCL and the front-end's own ``--throttle`` apply there; taken where they are at least as new
+    (``stamp``: :data:`server.fabric.settings.Stamp`) as those held."""
+    return {"op": "settings", "values": values, "stamp": list(stamp)}
 
 
 def failover(down: int, to: int, homes: list[int]) -> Op:
