@@ -625,6 +625,52 @@ async def test_a_sync_does_not_remove_a_soldier_created_again_that_its_front_end
         await op.aclose()
 
 
+async def test_a_restarted_front_ends_creation_is_not_removed_by_an_older_removal(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Front-end 0 creates the walker and removes it (generation 2 of its index), dies and starts again (its
+    generations start again too), and creates the index anew; front-end 1 has not heard of that creation
+    when shard 1 restarts, and its sync (after the new front-end's) says the index was removed at generation
+    2: on main the shard removed the new soldier (generation 1), which every front-end kept showing. A
+    creation's generation is past the wall clock's ms as well, newer than any removal made before it."""
+    async with inprocess.fronts() as c:
+        made = await inprocess.walker(c.servers[0], ODD)
+        await made.send(RemoveSoldier(ODD))
+        await made.expect(SoldierRemoved)
+        await made.aclose()
+        with trio.fail_after(30):
+            while ODD in inprocess.live(c.shards[1]) or ODD in inprocess.live(c.servers[1]):
+                await trio.sleep(0.01)
+        c.fabrics[0].close()  # front-end 0 dies and starts again
+        c.servers[0].shutdown()
+        late = await c.start_front(inprocess.Sharding(0, 2))
+        with trio.fail_after(30):  # both shards answered its books
+            while min(c.nodes[2].heard_at) < 0 or c.nodes[2]._asked:
+                await trio.sleep(0.1)
+        held: list[bytes] = []
+        told = c.nodes[2]._books
+        assert told is not None
+        c.nodes[2]._books = held.append  # front-end 1 hears the new front-end 0 late
+        again = await inprocess.walker(late, ODD)
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.shards[1]):
+                await trio.sleep(0.01)
+        slow: list[bytes] = []
+        put, c.nodes[1]._puts[1] = c.nodes[1]._puts[1], slow.append  # front-end 1's sync comes last
+        c.shard_nodes[1].seq = 0  # shard 1 restarts (its count goes back): both front-ends sync it
+        await trio.sleep(1)
+        c.nodes[1]._puts[1] = put
+        for data in slow:
+            put(data)
+        await trio.sleep(1)
+        c.nodes[2]._books = told
+        for data in held:
+            told(data)
+        await inprocess.moving(again, ODD, 3)
+        assert ODD in inprocess.live(c.shards[1]) and ODD in inprocess.live(c.servers[1])
+        await again.aclose()
+
+
 async def test_a_front_end_fails_a_shard_over_when_another_does(autojump_clock: trio.abc.Clock) -> None:
     """Shard 1 hangs; front-end 0 fails it over after its 5 s, front-end 1 (whose loop heard its last pulse
     later: here a longer limit) has not yet: it follows front-end 0's fail-over, so a request for the standing

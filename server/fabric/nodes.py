@@ -58,6 +58,7 @@ from server.fabric import settings as shared
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import PULSE, Batch, decode_batch, encode_batch
 from server.fabric.fronts import Fences, IndexShare, Soldier
+from server.fabric.stamps import after
 from server.fabric.watch import Watch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
@@ -1127,7 +1128,7 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.taken(index)
-        self.gen[index] += 1
+        self.gen[index] = after(int(self.gen[index]))
         op = req.create(index, figure, weapon, owner, int(self.gen[index]))
         self._send(self._shard_of(index), op)
         self._book_fenced(op, index)
@@ -1138,7 +1139,7 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.freed(index)
-        self.gen[index] += 1
+        self.gen[index] = after(int(self.gen[index]))
         op = req.remove(index, int(self.gen[index]))
         self._send(self._shard_of(index), op)
         self._book_fenced(op, index)

@@ -78,8 +78,9 @@ def sync(
     ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in); ``gone``:
     soldiers removed, which the shard removes if it has them; ``homes``: as :func:`homes` (None: kept);
     ``gens`` and ``gone_gens``: the generation of each soldier and of each removal (an index's creations and
-    removals count up, through every front-end: a removal removes only a soldier created before it, not
-    one created again through another front-end that the sender has not heard of yet)."""
+    removals count up, through every front-end and past a front-end's restart: :mod:`server.fabric.stamps`;
+    a removal removes only a soldier created before it, not one created again through another front-end
+    that the sender has not heard of yet)."""
     rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
     op = {
         "op": "sync",

@@ -17,9 +17,9 @@ settings are :data:`OWN`, below every front-end's) and from the other front-ends
 from __future__ import annotations
 
 import dataclasses
-import time
 from typing import TYPE_CHECKING, Any
 
+from server.fabric.stamps import after
 from server.soldier.settings import SoldierSettings
 
 if TYPE_CHECKING:
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 OWN = frozenset({"tick_period", "record_clips"})  # each process's own (its tick; what it records)
 SHARED = tuple(f.name for f in dataclasses.fields(SoldierSettings) if f.name not in OWN)
 
-Stamp = tuple[int, int]  # (when: ms of the wall clock, or past the newest heard; the front-end that made it)
+Stamp = tuple[int, int]  # (:func:`server.fabric.stamps.after`; the front-end that made it)
 OWN_STAMP: Stamp = (-1, -1)  # a shard's own start-up settings: any front-end's replace them
 START: Stamp = (0, -1)  # a front-end's start-up settings: below any change made since
 
@@ -37,7 +37,7 @@ def stamp(newest: Stamp, front: int) -> Stamp:
     """The stamp of a change made now through front-end ``front``: newer than ``newest`` (the newest it
     holds), and by the wall clock than changes made elsewhere before (a restarted front-end that has heard
     of none yet)."""
-    return (max(int(time.time() * 1000), newest[0] + 1), front)
+    return (after(newest[0]), front)
 
 
 def stamp_of(msg: dict[str, Any]) -> Stamp:
