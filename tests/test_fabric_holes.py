@@ -699,6 +699,66 @@ async def test_a_front_end_fails_a_shard_over_when_another_does(autojump_clock: 
         await there.aclose()
 
 
+async def test_a_front_end_that_still_hears_a_shard_another_failed_over_routes_to_the_stand_in(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """A split fabric: front-end 0 no longer hears shard 1 and fails it over to shard 0; front-end 1 still
+    hears shard 1. On main front-end 1 kept routing to shard 1, so a walk request through it never reached
+    the walker that front-end 0's clients see (shard 0's): it stood. Now front-end 1 follows the fail-over
+    and keeps it while it stands (it merges no rows of shard 1's soldiers from shard 1), until front-end 0
+    hears shard 1 again and takes the soldiers back: then both route to shard 1."""
+    async with inprocess.fronts() as c:
+        made = await inprocess.walker(c.servers[0], ODD)
+        await made.requests(index=[ODD], velocity=(0.0, 0.0, 0.0))  # it stands
+        there = await _client(c.servers[1])
+        await there.send(Subscribe((ODD,)))
+        await trio.sleep(1)
+        c.fabrics[0].deaf = ("ttes/poses/1",)  # front-end 0 hears shard 1 no more; front-end 1 does
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.shards[0]):
+                await trio.sleep(0.1)
+        await trio.sleep(1)
+        assert c.nodes[0].route == [0, 0]
+        await made.drain(1.0)
+        await there.requests(index=[ODD], velocity=WALK)
+        await inprocess.moving(made, ODD, 10)  # shard 0's walker walks, as front-end 0's clients see
+        assert c.nodes[1].route == [0, 0]
+        c.fabrics[0].deaf = ()  # the fabric is whole again: front-end 0 takes shard 1's soldiers back
+        with trio.fail_after(30):
+            while ODD in inprocess.live(c.shards[0]):
+                await trio.sleep(0.1)
+        await trio.sleep(1)
+        assert c.nodes[0].route == [0, 1] and c.nodes[1].route == [0, 1]
+        await there.drain(1.0)
+        await inprocess.moving(there, ODD, 10)  # it walks on in shard 1
+        await made.aclose()
+        await there.aclose()
+
+
+async def test_a_fail_over_followed_ends_when_the_front_end_that_made_it_is_gone(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Front-end 0, deaf to shard 1, fails it over and dies before it hears shard 1 again: front-end 1,
+    which followed, takes shard 1's soldiers back itself (nobody else would end that fail-over)."""
+    async with inprocess.fronts() as c:
+        made = await inprocess.walker(c.servers[0], ODD)
+        there = await _client(c.servers[1])
+        await there.send(Subscribe((ODD,)))
+        await trio.sleep(1)
+        c.fabrics[0].deaf = ("ttes/poses/1",)
+        with trio.fail_after(30):
+            while c.nodes[1].route != [0, 0]:
+                await trio.sleep(0.1)
+        c.fabrics[0].close()
+        with trio.fail_after(30):
+            while c.nodes[1].route != [0, 1] or ODD in inprocess.live(c.shards[0]):
+                await trio.sleep(0.1)
+        await there.drain(1.0)
+        await inprocess.moving(there, ODD, 10)  # it walks on in shard 1
+        await made.aclose()
+        await there.aclose()
+
+
 async def test_an_anonymous_clients_soldiers_go_after_its_grace_whatever_the_other_front_ends_serve(
     autojump_clock: trio.abc.Clock,
 ) -> None:

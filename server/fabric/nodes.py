@@ -26,6 +26,7 @@ the same, so a client of the front-end gets the handshake, tables and FIGURE of 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import itertools
 import math
@@ -74,7 +75,6 @@ if TYPE_CHECKING:
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
 TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
-FOLLOW_S = 1.0  # a shard another front-end failed over, unheard here this long, is failed over here too
 PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batch a block heard); beyond, the
 # oldest go (and it asks for a key)
 
@@ -483,6 +483,7 @@ class FrontNode:
         self._pending_lock = threading.Lock()  # appended on the fabric's thread, taken on the loop
         self.key_asked = [False] * shards  # a key batch asked for after a lost batch, not come yet
         self.route = list(range(shards))
+        self._own_route = list(range(shards))  # every shard animates its own
         self.heard_at = [-math.inf] * shards  # server time of each shard's last pulse
         self.last_seq = [-1] * shards  # of its pulses (ticks)
         self.blocks = -(-n // block)  # index blocks: a shard's pose topics
@@ -504,6 +505,7 @@ class FrontNode:
         self.known = np.zeros(n, bool)  # created or removed here, or told so by a front-end: not learned
         self._unknown: dict[int, set[int]] = {}  # shard asked -> its batches' soldiers not in the books
         self._stood_for: dict[int, set[int]] = {}  # shard failed over -> the other homes it animated
+        self._followed: dict[int, int] = {}  # shard failed over by another front-end -> that front-end
         self.batches = 0  # merged
         self.skipped = 0  # lost on the fabric (or dropped from a full queue)
         self.failovers = 0
@@ -673,7 +675,7 @@ class FrontNode:
         if not batches:
             return np.zeros(0, np.int64)
         self.batches += len(batches)
-        batches = [self.fences.clean(b) for b in batches]  # (after _heard: a sync there moves the fences)
+        batches = [self._routed(self.fences.clean(b)) for b in batches]  # (after _heard: a sync moves fences)
         rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
         if merge(board, batches, tick, m.table.alive, self.watching):
             changed = rows[
@@ -694,13 +696,24 @@ class FrontNode:
                 self._token.run_sync_soon(self.server.publish_fed)
         return changed
 
+    def _routed(self, b: Batch) -> Batch:
+        """``b`` without the rows of soldiers whose home is routed to another shard than ``b``'s: a shard
+        failed over that this front-end still hears (a split fabric, a shard that resumes before the
+        take-back) animates copies that nobody drives."""
+        if self.route == self._own_route or not len(b.indices):
+            return b
+        ok = np.asarray(self.route)[Sharding.home(b.indices, self.shards)] == b.shard
+        if ok.all():
+            return b
+        return dataclasses.replace(b, indices=b.indices[ok], tables=b.tables[ok], codes=b.codes[ok])
+
     def _answers_first(self, batches: list[Batch]) -> tuple[list[Batch], list[Batch]]:
         """``(now, held)``: the answers among ``batches`` to merge now, before the ticks' batches that came
         with them (issue 21: a client whose answer was merged with a tick waited for the encode of that
         tick's rows, its own client's and the others'), and the rest: each shard's answers that came before
         its first tick's batch here (a shard's batches merge in order); while a shard stands in for another,
         all now (their rows may overlap)."""
-        if self.route != list(range(self.shards)):
+        if self.route != self._own_route:
             return batches, []
         now: list[Batch] = []
         held: list[Batch] = []
@@ -764,18 +777,20 @@ class FrontNode:
 
     def _pulse(self, b: Batch, now: float) -> None:
         """Shard ``b.shard``'s tick: it lives; heard for the first time, or back (a restart: its count went
-        back; or it had failed over), it gets a sync."""
+        back; or it had failed over), it gets a sync; not while another front-end's fail-over of it stands
+        (:meth:`follow`)."""
         k = b.shard
         first = self.heard_at[k] == -math.inf
         back = first or b.seq < self.last_seq[k] or self.route[k] != k
         self.last_seq[k], self.heard_at[k] = b.seq, now
-        if back:
+        if back and k not in self._followed:
             stood_in = self.route[k]
             self.route[k] = k
             if stood_in != k:  # it stood in for k: k's soldiers go home
                 for i in self._homed(k).tolist():
                     self._send(stood_in, req.remove(i, int(self.gen[i])))
                 self._send(stood_in, req.homes(self._animated_by(stood_in)))
+                self._book(req.back(k))  # a fail-over the others followed stands no more
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
             # it stood in for other shards before it went (hung): their soldiers live elsewhere now
             moved = [h for h in self._stood_for.pop(k, set()) if self.route[h] != k]
@@ -820,7 +835,7 @@ class FrontNode:
         return not np.isin(scope, idx).all()
 
     def _fail_over(self, now: float) -> None:
-        alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
+        alive = [k for k in range(self.shards) if self._hears(k, now)]
         heard = [at > -math.inf for at in self.heard_at]
         for k, survivor, homes in books.rerouted(self.route, alive, heard):
             self._failed(k, survivor, homes, now)
@@ -834,21 +849,33 @@ class FrontNode:
         self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
         self._sync(survivor, homes)
 
-    def follow(self, down: int, to: int) -> None:
-        """Another front-end failed shard ``down`` over to ``to``: fail it over here too, unless this one
-        heard it within ``FOLLOW_S`` (two front-ends routed a hung shard's requests differently for up to
-        the hung limit, each deciding on its own clock; one that hears the shard keeps it: a take-back would
-        take its soldiers from the stand-in the other front-end routes to)."""
+    def follow(self, down: int, to: int, by: int) -> None:
+        """Front-end ``by`` failed shard ``down`` over to ``to``: fail it over here too, and keep it failed
+        over while that fail-over stands, even if this front-end hears the shard (two front-ends routed a
+        hung shard's requests differently for up to the hung limit, each deciding on its own clock; with a
+        split fabric, for as long as the split lasted: one that still heard the shard kept routing to it,
+        while the other's clients saw the stand-in's soldiers). It stands until a front-end takes the
+        shard's soldiers back (:meth:`took_back`) or ``by`` is gone from the fabric."""
         now = self.server.now()
         if not (0 <= down < self.shards and 0 <= to < self.shards) or down == to:
             return
-        if self.present[down] and now - self.heard_at[down] < FOLLOW_S:
-            return
         homes = [h for h, r in enumerate(self.route) if r == down]
         if homes:
+            self._followed[down] = by
             for h in homes:
                 self.route[h] = to
             self._failed(down, to, homes, now)
+
+    def took_back(self, k: int) -> None:
+        """Another front-end heard shard ``k`` again and took its soldiers back from the stand-in: this one
+        takes them back at ``k``'s next pulse (its own last requests replayed), or, if it does not hear
+        ``k``, fails it over itself (the stand-in has let them go)."""
+        self._followed.pop(k, None)
+        if 0 <= k < self.shards and self.route[k] != k and not self._hears(k, self.server.now()):
+            self.route[k] = k  # (the next _fail_over hands its soldiers to a survivor again)
+
+    def _hears(self, k: int, now: float) -> bool:
+        return self.present[k] and now - self.heard_at[k] <= self.hung_s
 
     def _settings_told(self) -> None:
         """The server-wide settings changed (an operator's JCL): every shard takes them, and every other
@@ -984,7 +1011,10 @@ class FrontNode:
                         self._count(int(op["front"]), cid, n)
                 return
             if op["op"] == "failover":
-                self.follow(int(op["down"]), int(op["to"]))
+                self.follow(int(op["down"]), int(op["to"]), int(op["front"]))
+                return
+            if op["op"] == "back":
+                self.took_back(int(op["shard"]))
                 return
             if op["op"] == "settings":  # the shards have them from that front-end
                 self._settings_learned(op["values"], shared.stamp_of(op))
@@ -1020,6 +1050,8 @@ class FrontNode:
             return
         for cid in list(self.elsewhere.counts[j]):
             self._count(j, cid, 0)
+        for k in [k for k, by in self._followed.items() if by == j]:  # its fail-overs stand no more
+            del self._followed[k]
         self.server.orphans_check()
 
     def _connections(self, client_id: str) -> None:

@@ -16,8 +16,9 @@ they change, and before each sync; the newest stamp wins); ``books`` (front): an
 with every soldier the shard animates, for front-end ``front`` that has just heard the shard first
 (:mod:`server.fabric.fronts`); ``fence`` (front, serial): the end of a message that created or removed
 soldiers, echoed in the batches (:class:`~server.fabric.fronts.Fences`); on ``ttes/fronts`` only,
-``clients`` (counts): a front-end's connections of client ids, ``failover`` (down, to, homes). The topic
-is reliable: ownership and requests are never lost once a shard listens, and a sync covers the time before.
+``clients`` (counts): a front-end's connections of client ids, ``failover`` (down, to, homes), ``back``
+(shard): a fail-over ended. The topic is reliable: ownership and requests are never lost once a shard
+listens, and a sync covers the time before.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ OPS = (
     "homes",
     "settings",
     "failover",
+    "back",
 )
 Op = dict[str, Any]
 
@@ -107,6 +109,12 @@ def failover(down: int, to: int, homes: list[int]) -> Op:
     """On ``ttes/fronts``: a front-end failed shard ``down`` over to ``to`` (``homes``: the shards whose
     soldiers went): the others follow unless they heard ``down`` lately (``FrontNode.follow``)."""
     return {"op": "failover", "down": down, "to": to, "homes": list(homes)}
+
+
+def back(shard: int) -> Op:
+    """On ``ttes/fronts``: a front-end heard shard ``shard`` again and took its soldiers back from the
+    stand-in: the others' following of its fail-over ends (``FrontNode.took_back``)."""
+    return {"op": "back", "shard": shard}
 
 
 def homes(shards: list[int]) -> Op:
