@@ -544,26 +544,14 @@ async def test_the_settings_an_operator_changes_through_a_front_end_reach_the_sh
         await op.aclose()
 
 
-async def test_the_settings_changed_through_one_front_end_reach_the_other(
+async def test_the_settings_changed_through_one_front_end_reach_the_other_and_one_that_starts_later(
     autojump_clock: trio.abc.Clock,
 ) -> None:
-    """Its syncs (a fail-over) would hand the shards its old settings otherwise."""
-    async with inprocess.fronts() as c:
-        op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
-        await op.expect(Ready)
-        await op.jcl("set_ttes_blend_time(0.5);", 1)
-        await trio.sleep(1)
-        assert [s.world.settings.blend_time for s in (*c.servers, *c.shards)] == [0.5] * 4
-        await op.aclose()
-
-
-async def test_a_front_end_that_starts_later_keeps_the_settings_an_operator_changed_before(
-    autojump_clock: trio.abc.Clock,
-) -> None:
-    """An operator changes the blend time through front-end 0; front-end 1 restarts (a front-end that starts
-    later): its first syncs handed the shards its start-up settings on main, undoing the operator's change
-    (blend time 0.5 -> 0.2 in both shards). The change has a stamp newer than any start-up settings: the
-    shards keep it, and the new front-end learns it from their answers."""
+    """An operator changes the blend time through front-end 0: it reaches front-end 1 (its syncs, a
+    fail-over's, would hand the shards its old settings otherwise). Front-end 1 restarts (a front-end that
+    starts later): its first syncs handed the shards its start-up settings on main, undoing the operator's
+    change (blend time 0.5 -> 0.2 in both shards). The change has a stamp newer than any start-up settings:
+    the shards keep it, and the new front-end learns it from their answers."""
     async with inprocess.fronts() as c:
         op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
         await op.expect(Ready)
@@ -699,6 +687,18 @@ async def test_a_front_end_fails_a_shard_over_when_another_does(autojump_clock: 
         await there.aclose()
 
 
+async def _split(c: inprocess.Fronts) -> tuple[Client, Client]:
+    """The standing walker, made through front-end 0, and a client of front-end 1 that watches it; then a
+    split fabric: front-end 0 hears shard 1 no more, front-end 1 does."""
+    made = await inprocess.walker(c.servers[0], ODD)
+    await made.requests(index=[ODD], velocity=(0.0, 0.0, 0.0))
+    there = await _client(c.servers[1])
+    await there.send(Subscribe((ODD,)))
+    await trio.sleep(1)
+    c.fabrics[0].deaf = ("ttes/poses/1",)
+    return made, there
+
+
 async def test_a_front_end_that_still_hears_a_shard_another_failed_over_routes_to_the_stand_in(
     autojump_clock: trio.abc.Clock,
 ) -> None:
@@ -708,12 +708,7 @@ async def test_a_front_end_that_still_hears_a_shard_another_failed_over_routes_t
     and keeps it while it stands (it merges no rows of shard 1's soldiers from shard 1), until front-end 0
     hears shard 1 again and takes the soldiers back: then both route to shard 1."""
     async with inprocess.fronts() as c:
-        made = await inprocess.walker(c.servers[0], ODD)
-        await made.requests(index=[ODD], velocity=(0.0, 0.0, 0.0))  # it stands
-        there = await _client(c.servers[1])
-        await there.send(Subscribe((ODD,)))
-        await trio.sleep(1)
-        c.fabrics[0].deaf = ("ttes/poses/1",)  # front-end 0 hears shard 1 no more; front-end 1 does
+        made, there = await _split(c)
         with trio.fail_after(30):
             while ODD not in inprocess.live(c.shards[0]):
                 await trio.sleep(0.1)
@@ -741,11 +736,7 @@ async def test_a_fail_over_followed_ends_when_the_front_end_that_made_it_is_gone
     """Front-end 0, deaf to shard 1, fails it over and dies before it hears shard 1 again: front-end 1,
     which followed, takes shard 1's soldiers back itself (nobody else would end that fail-over)."""
     async with inprocess.fronts() as c:
-        made = await inprocess.walker(c.servers[0], ODD)
-        there = await _client(c.servers[1])
-        await there.send(Subscribe((ODD,)))
-        await trio.sleep(1)
-        c.fabrics[0].deaf = ("ttes/poses/1",)
+        made, there = await _split(c)
         with trio.fail_after(30):
             while c.nodes[1].route != [0, 0]:
                 await trio.sleep(0.1)
@@ -753,8 +744,8 @@ async def test_a_fail_over_followed_ends_when_the_front_end_that_made_it_is_gone
         with trio.fail_after(30):
             while c.nodes[1].route != [0, 1] or ODD in inprocess.live(c.shards[0]):
                 await trio.sleep(0.1)
-        await there.drain(1.0)
-        await inprocess.moving(there, ODD, 10)  # it walks on in shard 1
+        await there.requests(index=[ODD], velocity=WALK)  # to shard 1
+        await inprocess.moving(there, ODD, 10)
         await made.aclose()
         await there.aclose()
 
