@@ -897,7 +897,11 @@ class FrontNode:
         shards have them already, or the newer ones from here)."""
         if stamp <= self.settings_stamp:
             return
-        shared.apply(self.server.world, values)
+        try:
+            shared.apply(self.server.world, values)
+        except (ValueError, TypeError) as exc:
+            log.warning("fabric_settings_refused", front=self.front.k, error=str(exc))
+            return
         self._told = (self.server.world.settings, self.server.world.report_interval)
         self.settings_stamp = stamp
 

@@ -43,7 +43,7 @@ def stamp(newest: Stamp, front: int) -> Stamp:
 def stamp_of(msg: dict[str, Any]) -> Stamp:
     """The stamp a ``settings`` operation or a books answer carries (:data:`START` without one)."""
     told = msg.get("stamp")
-    if isinstance(told, (list, tuple)) and len(told) == 2:
+    if isinstance(told, (list, tuple)) and len(told) == 2 and all(isinstance(t, int) for t in told):
         return (int(told[0]), int(told[1]))
     return START
 
