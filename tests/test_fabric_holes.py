@@ -36,7 +36,7 @@ from protocol.events import (
     SoldierRemoved,
     Subscribe,
 )
-from server.fabric import Handler
+from server.fabric import Handler, settings
 from server.fabric import requests as req
 from server.fabric.batch import Batch
 from server.fabric.fronts import (
@@ -49,6 +49,7 @@ from server.fabric.fronts import (
     rerouted,
     stand_ins,
 )
+from server.fabric.stamps import after
 from server.session import Session
 
 pytest.importorskip("zenoh")
@@ -64,6 +65,14 @@ def test_a_sync_carries_the_soldiers_removed_of_its_homes() -> None:
     assert gone(known, live, [0], 3).tolist() == [3, 6]
     op = req.decode(req.pack([req.sync([], np.zeros(0, ENTITY_REQUEST_DTYPE), gone=[3, 11])]))[0]
     assert op["gone"] == [3, 11]
+
+
+def test_a_stamp_is_past_the_newest_held_and_the_wall_clocks_ms() -> None:
+    now = after(0)  # a restarted front-end's first generation: past any given before this ms
+    assert now > 1_700_000_000_000 and after(now) == now + 1 and after(10**15) == 10**15 + 1
+    assert settings.stamp(settings.START, 1) > settings.START > settings.OWN_STAMP
+    assert settings.stamp_of(req.settings({}, (5, 1))) == (5, 1)
+    assert settings.stamp_of({"stamp": ["x", 1]}) == settings.stamp_of({}) == settings.START
 
 
 def _rows(shard: int, indices: list[int], fences: tuple[int, ...]) -> Batch:
