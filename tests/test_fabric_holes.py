@@ -28,6 +28,7 @@ from client_stub.link.spawn import ServerProcess, free_port
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from protocol.events import (
     CreateSoldier,
+    Error,
     JointUpdates,
     Ready,
     RemoveSoldier,
@@ -35,7 +36,7 @@ from protocol.events import (
     SoldierRemoved,
     Subscribe,
 )
-from server.fabric import Handler
+from server.fabric import Handler, settings
 from server.fabric import requests as req
 from server.fabric.batch import Batch
 from server.fabric.fronts import (
@@ -48,6 +49,8 @@ from server.fabric.fronts import (
     rerouted,
     stand_ins,
 )
+from server.fabric.stamps import after
+from server.session import Session
 
 pytest.importorskip("zenoh")
 
@@ -62,6 +65,14 @@ def test_a_sync_carries_the_soldiers_removed_of_its_homes() -> None:
     assert gone(known, live, [0], 3).tolist() == [3, 6]
     op = req.decode(req.pack([req.sync([], np.zeros(0, ENTITY_REQUEST_DTYPE), gone=[3, 11])]))[0]
     assert op["gone"] == [3, 11]
+
+
+def test_a_stamp_is_past_the_newest_held_and_the_wall_clocks_ms() -> None:
+    now = after(0)  # a restarted front-end's first generation: past any given before this ms
+    assert now > 1_700_000_000_000 and after(now) == now + 1 and after(10**15) == 10**15 + 1
+    assert settings.stamp(settings.START, 1) > settings.START > settings.OWN_STAMP
+    assert settings.stamp_of(req.settings({}, (5, 1))) == (5, 1)
+    assert settings.stamp_of({"stamp": ["x", 1]}) == settings.stamp_of({}) == settings.START
 
 
 def _rows(shard: int, indices: list[int], fences: tuple[int, ...]) -> Batch:
@@ -542,16 +553,31 @@ async def test_the_settings_an_operator_changes_through_a_front_end_reach_the_sh
         await op.aclose()
 
 
-async def test_the_settings_changed_through_one_front_end_reach_the_other(
+async def test_the_settings_changed_through_one_front_end_reach_the_other_and_one_that_starts_later(
     autojump_clock: trio.abc.Clock,
 ) -> None:
-    """Its syncs (a fail-over) would hand the shards its old settings otherwise."""
+    """An operator changes the blend time through front-end 0: it reaches front-end 1 (its syncs, a
+    fail-over's, would hand the shards its old settings otherwise). Front-end 1 restarts (a front-end that
+    starts later): its first syncs handed the shards its start-up settings on main, undoing the operator's
+    change (blend time 0.5 -> 0.2 in both shards). The change has a stamp newer than any start-up settings:
+    the shards keep it, and the new front-end learns it from their answers."""
     async with inprocess.fronts() as c:
         op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
         await op.expect(Ready)
         await op.jcl("set_ttes_blend_time(0.5);", 1)
         await trio.sleep(1)
         assert [s.world.settings.blend_time for s in (*c.servers, *c.shards)] == [0.5] * 4
+        c.fabrics[1].close()  # front-end 1 dies and starts again
+        c.servers[1].shutdown()
+        late = await c.start_front(inprocess.Sharding(1, 2))
+        with trio.fail_after(30):  # both shards answered its books
+            while c.nodes[2].heard_at[0] < 0 or c.nodes[2].heard_at[1] < 0 or c.nodes[2]._asked:
+                await trio.sleep(0.1)
+        await trio.sleep(1)
+        assert [s.world.settings.blend_time for s in (c.servers[0], late, *c.shards)] == [0.5] * 4
+        await op.jcl("set_ttes_blend_time(0.3);", 2)  # a later change still reaches every one
+        await trio.sleep(1)
+        assert [s.world.settings.blend_time for s in (c.servers[0], late, *c.shards)] == [0.3] * 4
         await op.aclose()
 
 
@@ -596,6 +622,56 @@ async def test_a_sync_does_not_remove_a_soldier_created_again_that_its_front_end
         await op.aclose()
 
 
+async def test_a_restarted_front_ends_creation_is_not_removed_by_an_older_removal(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Front-end 0 creates the walker and removes it (generation 2 of its index), dies and starts again (its
+    generations start again too), and creates the index anew; front-end 1 has not heard of that creation
+    when shard 1 restarts, and its sync (after the new front-end's) says the index was removed at generation
+    2: on main the shard removed the new soldier (generation 1), which every front-end kept showing. A
+    creation's generation is past the wall clock's ms as well, newer than any removal made before it."""
+    async with inprocess.fronts() as c:
+        made = await inprocess.walker(c.servers[0], ODD)
+        await made.send(RemoveSoldier(ODD))
+        await made.expect(SoldierRemoved)
+        await made.aclose()
+        with trio.fail_after(30):
+            while ODD in inprocess.live(c.shards[1]) or ODD in inprocess.live(c.servers[1]):
+                await trio.sleep(0.01)
+        c.fabrics[0].close()  # front-end 0 dies and starts again
+        c.servers[0].shutdown()
+        late = await c.start_front(inprocess.Sharding(0, 2))
+        with trio.fail_after(30):  # both shards answered its books
+            while min(c.nodes[2].heard_at) < 0 or c.nodes[2]._asked:
+                await trio.sleep(0.1)
+        held: list[bytes] = []
+        told = c.nodes[2]._books
+        assert told is not None
+        c.nodes[2]._books = held.append  # front-end 1 hears the new front-end 0 late
+        again = await inprocess.walker(late, ODD)
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.shards[1]):
+                await trio.sleep(0.01)
+        slow: list[bytes] = []
+        put, c.nodes[1]._puts[1] = c.nodes[1]._puts[1], slow.append  # front-end 1's sync comes last
+        c.shard_nodes[1].seq = 0  # shard 1 restarts (its count goes back): both front-ends sync it
+        await trio.sleep(1)
+        c.nodes[1]._puts[1] = put
+        for data in slow:
+            put(data)
+        await trio.sleep(1)
+        c.nodes[2]._books = told
+        for data in held:
+            told(data)
+        with trio.fail_after(30):  # front-end 1 mirrors the creation
+            while ODD not in inprocess.live(c.servers[1]):
+                await trio.sleep(0.01)
+        await again.drain(1.0)
+        await inprocess.moving(again, ODD, 3)
+        assert ODD in inprocess.live(c.shards[1])
+        await again.aclose()
+
+
 async def test_a_front_end_fails_a_shard_over_when_another_does(autojump_clock: trio.abc.Clock) -> None:
     """Shard 1 hangs; front-end 0 fails it over after its 5 s, front-end 1 (whose loop heard its last pulse
     later: here a longer limit) has not yet: it follows front-end 0's fail-over, so a request for the standing
@@ -620,11 +696,74 @@ async def test_a_front_end_fails_a_shard_over_when_another_does(autojump_clock: 
         await there.aclose()
 
 
+async def _split(c: inprocess.Fronts) -> tuple[Client, Client]:
+    """The standing walker, made through front-end 0, and a client of front-end 1 that watches it; then a
+    split fabric: front-end 0 hears shard 1 no more, front-end 1 does."""
+    made = await inprocess.walker(c.servers[0], ODD)
+    await made.requests(index=[ODD], velocity=(0.0, 0.0, 0.0))
+    there = await _client(c.servers[1])
+    await there.send(Subscribe((ODD,)))
+    await trio.sleep(1)
+    c.fabrics[0].deaf = ("ttes/poses/1",)
+    return made, there
+
+
+async def test_a_front_end_that_still_hears_a_shard_another_failed_over_routes_to_the_stand_in(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """A split fabric: front-end 0 no longer hears shard 1 and fails it over to shard 0; front-end 1 still
+    hears shard 1. On main front-end 1 kept routing to shard 1, so a walk request through it never reached
+    the walker that front-end 0's clients see (shard 0's): it stood. Now front-end 1 follows the fail-over
+    and keeps it while it stands (it merges no rows of shard 1's soldiers from shard 1), until front-end 0
+    hears shard 1 again and takes the soldiers back: then both route to shard 1."""
+    async with inprocess.fronts() as c:
+        made, there = await _split(c)
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.shards[0]):
+                await trio.sleep(0.1)
+        await trio.sleep(1)
+        assert c.nodes[0].route == [0, 0]
+        await made.drain(1.0)
+        await there.requests(index=[ODD], velocity=WALK)
+        await inprocess.moving(made, ODD, 10)  # shard 0's walker walks, as front-end 0's clients see
+        assert c.nodes[1].route == [0, 0]
+        c.fabrics[0].deaf = ()  # the fabric is whole again: front-end 0 takes shard 1's soldiers back
+        with trio.fail_after(30):
+            while ODD in inprocess.live(c.shards[0]):
+                await trio.sleep(0.1)
+        await trio.sleep(1)
+        assert c.nodes[0].route == [0, 1] and c.nodes[1].route == [0, 1]
+        await there.drain(1.0)
+        await inprocess.moving(there, ODD, 10)  # it walks on in shard 1
+        await made.aclose()
+        await there.aclose()
+
+
+async def test_a_fail_over_followed_ends_when_the_front_end_that_made_it_is_gone(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Front-end 0, deaf to shard 1, fails it over and dies before it hears shard 1 again: front-end 1,
+    which followed, takes shard 1's soldiers back itself (nobody else would end that fail-over)."""
+    async with inprocess.fronts() as c:
+        made, there = await _split(c)
+        with trio.fail_after(30):
+            while c.nodes[1].route != [0, 0]:
+                await trio.sleep(0.1)
+        c.fabrics[0].close()
+        with trio.fail_after(30):
+            while c.nodes[1].route != [0, 1] or ODD in inprocess.live(c.shards[0]):
+                await trio.sleep(0.1)
+        await there.requests(index=[ODD], velocity=WALK)  # to shard 1
+        await inprocess.moving(there, ODD, 10)
+        await made.aclose()
+        await there.aclose()
+
+
 async def test_an_anonymous_clients_soldiers_go_after_its_grace_whatever_the_other_front_ends_serve(
     autojump_clock: trio.abc.Clock,
 ) -> None:
-    """A client without an id gets its connection's (``~anon-`` and the session's number, per process):
-    another front-end's client of the same number is another client, and keeps nothing alive here."""
+    """A client without an id gets its connection's (``~anon-``, its server's mark and the session's
+    number): a connection of that id told by another front-end keeps nothing alive here."""
     async with inprocess.fronts() as c:
         here = await _client(c.servers[0], "")
         assert here.accept is not None and here.accept.client_id.startswith("~anon-")
@@ -636,6 +775,33 @@ async def test_an_anonymous_clients_soldiers_go_after_its_grace_whatever_the_oth
         await here.aclose()
         await trio.sleep(GRACE * 1.5)
         assert _everywhere(c, index) == [False, False, False]
+
+
+async def test_anonymous_clients_of_two_front_end_processes_are_two_clients(
+    autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each process numbers its sessions from 1 (a restarted front-end too): on main the first anonymous
+    client of front-end 0 and the first of front-end 1 were both ``~anon-1``, one owner in every front-end's
+    books, so the client of front-end 1 could remove (and drive) the soldier the other made. Their ids differ
+    now, and it may not."""
+    async with inprocess.fronts() as c:
+        first = Session._ids
+        here = await _client(c.servers[0], "")
+        index = await _made(here)
+        monkeypatch.setattr(Session, "_ids", first)  # front-end 1's process numbers its sessions from 1 too
+        there = await _client(c.servers[1], "")
+        assert here.accept is not None and there.accept is not None
+        assert here.accept.client_id.startswith("~anon-") and there.accept.client_id.startswith("~anon-")
+        assert here.accept.client_id != there.accept.client_id
+        with trio.fail_after(30):
+            while index not in inprocess.live(c.servers[1]):
+                await trio.sleep(0.01)
+        await there.send(RemoveSoldier(index))
+        await there.expect(Error)
+        await trio.sleep(1)
+        assert _everywhere(c, index) == [True, True, True]
+        await here.aclose()
+        await there.aclose()
 
 
 @pytest.mark.parametrize("fabric", ["zenoh", "dds"])

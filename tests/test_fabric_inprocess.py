@@ -57,6 +57,7 @@ class MemoryFabric:
         self.mine: list[tuple[str, Handler]] = []
         self.announced: list[str] = []
         self.closed = False
+        self.deaf: tuple[str, ...] = ()  # topics (prefixes) it no longer hears: a split fabric
 
     def publisher(self, topic: str, kind: Kind, on_match: Presence | None = None) -> Handler:
         def put(data: bytes) -> None:
@@ -70,14 +71,18 @@ class MemoryFabric:
         return put
 
     def subscribe(self, topic: str, kind: Kind, on_message: Handler) -> Unsubscribe:
-        self.bus.topics[topic].append(on_message)
-        self.mine.append((topic, on_message))
+        def heard(data: bytes) -> None:
+            if not topic.startswith(self.deaf):
+                on_message(data)
+
+        self.bus.topics[topic].append(heard)
+        self.mine.append((topic, heard))
         if len(self.bus.topics[topic]) == 1:
             self.bus.matched(topic)
 
         def unsubscribe() -> None:
-            self.bus.topics[topic].remove(on_message)
-            self.mine.remove((topic, on_message))
+            self.bus.topics[topic].remove(heard)
+            self.mine.remove((topic, heard))
             if not self.bus.topics[topic]:
                 self.bus.matched(topic)
 

@@ -86,10 +86,14 @@ def answer(
     last: np.ndarray | None = None,
     homes: Sequence[int] = (),
     gens: Sequence[int] = (),
+    settings: dict[str, Any] | None = None,
+    stamp: tuple[int, int] = (-1, -1),
 ) -> bytes:
     """A shard's answer to front-end ``front``'s ``books``: every soldier it animates, the last request of
-    those that had one (``ENTITY_REQUEST_DTYPE`` rows), the other shards it stands in for (``homes``) and the
-    generation of each soldier (``gens``: :func:`server.fabric.requests.sync`)."""
+    those that had one (``ENTITY_REQUEST_DTYPE`` rows), the other shards it stands in for (``homes``), the
+    generation of each soldier (``gens``: :func:`server.fabric.requests.sync`) and its settings with their
+    stamp (:mod:`server.fabric.settings`: a late front-end learns an operator's change made before it
+    started)."""
     rows = np.zeros(0, ENTITY_REQUEST_DTYPE) if last is None else last
     rows = np.ascontiguousarray(rows, ENTITY_REQUEST_DTYPE)
     body = {
@@ -97,6 +101,8 @@ def answer(
         "rows": rows.tobytes(),
         "homes": list(homes),
         "gens": list(gens),
+        "settings": settings,
+        "stamp": list(stamp),
     }
     # the body packed apart: every front-end hears every answer, and only the one it is for unpacks its
     # soldiers (at 12,000 soldiers over 2 shards and 6 front-ends, unpacking the others' answers was 38 % of
@@ -126,6 +132,7 @@ def decode_answer(data: bytes) -> dict[str, Any]:
         msg["rows"] = np.frombuffer(msg.get("rows", b""), ENTITY_REQUEST_DTYPE)
         msg["homes"] = [int(h) for h in msg.get("homes", [])]
         msg["gens"] = [int(g) for g in msg.get("gens", [])]
+        msg["stamp"] = msg.get("stamp") or [-1, -1]  # (a shard's own settings, if it says none)
     except (ValueError, TypeError, KeyError, AttributeError, msgpack.UnpackException) as exc:
         raise ValueError(f"not a books answer: {exc}") from exc
     return msg

@@ -26,6 +26,7 @@ the same, so a client of the front-end gets the handshake, tables and FIGURE of 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import itertools
 import math
@@ -58,6 +59,7 @@ from server.fabric import settings as shared
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import PULSE, Batch, decode_batch, encode_batch
 from server.fabric.fronts import Fences, IndexShare, Soldier
+from server.fabric.stamps import after
 from server.fabric.watch import Watch
 from server.logging import get_logger
 from server.pose_board import PoseBoard
@@ -73,7 +75,6 @@ if TYPE_CHECKING:
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
 TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
-FOLLOW_S = 1.0  # a shard another front-end failed over, unheard here this long, is failed over here too
 PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batch a block heard); beyond, the
 # oldest go (and it asks for a key)
 
@@ -137,6 +138,7 @@ class ShardNode:
         self.has_last = np.zeros(n, bool)
         self.fences: list[int] = []  # per front-end, the newest fence taken (its batches carry them)
         self.stands_in: set[int] = set()  # the other shards whose soldiers it animates (a fail-over's)
+        self.settings_stamp = shared.OWN_STAMP  # of the settings it holds: older ones are not taken
         self.gen = np.zeros(n, np.int64)  # each soldier's generation (requests.sync): 0, the script's
         # soldiers created since the last fence, and those whose rows the next batch carries (born before a
         # fence): sets, so creations that no fence follows (a sync's) grow them no further than the soldiers
@@ -343,7 +345,10 @@ class ShardNode:
         elif op == "homes":
             self._homes(msg)
         elif op == "settings":
-            shared.apply(world, msg["values"])  # type: ignore[arg-type]
+            stamp = shared.stamp_of(msg)
+            if stamp >= self.settings_stamp:  # (a later front-end's start-up settings are older)
+                shared.apply(world, msg["values"])  # type: ignore[arg-type]
+                self.settings_stamp = stamp
         elif op == "fence":
             self._fenced(int(msg["front"]), int(msg["serial"]))  # type: ignore[call-overload]
 
@@ -363,7 +368,8 @@ class ShardNode:
         soldiers = _soldiers(self.server, live)
         last = self.last[live[self.has_last[live]]]
         homes, gens = sorted(self.stands_in), self.gen[live].tolist()
-        self._answer(books.answer(self.sharding.k, front, soldiers, last, homes, gens))
+        values, stamp = shared.of(self.server.world), self.settings_stamp
+        self._answer(books.answer(self.sharding.k, front, soldiers, last, homes, gens, values, stamp))
         log.info("fabric_books_answered", shard=self.sharding.k, front=front, soldiers=len(soldiers))
 
     def _homes(self, msg: dict[str, object]) -> None:
@@ -469,12 +475,15 @@ class FrontNode:
         self._out: list[list[req.Op]] = [[] for _ in range(shards)]  # per shard, sent at the loop's next turn
         self._token: trio.lowlevel.TrioToken | None = None
         self._flush_due = False
-        # the settings last sent to every shard (server.fabric.settings): sent again when they change
+        # the settings last sent to every shard (server.fabric.settings): sent again when they change, with
+        # a newer stamp than those held here
         self._told = (server.world.settings, server.world.report_interval)
+        self.settings_stamp = shared.START
         self._pending: dict[int, list[bytes]] = {}  # shard -> its batches not merged yet, in arrival order
         self._pending_lock = threading.Lock()  # appended on the fabric's thread, taken on the loop
         self.key_asked = [False] * shards  # a key batch asked for after a lost batch, not come yet
         self.route = list(range(shards))
+        self._own_route = list(range(shards))  # every shard animates its own
         self.heard_at = [-math.inf] * shards  # server time of each shard's last pulse
         self.last_seq = [-1] * shards  # of its pulses (ticks)
         self.blocks = -(-n // block)  # index blocks: a shard's pose topics
@@ -496,6 +505,7 @@ class FrontNode:
         self.known = np.zeros(n, bool)  # created or removed here, or told so by a front-end: not learned
         self._unknown: dict[int, set[int]] = {}  # shard asked -> its batches' soldiers not in the books
         self._stood_for: dict[int, set[int]] = {}  # shard failed over -> the other homes it animated
+        self._followed: dict[int, int] = {}  # shard failed over by another front-end -> that front-end
         self.batches = 0  # merged
         self.skipped = 0  # lost on the fabric (or dropped from a full queue)
         self.failovers = 0
@@ -665,7 +675,7 @@ class FrontNode:
         if not batches:
             return np.zeros(0, np.int64)
         self.batches += len(batches)
-        batches = [self.fences.clean(b) for b in batches]  # (after _heard: a sync there moves the fences)
+        batches = [self._routed(self.fences.clean(b)) for b in batches]  # (after _heard: a sync moves fences)
         rows = np.concatenate([b.indices for b in batches]).astype(np.int64)
         if merge(board, batches, tick, m.table.alive, self.watching):
             changed = rows[
@@ -686,13 +696,24 @@ class FrontNode:
                 self._token.run_sync_soon(self.server.publish_fed)
         return changed
 
+    def _routed(self, b: Batch) -> Batch:
+        """``b`` without the rows of soldiers whose home is routed to another shard than ``b``'s: a shard
+        failed over that this front-end still hears (a split fabric, a shard that resumes before the
+        take-back) animates copies that nobody drives."""
+        if self.route == self._own_route or not len(b.indices):
+            return b
+        ok = np.asarray(self.route)[Sharding.home(b.indices, self.shards)] == b.shard
+        if ok.all():
+            return b
+        return dataclasses.replace(b, indices=b.indices[ok], tables=b.tables[ok], codes=b.codes[ok])
+
     def _answers_first(self, batches: list[Batch]) -> tuple[list[Batch], list[Batch]]:
         """``(now, held)``: the answers among ``batches`` to merge now, before the ticks' batches that came
         with them (issue 21: a client whose answer was merged with a tick waited for the encode of that
         tick's rows, its own client's and the others'), and the rest: each shard's answers that came before
         its first tick's batch here (a shard's batches merge in order); while a shard stands in for another,
         all now (their rows may overlap)."""
-        if self.route != list(range(self.shards)):
+        if self.route != self._own_route:
             return batches, []
         now: list[Batch] = []
         held: list[Batch] = []
@@ -756,18 +777,20 @@ class FrontNode:
 
     def _pulse(self, b: Batch, now: float) -> None:
         """Shard ``b.shard``'s tick: it lives; heard for the first time, or back (a restart: its count went
-        back; or it had failed over), it gets a sync."""
+        back; or it had failed over), it gets a sync; not while another front-end's fail-over of it stands
+        (:meth:`follow`)."""
         k = b.shard
         first = self.heard_at[k] == -math.inf
         back = first or b.seq < self.last_seq[k] or self.route[k] != k
         self.last_seq[k], self.heard_at[k] = b.seq, now
-        if back:
+        if back and k not in self._followed:
             stood_in = self.route[k]
             self.route[k] = k
             if stood_in != k:  # it stood in for k: k's soldiers go home
                 for i in self._homed(k).tolist():
                     self._send(stood_in, req.remove(i, int(self.gen[i])))
                 self._send(stood_in, req.homes(self._animated_by(stood_in)))
+                self._book(req.back(k))  # a fail-over the others followed stands no more
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
             # it stood in for other shards before it went (hung): their soldiers live elsewhere now
             moved = [h for h in self._stood_for.pop(k, set()) if self.route[h] != k]
@@ -812,7 +835,7 @@ class FrontNode:
         return not np.isin(scope, idx).all()
 
     def _fail_over(self, now: float) -> None:
-        alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
+        alive = [k for k in range(self.shards) if self._hears(k, now)]
         heard = [at > -math.inf for at in self.heard_at]
         for k, survivor, homes in books.rerouted(self.route, alive, heard):
             self._failed(k, survivor, homes, now)
@@ -826,21 +849,33 @@ class FrontNode:
         self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
         self._sync(survivor, homes)
 
-    def follow(self, down: int, to: int) -> None:
-        """Another front-end failed shard ``down`` over to ``to``: fail it over here too, unless this one
-        heard it within ``FOLLOW_S`` (two front-ends routed a hung shard's requests differently for up to
-        the hung limit, each deciding on its own clock; one that hears the shard keeps it: a take-back would
-        take its soldiers from the stand-in the other front-end routes to)."""
+    def follow(self, down: int, to: int, by: int) -> None:
+        """Front-end ``by`` failed shard ``down`` over to ``to``: fail it over here too, and keep it failed
+        over while that fail-over stands, even if this front-end hears the shard (two front-ends routed a
+        hung shard's requests differently for up to the hung limit, each deciding on its own clock; with a
+        split fabric, for as long as the split lasted: one that still heard the shard kept routing to it,
+        while the other's clients saw the stand-in's soldiers). It stands until a front-end takes the
+        shard's soldiers back (:meth:`took_back`) or ``by`` is gone from the fabric."""
         now = self.server.now()
         if not (0 <= down < self.shards and 0 <= to < self.shards) or down == to:
             return
-        if self.present[down] and now - self.heard_at[down] < FOLLOW_S:
-            return
         homes = [h for h, r in enumerate(self.route) if r == down]
         if homes:
+            self._followed[down] = by
             for h in homes:
                 self.route[h] = to
             self._failed(down, to, homes, now)
+
+    def took_back(self, k: int) -> None:
+        """Another front-end heard shard ``k`` again and took its soldiers back from the stand-in: this one
+        takes them back at ``k``'s next pulse (its own last requests replayed), or, if it does not hear
+        ``k``, fails it over itself (the stand-in has let them go)."""
+        self._followed.pop(k, None)
+        if 0 <= k < self.shards and self.route[k] != k and not self._hears(k, self.server.now()):
+            self.route[k] = k  # (the next _fail_over hands its soldiers to a survivor again)
+
+    def _hears(self, k: int, now: float) -> bool:
+        return self.present[k] and now - self.heard_at[k] <= self.hung_s
 
     def _settings_told(self) -> None:
         """The server-wide settings changed (an operator's JCL): every shard takes them, and every other
@@ -848,10 +883,27 @@ class FrontNode:
         world = self.server.world
         if world.settings is not self._told[0] or world.report_interval != self._told[1]:
             self._told = (world.settings, world.report_interval)  # (a new value when one changes)
-            op = req.settings(shared.of(world))
+            self.settings_stamp = shared.stamp(self.settings_stamp, self.front.k)
+            op = self._settings_op()
             for k in range(self.shards):
                 self._send(k, op)
             self._book(op)
+
+    def _settings_op(self) -> req.Op:
+        return req.settings(shared.of(self.server.world), self.settings_stamp)
+
+    def _settings_learned(self, values: dict[str, object], stamp: shared.Stamp) -> None:
+        """Settings another front-end told, or a shard's answer carried: taken if newer than those here (the
+        shards have them already, or the newer ones from here)."""
+        if stamp <= self.settings_stamp:
+            return
+        try:
+            shared.apply(self.server.world, values)
+        except (ValueError, TypeError) as exc:
+            log.warning("fabric_settings_refused", front=self.front.k, error=str(exc))
+            return
+        self._told = (self.server.world.settings, self.server.world.report_interval)
+        self.settings_stamp = stamp
 
     def _homed(self, k: int) -> np.ndarray:
         """The live soldiers whose home is shard ``k``."""
@@ -885,7 +937,7 @@ class FrontNode:
         gone = [*removed.tolist(), *elsewhere.tolist()]
         gone_gens = [*self.gen[removed].tolist(), *(self.gen[elsewhere] + 1).tolist()]  # (those live on)
         animates = None if made else self._animated_by(shard)  # (a shard heard first: the stand-in knows)
-        self._send(shard, req.settings(shared.of(self.server.world)))
+        self._send(shard, self._settings_op())  # (the shard keeps newer ones: a change made elsewhere)
         gens = self.gen[idx].tolist()
         self._send(
             shard,
@@ -957,17 +1009,19 @@ class FrontNode:
 
     def _mirror_one(self, op: req.Op) -> None:
         try:
-            if op["op"] == "clients":  # (an anonymous id is one connection's there, another client here)
+            if op["op"] == "clients":  # (an anonymous id is one connection's, never connected here)
                 for cid, n in op["counts"].items():
                     if not cid.startswith(ANONYMOUS):
                         self._count(int(op["front"]), cid, n)
                 return
             if op["op"] == "failover":
-                self.follow(int(op["down"]), int(op["to"]))
+                self.follow(int(op["down"]), int(op["to"]), int(op["front"]))
+                return
+            if op["op"] == "back":
+                self.took_back(int(op["shard"]))
                 return
             if op["op"] == "settings":  # the shards have them from that front-end
-                shared.apply(self.server.world, op["values"])
-                self._told = (self.server.world.settings, self.server.world.report_interval)
+                self._settings_learned(op["values"], shared.stamp_of(op))
                 return
             i = int(op["index"])
             self._touch(i)
@@ -995,15 +1049,19 @@ class FrontNode:
         if present:
             if self.elsewhere.told:
                 self._book(req.clients(dict(self.elsewhere.told)))
+            if self.settings_stamp > shared.START:  # (an operator's change: it may have started since)
+                self._book(self._settings_op())
             return
         for cid in list(self.elsewhere.counts[j]):
             self._count(j, cid, 0)
+        for k in [k for k, by in self._followed.items() if by == j]:  # its fail-overs stand no more
+            del self._followed[k]
         self.server.orphans_check()
 
     def _connections(self, client_id: str) -> None:
         """The owners' hook: ``client_id``'s connections changed; tell the others this front-end's own."""
         assert self.elsewhere is not None
-        if client_id.startswith(ANONYMOUS):  # one connection's (numbered per process): not theirs
+        if client_id.startswith(ANONYMOUS):  # one connection's, of this server: nothing to the others
             return
         own = self.elsewhere.own(client_id, self.server.world.owners.connected.get(client_id, 0))
         if own is not None:
@@ -1080,6 +1138,8 @@ class FrontNode:
         self.last[last["index"]] = last  # what a fail-over of this front-end hands on
         self.has_last[last["index"]] = True
         log.info("fabric_books_learned", front=self.front.k, shard=k, dropped=len(drop), learned=len(add))
+        if isinstance(msg.get("settings"), dict):  # an operator's change made before it started
+            self._settings_learned(msg["settings"], shared.stamp_of(msg))
         if self.elsewhere is not None:  # soldiers of ids gone while it was away: their grace starts now
             self.server.orphans_check()
 
@@ -1104,7 +1164,7 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.taken(index)
-        self.gen[index] += 1
+        self.gen[index] = after(int(self.gen[index]))
         op = req.create(index, figure, weapon, owner, int(self.gen[index]))
         self._send(self._shard_of(index), op)
         self._book_fenced(op, index)
@@ -1115,7 +1175,7 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.freed(index)
-        self.gen[index] += 1
+        self.gen[index] = after(int(self.gen[index]))
         op = req.remove(index, int(self.gen[index]))
         self._send(self._shard_of(index), op)
         self._book_fenced(op, index)

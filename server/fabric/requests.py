@@ -11,13 +11,14 @@ late, restarted or takes over another's soldiers (failover) needs to animate the
 own soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
 soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for one
 too; ``homes`` (shards): the homes it animates now (a fail-over's stand-in, told again when one goes
-home; a sync carries them too); ``settings`` (values): the front-end's server-wide settings (when they
-change, and before each sync); ``books`` (front): answer on ``ttes/books`` with every soldier the shard
-animates, for front-end ``front`` that has just heard the shard for the first time
+home; a sync carries them too); ``settings`` (values, stamp): the front-end's server-wide settings (when
+they change, and before each sync; the newest stamp wins); ``books`` (front): answer on ``ttes/books``
+with every soldier the shard animates, for front-end ``front`` that has just heard the shard first
 (:mod:`server.fabric.fronts`); ``fence`` (front, serial): the end of a message that created or removed
 soldiers, echoed in the batches (:class:`~server.fabric.fronts.Fences`); on ``ttes/fronts`` only,
-``clients`` (counts): a front-end's connections of client ids, ``failover`` (down, to, homes). The topic
-is reliable: ownership and requests are never lost once a shard listens, and a sync covers the time before.
+``clients`` (counts): a front-end's connections of client ids, ``failover`` (down, to, homes), ``back``
+(shard): a fail-over ended. The topic is reliable: ownership and requests are never lost once a shard
+listens, and a sync covers the time before.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ OPS = (
     "homes",
     "settings",
     "failover",
+    "back",
 )
 Op = dict[str, Any]
 
@@ -78,8 +80,9 @@ def sync(
     ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in); ``gone``:
     soldiers removed, which the shard removes if it has them; ``homes``: as :func:`homes` (None: kept);
     ``gens`` and ``gone_gens``: the generation of each soldier and of each removal (an index's creations and
-    removals count up, through every front-end: a removal removes only a soldier created before it, not
-    one created again through another front-end that the sender has not heard of yet)."""
+    removals count up, through every front-end and past a front-end's restart: :mod:`server.fabric.stamps`;
+    a removal removes only a soldier created before it, not one created again through another front-end
+    that the sender has not heard of yet)."""
     rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
     op = {
         "op": "sync",
@@ -95,16 +98,23 @@ def sync(
     return op if homes is None else {**op, "homes": list(homes)}
 
 
-def settings(values: dict[str, Any]) -> Op:
+def settings(values: dict[str, Any], stamp: tuple[int, int] = (0, -1)) -> Op:
     """The front-end's server-wide settings (:func:`server.fabric.settings.of`): the shards animate, so an
-    operator's JCL and the front-end's own ``--throttle`` apply there."""
-    return {"op": "settings", "values": values}
+    operator's JCL and the front-end's own ``--throttle`` apply there; taken where they are at least as new
+    (``stamp``: :data:`server.fabric.settings.Stamp`) as those held."""
+    return {"op": "settings", "values": values, "stamp": list(stamp)}
 
 
 def failover(down: int, to: int, homes: list[int]) -> Op:
     """On ``ttes/fronts``: a front-end failed shard ``down`` over to ``to`` (``homes``: the shards whose
     soldiers went): the others follow unless they heard ``down`` lately (``FrontNode.follow``)."""
     return {"op": "failover", "down": down, "to": to, "homes": list(homes)}
+
+
+def back(shard: int) -> Op:
+    """On ``ttes/fronts``: a front-end heard shard ``shard`` again and took its soldiers back from the
+    stand-in: the others' following of its fail-over ends (``FrontNode.took_back``)."""
+    return {"op": "back", "shard": shard}
 
 
 def homes(shards: list[int]) -> Op:

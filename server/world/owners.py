@@ -19,12 +19,13 @@ its own (:attr:`Owners.on_connections`), which join and leave here as the id's c
 
 from __future__ import annotations
 
+import secrets
 from collections.abc import Callable
 
 import numpy as np
 
 SHARED = -1  # owner code of a soldier no client owns (the start-up script's)
-ANONYMOUS = "~anon-"  # + a session number: a client that gave no id (one connection of one process)
+ANONYMOUS = "~anon-"  # + the server's mark and a session number: a client that gave no id (one connection)
 FULL_SIGHT = frozenset({"observer", "operator"})
 
 
@@ -41,6 +42,14 @@ class Owners:
         self.connected: dict[str, int] = {}  # client id -> open connections
         self.deadline: dict[str, float] = {}  # gone client id -> when its soldiers are removed
         self.on_connections: Callable[[str], None] | None = None  # told after an id's connections change
+        # this server's mark in its anonymous ids: a process numbers its sessions from 1, in every front-end
+        # and again after a restart (two front-ends' ``~anon-1`` were one owner in both books: each client
+        # could drive and remove the other's soldiers; a restarted front-end's took those of the one before)
+        self.mark = secrets.token_hex(4)
+
+    def anonymous(self, session: int) -> str:
+        """The client id of this server's session ``session``, whose client gave none."""
+        return f"{ANONYMOUS}{self.mark}-{session}"
 
     def code_of(self, client_id: str) -> int:
         """A small integer per client id that owns soldiers (given back when it owns none and is gone, so
