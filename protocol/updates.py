@@ -510,7 +510,7 @@ class UpdateEncoder:
             rows = self._rows_v1(q, last, changed, known)
         payloads = self._chunks(idx, rows, tick, max_payload)
         self._hlast, self._hknown = self._hlast.writable(), self._hknown.writable()
-        self._last[idx] = q
+        set_rows(self._last, idx, q)
         self._known[idx] = True
         if self.version >= 2:
             self._hbefore = self._hbefore.writable()
@@ -523,10 +523,10 @@ class UpdateEncoder:
         until now (or, for an entry sent absolute, the code sent), at ``tick``."""
         nf = last.shape[1]
         before = self._before
-        before[idx, :nf] = last
+        set_rows(before[:, :nf], idx, last)
         before[idx, nf] = predicted.tick_code(tick)
         if len(rows.restart_rows):
-            before[idx[rows.restart_rows], :nf] = rows.restart
+            set_rows(before[:, :nf], idx[rows.restart_rows], rows.restart)
 
     def _rows_v1(
         self, q: np.ndarray, last: np.ndarray, changed: np.ndarray, known: np.ndarray
@@ -608,6 +608,19 @@ class UpdateEncoder:
                 )
             )
         return out
+
+
+def set_rows(a: np.ndarray, idx: np.ndarray, rows: np.ndarray) -> None:
+    """``a[idx] = rows`` for an (N, F) ``a`` whose rows are contiguous (a column slice of a wider array too)
+    and C-contiguous (n, F) ``rows``: each row moved as one element of its F fields' bytes. numpy's fancy
+    assignment of rows steps through each row's fields: a third dearer at 64 int32 fields (the encoder's
+    state, written for every soldier sent)."""
+    f = a.shape[1]
+    if not f or a.dtype != rows.dtype or a.strides[1] != a.itemsize or not rows.flags.c_contiguous:
+        a[idx] = rows
+        return
+    row = np.dtype((np.void, a.itemsize * f))
+    a.view(row)[idx] = rows.view(row)
 
 
 def _checked(version: int) -> int:
