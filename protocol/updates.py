@@ -31,6 +31,7 @@ from protocol.bitpack import (
     place_groups,
     read_groups,
     scratch,
+    set_rows,
     split_groups,
 )
 from protocol.errors import ErrorCode, WireError
@@ -608,19 +609,6 @@ class UpdateEncoder:
                 )
             )
         return out
-
-
-def set_rows(a: np.ndarray, idx: np.ndarray, rows: np.ndarray) -> None:
-    """``a[idx] = rows`` for an (N, F) ``a`` whose rows are contiguous (a column slice of a wider array too)
-    and C-contiguous (n, F) ``rows``: each row moved as one element of its F fields' bytes. numpy's fancy
-    assignment of rows steps through each row's fields: a third dearer at 64 int32 fields (the encoder's
-    state, written for every soldier sent)."""
-    f = a.shape[1]
-    if not f or a.dtype != rows.dtype or a.strides[1] != a.itemsize or not rows.flags.c_contiguous:
-        a[idx] = rows
-        return
-    row = np.dtype((np.void, a.itemsize * f))
-    a.view(row)[idx] = rows.view(row)
 
 
 def _checked(version: int) -> int:

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from protocol.bitpack import bit_starts, pack_bits, unpack_bits
+from protocol.bitpack import bit_starts, pack_bits, set_rows, take_rows, unpack_bits
 from protocol.errors import ErrorCode, WireError
 from protocol.events import JointUpdates
 from protocol.update_table import (
@@ -21,7 +21,7 @@ from protocol.update_table import (
     table_from_wire,
     table_to_wire,
 )
-from protocol.updates import UpdateDecoder, UpdateEncoder, dequantise, quantise, set_rows
+from protocol.updates import UpdateDecoder, UpdateEncoder, dequantise, quantise
 
 BIG = 1 << 20
 DI = example_di_table()
@@ -361,3 +361,5 @@ def test_set_rows_writes_what_fancy_assignment_writes() -> None:
             set_rows(a[:, cols], idx, r)
             b[idx, cols] = r
             np.testing.assert_array_equal(a, b)
+        for src in (a, a[:, cols]):  # rows taken whole, or (not contiguous) by fancy indexing
+            np.testing.assert_array_equal(take_rows(src, idx), src[idx])
