@@ -256,3 +256,26 @@ def split_groups(groups: np.ndarray, widths: np.ndarray, g: int) -> np.ndarray:
         np.copyto(out[:, :, j], x, casting="unsafe")
         np.add(used, w[:, :, j], out=used, dtype=_U64)
     return out.reshape(n, c)
+
+
+def set_rows(a: np.ndarray, idx: np.ndarray, rows: np.ndarray) -> None:
+    """``a[idx] = rows`` for an (N, F) ``a`` whose rows are contiguous (a column slice of a wider array too)
+    and C-contiguous (n, F) ``rows``: each row moved as one element of its F fields' bytes. numpy's fancy
+    assignment of rows steps through each row's fields: a third dearer at 64 int32 fields (the encoder's
+    state, written for every soldier sent)."""
+    f = a.shape[1]
+    if not f or a.dtype != rows.dtype or a.strides[1] != a.itemsize or not rows.flags.c_contiguous:
+        a[idx] = rows
+        return
+    row = np.dtype((np.void, a.itemsize * f))
+    a.view(row)[idx] = rows.view(row)
+
+
+def take_rows(a: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """``a[idx]`` (a new C-contiguous array) for a C-contiguous (N, F) ``a``, each row taken as one element of
+    its fields' bytes: about half the CPU of numpy's fancy indexing of rows at 64 int32 fields."""
+    f = a.shape[1]
+    if not f or not a.flags.c_contiguous:
+        return a[idx]
+    row = np.dtype((np.void, a.itemsize * f))
+    return np.take(a.view(row), idx, axis=0).view(a.dtype).reshape(len(idx), f)

@@ -54,6 +54,7 @@ import trio
 
 from protocol.connection import State
 from server.config import ConfigError, ServerConfig
+from server.gc_freeze import freeze_loaded
 from server.listen import bind_tcp
 from server.logging import get_logger
 from server.pending_requests import PendingRequests
@@ -137,6 +138,9 @@ class TtesServer:
         self._bound_ws: list[Any] = []  # and the WebSocket port's
         self.on_tick: Callable[[Any], None] | None = None  # test hook: called with each TickUpdate
         self.cpu = StageCpu()  # the loop's CPU per stage, in the status log line
+        # a server process's (the CLI's): the loaded library frozen out of the GC's full collections
+        self.freeze_gc = False
+        self._frozen_library: object | None = None
         self.deaf = DeafSpans() if os.environ.get("TTES_DEAF") == "1" else None  # a bench's: loop_deaf_ms
         # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
         self.on_publish: Callable[[PoseBoard, bool], None] | None = None
@@ -193,6 +197,7 @@ class TtesServer:
 
     def _on_ready(self, caller: object | None) -> None:
         self._board()
+        self._freeze_library()
         for s in self.sessions.values():
             if s is caller or not s.ready_sent:
                 s.send_ready()
@@ -250,6 +255,7 @@ class TtesServer:
         if self.config.report_interval is not None:
             self.world.set_report_interval(self.config.report_interval)
         self._board()
+        self._freeze_library()
         m = self.world.manager
         log.info(
             "startup_done",
@@ -258,6 +264,14 @@ class TtesServer:
             soldiers=m.count if m else 0,
             data_dir=str(self.world.data_dir),
         )
+
+    def _freeze_library(self) -> None:
+        """With ``freeze_gc``: once a library is loaded (by the start-up script, or later for the first
+        READY), keep what the loading made out of the GC's full collections (:mod:`server.gc_freeze`)."""
+        library = self.world.soldiers.library
+        if self.freeze_gc and library is not None and library is not self._frozen_library:
+            self._frozen_library = library
+            freeze_loaded()
 
     def bind(self) -> None:
         """Bind the listening sockets now, before :meth:`start_world` loads anything: a port in use fails at

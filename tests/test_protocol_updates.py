@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from protocol.bitpack import bit_starts, pack_bits, unpack_bits
+from protocol.bitpack import bit_starts, pack_bits, set_rows, take_rows, unpack_bits
 from protocol.errors import ErrorCode, WireError
 from protocol.events import JointUpdates
 from protocol.update_table import (
@@ -346,3 +346,20 @@ def test_a_client_that_does_not_decode_updates_gets_their_headers_and_frame_size
     ev = client.next_event()
     assert isinstance(ev, UpdateHeaders) and (ev.table, ev.tick) == (DI.table_id, 7)
     assert ev.indices.tolist() == [1, 3] and client.frame_bytes == len(data)
+
+
+def test_set_rows_writes_what_fancy_assignment_writes() -> None:
+    """The encoder's state rows moved whole (``set_rows``): into a column slice of a wider array too, and
+    from rows that are not contiguous (the plain assignment then)."""
+    rng = np.random.default_rng(5)
+    idx = np.array([7, 0, 3, 12])
+    for cols in (slice(None), slice(0, 5)):
+        a = rng.integers(0, 99, (16, 6)).astype(np.int32)
+        b = a.copy()
+        rows = rng.integers(0, 99, (4, 6)).astype(np.int32)[:, cols]
+        for r in (np.ascontiguousarray(rows), rows[:, ::-1]):
+            set_rows(a[:, cols], idx, r)
+            b[idx, cols] = r
+            np.testing.assert_array_equal(a, b)
+        for src in (a, a[:, cols]):  # rows taken whole, or (not contiguous) by fancy indexing
+            np.testing.assert_array_equal(take_rows(src, idx), src[idx])

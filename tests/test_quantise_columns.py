@@ -52,6 +52,31 @@ def test_random_poses_give_the_reference_codes() -> None:
         np.testing.assert_array_equal(quantise(DI, d, p, q), reference(DI, d, p, q))
 
 
+def in_range_poses(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """DOFs and positions within their fields' ranges (nothing to clip), quaternions of any scale and sign."""
+    lay, rng = DI.layout, np.random.default_rng(seed)
+    hi = lay.lo + lay.step * lay.max_code
+    dofs = rng.uniform(lay.lo[lay.dof_fields], hi[lay.dof_fields], (n, DI.ndofs))
+    pos = rng.uniform(lay.lo[lay.pos_fields], hi[lay.pos_fields], (n, DI.nfigures, 3))
+    quat = rng.normal(size=(n, DI.nfigures, 4)) * rng.uniform(0.01, 100.0, (n, DI.nfigures, 1))
+    return dofs, pos, quat
+
+
+@pytest.mark.parametrize("n", [1, 16, 37])
+def test_one_value_out_of_range_is_clipped_in_any_row(n: int) -> None:
+    """Most ticks clip nothing and skip the clip (``updates._needs_clip``): one value below or above its
+    field's range, in any row (of the blocks of 16 the check reads, or of the rest), still clips."""
+    d, p, q = in_range_poses(n, n)
+    np.testing.assert_array_equal(quantise(DI, d, p, q), reference(DI, d, p, q))
+    for row in sorted({0, n // 2, n - 1}):
+        for value in (-1e6, 1e6):
+            d2, p2 = d.copy(), p.copy()
+            d2[row, (row * 7) % DI.ndofs] = value
+            p2[row, 0, row % 3] = value
+            for dofs, pos in ((d2, p), (d, p2)):
+                np.testing.assert_array_equal(quantise(DI, dofs, pos, q), reference(DI, dofs, pos, q))
+
+
 def test_ties_signs_and_half_steps_give_the_reference_codes() -> None:
     h = math.sqrt(0.5)
     quats = [

@@ -157,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
         server = TtesServer(cfg)
         server.bind()  # a port in use fails here, at once and naming host:port, before the data loads
+        server.freeze_gc = True  # the loaded library out of the GC's full collections (server.gc_freeze)
         server.start_world()  # a bad script or data dir fails here, before accepting
         start_fabric, close_fabric = _fabric_node(server, plan, args.fabric_block)
 
