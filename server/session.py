@@ -370,10 +370,12 @@ class Session:
         return max(-self.tokens / rate, 1e-3)
 
     def handle(self, ev: Event) -> None:
-        if self.pending is not None and (self.pending.holds(self) or not isinstance(ev, EntityRequests)):
+        pending = self.pending
+        if pending is not None and (not isinstance(ev, EntityRequests) or not pending.may_join(self)):
             # held requests first: nothing overtakes a request, and one frame's errors (a bad value closes the
-            # session) come before this client's next message is handled, as when each was applied at once
-            self.pending.apply()
+            # session) come before this client's next message is handled, as when each was applied at once;
+            # its next request frames join the held ones (server.pending_requests: queued frames, one batch)
+            pending.apply()
             if self.closing:
                 return
         try:

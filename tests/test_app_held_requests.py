@@ -84,6 +84,34 @@ async def test_a_bad_request_closes_the_session_before_its_next_frame_is_applied
         assert int(m.table.weapon[1]) == W.DEPLOYED
 
 
+async def test_request_frames_queued_in_a_socket_are_applied_as_one_batch(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """A client's request frames that queued up in its socket (the server could not run: a loaded machine)
+    are applied as one batch, not one frame at a time: after a 4-s spell, one by one, each frame paid for
+    bringing its soldiers up over the whole wait, 329 ms of CPU for 40 frames at 5,000 soldiers in one
+    reader turn, against 42 ms as one batch, and the tick starved behind such turns (issue 16's 2-second
+    spike). Order is kept: a soldier asked twice does the later."""
+    async with running_server(throttle=0.0) as server:
+        c = await watching(server)
+        await trio.sleep_until(server._t0 + 1.01)
+        applied = server.world.manager.apply_requests
+        calls: list[int] = []
+
+        def counting(rows: np.ndarray, now: float) -> np.ndarray:
+            calls.append(len(rows))
+            return applied(rows, now)
+
+        server.world.manager.apply_requests = counting  # type: ignore[method-assign]
+        frames = [c.conn.send(EntityRequests(make_entity_requests(k, A.KNEEL))) for k in range(6)]
+        frames.append(c.conn.send(EntityRequests(make_entity_requests(1, A.PRONE))))  # 1 again: prone
+        os.write(c.stream.socket.fileno(), b"".join(frames))
+        await c.expect(JointUpdates, lambda e: 0 in e.indices.tolist())
+        assert calls == [7]  # one batch of the 7 rows (on main: [1, 1, 1, 1, 1, 1, 1])
+        m = server.world.manager
+        assert [int(m.table.appearance[k]) for k in range(6)] == [A.KNEEL, A.PRONE, *[A.KNEEL] * 4]
+
+
 async def test_an_answer_is_written_before_the_next_readers_requests_are_applied(
     autojump_clock: trio.abc.Clock,
 ) -> None:

@@ -419,3 +419,18 @@ async def test_generators_in_step_say_ready_then_wait_for_the_gate(autojump_cloc
         assert ready.exists() and not passed
         gate.touch()
     assert passed and passed[0] >= 5.0
+
+
+def test_a_spawned_server_has_room_for_more_soldiers_than_its_default_indices() -> None:
+    """20,000 soldiers: more than the 16,384 indices a server has by default (the run failed with "all
+    16384 soldier indices are in use"); the wire's 65,536 at most."""
+    import contextlib
+    from pathlib import Path
+
+    from client_stub.loadtest.session import owner_limit
+
+    with contextlib.ExitStack() as stack:
+        assert owner_limit(1000, stack) == []
+        text = Path(owner_limit(20000, stack)[1]).read_text()
+        assert "max_soldiers_per_client = 20000" in text and "max_soldiers = 21024" in text
+        assert "max_soldiers = 65536" in Path(owner_limit(70000, stack)[1]).read_text()

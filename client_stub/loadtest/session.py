@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import math
+import os
 import tempfile
 import time
 from collections.abc import Callable, Iterator
@@ -32,11 +33,14 @@ from client_stub.link.auth import Credentials
 from client_stub.link.spawn import ServerProcess, cpu_seconds, self_cpu_seconds, spawn_server
 from client_stub.loadtest.client import LoadClient, LoadError, split_rows
 from client_stub.loadtest.mix import MOVING, MixDriver
+from client_stub.loadtest.observe import run_queue_seconds
 from client_stub.loadtest.role import STATUS_EVERY_S, STATUS_JCL, server_role
 from client_stub.loadtest.stats import GRACE_TICKS, Tracker, series, summarise
-from protocol.events import Ready, ticks_per_update
+from protocol.events import DEFAULT_MAX_SOLDIERS, Ready, ticks_per_update
+from protocol.messages import MAX_SOLDIERS_LIMIT
 
 MAX_STAGES = 40
+STARTUP_ROOM = 1024  # soldier indices left to the spawned server's start-up script beside the load's
 Progress = Callable[[float, float | None, str], None]  # (seconds done, in all: None unknown, stage)
 # The ramp's default latency bound: DIS's budget for tightly coupled interactions (IEEE 1278.2: 100 ms from
 # one simulator's action to another's display). A request's first update waits up to one server tick (33 ms
@@ -109,8 +113,12 @@ class LoadTestResult:
 class LoadSession:
     """The connections, the mix driver and the tracker of one run (or one ramp)."""
 
-    def __init__(self, cfg: LoadTestConfig, server_cpu: Any = None, *, buffer_updates: bool = False) -> None:
-        """``buffer_updates``: the clients keep decoded poses for a renderer (see :class:`LoadClient`)."""
+    def __init__(
+        self, cfg: LoadTestConfig, server_cpu: Any = None, *, buffer_updates: bool = False,
+        server_pid: int | None = None,
+    ) -> None:  # fmt: skip
+        """``buffer_updates``: the clients keep decoded poses for a renderer (see :class:`LoadClient`);
+        ``server_pid``: a server on this machine, whose run-queue waits the worst probes' account gives."""
         self.cfg = cfg
         self.clients = [
             LoadClient(k, self._on_updates, decode=cfg.decode, buffer_updates=buffer_updates)
@@ -126,6 +134,7 @@ class LoadSession:
         nsub = cfg.clients
         self.tracker = Tracker(cfg.rate_hz, nsub)
         self.server_cpu = server_cpu or (lambda: math.nan)
+        self.server_pid = server_pid
         self.index = np.zeros(0, np.int64)  # slot -> server index
         self.owner = np.zeros(0, np.int64)  # slot -> connection
         self.slot_of = np.full(1 << 16, -1, np.int64)  # server index -> slot
@@ -230,13 +239,18 @@ class LoadSession:
         self.tracker.rec.requests_sent.append((self.now(), float(len(rows))))
 
     def sample_cpu(self) -> None:
-        self.tracker.rec.cpu.append((self.now(), self.server_cpu(), self_cpu_seconds()))
+        now = self.now()
+        self.tracker.rec.cpu.append((now, self.server_cpu(), self_cpu_seconds()))
+        self.tracker.rec.waits.append(
+            (now, run_queue_seconds(self.server_pid), run_queue_seconds(os.getpid()))
+        )
 
     async def drive(self, until: float) -> None:
         """Step the mix until session time ``until``: requests, probes, CPU samples."""
         times = step_times(trio.current_time(), 1.0 / self.cfg.step_hz, self.jitter)
         begin = self.now()
-        await trio.sleep_until(next(times))
+        due = next(times)
+        await trio.sleep_until(due)
         while self.now() < until:
             if self.progress is not None:
                 self.progress(self.now() - begin, until - begin, self.stage)
@@ -247,10 +261,14 @@ class LoadSession:
             if len(ch):
                 was_static = ~MOVING[step.previous]
                 probe = was_static & self.tracker.settled(t, ch)
-                self.tracker.activity(t, ch, MOVING[self.driver.activity[ch]], probe)
+                now_doing = self.driver.activity[ch]
+                change = step.previous.astype(np.int64) * 16 + now_doing
+                self.tracker.activity(t, ch, MOVING[now_doing], probe, change)
             await self._send(step.rows)
+            self.tracker.rec.steps.append((due - self.t0, t, self.now()))
             self.sample_cpu()
-            await trio.sleep_until(next(times))
+            due = next(times)
+            await trio.sleep_until(due)
         if self.progress is not None:
             self.progress(until - begin, until - begin, self.stage)
 
@@ -270,6 +288,8 @@ class LoadSession:
         out = summarise(arr, self.rate, t0, t1, self.cfg.clients, self.every)
         out.update(ready_tick_hz=self.rate, ready_throttle=self.throttle, ticks_per_update=self.every)
         out["probes_pending"] = int((~np.isnan(self.tracker.probe_at)).sum())
+        for p in out["worst_probes"]:  # the server's index too, to find him in its log
+            p["soldier"] = int(self.index[p["slot"]])
         return out
 
     def series(self, t0: float, t1: float) -> dict[str, list[float]]:
@@ -318,9 +338,15 @@ def failed_on(cfg: LoadTestConfig, s: dict[str, Any]) -> str:
 
 
 async def _run(
-    cfg: LoadTestConfig, host: str, port: int, server_cpu: Any, remove: bool, progress: Progress | None = None
+    cfg: LoadTestConfig,
+    host: str,
+    port: int,
+    server_cpu: Any,
+    remove: bool,
+    progress: Progress | None = None,
+    server_pid: int | None = None,
 ) -> dict[str, Any]:
-    session = LoadSession(cfg, server_cpu)
+    session = LoadSession(cfg, server_cpu, server_pid=server_pid)
     session.progress, session.stage = progress, f"N={cfg.soldiers}"
     out: dict[str, Any] = {}
     async with trio.open_nursery() as nursery:
@@ -426,12 +452,19 @@ def server_args(tick_hz: float, throttle: float | None) -> list[str]:
 
 def owner_limit(soldiers: int, stack: contextlib.ExitStack) -> list[str]:
     """``--config`` raising the spawned server's soldiers per client id (4096 by default) to ``soldiers``:
-    the load generator's first client creates them all (the file lives until ``stack`` closes)."""
-    if soldiers <= MAX_SOLDIERS_PER_CLIENT:
+    the load generator's first client creates them all; and its soldier indices (16,384 by default, the
+    start-up script's soldiers among them) to make room for them, up to the wire's 65,536 (the file lives
+    until ``stack`` closes)."""
+    lines = []
+    if soldiers > MAX_SOLDIERS_PER_CLIENT:
+        lines.append(f"max_soldiers_per_client = {soldiers}")
+    if soldiers + STARTUP_ROOM > DEFAULT_MAX_SOLDIERS:
+        lines.append(f"max_soldiers = {min(MAX_SOLDIERS_LIMIT, soldiers + STARTUP_ROOM)}")
+    if not lines:
         return []
     folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="ttes-loadtest-"))
     path = Path(folder) / "server.toml"
-    path.write_text(f"max_soldiers_per_client = {soldiers}\n", encoding="utf-8")
+    path.write_text("".join(f"{line}\n" for line in lines), encoding="utf-8")
     return ["--config", str(path)]
 
 
@@ -457,16 +490,18 @@ def _run_loadtest(
     server_cpu: Callable[[], float] | None
     try:
         if cfg.spawn_server:
-            args = server_args(cfg.rate_hz, cfg.throttle) + owner_limit(cfg.soldiers, stack)
+            most = max(cfg.soldiers, cfg.ramp_max_soldiers) if cfg.ramp else cfg.soldiers
+            args = server_args(cfg.rate_hz, cfg.throttle) + owner_limit(most, stack)
             server = spawn_server(args, data=cfg.server_data, waiting=_loading(progress))
             host, port = server.host, server.port
             server_cpu = server.cpu_seconds
         else:
             host, port = cfg.host, cfg.port
-            pid = cfg.server_pid
-            server_cpu = (lambda: cpu_seconds(pid)) if pid else None
+            given = cfg.server_pid
+            server_cpu = (lambda: cpu_seconds(given)) if given else None
         try:
-            out = trio.run(_run, cfg, host, port, server_cpu, server is None, progress)
+            pid = server.pid if server is not None else cfg.server_pid
+            out = trio.run(_run, cfg, host, port, server_cpu, server is None, progress, pid)
         except BaseExceptionGroup as group:  # errors inside nurseries arrive grouped
             leaf = first_leaf(group)
             if isinstance(leaf, LoadError | OSError):

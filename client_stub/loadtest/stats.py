@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from client_stub.loadtest.worst import causes_over, worst_probes
+
 GRACE_TICKS = 2.0  # a soldier set moving counts as a steady mover this many ticks after the request
 SETTLE_S = 0.5  # a soldier with no update for this long is at rest: its next update answers a probe
 _KEY_SPAN = 1.0e6  # seconds: composite (slot, time) keys need times below this
@@ -62,6 +64,21 @@ class Recording:
     latency_time: list[np.ndarray] = field(default_factory=list)
     latency: list[np.ndarray] = field(default_factory=list)
     latency_superseded: list[np.ndarray] = field(default_factory=list)  # the answered probe was superseded
+    # and what each answered probe was (for the worst probes' account, :mod:`client_stub.loadtest.worst`):
+    # its slot, connection, the tick of the frame that answered it, and its change (from * 16 + to activity)
+    latency_slot: list[np.ndarray] = field(default_factory=list)
+    latency_conn: list[np.ndarray] = field(default_factory=list)
+    latency_tick: list[np.ndarray] = field(default_factory=list)
+    latency_change: list[np.ndarray] = field(default_factory=list)
+    latency_superseded_at: list[np.ndarray] = field(default_factory=list)  # when (nan: not superseded)
+    frame_conn: list[int] = field(default_factory=list)  # the connection and tick of each JOINT_UPDATES frame
+    frame_tick: list[int] = field(default_factory=list)
+    # the mix driver's steps: (when due, when it ran, when its requests were written): a late step is a load
+    # generator that did not run, a slow write a server that did not read
+    steps: list[tuple[float, float, float]] = field(default_factory=list)
+    # seconds the server's and the load generator's threads waited on a run queue so far (Linux schedstat;
+    # nan if unknown), sampled with the CPU: (time, server, load generator)
+    waits: list[tuple[float, float, float]] = field(default_factory=list)
     # CPU samples: time, server CPU seconds (nan if unknown), load generator CPU seconds
     cpu: list[tuple[float, float, float]] = field(default_factory=list)
     requests_sent: list[tuple[float, float]] = field(default_factory=list)
@@ -78,6 +95,8 @@ class Recording:
             "frame_time": np.asarray(self.frame_time, np.float64),
             "frame_bytes": np.asarray(self.frame_bytes, np.int64),
             "frame_rows": np.asarray(self.frame_rows, np.int64),
+            "frame_conn": np.asarray(self.frame_conn, np.int64),
+            "frame_tick": np.asarray(self.frame_tick, np.int64),
             "ep_slot": cat(self.ep_slot, np.int64),
             "ep_conn": cat(self.ep_conn, np.int64),
             "ep_start": cat(self.ep_start, np.float64),
@@ -86,7 +105,14 @@ class Recording:
             "latency_time": cat(self.latency_time, np.float64),
             "latency": cat(self.latency, np.float64),
             "latency_superseded": cat(self.latency_superseded, np.bool_),
+            "latency_slot": cat(self.latency_slot, np.int64),
+            "latency_conn": cat(self.latency_conn, np.int64),
+            "latency_tick": cat(self.latency_tick, np.int64),
+            "latency_change": cat(self.latency_change, np.int64),
+            "latency_superseded_at": cat(self.latency_superseded_at, np.float64),
             "cpu": np.asarray(self.cpu, np.float64).reshape(-1, 3),
+            "steps": np.asarray(self.steps, np.float64).reshape(-1, 3),
+            "waits": np.asarray(self.waits, np.float64).reshape(-1, 3),
             "requests": np.asarray(self.requests_sent, np.float64).reshape(-1, 2),
         }
 
@@ -107,6 +133,8 @@ class Tracker:
         self.last_rx = np.zeros((0, nconn))  # last arrival of an update, per connection
         self.probe_at = np.zeros((0, nconn))  # pending probe send time (nan: none)
         self.superseded = np.zeros((0, nconn), bool)  # its soldier's activity changed again since
+        self.change = np.zeros(0, np.int64)  # the pending probe's change (from * 16 + to; -1: not told)
+        self.superseded_at = np.zeros((0, nconn))  # when it was superseded (nan: not)
         self.owner = np.zeros(0, np.int64)  # subscribing connection, -1 = all
 
     def grow(self, n: int, owner: np.ndarray) -> None:
@@ -117,6 +145,8 @@ class Tracker:
         self.last_rx = np.concatenate([self.last_rx, np.full((k, self.nconn), -np.inf)])
         self.probe_at = np.concatenate([self.probe_at, np.full((k, self.nconn), np.nan)])
         self.superseded = np.concatenate([self.superseded, np.zeros((k, self.nconn), bool)])
+        self.change = np.concatenate([self.change, np.full(k, -1, np.int64)])
+        self.superseded_at = np.concatenate([self.superseded_at, np.full((k, self.nconn), np.nan)])
         self.owner = np.concatenate([self.owner, np.asarray(owner, np.int64)])
         self.n = n
 
@@ -142,23 +172,32 @@ class Tracker:
                 out.append((c, sel))
         return out
 
-    def activity(self, t: float, slots: np.ndarray, moving: np.ndarray, probe: np.ndarray) -> None:
+    def activity(
+        self, t: float, slots: np.ndarray, moving: np.ndarray, probe: np.ndarray,
+        change: np.ndarray | None = None,
+    ) -> None:  # fmt: skip
         """Requests sent at ``t`` that changed the activity of ``slots`` (``moving`` after the change);
-        ``probe`` marks those whose request is a latency probe (call :meth:`settled` to pick them)."""
+        ``probe`` marks those whose request is a latency probe (call :meth:`settled` to pick them);
+        ``change``: each one's change (from * 16 + to activity), kept with its probe's answer."""
         slots = np.asarray(slots, np.int64)
         if not len(slots):
             return
         self._close(slots, t)
         self.steady_from[slots[moving]] = t + self.grace
-        self.superseded[slots] |= ~np.isnan(self.probe_at[slots])
+        pending = ~np.isnan(self.probe_at[slots])
+        first = pending & ~self.superseded[slots]
+        self.superseded_at[slots] = np.where(first, t, self.superseded_at[slots])
+        self.superseded[slots] |= pending
         p = slots[probe]
         if len(p):
             self.rec.probe_sent.append(np.full(len(p), t))
+            self.change[p] = -1 if change is None else np.asarray(change, np.int64)[probe]
             cols = self.owner[p]
             for c in range(self.nconn):
                 sel = (cols == c) | (cols < 0)
                 self.probe_at[p[sel], c] = t
                 self.superseded[p[sel], c] = False
+                self.superseded_at[p[sel], c] = np.nan
 
     def settled(self, t: float, slots: np.ndarray) -> np.ndarray:
         """(len(slots),) bool: no update for ``SETTLE_S`` on any subscriber and no probe pending."""
@@ -173,6 +212,8 @@ class Tracker:
         rec.frame_time.append(t)
         rec.frame_bytes.append(nbytes)
         rec.frame_rows.append(len(slots))
+        rec.frame_conn.append(conn)
+        rec.frame_tick.append(tick)
         if not len(slots):
             return
         rec.row_time.append(np.full(len(slots), t))
@@ -186,6 +227,11 @@ class Tracker:
             rec.latency_time.append(np.full(int(answered.sum()), t))
             rec.latency.append(t - sent[answered])
             rec.latency_superseded.append(self.superseded[slots[answered], conn])
+            rec.latency_slot.append(slots[answered])
+            rec.latency_conn.append(np.full(int(answered.sum()), conn, np.int64))
+            rec.latency_tick.append(np.full(int(answered.sum()), tick, np.int64))
+            rec.latency_change.append(self.change[slots[answered]])
+            rec.latency_superseded_at.append(self.superseded_at[slots[answered], conn])
             self.probe_at[slots[answered], conn] = np.nan
 
     def arrays(self, t: float) -> dict[str, np.ndarray]:
@@ -339,6 +385,10 @@ def summarise(
         "probes_over_1s_superseded": int((sup & (lat > 1.0)).sum()),
         # when they were sent (s into the window, the first 50): a burst is a stall, a spread is lost answers
         "probes_over_1s_sent_s": np.round(np.sort(sent_at[lat > 1.0] - t0)[:50], 2).tolist(),
+        # the slowest probes, each with what went on while it waited, and what held up those over 1 s
+        # (client_stub.loadtest.worst)
+        "worst_probes": worst_probes(arr, t0, t1),
+        "probes_over_1s_causes": causes_over(arr, t0, t1, 1.0),
         "bytes_per_update": _round(fbytes / frows, 2) if frows else None,
         "bytes_per_s": _round(fbytes / dur, 0),
         "frames_per_s": _round(int(fsel.sum()) / dur, 1),

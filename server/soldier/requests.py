@@ -55,6 +55,38 @@ class _Columns(NamedTuple):
     pos: np.ndarray
 
 
+def _columns(rows: np.ndarray) -> _Columns:
+    """A batch's columns as the event path reads them."""
+    n = len(rows)
+    with np.errstate(invalid="ignore", over="ignore"):  # garbage floats (signalling NaNs) are bad values
+        return _Columns(
+            rows["index"].astype(np.int64),
+            rows["appearance"].astype(np.int64),
+            rows["weapon"].astype(np.int64),
+            rows["immediate"].astype(np.int64),
+            np.asarray(rows["velocity"], np.float64).reshape(n, 3),
+            np.asarray(rows["heading"], np.float64).reshape(n),
+            np.asarray(rows["position"], np.float64).reshape(n, 3),
+        )
+
+
+def _bad(c: _Columns) -> np.ndarray:
+    """(n,) bool: the rows with a value a request may not have (enums out of range, non-finite numbers, a
+    speed over MAX_SPEED): REQUEST_BAD_VALUE where the soldier is live."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        finite = np.isfinite(c.vel).all(1) & np.isfinite(c.hdg) & np.isfinite(c.pos).all(1)
+        return (
+            (c.app < _APP_LOW)
+            | (c.app > _APP_HIGH)
+            | (c.wpn < 0)
+            | (c.wpn > _WPN_HIGH)
+            | (c.imm < 0)
+            | (c.imm > 1)
+            | ~finite
+            | ~(np.linalg.norm(np.where(finite[:, None], c.vel, 0.0), axis=1) <= MAX_SPEED)
+        )
+
+
 class Requests(Ticking):
     """Requests in: stored (TTES → Jack) and turned into events where they change what a soldier does."""
 
@@ -63,36 +95,26 @@ class Requests(Ticking):
         (its shards animate the soldiers; running the event path here too cost it most of its core)."""
         return self._checked(np.asarray(batch))[0]
 
+    def has_bad_values(self, batch: np.ndarray) -> bool:
+        """Whether :meth:`apply_requests` would find a REQUEST_BAD_VALUE row in ``batch`` (a live soldier's
+        row with a value out of range): a session holds a client's next request frame with it only when
+        not (``Session.handle``). Counts nothing."""
+        cols = _columns(np.asarray(batch))
+        return bool((_bad(cols) & self.table.live_mask(cols.idx)).any())
+
     def _checked(self, rows: np.ndarray) -> tuple[np.ndarray, _Columns]:
         """Each row's status (and the stats counted) and the rows' columns as the event path reads them."""
         n = len(rows)
         status = np.zeros(n, np.uint8)
-        idx = rows["index"].astype(np.int64)
-        app = rows["appearance"].astype(np.int64)
-        wpn = rows["weapon"].astype(np.int64)
-        imm = rows["immediate"].astype(np.int64)
-        with np.errstate(invalid="ignore", over="ignore"):  # garbage floats (signalling NaNs) are bad values
-            vel = np.asarray(rows["velocity"], np.float64).reshape(n, 3)
-            hdg = np.asarray(rows["heading"], np.float64).reshape(n)
-            pos = np.asarray(rows["position"], np.float64).reshape(n, 3)
-            finite = np.isfinite(vel).all(1) & np.isfinite(hdg) & np.isfinite(pos).all(1)
-            bad = (
-                (app < _APP_LOW)
-                | (app > _APP_HIGH)
-                | (wpn < 0)
-                | (wpn > _WPN_HIGH)
-                | (imm < 0)
-                | (imm > 1)
-                | ~finite
-                | ~(np.linalg.norm(np.where(finite[:, None], vel, 0.0), axis=1) <= MAX_SPEED)
-            )
+        cols = _columns(rows)
+        idx, bad = cols.idx, _bad(cols)
         live = self.table.live_mask(idx)
         status[~live] = REQUEST_UNKNOWN_SOLDIER
         status[live & bad] = REQUEST_BAD_VALUE
         self.stats["requests"] += n
         self.stats["requests_unknown"] += int((~live).sum())
         self.stats["requests_bad"] += int((live & bad).sum())
-        return status, _Columns(idx, app, wpn, imm, vel, hdg, pos)
+        return status, cols
 
     def apply_requests(self, batch: np.ndarray, now: float) -> np.ndarray:
         """Take a batch of entity requests (``protocol.entity.ENTITY_REQUEST_DTYPE``, Performer coordinates).

@@ -161,9 +161,11 @@ def format_result(r: dict) -> str:
         return na(r.get(key), unit)
 
     from client_stub.loadtest.role import role_line
+    from client_stub.loadtest.worst import worst_line
 
     if r.get("ramp"):
         return _format_ramp(r)
+    worst = worst_line(r.get("worst_probes") or [], r.get("probes_over_1s_causes"))
     return "\n".join(
         [
             f"ttes loadtest: {r['soldiers']} soldiers, {r['clients']} clients, {r['rate_hz']:g} Hz, "
@@ -178,6 +180,7 @@ def format_result(r: dict) -> str:
             f"  latency request->update p50 {f('latency_ms_p50', ' ms')}, p99 {f('latency_ms_p99', ' ms')}, "
             f"max {f('latency_ms_max', ' ms')} ({f('latency_samples')} probes; "
             f"{f('probes_over_1s')} over 1 s, {f('probes_over_1s_superseded')} of them superseded)",
+            *([f"  {worst}"] if worst else []),
             f"  tick->arrival p50 {f('delivery_ms_p50', ' ms')}, p99 {f('delivery_ms_p99', ' ms')}; "
             f"dropped {f('dropped_updates')}, late {f('late_updates')} ({f('late_pct', '%')})",
             f"  bytes per update        {f('bytes_per_update')} ({f('bytes_per_s')} bytes/s)",
