@@ -9,15 +9,15 @@ more of hip extension: the lower legs rose 13-17 cm as his chest came down, a ki
 A limp body's pelvis rolls with a leg turning out. So here each leg in turn (:data:`ORDER`, over
 :data:`LEG_SECONDS`, from the physics' last frame: the first while his chest comes down, the second done
 within the check's ``limb_rest_lag_s`` of the trunk) turns out to a shape that lays its heel low
-(:data:`TURNED_DEG`) while the pelvis rolls a few degrees about the body's long axis through its lowest node
-on the other side and back: that hip rises, and the thigh turns over the ground instead of dragging across
-it. The lumbar spine takes the roll back, and the other leg's hip, knee and ankle keep its foot where it
-lies (:func:`_kept`): the chest, arms, head and the other foot stay put (rolled as one piece, the other
-leg's toes went 1.4 cm into the ground). Per leg, the roll, the hip's lead and the shape are the best of a
-small grid (:func:`rolled_leg`): the lowest heel, nothing on the ground sliding more than :data:`SLIDE_CM`,
-nothing going into it, the foot within the check's ``lying_feet_up_cm`` (less :data:`FOOT_UP_MARGIN`) and,
-once the trunk is down, no leg part rising more than :data:`RISE_CM`. Soldier DEAD@prstow heels 20.2 ->
-11.8 cm, DEAD@prfire 20.2 -> 12.5.
+(:data:`TURNED_DEG`, :data:`HIP_TURNS_DEG`) while the pelvis rolls a few degrees about the body's long axis
+through its lowest node on the other side and back: that hip rises, and the thigh turns over the ground
+instead of dragging across it. The lumbar spine takes the roll back, and the other leg's hip, knee and ankle
+keep its foot where it lies (:func:`_kept`): the chest, arms, head and the other foot stay put (rolled as one
+piece, the other leg's toes went 1.4 cm into the ground). Per leg, the roll, the hip's lead and the shape are
+the best of a small grid (:func:`rolled_leg`): the lowest heel, nothing on the ground sliding more than
+:data:`SLIDE_CM`, nothing going into it, the foot within the check's ``lying_feet_up_cm`` (less
+:data:`FOOT_UP_MARGIN`) and, once the trunk is down, no leg part rising more than :data:`RISE_CM`. Soldier
+DEAD@prstow heels 20.2 -> 11.8 cm, DEAD@prfire 20.2 -> 11.5.
 """
 
 from __future__ import annotations
@@ -37,10 +37,12 @@ from server.soldier.blend import smoothstep
 
 ORDER = ("left", "right")  # the legs roll out one after the other: the pelvis rolls one way for each
 LEG_SECONDS = 0.5  # s, each leg (the second is done within the check's limb_rest_lag_s of the trunk)
-# degrees: the hip's turn, the knee, the ankle's pointing and its second angle a turned-out leg goes to
-# (soldier.fig's passive range: hip turned out 60, ankle pointed 60, foot everted 30); its hip's first two
-# angles move by one of HIP_MOVES and its toes stay
-TURNED_DEG = (-57.0, 8.0, -60.0, 30.0)
+# degrees: the knee, the ankle's pointing and its second angle a turned-out leg goes to, its hip turned out
+# by one of HIP_TURNS_DEG (soldier.fig's passive range: hip turned out 60, ankle pointed 60, foot everted
+# 30; turned out 60 prstow2dead's right heel lay 12.4 cm up, 57: 11.8, prfire2dead's 10.8 and 11.8); its
+# hip's first two angles move by one of HIP_MOVES and its toes stay
+TURNED_DEG = (8.0, -60.0, 30.0)
+HIP_TURNS_DEG = (-57.0, -60.0)
 HIP_MOVES = ((-10.0, -1.0), (-10.0, 0.0), (-10.0, 1.0), (0.0, -1.0), (0.0, 0.0), (0.0, 1.0))
 ROLLS_DEG = (3.0, 4.0, 5.0, 6.0, 8.0)  # the pelvis's roll tried, least first
 LEADS = (0.5, 0.75)  # of a leg's time: its hip's turn is done by then (the knee and foot with the whole)
@@ -125,10 +127,11 @@ def rolled_leg(body: ds._Body, side: str, n: int, judged_from: int) -> Roll | No
     best: tuple[tuple[float, float, float], Roll] | None = None
     start_heel = leg._shape(leg.x0[None], 1.0)[1][0]
     start_heel = max(float(start_heel), float(leg.start[leg.foot, 1].min()))
-    for move, phi, lead, span, comp in itertools.product(HIP_MOVES, ROLLS_DEG, LEADS, SPANS, COMPS):
+    grid = itertools.product(HIP_MOVES, HIP_TURNS_DEG, ROLLS_DEG, LEADS, SPANS, COMPS)
+    for move, hip_turn, phi, lead, span, comp in grid:
         target = leg.x0.copy()
         target[:2] += np.radians(move)
-        target[2:6] = np.radians(TURNED_DEG)
+        target[2:6] = np.radians((hip_turn, *TURNED_DEG))
         target = np.clip(target, lo, hi)
         turn = np.repeat(smoothstep(t)[:, None], len(leg.idx), axis=1)
         turn[:, 2] = smoothstep(t / lead)
