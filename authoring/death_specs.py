@@ -109,6 +109,10 @@ class DeathSpec:
     # the slaves' ankles and toes take the master's angles as his feet go slack (authoring.slave_slack):
     # solved to his foot's points, crawl2dead's DI lay on its toes curled to their limit, heels 19.3 cm up
     slave_feet_slack: bool = False
+    # a prone death's legs roll out one after the other as his chest comes down, the pelvis rolling a few
+    # degrees with each (authoring.prone_roll): the settle left prstow/prfire on their toes, heels 20.2 cm up;
+    # his slaves' trunks are lowered while his pelvis rolls in place (slave_ground._rolling_in_place)
+    prone_legs_roll: bool = False
 
 
 def _prone(
@@ -252,9 +256,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_feet_held=True,
         slave_rest_slide_cm=KFIRE_REST_SLIDE,
     ),
-    replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD),  # not eased: see
-    # PRONE_START_EASE
-    replace(_prone_dead("prfire2dead", "PRONE_FIRE"), slave_arms_held=True),
+    replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD, prone_legs_roll=True),
+    # not eased: see PRONE_START_EASE
+    replace(_prone_dead("prfire2dead", "PRONE_FIRE"), slave_arms_held=True, prone_legs_roll=True),
     CRAWL_DEATH,
 )
 

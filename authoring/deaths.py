@@ -104,7 +104,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from authoring import dead_crawl, dead_settle
+from authoring import dead_crawl, dead_settle, prone_roll
 from authoring.contact_pin import pin_frames
 from authoring.death_specs import DEAD as DEAD
 from authoring.death_specs import DEATHS as DEATHS
@@ -124,6 +124,7 @@ from authoring.passive_range import passive_figure
 from authoring.planted import least_worst_turned, plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
 from authoring.quality_frames import FigureSet
+from authoring.quality_rest import DOWN_CM
 from authoring.transitions import FPS, ClipFrames
 from peabody.model import Figure
 
@@ -476,6 +477,7 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         frames = dead_crawl.sunk(FigureSet({"body": soldier, "rifle": rifle}), frames)
     if spec.slack_feet:  # settled and pinned past a live soldier's ankles (authoring.passive_range)
         soldier = passive_figure(soldier)
+    physics = len(frames.poses)
     # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
     frames = dead_settle.settle(
         frames,
@@ -490,4 +492,9 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:
         return frames
-    return pin_frames(frames, soldier, spec.propped, release if spec.propped else 0)
+    held = pin_frames(frames, soldier, spec.propped, release if spec.propped else 0)
+    if not spec.prone_legs_roll:
+        return held
+    figs = FigureSet({"body": soldier, "rifle": rifle})  # the legs roll out over the settle, on the pins
+    rest = dead_settle._rest_frame(figs, held, DOWN_CM)
+    return prone_roll.rolled(figs, held, physics - 1, rest, round(dead_settle.STILL_SECONDS * held.fps))

@@ -58,6 +58,7 @@ AIR_SHARE = 0.5  # ... and at least this share of the master's height
 ROOT_DOFS = ("tx", "ty", "tz", "rx", "rz")  # the body may go down and roll or pitch onto what it rests on
 SETTLE_SPEED_CM_S = 5.0  # the master lies still: his root moves slower than this for the rest of the clip
 SETTLE_FRAMES = 15  # ... the trunk is lowered onto the ground over this many frames from then
+IN_PLACE_CM = 0.01  # a pelvis node moving less than this a frame: the body turns about it, in place
 FADE_FRAMES = 12  # after the release the goals fade in over this many frames (the slaving's own fade)
 
 
@@ -133,7 +134,8 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
 
     limbs = tuple(p for p in parts if p not in TRUNK)
     unsolved, m_at = _positions(kin, q, loc), _positions(figures.kin[mtype], mq, mloc)
-    settle = w * _settled(mloc, float(master.fps))
+    in_place = _rolling_in_place(mq, mloc, figures, mtype) if _rolls(master) else None
+    settle = w * _settled(mloc, float(master.fps), in_place)
     arm_out, rigid = _arm_out(master), _trunk_rigid(master)
     planted = _plants(unsolved, m_at, m_h, release)
     # once the master lies still, the trunk (the body rolls or pitches onto what the master rests on); the
@@ -176,11 +178,32 @@ def _trunk_rigid(master: Channelset) -> bool:
     return spec is not None and spec.slave_trunk_rigid
 
 
-def _settled(root: np.ndarray, fps: float) -> np.ndarray:
-    """Per frame, 0 while the master's body still moves (its root faster than ``SETTLE_SPEED_CM_S``), easing
-    to 1 over ``SETTLE_FRAMES`` once it lies still for the rest of the clip: lowering a falling or sliding
-    slave onto the ground kept its trunk on the ground while the master's body moved on (it skated)."""
+def _rolls(master: Channelset) -> bool:
+    """Whether this death's master rolls his pelvis with each leg (``DeathSpec.prone_legs_roll``)."""
+    spec = deaths.death_specs().get(master.name.split(".", 1)[0])
+    return spec is not None and spec.prone_legs_roll
+
+
+def _rolling_in_place(q: np.ndarray, loc: np.ndarray, figures: FigureSet, ptype: str) -> np.ndarray:
+    """``(n - 1,)``: whether the master's body moves from each frame to the next only by turning about one
+    of its pelvis's nodes, which stays where it was (to :data:`IN_PLACE_CM`): a prone death's pelvis
+    rolling with a leg moves his root 10 cm/s, yet he lies still."""
+    kin = figures.kin[ptype]
+    nodes, segs = figures.nodes(ptype)
+    pelvis = figures.node_parts(ptype) == "pelvis"
+    g = kin.segment_globals(q, loc)
+    pts = np.einsum("nkij,kj->nki", g[:, segs[pelvis], :3, :], nodes[pelvis])
+    return np.linalg.norm(np.diff(pts, axis=0), axis=2).min(axis=1) < IN_PLACE_CM
+
+
+def _settled(root: np.ndarray, fps: float, in_place: np.ndarray | None = None) -> np.ndarray:
+    """Per frame, 0 while the master's body still moves (its root faster than ``SETTLE_SPEED_CM_S``, but not
+    where it only turns ``in_place``, :func:`_rolling_in_place`), easing to 1 over ``SETTLE_FRAMES`` once it
+    lies still for the rest of the clip: lowering a falling or sliding slave onto the ground kept its trunk
+    on the ground while the master's body moved on (it skated)."""
     speed = np.linalg.norm(np.diff(root[:, :3, 3], axis=0), axis=1) * fps
+    if in_place is not None:
+        speed[in_place] = 0.0
     moving = np.flatnonzero(speed > SETTLE_SPEED_CM_S)
     still = int(moving[-1]) + 1 if len(moving) else 0
     return _fade_in(len(root), still, SETTLE_FRAMES)

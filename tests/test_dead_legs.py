@@ -127,3 +127,71 @@ def test_slack_feet_lay_the_heels_lower_the_shins_on_the_ground(figs: FigureSet)
     assert np.degrees(np.abs(np.diff(path, axis=0))).max() <= 8.0  # the check's ankle_flick_deg
     knee = leg.body.parts[leg.nodes] == "left_kneecap"
     assert pts[:, knee, 1].min(axis=1).max() - pts[0, knee, 1].min() <= dead_legs.RISE_CM
+
+
+def test_a_prone_deaths_leg_rolls_out_with_the_pelvis(figs: FigureSet) -> None:
+    """A prone death's leg turns out while the pelvis rolls a few degrees about the body's long axis and back
+    (issue 14, authoring/prone_roll.py): the heel comes down from 21 cm to the check's 15 or under, nothing
+    on the ground slides more than SLIDE_CM nor goes into it, no leg part rises more than RISE_CM, and the
+    pelvis ends where it lay (held fixed, the thigh's ground nodes slid 3.5-5 cm; branch proneheels-s14)."""
+    from authoring import prone_roll
+
+    passive = FigureSet({"body": passive_figure(figs.figures["body"]), "rifle": figs.figures["rifle"]})
+    body = _on_his_toes(passive)
+    way = prone_roll.rolled_leg(body, "left", 30, 0)
+    assert way is not None
+    assert np.degrees(way.roll.max()) >= 3.0 and way.roll[-1] == pytest.approx(0.0)
+    leg = dead_settle._Leg(body, "left")
+    kin = body.kin
+    roots = prone_roll._rolled_roots(body.root, way.pivot, way.axis, way.roll)
+    q = np.repeat(body.q[None], len(way.path), axis=0)
+    q[:, leg.idx] = way.path
+    g = kin.segment_globals(q, roots)
+    pts = np.concatenate(
+        [leg.start[None], np.einsum("mkij,kj->mki", g[:, body.segs[leg.nodes], :3, :], body.nodes[leg.nodes])]
+    )
+    heel = max(float(g[-1, leg.foot_seg, 1, :] @ leg.heel), float(pts[-1, leg.foot, 1].min()))
+    assert way.heel == pytest.approx(heel) and heel <= 15.0 < float(leg._shape(leg.x0[None], 1.0)[1][0])
+    assert pts[..., 1].min() >= -prone_roll.DEEP_CM
+    assert contact_runs(pts, CONTACT_HEIGHT_CM).slide.max(initial=0.0) <= prone_roll.SLIDE_CM
+    assert prone_roll._rise(pts, body.parts[leg.nodes]) <= prone_roll.RISE_CM
+
+
+def test_the_lumbar_spine_takes_the_pelvis_roll_back(figs: FigureSet) -> None:
+    """While the pelvis rolls with a leg the chest stays where it lies (prone_roll._kept): rolled as one
+    piece, the chest's side over the pivot went into the ground and the arms rose."""
+    from authoring import prone_roll
+
+    body = _on_his_toes(figs)
+    kin = body.kin
+    pivot, axis = prone_roll._pivot(body, "left")
+    roll = np.radians([0.0, 3.0, 6.0])
+    roots = prone_roll._rolled_roots(body.root, pivot, axis, roll)
+    assert roots[0] == pytest.approx(body.root)
+    g = kin.segment_globals(body.q, roots[2])
+    assert (
+        g[kin.segment_names.index("left_upper_leg"), 1, 3]
+        > body.heights(body.q)[0][kin.segment_names.index("left_upper_leg"), 1, 3]
+    )
+    q = np.repeat(body.q[None], 3, axis=0)
+    chest = prone_roll._carried(kin, prone_roll.LUMBAR)
+    goal = np.repeat(kin.segment_globals(body.q, body.root)[chest][None], 3, axis=0)
+    kept = prone_roll._kept(kin, q, roots, goal, prone_roll.LUMBAR)
+    now = kin.segment_globals(kept, roots)[:, chest]
+    assert np.abs(now[:, :3, 3] - goal[:, :3, 3]).max() <= 0.1  # cm
+    turned = np.einsum("nji,njk->nik", goal[:, :3, :3], now[:, :3, :3])
+    assert (
+        np.degrees(np.arccos(np.clip((np.trace(turned, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))).max()
+        <= 0.3
+    )
+    lumbar = dead_settle._dofs(kin, prone_roll.LUMBAR)
+    assert (kept[:, lumbar] >= kin.lower[lumbar] - 1e-9).all() and (
+        kept[:, lumbar] <= kin.upper[lumbar] + 1e-9
+    ).all()
+
+
+def test_only_the_prone_deaths_roll_their_legs_out_with_the_pelvis() -> None:
+    """prone_legs_roll is prstow2dead's and prfire2dead's alone: every other death settles as before."""
+    from authoring import deaths
+
+    assert {d.name for d in deaths.DEATHS if d.prone_legs_roll} == {"prstow2dead", "prfire2dead"}

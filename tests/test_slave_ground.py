@@ -167,3 +167,33 @@ def test_only_the_crawlers_and_ststow2dead_slaves_move_their_arms_out_sideways()
     assert {d.name for d in deaths.DEATHS if d.slave_arm_out} == {"crawl2dead", "ststow2dead"}
     both = {d.name for d in deaths.DEATHS if d.slave_trunk_rigid or d.slave_feet_landed}
     assert both == {"ststow2dead"}
+
+
+def test_a_master_rolling_his_pelvis_in_place_lies_still() -> None:
+    """A prone death's master rolls his pelvis about a pelvis node on the ground with each leg
+    (DeathSpec.prone_legs_roll): his root moves ~10 cm/s, yet his body lies still, and the slave's trunk is
+    lowered onto the ground while he does (judged at his root alone, it waited for the last 6 frames: the
+    DI's pelvis stayed 1.8 cm up and its belly slid 7.7 cm)."""
+    from authoring import prone_roll
+    from authoring.dead_settle import _Body
+    from peabody.loader import read_figure
+
+    figs = FigureSet(
+        {"body": read_figure(FIGURES / "soldier.fig"), "rifle": read_figure(FIGURES / "AK_47.fig")}
+    )
+    kin = figs.kin["body"]
+    root = np.eye(4)
+    root[:3, :3] = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]  # face down
+    body = _Body(figs, np.zeros(kin.ndof), root, np.eye(4))
+    pivot, axis = prone_roll._pivot(body, "left")
+    t = np.linspace(0.0, 1.0, 30)
+    roots = prone_roll._rolled_roots(root, pivot, axis, np.radians(8.0) * np.sin(np.pi * t))
+    q = np.zeros((len(t), kin.ndof))
+    fps = 60.0
+    assert (
+        np.linalg.norm(np.diff(roots[:, :3, 3], axis=0), axis=1) * fps
+    ).max() > slave_ground.SETTLE_SPEED_CM_S
+    in_place = slave_ground._rolling_in_place(q, roots, figs, "body")
+    assert in_place.all()
+    assert slave_ground._settled(roots, fps)[-1] == 0.0  # judged at the root, he never lay still
+    assert slave_ground._settled(roots, fps, in_place)[slave_ground.SETTLE_FRAMES :] == pytest.approx(1.0)
