@@ -32,7 +32,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`; a crawler's,
    cradled across his forearms, forward ahead of his face: :attr:`DeathSpec.toss_to`); it collides
    with the arms and head it touched in the start pose too (:class:`~authoring.ragdoll.Ragdoll`), and a
-   rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`);
+   rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`); ststow2dead's falls
+   again on its own from where the hands let go, the body keeping its fall (:attr:`DeathSpec.drop_toss`,
+   :mod:`authoring.rifle_drop`: flung away from the fall, it came to rest by his boots);
 4. **the body settles and sleeps**: once the muscle program is over (:attr:`DeathSpec.fade`) and the pelvis
    is slower than :data:`SLEEP_SPEED`, the joints hold the shape they have (the springs' references frozen
    there) and are damped ever harder (:data:`SLEEP_DAMPING`): still-acting muscles (the legs rolling
