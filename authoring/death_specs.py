@@ -113,6 +113,10 @@ class DeathSpec:
     # degrees with each (authoring.prone_roll): the settle left prstow/prfire on their toes, heels 20.2 cm up;
     # his slaves' trunks are lowered while his pelvis rolls in place (slave_ground._rolling_in_place)
     prone_legs_roll: bool = False
+    # N (the pelvis' own frame at the start, x right, y up, z back): the let-go rifle is simulated again on
+    # its own from where and how fast it left the hands, flung by this, the body keeping its recorded fall
+    # (authoring.rifle_drop); None: the rifle as the ragdoll's fall left it
+    drop_toss: tuple[float, float, float] | None = None
 
 
 def _prone(
@@ -194,6 +198,13 @@ KFIRE_REST_SLIDE = 1.5
 # as he lands 4.51 -> 2.02 cm and the chest's 4.48 -> 3.00 (plant_worst got the thigh 2.53 but its arms' fall
 # then slid the chest 5.87)
 KSTOW_LEGS_EASED = 1.5
+# N: ststow2dead's let-go rifle, fallen again on its own (DeathSpec.drop_toss). In his fall it was flung
+# to his left (80 N, away from a fall straight ahead) and came to rest by his boots: the fall turns him onto
+# his right side, his legs swinging round toward it (35 cm from the right foot, 1.8 m from his hands). Any
+# other toss, or a later let-go, re-rolled the fall: let go unflung, his right thigh skidded 4.0 cm and his
+# pelvis lay 10.4 cm up; flung forward, right or up (10-200 N) or let go at 0.3-0.45 s, the thigh skidded
+# 3.6-5.8 cm, a foot rose 22-32 cm or the rifle lay under him (each was measured)
+STSTOW_DROP = (20.0, 0.0, -90.0)
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "ststow2dead",
@@ -201,6 +212,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         120.0,
         (0.0, -0.3, -1.0),
         toss=80.0,
+        drop_toss=STSTOW_DROP,
         pinned=True,
         knees_held=True,
         legs_roll=LEGS_ROLL,

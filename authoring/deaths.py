@@ -32,7 +32,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`; a crawler's,
    cradled across his forearms, forward ahead of his face: :attr:`DeathSpec.toss_to`); it collides
    with the arms and head it touched in the start pose too (:class:`~authoring.ragdoll.Ragdoll`), and a
-   rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`);
+   rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`); ststow2dead's falls
+   again on its own from where the hands let go, the body keeping its fall (:attr:`DeathSpec.drop_toss`,
+   :mod:`authoring.rifle_drop`: flung away from the fall, it came to rest by his boots);
 4. **the body settles and sleeps**: once the muscle program is over (:attr:`DeathSpec.fade`) and the pelvis
    is slower than :data:`SLEEP_SPEED`, the joints hold the shape they have (the springs' references frozen
    there) and are damped ever harder (:data:`SLEEP_DAMPING`): still-acting muscles (the legs rolling
@@ -125,6 +127,7 @@ from authoring.planted import least_worst_turned, plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
 from authoring.quality_frames import FigureSet
 from authoring.quality_rest import DOWN_CM
+from authoring.rifle_drop import LetGo, dropped, let_go
 from authoring.transitions import FPS, ClipFrames
 from peabody.model import Figure
 
@@ -402,11 +405,12 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     com = data.xipos.copy()
     still = 0
     release_frame = None
+    letgo: LetGo | None = None  # the rifle as the hands let go of it
     rifle_ground0 = 0.0
     ground0 = min(0.0, doll.lowest())  # a posture dipping into the ground starts on a ground that low
     t = 0.0
     while t < MAX_SECONDS:
-        for _ in range(steps):
+        for k in range(steps):
             ts = data.time
             set_muscles(ts)
             c = carry(ts)
@@ -420,6 +424,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
                 doll.release()
                 release_frame = len(poses)
                 rifle_ground0 = min(0.0, doll.rifle_lowest())
+                letgo = let_go(doll, steps - k)
             if release_frame is not None:  # a rifle the posture dipped into the ground is raised out of it
                 doll.set_rifle_ground(rifle_ground0 * (1.0 - _smoothstep((ts - spec.release) / GROUND_RISE)))
             doll.step()
@@ -437,9 +442,31 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         still = still + 1 if speed < REST_SPEED and t > spec.fade + spec.release else 0
         if still * dt >= REST_SECONDS:
             break
-    recorded = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
     release = int(release_frame if release_frame is not None else len(poses) - 1)
+    _dropped_alone(spec, rifle, pelvis, letgo, release, (poses, roots, rifles))
+    recorded = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
     return _eased(spec, DeathClip(_after_physics(spec, recorded, figures, release), release))
+
+
+def _dropped_alone(
+    spec: DeathSpec,
+    rifle: Figure,
+    pelvis: np.ndarray,
+    letgo: LetGo | None,
+    release: int,
+    recording: tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]],
+) -> None:
+    """(:attr:`DeathSpec.drop_toss`) the recorded rifle from the ``release`` frame on replaced, in place, by
+    the same rifle falling again on its own from where the hands let it go (``letgo``), flung by the toss
+    (the start ``pelvis``' frame; :mod:`authoring.rifle_drop`); the body lies still (its last frame
+    repeated) while the rifle comes to rest after it."""
+    if spec.drop_toss is None or letgo is None:
+        return
+    poses, roots, rifles = recording
+    toss = pelvis[:3, :3] @ np.array(spec.drop_toss)
+    rifles[release:] = list(dropped(rifle, letgo, toss, len(rifles) - release, FPS))
+    poses += poses[-1:] * (len(rifles) - len(poses))
+    roots += roots[-1:] * (len(rifles) - len(roots))
 
 
 def _eased(spec: DeathSpec, clip: DeathClip) -> DeathClip:

@@ -147,6 +147,30 @@ def test_a_standing_death_does_not_lie_on_his_rifle(ctx: BuildContext) -> None:
     assert not near.any()  # no part of the rifle under the pelvis or the belly
 
 
+def test_the_stowed_death_lets_his_rifle_fall_by_his_hands_not_at_his_boots(ctx: BuildContext) -> None:
+    """Issue 14: ststow2dead's rifle, flung to his left (deaths.TOSS) as the fall turned him onto his right
+    side, came to rest by his boots (35 cm from the right foot, 1.9 m from the hands). A rifle a man lets
+    go of as he falls lands near his hands, beside or ahead of him, and not under him."""
+    poses, roots, rifles, _ = _played(ctx, "ststow2dead")
+    figs = FigureSet({"body": ctx.soldier, "rifle": ctx.rifle})
+    nodes, segs = figs.nodes("body")
+    parts = figs.node_parts("body")
+    g = FigureKinematics(ctx.soldier).segment_globals(poses[-1], roots[-1])
+    body = np.einsum("kij,kj->ki", g[segs, :3], nodes)[:, [0, 2]]
+    gun_kin = FigureKinematics(ctx.rifle)
+    gun_nodes, gun_segs = figs.nodes("rifle")
+    gg = gun_kin.segment_globals(np.zeros(gun_kin.ndof), rifles[-1])
+    gun = np.einsum("kij,kj->ki", gg[gun_segs, :3], gun_nodes)[:, [0, 2]]
+    centre = gun.mean(axis=0)
+
+    def away(names: tuple[str, ...]) -> float:
+        return float(np.linalg.norm(body[np.isin(parts, names)] - centre, axis=1).min())
+
+    assert away(("left_hand", "right_hand")) < away(("left_foot", "right_foot"))
+    trunk = body[np.isin(parts, ("pelvis", "belly", "chest"))]
+    assert np.linalg.norm(gun[:, None] - trunk[None], axis=-1).min() > 2.0  # not under him
+
+
 def test_a_face_down_deaths_legs_are_laid_as_he_lands(monkeypatch: pytest.MonkeyPatch) -> None:
     """Issue 14: the settle laid stfire2dead's legs after the physics had ended, his feet moving 1.2 s after
     his trunk lay still (limb_rest_lag_s 1.18). Laid from the frame he is down (``k0``), the legs reach the
