@@ -156,6 +156,9 @@ class DeathSpec:
     hip_damping: float = 1.0  # the hips', waist's and lower back's (FALL_STIFF) damping: this many times
     # stronger until he is down
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
+    # cm: how far a fallen arm's forearm and hand may reach past his shoulders toward his head (dead_settle
+    # _Arm.overhead; None: anywhere): half on his side, kfire2dead's top arm lay lowest curled over his head
+    arms_headward_cm: float | None = None
     propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
     legs_lift: bool = False  # kneeling: a leg part that would skid on the ground lifts instead (leg_lift)
     # the skid taken out so that each part's worst slide is least, not the mean drift (kfire2dead: the thigh
@@ -304,6 +307,9 @@ STFIRE_TOSS = (1.0, -0.5, 0.2)
 # cm: kfire2dead's slaves' trunk rest may slide a resting part this far (DeathSpec.slave_rest_slide_cm): their
 # pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds)
 KFIRE_REST_SLIDE = 1.5
+# cm: kfire2dead's fallen arms reach no further than this past his shoulders toward his head
+# (DeathSpec.arms_headward_cm): half on his side, his top (right) arm lay lowest curled over his head
+KFIRE_ARMS_HEADWARD = 5.0
 # frames: kstow2dead's legs' flicking change by the pin and the lift smoothed (DeathSpec.legs_eased): the
 # worst flick 18.7 degrees (right knee) -> 7.5 (the left wrist's, untouched), the ankles' 12.7 -> 1.9, its
 # DI/M16 slaves' ankle 16.6 -> 2.6; turned least-worst last too (DeathSpec.turn_worst), its left thigh's slide
@@ -371,6 +377,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         turn_worst=True,
         slave_feet_held=True,
         slave_rest_slide_cm=KFIRE_REST_SLIDE,
+        arms_headward_cm=KFIRE_ARMS_HEADWARD,
     ),
     replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD),  # not eased: see
     # PRONE_START_EASE
@@ -732,6 +739,7 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         spec.propped,
         legs=spec.legs_settle,
         slack_feet=spec.slack_feet,
+        arms_headward_cm=spec.arms_headward_cm,
     )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
