@@ -1,0 +1,275 @@
+"""The seven deaths' specifications (:class:`DeathSpec`, :data:`DEATHS`): how each one goes, apart from
+:mod:`authoring.deaths`, which simulates them, so that a module the death pipeline imports (``slave_feet``,
+through ``contact_pin``) can ask what a death asks for without importing the pipeline back (issue 14)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+DEAD = "DEAD"
+MAX_SECONDS = 6.0  # s: a death's physics records at most this long
+TOSS = 40.0  # N: the hands fling the rifle they let go of (clear of the falling body)
+
+
+@dataclass(frozen=True)
+class DeathSpec:
+    """How one death goes: the posture it starts from and the hit and slump that fell the soldier."""
+
+    name: str  # the transition file, e.g. "ststow2dead"
+    start: str  # its posture
+    force: float  # N, peak of the hit on the upper torso
+    direction: tuple[float, float, float]  # the hit's direction, pelvis heading frame (x right, z back)
+    slump: str = "all"  # what slumps: "all" (the SLUMP key: knees buckle), "upper" (spine and head), "head"
+    ramp: float = 0.15  # s, the hit ramps up (and down) this long
+    hold: float = 0.25  # s, the hit is at its peak this long
+    slump_time: float = 0.4  # s, the muscles reach the slumped shape (at slump_gain of their strength)
+    slump_gain: float = 0.5
+    fade: float = 1.0  # s, by then only a faint tone toward the limp shape is left
+    release: float = 0.35  # s, the hands let go of the rifle
+    sideways: bool = False  # he may come to rest on his side: the legs roll outward only if on his front
+    knee_damping: float = 1.0  # the knees' damping is this many times stronger until he is down
+    arm_tone: float = 0.0  # the fraction of the arms' gain kept when dead (toward the DEAD key's arms)
+    toss: float = TOSS  # N, the hands fling the rifle they let go of this hard (he must not land on it)
+    toss_to: tuple[float, float, float] | None = None  # the toss's direction in the pelvis' own frame (x
+    # right, y up the spine, z back); None: to the side, away from the fall
+    knee_straighten: float | None = None  # s, a standing death's knees start straightening (None: at fade)
+    hip_damping: float = 1.0  # the hips', waist's and lower back's (FALL_STIFF) damping: this many times
+    # stronger until he is down
+    arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
+    # cm: how far a fallen arm's forearm and hand may reach past his shoulders toward his head (dead_settle
+    # _Arm.overhead; None: anywhere): half on his side, kfire2dead's top arm lay lowest curled over his head
+    arms_headward_cm: float | None = None
+    propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
+    legs_lift: bool = False  # kneeling: a leg part that would skid on the ground lifts instead (leg_lift)
+    # the skid taken out so that each part's worst slide is least, not the mean drift (kfire2dead: the thigh
+    # he lands on skids in the physics, 7.37 -> 3.92 cm; kstow2dead's thigh 4.51 -> 2.53 but then its arms'
+    # fall slid the chest 5.87: planted.plant_least_worst)
+    plant_worst: bool = False
+    # frames (Gaussian sigma): the legs' change by the pins and the lift smoothed over the clip
+    # (leg_lift.eased_legs): kstow2dead's right foot's pin stretched the knee as the leg came down and let
+    # it go 19 degrees in a frame, its lift turned an ankle 10 degrees for one frame (flicks)
+    legs_eased: float = 0.0
+    # once his legs are lifted, he is shifted and turned about the vertical so that each part's worst slide
+    # is least (kfire2dead's trunk, 3.3-3.7 cm: planted.least_worst_turned)
+    turn_worst: bool = False
+    # the slaves' trunk rest holds a foot near the ground whose knee is up where it was (slave_rest
+    # feet_held): kfire2dead's DI, its trunk turned to rest, lowered its hovering right foot onto the ground
+    # while it moved (skate 0.32 -> 4.06 cm once he was turned least-worst)
+    slave_feet_held: bool = False
+    # cm: how far the slaves' trunk rest may move a part resting on the ground (slave_rest; None: its
+    # SLIDE_CM, 0.8): kfire2dead's DI pelvis, bridged between its belly and left thigh on the ground, came
+    # down only to 2.34 cm (the check's rest limit 2) with the hands, knee, thigh and foot held to 0.8
+    slave_rest_slide_cm: float | None = None
+    # the slaves hold a foot where it is on the ground in each of the master's stances even where its knee
+    # is down too (slave_feet.plant_slave_feet; else only in his last stance): kstow2dead's DI, its left knee
+    # down, dragged that foot 9.5 cm (frames 52-64) once the master's right hip no longer flicked at frame 61
+    # (the flick had lifted the whole DI 2-3 cm off the ground there, build.lift_off_ground)
+    slave_feet_knelt: bool = False
+    # the slaves' trunk rest holds an upper arm or forearm lying on the ground at the end where it lands
+    # (slave_rest arms_held): prfire2dead's DI/M16, the trunk lowered under a right arm still swinging in,
+    # touched down and swept it 3.8/4.2 cm along the ground
+    slave_arms_held: bool = False
+    pinned: bool = False  # after the settle, the limbs on the ground are held still (contact_pin)
+    slave_arm_out: bool = False  # the DI slave's arms in the ground go out sideways (slave_ground.rest_limbs)
+    # the slave's trunk is laid by its root alone (slave_ground.rest_limbs): with its spine in the torso's
+    # goals, ststow2dead's DI belly asked 0.4 cm down moved 3 and the trunk swung (head slid 8.15 cm)
+    slave_trunk_rigid: bool = False
+    # the slave's feet are held where its own feet land in the master's last stance (slave_feet): laid by
+    # the root alone, ststow2dead's DI trunk took its feet along after they landed (3.1 cm)
+    slave_feet_landed: bool = False
+    # the slave's hands and forearms on the ground keep their place and turn where they come to rest, last
+    # (authoring.slave_arms): stfire2dead's DI left hand rolled under rest_limbs' frame-by-frame solve as its
+    # trunk settled, its nodes sliding 4.0 cm where the master's lay still
+    slave_arms_pinned: bool = False
+    # frames: the slaves' neck and head keep their start posture's pose (the node's, which the build snaps
+    # their first frame to) and blend into the solved fall over this many (authoring.build.snap_endpoints)
+    slave_head_held: int = 0
+    knees_held: bool = False  # after the settle, a knee on the ground stays put: the root follows it and the
+    # legs keep their feet (knee_hold); a kneeling death's tucked right foot slid 9-10 cm instead
+    # s: the hips and ankles roll out over this after :attr:`fade` into the dead legs' passive range
+    # (:data:`PASSIVE_ROLL`, :mod:`authoring.passive_range`), while the legs still move as he lands; None:
+    # to :data:`ROLLED_LEGS` over :data:`KNEE_STRAIGHTEN` (a crawler's thighs, rolled sooner, slid 6-8 cm)
+    legs_roll: float | None = None
+    # the settle lays the legs again as he lands (dead_settle.settle's ``legs``); False: they stay as
+    # the physics laid them (ststow2dead, rolled as he landed: laid again, his right foot moved from 0.5 s
+    # after he lay still, limb_rest_lag 1.13 s; stfire2dead keeps it: without, its heels rest 21.5 cm up)
+    legs_settle: bool = True
+    kept: tuple[tuple[str, float], ...] = ()  # joints (name suffix, until s) that keep the start posture's
+    # shape at kept_tone of their gain, letting go over KEPT_FADE from then on
+    kept_tone: float = 0.0
+    # s: the recorded fall leaves its start posture from rest over this (authoring.easing.eased_in; 0: as
+    # recorded). A prone death's first frames moved at 0.46 m/s (the toes leaving the ground, the hip) and
+    # its DI/M16 slaves' at 0.57-0.67, over the check's end_speed
+    start_ease: float = 0.0
+    # a crawler's trunk comes down about his thighs after the physics, before the chest and head settle
+    # (:func:`authoring.dead_crawl.sunk`): his kept arms held the pelvis and belly 4-5 cm up
+    sunk: bool = False
+    # a prone death's feet go slack after he has landed (issue 14: the ragdoll left him on his toes, heels
+    # 16-21 cm up): the settle points the ankles into their passive range and straightens the knees before
+    # the legs roll (:data:`authoring.dead_legs.FEET_LEADS`), the shins staying on the ground; after the
+    # physics, on the figure with the legs' passive range (:mod:`authoring.passive_range`)
+    slack_feet: bool = False
+    # the slaves' ankles and toes take the master's angles as his feet go slack (authoring.slave_slack):
+    # solved to his foot's points, crawl2dead's DI lay on its toes curled to their limit, heels 19.3 cm up
+    slave_feet_slack: bool = False
+
+
+def _prone(
+    name: str, start: str, force: float = 80.0, knee_damping: float = 1.0, pinned: bool = True
+) -> DeathSpec:
+    """A death of a soldier lying on his front: hit down on the upper torso, only the head slumping, quick;
+    left propped on his elbows, his chest comes down after the physics (and, ``pinned``, his forearms stay
+    where they lie)."""
+    return DeathSpec(
+        name,
+        start,
+        force,
+        (0.0, -1.0, 0.0),
+        "head",
+        slump_time=0.25,
+        fade=0.6,
+        release=0.15,
+        knee_damping=knee_damping,
+        propped=True,
+        pinned=pinned,
+        slack_feet=True,
+    )
+
+
+def _prone_dead(name: str, start: str) -> DeathSpec:
+    """A prone death (:func:`_prone`) whose fall leaves the prone posture from rest
+    (:data:`PRONE_START_EASE`)."""
+    return replace(_prone(name, start), start_ease=PRONE_START_EASE)
+
+
+# A crawler's arms stay propped (limp, his chest dropped onto them and the elbows splayed, the forearms slid
+# 5-6 cm; held by contact_pin they still slid 4.4: the shoulders passed over the elbows) and his legs drawn
+# until he is down (limp from the start, the knees splayed 3.5 cm); the settle lays the chest down. The
+# rifle he cradled across his forearms is flung forward, ahead of his face (tossed to the side, it stayed
+# under the face and the head rested on it, 11.8 cm up; 40-80 N did not move it off the forearms).
+CRAWL_DEATH = replace(
+    _prone("crawl2dead", "CRAWL", force=120.0, knee_damping=4.0, pinned=False),
+    toss=200.0,
+    toss_to=(0.0, 1.0, 0.3),
+    kept=(*((j, MAX_SECONDS) for j in ("clavicle", "shoulder", "elbow")), ("hip", 0.45), ("knee", 0.45)),
+    kept_tone=0.3,
+    sunk=True,
+    slave_arm_out=True,
+    slave_feet_slack=True,
+)
+# s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
+# ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands
+# (10.1/11.4 cm; 18.3/20.0 to the active range over 1 s), the thighs sliding no further. Over 0.5 s the right
+# hip was still rolling out as he landed on that thigh (frames 83-97): its nodes slid 3.30 cm over the
+# ground; over 0.4 s the roll is done sooner, 2.78 (0.35: thigh 2.46 but the head 3.38 as he settles; 0.45:
+# head 3.55 and an ankle flick of 8.5 degrees: the fall is chaotic in these, each was measured)
+LEGS_ROLL = 0.4
+# s: stfire2dead's (heels 15.4 -> 15.1 cm and its knee's rebound 3.9 -> 2.5 cm; over 0.6 s its left foot slid
+# 6.3 cm as he landed, over 0.7 s the heel lay at 19.4: the fall is chaotic in these, each was measured)
+STFIRE_LEGS_ROLL = 0.8
+# s: prfire2dead leaves its posture from rest over this (DeathSpec.start_ease): its first frames 0.46 ->
+# 0.14 m/s, its DI/M16 slaves' 0.57/0.67 -> 0.32/0.29 (over 0.25 s with its ankles rolled, branch
+# proneheels14-wip: 0.08, slaves 0.27/0.23, but the DI slave's belly slid 8.1 cm). prstow2dead is not
+# eased: eased, its master's right forearm lay still over the first frames while its DI slave's swept
+# 5.8 cm along the ground (the slave's own start ease, authoring.slaving START_EASE_FRAMES; the master
+# moving, that forearm was lifted off the ground by then)
+PRONE_START_EASE = 0.1
+# frames: prstow2dead's slaves hold their head at the start (DeathSpec.slave_head_held). The M16 slave's solve
+# starts its neck 6.5 degrees off the PRONE_STOWED node's and swings it there over its first 10 frames; its
+# first frame snapped and that change faded out over 12 frames, the head left at 0.59 m/s (0.62 faded over 24;
+# held over 24: 0.49, the DI slave's 0.46 -> 0.45; it catches up at 1.6 m/s 0.2-0.3 s in, as it falls later)
+PRSTOW_HEAD_HELD = 24
+# stfire2dead's rifle is flung to his right, a little down and back (pelvis frame): to his left, away from the
+# fall (the default), he turned onto it and lay with his pelvis on it, 4.8 cm up; to his right it lies flat
+# 32 cm clear of him and the trunk rests 1.7 cm up (right and down (1, -0.7, 0): his thighs skid 5.7 cm as
+# he lands; back, or left and back, it ends under him again; at 100 N it rests tilted 38 cm up against him)
+STFIRE_TOSS = (1.0, -0.5, 0.2)
+# cm: kfire2dead's slaves' trunk rest may slide a resting part this far (DeathSpec.slave_rest_slide_cm): their
+# pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds)
+KFIRE_REST_SLIDE = 1.5
+# cm: kfire2dead's fallen arms reach no further than this past his shoulders toward his head
+# (DeathSpec.arms_headward_cm): half on his side, his top (right) arm lay lowest curled over his head
+KFIRE_ARMS_HEADWARD = 5.0
+# frames: kstow2dead's legs' flicking change by the pin and the lift smoothed (DeathSpec.legs_eased): the
+# worst flick 18.7 degrees (right knee) -> 7.5 (the left wrist's, untouched), the ankles' 12.7 -> 1.9, its
+# DI/M16 slaves' ankle 16.6 -> 2.6; turned least-worst last too (DeathSpec.turn_worst), its left thigh's slide
+# as he lands 4.51 -> 2.02 cm and the chest's 4.48 -> 3.00 (plant_worst got the thigh 2.53 but its arms' fall
+# then slid the chest 5.87)
+KSTOW_LEGS_EASED = 1.5
+DEATHS: tuple[DeathSpec, ...] = (
+    DeathSpec(
+        "ststow2dead",
+        "STAND_STOWED",
+        120.0,
+        (0.0, -0.3, -1.0),
+        toss=80.0,
+        pinned=True,
+        knees_held=True,
+        legs_roll=LEGS_ROLL,
+        legs_settle=False,
+        slave_arm_out=True,
+        slave_trunk_rigid=True,
+        slave_feet_landed=True,
+    ),
+    DeathSpec(
+        "stfire2dead",
+        "STAND_FIRE",
+        120.0,
+        (0.0, -0.3, -1.0),
+        knee_damping=4.0,
+        toss=120.0,
+        knee_straighten=0.5,
+        hip_damping=13.0,
+        arm_tone=0.08,
+        pinned=True,
+        legs_roll=STFIRE_LEGS_ROLL,
+        toss_to=STFIRE_TOSS,
+        slave_arms_pinned=True,
+    ),
+    DeathSpec(
+        "kstow2dead",
+        "KNEEL_STOWED",
+        100.0,
+        (1.0, -0.3, 0.0),
+        "upper",
+        release=0.15,
+        sideways=True,
+        arm_tone=0.05,
+        pinned=True,
+        arms_fall=True,
+        legs_lift=True,
+        legs_eased=KSTOW_LEGS_EASED,
+        turn_worst=True,
+        slave_feet_knelt=True,
+    ),
+    DeathSpec(
+        "kfire2dead",
+        "KNEEL_FIRE",
+        100.0,
+        (1.0, -0.3, 0.0),
+        "upper",
+        release=0.15,
+        sideways=True,
+        knee_damping=4.0,
+        arms_fall=True,
+        legs_lift=True,
+        plant_worst=True,
+        turn_worst=True,
+        slave_feet_held=True,
+        slave_rest_slide_cm=KFIRE_REST_SLIDE,
+        arms_headward_cm=KFIRE_ARMS_HEADWARD,
+    ),
+    replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD),  # not eased: see
+    # PRONE_START_EASE
+    replace(_prone_dead("prfire2dead", "PRONE_FIRE"), slave_arms_held=True),
+    CRAWL_DEATH,
+)
+
+
+def death_specs() -> dict[str, DeathSpec]:
+    return {d.name: d for d in DEATHS}
+
+
+def dead_node(name: str) -> str:
+    """The DEAD variant a death ends in: ``ststow2dead`` -> ``DEAD@ststow``."""
+    return f"{DEAD}@{name.removesuffix('2dead')}"
