@@ -399,8 +399,11 @@ def fallen_arm(body: _Body, side: str) -> np.ndarray:
     arm = _Arm(body, side)
     lo, hi = body.kin.lower[arm.idx], body.kin.upper[arm.idx]
     starts = [arm.x0, *_grid_starts(body.kin, side, arm.x0, arm.cost)]
-    if body.headward_cm is None:
-        return _minimise(arm.cost, starts, lo, hi)
+    limit, body.headward_cm = body.headward_cm, None
+    best = _minimise(arm.cost, starts, lo, hi)
+    body.headward_cm = limit
+    if limit is None or arm.overhead(arm.into(best)[0]) == 0.0:  # an arm not over the head lies as it did
+        return best  # (kfire2dead's bottom arm laid anew too: his chest and belly slid 3.9 cm)
     starts += _grid_starts(body.kin, side, arm.x0, arm.cost, HEADWARD_GRID)
     return min([_minimise(arm.cost, starts, lo, hi), *(np.clip(x, lo, hi) for x in starts)], key=arm.cost)
 

@@ -79,3 +79,24 @@ def test_a_way_into_the_body_is_weighed_against_the_body_alone(figures: FigureSe
     assert honest >= dead_arms.PENALTY * 5.0
     arm.inside0 = 10.0  # as if the rifle had lain 10 cm deep in the arm where it was
     assert dead_arms.path_cost(arm, arm.x0, x1)(mid) == honest
+
+
+def test_an_arm_over_the_head_is_wrong_only_where_the_death_asks(figures: FigureSet) -> None:
+    """kfire2dead's top (right) arm lay curled over his head (issue 14): with the death's
+    ``arms_headward_cm`` its forearm and hand reaching past the shoulders up the spine count as wrong, and
+    the arm-fall search weighs them; without it (every other death) nothing changes."""
+    from authoring import dead_settle
+
+    cf = play(load_channelset(CHANNELSETS / "kfire2dead.chset.env"), figures)
+    two = FigureSet({"body": figures.figures["soldier.fig"], "rifle": figures.figures["AK_47.fig"]})
+    q, root = cf.poses["soldier.fig"][-1], cf.locations["soldier.fig"][-1]
+    body = dead_settle._Body(two, q.astype(float), root.astype(float), cf.locations["AK_47.fig"][-1])
+    arm = dead_settle._Arm(body, "right")
+    p = arm.into(arm.x0)[0]
+    assert arm.overhead(p) == 0.0  # headward_cm None: anywhere
+    body.headward_cm = 5.0
+    over = arm.overhead(p)
+    if over == 0.0:
+        pytest.skip("the committed kfire2dead's right arm no longer lies over his head")
+    assert over > 5.0
+    assert arm.terms(arm.x0)[2] >= over
