@@ -40,6 +40,7 @@ from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
 from authoring.slave_rest import rest_slave_trunk
 from authoring.slave_slack import slack_slave_feet
+from authoring.slave_wrists import ease_slave_wrists
 from authoring.slaving import MasterSlavePair
 from authoring.transitions import ClipFrames, clip_to_channelset
 from peabody.fk import FigureKinematics
@@ -264,6 +265,8 @@ def slave_one(
         rests += (pin_slave_arms,)
     if spec and spec.slave_feet_slack:  # last: the feet go slack as his, from where the slave's lay
         rests += (slack_slave_feet,)
+    if crawl_turn.eases_slave_wrists(chset.name.removesuffix(".chset")):  # a wrist flicking at its limits
+        rests += (ease_slave_wrists,)
     for rest in rests:
         rest(chset, out, ctx.figure_set)
         lift_off_ground(out, ctx.di)

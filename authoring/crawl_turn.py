@@ -64,16 +64,16 @@ TURN_ANGLES = (30, 45, 90)  # a crawling soldier turns the nearest (another afte
 U_TURN = "crawlarc_r180"
 # ... and the shorter ones, built the same way (a 135-165° reversal: turned on the spot and then the arcs he
 # ended 108 cm from his entity at 150°; the U-turn and the rest turned crawling on, 34 cm at 165°), to his
-# right, and the 165° one to his left
+# right and to his left
 U_TURN_ANGLES = (135, 150, 165, 180)
-LEFT_U_TURN_ANGLES = (165,)
+LEFT_U_TURN_ANGLES = (135, 150, 165)
 # share of the front's carry in the chest's and the pelvis's on a U-turn to his left: the body follows the
 # forearms, not the knees. The rifle across his body, his right elbow is near its reach in CRAWL: with
 # ADVANCE_FRONT the knees' moves carried the shoulders away from it to his left and the planted right forearm
 # slid 31 cm at 150°, the palms left the rifle 2.7 cm; 0.8: 7.0 cm; 1.0: 2.8 cm at 165° (the check's 3 cm),
-# 3.0 at 150°, 3.5 at 135°, as the knees make their last move: those two are not built yet (the chest
-# carried 1.1-1.2 of the front's: 4.4-4.5 cm; chest and pelvis 1.2-1.4: the right forearm 2.2-2.5 but the
-# pelvis dragged the left thigh 4-8 cm)
+# 3.0 at 150°, 3.5 at 135°, as the knees make their last move (the chest carried 1.1-1.2 of the front's:
+# 4.4-4.5 cm; chest and pelvis 1.2-1.4: the right forearm 2.2-2.5 but the pelvis dragged the left thigh 4-8
+# cm); with the pelvis's share below, 1.8-2.0 cm at 150° and 1.0 at 135°
 LEFT_U_TURN_AHEAD = 1.0
 # ... and in the pelvis's alone, each pair of moves (its front move and the knees' after it): carried with
 # the forearms a whole move ahead of the knees, the DI slave's pelvis pulled its thighs flat, its belly lay on
@@ -83,8 +83,20 @@ LEFT_U_TURN_AHEAD = 1.0
 # DI's right wrist flicked 15.2 degrees there). Sensitive, the DI's left wrist above all: 0.5 throughout, the
 # soldier's right forearm slid 4.3 cm in the fourth pair; 0.75 throughout, 3.5 cm in the last; 0.6 in the
 # last, the DI's hips popped 24 degrees; in the fifth 0.5, 0.55, 0.6: its left wrist flicked 15.1, 18.5, 15.1
-# degrees; 0.7: the M16 slave's right forearm slid 4.1 cm
-LEFT_U_TURN_PELVIS_AHEAD = (0.75, 1.0, 1.0, 1.0, 0.45, 0.5)
+# degrees; 0.7: the M16 slave's right forearm slid 4.1 cm. 150° and 135° (five pairs): the 165°'s last two
+# at 150°, the DI's left wrist flicked 19.2 degrees (at its limits, holding the handguard), the M16's belly
+# stepped 18.6 onto another branch as the knees made their last move; 1.0 in the fourth pair and 0.45 in the
+# last, 14.3 and 10.9 (0.5 in the last: the M16's belly 18.2; 0.6: 14.5). At 135° 1.0 in the fourth pair
+# dragged the DI's right knee 5.3 cm; with 0.45 there the DI's left wrist flicked 15.8-20.0 degrees whatever
+# the last pair's (0.45, 0.5, 0.6) or the fourth's (0.5): eased (LEFT_U_TURN_WRISTS_EASED)
+LEFT_U_TURN_PELVIS_AHEAD = {
+    165.0: (0.75, 1.0, 1.0, 1.0, 0.45, 0.5),
+    150.0: (0.75, 1.0, 1.0, 1.0, 0.45),
+    135.0: (0.75, 1.0, 1.0, 0.45, 0.5),
+}
+# ... the U-turns to his left whose DI/M16 slaves have their wrists eased where they flick (slave_wrists): the
+# DI's left wrist 15.85 -> 12.0 degrees at 135°, 14.3 -> 9.0 at 150° (the palm 0.58 and 0.50 cm off the rifle)
+LEFT_U_TURN_WRISTS_EASED = (135, 150)
 # ... and a U-turn for a faster entity, carrying him further as fast: more, shorter moves, each as quick in
 # degrees a second (143.5 cm in 4.2 s at the server's GROUND_TURN_RATE; 0.45 m/s: the U-turn's 103.5 cm in
 # 4 s left him 48 cm behind, played faster his body would swing over 360°/s; 25-30 cm a move, his arms fell
@@ -127,6 +139,7 @@ class Plan(NamedTuple):
     tempo: float = 1.0  # share of MOVE a move takes
     ahead: float = ADVANCE_FRONT  # share of the front's carry in the chest's and the pelvis's
     pelvis_ahead: tuple[float, ...] | None = None  # ... in the pelvis's, each pair of moves (None: ``ahead``)
+    slave_wrists_eased: bool = False  # the DI/M16 slaves' wrists eased where they flick (slave_wrists)
 
 
 _PLANS: dict[str, Plan] = {
@@ -142,12 +155,24 @@ _PLANS[U_TURN_FAR] = Plan("right", 180.0, ARC_ADVANCE, U_TURN_FAR_STEP, U_TURN_F
 _PLANS.update(
     {
         clip_name("left", a, ARC_ADVANCE): Plan(
-            "left", float(a), ARC_ADVANCE, ahead=LEFT_U_TURN_AHEAD, pelvis_ahead=LEFT_U_TURN_PELVIS_AHEAD
+            "left",
+            float(a),
+            ARC_ADVANCE,
+            ahead=LEFT_U_TURN_AHEAD,
+            pelvis_ahead=LEFT_U_TURN_PELVIS_AHEAD[float(a)],
+            slave_wrists_eased=a in LEFT_U_TURN_WRISTS_EASED,
         )
         for a in LEFT_U_TURN_ANGLES
     }
 )
 CRAWL_TURN_CLIPS: tuple[str, ...] = tuple(_PLANS)
+
+
+def eases_slave_wrists(name: str) -> bool:
+    """Whether clip ``name``'s DI/M16 slaves have their wrists eased where they flick
+    (:mod:`authoring.slave_wrists`): a turn on the ground whose plan asks for it."""
+    plan = _PLANS.get(name)
+    return plan is not None and plan.slave_wrists_eased
 
 
 def crawl_turn_arcs() -> list[tuple[str, str, str, bool]]:
@@ -240,7 +265,7 @@ def record_crawl_turn(
     ``plan.advance`` cm forward (its moves of ``plan.step`` degrees at most, at ``plan.tempo`` times MOVE;
     the chest and the pelvis carried ``plan.ahead`` of the front's carry and the rest of the knees', the
     pelvis ``plan.pelvis_ahead`` a pair of moves where given), and its ``end_offset``."""
-    direction, angle, advance, step, tempo, ahead, pelvis_ahead = plan
+    direction, angle, advance, step, tempo, ahead, pelvis_ahead, _ = plan
     moves, t_land = part_moves(direction, angle, step, tempo)
     t_end = round((t_land + SETTLE) * FPS) / FPS
     n = round(t_end * FPS) + 1

@@ -29,7 +29,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from authoring import ik
 from authoring.body_parts import contact_runs
-from authoring.quality import CONTACT_HEIGHT_CM
+from authoring.quality import CONTACT_HEIGHT_CM, one_frame_flicks
 from authoring.quality_frames import FigureSet
 from authoring.rifle_swap import _smooth_above
 from authoring.slave_feet import part_points
@@ -165,7 +165,7 @@ def eased_legs(fall: ClipFrames, held: ClipFrames, soldier: Figure, sigma: float
     change = poses[:, cols] - before[:, cols]
     turn = np.degrees(np.diff(change, axis=0))
     flicks = np.zeros(change.shape, dtype=bool)  # the frames either side of a flicking turn
-    flicks[1:-2] = np.minimum(np.abs(turn[1:-1] - turn[:-2]), np.abs(turn[1:-1] - turn[2:])) > EASE_FLICK_DEG
+    flicks[1:-2] = one_frame_flicks(turn) > EASE_FLICK_DEG
     flicks[1:] |= flicks[:-1]
     where = np.stack([_smooth_above(f * 1.0, sigma) for f in flicks.T], axis=1)
     where = np.clip(where, 0.0, 1.0)

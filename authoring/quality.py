@@ -194,15 +194,22 @@ def _highest_foot(key: str, feet: np.ndarray, frames: np.ndarray) -> dict[str, A
     return {f"{key}_cm": round(float(feet[at, side]), 3), f"{key}_where": f"{FOOT_PARTS[side]}[{at}]"}
 
 
+def one_frame_flicks(turn: np.ndarray) -> np.ndarray:
+    """The one-frame flicks of turns ``turn`` ``(m, k)`` (``turn[t] = q[t+1] - q[t]``), of turns 1 .. m-2
+    ``(m-2, k)``: the smaller of ``|turn(t) - turn(t-1)|`` and ``|turn(t) - turn(t+1)|`` (none for fewer
+    than 3 turns). The check's flick limits and the stages that ease a flick (``leg_lift.eased_legs``,
+    ``slave_wrists``) judge by this one measure."""
+    if len(turn) <= 2:
+        return np.zeros((0, turn.shape[1]))
+    return np.minimum(np.abs(turn[1:-1] - turn[:-2]), np.abs(turn[1:-1] - turn[2:]))
+
+
 def frame_flicks(q: np.ndarray, rot: np.ndarray, dof_slices: Mapping[str, slice]) -> dict[str, Any]:
     """The largest one-frame flick (degrees) of the rotational DOFs ``rot`` of poses ``q`` ``(n, ndof)``,
     over every joint (``max_frame_flick_deg``) and the ankles (``ankle_flick_deg``), with where: at frame
     ``t`` the smaller of ``|turn(t) - turn(t-1)|`` and ``|turn(t) - turn(t+1)|``, ``turn(t) = q[t+1] - q[t]``
     (a jump in a still joint scores the jump, a steady or smoothly changing turn little)."""
-    turn = np.degrees(np.diff(q, axis=0))
-    flick = np.zeros((0, q.shape[1]))
-    if len(turn) > 2:
-        flick = np.minimum(np.abs(turn[1:-1] - turn[:-2]), np.abs(turn[1:-1] - turn[2:]))
+    flick = one_frame_flicks(np.degrees(np.diff(q, axis=0)))
     flick[:, ~rot] = 0.0
     ankles = np.zeros(q.shape[1], dtype=bool)
     for joint, sl in dof_slices.items():

@@ -45,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from client_stub.link.spawn import ServerProcess, SpawnError, cpu_seconds, free_port
 from server.config import MAX_SOLDIERS_LIMIT
-from server.fabric import BLOCK
+from server.fabric import BLOCK, engine_flags
 
 HEADROOM = (
     512  # indices beyond the load's: the start-up script's soldiers and the front-ends' shares' rounding
@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="ttes-scaleout-") as tmp:
         config = Path(tmp) / "scale.toml"
         config.write_text(f"max_soldiers = {cap}\nmax_soldiers_per_client = {cap}\nreport_interval = 1.0\n")
-        flags = ["--config", str(config), "--throttle", "0", "--fabric", args.fabric]
+        flags = ["--config", str(config), "--throttle", "0", *engine_flags(args.fabric)]
         flags += ["--fabric-block", str(args.fabric_block)] if args.fabric_block else []
         started = time.monotonic()
         with cluster(flags, n, m) as servers:
@@ -111,6 +111,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             reports = [_report(Path(tmp), j) for j in range(procs_n)]
             logs = {k: p.log_tail(1 << 26) for k, p in servers.items()}
     books = {k: log.count("fabric_books_failed") for k, log in logs.items() if k.startswith("front")}
+    # books answers a shard sent (each a list of every soldier it animates, heard by every front-end)
+    answered = {k: log.count("fabric_books_answered") for k, log in logs.items() if k.startswith("shard")}
     failed = [r for r in reports if "error" in r]
     reports = [r for r in reports if "error" not in r]
     if not reports:
@@ -146,6 +148,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         },
         "cpu_ms_per_tick": {k: stages(r) for k, r in rows.items()},
         "books_failed": books,
+        "books_answered": answered,
         # at the window's end: every front-end should know every soldier, each shard its own; mirrored:
         # the soldiers a front-end knows from the others (ttes/fronts)
         "soldiers_known": {k: int(r[-1].get("soldiers", -1)) for k, r in rows.items() if r},

@@ -43,6 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench import trace_legs
 from client_stub.link.spawn import ServerProcess, cpu_seconds, free_port
 from client_stub.loadtest.session import LoadTestConfig, run_loadtest
+from server.fabric import engine_flags
 
 
 def main() -> int:
@@ -70,7 +71,7 @@ def main() -> int:
         config = Path(tmp) / "scale.toml"  # room for every soldier, one client id may own them all
         n = args.soldiers + 64
         config.write_text(f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\nreport_interval = 2.0\n")
-        common = ["--config", str(config), "--throttle", "0", "--fabric", args.fabric]
+        common = ["--config", str(config), "--throttle", "0", *engine_flags(args.fabric)]
         common += ["--fabric-block", str(args.fabric_block)] if args.fabric_block else []
         if args.trace:
             os.environ["TTES_TRACE"], os.environ["TTES_TRACE_BELOW"] = f"{tmp}/trace", str(args.trace + EXTRA)
@@ -196,7 +197,7 @@ def stage_cpu(log: str, name: str = "cpu_ms_per_tick") -> dict[str, float]:
 def probe(n: int, fabric: str) -> dict[str, object]:
     # --throttle 0 as the load's: the synthetic start-up script's 0.04 s held an answer until 23 ms after the
     # client's last write (16 ms p50 of the path's 9 at load 11, measured alone)
-    with cluster(["--synthetic", "--throttle", "0", "--fabric", fabric]) as procs:
+    with cluster(["--synthetic", "--throttle", "0", *engine_flags(fabric)]) as procs:
         lat = trio.run(_probe, procs["front"].port, n)
     ms = np.asarray(lat) * 1000
     return {

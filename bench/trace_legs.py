@@ -28,7 +28,7 @@ STAGES = (
     "shard_take",  # the shard's loop takes it (applies it, answers)
     "shard_publish",  # the shard's first batch with the soldier after that (note: answer or tick)
     "fe_arrive",  # the front-end's fabric thread received that batch
-    "fe_merge",  # the front-end's loop merged it into its board (note: fed or tick)
+    "fe_merge",  # the front-end's loop merged it into its board (note: fed, tick, or first: ahead of ticks)
     "encode",  # the probe's writer encoded the soldier's update
     "sent",  # ... and wrote it to the socket
     "client_recv",  # the probe read it

@@ -38,6 +38,7 @@ its start and duration (``SoldierManager.soldier_info``), or the clips it starte
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import ipaddress
 import math
@@ -75,6 +76,9 @@ SHUTDOWN_GRACE_S = 1.0
 FRONT_TURNS = os.environ.get("TTES_FRONT_TURNS") != "0"
 # clip ends a shard's tick handles between two looks at its CPU (each piece's passes cost a fixed part)
 ADVANCE_ROWS = 500
+# TTES_ANSWERS_FIRST=0: a shard's tick carries the requests it took while it sampled in its own batch, and a
+# front-end merges the answers and the ticks that arrived together in one publish, as before (a bench's A/B)
+ANSWERS_FIRST = os.environ.get("TTES_ANSWERS_FIRST") != "0"
 MAX_TICK_BACKLOG = 5  # ticks: a server that falls further behind skips ahead instead of bursting
 log = get_logger("app")
 
@@ -135,7 +139,12 @@ class TtesServer:
         self.cpu = StageCpu()  # the loop's CPU per stage, in the status log line
         self.deaf = DeafSpans() if os.environ.get("TTES_DEAF") == "1" else None  # a bench's: loop_deaf_ms
         # a shard's: called after each publish with the board (server.fabric: the batch for the front-ends)
-        self.on_publish: Callable[[PoseBoard], None] | None = None
+        self.on_publish: Callable[[PoseBoard, bool], None] | None = None
+        self._asked_in_tick = np.zeros(0, np.int64)  # a shard's: soldiers with requests when its tick sampled
+        # answers go before the ticks they came with: a shard's tick's first frames (_shard_first), a
+        # front-end's merge (server.fabric.nodes.FrontNode.feed)
+        self.answers_first = ANSWERS_FIRST
+        self.encoded: Callable[[Session], None] | None = None  # a front-end's: after a writer's encode
         self.board_poses = True  # the board keeps the Jack-unit poses beside the codes (:meth:`codes_only`)
         # a front-end's: fills the board from elsewhere (the shards' batches) instead of the manager, which
         # then only keeps the books; called with the wire tick to label them, returns the soldiers changed
@@ -472,8 +481,8 @@ class TtesServer:
                     data = tick_data
                 else:  # woken by answers alone (written at once, not after the next reader's answer), or a
                     # front-end's tick (its readers answer nothing, its shards do: at once, in turns: _encode)
-                    if session.ticked:
-                        session.ticked = session.more_of_tick = False
+                    if session.ticked:  # (a front-end's more_of_tick: answers merged before a tick's rows)
+                        session.ticked = False
                         self.apply_held()
                     data = await self._encode(session)
                 session.drained.set()
@@ -507,7 +516,10 @@ class TtesServer:
     def _encode_now(self, session: Session) -> bytes:
         session.wake = trio.Event()  # a publish from here on wakes it again
         with self.cpu("encode"):
-            return session.take_output(self.now())
+            data = session.take_output(self.now())
+        if self.encoded is not None:
+            self.encoded(session)
+        return data
 
     async def _tick_output(self, session: Session, stream: trio.abc.Stream) -> bytes | None:
         """A single server's writer woken by a tick: its client's frames of the tick (None: a write stalled).
@@ -602,15 +614,17 @@ class TtesServer:
         the tick is quantised and encoded, so a request that lands while the tick samples waits for the
         sampling only (issue 16). Requests taken after that are folded into the tick's publish
         (:meth:`publish_tick`)."""
+        first = False
         if self.on_publish is not None:  # a shard's
             update = await self._shard_sample(scheduled)
+            if update is not None and self.answers_first:
+                first = self._shard_first(update)
         else:
             update = self.sample_tick(scheduled)
         if update is None:
             return
         spent = self.last_tick_seconds
         self._ticking = True  # the readers' answers wait: this tick takes them up
-        first = False
         try:
             await self.let_readers_in()
             with self.cpu("requests"):
@@ -650,10 +664,35 @@ class TtesServer:
                 end = time.thread_time() + TURN_CPU_S
         await self._let_fabric_in()
         t0 = time.perf_counter()
+        if self.answers_first:  # (tick_emit clears the flags it samples)
+            self._asked_in_tick = np.flatnonzero(m.table.requested)
         with self.cpu("animate"):
             update = m.tick_emit(now)
         self.last_tick_seconds = spent + time.perf_counter() - t0
         return update
+
+    def _shard_first(self, update: TickUpdate) -> bool:
+        """A shard's tick's first publish: the soldiers whose requests it took while it sampled (their poses
+        are in ``update``), as an answer batch of their own before the tick's (issue 21: they waited for
+        the quantising and the batch of every soldier, and at the front-end for the encode of the whole
+        tick). The tick's publish (``again``) then finds their codes unchanged and sends them no second
+        time. False: none of them is in the tick (nothing published)."""
+        asked, self._asked_in_tick = self._asked_in_tick, np.zeros(0, np.int64)
+        board = self._board()
+        if not len(asked) or board is None:
+            return False
+        sel = np.flatnonzero(np.isin(update.indices, asked))
+        if not len(sel):
+            return False
+        part = update.select(sel)
+        t0 = time.perf_counter()
+        if self.on_tick is not None:
+            self.on_tick(part)
+        with self.cpu("quantise"):
+            changed = board.publish(part, self.world)
+        self._published(board, changed, part.indices, tick=False, more=True)
+        self.last_tick_seconds += time.perf_counter() - t0
+        return True
 
     async def _let_fabric_in(self) -> None:
         """Within a shard's tick: the requests that reached the fabric are taken (their answers held for the
@@ -797,7 +836,7 @@ class TtesServer:
         a tick's first frames, the rest to follow (``Session.more_of_tick``: not held by the throttle)."""
         if self.on_publish is not None:
             with self.cpu("fabric"):
-                self.on_publish(board)
+                self.on_publish(board, tick)
         if changed:
             if board.tick != self._counted_tick:
                 self._counted_tick = board.tick
@@ -880,9 +919,26 @@ class TtesServer:
         if not session.joined:
             return
         session.joined = False
-        deadline = self.world.owners.leave(session.client_id, self.now(), self.config.orphan_grace)
-        if deadline is not None and self._nursery is not None and not self._shutdown.is_set():
-            log.info("owner_gone", client_id=session.client_id, grace=self.config.orphan_grace)
+        self.client_left(session.client_id)
+
+    def client_left(self, client_id: str) -> None:
+        """A connection of ``client_id`` closed (here, or on another front-end: ``server.fabric``)."""
+        self._orphans_wait(
+            client_id, self.world.owners.leave(client_id, self.now(), self.config.orphan_grace)
+        )
+
+    def orphans_check(self) -> None:
+        """Start the grace of every id that owns soldiers and has no connection and none yet (a front-end
+        that held its connections is gone, or handed the removal of its share's orphans to this one)."""
+        owners, now, grace = self.world.owners, self.now(), self.config.orphan_grace
+        for cid in owners.owning():
+            self._orphans_wait(cid, owners.orphaned(cid, now, grace))
+
+    def _orphans_wait(self, client_id: str, deadline: float | None) -> None:
+        if deadline is None or self._nursery is None or self._shutdown.is_set():
+            return
+        log.info("owner_gone", client_id=client_id, grace=self.config.orphan_grace)
+        with contextlib.suppress(RuntimeError):  # stopped: its nursery is closed (a front-end told late)
             self._nursery.start_soon(self._expire_orphans, deadline)
 
     async def _expire_orphans(self, deadline: float) -> None:
@@ -894,6 +950,8 @@ class TtesServer:
         owners = self.world.owners
         for cid in owners.expired(self.now()):
             gone = owners.soldiers_of(cid)
+            if self.world.relay is not None:  # a front-end of several removes its own share's
+                gone = self.world.relay.orphans(gone)
             for i in gone:
                 self.world.remove_soldier(i, f"owner {cid} gone for {self.config.orphan_grace:g} s")
             log.info("orphans_removed", client_id=cid, soldiers=len(gone))

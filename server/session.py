@@ -74,6 +74,7 @@ from server.logging import get_logger
 from server.pose_board import BoardRef, PoseBoard
 from server.soldier.manager import REQUEST_BAD_VALUE, REQUEST_UNKNOWN_SOLDIER
 from server.trace import TRACE
+from server.world.owners import ANONYMOUS
 
 if TYPE_CHECKING:
     from server.pending_requests import PendingRequests
@@ -455,7 +456,7 @@ class Session:
             log.info("client_refused", session=self.id, peer=self.peer, name=ev.name, reason=refused)
             return
         self.role = ev.role
-        self.client_id = ev.client_id or f"~anon-{self.id}"
+        self.client_id = ev.client_id or f"{ANONYMOUS}{self.id}"
         reclaimed = self.world.owners.join(self.client_id)
         self.joined = True
         c = self.config

@@ -82,6 +82,11 @@ class Relay(Protocol):
 
     def react(self, index: int, kind: str) -> None: ...
 
+    def orphans(self, indices: list[int]) -> list[int]:
+        """Of a gone client id's soldiers, those this front-end removes (of several, each removes those of
+        its share, and tells the others: two removing one soldier could remove a soldier created again)."""
+        ...
+
 
 class ServerWorld:
     """The server's one simulation: its parts, readiness, and the JCL that drives them."""

@@ -100,6 +100,18 @@ def test_a_crawlers_u_turn_carries_him_along_the_heading_it_ends_on() -> None:
 
 
 @pytest.mark.parametrize("suffix", SUFFIXES)
+@pytest.mark.parametrize("angle", crawl_turn.LEFT_U_TURN_ANGLES)
+def test_a_u_turn_to_his_left_ends_where_the_one_to_his_right_ends_mirrored(angle: int, suffix: str) -> None:
+    """``crawlarc_l135``/``l150``/``l165`` carry him as far along his new heading as ``crawlarc_r*`` of the
+    same angle, on the other side (x and yaw mirrored): a reversal of 135-165° either way ends as near his
+    entity (the server's ``turning._u_turn`` weighs their carry alike)."""
+    left = load_channelset(CHANNELSETS / f"crawlarc_l{angle}{suffix}.chset.env").end_offset
+    right = load_channelset(CHANNELSETS / f"crawlarc_r{angle}{suffix}.chset.env").end_offset
+    assert left is not None and right is not None
+    np.testing.assert_allclose(left, (-right[0], right[1], -right[2]), atol=1e-3)
+
+
+@pytest.mark.parametrize("suffix", SUFFIXES)
 @pytest.mark.parametrize("name", [f"crawlarc_l{a}" for a in crawl_turn.LEFT_U_TURN_ANGLES])
 def test_a_u_turn_to_his_left_passes_the_check_on_every_figure(name: str, suffix: str) -> None:
     """Every limit of ``ttes author check`` holds for the U-turn to his left and its DI/M16 slaves (issue 16:

@@ -9,7 +9,6 @@ shards' soldiers must reach the one client, in tick order.
 from __future__ import annotations
 
 import contextlib
-import random
 from collections import Counter
 from collections.abc import Iterator
 
@@ -19,26 +18,18 @@ from test_server_support import Client, synthetic_dir
 
 from client_stub.link.spawn import ServerProcess, free_port
 from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, SoldierRemoved, Subscribe
-from server.fabric import DDS_DOMAIN_MAX
+from server.fabric import engine_flags
 
 pytest.importorskip("zenoh")
 
 WALK = (0.0, 1.4, 0.0)
 
 
-def fabric_flags(fabric: str) -> list[str]:
-    """``--fabric`` and, for DDS, a random domain of this run's own: DDS nodes of another run on this host
-    (the same loopback peers) would join this one."""
-    if fabric != "dds":
-        return ["--fabric", fabric]
-    return ["--fabric", fabric, "--fabric-domain", str(random.randrange(1, DDS_DOMAIN_MAX + 1))]
-
-
 @contextlib.contextmanager
 def cluster(shards: int = 2, fabric: str = "zenoh") -> Iterator[list[ServerProcess]]:
     """A front-end, then ``shards`` shards connected to its fabric endpoint; stopped on exit."""
     d = synthetic_dir()
-    data = ["--data-dir", str(d.path), "--startup-script", d.startup_script, *fabric_flags(fabric)]
+    data = ["--data-dir", str(d.path), "--startup-script", d.startup_script, *engine_flags(fabric)]
     endpoint = f"127.0.0.1:{free_port()}"
     procs = [ServerProcess([*data, "--shards", str(shards), "--fabric-listen", endpoint], command="front")]
     try:

@@ -14,11 +14,12 @@ from collections.abc import Iterator
 
 import pytest
 import trio
-from test_fabric_cluster import WALK, _soldiers_of, fabric_flags
+from test_fabric_cluster import WALK, _soldiers_of
 from test_server_support import Client, synthetic_dir
 
 from client_stub.link.spawn import ServerProcess, free_port
 from protocol.events import CreateSoldier, JointUpdates, Ready, SoldierCreated, Subscribe
+from server.fabric import engine_flags
 from server.fabric.fronts import IndexShare
 
 pytest.importorskip("zenoh")
@@ -28,16 +29,19 @@ EACH = 24  # soldiers each client creates
 
 
 @contextlib.contextmanager
-def two_fronts(fabric: str = "zenoh") -> Iterator[tuple[list[ServerProcess], list[ServerProcess]]]:
-    """Front-ends 0/2 and 1/2 (the second connects to the first), then 2 shards connected to both."""
+def two_fronts(
+    fabric: str = "zenoh", front_args: tuple[str, ...] = ()
+) -> Iterator[tuple[list[ServerProcess], list[ServerProcess]]]:
+    """Front-ends 0/2 and 1/2 (the second connects to the first; ``front_args`` for both), then 2 shards
+    connected to both."""
     d = synthetic_dir()
-    data = ["--data-dir", str(d.path), "--startup-script", d.startup_script, *fabric_flags(fabric)]
+    data = ["--data-dir", str(d.path), "--startup-script", d.startup_script, *engine_flags(fabric)]
     ends = [f"127.0.0.1:{free_port()}" for _ in range(2)]
     procs: list[ServerProcess] = []
     try:
         for k, end in enumerate(ends):
             joins = [a for e in ends[:k] for a in ("--fabric-connect", e)]
-            args = [*data, "--shards", "2", "--front", f"{k}/2", "--fabric-listen", end, *joins]
+            args = [*data, "--shards", "2", "--front", f"{k}/2", "--fabric-listen", end, *joins, *front_args]
             procs.append(ServerProcess(args, command="front"))
         for k in range(2):
             joins = [a for e in ends for a in ("--fabric-connect", e)]

@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
 import test_fabric_inprocess as inprocess
 import trio
 from test_fabric_cluster import WALK, _soldiers_of
+from test_fabric_fronts import two_fronts
 from test_fabric_latefront import _moving
 from test_server_support import Client, synthetic_dir
 
@@ -33,9 +35,19 @@ from protocol.events import (
     SoldierRemoved,
     Subscribe,
 )
+from server.fabric import Handler
 from server.fabric import requests as req
 from server.fabric.batch import Batch
-from server.fabric.fronts import Fences, answer, decode_answer, gone, learned_last, rerouted, stand_ins
+from server.fabric.fronts import (
+    Fences,
+    answer,
+    answer_scope,
+    decode_answer,
+    gone,
+    learned_last,
+    rerouted,
+    stand_ins,
+)
 
 pytest.importorskip("zenoh")
 
@@ -83,6 +95,14 @@ def test_the_rows_of_an_index_created_again_wait_for_the_shards_fence() -> None:
     assert fences.clean(_rows(0, [], (0, 2))).indices.tolist() == [] and fences.waiting == 0  # no rows: done
 
 
+def test_the_rows_of_an_index_another_front_end_created_again_wait_for_its_fence() -> None:
+    fences = Fences(1, 12, 2)  # front-end 1 mirrors front-end 0's creation at 5, which ends with fence 3
+    assert fences.wait([5], 0, 1, 3) and fences.due == [False, False]  # no fence of its own is due
+    assert fences.clean(_rows(1, [3, 5], (2, 9))).indices.tolist() == [3]  # front-end 0's fence 2 only
+    assert fences.clean(_rows(0, [5], (3, 0))).indices.tolist() == []  # shard 0's fence says nothing
+    assert fences.clean(_rows(1, [5], (3,))).indices.tolist() == [5] and fences.waiting == 0
+
+
 def test_a_shard_down_hands_its_own_and_the_homes_it_stood_in_for_to_the_least_busy_survivor() -> None:
     route = [0, 1, 0, 3]  # 2 failed over to 0
     assert rerouted(route, [0, 1, 2, 3], [True] * 4) == [] and route == [0, 1, 0, 3]
@@ -100,6 +120,10 @@ def test_an_answer_with_another_shards_soldiers_names_a_stand_in_for_a_shard_nev
     assert stand_ins(told, 0, 2, [True, False]) == {1: 0}
     assert stand_ins(told, 0, 2, [True, True]) == {}  # heard: it comes back, or failed over here
     assert stand_ins(told, 1, 3, [False, False, False]) == {0: 1}  # 3 and 0 homed on 0; 4 is shard 1's
+    assert stand_ins([], 0, 3, [True, False, False], homes=[2]) == {2: 0}  # it says so: soldiers or none
+    assert answer_scope(np.arange(10), [0, 0], 0, stand_in=[1]) == set(range(10))
+    assert decode_answer(answer(0, 0, [], homes=[2]))["homes"] == [2]
+    assert decode_answer(answer(0, 0, [(3, *di, None)], gens=[4]))["gens"] == [4]  # (generations: a sync's)
 
 
 def test_a_front_end_keeps_the_answers_last_requests_of_its_soldiers_without_one() -> None:
@@ -201,6 +225,7 @@ async def test_a_front_end_started_while_a_shard_is_failed_over_routes_to_the_st
         c.shard(0)
         c.shard(1)
         alpha = await _walker(c.front.port)
+        await _moving(c.front.port, [ODD], frames=2)  # shard 1 heard (else no fail-over: under load, flaky)
         await alpha.requests(index=[ODD], velocity=(0.0, 0.0, 0.0))  # it stands
         c.kill(c.shards[1])
         assert await _until_soldiers(c.shards[0].port, [*range(10), ODD]) == [*range(10), ODD]
@@ -263,6 +288,19 @@ async def test_a_hung_shard_that_resumes_lets_go_of_a_soldier_removed_while_it_w
         await c.aclose()
 
 
+async def _none_of_the_old_soldiers_codes(
+    c: Client, node: inprocess.FrontNode, put: Handler, held: list[bytes]
+) -> None:
+    """While shard 1 has not heard the removal and re-creation of ``ODD`` (``node``'s messages to it are
+    ``held``), ``c`` gets shard 1's batches (``ODD - 2`` walks) and no row of ``ODD``; then they go."""
+    updates = [e for e in await c.drain(2.0) if isinstance(e, JointUpdates)]
+    assert [u for u in updates if ODD - 2 in u.indices.tolist()], "shard 1's batches come"
+    assert not [u.tick for u in updates if ODD in u.indices.tolist()]
+    node._puts[1] = put
+    for data in held:
+        put(data)
+
+
 async def test_an_index_removed_and_created_again_shows_none_of_the_old_soldiers_codes(
     autojump_clock: trio.abc.Clock,
 ) -> None:
@@ -280,12 +318,7 @@ async def test_an_index_removed_and_created_again_shows_none_of_the_old_soldiers
         await c.expect(SoldierRemoved)
         await c.send(CreateSoldier(2, "DI.fig", "AK_47.fig", ODD))
         assert (await c.expect(SoldierCreated)).index == ODD
-        updates = [e for e in await c.drain(2.0) if isinstance(e, JointUpdates)]
-        assert [u for u in updates if ODD - 2 in u.indices.tolist()], "shard 1's batches come"
-        assert not [u.tick for u in updates if ODD in u.indices.tolist()]
-        node._puts[1] = put
-        for data in held:
-            put(data)
+        await _none_of_the_old_soldiers_codes(c, node, put, held)
         with trio.fail_after(30):
             while ODD not in inprocess.live(shards[1]):
                 await trio.sleep(0.1)
@@ -335,3 +368,297 @@ async def test_a_hung_stand_in_that_resumes_lets_go_of_the_soldiers_it_stood_in_
                 await trio.sleep(0.1)
         await inprocess.moving(c, ODD, 3)
         await c.aclose()
+
+
+GRACE = 12.0  # the default orphan_grace: a gone client id's soldiers wait this long for it
+
+
+async def _client(front: inprocess.TtesServer, client_id: str = "alpha") -> Client:
+    c = await Client.open(front.addresses[0][1], "ig", client_id=client_id)
+    await c.expect(Ready)
+    return c
+
+
+async def _made(c: Client, rid: int = 1) -> int:
+    """A soldier created through ``c``'s front-end (the lowest free index of that front-end's share)."""
+    await c.send(CreateSoldier(rid, "DI.fig", "AK_47.fig", None))
+    return int((await c.expect(SoldierCreated)).index)
+
+
+def _everywhere(c: inprocess.Fronts, index: int) -> list[bool]:
+    """Whether soldier ``index`` lives in each front-end's books and in its shard."""
+    return [index in inprocess.live(s) for s in (*c.servers, c.shards[index % len(c.shards)])]
+
+
+async def test_a_client_id_still_connected_to_another_front_end_keeps_its_soldiers(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Client id alpha is connected to both front-ends and leaves the one it created its soldier through:
+    the soldier stays past the grace (on main each front-end counted only its own connections, and the
+    soldier went 12 s later), and goes once alpha has left the other front-end too, after its grace."""
+    async with inprocess.fronts() as c:
+        here, there = await _client(c.servers[0]), await _client(c.servers[1])
+        index = await _made(here)
+        await trio.sleep(1)
+        assert _everywhere(c, index) == [True, True, True]
+        await here.aclose()
+        await trio.sleep(3 * GRACE)
+        assert _everywhere(c, index) == [True, True, True]
+        await there.aclose()
+        await trio.sleep(GRACE / 2)
+        assert _everywhere(c, index) == [True, True, True]  # its grace runs
+        await trio.sleep(GRACE)
+        assert _everywhere(c, index) == [False, False, False]
+
+
+async def test_a_client_id_that_comes_back_through_another_front_end_keeps_its_soldiers(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Alpha leaves front-end 0 and reconnects through front-end 1 within the grace: its soldier stays; when
+    front-end 1 goes from the fabric (its process died), alpha's connection went with it: the grace runs."""
+    async with inprocess.fronts() as c:
+        here = await _client(c.servers[0])
+        index = await _made(here)
+        await here.aclose()
+        await trio.sleep(GRACE / 2)
+        there = await _client(c.servers[1])
+        await trio.sleep(3 * GRACE)
+        assert _everywhere(c, index) == [True, True, True]
+        c.fabrics[1].close()
+        await trio.sleep(GRACE / 2)
+        assert _everywhere(c, index)[::2] == [True, True]
+        await trio.sleep(GRACE)
+        assert _everywhere(c, index)[::2] == [False, False]  # front-end 0 removed it, in the shard too
+        await there.aclose()
+
+
+async def test_the_orphans_of_a_front_end_gone_are_removed_by_another(autojump_clock: trio.abc.Clock) -> None:
+    """Alpha's soldier was made through front-end 1, which dies with alpha's connection: front-end 0 removes
+    the soldier after the grace (on main none did: the shard animated it for good)."""
+    async with inprocess.fronts() as c:
+        there = await _client(c.servers[1])
+        index = await _made(there)
+        assert index // 4096 % 2 == 1  # front-end 1's share
+        await trio.sleep(1)
+        assert _everywhere(c, index) == [True, True, True]
+        c.fabrics[1].close()
+        await trio.sleep(GRACE / 2)
+        assert _everywhere(c, index)[::2] == [True, True]
+        await trio.sleep(GRACE)
+        assert _everywhere(c, index)[::2] == [False, False]
+        await there.aclose()
+
+
+async def test_a_front_end_started_while_a_shard_without_soldiers_is_failed_over_routes_to_the_stand_in(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Shard 1's soldiers are removed, shard 1 dies and is failed over to shard 0 with none; the front-end
+    dies and a new one starts: shard 0's answer names no soldier of shard 1, yet the new front-end sends a
+    soldier created at shard 1's index to shard 0, which animates it (on main it went to shard 1's topic,
+    which nobody hears: the soldier never moved)."""
+    async with inprocess.fronts(fronts_n=1) as c:
+        op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
+        await op.expect(Ready)
+        for i in (1, 3, 5, 7, 9):
+            await op.send(RemoveSoldier(i))
+            await op.expect(SoldierRemoved)
+        await op.aclose()
+        with trio.fail_after(30):
+            while inprocess.live(c.shards[1]):
+                await trio.sleep(0.1)
+        c.shard_fabrics[1].close()
+        with trio.fail_after(30):
+            while c.nodes[0].route != [0, 0]:
+                await trio.sleep(0.1)
+        c.fabrics[0].close()  # the front-end dies
+        c.servers[0].shutdown()
+        late = await c.start_front(inprocess.Sharding(0, 1))
+        with trio.fail_after(30):  # shard 0 answered its books
+            while c.nodes[1].heard_at[0] < 0 or c.nodes[1]._asked:
+                await trio.sleep(0.1)
+        walker = await inprocess.walker(late, ODD)
+        await inprocess.moving(walker, ODD, 3)
+        assert ODD in inprocess.live(c.shards[0]) and c.nodes[1].route == [0, 0]
+        assert inprocess.live(late) == [0, 2, 4, 6, 8, ODD]  # and none of shard 1's removed start-up soldiers
+        await walker.aclose()
+
+
+async def test_a_front_end_that_mirrors_an_index_created_again_shows_none_of_the_old_soldiers_codes(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Two front-ends: the walker is removed and created again at its index through front-end 0 while shard 1
+    has not heard either; an observer of front-end 1, which only mirrors both, gets none of the old walker's
+    codes for the new soldier (on main it had no fence for them and got them every tick), and the new
+    soldier's pose once the shard hears."""
+    async with inprocess.fronts() as c:
+        made = await inprocess.walker(c.servers[0], ODD)
+        await made.requests(index=[ODD - 2], velocity=WALK)  # a start-up soldier of shard 1 walks too
+        obs = await Client.open(c.servers[1].addresses[0][1], "obs", role="observer")
+        await obs.expect(Ready)
+        await obs.send(Subscribe((ODD - 2, ODD)))
+        await inprocess.moving(obs, ODD, 3)
+        held: list[bytes] = []
+        node = c.nodes[0]
+        put, node._puts[1] = node._puts[1], held.append  # the fabric is slow from front-end 0 to shard 1
+        await made.send(RemoveSoldier(ODD))
+        await made.expect(SoldierRemoved)
+        await obs.expect(SoldierRemoved)
+        await made.send(CreateSoldier(2, "DI.fig", "AK_47.fig", ODD))
+        assert (await made.expect(SoldierCreated)).index == ODD
+        with trio.fail_after(30):  # front-end 1 mirrors the creation
+            while ODD not in inprocess.live(c.servers[1]):
+                await trio.sleep(0.01)
+        await _none_of_the_old_soldiers_codes(obs, node, put, held)
+        await obs.expect(JointUpdates, lambda u: ODD in u.indices.tolist(), timeout=30)
+        await made.aclose()
+        await obs.aclose()
+
+
+async def test_the_settings_an_operator_changes_through_a_front_end_reach_the_shards(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """An operator's JCL that changes server-wide settings, and the front-end's own (``--throttle``,
+    ``--report-interval``), reach the shards that animate the soldiers (on main only the front-end's world,
+    which animates none, changed); a shard heard later gets them with its sync."""
+    async with inprocess.fronts(fronts_n=1) as c:
+        op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
+        await op.expect(Ready)
+        await op.jcl("set_ttes_heading_offset(10, 20, 30);", 1)
+        await op.jcl("set_ttes_blend_time(0.5);", 2)
+        c.servers[0].world.set_throttle(0.25)
+        c.servers[0].world.set_report_interval(7.0)
+        await trio.sleep(1)
+        for shard in c.shards:
+            s = shard.world.settings
+            assert (s.heading_offsets, s.blend_time, s.throttle) == ((10.0, 20.0, 30.0), 0.5, 0.25)
+            assert shard.world.report_interval == 7.0 and s.tick_period == 1 / 30
+        c.shards[0].world.soldiers.configure(throttle=0.5)  # (its sync says the front-end's again)
+        c.shard_fabrics[1].close()  # shard 1 dies: shard 0 stands in for it, synced
+        with trio.fail_after(30):
+            while c.nodes[0].route != [0, 0]:
+                await trio.sleep(0.1)
+        await trio.sleep(1)
+        assert c.shards[0].world.settings.throttle == 0.25
+        await op.aclose()
+
+
+async def test_the_settings_changed_through_one_front_end_reach_the_other(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Its syncs (a fail-over) would hand the shards its old settings otherwise."""
+    async with inprocess.fronts() as c:
+        op = await Client.open(c.servers[0].addresses[0][1], "op", role="operator")
+        await op.expect(Ready)
+        await op.jcl("set_ttes_blend_time(0.5);", 1)
+        await trio.sleep(1)
+        assert [s.world.settings.blend_time for s in (*c.servers, *c.shards)] == [0.5] * 4
+        await op.aclose()
+
+
+async def test_a_sync_does_not_remove_a_soldier_created_again_that_its_front_end_has_not_heard_of(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Front-end 1 removes the walker; front-end 0 creates a soldier again at its index, and shard 1 (which
+    has it) restarts before front-end 1 hears of the creation: front-end 1's sync says the index was removed,
+    yet the shard keeps the new soldier (on main it removed it: every front-end showed a soldier that no
+    shard animated)."""
+    async with inprocess.fronts() as c:
+        made = await inprocess.walker(c.servers[0], ODD)
+        op = await Client.open(c.servers[1].addresses[0][1], "op", role="operator")
+        await op.expect(Ready)
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.servers[1]):
+                await trio.sleep(0.01)
+        await op.send(RemoveSoldier(ODD))
+        await op.expect(SoldierRemoved)
+        with trio.fail_after(30):
+            while ODD in inprocess.live(c.shards[1]) or ODD in inprocess.live(c.servers[0]):
+                await trio.sleep(0.01)
+        held: list[bytes] = []
+        told = c.nodes[0]._books
+        assert told is not None
+        c.nodes[0]._books = held.append  # front-end 1 hears front-end 0 late
+        await made.send(CreateSoldier(2, "DI.fig", "AK_47.fig", ODD))
+        assert (await made.expect(SoldierCreated)).index == ODD
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.shards[1]):
+                await trio.sleep(0.01)
+        await trio.sleep(1)
+        c.shard_nodes[1].seq = 0  # shard 1 restarts (its count goes back): both front-ends sync it
+        await trio.sleep(1)
+        c.nodes[0]._books = told
+        for data in held:
+            told(data)
+        await made.requests(index=[ODD], velocity=WALK)
+        await inprocess.moving(made, ODD, 3)
+        assert ODD in inprocess.live(c.shards[1]) and ODD in inprocess.live(c.servers[1])
+        await made.aclose()
+        await op.aclose()
+
+
+async def test_a_front_end_fails_a_shard_over_when_another_does(autojump_clock: trio.abc.Clock) -> None:
+    """Shard 1 hangs; front-end 0 fails it over after its 5 s, front-end 1 (whose loop heard its last pulse
+    later: here a longer limit) has not yet: it follows front-end 0's fail-over, so a request for the standing
+    walker sent through front-end 1 goes to the stand-in and the walker walks (on main it went to the hung
+    shard until front-end 1's own limit: the walker stood)."""
+    async with inprocess.fronts() as c:
+        c.nodes[1].hung_s = 60.0
+        made = await inprocess.walker(c.servers[0], ODD)
+        await made.requests(index=[ODD], velocity=(0.0, 0.0, 0.0))  # it stands
+        there = await _client(c.servers[1])
+        await there.send(Subscribe((ODD,)))
+        await trio.sleep(1)
+        c.shard_fabrics[1].closed = True  # it publishes nothing more, yet its presence stays
+        with trio.fail_after(30):
+            while ODD not in inprocess.live(c.shards[0]):
+                await trio.sleep(0.1)
+        await there.drain(3.0)  # it stands in shard 0 (a standing soldier is sent once)
+        await there.requests(index=[ODD], velocity=WALK)
+        await inprocess.moving(there, ODD, 10)
+        assert c.nodes[1].route == [0, 0]
+        await made.aclose()
+        await there.aclose()
+
+
+async def test_an_anonymous_clients_soldiers_go_after_its_grace_whatever_the_other_front_ends_serve(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """A client without an id gets its connection's (``~anon-`` and the session's number, per process):
+    another front-end's client of the same number is another client, and keeps nothing alive here."""
+    async with inprocess.fronts() as c:
+        here = await _client(c.servers[0], "")
+        assert here.accept is not None and here.accept.client_id.startswith("~anon-")
+        index = await _made(here)
+        # front-end 1's process has a session of the same number (here, in one process, they are numbered
+        # apart): it tells its connection (a front-end of this code does not), which counts for nothing here
+        told = {**req.clients({here.accept.client_id: 1}), "front": 1}
+        c.nodes[0].mirror(req.pack([told]))
+        await here.aclose()
+        await trio.sleep(GRACE * 1.5)
+        assert _everywhere(c, index) == [False, False, False]
+
+
+@pytest.mark.parametrize("fabric", ["zenoh", "dds"])
+async def test_two_front_end_processes_keep_a_client_ids_soldiers_while_it_is_connected_to_either(
+    tmp_path: Path, fabric: str
+) -> None:
+    """As real processes on both engines (each front-end announces itself and tells the other its
+    connections), with a grace of 1 s: alpha leaves the front-end its soldier was made through and stays on
+    the other; the soldier stays for 3 graces, and goes once alpha has left both."""
+    if fabric == "dds":
+        pytest.importorskip("cyclonedds")
+    config = tmp_path / "grace.toml"
+    config.write_text("orphan_grace = 1.0\n", encoding="utf-8")
+    with two_fronts(fabric, front_args=("--config", str(config))) as (fronts, _):
+        here = await Client.open(fronts[0].port, "ig", client_id="alpha")
+        await here.expect(Ready)
+        there = await Client.open(fronts[1].port, "ig", client_id="alpha")
+        await there.expect(Ready)
+        index = await _made(here)
+        assert await _until_soldiers(fronts[1].port, [*range(10), index]) == [*range(10), index]
+        await here.aclose()
+        await trio.sleep(3.0)  # (real time: three graces)
+        assert await _soldiers_of(fronts[0].port) == [*range(10), index]
+        await there.aclose()
+        assert await _until_soldiers(fronts[0].port, [*range(10)]) == [*range(10)]
+        assert await _until_soldiers(fronts[1].port, [*range(10)]) == [*range(10)]

@@ -107,30 +107,69 @@ class MemoryFabric:
                 watcher(False)
 
 
+@dataclass
+class Fronts:
+    """Several front-ends (``ttes front --front K/M``) and the shards behind them, on one :class:`Bus`."""
+
+    bus: Bus
+    nursery: trio.Nursery
+    shards_n: int
+    block: int
+    servers: list[TtesServer] = field(default_factory=list)
+    nodes: list[FrontNode] = field(default_factory=list)
+    fabrics: list[MemoryFabric] = field(default_factory=list)  # the front-ends'
+    shards: list[TtesServer] = field(default_factory=list)
+    shard_fabrics: list[MemoryFabric] = field(default_factory=list)
+    shard_nodes: list[ShardNode] = field(default_factory=list)
+
+    async def start_front(self, front: Sharding) -> TtesServer:
+        """Front-end ``front`` (K/M) started now (a late one, or one of several at the start)."""
+        server, fabric = make_server(), MemoryFabric(self.bus)
+        server.start_world()  # before it joins the fabric, as `ttes front` does: the script's are no relay's
+        node = FrontNode(server, fabric, self.shards_n, front=front, block=self.block)
+        await self.nursery.start(server.serve)
+        node.start(trio.lowlevel.current_trio_token())
+        self.servers.append(server)
+        self.nodes.append(node)
+        self.fabrics.append(fabric)
+        return server
+
+
+@contextlib.asynccontextmanager
+async def fronts(
+    bus: Bus | None = None,
+    key_every: int = KEY_EVERY,
+    shards_n: int = 2,
+    block: int = BLOCK,
+    fronts_n: int = 2,
+) -> AsyncIterator[Fronts]:
+    token = trio.lowlevel.current_trio_token()
+    async with trio.open_nursery() as nursery:
+        c = Fronts(bus or Bus(), nursery, shards_n, block)
+        for k in range(fronts_n):
+            await c.start_front(Sharding(k, fronts_n))
+        for k in range(shards_n):
+            shard, fabric = make_server(), MemoryFabric(c.bus)
+            shard.codes_only()  # as `ttes server --shard` makes it
+            shard_node = ShardNode(shard, fabric, Sharding(k, shards_n), key_every=key_every, block=block)
+            await nursery.start(shard.serve)
+            shard_node.keep_own()
+            shard_node.start(token)
+            c.shards.append(shard)
+            c.shard_fabrics.append(fabric)
+            c.shard_nodes.append(shard_node)
+        yield c
+        for s in (*c.servers, *c.shards):
+            s.shutdown()
+
+
 @contextlib.asynccontextmanager
 async def cluster(
     bus: Bus | None = None, key_every: int = KEY_EVERY, shards_n: int = 2, block: int = BLOCK
 ) -> AsyncIterator[tuple[TtesServer, FrontNode, list[TtesServer], list[MemoryFabric]]]:
-    bus = bus or Bus()
-    token = trio.lowlevel.current_trio_token()
-    front = make_server()
-    front_node = FrontNode(front, MemoryFabric(bus), shards_n, block=block)
-    shards, fabrics = [], []
-    async with trio.open_nursery() as nursery:
-        await nursery.start(front.serve)
-        front_node.start(token)
-        for k in range(shards_n):
-            shard, fabric = make_server(), MemoryFabric(bus)
-            shard.codes_only()  # as `ttes server --shard` makes it
-            node = ShardNode(shard, fabric, Sharding(k, shards_n), key_every=key_every, block=block)
-            await nursery.start(shard.serve)
-            node.keep_own()
-            node.start(token)
-            shards.append(shard)
-            fabrics.append(fabric)
-        yield front, front_node, shards, fabrics
-        for s in (front, *shards):
-            s.shutdown()
+    """One front-end and ``shards_n`` shards."""
+    async with fronts(bus, key_every, shards_n, block, fronts_n=1) as c:
+        yield c.servers[0], c.nodes[0], c.shards, c.shard_fabrics
 
 
 def live(server: TtesServer) -> list[int]:
@@ -165,7 +204,7 @@ async def crowd(front: TtesServer, count: int, watched: tuple[int, ...]) -> Clie
 
 async def moving(c: Client, index: int, updates: int = 10) -> list[int]:
     """The ticks of the next ``updates`` joint updates of ``index`` (they keep coming while it walks)."""
-    ticks = []
+    ticks: list[int] = []
     with trio.fail_after(30):  # one that stands still is sent once: it would never come
         while len(ticks) < updates:
             ju = await c.expect(JointUpdates)

@@ -17,7 +17,7 @@ from protocol.events import CreateSoldier, EntityRequests, Ready, SoldierCreated
 from server import app
 from server.fabric import poses_topic, requests_topic
 from server.fabric import requests as req
-from server.fabric.batch import decode_batch
+from server.fabric.batch import PULSE, Batch, decode_batch, encode_batch
 from server.fabric.nodes import Sharding, ShardNode
 from server.session import Session
 
@@ -166,20 +166,24 @@ async def test_a_request_that_arrives_during_one_clients_encode_is_relayed_befor
             await client.aclose()
 
 
-async def test_a_request_that_arrives_while_a_shard_ticks_is_sampled_by_that_tick(
+async def test_a_request_that_arrives_while_a_shard_ticks_is_sampled_by_that_tick_and_sent_first(
     autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A shard's tick lets its requests in between advancing the soldiers and sampling them (its loop is
-    not deaf for the whole sampling): a request that arrives meanwhile is in that tick's own batch, not in
-    an answer after it."""
+    not deaf for the whole sampling): a request that arrives meanwhile is sampled by that tick, not answered
+    after it, and its soldier's codes go first, in a batch of their own, before the tick's batch of every
+    soldier (issue 21: they waited for the tick's quantising and batch, and the front-end merged them with
+    the tick, so their client waited for the whole tick's encode); the tick's batch does not send them
+    again."""
     bus = Bus()
-    batches = []
-    bus.topics[poses_topic(0, 0)].append(lambda data: batches.append(decode_batch(data)))  # block 0
+    sent_out: list[Batch] = []  # the block's batches and the tick pulses, in the order sent
+    for topic in (poses_topic(0, 0), poses_topic(0)):
+        bus.topics[topic].append(lambda data: sent_out.append(decode_batch(data)))
     shard = make_server()
     node = ShardNode(shard, MemoryFabric(bus), Sharding(0, 1))
     m = shard.world.manager
     assert m is not None
-    arm = []
+    arm: list[int] = []
     advance = m._advance
 
     def advance_then_arrive(idx: np.ndarray) -> None:  # a request reaches the fabric while the tick samples
@@ -193,14 +197,81 @@ async def test_a_request_that_arrives_while_a_shard_ticks_is_sampled_by_that_tic
     async with trio.open_nursery() as nursery:
         await nursery.start(shard.serve)
         node.start(trio.lowlevel.current_trio_token())
+        for put in bus.topics[requests_topic(0)]:  # 2 walks: every tick's batch carries it
+            put(req.pack([req.requests(make_entity_requests(index=[2], velocity=WALK))]))
         await trio.sleep(0.2)
-        answers, sent = shard.answers, len(batches)
+        answers, sent = shard.answers, len(sent_out)
         arm.append(m.ticks)
         while arm:
             await trio.sleep(0.001)
         await trio.sleep(0.3 / shard.config.tick_hz)  # the tick's end (and an answer after it)
         assert not arm and m.soldier_info(1)["speed"] > 3.0
-        tick = batches[sent]
-        assert 1 in tick.indices.tolist()  # the tick's own batch carries it
+        first, *rest = sent_out[sent:]
+        assert first.block == 0 and first.indices.tolist() == [1] and not first.key  # its own batch, first
+        pulse = next(b for b in rest if b.block == PULSE)  # the tick's end
+        assert pulse.tick == first.tick  # first of that tick
+        (tick,) = rest[: rest.index(pulse)]  # then the tick's batch, without it
+        assert 2 in tick.indices.tolist() and (tick.key or 1 not in tick.indices.tolist())
         assert shard.answers == answers and not m.table.requested[1]  # and no answer after the tick
         shard.shutdown()
+
+
+@pytest.mark.parametrize("first", [True, False])
+async def test_a_front_end_merges_an_answer_before_the_tick_that_came_with_it(
+    autojump_clock: trio.abc.Clock, monkeypatch: pytest.MonkeyPatch, first: bool
+) -> None:
+    """A shard's answer and another shard's tick arrive together (the front-end's loop was busy): the answer
+    is merged and its client's writer encodes it before the tick's batch is merged (issue 21: that client
+    waited for the encode of the tick's rows, its own and the other clients'); then the tick follows, and
+    that client's rows of it are not held back by the throttle as a second write of the tick. With
+    ``answers_first`` off (``TTES_ANSWERS_FIRST=0``, the bench's A/B), both in one publish, as before."""
+    async with cluster() as (front, node, _, _):
+        front.answers_first = first
+        a = await Client.open(front.addresses[0][1], "ticked", client_id="alpha")
+        b = await Client.open(front.addresses[0][1], "answered", client_id="beta")
+        for client, indices in ((a, (10,)), (b, (12, 13))):  # 10 and 12 on shard 0, 13 on shard 1
+            await client.expect(Ready)
+            for index in indices:
+                await client.send(CreateSoldier(1, "DI.fig", "AK_47.fig", index))
+                await client.expect(SoldierCreated)
+            await client.send(Subscribe(indices))
+        await trio.sleep(0.5)
+        board = front.board_ref.board
+        assert board is not None
+
+        def batch(k: int, indices: list[int], answer: bool) -> bytes:  # the soldiers' codes, changed
+            stream = next(s for s in node._subs if s[0] == k)
+            seq = node._block_seq.get(stream, -1) + 1
+            rows = np.asarray(indices)
+            codes = board.codes[rows].astype(np.uint16) ^ 1
+            tables = board.table_of[rows]
+            return encode_batch(
+                Batch(k, 2, seq, board.tick, 0.0, rows, tables, codes, False, stream[1], (), answer)
+            )
+
+        writes: list[tuple[str, bool, bool]] = []  # (client, wrote, whether the tick was merged by then)
+        version = board.version[10]
+        take_output = Session.take_output
+
+        def encoding(self: Session, now: float | None = None) -> bytes:
+            data = take_output(self, now)
+            writes.append((self.name, bool(data), bool(board.version[10] != version)))
+            return data
+
+        monkeypatch.setattr(Session, "take_output", encoding)
+        tick, answer = batch(0, [10, 12], False), batch(1, [13], True)
+        with node._pending_lock:  # arrived while the loop was busy: the tick first
+            node._pending = {0: [tick], 1: [answer]}
+        front.publish_fed()
+        with trio.fail_after(1):
+            while board.version[10] == version or sum(w[0] == "answered" for w in writes) < (
+                2 if first else 1
+            ):
+                await trio.sleep(0)
+        answered = [(wrote, ticked) for name, wrote, ticked in writes if name == "answered"]
+        if first:  # the answer alone, then the tick's row at once
+            assert answered[:2] == [(True, False), (True, True)] and writes[0][0] == "answered"
+        else:  # one write of both (either writer may go first)
+            assert answered[0] == (True, True)
+        for client in (a, b):
+            await client.aclose()

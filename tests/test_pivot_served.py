@@ -18,10 +18,12 @@ from contextlib import asynccontextmanager
 from typing import Any
 
 import numpy as np
+import pytest
 import trio
 from test_server_support import REPO, Client
 
 from peabody.fk import FigureKinematics
+from peabody.quaternion import to_transform
 from protocol import coords
 from protocol.entity import Appearance, WeaponState
 from protocol.events import JointUpdates, Ready, Subscribe
@@ -31,6 +33,7 @@ from server.soldier.root_motion import feet_points
 from server.startup import ServerWorld
 from tests.test_gait_selection import shipped_library
 from tests.test_pivot_asked import BACK, HEADING, TOL_DEG, off, yaw
+from tests.test_prone_turn import DOWN_CM, SITES
 from tests.test_root_motion import CONTACT_CM, SKATE_CM, in_world, touchdowns
 
 TICK_HZ = 10.0
@@ -48,11 +51,11 @@ REFERENCE = 1  # a second soldier, knelt facing BACK from the start
 
 
 @asynccontextmanager
-async def served() -> AsyncIterator[tuple[TtesServer, ServerWorld, Client]]:
-    """The shipped world ticking at TICK_HZ (clips recorded) and an image generator watching soldiers 0
+async def served(tick_hz: float = TICK_HZ) -> AsyncIterator[tuple[TtesServer, ServerWorld, Client]]:
+    """The shipped world ticking at ``tick_hz`` (clips recorded) and an image generator watching soldiers 0
     and REFERENCE."""
     cfg = ServerConfig(port=0, data_dir=REPO, startup_script="jack-ttes-soldier_low.jcl")
-    cfg = cfg.with_overrides(record_clips=True, report_interval=1000.0, tick_hz=TICK_HZ)
+    cfg = cfg.with_overrides(record_clips=True, report_interval=1000.0, tick_hz=tick_hz)
     world = ServerWorld(
         cfg.data_dir, max_soldiers=cfg.max_soldiers, record_clips=True, library=shipped_library()
     )
@@ -73,16 +76,22 @@ def velocity(speed: float, heading: float) -> tuple[float, float, float]:
     return (speed * math.sin(a), speed * math.cos(a), 0.0)
 
 
-async def play(server: TtesServer, c: Client) -> dict[str, Any]:
-    """Send SCRIPT's requests (server time) for soldier 0 as an image generator dead-reckoning its entity
-    would; half a tick after each tick, the tick's time, the entity's position (m) and heading (radians)
-    then, and soldier 0's and the reference's decoded ``(dofs, positions, orientations)`` as they stand."""
+async def play(
+    server: TtesServer,
+    c: Client,
+    script: list[tuple[float, Appearance, float, float]] = SCRIPT,
+    until: float = UNTIL,
+) -> dict[str, Any]:
+    """Send ``script``'s requests (server time) for soldier 0 as an image generator dead-reckoning its entity
+    would; half a tick after each tick until ``until``, the tick's time, the entity's position (m) and
+    heading (radians) then, and soldier 0's and the reference's decoded ``(dofs, positions, orientations)``
+    as they stand."""
     await c.requests(index=REFERENCE, appearance=Appearance.KNEEL, weapon=WeaponState.DEPLOYED, heading=BACK)
-    tick = 1.0 / TICK_HZ
+    tick = 1.0 / server.config.tick_hz
     await c.drain(tick * (math.floor(server.now() / tick) + 1.5) - server.now())
-    sent, pos, vel, hd, pending = 0.0, np.zeros(2), np.zeros(2), HEADING, list(SCRIPT)
+    sent, pos, vel, hd, pending = 0.0, np.zeros(2), np.zeros(2), script[0][3], list(script)
     times, entity, headings, poses, refs = [], [], [], [], []
-    while (now := server.now()) < UNTIL:
+    while (now := server.now()) < until:
         while pending and pending[0][0] <= now + 1e-9:
             pos, sent = pos + vel * (now - sent), now
             _, app, speed, hd = pending.pop(0)
@@ -159,3 +168,52 @@ async def test_served_a_pivot_asked_to_kneel_keeps_its_feet_and_kneels_facing_hi
         ref = yaw(jack(world, run["refs"][-1:])[1][0, 3:7])
         assert off(faces[k], ref) <= TOL_DEG, (faces[k], ref)
         assert off(faces[-1], ref) <= TOL_DEG, (faces[-1], ref)
+
+
+CRAWL_HZ = 30.0  # the server's own rate: a forearm set down is seen in every frame it stays down
+CRAWL_SPEED = 0.3  # m/s
+PLANTED_CM = 2.0  # issue 16: a planted forearm, knee or toe slides at most this much in the world per stance
+
+
+def contact_slides(world: ServerWorld, run: dict[str, Any], clip: str) -> list[float]:
+    """Per planted phase (within DOWN_CM of its lowest) of soldier 0's elbows, kneecaps and toe tips that
+    begins while ``clip`` plays: how far (cm) it moved in the world, the decoded poses placed at the
+    dead-reckoned entity."""
+    assert world.manager is not None
+    m = world.manager
+    fset = m.library.sets[m.library.set_index("DI.fig", "AK_47.fig")]
+    kin = FigureKinematics(fset.prototypes[0])
+    joints, placement = jack(world, run["poses"])
+    roots = np.stack([to_transform(p[:3], p[3:7]) for p in placement])
+    g = kin.site_globals(joints, roots)[:, [kin.site_names.index(s) for s in SITES]]
+    pts, height = in_world(g[..., :3, 3], run["entity"], run["heading"]), g[..., 1, 3]
+    plays = [(s.time, s.time + s.duration) for s in m.clip_log if s.index == 0 and s.clip.endswith(clip)]
+    out = []
+    for c, _, k, j in touchdowns((height < height.min(axis=0) + DOWN_CM)[:, :, None]):
+        if any(t0 <= run["t"][k] < t1 for t0, t1 in plays):
+            track = pts[k : j + 1, c]
+            out.append(float(np.linalg.norm(track - track[0], axis=1).max()))
+    return out
+
+
+@pytest.mark.parametrize(("turn", "clip"), [(-135.0, "l135"), (-150.0, "l150"), (-165.0, "l165")])
+async def test_served_a_crawler_reversing_to_his_left_keeps_his_forearms_knees_and_toes(
+    autojump_clock: trio.abc.Clock, turn: float, clip: str
+) -> None:
+    """A crawler at 0.3 m/s whose entity turns 135-165° to his left comes round with the U-turn of that
+    angle (``crawlarc_l135``/``l150``/``l165``, issue 16); served at the server's 30 Hz, every planted
+    elbow, kneecap and toe tip stays within PLANTED_CM in the world while it is down (before crawlarc_l135
+    and l150, -135° and -150° played the turns on the spot and an arc)."""
+    script = [
+        (0.0, Appearance.CRAWL, 0.0, HEADING),
+        (0.5, Appearance.CRAWL, CRAWL_SPEED, HEADING),
+        (4.0, Appearance.CRAWL, CRAWL_SPEED, HEADING + turn),
+    ]
+    async with served(CRAWL_HZ) as (server, world, c):
+        run = await play(server, c, script, 12.0)
+        m = world.manager
+        assert m is not None
+        shown = {s.clip.split("/")[-1] for s in m.clip_log if s.index == 0}
+        assert {s for s in shown if "turn_" in s or "arc_" in s} == {f"crawlarc_{clip}_low"}, shown
+        slides = contact_slides(world, run, f"crawlarc_{clip}_low")
+        assert len(slides) >= 10 and max(slides) <= PLANTED_CM, sorted(slides)[-3:]

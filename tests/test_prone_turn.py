@@ -204,16 +204,16 @@ def test_a_crawler_reversing_comes_round_carried_along_his_new_heading(lib, spee
 
 @pytest.mark.parametrize(
     ("turn", "clip"),
-    [(150.0, "r150"), (135.0, "r135"), (165.0, "r165"), (-165.0, "l165")],
+    [(150.0, "r150"), (135.0, "r135"), (165.0, "r165"), (-165.0, "l165"), (-150.0, "l150"), (-135.0, "l135")],
 )
 def test_a_crawler_turning_nearly_back_comes_round_with_the_shorter_u_turn(
     lib, turn: float, clip: str
 ) -> None:
-    """135-165° to his right, 165° to his left: the U-turn of that angle, carried along the new heading as the
-    180° one is; he ends it within U_TURN_CM of his entity and the stop within REVERSAL_CM (150°: the 90° and
-    30° on the spot and the 30° arc, 108 cm and 52 after the stop; 165°: the 180° U-turn and 15° crawling on,
-    34 and 48; 135°: the 90° on the spot and the 45° arc, 82 and 11; to his left, before crawlarc_l165, -150°:
-    the 90° and 30° on the spot and the 30° arc, -165°: the 180° U-turn the long way round)."""
+    """135-165° either way: the U-turn of that angle, carried along the new heading as the 180° one is; he
+    ends it within U_TURN_CM of his entity and the stop within REVERSAL_CM (150°: the 90° and 30° on the
+    spot and the 30° arc, 108 cm and 52 after the stop; 165°: the 180° U-turn and 15° crawling on, 34 and
+    48; 135°: the 90° on the spot and the 45° arc, 82 and 11; to his left, before crawlarc_l135/l150/l165,
+    -135° and -150°: the 90° (and 30°) on the spot and an arc, -165°: the 180° U-turn the long way round)."""
     run = reversal(lib, 0.3, turn)
     shown = [c.split("/")[-1] for c in run["clips"].tolist()]
     assert sorted({c for c in shown if "turn_" in c or "arc_" in c}) == [f"crawlarc_{clip}_low"]
@@ -250,15 +250,17 @@ def test_a_crawlers_u_turn_swings_his_body_no_faster_than_recorded(lib, speed: f
 @pytest.mark.parametrize(
     ("want", "clip"),
     [(180.0, "r180"), (-180.0, "r180"), (175.0, "r180"), (-165.0, "l165"), (160.0, "r165"), (150.0, "r150"),
-     (140.0, "r135"), (128.0, "r135"), (120.0, None), (-150.0, "l165"), (-140.0, None), (-120.0, None)],
+     (140.0, "r135"), (128.0, "r135"), (120.0, None), (-160.0, "l165"), (-150.0, "l150"), (-145.0, "l150"),
+     (-140.0, "l135"), (-135.0, "l135"), (-128.0, "l135"), (-120.0, None)],
 )  # fmt: skip
 def test_a_crawler_reversing_either_way_plays_the_u_turn_a_near_reversal_the_arcs_that_fit(
     lib, want: float, clip: str | None
 ) -> None:
-    """The nearest U-turn (the 180° one either way, the shorter ones to his right, the 165° one to his
-    left) within U_TURN_SLACK_DEG from U_TURN_MIN_DEG on (the rest he turns as he crawls on; 128°: not the
-    90° and the 30° arc); ±120° and -140° the turns on the spot and an arc (never the long way round: -165°
-    was the 180° to his right before crawlarc_l165)."""
+    """The nearest U-turn (the 180° one either way, the shorter ones each way) within U_TURN_SLACK_DEG from
+    U_TURN_MIN_DEG on (the rest he turns as he crawls on; ±128°: not the 90° and the 30° arc); ±120° the
+    turns on the spot and an arc (never the long way round: -165° was the 180° to his right before
+    crawlarc_l165; -150° the 165° to his left and -140° the turns on the spot before crawlarc_l150 and
+    l135)."""
     m = SoldierManager(lib, throttle=0.0)
     steps = m._ground_turns(lib.node(CRAWL_NODE), want, moving=True)
     shown = [lib.clip_names[s.clip].split("/")[-1] for s in steps]
@@ -314,8 +316,9 @@ def _velocity(heading: float) -> np.ndarray:
 
 @pytest.mark.parametrize(
     ("turn", "clip", "near"),
-    [(180.0, "r180", REVERSAL_CM), (150.0, "r150", U_TURN_CM), (-165.0, "l165", U_TURN_CM)],
-)
+    [(180.0, "r180", REVERSAL_CM), (150.0, "r150", U_TURN_CM), (-165.0, "l165", U_TURN_CM),
+     (-150.0, "l150", U_TURN_CM), (-135.0, "l135", U_TURN_CM)],
+)  # fmt: skip
 async def test_over_the_wire_a_crawler_reversing_ends_his_u_turn_on_his_entity(
     autojump_clock: trio.abc.Clock, turn: float, clip: str, near: float
 ) -> None:

@@ -20,6 +20,7 @@ batch is superseded by the next tick's, never queued), requests are reliable and
 from __future__ import annotations
 
 import enum
+import random
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -62,6 +63,11 @@ def books_topic() -> str:
 
 def alive_key(shard: int) -> str:
     return f"ttes/alive/{shard}"
+
+
+def front_alive_key(front: int) -> str:
+    """Front-end ``front`` of several is on the fabric (the others count its clients' connections)."""
+    return f"ttes/alive/front/{front}"
 
 
 Handler = Callable[[bytes], None]  # called on the fabric's own thread, once per message
@@ -116,6 +122,16 @@ class Fabric(Protocol):
 DDS_DOMAIN_MAX = 232  # the highest DDS domain id (DDSI-RTPS 2.x port mapping: 7400 + 250 * domain < 65536)
 
 
+def engine_flags(engine: str) -> list[str]:
+    """The ``ttes server`` / ``ttes front`` flags of a run of its own on ``engine``: for DDS a random domain,
+    since DDS nodes of another run on this host (the same loopback peers) would join this one (the tests'
+    and the benches' clusters: a DDS bench failed 3 of 6 runs with "server closed the connection" while
+    another run used domain 0)."""
+    if engine != "dds":
+        return ["--fabric", engine]
+    return ["--fabric", engine, "--fabric-domain", str(random.randrange(1, DDS_DOMAIN_MAX + 1))]
+
+
 @dataclass(frozen=True)
 class FabricConfig:
     """Where this node listens and whom it connects to: unicast endpoints ``host:port``, no multicast.
@@ -130,7 +146,12 @@ class FabricConfig:
 
 
 def open_fabric(config: FabricConfig) -> Fabric:
-    """A node on the configured engine (ModuleNotFoundError without the ``[fabric]`` extra)."""
+    """A node on the configured engine (ModuleNotFoundError without the ``[fabric]`` extra). The process
+    keeps freed memory from then on (:mod:`server.fabric.heap`: each tick's whole-batch buffers page-faulted
+    anew, on either engine)."""
+    from server.fabric.heap import keep_freed_memory
+
+    keep_freed_memory()
     if config.engine == "zenoh":
         from server.fabric.zenoh_node import ZenohFabric
 

@@ -26,8 +26,8 @@ MAGIC = b"TTB5"
 PULSE = 0xFFFF  # the block of a shard's tick pulse (no soldiers)
 MAX_FRONTS = 255  # front-ends whose fences a batch carries: their count is one byte of the header
 FENCE_MAX = 2**32 - 1  # a fence serial travels as uint32
-# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, key, block, fronts (uint32 fences
-# follow)
+# magic, shard, shards, seq, tick, sent (monotonic s), soldiers, fields, flags (1: key, 2: answer), block,
+# fronts (uint32 fences follow)
 _HEAD = struct.Struct("<4sHHIIdIIBHB")
 
 
@@ -44,6 +44,7 @@ class Batch:
     key: bool = True  # every soldier of the shard (else: those changed since its previous batch)
     block: int = 0  # the index block of its soldiers (PULSE: a tick's pulse)
     fences: tuple[int, ...] = ()  # per front-end, the newest fence it sent that the shard had taken (0: none)
+    answer: bool = False  # an answer's (between ticks, or a tick's first frames), not a tick's
 
 
 def encode_batch(batch: Batch) -> bytes:
@@ -52,7 +53,8 @@ def encode_batch(batch: Batch) -> bytes:
     if batch.codes.size and (batch.codes.min() < 0 or batch.codes.max() > 0xFFFF):
         raise ValueError("codes beyond 16 bits")
     b = batch
-    head = _HEAD.pack(MAGIC, b.shard, b.shards, b.seq, b.tick, b.sent, n, nf, b.key, b.block, len(b.fences))
+    flags = b.key | b.answer << 1
+    head = _HEAD.pack(MAGIC, b.shard, b.shards, b.seq, b.tick, b.sent, n, nf, flags, b.block, len(b.fences))
     return b"".join(
         (
             head,
@@ -68,7 +70,7 @@ def decode_batch(data: bytes) -> Batch:
     """The batch of ``data`` (arrays are read-only views of it); ValueError if it is not one."""
     if len(data) < _HEAD.size:
         raise ValueError(f"a batch of {len(data)} bytes")
-    magic, shard, shards, seq, tick, sent, n, nf, key, block, nb = _HEAD.unpack_from(data)
+    magic, shard, shards, seq, tick, sent, n, nf, flags, block, nb = _HEAD.unpack_from(data)
     if magic != MAGIC or len(data) != _HEAD.size + 4 * nb + n * (5 + 2 * nf):
         raise ValueError(f"not a batch (magic {magic!r}, {len(data)} bytes for {n} x {nf})")
     fences = tuple(np.frombuffer(data, "<u4", nb, _HEAD.size).tolist())
@@ -76,4 +78,5 @@ def decode_batch(data: bytes) -> Batch:
     indices = np.frombuffer(data, "<u4", n, at)
     tables = np.frombuffer(data, "u1", n, at + 4 * n)
     codes = np.frombuffer(data, "<u2", n * nf, at + 5 * n).reshape(n, nf)
-    return Batch(shard, shards, seq, tick, sent, indices, tables, codes, bool(key), block, fences)
+    key, answer = bool(flags & 1), bool(flags & 2)
+    return Batch(shard, shards, seq, tick, sent, indices, tables, codes, key, block, fences, answer)

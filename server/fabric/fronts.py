@@ -35,7 +35,7 @@ from __future__ import annotations
 import dataclasses
 import heapq
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import msgpack
@@ -79,38 +79,68 @@ class IndexShare:
             heapq.heappush(self._free, int(index))
 
 
-def answer(shard: int, front: int, soldiers: list[Soldier], last: np.ndarray | None = None) -> bytes:
-    """A shard's answer to front-end ``front``'s ``books``: every soldier it animates, and the last request
-    of those that had one (``ENTITY_REQUEST_DTYPE`` rows)."""
+def answer(
+    shard: int,
+    front: int,
+    soldiers: list[Soldier],
+    last: np.ndarray | None = None,
+    homes: Sequence[int] = (),
+    gens: Sequence[int] = (),
+) -> bytes:
+    """A shard's answer to front-end ``front``'s ``books``: every soldier it animates, the last request of
+    those that had one (``ENTITY_REQUEST_DTYPE`` rows), the other shards it stands in for (``homes``) and the
+    generation of each soldier (``gens``: :func:`server.fabric.requests.sync`)."""
     rows = np.zeros(0, ENTITY_REQUEST_DTYPE) if last is None else last
     rows = np.ascontiguousarray(rows, ENTITY_REQUEST_DTYPE)
-    msg = {"shard": shard, "front": front, "soldiers": [list(s) for s in soldiers], "rows": rows.tobytes()}
-    return bytes(msgpack.packb(msg))
+    body = {
+        "soldiers": [list(s) for s in soldiers],
+        "rows": rows.tobytes(),
+        "homes": list(homes),
+        "gens": list(gens),
+    }
+    # the body packed apart: every front-end hears every answer, and only the one it is for unpacks its
+    # soldiers (at 12,000 soldiers over 2 shards and 6 front-ends, unpacking the others' answers was 38 % of
+    # a front-end's CPU: :func:`addressee`)
+    return bytes(msgpack.packb({"shard": shard, "front": front, "body": msgpack.packb(body)}))
+
+
+def addressee(data: bytes) -> tuple[int, int]:
+    """``(shard, front)`` of an answer without unpacking its body; ValueError if it is not one."""
+    try:
+        msg = msgpack.unpackb(data)
+        return int(msg["shard"]), int(msg["front"])
+    except (ValueError, TypeError, KeyError, msgpack.UnpackException) as exc:
+        raise ValueError(f"not a books answer: {exc}") from exc
 
 
 def decode_answer(data: bytes) -> dict[str, Any]:
     """The answer with ``soldiers`` as a list of :data:`Soldier` and ``rows`` as requests; ValueError if it
     is not one."""
     try:
-        msg = msgpack.unpackb(data)
+        head = msgpack.unpackb(data)
+        msg = msgpack.unpackb(head["body"])
+        msg["shard"], msg["front"] = int(head["shard"]), int(head["front"])
         msg["soldiers"] = [
             (int(i), str(f), str(w), None if o is None else str(o)) for i, f, w, o in msg["soldiers"]
         ]
-        msg["shard"], msg["front"] = int(msg["shard"]), int(msg["front"])
         msg["rows"] = np.frombuffer(msg.get("rows", b""), ENTITY_REQUEST_DTYPE)
+        msg["homes"] = [int(h) for h in msg.get("homes", [])]
+        msg["gens"] = [int(g) for g in msg.get("gens", [])]
     except (ValueError, TypeError, KeyError, AttributeError, msgpack.UnpackException) as exc:
         raise ValueError(f"not a books answer: {exc}") from exc
     return msg
 
 
-def answer_scope(live: np.ndarray, route: list[int], k: int) -> set[int]:
+def answer_scope(live: np.ndarray, route: list[int], k: int, stand_in: Sequence[int] = ()) -> set[int]:
     """The live soldiers (``live``) a books answer of shard ``k`` may drop: those homed on ``k`` (index modulo
-    the shards, ``len(route)``) and animated there (``route``: each shard's animating shard). One failed
-    over to ``k`` after it answered is missing from the answer: counting it in, the front-end removed a
-    killed shard's soldiers (test_a_killed_shards_soldiers_go_on_in_the_survivor)."""
+    the shards, ``len(route)``) and animated there (``route``: each shard's animating shard), and those of
+    the shards it stands in for by this answer (``stand_in``: this front-end never heard them; the removed
+    start-up soldiers of a shard failed over stayed on as ghosts). One failed over to ``k`` by this
+    front-end after it answered is missing from the answer: counting it in, the front-end removed a killed
+    shard's soldiers (test_a_killed_shards_soldiers_go_on_in_the_survivor)."""
     live = np.asarray(live, np.int64)
     home = live % len(route)
-    return set(live[(home == k) & (np.asarray(route)[home] == k)].tolist())
+    return set(live[((home == k) & (np.asarray(route)[home] == k)) | np.isin(home, list(stand_in))].tolist())
 
 
 def reconcile(
@@ -126,12 +156,15 @@ def reconcile(
     return drop, add
 
 
-def stand_ins(told: list[Soldier], shard: int, shards: int, heard: list[bool]) -> dict[int, int]:
-    """The shards whose soldiers ``shard``'s answer carries (home index modulo ``shards``) and which this
-    front-end never heard: failed over to ``shard`` before it started, their requests go there
-    (home -> ``shard``). A shard heard has its own route (it comes back, or this front-end failed it over)."""
-    homes = {s[0] % shards for s in told} - {shard}
-    return {h: shard for h in sorted(homes) if not heard[h]}
+def stand_ins(
+    told: list[Soldier], shard: int, shards: int, heard: list[bool], homes: Sequence[int] = ()
+) -> dict[int, int]:
+    """The shards ``shard``'s answer says it stands in for (``homes``, or whose soldiers it carries: home
+    index modulo ``shards``) and which this front-end never heard: failed over to ``shard`` before it
+    started, their requests go there (home -> ``shard``); a shard with no soldiers too (its creations went
+    to its dead topic). A shard heard has its own route (it comes back, or this front-end failed it over)."""
+    theirs = ({s[0] % shards for s in told} | {h for h in homes if 0 <= h < shards}) - {shard}
+    return {h: shard for h in sorted(theirs) if not heard[h]}
 
 
 def learned_last(rows: np.ndarray, live: np.ndarray, has_last: np.ndarray) -> np.ndarray:
@@ -170,31 +203,97 @@ def rerouted(route: list[int], alive: list[int], heard: list[bool]) -> list[tupl
     return out
 
 
+class Elsewhere:
+    """Front-end ``k`` of ``m``'s view of the others: which are on the fabric, and their open connections of
+    each client id (each tells its own on ``ttes/fronts``). An id's soldiers wait for it while it is
+    connected to any front-end (an IG that leaves one front-end still connected to another, or that
+    reconnects through another); of a gone id's soldiers each front-end removes those of its share, and
+    those of a front-end not on the fabric the lowest present one removes: one removal of each."""
+
+    def __init__(self, k: int, m: int, block: int) -> None:
+        self.k, self.block = k, block
+        self.present = [j == k for j in range(m)]
+        self.counts: dict[int, dict[str, int]] = {j: {} for j in range(m) if j != k}
+        self.told: dict[str, int] = {}  # this front-end's own counts, as last told the others
+
+    def total(self, client_id: str) -> int:
+        """The id's connections to the other front-ends."""
+        return sum(c.get(client_id, 0) for c in self.counts.values())
+
+    def own(self, client_id: str, connected: int) -> dict[str, int] | None:
+        """This front-end's count of ``client_id`` to tell the others (None: unchanged), from the id's
+        connections counted here (``connected``: its own and the others')."""
+        n = connected - self.total(client_id)
+        if n == self.told.get(client_id, 0):
+            return None
+        if n:
+            self.told[client_id] = n
+        else:
+            self.told.pop(client_id, None)
+        return {client_id: n}
+
+    def step(self, front: int, client_id: str, n: int) -> int:
+        """Move front-end ``front``'s count of ``client_id`` one connection towards ``n``: +1 (joined), -1
+        (left) or 0 (it is ``n``); counted first, so that :meth:`own` stays as it was."""
+        counts = self.counts.get(front)
+        if counts is None:
+            return 0
+        was = counts.get(client_id, 0)
+        if was == n:
+            return 0
+        step = 1 if n > was else -1
+        if was + step:
+            counts[client_id] = was + step
+        else:
+            del counts[client_id]
+        return step
+
+    def removes(self, indices: list[int]) -> list[int]:
+        """Of a gone id's soldiers, those this front-end removes."""
+        m = len(self.present)
+        first = self.present.index(True)
+        return [
+            i
+            for i in indices
+            if (j := (i // self.block) % m) == self.k or (not self.present[j] and first == self.k)
+        ]
+
+
 class Fences:
     """Front-end ``front``'s fences: for each index it created or removed (or synced elsewhere), the shard
     whose batches may carry it and the fence that shard must have taken first (issue 21 (d): the index
-    removed and created again within a tick showed the old soldier's codes for a tick)."""
+    removed and created again within a tick showed the old soldier's codes for a tick); for an index another
+    front-end created or removed (mirrored), that front-end's fence, which it names on ``ttes/fronts``."""
 
     def __init__(self, front: int, n: int, shards: int) -> None:
         self.front = front
         self.shard = np.full(n, -1, np.int64)  # the shard the index's rows wait for (-1: none)
         self.serial = np.zeros(n, np.int64)  # the fence of that shard they wait for
+        self.by = np.zeros(n, np.int64)  # the front-end whose fence it is
         self.next = [1] * shards  # per shard sent to, the serial of its next fence
         self.due = [False] * shards  # a fence ends the next message to it
-        self._marked: list[deque[tuple[int, np.ndarray]]] = [deque() for _ in range(shards)]  # per shard
+        # per (front-end, shard): the indices marked, in the order of their fences
+        self._marked: dict[tuple[int, int], deque[tuple[int, np.ndarray]]] = {}
         self.waiting = 0
         self.dropped = 0  # rows dropped (a test's count)
 
     def mark(self, indices: np.ndarray | list[int], shard: int) -> None:
         """The soldiers at ``indices`` were created or removed (or synced) by an operation queued for
         ``shard`` now: their rows count from the batch that carries the fence ending that message."""
+        if self.wait(indices, self.front, shard, self.next[shard]):
+            self.due[shard] = True
+
+    def wait(self, indices: np.ndarray | list[int], front: int, shard: int, serial: int) -> bool:
+        """The soldiers at ``indices`` were created or removed by front-end ``front``'s message to ``shard``
+        that ends with fence ``serial``: their rows count from the batch that carries it. False: none."""
         idx = np.unique(np.asarray(indices, np.int64))
-        if not len(idx):
-            return
+        idx = idx[(idx >= 0) & (idx < len(self.shard))]
+        if not len(idx) or not 0 <= shard < len(self.next):
+            return False
         self.waiting += int(np.count_nonzero(self.shard[idx] < 0))
-        self.shard[idx], self.serial[idx] = shard, self.next[shard]
-        self.due[shard] = True
-        self._marked[shard].append((self.next[shard], idx))
+        self.shard[idx], self.serial[idx], self.by[idx] = shard, serial, front
+        self._marked.setdefault((front, shard), deque()).append((serial, idx))
+        return True
 
     def moved(self, homes: list[int], shards: int, shard: int) -> None:
         """Shards ``homes``' soldiers are synced to ``shard`` now (a fail-over, a shard back): those
@@ -229,11 +328,13 @@ class Fences:
         return dataclasses.replace(b, indices=b.indices[~wait], tables=b.tables[~wait], codes=b.codes[~wait])
 
     def _acked(self, b: Batch) -> None:
-        """The indices marked for ``b``'s shard up to the fence it carries wait no more."""
-        ack = b.fences[self.front] if self.front < len(b.fences) else 0
-        marked = self._marked[b.shard] if b.shard < len(self._marked) else deque()
-        while marked and marked[0][0] <= ack:
-            idx = marked.popleft()[1]
-            idx = idx[(self.shard[idx] == b.shard) & (self.serial[idx] <= ack)]
-            self.shard[idx] = -1
-            self.waiting -= len(idx)
+        """The indices marked for ``b``'s shard up to the fences it carries wait no more."""
+        for (front, shard), marked in self._marked.items():
+            if shard != b.shard:
+                continue
+            ack = b.fences[front] if front < len(b.fences) else 0
+            while marked and marked[0][0] <= ack:
+                idx = marked.popleft()[1]
+                idx = idx[(self.shard[idx] == shard) & (self.by[idx] == front) & (self.serial[idx] <= ack)]
+                self.shard[idx] = -1
+                self.waiting -= len(idx)

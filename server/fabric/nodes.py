@@ -47,12 +47,14 @@ from server.fabric import (
     Unsubscribe,
     alive_key,
     books_topic,
+    front_alive_key,
     fronts_topic,
     poses_topic,
     requests_topic,
 )
 from server.fabric import fronts as books
 from server.fabric import requests as req
+from server.fabric import settings as shared
 from server.fabric.backlog import MAX_ROWS, Backlog
 from server.fabric.batch import PULSE, Batch, decode_batch, encode_batch
 from server.fabric.fronts import Fences, IndexShare, Soldier
@@ -62,13 +64,16 @@ from server.pose_board import PoseBoard
 from server.soldier import REQUEST_OK
 from server.stage_cpu import TURN_CPU_S
 from server.trace import TRACE
+from server.world.owners import ANONYMOUS
 
 if TYPE_CHECKING:
     from server.app import TtesServer
+    from server.session import Session
 
 log = get_logger("fabric")
 KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz): a lost batch heals by then
 TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
+FOLLOW_S = 1.0  # a shard another front-end failed over, unheard here this long, is failed over here too
 PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batch a block heard); beyond, the
 # oldest go (and it asks for a key)
 
@@ -131,6 +136,8 @@ class ShardNode:
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request taken, for a books answer
         self.has_last = np.zeros(n, bool)
         self.fences: list[int] = []  # per front-end, the newest fence taken (its batches carry them)
+        self.stands_in: set[int] = set()  # the other shards whose soldiers it animates (a fail-over's)
+        self.gen = np.zeros(n, np.int64)  # each soldier's generation (requests.sync): 0, the script's
         # soldiers created since the last fence, and those whose rows the next batch carries (born before a
         # fence): sets, so creations that no fence follows (a sync's) grow them no further than the soldiers
         self._born: set[int] = set()
@@ -201,11 +208,12 @@ class ShardNode:
         self.server.requests_arrived()
         return n
 
-    def publish(self, board: PoseBoard) -> None:
+    def publish(self, board: PoseBoard, tick: bool = True) -> None:
         """After each publish of the board: the soldiers whose codes changed since the previous batch (a
         tick's batch goes even when none did: it says the shard lives), or at a tick due for a key, every
-        soldier. An answer between ticks sends only what it changed, and nothing if that is nothing."""
-        tick = board.tick == board.ticks
+        soldier. An answer (between ticks, or a tick's first frames: not ``tick``) sends only what it
+        changed, and nothing if that is nothing."""
+        tick = tick and board.tick == board.ticks
         if self._fresh:  # a stream gained a subscriber: its still soldiers come in no other batch
             with self._match_lock:
                 self._fresh = False
@@ -227,12 +235,12 @@ class ShardNode:
         if TRACE is not None:
             TRACE.stamp("shard_publish", rows, "tick" if tick else "answer")
         if len(rows) and WHOLE in self.heard:  # a front-end hears every block: one batch for it
-            self._publish_block(board, WHOLE, rows, key)
+            self._publish_block(board, WHOLE, rows, key, not tick)
         blocks = rows // self.block  # (rows ascending: each block's rows are consecutive)
         cuts = [0, *(np.flatnonzero(np.diff(blocks)) + 1).tolist(), len(rows)]
         for a, z in itertools.pairwise(cuts):
             if z > a and self._declare(int(blocks[a])) in self.heard:  # some front-end hears it alone
-                self._publish_block(board, int(blocks[a]), rows[a:z], key)
+                self._publish_block(board, int(blocks[a]), rows[a:z], key, not tick)
         if tick:  # it lives, whatever blocks a front-end hears; a key's names every soldier (no codes)
             k, n, who = self.sharding.k, self.sharding.n, rows if key else rows[:0]
             empty = np.zeros((len(who), 0), np.uint16)
@@ -268,13 +276,14 @@ class ShardNode:
             self.heard = self.heard | {stream} if present else self.heard - {stream}
             self._fresh = self._fresh or (present and stream in self._puts)
 
-    def _publish_block(self, board: PoseBoard, block: int, rows: np.ndarray, key: bool) -> None:
+    def _publish_block(self, board: PoseBoard, block: int, rows: np.ndarray, key: bool, answer: bool) -> None:
         seq = self.block_seq.get(block, 0)
         self.block_seq[block] = seq + 1
         k, n = self.sharding.k, self.sharding.n
         codes, tables = board.codes[rows], board.table_of[rows]
+        fences = tuple(self.fences)
         batch = Batch(
-            k, n, seq, board.tick, time.monotonic(), rows, tables, codes, key, block, tuple(self.fences)
+            k, n, seq, board.tick, time.monotonic(), rows, tables, codes, key, block, fences, answer
         )
         self._sent(self._puts[block], encode_batch(batch))
 
@@ -314,6 +323,7 @@ class ShardNode:
                 owner=str(owner) if owner is not None else None,
             )
             self.has_last[index] = False
+            self.gen[index] = int(msg.get("gen") or 0)  # type: ignore[call-overload]
             self._born.add(index)
         elif op == "remove":
             world.remove_soldier(int(msg["index"]), "removed by a front-end")  # type: ignore[call-overload]
@@ -325,10 +335,15 @@ class ShardNode:
         elif op == "react":
             world.react(int(msg["index"]), str(msg["kind"]))  # type: ignore[call-overload]
         elif op == "sync":
+            self._homes(msg)
             self._sync(msg)
             self.key_due = True  # the front-end that sent it may lack soldiers no batch carried since
         elif op == "key":
             self.key_due = True
+        elif op == "homes":
+            self._homes(msg)
+        elif op == "settings":
+            shared.apply(world, msg["values"])  # type: ignore[arg-type]
         elif op == "fence":
             self._fenced(int(msg["front"]), int(msg["serial"]))  # type: ignore[call-overload]
 
@@ -347,8 +362,16 @@ class ShardNode:
         live = m.table.live
         soldiers = _soldiers(self.server, live)
         last = self.last[live[self.has_last[live]]]
-        self._answer(books.answer(self.sharding.k, front, soldiers, last))
+        homes, gens = sorted(self.stands_in), self.gen[live].tolist()
+        self._answer(books.answer(self.sharding.k, front, soldiers, last, homes, gens))
         log.info("fabric_books_answered", shard=self.sharding.k, front=front, soldiers=len(soldiers))
+
+    def _homes(self, msg: dict[str, object]) -> None:
+        """The shards whose soldiers this one animates from now on, when the message says (a late
+        front-end's ``books`` learns them even of a shard failed over with none)."""
+        homes = msg.get("homes")
+        if isinstance(homes, list):
+            self.stands_in = {int(h) for h in homes} - {self.sharding.k}
 
     def _applied(self, rows: np.ndarray) -> None:
         """Apply requests, and keep those taken as their soldiers' last (what a books answer carries)."""
@@ -366,17 +389,27 @@ class ShardNode:
         soldiers = msg["soldiers"]
         rows = msg["rows"]
         assert isinstance(soldiers, list) and isinstance(rows, np.ndarray)
-        told = msg.get("gone") or []
+        told, told_gens = msg.get("gone") or [], msg.get("gone_gens")
         assert isinstance(told, list)
-        gone = [int(i) for i in told if m.table.is_live(int(i))]
+        # a removal removes the soldier created before it, not one created again since (through another
+        # front-end that the sender had not heard of)
+        after: list[float] = [math.inf] * len(told)  # (a sync without generations: every one)
+        if isinstance(told_gens, list) and len(told_gens) == len(told):
+            after = [float(g) for g in told_gens]
+        gone = [
+            int(i) for i, g in zip(told, after, strict=True) if m.table.is_live(int(i)) and self.gen[i] < g
+        ]
         for i in gone:
             world.remove_soldier(i, "removed through a front-end while this shard did not hear it")
             self.has_last[i] = False
         new = []
-        for index, figure, weapon, owner in soldiers:
+        gens = msg.get("gens")
+        gens = gens if isinstance(gens, list) and len(gens) == len(soldiers) else [0] * len(soldiers)
+        for (index, figure, weapon, owner), gen in zip(soldiers, gens, strict=True):
             if not m.table.is_live(index):
                 world.create_soldier(figure, weapon, index, owner=owner)
                 self.has_last[index] = False
+                self.gen[index] = int(gen)
                 new.append(index)
         self._born.update(new)
         log.info(
@@ -419,6 +452,10 @@ class FrontNode:
         self.share = IndexShare(front.k, front.n, block, n) if front.n > 1 else None
         self._books = fabric.publisher(fronts_topic(), Kind.REQUESTS) if front.n > 1 else None
         self._books_out: list[req.Op] = []  # this front-end's creations and removals, for the others
+        # the others' presence and connections of client ids: an id's soldiers wait while it is connected
+        self.elsewhere = books.Elsewhere(front.k, front.n, block) if front.n > 1 else None
+        if self.elsewhere is not None:
+            server.world.owners.on_connections = self._connections
         self.mirrored = 0  # the other front-ends' creations and removals kept in the books here
         self.bytes_in = 0  # the shards' batches' bytes
         server.status_fields = lambda: {
@@ -432,6 +469,8 @@ class FrontNode:
         self._out: list[list[req.Op]] = [[] for _ in range(shards)]  # per shard, sent at the loop's next turn
         self._token: trio.lowlevel.TrioToken | None = None
         self._flush_due = False
+        # the settings last sent to every shard (server.fabric.settings): sent again when they change
+        self._told = (server.world.settings, server.world.report_interval)
         self._pending: dict[int, list[bytes]] = {}  # shard -> its batches not merged yet, in arrival order
         self._pending_lock = threading.Lock()  # appended on the fabric's thread, taken on the loop
         self.key_asked = [False] * shards  # a key batch asked for after a lost batch, not come yet
@@ -447,7 +486,13 @@ class FrontNode:
         self.last = np.zeros(n, ENTITY_REQUEST_DTYPE)  # each soldier's last request, for a sync
         self.has_last = np.zeros(n, bool)
         self.made = np.zeros(n, bool)  # created here (not the start-up script's, not another front-end's)
+        self.gen = np.zeros(n, np.int64)  # each index's creations and removals heard of (requests.sync)
         self._asked: set[int] = set()  # shards asked for their books, not answered yet
+        # shards whose last key pulse differed from the books: asked only if the next one differs too (a
+        # creation through another front-end is often in a pulse before its message on ttes/fronts is here:
+        # each front-end asked each shard about once a second while 6 of them made soldiers, 1,000-1,100
+        # whole answers a shard in a 100 s run of 48,000 over 6 shards and 6 front-ends)
+        self._differed: set[int] = set()
         self.known = np.zeros(n, bool)  # created or removed here, or told so by a front-end: not learned
         self._unknown: dict[int, set[int]] = {}  # shard asked -> its batches' soldiers not in the books
         self._stood_for: dict[int, set[int]] = {}  # shard failed over -> the other homes it animated
@@ -456,6 +501,11 @@ class FrontNode:
         self.failovers = 0
         self.keys = 0  # key batches heard
         self.watching = Watch(n)  # what its clients subscribe to; the others' codes wait there
+        # ticks' batches that arrived with answers, merged after the answers' clients encoded them
+        # (:meth:`_answers_first`), and those clients' sessions (ids) until they have
+        self._held: list[Batch] = []
+        self._answering: set[int] = set()
+        server.encoded = self._encoded
         self.fences = Fences(front.k, n, shards)  # indices created or removed here: rows wait for a fence
         server.board_ref.on_watch = self.watch
         server.feed = self.feed
@@ -481,6 +531,10 @@ class FrontNode:
                 token.run_sync_soon(self.mirror, data)
 
             self.fabric.subscribe(fronts_topic(), Kind.REQUESTS, told)
+            self.fabric.announce(front_alive_key(self.front.k))
+            for j in range(self.front.n):
+                if j != self.front.k:
+                    self.fabric.watch(front_alive_key(j), functools.partial(self._front_watched, token, j))
 
         def answered(data: bytes) -> None:
             token.run_sync_soon(self.learn, data)
@@ -590,13 +644,25 @@ class FrontNode:
                 self.rows_decoded += per_block[: self.blocks]
             self._heard(b, now)
         self._fail_over(now)
+        self._settings_told()
         m = self.server.world.manager
         if m is not None and self.watching.stale:
             subscribed = (s.conn.subscribed for s in self.server.sessions.values())
             self.watching.recount(subscribed, board, m.table.alive)
             self._resubscribe()
-        batches = [b for b in batches if b.block != PULSE]
+        batches = [*self._held, *(b for b in batches if b.block != PULSE)]
+        self._held = []
         if not batches or m is None:
+            self._answering.clear()
+            return np.zeros(0, np.int64)
+        holding = bool(self._answering)  # (its answers' clients have not encoded: more answers, no ticks)
+        if tick > self.server.ticks and self.server.answers_first:  # a publish between its ticks
+            first, held = self._answers_first(batches)
+            if held and (first or holding):
+                batches, self._held = first, held
+        if not self._held:
+            self._answering.clear()
+        if not batches:
             return np.zeros(0, np.int64)
         self.batches += len(batches)
         batches = [self.fences.clean(b) for b in batches]  # (after _heard: a sync there moves the fences)
@@ -609,8 +675,43 @@ class FrontNode:
         else:
             changed = rows[:0]
         if TRACE is not None:
-            TRACE.stamp("fe_merge", rows, "fed" if tick > self.server.ticks else "tick")
+            note = "first" if self._held else "fed" if tick > self.server.ticks else "tick"
+            TRACE.stamp("fe_merge", rows, note)  # (first: answers merged before ticks held)
+        if self._held and not holding:  # the clients the answers woke encode them before the ticks merge
+            woken = self._woken(changed)
+            for s in woken:  # the tick's rows follow at once: not held back by the server's throttle
+                s.more_of_tick = True  # (Session.take_output), as a single server's tick's first frames
+            self._answering = {s.id for s in woken}
+            if not self._answering and self._token is not None:
+                self._token.run_sync_soon(self.server.publish_fed)
         return changed
+
+    def _answers_first(self, batches: list[Batch]) -> tuple[list[Batch], list[Batch]]:
+        """``(now, held)``: the answers among ``batches`` to merge now, before the ticks' batches that came
+        with them (issue 21: a client whose answer was merged with a tick waited for the encode of that
+        tick's rows, its own client's and the others'), and the rest: each shard's answers that came before
+        its first tick's batch here (a shard's batches merge in order); while a shard stands in for another,
+        all now (their rows may overlap)."""
+        if self.route != list(range(self.shards)):
+            return batches, []
+        now: list[Batch] = []
+        held: list[Batch] = []
+        for b in batches:
+            (now if b.answer and not any(h.shard == b.shard for h in held) else held).append(b)
+        return now, held
+
+    def _woken(self, rows: np.ndarray) -> list[Session]:
+        """The sessions whose writers a publish of ``rows`` wakes (``TtesServer._published``)."""
+        sessions = self.server.sessions.values()
+        return [s for s in sessions if s.tables_sent and len(rows) and s.conn.subscribes_any(rows)]
+
+    def _encoded(self, session: Session) -> None:
+        """A writer encoded: once every client the held ticks' answers woke has, the ticks merge (at the
+        loop's next turn: the writer sends first)."""
+        if self._answering:
+            self._answering.discard(session.id)
+            if not self._answering and self._held and self._token is not None:
+                self._token.run_sync_soon(self.server.publish_fed)
 
     def watch(self, indices: np.ndarray | None) -> None:
         """A client subscribed to ``indices`` (None: one unsubscribed, or left): the held codes of those
@@ -665,7 +766,8 @@ class FrontNode:
             self.route[k] = k
             if stood_in != k:  # it stood in for k: k's soldiers go home
                 for i in self._homed(k).tolist():
-                    self._send(stood_in, req.remove(i))
+                    self._send(stood_in, req.remove(i, int(self.gen[i])))
+                self._send(stood_in, req.homes(self._animated_by(stood_in)))
             log.info("fabric_shard_joined", shard=k, seq=b.seq, took_back_from=stood_in)
             # it stood in for other shards before it went (hung): their soldiers live elsewhere now
             moved = [h for h in self._stood_for.pop(k, set()) if self.route[h] != k]
@@ -677,13 +779,23 @@ class FrontNode:
             return
         # this front-end may be late, or have missed another's message: it learns from the shard (a key
         # pulse names every soldier the shard animates, whatever blocks this front-end hears)
-        if k not in self._asked and (first or (b.key and self._differs(k, b.indices))):
+        if k not in self._asked and (first or (b.key and self._differs_again(k, b.indices))):
             self._ask_books(k)
         if k in self._asked:  # until it answers, no index it animates is allotted here
             alive = m.table.alive
             self._unknown.setdefault(k, set()).update(
                 b.indices[~alive[np.minimum(b.indices, len(alive) - 1)]].tolist()
             )
+
+    def _differs_again(self, k: int, indices: np.ndarray) -> bool:
+        """Whether shard ``k``'s key pulse differs from the books (:meth:`_differs`), as its last one did."""
+        differs = self._differs(k, indices)
+        again = differs and k in self._differed
+        if differs:
+            self._differed.add(k)
+        else:
+            self._differed.discard(k)
+        return again
 
     def _differs(self, k: int, indices: np.ndarray) -> bool:
         """Whether shard ``k``'s key pulse (every soldier it animates) carries a soldier the books lack, or
@@ -703,11 +815,43 @@ class FrontNode:
         alive = [k for k in range(self.shards) if self.present[k] and now - self.heard_at[k] <= self.hung_s]
         heard = [at > -math.inf for at in self.heard_at]
         for k, survivor, homes in books.rerouted(self.route, alive, heard):
-            self.failovers += 1
-            silent_s = round(now - self.heard_at[k], 3)
-            log.warning("fabric_failover", shard=k, to=survivor, homes=homes, silent_s=silent_s)
-            self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
-            self._sync(survivor, homes)
+            self._failed(k, survivor, homes, now)
+            self._book(req.failover(k, survivor, homes))  # the others follow (each decides on its own clock)
+
+    def _failed(self, k: int, survivor: int, homes: list[int], now: float) -> None:
+        """Shard ``k``'s soldiers of ``homes`` are routed to ``survivor`` now: it gets them by sync."""
+        self.failovers += 1
+        silent_s = round(now - self.heard_at[k], 3)
+        log.warning("fabric_failover", shard=k, to=survivor, homes=homes, silent_s=silent_s)
+        self._stood_for.setdefault(k, set()).update(h for h in homes if h != k)
+        self._sync(survivor, homes)
+
+    def follow(self, down: int, to: int) -> None:
+        """Another front-end failed shard ``down`` over to ``to``: fail it over here too, unless this one
+        heard it within ``FOLLOW_S`` (two front-ends routed a hung shard's requests differently for up to
+        the hung limit, each deciding on its own clock; one that hears the shard keeps it: a take-back would
+        take its soldiers from the stand-in the other front-end routes to)."""
+        now = self.server.now()
+        if not (0 <= down < self.shards and 0 <= to < self.shards) or down == to:
+            return
+        if self.present[down] and now - self.heard_at[down] < FOLLOW_S:
+            return
+        homes = [h for h, r in enumerate(self.route) if r == down]
+        if homes:
+            for h in homes:
+                self.route[h] = to
+            self._failed(down, to, homes, now)
+
+    def _settings_told(self) -> None:
+        """The server-wide settings changed (an operator's JCL): every shard takes them, and every other
+        front-end (its syncs carry them too)."""
+        world = self.server.world
+        if world.settings is not self._told[0] or world.report_interval != self._told[1]:
+            self._told = (world.settings, world.report_interval)  # (a new value when one changes)
+            op = req.settings(shared.of(world))
+            for k in range(self.shards):
+                self._send(k, op)
+            self._book(op)
 
     def _homed(self, k: int) -> np.ndarray:
         """The live soldiers whose home is shard ``k``."""
@@ -736,10 +880,30 @@ class FrontNode:
             idx = idx[self.made[idx]]
         soldiers = _soldiers(self.server, idx)
         have = idx[self.has_last[idx]]
-        gone = books.gone(self.known, m.table.alive, homes, self.shards).tolist()
-        gone += [] if drop is None else drop.tolist()
-        self._send(shard, req.sync(soldiers, self.last[have], replay=replay, gone=gone))
+        removed = books.gone(self.known, m.table.alive, homes, self.shards)
+        elsewhere = np.zeros(0, np.int64) if drop is None else np.asarray(drop, np.int64)
+        gone = [*removed.tolist(), *elsewhere.tolist()]
+        gone_gens = [*self.gen[removed].tolist(), *(self.gen[elsewhere] + 1).tolist()]  # (those live on)
+        animates = None if made else self._animated_by(shard)  # (a shard heard first: the stand-in knows)
+        self._send(shard, req.settings(shared.of(self.server.world)))
+        gens = self.gen[idx].tolist()
+        self._send(
+            shard,
+            req.sync(
+                soldiers,
+                self.last[have],
+                replay=replay,
+                gone=gone,
+                homes=animates,
+                gens=gens,
+                gone_gens=gone_gens,
+            ),
+        )
         self.fences.moved(homes, self.shards, shard)
+
+    def _animated_by(self, shard: int) -> list[int]:
+        """The homes routed to ``shard``: its own, and those it stands in for."""
+        return [h for h, r in enumerate(self.route) if r == shard]
 
     def _send(self, shard: int, op: req.Op) -> None:
         """Queue an operation for ``shard``: what one turn of the loop queued goes as one message."""
@@ -751,6 +915,13 @@ class FrontNode:
         if self._books is not None:
             self._books_out.append({**op, "front": self.front.k})
             self._flush_soon()
+
+    def _book_fenced(self, op: req.Op, index: int) -> None:
+        """A creation or removal sent to its shard now: its rows wait for the fence that ends the message,
+        here and, told which, on the other front-ends (they mirror it and have no fence of their own)."""
+        shard = self._shard_of(index)
+        self.fences.mark([index], shard)
+        self._book({**op, "shard": shard, "fence": int(self.fences.serial[index])})
 
     def _flush_soon(self) -> None:
         if self._token is None:
@@ -786,16 +957,69 @@ class FrontNode:
 
     def _mirror_one(self, op: req.Op) -> None:
         try:
+            if op["op"] == "clients":  # (an anonymous id is one connection's there, another client here)
+                for cid, n in op["counts"].items():
+                    if not cid.startswith(ANONYMOUS):
+                        self._count(int(op["front"]), cid, n)
+                return
+            if op["op"] == "failover":
+                self.follow(int(op["down"]), int(op["to"]))
+                return
+            if op["op"] == "settings":  # the shards have them from that front-end
+                shared.apply(self.server.world, op["values"])
+                self._told = (self.server.world.settings, self.server.world.report_interval)
+                return
             i = int(op["index"])
             self._touch(i)
+            self.gen[i] = max(int(self.gen[i]), int(op.get("gen") or 0))
             if op["op"] == "create":
                 self._kept(i, str(op["figure"]), str(op["weapon"]), op["owner"])
             elif op["op"] == "remove":
                 self._let_go(i, f"removed through front-end {op['front']}")
+            if "fence" in op:  # the shard's batches carry the old soldier's rows until they carry this
+                self.fences.wait([i], int(op["front"]), int(op["shard"]), int(op["fence"]))
         except (ValueError, KeyError, TypeError) as exc:
             log.warning("fabric_books_failed", front=self.front.k, op=op.get("op"), error=str(exc))
             return
         self.mirrored += 1
+
+    def _front_watched(self, token: trio.lowlevel.TrioToken, j: int, present: bool) -> None:
+        token.run_sync_soon(self._front_presence, j, present)  # from the fabric's thread to the loop
+
+    def _front_presence(self, j: int, present: bool) -> None:
+        """Front-end ``j`` came (it may have missed what this one told: its connections go again) or went
+        (its clients' connections went with it; the orphans of its share may be this one's to remove)."""
+        assert self.elsewhere is not None
+        self.elsewhere.present[j] = present
+        log.info("fabric_front_presence", front=j, present=present)
+        if present:
+            if self.elsewhere.told:
+                self._book(req.clients(dict(self.elsewhere.told)))
+            return
+        for cid in list(self.elsewhere.counts[j]):
+            self._count(j, cid, 0)
+        self.server.orphans_check()
+
+    def _connections(self, client_id: str) -> None:
+        """The owners' hook: ``client_id``'s connections changed; tell the others this front-end's own."""
+        assert self.elsewhere is not None
+        if client_id.startswith(ANONYMOUS):  # one connection's (numbered per process): not theirs
+            return
+        own = self.elsewhere.own(client_id, self.server.world.owners.connected.get(client_id, 0))
+        if own is not None:
+            self._book(req.clients(own))
+
+    def _count(self, front: int, client_id: str, n: int) -> None:
+        """Front-end ``front`` has ``n`` connections of ``client_id``: join or leave it here as many times."""
+        assert self.elsewhere is not None
+        while step := self.elsewhere.step(front, client_id, n):
+            if step > 0:
+                self.server.world.owners.join(client_id)
+            else:
+                self.server.client_left(client_id)
+
+    def orphans(self, indices: list[int]) -> list[int]:
+        return indices if self.elsewhere is None else self.elsewhere.removes(indices)
 
     def _kept(self, index: int, figure: str, weapon: str, owner: str | None) -> None:
         """Keep in the books a soldier a shard or another front-end already has (not relayed again)."""
@@ -821,12 +1045,12 @@ class FrontNode:
         made here): the shard's soldiers are the truth, kept in the books here (not relayed: the shard has
         them, and the front-end that made them told the others), and those it lacks go."""
         try:
+            k, front = books.addressee(data)
+            if front != self.front.k or k not in self._asked:  # (another front-end's: its body stays packed)
+                return
             msg = books.decode_answer(data)
         except ValueError as exc:
             log.warning("fabric_books_refused", front=self.front.k, error=str(exc))
-            return
-        k = msg["shard"]
-        if msg["front"] != self.front.k or k not in self._asked:
             return
         self._asked.discard(k)
         self._unknown.pop(k, None)
@@ -834,12 +1058,13 @@ class FrontNode:
         m = self.server.world.manager
         assert m is not None
         heard = [at > -math.inf for at in self.heard_at]
-        for home, stand_in in books.stand_ins(msg["soldiers"], k, self.shards, heard).items():
+        learned = books.stand_ins(msg["soldiers"], k, self.shards, heard, msg["homes"])
+        for home, stand_in in learned.items():
             self.route[home] = stand_in  # failed over before this front-end started
             log.warning("fabric_stand_in_learned", shard=home, to=stand_in)
         live = m.table.live
         mine = {s[0]: s for s in _soldiers(self.server, live)}
-        scope = books.answer_scope(live, self.route, k)
+        scope = books.answer_scope(live, self.route, k, list(learned))
         drop, add = books.reconcile(mine, scope, msg["soldiers"], set(np.flatnonzero(self.known).tolist()))
         for i in drop:
             self._let_go(i, f"not in shard {k}")
@@ -848,10 +1073,15 @@ class FrontNode:
                 self._kept(i, figure, weapon, owner)
             except (ValueError, KeyError) as exc:
                 log.warning("fabric_books_failed", front=self.front.k, soldier=i, error=str(exc))
+        if len(msg["gens"]) == len(msg["soldiers"]):  # its soldiers' generations, if newer
+            idx = np.array([s[0] for s in msg["soldiers"]], np.int64)
+            np.maximum.at(self.gen, idx, np.array(msg["gens"], np.int64))
         last = books.learned_last(msg["rows"], m.table.alive, self.has_last)
         self.last[last["index"]] = last  # what a fail-over of this front-end hands on
         self.has_last[last["index"]] = True
         log.info("fabric_books_learned", front=self.front.k, shard=k, dropped=len(drop), learned=len(add))
+        if self.elsewhere is not None:  # soldiers of ids gone while it was away: their grace starts now
+            self.server.orphans_check()
 
     def _shard_of(self, index: int) -> int:
         return self.route[int(Sharding.home(index, self.shards))]
@@ -874,10 +1104,10 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.taken(index)
-        op = req.create(index, figure, weapon, owner)
+        self.gen[index] += 1
+        op = req.create(index, figure, weapon, owner, int(self.gen[index]))
         self._send(self._shard_of(index), op)
-        self.fences.mark([index], self._shard_of(index))
-        self._book(op)
+        self._book_fenced(op, index)
 
     def removed(self, index: int) -> None:
         self._touch(index)
@@ -885,10 +1115,10 @@ class FrontNode:
         self.watching.forget(index)
         if self.share is not None:
             self.share.freed(index)
-        op = req.remove(index)
+        self.gen[index] += 1
+        op = req.remove(index, int(self.gen[index]))
         self._send(self._shard_of(index), op)
-        self.fences.mark([index], self._shard_of(index))
-        self._book(op)
+        self._book_fenced(op, index)
 
     def requests(self, rows: np.ndarray) -> None:
         idx = rows["index"].astype(np.int64)

@@ -10,11 +10,14 @@ front-end, perhaps before the shard listened: the shard removes those it has): w
 late, restarted or takes over another's soldiers (failover) needs to animate them (``replay``: the shard's
 own soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
 soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for one
-too; ``books`` (front): answer on ``ttes/books`` with every soldier the shard animates, for front-end
-``front`` that has just heard the shard for the first time (:mod:`server.fabric.fronts`); ``fence``
-(front, serial): the end of a message that created or removed soldiers, echoed in the batches
-(:class:`~server.fabric.fronts.Fences`). The topic is reliable: ownership and requests are never lost
-once a shard listens, and a sync covers the time before.
+too; ``homes`` (shards): the homes it animates now (a fail-over's stand-in, told again when one goes
+home; a sync carries them too); ``settings`` (values): the front-end's server-wide settings (when they
+change, and before each sync); ``books`` (front): answer on ``ttes/books`` with every soldier the shard
+animates, for front-end ``front`` that has just heard the shard for the first time
+(:mod:`server.fabric.fronts`); ``fence`` (front, serial): the end of a message that created or removed
+soldiers, echoed in the batches (:class:`~server.fabric.fronts.Fences`); on ``ttes/fronts`` only,
+``clients`` (counts): a front-end's connections of client ids, ``failover`` (down, to, homes). The topic
+is reliable: ownership and requests are never lost once a shard listens, and a sync covers the time before.
 """
 
 from __future__ import annotations
@@ -27,16 +30,30 @@ import numpy as np
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from server.fabric.batch import FENCE_MAX, MAX_FRONTS
 
-OPS = ("create", "remove", "requests", "react", "sync", "key", "books", "fence")
+OPS = (
+    "create",
+    "remove",
+    "requests",
+    "react",
+    "sync",
+    "key",
+    "books",
+    "fence",
+    "clients",
+    "homes",
+    "settings",
+    "failover",
+)
 Op = dict[str, Any]
 
 
-def create(index: int, figure: str, weapon: str, owner: str | None) -> Op:
-    return {"op": "create", "index": index, "figure": figure, "weapon": weapon, "owner": owner}
+def create(index: int, figure: str, weapon: str, owner: str | None, gen: int = 0) -> Op:
+    """``gen``: the index's generation (:func:`sync`)."""
+    return {"op": "create", "index": index, "figure": figure, "weapon": weapon, "owner": owner, "gen": gen}
 
 
-def remove(index: int) -> Op:
-    return {"op": "remove", "index": index}
+def remove(index: int, gen: int = 0) -> Op:
+    return {"op": "remove", "index": index, "gen": gen}
 
 
 def requests(rows: np.ndarray) -> Op:
@@ -53,18 +70,47 @@ def sync(
     *,
     replay: bool = False,
     gone: list[int] | None = None,
+    homes: list[int] | None = None,
+    gens: list[int] | None = None,
+    gone_gens: list[int] | None = None,
 ) -> Op:
     """``soldiers``: (index, figure, weapon, owner) each; ``last``: the last requests of those with one;
     ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in); ``gone``:
-    soldiers removed, which the shard removes if it has them."""
+    soldiers removed, which the shard removes if it has them; ``homes``: as :func:`homes` (None: kept);
+    ``gens`` and ``gone_gens``: the generation of each soldier and of each removal (an index's creations and
+    removals count up, through every front-end: a removal removes only a soldier created before it, not
+    one created again through another front-end that the sender has not heard of yet)."""
     rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
-    return {
+    op = {
         "op": "sync",
         "soldiers": [list(s) for s in soldiers],
         "rows": rows,
         "replay": replay,
         "gone": list(gone or []),
     }
+    if gens is not None:
+        op["gens"] = list(gens)
+    if gone_gens is not None:
+        op["gone_gens"] = list(gone_gens)
+    return op if homes is None else {**op, "homes": list(homes)}
+
+
+def settings(values: dict[str, Any]) -> Op:
+    """The front-end's server-wide settings (:func:`server.fabric.settings.of`): the shards animate, so an
+    operator's JCL and the front-end's own ``--throttle`` apply there."""
+    return {"op": "settings", "values": values}
+
+
+def failover(down: int, to: int, homes: list[int]) -> Op:
+    """On ``ttes/fronts``: a front-end failed shard ``down`` over to ``to`` (``homes``: the shards whose
+    soldiers went): the others follow unless they heard ``down`` lately (``FrontNode.follow``)."""
+    return {"op": "failover", "down": down, "to": to, "homes": list(homes)}
+
+
+def homes(shards: list[int]) -> Op:
+    """The shards whose soldiers the shard animates from now on (its own, and those it stands in for): its
+    answer to a late front-end's ``books`` names them, soldiers or none."""
+    return {"op": "homes", "homes": list(shards)}
 
 
 def key() -> Op:
@@ -79,6 +125,12 @@ def fence(front: int, serial: int) -> Op:
 
 def books(front: int) -> Op:
     return {"op": "books", "front": front}
+
+
+def clients(counts: dict[str, int]) -> Op:
+    """A front-end's open connections of each client id named (0: none now), for the other front-ends on
+    ``ttes/fronts``: an id's soldiers wait for it while it is connected to any of them."""
+    return {"op": "clients", "counts": counts}
 
 
 def pack(ops: list[Op]) -> bytes:
@@ -104,6 +156,12 @@ def _checked(op: object) -> Op:
             op["rows"] = np.frombuffer(op["rows"], ENTITY_REQUEST_DTYPE)
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"fabric {op['op']} without rows: {exc}") from exc
+    if op["op"] == "clients":
+        counts = op.get("counts")
+        if not isinstance(counts, dict) or not all(
+            isinstance(c, str) and isinstance(n, int) and n >= 0 for c, n in counts.items()
+        ):
+            raise ValueError(f"fabric clients without counts: {counts!r:.80}")
     if op["op"] == "fence":  # its numbers size the shard's list of fences and travel in every batch
         front, serial = op.get("front"), op.get("serial")
         if not (isinstance(front, int) and 0 <= front < MAX_FRONTS):

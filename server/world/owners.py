@@ -12,14 +12,19 @@ nothing and sees every soldier. :meth:`Owners.visible` is what a session's subsc
 
 When the last connection of an id closes its soldiers become *orphans*: :meth:`Owners.leave` starts their
 grace period, :meth:`Owners.join` (the id is back) ends it, :meth:`Owners.expired` lists the ids whose grace
-is over (the trio layer removes their soldiers). No clock here: times are passed in.
+is over (the trio layer removes their soldiers). No clock here: times are passed in. With several front-ends
+(``ttes front --front K/M``) an id's connections to the other front-ends count too: each tells the others
+its own (:attr:`Owners.on_connections`), which join and leave here as the id's connections elsewhere.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 SHARED = -1  # owner code of a soldier no client owns (the start-up script's)
+ANONYMOUS = "~anon-"  # + a session number: a client that gave no id (one connection of one process)
 FULL_SIGHT = frozenset({"observer", "operator"})
 
 
@@ -35,6 +40,7 @@ class Owners:
         self._soldiers: dict[str, set[int]] = {}
         self.connected: dict[str, int] = {}  # client id -> open connections
         self.deadline: dict[str, float] = {}  # gone client id -> when its soldiers are removed
+        self.on_connections: Callable[[str], None] | None = None  # told after an id's connections change
 
     def code_of(self, client_id: str) -> int:
         """A small integer per client id that owns soldiers (given back when it owns none and is gone, so
@@ -116,6 +122,8 @@ class Owners:
         """A connection of ``client_id`` opened: its grace (if any) ends; returns the soldiers it reclaims."""
         self.connected[client_id] = self.connected.get(client_id, 0) + 1
         self.deadline.pop(client_id, None)
+        if self.on_connections is not None:
+            self.on_connections(client_id)
         return self.soldiers_of(client_id)
 
     def leave(self, client_id: str, now: float, grace: float) -> float | None:
@@ -124,13 +132,26 @@ class Owners:
         left = self.connected.get(client_id, 0) - 1
         if left > 0:
             self.connected[client_id] = left
+        else:
+            self.connected.pop(client_id, None)
+        if self.on_connections is not None:
+            self.on_connections(client_id)
+        return None if left > 0 else self.orphaned(client_id, now, grace)
+
+    def orphaned(self, client_id: str, now: float, grace: float) -> float | None:
+        """When an id without connections that owns soldiers and has no deadline yet loses them (now +
+        ``grace``; None for an id that is connected, owns none or waits already)."""
+        if client_id in self.connected or client_id in self.deadline:
             return None
-        self.connected.pop(client_id, None)
         if not self._soldiers.get(client_id):
             self._release(client_id)
             return None
         self.deadline[client_id] = now + grace
         return self.deadline[client_id]
+
+    def owning(self) -> list[str]:
+        """The ids that own soldiers."""
+        return [cid for cid, soldiers in self._soldiers.items() if soldiers]
 
     def expired(self, now: float) -> list[str]:
         """The gone client ids whose grace is over (their deadlines are forgotten: remove their soldiers)."""
