@@ -37,7 +37,9 @@ straight way (in the angles) lifts a part of the arm is wrong (kstow2dead's left
 chest on the far side, rose 40 cm). The fall accelerates like a dropped limb and lands softly
 (:func:`fall_easing`), each arm along a way bent through a control pose so that no part of it rises
 (:mod:`authoring.dead_arms`: kfire2dead's right hand swung up 18.6 cm over the head, eased straight). Half
-on his side, the top arm reaches the ground only past the head, its elbow on the body (17.5 cm). The arms
+on his side, the top arm reaches the ground only past the head, its elbow on the body (17.5 cm), curled
+over his head: a death that keeps its arms from there (``DeathSpec.arms_headward_cm``) lays such an arm
+anew against the other (:func:`_relaid`; kfire2dead's lies out across his chest, 11.8 cm). The arms
 fall as the body lands (:func:`_arms_fall`: from the frame it is down, as the check's ``limb_rest_lag_s``
 sees it, in :data:`ARM_FALL_SECONDS`), over the physics' last frames: appended after them, kfire2dead's arm
 hung in the air 1.5 s after he lay still (the asleep ragdoll's damped joints hold it) and was then lowered.
@@ -77,8 +79,8 @@ SUPINE = 0.7  # the shoulders' line at least this level: on his back, an arm's o
 ARM_FALL_SECONDS = 0.4  # s: a dead arm drops to the ground as the body lands (a limp arm swinging down
 # from the shoulder: 0.3-0.4 s); kfire2dead: 0.8 s, after the physics, 1.5 s after he lay still
 ARM_CLEARANCE = 0.3  # cm: an arm's lowest node stops this far above the ground
-HEADWARD_FALL_SECONDS = 0.6  # s: an arm kept from over the head (_Body.headward_cm) falls further, across
-# the chest (kfire2dead's top arm in 0.4 s: its shoulder turned 20.9 degrees in a frame)
+HEADWARD_FALL_SECONDS = 0.6  # s: an arm laid anew from over the head (_relaid) falls further, across the
+# chest (kfire2dead's top arm in 0.4 s: its shoulder turned 20.9 degrees in a frame)
 FALL_POWER = 1.8  # the fall's easing: smoothstep(s ** FALL_POWER), fast late, landing softly
 # degrees: the clavicle's two, the shoulder's three and the elbow's first angles tried for a fallen arm (a
 # grid: its best shapes are starts; the top arm of a body half on his side lies low only with the shoulder
@@ -92,7 +94,8 @@ HEADWARD_GRID = ((-10.0, 40.0), (-25.0, 25.0), (-15.0, 45.0, 75.0, 105.0, 135.0,
                  (0.0, 50.0, 100.0))  # fmt: skip
 MEAN_WEIGHT = 0.2  # of the arm nodes' mean height (besides the highest part's lowest node): lie flat
 ARM_STARTS = 2  # the grid's best shapes that Powell starts from (with the arm's own pose)
-SIDE_ORDERS = (("left", "right"), ("right", "left"))  # the arms fall one after the other: both tried
+SIDES = ("left", "right")
+SIDE_ORDERS = (SIDES, SIDES[::-1])  # the arms fall one after the other: both tried
 LEG_DOFS = ("hip", "knee", "ankle", "toes")
 # degrees, per DOF of LEG_DOFS (hip: abduction, flexion, turn about the thigh; knee; ankle: pointing,
 # eversion; toes): the first search's grid, the hip's first two about the leg's own pose, None its own angle
@@ -399,11 +402,8 @@ def fallen_arm(body: _Body, side: str) -> np.ndarray:
     arm = _Arm(body, side)
     lo, hi = body.kin.lower[arm.idx], body.kin.upper[arm.idx]
     starts = [arm.x0, *_grid_starts(body.kin, side, arm.x0, arm.cost)]
-    limit, body.headward_cm = body.headward_cm, None
-    best = _minimise(arm.cost, starts, lo, hi)
-    body.headward_cm = limit
-    if limit is None or arm.overhead(arm.into(best)[0]) == 0.0:  # an arm not over the head lies as it did
-        return best  # (kfire2dead's bottom arm laid anew too: his chest and belly slid 3.9 cm)
+    if body.headward_cm is None:
+        return _minimise(arm.cost, starts, lo, hi)
     starts += _grid_starts(body.kin, side, arm.x0, arm.cost, HEADWARD_GRID)
     return min([_minimise(arm.cost, starts, lo, hi), *(np.clip(x, lo, hi) for x in starts)], key=arm.cost)
 
@@ -437,16 +437,39 @@ def limp_target(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
     return target
 
 
-def _fallen(figs: FigureSet, body: _Body) -> np.ndarray:
-    """The pose of ``body`` (on his back) with both arms fallen: the lower of :data:`SIDE_ORDERS`."""
-    return min((_fallen_arms(figs, body, order) for order in SIDE_ORDERS), key=lambda t: t[0])[1]
+def _fallen(figs: FigureSet, body: _Body) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The pose of ``body`` (on his back) with both arms fallen, the lower of :data:`SIDE_ORDERS`, and the
+    sides laid anew: with :attr:`_Body.headward_cm`, an arm that lies over the head so is laid again against
+    the other where it lies (:func:`_relaid`)."""
+    target = min((_fallen_arms(figs, body, order) for order in SIDE_ORDERS), key=lambda t: t[0])[1]
+    return (target, ()) if body.headward_cm is None else _relaid(figs, body, target)
+
+
+def _relaid(figs: FigureSet, start: _Body, target: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
+    """``target`` with each arm that reaches over the head (:meth:`_Arm.overhead`) laid anew from its pose in
+    ``start`` against the rest of ``target``, and those sides: the other arm lies as the usual search laid it
+    (kfire2dead's bottom arm, laid anew with both arms, swept his upper arm 3.9 cm along the ground as he
+    landed, and the turn that followed slid his belly 3.96 cm and a foot 3.31)."""
+    sides: list[str] = []
+    for side in SIDES:
+        idx = _dofs(start.kin, tuple(f"{side}_{j}" for j in ARM_DOFS))
+        q = target.copy()
+        q[idx] = start.q[idx]
+        body = _Body(figs, q, start.root, start.rifle)
+        body.headward_cm = start.headward_cm
+        body.way_checked = bool(body.leftward.any())
+        arm = _Arm(body, side)
+        if arm.overhead(arm.into(target[idx])[0]) > 0.0:
+            target = target.copy()
+            target[idx] = fallen_arm(body, side)
+            sides.append(side)
+    return target, tuple(sides)
 
 
 def _fallen_arms(figs: FigureSet, start: _Body, order: tuple[str, str]) -> tuple[float, np.ndarray]:
     """Both arms of ``start``'s body fallen, the first of ``order`` first and the second against it where it
     lies: the higher arm's highest part (cm, as the check sees it) and the pose."""
     body = _Body(figs, start.q, start.root, start.rifle)
-    body.headward_cm = start.headward_cm
     body.way_checked = bool(body.leftward.any())  # on his back (half on his side, checked, kfire2dead's top
     # arm's lowest shapes lay over the head only, and it stayed 27 cm up: its way is bent afterwards instead)
     target = body.q.copy()
@@ -549,25 +572,31 @@ def _arms_fall(figs: FigureSet, frames: ClipFrames, headward_cm: float | None = 
     (:mod:`authoring.dead_arms`), the physics' own arm motion fading out of it; the rest of the body goes on
     as the physics has it, and the clip ends still (:data:`STILL_SECONDS` after the arms land, or where the
     physics ended). Started after the physics had ended (1.5 s after he lay still), kfire2dead's top arm was
-    held up in the air and lowered: a dead man holding up his arm."""
+    held up in the air and lowered: a dead man holding up his arm. An arm laid anew from over the head
+    (``headward_cm``, :func:`_relaid`) falls in :data:`HEADWARD_FALL_SECONDS` from its pose as he came down.
+    """
     kin = figs.kin["body"]
     k0 = down_frame(figs, frames)
     arms = _dofs(kin, tuple(f"{side}_{j}" for side in ("left", "right") for j in ARM_DOFS))
-    n = round((ARM_FALL_SECONDS if headward_cm is None else HEADWARD_FALL_SECONDS) * frames.fps)
-    extra = max(0, k0 + n + round(STILL_SECONDS * frames.fps) + 1 - len(frames.poses))
-    out = _appended(frames, np.repeat(frames.poses[-1:], extra, axis=0))
-    held = out.poses[-1].copy()
-    held[arms] = out.poses[k0, arms]  # the arms as they were when he came down
-    body = _Body(figs, held, out.roots[-1], out.rifles[-1])
+    held = frames.poses[-1].copy()
+    held[arms] = frames.poses[k0, arms]  # the arms as they were when he came down
+    body = _Body(figs, held, frames.roots[-1], frames.rifles[-1])
     body.headward_cm = headward_cm
-    target = _fallen(figs, body)
-    u = np.concatenate([fall_easing(np.arange(1, n + 1) / n), np.ones(len(out.poses) - k0 - 1 - n)])
+    target, relaid = _fallen(figs, body)
+    lengths = {
+        s: round((HEADWARD_FALL_SECONDS if s in relaid else ARM_FALL_SECONDS) * frames.fps) for s in SIDES
+    }
+    extra = max(0, k0 + max(lengths.values()) + round(STILL_SECONDS * frames.fps) + 1 - len(frames.poses))
+    out = _appended(frames, np.repeat(frames.poses[-1:], extra, axis=0))
     poses = out.poses.copy()
-    for side in ("left", "right"):
+    for side, n in lengths.items():
+        u = np.concatenate([fall_easing(np.arange(1, n + 1) / n), np.ones(len(out.poses) - k0 - 1 - n)])
         arm = _Arm(body, side)
         x1 = target[arm.idx]
         c = dead_arms.control_pose(arm, x1, _minimise)
-        poses[k0 + 1 :, arm.idx] = dead_arms.bent(out.poses[k0 + 1 :, arm.idx], c, x1, u)
+        x0 = out.poses[k0 + 1 :, arm.idx] if side not in relaid else arm.x0  # a relaid arm's own motion
+        # left out: kfire2dead's top arm, still sinking 2 cm as its way rose over his chest, rose 3.5 cm
+        poses[k0 + 1 :, arm.idx] = dead_arms.bent(x0, c, x1, u)
     return ClipFrames(poses, out.roots, out.rifles, out.fps)
 
 

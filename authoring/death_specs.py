@@ -52,6 +52,9 @@ class DeathSpec:
     # once his legs are lifted, he is shifted and turned about the vertical so that each part's worst slide
     # is least (kfire2dead's trunk, 3.3-3.7 cm: planted.least_worst_turned)
     turn_worst: bool = False
+    # the turn measures the slides along the check's directions (body_parts.DIRECTIONS, 16), not the
+    # planted.WORST_DIRECTIONS (8): kfire2dead's chest slid 3.007 cm (limit 3) where the turn saw 3.0
+    turn_as_checked: bool = False
     # the slaves' trunk rest holds a foot near the ground whose knee is up where it was (slave_rest
     # feet_held): kfire2dead's DI, its trunk turned to rest, lowered its hovering right foot onto the ground
     # while it moved (skate 0.32 -> 4.06 cm once he was turned least-worst)
@@ -258,6 +261,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_feet_held=True,
         slave_rest_slide_cm=KFIRE_REST_SLIDE,
         arms_headward_cm=KFIRE_ARMS_HEADWARD,
+        turn_as_checked=True,
     ),
     replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD),  # not eased: see
     # PRONE_START_EASE
