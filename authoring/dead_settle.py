@@ -81,6 +81,9 @@ ARM_FALL_SECONDS = 0.4  # s: a dead arm drops to the ground as the body lands (a
 ARM_CLEARANCE = 0.3  # cm: an arm's lowest node stops this far above the ground
 HEADWARD_FALL_SECONDS = 0.6  # s: an arm laid anew from over the head (_relaid) falls further, across the
 # chest (kfire2dead's top arm in 0.4 s: its shoulder turned 20.9 degrees in a frame)
+HEADWARD_STILL_SECONDS = 0.6  # s: and the clip ends this long after it lands (the slaves' trunk rest eases in
+# over the clip's last 0.5 s, slave_rest.EASE_FRAMES: kfire2dead's DI, its trunk turned while the arm swung
+# down, slid its chest 3.35 cm and ended moving its right hand at 0.51 m/s)
 FALL_POWER = 1.8  # the fall's easing: smoothstep(s ** FALL_POWER), fast late, landing softly
 # degrees: the clavicle's two, the shoulder's three and the elbow's first angles tried for a fallen arm (a
 # grid: its best shapes are starts; the top arm of a body half on his side lies low only with the shoulder
@@ -586,7 +589,8 @@ def _arms_fall(figs: FigureSet, frames: ClipFrames, headward_cm: float | None = 
     lengths = {
         s: round((HEADWARD_FALL_SECONDS if s in relaid else ARM_FALL_SECONDS) * frames.fps) for s in SIDES
     }
-    extra = max(0, k0 + max(lengths.values()) + round(STILL_SECONDS * frames.fps) + 1 - len(frames.poses))
+    still = round((HEADWARD_STILL_SECONDS if relaid else STILL_SECONDS) * frames.fps)
+    extra = max(0, k0 + max(lengths.values()) + still + 1 - len(frames.poses))
     out = _appended(frames, np.repeat(frames.poses[-1:], extra, axis=0))
     poses = out.poses.copy()
     for side, n in lengths.items():

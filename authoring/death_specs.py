@@ -188,8 +188,9 @@ PRSTOW_HEAD_HELD = 24
 # he lands; back, or left and back, it ends under him again; at 100 N it rests tilted 38 cm up against him)
 STFIRE_TOSS = (1.0, -0.5, 0.2)
 # cm: kfire2dead's slaves' trunk rest may slide a resting part this far (DeathSpec.slave_rest_slide_cm): their
-# pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds)
-KFIRE_REST_SLIDE = 1.5
+# pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds); 2.0 once his
+# top arm lay across his chest (DI pelvis 2.35 -> 1.27 cm, the check's rest limit 2; DI foot_skate 0.41)
+KFIRE_REST_SLIDE = 2.0
 # cm: kfire2dead's fallen arms reach no further than this past his shoulders toward his head
 # (DeathSpec.arms_headward_cm): half on his side, his top (right) arm lay lowest curled over his head
 KFIRE_ARMS_HEADWARD = 5.0
