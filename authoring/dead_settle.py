@@ -37,7 +37,9 @@ straight way (in the angles) lifts a part of the arm is wrong (kstow2dead's left
 chest on the far side, rose 40 cm). The fall accelerates like a dropped limb and lands softly
 (:func:`fall_easing`), each arm along a way bent through a control pose so that no part of it rises
 (:mod:`authoring.dead_arms`: kfire2dead's right hand swung up 18.6 cm over the head, eased straight). Half
-on his side, the top arm reaches the ground only past the head, its elbow on the body (17.5 cm). The arms
+on his side, the top arm reaches the ground only past the head, its elbow on the body (17.5 cm), curled
+over his head: a death that keeps its arms from there (``DeathSpec.arms_headward_cm``) lays such an arm
+anew against the other (:func:`_relaid`; kfire2dead's lies out across his chest, 11.8 cm). The arms
 fall as the body lands (:func:`_arms_fall`: from the frame it is down, as the check's ``limb_rest_lag_s``
 sees it, in :data:`ARM_FALL_SECONDS`), over the physics' last frames: appended after them, kfire2dead's arm
 hung in the air 1.5 s after he lay still (the asleep ragdoll's damped joints hold it) and was then lowered.
@@ -77,15 +79,26 @@ SUPINE = 0.7  # the shoulders' line at least this level: on his back, an arm's o
 ARM_FALL_SECONDS = 0.4  # s: a dead arm drops to the ground as the body lands (a limp arm swinging down
 # from the shoulder: 0.3-0.4 s); kfire2dead: 0.8 s, after the physics, 1.5 s after he lay still
 ARM_CLEARANCE = 0.3  # cm: an arm's lowest node stops this far above the ground
+HEADWARD_FALL_SECONDS = 0.6  # s: an arm laid anew from over the head (_relaid) falls further, across the
+# chest (kfire2dead's top arm in 0.4 s: its shoulder turned 20.9 degrees in a frame)
+HEADWARD_STILL_SECONDS = 0.6  # s: and the clip ends this long after it lands (the slaves' trunk rest eases in
+# over the clip's last 0.5 s, slave_rest.EASE_FRAMES: kfire2dead's DI, its trunk turned while the arm swung
+# down, slid its chest 3.35 cm and ended moving its right hand at 0.51 m/s)
 FALL_POWER = 1.8  # the fall's easing: smoothstep(s ** FALL_POWER), fast late, landing softly
 # degrees: the clavicle's two, the shoulder's three and the elbow's first angles tried for a fallen arm (a
 # grid: its best shapes are starts; the top arm of a body half on his side lies low only with the shoulder
 # dropped)
 ARM_GRID = ((-10.0, 40.0), (-25.0, 25.0), (-15.0, 20.0, 60.0, 100.0), (-30.0, 0.0, 30.0, 60.0, 90.0),
             (-60.0, 0.0, 60.0), (0.0, 45.0, 90.0))  # fmt: skip
+# the wider grid of an arm kept from over the head (_Body.headward_cm): half on his side, kfire2dead's top arm
+# reaches the ground only across his chest, the shoulder turned in past ARM_GRID's (28 -> 12 cm up)
+HEADWARD_GRID = ((-10.0, 40.0), (-25.0, 25.0), (-15.0, 45.0, 75.0, 105.0, 135.0, 165.0),
+                 (-60.0, -30.0, 0.0, 30.0, 60.0, 90.0), (-90.0, -45.0, 0.0, 45.0, 90.0),
+                 (0.0, 50.0, 100.0))  # fmt: skip
 MEAN_WEIGHT = 0.2  # of the arm nodes' mean height (besides the highest part's lowest node): lie flat
 ARM_STARTS = 2  # the grid's best shapes that Powell starts from (with the arm's own pose)
-SIDE_ORDERS = (("left", "right"), ("right", "left"))  # the arms fall one after the other: both tried
+SIDES = ("left", "right")
+SIDE_ORDERS = (SIDES, SIDES[::-1])  # the arms fall one after the other: both tried
 LEG_DOFS = ("hip", "knee", "ankle", "toes")
 # degrees, per DOF of LEG_DOFS (hip: abduction, flexion, turn about the thigh; knee; ankle: pointing,
 # eversion; toes): the first search's grid, the hip's first two about the leg's own pose, None its own angle
@@ -143,6 +156,10 @@ class _Body:
         self.planted = self.points[:, 1] <= CONTACT_HEIGHT_CM
         self.shoulders, self.leftward = _body_axes(self.kin, q, root)
         self.way_checked = False  # a fallen arm's search weighs how far its way lifts it
+        # cm: how far a fallen arm's forearm and hand may reach past the shoulders toward the head (None:
+        # anywhere; :meth:`_Arm.overhead`)
+        self.headward_cm: float | None = None
+        self.headward = _headward(self.kin, q, root)
 
     def heights(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         g = self.kin.segment_globals(q, self.root)
@@ -167,6 +184,14 @@ def _body_axes(kin, q: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.nda
     norm = float(np.linalg.norm(flat))
     side = flat / norm if norm >= SUPINE * float(np.linalg.norm(left - right)) else np.zeros(3)
     return (left + right) / 2.0, side
+
+
+def _headward(kin, q: np.ndarray, root: np.ndarray) -> np.ndarray:
+    """The unit direction from the pelvis to the point between the shoulders (up the spine)."""
+    s = kin.site_globals(q, root)[:, :3, 3]
+    shoulders = sum(s[kin.site_names.index(f"{side}_upper_arm.proximal")] for side in ("left", "right")) / 2
+    up = shoulders - kin.segment_globals(q, root)[kin.segment_names.index("lower_torso")][:3, 3]
+    return up / np.linalg.norm(up)
 
 
 def dropped_head(body: _Body) -> np.ndarray:
@@ -345,7 +370,7 @@ class _Arm:
         p, inside = self.into(x)
         low = float(p[self.arm, 1].min())
         wrong = max(0.0, self.clearance - low) + max(0.0, inside - self.inside0)
-        wrong += self.body.misplaced(self.pose(x)) + self.astray(p)
+        wrong += self.body.misplaced(self.pose(x)) + self.astray(p) + self.overhead(p)
         if self.body.way_checked:  # its way down lifts no part of it (authoring.dead_arms)
             wrong += max(0.0, dead_arms.straight_rise(self, x) - dead_arms.RISE_OK_CM)
         return max(float(p[m, 1].min()) for m in self.limb), float(p[self.arm, 1].mean()), wrong
@@ -357,6 +382,15 @@ class _Arm:
         across = float(np.dot(self.body.shoulders - hand, self.body.leftward))
         return max(0.0, across if self.side == "left" else -across)
 
+    def overhead(self, p: np.ndarray) -> float:
+        """cm the forearm and hand reach past the shoulders toward the head beyond the body's
+        :attr:`_Body.headward_cm`: half on his side, kfire2dead's top arm lay lowest curled over his head,
+        its elbow up by the head and the hand over the crown (not how a dead man's arm lies)."""
+        if self.body.headward_cm is None:
+            return 0.0
+        reach = (p[self.lower] - self.body.shoulders) @ self.body.headward
+        return max(0.0, float(reach.max()) - self.body.headward_cm)
+
     def cost(self, x: np.ndarray) -> float:
         high, mean, wrong = self.terms(x)
         move = MOVE_COST * float(np.degrees(np.abs(x - self.x0)).sum())
@@ -365,20 +399,28 @@ class _Arm:
 
 def fallen_arm(body: _Body, side: str) -> np.ndarray:
     """The ``side`` arm's angles that lay it lowest, into neither the ground, the rest of the body nor the
-    rifle, sliding nothing on the ground (from its own pose and the best of :data:`ARM_GRID`)."""
+    rifle, sliding nothing on the ground (from its own pose and the best of :data:`ARM_GRID`; an arm kept
+    from over the head, :attr:`_Body.headward_cm`, from :data:`HEADWARD_GRID`'s best too, and no worse than
+    its best start: bounded Powell's line searches can end above where they began, 19 -> 35)."""
     arm = _Arm(body, side)
+    lo, hi = body.kin.lower[arm.idx], body.kin.upper[arm.idx]
     starts = [arm.x0, *_grid_starts(body.kin, side, arm.x0, arm.cost)]
-    return _minimise(arm.cost, starts, body.kin.lower[arm.idx], body.kin.upper[arm.idx])
+    if body.headward_cm is None:
+        return _minimise(arm.cost, starts, lo, hi)
+    starts += _grid_starts(body.kin, side, arm.x0, arm.cost, HEADWARD_GRID)
+    return min([_minimise(arm.cost, starts, lo, hi), *(np.clip(x, lo, hi) for x in starts)], key=arm.cost)
 
 
-def _grid_starts(kin, side: str, x0: np.ndarray, cost: Callable[[np.ndarray], float]) -> list[np.ndarray]:
-    """The :data:`ARM_STARTS` lowest arm shapes of :data:`ARM_GRID` (the wrist and the elbow's second angle
-    as they are): a forearm standing up by the head may lie best beside or across the body."""
+def _grid_starts(
+    kin, side: str, x0: np.ndarray, cost: Callable[[np.ndarray], float], grid_deg: tuple = ARM_GRID
+) -> list[np.ndarray]:
+    """The :data:`ARM_STARTS` lowest arm shapes of ``grid_deg`` (:data:`ARM_GRID`; the wrist and the elbow's
+    second angle as they are): a forearm standing up by the head may lie best beside or across the body."""
     base = kin.dof_slices[f"{side}_clavicle"].start
     grid = [kin.dof_slices[f"{side}_{j}"].start - base for j in ("clavicle", "shoulder", "elbow")]
     at = np.array([grid[0], grid[0] + 1, grid[1], grid[1] + 1, grid[1] + 2, grid[2]])
     shapes: list[tuple[float, int, np.ndarray]] = []
-    for angles in itertools.product(*ARM_GRID):
+    for angles in itertools.product(*grid_deg):
         x = x0.copy()
         x[at] = np.radians(angles)
         shapes.append((cost(x), len(shapes), x))
@@ -398,9 +440,33 @@ def limp_target(figs: FigureSet, frames: ClipFrames) -> np.ndarray | None:
     return target
 
 
-def _fallen(figs: FigureSet, body: _Body) -> np.ndarray:
-    """The pose of ``body`` (on his back) with both arms fallen: the lower of :data:`SIDE_ORDERS`."""
-    return min((_fallen_arms(figs, body, order) for order in SIDE_ORDERS), key=lambda t: t[0])[1]
+def _fallen(figs: FigureSet, body: _Body) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The pose of ``body`` (on his back) with both arms fallen, the lower of :data:`SIDE_ORDERS`, and the
+    sides laid anew: with :attr:`_Body.headward_cm`, an arm that lies over the head so is laid again against
+    the other where it lies (:func:`_relaid`)."""
+    target = min((_fallen_arms(figs, body, order) for order in SIDE_ORDERS), key=lambda t: t[0])[1]
+    return (target, ()) if body.headward_cm is None else _relaid(figs, body, target)
+
+
+def _relaid(figs: FigureSet, start: _Body, target: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
+    """``target`` with each arm that reaches over the head (:meth:`_Arm.overhead`) laid anew from its pose in
+    ``start`` against the rest of ``target``, and those sides: the other arm lies as the usual search laid it
+    (kfire2dead's bottom arm, laid anew with both arms, swept his upper arm 3.9 cm along the ground as he
+    landed, and the turn that followed slid his belly 3.96 cm and a foot 3.31)."""
+    sides: list[str] = []
+    for side in SIDES:
+        idx = _dofs(start.kin, tuple(f"{side}_{j}" for j in ARM_DOFS))
+        q = target.copy()
+        q[idx] = start.q[idx]
+        body = _Body(figs, q, start.root, start.rifle)
+        body.headward_cm = start.headward_cm
+        body.way_checked = bool(body.leftward.any())
+        arm = _Arm(body, side)
+        if arm.overhead(arm.into(target[idx])[0]) > 0.0:
+            target = target.copy()
+            target[idx] = fallen_arm(body, side)
+            sides.append(side)
+    return target, tuple(sides)
 
 
 def _fallen_arms(figs: FigureSet, start: _Body, order: tuple[str, str]) -> tuple[float, np.ndarray]:
@@ -431,19 +497,21 @@ def settle(
     propped: bool = False,
     legs: bool = True,
     slack_feet: bool = False,
+    arms_headward_cm: float | None = None,
 ) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
     with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
     (:mod:`authoring.dead_prone`); a body on its back (``arms_fall``) lets its arms fall as it lands
     (:func:`_arms_fall`). A face-down body's legs are laid as it lands (:func:`_legs_land`); ``legs`` False:
-    they stay as the physics laid them (``DeathSpec.legs_settle``)."""
+    they stay as the physics laid them (``DeathSpec.legs_settle``); ``arms_headward_cm``: how far a fallen
+    arm may reach past the shoulders toward the head (``DeathSpec.arms_headward_cm``; None: anywhere)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
     lowered = _lowered(figs, frames, slack_feet) if propped else None
     if lowered is not None:
         return _appended(frames, lowered)
     kin, last = figs.kin["body"], frames.poses[-1]
     if arms_fall and not _face_down(kin, last, frames.roots[-1]) and _face_up(kin, last, frames.roots[-1]):
-        return _arms_fall(figs, frames)
+        return _arms_fall(figs, frames, arms_headward_cm)
     target = limp_target(figs, frames)
     if target is None:
         return frames
@@ -500,31 +568,39 @@ def _rest_frame(figs: FigureSet, frames: ClipFrames, near: float) -> int:
     return len(frames.poses) - 1 if k is None else k
 
 
-def _arms_fall(figs: FigureSet, frames: ClipFrames) -> ClipFrames:
+def _arms_fall(figs: FigureSet, frames: ClipFrames, headward_cm: float | None = None) -> ClipFrames:
     """A body on its back lets its arms fall as it lands: from the frame it is down (:func:`down_frame`)
     each arm falls, in :data:`ARM_FALL_SECONDS`, to the shape :func:`fallen_arm` lays it in (found on the
     last frame's body with the arms as they were then), along a way bent so that no part of it rises
     (:mod:`authoring.dead_arms`), the physics' own arm motion fading out of it; the rest of the body goes on
     as the physics has it, and the clip ends still (:data:`STILL_SECONDS` after the arms land, or where the
     physics ended). Started after the physics had ended (1.5 s after he lay still), kfire2dead's top arm was
-    held up in the air and lowered: a dead man holding up his arm."""
+    held up in the air and lowered: a dead man holding up his arm. An arm laid anew from over the head
+    (``headward_cm``, :func:`_relaid`) falls in :data:`HEADWARD_FALL_SECONDS` from its pose as he came down.
+    """
     kin = figs.kin["body"]
     k0 = down_frame(figs, frames)
     arms = _dofs(kin, tuple(f"{side}_{j}" for side in ("left", "right") for j in ARM_DOFS))
-    n = round(ARM_FALL_SECONDS * frames.fps)
-    extra = max(0, k0 + n + round(STILL_SECONDS * frames.fps) + 1 - len(frames.poses))
+    held = frames.poses[-1].copy()
+    held[arms] = frames.poses[k0, arms]  # the arms as they were when he came down
+    body = _Body(figs, held, frames.roots[-1], frames.rifles[-1])
+    body.headward_cm = headward_cm
+    target, relaid = _fallen(figs, body)
+    lengths = {
+        s: round((HEADWARD_FALL_SECONDS if s in relaid else ARM_FALL_SECONDS) * frames.fps) for s in SIDES
+    }
+    still = round((HEADWARD_STILL_SECONDS if relaid else STILL_SECONDS) * frames.fps)
+    extra = max(0, k0 + max(lengths.values()) + still + 1 - len(frames.poses))
     out = _appended(frames, np.repeat(frames.poses[-1:], extra, axis=0))
-    held = out.poses[-1].copy()
-    held[arms] = out.poses[k0, arms]  # the arms as they were when he came down
-    body = _Body(figs, held, out.roots[-1], out.rifles[-1])
-    target = _fallen(figs, body)
-    u = np.concatenate([fall_easing(np.arange(1, n + 1) / n), np.ones(len(out.poses) - k0 - 1 - n)])
     poses = out.poses.copy()
-    for side in ("left", "right"):
+    for side, n in lengths.items():
+        u = np.concatenate([fall_easing(np.arange(1, n + 1) / n), np.ones(len(out.poses) - k0 - 1 - n)])
         arm = _Arm(body, side)
         x1 = target[arm.idx]
         c = dead_arms.control_pose(arm, x1, _minimise)
-        poses[k0 + 1 :, arm.idx] = dead_arms.bent(out.poses[k0 + 1 :, arm.idx], c, x1, u)
+        x0 = out.poses[k0 + 1 :, arm.idx] if side not in relaid else arm.x0  # a relaid arm's own motion
+        # left out: kfire2dead's top arm, still sinking 2 cm as its way rose over his chest, rose 3.5 cm
+        poses[k0 + 1 :, arm.idx] = dead_arms.bent(x0, c, x1, u)
     return ClipFrames(poses, out.roots, out.rifles, out.fps)
 
 

@@ -36,6 +36,9 @@ class DeathSpec:
     hip_damping: float = 1.0  # the hips', waist's and lower back's (FALL_STIFF) damping: this many times
     # stronger until he is down
     arms_fall: bool = False  # on his back, his arms fall to the ground after the physics (dead_settle)
+    # cm: how far a fallen arm's forearm and hand may reach past his shoulders toward his head (dead_settle
+    # _Arm.overhead; None: anywhere): half on his side, kfire2dead's top arm lay lowest curled over his head
+    arms_headward_cm: float | None = None
     propped: bool = False  # prone, left propped on his elbows: the chest comes down after the physics
     legs_lift: bool = False  # kneeling: a leg part that would skid on the ground lifts instead (leg_lift)
     # the skid taken out so that each part's worst slide is least, not the mean drift (kfire2dead: the thigh
@@ -49,6 +52,9 @@ class DeathSpec:
     # once his legs are lifted, he is shifted and turned about the vertical so that each part's worst slide
     # is least (kfire2dead's trunk, 3.3-3.7 cm: planted.least_worst_turned)
     turn_worst: bool = False
+    # the turn measures the slides along the check's directions (body_parts.DIRECTIONS, 16), not the
+    # planted.WORST_DIRECTIONS (8): kfire2dead's chest slid 3.007 cm (limit 3) where the turn saw 3.0
+    turn_as_checked: bool = False
     # the slaves' trunk rest holds a foot near the ground whose knee is up where it was (slave_rest
     # feet_held): kfire2dead's DI, its trunk turned to rest, lowered its hovering right foot onto the ground
     # while it moved (skate 0.32 -> 4.06 cm once he was turned least-worst)
@@ -190,8 +196,12 @@ PRSTOW_HEAD_HELD = 24
 # he lands; back, or left and back, it ends under him again; at 100 N it rests tilted 38 cm up against him)
 STFIRE_TOSS = (1.0, -0.5, 0.2)
 # cm: kfire2dead's slaves' trunk rest may slide a resting part this far (DeathSpec.slave_rest_slide_cm): their
-# pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds)
-KFIRE_REST_SLIDE = 1.5
+# pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds); 2.0 once his
+# top arm lay across his chest (DI pelvis 2.35 -> 1.27 cm, the check's rest limit 2; DI foot_skate 0.41)
+KFIRE_REST_SLIDE = 2.0
+# cm: kfire2dead's fallen arms reach no further than this past his shoulders toward his head
+# (DeathSpec.arms_headward_cm): half on his side, his top (right) arm lay lowest curled over his head
+KFIRE_ARMS_HEADWARD = 5.0
 # frames: kstow2dead's legs' flicking change by the pin and the lift smoothed (DeathSpec.legs_eased): the
 # worst flick 18.7 degrees (right knee) -> 7.5 (the left wrist's, untouched), the ankles' 12.7 -> 1.9, its
 # DI/M16 slaves' ankle 16.6 -> 2.6; turned least-worst last too (DeathSpec.turn_worst), its left thigh's slide
@@ -267,6 +277,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         turn_worst=True,
         slave_feet_held=True,
         slave_rest_slide_cm=KFIRE_REST_SLIDE,
+        arms_headward_cm=KFIRE_ARMS_HEADWARD,
+        turn_as_checked=True,
     ),
     replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD, prone_legs_roll=True),
     # not eased: see PRONE_START_EASE

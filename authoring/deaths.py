@@ -107,6 +107,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from authoring import dead_crawl, dead_settle, prone_roll
+from authoring.body_parts import DIRECTIONS
 from authoring.contact_pin import pin_frames
 from authoring.death_specs import DEAD as DEAD
 from authoring.death_specs import DEATHS as DEATHS
@@ -123,7 +124,7 @@ from authoring.knee_hold import hold_knees
 from authoring.leg_lift import eased_legs, lifted
 from authoring.motion import KeyPosture
 from authoring.passive_range import passive_figure
-from authoring.planted import least_worst_turned, plant, plant_least_worst
+from authoring.planted import WORST_DIRECTIONS, least_worst_turned, plant, plant_least_worst
 from authoring.postures import RIFLE, SOLDIER
 from authoring.quality_frames import FigureSet
 from authoring.quality_rest import DOWN_CM
@@ -490,7 +491,9 @@ def _after_physics(
     frames = _held(spec, planted, figures, release)
     frames = lifted(frames, figures[0]) if spec.legs_lift else frames
     frames = eased_legs(planted, frames, figures[0], spec.legs_eased) if spec.legs_eased else frames
-    return least_worst_turned(frames, figures[0]) if spec.turn_worst else frames
+    if not spec.turn_worst:
+        return frames
+    return least_worst_turned(frames, figures[0], DIRECTIONS if spec.turn_as_checked else WORST_DIRECTIONS)
 
 
 def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], release: int) -> ClipFrames:
@@ -514,6 +517,7 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         spec.propped,
         legs=spec.legs_settle,
         slack_feet=spec.slack_feet,
+        arms_headward_cm=spec.arms_headward_cm,
     )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)

@@ -72,14 +72,17 @@ PART_WEIGHT = 0.2  # each other part's own worst slide (besides the worst of the
 LEG_PARTS = ("left_foot", "right_foot", "left_knee", "right_knee")
 
 
-def least_worst_shift(points: np.ndarray, parts: np.ndarray, pivot: np.ndarray | None = None) -> np.ndarray:
+def least_worst_shift(
+    points: np.ndarray, parts: np.ndarray, pivot: np.ndarray | None = None, directions: int = WORST_DIRECTIONS
+) -> np.ndarray:
     """``(n, 3)`` horizontal shifts (cm; the first frame's 0) of a body whose mesh nodes are ``points``
     ``(n, k, 3)`` (of body ``parts`` ``(k,)``) that bring each part's largest slide on the ground (the
-    check's measure, along :data:`WORST_DIRECTIONS`) down, their sum least: a linear programme (HiGHS) in
-    the shifts, each part's worst slide and, per contact run and direction, its extent; the correction moves
-    at most :data:`WORST_STEP_CM` a frame and costs :data:`WORST_MOTION` a cm. With a ``pivot`` (x, z) the
-    body may also turn about the vertical through it (linearised: :data:`WORST_TURN_STEP` a frame at most,
-    costing :data:`WORST_TURN_COST` a radian); the turns are the returned array's y column (radians)."""
+    check's measure, along ``directions``: :data:`WORST_DIRECTIONS`) down, their sum least: a linear
+    programme (HiGHS) in the shifts, each part's worst slide and, per contact run and direction, its extent;
+    the correction moves at most :data:`WORST_STEP_CM` a frame and costs :data:`WORST_MOTION` a cm. With a
+    ``pivot`` (x, z) the body may also turn about the vertical through it (linearised:
+    :data:`WORST_TURN_STEP` a frame at most, costing :data:`WORST_TURN_COST` a radian); the turns are the
+    returned array's y column (radians)."""
     from authoring.body_parts import contact_runs
 
     n = len(points)
@@ -93,8 +96,8 @@ def least_worst_shift(points: np.ndarray, parts: np.ndarray, pivot: np.ndarray |
                              for p in np.unique(run_part)])  # fmt: skip
     shift = np.zeros((n, 3))
     for _ in range(WORST_ROUNDS):
-        shift = _solve_shift(points, runs, chosen, names, pivot)
-        extent = _run_extents(_turned(points, shift, pivot), runs, long, np.zeros((n, 2)))
+        shift = _solve_shift(points, runs, chosen, names, pivot, directions)
+        extent = _run_extents(_turned(points, shift, pivot), runs, long, np.zeros((n, 2)), directions)
         worst = {p: extent[run_part == p].max() for p in np.unique(run_part)}
         late = long[(extent > np.array([worst[p] for p in run_part]) - 1e-6) & ~np.isin(long, chosen)]
         if not len(late):
@@ -116,14 +119,16 @@ def _turned(points: np.ndarray, shift: np.ndarray, pivot: np.ndarray | None) -> 
     return out
 
 
-def _directions() -> np.ndarray:
-    ang = np.arange(WORST_DIRECTIONS) * np.pi / WORST_DIRECTIONS
+def _directions(count: int = WORST_DIRECTIONS) -> np.ndarray:
+    ang = np.arange(count) * np.pi / count
     return np.stack([np.cos(ang), np.sin(ang)], axis=1)
 
 
-def _run_extents(points: np.ndarray, runs, which: np.ndarray, shift: np.ndarray) -> np.ndarray:
+def _run_extents(
+    points: np.ndarray, runs, which: np.ndarray, shift: np.ndarray, directions: int = WORST_DIRECTIONS
+) -> np.ndarray:
     """Each run's slide (along :func:`_directions`) with the body shifted by ``shift`` ``(n, 2)``."""
-    dirs = _directions()
+    dirs = _directions(directions)
     out = np.zeros(len(which))
     for j, r in enumerate(which):
         a, b = runs.first[r], runs.last[r] + 1
@@ -133,14 +138,19 @@ def _run_extents(points: np.ndarray, runs, which: np.ndarray, shift: np.ndarray)
 
 
 def _solve_shift(
-    points: np.ndarray, runs, chosen: np.ndarray, names: np.ndarray, pivot: np.ndarray | None = None
+    points: np.ndarray,
+    runs,
+    chosen: np.ndarray,
+    names: np.ndarray,
+    pivot: np.ndarray | None = None,
+    directions: int = WORST_DIRECTIONS,
 ) -> np.ndarray:
     """The linear programme of :func:`least_worst_shift` over the runs ``chosen``: ``(n, 3)`` shifts (x, the
     turn about the vertical through ``pivot`` or 0, z)."""
     from scipy.optimize import linprog
     from scipy.sparse import coo_matrix
 
-    n, dirs = len(points), _directions()
+    n, dirs = len(points), _directions(directions)
     nd = len(dirs)
     groups = sorted(set(names[runs.node[chosen]]))
     # variables: shifts (2n) | per run and direction, the highest and lowest projection | per part its
@@ -237,14 +247,14 @@ def plant_least_worst(frames: ClipFrames, soldier: Figure) -> ClipFrames:
     return ClipFrames(frames.poses, roots, rifles, frames.fps)
 
 
-def least_worst_turned(frames: ClipFrames, soldier: Figure) -> ClipFrames:
+def least_worst_turned(frames: ClipFrames, soldier: Figure, directions: int = WORST_DIRECTIONS) -> ClipFrames:
     """``frames`` shifted along the ground and turned about the vertical (through the middle of what he
-    finally lies on) so that each part's worst slide is least (:func:`least_worst_shift`); their poses
-    unchanged, the first frame where it was."""
+    finally lies on) so that each part's worst slide is least (:func:`least_worst_shift`, measured along
+    ``directions``); their poses unchanged, the first frame where it was."""
     points, parts = _mesh_points(frames, soldier)
     last = points[-1]
     pivot = last[last[:, 1] <= CONTACT_HEIGHT_CM][:, [0, 2]].mean(axis=0)
-    shift = least_worst_shift(points, parts, pivot)
+    shift = least_worst_shift(points, parts, pivot, directions)
     c, s = np.cos(shift[:, 1]), np.sin(shift[:, 1])
     move = np.tile(np.eye(4), (len(shift), 1, 1))
     move[:, 0, 0], move[:, 0, 2], move[:, 2, 0], move[:, 2, 2] = c, s, -s, c

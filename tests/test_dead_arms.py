@@ -12,6 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from authoring import dead_arms
+from authoring.death_specs import KFIRE_ARMS_HEADWARD
 from authoring.quality import check_clip
 from authoring.quality_frames import FigureSet, play
 from authoring.quality_postures import rest_endpoint
@@ -79,3 +80,76 @@ def test_a_way_into_the_body_is_weighed_against_the_body_alone(figures: FigureSe
     assert honest >= dead_arms.PENALTY * 5.0
     arm.inside0 = 10.0  # as if the rifle had lain 10 cm deep in the arm where it was
     assert dead_arms.path_cost(arm, arm.x0, x1)(mid) == honest
+
+
+# degrees: kfire2dead's top (right) arm as the search laid it curled over his head (clavicle 2, shoulder 3,
+# elbow 2, wrist 2; issue 14, main before session 15)
+OVER_THE_HEAD = (40.0, -25.0, 121.0, -30.0, -60.0, 90.0, -87.0, -30.0, -34.0)
+
+
+def _kfire_last(figures: FigureSet, right_arm: tuple[float, ...] | None = None):
+    """The body of the committed kfire2dead's last frame (its right arm at ``right_arm`` degrees)."""
+    from authoring import dead_settle
+
+    cf = play(load_channelset(CHANNELSETS / "kfire2dead.chset.env"), figures)
+    two = FigureSet({"body": figures.figures["soldier.fig"], "rifle": figures.figures["AK_47.fig"]})
+    q, root = cf.poses["soldier.fig"][-1].astype(float), cf.locations["soldier.fig"][-1].astype(float)
+    body = dead_settle._Body(two, q, root, cf.locations["AK_47.fig"][-1])
+    if right_arm is not None:
+        body.q[dead_settle._Arm(body, "right").idx] = np.radians(right_arm)
+    return two, body
+
+
+def test_an_arm_over_the_head_is_wrong_only_where_the_death_asks(figures: FigureSet) -> None:
+    """kfire2dead's top (right) arm lay curled over his head (issue 14): with the death's
+    ``arms_headward_cm`` its forearm and hand reaching past the shoulders up the spine count as wrong, and
+    the arm-fall search weighs them; without it (every other death) nothing changes."""
+    from authoring import dead_settle
+
+    _, body = _kfire_last(figures, OVER_THE_HEAD)
+    arm = dead_settle._Arm(body, "right")
+    p = arm.into(arm.x0)[0]
+    assert arm.overhead(p) == 0.0  # headward_cm None: anywhere
+    body.headward_cm = KFIRE_ARMS_HEADWARD
+    over = arm.overhead(p)
+    assert over > 5.0
+    assert arm.terms(arm.x0)[2] >= over
+
+
+def test_kfire2dead_s_arms_lie_not_over_his_head(figures: FigureSet) -> None:
+    """Issue 14: kfire2dead's top arm ended curled over his head, its forearm and hand 47.8 cm past his
+    shoulders up the spine; now neither arm's reaches past them by more than 15 (its search keeps them
+    within 5 of the shoulders as they were when he came down; the clavicle moves as the arm falls: 10.7)."""
+    from authoring import dead_settle
+
+    _, body = _kfire_last(figures)
+    body.headward_cm = 0.0  # overhead: the whole reach past the shoulders
+    for side in ("left", "right"):
+        arm = dead_settle._Arm(body, side)
+        assert arm.overhead(arm.into(arm.x0)[0]) <= 15.0, side
+
+
+def test_only_the_arm_over_the_head_is_laid_anew(figures: FigureSet, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The arms fall as every death's do; then an arm that lies over the head is laid again from its pose as
+    he came down, against the other where it lies: kfire2dead's bottom arm, laid anew with both, swept his
+    upper arm along the ground and the turn after it slid his belly 3.96 cm."""
+    from authoring import dead_settle
+
+    two, start = _kfire_last(figures)
+    start.headward_cm = KFIRE_ARMS_HEADWARD
+    target = start.q.copy()
+    right = dead_settle._Arm(start, "right").idx
+    target[right] = np.radians(OVER_THE_HEAD)
+    laid: list[tuple[str, np.ndarray]] = []
+
+    def fallen_arm(body, side: str) -> np.ndarray:
+        laid.append((side, body.q.copy()))
+        return start.q[dead_settle._Arm(body, side).idx]
+
+    monkeypatch.setattr(dead_settle, "fallen_arm", fallen_arm)
+    out, sides = dead_settle._relaid(two, start, target)
+    assert sides == ("right",) and [s for s, _ in laid] == ["right"]
+    left = dead_settle._Arm(start, "left").idx
+    np.testing.assert_array_equal(laid[0][1][left], target[left])  # against the other arm where it lies
+    np.testing.assert_array_equal(laid[0][1][right], start.q[right])  # from its own pose
+    np.testing.assert_array_equal(out[left], target[left])

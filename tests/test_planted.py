@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from authoring.planted import ground_drift, least_worst_shift, plant
+from authoring.body_parts import DIRECTIONS, contact_runs, contact_slides
+from authoring.planted import WORST_DIRECTIONS, _run_extents, _turned, ground_drift, least_worst_shift, plant
 from authoring.postures import lowest_point
 from authoring.transitions import ClipFrames
 from peabody.fk import FigureKinematics
@@ -119,3 +120,20 @@ def test_a_turned_clip_keeps_its_first_frame_and_its_rifle_on_him(soldier) -> No
     np.testing.assert_allclose(out.roots, clip.roots, atol=1e-9)
     np.testing.assert_allclose(out.rifles, clip.rifles, atol=1e-9)
     np.testing.assert_array_equal(out.poses, clip.poses)
+
+
+def test_the_turn_may_measure_a_slide_as_the_check_does() -> None:
+    """The least worst shift measures slides along WORST_DIRECTIONS (8); a drag between two of them reads
+    shorter than along the check's 16 (kfire2dead's chest: 3.0 for the turn, 3.007 cm for the check, limit
+    3). Asked to measure along the check's directions, the shift leaves each part's slide, as the check
+    sees it, at half the drag."""
+    n, angle = 12, np.pi / DIRECTIONS  # between two of the 8 directions
+    drag = np.minimum(0.4 * np.arange(n), 4.0)
+    points = np.zeros((n, 2, 3))
+    points[:, 1, 0], points[:, 1, 2] = drag * np.cos(angle), drag * np.sin(angle)  # the chest drags 4 cm
+    runs = contact_runs(points[:, 1:], 0.5)
+    eight = _run_extents(points[:, 1:], runs, np.arange(1), np.zeros((n, 2)), WORST_DIRECTIONS)
+    assert eight[0] == pytest.approx(4.0 * np.cos(angle))  # 3.92
+    shift = least_worst_shift(points, np.array(["belly", "chest"]), directions=DIRECTIONS)
+    seen, _ = contact_slides(_turned(points, shift, None), 0.5)
+    assert seen.max() == pytest.approx(2.0, abs=1e-3)

