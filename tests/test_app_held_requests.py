@@ -11,6 +11,7 @@ set the latency on a real machine.
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import numpy as np
 import trio
@@ -32,6 +33,19 @@ async def watching_soldier(server, index: int) -> Client:  # type: ignore[no-unt
     return c
 
 
+def counting_applies(server: Any) -> list[int]:
+    """The number of rows of each ``apply_requests`` call the server's manager makes from now on."""
+    applied = server.world.manager.apply_requests
+    calls: list[int] = []
+
+    def counting(rows: np.ndarray, now: float) -> np.ndarray:
+        calls.append(len(rows))
+        return applied(rows, now)
+
+    server.world.manager.apply_requests = counting
+    return calls
+
+
 async def test_two_clients_requests_landing_together_are_applied_as_one_batch_and_answered_once(
     autojump_clock: trio.abc.Clock,
 ) -> None:
@@ -42,14 +56,7 @@ async def test_two_clients_requests_landing_together_are_applied_as_one_batch_an
         b = await watching_soldier(server, 1)
         await trio.sleep_until(server._t0 + 1.01)
         rest = a.pose(1, 0)[0].copy(), b.pose(1, 1)[0].copy()
-        applied = server.world.manager.apply_requests
-        calls: list[int] = []
-
-        def counting(rows: np.ndarray, now: float) -> np.ndarray:
-            calls.append(len(rows))
-            return applied(rows, now)
-
-        server.world.manager.apply_requests = counting  # type: ignore[method-assign]
+        calls = counting_applies(server)
         answers, nxt = server.answers, server.next_tick
         for c, i in ((a, 0), (b, 1)):
             os.write(c.stream.socket.fileno(), c.conn.send(EntityRequests(make_entity_requests(i, A.KNEEL))))
@@ -95,14 +102,7 @@ async def test_request_frames_queued_in_a_socket_are_applied_as_one_batch(
     async with running_server(throttle=0.0) as server:
         c = await watching(server)
         await trio.sleep_until(server._t0 + 1.01)
-        applied = server.world.manager.apply_requests
-        calls: list[int] = []
-
-        def counting(rows: np.ndarray, now: float) -> np.ndarray:
-            calls.append(len(rows))
-            return applied(rows, now)
-
-        server.world.manager.apply_requests = counting  # type: ignore[method-assign]
+        calls = counting_applies(server)
         frames = [c.conn.send(EntityRequests(make_entity_requests(k, A.KNEEL))) for k in range(6)]
         frames.append(c.conn.send(EntityRequests(make_entity_requests(1, A.PRONE))))  # 1 again: prone
         os.write(c.stream.socket.fileno(), b"".join(frames))
