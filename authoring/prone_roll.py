@@ -48,19 +48,15 @@ ROLLS_DEG = (3.0, 4.0, 5.0, 6.0, 8.0)  # the pelvis's roll tried, least first
 LEADS = (0.5, 0.75)  # of a leg's time: its hip's turn is done by then (the knee and foot with the whole)
 SPANS = (0.3, 0.45)  # ... the pelvis rolls over this much of it, and back over as much at its end
 COMPS = (0.0, 0.5)  # the hip flexes this much of the roll with it (the thigh kept nearer the ground)
-SLIDE_CM = (
-    1.9  # cm: a leg node on the ground moves at most this far while on it (the check: 3, the fall's own
-)
-# slide under it)
+# cm: a leg node on the ground moves at most this far while on it (the check: 3, the fall's own slide
+# under it)
+SLIDE_CM = 1.9
 FOOT_UP_MARGIN = 3.0  # cm under the check's lying_feet_up_cm: the foot over the pelvis
 RISE_CM = 2.5  # cm: once the trunk is down a leg part's lowest node rises at most this (the check: 3)
 DEEP_CM = 0.05  # cm: into the ground, at most
 LUMBAR = ("waist", "vl5", "vl4", "vl3", "vl2", "vl1")  # take the pelvis's roll back: the chest stays
-OTHER_LEG = (
-    "hip",
-    "knee",
-    "ankle",
-)  # ... and the other leg's hip, knee and ankle keep its foot where it lies
+# ... and the other leg's hip, knee and ankle keep its foot where it lies
+OTHER_LEG = ("hip", "knee", "ankle")
 LUMBAR_ITERATIONS = 8
 ROT_CM = 30.0  # cm per radian: the chest's turn weighed against its move
 LUMBAR_DAMPING = 1e-2
