@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from authoring import crawl, crawl_prone, crawl_turn, deaths, gait, postures, reactions, transitions, turns
+from authoring.death_specs import spec_of
 from authoring.motion import KeyPosture
 from authoring.passive_range import passive_figure, past_live_limits
 from authoring.quality_frames import FigureSet, play
@@ -246,7 +247,7 @@ def slave_one(
     # foot it hovers over the ground (DeathSpec.slave_feet_held), sliding its resting parts as far as the
     # death asks (slave_rest_slide_cm) or holding an arm lying there at the end (slave_arms_held); then,
     # where it asks (slave_arms_pinned), its hands and forearms on the ground held still where they rest
-    spec = deaths.death_specs().get(chset.name.removesuffix(".chset"))
+    spec = spec_of(chset.name)
     trunk: Callable[[Channelset, Channelset, FigureSet], object] = partial(
         rest_slave_trunk,
         feet_held=bool(spec and spec.slave_feet_held),

@@ -9,6 +9,9 @@ from dataclasses import dataclass, replace
 DEAD = "DEAD"
 MAX_SECONDS = 6.0  # s: a death's physics records at most this long
 TOSS = 40.0  # N: the hands fling the rifle they let go of (clear of the falling body)
+TOSS_SECONDS = 0.1  # s: ... this long (deaths; rifle_drop, a let-go rifle recorded again alone)
+REST_SPEED = 0.03  # m/s: a body (each body; the rifle alone) slower than this is still
+REST_SECONDS = 0.35  # s: ... this long: the death is over (the rifle at rest)
 
 
 @dataclass(frozen=True)
@@ -289,6 +292,11 @@ DEATHS: tuple[DeathSpec, ...] = (
 
 def death_specs() -> dict[str, DeathSpec]:
     return {d.name: d for d in DEATHS}
+
+
+def spec_of(channelset_name: str) -> DeathSpec | None:
+    """The death a channelset records (``kfire2dead.chset`` -> kfire2dead's spec), None if none."""
+    return death_specs().get(channelset_name.split(".", 1)[0])
 
 
 def dead_node(name: str) -> str:

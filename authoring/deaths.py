@@ -114,6 +114,7 @@ from authoring.death_specs import DEATHS as DEATHS
 from authoring.death_specs import MAX_SECONDS as MAX_SECONDS
 from authoring.death_specs import PRONE_START_EASE as PRONE_START_EASE
 from authoring.death_specs import PRSTOW_HEAD_HELD as PRSTOW_HEAD_HELD
+from authoring.death_specs import REST_SECONDS, REST_SPEED, TOSS_SECONDS
 from authoring.death_specs import STFIRE_TOSS as STFIRE_TOSS
 from authoring.death_specs import TOSS as TOSS
 from authoring.death_specs import DeathSpec as DeathSpec
@@ -132,9 +133,6 @@ from authoring.rifle_drop import LetGo, dropped, let_go
 from authoring.transitions import FPS, ClipFrames
 from peabody.model import Figure
 
-REST_SPEED = 0.03  # m/s: a body's centre of mass slower than this is still
-REST_SECONDS = 0.35  # every body still this long: the death is over
-TOSS_SECONDS = 0.1  # s: the hands fling the rifle they let go of (TOSS) this long
 GROUND_RISE = 0.4  # s: a ground lowered under a posture dipping into it rises to 0
 SLEEP_SPEED = 0.15  # m/s: once the muscles are done and the pelvis is this slow, the body goes to sleep
 SLEEP_DAMPING = 20.0  # asleep: the joints hold the shape they have, damped this many times harder

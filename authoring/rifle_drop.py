@@ -17,12 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from authoring import ragdoll
+from authoring.death_specs import REST_SECONDS, REST_SPEED, TOSS_SECONDS
 from peabody.fk import rigid_inverse
 from peabody.model import Figure
-
-TOSS_SECONDS = 0.1  # s: the hands fling the rifle this long (as deaths.TOSS_SECONDS)
-REST_SPEED = 0.03  # m/s: a rifle slower than this is still (as deaths.REST_SPEED)
-REST_SECONDS = 0.35  # s: ... this long: it has come to rest
 
 
 @dataclass(frozen=True)

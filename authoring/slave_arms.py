@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from authoring import deaths
 from authoring.contact_pin import PINS, Pin, pin_contacts
+from authoring.death_specs import spec_of
 from authoring.quality_frames import FigureSet
 from authoring.slave_contacts import _played
 from server.motion.binding import bind_channelset
@@ -32,7 +32,7 @@ ARM_PINS: tuple[Pin, ...] = tuple(
 
 def arms_pinned(master: Channelset) -> bool:
     """Whether this death's slave holds its arms on the ground (``DeathSpec.slave_arms_pinned``)."""
-    spec = deaths.death_specs().get(master.name.split(".", 1)[0])
+    spec = spec_of(master.name)
     return spec is not None and spec.slave_arms_pinned
 
 

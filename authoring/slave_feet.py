@@ -45,7 +45,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from authoring import ik
-from authoring.death_specs import death_specs
+from authoring.death_specs import spec_of
 from authoring.postures import leg
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
@@ -487,7 +487,7 @@ def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) 
 
         turns = {side: (seg(f"{side}_foot"), seg(f"{side}_toes")) for side in SIDES}
     lying = getattr(slave, "release_frame", None) is not None and knelt and loc[0, 1, 3] < LYING_ROOT_CM
-    spec = death_specs().get(master.name.split(".", 1)[0])
+    spec = spec_of(master.name)
     landed = turns["left"] is not None and spec is not None and spec.slave_feet_landed
     death = ("landed" if landed else "dying") if dying else ""
     if dying and spec is not None and spec.slave_feet_knelt:

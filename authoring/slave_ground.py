@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from authoring import deaths, ik
+from authoring import ik
+from authoring.death_specs import spec_of
 from authoring.quality_frames import FigureSet, play
 from authoring.slave_contacts import _fade, _played, _smooth, part_heights
 from peabody import quaternion
@@ -168,19 +169,19 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
 
 def _arm_out(master: Channelset) -> bool:
     """Whether this death's slave moves its arms out of the ground sideways (``DeathSpec.slave_arm_out``)."""
-    spec = deaths.death_specs().get(master.name.split(".", 1)[0])
+    spec = spec_of(master.name)
     return spec is not None and spec.slave_arm_out
 
 
 def _trunk_rigid(master: Channelset) -> bool:
     """Whether this death's slave trunk is laid by its root alone (``DeathSpec.slave_trunk_rigid``)."""
-    spec = deaths.death_specs().get(master.name.split(".", 1)[0])
+    spec = spec_of(master.name)
     return spec is not None and spec.slave_trunk_rigid
 
 
 def _rolls(master: Channelset) -> bool:
     """Whether this death's master rolls his pelvis with each leg (``DeathSpec.prone_legs_roll``)."""
-    spec = deaths.death_specs().get(master.name.split(".", 1)[0])
+    spec = spec_of(master.name)
     return spec is not None and spec.prone_legs_roll
 
 
