@@ -184,10 +184,7 @@ class MixDriver:
         self.time = max(self.time, now)
         if dt and self.n:  # the movers alone (the others' velocity is 0): half the sines of a realistic mix
             mov = np.flatnonzero(MOVING[self.activity])
-            h = np.radians(self.heading[mov])
-            s = SPEED[self.activity[mov]]
-            self.position[mov, 0] += s * np.sin(h) * dt  # velocity()'s products, times dt, as before
-            self.position[mov, 1] += s * np.cos(h) * dt
+            self.position[mov, :2] += self.velocity(mov)[:, :2] * dt
 
     def step(self, now: float) -> MixStep:
         """Advance to ``now`` and decide the requests due: activity changes, turns, heartbeats."""

@@ -114,9 +114,13 @@ class LoadSession:
     """The connections, the mix driver and the tracker of one run (or one ramp)."""
 
     def __init__(
-        self, cfg: LoadTestConfig, server_cpu: Any = None, *, buffer_updates: bool = False,
+        self,
+        cfg: LoadTestConfig,
+        server_cpu: Any = None,
+        *,
+        buffer_updates: bool = False,
         server_pid: int | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """``buffer_updates``: the clients keep decoded poses for a renderer (see :class:`LoadClient`);
         ``server_pid``: a server on this machine, whose run-queue waits the worst probes' account gives."""
         self.cfg = cfg
