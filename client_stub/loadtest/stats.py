@@ -132,9 +132,9 @@ class Tracker:
         self.steady_from = np.zeros(0)  # start of the open episode (inf: not a steady mover now)
         self.last_rx = np.zeros((0, nconn))  # last arrival of an update, per connection
         self.probe_at = np.zeros((0, nconn))  # pending probe send time (nan: none)
-        self.superseded = np.zeros((0, nconn), bool)  # its soldier's activity changed again since
         self.change = np.zeros(0, np.int64)  # the pending probe's change (from * 16 + to; -1: not told)
-        self.superseded_at = np.zeros((0, nconn))  # when it was superseded (nan: not)
+        # when its soldier's activity changed again since (nan: not: the probe is not superseded)
+        self.superseded_at = np.zeros((0, nconn))
         self.owner = np.zeros(0, np.int64)  # subscribing connection, -1 = all
 
     def grow(self, n: int, owner: np.ndarray) -> None:
@@ -144,7 +144,6 @@ class Tracker:
         self.steady_from = np.concatenate([self.steady_from, np.full(k, np.inf)])
         self.last_rx = np.concatenate([self.last_rx, np.full((k, self.nconn), -np.inf)])
         self.probe_at = np.concatenate([self.probe_at, np.full((k, self.nconn), np.nan)])
-        self.superseded = np.concatenate([self.superseded, np.zeros((k, self.nconn), bool)])
         self.change = np.concatenate([self.change, np.full(k, -1, np.int64)])
         self.superseded_at = np.concatenate([self.superseded_at, np.full((k, self.nconn), np.nan)])
         self.owner = np.concatenate([self.owner, np.asarray(owner, np.int64)])
@@ -173,9 +172,13 @@ class Tracker:
         return out
 
     def activity(
-        self, t: float, slots: np.ndarray, moving: np.ndarray, probe: np.ndarray,
+        self,
+        t: float,
+        slots: np.ndarray,
+        moving: np.ndarray,
+        probe: np.ndarray,
         change: np.ndarray | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """Requests sent at ``t`` that changed the activity of ``slots`` (``moving`` after the change);
         ``probe`` marks those whose request is a latency probe (call :meth:`settled` to pick them);
         ``change``: each one's change (from * 16 + to activity), kept with its probe's answer."""
@@ -185,9 +188,8 @@ class Tracker:
         self._close(slots, t)
         self.steady_from[slots[moving]] = t + self.grace
         pending = ~np.isnan(self.probe_at[slots])
-        first = pending & ~self.superseded[slots]
+        first = pending & np.isnan(self.superseded_at[slots])
         self.superseded_at[slots] = np.where(first, t, self.superseded_at[slots])
-        self.superseded[slots] |= pending
         p = slots[probe]
         if len(p):
             self.rec.probe_sent.append(np.full(len(p), t))
@@ -196,7 +198,6 @@ class Tracker:
             for c in range(self.nconn):
                 sel = (cols == c) | (cols < 0)
                 self.probe_at[p[sel], c] = t
-                self.superseded[p[sel], c] = False
                 self.superseded_at[p[sel], c] = np.nan
 
     def settled(self, t: float, slots: np.ndarray) -> np.ndarray:
@@ -226,7 +227,7 @@ class Tracker:
         if answered.any():
             rec.latency_time.append(np.full(int(answered.sum()), t))
             rec.latency.append(t - sent[answered])
-            rec.latency_superseded.append(self.superseded[slots[answered], conn])
+            rec.latency_superseded.append(~np.isnan(self.superseded_at[slots[answered], conn]))
             rec.latency_slot.append(slots[answered])
             rec.latency_conn.append(np.full(int(answered.sum()), conn, np.int64))
             rec.latency_tick.append(np.full(int(answered.sum()), tick, np.int64))
