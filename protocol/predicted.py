@@ -154,10 +154,16 @@ def residuals(
     ``tick − 1`` (mod 2³²), else ``cur``."""
     nf = q.shape[1]
     resid = np.subtract(q, cur, out=out)
-    rows = np.flatnonzero(state[:, nf] == tick_code(tick - 1))
-    if len(rows) == len(q):
+    predicts = state[:, nf] == tick_code(tick - 1)
+    rows = np.flatnonzero(predicts)
+    if 2 * len(rows) >= len(q):
+        # most rows predict (every mover of a tick): dense passes, then the few that do not put back to
+        # ``q − cur`` (a fancy gather of nearly every row costs several dense passes)
         resid -= cur
         resid += state[:, :nf]
+        if len(rows) < len(q):
+            rest = np.flatnonzero(~predicts)
+            resid[rest] = q[rest] - cur[rest]
     elif len(rows):
         resid[rows] -= cur[rows] - state[rows, :nf]
     return resid
