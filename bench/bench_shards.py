@@ -62,6 +62,12 @@ def main() -> int:
     )
     ap.add_argument("--probe", type=int, metavar="N", help="request -> update latency of N soldiers")
     ap.add_argument("--trace", type=int, metavar="N", help="trace N probe soldiers' requests under the load")
+    ap.add_argument(
+        "--subscribe-all",
+        action="store_true",
+        help="the load's connections share one client id and each watches every soldier (their encodes may "
+        "then be shared: front_encodes' hits; by default each watches its own and none can be)",
+    )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     if args.probe:
@@ -89,6 +95,7 @@ def main() -> int:
                     port=procs["front"].port,
                     throttle=None,
                     timeout_s=120.0,
+                    subscribe_all=args.subscribe_all,
                     server_pid=procs["front"].pid,
                 )
             )
