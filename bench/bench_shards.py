@@ -62,6 +62,12 @@ def main() -> int:
     )
     ap.add_argument("--probe", type=int, metavar="N", help="request -> update latency of N soldiers")
     ap.add_argument("--trace", type=int, metavar="N", help="trace N probe soldiers' requests under the load")
+    ap.add_argument(
+        "--subscribe-all",
+        action="store_true",
+        help="the load's connections share one client id and each watches every soldier (their encodes may "
+        "then be shared: front_encodes' hits; by default each watches its own and none can be)",
+    )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     if args.probe:
@@ -89,6 +95,7 @@ def main() -> int:
                     port=procs["front"].port,
                     throttle=None,
                     timeout_s=120.0,
+                    subscribe_all=args.subscribe_all,
                     server_pid=procs["front"].pid,
                 )
             )
@@ -97,6 +104,7 @@ def main() -> int:
             stages = {k: stage_cpu(p.log_tail(1 << 24)) for k, p in procs.items()}
             deaf = {k: stage_cpu(p.log_tail(1 << 24), "loop_deaf_ms") for k, p in procs.items()}
             streams = last_field(procs["front"].log_tail(1 << 24), "fabric_blocks")
+            memo = memo_counts(procs["front"].log_tail(1 << 24))
             traced = probed(time.monotonic() - args.seconds) if args.trace else {}
     keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
@@ -118,6 +126,7 @@ def main() -> int:
         "cpu_pct": cpu,
         "cpu_ms_per_tick": stages,
         "front_streams_heard": streams,  # (shard, block or whole) pose topics: 2 = each shard whole
+        "front_encodes": memo,  # per tick between its status lines (the first left out): shared or own
         **({"loop_deaf_ms": deaf} if os.environ.get("TTES_DEAF") == "1" else {}),
         **traced,
     }
@@ -180,6 +189,29 @@ def last_field(log: str, name: str) -> str | None:
         if "event=status" in line and field:
             return field.split("=", 1)[1]
     return None
+
+
+def memo_counts(log: str) -> dict[str, float]:
+    """A front-end's encodes per tick between its first and last status lines (``shared_encodes``:
+    ``hits`` taken from a client in the same delta state, ``own`` a writer's own diff-and-pack), and the rows
+    of an own encode: whether its clients share encodes (issue 21's two clients watch their own soldiers)."""
+    rows = []
+    for line in log.splitlines():
+        fields = dict(f.split("=", 1) for f in line.split() if "=" in f)
+        if fields.get("event") == "status" and "shared_encodes" in fields:
+            counts = {k: int(v) for k, v in (kv.split(":") for kv in fields["shared_encodes"].split(","))}
+            rows.append((int(fields["ticks"]), counts))
+    if len(rows) < 3:
+        return {}
+    (t0, a), (t1, b) = rows[1], rows[-1]
+    ticks = max(1, t1 - t0)
+    own = b["own"] - a["own"]
+    return {
+        "hits_per_tick": round((b["hits"] - a["hits"]) / ticks, 2),
+        "own_per_tick": round(own / ticks, 2),
+        "caught_up_per_tick": round((b["caught_up"] - a["caught_up"]) / ticks, 2),
+        "rows_per_own": round((b["rows"] - a["rows"]) / max(1, own)),
+    }
 
 
 def stage_cpu(log: str, name: str = "cpu_ms_per_tick") -> dict[str, float]:

@@ -154,10 +154,16 @@ def residuals(
     ``tick − 1`` (mod 2³²), else ``cur``."""
     nf = q.shape[1]
     resid = np.subtract(q, cur, out=out)
-    rows = np.flatnonzero(state[:, nf] == tick_code(tick - 1))
-    if len(rows) == len(q):
+    predicts = state[:, nf] == tick_code(tick - 1)
+    rows = np.flatnonzero(predicts)
+    if 2 * len(rows) >= len(q):
+        # most rows predict (every mover of a tick): dense passes, then the few that do not put back to
+        # ``q − cur`` (a fancy gather of nearly every row costs several dense passes)
         resid -= cur
         resid += state[:, :nf]
+        if len(rows) < len(q):
+            rest = np.flatnonzero(~predicts)
+            resid[rest] = q[rest] - cur[rest]
     elif len(rows):
         resid[rows] -= cur[rows] - state[rows, :nf]
     return resid
@@ -247,7 +253,8 @@ def encode_rows(
     groups, gwidth = merge_columns(values, widths, cols.g)
     return Rows(
         header=header,
-        nibbles=np.ascontiguousarray(c.w.T)[sent],
+        # np.compress, not a boolean index: about 2.4 times cheaper for 65,000 bytes of which 78 % are taken
+        nibbles=np.compress(np.ascontiguousarray(sent).reshape(-1), np.ascontiguousarray(c.w.T).reshape(-1)),
         nibble_count=nibble_count,
         row_bits=np.where(c.row_abs, c.cost_abs, c.cost_delta - WIDTH_BITS * nibble_count).astype(np.int64),
         groups=groups,

@@ -117,6 +117,7 @@ class SharedEncodes:
         self.hits = 0
         self.misses = 0
         self.caught_up = 0  # memoised encodes sent to writers that missed their publish
+        self.rows_encoded = 0  # the rows of the misses (each one diffed and packed by its encoder)
 
     def new_id(self) -> int:
         return next(self._ids)

@@ -367,6 +367,7 @@ class UpdateEncoder:
             self.state = hit.state
             return list(hit.payloads)
         payloads = self._encode_sorted(idx, q, tick, max_payload)
+        shared.rows_encoded += len(idx)
         new = shared.new_id()
         held = (self._hlast, self._hknown, self._hbefore)
         shared.store(self.state, rows, Encoded(tuple(payloads), new, held, idx, tick))

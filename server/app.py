@@ -1028,9 +1028,20 @@ class TtesServer:
             mean_tick_us=round(st.get("mean_tick_us", 0.0), 1),
             modes=st.get("modes", {}),
             cpu_ms_per_tick=self.cpu.report(self.ticks),
+            **self._encode_counts(),
             **({} if self.deaf is None else {"loop_deaf_ms": self.deaf.report()}),
             **({} if self.status_fields is None else self.status_fields()),
         )
+
+    def _encode_counts(self) -> dict[str, str]:
+        """The shared memo's counts since start (``shared_encodes=hits:H,own:M,caught_up:C,rows:R``):
+        encodes taken from a client in the same delta state, a writer's own encodes and the rows they diffed,
+        frames sent to late writers; none without a memo."""
+        memo = self.board_ref.encodes
+        if memo is None:
+            return {}
+        counts = (memo.hits, memo.misses, memo.caught_up, memo.rows_encoded)
+        return {"shared_encodes": "hits:{},own:{},caught_up:{},rows:{}".format(*counts)}
 
 
 def check_exposure(config: ServerConfig) -> None:

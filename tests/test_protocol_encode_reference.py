@@ -5,6 +5,7 @@ and prediction state."""
 
 from __future__ import annotations
 
+import encode_reference as reference
 import numpy as np
 import pytest
 from encode_reference import ReferenceEncoder
@@ -135,3 +136,16 @@ def test_transpose_is_numpys(seed: int, n: int, f: int) -> None:
     out = np.empty((f, n), np.int32)
     predicted.transpose(a, out)
     assert np.array_equal(out, a.T)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 300), st.floats(0.0, 1.0))
+def test_residuals_are_the_frozen_ones(seed: int, n: int, predicting: float) -> None:
+    """Whatever share of the rows predicts (all, most: dense passes and the rest put back; few: by row)."""
+    rng = np.random.default_rng(seed)
+    nf, tick = DI.layout.nfields, 1000
+    q, cur = (rng.integers(-(1 << 31), 1 << 31, (n, nf)).astype(np.int32) for _ in range(2))
+    state = rng.integers(-(1 << 31), 1 << 31, (n, nf + 1)).astype(np.int32)
+    state[:, nf] = np.where(rng.random(n) < predicting, tick - 1, tick - 2)
+    ours = predicted.residuals(q, cur, state, tick, np.empty((n, nf), np.int32))
+    assert np.array_equal(ours, reference.residuals(q, cur, state, tick))

@@ -186,6 +186,29 @@ def test_clients_share_encodes_and_each_gets_the_float_paths_bytes() -> None:
     assert states[0] == states[1] == states[3] != states[2]  # the late joiner joined after its keyframe
 
 
+def test_clients_that_watch_their_own_soldiers_never_share_an_encode() -> None:
+    """Issue 21's bench: each load client watches the soldiers it made, so no two encoders get the same rows:
+    the memo only misses, and the status line's counts (``shared_encodes``) say so, with the rows diffed."""
+    server = make_server(throttle=0.0)
+    server.start_world()
+    walk(server, list(range(10)), 1.4)
+    pairs = [Pair(server, "a"), Pair(server, "b")]
+    pairs[0].subscribe(tuple(range(0, 10, 2)))
+    pairs[1].subscribe(tuple(range(1, 10, 2)))
+    rows = 0
+    for k in range(1, 10):
+        server.tick(k / 30)
+        for p in pairs:
+            before = len(p.updates)
+            p.flush()
+            rows += sum(len(u.indices) for u in p.updates[before:])
+    encodes = server.board_ref.encodes
+    assert encodes.hits == 0 and encodes.misses >= 2 * 9
+    assert encodes.rows_encoded >= rows > 0  # (an encode's rows: those sent and the unchanged ones given)
+    counts = server._encode_counts()["shared_encodes"]
+    assert counts == f"hits:0,own:{encodes.misses},caught_up:0,rows:{encodes.rows_encoded}"
+
+
 def test_a_fed_publish_labels_its_rows_with_the_tick_it_names() -> None:
     """A front-end's board (``publish_codes``, no tick loop of its own) labels what it sends with the tick
     each publish names, not one more (``PoseBoard.labels``)."""
