@@ -81,6 +81,7 @@ from authoring.passive_range import passive_limits
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from authoring.quality_rest import LAG_LIMIT_S, RISE_LIMIT_CM, rest_lag, rest_rise
+from authoring.quality_rifle_rest import dropped_rifle_rest
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
 
@@ -364,6 +365,10 @@ def check_clip(
         r = rruns.worst(np.ones(len(rnodes), dtype=bool))
         out["rifle_slide_cm"] = 0.0 if r is None else round(float(rruns.slide[r]), 3)
         out["rifle_slide_frames"] = None if r is None else [int(rruns.first[r]), int(rruns.last[r])]
+        # information: the rifle he let go rests on something (a clip that ends in DEAD; quality_rifle_rest)
+        centre = rs[:, rnames.get("grip", 0), :3, 3] + shift  # a rifle's centre of mass: by its grip
+        hulls = figures.hulls(body_type, hands=True)
+        out.update(dropped_rifle_rest(cs, ends_dead, rpts + shift[:, None, :], centre, hulls, segg))
         depth, frame, seg = figures.hulls(body_type).depth(rpts, segg)
         out["rifle_in_body_cm"] = round(depth, 3)
         out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None

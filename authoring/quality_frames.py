@@ -95,14 +95,17 @@ class FigureSet:
             self._cache[key] = hit
         return hit
 
-    def hulls(self, ptype: str) -> SegmentHulls:
-        """Convex hulls of the body segments a rifle must stay out of (all but the hands)."""
-        key = f"hulls:{ptype}"
+    def hulls(self, ptype: str, hands: bool = False) -> SegmentHulls:
+        """Convex hulls of the body segments a rifle must stay out of (all but the hands; ``hands``: every
+        segment, e.g. what a dropped rifle may rest on)."""
+        key = f"hulls:{ptype}:{hands}"
         hit = self._cache.get(key)
         if hit is None:
             nodes, segs = self.nodes(ptype)
             names = self.kin[ptype].segment_names
-            keep = np.array([s for s in np.unique(segs) if part_of(names[s]) not in HAND_PARTS], dtype=int)
+            keep = np.array(
+                [s for s in np.unique(segs) if hands or part_of(names[s]) not in HAND_PARTS], dtype=int
+            )
             hit = SegmentHulls.build(nodes, segs, keep)
             self._cache[key] = hit
         return hit
