@@ -79,6 +79,7 @@ import numpy as np
 from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
 from authoring.passive_range import passive_limits
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
+from authoring.quality_limbs import limbs_through
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from authoring.quality_rest import LAG_LIMIT_S, RISE_LIMIT_CM, rest_lag, rest_rise
 from authoring.quality_rifle_rest import dropped_rifle_rest
@@ -326,6 +327,9 @@ def check_clip(
     out["stance_phases"] = sum(1 for row in foot_down for a, b in _runs(row) if b - a >= 3)
     ys = pts[..., 1]
     out.update(feet_up(kin, segg, ys, parts))
+    # information: no limb passes through another part of the body (quality_limbs)
+    limb_hulls = figures.limb_hulls(body_type)
+    out.update(limbs_through(pts - shift[:, None, :], parts, limb_hulls, segg, list(kin.segment_names)))
     low = np.unravel_index(int(np.argmin(ys)), ys.shape)
     out["ground_penetration_cm"] = round(max(0.0, -float(ys[low])), 3)
     out["lowest_segment"] = kin.segment_names[int(segs[low[1]])]
