@@ -42,6 +42,10 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``LYING_PELVIS_CM`` of it): the same height while he lies so. A man shot while prone has no fall to fling
   his legs: his lower legs lifting 13-17 cm as his chest came down (branch proneheels-s13) read as a kick
   and passed ``feet_up_cm``; every clip on main that starts lying keeps them within 4 cm.
+* ``limb_through_cm`` (information, no limit yet; :mod:`~authoring.quality_limbs`): how deep a limb goes
+  through another part of the body (an arm into a leg, a forearm into the trunk, a shin into the other leg).
+* ``rifle_rest_overhang_cm`` (information, no limit yet; :mod:`~authoring.quality_rifle_rest`): a clip that
+  ends in DEAD with its rifle let go, how far the rifle's centre lies outside what it rests on at the end.
 * a clip that ends in DEAD (:mod:`~authoring.quality_rest`): ``rest_rise_cm``, how far a limb rises once
   the body is down, and ``limb_rest_lag_s``, how long after the body the last limb part comes to rest.
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
