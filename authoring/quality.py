@@ -42,6 +42,10 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``LYING_PELVIS_CM`` of it): the same height while he lies so. A man shot while prone has no fall to fling
   his legs: his lower legs lifting 13-17 cm as his chest came down (branch proneheels-s13) read as a kick
   and passed ``feet_up_cm``; every clip on main that starts lying keeps them within 4 cm.
+* ``limb_through_cm`` (information, no limit yet; :mod:`~authoring.quality_limbs`): how deep a limb goes
+  through another part of the body (an arm into a leg, a forearm into the trunk, a shin into the other leg).
+* ``rifle_rest_overhang_cm`` (information, no limit yet; :mod:`~authoring.quality_rifle_rest`): a clip that
+  ends in DEAD with its rifle let go, how far the rifle's centre lies outside what it rests on at the end.
 * a clip that ends in DEAD (:mod:`~authoring.quality_rest`): ``rest_rise_cm``, how far a limb rises once
   the body is down, and ``limb_rest_lag_s``, how long after the body the last limb part comes to rest.
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
@@ -79,8 +83,10 @@ import numpy as np
 from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
 from authoring.passive_range import passive_limits
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
+from authoring.quality_limbs import limbs_through
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from authoring.quality_rest import LAG_LIMIT_S, RISE_LIMIT_CM, rest_lag, rest_rise
+from authoring.quality_rifle_rest import dropped_rifle_rest
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
 
@@ -325,6 +331,9 @@ def check_clip(
     out["stance_phases"] = sum(1 for row in foot_down for a, b in _runs(row) if b - a >= 3)
     ys = pts[..., 1]
     out.update(feet_up(kin, segg, ys, parts))
+    # information: no limb passes through another part of the body (quality_limbs)
+    limb_hulls = figures.limb_hulls(body_type)
+    out.update(limbs_through(pts - shift[:, None, :], parts, limb_hulls, segg, list(kin.segment_names)))
     low = np.unravel_index(int(np.argmin(ys)), ys.shape)
     out["ground_penetration_cm"] = round(max(0.0, -float(ys[low])), 3)
     out["lowest_segment"] = kin.segment_names[int(segs[low[1]])]
@@ -364,6 +373,10 @@ def check_clip(
         r = rruns.worst(np.ones(len(rnodes), dtype=bool))
         out["rifle_slide_cm"] = 0.0 if r is None else round(float(rruns.slide[r]), 3)
         out["rifle_slide_frames"] = None if r is None else [int(rruns.first[r]), int(rruns.last[r])]
+        # information: the rifle he let go rests on something (a clip that ends in DEAD; quality_rifle_rest)
+        centre = rs[:, rnames.get("grip", 0), :3, 3] + shift  # a rifle's centre of mass: by its grip
+        hulls = figures.hulls(body_type, hands=True)
+        out.update(dropped_rifle_rest(cs, ends_dead, rpts + shift[:, None, :], centre, hulls, segg))
         depth, frame, seg = figures.hulls(body_type).depth(rpts, segg)
         out["rifle_in_body_cm"] = round(depth, 3)
         out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None

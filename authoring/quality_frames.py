@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from authoring.body_parts import HAND_PARTS, KNEE_RADIUS_CM, SegmentHulls, part_of
+from authoring.quality_limbs import part_hulls
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
 from server.motion.binding import bind_channelset
@@ -95,15 +96,28 @@ class FigureSet:
             self._cache[key] = hit
         return hit
 
-    def hulls(self, ptype: str) -> SegmentHulls:
-        """Convex hulls of the body segments a rifle must stay out of (all but the hands)."""
-        key = f"hulls:{ptype}"
+    def hulls(self, ptype: str, hands: bool = False) -> SegmentHulls:
+        """Convex hulls of the body segments a rifle must stay out of (all but the hands; ``hands``: every
+        segment, e.g. what a dropped rifle may rest on)."""
+        key = f"hulls:{ptype}:{hands}"
         hit = self._cache.get(key)
         if hit is None:
             nodes, segs = self.nodes(ptype)
             names = self.kin[ptype].segment_names
-            keep = np.array([s for s in np.unique(segs) if part_of(names[s]) not in HAND_PARTS], dtype=int)
+            keep = np.array(
+                [s for s in np.unique(segs) if hands or part_of(names[s]) not in HAND_PARTS], dtype=int
+            )
             hit = SegmentHulls.build(nodes, segs, keep)
+            self._cache[key] = hit
+        return hit
+
+    def limb_hulls(self, ptype: str) -> dict[str, SegmentHulls]:
+        """Per body part others must stay out of, its segments' hulls (:mod:`authoring.quality_limbs`)."""
+        key = f"limbs:{ptype}"
+        hit = self._cache.get(key)
+        if hit is None:
+            nodes, segs = self.nodes(ptype)
+            hit = part_hulls(nodes, segs, list(self.kin[ptype].segment_names))
             self._cache[key] = hit
         return hit
 
