@@ -21,6 +21,7 @@ import numpy as np
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
 from peabody.quaternion import to_transform
+from protocol.bitpack import set_rows
 
 if TYPE_CHECKING:
     from server.soldier.library import MotionLibrary
@@ -248,7 +249,7 @@ class TravelTable:
         f1 = np.minimum(f0 + 1, last)
         w = (f - f0).reshape((-1,) + (1,) * (values.ndim - 1))
         base = self.start[clip]
-        return values[base + f0] * (1.0 - w) + values[base + f1] * w
+        return np.take(values, base + f0, axis=0) * (1.0 - w) + np.take(values, base + f1, axis=0) * w
 
     def at_exact(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """:meth:`at1` over arrays, bit for bit (``v0 + (v1 - v0) w``, not :meth:`at`'s blend): the grouped
@@ -258,8 +259,8 @@ class TravelTable:
         f = np.minimum(np.maximum(np.asarray(frame, np.float64), 0.0), last)
         f0 = np.floor(f).astype(np.int64)
         base = self.start[clip]
-        v0 = self.data[base + f0]
-        return v0 + (self.data[base + np.minimum(f0 + 1, last)] - v0) * (f - f0)[:, None]
+        v0 = np.take(self.data, base + f0, axis=0)
+        return v0 + (np.take(self.data, base + np.minimum(f0 + 1, last), axis=0) - v0) * (f - f0)[:, None]
 
     def at1(self, clip: int, frame: float) -> tuple[float, float]:
         """:meth:`at` for one clip and frame in scalar Python (the per-event paths)."""
@@ -287,7 +288,7 @@ class TravelTable:
         clip = np.asarray(clip, np.int64)
         last = np.maximum(self.nframes[clip] - 1, 0)
         f = np.minimum(np.maximum(np.floor(np.asarray(frame, np.float64) + 0.5).astype(np.int64), 0), last)
-        return self.contact[self.start[clip] + f]
+        return np.take(self.contact, self.start[clip] + f, axis=0)
 
 
 def measure(figure: Figure, joints: np.ndarray, placements: np.ndarray) -> np.ndarray:
@@ -320,9 +321,10 @@ def offset_at(
         frames = frame_at(tb, lib, idx, t)
     if travel_now is None:
         travel_now = lib.travel.at(tb.clip[idx], frames)
-    travel = (travel_now - tb.root_ref[idx]) * tb.stride[idx][:, None]
+    travel = (travel_now - np.take(tb.root_ref, idx, axis=0)) * tb.stride[idx][:, None]
     dt = np.asarray(t, np.float64) - tb.root_t[idx]
-    return tb.root_off[idx] + yawed(travel, tb.root_yaw[idx]) - tb.vlocal[idx] * np.reshape(dt, (-1, 1))
+    off = np.take(tb.root_off, idx, axis=0)
+    return off + yawed(travel, tb.root_yaw[idx]) - np.take(tb.vlocal, idx, axis=0) * np.reshape(dt, (-1, 1))
 
 
 def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
@@ -332,7 +334,7 @@ def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
     if len(turned) < len(compass_deg):  # unturned rows as they are (a walking crowd: most, or all, of them)
         out = np.array(xz, np.float64)
         if len(turned):
-            out[turned] = yawed(out[turned], compass_deg[turned])
+            set_rows(out, turned, yawed(np.take(out, turned, axis=0), compass_deg[turned]))
         return out
     a = -np.radians(compass_deg)
     c, s = np.cos(a), np.sin(a)
@@ -364,7 +366,7 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
     turning &= ~tb.reversing[idx]  # a reversing figure stops facing the old way, then pivots
     j = np.flatnonzero(turning)
     if len(j):  # the turning rows alone (a walking crowd: few of them)
-        ti, fj, yj, oj = idx[j], frames[j], yaw[j], off[j]
+        ti, fj, yj, oj = idx[j], frames[j], yaw[j], np.take(off, j, axis=0)
         dt = np.maximum(np.broadcast_to(np.asarray(t, np.float64), idx.shape)[j] - tb.root_t[ti], 0.0)
         rate = TURN_RATE * np.maximum(1.0, np.abs(yj) / 90.0)  # a reversal turns faster (it walks away)
         rate = np.where(tb.mode[ti] == STEPPING[1], CRAWL_TURN_RATE, rate)
@@ -374,11 +376,13 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         step = np.where(lib.travel.paced[clip], free, rate * dt)
         new = yj - np.minimum(np.maximum(yj - steer(tb, lib, ti, oj), -step), step)
         contact = lib.travel.contact_at(clip, fj)
-        off[j] = oj + yawed(contact, yj) - yawed(contact, new)  # about the sole point carrying the weight
+        set_rows(
+            off, j, oj + yawed(contact, yj) - yawed(contact, new)
+        )  # about the sole point carrying the weight
         tb.root_yaw[ti] = new
-    tb.root_off[idx] = off
+    set_rows(tb.root_off, idx, off)
     tb.root_t[idx] = t
-    tb.root_ref[idx] = travel_now
+    set_rows(tb.root_ref, idx, travel_now)
 
 
 def steer(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
@@ -386,7 +390,7 @@ def steer(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, off: np.ndarray
     the heading, or for a figure walking or running forwards along a velocity along its heading, towards its
     entity's path, STEER_S ahead, when it is more than STEER_FREE_CM beside it. Turned 90° at each footfall
     without it, a walker at 1.4 m/s ended 1.1 m beside the path (110°: 1.9 m); with it 0.1 m (0.4 m)."""
-    v = tb.vlocal[idx]
+    v = np.take(tb.vlocal, idx, axis=0)
     speed = np.hypot(v[:, 0], v[:, 1])
     ahead = lib.travel.ahead[tb.clip[idx]] & (tb.direc[idx] > 0) & (np.abs(v[:, 0]) <= 0.01 * speed)
     side = np.sign(off[:, 0]) * np.maximum(np.abs(off[:, 0]) - STEER_FREE_CM, 0.0)
@@ -410,10 +414,10 @@ def pivot(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray |
     was = lib.travel.share_at(clip, frame_at(tb, lib, idx, tb.root_t[idx]))
     new = yaw + tb.pivot_rest[idx] * (lib.travel.share_at(clip, frames) - was)
     contact = lib.travel.contact_at(clip, frames)
-    tb.root_off[idx] = off + yawed(contact, yaw) - yawed(contact, new)
+    set_rows(tb.root_off, idx, off + yawed(contact, yaw) - yawed(contact, new))
     tb.root_yaw[idx] = new
     tb.root_t[idx] = t
-    tb.root_ref[idx] = travel_now
+    set_rows(tb.root_ref, idx, travel_now)
 
 
 def frame_at1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> float:
@@ -456,16 +460,16 @@ def fold_unturned(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.n
     """:func:`fold1` of soldiers whose figure faces its heading (``root_yaw`` 0) at once, bit for bit."""
     travel = lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, t))
     dt = (t - tb.root_t[idx])[:, None]
-    tb.root_off[idx] = (
-        tb.root_off[idx] + (travel - tb.root_ref[idx]) * tb.stride[idx][:, None] - tb.vlocal[idx] * dt
-    )
+    off = np.take(tb.root_off, idx, axis=0)
+    off = off + (travel - np.take(tb.root_ref, idx, axis=0)) * tb.stride[idx][:, None]
+    set_rows(tb.root_off, idx, off - np.take(tb.vlocal, idx, axis=0) * dt)
     tb.root_t[idx] = t
-    tb.root_ref[idx] = travel
+    set_rows(tb.root_ref, idx, travel)
 
 
 def rebase_exact(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
     """:func:`rebase1` of soldiers ``idx`` at once, bit for bit."""
-    tb.root_ref[idx] = lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx]))
+    set_rows(tb.root_ref, idx, lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx])))
 
 
 def rebase1(tb: SoldierTable, lib: MotionLibrary, i: int) -> None:
@@ -476,7 +480,7 @@ def rebase1(tb: SoldierTable, lib: MotionLibrary, i: int) -> None:
 def rebase(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
     """After a new clip starts (at ``root_t``): its travel counts from the frame it shows then."""
     if len(idx):
-        tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx]))
+        set_rows(tb.root_ref, idx, lib.travel.at(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx])))
 
 
 def turn_offsets(tb: SoldierTable, idx: np.ndarray, compass_change: np.ndarray) -> None:
