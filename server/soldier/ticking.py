@@ -193,8 +193,9 @@ class Ticking(Events):
             if len(about):
                 set_rows(off, about, root_motion.yawed(np.take(off, about, axis=0), face[about]))
             off = off.astype(np.float32)
-            figures[:, :, 0] += off[:, None, 0]
-            figures[:, :, 2] += off[:, None, 1]
+            for k in range(figures.shape[1]):  # (a figure at a time: an (n, 1) broadcast over nfig is dearer)
+                figures[:, k, 0] += off[:, 0]
+                figures[:, k, 2] += off[:, 1]
         if n and self._offsets.any():
             off = self._offsets[lib.clip_graph[clip]]
             turn = np.flatnonzero(off != 0.0)
