@@ -207,6 +207,7 @@ class TravelTable:
         sizes = np.array([len(c) for c in curves], np.int64)
         self.start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
         self.nframes = sizes
+        self.last = np.maximum(sizes - 1, 0)  # per clip its last frame's number (the lerps clamp to it)
         self.data = (
             np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in curves])
             if len(curves)
@@ -243,7 +244,7 @@ class TravelTable:
     def _lerp(self, values: np.ndarray, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """Per-frame ``values`` (flat over clips) of ``clip`` at fractional ``frame`` (clamped), blended."""
         clip = np.asarray(clip, np.int64)
-        last = np.maximum(self.nframes[clip] - 1, 0)
+        last = self.last[clip]
         f = np.minimum(np.maximum(np.asarray(frame, np.float64), 0.0), last)  # np.clip's values, cheaper
         f0 = np.floor(f).astype(np.int64)
         f1 = np.minimum(f0 + 1, last)
@@ -258,7 +259,7 @@ class TravelTable:
         """:meth:`at1` over arrays, bit for bit (``v0 + (v1 - v0) w``, not :meth:`at`'s blend): the grouped
         event paths store what the per-soldier one stored."""
         clip = np.asarray(clip, np.int64)
-        last = np.maximum(self.nframes[clip] - 1, 0)
+        last = self.last[clip]
         f = np.minimum(np.maximum(np.asarray(frame, np.float64), 0.0), last)
         f0 = np.floor(f).astype(np.int64)
         base = self.start[clip]
@@ -289,7 +290,7 @@ class TravelTable:
     def contact_at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """``(n, 2)`` the weight-bearing sole point of ``clip`` at the frame nearest ``frame``."""
         clip = np.asarray(clip, np.int64)
-        last = np.maximum(self.nframes[clip] - 1, 0)
+        last = self.last[clip]
         f = np.minimum(np.maximum(np.floor(np.asarray(frame, np.float64) + 0.5).astype(np.int64), 0), last)
         return np.take(self.contact, self.start[clip] + f, axis=0)
 
@@ -329,7 +330,7 @@ def frame_at(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarra
     clip = tb.clip[idx]
     u = np.minimum(np.maximum((t - tb.start[idx]) / np.maximum(tb.dur[idx], 1e-9), 0.0), 1.0)  # np.clip's
     u = np.where(tb.direc[idx] > 0, u, 1.0 - u)
-    return u * np.maximum(lib.clip_nframes[clip] - 1, 0)
+    return u * lib.clip_last[clip]
 
 
 def offset_at(
