@@ -403,9 +403,8 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         step = np.where(lib.travel.paced[clip], free, rate * dt)
         new = yj - np.minimum(np.maximum(yj - steer(tb, lib, ti, oj), -step), step)
         contact = lib.travel.contact_at(clip, fj)
-        put_rows(
-            off, j, oj + yawed(contact, yj) - yawed(contact, new)
-        )  # about the sole point carrying the weight
+        # about the sole point carrying the weight
+        put_rows(off, j, oj + yawed(contact, yj) - yawed(contact, new))
         tb.root_yaw[ti] = new
     put_rows(tb.root_off, idx, off)
     tb.root_t[idx] = t
