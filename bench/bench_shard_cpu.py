@@ -7,9 +7,10 @@ soldiers on every ``--every``-th index as a shard's are, and measures thread CPU
 stage: ``tick_start``, ``advance`` (the clip ends), ``emit`` (sampling), ``quantise`` (the board's publish),
 ``apply`` (``apply_requests``), ``answer`` (its sampling and publish). ``codes`` digests every publish's codes
 and versions and every apply's status: equal on two trees, the shard sent the same. For an A/B, copy this file
-and ``bench_answer_cost.py`` to the other tree and alternate.
+outside the trees and run it with ``PYTHONPATH=<tree>`` for each, both at the same time (on a loaded machine
+two runs at once see the same load; alternated ones moved by ±15 %).
 
-    python bench/bench_shard_cpu.py [--soldiers 10000] [--every 2] [--seconds 6] [--json]
+    python bench/bench_shard_cpu.py [--soldiers 10000] [--every 2] [--seconds 6] [--batch 256] [--json]
 """
 
 from __future__ import annotations
