@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import trio
 
+from protocol.bitpack import take_rows
 from protocol.entity import ENTITY_REQUEST_DTYPE
 from server.fabric import (
     BLOCK,
@@ -282,7 +283,7 @@ class ShardNode:
         seq = self.block_seq.get(block, 0)
         self.block_seq[block] = seq + 1
         k, n = self.sharding.k, self.sharding.n
-        codes, tables = board.codes[rows], board.table_of[rows]
+        codes, tables = take_rows(board.codes, rows), board.table_of[rows]  # (rows whole: 2-3 times cheaper)
         fences = tuple(self.fences)
         batch = Batch(
             k, n, seq, board.tick, time.monotonic(), rows, tables, codes, key, block, fences, answer

@@ -47,13 +47,14 @@ def blend_into(
 def yaw_rotate(figures: np.ndarray, compass_deg: np.ndarray) -> None:
     """In place: turn figure placements ``(n, nfig, 7)`` by per-soldier compass offsets ``(n,)`` about +Y."""
     a = -np.radians(np.asarray(compass_deg, np.float64))
-    c, s = np.cos(a).astype(np.float32)[:, None], np.sin(a).astype(np.float32)[:, None]
-    x, z = figures[..., 0].copy(), figures[..., 2].copy()
-    figures[..., 0] = c * x + s * z
-    figures[..., 2] = c * z - s * x
-    ch, sh = np.cos(a / 2).astype(np.float32)[:, None], np.sin(a / 2).astype(np.float32)[:, None]
-    qw, qx, qy, qz = (figures[..., k].copy() for k in range(3, 7))
-    figures[..., 3] = ch * qw - sh * qy
-    figures[..., 4] = ch * qx + sh * qz
-    figures[..., 5] = ch * qy + sh * qw
-    figures[..., 6] = ch * qz - sh * qx
+    c, s = np.cos(a).astype(np.float32), np.sin(a).astype(np.float32)
+    ch, sh = np.cos(a / 2).astype(np.float32), np.sin(a / 2).astype(np.float32)
+    for f in (figures[:, k] for k in range(figures.shape[1])):  # a figure at a time: (n,) passes, not an
+        x, z = f[:, 0].copy(), f[:, 2].copy()  # (n, 1) broadcast over nfig (an inner loop per row)
+        f[:, 0] = c * x + s * z
+        f[:, 2] = c * z - s * x
+        qw, qx, qy, qz = (f[:, k].copy() for k in range(3, 7))
+        f[:, 3] = ch * qw - sh * qy
+        f[:, 4] = ch * qx + sh * qz
+        f[:, 5] = ch * qy + sh * qw
+        f[:, 6] = ch * qz - sh * qx

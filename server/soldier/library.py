@@ -189,6 +189,7 @@ class MotionLibrary:
         self.clip_graph = np.array([c.graph for c in infos], np.int8)
         self.clip_duration = np.array([c.duration for c in infos], np.float64)
         self.clip_nframes = np.array([c.nframes for c in infos], np.int64)
+        self.clip_last = np.maximum(self.clip_nframes - 1, 0)  # each clip's last frame (root_motion.frame_at)
         self.clip_ground_speed = np.array([c.ground_speed for c in infos], np.float64)
         self.clip_frame_time = self.clip_duration / np.maximum(self.clip_nframes - 1, 1)
         # end_offset (x cm, z cm, yaw degrees) of clips that move the soldier (turns, side-steps), else 0

@@ -46,6 +46,7 @@ SHARE_FLOOR = 0.05  # a pivot's extra turn in double support, relative to single
 FLIGHT_CM = 3.0  # a foot whose lowest sole point is this far above the clip's lowest carries no weight
 FLAT_CM = 1.0  # a carrying foot's sole points this near its lowest are all down: it turns about their middle
 # per foot, the sole points whose lower one carries the weight (heel strike, then the ball at push-off)
+COLUMNS_MIN = 512  # rows from which :func:`scaled` works a column at a time
 FOOT_SITES: tuple[tuple[str, ...], ...] = (
     ("left_foot.heel", "left_foot.ball"),
     ("right_foot.heel", "right_foot.ball"),
@@ -206,6 +207,7 @@ class TravelTable:
         sizes = np.array([len(c) for c in curves], np.int64)
         self.start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
         self.nframes = sizes
+        self.last = np.maximum(sizes - 1, 0)  # per clip its last frame's number (the lerps clamp to it)
         self.data = (
             np.concatenate([np.asarray(c, np.float64).reshape(-1, 2) for c in curves])
             if len(curves)
@@ -242,24 +244,27 @@ class TravelTable:
     def _lerp(self, values: np.ndarray, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """Per-frame ``values`` (flat over clips) of ``clip`` at fractional ``frame`` (clamped), blended."""
         clip = np.asarray(clip, np.int64)
-        last = np.maximum(self.nframes[clip] - 1, 0)
+        last = self.last[clip]
         f = np.minimum(np.maximum(np.asarray(frame, np.float64), 0.0), last)  # np.clip's values, cheaper
         f0 = np.floor(f).astype(np.int64)
         f1 = np.minimum(f0 + 1, last)
-        w = (f - f0).reshape((-1,) + (1,) * (values.ndim - 1))
+        w = f - f0
         base = self.start[clip]
-        return values[base + f0] * (1.0 - w) + values[base + f1] * w
+        v0, v1 = np.take(values, base + f0, axis=0), np.take(values, base + f1, axis=0)
+        if values.ndim == 1:
+            return v0 * (1.0 - w) + v1 * w
+        return scaled(v0, 1.0 - w) + scaled(v1, w)
 
     def at_exact(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """:meth:`at1` over arrays, bit for bit (``v0 + (v1 - v0) w``, not :meth:`at`'s blend): the grouped
         event paths store what the per-soldier one stored."""
         clip = np.asarray(clip, np.int64)
-        last = np.maximum(self.nframes[clip] - 1, 0)
+        last = self.last[clip]
         f = np.minimum(np.maximum(np.asarray(frame, np.float64), 0.0), last)
         f0 = np.floor(f).astype(np.int64)
         base = self.start[clip]
-        v0 = self.data[base + f0]
-        return v0 + (self.data[base + np.minimum(f0 + 1, last)] - v0) * (f - f0)[:, None]
+        v0 = np.take(self.data, base + f0, axis=0)
+        return v0 + scaled(np.take(self.data, base + np.minimum(f0 + 1, last), axis=0) - v0, f - f0)
 
     def at1(self, clip: int, frame: float) -> tuple[float, float]:
         """:meth:`at` for one clip and frame in scalar Python (the per-event paths)."""
@@ -285,9 +290,9 @@ class TravelTable:
     def contact_at(self, clip: np.ndarray, frame: np.ndarray) -> np.ndarray:
         """``(n, 2)`` the weight-bearing sole point of ``clip`` at the frame nearest ``frame``."""
         clip = np.asarray(clip, np.int64)
-        last = np.maximum(self.nframes[clip] - 1, 0)
+        last = self.last[clip]
         f = np.minimum(np.maximum(np.floor(np.asarray(frame, np.float64) + 0.5).astype(np.int64), 0), last)
-        return self.contact[self.start[clip] + f]
+        return np.take(self.contact, self.start[clip] + f, axis=0)
 
 
 def measure(figure: Figure, joints: np.ndarray, placements: np.ndarray) -> np.ndarray:
@@ -297,12 +302,35 @@ def measure(figure: Figure, joints: np.ndarray, placements: np.ndarray) -> np.nd
 
 
 # -- the per-soldier root offset over a SoldierTable (vectorised; the manager calls these) -----------------
+def put_rows(a: np.ndarray, idx: np.ndarray, rows: np.ndarray) -> None:
+    """``a[idx] = rows`` for an (N, 2) float64 ``a`` (root offsets, travel), each row moved as one complex128:
+    numpy's fancy assignment steps through a row's two fields (10,000 rows: ~170 us against ~18;
+    ``bitpack.set_rows`` builds a void dtype per call, ~4 us, the cost of a request path's few rows)."""
+    if a.dtype != np.float64 or a.ndim != 2 or a.shape[1] != 2 or a.strides[1] != 8:
+        a[idx] = rows
+        return
+    a.view(np.complex128)[idx] = np.ascontiguousarray(rows, np.float64).view(np.complex128)
+
+
+def scaled(rows: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``rows * v[:, None]`` of (n, k) ``rows`` and (n,) ``v``, a column at a time: numpy broadcasts an
+    (n, 1) over a short last axis with an inner loop per row, 4-8 times dearer at k = 2 and 4,000-10,000
+    rows; below COLUMNS_MIN rows the broadcast's one call is the cheaper."""
+    v = np.asarray(v)
+    if len(rows) < COLUMNS_MIN:
+        return rows * v[:, None]
+    out = np.empty(rows.shape, np.result_type(rows, v))
+    for k in range(rows.shape[1]):
+        np.multiply(rows[:, k], v, out=out[:, k])
+    return out
+
+
 def frame_at(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> np.ndarray:
     """The fractional frame each soldier's clip shows at ``t`` (as ``ClipLibrary.sample`` computes it)."""
     clip = tb.clip[idx]
     u = np.minimum(np.maximum((t - tb.start[idx]) / np.maximum(tb.dur[idx], 1e-9), 0.0), 1.0)  # np.clip's
     u = np.where(tb.direc[idx] > 0, u, 1.0 - u)
-    return u * np.maximum(lib.clip_nframes[clip] - 1, 0)
+    return u * lib.clip_last[clip]
 
 
 def offset_at(
@@ -320,9 +348,10 @@ def offset_at(
         frames = frame_at(tb, lib, idx, t)
     if travel_now is None:
         travel_now = lib.travel.at(tb.clip[idx], frames)
-    travel = (travel_now - tb.root_ref[idx]) * tb.stride[idx][:, None]
+    travel = scaled(travel_now - np.take(tb.root_ref, idx, axis=0), tb.stride[idx])
     dt = np.asarray(t, np.float64) - tb.root_t[idx]
-    return tb.root_off[idx] + yawed(travel, tb.root_yaw[idx]) - tb.vlocal[idx] * np.reshape(dt, (-1, 1))
+    off = np.take(tb.root_off, idx, axis=0)
+    return off + yawed(travel, tb.root_yaw[idx]) - scaled(np.take(tb.vlocal, idx, axis=0), dt)
 
 
 def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
@@ -332,7 +361,7 @@ def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
     if len(turned) < len(compass_deg):  # unturned rows as they are (a walking crowd: most, or all, of them)
         out = np.array(xz, np.float64)
         if len(turned):
-            out[turned] = yawed(out[turned], compass_deg[turned])
+            put_rows(out, turned, yawed(np.take(out, turned, axis=0), compass_deg[turned]))
         return out
     a = -np.radians(compass_deg)
     c, s = np.cos(a), np.sin(a)
@@ -364,7 +393,7 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
     turning &= ~tb.reversing[idx]  # a reversing figure stops facing the old way, then pivots
     j = np.flatnonzero(turning)
     if len(j):  # the turning rows alone (a walking crowd: few of them)
-        ti, fj, yj, oj = idx[j], frames[j], yaw[j], off[j]
+        ti, fj, yj, oj = idx[j], frames[j], yaw[j], np.take(off, j, axis=0)
         dt = np.maximum(np.broadcast_to(np.asarray(t, np.float64), idx.shape)[j] - tb.root_t[ti], 0.0)
         rate = TURN_RATE * np.maximum(1.0, np.abs(yj) / 90.0)  # a reversal turns faster (it walks away)
         rate = np.where(tb.mode[ti] == STEPPING[1], CRAWL_TURN_RATE, rate)
@@ -374,11 +403,12 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         step = np.where(lib.travel.paced[clip], free, rate * dt)
         new = yj - np.minimum(np.maximum(yj - steer(tb, lib, ti, oj), -step), step)
         contact = lib.travel.contact_at(clip, fj)
-        off[j] = oj + yawed(contact, yj) - yawed(contact, new)  # about the sole point carrying the weight
+        # about the sole point carrying the weight
+        put_rows(off, j, oj + yawed(contact, yj) - yawed(contact, new))
         tb.root_yaw[ti] = new
-    tb.root_off[idx] = off
+    put_rows(tb.root_off, idx, off)
     tb.root_t[idx] = t
-    tb.root_ref[idx] = travel_now
+    put_rows(tb.root_ref, idx, travel_now)
 
 
 def steer(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
@@ -386,7 +416,7 @@ def steer(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, off: np.ndarray
     the heading, or for a figure walking or running forwards along a velocity along its heading, towards its
     entity's path, STEER_S ahead, when it is more than STEER_FREE_CM beside it. Turned 90° at each footfall
     without it, a walker at 1.4 m/s ended 1.1 m beside the path (110°: 1.9 m); with it 0.1 m (0.4 m)."""
-    v = tb.vlocal[idx]
+    v = np.take(tb.vlocal, idx, axis=0)
     speed = np.hypot(v[:, 0], v[:, 1])
     ahead = lib.travel.ahead[tb.clip[idx]] & (tb.direc[idx] > 0) & (np.abs(v[:, 0]) <= 0.01 * speed)
     side = np.sign(off[:, 0]) * np.maximum(np.abs(off[:, 0]) - STEER_FREE_CM, 0.0)
@@ -410,10 +440,10 @@ def pivot(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray |
     was = lib.travel.share_at(clip, frame_at(tb, lib, idx, tb.root_t[idx]))
     new = yaw + tb.pivot_rest[idx] * (lib.travel.share_at(clip, frames) - was)
     contact = lib.travel.contact_at(clip, frames)
-    tb.root_off[idx] = off + yawed(contact, yaw) - yawed(contact, new)
+    put_rows(tb.root_off, idx, off + yawed(contact, yaw) - yawed(contact, new))
     tb.root_yaw[idx] = new
     tb.root_t[idx] = t
-    tb.root_ref[idx] = travel_now
+    put_rows(tb.root_ref, idx, travel_now)
 
 
 def frame_at1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> float:
@@ -455,17 +485,17 @@ def fold_exact(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndar
 def fold_unturned(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray) -> None:
     """:func:`fold1` of soldiers whose figure faces its heading (``root_yaw`` 0) at once, bit for bit."""
     travel = lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, t))
-    dt = (t - tb.root_t[idx])[:, None]
-    tb.root_off[idx] = (
-        tb.root_off[idx] + (travel - tb.root_ref[idx]) * tb.stride[idx][:, None] - tb.vlocal[idx] * dt
-    )
+    dt = t - tb.root_t[idx]
+    off = np.take(tb.root_off, idx, axis=0)
+    off = off + scaled(travel - np.take(tb.root_ref, idx, axis=0), tb.stride[idx])
+    put_rows(tb.root_off, idx, off - scaled(np.take(tb.vlocal, idx, axis=0), dt))
     tb.root_t[idx] = t
-    tb.root_ref[idx] = travel
+    put_rows(tb.root_ref, idx, travel)
 
 
 def rebase_exact(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
     """:func:`rebase1` of soldiers ``idx`` at once, bit for bit."""
-    tb.root_ref[idx] = lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx]))
+    put_rows(tb.root_ref, idx, lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx])))
 
 
 def rebase1(tb: SoldierTable, lib: MotionLibrary, i: int) -> None:
@@ -476,7 +506,7 @@ def rebase1(tb: SoldierTable, lib: MotionLibrary, i: int) -> None:
 def rebase(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
     """After a new clip starts (at ``root_t``): its travel counts from the frame it shows then."""
     if len(idx):
-        tb.root_ref[idx] = lib.travel.at(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx]))
+        put_rows(tb.root_ref, idx, lib.travel.at(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx])))
 
 
 def turn_offsets(tb: SoldierTable, idx: np.ndarray, compass_change: np.ndarray) -> None:
