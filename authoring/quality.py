@@ -42,8 +42,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``LYING_PELVIS_CM`` of it): the same height while he lies so. A man shot while prone has no fall to fling
   his legs: his lower legs lifting 13-17 cm as his chest came down (branch proneheels-s13) read as a kick
   and passed ``feet_up_cm``; every clip on main that starts lying keeps them within 4 cm.
-* ``limb_through_cm`` (information, no limit yet; :mod:`~authoring.quality_limbs`): how deep a limb goes
-  through another part of the body (an arm into a leg, a forearm into the trunk, a shin into the other leg).
+* ``limb_through_cm`` (:mod:`~authoring.quality_limbs`): how deep a limb goes through another part of the
+  body (an arm into a leg, a forearm into the trunk, a shin into the other leg).
 * ``rifle_rest_overhang_cm`` (information, no limit yet; :mod:`~authoring.quality_rifle_rest`): a clip that
   ends in DEAD with its rifle let go, how far the rifle's centre lies outside what it rests on at the end.
 * a clip that ends in DEAD (:mod:`~authoring.quality_rest`): ``rest_rise_cm``, how far a limb rises once
@@ -83,7 +83,7 @@ import numpy as np
 from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
 from authoring.passive_range import passive_limits
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
-from authoring.quality_limbs import limbs_through
+from authoring.quality_limbs import LIMB_THROUGH_LIMIT_CM, limbs_through
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from authoring.quality_rest import LAG_LIMIT_S, RISE_LIMIT_CM, rest_lag, rest_rise
 from authoring.quality_rifle_rest import dropped_rifle_rest
@@ -120,6 +120,7 @@ THRESHOLDS: dict[str, float] = {
     "lying_feet_up_cm": 6.0,  # ... and of a clip that starts lying face down (no fall flings the legs)
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
+    "limb_through_cm": LIMB_THROUGH_LIMIT_CM,  # no limb passes through another part of the body
     **POSTURE_LIMITS,
 }
 POSTURE_KEYS = tuple(POSTURE_LIMITS)
@@ -331,7 +332,7 @@ def check_clip(
     out["stance_phases"] = sum(1 for row in foot_down for a, b in _runs(row) if b - a >= 3)
     ys = pts[..., 1]
     out.update(feet_up(kin, segg, ys, parts))
-    # information: no limb passes through another part of the body (quality_limbs)
+    # no limb passes through another part of the body (quality_limbs)
     limb_hulls = figures.limb_hulls(body_type)
     out.update(limbs_through(pts - shift[:, None, :], parts, limb_hulls, segg, list(kin.segment_names)))
     low = np.unravel_index(int(np.argmin(ys)), ys.shape)

@@ -303,8 +303,11 @@ SHUFFLED = "KNEEL_STOWED@SHUFFLED"  # right knee and toes as there, hips most of
 SHUFFLING = "KNEEL_STOWED@SHUFFLING"  # on the way there, the right hip hiked so the right knee can lift
 FOLD = "FOLD@CRAWL"  # shuffled, the left heel pulled up behind the left thigh (the foot off the ground)
 TUCK = "TUCK@CRAWL"  # on both knees at the crawl's places, the left shin still folded up behind
+RAISED = "KNEEL_STOWED@RAISED"  # the rifle raised in the right hand: the left forearm over the left knee
 # Knees and toes already where the crawl has them, the soldier only pivots forward about them onto his
-# forearms. Fold and tuck bring the front leg back onto its knee without the foot touching the ground.
+# forearms. Fold and tuck bring the front leg back onto its knee without the foot touching the ground; the
+# thigh lifts only 10 degrees into the fold and the rifle is raised meanwhile (with the thigh lifted 40 and
+# the rifle low, the left knee came up 5 cm through the left arm: limb_through_cm).
 DERIVED_KEYS: dict[str, DerivedKey] = {
     KNEES_AT_CRAWL: DerivedKey(
         "KNEEL_BOTH",
@@ -335,8 +338,9 @@ DERIVED_KEYS: dict[str, DerivedKey] = {
         hike=5.0,
         hike_side="right",
     ),
-    FOLD: DerivedKey(SHUFFLED, joints={"left_hip": (0.0, 40.0, 0.0), "left_knee": (75.0,)}),
+    FOLD: DerivedKey(SHUFFLED, joints={"left_hip": (0.0, 10.0, 0.0), "left_knee": (75.0,)}),
     TUCK: DerivedKey(KNEES_AT_CRAWL, joints={"left_knee": (59.0,)}, hike=4.0),
+    RAISED: DerivedKey(SHUFFLED, joints={"right_shoulder": (0.0, 0.0, -15.0)}),
 }
 
 
@@ -773,7 +777,7 @@ def _left_knee_down(t0: float, t1: float) -> tuple[Step, ...]:
     right one by ``t1``: the left heel comes up behind the thigh (:data:`FOLD`, the foot peels off the
     ground along an arc: left to the folding leg it slid back 2 cm first), the thigh swings down until the
     knee is on its place (:data:`TUCK`), then the shin comes down behind onto the toes; knee and toes stay
-    from then on."""
+    from then on. The arms come down from :data:`RAISED` only once the knee is past them."""
     d = t1 - t0
     return (
         Step("left_foot", FOLD, t0, 0.25 * d, lift=6.0, arc_site="ball"),  # peeled off, not dragged back
@@ -788,7 +792,7 @@ def _left_knee_down(t0: float, t1: float) -> tuple[Step, ...]:
         Step("root", KNEES_AT_CRAWL, t0 + 0.6 * d, 0.4 * d),
         Step("spine", KNEES_AT_CRAWL, t0, d),
         Step("head", KNEES_AT_CRAWL, t0, d),
-        *_arms(KNEES_AT_CRAWL, t0, d),
+        *_arms(KNEES_AT_CRAWL, t0 + 0.3 * d, 0.7 * d),
     )
 
 
@@ -799,7 +803,7 @@ def _stand_to_crawl(ta: float, tb: float, t: float) -> tuple[Step, ...]:
     return (
         *_kneel_down(SHUFFLED, ta),
         Step("right_knee", SHUFFLED, 0.0, ta, free=True),
-        *_arms(SHUFFLED, 0.1 * ta, 0.85 * ta),
+        *_arms(RAISED, 0.1 * ta, 0.85 * ta),
         *_left_knee_down(ta, tb),
         *_down_to_crawl(tb, t),
     )
@@ -816,6 +820,7 @@ def _kneel_to_crawl(ta: float, tb: float, t: float) -> tuple[Step, ...]:
         Step("root", SHUFFLING, 0.0, 0.5 * ta),
         Step("root", SHUFFLED, 0.5 * ta, 0.5 * ta),
         Step("legs", SHUFFLED, 0.0, ta),
+        *_arms(RAISED, 0.0, ta),
         *_left_knee_down(ta, tb),
         *_down_to_crawl(tb, t),
     )
