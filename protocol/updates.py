@@ -642,8 +642,12 @@ def encode_union(jobs: Sequence[EncodeJob], tick: int) -> list[list[bytes]]:
         idx, q = jobs[0][1], jobs[0][2]
     else:
         idx = np.concatenate([job[1] for job in jobs])
-        q = sc.get("enc.union", (cut[-1], jobs[0][2].shape[1]), np.int32)
-        np.concatenate([job[2] for job in jobs], out=q)
+        adjacent = _adjacent([job[2] for job in jobs])
+        if adjacent is None:
+            q = sc.get("enc.union", (cut[-1], jobs[0][2].shape[1]), np.int32)
+            np.concatenate([job[2] for job in jobs], out=q)
+        else:
+            q = adjacent
     last = sc.get("enc.last", q.shape, np.int32)
     known = np.empty(len(idx), bool)
     for (e, i, _, _), (a, b) in zip(jobs, pairwise(cut), strict=True):
@@ -718,6 +722,20 @@ def encode_codes_union(jobs: Sequence[EncodeJob], tick: int, version: object = N
         e, indices, codes, max_payload = jobs[k]
         out[k] = e.encode_codes(indices, codes, tick, max_payload, version)
     return out
+
+
+def _adjacent(parts: list[np.ndarray]) -> np.ndarray | None:
+    """The rows of C-contiguous int32 ``parts`` as one array, uncopied, if they lie one after another in one
+    array (a caller's one gather of every job's codes, sliced), else None."""
+    first = parts[0]
+    at = first.__array_interface__["data"][0]
+    for p in parts:
+        ok = p.dtype == np.int32 and p.flags.c_contiguous and p.base is not None and p.base is first.base
+        if not ok or p.__array_interface__["data"][0] != at:
+            return None
+        at += p.nbytes
+    n = sum(len(p) for p in parts)
+    return np.lib.stride_tricks.as_strided(first, (n, first.shape[1]), first.strides, writeable=False)
 
 
 def _segments(rows: predicted.Rows, cut: list[int]) -> list[predicted.Rows]:

@@ -50,14 +50,18 @@ def union_stream(
         tick = (tick + {"same": 0, "gap": 2}.get(step, 1)) % 2**32
         codes = _moved(rng, codes, vel, table, 0.9 if step == "idle" else float(rng.random()) * 0.5)
         shared_rows = rng.choice(n, int(rng.integers(0, n + 1)), replace=False)
-        jobs = []
-        for k, max_payload in enumerate(payloads):
-            rows = (
-                shared_rows
-                if rng.random() < 0.3
-                else rng.choice(n, int(rng.integers(0, n + 1)), replace=False)
-            )
-            jobs.append((union[k], rows, codes[rows], max_payload))
+        subs = [
+            shared_rows if rng.random() < 0.3 else rng.choice(n, int(rng.integers(0, n + 1)), replace=False)
+            for _ in payloads
+        ]
+        if rng.random() < 0.5:  # sorted, their codes slices of one gather: the union reads them uncopied
+            subs = [np.sort(rows) for rows in subs]
+        gathered = codes[np.concatenate(subs)]
+        at = np.cumsum([0, *map(len, subs)])
+        jobs = [
+            (union[k], rows, gathered[at[k] : at[k + 1]], max_payload)
+            for k, (rows, max_payload) in enumerate(zip(subs, payloads, strict=True))
+        ]
         version_key = serial if memo else None
         try:
             got = encode_codes_union(jobs, tick, version_key)
