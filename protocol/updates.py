@@ -509,10 +509,16 @@ class UpdateEncoder:
         return encode_union([(self, idx, q, max_payload)], tick)[0]
 
     def _record(
-        self, idx: np.ndarray, q: np.ndarray, last: np.ndarray, rows: predicted.Rows, tick: int
+        self,
+        idx: np.ndarray,
+        q: np.ndarray,
+        last: np.ndarray,
+        restart: tuple[np.ndarray, np.ndarray],
+        tick: int,
     ) -> None:
-        """The state after sending ``rows`` of soldiers ``idx`` (codes ``q``; ``last``: what they held);
-        nothing was sent if ``idx`` is empty."""
+        """The state after sending soldiers ``idx`` (codes ``q``; ``last``: what they held; ``restart``: the
+        rows with an entry sent absolute and their ``before``, ``predicted.Rows``); nothing was sent if
+        ``idx`` is empty."""
         self._sent = idx
         if not len(idx):
             return
@@ -521,17 +527,19 @@ class UpdateEncoder:
         self._known[idx] = True
         if self.version >= 2:
             self._hbefore = self._hbefore.writable()
-            self._restart(idx, last, rows, tick)
+            self._restart(idx, last, *restart, tick)
 
-    def _restart(self, idx: np.ndarray, last: np.ndarray, rows: predicted.Rows, tick: int) -> None:
-        """Version 2: the prediction state after sending ``rows``: ``before`` is the code each soldier held
-        until now (or, for an entry sent absolute, the code sent), at ``tick``."""
+    def _restart(
+        self, idx: np.ndarray, last: np.ndarray, restart_rows: np.ndarray, restart: np.ndarray, tick: int
+    ) -> None:
+        """Version 2: the prediction state after sending: ``before`` is the code each soldier held until now
+        (or, for an entry sent absolute, the code sent: ``restart`` of ``restart_rows``), at ``tick``."""
         nf = last.shape[1]
         before = self._before
         set_rows(before[:, :nf], idx, last)
         before[idx, nf] = predicted.tick_code(tick)
-        if len(rows.restart_rows):
-            set_rows(before[:, :nf], idx[rows.restart_rows], rows.restart)
+        if len(restart_rows):
+            set_rows(before[:, :nf], idx[restart_rows], restart)
 
     def _rows_v1(
         self, q: np.ndarray, last: np.ndarray, changed: np.ndarray, known: np.ndarray
@@ -565,20 +573,26 @@ class UpdateEncoder:
             restart=last[:0],
         )
 
-    def _chunks(self, idx: np.ndarray, rows: predicted.Rows, tick: int, max_payload: int) -> list[bytes]:
-        """Split rows into frames; pack all frames' fields in one pass (each frame's body word-aligned)."""
+    def _chunks(
+        self, idx: np.ndarray, rows: predicted.Rows, tick: int, cut: list[int], max_payloads: list[int]
+    ) -> list[list[bytes]]:
+        """Split rows into frames; pack all frames' fields in one pass (each frame's body word-aligned).
+        ``cut``: the row positions where each job of a union starts (then ``len(idx)``), each job's frames
+        within its rows and ``max_payloads``: a frame's bytes depend on its own rows only."""
         row_bits = rows.row_bits
         per_row = 16 + rows.header.shape[1] + predicted.WIDTH_BITS * rows.nibble_count + row_bits
         slack = 3 if self.version >= 2 else 2  # bytes for the paddings of the header, widths, fields
-        capacity = (max_payload - UPDATE_HEADER.size - slack) * 8
-        if capacity < int(per_row.max()):
-            raise ValueError(f"max_payload {max_payload} cannot hold one soldier update")
         cum = np.concatenate([[0], np.cumsum(per_row)])
-        bounds = [0]
-        while bounds[-1] < len(idx):  # one iteration per frame, not per soldier
-            a = bounds[-1]
-            b = int(np.searchsorted(cum, cum[a] + capacity, side="right")) - 1
-            bounds.append(min(max(b, a + 1), a + MAX_COUNT, len(idx)))
+        bounds, frames = [0], []
+        for (a0, b0), max_payload in zip(pairwise(cut), max_payloads, strict=True):
+            capacity = (max_payload - UPDATE_HEADER.size - slack) * 8
+            if b0 > a0 and capacity < int(per_row[a0:b0].max()):
+                raise ValueError(f"max_payload {max_payload} cannot hold one soldier update")
+            while bounds[-1] < b0:  # one iteration per frame, not per soldier
+                a = bounds[-1]
+                b = int(np.searchsorted(cum, cum[a] + capacity, side="right")) - 1
+                bounds.append(min(max(b, a + 1), a + MAX_COUNT, b0))
+            frames.append(len(bounds) - 1)
         fbits = np.concatenate([[0], np.cumsum(row_bits)])
         frame_bits = np.diff(fbits[bounds])
         frame_word = np.concatenate([[0], np.cumsum((frame_bits + 63) >> 6)])  # each body starts a word
@@ -612,7 +626,7 @@ class UpdateEncoder:
                     )
                 )
             )
-        return out
+        return [out[a:b] for a, b in pairwise([0, *frames])]
 
 
 # a union encode's job: an encoder, sorted distinct soldier indices, their codes, its max_payload
@@ -678,13 +692,10 @@ def encode_union(jobs: Sequence[EncodeJob], tick: int) -> list[list[bytes]]:
         rows = predicted.encode_rows(plan.v2, q, last, before, known, changed, tick)
     else:
         rows = first._rows_v1(q, last, changed, known)
-    parts = [rows] if len(jobs) == 1 else _segments(rows, cut)
-    out = [
-        e._chunks(idx[a:b], r, tick, max_payload) if b > a else []
-        for (e, _, _, max_payload), r, (a, b) in zip(jobs, parts, pairwise(cut), strict=True)
-    ]
-    for (e, _, _, _), r, (a, b) in zip(jobs, parts, pairwise(cut), strict=True):
-        e._record(idx[a:b], q[a:b], last[a:b], r, tick)
+    out = first._chunks(idx, rows, tick, cut, [job[3] for job in jobs])
+    restarts = [(rows.restart_rows, rows.restart)] if len(jobs) == 1 else _restarts(rows, cut)
+    for (e, _, _, _), restart, (a, b) in zip(jobs, restarts, pairwise(cut), strict=True):
+        e._record(idx[a:b], q[a:b], last[a:b], restart, tick)
     return out
 
 
@@ -738,22 +749,13 @@ def _adjacent(parts: list[np.ndarray]) -> np.ndarray | None:
     return np.lib.stride_tricks.as_strided(first, (n, first.shape[1]), first.strides, writeable=False)
 
 
-def _segments(rows: predicted.Rows, cut: list[int]) -> list[predicted.Rows]:
-    """``rows`` cut at ``cut`` (row positions, first 0, last n) into the rows of each job of a union."""
-    nib_at = np.concatenate([[0], np.cumsum(rows.nibble_count)])[cut].tolist()
-    restart_at = np.searchsorted(rows.restart_rows, cut).tolist()
+def _restarts(rows: predicted.Rows, cut: list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The restarted rows of ``rows`` (positions within each job) and their codes, for each job of a union
+    (``cut``: where each starts, then the row count)."""
+    at = np.searchsorted(rows.restart_rows, cut).tolist()
     return [
-        predicted.Rows(
-            header=rows.header[a:b],
-            nibbles=rows.nibbles[nib_at[k] : nib_at[k + 1]],
-            nibble_count=rows.nibble_count[a:b],
-            row_bits=rows.row_bits[a:b],
-            groups=rows.groups[a:b],
-            gwidth=rows.gwidth[a:b],
-            restart_rows=rows.restart_rows[restart_at[k] : restart_at[k + 1]] - a,
-            restart=rows.restart[restart_at[k] : restart_at[k + 1]],
-        )
-        for k, (a, b) in enumerate(pairwise(cut))
+        (rows.restart_rows[at[k] : at[k + 1]] - a, rows.restart[at[k] : at[k + 1]])
+        for k, a in enumerate(cut[:-1])
     ]
 
 
