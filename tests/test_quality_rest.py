@@ -14,9 +14,11 @@ from authoring.quality import THRESHOLDS, check_clip, summarise
 from authoring.quality_frames import FigureSet, play
 from authoring.quality_rest import (
     LAG_LIMIT_S,
+    PROPPED_LIMIT_S,
     RISE_LIMIT_CM,
     _heights,
     limb_rest_lag,
+    propped_lag,
     rest_frame,
     rest_rise,
     rise_after,
@@ -108,6 +110,35 @@ def test_an_arm_that_lands_with_the_body_passes() -> None:
     sliding[:200, 0] = np.arange(200) * 0.5  # cm per frame: 0.3 m/s until 3.3 s
     assert limb_rest_lag({"right_hand": sliding}, start, FPS)["limb_rest_lag_s"] > LAG_LIMIT_S
     assert THRESHOLDS["limb_rest_lag_s"] == LAG_LIMIT_S
+
+
+def test_a_prone_death_left_propped_on_his_elbows_fails() -> None:
+    """A constructed prone death (prstow2dead): the pelvis lies from the start; the head, 35 cm up, sinks to
+    31 cm and stays there, propped on the elbows, until 2.8 s, then comes down with the chest over 0.4 s: it
+    stays up 2.8 s after the pelvis lies. The same death whose head and chest come down as he is hit (by
+    0.7 s) passes."""
+    n = 240
+    pelvis = np.full(n, 0.5)
+    head = _fall(35.0, 31.0, 10, 30, n) + _fall(0.0, -30.7, 168, 24, n)
+    chest = _fall(12.0, 5.0, 168, 24, n)
+    row = propped_lag(pelvis, {"head": head, "chest": chest}, FPS)
+    assert row["propped_s"] > PROPPED_LIMIT_S and row["propped_part"] == "head"
+    quick = propped_lag(
+        pelvis, {"head": _fall(35.0, 0.3, 10, 30, n), "chest": _fall(12.0, 5.0, 10, 30, n)}, FPS
+    )
+    assert quick["propped_s"] <= PROPPED_LIMIT_S
+
+
+def test_a_man_who_falls_and_lies_is_not_propped() -> None:
+    """A constructed standing fall: the pelvis lands at 1.0 s, the chest and head with it (the head just
+    before): nothing is up after the pelvis lies. His head landing 0.3 s later (half on his side, kfire2dead)
+    is within the limit."""
+    n = 180
+    pelvis = _fall(90.0, 1.0, 20, 40, n)
+    upper = {"head": _fall(160.0, 2.0, 15, 40, n), "chest": _fall(130.0, 10.0, 20, 40, n)}
+    assert propped_lag(pelvis, upper, FPS)["propped_s"] == 0.0
+    late = propped_lag(pelvis, {**upper, "head": _fall(160.0, 2.0, 25, 52, n)}, FPS)
+    assert 0.0 < late["propped_s"] <= PROPPED_LIMIT_S and late["propped_part"] == "head"
 
 
 @pytest.fixture(scope="module")
