@@ -126,6 +126,10 @@ class DeathSpec:
     # its own from where and how fast it left the hands, flung by this, the body keeping its recorded fall
     # (authoring.rifle_drop); None: the rifle as the ragdoll's fall left it
     drop_toss: tuple[float, float, float] | None = None
+    # the let-go rifle left leaning on him falls again among the settled body once his arms go, from the
+    # frame it last moved (authoring.rifle_settle): the settle laid prstow/prfire's arms down from under it
+    # and left it standing on its magazine or muzzle, butt 19-36 cm up
+    rifle_resettle: bool = False
 
 
 def _prone(
@@ -284,9 +288,19 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_headward_cm=KFIRE_ARMS_HEADWARD,
         turn_as_checked=True,
     ),
-    replace(_prone("prstow2dead", "PRONE_STOWED"), slave_head_held=PRSTOW_HEAD_HELD, prone_legs_roll=True),
+    replace(
+        _prone("prstow2dead", "PRONE_STOWED"),
+        slave_head_held=PRSTOW_HEAD_HELD,
+        prone_legs_roll=True,
+        rifle_resettle=True,
+    ),
     # not eased: see PRONE_START_EASE
-    replace(_prone_dead("prfire2dead", "PRONE_FIRE"), slave_arms_held=True, prone_legs_roll=True),
+    replace(
+        _prone_dead("prfire2dead", "PRONE_FIRE"),
+        slave_arms_held=True,
+        prone_legs_roll=True,
+        rifle_resettle=True,
+    ),
     CRAWL_DEATH,
 )
 

@@ -89,6 +89,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    is retimed so that it starts from standstill (:func:`authoring.easing.eased_in`, lengthened by half the
    ramp): its first frames moved at 0.46 m/s (a toe, the hip, as the hit ramped in) and its DI/M16 slaves'
    at 0.57-0.67 m/s, over the check's end_speed (:data:`PRONE_START_EASE`).
+10. **the prone deaths' rifle falls again** (:attr:`DeathSpec.rifle_resettle`, last): steps 5-8 moved his
+    arms from under the rifle that leaned on them and left it standing on its magazine or muzzle, butt
+    19-36 cm up; from the frame the ragdoll laid it there it is simulated again among the finished body
+    (:mod:`authoring.rifle_settle`), tips over and lies on the ground (overhang 20.8-26.8 -> 0 cm).
 
 **No pop at DEAD — option (b) of issue 14.** Real physics does not land seven falls in one pose, so each
 death ends in its own variant of the DEAD posture, a node ``DEAD@<start>`` of the static posture graph
@@ -106,7 +110,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from authoring import dead_crawl, dead_settle, prone_roll
+from authoring import dead_crawl, dead_settle, prone_roll, rifle_settle
 from authoring.body_parts import DIRECTIONS
 from authoring.contact_pin import pin_frames
 from authoring.death_specs import DEAD as DEAD
@@ -444,7 +448,16 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     release = int(release_frame if release_frame is not None else len(poses) - 1)
     _dropped_alone(spec, rifle, pelvis, letgo, release, (poses, roots, rifles))
     recorded = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
-    return _eased(spec, DeathClip(_after_physics(spec, recorded, figures, release), release))
+    clip = _eased(spec, DeathClip(_after_physics(spec, recorded, figures, release), release))
+    return _rifle_resettled(spec, clip, figures)
+
+
+def _rifle_resettled(spec: DeathSpec, clip: DeathClip, figures: tuple[Figure, Figure]) -> DeathClip:
+    """(:attr:`DeathSpec.rifle_resettle`) the rifle leaning on him falls again among the finished body, as
+    the settle takes his arms from under it (:mod:`authoring.rifle_settle`)."""
+    if not spec.rifle_resettle:
+        return clip
+    return DeathClip(rifle_settle.settled(clip.frames, *figures), clip.release_frame)
 
 
 def _dropped_alone(

@@ -44,8 +44,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
   and passed ``feet_up_cm``; every clip on main that starts lying keeps them within 4 cm.
 * ``limb_through_cm`` (:mod:`~authoring.quality_limbs`): how deep a limb goes through another part of the
   body (an arm into a leg, a forearm into the trunk, a shin into the other leg).
-* ``rifle_rest_overhang_cm`` (information, no limit yet; :mod:`~authoring.quality_rifle_rest`): a clip that
-  ends in DEAD with its rifle let go, how far the rifle's centre lies outside what it rests on at the end.
+* ``rifle_rest_overhang_cm`` (:mod:`~authoring.quality_rifle_rest`): a clip that ends in DEAD with its rifle
+  let go, how far the rifle's centre lies outside what it rests on at the end (a rifle left standing on its
+  magazine or muzzle, held up by nothing).
 * a clip that ends in DEAD (:mod:`~authoring.quality_rest`): ``rest_rise_cm``, how far a limb rises once
   the body is down, ``limb_rest_lag_s``, how long after the body the last limb part comes to rest, and
   ``propped_s`` (information, no limit yet: the prone deaths fail the proposed 1 s), how long after the
@@ -88,7 +89,7 @@ from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_limbs import LIMB_THROUGH_LIMIT_CM, limbs_through
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from authoring.quality_rest import LAG_LIMIT_S, RISE_LIMIT_CM, propped, rest_lag, rest_rise
-from authoring.quality_rifle_rest import dropped_rifle_rest
+from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, dropped_rifle_rest
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
 
@@ -123,6 +124,7 @@ THRESHOLDS: dict[str, float] = {
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
     "limb_through_cm": LIMB_THROUGH_LIMIT_CM,  # no limb passes through another part of the body
+    "rifle_rest_overhang_cm": OVERHANG_LIMIT_CM,  # ... and the rifle he let go lies on something
     **POSTURE_LIMITS,
 }
 POSTURE_KEYS = tuple(POSTURE_LIMITS)

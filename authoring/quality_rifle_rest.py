@@ -11,8 +11,8 @@ DEAD. The check passed it: a rifle in the air goes into neither the ground nor t
 its nodes touch: the 2D convex hull of the rifle nodes within :data:`TOUCH_CM` of the ground or of a body
 segment's convex hull (hands included). A rifle lying on the ground or across his legs scores 0; one balanced
 on an end scores the distance it would have to tip. No node touching anything: the centre's height (a rifle
-in the air is at least that far from resting). Recorded, not judged, while the prone deaths fail it
-(:data:`OVERHANG_LIMIT_CM` is the proposed limit: every other death scores 0).
+in the air is at least that far from resting). Judged against :data:`OVERHANG_LIMIT_CM` since the prone
+deaths' rifle falls again once the settle takes his arms from under it (:mod:`authoring.rifle_settle`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from authoring.body_parts import SegmentHulls
 from server.motion.channelset import Channelset
 
 TOUCH_CM = 2.0  # cm: a rifle node this near the ground or the body rests on it
-OVERHANG_LIMIT_CM = 2.0  # cm: proposed limit (not in THRESHOLDS while prstow2dead/prfire2dead fail it)
+OVERHANG_LIMIT_CM = 2.0  # cm: the limit (quality.THRESHOLDS); every death's rifle lies at 0
 
 
 def body_clearance(points: np.ndarray, hulls: SegmentHulls, seg_globals: np.ndarray) -> np.ndarray:

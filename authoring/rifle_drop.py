@@ -38,7 +38,14 @@ def let_go(doll: ragdoll.Ragdoll, substeps: int) -> LetGo:
     return LetGo(doll.rifle_location(), doll.data.qvel[adr : adr + 6].copy(), substeps)
 
 
-def _mjcf(rifle: Figure) -> str:
+def mesh_asset(name: str, nodes: np.ndarray) -> str:
+    """A MuJoCo mesh asset of a segment's psurf ``nodes`` (cm)."""
+    return f'<mesh name="{name}" vertex="{ragdoll._fmt((np.asarray(nodes) * ragdoll.CM).ravel())}"/>'
+
+
+def _mjcf(rifle: Figure, assets: str = "", bodies: str = "", contact: str = "") -> str:
+    """The rifle and the ground, with (:mod:`authoring.rifle_settle`) more ``assets``, ``bodies`` in the
+    world and ``contact`` pairs."""
     nodes = rifle.segments["rifle"].psurf.nodes  # type: ignore[union-attr]
     return f"""<mujoco model="rifle_drop">
   <compiler angle="radian"/>
@@ -48,14 +55,14 @@ def _mjcf(rifle: Figure) -> str:
     <geom condim="6" friction="{ragdoll.GROUND_FRICTION}" solref="{ragdoll.CONTACT_SOLREF}"
           solimp="{ragdoll.CONTACT_SOLIMP}"/>
   </default>
-  <asset><mesh name="rifle" vertex="{ragdoll._fmt((np.asarray(nodes) * ragdoll.CM).ravel())}"/></asset>
+  <asset>{mesh_asset("rifle", nodes)}{assets}</asset>
   <worldbody>
     <geom name="ground" type="plane" size="0 0 1"/>
     <body name="rifle">
       <freejoint name="rifle"/>
       <geom name="rifle" type="mesh" mesh="rifle" mass="{ragdoll.RIFLE_MASS}"/>
-    </body>
-  </worldbody>
+    </body>{bodies}
+  </worldbody>{contact}
 </mujoco>
 """
 

@@ -52,7 +52,7 @@ def test_a_rifle_lying_on_the_ground_rests(figset: FigureSet) -> None:
     side[:3, 3] = (70.0, 0.0, 0.0)  # beside him
     flat = _dead(figset, _on_ground(figset, side @ _rot(2, 90.0)), "flat.chset")  # on its side
     assert flat["rifle_rest_overhang_cm"] == 0.0 and "nodes on the ground" in flat["rifle_rest_where"]
-    assert "rifle_rest_overhang_cm" not in THRESHOLDS and OVERHANG_LIMIT_CM == 2.0  # recorded, not judged
+    assert THRESHOLDS["rifle_rest_overhang_cm"] == OVERHANG_LIMIT_CM == 2.0 and flat["pass"]
 
 
 def test_a_rifle_balanced_on_its_muzzle_does_not_rest(figset: FigureSet) -> None:
@@ -62,7 +62,7 @@ def test_a_rifle_balanced_on_its_muzzle_does_not_rest(figset: FigureSet) -> None
     tilted = side @ _rot(0, -25.0) @ _rot(2, 90.0)  # muzzle (-Z) down, butt up 25 degrees
     row = _dead(figset, _on_ground(figset, tilted), "tilted.chset")
     assert row["rifle_rest_overhang_cm"] > 20.0
-    assert row["pass"]  # information only while the prone deaths fail it
+    assert not row["pass"] and "rifle_rest_overhang_cm" in row["failures"]
     up = side.copy()
     up[1, 3] = 50.0  # in the air, touching nothing: its centre's height
     row = _dead(figset, up, "floating.chset")
