@@ -123,8 +123,8 @@ THRESHOLDS: dict[str, float] = {
     "lying_feet_up_cm": 6.0,  # ... and of a clip that starts lying face down (no fall flings the legs)
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
-    "limb_through_cm": LIMB_THROUGH_LIMIT_CM,  # no limb passes through another part of the body
     "rifle_rest_overhang_cm": OVERHANG_LIMIT_CM,  # ... and the rifle he let go lies on something
+    "limb_through_cm": LIMB_THROUGH_LIMIT_CM,  # no limb passes through another part of the body
     **POSTURE_LIMITS,
 }
 POSTURE_KEYS = tuple(POSTURE_LIMITS)
