@@ -27,6 +27,7 @@ INSIDE_M = 0.01  # m: a body hull the rifle is this deep in at the start meets i
 # m/s: the recorded rifle slower than this from some frame on has been laid where it leans (prstow2dead's,
 # leaning on arms the settle had moved 3.5-4 cm away, shook at 0.1 m/s in place: REST_SPEED is 0.03)
 SETTLED_SPEED = 0.15
+MORE_S = 10.0  # s: the most the rifle falls on past the clip's end (one that never rests: the check sees it)
 
 
 def resting_from(rifles: np.ndarray, fps: float) -> int:
@@ -117,7 +118,8 @@ def settled(frames: ClipFrames, soldier: Figure, rifle: Figure, start: int | Non
     steps = round(1.0 / (frames.fps * model.opt.timestep))
     out: list[np.ndarray] = []
     still, frame = 0, 0
-    while frame < len(poses) - 1 or still * steps * model.opt.timestep < REST_SECONDS:
+    last = len(poses) - 1 + round(MORE_S * frames.fps)
+    while frame < len(poses) - 1 or (still * steps * model.opt.timestep < REST_SECONDS and frame < last):
         before = data.xipos[gun].copy()
         a, b = poses[min(frame, len(poses) - 1)], poses[min(frame + 1, len(poses) - 1)]
         for k in range(steps):
