@@ -100,7 +100,7 @@ async def _created_while_deaf(c: inprocess.Fronts, deaf_s: float) -> None:
     """Three soldiers created through each front-end, the fabric heard again ``deaf_s`` later: every
     front-end and shard has them all (a deadline, not a timing; the clients stay: no orphan goes)."""
     made: list[int] = []
-    clients = []
+    clients: list[Client] = []
     for front, cid in zip(c.servers, ("alpha", "beta"), strict=True):
         client = await Client.open(front.addresses[0][1], "ig", client_id=cid)
         await client.expect(Ready)
