@@ -13,6 +13,7 @@ import contextlib
 from collections.abc import Iterator
 
 import pytest
+import test_fabric_inprocess as inprocess
 import trio
 from test_fabric_cluster import WALK, _soldiers_of
 from test_server_support import Client, synthetic_dir
@@ -93,6 +94,55 @@ async def test_two_front_ends_create_at_once_without_collision_and_both_see_all(
                 while seen != set(theirs):
                     seen |= set((await obs.expect(JointUpdates)).indices.tolist()) & set(theirs)
             await obs.aclose()
+
+
+async def _created_while_deaf(c: inprocess.Fronts, deaf_s: float) -> None:
+    """Three soldiers created through each front-end, the fabric heard again ``deaf_s`` later: every
+    front-end and shard has them all (a deadline, not a timing; the clients stay: no orphan goes)."""
+    made: list[int] = []
+    clients: list[Client] = []
+    for front, cid in zip(c.servers, ("alpha", "beta"), strict=True):
+        client = await Client.open(front.addresses[0][1], "ig", client_id=cid)
+        await client.expect(Ready)
+        for rid in range(1, 4):
+            await client.send(CreateSoldier(rid, "DI.fig", "AK_47.fig", None))
+        made += [(await client.expect(SoldierCreated)).index for _ in range(3)]
+        clients.append(client)
+    await trio.sleep(deaf_s)
+    for fabric in (*c.fabrics, *c.shard_fabrics):
+        fabric.deaf = ()
+    every = sorted([*range(START), *made])
+    want = [every, every, *([i for i in every if i % 2 == k] for k in range(2))]
+    with contextlib.suppress(trio.TooSlowError), trio.fail_after(30):
+        while [inprocess.live(s) for s in (*c.servers, *c.shards)] != want:
+            await trio.sleep(0.1)
+    assert [inprocess.live(s) for s in (*c.servers, *c.shards)] == want
+    for client in clients:
+        await client.aclose()
+
+
+async def test_soldiers_created_before_a_shards_subscription_is_known_reach_it_and_every_front_end(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Zenoh drops what a node publishes before it knows of a subscriber: a shard's first pulses reached
+    the front-ends before its subscription to its requests did (CI, under load), and they sent it their
+    sync and their ``books`` into the void. Here every node is deaf to the requests and ``ttes/fronts``
+    for 3 s while two clients create soldiers. On main each front-end asked each shard once and waited for
+    the answer for ever: the shards never had the soldiers, and 12 s after their clients left every
+    front-end held the 10 start-up soldiers alone (the CI failure of the test above). A front-end asks
+    again, its sync first, until the shard answers."""
+    async with inprocess.fronts(deaf=("ttes/requests", "ttes/fronts")) as c:
+        await _created_while_deaf(c, 3)
+
+
+async def test_a_front_end_that_missed_the_others_creations_learns_them_from_the_shards(
+    autojump_clock: trio.abc.Clock,
+) -> None:
+    """Each front-end misses the other's first messages on ``ttes/fronts``: a shard's key pulse that names
+    soldiers its books lack (twice) makes it ask for the shard's books. On main front-end 0 never did: it
+    compared only the indices below its table's length, and front-end 1's share (4096 on) is beyond."""
+    async with inprocess.fronts(deaf=("ttes/fronts",)) as c:
+        await _created_while_deaf(c, 3)
 
 
 def test_each_front_end_allots_its_own_share_spread_over_the_shards() -> None:

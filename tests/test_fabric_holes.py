@@ -622,6 +622,27 @@ async def test_a_sync_does_not_remove_a_soldier_created_again_that_its_front_end
         await op.aclose()
 
 
+async def test_a_restarted_shard_that_missed_its_sync_gets_it_again(autojump_clock: trio.abc.Clock) -> None:
+    """Shard 1 restarts without the walker, and its first pulses reach the front-ends before its
+    subscription to its requests does (Zenoh drops the sync they send it). On main no front-end knew: the
+    books kept the walker, no shard animated it (its key pulses lack it, but a soldier a front-end was
+    told of is not the shards' to judge). Each front-end asks for the books with its sync, and asks again
+    with the sync until the shard answers: the walker is back, walking."""
+    async with inprocess.fronts() as c:
+        made = await inprocess.walker(c.servers[0], ODD)
+        await inprocess.moving(made, ODD, 3)
+        c.shard_fabrics[1].deaf = ("ttes/requests",)
+        c.shards[1].world.remove_soldier(ODD, "a restart")  # its start-up script's soldiers alone
+        c.shard_nodes[1].seq = 0  # its count goes back: both front-ends sync it
+        await trio.sleep(3)
+        assert ODD not in inprocess.live(c.shards[1])
+        c.shard_fabrics[1].deaf = ()
+        await made.requests(index=[ODD], velocity=WALK)
+        await inprocess.moving(made, ODD, 3)
+        assert ODD in inprocess.live(c.shards[1]) and ODD in inprocess.live(c.servers[1])
+        await made.aclose()
+
+
 async def test_a_restarted_front_ends_creation_is_not_removed_by_an_older_removal(
     autojump_clock: trio.abc.Clock,
 ) -> None:

@@ -127,9 +127,11 @@ class Fronts:
     shard_fabrics: list[MemoryFabric] = field(default_factory=list)
     shard_nodes: list[ShardNode] = field(default_factory=list)
 
-    async def start_front(self, front: Sharding) -> TtesServer:
-        """Front-end ``front`` (K/M) started now (a late one, or one of several at the start)."""
+    async def start_front(self, front: Sharding, deaf: tuple[str, ...] = ()) -> TtesServer:
+        """Front-end ``front`` (K/M) started now (a late one, or one of several at the start), deaf to the
+        topics of ``deaf`` (prefixes) until told otherwise."""
         server, fabric = make_server(), MemoryFabric(self.bus)
+        fabric.deaf = deaf
         server.start_world()  # before it joins the fabric, as `ttes front` does: the script's are no relay's
         node = FrontNode(server, fabric, self.shards_n, front=front, block=self.block)
         await self.nursery.start(server.serve)
@@ -147,14 +149,18 @@ async def fronts(
     shards_n: int = 2,
     block: int = BLOCK,
     fronts_n: int = 2,
+    deaf: tuple[str, ...] = (),
 ) -> AsyncIterator[Fronts]:
+    """``fronts_n`` front-ends and ``shards_n`` shards; every node deaf to the topics of ``deaf`` at first
+    (messages published before a subscription is known to the publisher, which Zenoh drops)."""
     token = trio.lowlevel.current_trio_token()
     async with trio.open_nursery() as nursery:
         c = Fronts(bus or Bus(), nursery, shards_n, block)
         for k in range(fronts_n):
-            await c.start_front(Sharding(k, fronts_n))
+            await c.start_front(Sharding(k, fronts_n), deaf)
         for k in range(shards_n):
             shard, fabric = make_server(), MemoryFabric(c.bus)
+            fabric.deaf = deaf
             shard.codes_only()  # as `ttes server --shard` makes it
             shard_node = ShardNode(shard, fabric, Sharding(k, shards_n), key_every=key_every, block=block)
             await nursery.start(shard.serve)

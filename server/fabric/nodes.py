@@ -32,6 +32,7 @@ import itertools
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -78,6 +79,8 @@ KEY_EVERY = 30  # a shard's tick batches between two key batches (1 s at 30 Hz):
 TURN_S = TURN_CPU_S  # a shard's turn of fabric requests before it answers them and lets a tick run
 PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batch a block heard); beyond, the
 # oldest go (and it asks for a key)
+ASK_AGAIN_S = 2.0  # a shard heard that has not answered ``books`` by then is asked again; each wait twice
+ASK_AGAIN_MAX_S = 32.0  # the last, up to this (a shard busy with a crowd's creations answers late)
 
 
 @dataclass(frozen=True)
@@ -426,6 +429,21 @@ class ShardNode:
             self._applied(rows if msg.get("replay") else rows[np.isin(rows["index"], new)])
 
 
+@dataclass(frozen=True)
+class Asked:
+    """A shard asked for its books that has not answered: asked again at its first pulse from ``again``
+    (server time) on, after ``wait`` s, with ``sync`` first (the sync that went with the ask: a shard
+    heard for the first time, or again after a restart or a fail-over). The answer follows the sync (one
+    message, in order): it acknowledges both. Zenoh drops what a node publishes before it knows of a
+    subscriber: a shard's first pulses reached a front-end before its subscription to its requests did,
+    the sync and the ask went nowhere, and on main the front-end waited for the answer for ever (the
+    soldiers created meanwhile never reached the shard: issue 21's flaky CI test)."""
+
+    again: float
+    wait: float
+    sync: Callable[[], None] | None
+
+
 class FrontNode:
     """A front-end's link: every shard's newest batch in, its clients' requests out to the shard that
     animates the soldier (it is the world's :class:`~server.startup.Relay`).
@@ -497,7 +515,7 @@ class FrontNode:
         self.has_last = np.zeros(n, bool)
         self.made = np.zeros(n, bool)  # created here (not the start-up script's, not another front-end's)
         self.gen = np.zeros(n, np.int64)  # each index's creations and removals heard of (requests.sync)
-        self._asked: set[int] = set()  # shards asked for their books, not answered yet
+        self._asked: dict[int, Asked] = {}  # shards asked for their books, not answered yet
         # shards whose last key pulse differed from the books: asked only if the next one differs too (a
         # creation through another front-end is often in a pulse before its message on ttes/fronts is here:
         # each front-end asked each shard about once a second while 6 of them made soldiers, 1,000-1,100
@@ -766,24 +784,25 @@ class FrontNode:
         if m is None:
             return
         if k in self._asked:  # until it answers, no index it animates is allotted here
-            alive = m.table.alive
-            self._unknown.setdefault(k, set()).update(
-                b.indices[~alive[np.minimum(b.indices, len(alive) - 1)]].tolist()
-            )
+            self._unknown.setdefault(k, set()).update(b.indices[~m.table.live_mask(b.indices)].tolist())
 
-    def _ask_books(self, k: int) -> None:
-        self._asked.add(k)
+    def _ask_books(self, k: int, now: float, sync: Callable[[], None] | None = None) -> None:
+        """Ask shard ``k`` for its books, and again at its pulses until it answers (:class:`Asked`)."""
+        ask = self._asked.get(k)
+        wait = ASK_AGAIN_S if ask is None else min(2 * ask.wait, ASK_AGAIN_MAX_S)
+        self._asked[k] = Asked(now + wait, wait, sync)
         self._send(k, req.books(self.front.k))
         self._resubscribe()
 
     def _pulse(self, b: Batch, now: float) -> None:
         """Shard ``b.shard``'s tick: it lives; heard for the first time, or back (a restart: its count went
-        back; or it had failed over), it gets a sync; not while another front-end's fail-over of it stands
-        (:meth:`follow`)."""
+        back; or it had failed over), it gets a sync and ``books`` (:class:`Asked`); not while another
+        front-end's fail-over of it stands (:meth:`follow`)."""
         k = b.shard
         first = self.heard_at[k] == -math.inf
         back = first or b.seq < self.last_seq[k] or self.route[k] != k
         self.last_seq[k], self.heard_at[k] = b.seq, now
+        sync = None
         if back and k not in self._followed:
             stood_in = self.route[k]
             self.route[k] = k
@@ -797,19 +816,25 @@ class FrontNode:
             moved = [h for h in self._stood_for.pop(k, set()) if self.route[h] != k]
             drop = np.concatenate([self._homed(h) for h in moved]) if moved else None
             # from a stand-in (perhaps learned from its answer: this front-end started meanwhile), all of them
-            self._sync(k, [k], replay=stood_in != k, made=first and stood_in == k, drop=drop)
+            sync = functools.partial(
+                self._sync, k, [k], replay=stood_in != k, made=first and stood_in == k, drop=drop
+            )
+            sync()
         m = self.server.world.manager
         if m is None:
             return
         # this front-end may be late, or have missed another's message: it learns from the shard (a key
         # pulse names every soldier the shard animates, whatever blocks this front-end hears)
-        if k not in self._asked and (first or (b.key and self._differs_again(k, b.indices))):
-            self._ask_books(k)
+        ask = self._asked.get(k)
+        if sync is not None or (ask is None and (first or (b.key and self._differs_again(k, b.indices)))):
+            self._ask_books(k, now, sync)  # (with a sync: its answer acknowledges it)
+        elif ask is not None and now >= ask.again:  # lost (or the shard is busy): ask again
+            log.warning("fabric_books_asked_again", front=self.front.k, shard=k, waited_s=ask.wait)
+            if ask.sync is not None and self.route[k] == k:
+                ask.sync()
+            self._ask_books(k, now, ask.sync)
         if k in self._asked:  # until it answers, no index it animates is allotted here
-            alive = m.table.alive
-            self._unknown.setdefault(k, set()).update(
-                b.indices[~alive[np.minimum(b.indices, len(alive) - 1)]].tolist()
-            )
+            self._unknown.setdefault(k, set()).update(b.indices[~m.table.live_mask(b.indices)].tolist())
 
     def _differs_again(self, k: int, indices: np.ndarray) -> bool:
         """Whether shard ``k``'s key pulse differs from the books (:meth:`_differs`), as its last one did."""
@@ -826,10 +851,10 @@ class FrontNode:
         lacks one they hold, of those no front-end told this one of (a message lost before a link came up)."""
         m = self.server.world.manager
         assert m is not None
-        alive, known = m.table.alive, self.known
-        idx = np.asarray(indices, np.int64)
-        idx = idx[idx < len(alive)]
-        if (~alive[idx] & ~known[idx]).any():
+        known, idx = self.known, np.asarray(indices, np.int64)
+        idx = idx[idx < len(known)]  # (not the table's length: it grows, and another front-end's share is
+        # beyond it: on main a pulse never differed by a soldier created through front-end 1 of 2)
+        if (~m.table.live_mask(idx) & ~known[idx]).any():
             return True
         live = m.table.live
         scope = live[(np.asarray(self.route)[Sharding.home(live, self.shards)] == k) & ~known[live]]
@@ -1111,7 +1136,7 @@ class FrontNode:
         except ValueError as exc:
             log.warning("fabric_books_refused", front=self.front.k, error=str(exc))
             return
-        self._asked.discard(k)
+        self._asked.pop(k, None)
         self._unknown.pop(k, None)
         self._resubscribe()  # its blocks no client watches: heard no more
         m = self.server.world.manager
