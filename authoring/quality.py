@@ -48,9 +48,11 @@ Per clip (a channelset bound to its soldier figure and rifle):
   let go, how far the rifle's centre lies outside what it rests on at the end (a rifle left standing on its
   magazine or muzzle, held up by nothing).
 * a clip that ends in DEAD (:mod:`~authoring.quality_rest`): ``rest_rise_cm``, how far a limb rises once
-  the body is down, ``limb_rest_lag_s``, how long after the body the last limb part comes to rest, and
-  ``propped_s`` (information, no limit yet: the prone deaths fail the proposed 1 s), how long after the
-  pelvis lies the head and chest come down (a dead man left propped on his elbows looks alive).
+  the body is down, ``limb_rest_lag_s``, how long after the body the last limb part comes to rest,
+  ``propped_s`` (information, no limit yet: main's prone deaths fail the proposed 1 s), how long after the
+  pelvis comes near the ground the head and chest come down (a dead man left propped on his elbows looks
+  alive), and ``trunk_rise_cm`` (information, no limit yet: the proposed 2 cm fails DI/M16 slaves), how far
+  the pelvis or chest rises once down (a dead man lifting his hips).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
   recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
   cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
@@ -88,7 +90,7 @@ from authoring.passive_range import passive_limits
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_limbs import LIMB_THROUGH_LIMIT_CM, limbs_through
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
-from authoring.quality_rest import LAG_LIMIT_S, RISE_LIMIT_CM, propped, rest_lag, rest_rise
+from authoring.quality_rest import LAG_LIMIT_S, RISE_LIMIT_CM, dead_trunk, rest_lag, rest_rise
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, dropped_rifle_rest
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
@@ -419,7 +421,7 @@ def check_clip(
     if ends_dead:
         out.update(rest_rise(frames, figures))
         out.update(rest_lag(frames, figures))
-        out.update(propped(frames, figures))
+        out.update(dead_trunk(frames, figures))
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
     if locomotion:
         speed, stride = cs.ground_speed, cs.stride_length

@@ -21,14 +21,22 @@ thigh, shin, foot) coming to rest; a part is at rest from the first frame after 
 within :data:`NEAR_CM` of its final height and slower than :data:`STILL_M_S` (:func:`limb_rest_lag`,
 :data:`LAG_LIMIT_S`: a limb falls with the body).
 
-Nor should the trunk stay up long after he is down: prstow2dead and prfire2dead lie propped on their
+Nor should the trunk stay up long after he is down: prstow2dead and prfire2dead lay propped on their
 elbows, the head 30 cm up, from the hit until 3.4 s and 1.7 s (the physics leaves him so and the settle
-lowers the chest after it), and every other limit passes: to a trainee he looks alive (recorded, not yet
-a limit). ``propped_s`` is the time from the pelvis lying (its lowest node within :data:`NEAR_CM` of where
-it finally lies, staying so) to the head's lowest node and the chest's centroid coming within
-:data:`PROPPED_CM` of where they finally lie and staying so (:func:`propped_lag`, :data:`PROPPED_LIMIT_S`):
-a man who falls lands on his chest as his pelvis comes down (the standing and kneeling deaths: 0.0-0.3 s),
-a man shot lying drops his head at once.
+lowered the chest after it), and every other limit passed: to a trainee he looks alive. ``propped_s`` is the
+time from the pelvis first coming near the ground (its lowest node within :data:`PELVIS_NEAR_CM` of where it
+finally lies) to the head's lowest node and the chest's centroid coming within :data:`PROPPED_CM` of where
+they finally lie and staying so (:func:`propped_lag`, :data:`PROPPED_LIMIT_S`): a man who falls lands on his
+chest as his pelvis comes down (the standing and kneeling deaths: 0.0-0.25 s), a man shot lying drops his
+head at once. Counted from the pelvis *lying* (within :data:`NEAR_CM`, staying so) a slave whose pelvis was
+laid only at the end read 0 (the DI prone deaths of branch proppedmerge-s16, 1.0 s from the pelvis near); a
+crawler's head resting on his forearms 10 cm up read 1.4-1.6 s against 5 cm.
+
+Nor should a dead trunk rise: a DI slave's pelvis, down on the ground, rose 3-5 cm 1.2 s into a prone death
+(proppedmerge-s16, frames 72-84) and 5 cm as a knelt one's chest landed (kfire2dead_low, frames 76-108), a
+man lifting his hips, and ``rest_rise_cm`` judges only the limbs. ``trunk_rise_cm`` is, for the pelvis and
+the chest (lowest nodes), from the first frame each is down (within :data:`TRUNK_DOWN_CM` of where it finally
+lies), the most it rises above its lowest since (:func:`trunk_rise`, :data:`TRUNK_RISE_LIMIT_CM`).
 """
 
 from __future__ import annotations
@@ -48,13 +56,19 @@ TORSO_PARTS = ("pelvis", "chest", "belly", "head")
 LAG_LIMIT_S = 0.5  # s: the most a limb part may come to rest after the trunk
 NEAR_CM = 3.0  # cm: a part is at rest within this of its final height ...
 STILL_M_S = 0.1  # m/s: ... and slower than this (its centroid)
-PROPPED_CM = 5.0  # cm: the head (lowest node) and chest (centroid) are down within this of where they lie
-# s: the most they should stay up after the pelvis lies; proposed, not yet in quality.THRESHOLDS:
-# prstow2dead (soldier / DI / M16) 3.40 / 3.05 / 3.00 and prfire2dead 1.68 / 1.22 / 1.20 fail it (branch
-# propped-s16 brings the soldier's down by 1.0 s; its DI/M16 slaves then fail other limits). A slave whose
-# trunk is lowered late (its pelvis lying only at the end) reads 0: measure from the pelvis near the ground
-# before this becomes a limit.
+PELVIS_NEAR_CM = 10.0  # cm: the pelvis is near the ground within this of where it finally lies
+# cm: the head (lowest node) and chest (centroid) are down within this of where they lie: a head held up a
+# hand's breadth; a dead crawler's rests on his forearms 10 cm up
+PROPPED_CM = 12.0
+# s: the most they may stay up after the pelvis is near the ground (proposed, not yet in quality.THRESHOLDS):
+# main's prstow2dead (soldier / DI / M16) 3.33 / 3.37 / 3.37 and prfire2dead 1.62 / 1.67 / 1.67 fail it
+# (branch proppedmerge-s16: 0.92-1.00)
 PROPPED_LIMIT_S = 1.0
+TRUNK_DOWN_CM = 5.0  # cm: the pelvis or chest is down within this of where it finally lies
+TRUNK_RISE_PARTS = ("pelvis", "chest")
+# cm: the most the pelvis or chest may rise above its lowest once down (proposed, not yet in THRESHOLDS): the
+# DI/M16 slaves of kfire2dead (5.3) and of the prone deaths (main 3.6-4.0, proppedmerge-s16 3.7-5.3) fail it
+TRUNK_RISE_LIMIT_CM = 2.0
 LIMBS = ("upper_arm", "forearm", "hand", "thigh", "knee", "foot")  # knee: the shin (authoring.body_parts)
 
 
@@ -189,23 +203,49 @@ def down_from(y: np.ndarray, near: float) -> int:
     return 0 if len(up) == 0 else int(up[-1]) + 1
 
 
+def near_from(y: np.ndarray, near: float) -> int:
+    """The first frame at which heights ``y`` come within ``near`` (cm) of the last one (whatever after)."""
+    return int(np.argmax(y <= y[-1] + near))
+
+
 def propped_lag(pelvis: np.ndarray, upper: dict[str, np.ndarray], fps: float) -> dict[str, Any]:
-    """How long (s) after the ``pelvis`` (its lowest node's heights) lies, within :data:`NEAR_CM` of where it
-    finally does, the last of ``upper`` (name: heights, the head's lowest node, the chest's centroid) comes
-    down within :data:`PROPPED_CM` (0 if none is up after the pelvis lies), which part and from which
-    frame."""
-    lies = down_from(pelvis, NEAR_CM)
+    """How long (s) after the ``pelvis`` (its lowest node's heights) first comes within
+    :data:`PELVIS_NEAR_CM` of where it finally lies the last of ``upper`` (name: heights, the head's lowest
+    node, the chest's centroid) comes down within :data:`PROPPED_CM` (0 if none is up after the pelvis is
+    near), which part and from which frame."""
+    near = near_from(pelvis, PELVIS_NEAR_CM)
     part, frame = max(((k, down_from(y, PROPPED_CM)) for k, y in upper.items()), key=lambda kv: kv[1])
-    lag = max(0.0, (frame - lies) / fps)
-    where = f"{part} down from frame {frame}, pelvis lies from {lies}" if lag > 0 else None
+    lag = max(0.0, (frame - near) / fps)
+    where = f"{part} down from frame {frame}, pelvis near the ground from {near}" if lag > 0 else None
     return {"propped_s": round(lag, 3), "propped_part": part if lag > 0 else None, "propped_where": where}
 
 
-def propped(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
-    """:func:`propped_lag` of a played clip: its head's lowest node and its chest's centroid."""
+def trunk_rise(parts: dict[str, np.ndarray]) -> dict[str, Any]:
+    """For each of ``parts`` (name: its lowest node's heights), from the first frame it is down (within
+    :data:`TRUNK_DOWN_CM` of where it finally lies) the most (cm) it rises above its lowest since: the worst
+    part, at which frame (None: no such part)."""
+    if not parts:
+        return {"trunk_rise_cm": None, "trunk_rise_part": None, "trunk_rise_where": None}
+    best: tuple[float, str | None, int, int] = (0.0, None, 0, 0)
+    for name, y in parts.items():
+        down = near_from(y, TRUNK_DOWN_CM)
+        tail = y[down:]
+        rise = tail - np.minimum.accumulate(tail)
+        k = int(np.argmax(rise))
+        if rise[k] > best[0]:
+            best = (float(rise[k]), name, down + k, down)
+    rise_cm, part, frame, down = best
+    where = f"{part} at frame {frame}, down from {down}" if part is not None else None
+    return {"trunk_rise_cm": round(rise_cm, 3), "trunk_rise_part": part, "trunk_rise_where": where}
+
+
+def dead_trunk(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
+    """:func:`propped_lag` (its head's lowest node, its chest's centroid) and :func:`trunk_rise` (its pelvis'
+    and chest's lowest nodes) of a played clip."""
     h = _heights(cf, figures)
+    row = trunk_rise({k: h[k] for k in TRUNK_RISE_PARTS if k in h})
     if "pelvis" not in h or "head" not in h:
-        return {"propped_s": None, "propped_part": None, "propped_where": None}
+        return {**row, "propped_s": None, "propped_part": None, "propped_where": None}
     upper = {"head": h["head"]}
     upper.update({k: c[:, 1] for k, c in _centroids(cf, figures, ("chest",)).items()})
-    return propped_lag(h["pelvis"], upper, cf.channelset.fps)
+    return {**row, **propped_lag(h["pelvis"], upper, cf.channelset.fps)}

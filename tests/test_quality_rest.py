@@ -16,6 +16,7 @@ from authoring.quality_rest import (
     LAG_LIMIT_S,
     PROPPED_LIMIT_S,
     RISE_LIMIT_CM,
+    TRUNK_RISE_LIMIT_CM,
     _heights,
     limb_rest_lag,
     propped_lag,
@@ -24,6 +25,7 @@ from authoring.quality_rest import (
     rise_after,
     settled_from,
     trunk_rest,
+    trunk_rise,
 )
 from server.motion.cache import load_channelset
 from ttes.paths import FIGURES
@@ -131,14 +133,43 @@ def test_a_prone_death_left_propped_on_his_elbows_fails() -> None:
 
 def test_a_man_who_falls_and_lies_is_not_propped() -> None:
     """A constructed standing fall: the pelvis lands at 1.0 s, the chest and head with it (the head just
-    before): nothing is up after the pelvis lies. His head landing 0.3 s later (half on his side, kfire2dead)
-    is within the limit."""
+    before): they are down within 0.3 s of the pelvis coming near the ground. His head landing 0.3 s later
+    (half on his side, kfire2dead) is within the limit too."""
     n = 180
     pelvis = _fall(90.0, 1.0, 20, 40, n)
     upper = {"head": _fall(160.0, 2.0, 15, 40, n), "chest": _fall(130.0, 10.0, 20, 40, n)}
-    assert propped_lag(pelvis, upper, FPS)["propped_s"] == 0.0
+    assert propped_lag(pelvis, upper, FPS)["propped_s"] <= 0.3
     late = propped_lag(pelvis, {**upper, "head": _fall(160.0, 2.0, 25, 52, n)}, FPS)
     assert 0.0 < late["propped_s"] <= PROPPED_LIMIT_S and late["propped_part"] == "head"
+
+
+def test_a_slave_whose_pelvis_is_laid_late_is_still_seen_propped() -> None:
+    """A constructed prone slave: the pelvis hovers 4 cm up and is laid only in the last 0.2 s, the head
+    propped 30 cm up until 2.5 s. Counted from the pelvis lying it read 0; from the pelvis near the ground it
+    is propped 2.5 s."""
+    n = 200
+    pelvis = np.full(n, 4.0) + _fall(0.0, -3.5, n - 12, 10, n)
+    upper = {"head": _fall(30.0, 0.3, 150, 20, n), "chest": _fall(25.0, 14.0, 150, 20, n)}
+    row = propped_lag(pelvis, upper, FPS)
+    assert row["propped_s"] > PROPPED_LIMIT_S and row["propped_part"] == "head"
+
+
+def test_a_dead_trunk_that_rises_is_seen() -> None:
+    """A constructed prone death: the pelvis lies at 1 cm and rises 5 cm 1.2 s in (a DI slave, branch
+    proppedmerge-s16, frames 72-84), then comes down again: it fails. A chest settling 1 cm and a pelvis
+    landing from a fall (its drop is no rise) pass."""
+    n = 120
+    down = np.full(n, 1.0)
+    hips = down + _fall(0.0, 5.0, 66, 10, n) - _fall(0.0, 5.0, 84, 10, n)
+    row = trunk_rise({"pelvis": hips, "chest": down + 2.0})
+    assert row["trunk_rise_cm"] == pytest.approx(5.0, abs=0.05) and row["trunk_rise_part"] == "pelvis"
+    assert row["trunk_rise_cm"] > TRUNK_RISE_LIMIT_CM
+    assert row["trunk_rise_where"] == "pelvis at frame 76, down from 0"
+    settle = down + 2.0 + _fall(0.0, 1.0, 30, 10, n) - _fall(0.0, 1.5, 50, 20, n)
+    fall = _fall(90.0, 1.0, 0, 40, n)
+    ok = trunk_rise({"pelvis": fall, "chest": settle})
+    assert ok["trunk_rise_cm"] == pytest.approx(1.0, abs=0.05) and ok["trunk_rise_cm"] <= TRUNK_RISE_LIMIT_CM
+    assert trunk_rise({"pelvis": fall})["trunk_rise_cm"] == 0.0 and trunk_rise({})["trunk_rise_cm"] is None
 
 
 @pytest.fixture(scope="module")
@@ -189,4 +220,5 @@ def test_kfire2dead_s_arms_land_with_the_body(figures: FigureSet) -> None:
     row = check_clip(cf, figures, ends_dead=True)
     assert row["limb_rest_lag_s"] <= LAG_LIMIT_S, row["limb_rest_lag_where"]
     assert row["rest_rise_cm"] <= RISE_LIMIT_CM
+    assert row["propped_s"] <= PROPPED_LIMIT_S and row["trunk_rise_cm"] <= TRUNK_RISE_LIMIT_CM
     assert "limb_rest_lag_s" not in check_clip(cf, figures)
