@@ -509,8 +509,8 @@ class UpdateEncoder:
         self._tick = tick
         known = self._known[idx]
         sc = scratch()  # gathers into reused buffers (idx is checked: clip gathers unbuffered)
-        state = self._last.dtype
-        last = np.take(self._last, idx, axis=0, out=sc.get("enc.last", q.shape, state), mode="clip")
+        stored = self._last.dtype  # uint16, or int32 (wide tables, or widened)
+        last = np.take(self._last, idx, axis=0, out=sc.get("enc.last", q.shape, stored), mode="clip")
         words = plan.diff_words(q != last)
         send = (words[:, 0] != 0) if plan.nwords == 1 else (words != 0).any(axis=1)
         send |= ~known
@@ -521,19 +521,19 @@ class UpdateEncoder:
                 return []
             shape = (len(sel), q.shape[1])
             q = np.take(q, sel, axis=0, out=sc.get("enc.q", shape, np.int32), mode="clip")
-            last = np.take(last, sel, axis=0, out=sc.get("enc.sent_last", shape, state), mode="clip")
+            last = np.take(last, sel, axis=0, out=sc.get("enc.sent_last", shape, stored), mode="clip")
             idx, known, words = idx[sel], known[sel], words[sel]
         changed = plan.changed(words)
         if not known.all():
             changed[~known] = True
         if self.version >= 2:
-            before = sc.get("enc.before", (len(idx), self._before.shape[1]), state)
+            before = sc.get("enc.before", (len(idx), self._before.shape[1]), stored)
             np.take(self._before, idx, axis=0, out=before, mode="clip")
             rows = predicted.encode_rows(self._plan.v2, q, last, before, known, changed, tick)
         else:
             rows = self._rows_v1(q, last, changed, known)
         payloads = self._chunks(idx, rows, tick, max_payload)
-        if state == np.uint16:  # the codes as stored (one pass), or int32 arrays for codes past 16 bits
+        if stored == np.uint16:  # the codes as stored (one pass), or int32 arrays for codes past 16 bits
             if int(np.bitwise_or.reduce(q, axis=None)) >> 16:
                 self._widen()
             else:
