@@ -33,6 +33,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,8 @@ from client_stub.link.spawn import ServerProcess, cpu_seconds, free_port
 from client_stub.loadtest.session import LoadTestConfig, run_loadtest
 from server.fabric import engine_flags
 from server.gc_freeze import freeze_loaded
+
+REPORT_S = 2.0  # the servers' status period (their CPU per tick by stage)
 
 
 def main() -> int:
@@ -77,7 +80,9 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="ttes-shards-") as tmp:
         config = Path(tmp) / "scale.toml"  # room for every soldier, one client id may own them all
         n = args.soldiers + 64
-        config.write_text(f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\nreport_interval = 2.0\n")
+        config.write_text(
+            f"max_soldiers = {n}\nmax_soldiers_per_client = {n}\nreport_interval = {REPORT_S}\n"
+        )
         common = ["--config", str(config), "--throttle", "0", *engine_flags(args.fabric)]
         common += ["--fabric-block", str(args.fabric_block)] if args.fabric_block else []
         if args.trace:
@@ -100,13 +105,22 @@ def main() -> int:
                 )
             )
             wall = time.monotonic() - t0
+            end = time.time()
+            window = (end - args.seconds, end)  # the load generator's measured seconds, just ended
             cpu = {k: round(100 * (cpu_seconds(p.pid) - cpu0[k]) / wall, 1) for k, p in procs.items()}
             stages = {k: stage_cpu(p.log_tail(1 << 24)) for k, p in procs.items()}
+            steady = {k: stage_cpu(p.log_tail(1 << 24), window=window) for k, p in procs.items()}
             deaf = {k: stage_cpu(p.log_tail(1 << 24), "loop_deaf_ms") for k, p in procs.items()}
             streams = last_field(procs["front"].log_tail(1 << 24), "fabric_blocks")
             memo = memo_counts(procs["front"].log_tail(1 << 24))
             traced = probed(time.monotonic() - args.seconds) if args.trace else {}
-    keys = ("delivered_pct", "latency_ms_p50", "latency_ms_p99", "delivery_ms_p99", "bytes_per_update")
+    keys: tuple[str, ...] = (
+        "delivered_pct",
+        "latency_ms_p50",
+        "latency_ms_p99",
+        "delivery_ms_p99",
+        "bytes_per_update",
+    )
     keys += ("all_updates_per_s", "soldiers_seen_min", "server_ticks_seen")
     keys += (
         "latency_samples",
@@ -125,6 +139,7 @@ def main() -> int:
         **{k: report.get(k) for k in keys},
         "cpu_pct": cpu,
         "cpu_ms_per_tick": stages,
+        "cpu_ms_per_tick_window": steady,  # the status lines within the measured window only
         "front_streams_heard": streams,  # (shard, block or whole) pose topics: 2 = each shard whole
         "front_encodes": memo,  # per tick between its status lines (the first left out): shared or own
         **({"loop_deaf_ms": deaf} if os.environ.get("TTES_DEAF") == "1" else {}),
@@ -214,16 +229,24 @@ def memo_counts(log: str) -> dict[str, float]:
     }
 
 
-def stage_cpu(log: str, name: str = "cpu_ms_per_tick") -> dict[str, float]:
+def stage_cpu(
+    log: str, name: str = "cpu_ms_per_tick", window: tuple[float, float] | None = None
+) -> dict[str, float]:
     """The mean of a server's ``cpu_ms_per_tick`` (``animate:3.2,merge:1.1,...``) over its status lines,
     the first (start-up, creations) left out; ``name``: another such field (``loop_deaf_ms``: with
-    ``TTES_DEAF=1`` in the environment, ``server.stage_cpu.DeafSpans``)."""
+    ``TTES_DEAF=1`` in the environment, ``server.stage_cpu.DeafSpans``). With ``window`` (epoch seconds),
+    only the lines whose span lies in it: the whole run's mean has the creation burst in it (a front-end's
+    ``requests`` 10-19 ms a tick while the clients create their soldiers, 0.5-0.7 in the steady window)."""
     rows = []
     for line in log.splitlines():
         field = next((f for f in line.split() if f.startswith(name + "=")), None)
         if "event=status" in line and field:
+            if window is not None:
+                at = datetime.fromisoformat(line.split()[0]).timestamp()
+                if not window[0] <= at - REPORT_S <= at <= window[1]:
+                    continue
             rows.append({k: float(v) for k, v in (kv.split(":") for kv in field.split("=", 1)[1].split(","))})
-    rows = rows[1:] or [{}]
+    rows = (rows if window is not None else rows[1:]) or [{}]
     keys = sorted({k for r in rows for k in r})
     return {k: round(float(np.mean([r.get(k, 0.0) for r in rows])), 2) for k in keys} | {"reports": len(rows)}
 

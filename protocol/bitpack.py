@@ -207,18 +207,19 @@ def place_groups(groups: np.ndarray, starts: np.ndarray, nwords: int) -> np.ndar
     part = sc.get("place.part", (m,), _U64)
     np.right_shift(s, 6, out=word)
     np.bitwise_and(s, 63, out=off, casting="unsafe")
-    edge = sc.get("place.edge", (m,), bool)
-    edge[0] = True
-    np.not_equal(word[1:], word[:-1], out=edge[1:])
-    first = np.flatnonzero(edge)
-    at = word[first]
     np.right_shift(gr, off, out=part)
-    words[at] = np.bitwise_or.reduceat(part, first)
+    # each word's run of groups, by its last group; the runs' parts have disjoint bits, so a run's OR is
+    # its sum, read off one running sum mod 2**64 (exact: the sum fits its word) instead of a reduceat
+    end = sc.get("place.end", (m,), bool)
+    end[-1] = True
+    np.not_equal(word[1:], word[:-1], out=end[:-1])
+    last = np.flatnonzero(end)
+    run = np.cumsum(part, out=part)[last]
+    run[1:] -= run[:-1].copy()
+    at = word[last]
+    words[at] = run
     # only a run's last group can reach into the next word: the others end where the next one starts, in
     # their word, and their bits past their width are 0 (a gather of one group a word, not a second pass)
-    last = np.empty_like(first)
-    last[:-1] = first[1:] - 1
-    last[-1] = m - 1
     words[at + 1] |= gr[last] << (_U64(64) - off[last])
     return words
 

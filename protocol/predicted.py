@@ -127,6 +127,12 @@ def state_columns(nfields: int) -> int:
     return nfields + 1
 
 
+def state_ticks(state: np.ndarray) -> np.ndarray:
+    """(n,) int32 view of a prediction state's tick column: the (n, F + 1) int32 layout's last column, or
+    the (n, F + 2) uint16 layout's last two (an encoder keeps codes of at most 16 bits as uint16)."""
+    return state[:, state.shape[1] - (4 // state.itemsize) :].view(np.int32)[:, 0]
+
+
 def tick_code(tick: int) -> np.int32:
     """A u32 tick as stored in the state's int32 tick column."""
     return np.uint32(tick & 0xFFFFFFFF).view(np.int32)
@@ -151,10 +157,10 @@ def residuals(
     q: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int, out: np.ndarray | None = None
 ) -> np.ndarray:
     """(n, F) int32: ``q`` minus the prediction, ``2 · cur − before`` for soldiers whose last update was at
-    ``tick − 1`` (mod 2³²), else ``cur``."""
+    ``tick − 1`` (mod 2³²), else ``cur``. ``cur`` and ``state`` may be uint16 (:func:`state_ticks`)."""
     nf = q.shape[1]
-    resid = np.subtract(q, cur, out=out)
-    predicts = state[:, nf] == tick_code(tick - 1)
+    resid = np.subtract(q, cur, out=out, dtype=np.int32)
+    predicts = state_ticks(state) == tick_code(tick - 1)
     rows = np.flatnonzero(predicts)
     if 2 * len(rows) >= len(q):
         # most rows predict (every mover of a tick): dense passes, then the few that do not put back to
@@ -165,7 +171,7 @@ def residuals(
             rest = np.flatnonzero(~predicts)
             resid[rest] = q[rest] - cur[rest]
     elif len(rows):
-        resid[rows] -= cur[rows] - state[rows, :nf]
+        resid[rows] -= np.subtract(cur[rows], state[rows, :nf], dtype=np.int32)
     return resid
 
 

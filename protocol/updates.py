@@ -267,10 +267,14 @@ class UpdateEncoder:
         self.max_soldiers = max_soldiers
         self.version = _checked(version)
         nf = table.layout.nfields
-        self._hlast = Held(np.zeros((max_soldiers, nf), np.int32))
+        # codes of at most 16 bits (the usual tables) are kept as uint16: the state's rows, gathered and
+        # written for every soldier sent from arrays far larger than the caches, move half the bytes
+        narrow = int(table.layout.width.max(initial=0)) <= 16
+        dtype = np.uint16 if narrow else np.int32
+        self._hlast = Held(np.zeros((max_soldiers, nf), dtype))
         self._hknown = Held(np.zeros(max_soldiers, bool))
-        ncols = predicted.state_columns(nf) if version >= 2 else 0
-        self._hbefore = Held(np.zeros((max_soldiers if version >= 2 else 0, ncols), np.int32))  # prediction
+        ncols = (nf + 2 if narrow else predicted.state_columns(nf)) if version >= 2 else 0
+        self._hbefore = Held(np.zeros((max_soldiers if version >= 2 else 0, ncols), dtype))  # prediction
         self._tick = 0  # the tick of the last encode (version 2's join compares the state it predicts from)
         self._plan = _Plan(table)
         self.shared = shared  # the server's memo: encoders in one state share one encode per version
@@ -290,8 +294,22 @@ class UpdateEncoder:
 
     @property
     def _before(self) -> np.ndarray:
-        """Version 2: (max_soldiers, F + 1) the prediction state (``predicted.state_columns``)."""
+        """Version 2: the prediction state, ``before``'s F codes then the tick (``predicted.state_columns``:
+        (max_soldiers, F + 1) int32, or (max_soldiers, F + 2) uint16 with the tick in the last two)."""
         return self._hbefore.array
+
+    def _widen(self) -> None:
+        """Codes past 16 bits (not a quantiser's) for a uint16 state: int32 arrays from now on (the layout
+        is read off the arrays, so an encoder may adopt either)."""
+        nf = self.table.layout.nfields
+        ncols = predicted.state_columns(nf) if self._before.shape[1] else 0
+        before = np.zeros((len(self._before), ncols), np.int32)
+        if ncols:
+            before[:, :nf] = self._before[:, :nf]
+            before[:, nf] = predicted.state_ticks(self._before)
+        for h in (self._hlast, self._hbefore):
+            h.drop()
+        self._hlast, self._hbefore = Held(self._last.astype(np.int32)), Held(before)
 
     def reset(self, indices: np.ndarray | list[int] | None = None) -> None:
         """Forget what these soldiers (all if None) last sent: their next update is full."""
@@ -308,7 +326,7 @@ class UpdateEncoder:
 
     def codes(self, indices: np.ndarray) -> np.ndarray:
         """The quantised field values (n, F) this client last received for these soldiers."""
-        return self._last[np.asarray(indices, np.int64)].copy()
+        return self._last[np.asarray(indices, np.int64)].astype(np.int32)
 
     def encode(self, updates: JointUpdates, max_payload: int) -> list[bytes]:
         """JOINT_UPDATES payloads (each <= ``max_payload`` bytes) carrying what changed; [] if nothing did.
@@ -471,9 +489,12 @@ class UpdateEncoder:
         """Version 2: both predict alike from now on. Only soldiers updated at this tick may predict from
         ``before`` at the next; every other soldier's ``before`` is never used again."""
         now = predicted.tick_code(self._tick)
-        mine = self._known & (self._before[:, -1] == now)
-        theirs = first._known & (first._before[:, -1] == now)
-        return np.array_equal(mine, theirs) and np.array_equal(self._before[mine], first._before[theirs])
+        nf = self.table.layout.nfields
+        mine = self._known & (predicted.state_ticks(self._before) == now)
+        theirs = first._known & (predicted.state_ticks(first._before) == now)
+        return np.array_equal(mine, theirs) and np.array_equal(
+            self._before[mine, :nf], first._before[theirs, :nf]
+        )
 
     def _adopt(self, last: Held, known: Held, before: Held) -> None:
         """Share another encoder's state arrays (equal content) instead of keeping our own."""
@@ -488,7 +509,8 @@ class UpdateEncoder:
         self._tick = tick
         known = self._known[idx]
         sc = scratch()  # gathers into reused buffers (idx is checked: clip gathers unbuffered)
-        last = np.take(self._last, idx, axis=0, out=sc.get("enc.last", q.shape, np.int32), mode="clip")
+        stored = self._last.dtype  # uint16, or int32 (wide tables, or widened)
+        last = np.take(self._last, idx, axis=0, out=sc.get("enc.last", q.shape, stored), mode="clip")
         words = plan.diff_words(q != last)
         send = (words[:, 0] != 0) if plan.nwords == 1 else (words != 0).any(axis=1)
         send |= ~known
@@ -499,18 +521,25 @@ class UpdateEncoder:
                 return []
             shape = (len(sel), q.shape[1])
             q = np.take(q, sel, axis=0, out=sc.get("enc.q", shape, np.int32), mode="clip")
-            last = np.take(last, sel, axis=0, out=sc.get("enc.sent_last", shape, np.int32), mode="clip")
+            last = np.take(last, sel, axis=0, out=sc.get("enc.sent_last", shape, stored), mode="clip")
             idx, known, words = idx[sel], known[sel], words[sel]
         changed = plan.changed(words)
         if not known.all():
             changed[~known] = True
         if self.version >= 2:
-            before = sc.get("enc.before", (len(idx), self._before.shape[1]), np.int32)
+            before = sc.get("enc.before", (len(idx), self._before.shape[1]), stored)
             np.take(self._before, idx, axis=0, out=before, mode="clip")
             rows = predicted.encode_rows(self._plan.v2, q, last, before, known, changed, tick)
         else:
             rows = self._rows_v1(q, last, changed, known)
         payloads = self._chunks(idx, rows, tick, max_payload)
+        if stored == np.uint16:  # the codes as stored (one pass), or int32 arrays for codes past 16 bits
+            if int(np.bitwise_or.reduce(q, axis=None)) >> 16:
+                self._widen()
+            else:
+                q16 = sc.get("enc.q16", q.shape, np.uint16)
+                np.copyto(q16, q, casting="unsafe")
+                q = q16
         self._hlast, self._hknown = self._hlast.writable(), self._hknown.writable()
         set_rows(self._last, idx, q)
         self._known[idx] = True
@@ -525,8 +554,8 @@ class UpdateEncoder:
         until now (or, for an entry sent absolute, the code sent), at ``tick``."""
         nf = last.shape[1]
         before = self._before
-        set_rows(before[:, :nf], idx, last)
-        before[idx, nf] = predicted.tick_code(tick)
+        set_rows(before[:, :nf], idx, last.astype(before.dtype, copy=False))
+        predicted.state_ticks(before)[idx] = predicted.tick_code(tick)
         if len(rows.restart_rows):
             set_rows(before[:, :nf], idx[rows.restart_rows], rows.restart)
 

@@ -6,6 +6,7 @@ state, shared memo) is inherited from :class:`protocol.updates.UpdateEncoder`.""
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -157,6 +158,10 @@ class ReferenceEncoder(UpdateEncoder):
     stand in another frozen version-2 row encoder (``v2_reference``: the one before issue 18's rewrite)."""
 
     rows_v2: _RowsV2 | None = None
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._widen()  # the frozen code's int32 state (the encoder keeps 16-bit codes as uint16)
 
     def _encode_sorted(self, idx: np.ndarray, q: np.ndarray, tick: int, max_payload: int) -> list[bytes]:
         plan = self._plan

@@ -69,7 +69,9 @@ def same_stream(
         assert np.array_equal(new._known, ref._known)
         assert np.array_equal(new._last[new._known], ref._last[ref._known])
         if version >= 2:
-            assert np.array_equal(new._before, ref._before)
+            nf = lay.nfields  # the same prediction (the encoder keeps it as uint16, the reference int32)
+            assert np.array_equal(new._before[:, :nf], ref._before[:, :nf])
+            assert np.array_equal(predicted.state_ticks(new._before), predicted.state_ticks(ref._before))
         for f in frames:
             assert len(f) <= max_payload
             dec.decode(f)
@@ -126,6 +128,28 @@ def test_nothing_changed_sends_nothing(version: int) -> None:
     idx = np.arange(8)
     assert new.encode_codes(idx, codes, 5, 1 << 16) == ref.encode_codes(idx, codes, 5, 1 << 16)
     assert new.encode_codes(idx, codes, 6, 1 << 16) == ref.encode_codes(idx, codes, 6, 1 << 16) == []
+
+
+@pytest.mark.parametrize("version", [1, 2])
+def test_codes_past_16_bits_widen_the_state_and_keep_the_frozen_bytes(version: int) -> None:
+    """The encoder keeps a table of 16-bit fields' codes as uint16; codes no quantiser makes (past 16 bits,
+    negative) turn its state to int32 first, so every frame stays the frozen encoder's."""
+    rng = np.random.default_rng(7)
+    new, ref = UpdateEncoder(DI, 40, version=version), ReferenceEncoder(DI, 40, version=version)
+    assert new._last.dtype == np.uint16
+    codes = rng.integers(0, 4000, (40, DI.layout.nfields)).astype(np.int32)
+    codes[:, DI.layout.qidx_fields] = 0
+    idx = np.arange(40)
+    for tick in range(5, 10):
+        codes += rng.integers(-3, 4, codes.shape).astype(np.int32) * (codes > 8)
+        codes[:, DI.layout.qidx_fields] = 0
+        if tick == 7:
+            codes[3, 5], codes[9, 2] = 70_000, -5
+        assert new.encode_codes(idx, codes, tick, 1 << 16) == ref.encode_codes(idx, codes, tick, 1 << 16)
+    assert new._last.dtype == np.int32
+    assert np.array_equal(new._last, ref._last)
+    if version >= 2:
+        assert np.array_equal(new._before, ref._before)
 
 
 @settings(max_examples=30, deadline=None)
