@@ -334,14 +334,15 @@ class Turning(ManagerCore):
             return self._nearest_turn(want, clips)
         return min(fits, key=lambda c: rest(c) / float(self.library.travel.stances[c[0]]))
 
-    def _turn_end(self, i: int, t: float) -> None:
-        """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading."""
+    def _turn_end(self, i: int, t: float, folded: bool = False) -> None:
+        """The turn's own move (``end_offset``) joins the root offset; the figure rests in its new heading
+        (``folded``: its pivot bit and fold were done with a group's, ``Events._fold_arc_ends``)."""
         tb, lib = self.table, self.library
         if tb.pivot_rest[i] != 0.0:  # the pivot's last bit of turn, about where the figure ends
             root_motion.pivot(tb, lib, np.array([i], np.int64), t)
             tb.pivot_rest[i] = 0.0
         clip = int(tb.clip[i])
-        self._rest(i, int(tb.node[i]), t)
+        self._rest(i, int(tb.node[i]), t, folded=folded)
         self._turned(i, clip)
 
     def _turned(self, i: int, clip: int) -> None:
