@@ -169,9 +169,9 @@ class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
         if turns.any():
             standing = np.flatnonzero(turns & (kind == 0))
             turns[standing] = self._turns(idx[standing], t[standing])
-            for k in np.flatnonzero(turns & (kind != 0)).tolist():
-                # a pivot stops, turns, then (its end decides again) walks away
-                turns[k] = self._turn(int(idx[k]), float(t[k]), moving=True)
+            pivots = np.flatnonzero(turns & (kind != 0))
+            if len(pivots):  # a pivot stops, turns, then (its end decides again) walks away
+                turns[pivots] = self._turn_many(idx[pivots], t[pivots], moving=True)
             idx, t, kind = idx[~turns], t[~turns], kind[~turns]
         node = tb.node[idx]
         still = idx[(kind == 0) & (node != self._home) & ~self.library.faces_world[node]]
