@@ -251,11 +251,14 @@ class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
         speed = tb.speed[idx]
         st = self._settings
         hysteresis = min(st.walk_run_hysteresis, 0.5 * st.walk_run_threshold)
+        known = root_motion.offsets(tb, self.library, idx, t)  # (the steps that go on fold with these)
+        fast = is_fast(tb.loco[idx], speed, st.walk_run_threshold, hysteresis)
+        fast |= self._far_behind(idx, known.off)
         cond = conditions(
             tb.loco[idx],
             (speed > MOVING_EPS) & ~tb.reversing[idx],  # a reversing soldier stops first
             tb.backward[idx],
-            is_fast(tb.loco[idx], speed, st.walk_run_threshold, hysteresis) | self._far_behind(idx, t),
+            fast,
             self.library.can_run,
             tb.side[idx],
         )
@@ -267,7 +270,7 @@ class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
             nxt = np.where(wrong_foot, _GAIT_STAY[nxt], nxt)
         done = nxt == _NONE
         cont = ~done
-        self._enter_states(idx[cont], nxt[cont], t[cont])
+        self._enter_states(idx[cont], nxt[cont], t[cont], known=known.take(np.flatnonzero(cont)))
         if done.any():  # stopped: at rest, then what the last request asks for
             stopped = idx[done]
             tb.mode[stopped] = _IDLE
