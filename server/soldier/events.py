@@ -242,8 +242,14 @@ class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
         if len(idx) >= self._group_min:
             self._enter_states(idx, states, t, exact=True)
             return
-        for i, state, ti in zip(idx.tolist(), states.tolist(), t.tolist(), strict=True):
-            self._enter_one(i, state, ti)
+        # one by one, but the turned figures' folds at once (each a vectorised fold: ~100 µs of numpy calls)
+        turned = (tb.root_yaw[idx] != 0.0) | (tb.pivot_rest[idx] != 0.0)
+        if np.count_nonzero(turned) < 2:
+            turned[:] = False
+        root_motion.fold(tb, self.library, idx[turned], t[turned])  # (what fold1 does with a turned one)
+        rows = zip(idx.tolist(), states.tolist(), t.tolist(), turned.tolist(), strict=True)
+        for i, state, ti, folded in rows:
+            self._enter_one(i, state, ti, folded=folded)
 
     def _loco_ended(self, idx: np.ndarray) -> None:
         tb = self.table
