@@ -148,6 +148,8 @@ class ManagerCore:
     """What every part of the soldier manager shares: the table, the library, the settings, the lookups."""
 
     _group_min = GROUP_MIN  # (tests set it per manager: 1 always grouped, a large one always one by one)
+    # fold the root offsets of an event's soldiers at once (False, the tests' reference: each on its own)
+    _fold_groups = True
 
     def __init__(
         self,

@@ -244,7 +244,7 @@ class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
             return
         # one by one, but the turned figures' folds at once (each a vectorised fold: ~100 µs of numpy calls)
         turned = (tb.root_yaw[idx] != 0.0) | (tb.pivot_rest[idx] != 0.0)
-        if np.count_nonzero(turned) < 2:
+        if np.count_nonzero(turned) < 2 or not self._fold_groups:
             turned[:] = False
         root_motion.fold(tb, self.library, idx[turned], t[turned])  # (what fold1 does with a turned one)
         rows = zip(idx.tolist(), states.tolist(), t.tolist(), turned.tolist(), strict=True)
@@ -276,7 +276,8 @@ class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
             nxt = np.where(wrong_foot, _GAIT_STAY[nxt], nxt)
         done = nxt == _NONE
         cont = ~done
-        self._enter_states(idx[cont], nxt[cont], t[cont], known=known.take(np.flatnonzero(cont)))
+        known_cont = known.take(np.flatnonzero(cont)) if self._fold_groups else None
+        self._enter_states(idx[cont], nxt[cont], t[cont], known=known_cont)
         if done.any():  # stopped: at rest, then what the last request asks for
             stopped = idx[done]
             tb.mode[stopped] = _IDLE
@@ -359,11 +360,13 @@ class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
                 self._loco_ended(stepping)
             transition = cand[mode == _TRANSITION]
             ends = tb.end[transition].copy()
-            self._fold_arc_ends(transition, ends)
+            folded = self._fold_groups
+            if folded:
+                self._fold_arc_ends(transition, ends)
             rest = [
                 k
                 for k, i in enumerate(transition.tolist())
-                if self._transition_end(i, float(ends[k]), folded=True)
+                if self._transition_end(i, float(ends[k]), folded=folded)
             ]
             if rest:
                 self._paths_ended(transition[rest], ends[rest])

@@ -149,6 +149,9 @@ class Turning(ManagerCore):
         """:meth:`_turn` of soldiers ``idx`` at times ``t``, one by one but their folds at once
         (:func:`root_motion.fold_exact`, bit for bit: a turned figure's fold of one row was ~100 µs of numpy
         calls, a group's costs about as much); which of them turn."""
+        if not self._fold_groups:
+            pairs = zip(idx.tolist(), t.tolist(), strict=True)
+            return np.array([self._turn(i, ti, moving) for i, ti in pairs], bool)
         plans = [self._turn_plan(i, moving) for i in idx.tolist()]
         go = [k for k, plan in enumerate(plans) if plan is not None]
         if go:
