@@ -415,14 +415,18 @@ def fold(
         dt = np.maximum(np.broadcast_to(np.asarray(t, np.float64), idx.shape)[j] - tb.root_t[ti], 0.0)
         rate = TURN_RATE * np.maximum(1.0, np.abs(yj) / 90.0)  # a reversal turns faster (it walks away)
         rate = np.where(tb.mode[ti] == STEPPING[1], CRAWL_TURN_RATE, rate)
-        clip = tb.clip[ti]
-        was = lib.travel.turn_at(clip, frame_at(tb, lib, ti, tb.root_t[ti]))
-        free = np.minimum(np.abs(lib.travel.turn_at(clip, fj) - was), STEP_TURN_RATE * dt)
+        clip, n = tb.clip[ti], len(j)
+        # the turn allowed by the frames then and now, in one lerp (each row's own: the same values)
+        turn = lib.travel.turn_at(
+            np.concatenate([clip, clip]), np.concatenate([frame_at(tb, lib, ti, tb.root_t[ti]), fj])
+        )
+        free = np.minimum(np.abs(turn[n:] - turn[:n]), STEP_TURN_RATE * dt)
         step = np.where(lib.travel.paced[clip], free, rate * dt)
         new = yj - np.minimum(np.maximum(yj - steer(tb, lib, ti, oj), -step), step)
         contact = lib.travel.contact_at(clip, fj)
-        # about the sole point carrying the weight
-        set_rows(off, j, oj + yawed(contact, yj) - yawed(contact, new))
+        # about the sole point carrying the weight (its old and new yaw in one call)
+        both = yawed(np.concatenate([contact, contact]), np.concatenate([yj, new]))
+        set_rows(off, j, oj + both[:n] - both[n:])
         tb.root_yaw[ti] = new
     set_rows(tb.root_off, idx, off)
     tb.root_t[idx] = t
