@@ -148,6 +148,8 @@ class ManagerCore:
     """What every part of the soldier manager shares: the table, the library, the settings, the lookups."""
 
     _group_min = GROUP_MIN  # (tests set it per manager: 1 always grouped, a large one always one by one)
+    # fold the root offsets of an event's soldiers at once (False, the tests' reference: each on its own)
+    _fold_groups = True
 
     def __init__(
         self,
@@ -233,9 +235,12 @@ class ManagerCore:
                     travel[end] if end >= 0 and NEXT[state, Cond.STOP] else 0.0
                 )
 
-    def _play_step(self, i: int, step: PathStep, t: float) -> None:
+    def _play_step(self, i: int, step: PathStep, t: float, folded: bool = False) -> None:
+        """Soldier ``i`` plays arc ``step`` from ``t`` (``folded``: his root offset is already folded to
+        ``t``, with a group's, :func:`root_motion.fold_exact`)."""
         tb = self.table
-        root_motion.fold1(tb, self.library, i, t)
+        if not folded:
+            root_motion.fold1(tb, self.library, i, t)
         tb.stride[i] = 1.0
         tb.pivot_rest[i] = 0.0  # (a reversal's pivot sets its own after this)
         tb.clip[i] = step.clip
@@ -264,10 +269,12 @@ class ManagerCore:
             for i, ti in zip(idx.tolist(), t.tolist(), strict=True):
                 self._record(i, ti)
 
-    def _rest(self, i: int, node: int, t: float) -> None:
-        """Show posture ``node``'s pose: its clip held at the frame that is that posture."""
+    def _rest(self, i: int, node: int, t: float, folded: bool = False) -> None:
+        """Show posture ``node``'s pose: its clip held at the frame that is that posture (``folded``: as
+        :meth:`_play_step`)."""
         tb, lib = self.table, self.library
-        root_motion.fold1(tb, lib, i, t)  # the offset stays where the last step left it (feet planted)
+        if not folded:
+            root_motion.fold1(tb, lib, i, t)  # the offset stays where the last step left it (feet planted)
         tb.node[i] = node
         self._hold_rest(i, node, t)
         root_motion.rebase1(tb, lib, i)

@@ -14,7 +14,7 @@ X and Z (horizontal, centimetres) are kept.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -363,21 +363,48 @@ def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
     return out
 
 
-def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> None:
+class Offsets(NamedTuple):
+    """What :func:`fold` computes first of soldiers at a time: the frames shown, their clips' travel there,
+    and the root offsets (:func:`offset_at`); a caller that needs the offsets hands them on to the fold."""
+
+    frames: np.ndarray
+    travel: np.ndarray
+    off: np.ndarray
+
+    def take(self, rows: np.ndarray) -> Offsets:
+        """These of ``rows`` (an index array of positions in them)."""
+        return Offsets(self.frames[rows], np.take(self.travel, rows, axis=0), np.take(self.off, rows, axis=0))
+
+
+def offsets(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | float) -> Offsets:
+    """:class:`Offsets` of soldiers ``idx`` at ``t``, as :func:`fold` computes them."""
+    frames = frame_at(tb, lib, idx, t)
+    travel_now = lib.travel.at(tb.clip[idx], frames)
+    return Offsets(frames, travel_now, offset_at(tb, lib, idx, t, frames, travel_now))
+
+
+def fold(
+    tb: SoldierTable,
+    lib: MotionLibrary,
+    idx: np.ndarray,
+    t: np.ndarray | float,
+    known: Offsets | None = None,
+) -> None:
     """Bring the offsets up to ``t``: before a clip, the velocity or the stride scale changes, and while a
     stepping figure turns towards the heading (:func:`steer`), about the sole point carrying its weight: a
     walking or running one by what :func:`step_turns` allows between the frames shown then and now (at most
     STEP_TURN_RATE), a crawling one at TURN_RATE. A pivot's extra turn (:func:`pivot`) comes first: a request
     mid-pivot folds to its time, and the share turned since the last update was lost (issue 16: asked to
-    kneel mid-pivot at 10 Hz he knelt 5.6° off his heading, then snapped to it)."""
+    kneel mid-pivot at 10 Hz he knelt 5.6° off his heading, then snapped to it). ``known``: :func:`offsets`
+    of these soldiers at ``t``, computed since their rows last changed (not computed twice; a pivot's rows
+    change first, so with one among them they are)."""
     if len(idx) == 0:
         return
     p = np.flatnonzero(tb.pivot_rest[idx] != 0.0)
     if len(p):
         pivot(tb, lib, idx[p], np.broadcast_to(np.asarray(t, np.float64), idx.shape)[p])
-    frames = frame_at(tb, lib, idx, t)
-    travel_now = lib.travel.at(tb.clip[idx], frames)
-    off = offset_at(tb, lib, idx, t, frames, travel_now)
+        known = None
+    frames, travel_now, off = known if known is not None else offsets(tb, lib, idx, t)
     yaw = tb.root_yaw[idx]
     mode = tb.mode[idx]
     turning = (yaw != 0.0) & ((mode == STEPPING[0]) | (mode == STEPPING[1]))
@@ -388,14 +415,18 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         dt = np.maximum(np.broadcast_to(np.asarray(t, np.float64), idx.shape)[j] - tb.root_t[ti], 0.0)
         rate = TURN_RATE * np.maximum(1.0, np.abs(yj) / 90.0)  # a reversal turns faster (it walks away)
         rate = np.where(tb.mode[ti] == STEPPING[1], CRAWL_TURN_RATE, rate)
-        clip = tb.clip[ti]
-        was = lib.travel.turn_at(clip, frame_at(tb, lib, ti, tb.root_t[ti]))
-        free = np.minimum(np.abs(lib.travel.turn_at(clip, fj) - was), STEP_TURN_RATE * dt)
+        clip, n = tb.clip[ti], len(j)
+        # the turn allowed by the frames then and now, in one lerp (each row's own: the same values)
+        turn = lib.travel.turn_at(
+            np.concatenate([clip, clip]), np.concatenate([frame_at(tb, lib, ti, tb.root_t[ti]), fj])
+        )
+        free = np.minimum(np.abs(turn[n:] - turn[:n]), STEP_TURN_RATE * dt)
         step = np.where(lib.travel.paced[clip], free, rate * dt)
         new = yj - np.minimum(np.maximum(yj - steer(tb, lib, ti, oj), -step), step)
         contact = lib.travel.contact_at(clip, fj)
-        # about the sole point carrying the weight
-        set_rows(off, j, oj + yawed(contact, yj) - yawed(contact, new))
+        # about the sole point carrying the weight (its old and new yaw in one call)
+        both = yawed(np.concatenate([contact, contact]), np.concatenate([yj, new]))
+        set_rows(off, j, oj + both[:n] - both[n:])
         tb.root_yaw[ti] = new
     set_rows(tb.root_off, idx, off)
     tb.root_t[idx] = t

@@ -97,20 +97,28 @@ class Stepping(ManagerCore):
         v = self.table.vlocal[idx]
         return np.einsum("ij,ij->i", off, v) / np.maximum(np.hypot(v[:, 0], v[:, 1]), 1e-9)
 
-    def _far_behind(self, idx: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """Whether walking (running) soldiers ``idx`` are so far behind their entity at ``t`` that their
-        figure jogs to catch up (goes on jogging): CATCH_UP_RUN_CM behind their stop lag."""
+    def _far_behind(self, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
+        """Whether walking (running) soldiers ``idx`` are so far behind their entity, root offsets ``off``,
+        that their figure jogs to catch up (goes on jogging): CATCH_UP_RUN_CM behind their stop lag."""
         tb, lib = self.table, self.library
         st = tb.loco[idx].astype(np.int64)
-        along = self._along(idx, root_motion.offset_at(tb, lib, idx, t))
+        along = self._along(idx, off)
         behind = -(along + self._stop_lag[st])
         limit = np.where(IS_RUN[st], CATCH_UP_RUN_CM[1], CATCH_UP_RUN_CM[0])
         return (IS_WALK[st] | IS_RUN[st]) & ~IS_BACKWARD[st] & (behind > limit) & lib.can_run
 
-    def _enter_states(self, idx: np.ndarray, states: np.ndarray, t: np.ndarray, exact: bool = False) -> None:
+    def _enter_states(
+        self,
+        idx: np.ndarray,
+        states: np.ndarray,
+        t: np.ndarray,
+        exact: bool = False,
+        known: root_motion.Offsets | None = None,
+    ) -> None:
         """Start the clips of Figure-5 ``states`` at times ``t`` (the next step uses the other foot).
         ``exact``: the root offsets folded and rebased as :meth:`_enter_one` does (:func:`root_motion.fold1`,
-        bit for bit): a group's starts from rest."""
+        bit for bit): a group's starts from rest. ``known``: for the fold (not ``exact``), as
+        :func:`root_motion.fold`'s."""
         if len(idx) == 0:
             return
         tb, lib = self.table, self.library
@@ -119,7 +127,10 @@ class Stepping(ManagerCore):
         clip = lib.loco_clip[st, foot]
         direc = lib.loco_dir[st].astype(np.int8)
         direc = np.where((st == _CRAWL_CYCLE) & tb.backward[idx], -direc, direc)
-        (root_motion.fold_exact if exact else root_motion.fold)(tb, lib, idx, t)
+        if exact:
+            root_motion.fold_exact(tb, lib, idx, t)
+        else:
+            root_motion.fold(tb, lib, idx, t, known)
         dur, tb.stride[idx] = self._step_duration(idx, clip, st)
         tb.loco[idx] = st
         tb.foot[idx] = foot
@@ -133,15 +144,17 @@ class Stepping(ManagerCore):
             for k in range(len(idx)):
                 self._record(int(idx[k]), float(t[k]))
 
-    def _enter_one(self, i: int, state: int, t: float) -> None:
-        """:meth:`_enter_states` for one soldier in scalar Python (a small group's starts: ~10x cheaper)."""
+    def _enter_one(self, i: int, state: int, t: float, folded: bool = False) -> None:
+        """:meth:`_enter_states` for one soldier in scalar Python (a small group's starts: ~10x cheaper;
+        ``folded``: his root offset is already folded to ``t``, with a group's)."""
         tb, lib = self.table, self.library
         foot = 1 - int(tb.foot[i])
         clip = int(lib.loco_clip[state, foot])
         direc = int(lib.loco_dir[state])
         if state == _CRAWL_CYCLE and tb.backward[i]:
             direc = -direc
-        root_motion.fold1(tb, lib, i, t)
+        if not folded:
+            root_motion.fold1(tb, lib, i, t)
         if _SCALED[state]:  # a side-step: the vectorised pacing
             durs, strides = self._step_duration(np.array([i], np.int64), np.array([clip]), np.array([state]))
             dur, tb.stride[i] = float(durs[0]), strides[0]
