@@ -253,6 +253,7 @@ def slave_one(
         feet_held=bool(spec and spec.slave_feet_held),
         slide_cm=spec.slave_rest_slide_cm if spec else None,
         arms_held=bool(spec and spec.slave_arms_held),
+        heels_cm=spec.slave_heels_cm if spec else None,
     )
     rests: tuple[Callable[[Channelset, Channelset, FigureSet], object], ...] = (
         rest_slave_knees,

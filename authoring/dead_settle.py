@@ -501,10 +501,11 @@ def settle(
 ) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
     with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
-    (:mod:`authoring.dead_prone`); a body on its back (``arms_fall``) lets its arms fall as it lands
-    (:func:`_arms_fall`). A face-down body's legs are laid as it lands (:func:`_legs_land`); ``legs`` False:
-    they stay as the physics laid them (``DeathSpec.legs_settle``); ``arms_headward_cm``: how far a fallen
-    arm may reach past the shoulders toward the head (``DeathSpec.arms_headward_cm``; None: anywhere)."""
+    (:mod:`authoring.dead_prone`; :func:`lowered_early`: as he is hit); a body on its back (``arms_fall``)
+    lets its arms fall as it lands (:func:`_arms_fall`). A face-down body's legs are laid as it lands
+    (:func:`_legs_land`); ``legs`` False: they stay as the physics laid them (``DeathSpec.legs_settle``);
+    ``arms_headward_cm``: how far a fallen arm may reach past the shoulders toward the head
+    (``DeathSpec.arms_headward_cm``; None: anywhere)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
     lowered = _lowered(figs, frames, slack_feet) if propped else None
     if lowered is not None:
@@ -604,12 +605,17 @@ def _arms_fall(figs: FigureSet, frames: ClipFrames, headward_cm: float | None = 
     return ClipFrames(poses, out.roots, out.rifles, out.fps)
 
 
-def _lowered(figs: FigureSet, frames: ClipFrames, slack_feet: bool = False) -> np.ndarray | None:
-    """The settle poses of a face-down body left propped on its arms (:mod:`authoring.dead_prone`), then
-    still; None if it is not."""
+def _lowered(
+    figs: FigureSet,
+    frames: ClipFrames,
+    slack_feet: bool = False,
+    at: int = -1,
+) -> np.ndarray | None:
+    """The settle poses of a face-down body left propped on its arms (:mod:`authoring.dead_prone`) from
+    its frame ``at`` (the rifle where it finally lies), then still; None if it is not."""
     from authoring import dead_prone
 
-    q, root = frames.poses[-1], frames.roots[-1]
+    q, root = frames.poses[at], frames.roots[at]
     body = _Body(figs, q, root, frames.rifles[-1])
     if not _face_down(body.kin, q, root):
         return None
@@ -629,5 +635,33 @@ def _appended(frames: ClipFrames, poses: np.ndarray) -> ClipFrames:
         np.concatenate([frames.poses, poses]),
         np.concatenate([frames.roots, np.repeat(frames.roots[-1:], k, axis=0)]),
         np.concatenate([frames.rifles, np.repeat(frames.rifles[-1:], k, axis=0)]),
+        frames.fps,
+    )
+
+
+def lowered_early(
+    frames: ClipFrames, soldier: Figure, rifle: Figure, k0: int, slack_feet: bool = False
+) -> ClipFrames:
+    """A propped face-down body's chest brought down (as :func:`settle` does) from frame ``k0`` of the
+    physics ``frames`` on (:func:`_cut_short`); unchanged if not face down."""
+    figs = FigureSet({"body": soldier, "rifle": rifle})
+    end = k0 + 1 + round((SETTLE_SECONDS + STILL_SECONDS) * frames.fps)  # the rifle too lies still from then
+    # (prstow2dead's, rocking on the ground until 2.9 s: the pins eased a still arm back as the clip ended)
+    frames = ClipFrames(frames.poses[:end], frames.roots[:end], frames.rifles[:end], frames.fps)
+    lowered = _lowered(figs, frames, slack_feet, k0)
+    return frames if lowered is None else _cut_short(frames, lowered, k0)
+
+
+def _cut_short(frames: ClipFrames, poses: np.ndarray, k0: int) -> ClipFrames:
+    """The body of ``frames`` to frame ``k0``, then the settle ``poses`` found there, the root held; the
+    rifle as the physics has it, then where it lies; as long as the longer. A prone death's physics leaves
+    him propped on his elbows until the body and the rifle are still (prstow2dead: 2.9 s, the let-go rifle
+    rocking on the ground): his chest comes down as he is hit instead."""
+    m = max(k0 + 1 + len(poses), len(frames.poses))
+    body = np.concatenate([frames.poses[: k0 + 1], poses])
+    return ClipFrames(
+        np.concatenate([body, np.repeat(body[-1:], m - len(body), axis=0)]),
+        np.concatenate([frames.roots[: k0 + 1], np.repeat(frames.roots[k0 : k0 + 1], m - k0 - 1, axis=0)]),
+        np.concatenate([frames.rifles, np.repeat(frames.rifles[-1:], m - len(frames.rifles), axis=0)]),
         frames.fps,
     )

@@ -130,6 +130,23 @@ class DeathSpec:
     # frame it last moved (authoring.rifle_settle): the settle laid prstow/prfire's arms down from under it
     # and left it standing on its magazine or muzzle, butt 19-36 cm up
     rifle_resettle: bool = False
+    # s: a propped death's chest comes down from this time of the physics on, over its tail (its own motion
+    # fading out, authoring.dead_settle._overlapped), not after it (None): the physics left prstow2dead and
+    # prfire2dead propped on their elbows, head 30 cm up, until 3.1 and 1.4 s (the check's propped_s)
+    lowered_at: float | None = None
+    # the slaves' trunk settles onto the ground (slave_ground.rest_limbs) only once the master's arms and
+    # head lie still too: lowered as his chest came down (lowered_at), prstow2dead's DI and M16 slaves swept
+    # their right forearm 4.0 / 7.0 cm along the ground as it swung out
+    slave_settle_arms_still: bool = False
+    # cm: the slaves' trunk rest (slave_rest) brings their heels down to this however high they lay (None:
+    # never higher than the check's 15 or where they lay): prstow2dead's DI, its toes laid on the ground
+    # where the master's are, lay with its left heel 15.85 cm up
+    slave_heels_cm: float | None = None
+    # frames: the slaves' held rifle slides out of their body (slave_contacts._settle_rifle) until this many
+    # frames past the release, fading out there, as the dropped rifle's clearing fades in (slave_ground
+    # .clear_rifle): faded out before the release, prfire2dead's DI right upper arm lay 1.04 cm in the stock
+    # at the release frame (13)
+    slave_rifle_slid_past: int = 0
 
 
 def _prone(
@@ -222,6 +239,17 @@ KSTOW_LEGS_EASED = 1.5
 # pelvis lay 10.4 cm up; flung forward, right or up (10-200 N) or let go at 0.3-0.45 s, the thigh skidded
 # 3.6-5.8 cm, a foot rose 22-32 cm or the rifle lay under him (each was measured)
 STSTOW_DROP = (20.0, 0.0, -90.0)
+# s: the prone deaths' chest comes down from this time of the physics on (DeathSpec.lowered_at), as the hit
+# (0-0.55 s) ends: after the physics, they lay propped on their elbows, head 30 cm up, until 3.4 / 1.7 s
+# (the check's propped_s); prfire2dead, from 0.35 s (0.4), lifted off a right forearm still sliding under
+# him: it slid 5.1 (3.4) cm; from 0.45 s over a shorter settle (0.6, 0.7 s) his right hand swung up 3.9 (3.2)
+# cm after his trunk was down (rest_rise)
+PRONE_LOWERED_AT = 0.45
+# cm: prstow2dead's slaves' heels at rest (DeathSpec.slave_heels_cm; the check's rest_foot limit 15)
+PRSTOW_SLAVE_HEELS = 14.0
+# frames: prfire2dead's slaves' held rifle slides out of the body until this far past the release
+# (DeathSpec.slave_rifle_slid_past)
+PRFIRE_RIFLE_SLID_PAST = 2
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "ststow2dead",
@@ -293,6 +321,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_head_held=PRSTOW_HEAD_HELD,
         prone_legs_roll=True,
         rifle_resettle=True,
+        lowered_at=PRONE_LOWERED_AT,
+        slave_settle_arms_still=True,
+        slave_heels_cm=PRSTOW_SLAVE_HEELS,
     ),
     # not eased: see PRONE_START_EASE
     replace(
@@ -300,6 +331,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_arms_held=True,
         prone_legs_roll=True,
         rifle_resettle=True,
+        lowered_at=PRONE_LOWERED_AT,
+        slave_settle_arms_still=True,
+        slave_rifle_slid_past=PRFIRE_RIFLE_SLID_PAST,
     ),
     CRAWL_DEATH,
 )

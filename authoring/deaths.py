@@ -50,7 +50,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
 6. **a face-down body goes limp**: a short kinematic settle drops the head and turns the legs out (heels
    lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
    left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
-   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`), a crawler's pelvis and
+   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`; the prone deaths from
+   :attr:`DeathSpec.lowered_at` on, as the hit ends, the physics' tail left out but the rifle's: after it,
+   they lay propped on their elbows, head up, until 3.4 and 1.7 s), a crawler's pelvis and
    belly first, turned down about his thighs (:attr:`DeathSpec.sunk`, :mod:`authoring.dead_crawl`), and its
    feet go slack, the ankles pointing into their passive range before the legs roll, the shins on the
    ground (:attr:`DeathSpec.slack_feet`: he lay on his toes, heels 16-21 cm up); a
@@ -518,18 +520,21 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         frames = dead_crawl.sunk(FigureSet({"body": soldier, "rifle": rifle}), frames)
     if spec.slack_feet:  # settled and pinned past a live soldier's ankles (authoring.passive_range)
         soldier = passive_figure(soldier)
-    physics = len(frames.poses)
-    # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
-    frames = dead_settle.settle(
-        frames,
-        soldier,
-        rifle,
-        spec.arms_fall,
-        spec.propped,
-        legs=spec.legs_settle,
-        slack_feet=spec.slack_feet,
-        arms_headward_cm=spec.arms_headward_cm,
-    )
+    settled_from = len(frames.poses) - 1  # the frame the settle starts after
+    if spec.lowered_at is not None:  # the chest comes down as he is hit, not after the physics
+        settled_from = round(spec.lowered_at * frames.fps)
+        frames = dead_settle.lowered_early(frames, soldier, rifle, settled_from, spec.slack_feet)
+    else:  # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
+        frames = dead_settle.settle(
+            frames,
+            soldier,
+            rifle,
+            spec.arms_fall,
+            spec.propped,
+            legs=spec.legs_settle,
+            slack_feet=spec.slack_feet,
+            arms_headward_cm=spec.arms_headward_cm,
+        )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:
@@ -539,4 +544,4 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         return held
     figs = FigureSet({"body": soldier, "rifle": rifle})  # the legs roll out over the settle, on the pins
     rest = dead_settle._rest_frame(figs, held, DOWN_CM)
-    return prone_roll.rolled(figs, held, physics - 1, rest, round(dead_settle.STILL_SECONDS * held.fps))
+    return prone_roll.rolled(figs, held, settled_from, rest, round(dead_settle.STILL_SECONDS * held.fps))

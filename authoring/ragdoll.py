@@ -87,16 +87,18 @@ def frozen(joint: str) -> bool:
     return joint.startswith(FROZEN_PREFIXES)
 
 
-def _fmt(v: Iterable[float]) -> str:
+def mjcf_numbers(v: Iterable[float]) -> str:
+    """Numbers as an MJCF attribute's text (the ragdoll's and the lone rifle's models)."""
     return " ".join(f"{float(x):.9g}" for x in v)
 
 
-def _pos_quat(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def pos_quat(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A rigid transform (cm) as MuJoCo's position (m) and (w, x, y, z) quaternion."""
     return m[:3, 3] * CM, quaternion.from_matrix(m[None, :3, :3])[0]  # both (w, x, y, z)
 
 
-def _from_pos_quat(p: np.ndarray, wxyz: np.ndarray) -> np.ndarray:
+def from_pos_quat(p: np.ndarray, wxyz: np.ndarray) -> np.ndarray:
+    """MuJoCo's position (m) and (w, x, y, z) quaternion as a transform (cm): :func:`pos_quat` undone."""
     return quaternion.to_transform(np.asarray(p)[None] / CM, np.asarray(wxyz)[None])[0]
 
 
@@ -170,7 +172,7 @@ class Ragdoll:
         q = self.pose0
 
         def hull(name: str, nodes: np.ndarray) -> str:
-            assets.append(f'<mesh name="{name}" vertex="{_fmt((nodes * CM).ravel())}"/>')
+            assets.append(f'<mesh name="{name}" vertex="{mjcf_numbers((nodes * CM).ravel())}"/>')
             return name
 
         def geoms(seg: str) -> str:
@@ -181,8 +183,12 @@ class Ragdoll:
 
         def body(seg: str, rel: np.ndarray, joints: str, depth: int) -> str:
             pad = "  " * depth
-            p, quat = _pos_quat(rel)
-            inner = [f'{pad}<body name="{seg}" pos="{_fmt(p)}" quat="{_fmt(quat)}">', joints, geoms(seg)]
+            p, quat = pos_quat(rel)
+            inner = [
+                f'{pad}<body name="{seg}" pos="{mjcf_numbers(p)}" quat="{mjcf_numbers(quat)}">',
+                joints,
+                geoms(seg),
+            ]
             for step in children.get(seg, []):
                 child = kin.segment_names[step.child]
                 jname = step.joint
@@ -199,8 +205,8 @@ class Ragdoll:
                     lo, hi = kin.lower[i], kin.upper[i]
                     rng = f' range="{lo:.9g} {hi:.9g}" limited="true"' if np.isfinite([lo, hi]).all() else ""
                     hinge.append(
-                        f'<joint name="{jname}:{k}" type="hinge" pos="{_fmt(site2[:3, 3] * CM)}" '
-                        f'axis="{_fmt(axis)}"{rng}/>'
+                        f'<joint name="{jname}:{k}" type="hinge" pos="{mjcf_numbers(site2[:3, 3] * CM)}" '
+                        f'axis="{mjcf_numbers(axis)}"{rng}/>'
                     )
                 inner.append(body(child, step.pre @ step.post, "".join(hinge), depth + 1))
             inner.append(f"{pad}</body>")
@@ -281,7 +287,7 @@ class Ragdoll:
             ("rifle", rifle @ rigid_inverse(self._rifle_site)),
         ):
             adr = model.jnt_qposadr[model.joint(jname).id]
-            p, quat = _pos_quat(_to_mj_world(frame))
+            p, quat = pos_quat(to_mj_world(frame))
             data.qpos[adr : adr + 3] = p
             data.qpos[adr + 3 : adr + 7] = quat
         data.qvel[:] = 0.0
@@ -313,7 +319,7 @@ class Ragdoll:
             gp = self.body_global(palm)
             gr = self.body_global("rifle")
             rel = rigid_inverse(gp) @ gr  # the rifle in the palm's frame
-            p, quat = _pos_quat(rel)
+            p, quat = pos_quat(rel)
             eq.data[:3] = 0.0  # anchor on body2 (rifle) at its origin
             eq.data[3:6] = p
             eq.data[6:10] = quat
@@ -371,7 +377,7 @@ class Ragdoll:
     def body_global(self, name: str) -> np.ndarray:
         """A body's frame in figure world coordinates (cm, +Y up)."""
         b = self.data.body(name)
-        return _from_mj_world(_from_pos_quat(b.xpos, b.xquat))
+        return from_mj_world(from_pos_quat(b.xpos, b.xquat))
 
     def pose(self) -> np.ndarray:
         """The current pose vector (frozen DOFs keep their start values), within the joint limits (the
@@ -400,9 +406,11 @@ class Ragdoll:
 _Y_UP_TO_Z_UP = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])
 
 
-def _to_mj_world(m: np.ndarray) -> np.ndarray:
+def to_mj_world(m: np.ndarray) -> np.ndarray:
+    """A figure-world transform in the MuJoCo world (z up)."""
     return _Y_UP_TO_Z_UP @ m
 
 
-def _from_mj_world(m: np.ndarray) -> np.ndarray:
+def from_mj_world(m: np.ndarray) -> np.ndarray:
+    """A MuJoCo-world transform in the figure world (y up): :func:`to_mj_world` undone."""
     return _Y_UP_TO_Z_UP.T @ m

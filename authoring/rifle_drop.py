@@ -40,12 +40,12 @@ def let_go(doll: ragdoll.Ragdoll, substeps: int) -> LetGo:
 
 def mesh_asset(name: str, nodes: np.ndarray) -> str:
     """A MuJoCo mesh asset of a segment's psurf ``nodes`` (cm)."""
-    return f'<mesh name="{name}" vertex="{ragdoll._fmt((np.asarray(nodes) * ragdoll.CM).ravel())}"/>'
+    return f'<mesh name="{name}" vertex="{ragdoll.mjcf_numbers((np.asarray(nodes) * ragdoll.CM).ravel())}"/>'
 
 
-def _mjcf(rifle: Figure, assets: str = "", bodies: str = "", contact: str = "") -> str:
+def mjcf(rifle: Figure, assets: str = "", bodies: str = "", contact: str = "", parts: str = "") -> str:
     """The rifle and the ground, with (:mod:`authoring.rifle_settle`) more ``assets``, ``bodies`` in the
-    world and ``contact`` pairs."""
+    world, ``contact`` pairs and massless geoms ``parts`` on the rifle."""
     nodes = rifle.segments["rifle"].psurf.nodes  # type: ignore[union-attr]
     return f"""<mujoco model="rifle_drop">
   <compiler angle="radian"/>
@@ -60,7 +60,7 @@ def _mjcf(rifle: Figure, assets: str = "", bodies: str = "", contact: str = "") 
     <geom name="ground" type="plane" size="0 0 1"/>
     <body name="rifle">
       <freejoint name="rifle"/>
-      <geom name="rifle" type="mesh" mesh="rifle" mass="{ragdoll.RIFLE_MASS}"/>
+      <geom name="rifle" type="mesh" mesh="rifle" mass="{ragdoll.RIFLE_MASS}"/>{parts}
     </body>{bodies}
   </worldbody>{contact}
 </mujoco>
@@ -73,10 +73,10 @@ def dropped(rifle: Figure, start: LetGo, toss: np.ndarray, frames: int, fps: flo
     on until it has lain still for :data:`REST_SECONDS`."""
     import mujoco
 
-    model = mujoco.MjModel.from_xml_string(_mjcf(rifle))
+    model = mujoco.MjModel.from_xml_string(mjcf(rifle))
     data = mujoco.MjData(model)
     site = rifle.root.location  # type: ignore[union-attr]
-    p, quat = ragdoll._pos_quat(ragdoll._to_mj_world(start.location @ rigid_inverse(site)))
+    p, quat = ragdoll.pos_quat(ragdoll.to_mj_world(start.location @ rigid_inverse(site)))
     data.qpos[:3], data.qpos[3:7] = p, quat
     data.qvel[:] = start.velocity
     push = np.array([toss[0], -toss[2], toss[1]])  # figure (x, y, z) -> MuJoCo (x, -z, y)
@@ -91,7 +91,7 @@ def dropped(rifle: Figure, start: LetGo, toss: np.ndarray, frames: int, fps: flo
             data.xfrc_applied[gun, :3] = push if data.time - t0 < TOSS_SECONDS else 0.0
             mujoco.mj_step(model, data)
         todo = steps
-        out.append(ragdoll._from_mj_world(ragdoll._from_pos_quat(data.xpos[gun], data.xquat[gun])) @ site)
+        out.append(ragdoll.from_mj_world(ragdoll.from_pos_quat(data.xpos[gun], data.xquat[gun])) @ site)
         speed = np.linalg.norm(data.xipos[gun] - before) * fps
         still = still + 1 if speed < REST_SPEED else 0
     return np.array(out)

@@ -10,6 +10,11 @@ interpolated), with the ragdoll's contact and time step (:mod:`authoring.rifle_d
 tips and falls onto the ground or his body, and comes to rest there; the body moves as recorded, the rifle
 does not push it. A hull the rifle already lies in at the start (a hand it was never meant to meet) is left
 out of its contacts, so it does not shoot out of it.
+
+The body meets the rifle's pieces (:func:`rifle_parts`), not its convex hull (8070 cm3; the pieces' 3070):
+prstow2dead's rifle lay flat on the ground by 0.8 s when his settled left palm came down 2.5 cm clear of its
+nodes but 1.5 cm into its hull, between magazine and barrel, and wedged it against the ground; it rocked
+there butt-up (overhang 44 cm) to the end. The ground meets the hull, which touches it where the nodes do.
 """
 
 from __future__ import annotations
@@ -18,8 +23,9 @@ import numpy as np
 
 from authoring import ragdoll
 from authoring.death_specs import REST_SECONDS, REST_SPEED
-from authoring.rifle_drop import _mjcf, mesh_asset
+from authoring.rifle_drop import mesh_asset, mjcf
 from authoring.transitions import ClipFrames
+from peabody import quaternion
 from peabody.fk import FigureKinematics, rigid_inverse
 from peabody.model import Figure
 
@@ -38,8 +44,39 @@ def resting_from(rifles: np.ndarray, fps: float) -> int:
     return int(fast[-1]) + 1 if len(fast) else 0
 
 
-def _body_xml(soldier: Figure, segments: list[str], paired: list[str]) -> tuple[str, str, str]:
-    """The body's hulls as mocap bodies (assets, bodies) and the rifle's contact pairs with ``paired``."""
+def rifle_parts(rifle: Figure) -> list[np.ndarray]:
+    """The rifle's mesh nodes (cm, its own frame) split into its pieces, its mesh's connected faces (stock,
+    grip, receiver, barrel, each bend of the magazine): each convex, where the whole rifle is not."""
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+
+    psurf = rifle.segments["rifle"].psurf
+    assert psurf is not None
+    edges = np.array([(a, b) for face in psurf.faces for a, b in zip(face, np.roll(face, 1), strict=True)])
+    n = len(psurf.nodes)
+    graph = coo_array((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    count, label = connected_components(graph, directed=False)
+    return [psurf.nodes[label == k] for k in range(count) if (label == k).sum() >= 4]
+
+
+def _parts_xml(rifle: Figure) -> tuple[str, str, list[str]]:
+    """The rifle's pieces (:func:`rifle_parts`) as massless geoms meeting nothing but their contact pairs:
+    their mesh assets, the geoms and the geoms' names."""
+    parts = rifle_parts(rifle)
+    names = [f"rifle_part{k}" for k in range(len(parts))]
+    assets = "".join(mesh_asset(name, nodes) for name, nodes in zip(names, parts, strict=True))
+    geoms = "".join(
+        f'\n      <geom name="{name}" type="mesh" mesh="{name}" mass="0" contype="0" conaffinity="0"/>'
+        for name in names
+    )
+    return assets, geoms, names
+
+
+def _body_xml(
+    soldier: Figure, segments: list[str], paired: list[str], parts: list[str]
+) -> tuple[str, str, str]:
+    """The body's hulls as mocap bodies (assets, bodies) and the contact pairs of the rifle's ``parts``
+    with ``paired``."""
     assets, bodies = [], []
     for seg in segments:
         assets.append(mesh_asset(seg, soldier.segments[seg].psurf.nodes))  # type: ignore[union-attr]
@@ -48,24 +85,25 @@ def _body_xml(soldier: Figure, segments: list[str], paired: list[str]) -> tuple[
             f'contype="0" conaffinity="0"/></body>'
         )
     pairs = "".join(
-        f'\n    <pair geom1="rifle" geom2="{seg}" condim="3" friction="{ragdoll.RIFLE_BODY_FRICTION}" '
+        f'\n    <pair geom1="{part}" geom2="{seg}" condim="3" friction="{ragdoll.RIFLE_BODY_FRICTION}" '
         f'solref="{ragdoll.CONTACT_SOLREF}" solimp="{ragdoll.CONTACT_SOLIMP}"/>'
         for seg in paired
+        for part in parts
     )
     return "".join(assets), "".join(bodies), f"\n  <contact>{pairs}\n  </contact>" if paired else ""
 
 
 def _mocap(globals_: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Segment globals ``(nseg, 4, 4)`` (figure world) as MuJoCo mocap positions and quaternions."""
-    pq = [ragdoll._pos_quat(ragdoll._to_mj_world(g)) for g in globals_]
+    pq = [ragdoll.pos_quat(ragdoll.to_mj_world(g)) for g in globals_]
     return np.array([p for p, _ in pq]), np.array([q for _, q in pq])
 
 
-def _between(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray], u: float):
-    """Mocap poses ``u`` of the way from ``a`` to ``b`` (positions linear, quaternions normalised lerp)."""
-    qb = np.where((np.sum(a[1] * b[1], axis=1) < 0.0)[:, None], -b[1], b[1])
-    q = (1.0 - u) * a[1] + u * qb
-    return (1.0 - u) * a[0] + u * b[0], q / np.linalg.norm(q, axis=1)[:, None]
+def _between(
+    a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray], u: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mocap poses ``u`` of the way from ``a`` to ``b`` (positions linear, quaternions slerped)."""
+    return (1.0 - u) * a[0] + u * b[0], quaternion.slerp(a[1], b[1], u)
 
 
 def _velocity(rifles: np.ndarray, site: np.ndarray, frame: int, fps: float) -> np.ndarray:
@@ -75,7 +113,7 @@ def _velocity(rifles: np.ndarray, site: np.ndarray, frame: int, fps: float) -> n
 
     if frame < 1:
         return np.zeros(6)
-    a, b = (ragdoll._to_mj_world(rifles[i] @ rigid_inverse(site)) for i in (frame - 1, frame))
+    a, b = (ragdoll.to_mj_world(rifles[i] @ rigid_inverse(site)) for i in (frame - 1, frame))
     turn = Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).as_rotvec() * fps
     return np.r_[(b[:3, 3] - a[:3, 3]) * ragdoll.CM * fps, turn]
 
@@ -95,11 +133,14 @@ def settled(frames: ClipFrames, soldier: Figure, rifle: Figure, start: int | Non
     seg_globals = kin.segment_globals(frames.poses[start:], frames.roots[start:])[:, index]
     poses = [_mocap(g) for g in seg_globals]
 
+    part_assets, part_geoms, parts = _parts_xml(rifle)
+
     def build(paired: list[str]):
-        model = mujoco.MjModel.from_xml_string(_mjcf(rifle, *_body_xml(soldier, segments, paired)))
+        assets, bodies, contact = _body_xml(soldier, segments, paired, parts)
+        model = mujoco.MjModel.from_xml_string(mjcf(rifle, part_assets + assets, bodies, contact, part_geoms))
         data = mujoco.MjData(model)
         site = rifle.root.location  # type: ignore[union-attr]
-        p, quat = ragdoll._pos_quat(ragdoll._to_mj_world(frames.rifles[start] @ rigid_inverse(site)))
+        p, quat = ragdoll.pos_quat(ragdoll.to_mj_world(frames.rifles[start] @ rigid_inverse(site)))
         data.qpos[:3], data.qpos[3:7] = p, quat
         data.qvel[:] = _velocity(frames.rifles, site, start, frames.fps)
         data.mocap_pos[:], data.mocap_quat[:] = poses[0]
@@ -110,7 +151,7 @@ def settled(frames: ClipFrames, soldier: Figure, rifle: Figure, start: int | Non
     inside = {
         mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, int(c.geom2))
         for c in data.contact[: data.ncon]
-        if c.dist < -INSIDE_M and int(c.geom1) == model.geom("rifle").id
+        if c.dist < -INSIDE_M and mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, int(c.geom1)) in parts
     }
     model, data = build([s for s in segments if s not in inside])
     gun = model.body("rifle").id
@@ -126,7 +167,7 @@ def settled(frames: ClipFrames, soldier: Figure, rifle: Figure, start: int | Non
             data.mocap_pos[:], data.mocap_quat[:] = _between(a, b, (k + 1) / steps)
             mujoco.mj_step(model, data)
         frame += 1
-        out.append(ragdoll._from_mj_world(ragdoll._from_pos_quat(data.xpos[gun], data.xquat[gun])) @ site)
+        out.append(ragdoll.from_mj_world(ragdoll.from_pos_quat(data.xpos[gun], data.xquat[gun])) @ site)
         speed = np.linalg.norm(data.xipos[gun] - before) * frames.fps
         still = still + 1 if speed < REST_SPEED else 0
     n = start + 1 + len(out)

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from authoring import ik
+from authoring.death_specs import spec_of
 from authoring.postures import leg, segment_heights
 from authoring.quality_frames import FigureSet, play
 from authoring.rifle_swap import _smooth_above
@@ -163,6 +164,8 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     knees = part_heights(mq, mloc, figures, mtype)
     kneeling = _fade(np.min(list(knees.values()), axis=0)) if knees else np.zeros(len(q))
     held_rifle = _holding(slave)
+    spec = spec_of(master.name)  # the held rifle's slide out of the body, past the release where asked
+    slid = _holding(slave, spec.slave_rifle_slid_past if spec else 0)
     crawling = {
         side: _fade(m_h[side]) * (1.0 - prone) * kneeling * held_rifle for side in SIDES if side in m_h
     }
@@ -234,7 +237,7 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
             [(weight[s] - crawling[s]) * (s_h[s] - _forearm_aim(m_h[s])) for s in weight],
             axis=0,
         )
-        if not _settle_rifle(slave, figures, (pose, loc, stype), prone * held_rifle, high, held):
+        if not _settle_rifle(slave, figures, (pose, loc, stype), prone * slid, high, held):
             break
         pose, goals = passes(pose)  # the palms after the rifle, the forearms kept down
     # frames solved alone land a few degrees apart where the neck is at its limit: smooth the change over
@@ -339,14 +342,15 @@ def _planted_tracks(
     return np.where(eased_here[:, None], eased, track), np.where(eased_here, hold > 0, down)
 
 
-def _holding(slave: Channelset) -> np.ndarray:
+def _holding(slave: Channelset, past: int = 0) -> np.ndarray:
     """Per frame, 1 while the hands hold the rifle, easing to 0 over the ``HOLD_FADE_FRAMES`` before the
-    clip's ``release_frame`` (a death lets go of it: the rifle is a free body from there)."""
+    clip's ``release_frame`` (a death lets go of it: the rifle is a free body from there), or ``past``
+    frames later."""
     n = slave.nframes
     release = getattr(slave, "release_frame", None)
     if release is None:
         return np.ones(n)
-    u = np.clip((release - np.arange(n)) / HOLD_FADE_FRAMES, 0.0, 1.0)
+    u = np.clip((release + past - np.arange(n)) / HOLD_FADE_FRAMES, 0.0, 1.0)
     return u * u * (3.0 - 2.0 * u)
 
 

@@ -59,6 +59,7 @@ AIR_SHARE = 0.5  # ... and at least this share of the master's height
 ROOT_DOFS = ("tx", "ty", "tz", "rx", "rz")  # the body may go down and roll or pitch onto what it rests on
 SETTLE_SPEED_CM_S = 5.0  # the master lies still: his root moves slower than this for the rest of the clip
 SETTLE_FRAMES = 15  # ... the trunk is lowered onto the ground over this many frames from then
+ARMS_STILL_CM_S = 10.0  # ... and, where a death asks, his arm and head sites slower than this
 IN_PLACE_CM = 0.01  # a pelvis node moving less than this a frame: the body turns about it, in place
 FADE_FRAMES = 12  # after the release the goals fade in over this many frames (the slaving's own fade)
 
@@ -137,6 +138,8 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     unsolved, m_at = _positions(kin, q, loc), _positions(figures.kin[mtype], mq, mloc)
     in_place = _rolling_in_place(mq, mloc, figures, mtype) if _rolls(master) else None
     settle = w * _settled(mloc, float(master.fps), in_place)
+    if _settles_arms_still(master):
+        settle = np.minimum(settle, _fade_in(n, _arms_still(m_at, float(master.fps)), SETTLE_FRAMES))
     arm_out, rigid = _arm_out(master), _trunk_rigid(master)
     planted = _plants(unsolved, m_at, m_h, release)
     # once the master lies still, the trunk (the body rolls or pitches onto what the master rests on); the
@@ -177,6 +180,23 @@ def _trunk_rigid(master: Channelset) -> bool:
     """Whether this death's slave trunk is laid by its root alone (``DeathSpec.slave_trunk_rigid``)."""
     spec = spec_of(master.name)
     return spec is not None and spec.slave_trunk_rigid
+
+
+def _settles_arms_still(master: Channelset) -> bool:
+    """Whether this death's slave trunk settles only once the master's arms and head lie still too
+    (``DeathSpec.slave_settle_arms_still``)."""
+    spec = spec_of(master.name)
+    return spec is not None and spec.slave_settle_arms_still
+
+
+def _arms_still(at: dict[str, np.ndarray], fps: float) -> int:
+    """The frame from which every arm and head site of ``at`` (the master's positions) moves slower than
+    :data:`ARMS_STILL_CM_S` for the rest of the clip."""
+    parts = [p for p in PART_SITES if p.endswith(("arm", "hand")) or p == "head"]
+    sites = [at[s] for p in parts for s in PART_SITES[p] if s in at]
+    speed = np.linalg.norm(np.diff(np.stack(sites), axis=1), axis=2).max(axis=0) * fps
+    moving = np.flatnonzero(speed > ARMS_STILL_CM_S)
+    return int(moving[-1]) + 1 if len(moving) else 0
 
 
 def _rolls(master: Channelset) -> bool:

@@ -50,6 +50,7 @@ SLIDE_CM = 0.8  # ... and its sites move along the ground no further than this (
 TRUNK_PARTS = ("pelvis", "chest|belly")  # a dead body's trunk parts, both on the ground
 # may not rise above max(now, their check limit): the feet (heel sites too) and the head
 RISE_LIMIT_CM = {"left_foot": 15.0, "right_foot": 15.0, "left_heel": 15.0, "right_heel": 15.0, "head": 10.0}
+HEELS = ("left_heel", "right_heel")
 AIM_CM = 1.0  # the trunk is brought this low (not lower: the smallest change that rests it)
 MOVE_WEIGHT = 0.002  # the search's cost per square degree of change (of two equal rests, the smaller change)
 MAX_TURN_DEG = 20.0  # no parameter turns further than this
@@ -115,7 +116,13 @@ class _Rest:
     """The last frame of a dead slave and the candidates of the search around it."""
 
     def __init__(
-        self, figures: FigureSet, ptype: str, pose: np.ndarray, loc: np.ndarray, slide_cm: float = SLIDE_CM
+        self,
+        figures: FigureSet,
+        ptype: str,
+        pose: np.ndarray,
+        loc: np.ndarray,
+        slide_cm: float = SLIDE_CM,
+        heels_cm: float | None = None,
     ) -> None:
         self.figures, self.ptype, self.pose, self.loc = figures, ptype, pose, loc
         kin = figures.kin[ptype]
@@ -134,6 +141,8 @@ class _Rest:
         resting = [p for p, h in base.items() if h <= REST_CM and p not in not_limbs]
         self.ceiling = {p: max(base[p], REST_CM) for p in resting}
         self.ceiling |= {p: max(base[p], cm) for p, cm in RISE_LIMIT_CM.items() if p in base}
+        if heels_cm is not None:  # the heels brought down to this, however high they lay
+            self.ceiling |= {p: heels_cm for p in HEELS if p in base}
         # a resting limb's sites do not slide either (the turn about the trunk moved feet 3-4 cm)
         self.slides = {p: [kin.site_names.index(s) for s in PART_SITES[p] if s in kin.site_names]
                        for p in resting if p in PART_SITES}  # fmt: skip
@@ -348,6 +357,7 @@ def rest_slave_trunk(
     feet_held: bool = False,
     slide_cm: float | None = None,
     arms_held: bool = False,
+    heels_cm: float | None = None,
 ) -> np.ndarray:
     """Turn a dead slave's body and lumbar so its pelvis and chest or belly rest on the ground at the end
     (``slave``'s joint and body channels, in place; a clip without a ``release_frame`` is left alone); with
@@ -360,7 +370,7 @@ def rest_slave_trunk(
         return np.zeros(len(PARAMS))
     q, loc, stype = _played(slave, figures)
     n = len(q)
-    rest = _Rest(figures, stype, q[-1], loc[-1], SLIDE_CM if slide_cm is None else slide_cm)
+    rest = _Rest(figures, stype, q[-1], loc[-1], SLIDE_CM if slide_cm is None else slide_cm, heels_cm)
     w = _ease(n, max(release, n - 1 - EASE_FRAMES - END_HOLD_FRAMES))
     held = _held_feet(q, loc, figures, stype, np.flatnonzero(w > 0)) if feet_held else ()
     x = search(rest)

@@ -11,7 +11,7 @@ from test_quality_rifle_rest import _on_ground, _rifle_points, _rot
 
 from authoring.quality import FigureSet
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, rifle_rest
-from authoring.rifle_settle import settled
+from authoring.rifle_settle import rifle_parts, settled
 from authoring.transitions import ClipFrames
 from peabody.loader import read_figure
 from ttes.paths import FIGURES
@@ -84,3 +84,47 @@ def test_a_rifle_lying_across_him_stays_on_him(figset: FigureSet) -> None:
     frames, last, depth = _settle(figset, loc)
     assert max(depth) <= 1.0  # never through him
     assert _rest(figset, frames, last) < OVERHANG_LIMIT_CM
+
+
+def test_a_body_coming_down_beside_a_lying_rifle_leaves_it_lying(figset: FigureSet) -> None:
+    """The body meets the rifle's pieces, not its convex hull: his shoulder, lowered onto the ground 2.4 cm
+    clear of the rifle lying on its side but 1.9 cm into its hull (between barrel and magazine), pushed the
+    hull 0.53 cm (prstow2dead's left palm wedged it against the ground and stood it up: overhang 44 cm)."""
+    from scipy.spatial import ConvexHull
+
+    lying, body, _ = _lying(figset, n=40)
+    body[:20, 1, 3] += np.linspace(8.0, 0.0, 20)  # he comes down from 8 cm up, then lies still
+    side = np.eye(4)
+    side[:3, 3] = (27.0, 0.0, 170.0)  # by his left shoulder, its magazine toward him
+    loc = _on_ground(figset, side @ _rot(1, 180.0) @ _rot(2, 90.0))
+    kin, hulls = figset.kin["DI.fig"], figset.hulls("DI.fig", hands=True)
+    segg = kin.segment_globals(lying[-1:], body[-1:])[0]
+    assert hulls.clearance(_rifle_points(figset, loc), segg).min() > 2.0  # clear of him ...
+    nodes, segs = figset.nodes("DI.fig")
+    him = np.linalg.solve(loc, np.einsum("kij,kj->ki", segg[segs], nodes).T).T[:, :3]
+    hull = ConvexHull(figset.nodes("AK_47.fig")[0][:, :3]).equations
+    assert (him @ hull[:, :3].T + hull[:, 3]).max(axis=1).min() < -1.5  # ... but in its hull
+    away = body.copy()
+    away[:, 0, 3] -= 300.0  # he lies 3 m away: the rifle settles on the ground alone
+
+    def rifle_settled(roots: np.ndarray) -> ClipFrames:
+        clip = ClipFrames(lying, roots, np.tile(loc, (len(lying), 1, 1)), 60.0)
+        return settled(clip, figset.figures["DI.fig"], figset.figures["AK_47.fig"])
+
+    frames, alone = rifle_settled(body), rifle_settled(away)
+    moved = _rifle_points(figset, frames.rifles[-1]) - _rifle_points(figset, alone.rifles[-1])
+    assert np.linalg.norm(moved, axis=1).max() < 0.05  # it lies as it would without him
+    assert _rest(figset, frames, kin.segment_globals(frames.poses[-1:], frames.roots[-1:])[0]) == 0.0
+
+
+def test_the_rifle_splits_into_convex_pieces_far_smaller_than_its_hull(figset: FigureSet) -> None:
+    from scipy.spatial import ConvexHull
+
+    rifle = figset.figures["AK_47.fig"]
+    parts = rifle_parts(rifle)
+    nodes = rifle.segments["rifle"].psurf.nodes  # type: ignore[union-attr]
+    assert sum(len(p) for p in parts) == len(nodes) and len(parts) > 10  # stock, grip, magazine, barrel...
+    for part in parts:  # each convex: every node on its hull
+        eq = ConvexHull(part).equations
+        assert (part @ eq[:, :3].T + eq[:, 3]).max(axis=1).min() > -0.01
+    assert sum(ConvexHull(p).volume for p in parts) < 0.5 * ConvexHull(nodes).volume

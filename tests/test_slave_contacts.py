@@ -255,3 +255,19 @@ def test_a_slid_rifle_is_put_where_the_reference_holds_it_at_a_posture_node() ->
     pos = near.fig_pos.copy()
     _snap_rifle(near, 0, ref, 0)
     np.testing.assert_array_equal(near.fig_pos, pos)
+
+
+def test_the_held_rifle_slides_out_of_the_body_past_the_release_where_the_death_asks() -> None:
+    """The held rifle's slide out of the slave's body fades out before the release and the dropped rifle's
+    clearing fades in after it: prfire2dead's DI right upper arm lay 1.04 cm in the stock at the release
+    frame. Its slide goes on ``past`` frames (DeathSpec.slave_rifle_slid_past, prfire2dead's own)."""
+    from types import SimpleNamespace
+
+    from authoring import deaths
+    from authoring.slave_contacts import HOLD_FADE_FRAMES, _holding
+
+    clip = SimpleNamespace(nframes=40, release_frame=20)
+    assert _holding(clip)[20] == 0.0  # type: ignore[arg-type]
+    later = _holding(clip, 2)  # type: ignore[arg-type]
+    assert later[20] > 0.0 and later[22] == 0.0 and later[: 22 - HOLD_FADE_FRAMES] == pytest.approx(1.0)
+    assert {d.name for d in deaths.DEATHS if d.slave_rifle_slid_past} == {"prfire2dead"}

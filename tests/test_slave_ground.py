@@ -197,3 +197,21 @@ def test_a_master_rolling_his_pelvis_in_place_lies_still() -> None:
     assert in_place.all()
     assert slave_ground._settled(roots, fps)[-1] == 0.0  # judged at the root, he never lay still
     assert slave_ground._settled(roots, fps, in_place)[slave_ground.SETTLE_FRAMES :] == pytest.approx(1.0)
+
+
+def test_a_slave_settles_once_its_masters_arms_lie_still_where_the_death_asks() -> None:
+    """prstow2dead's master lowers his chest as he is hit (DeathSpec.lowered_at) and swings his arms in
+    beside him while his pelvis lies still: the slave's trunk settled then and swept its right forearm
+    4.0 cm along the ground as it swung out. Where the death asks (slave_settle_arms_still) the settle waits
+    for the master's arm and head sites to be still; only the two prone deaths ask it."""
+    from authoring import deaths
+
+    fps, n = 60.0, 40
+    still = np.zeros((n, 3))
+    swing = still.copy()
+    swing[:25, 0] = np.linspace(0.0, 10.0, 25)  # 25 cm/s over frames 0-24, still from frame 24 on
+    at = {"right_lower_arm.distal": swing, "left_lower_arm.distal": still, "bottom_head.distal": still}
+    assert slave_ground._arms_still(at, fps) == 24
+    assert slave_ground._arms_still({"right_lower_arm.distal": still}, fps) == 0
+    asked = {d.name for d in deaths.DEATHS if d.slave_settle_arms_still}
+    assert asked == {"prstow2dead", "prfire2dead"}

@@ -214,3 +214,23 @@ def test_an_arm_landing_as_the_trunk_settles_is_held_where_it_lands(monkeypatch)
     np.testing.assert_array_equal(poses[True][:f], poses[False][:f])
     assert swept[False] > 2.5, swept  # 3.1 cm
     assert swept[True] < 1.5, swept  # 0.3 (1.3 before session 15): the solve leaves the elbow ~1 cm off
+
+
+@pytest.mark.parametrize("suffix", ["_low", "_m16_low"])
+def test_prstow2dead_slaves_rest_their_heels_under_the_checks_bound(suffix: str) -> None:
+    """Issue 14: re-slaved from the soldier whose chest comes down as he is hit, the DI/M16 prstow2dead
+    slaves' toes were laid on the ground where his are and their left heel rested 15.85/15.90 cm up at
+    DEAD@prstow (the check's rest_foot limit 15): the trunk rest brings them down (DeathSpec.slave_heels_cm),
+    prstow2dead's own setting."""
+    from authoring import deaths
+    from authoring.quality_frames import play
+
+    assert {d.name for d in deaths.DEATHS if d.slave_heels_cm is not None} == {"prstow2dead"}
+    ctx = BuildContext.load(FIGURES)
+    figs = FigureSet({"DI.fig": ctx.di, "AK_47.fig": ctx.rifle, "M16.fig": ctx.m16})
+    slave = load_channelset(CHANNELSETS / f"prstow2dead{suffix}.chset.env", use_cache=False)
+    f = play(slave, figs)
+    kin = figs.kin["DI.fig"]
+    y = kin.site_globals(f.poses["DI.fig"][-1:], f.locations["DI.fig"][-1:])[0, :, 1, 3]
+    heels = [y[kin.site_names.index(f"{s}_foot.heel")] for s in ("left", "right")]
+    assert max(heels) <= 15.0
