@@ -147,18 +147,33 @@ class SegmentHulls:
     def depth(self, points: np.ndarray, seg_globals: np.ndarray) -> tuple[float, int, int]:
         """Deepest penetration (cm) of ``points`` ``(n, k, 3)`` (world) into any hull, with its frame and
         segment index (``-1`` when nothing is inside). ``seg_globals``: ``(n, nseg, 4, 4)``."""
-        f, m, d, _ = self._inside(points, seg_globals)
+        return self.deepest(points, seg_globals)[:3]
+
+    def deepest(self, points: np.ndarray, seg_globals: np.ndarray) -> tuple[float, int, int, int]:
+        """:meth:`depth` and the index (of ``k``) of the deepest point (``-1`` when nothing is inside)."""
+        f, m, p, d, _ = self._inside(points, seg_globals)
         if not len(f) or d.max() <= 0:
-            return 0.0, -1, -1
+            return 0.0, -1, -1, -1
         best = int(np.argmax(d))
-        return float(d[best]), int(f[best]), int(self.segments[m[best]])
+        return float(d[best]), int(f[best]), int(self.segments[m[best]]), int(p[best])
+
+    def clearance(self, points: np.ndarray, seg_globals: np.ndarray) -> np.ndarray:
+        """Per point ``(k, 3)`` (world) a lower bound of its distance (cm) outside the nearest hull (the
+        largest of its face distances; negative inside), for one frame's ``seg_globals`` ``(nseg, 4, 4)``
+        (every hull, no bounding-sphere cut: a point just outside one counts)."""
+        if not len(self.segments):
+            return np.full(len(points), np.inf)
+        g = seg_globals[self.segments]  # (m, 4, 4)
+        local = np.einsum("mji,mkj->mki", g[:, :3, :3], points[None, :, :] - g[:, None, :3, 3])
+        gap = np.einsum("mfi,mki->mkf", self.equations[..., :3], local) + self.equations[:, None, :, 3]
+        return np.asarray(gap.max(axis=2).min(axis=0))
 
     def exits(self, points: np.ndarray, seg_globals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per frame of ``points`` ``(n, k, 3)``: the deepest point's depth in a hull (cm, 0 when nothing is
         inside) and the world direction ``(n, 3)`` out of that hull through its nearest face."""
         n = len(points)
         depth, out = np.zeros(n), np.zeros((n, 3))
-        f, m, d, normal = self._inside(points, seg_globals)
+        f, m, _, d, normal = self._inside(points, seg_globals)
         for i in np.argsort(d):  # the deepest of each frame last
             if d[i] > depth[f[i]]:
                 depth[f[i]], out[f[i]] = d[i], seg_globals[f[i], self.segments[m[i]], :3, :3] @ normal[i]
@@ -166,12 +181,12 @@ class SegmentHulls:
 
     def _inside(
         self, points: np.ndarray, seg_globals: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The (frame, hull) of every point within a hull's bounding sphere, its depth inside the hull (cm,
-        negative outside) and the normal of the face it is nearest to (the hull's frame)."""
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The (frame, hull, point) of every point within a hull's bounding sphere, its depth inside the hull
+        (cm, negative outside) and the normal of the face it is nearest to (the hull's frame)."""
         empty = np.zeros(0, dtype=int)
         if not len(self.segments):
-            return empty, empty, np.zeros(0), np.zeros((0, 3))
+            return empty, empty, empty, np.zeros(0), np.zeros((0, 3))
         g = seg_globals[:, self.segments]  # (n, m, 4, 4)
         centre = np.einsum("fmij,mj->fmi", g[..., :3, :3], self.centres) + g[..., :3, 3]
         near = (
@@ -189,4 +204,4 @@ class SegmentHulls:
             face = np.argmin(gap, axis=1)
             d[b] = gap[np.arange(len(face)), face]
             normal[b] = eq[np.arange(len(face)), face, :3]
-        return f, m, d, normal
+        return f, m, p, d, normal

@@ -80,15 +80,10 @@ def _deepest(
     frames, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
     if not len(frames):
         return 0.0, -1, -1, -1
-    depth, f, seg = hull.depth(points[frames][:, cols], seg_globals[frames])
+    depth, f, seg, point = hull.deepest(points[frames][:, cols], seg_globals[frames])
     if seg < 0:
         return 0.0, -1, -1, -1
-    k = int(frames[f])
-    g = seg_globals[k, seg]
-    local = (points[k, cols] - g[:3, 3]) @ g[:3, :3]  # world -> segment frame
-    eq = hull.equations[int(np.flatnonzero(hull.segments == seg)[0])]
-    inside = -(local @ eq[:, :3].T + eq[:, 3]).max(axis=1)
-    return depth, k, seg, int(cols[int(np.argmax(inside))])
+    return depth, int(frames[f]), seg, int(cols[point])
 
 
 def limbs_through(

@@ -28,19 +28,6 @@ TOUCH_CM = 2.0  # cm: a rifle node this near the ground or the body rests on it
 OVERHANG_LIMIT_CM = 2.0  # cm: the limit (quality.THRESHOLDS); every death's rifle lies at 0
 
 
-def body_clearance(points: np.ndarray, hulls: SegmentHulls, seg_globals: np.ndarray) -> np.ndarray:
-    """Per point ``(k, 3)`` (world) a lower bound of its distance (cm) outside the nearest body hull (the
-    largest of its face distances; negative inside), for one frame's ``seg_globals`` (``(nseg, 4, 4)``)."""
-    if not len(hulls.segments):
-        return np.full(len(points), np.inf)
-    g = seg_globals[hulls.segments]  # (m, 4, 4)
-    local = np.einsum(
-        "mji,mkj->mki", g[:, :3, :3], points[None, :, :] - g[:, None, :3, 3]
-    )  # world -> segment
-    gap = np.einsum("mfi,mki->mkf", hulls.equations[..., :3], local) + hulls.equations[:, None, :, 3]
-    return np.asarray(gap.max(axis=2).min(axis=0))
-
-
 def _outside(p: np.ndarray, support: np.ndarray) -> float:
     """Distance (cm) of ``p`` ``(2,)`` outside the convex hull of ``support`` ``(s, 2)`` (0 inside); a
     degenerate support (a point, a line) is measured to its extent along its main direction."""
@@ -75,7 +62,7 @@ def rifle_rest(
     its centre of mass ``(3,)`` at ``frame``, the body's ``hulls`` and that frame's segment globals
     ``(nseg, 4, 4)``."""
     on_ground = rifle_points[:, 1] <= TOUCH_CM
-    on_body = body_clearance(rifle_points, hulls, seg_globals) <= TOUCH_CM
+    on_body = hulls.clearance(rifle_points, seg_globals) <= TOUCH_CM
     held = on_ground | on_body
     overhang = _outside(centre[[0, 2]], rifle_points[held][:, [0, 2]]) if held.any() else float(centre[1])
     body = int((on_body & ~on_ground).sum())

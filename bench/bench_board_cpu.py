@@ -4,8 +4,7 @@ publish (quantise) and a front-end's merge and encodes, on N soldiers of the loa
 The soldiers tick at 30 Hz of simulated time with the load mix's requests (``client_stub.loadtest.mix``);
 their codes go out as two shards' batches (even and odd indices, as ``Sharding.home`` splits them, through
 ``encode_batch``/``decode_batch``), which a front-end's board merges one at a time (``nodes.merge``), and
-after each of them two clients, each subscribed to half the soldiers, encode what changed (in one pass,
-as a front-end's writer encodes its woken clients together; ``TTES_FRONT_UNION=0``: one by one). Thread CPU
+after each of them two clients, each subscribed to half the soldiers, encode what changed. Thread CPU
 (``time.thread_time``), so a loaded machine disturbs it little; for an A/B run it on both trees, alternated.
 ``sha`` digests every client byte, ``codes`` the shards' codes and versions: equal on two trees, the
 clients received the same. The shards' numbers are for all N soldiers (both shards' together). For an
@@ -19,7 +18,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -31,7 +29,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.bench_answer_cost import mix_world
 from protocol.connection import CLIENT, NEED_DATA, PAUSED, Connection
 from protocol.events import Hello, Subscribe
-from server import session as session_module
 from server.app import TtesServer
 from server.config import ServerConfig
 from server.fabric.batch import Batch, decode_batch, encode_batch
@@ -55,9 +52,6 @@ def measure(soldiers: int, ticks: int) -> dict[str, object]:
     sessions = [_client(server, front, range(k * n // 2, (k + 1) * n // 2), f"c{k}") for k in range(2)]
     alive = np.ones(n, bool)
     sha, codes = hashlib.sha256(), hashlib.sha256()
-    # (getattr: a tree without it, for an A/B; TTES_FRONT_UNION=0 as the server reads it)
-    union = os.environ.get("TTES_FRONT_UNION") != "0"
-    together = getattr(session_module, "take_updates_together", None) if union else None
     ms: dict[str, float] = dict.fromkeys(("animate", "quantise", "merge", "encode"), 0.0)
     for k in range(1, ticks + WARM + 1):
         t = k / 30
@@ -80,8 +74,6 @@ def measure(soldiers: int, ticks: int) -> dict[str, object]:
             a = time.thread_time()
             merge(front.board, [batch], k, alive)
             b = time.thread_time()
-            if together is not None:  # as a front-end's writer does (server.app._encode_ahead)
-                together(sessions, None)
             written = [s.take_output() for s in sessions]
             encoded += time.thread_time() - b
             merged += b - a

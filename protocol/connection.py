@@ -50,7 +50,7 @@ from protocol.messages import (
     MessageType,
 )
 from protocol.shared_encode import SharedEncodes
-from protocol.updates import UPDATE_HEADER, EncodeJob, UpdateDecoder, UpdateEncoder, encode_codes_union
+from protocol.updates import UPDATE_HEADER, UpdateDecoder, UpdateEncoder
 
 
 class Role(Enum):
@@ -394,21 +394,16 @@ class Connection:
         ``version`` (equal versions and rows mean equal codes) lets connections made with one
         ``shared_encodes`` memo share the encode (:mod:`protocol.shared_encode`).
         """
-        encoder, idx, codes, max_payload = self._update_job(table, indices, codes)
-        try:
-            payloads = encoder.encode_codes(idx, codes, tick & 0xFFFFFFFF, max_payload, version)
-        except ValueError as exc:
-            raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
-        return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
-
-    def _update_job(self, table: int, indices: np.ndarray, codes: np.ndarray) -> EncodeJob:
-        """The encode of these soldiers' codes of ``table`` that this connection may send (subscribed)."""
         encoder = self._update_encoder(table)
         idx = self._soldier_indices(indices)
         keep = self._subscribed[idx]
         if not keep.all():
             idx, codes = idx[keep], np.asarray(codes)[keep]
-        return encoder, idx, codes, self.peer_max_frame - 1
+        try:
+            payloads = encoder.encode_codes(idx, codes, tick & 0xFFFFFFFF, self.peer_max_frame - 1, version)
+        except ValueError as exc:
+            raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
+        return b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in payloads)
 
     def catch_up_codes(
         self,
@@ -498,18 +493,3 @@ class Connection:
     def decoder(self, table_id: int) -> UpdateDecoder | None:
         """Client: the decoder (current soldier poses) of an update table."""
         return self._decoders.get(table_id)
-
-
-def send_update_codes_union(
-    rows: Sequence[tuple[Connection, np.ndarray, np.ndarray]], table: int, tick: int, version: object = None
-) -> list[bytes]:
-    """Each connection's ``send_update_codes(table, indices, codes, tick, version)`` (``rows``: connection,
-    indices, codes; each connection once), the encodes made in one pass over all their rows
-    (:func:`protocol.updates.encode_codes_union`: the same bytes and states, an encode's fixed cost paid
-    once): a server's clients of one batch of poses."""
-    jobs = [conn._update_job(table, indices, codes) for conn, indices, codes in rows]
-    try:
-        payloads = encode_codes_union(jobs, tick & 0xFFFFFFFF, version)
-    except ValueError as exc:
-        raise LocalProtocolError(ErrorCode.BAD_VALUE, str(exc)) from None
-    return [b"".join(encode_frame(MessageType.JOINT_UPDATES, p) for p in frames) for frames in payloads]

@@ -20,7 +20,6 @@ from __future__ import annotations
 import struct
 import sys
 from collections.abc import Sequence
-from itertools import pairwise
 
 import numpy as np
 
@@ -333,19 +332,6 @@ class UpdateEncoder:
         a ``version`` (the caller's promise: equal versions and rows mean equal codes) and a ``shared`` memo,
         an encoder in the same state as one that already encoded these rows at this version takes its bytes.
         """
-        idx, q = self._sorted(indices, codes)
-        if len(idx) == 0:
-            return []
-        if self.shared is None or version is None:
-            return self._after(idx, self._encode_sorted(idx, q, tick, max_payload), None, tick)
-        key = self._memo_key(idx, tick, max_payload)
-        hit = self._memo_hit(key, version)
-        if hit is not None:
-            return hit
-        return self._after(idx, self._encode_sorted(idx, q, tick, max_payload), key, tick)
-
-    def _sorted(self, indices: np.ndarray, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``indices`` (int64) and ``codes`` (int32) checked and in index order."""
         lay = self.table.layout
         idx: np.ndarray = np.asarray(indices, np.int64).reshape(-1)
         q: np.ndarray = np.asarray(codes, np.int32)
@@ -358,37 +344,29 @@ class UpdateEncoder:
             idx, q = idx[order], q[order]
             if (np.diff(idx) == 0).any():
                 raise ValueError("duplicate soldier index in one JointUpdates")
-        return idx, q
+        if len(idx) == 0:
+            return []
+        if self.shared is not None and version is not None:
+            return self._shared_encode(idx, q, tick, max_payload, version)
+        payloads = self._encode_sorted(idx, q, tick, max_payload)
+        if self.shared is not None and len(self._sent):  # a state no other encoder is known to share
+            self.state = self.shared.new_id()
+        return payloads
 
-    def _memo_key(self, idx: np.ndarray, tick: int, max_payload: int) -> tuple[object, ...]:
-        """The shared memo's name of an encode of sorted ``idx`` by this encoder (with its state)."""
-        return (id(self.table), self.version, self.max_soldiers, digest(idx), tick, max_payload)
-
-    def _memo_hit(self, key: tuple[object, ...], version: object) -> list[bytes] | None:
-        """The frames of the memo's encode ``key`` from this encoder's state at this version (same state,
-        rows, codes: same bytes; its state adopted), else None."""
+    def _shared_encode(
+        self, idx: np.ndarray, q: np.ndarray, tick: int, max_payload: int, version: object
+    ) -> list[bytes]:
+        """:meth:`_encode_sorted` through the shared memo (same bytes, one diff-and-pack per state)."""
         shared = self.shared
         assert shared is not None
-        hit = shared.lookup(self.state, key, version)
-        if hit is None or hit.held is None:
-            return None
-        self._adopt(*hit.held)
-        self._tick = hit.tick
-        self.state = hit.state
-        return list(hit.payloads)
-
-    def _after(
-        self, idx: np.ndarray, payloads: list[bytes], rows: tuple[object, ...] | None, tick: int
-    ) -> list[bytes]:
-        """``payloads``, after the memo learnt of this encoder's own encode of ``idx`` (``rows``: its memo
-        key; None: not memoised, a state no other encoder is known to share)."""
-        shared = self.shared
-        if shared is None:
-            return payloads
-        if rows is None:
-            if len(self._sent):
-                self.state = shared.new_id()
-            return payloads
+        rows = (id(self.table), self.version, self.max_soldiers, digest(idx), tick, max_payload)
+        hit = shared.lookup(self.state, rows, version)
+        if hit is not None and hit.held is not None:  # same state, rows, codes: same bytes; adopt its state
+            self._adopt(*hit.held)
+            self._tick = tick
+            self.state = hit.state
+            return list(hit.payloads)
+        payloads = self._encode_sorted(idx, q, tick, max_payload)
         shared.rows_encoded += len(idx)
         new = shared.new_id()
         held = (self._hlast, self._hknown, self._hbefore)
@@ -429,7 +407,7 @@ class UpdateEncoder:
         q = np.asarray(codes, np.int32)
         order = np.argsort(idx, kind="stable")
         idx, q = idx[order], q[order]
-        rows = self._memo_key(idx, tick, max_payload)
+        rows = (id(self.table), self.version, self.max_soldiers, digest(idx), tick, max_payload)
         hit = shared.peek(end.state, rows, version) if len(idx) else None
         held = hit.held if hit is not None else end.intact()
         if held is None:
@@ -506,40 +484,51 @@ class UpdateEncoder:
 
     def _encode_sorted(self, idx: np.ndarray, q: np.ndarray, tick: int, max_payload: int) -> list[bytes]:
         """The frames for sorted, distinct, non-empty ``idx``; records what was sent in ``_sent``."""
-        return encode_union([(self, idx, q, max_payload)], tick)[0]
-
-    def _record(
-        self,
-        idx: np.ndarray,
-        q: np.ndarray,
-        last: np.ndarray,
-        restart: tuple[np.ndarray, np.ndarray],
-        tick: int,
-    ) -> None:
-        """The state after sending soldiers ``idx`` (codes ``q``; ``last``: what they held; ``restart``: the
-        rows with an entry sent absolute and their ``before``, ``predicted.Rows``); nothing was sent if
-        ``idx`` is empty."""
-        self._sent = idx
-        if not len(idx):
-            return
+        plan = self._plan
+        self._tick = tick
+        known = self._known[idx]
+        sc = scratch()  # gathers into reused buffers (idx is checked: clip gathers unbuffered)
+        last = np.take(self._last, idx, axis=0, out=sc.get("enc.last", q.shape, np.int32), mode="clip")
+        words = plan.diff_words(q != last)
+        send = (words[:, 0] != 0) if plan.nwords == 1 else (words != 0).any(axis=1)
+        send |= ~known
+        if not send.all():  # idle soldiers: gather the rest by index (cheaper than boolean masks of rows)
+            sel = np.flatnonzero(send)
+            if not len(sel):
+                self._sent = idx[:0]
+                return []
+            shape = (len(sel), q.shape[1])
+            q = np.take(q, sel, axis=0, out=sc.get("enc.q", shape, np.int32), mode="clip")
+            last = np.take(last, sel, axis=0, out=sc.get("enc.sent_last", shape, np.int32), mode="clip")
+            idx, known, words = idx[sel], known[sel], words[sel]
+        changed = plan.changed(words)
+        if not known.all():
+            changed[~known] = True
+        if self.version >= 2:
+            before = sc.get("enc.before", (len(idx), self._before.shape[1]), np.int32)
+            np.take(self._before, idx, axis=0, out=before, mode="clip")
+            rows = predicted.encode_rows(self._plan.v2, q, last, before, known, changed, tick)
+        else:
+            rows = self._rows_v1(q, last, changed, known)
+        payloads = self._chunks(idx, rows, tick, max_payload)
         self._hlast, self._hknown = self._hlast.writable(), self._hknown.writable()
         set_rows(self._last, idx, q)
         self._known[idx] = True
         if self.version >= 2:
             self._hbefore = self._hbefore.writable()
-            self._restart(idx, last, *restart, tick)
+            self._restart(idx, last, rows, tick)
+        self._sent = idx
+        return payloads
 
-    def _restart(
-        self, idx: np.ndarray, last: np.ndarray, restart_rows: np.ndarray, restart: np.ndarray, tick: int
-    ) -> None:
-        """Version 2: the prediction state after sending: ``before`` is the code each soldier held until now
-        (or, for an entry sent absolute, the code sent: ``restart`` of ``restart_rows``), at ``tick``."""
+    def _restart(self, idx: np.ndarray, last: np.ndarray, rows: predicted.Rows, tick: int) -> None:
+        """Version 2: the prediction state after sending ``rows``: ``before`` is the code each soldier held
+        until now (or, for an entry sent absolute, the code sent), at ``tick``."""
         nf = last.shape[1]
         before = self._before
         set_rows(before[:, :nf], idx, last)
         before[idx, nf] = predicted.tick_code(tick)
-        if len(restart_rows):
-            set_rows(before[:, :nf], idx[restart_rows], restart)
+        if len(rows.restart_rows):
+            set_rows(before[:, :nf], idx[rows.restart_rows], rows.restart)
 
     def _rows_v1(
         self, q: np.ndarray, last: np.ndarray, changed: np.ndarray, known: np.ndarray
@@ -573,26 +562,20 @@ class UpdateEncoder:
             restart=last[:0],
         )
 
-    def _chunks(
-        self, idx: np.ndarray, rows: predicted.Rows, tick: int, cut: list[int], max_payloads: list[int]
-    ) -> list[list[bytes]]:
-        """Split rows into frames; pack all frames' fields in one pass (each frame's body word-aligned).
-        ``cut``: the row positions where each job of a union starts (then ``len(idx)``), each job's frames
-        within its rows and ``max_payloads``: a frame's bytes depend on its own rows only."""
+    def _chunks(self, idx: np.ndarray, rows: predicted.Rows, tick: int, max_payload: int) -> list[bytes]:
+        """Split rows into frames; pack all frames' fields in one pass (each frame's body word-aligned)."""
         row_bits = rows.row_bits
         per_row = 16 + rows.header.shape[1] + predicted.WIDTH_BITS * rows.nibble_count + row_bits
         slack = 3 if self.version >= 2 else 2  # bytes for the paddings of the header, widths, fields
+        capacity = (max_payload - UPDATE_HEADER.size - slack) * 8
+        if capacity < int(per_row.max()):
+            raise ValueError(f"max_payload {max_payload} cannot hold one soldier update")
         cum = np.concatenate([[0], np.cumsum(per_row)])
-        bounds, frames = [0], []
-        for (a0, b0), max_payload in zip(pairwise(cut), max_payloads, strict=True):
-            capacity = (max_payload - UPDATE_HEADER.size - slack) * 8
-            if b0 > a0 and capacity < int(per_row[a0:b0].max()):
-                raise ValueError(f"max_payload {max_payload} cannot hold one soldier update")
-            while bounds[-1] < b0:  # one iteration per frame, not per soldier
-                a = bounds[-1]
-                b = int(np.searchsorted(cum, cum[a] + capacity, side="right")) - 1
-                bounds.append(min(max(b, a + 1), a + MAX_COUNT, b0))
-            frames.append(len(bounds) - 1)
+        bounds = [0]
+        while bounds[-1] < len(idx):  # one iteration per frame, not per soldier
+            a = bounds[-1]
+            b = int(np.searchsorted(cum, cum[a] + capacity, side="right")) - 1
+            bounds.append(min(max(b, a + 1), a + MAX_COUNT, len(idx)))
         fbits = np.concatenate([[0], np.cumsum(row_bits)])
         frame_bits = np.diff(fbits[bounds])
         frame_word = np.concatenate([[0], np.cumsum((frame_bits + 63) >> 6)])  # each body starts a word
@@ -626,137 +609,7 @@ class UpdateEncoder:
                     )
                 )
             )
-        return [out[a:b] for a, b in pairwise([0, *frames])]
-
-
-# a union encode's job: an encoder, sorted distinct soldier indices, their codes, its max_payload
-EncodeJob = tuple["UpdateEncoder", np.ndarray, np.ndarray, int]
-
-
-def encode_union(jobs: Sequence[EncodeJob], tick: int) -> list[list[bytes]]:
-    """Each job's frames, as its encoder's own encode would give them (same bytes, same state after), from one
-    diff-and-pack pass over the rows of every job: the fixed cost of an encode (its hundred-odd numpy calls,
-    ≈ 0.3 ms) is paid once for all of a shard batch's clients instead of once per client (issue 21).
-
-    A job: an encoder, its sorted, distinct, non-empty soldier indices, their codes (n, F) int32 and its
-    ``max_payload``. The encoders share one table and protocol version; each keeps its own delta state (a
-    soldier may be in several jobs). Every per-row result (diff, residuals, widths, groups) depends on the
-    row and its own encoder's state only, so the union's rows are cut back into each job's frames. Nothing
-    is written to any encoder's state unless every job's frames were made.
-    """
-    first = jobs[0][0]
-    if any(e.table is not first.table or e.version != first.version for e, *_ in jobs):
-        raise ValueError("a union encode's encoders must share one table and version")
-    plan = first._plan
-    sc = scratch()
-    cut = [0]
-    for job in jobs:
-        cut.append(cut[-1] + len(job[1]))
-    if len(jobs) == 1:
-        idx, q = jobs[0][1], jobs[0][2]
-    else:
-        idx = np.concatenate([job[1] for job in jobs])
-        adjacent = _adjacent([job[2] for job in jobs])
-        if adjacent is None:
-            q = sc.get("enc.union", (cut[-1], jobs[0][2].shape[1]), np.int32)
-            np.concatenate([job[2] for job in jobs], out=q)
-        else:
-            q = adjacent
-    last = sc.get("enc.last", q.shape, np.int32)
-    known = np.empty(len(idx), bool)
-    for (e, i, _, _), (a, b) in zip(jobs, pairwise(cut), strict=True):
-        e._tick = tick
-        np.take(e._last, i, axis=0, out=last[a:b], mode="clip")  # (indices checked: clip gathers unbuffered)
-        np.take(e._known, i, out=known[a:b], mode="clip")
-    words = plan.diff_words(q != last)
-    send = (words[:, 0] != 0) if plan.nwords == 1 else (words != 0).any(axis=1)
-    send |= ~known
-    if not send.all():  # idle soldiers: gather the rest by index (cheaper than boolean masks of rows)
-        sel = np.flatnonzero(send)
-        cut = np.searchsorted(sel, cut).tolist()
-        if not len(sel):
-            for e, i, _, _ in jobs:
-                e._sent = i[:0]
-            return [[] for _ in jobs]
-        shape = (len(sel), q.shape[1])
-        q = np.take(q, sel, axis=0, out=sc.get("enc.q", shape, np.int32), mode="clip")
-        last = np.take(last, sel, axis=0, out=sc.get("enc.sent_last", shape, np.int32), mode="clip")
-        idx, known, words = idx[sel], known[sel], words[sel]
-    changed = plan.changed(words)
-    if not known.all():
-        changed[~known] = True
-    if first.version >= 2:
-        before = sc.get("enc.before", (len(idx), first._before.shape[1]), np.int32)
-        for (e, _, _, _), (a, b) in zip(jobs, pairwise(cut), strict=True):
-            np.take(e._before, idx[a:b], axis=0, out=before[a:b], mode="clip")
-        rows = predicted.encode_rows(plan.v2, q, last, before, known, changed, tick)
-    else:
-        rows = first._rows_v1(q, last, changed, known)
-    out = first._chunks(idx, rows, tick, cut, [job[3] for job in jobs])
-    restarts = [(rows.restart_rows, rows.restart)] if len(jobs) == 1 else _restarts(rows, cut)
-    for (e, _, _, _), restart, (a, b) in zip(jobs, restarts, pairwise(cut), strict=True):
-        e._record(idx[a:b], q[a:b], last[a:b], restart, tick)
-    return out
-
-
-def encode_codes_union(jobs: Sequence[EncodeJob], tick: int, version: object = None) -> list[list[bytes]]:
-    """Each job's ``encoder.encode_codes(indices, codes, tick, max_payload, version)``, in order (the same
-    bytes, states and memo), with the encodes of the jobs the memo does not answer made in one
-    :func:`encode_union` per table and protocol version: a front-end's clients of one shard batch pay its
-    fixed cost once. Jobs: (encoder, indices, codes, max_payload), each encoder at most once."""
-    if len({id(e) for e, *_ in jobs}) < len(jobs):
-        raise ValueError("an encoder may take one job of a union encode")
-    out: list[list[bytes]] = [[] for _ in jobs]
-    own: dict[tuple[int, int], list[tuple[int, EncodeJob, tuple[object, ...] | None]]] = {}
-    first: dict[tuple[object, ...], int] = {}  # (memo, state, rows) -> the job that encodes them
-    later: list[int] = []  # jobs a job before them in this union encodes for (their memo hit)
-    for k, (e, indices, codes, max_payload) in enumerate(jobs):
-        idx, q = e._sorted(indices, codes)
-        if not len(idx):
-            continue
-        key: tuple[object, ...] | None = None
-        if e.shared is not None and version is not None:
-            key = e._memo_key(idx, tick, max_payload)
-            if (id(e.shared), e.state, *key) in first:
-                later.append(k)
-                continue
-            hit = e._memo_hit(key, version)
-            if hit is not None:
-                out[k] = hit
-                continue
-            first[(id(e.shared), e.state, *key)] = k
-        own.setdefault((id(e.table), e.version), []).append((k, (e, idx, q, max_payload), key))
-    for group in own.values():
-        for (k, job, key), payloads in zip(group, encode_union([j for _, j, _ in group], tick), strict=True):
-            out[k] = job[0]._after(job[1], payloads, key, tick)
-    for k in later:
-        e, indices, codes, max_payload = jobs[k]
-        out[k] = e.encode_codes(indices, codes, tick, max_payload, version)
-    return out
-
-
-def _adjacent(parts: list[np.ndarray]) -> np.ndarray | None:
-    """The rows of C-contiguous int32 ``parts`` as one array, uncopied, if they lie one after another in one
-    array (a caller's one gather of every job's codes, sliced), else None."""
-    first = parts[0]
-    at = first.__array_interface__["data"][0]
-    for p in parts:
-        ok = p.dtype == np.int32 and p.flags.c_contiguous and p.base is not None and p.base is first.base
-        if not ok or p.__array_interface__["data"][0] != at:
-            return None
-        at += p.nbytes
-    n = sum(len(p) for p in parts)
-    return np.lib.stride_tricks.as_strided(first, (n, first.shape[1]), first.strides, writeable=False)
-
-
-def _restarts(rows: predicted.Rows, cut: list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The restarted rows of ``rows`` (positions within each job) and their codes, for each job of a union
-    (``cut``: where each starts, then the row count)."""
-    at = np.searchsorted(rows.restart_rows, cut).tolist()
-    return [
-        (rows.restart_rows[at[k] : at[k + 1]] - a, rows.restart[at[k] : at[k + 1]])
-        for k, a in enumerate(cut[:-1])
-    ]
+        return out
 
 
 def _checked(version: int) -> int:

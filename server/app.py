@@ -59,7 +59,7 @@ from server.listen import bind_tcp
 from server.logging import get_logger
 from server.pending_requests import PendingRequests
 from server.pose_board import BoardRef, PoseBoard
-from server.session import Session, take_updates_together
+from server.session import Session
 from server.soldier.manager import TickUpdate
 from server.stage_cpu import TURN_CPU_S, DeafSpans, StageCpu
 from server.startup import ServerWorld
@@ -75,8 +75,6 @@ FLUSH_ON_CLOSE_S = 2.0  # how long a closing session's writer may take to flush 
 SHUTDOWN_GRACE_S = 1.0
 # TTES_FRONT_TURNS=0: a front-end's woken writers encode back to back, as before (_encode; a bench's A/B)
 FRONT_TURNS = os.environ.get("TTES_FRONT_TURNS") != "0"
-# TTES_FRONT_UNION=0: each of a front-end's writers encodes its own client only (_encode_ahead; a bench's A/B)
-FRONT_UNION = os.environ.get("TTES_FRONT_UNION") != "0"
 # clip ends a shard's tick handles between two looks at its CPU (each piece's passes cost a fixed part)
 ADVANCE_ROWS = 500
 # TTES_ANSWERS_FIRST=0: a shard's tick carries the requests it took while it sampled in its own batch, and a
@@ -531,31 +529,11 @@ class TtesServer:
 
     def _encode_now(self, session: Session) -> bytes:
         session.wake = trio.Event()  # a publish from here on wakes it again
-        now = self.now()
         with self.cpu("encode"):
-            ahead = self._encode_ahead(session, now)
-            data = session.take_output(now)
+            data = session.take_output(self.now())
         if self.encoded is not None:
-            for s in ahead:
-                self.encoded(s)
             self.encoded(session)
         return data
-
-    def _encode_ahead(self, session: Session, now: float) -> list[Session]:
-        """A front-end's writer that encodes also encodes for the other woken writers whose updates are due
-        (not sending), all of them in one pass a shard batch (``take_updates_together``: the same bytes,
-        left for each writer's next take); returns those others. The bench's clients watch disjoint soldiers
-        and never share an encode, so each batch cost one encode's fixed part per client (issue 21)."""
-        if self.feed is None or not FRONT_UNION:
-            return []
-        others = [
-            s
-            for s in self.sessions.values()
-            if s is not session and s.wake.is_set() and not s.sending and s.board_ref is session.board_ref
-        ]
-        if not others:
-            return []
-        return [s for s in take_updates_together([session, *others], now) if s is not session]
 
     async def _tick_output(self, session: Session, stream: trio.abc.Stream) -> bytes | None:
         """A single server's writer woken by a tick: its client's frames of the tick (None: a write stalled).

@@ -32,14 +32,12 @@ import hmac
 import math
 import time
 from collections import deque
-from itertools import pairwise
 from typing import TYPE_CHECKING
 
 import numpy as np
 import trio
 
-from protocol.bitpack import take_rows
-from protocol.connection import NEED_DATA, PAUSED, SERVER, Connection, State, send_update_codes_union
+from protocol.connection import NEED_DATA, PAUSED, SERVER, Connection, State
 from protocol.entity import Reaction
 from protocol.errors import ErrorCode, LocalProtocolError
 from protocol.events import (
@@ -124,7 +122,6 @@ class Session:
         self.more_of_tick = False  # woken by a tick's first publish of answered soldiers only (take_output)
         self.early: tuple[int, np.ndarray] | None = None  # (board serial, rows) written ahead of a tick
         self.sending = False  # the writer waits for the socket to take a write (the trio app's writer)
-        self.ready = b""  # joint updates encoded ahead, at another writer's turn (take_updates_together)
         self.force = np.zeros(config.max_soldiers, bool)  # subscribed soldiers owed a (full) update
         self.tokens = float(config.max_requests_per_s)
         self.tokens_at = 0.0
@@ -193,40 +190,21 @@ class Session:
         the manager's throttle already applied to those soldiers (not so to a client's own throttle)."""
         out = b"".join(self.control)
         self.control.clear()
-        if self.ready:  # encoded ahead, at another writer's turn: what this take would have encoded then
-            out, self.ready = out + self.ready, b""
         self.retry_at = None
-        if not self.takes_updates:
+        if self.closing or self.conn.state is not State.OPEN or not self.tables_sent:
             return out
-        held = self._held_until(now)
         more, self.more_of_tick = self.more_of_tick and self.throttle is None, False
-        if held is not None:
-            self.retry_at = held
-            return out
+        if now is not None and not more:
+            due = self.last_updates_at + self.own_throttle() - 0.5 / self.config.tick_hz
+            if now < due - 1e-9:
+                # the tick at which they are due wakes the writer; this is for when no tick publishes:
+                # a quarter period after it, so a retry never writes ahead of that tick's poses
+                self.retry_at = due + 0.75 / self.config.tick_hz
+                return out
         data = self._joint_updates()
         if data and now is not None and not more:
             self.last_updates_at = now
         return out + data
-
-    def _took(self, data: bytes, now: float | None, more: bool) -> None:
-        """Joint updates encoded ahead of this writer's take (:func:`take_updates_together`)."""
-        self.ready += data
-        if data and now is not None and not more:
-            self.last_updates_at = now
-
-    @property
-    def takes_updates(self) -> bool:
-        """A write may carry joint updates: the connection is open and the tables went out."""
-        return not self.closing and self.conn.state is State.OPEN and self.tables_sent
-
-    def _held_until(self, now: float | None) -> float | None:
-        """When to retry if this connection's own throttle holds its joint updates back at ``now``, else None.
-        The tick at which they are due wakes the writer; this is for when no tick publishes: a quarter
-        period after it, so a retry never writes ahead of that tick's poses."""
-        if now is None or (self.more_of_tick and self.throttle is None):
-            return None
-        due = self.last_updates_at + self.own_throttle() - 0.5 / self.config.tick_hz
-        return due + 0.75 / self.config.tick_hz if now < due - 1e-9 else None
 
     def own_throttle(self) -> float:
         """This connection's rate cap: its own, never below the server's (a client only lowers its rate)."""
@@ -270,64 +248,48 @@ class Session:
 
         A writer that missed publishes (a busy server, a slow socket) first catches up through the encodes
         its group was sent at them (:meth:`_catch_up`), then needs only what changed at the newest."""
-        due = self._due()
-        return b"" if due is None else self._encode_rows(*due)
-
-    def _due(self) -> tuple[PoseBoard, np.ndarray, np.ndarray, int, bool] | None:
-        """What :meth:`_joint_updates` would encode now (the board, the due soldiers, those this client may
-        see, the serial its last write covered, whether it is late), taken as its write: None if nothing."""
         board = self.board_ref.board
         if board is None:
-            return None
+            return b""
         sub = self.conn.subscribed
         since = self.flushed_serial
         self.flushed_serial = board.serial
         early, self.early = self.early, None
         if len(sub) == 0:
-            return None
+            return b""
         sub = self.may_see(sub[sub < board.capacity])
         due = board.valid[sub] & ((board.version[sub] > since) | self.force[sub])
         if early is not None:  # written ahead of the rest of the tick (take_answers), not changed since
             due &= ~(np.isin(sub, early[1]) & (board.version[sub] <= early[0]))
         idx = sub[due]
         if len(idx) == 0:
-            return None
+            return b""
         late = early is None and self._may_catch_up(since, board.serial) and not self.force[idx].any()
         self.force[idx] = False
-        return board, idx, sub, since, late
-
-    def _parts(self, board: PoseBoard, idx: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
-        """Soldiers ``idx`` by wire tick (the tick's rows, then those answered since: the next tick's), then
-        by table: (tick, table, rows), in the order they are written."""
-        tables = board.table_of[idx]
-        ticks = board.labels(idx)
-        parts = []
-        for tick in _distinct(ticks):
-            for t in _distinct(tables):
-                sel = (tables == t) & (ticks == tick)
-                rows = idx if sel.all() else idx[sel]
-                if len(rows):
-                    parts.append((tick, t, rows))
-        return parts
+        return self._encode_rows(board, idx, sub, since, late)
 
     def _encode_rows(
         self, board: PoseBoard, idx: np.ndarray, sub: np.ndarray, since: int, late: bool
     ) -> bytes:
         """JOINT_UPDATES of soldiers ``idx`` (``sub``: those this client may see; ``late``: catch up through
         the shared memo's encodes of the publishes after ``since``)."""
-        parts = self._parts(board, idx)
-        # catching up through the memo is for a tick's plain publish: rows labelled with the board's tick only
-        late = late and {tick for tick, _, _ in parts} == {board.tick}
+        tables = board.table_of[idx]
+        ticks = board.labels(idx)  # the tick's rows, then the rows answered since (the next tick's), in order
         chunks = []
-        for tick, t, rows in parts:
-            caught = self._catch_up(t, rows, sub, since) if late else None
-            if caught is None:
-                caught = self.conn.send_update_codes(t, rows, board.codes_of(rows), tick, board.serial)
-            chunks.append(caught)
-        return self._wrote(idx, b"".join(chunks))
-
-    def _wrote(self, idx: np.ndarray, data: bytes) -> bytes:
-        """``data``, the joint updates of soldiers ``idx``, counted (and traced)."""
+        labels = _distinct(ticks)
+        # catching up through the memo is for a tick's plain publish: rows labelled with the board's tick only
+        late = late and labels == [board.tick]
+        for tick in labels:
+            for t in _distinct(tables):
+                sel = (tables == t) & (ticks == tick)
+                rows = idx if sel.all() else idx[sel]
+                if not len(rows):
+                    continue
+                caught = self._catch_up(t, rows, sub, since) if late else None
+                if caught is None:
+                    caught = self.conn.send_update_codes(t, rows, board.codes_of(rows), tick, board.serial)
+                chunks.append(caught)
+        data = b"".join(chunks)
         if data:
             self.batches_out += 1
         if TRACE is not None:
@@ -808,45 +770,3 @@ def _distinct(values: np.ndarray) -> list[int]:
     if len(values) and (values == values[0]).all():
         return [int(values[0])]
     return [int(v) for v in np.unique(values)]
-
-
-def take_updates_together(sessions: list[Session], now: float | None) -> list[Session]:
-    """The joint updates each of ``sessions`` would take now (as :meth:`Session.take_output` would: the
-    same bytes, state and throttle), encoded together and left in each one's ``ready`` for its writer's next
-    take: each (tick, table) part of all of them in one encode (``send_update_codes_union``), whose fixed
-    cost (≈ 0.3 ms of numpy calls, ≈ 0.4 with its frames) is then paid once for a shard batch's clients
-    instead of once per client (issue 21). A session whose own throttle holds its updates back is left for
-    its writer; one that catches up through the memo takes its own path. Returns those that took updates."""
-    took: list[Session] = []
-    parts: dict[tuple[int, int], list[tuple[Session, np.ndarray]]] = {}  # (tick, table) -> (session, rows)
-    plans: list[tuple[Session, np.ndarray, list[tuple[int, int, np.ndarray]], bool]] = []
-    for s in sessions:
-        if not s.takes_updates or s._held_until(now) is not None:
-            continue
-        more, s.more_of_tick = s.more_of_tick and s.throttle is None, False
-        s.retry_at = None
-        took.append(s)
-        due = s._due()
-        if due is None:
-            continue
-        board, idx, sub, since, late = due
-        s_parts = s._parts(board, idx)
-        if late and {tick for tick, _, _ in s_parts} == {board.tick}:
-            s._took(s._encode_rows(board, idx, sub, since, late), now, more)
-            continue
-        for tick, t, rows in s_parts:
-            parts.setdefault((tick, t), []).append((s, rows))
-        plans.append((s, idx, s_parts, more))
-    shared = sessions[0].board_ref.board
-    frames: dict[tuple[int, int, int], bytes] = {}  # (session id, tick, table) -> its frames
-    for (tick, t), group in parts.items():
-        assert shared is not None
-        # one gather of every client's codes, sliced: the union encode reads them uncopied
-        codes = take_rows(shared.codes, np.concatenate([rows for _, rows in group]))
-        at = np.cumsum([0, *(len(rows) for _, rows in group)]).tolist()
-        jobs = [(s.conn, rows, codes[a:b]) for (s, rows), (a, b) in zip(group, pairwise(at), strict=True)]
-        for (s, _), data in zip(group, send_update_codes_union(jobs, t, tick, shared.serial), strict=True):
-            frames[(s.id, tick, t)] = data
-    for s, idx, s_parts, more in plans:
-        s._took(s._wrote(idx, b"".join(frames[(s.id, tick, t)] for tick, t, _ in s_parts)), now, more)
-    return took

@@ -10,7 +10,7 @@ import pytest
 from test_quality import FIGURES, _clip, _lying
 
 from authoring.quality import THRESHOLDS, FigureSet, check_clip
-from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, body_clearance
+from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM
 from peabody.loader import read_figure
 
 
@@ -84,7 +84,7 @@ def test_a_rifle_lying_across_him_rests_on_the_body(figset: FigureSet) -> None:
     loc[:3, 3] = np.r_[belly[0], 60.0, belly[2]] - (loc @ grip)[:3]
     for _ in range(60):  # lower it until it touches him
         pts = _rifle_points(figset, loc)
-        gap = min(body_clearance(pts, hulls, segg).min(), pts[:, 1].min())
+        gap = min(hulls.clearance(pts, segg).min(), pts[:, 1].min())
         if gap <= 0.5:
             break
         loc[1, 3] -= gap - 0.25

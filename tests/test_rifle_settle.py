@@ -10,7 +10,7 @@ from test_quality import _lying
 from test_quality_rifle_rest import _on_ground, _rifle_points, _rot
 
 from authoring.quality import FigureSet
-from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, body_clearance, rifle_rest
+from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, rifle_rest
 from authoring.rifle_settle import settled
 from authoring.transitions import ClipFrames
 from peabody.loader import read_figure
@@ -38,8 +38,7 @@ def _settle(figset: FigureSet, rifle: np.ndarray) -> tuple[ClipFrames, np.ndarra
     kin, hulls = figset.kin["DI.fig"], figset.hulls("DI.fig")
     segg = kin.segment_globals(frames.poses, frames.roots)
     depth = [
-        -body_clearance(_rifle_points(figset, r), hulls, g).min()
-        for r, g in zip(frames.rifles, segg, strict=True)
+        -hulls.clearance(_rifle_points(figset, r), g).min() for r, g in zip(frames.rifles, segg, strict=True)
     ]
     return frames, segg[-1], depth
 
@@ -78,7 +77,7 @@ def test_a_rifle_lying_across_him_stays_on_him(figset: FigureSet) -> None:
     loc[:3, 3] = np.r_[belly[0], 60.0, belly[2]] - (loc @ grip)[:3]
     for _ in range(60):  # lowered until it touches him
         pts = _rifle_points(figset, loc)
-        gap = min(body_clearance(pts, hulls, segg).min(), pts[:, 1].min())
+        gap = min(hulls.clearance(pts, segg).min(), pts[:, 1].min())
         if gap <= 0.5:
             break
         loc[1, 3] -= gap - 0.25

@@ -16,7 +16,7 @@ from protocol.entity import Appearance, make_entity_requests
 from protocol.events import Accept, ConnectionClosed, Error, Hello, JointUpdates, Subscribe, UpdateTableMsg
 from protocol.updates import UpdateEncoder, quantise
 from server.app import TtesServer
-from server.session import Session, take_updates_together
+from server.session import Session
 
 
 class Pair:
@@ -378,36 +378,3 @@ def test_codes_of_one_table_or_several_are_stored_alike() -> None:
     assert one.publish_codes(rows, np.array([1, 1, 1, 2]), codes, 8) == 2
     assert two.publish_codes(rows, np.array([1, 2, 1, 2]), codes, 8) == 1
     assert one.version[rows].tolist() == [1, 1, 2, 2] and two.version[rows].tolist() == [1, 1, 2, 1]
-
-
-def test_clients_encoded_together_each_get_the_float_paths_bytes() -> None:
-    """Issue 21: a front-end's writer encodes the other woken clients' updates with its own, in one pass a
-    batch (``take_updates_together``): each client still gets exactly its own bytes, at its next take,
-    whether the clients watch disjoint, overlapping or the same soldiers, read late or join late."""
-    server = make_server(throttle=0.0)
-    server.start_world()
-    walk(server, [0, 1, 2, 5, 8, 11], 1.4)
-    walk(server, [4, 13], 4.0)
-    pairs = [Pair(server, f"c{k}") for k in range(4)]
-    for p, sub in zip(pairs, [range(0, 16, 2), range(1, 16, 2), range(16), range(0, 16, 2)], strict=True):
-        p.subscribe(tuple(sub))
-    shared = server.board_ref.encodes
-    assert shared is not None
-    for k in range(1, 40):
-        server.tick(k / 30)
-        if k == 20:
-            late = Pair(server, "late")
-            late.subscribe(tuple(range(3, 12)))
-            pairs.append(late)
-        together = [p for j, p in enumerate(pairs) if k % 3 == 0 or j != 2]  # c2 reads every third tick
-        took = take_updates_together([p.session for p in together], None)
-        assert took == [p.session for p in together]
-        for p in together:
-            want = p.expected()
-            assert p.flush() == want
-    board = server.board_ref.board
-    assert board is not None
-    for p in pairs:
-        dec, sub = p.client.decoder(1), p.shadow.subscribed
-        assert dec is not None and len(sub[board.valid[sub]]) > 3 and dec.known(sub[board.valid[sub]]).all()
-    assert shared.hits > 0  # c0 and c3 (one state, the same rows) still share their encodes

@@ -21,6 +21,7 @@ import numpy as np
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
 from peabody.quaternion import to_transform
+from protocol.bitpack import set_rows
 
 if TYPE_CHECKING:
     from server.soldier.library import MotionLibrary
@@ -302,16 +303,6 @@ def measure(figure: Figure, joints: np.ndarray, placements: np.ndarray) -> np.nd
 
 
 # -- the per-soldier root offset over a SoldierTable (vectorised; the manager calls these) -----------------
-def put_rows(a: np.ndarray, idx: np.ndarray, rows: np.ndarray) -> None:
-    """``a[idx] = rows`` for an (N, 2) float64 ``a`` (root offsets, travel), each row moved as one complex128:
-    numpy's fancy assignment steps through a row's two fields (10,000 rows: ~170 us against ~18;
-    ``bitpack.set_rows`` builds a void dtype per call, ~4 us, the cost of a request path's few rows)."""
-    if a.dtype != np.float64 or a.ndim != 2 or a.shape[1] != 2 or a.strides[1] != 8:
-        a[idx] = rows
-        return
-    a.view(np.complex128)[idx] = np.ascontiguousarray(rows, np.float64).view(np.complex128)
-
-
 def scaled(rows: np.ndarray, v: np.ndarray) -> np.ndarray:
     """``rows * v[:, None]`` of (n, k) ``rows`` and (n,) ``v``, a column at a time: numpy broadcasts an
     (n, 1) over a short last axis with an inner loop per row, 4-8 times dearer at k = 2 and 4,000-10,000
@@ -361,7 +352,7 @@ def yawed(xz: np.ndarray, compass_deg: np.ndarray) -> np.ndarray:
     if len(turned) < len(compass_deg):  # unturned rows as they are (a walking crowd: most, or all, of them)
         out = np.array(xz, np.float64)
         if len(turned):
-            put_rows(out, turned, yawed(np.take(out, turned, axis=0), compass_deg[turned]))
+            set_rows(out, turned, yawed(np.take(out, turned, axis=0), compass_deg[turned]))
         return out
     a = -np.radians(compass_deg)
     c, s = np.cos(a), np.sin(a)
@@ -404,11 +395,11 @@ def fold(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray | 
         new = yj - np.minimum(np.maximum(yj - steer(tb, lib, ti, oj), -step), step)
         contact = lib.travel.contact_at(clip, fj)
         # about the sole point carrying the weight
-        put_rows(off, j, oj + yawed(contact, yj) - yawed(contact, new))
+        set_rows(off, j, oj + yawed(contact, yj) - yawed(contact, new))
         tb.root_yaw[ti] = new
-    put_rows(tb.root_off, idx, off)
+    set_rows(tb.root_off, idx, off)
     tb.root_t[idx] = t
-    put_rows(tb.root_ref, idx, travel_now)
+    set_rows(tb.root_ref, idx, travel_now)
 
 
 def steer(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, off: np.ndarray) -> np.ndarray:
@@ -440,10 +431,10 @@ def pivot(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.ndarray |
     was = lib.travel.share_at(clip, frame_at(tb, lib, idx, tb.root_t[idx]))
     new = yaw + tb.pivot_rest[idx] * (lib.travel.share_at(clip, frames) - was)
     contact = lib.travel.contact_at(clip, frames)
-    put_rows(tb.root_off, idx, off + yawed(contact, yaw) - yawed(contact, new))
+    set_rows(tb.root_off, idx, off + yawed(contact, yaw) - yawed(contact, new))
     tb.root_yaw[idx] = new
     tb.root_t[idx] = t
-    put_rows(tb.root_ref, idx, travel_now)
+    set_rows(tb.root_ref, idx, travel_now)
 
 
 def frame_at1(tb: SoldierTable, lib: MotionLibrary, i: int, t: float) -> float:
@@ -488,14 +479,14 @@ def fold_unturned(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray, t: np.n
     dt = t - tb.root_t[idx]
     off = np.take(tb.root_off, idx, axis=0)
     off = off + scaled(travel - np.take(tb.root_ref, idx, axis=0), tb.stride[idx])
-    put_rows(tb.root_off, idx, off - scaled(np.take(tb.vlocal, idx, axis=0), dt))
+    set_rows(tb.root_off, idx, off - scaled(np.take(tb.vlocal, idx, axis=0), dt))
     tb.root_t[idx] = t
-    put_rows(tb.root_ref, idx, travel)
+    set_rows(tb.root_ref, idx, travel)
 
 
 def rebase_exact(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
     """:func:`rebase1` of soldiers ``idx`` at once, bit for bit."""
-    put_rows(tb.root_ref, idx, lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx])))
+    set_rows(tb.root_ref, idx, lib.travel.at_exact(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx])))
 
 
 def rebase1(tb: SoldierTable, lib: MotionLibrary, i: int) -> None:
@@ -506,7 +497,7 @@ def rebase1(tb: SoldierTable, lib: MotionLibrary, i: int) -> None:
 def rebase(tb: SoldierTable, lib: MotionLibrary, idx: np.ndarray) -> None:
     """After a new clip starts (at ``root_t``): its travel counts from the frame it shows then."""
     if len(idx):
-        put_rows(tb.root_ref, idx, lib.travel.at(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx])))
+        set_rows(tb.root_ref, idx, lib.travel.at(tb.clip[idx], frame_at(tb, lib, idx, tb.root_t[idx])))
 
 
 def turn_offsets(tb: SoldierTable, idx: np.ndarray, compass_change: np.ndarray) -> None:

@@ -191,7 +191,7 @@ class Ticking(Events):
             off = root_motion.offset_at(tb, lib, idx, clock, frames)
             about = np.flatnonzero(face != 0.0)
             if len(about):
-                root_motion.put_rows(off, about, root_motion.yawed(np.take(off, about, axis=0), face[about]))
+                set_rows(off, about, root_motion.yawed(np.take(off, about, axis=0), face[about]))
             off = off.astype(np.float32)
             for k in range(figures.shape[1]):  # (a figure at a time: an (n, 1) broadcast over nfig is dearer)
                 figures[:, k, 0] += off[:, 0]
