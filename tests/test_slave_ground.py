@@ -210,6 +210,7 @@ def test_a_slave_settles_once_its_masters_arms_lie_still_where_the_death_asks() 
     still = np.zeros((n, 3))
     swing = still.copy()
     swing[:25, 0] = np.linspace(0.0, 10.0, 25)  # 25 cm/s over frames 0-24, still from frame 24 on
+    swing[25:, 0] = 10.0
     at = {"right_lower_arm.distal": swing, "left_lower_arm.distal": still, "bottom_head.distal": still}
     assert slave_ground._arms_still(at, fps) == 24
     assert slave_ground._arms_still({"right_lower_arm.distal": still}, fps) == 0
