@@ -125,6 +125,8 @@ def test_a_prone_death_left_propped_on_his_elbows_fails() -> None:
     chest = _fall(12.0, 5.0, 168, 24, n)
     row = propped_lag(pelvis, {"head": head, "chest": chest}, FPS)
     assert row["propped_s"] > PROPPED_LIMIT_S and row["propped_part"] == "head"
+    assert summarise([{"name": "prstow2dead", **row}], [])["thresholds"]["propped_s"]["failing"] == 1
+    assert THRESHOLDS["propped_s"] == PROPPED_LIMIT_S == 1.0
     quick = propped_lag(
         pelvis, {"head": _fall(35.0, 0.3, 10, 30, n), "chest": _fall(12.0, 5.0, 10, 30, n)}, FPS
     )
