@@ -51,8 +51,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
   the body is down, ``limb_rest_lag_s``, how long after the body the last limb part comes to rest,
   ``propped_s`` (limit 1 s: main's prone deaths fail it until branch proppedmerge-s16's data lands), how
   long after the pelvis comes near the ground the head and chest come down (a dead man left propped on his
-  elbows looks alive), and ``trunk_rise_cm`` (limit 2 cm: the DI/M16 slaves of kfire2dead and of the prone
-  deaths fail it), how far the pelvis or chest rises once down (a dead man lifting his hips).
+  elbows looks alive), and ``trunk_rise_cm`` (limit 2 cm: the DI/M16 slaves of the prone deaths fail it;
+  kfire2dead's 5.3 -> 1.2 with DeathSpec.slave_settle_down), how far the pelvis or chest rises once down
+  (a dead man lifting his hips).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
   recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
   cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
