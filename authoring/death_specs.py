@@ -147,6 +147,10 @@ class DeathSpec:
     # .clear_rifle): faded out before the release, prfire2dead's DI right upper arm lay 1.04 cm in the stock
     # at the release frame (13)
     slave_rifle_slid_past: int = 0
+    # the slaves' trunk settles onto the ground (slave_ground.rest_limbs) once the master's pelvis and chest
+    # lie down, however his root still turns, not once it is still: kfire2dead's DI, lifted by its arm in the
+    # ground under it, hovered pelvis 6-11 cm up until his root stopped 0.6 s later (trunk_rise 5.28 -> 1.2)
+    slave_settle_down: bool = False
 
 
 def _prone(
@@ -315,6 +319,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_rest_slide_cm=KFIRE_REST_SLIDE,
         arms_headward_cm=KFIRE_ARMS_HEADWARD,
         turn_as_checked=True,
+        slave_settle_down=True,
     ),
     replace(
         _prone("prstow2dead", "PRONE_STOWED"),

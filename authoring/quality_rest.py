@@ -60,14 +60,15 @@ PELVIS_NEAR_CM = 10.0  # cm: the pelvis is near the ground within this of where 
 # cm: the head (lowest node) and chest (centroid) are down within this of where they lie: a head held up a
 # hand's breadth; a dead crawler's rests on his forearms 10 cm up
 PROPPED_CM = 12.0
-# s: the most they may stay up after the pelvis is near the ground (proposed, not yet in quality.THRESHOLDS):
-# main's prstow2dead (soldier / DI / M16) 3.33 / 3.37 / 3.37 and prfire2dead 1.62 / 1.67 / 1.67 fail it
-# (branch proppedmerge-s16: 0.92-1.00)
+# s: the most they may stay up after the pelvis is near the ground (quality.THRESHOLDS): main's prstow2dead
+# (soldier / DI / M16) 3.33 / 3.37 / 3.37 and prfire2dead 1.62 / 1.67 / 1.67 fail it (branch
+# proppedmerge-s16: 0.92-1.00)
 PROPPED_LIMIT_S = 1.0
 TRUNK_DOWN_CM = 5.0  # cm: the pelvis or chest is down within this of where it finally lies
 TRUNK_RISE_PARTS = ("pelvis", "chest")
-# cm: the most the pelvis or chest may rise above its lowest once down (proposed, not yet in THRESHOLDS): the
-# DI/M16 slaves of kfire2dead (5.3) and of the prone deaths (main 3.6-4.0, proppedmerge-s16 3.7-5.3) fail it
+# cm: the most the pelvis or chest may rise above its lowest once down (quality.THRESHOLDS): the
+# DI/M16 slaves of the prone deaths (main 3.6-4.0, proppedmerge-s16 3.7-5.3) fail it (kfire2dead's 5.3 -> 1.2:
+# DeathSpec.slave_settle_down)
 TRUNK_RISE_LIMIT_CM = 2.0
 LIMBS = ("upper_arm", "forearm", "hand", "thigh", "knee", "foot")  # knee: the shin (authoring.body_parts)
 

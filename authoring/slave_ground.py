@@ -62,6 +62,11 @@ SETTLE_FRAMES = 15  # ... the trunk is lowered onto the ground over this many fr
 ARMS_STILL_CM_S = 10.0  # ... and, where a death asks, his arm and head sites slower than this
 IN_PLACE_CM = 0.01  # a pelvis node moving less than this a frame: the body turns about it, in place
 FADE_FRAMES = 12  # after the release the goals fade in over this many frames (the slaving's own fade)
+# where a death asks (DeathSpec.slave_settle_down) the trunk settles once the master's pelvis and chest lie
+# within DOWN_CM of where they end, over DOWN_SETTLE_FRAMES (over 15, kfire2dead's DI upper arm, on the
+# ground under it while he still rolled, slid 3.07 cm and its chest rose 2.02 cm after it lay)
+DOWN_CM = 3.0
+DOWN_SETTLE_FRAMES = 30
 
 
 def _chain(site: str) -> tuple[str, ...]:
@@ -142,6 +147,8 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
         settle = np.minimum(settle, _fade_in(n, _arms_still(m_at, float(master.fps)), SETTLE_FRAMES))
     arm_out, rigid = _arm_out(master), _trunk_rigid(master)
     planted = _plants(unsolved, m_at, m_h, release)
+    if _settles_down(master):  # from his trunk down, however his root still turns (slave_settle_down)
+        settle = w * _fade_in(n, _trunk_down(m_h), DOWN_SETTLE_FRAMES)
     # once the master lies still, the trunk (the body rolls or pitches onto what the master rests on); the
     # limbs throughout; last, the limbs again unplanted: a part that its plant kept in the ground comes out
     stages = [(TRUNK, ROOT_DOFS, True), (limbs, (), True)] * LIMB_PASSES + [(limbs, (), False)]
@@ -228,6 +235,23 @@ def _settled(root: np.ndarray, fps: float, in_place: np.ndarray | None = None) -
     moving = np.flatnonzero(speed > SETTLE_SPEED_CM_S)
     still = int(moving[-1]) + 1 if len(moving) else 0
     return _fade_in(len(root), still, SETTLE_FRAMES)
+
+
+def _settles_down(master: Channelset) -> bool:
+    """Whether this death's slave trunk settles once the master's trunk is down
+    (``DeathSpec.slave_settle_down``)."""
+    spec = spec_of(master.name)
+    return spec is not None and spec.slave_settle_down
+
+
+def _trunk_down(heights: dict[str, np.ndarray]) -> int:
+    """The frame from which the master's pelvis and chest (their lowest nodes' ``heights``) stay within
+    :data:`DOWN_CM` of where they finally lie."""
+    down = 0
+    for part in ("pelvis", "chest"):
+        up = np.flatnonzero(heights[part] > heights[part][-1] + DOWN_CM)
+        down = max(down, int(up[-1]) + 1 if len(up) else 0)
+    return down
 
 
 def _smooth_moves(before: np.ndarray, after: np.ndarray, frames: np.ndarray) -> np.ndarray:

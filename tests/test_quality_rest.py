@@ -125,6 +125,8 @@ def test_a_prone_death_left_propped_on_his_elbows_fails() -> None:
     chest = _fall(12.0, 5.0, 168, 24, n)
     row = propped_lag(pelvis, {"head": head, "chest": chest}, FPS)
     assert row["propped_s"] > PROPPED_LIMIT_S and row["propped_part"] == "head"
+    assert summarise([{"name": "prstow2dead", **row}], [])["thresholds"]["propped_s"]["failing"] == 1
+    assert THRESHOLDS["propped_s"] == PROPPED_LIMIT_S == 1.0
     quick = propped_lag(
         pelvis, {"head": _fall(35.0, 0.3, 10, 30, n), "chest": _fall(12.0, 5.0, 10, 30, n)}, FPS
     )
@@ -165,6 +167,8 @@ def test_a_dead_trunk_that_rises_is_seen() -> None:
     assert row["trunk_rise_cm"] == pytest.approx(5.0, abs=0.05) and row["trunk_rise_part"] == "pelvis"
     assert row["trunk_rise_cm"] > TRUNK_RISE_LIMIT_CM
     assert row["trunk_rise_where"] == "pelvis at frame 76, down from 0"
+    assert summarise([{"name": "x", **row}], [])["thresholds"]["trunk_rise_cm"]["failing"] == 1
+    assert THRESHOLDS["trunk_rise_cm"] == TRUNK_RISE_LIMIT_CM == 2.0
     settle = down + 2.0 + _fall(0.0, 1.0, 30, 10, n) - _fall(0.0, 1.5, 50, 20, n)
     fall = _fall(90.0, 1.0, 0, 40, n)
     ok = trunk_rise({"pelvis": fall, "chest": settle})

@@ -169,6 +169,26 @@ def test_only_the_crawlers_and_ststow2dead_slaves_move_their_arms_out_sideways()
     assert both == {"ststow2dead"}
 
 
+def test_the_trunk_is_down_once_pelvis_and_chest_stay_near_where_they_end() -> None:
+    """kfire2dead (issue 14): the master's trunk was down 0.25 s before his root, still rolling him on the
+    ground, stopped; judged at his root the DI's trunk, lifted out of the ground by its arm under it, was laid
+    only then and hovered, pelvis 6-11 cm up (trunk_rise 5.28 cm). With DeathSpec.slave_settle_down it
+    settles from the frame his pelvis and chest both lie within DOWN_CM of where they end."""
+    near = slave_ground.DOWN_CM - 0.5
+    pelvis = np.array([40.0, 20.0, 3.0, 1.0 + near, 2.0, 1.0 + near, 1.0, 1.0])  # down from frame 2
+    chest = np.array([60.0, 40.0, 20.0, 9.0, 0.0, near, 0.0, 0.0])  # down from frame 4
+    assert slave_ground._trunk_down({"pelvis": pelvis, "chest": chest}) == 4
+    assert slave_ground._trunk_down({"pelvis": np.ones(3), "chest": np.zeros(3)}) == 0
+
+
+def test_only_kfire2dead_slaves_settle_once_the_trunk_is_down() -> None:
+    """The settle from the trunk down is kfire2dead's own setting: the other deaths' slaves rebuild
+    unchanged."""
+    from authoring import deaths
+
+    assert {d.name for d in deaths.DEATHS if d.slave_settle_down} == {"kfire2dead"}
+
+
 def test_a_master_rolling_his_pelvis_in_place_lies_still() -> None:
     """A prone death's master rolls his pelvis about a pelvis node on the ground with each leg
     (DeathSpec.prone_legs_roll): his root moves ~10 cm/s, yet his body lies still, and the slave's trunk is
