@@ -66,8 +66,8 @@ PROPPED_CM = 12.0
 PROPPED_LIMIT_S = 1.0
 TRUNK_DOWN_CM = 5.0  # cm: the pelvis or chest is down within this of where it finally lies
 TRUNK_RISE_PARTS = ("pelvis", "chest")
-# cm: the most the pelvis or chest may rise above its lowest once down (quality.THRESHOLDS): the
-# DI/M16 slaves of the prone deaths (main 3.6-4.0, proppedmerge-s16 3.7-5.3) fail it (kfire2dead's 5.3 -> 1.2:
+# cm: the most the pelvis or chest may rise above its lowest once down (proposed, not yet in THRESHOLDS): the
+# DI/M16 slaves of the prone deaths fail it (4.2-5.3 at frames 75-76; kfire2dead's 5.3 -> 1.2:
 # DeathSpec.slave_settle_down)
 TRUNK_RISE_LIMIT_CM = 2.0
 LIMBS = ("upper_arm", "forearm", "hand", "thigh", "knee", "foot")  # knee: the shin (authoring.body_parts)

@@ -167,8 +167,6 @@ def test_a_dead_trunk_that_rises_is_seen() -> None:
     assert row["trunk_rise_cm"] == pytest.approx(5.0, abs=0.05) and row["trunk_rise_part"] == "pelvis"
     assert row["trunk_rise_cm"] > TRUNK_RISE_LIMIT_CM
     assert row["trunk_rise_where"] == "pelvis at frame 76, down from 0"
-    assert summarise([{"name": "x", **row}], [])["thresholds"]["trunk_rise_cm"]["failing"] == 1
-    assert THRESHOLDS["trunk_rise_cm"] == TRUNK_RISE_LIMIT_CM == 2.0
     settle = down + 2.0 + _fall(0.0, 1.0, 30, 10, n) - _fall(0.0, 1.5, 50, 20, n)
     fall = _fall(90.0, 1.0, 0, 40, n)
     ok = trunk_rise({"pelvis": fall, "chest": settle})
