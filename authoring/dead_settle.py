@@ -43,12 +43,16 @@ anew against the other (:func:`_relaid`; kfire2dead's lies out across his chest,
 fall as the body lands (:func:`_arms_fall`: from the frame it is down, as the check's ``limb_rest_lag_s``
 sees it, in :data:`ARM_FALL_SECONDS`), over the physics' last frames: appended after them, kfire2dead's arm
 hung in the air 1.5 s after he lay still (the asleep ragdoll's damped joints hold it) and was then lowered.
+A death that asks (:attr:`ArmsFall.early_s`) lets its arms go before it is down and gives them longer
+(:data:`EARLY_LONGER`): kfire2dead's relaid top arm, swept 90 cm across his chest in 0.6 s, whipped its hand
+round at 9 m/s; a dead arm drops with the body, it is not flung after it.
 """
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -84,6 +88,8 @@ HEADWARD_FALL_SECONDS = 0.6  # s: an arm laid anew from over the head (_relaid) 
 HEADWARD_STILL_SECONDS = 0.6  # s: and the clip ends this long after it lands (the slaves' trunk rest eases in
 # over the clip's last 0.5 s, slave_rest.EASE_FRAMES: kfire2dead's DI, its trunk turned while the arm swung
 # down, slid its chest 3.35 cm and ended moving its right hand at 0.51 m/s)
+EARLY_LONGER = 1.5  # an arm let go early (ArmsFall.early_s) falls this many times the lead longer (it lands
+# half the lead later, within the check's limb_rest_lag_s of the trunk at rest: kfire2dead 0.2 s)
 FALL_POWER = 1.8  # the fall's easing: smoothstep(s ** FALL_POWER), fast late, landing softly
 # degrees: the clavicle's two, the shoulder's three and the elbow's first angles tried for a fallen arm (a
 # grid: its best shapes are starts; the top arm of a body half on his side lies low only with the shoulder
@@ -109,6 +115,16 @@ LEG_STEP_MIN = 0.5  # ... down to this
 LEG_CHECKS = 24  # the settle is checked at this many even steps of its progress (it is linear in the angles)
 LEG_SLIDE_CM = 0.5  # cm: a leg node on the ground at two checks may be this far apart (its run on the
 # ground began in the fall: the check judges the run's whole extent)
+
+
+@dataclass(frozen=True)
+class ArmsFall:
+    """How a body on its back lets its arms fall: how far a fallen arm may reach past the shoulders toward
+    the head (cm, ``DeathSpec.arms_headward_cm``; None: anywhere) and how long before the body is down they
+    go (s, ``DeathSpec.arms_fall_early_s``: their fall lasts :data:`EARLY_LONGER` times that longer)."""
+
+    headward_cm: float | None = None
+    early_s: float = 0.0
 
 
 def _face_down(kin, q: np.ndarray, root: np.ndarray) -> bool:
@@ -497,22 +513,21 @@ def settle(
     propped: bool = False,
     legs: bool = True,
     slack_feet: bool = False,
-    arms_headward_cm: float | None = None,
+    arms: ArmsFall | None = None,
 ) -> ClipFrames:
     """``frames`` with the limp settle appended (see the module docstring); unchanged if not face down (or,
     with ``arms_fall``, face up). A prone death (``propped``) left propped on its arms brings its chest down
     (:mod:`authoring.dead_prone`; :func:`lowered_early`: as he is hit); a body on its back (``arms_fall``)
     lets its arms fall as it lands (:func:`_arms_fall`). A face-down body's legs are laid as it lands
     (:func:`_legs_land`); ``legs`` False: they stay as the physics laid them (``DeathSpec.legs_settle``);
-    ``arms_headward_cm``: how far a fallen arm may reach past the shoulders toward the head
-    (``DeathSpec.arms_headward_cm``; None: anywhere)."""
+    ``arms``: how the arms fall on his back (:class:`ArmsFall`; None: the defaults)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
     lowered = _lowered(figs, frames, slack_feet) if propped else None
     if lowered is not None:
         return _appended(frames, lowered)
     kin, last = figs.kin["body"], frames.poses[-1]
     if arms_fall and not _face_down(kin, last, frames.roots[-1]) and _face_up(kin, last, frames.roots[-1]):
-        return _arms_fall(figs, frames, arms_headward_cm)
+        return _arms_fall(figs, frames, arms or ArmsFall())
     target = limp_target(figs, frames)
     if target is None:
         return frames
@@ -569,7 +584,7 @@ def _rest_frame(figs: FigureSet, frames: ClipFrames, near: float) -> int:
     return len(frames.poses) - 1 if k is None else k
 
 
-def _arms_fall(figs: FigureSet, frames: ClipFrames, headward_cm: float | None = None) -> ClipFrames:
+def _arms_fall(figs: FigureSet, frames: ClipFrames, fall: ArmsFall) -> ClipFrames:
     """A body on its back lets its arms fall as it lands: from the frame it is down (:func:`down_frame`)
     each arm falls, in :data:`ARM_FALL_SECONDS`, to the shape :func:`fallen_arm` lays it in (found on the
     last frame's body with the arms as they were then), along a way bent so that no part of it rises
@@ -577,7 +592,9 @@ def _arms_fall(figs: FigureSet, frames: ClipFrames, headward_cm: float | None = 
     as the physics has it, and the clip ends still (:data:`STILL_SECONDS` after the arms land, or where the
     physics ended). Started after the physics had ended (1.5 s after he lay still), kfire2dead's top arm was
     held up in the air and lowered: a dead man holding up his arm. An arm laid anew from over the head
-    (``headward_cm``, :func:`_relaid`) falls in :data:`HEADWARD_FALL_SECONDS` from its pose as he came down.
+    (``fall.headward_cm``, :func:`_relaid`) falls in :data:`HEADWARD_FALL_SECONDS` from its pose as he came
+    down. ``fall.early_s``: the arms go that long before he is down (their own motion until then), their
+    fall :data:`EARLY_LONGER` times that longer.
     """
     kin = figs.kin["body"]
     k0 = down_frame(figs, frames)
@@ -585,23 +602,30 @@ def _arms_fall(figs: FigureSet, frames: ClipFrames, headward_cm: float | None = 
     held = frames.poses[-1].copy()
     held[arms] = frames.poses[k0, arms]  # the arms as they were when he came down
     body = _Body(figs, held, frames.roots[-1], frames.rifles[-1])
-    body.headward_cm = headward_cm
+    body.headward_cm = fall.headward_cm
     target, relaid = _fallen(figs, body)
+    early = min(k0, round(fall.early_s * frames.fps))
+    ks = k0 - early  # the arms go from here
     lengths = {
-        s: round((HEADWARD_FALL_SECONDS if s in relaid else ARM_FALL_SECONDS) * frames.fps) for s in SIDES
+        s: round(
+            (HEADWARD_FALL_SECONDS if s in relaid else ARM_FALL_SECONDS) * frames.fps + EARLY_LONGER * early
+        )
+        for s in SIDES
     }
     still = round((HEADWARD_STILL_SECONDS if relaid else STILL_SECONDS) * frames.fps)
-    extra = max(0, k0 + max(lengths.values()) + still + 1 - len(frames.poses))
+    extra = max(0, ks + max(lengths.values()) + still + 1 - len(frames.poses))
     out = _appended(frames, np.repeat(frames.poses[-1:], extra, axis=0))
     poses = out.poses.copy()
     for side, n in lengths.items():
-        u = np.concatenate([fall_easing(np.arange(1, n + 1) / n), np.ones(len(out.poses) - k0 - 1 - n)])
+        u = np.concatenate([fall_easing(np.arange(1, n + 1) / n), np.ones(len(out.poses) - ks - 1 - n)])
         arm = _Arm(body, side)
         x1 = target[arm.idx]
         c = dead_arms.control_pose(arm, x1, _minimise)
-        x0 = out.poses[k0 + 1 :, arm.idx] if side not in relaid else arm.x0  # a relaid arm's own motion
-        # left out: kfire2dead's top arm, still sinking 2 cm as its way rose over his chest, rose 3.5 cm
-        poses[k0 + 1 :, arm.idx] = dead_arms.bent(x0, c, x1, u)
+        x0 = out.poses[ks + 1 :, arm.idx].copy()
+        if side in relaid:  # a relaid arm's own motion after he is down left out: kfire2dead's top arm, still
+            # sinking 2 cm as its way rose over his chest, rose 3.5 cm
+            x0[early:] = arm.x0
+        poses[ks + 1 :, arm.idx] = dead_arms.bent(x0, c, x1, u)
     return ClipFrames(poses, out.roots, out.rifles, out.fps)
 
 

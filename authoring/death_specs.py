@@ -151,6 +151,9 @@ class DeathSpec:
     # lie down, however his root still turns, not once it is still: kfire2dead's DI, lifted by its arm in the
     # ground under it, hovered pelvis 6-11 cm up until his root stopped 0.6 s later (trunk_rise 5.28 -> 1.2)
     slave_settle_down: bool = False
+    # s: a body on its back (arms_fall) lets its arms go this long before it is down, and they fall
+    # 1.5 times as long (dead_settle.ArmsFall): kfire2dead's relaid top arm swept across in 0.6 s, hand 9 m/s
+    arms_fall_early_s: float = 0.0
 
 
 def _prone(
@@ -230,6 +233,9 @@ KFIRE_REST_SLIDE = 2.0
 # cm: kfire2dead's fallen arms reach no further than this past his shoulders toward his head
 # (DeathSpec.arms_headward_cm): half on his side, his top (right) arm lay lowest curled over his head
 KFIRE_ARMS_HEADWARD = 5.0
+# s: kfire2dead's arms go this long before he is down (DeathSpec.arms_fall_early_s): his relaid top arm swept
+# across his chest after he was down, hand 8.96 -> 3.08 m/s (0.4: 4.59, 0.6: 3.67; limb_rest_lag 0.2 s)
+KFIRE_ARMS_EARLY = 0.8
 # frames: kstow2dead's legs' flicking change by the pin and the lift smoothed (DeathSpec.legs_eased): the
 # worst flick 18.7 degrees (right knee) -> 7.5 (the left wrist's, untouched), the ankles' 12.7 -> 1.9, its
 # DI/M16 slaves' ankle 16.6 -> 2.6; turned least-worst last too (DeathSpec.turn_worst), its left thigh's slide
@@ -320,6 +326,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_headward_cm=KFIRE_ARMS_HEADWARD,
         turn_as_checked=True,
         slave_settle_down=True,
+        arms_fall_early_s=KFIRE_ARMS_EARLY,
     ),
     replace(
         _prone("prstow2dead", "PRONE_STOWED"),

@@ -515,7 +515,8 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
     if spec.pinned and spec.arms_fall:  # held where they landed first, then the arms fall (kstow2dead: pinned
         # after the fall, the still frames appended moved the feet's pins and slid a foot 1.8 cm more)
         assert not (spec.knees_held or spec.propped), f"{spec.name}: knees held or propped, and arms falling"
-        return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall)
+        arms = dead_settle.ArmsFall(early_s=spec.arms_fall_early_s)
+        return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall, arms=arms)
     if spec.sunk:  # a crawler's trunk comes down about his thighs first
         frames = dead_crawl.sunk(FigureSet({"body": soldier, "rifle": rifle}), frames)
     if spec.slack_feet:  # settled and pinned past a live soldier's ankles (authoring.passive_range)
@@ -533,7 +534,7 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
             spec.propped,
             legs=spec.legs_settle,
             slack_feet=spec.slack_feet,
-            arms_headward_cm=spec.arms_headward_cm,
+            arms=dead_settle.ArmsFall(spec.arms_headward_cm, spec.arms_fall_early_s),
         )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)

@@ -37,6 +37,12 @@ Nor should a dead trunk rise: a DI slave's pelvis, down on the ground, rose 3-5 
 man lifting his hips, and ``rest_rise_cm`` judges only the limbs. ``trunk_rise_cm`` is, for the pelvis and
 the chest (lowest nodes), from the first frame each is down (within :data:`TRUNK_DOWN_CM` of where it finally
 lies), the most it rises above its lowest since (:func:`trunk_rise`, :data:`TRUNK_RISE_LIMIT_CM`).
+
+Nor should a dead limb be flung once the body is down: kfire2dead's top arm, laid anew across his chest after
+he was down, swung its hand round at 8.96 m/s, kstow2dead's left at 7.92 (a limp hand dropped 45 cm lands at
+about 3 m/s; every other death's limbs 0.2-3.1 m/s). ``dead_limb_speed_m_s`` is the fastest any limb part's
+centroid moves from the frame the body is down (:func:`rest_frame`, within :data:`NEAR_CM`;
+:func:`limb_whip`, :data:`WHIP_M_S`).
 """
 
 from __future__ import annotations
@@ -56,6 +62,7 @@ TORSO_PARTS = ("pelvis", "chest", "belly", "head")
 LAG_LIMIT_S = 0.5  # s: the most a limb part may come to rest after the trunk
 NEAR_CM = 3.0  # cm: a part is at rest within this of its final height ...
 STILL_M_S = 0.1  # m/s: ... and slower than this (its centroid)
+WHIP_M_S = 4.5  # m/s: the fastest a limb part's centroid may move once the body is down (a whip, not a fall)
 PELVIS_NEAR_CM = 10.0  # cm: the pelvis is near the ground within this of where it finally lies
 # cm: the head (lowest node) and chest (centroid) are down within this of where they lie: a head held up a
 # hand's breadth; a dead crawler's rests on his forearms 10 cm up
@@ -179,13 +186,31 @@ def limb_rest_lag(limbs: dict[str, np.ndarray], trunk: int | None, fps: float) -
     return row
 
 
+def limb_whip(limbs: dict[str, np.ndarray], down: int | None, fps: float) -> dict[str, Any]:
+    """The fastest (m/s) any limb part at ``limbs`` (name: centroids ``(n, 3)``, cm) moves from frame
+    ``down`` (the body is down) on, which part and at which frame."""
+    row: dict[str, Any] = {"dead_limb_speed_m_s": None, "dead_limb_speed_where": None}
+    if down is None or not limbs:
+        return row
+    speeds = {
+        k: np.linalg.norm(np.gradient(v, axis=0), axis=1)[down:] * fps / 100.0 for k, v in limbs.items()
+    }
+    part = max(speeds, key=lambda k: float(speeds[k].max(initial=0.0)))
+    frame = down + int(np.argmax(speeds[part]))
+    row.update(dead_limb_speed_m_s=round(float(speeds[part].max(initial=0.0)), 3))
+    row["dead_limb_speed_where"] = f"{part} at frame {frame}"
+    return row
+
+
 def rest_lag(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
     """:func:`limb_rest_lag` of a played clip, from the frame its body is down (:func:`rest_frame`, within
     :data:`NEAR_CM`: as near as a limb at rest; a slave's body lowered the last 2 cm at the end hid its arm
     held up)."""
     fps = cf.channelset.fps
-    trunk = trunk_rest(rest_frame(_heights(cf, figures), NEAR_CM), _centroids(cf, figures, TORSO_PARTS), fps)
-    return limb_rest_lag(_centroids(cf, figures), trunk, fps)
+    down = rest_frame(_heights(cf, figures), NEAR_CM)
+    trunk = trunk_rest(down, _centroids(cf, figures, TORSO_PARTS), fps)
+    limbs = _centroids(cf, figures)
+    return limb_rest_lag(limbs, trunk, fps) | limb_whip(limbs, down, fps)
 
 
 def trunk_rest(down: int | None, torso: dict[str, np.ndarray], fps: float) -> int | None:

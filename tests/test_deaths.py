@@ -245,6 +245,24 @@ def test_a_prone_deaths_forearms_do_not_skid(ctx: BuildContext, name: str, parts
     assert slide <= THRESHOLDS["contact_slide_cm"]
 
 
+def test_kfire2dead_s_arms_drop_with_him_not_whip_after(ctx: BuildContext) -> None:
+    """Issue 14: kfire2dead's top arm, laid anew across his chest, swung down after he was down in 0.6 s,
+    its hand at 8.96 m/s (a whip, not a limp arm dropping); let go as he comes down
+    (``DeathSpec.arms_fall_early_s``), no hand or forearm moves faster than 4.5 m/s once he is down."""
+    assert deaths.death_specs()["kfire2dead"].arms_fall_early_s > 0.0
+    poses, roots, rifles, _ = _played(ctx, "kfire2dead")
+    figs = FigureSet({"body": ctx.soldier, "rifle": ctx.rifle})
+    k0 = dead_settle.down_frame(figs, ClipFrames(poses, roots, rifles))
+    nodes, segs = figs.nodes("body")
+    parts = figs.node_parts("body")
+    g = figs.kin["body"].segment_globals(poses, roots)
+    for part in ("left_hand", "left_forearm", "right_hand", "right_forearm"):
+        m = parts == part
+        c = np.einsum("nkij,kj->ni", g[:, segs[m], :3, :], nodes[m]) / int(m.sum())
+        speed = np.linalg.norm(np.gradient(c, axis=0), axis=1) * 60.0 / 100.0  # m/s at 60 fps
+        assert speed[k0:].max() <= 4.5, part
+
+
 def test_a_dead_arm_falls_fastest_late_and_lands_softly() -> None:
     s = np.linspace(0.0, 1.0, 49)
     u = dead_settle.fall_easing(s)

@@ -17,8 +17,10 @@ from authoring.quality_rest import (
     PROPPED_LIMIT_S,
     RISE_LIMIT_CM,
     TRUNK_RISE_LIMIT_CM,
+    WHIP_M_S,
     _heights,
     limb_rest_lag,
+    limb_whip,
     propped_lag,
     rest_frame,
     rest_rise,
@@ -224,3 +226,20 @@ def test_kfire2dead_s_arms_land_with_the_body(figures: FigureSet) -> None:
     assert row["rest_rise_cm"] <= RISE_LIMIT_CM
     assert row["propped_s"] <= PROPPED_LIMIT_S and row["trunk_rise_cm"] <= TRUNK_RISE_LIMIT_CM
     assert "limb_rest_lag_s" not in check_clip(cf, figures)
+
+
+def test_a_dead_arm_swung_round_after_he_is_down_is_a_whip_a_dropped_one_is_not() -> None:
+    """Constructed deaths, the body down at frame 30: a hand swung half round the shoulder in 0.6 s after
+    it (kfire2dead's relaid top arm: 8.96 m/s) is a whip; one dropped 45 cm as under gravity (from rest,
+    speeding up, t = sqrt(2h/g)) lands at about 3 m/s and is not; a fling before he is down is the fall's."""
+    n, down = 120, 30
+    s = np.clip((np.arange(n) - 40) / 36, 0.0, 1.0) ** 1.8  # fast late (dead_settle.fall_easing)
+    turn = np.pi * s * s * (3.0 - 2.0 * s)  # swung round the shoulder, 60 cm out
+    swept = np.stack([60.0 * np.cos(turn), np.full(n, 12.0), 60.0 * np.sin(turn)], axis=1)
+    row = limb_whip({"right_hand": swept, "left_hand": _part(np.full(n, 2.0))}, down, FPS)
+    assert row["dead_limb_speed_m_s"] > WHIP_M_S and row["dead_limb_speed_where"].startswith("right_hand")
+    t = np.clip((np.arange(n) - 40) / FPS, 0.0, np.sqrt(2 * 45.0 / 981.0))
+    dropped = _part(47.0 - 0.5 * 981.0 * t * t)
+    assert limb_whip({"right_hand": dropped}, down, FPS)["dead_limb_speed_m_s"] <= WHIP_M_S
+    assert limb_whip({"right_hand": swept}, 80, FPS)["dead_limb_speed_m_s"] <= WHIP_M_S  # before: the fall's
+    assert limb_whip({"right_hand": swept}, None, FPS)["dead_limb_speed_m_s"] is None
