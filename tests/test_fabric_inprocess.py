@@ -26,6 +26,8 @@ from protocol.events import (
 )
 from server.app import TtesServer
 from server.fabric import BLOCK, Handler, Kind, Presence, Unsubscribe
+from server.fabric import requests as req
+from server.fabric.batch import PULSE, Batch
 from server.fabric.nodes import KEY_EVERY, FrontNode, Sharding, ShardNode
 
 WALK = (0.0, 1.4, 0.0)
@@ -386,3 +388,34 @@ async def test_the_load_tester_names_the_shards_behind_a_front_end(autojump_cloc
         fabrics[1].close()  # shard 1 dies: the next run says its soldiers live on shard 0
         out = await _run(cfg, "127.0.0.1", port, None, True)
         assert out["server"]["shards"][1] == {"shard": 1, "animated_by": 0, "present": False}
+
+
+def _pulse(k: int, shards: int, seq: int) -> Batch:
+    """Shard ``k``'s tick pulse (no soldiers)."""
+    none = np.zeros(0, np.uint32)
+    return Batch(
+        k, shards, seq, seq, 0.0, none, none.astype(np.uint8), np.zeros((0, 4), np.uint16), False, PULSE
+    )
+
+
+def test_a_sync_asked_again_keeps_the_soldiers_of_a_home_routed_to_the_shard_since() -> None:
+    """Shard 0 stood in for home 1, hung, and both homes went to shard 2; back, it gets its own soldiers
+    and lets home 1's go (the sync's ``gone``). It does not answer ``books``, and shard 2 fails meanwhile:
+    home 1 is routed to shard 0 again. The sync asked again with ``books`` (its answer acknowledges both)
+    names home 1 among those shard 0 animates: it must not tell it to let home 1's soldiers go too (they
+    would live nowhere: a key pulse that lacks a soldier the books hold is not the shard's to judge)."""
+    server = make_server()
+    server.start_world()  # the start-up script's soldiers 0-9: home 1's are 1, 4, 7 of 3 shards
+    node = FrontNode(server, MemoryFabric(Bus()), 3)
+    sent: list[bytes] = []
+    node._puts[0] = sent.append
+    node.heard_at, node.last_seq = [0.0] * 3, [5] * 3
+    node._stood_for[0] = {1}
+    node.route = [2, 2, 2]
+    node._pulse(_pulse(0, 3, 6), 10.0)  # back from its hang
+    syncs = [op for data in sent for op in req.decode(data) if op["op"] == "sync"]
+    assert syncs[-1]["homes"] == [0] and syncs[-1]["gone"] == [1, 4, 7]
+    node.route[1] = 0  # shard 2's fail-over
+    node._pulse(_pulse(0, 3, 7), 13.0)  # no answer after 2 s: asked again, the sync first
+    syncs = [op for data in sent for op in req.decode(data) if op["op"] == "sync"]
+    assert len(syncs) == 2 and syncs[-1]["homes"] == [0, 1] and syncs[-1]["gone"] == []

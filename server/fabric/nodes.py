@@ -960,6 +960,8 @@ class FrontNode:
         have = idx[self.has_last[idx]]
         removed = books.gone(self.known, m.table.alive, homes, self.shards)
         elsewhere = np.zeros(0, np.int64) if drop is None else np.asarray(drop, np.int64)
+        # (not those whose home is routed to the shard since: a sync asked again after another fail-over)
+        elsewhere = elsewhere[np.asarray(self.route)[Sharding.home(elsewhere, self.shards)] != shard]
         gone = [*removed.tolist(), *elsewhere.tolist()]
         gone_gens = [*self.gen[removed].tolist(), *(self.gen[elsewhere] + 1).tolist()]  # (those live on)
         animates = None if made else self._animated_by(shard)  # (a shard heard first: the stand-in knows)
