@@ -419,3 +419,19 @@ def test_a_sync_asked_again_keeps_the_soldiers_of_a_home_routed_to_the_shard_sin
     node._pulse(_pulse(0, 3, 7), 13.0)  # no answer after 2 s: asked again, the sync first
     syncs = [op for data in sent for op in req.decode(data) if op["op"] == "sync"]
     assert len(syncs) == 2 and syncs[-1]["homes"] == [0, 1] and syncs[-1]["gone"] == []
+
+
+def test_a_shard_asked_for_its_books_grows_the_soldiers_not_in_them_by_the_index_space_at_most() -> None:
+    """Until a shard asked for its books answers, the soldiers its batches carry that the books lack are
+    kept (no index of them is allotted here); asked again until it answers, the ask may stand a long time:
+    an index past the index space (a peer's bad batch) is not kept."""
+    server = make_server()
+    server.start_world()  # soldiers 0-9
+    node = FrontNode(server, MemoryFabric(Bus()), 2)
+    node._pulse(_pulse(1, 2, 0), 0.0)  # heard for the first time: asked for its books
+    assert 1 in node._asked
+    n = len(node.known)
+    indices = np.array([3, 11, n - 1, n, n + 5, 2**32 - 1], np.uint32)
+    codes = np.zeros((len(indices), 4), np.uint16)
+    node._heard(Batch(1, 2, 1, 1, 0.0, indices, np.ones(len(indices), np.uint8), codes, False, 0), 0.1)
+    assert node._unknown[1] == {11, n - 1}

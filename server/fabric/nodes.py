@@ -780,11 +780,18 @@ class FrontNode:
         elif (lost or stream in self._key_wanted) and not self.key_asked[k]:
             self.key_asked[k] = True  # the rows that changed in a lost batch are stale until a key
             self._send(self.route[k], req.key())
+        if k in self._asked and self.server.world.manager is not None:
+            self._not_in_books(k, b.indices)
+
+    def _not_in_books(self, k: int, indices: np.ndarray) -> None:
+        """Shard ``k`` asked for its books: its soldiers ``indices`` that the books lack, no index of which is
+        allotted here until it answers. Only those of the index space: a shard's batches grow this by no
+        more (asked again until it answers, :class:`Asked`, the ask may stand a long time)."""
         m = self.server.world.manager
-        if m is None:
-            return
-        if k in self._asked:  # until it answers, no index it animates is allotted here
-            self._unknown.setdefault(k, set()).update(b.indices[~m.table.live_mask(b.indices)].tolist())
+        assert m is not None
+        idx = np.asarray(indices, np.int64)
+        idx = idx[(idx >= 0) & (idx < len(self.known))]
+        self._unknown.setdefault(k, set()).update(idx[~m.table.live_mask(idx)].tolist())
 
     def _ask_books(self, k: int, now: float, sync: Callable[[], None] | None = None) -> None:
         """Ask shard ``k`` for its books, and again at its pulses until it answers (:class:`Asked`)."""
@@ -834,7 +841,7 @@ class FrontNode:
                 ask.sync()
             self._ask_books(k, now, ask.sync)
         if k in self._asked:  # until it answers, no index it animates is allotted here
-            self._unknown.setdefault(k, set()).update(b.indices[~m.table.live_mask(b.indices)].tolist())
+            self._not_in_books(k, b.indices)
 
     def _differs_again(self, k: int, indices: np.ndarray) -> bool:
         """Whether shard ``k``'s key pulse differs from the books (:meth:`_differs`), as its last one did."""
