@@ -28,7 +28,7 @@ from server.app import TtesServer
 from server.fabric import BLOCK, Handler, Kind, Presence, Unsubscribe
 from server.fabric import requests as req
 from server.fabric.batch import PULSE, Batch
-from server.fabric.nodes import KEY_EVERY, FrontNode, Sharding, ShardNode
+from server.fabric.nodes import ASK_AGAIN_S, KEY_EVERY, FrontNode, Sharding, ShardNode
 
 WALK = (0.0, 1.4, 0.0)
 RUN = (0.0, 3.5, 0.0)
@@ -435,3 +435,17 @@ def test_a_shard_asked_for_its_books_grows_the_soldiers_not_in_them_by_the_index
     codes = np.zeros((len(indices), 4), np.uint16)
     node._heard(Batch(1, 2, 1, 1, 0.0, indices, np.ones(len(indices), np.uint8), codes, False, 0), 0.1)
     assert node._unknown[1] == {11, n - 1}
+
+
+def test_a_shard_that_restarts_while_asked_for_its_books_is_asked_anew() -> None:
+    """Asked again, a shard that has not answered ``books`` waits twice as long each time (up to
+    ASK_AGAIN_MAX_S); one that restarts meanwhile gets a new sync and ``books``, asked again after the first
+    wait (on main after twice the last: its new sync, as likely lost as the first, waited 8 s here)."""
+    server = make_server()
+    server.start_world()
+    node = FrontNode(server, MemoryFabric(Bus()), 2)
+    node._pulse(_pulse(1, 2, 10), 0.0)  # heard for the first time: synced and asked
+    node._pulse(_pulse(1, 2, 11), 2.0)  # no answer: asked again
+    assert node._asked[1].wait == 2 * ASK_AGAIN_S and node._asked[1].again == 2.0 + 2 * ASK_AGAIN_S
+    node._pulse(_pulse(1, 2, 0), 3.0)  # restarted (its count went back)
+    assert node._asked[1].wait == ASK_AGAIN_S and node._asked[1].again == 3.0 + ASK_AGAIN_S

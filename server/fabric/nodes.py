@@ -795,8 +795,8 @@ class FrontNode:
 
     def _ask_books(self, k: int, now: float, sync: Callable[[], None] | None = None) -> None:
         """Ask shard ``k`` for its books, and again at its pulses until it answers (:class:`Asked`)."""
-        ask = self._asked.get(k)
-        wait = ASK_AGAIN_S if ask is None else min(2 * ask.wait, ASK_AGAIN_MAX_S)
+        ask = self._asked.get(k)  # asked again: twice the last wait; a new sync (a restart) asks anew
+        wait = ASK_AGAIN_S if ask is None or sync is not ask.sync else min(2 * ask.wait, ASK_AGAIN_MAX_S)
         self._asked[k] = Asked(now + wait, wait, sync)
         self._send(k, req.books(self.front.k))
         self._resubscribe()
