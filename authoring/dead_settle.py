@@ -665,15 +665,16 @@ def _appended(frames: ClipFrames, poses: np.ndarray) -> ClipFrames:
 
 def lowered_early(
     frames: ClipFrames, soldier: Figure, rifle: Figure, k0: int, slack_feet: bool = False
-) -> ClipFrames:
+) -> ClipFrames | None:
     """A propped face-down body's chest brought down (as :func:`settle` does) from frame ``k0`` of the
-    physics ``frames`` on (:func:`_cut_short`); unchanged if not face down."""
+    physics ``frames`` on (:func:`_cut_short`); None if not face down there (the caller settles after the
+    physics, as without ``DeathSpec.lowered_at``: the tail cut short and no settle at all, on main)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
     end = k0 + 1 + round((SETTLE_SECONDS + STILL_SECONDS) * frames.fps)  # the rifle too lies still from then
     # (prstow2dead's, rocking on the ground until 2.9 s: the pins eased a still arm back as the clip ended)
     frames = ClipFrames(frames.poses[:end], frames.roots[:end], frames.rifles[:end], frames.fps)
     lowered = _lowered(figs, frames, slack_feet, k0)
-    return frames if lowered is None else _cut_short(frames, lowered, k0)
+    return None if lowered is None else _cut_short(frames, lowered, k0)
 
 
 def _cut_short(frames: ClipFrames, poses: np.ndarray, k0: int) -> ClipFrames:

@@ -522,9 +522,13 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
     if spec.slack_feet:  # settled and pinned past a live soldier's ankles (authoring.passive_range)
         soldier = passive_figure(soldier)
     settled_from = len(frames.poses) - 1  # the frame the settle starts after
+    lowered = None
     if spec.lowered_at is not None:  # the chest comes down as he is hit, not after the physics
-        settled_from = round(spec.lowered_at * frames.fps)
-        frames = dead_settle.lowered_early(frames, soldier, rifle, settled_from, spec.slack_feet)
+        early = min(round(spec.lowered_at * frames.fps), settled_from)
+        lowered = dead_settle.lowered_early(frames, soldier, rifle, early, spec.slack_feet)
+        settled_from = settled_from if lowered is None else early  # (not face down there: as without it)
+    if lowered is not None:
+        frames = lowered
     else:  # face down: the head drops; on his back (arms_fall): the arms fall, kinematically
         frames = dead_settle.settle(
             frames,

@@ -23,6 +23,7 @@ import numpy as np
 from authoring import ik
 from authoring.death_specs import spec_of
 from authoring.quality_frames import FigureSet, play
+from authoring.quality_rest import down_from
 from authoring.slave_contacts import _fade, _played, _smooth, part_heights
 from peabody import quaternion
 from peabody.fk import FigureKinematics
@@ -247,11 +248,7 @@ def _settles_down(master: Channelset) -> bool:
 def _trunk_down(heights: dict[str, np.ndarray]) -> int:
     """The frame from which the master's pelvis and chest (their lowest nodes' ``heights``) stay within
     :data:`DOWN_CM` of where they finally lie."""
-    down = 0
-    for part in ("pelvis", "chest"):
-        up = np.flatnonzero(heights[part] > heights[part][-1] + DOWN_CM)
-        down = max(down, int(up[-1]) + 1 if len(up) else 0)
-    return down
+    return max(down_from(heights[part], DOWN_CM) for part in ("pelvis", "chest"))
 
 
 def _smooth_moves(before: np.ndarray, after: np.ndarray, frames: np.ndarray) -> np.ndarray:

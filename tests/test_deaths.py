@@ -276,6 +276,9 @@ def test_a_body_not_on_its_front_does_not_settle(ctx: BuildContext) -> None:
     poses, roots, rifles, _ = _played(ctx, "kstow2dead")  # on his back, the arms already down
     frames = ClipFrames(poses, roots, rifles)
     assert dead_settle.settle(frames, ctx.soldier, ctx.rifle) is frames  # only a death that asks for it
+    # nor is it lowered early (DeathSpec.lowered_at): the death settles after the physics instead (on main
+    # its frames came back cut short at 0.45 s + the settle, and its settle was left out)
+    assert dead_settle.lowered_early(frames, ctx.soldier, ctx.rifle, round(0.45 * frames.fps)) is None
 
 
 def part_lows_of(ctx: BuildContext, q: np.ndarray, root: np.ndarray) -> dict[str, float]:

@@ -26,7 +26,9 @@ from protocol.events import (
 )
 from server.app import TtesServer
 from server.fabric import BLOCK, Handler, Kind, Presence, Unsubscribe
-from server.fabric.nodes import KEY_EVERY, FrontNode, Sharding, ShardNode
+from server.fabric import requests as req
+from server.fabric.batch import PULSE, Batch
+from server.fabric.nodes import ASK_AGAIN_S, KEY_EVERY, FrontNode, Sharding, ShardNode
 
 WALK = (0.0, 1.4, 0.0)
 RUN = (0.0, 3.5, 0.0)
@@ -386,3 +388,64 @@ async def test_the_load_tester_names_the_shards_behind_a_front_end(autojump_cloc
         fabrics[1].close()  # shard 1 dies: the next run says its soldiers live on shard 0
         out = await _run(cfg, "127.0.0.1", port, None, True)
         assert out["server"]["shards"][1] == {"shard": 1, "animated_by": 0, "present": False}
+
+
+def _pulse(k: int, shards: int, seq: int) -> Batch:
+    """Shard ``k``'s tick pulse (no soldiers)."""
+    none = np.zeros(0, np.uint32)
+    return Batch(
+        k, shards, seq, seq, 0.0, none, none.astype(np.uint8), np.zeros((0, 4), np.uint16), False, PULSE
+    )
+
+
+def test_a_sync_asked_again_keeps_the_soldiers_of_a_home_routed_to_the_shard_since() -> None:
+    """Shard 0 stood in for home 1, hung, and both homes went to shard 2; back, it gets its own soldiers
+    and lets home 1's go (the sync's ``gone``). It does not answer ``books``, and shard 2 fails meanwhile:
+    home 1 is routed to shard 0 again. The sync asked again with ``books`` (its answer acknowledges both)
+    names home 1 among those shard 0 animates: it must not tell it to let home 1's soldiers go too (they
+    would live nowhere: a key pulse that lacks a soldier the books hold is not the shard's to judge)."""
+    server = make_server()
+    server.start_world()  # the start-up script's soldiers 0-9: home 1's are 1, 4, 7 of 3 shards
+    node = FrontNode(server, MemoryFabric(Bus()), 3)
+    sent: list[bytes] = []
+    node._puts[0] = sent.append
+    node.heard_at, node.last_seq = [0.0] * 3, [5] * 3
+    node._stood_for[0] = {1}
+    node.route = [2, 2, 2]
+    node._pulse(_pulse(0, 3, 6), 10.0)  # back from its hang
+    syncs = [op for data in sent for op in req.decode(data) if op["op"] == "sync"]
+    assert syncs[-1]["homes"] == [0] and syncs[-1]["gone"] == [1, 4, 7]
+    node.route[1] = 0  # shard 2's fail-over
+    node._pulse(_pulse(0, 3, 7), 13.0)  # no answer after 2 s: asked again, the sync first
+    syncs = [op for data in sent for op in req.decode(data) if op["op"] == "sync"]
+    assert len(syncs) == 2 and syncs[-1]["homes"] == [0, 1] and syncs[-1]["gone"] == []
+
+
+def test_a_shard_asked_for_its_books_grows_the_soldiers_not_in_them_by_the_index_space_at_most() -> None:
+    """Until a shard asked for its books answers, the soldiers its batches carry that the books lack are
+    kept (no index of them is allotted here); asked again until it answers, the ask may stand a long time:
+    an index past the index space (a peer's bad batch) is not kept."""
+    server = make_server()
+    server.start_world()  # soldiers 0-9
+    node = FrontNode(server, MemoryFabric(Bus()), 2)
+    node._pulse(_pulse(1, 2, 0), 0.0)  # heard for the first time: asked for its books
+    assert 1 in node._asked
+    n = len(node.known)
+    indices = np.array([3, 11, n - 1, n, n + 5, 2**32 - 1], np.uint32)
+    codes = np.zeros((len(indices), 4), np.uint16)
+    node._heard(Batch(1, 2, 1, 1, 0.0, indices, np.ones(len(indices), np.uint8), codes, False, 0), 0.1)
+    assert node._unknown[1] == {11, n - 1}
+
+
+def test_a_shard_that_restarts_while_asked_for_its_books_is_asked_anew() -> None:
+    """Asked again, a shard that has not answered ``books`` waits twice as long each time (up to
+    ASK_AGAIN_MAX_S); one that restarts meanwhile gets a new sync and ``books``, asked again after the first
+    wait (on main after twice the last: its new sync, as likely lost as the first, waited 8 s here)."""
+    server = make_server()
+    server.start_world()
+    node = FrontNode(server, MemoryFabric(Bus()), 2)
+    node._pulse(_pulse(1, 2, 10), 0.0)  # heard for the first time: synced and asked
+    node._pulse(_pulse(1, 2, 11), 2.0)  # no answer: asked again
+    assert node._asked[1].wait == 2 * ASK_AGAIN_S and node._asked[1].again == 2.0 + 2 * ASK_AGAIN_S
+    node._pulse(_pulse(1, 2, 0), 3.0)  # restarted (its count went back)
+    assert node._asked[1].wait == ASK_AGAIN_S and node._asked[1].again == 3.0 + ASK_AGAIN_S

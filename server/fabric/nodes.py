@@ -780,16 +780,23 @@ class FrontNode:
         elif (lost or stream in self._key_wanted) and not self.key_asked[k]:
             self.key_asked[k] = True  # the rows that changed in a lost batch are stale until a key
             self._send(self.route[k], req.key())
+        if k in self._asked and self.server.world.manager is not None:
+            self._not_in_books(k, b.indices)
+
+    def _not_in_books(self, k: int, indices: np.ndarray) -> None:
+        """Shard ``k`` asked for its books: its soldiers ``indices`` that the books lack, no index of which is
+        allotted here until it answers. Only those of the index space: a shard's batches grow this by no
+        more (asked again until it answers, :class:`Asked`, the ask may stand a long time)."""
         m = self.server.world.manager
-        if m is None:
-            return
-        if k in self._asked:  # until it answers, no index it animates is allotted here
-            self._unknown.setdefault(k, set()).update(b.indices[~m.table.live_mask(b.indices)].tolist())
+        assert m is not None
+        idx = np.asarray(indices, np.int64)
+        idx = idx[(idx >= 0) & (idx < len(self.known))]
+        self._unknown.setdefault(k, set()).update(idx[~m.table.live_mask(idx)].tolist())
 
     def _ask_books(self, k: int, now: float, sync: Callable[[], None] | None = None) -> None:
         """Ask shard ``k`` for its books, and again at its pulses until it answers (:class:`Asked`)."""
-        ask = self._asked.get(k)
-        wait = ASK_AGAIN_S if ask is None else min(2 * ask.wait, ASK_AGAIN_MAX_S)
+        ask = self._asked.get(k)  # asked again: twice the last wait; a new sync (a restart) asks anew
+        wait = ASK_AGAIN_S if ask is None or sync is not ask.sync else min(2 * ask.wait, ASK_AGAIN_MAX_S)
         self._asked[k] = Asked(now + wait, wait, sync)
         self._send(k, req.books(self.front.k))
         self._resubscribe()
@@ -834,7 +841,7 @@ class FrontNode:
                 ask.sync()
             self._ask_books(k, now, ask.sync)
         if k in self._asked:  # until it answers, no index it animates is allotted here
-            self._unknown.setdefault(k, set()).update(b.indices[~m.table.live_mask(b.indices)].tolist())
+            self._not_in_books(k, b.indices)
 
     def _differs_again(self, k: int, indices: np.ndarray) -> bool:
         """Whether shard ``k``'s key pulse differs from the books (:meth:`_differs`), as its last one did."""
@@ -960,6 +967,8 @@ class FrontNode:
         have = idx[self.has_last[idx]]
         removed = books.gone(self.known, m.table.alive, homes, self.shards)
         elsewhere = np.zeros(0, np.int64) if drop is None else np.asarray(drop, np.int64)
+        # (not those whose home is routed to the shard since: a sync asked again after another fail-over)
+        elsewhere = elsewhere[np.asarray(self.route)[Sharding.home(elsewhere, self.shards)] != shard]
         gone = [*removed.tolist(), *elsewhere.tolist()]
         gone_gens = [*self.gen[removed].tolist(), *(self.gen[elsewhere] + 1).tolist()]  # (those live on)
         animates = None if made else self._animated_by(shard)  # (a shard heard first: the stand-in knows)
