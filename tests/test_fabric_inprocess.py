@@ -8,10 +8,12 @@ from collections import defaultdict
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 
+import msgpack
 import numpy as np
 import trio
 from test_server_support import Client, make_server
 
+from protocol.entity import ENTITY_REQUEST_DTYPE
 from protocol.events import (
     CreateSoldier,
     Error,
@@ -449,3 +451,92 @@ def test_a_shard_that_restarts_while_asked_for_its_books_is_asked_anew() -> None
     assert node._asked[1].wait == 2 * ASK_AGAIN_S and node._asked[1].again == 2.0 + 2 * ASK_AGAIN_S
     node._pulse(_pulse(1, 2, 0), 3.0)  # restarted (its count went back)
     assert node._asked[1].wait == ASK_AGAIN_S and node._asked[1].again == 3.0 + ASK_AGAIN_S
+
+
+def _ops(sent: list[bytes], name: str) -> list[req.Op]:
+    return [op for data in sent for op in req.decode(data) if op["op"] == name]
+
+
+def test_a_sync_sent_again_to_a_shard_that_took_it_replays_nothing_again() -> None:
+    """Shard 0 comes back from a fail-over: its soldiers come home with their last requests replayed, and
+    ``books``. Its answer is late (it is busy), so the front-end sends both again: the shard takes the sync
+    once (on main it replayed every soldier's last request twice, and an ``immediate`` one snapped the
+    figure again; a sync that keeps going unanswered did so every 32 s)."""
+    server = make_server()
+    server.start_world()  # the start-up script's soldiers 0-9: shard 0's are the even ones
+    node = FrontNode(server, MemoryFabric(Bus()), 2)
+    sent: list[bytes] = []
+    node._puts[0] = sent.append
+    node.heard_at, node.last_seq = [0.0] * 2, [5] * 2
+    node.route = [1, 1]  # shard 0 failed over to shard 1
+    row = np.zeros(1, ENTITY_REQUEST_DTYPE)
+    row["index"], row["velocity"], row["immediate"] = 2, WALK, 1
+    node.last[2], node.has_last[2] = row[0], True
+    node._pulse(_pulse(0, 2, 6), 10.0)  # back: its soldiers come home, their last requests replayed
+    node._pulse(_pulse(0, 2, 7), 10.0 + ASK_AGAIN_S)  # no answer yet: the sync and books again
+    syncs = _ops(sent, "sync")
+    assert len(syncs) == 2 and all(s["replay"] for s in syncs)
+    shard = make_server()
+    shard.start_world()
+    shard_node = ShardNode(shard, MemoryFabric(Bus()), Sharding(0, 2))
+    shard_node.keep_own()
+    replayed: list[list[int]] = []
+    apply = shard.world.apply_requests
+
+    def applied(rows: np.ndarray) -> np.ndarray:
+        replayed.append(rows["index"].tolist())
+        return apply(rows)
+
+    shard.world.apply_requests = applied  # type: ignore[method-assign]
+    for data in sent:  # both arrive: the first was late, not lost
+        for op in req.decode(data):
+            shard_node.handle(op)
+    assert replayed == [[2]]
+    assert len(_ops(sent, "books")) == 2  # (it answers each: the front-end takes the first)
+
+
+def test_a_refused_books_answer_ends_the_ask_and_its_sync_goes_no_more() -> None:
+    """The answer to ``books`` follows the sync in the same message: refused (``learn`` cannot read it),
+    it still says the shard took the sync. On main the ask stood, and the sync and ``books`` went again
+    every 32 s for ever."""
+    server = make_server()
+    server.start_world()
+    node = FrontNode(server, MemoryFabric(Bus()), 2)
+    sent: list[bytes] = []
+    node._puts[1] = sent.append
+    node._pulse(_pulse(1, 2, 0), 0.0)  # heard for the first time: synced and asked
+    assert len(_ops(sent, "sync")) == 1 and len(_ops(sent, "books")) == 1
+    body = msgpack.packb({"soldiers": 5})  # not a list of soldiers
+    node.learn(msgpack.packb({"shard": 1, "front": 0, "body": body}))
+    for seq in range(1, 200):
+        node._pulse(_pulse(1, 2, seq), float(seq))
+    assert 1 not in node._asked and 1 not in node._unknown
+    assert len(_ops(sent, "sync")) == 1 and len(_ops(sent, "books")) == 1
+
+
+def test_a_sync_does_not_bring_back_a_soldier_removed_at_a_newer_generation() -> None:
+    """Front-end 0 created soldier 11 (generation 5); front-end 1 removed it (6); front-end 0's sync, made
+    before it heard of the removal (sent again while the shard had not answered ``books``: 2 to 32 s
+    later), names it: the shard does not create it again (on main it did: a soldier nobody's books held,
+    animated for ever). A sync made after a newer creation (7) does; a removal of a soldier the shard
+    never had (its creation's sync was lost) counts too."""
+    shard = make_server()
+    shard.start_world()
+    node = ShardNode(shard, MemoryFabric(Bus()), Sharding(1, 2))
+    node.keep_own()
+    soldier = (11, "DI.fig", "AK_47.fig", "alpha")
+
+    def take(*ops: req.Op) -> None:
+        for op in req.decode(req.pack(list(ops))):
+            node.handle(op)
+
+    def sync(index: int, gen: int) -> req.Op:
+        return req.sync([(index, *soldier[1:])], np.zeros(0, ENTITY_REQUEST_DTYPE), gens=[gen])
+
+    take(req.create(*soldier, 5), req.remove(11, 6))
+    take(sync(11, 5))
+    assert 11 not in live(shard)
+    take(sync(11, 7))  # created again through front-end 1, which synced it
+    assert 11 in live(shard)
+    take(req.remove(13, 9), sync(13, 8))  # removed before its creation's sync came
+    assert 13 not in live(shard)

@@ -81,6 +81,7 @@ PENDING_MAX = 64  # a front-end's queue of one shard's ticks (a pulse and a batc
 # oldest go (and it asks for a key)
 ASK_AGAIN_S = 2.0  # a shard heard that has not answered ``books`` by then is asked again; each wait twice
 ASK_AGAIN_MAX_S = 32.0  # the last, up to this (a shard busy with a crowd's creations answers late)
+SYNCS_KEPT = 256  # the sync ids a shard remembers taking: one sent again is only an ask for a key
 
 
 @dataclass(frozen=True)
@@ -143,7 +144,9 @@ class ShardNode:
         self.fences: list[int] = []  # per front-end, the newest fence taken (its batches carry them)
         self.stands_in: set[int] = set()  # the other shards whose soldiers it animates (a fail-over's)
         self.settings_stamp = shared.OWN_STAMP  # of the settings it holds: older ones are not taken
-        self.gen = np.zeros(n, np.int64)  # each soldier's generation (requests.sync): 0, the script's
+        self.gen = np.zeros(n, np.int64)  # each soldier's generation (requests.sync): 0, the script's; of an
+        # index not live, its removal's if that is newer (a sync does not create it again from before)
+        self._synced: dict[tuple[int, int], None] = {}  # the ids of the syncs taken, oldest first
         # soldiers created since the last fence, and those whose rows the next batch carries (born before a
         # fence): sets, so creations that no fence follows (a sync's) grow them no further than the soldiers
         self._born: set[int] = set()
@@ -332,8 +335,11 @@ class ShardNode:
             self.gen[index] = int(msg.get("gen") or 0)  # type: ignore[call-overload]
             self._born.add(index)
         elif op == "remove":
-            world.remove_soldier(int(msg["index"]), "removed by a front-end")  # type: ignore[call-overload]
-            self.has_last[int(msg["index"])] = False  # type: ignore[call-overload]
+            index, gen = int(msg["index"]), int(msg.get("gen") or 0)  # type: ignore[call-overload]
+            if 0 <= index < len(self.gen):  # (a removal of a soldier not here counts too: its sync was lost)
+                self.gen[index] = max(int(self.gen[index]), gen)
+            world.remove_soldier(index, "removed by a front-end")
+            self.has_last[index] = False
         elif op == "requests":
             rows = msg["rows"]
             assert isinstance(rows, np.ndarray)
@@ -342,7 +348,10 @@ class ShardNode:
             world.react(int(msg["index"]), str(msg["kind"]))  # type: ignore[call-overload]
         elif op == "sync":
             self._homes(msg)
-            self._sync(msg)
+            if self._first_time(msg.get("id")):
+                self._sync(msg)
+            else:  # sent again (its answer was late, not lost): its replay would snap each figure again
+                log.info("fabric_sync_again", shard=self.sharding.k, id=msg.get("id"))
             self.key_due = True  # the front-end that sent it may lack soldiers no batch carried since
         elif op == "key":
             self.key_due = True
@@ -376,6 +385,19 @@ class ShardNode:
         self._answer(books.answer(self.sharding.k, front, soldiers, last, homes, gens, values, stamp))
         log.info("fabric_books_answered", shard=self.sharding.k, front=front, soldiers=len(soldiers))
 
+    def _first_time(self, sync_id: object) -> bool:
+        """Whether the sync of id ``sync_id`` (front-end, stamp; None: a sync without one) is new here, and
+        remember it: a front-end sends a sync again with the same id until the shard answers ``books``."""
+        if not (isinstance(sync_id, list) and len(sync_id) == 2):
+            return True
+        key = (int(sync_id[0]), int(sync_id[1]))
+        if key in self._synced:
+            return False
+        self._synced[key] = None
+        if len(self._synced) > SYNCS_KEPT:
+            del self._synced[next(iter(self._synced))]
+        return True
+
     def _homes(self, msg: dict[str, object]) -> None:
         """The shards whose soldiers this one animates from now on, when the message says (a late
         front-end's ``books`` learns them even of a shard failed over with none)."""
@@ -392,8 +414,9 @@ class ShardNode:
     def _sync(self, msg: dict[str, object]) -> None:
         """Remove the soldiers gone that are here (a removal sent before this shard listened; start-up
         soldiers its script made again), animate every soldier of the sync that is not here yet, from its
-        last request; with ``replay`` (soldiers coming home after a stand-in animated them) replay the last
-        request of every one."""
+        last request, unless this shard took a removal of its index newer than the sync's soldier (another
+        front-end removed it since the sync was made); with ``replay`` (soldiers coming home after a
+        stand-in animated them) replay the last request of every one."""
         world, m = self.server.world, self.server.world.manager
         assert m is not None
         soldiers = msg["soldiers"]
@@ -412,18 +435,25 @@ class ShardNode:
         for i in gone:
             world.remove_soldier(i, "removed through a front-end while this shard did not hear it")
             self.has_last[i] = False
-        new = []
+        new, stale = [], 0
         gens = msg.get("gens")
         gens = gens if isinstance(gens, list) and len(gens) == len(soldiers) else [0] * len(soldiers)
         for (index, figure, weapon, owner), gen in zip(soldiers, gens, strict=True):
-            if not m.table.is_live(index):
+            if not m.table.is_live(index) and 0 <= index < len(self.gen) and self.gen[index] > int(gen):
+                stale += 1  # removed at a newer generation: the sync's soldier is the one removed
+            elif not m.table.is_live(index):
                 world.create_soldier(figure, weapon, index, owner=owner)
                 self.has_last[index] = False
                 self.gen[index] = int(gen)
                 new.append(index)
         self._born.update(new)
         log.info(
-            "fabric_sync", shard=self.sharding.k, soldiers=len(soldiers), created=len(new), removed=len(gone)
+            "fabric_sync",
+            shard=self.sharding.k,
+            soldiers=len(soldiers),
+            created=len(new),
+            removed=len(gone),
+            removed_since=stale,
         )
         if len(rows):
             self._applied(rows if msg.get("replay") else rows[np.isin(rows["index"], new)])
@@ -433,8 +463,9 @@ class ShardNode:
 class Asked:
     """A shard asked for its books that has not answered: asked again at its first pulse from ``again``
     (server time) on, after ``wait`` s, with ``sync`` first (the sync that went with the ask: a shard
-    heard for the first time, or again after a restart or a fail-over). The answer follows the sync (one
-    message, in order): it acknowledges both. Zenoh drops what a node publishes before it knows of a
+    heard for the first time, or again after a restart or a fail-over; sent again with the same id, a
+    shard that took it already only sends a key). The answer follows the sync (one message, in order):
+    it acknowledges both, refused or not. Zenoh drops what a node publishes before it knows of a
     subscriber: a shard's first pulses reached a front-end before its subscription to its requests did,
     the sync and the ask went nowhere, and on main the front-end waited for the answer for ever (the
     soldiers created meanwhile never reached the shard: issue 21's flaky CI test)."""
@@ -516,6 +547,7 @@ class FrontNode:
         self.made = np.zeros(n, bool)  # created here (not the start-up script's, not another front-end's)
         self.gen = np.zeros(n, np.int64)  # each index's creations and removals heard of (requests.sync)
         self._asked: dict[int, Asked] = {}  # shards asked for their books, not answered yet
+        self._sync_id = 0  # the stamp of the last sync's id (front-end, stamp): a restart's count past it
         # shards whose last key pulse differed from the books: asked only if the next one differs too (a
         # creation through another front-end is often in a pulse before its message on ttes/fronts is here:
         # each front-end asked each shard about once a second while 6 of them made soldiers, 1,000-1,100
@@ -824,7 +856,13 @@ class FrontNode:
             drop = np.concatenate([self._homed(h) for h in moved]) if moved else None
             # from a stand-in (perhaps learned from its answer: this front-end started meanwhile), all of them
             sync = functools.partial(
-                self._sync, k, [k], replay=stood_in != k, made=first and stood_in == k, drop=drop
+                self._sync,
+                k,
+                [k],
+                replay=stood_in != k,
+                made=first and stood_in == k,
+                drop=drop,
+                sync_id=self._next_sync_id(),  # sent again, the same: a shard takes it once
             )
             sync()
         m = self.server.world.manager
@@ -944,6 +982,10 @@ class FrontNode:
         live = m.table.live if m is not None else np.zeros(0, np.int64)
         return live[Sharding.home(live, self.shards) == k]
 
+    def _next_sync_id(self) -> int:
+        self._sync_id = after(self._sync_id)  # (past a restart's: the shard remembers the ids it took)
+        return self._sync_id
+
     def _sync(
         self,
         shard: int,
@@ -952,11 +994,13 @@ class FrontNode:
         replay: bool = False,
         made: bool = False,
         drop: np.ndarray | None = None,
+        sync_id: int | None = None,
     ) -> None:
         """``made``: only the soldiers created here (a shard heard for the first time: this front-end's
         creations may have gone before it listened; the start-up script's it has, the others' their makers
         sync, and a late front-end's books are not the truth: it learns them from the answer to ``books``).
-        ``drop``: soldiers of other homes the shard is to let go of (it stood in for them, and hung)."""
+        ``drop``: soldiers of other homes the shard is to let go of (it stood in for them, and hung).
+        ``sync_id``: the id of a sync sent again (:class:`Asked`); None: a new one."""
         m = self.server.world.manager
         if m is None:
             return
@@ -984,6 +1028,7 @@ class FrontNode:
                 homes=animates,
                 gens=gens,
                 gone_gens=gone_gens,
+                sync_id=(self.front.k, self._next_sync_id() if sync_id is None else sync_id),
             ),
         )
         self.fences.moved(homes, self.shards, shard)
@@ -1139,15 +1184,19 @@ class FrontNode:
         them, and the front-end that made them told the others), and those it lacks go."""
         try:
             k, front = books.addressee(data)
-            if front != self.front.k or k not in self._asked:  # (another front-end's: its body stays packed)
-                return
-            msg = books.decode_answer(data)
         except ValueError as exc:
             log.warning("fabric_books_refused", front=self.front.k, error=str(exc))
             return
-        self._asked.pop(k, None)
-        self._unknown.pop(k, None)
+        if front != self.front.k or k not in self._asked:  # (another front-end's: its body stays packed)
+            return
+        self._asked.pop(k, None)  # answered: the sync before it was taken, refused or not (on main a
+        self._unknown.pop(k, None)  # refused answer left the ask, and sync and replay went every 32 s)
         self._resubscribe()  # its blocks no client watches: heard no more
+        try:
+            msg = books.decode_answer(data)
+        except ValueError as exc:  # (its key pulses ask again if the books differ from the shard's)
+            log.warning("fabric_books_refused", front=self.front.k, shard=k, error=str(exc))
+            return
         m = self.server.world.manager
         assert m is not None
         heard = [at > -math.inf for at in self.heard_at]

@@ -8,9 +8,10 @@ by the front-end), ``react`` (index, kind) and ``sync``: every soldier the shard
 figure, weapon, owner) with the last request of each that had one, and the soldiers gone (removed through a
 front-end, perhaps before the shard listened: the shard removes those it has): what a shard that joined
 late, restarted or takes over another's soldiers (failover) needs to animate them (``replay``: the shard's
-own soldiers come home from a stand-in, replay every last request) and ``key``: send a key batch (every
-soldier, not only the changed ones) at the next tick, for a front-end that lost a batch; a sync asks for one
-too; ``homes`` (shards): the homes it animates now (a fail-over's stand-in, told again when one goes
+own soldiers come home from a stand-in, replay every last request; ``id``: (front-end, stamp), the same
+when sent again: a shard takes it once) and ``key``: send a key batch (every soldier, not only the changed
+ones) at the next tick, for a front-end that lost a batch; a sync asks for one too; ``homes`` (shards): the
+homes it animates now (a fail-over's stand-in, told again when one goes
 home; a sync carries them too); ``settings`` (values, stamp): the front-end's server-wide settings (when
 they change, and before each sync; the newest stamp wins); ``books`` (front): answer on ``ttes/books``
 with every soldier the shard animates, for front-end ``front`` that has just heard the shard first
@@ -75,6 +76,7 @@ def sync(
     homes: list[int] | None = None,
     gens: list[int] | None = None,
     gone_gens: list[int] | None = None,
+    sync_id: tuple[int, int] | None = None,
 ) -> Op:
     """``soldiers``: (index, figure, weapon, owner) each; ``last``: the last requests of those with one;
     ``replay``: apply them to the soldiers the shard has too (they come home from a stand-in); ``gone``:
@@ -82,7 +84,9 @@ def sync(
     ``gens`` and ``gone_gens``: the generation of each soldier and of each removal (an index's creations and
     removals count up, through every front-end and past a front-end's restart: :mod:`server.fabric.stamps`;
     a removal removes only a soldier created before it, not one created again through another front-end
-    that the sender has not heard of yet)."""
+    that the sender has not heard of yet; a shard creates no soldier whose index it saw removed at a newer
+    generation); ``sync_id``: (front-end, stamp), the same when the front-end sends the sync again
+    (``FrontNode``'s ask for ``books``): a shard that took it already only sends a key (no replay)."""
     rows = np.ascontiguousarray(last, ENTITY_REQUEST_DTYPE).tobytes()
     op = {
         "op": "sync",
@@ -95,6 +99,8 @@ def sync(
         op["gens"] = list(gens)
     if gone_gens is not None:
         op["gone_gens"] = list(gone_gens)
+    if sync_id is not None:
+        op["id"] = list(sync_id)
     return op if homes is None else {**op, "homes": list(homes)}
 
 
