@@ -36,6 +36,7 @@ from authoring.motion import KeyPosture
 from authoring.passive_range import passive_figure, past_live_limits
 from authoring.quality_frames import FigureSet, play
 from authoring.slave_arms import pin_slave_arms
+from authoring.slave_arms_down import keep_slave_arms_down
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
@@ -262,6 +263,7 @@ def slave_one(
         rest_limbs,
         plant_slave_feet,
         trunk,
+        keep_slave_arms_down,  # where a death asks (slave_arms_down): no arm rising once the body is down
     )
     if spec and spec.slave_arms_pinned:
         rests += (pin_slave_arms,)

@@ -154,6 +154,9 @@ class DeathSpec:
     # s: a body on its back (arms_fall) lets its arms go this long before it is down, and they fall
     # 1.5 times as long (dead_settle.ArmsFall): kfire2dead's relaid top arm swept across in 0.6 s, hand 9 m/s
     arms_fall_early_s: float = 0.0
+    # the slaves' arms are brought down where they rise once the master is down (authoring.slave_arms_down):
+    # kfire2dead's early-falling top arm, over the DI's own chest, lifted its hand 14.3 cm after it lay
+    slave_arms_down: bool = False
 
 
 def _prone(
@@ -228,8 +231,9 @@ PRSTOW_HEAD_HELD = 24
 STFIRE_TOSS = (1.0, -0.5, 0.2)
 # cm: kfire2dead's slaves' trunk rest may slide a resting part this far (DeathSpec.slave_rest_slide_cm): their
 # pelvis 2.34 -> 1.54 cm up (the search's resting hands, knee, thigh and foot at their bounds); 2.0 once his
-# top arm lay across his chest (DI pelvis 2.35 -> 1.27 cm, the check's rest limit 2; DI foot_skate 0.41)
-KFIRE_REST_SLIDE = 2.0
+# top arm lay across his chest (DI pelvis 2.35 -> 1.27 cm, the check's rest limit 2; DI foot_skate 0.41); 2.5
+# once his arms fell early (DeathSpec.arms_fall_early_s): the DI pelvis 2.43 -> 1.36 cm
+KFIRE_REST_SLIDE = 2.5
 # cm: kfire2dead's fallen arms reach no further than this past his shoulders toward his head
 # (DeathSpec.arms_headward_cm): half on his side, his top (right) arm lay lowest curled over his head
 KFIRE_ARMS_HEADWARD = 5.0
@@ -327,6 +331,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         turn_as_checked=True,
         slave_settle_down=True,
         arms_fall_early_s=KFIRE_ARMS_EARLY,
+        slave_arms_down=True,
     ),
     replace(
         _prone("prstow2dead", "PRONE_STOWED"),
