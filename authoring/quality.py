@@ -53,7 +53,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
   long after the pelvis comes near the ground the head and chest come down (a dead man left propped on his
   elbows looks alive), and ``trunk_rise_cm`` (information, no limit yet: the proposed 2 cm fails the DI/M16
   slaves of the prone deaths, 4.2-5.3), how far the pelvis or chest rises once down (a dead man lifting his
-  hips).
+  hips), and ``dead_limb_speed_m_s`` (information: kstow2dead's left arm, 7.9, waits for kfire2dead's fix),
+  the fastest a limb moves once the trunk is down (a dead arm swung, not dropped).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
   recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
   cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
