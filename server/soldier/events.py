@@ -244,9 +244,10 @@ class Events(Stepping, Turning, Reactions, LeadIn, Replanning):
             return
         # one by one, but the turned figures' folds at once (each a vectorised fold: ~100 µs of numpy calls)
         turned = (tb.root_yaw[idx] != 0.0) | (tb.pivot_rest[idx] != 0.0)
-        if np.count_nonzero(turned) < 2 or not self._fold_groups:
+        if np.count_nonzero(turned) >= 2 and self._fold_groups:  # (what fold1 does with a turned one)
+            root_motion.fold(tb, self.library, idx[turned], t[turned])
+        else:  # none or one: each folds its own (an empty fold is still a few dozen numpy calls)
             turned[:] = False
-        root_motion.fold(tb, self.library, idx[turned], t[turned])  # (what fold1 does with a turned one)
         rows = zip(idx.tolist(), states.tolist(), t.tolist(), turned.tolist(), strict=True)
         for i, state, ti, folded in rows:
             self._enter_one(i, state, ti, folded=folded)
