@@ -157,7 +157,8 @@ def residuals(
     q: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int, out: np.ndarray | None = None
 ) -> np.ndarray:
     """(n, F) int32: ``q`` minus the prediction, ``2 · cur − before`` for soldiers whose last update was at
-    ``tick − 1`` (mod 2³²), else ``cur``. ``cur`` and ``state`` may be uint16 (:func:`state_ticks`)."""
+    ``tick − 1`` (mod 2³²), else ``cur``. ``q``, ``cur`` and ``state`` may be uint16 (:func:`state_ticks`):
+    the sums run in int32."""
     nf = q.shape[1]
     resid = np.subtract(q, cur, out=out, dtype=np.int32)
     predicts = state_ticks(state) == tick_code(tick - 1)
@@ -169,7 +170,7 @@ def residuals(
         resid += state[:, :nf]
         if len(rows) < len(q):
             rest = np.flatnonzero(~predicts)
-            resid[rest] = q[rest] - cur[rest]
+            resid[rest] = np.subtract(q[rest], cur[rest], dtype=np.int32)
     elif len(rows):
         resid[rows] -= np.subtract(cur[rows], state[rows, :nf], dtype=np.int32)
     return resid
