@@ -610,13 +610,21 @@ class UpdateEncoder:
         fbits = np.concatenate([[0], np.cumsum(row_bits)])
         frame_bits = np.diff(fbits[bounds])
         frame_word = np.concatenate([[0], np.cumsum((frame_bits + 63) >> 6)])  # each body starts a word
-        gwidth = rows.gwidth
-        starts = np.cumsum(gwidth.reshape(-1)).reshape(gwidth.shape)  # rows are consecutive in the stream
-        starts -= gwidth
+        if rows.pack is None:
+            gwidth = rows.gwidth
+            starts = np.cumsum(gwidth.reshape(-1)).reshape(gwidth.shape)  # rows are consecutive in the stream
+            starts -= gwidth
+        else:  # the fused path: each row's start bit
+            starts = fbits[:-1].copy()
         for f in range(1, len(bounds) - 1):  # each frame's body starts a word
             a, b = bounds[f], bounds[f + 1]
             starts[a:b] += frame_word[f] * 64 - fbits[a]
-        words = place_groups(rows.groups, starts, int(frame_word[-1]))
+        if rows.pack is None:
+            words = place_groups(rows.groups, starts, int(frame_word[-1]))
+        else:
+            words = scratch().get("place.words", (int(frame_word[-1]) + 2,), np.uint64)
+            words[:] = 0
+            rows.pack(starts, words)
         if sys.byteorder == "little":  # the wire's words are big-endian: swapped in place, sliced uncopied
             words.byteswap(inplace=True)
         body = words.view(np.uint8).data
