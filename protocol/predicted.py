@@ -21,10 +21,12 @@ shared frame splitting).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from protocol import fused
 from protocol.bitpack import merge_columns, scratch
 from protocol.update_table import TableLayout
 
@@ -45,6 +47,8 @@ class Rows:
     gwidth: np.ndarray  # (n, C/g) int64 their bit widths
     restart_rows: np.ndarray  # rows with an entry sent absolute: their prediction restarts
     restart: np.ndarray  # (len(restart_rows), F) their ``before`` codes (every other row's: its old ``cur``)
+    # the fused path's (``groups`` empty): the rows' fields ORed into zeroed words from each row's start bit
+    pack: Callable[[np.ndarray, np.ndarray], None] | None = None
 
 
 class Columns:
@@ -81,6 +85,12 @@ class Columns:
         self.qidx_fields = lay.qidx_fields
         self.qidx_entry = lay.entry_of[lay.qidx_fields]
         self.width = lay.width.astype(np.uint8)
+        # the fused loops' (protocol.fused): every entry has a delta field (entry_widths assumes it too)
+        self.fused = fused.AVAILABLE and bool((nd >= 1).all())
+        self.field_entry = lay.entry_of.astype(np.int64)
+        self.is_qidx = lay.is_qidx.astype(bool)
+        self.width64 = lay.width.astype(np.int64)
+        self.ndelta64, self.absbits64 = nd, lay.entry_absbits.astype(np.int64)
 
 
 def _entry_bits(mag: np.ndarray) -> np.ndarray:
@@ -157,7 +167,8 @@ def residuals(
     q: np.ndarray, cur: np.ndarray, state: np.ndarray, tick: int, out: np.ndarray | None = None
 ) -> np.ndarray:
     """(n, F) int32: ``q`` minus the prediction, ``2 · cur − before`` for soldiers whose last update was at
-    ``tick − 1`` (mod 2³²), else ``cur``. ``cur`` and ``state`` may be uint16 (:func:`state_ticks`)."""
+    ``tick − 1`` (mod 2³²), else ``cur``. ``q``, ``cur`` and ``state`` may be uint16 (:func:`state_ticks`):
+    the sums run in int32."""
     nf = q.shape[1]
     resid = np.subtract(q, cur, out=out, dtype=np.int32)
     predicts = state_ticks(state) == tick_code(tick - 1)
@@ -169,7 +180,7 @@ def residuals(
         resid += state[:, :nf]
         if len(rows) < len(q):
             rest = np.flatnonzero(~predicts)
-            resid[rest] = q[rest] - cur[rest]
+            resid[rest] = np.subtract(q[rest], cur[rest], dtype=np.int32)
     elif len(rows):
         resid[rows] -= np.subtract(cur[rows], state[rows, :nf], dtype=np.int32)
     return resid
@@ -231,8 +242,10 @@ def encode_rows(
     Per entry the smallest width holding every residual, or absolute (:func:`_choose`). The work is
     field-major (one transposed copy of the residuals): every pass runs along the soldiers. The dense passes
     treat every entry as a delta entry; the few rows with an absolute entry (new soldiers, qidx flips,
-    jumps) are fixed up on their own.
+    jumps) are fixed up on their own. With ``cols.fused``, :func:`fused_rows` does it all in two loops.
     """
+    if cols.fused:
+        return fused_rows(cols, (q, cur, state), known, present, tick)
     n, nf = q.shape
     sc = scratch()  # big work arrays reused from tick to tick: no page faults for fresh megabytes
     values = sc.get("v2.values", (cols.ncols, n), np.int32)  # field-major; padding fields have width 0
@@ -267,6 +280,55 @@ def encode_rows(
         gwidth=gwidth,
         restart_rows=rows,
         restart=restart,
+    )
+
+
+def fused_rows(
+    cols: Columns,
+    rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    known: np.ndarray,
+    present: np.ndarray,
+    tick: int,
+) -> Rows:
+    """:func:`encode_rows` through the compiled loops of :mod:`protocol.fused` (``cols.fused``), ``rows``
+    its ``(q, cur, state)``: the same rows, whose fields ``Rows.pack`` writes once the frames are cut
+    (``groups`` and ``gwidth`` empty)."""
+    q, cur, state = rows
+    n, ne = len(q), cols.nent
+    sc = scratch()
+    w = sc.get("fused.w", (n, ne), np.uint8)
+    ent_abs = sc.get("fused.abs", (n, ne), np.bool_)
+    nibbles = sc.get("fused.nibbles", (n * ne,), np.uint8)
+    restarts = sc.get("fused.restarts", (n,), np.bool_)
+    header = np.empty((n, MODE_BITS + ne), np.uint8)
+    row_bits, nibble_count = np.empty(n, np.int64), np.empty(n, np.int64)
+    predicts = state_ticks(state) == tick_code(tick - 1)
+    args = (cols.field_entry, cols.is_qidx)
+    count = fused.kernel("rows_meta")(
+        q, cur, state, predicts, known, present, *args, cols.ndelta64, cols.absbits64, MAX_WIDTH,
+        w, ent_abs, header, nibbles, nibble_count, row_bits, restarts,
+    )  # fmt: skip
+    again = np.flatnonzero(restarts)  # few: absolute entries send codes
+    restart = q[:0]
+    if len(again):
+        absf = np.take(ent_abs[again] & present[again], cols.field_entry, axis=1)  # (m, F)
+        restart = np.where(absf, q[again], cur[again])
+
+    def pack(starts: np.ndarray, words: np.ndarray) -> None:
+        fused.kernel("pack_fields")(
+            q, cur, state, predicts, present, ent_abs, w, *args, cols.width64, starts, words
+        )
+
+    return Rows(
+        header=header,
+        nibbles=nibbles[:count],
+        nibble_count=nibble_count,
+        row_bits=row_bits,
+        groups=np.zeros((n, 0), np.uint64),
+        gwidth=np.zeros((n, 0), np.int64),
+        restart_rows=again,
+        restart=restart,
+        pack=pack,
     )
 
 

@@ -352,7 +352,9 @@ class UpdateEncoder:
         """
         lay = self.table.layout
         idx: np.ndarray = np.asarray(indices, np.int64).reshape(-1)
-        q: np.ndarray = np.asarray(codes, np.int32)
+        q: np.ndarray = np.asarray(codes)
+        if q.dtype != np.uint16 or self.version < 2:  # uint16 (a front-end's board): no int32 copy
+            q = q.astype(np.int32, copy=False)
         if q.shape != (len(idx), lay.nfields):
             raise ValueError(f"codes of shape {q.shape} for {len(idx)} indices and {lay.nfields} fields")
         if len(idx) and (idx.min() < 0 or idx.max() >= self.max_soldiers):
@@ -520,7 +522,7 @@ class UpdateEncoder:
                 self._sent = idx[:0]
                 return []
             shape = (len(sel), q.shape[1])
-            q = np.take(q, sel, axis=0, out=sc.get("enc.q", shape, np.int32), mode="clip")
+            q = np.take(q, sel, axis=0, out=sc.get("enc.q", shape, q.dtype), mode="clip")
             last = np.take(last, sel, axis=0, out=sc.get("enc.sent_last", shape, stored), mode="clip")
             idx, known, words = idx[sel], known[sel], words[sel]
         changed = plan.changed(words)
@@ -533,7 +535,7 @@ class UpdateEncoder:
         else:
             rows = self._rows_v1(q, last, changed, known)
         payloads = self._chunks(idx, rows, tick, max_payload)
-        if stored == np.uint16:  # the codes as stored (one pass), or int32 arrays for codes past 16 bits
+        if stored == np.uint16 and q.dtype != np.uint16:  # as stored (one pass), or int32 past 16 bits
             if int(np.bitwise_or.reduce(q, axis=None)) >> 16:
                 self._widen()
             else:
@@ -608,13 +610,21 @@ class UpdateEncoder:
         fbits = np.concatenate([[0], np.cumsum(row_bits)])
         frame_bits = np.diff(fbits[bounds])
         frame_word = np.concatenate([[0], np.cumsum((frame_bits + 63) >> 6)])  # each body starts a word
-        gwidth = rows.gwidth
-        starts = np.cumsum(gwidth.reshape(-1)).reshape(gwidth.shape)  # rows are consecutive in the stream
-        starts -= gwidth
+        if rows.pack is None:
+            gwidth = rows.gwidth
+            starts = np.cumsum(gwidth.reshape(-1)).reshape(gwidth.shape)  # rows are consecutive in the stream
+            starts -= gwidth
+        else:  # the fused path: each row's start bit
+            starts = fbits[:-1].copy()
         for f in range(1, len(bounds) - 1):  # each frame's body starts a word
             a, b = bounds[f], bounds[f + 1]
             starts[a:b] += frame_word[f] * 64 - fbits[a]
-        words = place_groups(rows.groups, starts, int(frame_word[-1]))
+        if rows.pack is None:
+            words = place_groups(rows.groups, starts, int(frame_word[-1]))
+        else:
+            words = scratch().get("place.words", (int(frame_word[-1]) + 2,), np.uint64)
+            words[:] = 0
+            rows.pack(starts, words)
         if sys.byteorder == "little":  # the wire's words are big-endian: swapped in place, sliced uncopied
             words.byteswap(inplace=True)
         body = words.view(np.uint8).data

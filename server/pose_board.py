@@ -59,7 +59,9 @@ class PoseBoard:
         self.dofs = np.zeros((0, ndofs))
         self.positions = np.zeros((0, nfigs, 3))
         self.orientations = np.zeros((0, nfigs, 4))
-        self.codes = np.zeros((0, 0), np.int32)  # quantised fields; width set by the first table quantised
+        # quantised fields, width set by the first table quantised: int32, or uint16 on a board fed codes
+        # (a front-end's: its batches carry 16-bit codes), half the bytes for its merges and gathers
+        self.codes = np.zeros((0, 0), np.int32)
         self.version = np.zeros(0, np.int64)
         self.valid = np.zeros(0, bool)
         self.table_of = np.zeros(0, np.int32)
@@ -88,11 +90,12 @@ class PoseBoard:
         self.version, self.valid, self.table_of = pad(self.version), pad(self.valid), pad(self.table_of, -1)
         self.capacity = n
 
-    def _code_width(self, nfields: int) -> None:
-        if self.codes.shape[1] != nfields:
-            if self.valid.any():
+    def _code_width(self, nfields: int, dtype: type = np.int32) -> None:
+        if self.codes.shape[1] != nfields or self.codes.dtype != dtype:
+            if not self.valid.any():
+                self.codes = np.zeros((self.capacity, nfields), dtype)
+            elif self.codes.shape[1] != nfields:
                 raise ValueError(f"update tables of {self.codes.shape[1]} and {nfields} fields on one board")
-            self.codes = np.zeros((self.capacity, nfields), np.int32)
 
     def drop_poses(self) -> None:
         """Keep the codes alone from now on: ``dofs``, ``positions`` and ``orientations`` are emptied and no
@@ -201,7 +204,7 @@ class PoseBoard:
             return 0
         rows = np.asarray(rows, np.int64)
         self.ensure(int(rows.max()))
-        self._code_width(codes.shape[1])
+        self._code_width(codes.shape[1], np.uint16 if codes.dtype == np.uint16 else np.int32)
         changed = 0
         tables = np.asarray(tables, np.int32)
         first = int(tables[0])
@@ -215,9 +218,17 @@ class PoseBoard:
         self.rows_changed += changed
         return changed
 
+    def _as_codes(self, q: np.ndarray) -> np.ndarray:
+        """``q`` in the board's dtype: a uint16 board given codes past 16 bits turns int32 first."""
+        if self.codes.dtype == np.uint16 and not _fits_u16(q):
+            self.codes = self.codes.astype(np.int32)
+        return np.ascontiguousarray(q, self.codes.dtype)
+
     def _store(self, rows: np.ndarray, q: np.ndarray, table_id: int) -> int:
         """Write codes of one table; bump the version of the rows whose codes (or table) changed."""
         at = _span(rows)  # a run of rows (every soldier due, the usual moving crowd): views, not gathers
+        if q.dtype != self.codes.dtype:
+            q = self._as_codes(q)
         new = ~self.valid[at] | (self.table_of[at] != table_id)
         if isinstance(at, slice):
             new |= _rows_differ(self.codes[at], q)
@@ -230,6 +241,10 @@ class PoseBoard:
         moved = rows[new] if not new.all() else rows
         self.version[moved] = self.serial
         return len(moved)
+
+
+def _fits_u16(q: np.ndarray) -> bool:
+    return not q.size or (int(q.min()) >= 0 and int(q.max()) <= 0xFFFF)
 
 
 def _rows_differ(a: np.ndarray, b: np.ndarray) -> np.ndarray:

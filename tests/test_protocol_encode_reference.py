@@ -45,12 +45,13 @@ def same_stream(
     max_payload: int,
     version: int,
     reference: type[ReferenceEncoder] = ReferenceEncoder,
+    encoder: type[UpdateEncoder] = UpdateEncoder,
 ) -> None:
-    """The encoder and ``reference`` get the same ticks: every frame is the same bytes, the states after it
-    agree, and what is sent decodes back to the codes."""
+    """The ``encoder`` and ``reference`` get the same ticks: every frame is the same bytes, the states after
+    it agree, and what is sent decodes back to the codes."""
     rng = np.random.default_rng(seed)
     lay = table.layout
-    new, ref = UpdateEncoder(table, n, version=version), reference(table, n, version=version)
+    new, ref = encoder(table, n, version=version), reference(table, n, version=version)
     dec = UpdateDecoder(table, n, version=version)
     codes = rng.integers(0, lay.max_code + 1, (n, lay.nfields)).astype(np.int32)
     vel = rng.integers(-30, 31, codes.shape)

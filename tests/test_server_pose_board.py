@@ -221,6 +221,23 @@ def test_a_fed_publish_labels_its_rows_with_the_tick_it_names() -> None:
     assert board.labels(np.array([0, 1])).tolist() == [8, 8]
 
 
+def test_a_board_fed_16_bit_codes_keeps_them_as_uint16_until_a_wider_code() -> None:
+    """A front-end's board keeps its batches' uint16 codes as they came (half the bytes of its merges and
+    gathers); codes past 16 bits (no batch carries them) turn it to int32 with every code kept."""
+    from server.pose_board import PoseBoard
+
+    board = PoseBoard(4, 2)
+    board.publish_codes(np.arange(3), np.ones(3), np.arange(9, dtype=np.uint16).reshape(3, 3), 1)
+    assert board.codes.dtype == np.uint16 and board.codes_of(np.array([2])).dtype == np.uint16
+    assert (
+        board.publish_codes(np.array([0, 1]), np.ones(2), np.array([[0, 1, 2], [3, 4, 6]], np.int32), 2) == 1
+    )
+    assert board.codes.dtype == np.uint16 and board.version[:3].tolist() == [1, 2, 1]
+    board.publish_codes(np.array([2]), np.ones(1), np.full((1, 3), 70_000, np.int32), 3)
+    assert board.codes.dtype == np.int32
+    assert board.codes[:3].tolist() == [[0, 1, 2], [3, 4, 6], [70_000] * 3]
+
+
 def test_sessions_asking_for_the_same_rows_share_one_gather_of_the_codes() -> None:
     """``codes_of``: one read-only gather per publish for equal rows (the clients of one group); other rows
     or a new publish gather again."""

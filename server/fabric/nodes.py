@@ -1316,8 +1316,9 @@ def merge(
     if watch is not None:
         used = [watch.split(b) for b in used]
     rows = np.concatenate([b.indices for b in used]).astype(np.int64)
-    tables = np.concatenate([b.tables for b in used])
-    codes = np.concatenate([b.codes for b in used])
+    # one batch (a shard's tick): its tables and uint16 codes as they came, read-only views of its bytes
+    tables = used[0].tables if len(used) == 1 else np.concatenate([b.tables for b in used])
+    codes = used[0].codes if len(used) == 1 else np.concatenate([b.codes for b in used])
     if again:
         _, first = np.unique(rows[::-1], return_index=True)
         newest = len(rows) - 1 - first
@@ -1325,4 +1326,4 @@ def merge(
     live = (rows < len(alive)) & alive[np.minimum(rows, len(alive) - 1)]
     if not live.all():
         rows, tables, codes = rows[live], tables[live], codes[live]
-    return board.publish_codes(rows, tables, codes.astype(np.int32), tick)
+    return board.publish_codes(rows, tables, codes, tick)

@@ -74,7 +74,7 @@ class Watch:
         rows = rows[(rows < len(alive)) & alive[np.minimum(rows, len(alive) - 1)]]
         if not len(rows):
             return 0
-        return board.publish_codes(rows, self.tables[rows], self.codes[rows].astype(np.int32), board.ticks)
+        return board.publish_codes(rows, self.tables[rows], self.codes[rows], board.ticks)
 
     def recount(self, subscribed: Iterable[np.ndarray], board: PoseBoard | None, alive: np.ndarray) -> None:
         """After an unsubscription: ``watched`` becomes what the clients' subscriptions say (``subscribed``:

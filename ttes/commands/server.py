@@ -121,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
 
     import trio
 
+    from protocol import fused
     from server.app import TtesServer, check_exposure, run_server
     from server.config import ConfigError, ServerConfig, load_config, with_env_tokens
     from server.logging import configure
@@ -158,6 +159,7 @@ def run(args: argparse.Namespace) -> int:
         server = TtesServer(cfg)
         server.bind()  # a port in use fails here, at once and naming host:port, before the data loads
         server.freeze_gc = True  # the loaded library out of the GC's full collections (server.gc_freeze)
+        fused.warm()  # the compiled encode (the fast extra) before the first client, not at its first update
         server.start_world()  # a bad script or data dir fails here, before accepting
         start_fabric, close_fabric = _fabric_node(server, plan, args.fabric_block)
 
