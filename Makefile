@@ -34,7 +34,7 @@ wheel-check:
 # The image's pinned dependencies with their hashes (the wheel's [stub] and [fabric] extras, Python 3.11,
 # Debian bookworm): after a change to pyproject.toml's dependencies. Needs uv (`pip install uv` anywhere on PATH).
 docker-lock:
-	uv pip compile pyproject.toml --extra stub --extra fabric --generate-hashes --python-version 3.11 \
+	uv pip compile pyproject.toml --extra stub --extra fabric --extra fast --generate-hashes --python-version 3.11 \
 	    --python-platform x86_64-manylinux_2_36 --custom-compile-command "make docker-lock" \
 	    -o docker/requirements.lock
 

@@ -122,12 +122,12 @@ def _requirement_names(specs: list[str]) -> set[str]:
     return {re.split(r"[<>=!~\[; ]", s, maxsplit=1)[0].lower().replace("_", "-") for s in specs}
 
 
-def test_lock_pins_every_dependency_of_the_server_the_stub_and_fabric_extras_with_hashes() -> None:
+def test_lock_pins_every_dependency_of_the_server_the_stub_fabric_and_fast_extras_with_hashes() -> None:
     import tomllib
 
     project = tomllib.loads((DOCKER.parent / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     extras = project["optional-dependencies"]
-    wanted = _requirement_names(project["dependencies"] + extras["stub"] + extras["fabric"])  # scaled profile
+    wanted = _requirement_names(project["dependencies"] + extras["stub"] + extras["fabric"] + extras["fast"])  # scaled profile
     lock = (DOCKER / "requirements.lock").read_text(encoding="utf-8")
     pinned = dict(re.findall(r"^([A-Za-z0-9_.-]+)==(\S+) \\\n\s+--hash=sha256:", lock, re.M))
     assert wanted <= {name.lower().replace("_", "-") for name in pinned}, wanted - set(pinned)
