@@ -34,7 +34,10 @@ def kernel(name: str) -> Callable[..., Any]:
         import numba  # here: its import costs 0.3 s of CPU, paid only where something encodes
 
         for k, func in (("rows_meta", rows_meta), ("pack_fields", pack_fields)):
-            _compiled[k] = numba.njit(cache=True, nogil=True)(func)
+            try:
+                _compiled[k] = numba.njit(cache=True, nogil=True)(func)
+            except RuntimeError:  # no cache directory it may write (numba's "no locator"): compile each start
+                _compiled[k] = numba.njit(nogil=True)(func)
         hit = _compiled[name]
     return hit
 
