@@ -16,24 +16,14 @@ import os
 import numpy as np
 import trio
 from test_app_walkthrough import STEP, port_of, vel, watching
-from test_server_support import Client, running_server
+from test_server_support import Client, frames_until, running_server
 
 from protocol.entity import Appearance as A
 from protocol.entity import WeaponState as W
 from protocol.entity import make_entity_requests
-from protocol.events import EntityRequests, JointUpdates, Ready, Subscribe
+from protocol.events import EntityRequests, Ready, Subscribe
 
 HZ = 30.0
-
-
-async def frames_of(c: Client, seconds: float) -> list[tuple[int, list[int], JointUpdates]]:
-    out: list[tuple[int, list[int], JointUpdates]] = []
-    with trio.move_on_after(seconds):
-        while True:
-            ev = await c.next_event()
-            if isinstance(ev, JointUpdates):
-                out.append((ev.tick, ev.indices.tolist(), ev))
-    return out
 
 
 async def test_a_request_landing_during_another_clients_encode_is_written_before_its_own_tick(
@@ -69,8 +59,10 @@ async def test_a_request_landing_during_another_clients_encode_is_written_before
         await b.drain(1.5 / HZ)
         answers = server.answers
         session_a.take_output = taking  # type: ignore[method-assign]
-        frames = await frames_of(b, 6.5 / HZ)  # (the writers' order varies: a's first within a few ticks)
-        assert landed
+        # until soldier 1's frame two ticks after the landing (a's writer encodes first within a few ticks)
+        frames = await frames_until(
+            b, lambda fs: bool(landed) and any(t >= landed[0] + 2 and 1 in i for t, i, _ in fs)
+        )
         tick = landed[0]
         frames = [f for f in frames if f[0] >= tick]
         assert [(t, i) for t, i, _ in frames[:2]] == [(tick, [0]), (tick, [1])]
@@ -104,8 +96,9 @@ async def test_a_walk_off_a_rest_landing_during_the_encodes_moves_the_joints_in_
         await c.drain(1.5 / HZ)
         answers, before = server.answers, board.ticks
         server.publish_tick = publishing  # type: ignore[method-assign]
-        frames = await frames_of(c, 0.9 / HZ)
         tick = before + 1
+        frames = await frames_until(c, lambda fs: any(t > tick for t, _, _ in fs))  # the next tick's frame
+        frames = [f for f in frames if f[0] == tick]
         assert [(t, i) for t, i, _ in frames] == [(tick, [0]), (tick, [1])]
         assert np.abs(frames[0][2].dofs[0] - rest).max() > STEP
         assert server.answers == answers

@@ -14,7 +14,7 @@ import os
 import numpy as np
 import trio
 from test_app_walkthrough import STEP, vel, watching
-from test_server_support import running_server
+from test_server_support import frames_until, running_server
 
 from protocol.entity import Appearance as A
 from protocol.entity import WeaponState as W
@@ -66,13 +66,9 @@ async def test_a_request_landing_while_the_tick_samples_is_written_before_the_re
         before, answers = board.ticks, server.answers
         order.clear()
         m.tick = sampling
-        frames: list[tuple[int, list[int], JointUpdates]] = []
-        with trio.move_on_after(2.5 / HZ):
-            while True:
-                ev = await c.next_event()
-                if isinstance(ev, JointUpdates):
-                    frames.append((ev.tick, ev.indices.tolist(), ev))
         tick = before + 1
+        frames = await frames_until(c, lambda fs: any(t >= tick + 2 and 1 in i for t, i, _ in fs))
+        frames = [f for f in frames if f[0] > before]
         assert [(t, i) for t, i, _ in frames[:2]] == [(tick, [0]), (tick, [1])]
         assert [t for t, i, _ in frames if 1 in i] == [tick, tick + 1, tick + 2]  # every tick
         assert order[:2] == ["publish [0]", "write"]  # written before the rest of the tick is published
@@ -92,9 +88,11 @@ async def test_the_tick_frames_carry_the_answered_soldiers_new_pose(
         await c.requests(index=0, velocity=vel(1.4, 0.0), heading=0.0)
         await trio.sleep_until(server._t0 + 1.51)
         m, board = server.world.manager, server.board_ref.board
-        sample = m.tick
+        assert m is not None and board is not None
+        sample, publish = m.tick, board.publish
         kneel = c.conn.send(EntityRequests(make_entity_requests(0, A.KNEEL, W.DEPLOYED)))
         sampled: list[bool] = []
+        published: list[tuple[int, bool, np.ndarray]] = []  # (label, between, soldier 0's row) after each
 
         def sampling(now: float):  # type: ignore[no-untyped-def]
             update = sample(now)
@@ -103,15 +101,24 @@ async def test_the_tick_frames_carry_the_answered_soldiers_new_pose(
             m.tick = sample
             return update
 
+        def publishing(update, world, **kw):  # type: ignore[no-untyped-def]
+            changed = publish(update, world, **kw)
+            published.append((board.tick, kw.get("between", False), board.dofs[0].copy()))
+            return changed
+
         c.events.clear()
         await c.drain(1.5 / HZ)
-        m.tick = sampling
-        ev = await c.expect(JointUpdates, lambda e: 0 in e.indices.tolist())
-        answered = board.dofs[0].copy()
-        frames = await c.drain(0.5 / HZ)  # the rest of that tick; the next is not due yet
+        before = board.ticks
+        m.tick, board.publish = sampling, publishing  # type: ignore[method-assign]
+        ev = await c.expect(JointUpdates, lambda e: e.tick > before and 0 in e.indices.tolist())
+        frames = await c.caught_up(server)  # all written by now (the next tick's frames too, if it ran)
         assert sampled == [True]  # the tick sampled it walking
-        assert not [e for e in frames if isinstance(e, JointUpdates) and 0 in e.indices.tolist()]
-        assert ev.tick == board.ticks and np.array_equal(board.dofs[0], answered)
+        assert not [
+            e for e in frames if isinstance(e, JointUpdates) and e.tick == ev.tick and 0 in e.indices.tolist()
+        ]
+        rows = [(between, row) for label, between, row in published if label == ev.tick]
+        assert len(rows) >= 2 and not any(between for between, _ in rows)  # the answer, then the tick
+        assert all(np.array_equal(row, rows[0][1]) for _, row in rows)  # the tick keeps the answered row
 
 
 def test_tick_update_take_replaces_the_rows_of_the_soldiers_both_hold() -> None:

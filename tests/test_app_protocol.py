@@ -118,7 +118,7 @@ async def test_create_subscribe_full_then_deltas_and_idle_costs_nothing(
         assert quiet == []
         # start walking: deltas arrive, only for the changed entries
         await c.requests(index=i, appearance=Appearance.UPRIGHT, velocity=(0.0, 1.4, 0.0), heading=0.0)
-        ups = [e for e in await c.drain(2.0) if isinstance(e, JointUpdates)]
+        ups = [e for e in await c.drain(2.0) + await c.caught_up(server) if isinstance(e, JointUpdates)]
         assert len(ups) >= 20  # ~30 Hz
         assert all(u.indices.tolist() == [i] for u in ups)
         assert any(not u.changed[0].all() for u in ups[3:])  # some frames carry only part of the soldier

@@ -82,32 +82,57 @@ async def play(
     script: list[tuple[float, Appearance, float, float]] = SCRIPT,
     until: float = UNTIL,
 ) -> dict[str, Any]:
-    """Send ``script``'s requests (server time) for soldier 0 as an image generator dead-reckoning its entity
-    would; half a tick after each tick until ``until``, the tick's time, the entity's position (m) and
-    heading (radians) then, and soldier 0's and the reference's decoded ``(dofs, positions, orientations)``
-    as they stand."""
+    """Send ``script``'s requests for soldier 0 (seconds from the next tick; each half a tick after its tick)
+    as an image generator dead-reckoning its entity would; for every tick until ``until``, the
+    tick's time, the entity's position (m) and heading (radians) then, and soldier 0's and the reference's
+    decoded ``(dofs, positions, orientations)`` as the frames up to that tick left them. The poses go by
+    the frames' tick numbers, not by when their bytes arrived: under ``autojump_clock`` the clock jumps
+    while they are on their way, so a pose read at a given time may still be an earlier tick's."""
     await c.requests(index=REFERENCE, appearance=Appearance.KNEEL, weapon=WeaponState.DEPLOYED, heading=BACK)
     tick = 1.0 / server.config.tick_hz
-    await c.drain(tick * (math.floor(server.now() / tick) + 1.5) - server.now())
-    sent, pos, vel, hd, pending = 0.0, np.zeros(2), np.zeros(2), script[0][3], list(script)
-    times, entity, headings, poses, refs = [], [], [], [], []
-    while (now := server.now()) < until:
-        while pending and pending[0][0] <= now + 1e-9:
+    base = tick * (math.floor(server.now() / tick) + 1)  # the next tick's time: the script's 0
+    await trio.sleep_until(server._t0 + base + tick / 2)
+    await c.caught_up(server)
+    first = round(base / tick) + 1  # tick n is at (n - 1) * tick
+    shown = {0: c.pose(1, 0), REFERENCE: c.pose(1, REFERENCE)}
+    c.events.clear()
+    pos, vel, sent = np.zeros(2), np.zeros(2), 0.0
+    asked = [(sent, pos, vel, script[0][3])]  # (server time, entity position, velocity, heading)
+
+    async def read() -> None:
+        while True:
+            await c.next_event()
+
+    async with trio.open_nursery() as nursery:
+        nursery.start_soon(read)
+        for at, app, speed, hd in script:
+            await trio.sleep_until(server._t0 + base + tick * (math.ceil(at / tick - 0.5 - 1e-9) + 0.5))
+            now = server.now()
             pos, sent = pos + vel * (now - sent), now
-            _, app, speed, hd = pending.pop(0)
             v = velocity(speed, hd)
             vel = np.array(v[:2])
+            asked.append((now, pos, vel, hd))
             await c.requests(
                 index=0, appearance=app, weapon=WeaponState.DEPLOYED, velocity=v, heading=hd,
                 position=(*pos, 0.0),
             )  # fmt: skip
-        await c.drain(tick)
-        shown = tick * math.floor(server.now() / tick + 1e-6)  # the last tick's time: what the poses show
-        times.append(shown)
-        entity.append(pos + vel * (shown - sent))
+        await trio.sleep_until(server._t0 + base + until)
+        nursery.cancel_scope.cancel()
+    await c.caught_up(server)
+    last = math.floor((server.now() - base) / tick + 1e-6) + first  # the last tick run
+    frames = [ev for ev in c.events if isinstance(ev, JointUpdates) and ev.table == 1]
+    times, entity, headings, poses, refs = [], [], [], [], []
+    for n in range(first, last + 1):
+        for ev in (ev for ev in frames if ev.tick == n):
+            for row, index in enumerate(ev.indices.tolist()):
+                shown[index] = (ev.dofs[row], ev.positions[row], ev.orientations[row])
+        t = (n - 1) * tick
+        when, at_pos, at_vel, hd = [a for a in asked if a[0] <= t + 1e-9][-1]
+        times.append(t)
+        entity.append(at_pos + at_vel * (t - when))
         headings.append(math.radians(hd))
-        poses.append(c.pose(1, 0))
-        refs.append(c.pose(1, REFERENCE))
+        poses.append(shown[0])
+        refs.append(shown[REFERENCE])
     return {"t": np.array(times), "entity": np.array(entity), "heading": np.array(headings),
             "poses": poses, "refs": refs}  # fmt: skip
 

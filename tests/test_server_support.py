@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import pytest
 import trio
+import trio.testing
 
 from protocol.connection import CLIENT, NEED_DATA, Connection
 from protocol.entity import make_entity_requests
@@ -32,12 +33,14 @@ from protocol.events import (
     Event,
     Hello,
     Jcl,
+    JointUpdates,
     ProtocolError,
     Status,
 )
 from server.app import TtesServer
 from server.config import ServerConfig
 from server.jcl import JclError
+from server.session import Session
 from server.soldier.library import MotionLibrary
 from server.startup import ServerWorld, SyntheticDataDir, write_synthetic_data_dir
 
@@ -139,16 +142,22 @@ class Client:
     async def requests(self, **columns: Any) -> None:
         await self.send(EntityRequests(make_entity_requests(**columns)))
 
+    def buffered_event(self) -> Event | None:
+        """The next event among the bytes already received (None: it needs more)."""
+        ev = self.conn.next_event()
+        if ev is NEED_DATA:
+            return None
+        assert isinstance(ev, Event)
+        if not isinstance(ev, ConnectionClosed):
+            self.events.append(ev)
+        else:
+            self.closed = True
+        return ev
+
     async def next_event(self) -> Event:
         """The next event (ConnectionClosed at the end)."""
         while True:
-            ev = self.conn.next_event()
-            if ev is not NEED_DATA:
-                assert isinstance(ev, Event)
-                if not isinstance(ev, ConnectionClosed):
-                    self.events.append(ev)
-                else:
-                    self.closed = True
+            if (ev := self.buffered_event()) is not None:
                 return ev
             try:
                 data = await self.stream.receive_some(65536)
@@ -180,6 +189,42 @@ class Client:
                     break
         return out
 
+    def session(self, server: TtesServer) -> Session:
+        """This client's session on ``server`` (by its address)."""
+        host, port = self.stream.socket.getsockname()[:2]
+        return next(s for s in server.sessions.values() if s.peer == f"{host}:{port}")
+
+    def writes(self, server: TtesServer) -> list[tuple[float, int]]:
+        """(server time, ticks run) each time from now on that the server encodes bytes for this client: when
+        a frame was written, whenever its bytes arrive (under ``autojump_clock`` the clock jumps while they
+        are on their way, so the time a frame is read says little)."""
+        session, out = self.session(server), []
+        take = session.take_output
+
+        def taking(now: float | None = None) -> bytes:
+            data = take(now)
+            if data:
+                out.append((server.now(), server.ticks))
+            return data
+
+        session.take_output = taking  # type: ignore[method-assign]
+        return out
+
+    async def caught_up(self, server: TtesServer) -> list[Event]:
+        """Every event the server has written to this client by now (its session's ``bytes_out``), however
+        late the bytes arrive. Under ``autojump_clock`` the clock jumps as soon as no task can run, also
+        while bytes are still on their way over the loopback (a loaded machine delivers them late), so a
+        time box (:meth:`drain`) may end before a frame written well within it arrives."""
+        session = self.session(server)
+        out: list[Event] = []
+        while True:
+            await trio.testing.wait_all_tasks_blocked()  # the writers have written what they owe
+            while (ev := self.buffered_event()) is not None:
+                out.append(ev)
+            if self.closed or self.bytes_in >= session.bytes_out:
+                return out
+            out.append(await self.next_event())
+
     async def until_closed(self, timeout: float = 30.0) -> list[Event]:
         with trio.fail_after(timeout):
             out = []
@@ -206,6 +251,23 @@ class Client:
 
     async def aclose(self) -> None:
         await self.stream.aclose()
+
+
+Frame = tuple[int, list[int], JointUpdates]
+
+
+async def frames_until(c: Client, done: Callable[[list[Frame]], bool], timeout: float = 2.0) -> list[Frame]:
+    """``c``'s frames (tick, soldiers, event) until ``done`` holds for them (say, a tick number seen), never a
+    time box: under ``autojump_clock`` the clock jumps while a frame's bytes are still on their way, and
+    trio runs each batch of ready tasks in either order (so the writers' order varies), so a time box ends
+    at a different point of the server's output from run to run."""
+    out: list[Frame] = []
+    with trio.fail_after(timeout):
+        while not done(out):
+            ev = await c.next_event()
+            if isinstance(ev, JointUpdates):
+                out.append((ev.tick, ev.indices.tolist(), ev))
+    return out
 
 
 # -- tests of the start-up ------------------------------------------------------------------------------
