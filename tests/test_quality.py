@@ -653,13 +653,16 @@ def test_a_rifle_swung_flat_across_the_body_fails(figset: FigureSet, holding) ->
 @pytest.mark.parametrize("suffix", ["", "_low", "_m16_low"])
 def test_the_shipped_clips_getting_down_to_crawl_pass(clip: str, suffix: str) -> None:
     """The rifle no longer whips muzzle-up past the shoulder (22-26 degrees in 0.1 s before) nor goes
-    3.0-5.1 cm into the right upper arm while the soldier goes down onto his forearms: the clips pass."""
+    3.0-5.1 cm into the right upper arm while the soldier goes down onto his forearms, nor swings across
+    the body with the chest (its line turning 21-25 degrees in 0.1 s; paced: authoring.rifle_pace): the
+    clips pass, the rifle's turn with margin."""
     from server.motion.cache import load_channelset
 
     cs = load_channelset(Path(__file__).resolve().parents[1] / "channelsets" / f"{clip}{suffix}.chset.env")
     types = sorted({c.protofiletype for c in cs.channels})
     row = check_clip(cs, FigureSet.from_dir(FIGURES, types))
     assert row["pass"], {k: row[k] for k in row["failures"]}
+    assert row["rifle_turn_deg"] <= 16.0
 
 
 @pytest.mark.parametrize("suffix", ["", "_low", "_m16_low"])
