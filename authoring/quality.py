@@ -21,6 +21,10 @@ Per clip (a channelset bound to its soldier figure and rifle):
   8-10 degrees per 0.1 s, a recoil 6, a rifle swung muzzle-up across the shoulder 22-34 (a pose may be
   frame-to-frame smooth and still whip the rifle round); a clip whose rifle lacks ``butt`` or ``muzzle``
   sites is not judged.
+* ``rifle_turn_deg`` — the largest angle the butt-to-muzzle line turns through over any ``PITCH_WINDOW_S``
+  while it is held, whichever way: a rifle swung flat across the body keeps its pitch (kstow2crawl's swing
+  from the kneeling carry round to the crawl's cradle: 24 degrees in 0.1 s read 17 as pitch); carried
+  through the crawl cycle it turns 16, through a crawl turn 14.
 * ``palm_rifle_cm`` — right palm centre to the rifle's ``grip``, left palm centre to its ``handguard``, only
   while the rifle is held (before the channelset's ``release_frame``).
 * ``end_speed_m_s`` — at each end of the clip that is a static posture (both ends of a static-graph clip, the
@@ -125,6 +129,7 @@ THRESHOLDS: dict[str, float] = {
     "rifle_in_body_cm": 1.0,
     "palm_rifle_cm": 1.0,
     "rifle_pitch_jump_deg": 18.0,
+    "rifle_turn_deg": 18.0,  # ... and its turn any way (a swing across the body keeps its pitch)
     "end_speed_m_s": 0.5,
     "joint_limit_violations": 0.0,
     "max_frame_jump_deg": 20.0,
@@ -190,6 +195,21 @@ def rifle_pitch_jump(butt: np.ndarray, muzzle: np.ndarray, fps: float) -> tuple[
     change = np.abs(pitch[w:] - pitch[:-w])
     at = int(np.argmax(change))
     return float(change[at]), at, at + w
+
+
+def rifle_turn(butt: np.ndarray, muzzle: np.ndarray, fps: float) -> tuple[float, int, int]:
+    """Largest angle (degrees) the line from ``butt`` to ``muzzle`` (``(n, 3)``) turns through over any
+    window of ``PITCH_WINDOW_S``, with the window's first and last frame (yaw as well as pitch)."""
+    w = min(max(1, round(PITCH_WINDOW_S * fps)), len(butt) - 1)
+    if w < 1:
+        return 0.0, 0, 0
+    axis = muzzle - butt
+    length = np.linalg.norm(axis, axis=1, keepdims=True)
+    unit = np.divide(axis, length, out=np.zeros_like(axis), where=length > 0)
+    cosine = np.clip(np.einsum("ij,ij->i", unit[w:], unit[:-w]), -1.0, 1.0)
+    turn = np.degrees(np.arccos(cosine))
+    at = int(np.argmax(turn))
+    return float(turn[at]), at, at + w
 
 
 def feet_up(kin, segg: np.ndarray, heights: np.ndarray, parts: np.ndarray) -> dict[str, Any]:
@@ -380,6 +400,9 @@ def check_clip(
             jump, a, b = rifle_pitch_jump(butt, muzzle, cs.fps)
             out["rifle_pitch_jump_deg"] = round(jump, 3)
             out["rifle_pitch_jump_where"] = f"frames {a}-{b}" if jump > 0 else None
+            turn, a, b = rifle_turn(butt, muzzle, cs.fps)
+            out["rifle_turn_deg"] = round(turn, 3)
+            out["rifle_turn_where"] = f"frames {a}-{b}" if turn > 0 else None
         rnodes, rsegs = figures.nodes(rifle_type)
         rg = rk.segment_globals(rq, rloc)
         rpts = np.einsum("fkij,kj->fki", rg[:, rsegs, :3, :], rnodes)

@@ -4,7 +4,8 @@ foot, heel, knee or arm lifts off where it lay.
 A settle that lifted each leg 4-8 deg of hip extension to turn it out (heels 19-22 -> 14-16 cm) raised the
 lower legs ~15 cm a second after the body had landed (ststow2dead, 2.28-2.60 s): a dead man kicking. This
 measures, from the first frame where the pelvis, the chest (or belly) and the head are down (each within
-:data:`DOWN_CM` of its height at the last frame, and staying so), how far each leg point rises above the
+:data:`NEAR_CM` of its height at the last frame, :func:`down_frame`: not "staying so", which a slave's pelvis
+settled late pushed to the clip's end), how far each leg point rises above the
 lowest it has been since (``rest_rise_cm``; the heel and knee sites, the lowest nodes of the foot, the
 kneecap, the upper arm, forearm and hand). ``ttes author check`` holds every clip that ends in DEAD to it
 (:data:`RISE_LIMIT_CM`); the leg settle (:mod:`authoring.dead_legs`) searches within it. kfire2dead's right
@@ -116,6 +117,19 @@ def rest_frame(h: dict[str, np.ndarray], near: float = DOWN_CM) -> int | None:
     return 0 if len(late) == 0 else int(late[-1]) + 1
 
 
+def down_frame(h: dict[str, np.ndarray], near: float = NEAR_CM) -> int | None:
+    """The first frame at which the pelvis, chest (or belly) and head are all down, within ``near`` (cm) of
+    where they finally lie, whatever they do after (None: the body lacks the pelvis or chest). A slave's
+    pelvis settling its last 2 cm late moved :func:`rest_frame` of kfire2dead_low from 94 to 165 (of 184)
+    and hid a forearm's 2.96 cm rise at frame 100 (rest_rise 0.82)."""
+    if "pelvis" not in h or not any(p in h for p in ("chest", "belly")):
+        return None
+    chest = np.minimum.reduce([h[p] for p in ("chest", "belly") if p in h])
+    down = [h["pelvis"], chest] + ([h["head"]] if "head" in h else [])
+    near_all = np.logical_and.reduce([y <= y[-1] + near for y in down])
+    return int(np.argmax(near_all))
+
+
 def rise_after(h: dict[str, np.ndarray], start: int) -> tuple[float, str | None, int | None]:
     """From frame ``start`` on: the most (cm) any leg or arm point of ``h`` rises above its lowest since
     then, which point and at which frame (0.0, None, None if none rises)."""
@@ -132,10 +146,11 @@ def rise_after(h: dict[str, np.ndarray], start: int) -> tuple[float, str | None,
 
 
 def rest_rise(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
-    """``rest_frame`` and, after it, the most (cm) any leg or arm point rises above its lowest since then
-    (``rest_rise_cm``), which point and at which frame."""
+    """From the frame the body is first down (:func:`down_frame`, reported as ``rest_frame``), the most (cm)
+    any leg or arm point rises above its lowest since then (``rest_rise_cm``), which point and at which
+    frame: a trunk that settles its last cm late does not shorten the window."""
     h = _heights(cf, figures)
-    start = rest_frame(h)
+    start = down_frame(h)
     row: dict[str, Any] = {"rest_frame": start, "rest_rise_cm": None, "rest_rise_part": None}
     row["rest_rise_frame"] = None
     if start is None:

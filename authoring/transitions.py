@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from authoring import easing, ik
+from authoring import easing, ik, rifle_pace
 from authoring.motion import (
     JointTarget,
     KeyPosture,
@@ -123,6 +123,8 @@ class TransitionSpec:
     # in_hand: the left elbow is guided (lowest priority) from its start key's place to its end key's,
     # relative to the chest, so the solved arm swings round the rifle on the end key's side of its swivel
     guide_elbow: bool = False
+    # degrees per second: the clip is retimed so its rifle's line turns no faster (authoring.rifle_pace)
+    rifle_pace: float | None = None
 
 
 # --- clip frames --------------------------------------------------------------------------------------------
@@ -716,6 +718,8 @@ def record_transition(
     clip = ClipFrames(q, roots, rifles, fps)
     if spec.end == "DEAD":  # deaths are left as they are (recorded by physics, not by these steps)
         return clip
+    if spec.rifle_pace is not None:
+        clip = rifle_pace.paced(soldier, rkin, clip, spec.rifle_pace)
     return easing.ease_ends(kin, rkin, clip)
 
 
@@ -843,6 +847,8 @@ def _down_to_crawl(src_end: float, t: float) -> tuple[Step, ...]:
     )
 
 
+# degrees per second: down onto the forearms the rifle swung 21-24 degrees in 0.1 s with the chest
+PACE = 110.0
 # name, start, end, seconds (the arc times of seed 002 Figure 7; the elided ones invented), primitive motions.
 # The seven deaths (`*2dead`) have no steps: they are simulated (authoring.deaths), not scripted.
 TRANSITIONS: tuple[TransitionSpec, ...] = (
@@ -867,6 +873,7 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         2.0,
         _stand_to_crawl(0.75, 1.35, 2.0),
         hand_turn=(1.4, 1.95),
+        rifle_pace=PACE,
     ),
     TransitionSpec(
         "ststow2kfire",
@@ -904,6 +911,7 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         1.4,
         _kneel_to_crawl(0.3, 0.85, 1.4),
         hand_turn=(0.88, 1.4),
+        rifle_pace=PACE,
     ),
     TransitionSpec("kstow2dead", "KNEEL_STOWED", "DEAD", 1.0),
     TransitionSpec("kfire2dead", "KNEEL_FIRE", "DEAD", 1.0),

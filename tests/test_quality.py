@@ -619,17 +619,50 @@ def test_a_rifle_that_swings_muzzle_up_fails(figset: FigureSet, holding) -> None
     assert still["rifle_pitch_jump_deg"] == 0.0
 
 
+def _yawed(rifle: np.ndarray, degrees: np.ndarray) -> np.ndarray:
+    """The rifles ``(n, 4, 4)`` turned flat (about their own +Y axis) by ``degrees`` per frame."""
+    out = rifle.copy()
+    for k, a in enumerate(np.radians(degrees)):
+        turn = np.eye(4)
+        turn[0, 0], turn[0, 2], turn[2, 0], turn[2, 2] = np.cos(a), np.sin(a), -np.sin(a), np.cos(a)
+        out[k] = rifle[k] @ turn
+    return out
+
+
+def test_a_rifle_swung_flat_across_the_body_fails(figset: FigureSet, holding) -> None:
+    """kstow2crawl swung the rifle from the kneeling carry round to the crawl's cradle, 24 degrees in 0.1 s,
+    at a steady pitch: the pitch jump read 17 (limit 18), the turn of the rifle's line reads the swing."""
+    poses, body, rifle = _standing(figset, holding, n=61)
+    t = np.arange(61) / 60.0
+    cases = (  # (name, yaw per frame, fails)
+        ("swing", 60.0 * np.clip((t - 0.2) / 0.25, 0.0, 1.0), True),  # 60 degrees in 0.25 s: 24 per 0.1 s
+        ("eased", 60.0 * (0.5 - 0.5 * np.cos(np.pi * np.clip((t - 0.1) / 0.6, 0.0, 1.0))), False),
+    )
+    for name, yaw, fails in cases:
+        row = check_clip(_clip(f"{name}.chset", figset, poses, body, _yawed(rifle, yaw)), figset)
+        assert row["rifle_pitch_jump_deg"] < 1.0, name  # flat: no pitch to see
+        assert row["rifle_turn_deg"] == pytest.approx(np.abs(yaw[6:] - yaw[:-6]).max(), abs=0.5), name
+        assert ("rifle_turn_deg" in row["failures"]) is fails, (name, row["rifle_turn_deg"])
+    pitched = check_clip(
+        _clip("up.chset", figset, poses, body, _pitched(rifle, 45.0 * np.clip(t / 0.1, 0, 1))), figset
+    )
+    assert pitched["rifle_turn_deg"] == pytest.approx(pitched["rifle_pitch_jump_deg"], abs=0.5)
+
+
 @pytest.mark.parametrize("clip", ["ststow2crawl", "kstow2crawl"])
 @pytest.mark.parametrize("suffix", ["", "_low", "_m16_low"])
 def test_the_shipped_clips_getting_down_to_crawl_pass(clip: str, suffix: str) -> None:
     """The rifle no longer whips muzzle-up past the shoulder (22-26 degrees in 0.1 s before) nor goes
-    3.0-5.1 cm into the right upper arm while the soldier goes down onto his forearms: the clips pass."""
+    3.0-5.1 cm into the right upper arm while the soldier goes down onto his forearms, nor swings across
+    the body with the chest (its line turning 21-25 degrees in 0.1 s; paced: authoring.rifle_pace): the
+    clips pass, the rifle's turn with margin."""
     from server.motion.cache import load_channelset
 
     cs = load_channelset(Path(__file__).resolve().parents[1] / "channelsets" / f"{clip}{suffix}.chset.env")
     types = sorted({c.protofiletype for c in cs.channels})
     row = check_clip(cs, FigureSet.from_dir(FIGURES, types))
     assert row["pass"], {k: row[k] for k in row["failures"]}
+    assert row["rifle_turn_deg"] <= 16.0
 
 
 @pytest.mark.parametrize("suffix", ["", "_low", "_m16_low"])

@@ -19,6 +19,7 @@ from authoring.quality_rest import (
     TRUNK_RISE_LIMIT_CM,
     WHIP_M_S,
     _heights,
+    down_frame,
     limb_rest_lag,
     limb_whip,
     propped_lag,
@@ -51,6 +52,27 @@ def test_a_leg_kicked_up_after_the_body_landed_is_seen() -> None:
     assert rise_after(h, start) == (14.0, "left_foot", 7)
     h["left_foot"] = np.minimum(foot, 1.0)  # laid still: the fall's own drop is no rise
     assert rise_after(h, start) == (0.0, None, None)
+
+
+def test_a_late_pelvis_settle_does_not_hide_a_limb_rising_once_he_is_down() -> None:
+    """The body is down at frame 4 but the pelvis lowers its last 2 cm only at frames 14-16 (a slave laid
+    late: kfire2dead_low's rest frame 94 -> 165); the forearm rises 5 cm at frames 6-9 meanwhile."""
+    pelvis = np.concatenate([[40.0, 30.0, 15.0, 6.0], np.full(10, 2.5), [2.0, 1.0, 0.5]])
+    arm = np.concatenate([[30.0, 20.0, 10.0, 4.0, 1.0, 1.0, 2.0, 4.0, 6.0, 3.0], np.full(7, 1.0)])
+    h = {"pelvis": pelvis, "chest": pelvis + 1.0, "head": pelvis + 2.0, "left_forearm": arm}
+    assert rest_frame(h) == 15 and rise_after(h, 15)[0] == 0.0  # the old window: hidden
+    assert down_frame(h) == 4
+    assert rise_after(h, 4) == (5.0, "left_forearm", 8) and rise_after(h, 4)[0] > RISE_LIMIT_CM
+
+
+def test_a_clean_fall_lies_within_the_rest_rise_limit_from_when_he_is_down() -> None:
+    """The body falls and lies from frame 4; the foot lands with it and stays: no rise."""
+    torso = np.array([40.0, 30.0, 15.0, 5.0, 1.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5])
+    foot = np.array([20.0, 15.0, 8.0, 3.0, 1.0, 0.8, 0.6, 0.5, 0.5, 0.5, 0.5])
+    h = {"pelvis": torso, "chest": torso + 1.0, "head": torso + 3.0, "left_foot": foot}
+    assert down_frame(h) == 4
+    assert rise_after(h, 4) == (0.0, None, None)
+    assert down_frame({"pelvis": torso}) is None
 
 
 FPS = 60.0

@@ -150,6 +150,7 @@ CHECK_COLUMNS = (  # (metric, header, width, format)
     ("rifle_in_body_cm", "r.body", 6, ".1f"),
     ("palm_rifle_cm", "palms", 6, ".2f"),
     ("rifle_pitch_jump_deg", "r.ptch", 6, ".1f"),
+    ("rifle_turn_deg", "r.turn", 6, ".1f"),
     ("end_speed_m_s", "v.end", 6, ".2f"),
     ("max_frame_jump_deg", "jump", 6, ".1f"),
     ("max_frame_flick_deg", "flick", 6, ".1f"),
