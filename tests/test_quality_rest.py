@@ -296,3 +296,22 @@ def test_kstow2dead_is_still_rolling_onto_his_back_when_his_trunk_is_down_by_hei
     h, turned = _heights(cf, figures), pelvis_turn(cf, figures)
     assert turned is not None and turned[down_frame(h)] > ROLL_DEG and turned[-1] < 1e-3
     assert rest_rise(cf, figures)["rest_rise_cm"] <= RISE_LIMIT_CM
+
+
+def test_a_death_whose_dead_arm_whips_fails_the_check() -> None:
+    """``dead_limb_speed_m_s`` is a limit (:data:`WHIP_M_S`): of two constructed deaths, the body down at
+    frame 30, the one whose hand swings round the shoulder after it (kstow2dead's left hand did, 7.92 m/s)
+    fails the library's verdict; the one whose hand drops as under gravity (about 3 m/s) passes."""
+    n, down = 120, 30
+    s = np.clip((np.arange(n) - 40) / 36, 0.0, 1.0) ** 1.8
+    turn = np.pi * s * s * (3.0 - 2.0 * s)
+    swept = np.stack([60.0 * np.cos(turn), np.full(n, 12.0), 60.0 * np.sin(turn)], axis=1)
+    t = np.clip((np.arange(n) - 40) / FPS, 0.0, np.sqrt(2 * 45.0 / 981.0))
+    dropped = _part(47.0 - 0.5 * 981.0 * t * t)
+    assert THRESHOLDS["dead_limb_speed_m_s"] == WHIP_M_S
+    whipped = {"name": "whip", **limb_whip({"right_hand": swept}, down, FPS)}
+    fallen = {"name": "fall", **limb_whip({"right_hand": dropped}, down, FPS)}
+    row = summarise([whipped, fallen], [])["thresholds"]["dead_limb_speed_m_s"]
+    assert (row["failing"], row["pass"]) == (1, False)
+    row = summarise([fallen], [])["thresholds"]["dead_limb_speed_m_s"]
+    assert (row["failing"], row["pass"]) == (0, True)
