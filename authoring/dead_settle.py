@@ -125,6 +125,8 @@ class ArmsFall:
 
     headward_cm: float | None = None
     early_s: float = 0.0
+    seconds: float | None = None  # s: an arm not laid anew falls this long (None: ARM_FALL_SECONDS)
+    still_s: float | None = None  # s: the clip ends this long after the arms land (None: STILL_SECONDS)
 
 
 def _face_down(kin, q: np.ndarray, root: np.ndarray) -> bool:
@@ -594,7 +596,8 @@ def _arms_fall(figs: FigureSet, frames: ClipFrames, fall: ArmsFall) -> ClipFrame
     held up in the air and lowered: a dead man holding up his arm. An arm laid anew from over the head
     (``fall.headward_cm``, :func:`_relaid`) falls in :data:`HEADWARD_FALL_SECONDS` from its pose as he came
     down. ``fall.early_s``: the arms go that long before he is down (their own motion until then), their
-    fall :data:`EARLY_LONGER` times that longer.
+    fall :data:`EARLY_LONGER` times that longer; ``fall.seconds``: an arm not laid anew falls that long;
+    ``fall.still_s``: the clip ends that long after the arms land.
     """
     kin = figs.kin["body"]
     k0 = down_frame(figs, frames)
@@ -608,11 +611,12 @@ def _arms_fall(figs: FigureSet, frames: ClipFrames, fall: ArmsFall) -> ClipFrame
     ks = k0 - early  # the arms go from here
     lengths = {
         s: round(
-            (HEADWARD_FALL_SECONDS if s in relaid else ARM_FALL_SECONDS) * frames.fps + EARLY_LONGER * early
+            (HEADWARD_FALL_SECONDS if s in relaid else fall.seconds or ARM_FALL_SECONDS) * frames.fps
+            + EARLY_LONGER * early
         )
         for s in SIDES
     }
-    still = round((HEADWARD_STILL_SECONDS if relaid else STILL_SECONDS) * frames.fps)
+    still = round((HEADWARD_STILL_SECONDS if relaid else fall.still_s or STILL_SECONDS) * frames.fps)
     extra = max(0, ks + max(lengths.values()) + still + 1 - len(frames.poses))
     out = _appended(frames, np.repeat(frames.poses[-1:], extra, axis=0))
     poses = out.poses.copy()

@@ -157,6 +157,13 @@ class DeathSpec:
     # the slaves' arms are brought down where they rise once the master is down (authoring.slave_arms_down):
     # kfire2dead's early-falling top arm, over the DI's own chest, lifted its hand 14.3 cm after it lay
     slave_arms_down: bool = False
+    # s: on his back (arms_fall), an arm falls this long from when he is down (dead_settle.ArmsFall.seconds;
+    # None: 0.4): kstow2dead's left hand, 45 cm up, swept 80 cm round to his side in 0.4 s at 7.92 m/s
+    arms_fall_s: float | None = None
+    # s: on his back (arms_fall), the clip ends this long after the arms land (dead_settle.ArmsFall
+    # .still_s; None: 0.1): kstow2dead's DI/M16 right hand, its arm falling 0.8 s, landed as the slaves'
+    # trunk rest eased in over the last 0.5 s (slave_rest.EASE_FRAMES) and slid 3.27 cm
+    arms_still_s: float | None = None
 
 
 def _prone(
@@ -246,6 +253,14 @@ KFIRE_ARMS_EARLY = 0.8
 # as he lands 4.51 -> 2.02 cm and the chest's 4.48 -> 3.00 (plant_worst got the thigh 2.53 but its arms' fall
 # then slid the chest 5.87)
 KSTOW_LEGS_EASED = 1.5
+# s: kstow2dead's arms fall this long from when he is down (DeathSpec.arms_fall_s): his left hand, 45 cm up
+# as he came down half on his side, swept round to his side while he rolled onto his back at 7.92 m/s in
+# 0.4 s; 0.65 s: 5.02 (chest slide 3.05); 0.8 s: 4.09, limb_rest_lag 0.07 -> 0.2 s. Let go early instead
+# (arms_fall_early_s 0.5-0.8) the arm, still on his side, was pressed into the ground (upper arm 1.1-2.6 cm)
+KSTOW_ARMS_FALL = 0.8
+# s: and the clip ends this long after they land (DeathSpec.arms_still_s): the slaves' trunk rest eases in
+# over the last 0.5 s, after the arms lie
+KSTOW_ARMS_STILL = 0.5
 # N: ststow2dead's let-go rifle, fallen again on its own (DeathSpec.drop_toss). In his fall it was flung
 # to his left (80 N, away from a fall straight ahead) and came to rest by his boots: the fall turns him onto
 # his right side, his legs swinging round toward it (35 cm from the right foot, 1.8 m from his hands). Any
@@ -311,6 +326,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         turn_worst=True,
         turn_as_checked=True,  # chest 3.00 -> 2.95 cm (limit 3), the turn seeing the check's 16 directions
         slave_feet_knelt=True,
+        arms_fall_s=KSTOW_ARMS_FALL,
+        arms_still_s=KSTOW_ARMS_STILL,
     ),
     DeathSpec(
         "kfire2dead",

@@ -515,7 +515,9 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
     if spec.pinned and spec.arms_fall:  # held where they landed first, then the arms fall (kstow2dead: pinned
         # after the fall, the still frames appended moved the feet's pins and slid a foot 1.8 cm more)
         assert not (spec.knees_held or spec.propped), f"{spec.name}: knees held or propped, and arms falling"
-        arms = dead_settle.ArmsFall(early_s=spec.arms_fall_early_s)
+        arms = dead_settle.ArmsFall(
+            early_s=spec.arms_fall_early_s, seconds=spec.arms_fall_s, still_s=spec.arms_still_s
+        )
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall, arms=arms)
     if spec.sunk:  # a crawler's trunk comes down about his thighs first
         frames = dead_crawl.sunk(FigureSet({"body": soldier, "rifle": rifle}), frames)
@@ -538,7 +540,9 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
             spec.propped,
             legs=spec.legs_settle,
             slack_feet=spec.slack_feet,
-            arms=dead_settle.ArmsFall(spec.arms_headward_cm, spec.arms_fall_early_s),
+            arms=dead_settle.ArmsFall(
+                spec.arms_headward_cm, spec.arms_fall_early_s, spec.arms_fall_s, spec.arms_still_s
+            ),
         )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)

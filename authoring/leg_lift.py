@@ -155,9 +155,12 @@ def eased_legs(fall: ClipFrames, held: ClipFrames, soldier: Figure, sigma: float
     the knee to 2 degrees as the leg came down and gave it back 19 degrees in a frame, its lift turned the
     hip and ankle 10 degrees for one frame). Elsewhere, and at the first and last frames, as held (smoothed
     throughout, the slaves' legs, solved from his, dragged a foot 9.6 cm: their kneeling rest is
-    sensitive to every millimetre of the master's legs)."""
+    sensitive to every millimetre of the master's legs). Frames ``held`` appends past ``fall`` (still frames
+    after an arms' fall that outlasts the physics, kstow2dead's early-going arms) are measured against
+    ``fall``'s last."""
     kin = FigureSet({"body": soldier}).kin["body"]
     before, poses = np.asarray(fall.poses), np.array(held.poses)
+    before = np.concatenate([before, np.repeat(before[-1:], len(poses) - len(before), axis=0)])
     cols = np.zeros(kin.ndof, dtype=bool)
     for side in SIDES:
         for joint in LEG_JOINTS:

@@ -57,8 +57,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
   long after the pelvis comes near the ground the head and chest come down (a dead man left propped on his
   elbows looks alive), and ``trunk_rise_cm`` (information, no limit yet: the proposed 2 cm fails the DI/M16
   slaves of the prone deaths, 4.2-5.3), how far the pelvis or chest rises once down (a dead man lifting his
-  hips), and ``dead_limb_speed_m_s`` (information: kstow2dead's left arm, 7.9, waits for kfire2dead's fix),
-  the fastest a limb moves once the trunk is down (a dead arm swung, not dropped).
+  hips), and ``dead_limb_speed_m_s`` (limit 4.5 m/s: every death <= 4.2), the fastest a limb moves once
+  the trunk is down (a dead arm swung, not dropped).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
   recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
   cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
@@ -100,6 +100,7 @@ from authoring.quality_rest import (
     LAG_LIMIT_S,
     PROPPED_LIMIT_S,
     RISE_LIMIT_CM,
+    WHIP_M_S,
     dead_trunk,
     rest_lag,
     rest_rise,
@@ -139,6 +140,7 @@ THRESHOLDS: dict[str, float] = {
     "lying_feet_up_cm": 6.0,  # ... and of a clip that starts lying face down (no fall flings the legs)
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
+    "dead_limb_speed_m_s": WHIP_M_S,  # ... and no limb is flung once the trunk is down (a whip, not a fall)
     "propped_s": PROPPED_LIMIT_S,  # ... and the head and chest come down with the pelvis (none lies propped)
     "rifle_rest_overhang_cm": OVERHANG_LIMIT_CM,  # ... and the rifle he let go lies on something
     "limb_through_cm": LIMB_THROUGH_LIMIT_CM,  # no limb passes through another part of the body

@@ -5,8 +5,9 @@ A settle that lifted each leg 4-8 deg of hip extension to turn it out (heels 19-
 lower legs ~15 cm a second after the body had landed (ststow2dead, 2.28-2.60 s): a dead man kicking. This
 measures, from the first frame where the pelvis, the chest (or belly) and the head are down (each within
 :data:`NEAR_CM` of its height at the last frame, :func:`down_frame`: not "staying so", which a slave's pelvis
-settled late pushed to the clip's end), how far each leg point rises above the
-lowest it has been since (``rest_rise_cm``; the heel and knee sites, the lowest nodes of the foot, the
+settled late pushed to the clip's end; nor while the pelvis is still turned more than :data:`ROLL_DEG` from
+how it lies: a body rolling over onto his back carries his bent knee up), how far each leg point rises above
+the lowest it has been since (``rest_rise_cm``; the heel and knee sites, the lowest nodes of the foot, the
 kneecap, the upper arm, forearm and hand). ``ttes author check`` holds every clip that ends in DEAD to it
 (:data:`RISE_LIMIT_CM`); the leg settle (:mod:`authoring.dead_legs`) searches within it. kfire2dead's right
 hand, laid over the head by the arm fall, rose 18.6 cm after he lay still: the contact sheet showed it, the
@@ -64,6 +65,11 @@ LAG_LIMIT_S = 0.5  # s: the most a limb part may come to rest after the trunk
 NEAR_CM = 3.0  # cm: a part is at rest within this of its final height ...
 STILL_M_S = 0.1  # m/s: ... and slower than this (its centroid)
 WHIP_M_S = 4.5  # m/s: the fastest a limb part's centroid may move once the body is down (a whip, not a fall)
+# degrees: a pelvis turned more than this from how it finally lies is still rolling over, not down
+# (rest_rise): kstow2dead's, 60 degrees off as his trunk came within 3 cm of its last height, rolled onto
+# his back 0.3 s more, its pelvis moving 11.6 cm, and his bent left knee rose 6.7 cm with it; every other
+# death's (and slave's) pelvis is within 22 degrees by then
+ROLL_DEG = 30.0
 PELVIS_NEAR_CM = 10.0  # cm: the pelvis is near the ground within this of where it finally lies
 # cm: the head (lowest node) and chest (centroid) are down within this of where they lie: a head held up a
 # hand's breadth; a dead crawler's rests on his forearms 10 cm up
@@ -117,17 +123,36 @@ def rest_frame(h: dict[str, np.ndarray], near: float = DOWN_CM) -> int | None:
     return 0 if len(late) == 0 else int(late[-1]) + 1
 
 
-def down_frame(h: dict[str, np.ndarray], near: float = NEAR_CM) -> int | None:
+def down_frame(
+    h: dict[str, np.ndarray], near: float = NEAR_CM, turned: np.ndarray | None = None
+) -> int | None:
     """The first frame at which the pelvis, chest (or belly) and head are all down, within ``near`` (cm) of
     where they finally lie, whatever they do after (None: the body lacks the pelvis or chest). A slave's
     pelvis settling its last 2 cm late moved :func:`rest_frame` of kfire2dead_low from 94 to 165 (of 184)
-    and hid a forearm's 2.96 cm rise at frame 100 (rest_rise 0.82)."""
+    and hid a forearm's 2.96 cm rise at frame 100 (rest_rise 0.82). ``turned``: per frame, how far (deg)
+    the pelvis is turned from how it finally lies (:func:`pelvis_turn`); one turned more than
+    :data:`ROLL_DEG` is still rolling over, not down."""
     if "pelvis" not in h or not any(p in h for p in ("chest", "belly")):
         return None
     chest = np.minimum.reduce([h[p] for p in ("chest", "belly") if p in h])
     down = [h["pelvis"], chest] + ([h["head"]] if "head" in h else [])
     near_all = np.logical_and.reduce([y <= y[-1] + near for y in down])
+    if turned is not None:
+        near_all &= turned <= ROLL_DEG
     return int(np.argmax(near_all))
+
+
+def pelvis_turn(cf: ClipFrames, figures: FigureSet) -> np.ndarray | None:
+    """Per frame, the angle (deg) between the pelvis' orientation and its orientation at the last frame
+    (None: the body has no ``lower_torso``)."""
+    body = max(cf.poses, key=lambda k: figures.kin[k].ndof)
+    kin = figures.kin[body]
+    if "lower_torso" not in kin.segment_names:
+        return None
+    g = kin.segment_globals(cf.poses[body], cf.locations[body])[:, kin.segment_names.index("lower_torso")]
+    r = g[:, :3, :3]
+    cos = (np.einsum("nij,ij->n", r, r[-1]) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
 def rise_after(h: dict[str, np.ndarray], start: int) -> tuple[float, str | None, int | None]:
@@ -150,7 +175,7 @@ def rest_rise(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
     any leg or arm point rises above its lowest since then (``rest_rise_cm``), which point and at which
     frame: a trunk that settles its last cm late does not shorten the window."""
     h = _heights(cf, figures)
-    start = down_frame(h)
+    start = down_frame(h, turned=pelvis_turn(cf, figures))
     row: dict[str, Any] = {"rest_frame": start, "rest_rise_cm": None, "rest_rise_part": None}
     row["rest_rise_frame"] = None
     if start is None:

@@ -245,12 +245,16 @@ def test_a_prone_deaths_forearms_do_not_skid(ctx: BuildContext, name: str, parts
     assert slide <= THRESHOLDS["contact_slide_cm"]
 
 
-def test_kfire2dead_s_arms_drop_with_him_not_whip_after(ctx: BuildContext) -> None:
+@pytest.mark.parametrize("name", ["kfire2dead", "kstow2dead"])
+def test_a_dead_arm_drops_with_him_not_whips_after(ctx: BuildContext, name: str) -> None:
     """Issue 14: kfire2dead's top arm, laid anew across his chest, swung down after he was down in 0.6 s,
     its hand at 8.96 m/s (a whip, not a limp arm dropping); let go as he comes down
-    (``DeathSpec.arms_fall_early_s``), no hand or forearm moves faster than 4.5 m/s once he is down."""
-    assert deaths.death_specs()["kfire2dead"].arms_fall_early_s > 0.0
-    poses, roots, rifles, _ = _played(ctx, "kfire2dead")
+    (``DeathSpec.arms_fall_early_s``). kstow2dead's left hand, 45 cm up as he came down half on his side,
+    swept round to his side in 0.4 s while he rolled onto his back, 7.92 m/s; it falls in 0.8 s
+    (``DeathSpec.arms_fall_s``). No hand or forearm moves faster than 4.5 m/s once he is down."""
+    spec = deaths.death_specs()[name]
+    assert spec.arms_fall_early_s > 0.0 or (spec.arms_fall_s or 0.0) > dead_settle.ARM_FALL_SECONDS
+    poses, roots, rifles, _ = _played(ctx, name)
     figs = FigureSet({"body": ctx.soldier, "rifle": ctx.rifle})
     k0 = dead_settle.down_frame(figs, ClipFrames(poses, roots, rifles))
     nodes, segs = figs.nodes("body")

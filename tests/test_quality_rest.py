@@ -16,12 +16,14 @@ from authoring.quality_rest import (
     LAG_LIMIT_S,
     PROPPED_LIMIT_S,
     RISE_LIMIT_CM,
+    ROLL_DEG,
     TRUNK_RISE_LIMIT_CM,
     WHIP_M_S,
     _heights,
     down_frame,
     limb_rest_lag,
     limb_whip,
+    pelvis_turn,
     propped_lag,
     rest_frame,
     rest_rise,
@@ -73,6 +75,23 @@ def test_a_clean_fall_lies_within_the_rest_rise_limit_from_when_he_is_down() -> 
     assert down_frame(h) == 4
     assert rise_after(h, 4) == (0.0, None, None)
     assert down_frame({"pelvis": torso}) is None
+
+
+def test_a_knee_carried_up_by_a_body_rolling_onto_his_back_is_not_a_rise_one_raised_after_is() -> None:
+    """A constructed death: the trunk's lowest points are at their last height from frame 4, but the pelvis
+    is still turned 60 degrees from how it ends and rolls flat by frame 14 (kstow2dead: 60 degrees, 0.3 s,
+    his bent left knee rising 6.7 cm with it): the roll carries the knee up 6 cm, part of the fall. The same
+    knee raised 6 cm after he lies flat is a rise."""
+    torso = np.concatenate([[40.0, 30.0, 15.0, 5.0], np.full(16, 0.5)])
+    turned = np.concatenate([np.full(4, 80.0), np.linspace(60.0, 0.0, 11), np.zeros(5)])
+    knee = np.concatenate([[30.0, 25.0, 20.0, 12.0], 12.0 + 6.0 * (1.0 - turned[4:] / 60.0)])
+    h = {"pelvis": torso, "chest": torso + 1.0, "head": torso + 3.0, "left_lower_leg.knee": knee}
+    assert down_frame(h) == 4 and rise_after(h, 4)[0] > RISE_LIMIT_CM  # by height alone: a rise
+    start = down_frame(h, turned=turned)
+    assert start is not None and turned[start] <= ROLL_DEG < turned[start - 1]
+    assert rise_after(h, start)[0] <= RISE_LIMIT_CM
+    flat = np.concatenate([np.full(4, 80.0), np.zeros(16)])  # down and flat at frame 4, the knee raised
+    assert down_frame(h, turned=flat) == 4 and rise_after(h, down_frame(h, turned=flat))[0] > RISE_LIMIT_CM
 
 
 FPS = 60.0
@@ -265,3 +284,34 @@ def test_a_dead_arm_swung_round_after_he_is_down_is_a_whip_a_dropped_one_is_not(
     assert limb_whip({"right_hand": dropped}, down, FPS)["dead_limb_speed_m_s"] <= WHIP_M_S
     assert limb_whip({"right_hand": swept}, 80, FPS)["dead_limb_speed_m_s"] <= WHIP_M_S  # before: the fall's
     assert limb_whip({"right_hand": swept}, None, FPS)["dead_limb_speed_m_s"] is None
+
+
+def test_kstow2dead_is_still_rolling_onto_his_back_when_his_trunk_is_down_by_height(
+    figures: FigureSet,
+) -> None:
+    """kstow2dead's pelvis, chest and head come within 3 cm of their last height at frame 82 while he still
+    lies half on his side (the pelvis turned 60 degrees from how it ends): rest_rise judges from when he has
+    rolled onto his back, and his knee carried up by the roll is no rise."""
+    cf = play(load_channelset(CHANNELSETS / "kstow2dead.chset.env"), figures)
+    h, turned = _heights(cf, figures), pelvis_turn(cf, figures)
+    assert turned is not None and turned[down_frame(h)] > ROLL_DEG and turned[-1] < 1e-3
+    assert rest_rise(cf, figures)["rest_rise_cm"] <= RISE_LIMIT_CM
+
+
+def test_a_death_whose_dead_arm_whips_fails_the_check() -> None:
+    """``dead_limb_speed_m_s`` is a limit (:data:`WHIP_M_S`): of two constructed deaths, the body down at
+    frame 30, the one whose hand swings round the shoulder after it (kstow2dead's left hand did, 7.92 m/s)
+    fails the library's verdict; the one whose hand drops as under gravity (about 3 m/s) passes."""
+    n, down = 120, 30
+    s = np.clip((np.arange(n) - 40) / 36, 0.0, 1.0) ** 1.8
+    turn = np.pi * s * s * (3.0 - 2.0 * s)
+    swept = np.stack([60.0 * np.cos(turn), np.full(n, 12.0), 60.0 * np.sin(turn)], axis=1)
+    t = np.clip((np.arange(n) - 40) / FPS, 0.0, np.sqrt(2 * 45.0 / 981.0))
+    dropped = _part(47.0 - 0.5 * 981.0 * t * t)
+    assert THRESHOLDS["dead_limb_speed_m_s"] == WHIP_M_S
+    whipped = {"name": "whip", **limb_whip({"right_hand": swept}, down, FPS)}
+    fallen = {"name": "fall", **limb_whip({"right_hand": dropped}, down, FPS)}
+    row = summarise([whipped, fallen], [])["thresholds"]["dead_limb_speed_m_s"]
+    assert (row["failing"], row["pass"]) == (1, False)
+    row = summarise([fallen], [])["thresholds"]["dead_limb_speed_m_s"]
+    assert (row["failing"], row["pass"]) == (0, True)
