@@ -28,24 +28,29 @@ _compiled: dict[str, Callable[..., Any]] = {}
 
 
 def kernel(name: str) -> Callable[..., Any]:
-    """The compiled ``rows_meta`` or ``pack_fields`` (``AVAILABLE`` only)."""
+    """The compiled loop of that name below (``AVAILABLE`` only)."""
     hit = _compiled.get(name)
     if hit is None:
-        import numba  # here: its import costs 0.3 s of CPU, paid only where something encodes
-
-        for k, func in (("rows_meta", rows_meta), ("pack_fields", pack_fields)):
-            try:
-                _compiled[k] = numba.njit(cache=True, nogil=True)(func)
-            except RuntimeError:  # no cache directory it may write (numba's "no locator"): compile each start
-                _compiled[k] = numba.njit(nogil=True)(func)
+        for func in (rows_meta, pack_fields, jack_codes, store_rows):
+            _compiled[func.__name__] = compiled(func)
         hit = _compiled[name]
     return hit
 
 
+def compiled(func: Callable[..., Any]) -> Callable[..., Any]:
+    """``func`` compiled by numba (``AVAILABLE`` only), cached beside its module where numba may write."""
+    import numba  # here: its import costs 0.3 s of CPU, paid only where something encodes
+
+    try:
+        return numba.njit(cache=True, nogil=True)(func)
+    except RuntimeError:  # no cache directory it may write (numba's "no locator"): compile each start
+        return numba.njit(nogil=True)(func)
+
+
 def warm() -> None:
     """Compile (or load) the loops for the codes a server encodes (int32 from its own board, uint16 from a
-    front-end's; read-only as the board lends them, or a copy of some of their rows), so that no client's
-    first update waits for it."""
+    front-end's; read-only as the board lends them, or a copy of some of their rows), and those of its
+    board's quantise and store, so that no client's first update (nor a shard's first tick) waits for it."""
     if not AVAILABLE:
         return
     from protocol.predicted import fused_rows  # (predicted imports this module)
@@ -66,6 +71,23 @@ def warm() -> None:
                 np.cumsum(rows.row_bits) - rows.row_bits,
                 np.zeros(int(rows.row_bits.sum()) // 64 + 3, np.uint64),
             )
+    for dtype in (np.int32, np.uint16):  # a shard's board (its own codes), a front-end's (the batches')
+        kernel("store_rows")(np.zeros((4, 2), dtype), np.arange(2), np.ones((2, 2), dtype), np.zeros(2, bool))
+    lay = example_di_table().layout
+    g, nd = len(lay.qidx_fields), len(lay.dof_fields)
+    figures = np.zeros((2, g, 7), np.float32)
+    figures[..., 3] = 1.0
+    kernel("jack_codes")(
+        np.zeros((2, nd), np.float32),
+        figures,
+        np.zeros(nd, bool),
+        lay.lo,
+        1.0 / lay.step,
+        lay.max_code.astype(np.float64),
+        *(np.ascontiguousarray(a, np.int64) for a in (lay.dof_fields, lay.pos_fields, lay.qidx_fields)),
+        np.ascontiguousarray(lay.comp_fields, np.int64),
+        np.zeros((2, lay.nfields), np.int32),
+    )
 
 
 def rows_meta(
@@ -207,3 +229,91 @@ def pack_fields(
                 acc = (v << np.uint64(63 - spill)) << np.uint64(1)  # (a shift by 64 is undefined)
                 off = spill
     words[at] |= acc
+
+
+def jack_codes(
+    joints: np.ndarray,
+    figures: np.ndarray,
+    translational: np.ndarray,
+    lo: np.ndarray,
+    inv_step: np.ndarray,
+    top: np.ndarray,
+    dof_fields: np.ndarray,
+    pos_fields: np.ndarray,
+    qidx_fields: np.ndarray,
+    comp_fields: np.ndarray,
+    out: np.ndarray,
+) -> int:
+    """A shard's poses straight to their codes, a row at a time: ``joints`` (n, D) and ``figures``
+    (n, G, 7) float32 in Jack's units (radians, cm; x, y, z, w, x, y, z) into ``out`` (n, F) int32, as
+    ``WireConverter.convert`` then :func:`protocol.updates.quantise` compute them, value for value: a DOF
+    widened (a translational one / 100; a rotation outside [-pi, pi] wrapped), the axis change (x, -z, y)
+    / 100 and (w, x, -z, y), each quaternion normalised (its squares summed in order), its first largest
+    ``|component|``'s index and the other three signed so that the largest is positive, then
+    ``clip(rint((v - lo) * inv_step), 0, top)``. Those passes read and write ten (n, F) float64 arrays;
+    this reads the float32 rows once. Returns -1, or the first row with a non-finite value or a zero
+    quaternion (``out`` then undefined: the caller takes the numpy path, which says why)."""
+    n, nd = joints.shape
+    g = figures.shape[1]
+    pi = np.pi
+    two_pi = 2 * np.pi
+    comps = np.empty(4, np.float64)
+    for i in range(n):
+        acc = 0.0  # a row's values summed: finite unless one of them is not (or the sum overflows)
+        for c in range(nd):
+            v = np.float64(joints[i, c])
+            if translational[c]:
+                v = v / 100.0
+            elif v > pi or v < -pi:
+                v = v - two_pi * np.floor((v + pi) / two_pi)
+            acc += v
+            f = dof_fields[c]
+            out[i, f] = np.int32(min(max(np.rint((v - lo[f]) * inv_step[f]), 0.0), top[f]))
+        for k in range(g):
+            for c in range(3):
+                x = figures[i, k, 0] if c == 0 else (-figures[i, k, 2] if c == 1 else figures[i, k, 1])
+                v = np.float64(x) / 100.0
+                acc += v
+                f = pos_fields[k, c]
+                out[i, f] = np.int32(min(max(np.rint((v - lo[f]) * inv_step[f]), 0.0), top[f]))
+            comps[0] = np.float64(figures[i, k, 3])
+            comps[1] = np.float64(figures[i, k, 4])
+            comps[2] = np.float64(-figures[i, k, 6])
+            comps[3] = np.float64(figures[i, k, 5])
+            norm = comps[0] * comps[0]
+            for c in range(1, 4):
+                norm += comps[c] * comps[c]
+            norm = np.sqrt(norm)
+            if not (norm >= 1e-9 and norm - norm == 0.0):
+                return i
+            best = 0
+            for c in range(4):
+                comps[c] = comps[c] / norm
+                if abs(comps[c]) > abs(comps[best]):
+                    best = c
+            flip = comps[best] < 0
+            f = qidx_fields[k]
+            out[i, f] = np.int32(min(max(np.rint((best - lo[f]) * inv_step[f]), 0.0), top[f]))
+            for j in range(3):
+                v = comps[j + 1] if best <= j else comps[j]
+                if flip:
+                    v = -v
+                f = comp_fields[k, j]
+                out[i, f] = np.int32(min(max(np.rint((v - lo[f]) * inv_step[f]), 0.0), top[f]))
+        if acc - acc != 0.0:  # (an inf or a NaN: NaN)
+            return i
+    return -1
+
+
+def store_rows(codes: np.ndarray, rows: np.ndarray, q: np.ndarray, changed: np.ndarray) -> None:
+    """``changed[i] = (codes[rows[i]] != q[i]).any()``, then ``codes[rows[i]] = q[i]``: a board's store of
+    scattered rows (a shard's every N-th soldier) as one pass, not a gather, a compare and a scatter."""
+    n, nf = q.shape
+    for i in range(n):
+        r = rows[i]
+        d = False
+        for f in range(nf):
+            v = q[i, f]
+            d |= codes[r, f] != v
+            codes[r, f] = v
+        changed[i] = d

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from protocol import fused
 from protocol.bitpack import scratch, set_rows, take_rows
 from protocol.shared_encode import SharedEncodes
 from protocol.update_table import UpdateTable
@@ -170,9 +171,14 @@ class PoseBoard:
             if len(sel) == 0:
                 continue
             part = update if len(sel) == n else update.select(sel)
-            ju = sets[k].converter.convert(part, reuse=True)  # work buffers: copied below
             table = sets[k].table
             rows = idx[sel]
+            q = None if self.poses else sets[k].converter.codes(part)  # work buffers: copied below
+            if q is not None:  # (a board without poses keeps no Jack-unit arrays: the codes in one pass)
+                self._code_width(q.shape[1])
+                changed += self._store(rows, q, table.table_id)
+                continue
+            ju = sets[k].converter.convert(part, reuse=True)
             dofs, positions, orientations = ju.dofs, ju.positions, ju.orientations
             q, ok = _quantise_rows(table, dofs, positions, orientations)
             self._code_width(q.shape[1])
@@ -233,6 +239,10 @@ class PoseBoard:
         if isinstance(at, slice):
             new |= _rows_differ(self.codes[at], q)
             self.codes[at] = q
+        elif fused.AVAILABLE and q.dtype == self.codes.dtype and q.shape[1] == self.codes.shape[1]:
+            differ = np.empty(len(at), bool)  # (scattered rows: compared and written in one pass)
+            fused.kernel("store_rows")(self.codes, at, q, differ)
+            new |= differ
         else:  # a shard's soldiers (every N-th index), a front-end's merge: each row moved whole
             new |= _rows_differ(take_rows(self.codes, at), q)
             set_rows(self.codes, at, q)

@@ -23,8 +23,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from peabody.model import Figure
+from protocol import fused
 from protocol.bitpack import scratch
 from server.motion.binding import bind_channelset, neutral_pose, protofiletype
+from server.motion.blend_loop import blend_rows, frame_rows
 from server.motion.channelset import Channelset
 from server.motion.errors import BindingError
 
@@ -211,6 +213,30 @@ class ClipLibrary:
             out = self._fresh(n)
         if n == 0:
             return out
+        if fused.AVAILABLE and interpolate:  # the frames, gathers and blends compiled (the sines in numpy)
+            g0, g1 = np.empty(n, np.int64), np.empty(n, np.int64)
+            w = np.empty(n, np.float32)
+            now_ = np.broadcast_to(np.asarray(now, np.float64), (n,))
+            frame_rows()(
+                clip,
+                np.asarray(start_time, np.float64),
+                np.asarray(direction),
+                np.asarray(duration, np.float64),
+                now_,
+                self.clip_nframes,
+                self.clip_duration,
+                self.clip_start,
+                out.position,
+                out.ended,
+                g0,
+                g1,
+                w,
+            )
+            qa, qb = self._slerp_weights(g0, w) if self.nfig else (w[:, None], w[:, None])
+            blend_rows()(self.joint_data, self.fig_data, g0, g1, w, qa, qb, out.joints, out.figures)
+            if self.nfig:
+                self._roots(g0, g1, w, out)
+            return out
         nfr = self.clip_nframes[clip]
         last = (nfr - 1).astype(np.float64)
         dur = np.asarray(duration, dtype=np.float64)
@@ -266,16 +292,7 @@ class ClipLibrary:
         fa = np.take(self.fig_data, g0, axis=0, out=out.figures, mode="clip")
         fb = np.take(self.fig_data, g1, axis=0, out=out._scratch_f, mode="clip")
         wa, wb = out._weights_a, out._weights_b
-        theta = np.take(self._theta, g0, axis=0, mode="clip")
-        t_theta = np.empty_like(theta)
-        # filled a figure and a component at a time: numpy broadcasts an (n, 1) over a last axis of nfig (or
-        # 3, 4) with an inner loop per row, 3-6 times dearer than these strided passes
-        for k in range(self.nfig):
-            np.multiply(theta[:, k], w, out=t_theta[:, k])
-        qa = np.sin(theta - t_theta)
-        qa *= np.take(self._inv_sin, g0, axis=0, mode="clip")
-        qb = np.sin(t_theta, out=t_theta)
-        qb *= np.take(self._inv_sin_next, g0, axis=0, mode="clip")
+        qa, qb = self._slerp_weights(g0, w)
         rest = 1.0 - w
         for k in range(self.nfig):
             for c in range(3):
@@ -287,6 +304,25 @@ class ClipLibrary:
         fa *= wa
         fb *= wb
         fa += fb
+        self._roots(g0, g1, w, out)
+
+    def _slerp_weights(self, g0: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, nfig) float32 slerp weights of the quaternions of rows ``g0`` and the next at ``w``."""
+        theta = np.take(self._theta, g0, axis=0, mode="clip")
+        t_theta = np.empty_like(theta)
+        # filled a figure and a component at a time: numpy broadcasts an (n, 1) over a last axis of nfig (or
+        # 3, 4) with an inner loop per row, 3-6 times dearer than these strided passes
+        for k in range(self.nfig):
+            np.multiply(theta[:, k], w, out=t_theta[:, k])
+        qa = np.sin(theta - t_theta)
+        qa *= np.take(self._inv_sin, g0, axis=0, mode="clip")
+        qb = np.sin(t_theta, out=t_theta)
+        qb *= np.take(self._inv_sin_next, g0, axis=0, mode="clip")
+        return qa, qb
+
+    def _roots(self, g0: np.ndarray, g1: np.ndarray, w: np.ndarray, out: LibrarySample) -> None:
+        """The figures' root sites of rows ``g0``; a row re-rooted before the next shows the nearest frame."""
+        fa = out.figures
         np.take(self.fig_root, g0, axis=0, out=out.roots, mode="clip")
         changed_rows = np.take(self._reroot_any, g0, mode="clip")
         if changed_rows.any():  # re-rooted between the two frames: show the nearest frame, never a blend

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from peabody.model import Figure
-from protocol import coords
+from protocol import coords, fused
 from protocol.bitpack import scratch
 from protocol.events import JointUpdates
 from protocol.update_table import DEFAULT_DOF_BITS, DofRange, FigureEntry, JointEntry, UpdateTable
@@ -78,6 +78,26 @@ class WireConverter:
         self.translational = np.array([k == "T" for k in kinds], bool)
         self._t_cols = np.flatnonzero(self.translational) if self.translational.any() else None
         self._r_cols = np.flatnonzero(~self.translational)
+        lay = table.layout
+        self._fused = (  # jack_codes' table arrays, worked out once
+            self.translational,
+            lay.lo,
+            1.0 / lay.step,
+            lay.max_code.astype(np.float64),
+            *(np.ascontiguousarray(a, np.int64) for a in (lay.dof_fields, lay.pos_fields, lay.qidx_fields)),
+            np.ascontiguousarray(lay.comp_fields, np.int64),
+        )
+
+    def codes(self, update: TickUpdate) -> np.ndarray | None:
+        """The update's codes for the table (a work buffer, valid until the next call), as :meth:`convert`
+        then ``protocol.updates.quantise`` give them, in one compiled pass (``protocol.fused.jack_codes``);
+        None without numba, or for a batch with a pose that cannot be quantised (the caller's numpy path
+        says which)."""
+        if not fused.AVAILABLE:
+            return None
+        out = scratch().get("wire.codes", (len(update), self.table.layout.nfields), np.int32)
+        bad = fused.kernel("jack_codes")(update.joints, update.figures, *self._fused, out)
+        return out if bad < 0 else None
 
     def convert(self, update: TickUpdate, tick: int | None = None, *, reuse: bool = False) -> JointUpdates:
         """The update in the protocol's units. ``reuse``: its arrays are this thread's work buffers

@@ -125,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
     from server.app import TtesServer, check_exposure, run_server
     from server.config import ConfigError, ServerConfig, load_config, with_env_tokens
     from server.logging import configure
+    from server.motion import blend_loop
     from ttes.output import print_json
 
     cfg = load_config(args.config) if args.config else ServerConfig()  # a bad file: exit 1, naming it
@@ -160,6 +161,7 @@ def run(args: argparse.Namespace) -> int:
         server.bind()  # a port in use fails here, at once and naming host:port, before the data loads
         server.freeze_gc = True  # the loaded library out of the GC's full collections (server.gc_freeze)
         fused.warm()  # the compiled encode (the fast extra) before the first client, not at its first update
+        blend_loop.warm()  # and the sampling's blend, before the first tick
         server.start_world()  # a bad script or data dir fails here, before accepting
         start_fabric, close_fabric = _fabric_node(server, plan, args.fabric_block)
 
