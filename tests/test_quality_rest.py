@@ -222,16 +222,27 @@ def figures() -> FigureSet:
     return FigureSet.from_dir(FIGURES, ["soldier.fig", "DI.fig", "M16.fig", "AK_47.fig"])
 
 
-# none left: stfire2dead's left knee rebounded 3.9 cm 0.1 s after the torso was down (the physics); its
-# legs rolled into their passive range as he lands (authoring.deaths.DeathSpec.legs_roll), 2.5 cm
-PHYSICS_REBOUND: set[str] = set()
+# Faults the check sees (its window opens when the pelvis, chest and head are first down, branch
+# restwindow-s17) that the data does not yet mend: each names what a person sees. Strict, so a clip mended
+# drops out of this list. (Before: stfire2dead's left knee rebounded 3.9 cm 0.1 s after the torso was down;
+# mended by DeathSpec.legs_roll.)
+KNOWN_RISES: dict[str, str] = {
+    "stfire2dead": "face down, both shins kick up ~45 deg (1.17-1.42 s) and sink by 1.6 s: his knees held "
+    "bent by their damping as the thighs swing flat (branch stfirelegs-s18)",
+    "crawl2dead": "dead_prone lifts the left hand clear; it rises 4.4 cm in mid-air after his head is down",
+    "prfire2dead": "the right fist rises 12 -> 17 cm by his head after it is down (1.0-1.25 s)",
+    "prfire2dead_low": "the whole-body lift out of the ground after each slaving stage (trunk_rise 5.31)",
+    "prfire2dead_m16_low": "the whole-body lift out of the ground after each slaving stage (trunk_rise 4.91)",
+    "prstow2dead_low": "the whole-body lift out of the ground after each slaving stage: a knee up 4.3 cm",
+    "prstow2dead_m16_low": "the whole-body lift out of the ground after each slaving stage: a knee up 4.0 cm",
+}
 
 
 @pytest.mark.parametrize(
     "clip",
     [
-        pytest.param(c, marks=pytest.mark.xfail(strict=True, reason="physics rebound"))
-        if c in PHYSICS_REBOUND
+        pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=KNOWN_RISES[c]))
+        if c in KNOWN_RISES
         else c
         for c in TURNED
     ],
