@@ -287,6 +287,11 @@ STSTOW_REFALL = (-1, (-60.0, 0.0, -20.0))
 # nothing, 0.4 s (rifle_upright_s; 1 s seen from the front); from 6-8 frames it tips and lies flat by 1 s
 # (from 2: it stood again on his legs at 1.3 s; from 30-40: it leaned on his boot until 1.2 s)
 KFIRE_REFALL = 8
+# frames after the release: kstow2dead's let-go rifle falls again among his body from the last held frame
+# (DeathSpec.rifle_refall), unflung: as recorded it flew 1.97 m, thrown clear as he pitched over; now it
+# slides from his hands, lands by his front boot by 0.67 s and lies there, 0.23 m from where he let it go.
+# From 0-5 frames it went 1.2-3.1 cm through a forearm left out of it (or flew 1.1 m), flung (+-20-40 N) too
+KSTOW_REFALL = -1
 # s: the prone deaths' chest comes down from this time of the physics on (DeathSpec.lowered_at), as the hit
 # (0-0.55 s) ends: after the physics, they lay propped on their elbows, head 30 cm up, until 3.4 / 1.7 s
 # (the check's propped_s); prfire2dead, from 0.35 s (0.4), lifted off a right forearm still sliding under
@@ -350,6 +355,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_feet_knelt=True,
         arms_fall_s=KSTOW_ARMS_FALL,
         arms_still_s=KSTOW_ARMS_STILL,
+        rifle_refall=KSTOW_REFALL,
     ),
     DeathSpec(
         "kfire2dead",

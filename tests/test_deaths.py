@@ -147,13 +147,15 @@ def test_a_standing_death_does_not_lie_on_his_rifle(ctx: BuildContext) -> None:
     assert not near.any()  # no part of the rifle under the pelvis or the belly
 
 
-def test_the_stowed_death_drops_his_rifle_by_him_not_under_him(ctx: BuildContext) -> None:
+@pytest.mark.parametrize("name", ["ststow2dead", "kstow2dead"])
+def test_the_stowed_deaths_drop_their_rifle_by_them_not_under_them(ctx: BuildContext, name: str) -> None:
     """Issue 14: ststow2dead's rifle, flung to his left (deaths.TOSS) as the fall turned him onto his right
     side, came to rest by his boots (35 cm from the right foot, 1.9 m from the hands); flung ahead again on
     its own (DeathSpec.drop_toss) it landed by his hands, but 1.47 m from where they let it go: thrown (review
-    s17). A rifle a man shot standing lets go of falls near where he let it go (the check's rifle_throw_m),
-    beside him as he falls past it (DeathSpec.rifle_refall), and not under him."""
-    poses, roots, rifles, release = _played(ctx, "ststow2dead")
+    s17); kstow2dead's, as recorded, flew 1.97 m. A rifle a man shot standing or kneeling lets go of falls
+    near where he let it go (the check's rifle_throw_m), beside him as he falls past it
+    (DeathSpec.rifle_refall), and not under him."""
+    poses, roots, rifles, release = _played(ctx, name)
     figs = FigureSet({"body": ctx.soldier, "rifle": ctx.rifle})
     nodes, segs = figs.nodes("body")
     parts = figs.node_parts("body")
