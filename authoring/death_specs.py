@@ -164,6 +164,15 @@ class DeathSpec:
     # .still_s; None: 0.1): kstow2dead's DI/M16 right hand, its arm falling 0.8 s, landed as the slaves'
     # trunk rest eased in over the last 0.5 s (slave_rest.EASE_FRAMES) and slid 3.27 cm
     arms_still_s: float | None = None
+    # frames from the release (-1: the last held): the let-go rifle falls again from there among the finished
+    # body, its arms left out (authoring.rifle_settle), flung by rifle_refall_toss; None: as recorded.
+    # ststow2dead's, flung clear of his fall, landed 1.47 m from his hands; kfire2dead's stood on its butt
+    rifle_refall: int | None = None
+    rifle_refall_toss: tuple[float, float, float] = (0.0, 0.0, 0.0)  # N, the start pelvis' frame
+    # the M16 slave's arms blend from their pose as the hands let go into the master's angles, not from the
+    # goals tracked on (slaving._let_go_in_place): ststow2dead's, its rifle falling again, swung the right
+    # shoulder 22.5 degrees in the frame after the release (max_frame_jump 20; before 19.5)
+    slave_let_go_in_place: bool = False
 
 
 def _prone(
@@ -268,6 +277,21 @@ KSTOW_ARMS_STILL = 0.5
 # pelvis lay 10.4 cm up; flung forward, right or up (10-200 N) or let go at 0.3-0.45 s, the thigh skidded
 # 3.6-5.8 cm, a foot rose 22-32 cm or the rifle lay under him (each was measured)
 STSTOW_DROP = (20.0, 0.0, -90.0)
+# ststow2dead's let-go rifle falls again among his finished body from the last frame the hands hold it
+# (DeathSpec.rifle_refall), flung to his left and a little ahead (pelvis frame): it landed 1.47 m from his
+# hands (STSTOW_DROP, 2.6 m/s), now 0.74. Unflung it lay under his right thigh, squeezed 4.3 cm into the
+# ground; flung (-20..-80, 0, 0..-30) N it landed 0.69-1.37 m off, some through his legs (each was measured)
+STSTOW_REFALL = (-1, (-60.0, 0.0, -20.0))
+# frames after the release: kfire2dead's let-go rifle falls again among his body from here
+# (DeathSpec.rifle_refall): recorded, it landed butt first by his left boot and stood there, leaning on
+# nothing, 0.4 s (rifle_upright_s; 1 s seen from the front); from 6-8 frames it tips and lies flat by 1 s
+# (from 2: it stood again on his legs at 1.3 s; from 30-40: it leaned on his boot until 1.2 s)
+KFIRE_REFALL = 8
+# frames after the release: kstow2dead's let-go rifle falls again among his body from the last held frame
+# (DeathSpec.rifle_refall), unflung: as recorded it flew 1.97 m, thrown clear as he pitched over; now it
+# slides from his hands, lands by his front boot by 0.67 s and lies there, 0.23 m from where he let it go.
+# From 0-5 frames it went 1.2-3.1 cm through a forearm left out of it (or flew 1.1 m), flung (+-20-40 N) too
+KSTOW_REFALL = -1
 # s: the prone deaths' chest comes down from this time of the physics on (DeathSpec.lowered_at), as the hit
 # (0-0.55 s) ends: after the physics, they lay propped on their elbows, head 30 cm up, until 3.4 / 1.7 s
 # (the check's propped_s); prfire2dead, from 0.35 s (0.4), lifted off a right forearm still sliding under
@@ -287,6 +311,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         (0.0, -0.3, -1.0),
         toss=80.0,
         drop_toss=STSTOW_DROP,
+        rifle_refall=STSTOW_REFALL[0],
+        rifle_refall_toss=STSTOW_REFALL[1],
+        slave_let_go_in_place=True,
         pinned=True,
         knees_held=True,
         legs_roll=LEGS_ROLL,
@@ -328,6 +355,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_feet_knelt=True,
         arms_fall_s=KSTOW_ARMS_FALL,
         arms_still_s=KSTOW_ARMS_STILL,
+        rifle_refall=KSTOW_REFALL,
     ),
     DeathSpec(
         "kfire2dead",
@@ -349,6 +377,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_settle_down=True,
         arms_fall_early_s=KFIRE_ARMS_EARLY,
         slave_arms_down=True,
+        rifle_refall=KFIRE_REFALL,
+        slave_let_go_in_place=True,
     ),
     replace(
         _prone("prstow2dead", "PRONE_STOWED"),

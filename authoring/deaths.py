@@ -137,6 +137,7 @@ from authoring.quality_frames import FigureSet
 from authoring.quality_rest import DOWN_CM
 from authoring.rifle_drop import LetGo, dropped, let_go
 from authoring.transitions import FPS, ClipFrames
+from peabody.fk import FigureKinematics
 from peabody.model import Figure
 
 GROUND_RISE = 0.4  # s: a ground lowered under a posture dipping into it rises to 0
@@ -456,7 +457,16 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
 
 def _rifle_resettled(spec: DeathSpec, clip: DeathClip, figures: tuple[Figure, Figure]) -> DeathClip:
     """(:attr:`DeathSpec.rifle_resettle`) the rifle leaning on him falls again among the finished body, as
-    the settle takes his arms from under it (:mod:`authoring.rifle_settle`)."""
+    the settle takes his arms from under it; (:attr:`DeathSpec.rifle_refall`) it falls again among his
+    trunk and legs from about the release, flung by :attr:`DeathSpec.rifle_refall_toss` (the first
+    frame's pelvis' frame) (:mod:`authoring.rifle_settle`)."""
+    if spec.rifle_refall is not None:
+        kin = FigureKinematics(figures[0])
+        first = kin.segment_globals(clip.frames.poses[:1], clip.frames.roots[:1])[0]
+        toss = first[kin.segment_names.index("lower_torso"), :3, :3] @ np.array(spec.rifle_refall_toss)
+        start = clip.release_frame + spec.rifle_refall
+        frames = rifle_settle.settled(clip.frames, *figures, start, rifle_settle.ARMS, toss)
+        clip = DeathClip(frames, clip.release_frame)
     if not spec.rifle_resettle:
         return clip
     return DeathClip(rifle_settle.settled(clip.frames, *figures), clip.release_frame)

@@ -51,6 +51,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
 * ``rifle_rest_overhang_cm`` (:mod:`~authoring.quality_rifle_rest`): a clip that ends in DEAD with its rifle
   let go, how far the rifle's centre lies outside what it rests on at the end (a rifle left standing on its
   magazine or muzzle, held up by nothing).
+* ``rifle_throw_m`` and ``rifle_upright_s`` (:mod:`~authoring.quality_rifle_drop`): a clip whose rifle is let
+  go, how far it ends from where the hands let it go (a rifle thrown, not dropped), and how long it stands
+  on an end on the ground.
 * a clip that ends in DEAD (:mod:`~authoring.quality_rest`): ``rest_rise_cm``, how far a limb rises once
   the body is down, ``limb_rest_lag_s``, how long after the body the last limb part comes to rest,
   ``propped_s`` (limit 1 s: the prone deaths 0.92-1.00, every other death <= 0.25), how
@@ -105,6 +108,7 @@ from authoring.quality_rest import (
     rest_lag,
     rest_rise,
 )
+from authoring.quality_rifle_drop import THROW_LIMIT_M, UPRIGHT_LIMIT_S, rifle_drop
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, dropped_rifle_rest
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
@@ -143,6 +147,8 @@ THRESHOLDS: dict[str, float] = {
     "dead_limb_speed_m_s": WHIP_M_S,  # ... and no limb is flung once the trunk is down (a whip, not a fall)
     "propped_s": PROPPED_LIMIT_S,  # ... and the head and chest come down with the pelvis (none lies propped)
     "rifle_rest_overhang_cm": OVERHANG_LIMIT_CM,  # ... and the rifle he let go lies on something
+    "rifle_throw_m": THROW_LIMIT_M,  # a rifle let go falls by him, not thrown (quality_rifle_drop)
+    "rifle_upright_s": UPRIGHT_LIMIT_S,  # ... and does not stand on an end on the ground
     "limb_through_cm": LIMB_THROUGH_LIMIT_CM,  # no limb passes through another part of the body
     **POSTURE_LIMITS,
 }
@@ -419,6 +425,9 @@ def check_clip(
         centre = rs[:, rnames.get("grip", 0), :3, 3] + shift  # a rifle's centre of mass: by its grip
         hulls = figures.hulls(body_type, hands=True)
         out.update(dropped_rifle_rest(cs, ends_dead, rpts + shift[:, None, :], centre, hulls, segg))
+        ends = [rs[:, rnames[k], :3, 3] for k in ("butt", "muzzle") if k in rnames]
+        axis = ends[1] - ends[0] if len(ends) == 2 else None  # the rifle's long axis, butt to muzzle
+        out.update(rifle_drop(cs, rpts + shift[:, None, :], centre, axis, hulls, segg))
         depth, frame, seg = figures.hulls(body_type).depth(rpts, segg)
         out["rifle_in_body_cm"] = round(depth, 3)
         out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None

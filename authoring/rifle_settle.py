@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from authoring import ragdoll
-from authoring.death_specs import REST_SECONDS, REST_SPEED
+from authoring.death_specs import REST_SECONDS, REST_SPEED, TOSS_SECONDS
 from authoring.rifle_drop import mesh_asset, mjcf
 from authoring.transitions import ClipFrames
 from peabody import quaternion
@@ -33,6 +33,9 @@ INSIDE_M = 0.01  # m: a body hull the rifle is this deep in at the start meets i
 # m/s: the recorded rifle slower than this from some frame on has been laid where it leans (prstow2dead's,
 # leaning on arms the settle had moved 3.5-4 cm away, shook at 0.1 m/s in place: REST_SPEED is 0.03)
 SETTLED_SPEED = 0.15
+# the segments a rifle falling from the hands that let it go meets not at all (DeathSpec.rifle_refall): the
+# arms, flailing as he falls, juggled ststow2dead's over his head and let it fall 0.6 s later
+ARMS = ("arm", "palm", "thumb", "index", "middle", "ring", "pinky")
 MORE_S = 10.0  # s: the most the rifle falls on past the clip's end (one that never rests: the check sees it)
 
 
@@ -118,10 +121,19 @@ def _velocity(rifles: np.ndarray, site: np.ndarray, frame: int, fps: float) -> n
     return np.r_[(b[:3, 3] - a[:3, 3]) * ragdoll.CM * fps, turn]
 
 
-def settled(frames: ClipFrames, soldier: Figure, rifle: Figure, start: int | None = None) -> ClipFrames:
+def settled(
+    frames: ClipFrames,
+    soldier: Figure,
+    rifle: Figure,
+    start: int | None = None,
+    unmet: tuple[str, ...] = (),
+    toss: np.ndarray | None = None,
+) -> ClipFrames:
     """``frames`` with the rifle, from ``start`` (None: :func:`resting_from`), falling again among
     the replayed body, as fast as it moved then, until it rests (at least to the clip's end; the body's
-    last frame held after it if the rifle takes longer)."""
+    last frame held after it if the rifle takes longer). It meets no segment whose name contains one of
+    ``unmet`` (the arms that have just let it go), and is flung by ``toss`` (N, figure world) for
+    :data:`TOSS_SECONDS` from ``start``."""
     import mujoco
 
     start = resting_from(frames.rifles, frames.fps) if start is None else start
@@ -153,18 +165,20 @@ def settled(frames: ClipFrames, soldier: Figure, rifle: Figure, start: int | Non
         for c in data.contact[: data.ncon]
         if c.dist < -INSIDE_M and mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, int(c.geom1)) in parts
     }
-    model, data = build([s for s in segments if s not in inside])
+    model, data = build([s for s in segments if s not in inside and not any(u in s for u in unmet)])
     gun = model.body("rifle").id
     site = rifle.root.location  # type: ignore[union-attr]
     steps = round(1.0 / (frames.fps * model.opt.timestep))
+    push = np.zeros(3) if toss is None else np.array([toss[0], -toss[2], toss[1]])  # figure -> MuJoCo
     out: list[np.ndarray] = []
-    still, frame = 0, 0
+    still, frame, t0 = 0, 0, data.time
     last = len(poses) - 1 + round(MORE_S * frames.fps)
     while frame < len(poses) - 1 or (still * steps * model.opt.timestep < REST_SECONDS and frame < last):
         before = data.xipos[gun].copy()
         a, b = poses[min(frame, len(poses) - 1)], poses[min(frame + 1, len(poses) - 1)]
         for k in range(steps):
             data.mocap_pos[:], data.mocap_quat[:] = _between(a, b, (k + 1) / steps)
+            data.xfrc_applied[gun, :3] = push if data.time - t0 < TOSS_SECONDS else 0.0
             mujoco.mj_step(model, data)
         frame += 1
         out.append(ragdoll.from_mj_world(ragdoll.from_pos_quat(data.xpos[gun], data.xquat[gun])) @ site)

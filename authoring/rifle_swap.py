@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from authoring.death_specs import spec_of
 from authoring.quality import FigureSet
 from authoring.slaving import MasterSlavePair, create_channelset_motion, reslave_channelset
 from peabody.fk import FigureKinematics
@@ -167,4 +168,6 @@ def reslave_holding(
     placed = place_swapped_rifle(
         held, held_type, other_type, figs, channelset.release_frame, float(channelset.fps)
     )
-    return reslave_channelset(channelset, pair, name, rifle, placed)
+    spec = spec_of(channelset.name)
+    in_place = bool(spec and spec.slave_let_go_in_place)
+    return reslave_channelset(channelset, pair, name, rifle, placed, in_place)

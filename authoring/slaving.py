@@ -337,6 +337,7 @@ class MasterSlavePair:
         release_frame: int | None = None,
         *,
         targets: Mapping[str, np.ndarray] | None = None,
+        let_go_in_place: bool = False,
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`slave_pose` over the frames ``(n, ndof)`` of a clip, made temporally coherent.
 
@@ -351,7 +352,9 @@ class MasterSlavePair:
         shoulder's Euler angles jumped 20-28 degrees between frames near their pole while crawling), pulled
         towards the smoothed pose. DOFs no goal moves keep the master's
         angles; the first and last frames stay exactly :meth:`slave_pose`'s (a frame's solution alone), so
-        every clip meeting at a posture node is slaved to the same pose there."""
+        every clip meeting at a posture node is slaved to the same pose there. ``let_go_in_place``: from
+        ``release_frame`` on the arms blend from their pose as the hands let go into the copied angles, not
+        from their goals tracked on (:func:`_let_go_in_place`)."""
         mk, sk = self.master_kin, self.slave_kin
         q = np.asarray(master_poses, dtype=np.float64)
         loc = np.asarray(master_locations, dtype=np.float64)
@@ -380,6 +383,11 @@ class MasterSlavePair:
         if release_frame is None:  # (a death's arms are flung, then blended into the copied angles)
             out = self._ease_leaps(out, start, goals, slave_loc)
         out = _let_go(out, start, release_frame)
+        if let_go_in_place and release_frame is not None:
+            limbs = np.zeros(sk.ndof, dtype=bool)
+            for j in (j for chain in ARM_CHAINS for j in chain if j in sk.dof_slices):
+                limbs[sk.dof_slices[j]] = True
+            out = _let_go_in_place(out, start, release_frame, limbs)
         out[[0, -1]] = pose[[0, -1]]
         if release_frame is not None:  # (a death starts from rest: the master's body is still there)
             out = self._ease_start(out, start, goals, slave_loc, release_frame)
@@ -500,6 +508,22 @@ def _let_go(solved: np.ndarray, copied: np.ndarray, release_frame: int | None) -
     return solved + w * (copied - solved)
 
 
+def _let_go_in_place(
+    poses: np.ndarray, copied: np.ndarray, release_frame: int, arms: np.ndarray
+) -> np.ndarray:
+    """Slave poses ``(n, ndof)`` whose ``arms`` DOFs, from ``release_frame`` on, blend (as :func:`_let_go`)
+    from their pose in the frame before into the ``copied`` angles: the arms' goals tracked on after the
+    hands let go leapt (ststow2dead's M16 slave's right shoulder, 19.5-24.6 degrees in the first frame)."""
+    if not 0 < release_frame < len(poses):
+        return poses
+    u = np.clip((np.arange(len(poses)) - release_frame + 1) / RELEASE_FADE_FRAMES, 0.0, 1.0)
+    w = (u * u * (3.0 - 2.0 * u))[release_frame:, None]
+    held = poses[release_frame - 1, arms]
+    out = poses.copy()
+    out[release_frame:, arms] = held + w * (copied[release_frame:, arms] - held)
+    return out
+
+
 def create_master_slave_pair(master: Figure, slave: Figure, rifle: Figure | None = None) -> MasterSlavePair:
     """Jack's ``create_master_slave_pair``: a soldier.fig master and a DI.fig slave (plus their rifle)."""
     return MasterSlavePair(master, slave, rifle)
@@ -610,6 +634,7 @@ def reslave_channelset(
     name: str | None = None,
     rifle: Figure | None = None,
     rifle_locations: np.ndarray | None = None,
+    let_go_in_place: bool = False,
 ) -> Channelset:
     """Re-record a master channelset for the slave: slave channels (figure + joints) replace the master's,
     every other sharedchannel (the rifle) is copied unchanged, and optional fields (``ground_speed``,
@@ -617,7 +642,8 @@ def reslave_channelset(
 
     With ``rifle`` (another rifle figure, e.g. ``M16.fig``) and its root-site globals ``rifle_locations``
     ``(n, 4, 4)``, the slave holds that rifle instead: its palms go on the rifle's grip and handguard (until
-    the channelset's ``release_frame``) and its figure channel replaces the master's rifle channel."""
+    the channelset's ``release_frame``; ``let_go_in_place``: see :meth:`MasterSlavePair.slave_clip`) and its
+    figure channel replaces the master's rifle channel."""
     rec = create_channelset_motion(channelset, [pair.master])
     n = rec.nframes
     q = np.asarray(rec.poses[pair.master.name], dtype=np.float64)
@@ -629,7 +655,9 @@ def reslave_channelset(
             raise ValueError(f"{channelset.name}: rifle_locations must be ({n}, 4, 4)")
         figures.append(rifle)
         targets = held_rifle_targets(pair, q, loc, rifle, rifle_locations, channelset.release_frame)
-    pose, slave_loc = pair.slave_clip(q, loc, channelset.release_frame, targets=targets)
+    pose, slave_loc = pair.slave_clip(
+        q, loc, channelset.release_frame, targets=targets, let_go_in_place=let_go_in_place
+    )
     out = Recording(figures)
     out.poses[pair.slave.name].extend(pose)
     out.roots[pair.slave.name].extend([pair._slave_root] * n)

@@ -128,3 +128,33 @@ def test_the_rifle_splits_into_convex_pieces_far_smaller_than_its_hull(figset: F
         eq = ConvexHull(part).equations
         assert (part @ eq[:, :3].T + eq[:, 3]).max(axis=1).min() > -0.01
     assert sum(ConvexHull(p).volume for p in parts) < 0.5 * ConvexHull(nodes).volume
+
+
+def test_a_rifle_let_go_over_him_falls_through_the_parts_it_does_not_meet(figset: FigureSet) -> None:
+    """DeathSpec.rifle_refall: the rifle falling again from the hands meets no arm (ststow2dead's flailing
+    arms juggled it over his head); here it meets no part at all and falls past his belly to the ground,
+    where meeting him it lies on him."""
+    poses, body, _ = _lying(figset, n=40)
+    kin = figset.kin["DI.fig"]
+    belly = kin.segment_globals(poses[:1], body[:1])[0, kin.segment_names.index("lower_torso"), :3, 3]
+    loc = _rot(1, 90.0) @ _rot(2, 90.0)  # on its side, across his belly, 50 cm up
+    grip = figset.figures["AK_47.fig"].site("rifle.grip").location[:, 3]
+    loc[:3, 3] = np.r_[belly[0], 50.0, belly[2]] - (loc @ grip)[:3]
+    clip = ClipFrames(poses, body, np.tile(loc, (len(poses), 1, 1)), 60.0)
+    soldier, rifle = figset.figures["DI.fig"], figset.figures["AK_47.fig"]
+    on_him = settled(clip, soldier, rifle, start=0)
+    through = settled(clip, soldier, rifle, start=0, unmet=tuple(kin.segment_names))
+    assert (on_him.rifles[-1] @ grip)[1] > 10.0  # its centre on him (cm up)
+    assert (through.rifles[-1] @ grip)[1] < 6.0  # ... and on the ground
+
+
+def test_a_tossed_rifle_is_flung_its_way(figset: FigureSet) -> None:
+    """DeathSpec.rifle_refall_toss: the rifle falling again is flung by the toss (N) for TOSS_SECONDS."""
+    poses, body, _ = _lying(figset, n=40)
+    side = np.eye(4)
+    side[:3, 3] = (80.0, 30.0, 0.0)  # beside him, 30 cm up
+    clip = ClipFrames(poses, body, np.tile(side, (len(poses), 1, 1)), 60.0)
+    soldier, rifle = figset.figures["DI.fig"], figset.figures["AK_47.fig"]
+    dropped = settled(clip, soldier, rifle, start=0).rifles[-1, :3, 3]
+    tossed = settled(clip, soldier, rifle, start=0, toss=np.array([80.0, 0.0, 0.0])).rifles[-1, :3, 3]
+    assert tossed[0] - dropped[0] > 10.0  # cm: away from him, along +X

@@ -207,3 +207,21 @@ def test_reslave_carries_optional_fields(pair: MasterSlavePair) -> None:
     low = reslave_channelset(master_cs, pair, name="x_low.chset")
     assert low.name == "x_low.chset"
     assert (low.ground_speed, low.stride_length) == (123.5, 70.25)  # type: ignore[attr-defined]
+
+
+def test_arms_let_go_in_place_blend_from_their_pose_at_the_release() -> None:
+    """DeathSpec.slave_let_go_in_place: after the release the arms blend from the pose they had as the hands
+    let go into the copied angles (ststow2dead's M16 slave's right shoulder leapt 22.5 degrees in the first
+    frame, its goals tracked on); the other DOFs are left as they are."""
+    from authoring.slaving import RELEASE_FADE_FRAMES, _let_go_in_place
+
+    n, release = 40, 10
+    poses = np.random.default_rng(0).normal(size=(n, 4))
+    copied = np.zeros((n, 4))
+    arms = np.array([True, True, False, False])
+    out = _let_go_in_place(poses, copied, release, arms)
+    np.testing.assert_array_equal(out[:release], poses[:release])
+    np.testing.assert_array_equal(out[:, ~arms], poses[:, ~arms])
+    step = np.abs(np.diff(out[release - 1 :, arms], axis=0)).max()
+    assert step <= np.abs(poses[release - 1, arms]).max() * 0.25  # eased, no leap
+    np.testing.assert_allclose(out[release - 1 + RELEASE_FADE_FRAMES :, arms], 0.0)  # the copied angles
