@@ -164,6 +164,9 @@ class DeathSpec:
     # .still_s; None: 0.1): kstow2dead's DI/M16 right hand, its arm falling 0.8 s, landed as the slaves'
     # trunk rest eased in over the last 0.5 s (slave_rest.EASE_FRAMES) and slid 3.27 cm
     arms_still_s: float | None = None
+    # a prone death's settle (lowered_at) lifts its arms no higher than just clear of where they lay and will
+    # lie (dead_prone.LEVEL_WEIGHT): prfire2dead's right hand rose 12.2 -> 16.6 cm by his head as it lay down
+    arms_lifted_level: bool = False
 
 
 def _prone(
@@ -368,6 +371,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         lowered_at=PRONE_LOWERED_AT,
         slave_settle_arms_still=True,
         slave_rifle_slid_past=PRFIRE_RIFLE_SLID_PAST,
+        arms_lifted_level=True,
     ),
     CRAWL_DEATH,
 )
