@@ -60,6 +60,11 @@ AIR_SPAN = (0.2, 0.8)  # of the settle: the arm well clear (LIFT_CM) above where
 AIR_KEYS = 7  # shapes over AIR_SPAN (both ends too)
 RIFLE_SLACK_CM = 0.5  # the head may touch the rifle where it lies this deep on its way down
 MORE_KEYS = 6  # at most so many more where the path between them dips
+# (DeathSpec.arms_lifted_level) an arm shape lifted straight above its nodes counts the square of their
+# height over that lift this much of a miss sideways: only a miss sideways counted, prfire2dead's right arm,
+# its elbow held 4 cm up, swung its hand up to 16.9 cm, fingers up by his face, as his head lay down
+# (rest_rise 4.39); weighed 1, the arm lay 0.8 cm in the falling rifle and the rifle_settle flung it 2 m up
+LEVEL_WEIGHT = 0.2
 TORSO_SPAN = (0.2, 0.8)  # of the settle: the torso comes down while the arms are in the air
 ARM_SIDES = ("left", "right")
 STEP_DEG = 16.0  # the pattern search's first step
@@ -241,15 +246,18 @@ class _LaidArm:
         return high + ds.MEAN_WEIGHT * y.mean(axis=1) + ds.PENALTY * wrong + move
 
     def lifted_cost(
-        self, x: np.ndarray, near: np.ndarray, above: np.ndarray | None, lift: float
+        self, x: np.ndarray, near: np.ndarray, above: np.ndarray | None, lift: float, level: float = 0.0
     ) -> np.ndarray:
         """Lifted ``lift`` cm clear, the nearest to the shape ``near`` or, given ``above``, with its nodes
-        the nearest straight above those (world ``(k, 3)``)."""
+        the nearest straight above those (world ``(k, 3)``), their height over ``lift`` above them weighed
+        ``level`` times as much as a miss sideways."""
         p, inside = self.measure(x)
         wrong = np.maximum(0.0, lift - p[..., 1].min(axis=1)) + inside
         far = 1e-3 * (np.degrees(x - near) ** 2).sum(axis=1)
         if above is not None:
             far = far + ((p - above)[..., [0, 2]] ** 2).sum(axis=2).mean(axis=1)
+            if level:
+                far = far + level * (np.maximum(0.0, p[..., 1] - above[:, 1] - lift) ** 2).mean(axis=1)
         return far + ds.PENALTY * wrong
 
 
@@ -279,15 +287,20 @@ def _grid_starts(kin, side: str, x0: np.ndarray, cost: Cost) -> list[np.ndarray]
 
 
 def lifted_arm(
-    body: ds._Body, side: str, near: np.ndarray, above: np.ndarray | None = None, lift: float = LIFT_CM
+    body: ds._Body,
+    side: str,
+    near: np.ndarray,
+    above: np.ndarray | None = None,
+    lift: float = LIFT_CM,
+    level: float = 0.0,
 ) -> np.ndarray:
-    """The ``side`` arm's shape nearest ``near`` (given ``above``, its nodes' places: straight above them)
-    with every arm node ``lift`` cm up, into neither the body nor the rifle (``body.q``: the torso where it
-    is then)."""
+    """The ``side`` arm's shape nearest ``near`` (given ``above``, its nodes' places: straight above them,
+    ``level``: no higher, :data:`LEVEL_WEIGHT`) with every arm node ``lift`` cm up, into neither the body nor
+    the rifle (``body.q``: the torso where it is then)."""
     arm = _LaidArm(body, side)
 
     def cost(x: np.ndarray) -> np.ndarray:
-        return arm.lifted_cost(x, near, above, lift)
+        return arm.lifted_cost(x, near, above, lift, level)
 
     return search(cost, near[None], body.kin.lower[arm.idx], body.kin.upper[arm.idx])
 
@@ -322,10 +335,12 @@ def _within(kin, side: str, x: np.ndarray) -> np.ndarray:
     return np.clip(x, kin.lower[i], kin.upper[i])
 
 
-def _air_keys(body: ds._Body, side: str, poses: np.ndarray, q0: np.ndarray, target: np.ndarray) -> dict:
+def _air_keys(
+    body: ds._Body, side: str, poses: np.ndarray, q0: np.ndarray, target: np.ndarray, level: float = 0.0
+) -> dict:
     """The ``side`` arm's shapes at frames of the settle ``poses`` (the torso coming down): as it lay and as
     it will lie, just clear straight above both (:data:`CLEAR_CM`, :data:`LIFT_OFF`), well clear straight
-    above both (:data:`LIFT_CM`, :data:`AIR_SPAN`) and between."""
+    above both (:data:`LIFT_CM`, :data:`AIR_SPAN`; ``level``: no higher, :func:`lifted_arm`) and between."""
     n, i = len(poses), _arm_dofs(body.kin, side)
     x0, x1 = q0[i], target[i]
 
@@ -333,7 +348,7 @@ def _air_keys(body: ds._Body, side: str, poses: np.ndarray, q0: np.ndarray, targ
         frame: int, near: np.ndarray, above: np.ndarray | None = None, lift: float = LIFT_CM
     ) -> np.ndarray:
         body.q = poses[frame].copy()  # the torso (and the other arm) then
-        return lifted_arm(body, side, near, above, lift)
+        return lifted_arm(body, side, near, above, lift, level if above is not None else 0.0)
 
     body.q = q0.copy()
     start = _arm_points(body, side, x0)
@@ -371,9 +386,10 @@ def _heights(body: ds._Body, side: str, poses: np.ndarray, keys: dict) -> np.nda
     return arm.bb.points(q, arm.arm)[1][..., 1].min(axis=1)
 
 
-def lowered(body: ds._Body, n: int) -> np.ndarray:
+def lowered(body: ds._Body, n: int, level: bool = False) -> np.ndarray:
     """The ``n`` settle poses of a propped face-down ``body`` (its last frame in ``body.q``): the torso and
-    head come down, the arms move to their new places through the air."""
+    head come down, the arms move to their new places through the air (``level``: lifted no higher than
+    just clear, :data:`LEVEL_WEIGHT`)."""
     kin, q0 = body.kin, body.q.copy()
     torso = lowered_torso(body)
     body.q = torso.copy()
@@ -383,7 +399,7 @@ def lowered(body: ds._Body, n: int) -> np.ndarray:
     t = np.arange(1, n + 1) / n
     poses = q0[None] + torso_progress(t)[:, None] * (target - q0)[None]
     for side in ARM_SIDES:
-        keys = _air_keys(body, side, poses, q0, target)
+        keys = _air_keys(body, side, poses, q0, target, LEVEL_WEIGHT if level else 0.0)
         poses[:, _arm_dofs(kin, side)] = _within(kin, side, arm_path(keys, np.arange(n)))
     body.q = q0
     _head_clear_of_rifle(body, poses)

@@ -638,9 +638,11 @@ def _lowered(
     frames: ClipFrames,
     slack_feet: bool = False,
     at: int = -1,
+    level: bool = False,
 ) -> np.ndarray | None:
     """The settle poses of a face-down body left propped on its arms (:mod:`authoring.dead_prone`) from
-    its frame ``at`` (the rifle where it finally lies), then still; None if it is not."""
+    its frame ``at`` (the rifle where it finally lies; ``level``: its arms lifted no higher than just clear),
+    then still; None if it is not."""
     from authoring import dead_prone
 
     q, root = frames.poses[at], frames.roots[at]
@@ -651,7 +653,7 @@ def _lowered(
     t = np.arange(1, n + 1) / n
     legs = _legs_path(body, t, dead_prone.torso_progress(t), slack_feet=slack_feet)  # a limp leg goes as the
     # torso comes down
-    poses = dead_prone.lowered(body, n)
+    poses = dead_prone.lowered(body, n, level)
     poses[:, _leg_dofs(body.kin)] = legs
     return np.concatenate([poses, np.repeat(poses[-1:], round(STILL_SECONDS * frames.fps), axis=0)])
 
@@ -668,16 +670,22 @@ def _appended(frames: ClipFrames, poses: np.ndarray) -> ClipFrames:
 
 
 def lowered_early(
-    frames: ClipFrames, soldier: Figure, rifle: Figure, k0: int, slack_feet: bool = False
+    frames: ClipFrames,
+    soldier: Figure,
+    rifle: Figure,
+    k0: int,
+    slack_feet: bool = False,
+    level: bool = False,
 ) -> ClipFrames | None:
     """A propped face-down body's chest brought down (as :func:`settle` does) from frame ``k0`` of the
-    physics ``frames`` on (:func:`_cut_short`); None if not face down there (the caller settles after the
-    physics, as without ``DeathSpec.lowered_at``: the tail cut short and no settle at all, on main)."""
+    physics ``frames`` on (:func:`_cut_short`; ``level``: ``DeathSpec.arms_lifted_level``); None if not face
+    down there (the caller settles after the physics, as without ``DeathSpec.lowered_at``: the tail cut
+    short and no settle at all, on main)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
     end = k0 + 1 + round((SETTLE_SECONDS + STILL_SECONDS) * frames.fps)  # the rifle too lies still from then
     # (prstow2dead's, rocking on the ground until 2.9 s: the pins eased a still arm back as the clip ended)
     frames = ClipFrames(frames.poses[:end], frames.roots[:end], frames.rifles[:end], frames.fps)
-    lowered = _lowered(figs, frames, slack_feet, k0)
+    lowered = _lowered(figs, frames, slack_feet, k0, level)
     return None if lowered is None else _cut_short(frames, lowered, k0)
 
 

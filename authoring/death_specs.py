@@ -173,6 +173,9 @@ class DeathSpec:
     # goals tracked on (slaving._let_go_in_place): ststow2dead's, its rifle falling again, swung the right
     # shoulder 22.5 degrees in the frame after the release (max_frame_jump 20; before 19.5)
     slave_let_go_in_place: bool = False
+    # a prone death's settle (lowered_at) lifts its arms no higher than just clear of where they lay and will
+    # lie (dead_prone.LEVEL_WEIGHT): prfire2dead's right hand rose 12.2 -> 16.6 cm by his head as it lay down
+    arms_lifted_level: bool = False
 
 
 def _prone(
@@ -398,6 +401,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         lowered_at=PRONE_LOWERED_AT,
         slave_settle_arms_still=True,
         slave_rifle_slid_past=PRFIRE_RIFLE_SLID_PAST,
+        arms_lifted_level=True,
     ),
     CRAWL_DEATH,
 )

@@ -537,7 +537,9 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
     lowered = None
     if spec.lowered_at is not None:  # the chest comes down as he is hit, not after the physics
         early = min(round(spec.lowered_at * frames.fps), settled_from)
-        lowered = dead_settle.lowered_early(frames, soldier, rifle, early, spec.slack_feet)
+        lowered = dead_settle.lowered_early(
+            frames, soldier, rifle, early, spec.slack_feet, spec.arms_lifted_level
+        )
         settled_from = settled_from if lowered is None else early  # (not face down there: as without it)
     if lowered is not None:
         frames = lowered

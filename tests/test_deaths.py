@@ -373,6 +373,33 @@ def test_the_propped_arms_are_lifted_clear_while_they_move(propped) -> None:
     assert max(lows["left_forearm"], lows["right_forearm"]) <= 5.0
 
 
+def test_an_arm_lifted_level_stays_just_clear_over_where_it_lies(ctx: BuildContext) -> None:
+    """Issue 14: a prone death's arm lifted straight above where it will lie counted only its nodes' miss
+    sideways, so a hand turned up stayed up (prfire2dead's right hand stood 16.9 cm up, fingers up by his
+    face, as his head lay down); lifted level (DeathSpec.arms_lifted_level) it comes down to just clear."""
+    key = ctx.keys["PRONE_FIRE"]
+    q, root = key.poses[SOLDIER], key.locations[SOLDIER]
+    rifle = key.locations[RIFLE].copy()
+    rifle[0, 3] += 200.0
+    body = dead_settle._Body(FigureSet({"body": ctx.soldier, "rifle": ctx.rifle}), q, root, rifle)
+    body.q = dead_prone.lowered_torso(body)
+    i = dead_prone._arm_dofs(body.kin, "right")
+    body.q[i] = laid = dead_prone.laid_arm(body, "right")
+    below = dead_prone._arm_points(body, "right", laid)
+    up = laid.copy()  # the hand bent up at the wrist
+    wrist = body.kin.dof_slices["right_wrist"].start + 1
+    up[list(i).index(wrist)] += np.radians(60.0)
+    up = np.clip(up, body.kin.lower[i], body.kin.upper[i])
+    over = {}
+    for level in (0.0, dead_prone.LEVEL_WEIGHT):
+        x = dead_prone.lifted_arm(body, "right", up, below, dead_prone.LIFT_CM, level)
+        p = dead_prone._arm_points(body, "right", x)
+        assert p[:, 1].min() >= dead_prone.LIFT_CM - 0.5
+        over[level] = float((p[:, 1] - below[:, 1] - dead_prone.LIFT_CM).max())
+    assert over[0.0] > 15.0  # the fault: the hand stays up
+    assert over[dead_prone.LEVEL_WEIGHT] < 0.5 * over[0.0]
+
+
 def test_an_eased_death_lets_go_where_the_recorded_one_did() -> None:
     """A death eased out of its start posture (DeathSpec.start_ease) lets go of the rifle at the first frame
     that plays the recorded release frame or a later one, and starts exactly in the posture."""
