@@ -167,6 +167,7 @@ def test_a_knelt_dying_slaves_foot_stays_on_the_ground_where_his_rests() -> None
     figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
     master = load_channelset(CHANNELSETS / "kstow2dead.chset.env", use_cache=False)
     slave = load_channelset(CHANNELSETS / "kstow2dead_low.chset.env", use_cache=False)
+    as_built = check_clip(copy.deepcopy(slave), figs, ends_dead=True)["contact_slides"]["left_knee"]
     u = np.clip((np.arange(slave.nframes) - 100) / 25.0, 0.0, 1.0)
     drag = u * u * (3.0 - 2.0 * u) * 2.0
     slave.fig_pos[:, :, 0] += drag[:, None].astype(slave.fig_pos.dtype)
@@ -176,7 +177,9 @@ def test_a_knelt_dying_slaves_foot_stays_on_the_ground_where_his_rests() -> None
     lift_off_ground(slave, ctx.di)
     after = check_clip(slave, figs, ends_dead=True)
     assert after["contact_slides"]["left_foot"] <= 1.5
-    assert after["contact_slides"]["left_knee"] <= 2.0  # the knee, left as slaved, dragged (0.6 -> 1.4)
+    # the knee, left as slaved, carries the 2 cm drag and no more (since kstow2dead's arms fall longer,
+    # session 18, his DI's left knee lies on the ground through the drag: 0.95 built, 3.08; was 0.6 -> 1.4)
+    assert after["contact_slides"]["left_knee"] <= as_built + 2.0 + 0.2
     assert after["max_frame_jump_deg"] <= 20.0
 
 
