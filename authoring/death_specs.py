@@ -164,6 +164,9 @@ class DeathSpec:
     # .still_s; None: 0.1): kstow2dead's DI/M16 right hand, its arm falling 0.8 s, landed as the slaves'
     # trunk rest eased in over the last 0.5 s (slave_rest.EASE_FRAMES) and slid 3.27 cm
     arms_still_s: float | None = None
+    # a prone death's arms, lifted while his chest comes down (authoring.dead_prone), are held low in the air:
+    # crawl2dead's left hand rose 5.0 -> 9.4 cm in mid-air after his head was down (rest_rise 4.42 -> 1.06)
+    arms_air_low: bool = False
 
 
 def _prone(
@@ -206,6 +209,7 @@ CRAWL_DEATH = replace(
     kept=(*((j, MAX_SECONDS) for j in ("clavicle", "shoulder", "elbow")), ("hip", 0.45), ("knee", 0.45)),
     kept_tone=0.3,
     sunk=True,
+    arms_air_low=True,
     slave_arm_out=True,
     slave_feet_slack=True,
 )
