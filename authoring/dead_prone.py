@@ -21,7 +21,10 @@ ground. So a prone death's settle (:func:`lowered`) is solved in three steps:
    elbow never skids over the ground (the check judges contact by height alone: pulled sideways out of a
    propped pose the elbows slid 5-8 cm); the torso comes down while the arms are in the air
    (:data:`TORSO_SPAN`), the arms pass their shapes on a smooth spline (:func:`arm_path`), and a head that
-   would pass through the rifle on its way gets shapes clear of it too.
+   would pass through the rifle on its way gets shapes clear of it too. Nearest the blend of its shapes,
+   an arm's part may rise in mid-air after the chest is down: a death that asks (``low_air``,
+   ``DeathSpec.arms_air_low``) holds each shape off the ground as low as its clearance lets
+   (:data:`LOW_AIR_WEIGHT`).
 
 The searches are batched pattern searches (:func:`search`): one forward-kinematics call evaluates every
 trial step of every start at once, so a settle takes seconds, not minutes; deterministic.
@@ -66,6 +69,11 @@ MORE_KEYS = 6  # at most so many more where the path between them dips
 # (rest_rise 4.39); weighed 1, the arm lay 0.8 cm in the falling rifle and the rifle_settle flung it 2 m up
 LEVEL_WEIGHT = 0.2
 TORSO_SPAN = (0.2, 0.8)  # of the settle: the torso comes down while the arms are in the air
+# per cm: (``low_air``) an arm in the air is held this low too, each part's lowest node as the check's
+# rest_rise sees it: nearest the blend of its shapes, crawl2dead's left hand rose 5.0 -> 9.4 cm in mid-air
+# after his head was down (0.5: 1.06 cm; each measured held low from the ground on: 0.1, 2.94; 0.3, his hand
+# rose 5.2 cm as it landed; 1.0 and 2.0, his elbow swung 13 degrees a frame)
+LOW_AIR_WEIGHT = 0.5
 ARM_SIDES = ("left", "right")
 STEP_DEG = 16.0  # the pattern search's first step
 TOL_DEG = 0.25  # and its last
@@ -246,11 +254,17 @@ class _LaidArm:
         return high + ds.MEAN_WEIGHT * y.mean(axis=1) + ds.PENALTY * wrong + move
 
     def lifted_cost(
-        self, x: np.ndarray, near: np.ndarray, above: np.ndarray | None, lift: float, level: float = 0.0
+        self,
+        x: np.ndarray,
+        near: np.ndarray,
+        above: np.ndarray | None,
+        lift: float,
+        level: float = 0.0,
+        low: bool = False,
     ) -> np.ndarray:
         """Lifted ``lift`` cm clear, the nearest to the shape ``near`` or, given ``above``, with its nodes
         the nearest straight above those (world ``(k, 3)``), their height over ``lift`` above them weighed
-        ``level`` times as much as a miss sideways."""
+        ``level`` times as much as a miss sideways; ``low``: each part held low too."""
         p, inside = self.measure(x)
         wrong = np.maximum(0.0, lift - p[..., 1].min(axis=1)) + inside
         far = 1e-3 * (np.degrees(x - near) ** 2).sum(axis=1)
@@ -258,6 +272,9 @@ class _LaidArm:
             far = far + ((p - above)[..., [0, 2]] ** 2).sum(axis=2).mean(axis=1)
             if level:
                 far = far + level * (np.maximum(0.0, p[..., 1] - above[:, 1] - lift) ** 2).mean(axis=1)
+        if low:
+            y = p[..., 1]
+            far = far + LOW_AIR_WEIGHT * np.sum([y[:, m].min(axis=1) - lift for m in self.limbs], axis=0)
         return far + ds.PENALTY * wrong
 
 
@@ -293,14 +310,15 @@ def lifted_arm(
     above: np.ndarray | None = None,
     lift: float = LIFT_CM,
     level: float = 0.0,
+    low: bool = False,
 ) -> np.ndarray:
     """The ``side`` arm's shape nearest ``near`` (given ``above``, its nodes' places: straight above them,
-    ``level``: no higher, :data:`LEVEL_WEIGHT`) with every arm node ``lift`` cm up, into neither the body nor
-    the rifle (``body.q``: the torso where it is then)."""
+    ``level``: no higher, :data:`LEVEL_WEIGHT`) with every arm node ``lift`` cm up (``low``: and no higher
+    than it must), into neither the body nor the rifle (``body.q``: the torso where it is then)."""
     arm = _LaidArm(body, side)
 
     def cost(x: np.ndarray) -> np.ndarray:
-        return arm.lifted_cost(x, near, above, lift, level)
+        return arm.lifted_cost(x, near, above, lift, level, low)
 
     return search(cost, near[None], body.kin.lower[arm.idx], body.kin.upper[arm.idx])
 
@@ -336,19 +354,30 @@ def _within(kin, side: str, x: np.ndarray) -> np.ndarray:
 
 
 def _air_keys(
-    body: ds._Body, side: str, poses: np.ndarray, q0: np.ndarray, target: np.ndarray, level: float = 0.0
+    body: ds._Body,
+    side: str,
+    poses: np.ndarray,
+    q0: np.ndarray,
+    target: np.ndarray,
+    level: float = 0.0,
+    held_low: bool = False,
 ) -> dict:
     """The ``side`` arm's shapes at frames of the settle ``poses`` (the torso coming down): as it lay and as
     it will lie, just clear straight above both (:data:`CLEAR_CM`, :data:`LIFT_OFF`), well clear straight
-    above both (:data:`LIFT_CM`, :data:`AIR_SPAN`; ``level``: no higher, :func:`lifted_arm`) and between."""
+    above both (:data:`LIFT_CM`, :data:`AIR_SPAN`; ``level``: no higher, :func:`lifted_arm`) and between
+    (``held_low``: each after it is well clear of where it lay held low, :data:`LOW_AIR_WEIGHT`)."""
     n, i = len(poses), _arm_dofs(body.kin, side)
     x0, x1 = q0[i], target[i]
 
     def at(
-        frame: int, near: np.ndarray, above: np.ndarray | None = None, lift: float = LIFT_CM
+        frame: int,
+        near: np.ndarray,
+        above: np.ndarray | None = None,
+        lift: float = LIFT_CM,
+        low: bool = held_low,
     ) -> np.ndarray:
         body.q = poses[frame].copy()  # the torso (and the other arm) then
-        return lifted_arm(body, side, near, above, lift, level if above is not None else 0.0)
+        return lifted_arm(body, side, near, above, lift, level if above is not None else 0.0, low)
 
     body.q = q0.copy()
     start = _arm_points(body, side, x0)
@@ -356,9 +385,11 @@ def _air_keys(
     end = _arm_points(body, side, x1)
     frame = [round(f * n) - 1 for f in (LIFT_OFF, AIR_SPAN[0], AIR_SPAN[1], 1.0 - LIFT_OFF)]
     keys = {-1: x0, n - 1: x1}
-    keys[frame[0]] = at(frame[0], x0, start, CLEAR_CM)
+    # it leaves the ground as without held_low (held low from the start, crawl2dead's M16 slave's right upper
+    # arm skidded 3.6-4.9 cm as it left)
+    keys[frame[0]] = at(frame[0], x0, start, CLEAR_CM, low=False)
     keys[frame[3]] = at(frame[3], x1, end, CLEAR_CM)
-    keys[frame[1]] = a = at(frame[1], x0, start)
+    keys[frame[1]] = a = at(frame[1], x0, start, low=False)
     keys[frame[2]] = b = at(frame[2], x1, end)
     for f in np.linspace(frame[1], frame[2], AIR_KEYS)[1:-1].round().astype(int):
         w = (f - frame[1]) / (frame[2] - frame[1])
@@ -386,10 +417,10 @@ def _heights(body: ds._Body, side: str, poses: np.ndarray, keys: dict) -> np.nda
     return arm.bb.points(q, arm.arm)[1][..., 1].min(axis=1)
 
 
-def lowered(body: ds._Body, n: int, level: bool = False) -> np.ndarray:
+def lowered(body: ds._Body, n: int, level: bool = False, low_air: bool = False) -> np.ndarray:
     """The ``n`` settle poses of a propped face-down ``body`` (its last frame in ``body.q``): the torso and
     head come down, the arms move to their new places through the air (``level``: lifted no higher than
-    just clear, :data:`LEVEL_WEIGHT`)."""
+    just clear, :data:`LEVEL_WEIGHT`; ``low_air``: held low in it)."""
     kin, q0 = body.kin, body.q.copy()
     torso = lowered_torso(body)
     body.q = torso.copy()
@@ -399,7 +430,7 @@ def lowered(body: ds._Body, n: int, level: bool = False) -> np.ndarray:
     t = np.arange(1, n + 1) / n
     poses = q0[None] + torso_progress(t)[:, None] * (target - q0)[None]
     for side in ARM_SIDES:
-        keys = _air_keys(body, side, poses, q0, target, LEVEL_WEIGHT if level else 0.0)
+        keys = _air_keys(body, side, poses, q0, target, LEVEL_WEIGHT if level else 0.0, low_air)
         poses[:, _arm_dofs(kin, side)] = _within(kin, side, arm_path(keys, np.arange(n)))
     body.q = q0
     _head_clear_of_rifle(body, poses)

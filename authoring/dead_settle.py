@@ -127,6 +127,7 @@ class ArmsFall:
     early_s: float = 0.0
     seconds: float | None = None  # s: an arm not laid anew falls this long (None: ARM_FALL_SECONDS)
     still_s: float | None = None  # s: the clip ends this long after the arms land (None: STILL_SECONDS)
+    low_air: bool = False  # face down and propped: the arms held low in the air (dead_prone.lowered)
 
 
 def _face_down(kin, q: np.ndarray, root: np.ndarray) -> bool:
@@ -522,9 +523,11 @@ def settle(
     (:mod:`authoring.dead_prone`; :func:`lowered_early`: as he is hit); a body on its back (``arms_fall``)
     lets its arms fall as it lands (:func:`_arms_fall`). A face-down body's legs are laid as it lands
     (:func:`_legs_land`); ``legs`` False: they stay as the physics laid them (``DeathSpec.legs_settle``);
-    ``arms``: how the arms fall on his back (:class:`ArmsFall`; None: the defaults)."""
+    ``arms``: how the arms fall on his back, or go through the air propped (:class:`ArmsFall`; None: the
+    defaults)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
-    lowered = _lowered(figs, frames, slack_feet) if propped else None
+    low_air = arms is not None and arms.low_air
+    lowered = _lowered(figs, frames, slack_feet, low_air=low_air) if propped else None
     if lowered is not None:
         return _appended(frames, lowered)
     kin, last = figs.kin["body"], frames.poses[-1]
@@ -639,6 +642,7 @@ def _lowered(
     slack_feet: bool = False,
     at: int = -1,
     level: bool = False,
+    low_air: bool = False,
 ) -> np.ndarray | None:
     """The settle poses of a face-down body left propped on its arms (:mod:`authoring.dead_prone`) from
     its frame ``at`` (the rifle where it finally lies; ``level``: its arms lifted no higher than just clear),
@@ -653,7 +657,7 @@ def _lowered(
     t = np.arange(1, n + 1) / n
     legs = _legs_path(body, t, dead_prone.torso_progress(t), slack_feet=slack_feet)  # a limp leg goes as the
     # torso comes down
-    poses = dead_prone.lowered(body, n, level)
+    poses = dead_prone.lowered(body, n, level, low_air)
     poses[:, _leg_dofs(body.kin)] = legs
     return np.concatenate([poses, np.repeat(poses[-1:], round(STILL_SECONDS * frames.fps), axis=0)])
 

@@ -176,6 +176,9 @@ class DeathSpec:
     # a prone death's settle (lowered_at) lifts its arms no higher than just clear of where they lay and will
     # lie (dead_prone.LEVEL_WEIGHT): prfire2dead's right hand rose 12.2 -> 16.6 cm by his head as it lay down
     arms_lifted_level: bool = False
+    # a prone death's arms, lifted while his chest comes down (authoring.dead_prone), are held low in the air:
+    # crawl2dead's left hand rose 5.0 -> 9.4 cm in mid-air after his head was down (rest_rise 4.42 -> 1.06)
+    arms_air_low: bool = False
 
 
 def _prone(
@@ -218,6 +221,7 @@ CRAWL_DEATH = replace(
     kept=(*((j, MAX_SECONDS) for j in ("clavicle", "shoulder", "elbow")), ("hip", 0.45), ("knee", 0.45)),
     kept_tone=0.3,
     sunk=True,
+    arms_air_low=True,
     slave_arm_out=True,
     slave_feet_slack=True,
 )

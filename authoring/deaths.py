@@ -553,7 +553,11 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
             legs=spec.legs_settle,
             slack_feet=spec.slack_feet,
             arms=dead_settle.ArmsFall(
-                spec.arms_headward_cm, spec.arms_fall_early_s, spec.arms_fall_s, spec.arms_still_s
+                spec.arms_headward_cm,
+                spec.arms_fall_early_s,
+                spec.arms_fall_s,
+                spec.arms_still_s,
+                spec.arms_air_low,
             ),
         )
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)

@@ -400,6 +400,20 @@ def test_an_arm_lifted_level_stays_just_clear_over_where_it_lies(ctx: BuildConte
     assert over[dead_prone.LEVEL_WEIGHT] < 0.5 * over[0.0]
 
 
+def test_a_crawlers_dead_hand_does_not_rise_in_mid_air_after_his_head_is_down() -> None:
+    """Issue 14: crawl2dead's arms, lifted while his chest came down, passed shapes nearest the blend of
+    where they lay and will lie: his left hand went 7.1 -> 5.0 -> 9.4 cm up in mid-air after his head was
+    down (the check's rest_rise_cm 4.42, limit 3). Held low in the air (``DeathSpec.arms_air_low``), no arm
+    part rises once he is down."""
+    from authoring.quality_frames import play
+    from authoring.quality_rest import RISE_LIMIT_CM, rest_rise
+
+    assert deaths.death_specs()["crawl2dead"].arms_air_low
+    figures = FigureSet.from_dir(FIGURES, ["soldier.fig", "AK_47.fig"])
+    row = rest_rise(play(load_channelset(CHANNELSETS / "crawl2dead.chset.env"), figures), figures)
+    assert row["rest_rise_cm"] <= RISE_LIMIT_CM, (row["rest_rise_part"], row["rest_rise_frame"])
+
+
 def test_an_eased_death_lets_go_where_the_recorded_one_did() -> None:
     """A death eased out of its start posture (DeathSpec.start_ease) lets go of the rifle at the first frame
     that plays the recorded release frame or a later one, and starts exactly in the posture."""
