@@ -78,6 +78,12 @@ class ContactRuns:
         return None if not len(pick) else int(pick[np.argmax(self.slide[pick])])
 
 
+def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[start, stop)`` of each run of True in the 1-D ``mask``."""
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
+
+
 def contact_runs(points: np.ndarray, height: float) -> ContactRuns:
     """The contact runs of the nodes of ``points`` ``(n, k, 3)`` (world, cm, +Y up). Contact is judged by
     height alone, so a fast skim just above the ground counts as sliding."""

@@ -94,7 +94,7 @@ from typing import Any
 
 import numpy as np
 
-from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides
+from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides, true_runs
 from authoring.passive_range import passive_limits
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_limbs import LIMB_THROUGH_LIMIT_CM, limbs_through
@@ -172,12 +172,6 @@ LOCOMOTION_GRAPH_WORDS = ("loco", "crawl")
 BACKWARD_WORDS = ("bwalk", "backward", "back_walk", "walkback")
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``[start, stop)`` of the runs of True."""
-    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
-    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
-
-
 def foot_skate(points: np.ndarray, fps: float) -> tuple[float, int]:
     """Largest horizontal slide (cm) of contact points ``(n, k, 3)`` (world) while below the contact height
     (judged by height alone), and the number of contact runs of three frames or more."""
@@ -185,7 +179,7 @@ def foot_skate(points: np.ndarray, fps: float) -> tuple[float, int]:
     if points.shape[0] < 2:
         return 0.0, 0
     slide, _ = contact_slides(points, CONTACT_HEIGHT_CM)
-    phases = sum(1 for k in range(points.shape[1]) for a, b in _runs(points[:, k, 1] <= CONTACT_HEIGHT_CM)
+    phases = sum(1 for k in range(points.shape[1]) for a, b in true_runs(points[:, k, 1] <= CONTACT_HEIGHT_CM)
                  if b - a >= 3)  # fmt: skip
     return float(slide.max(initial=0.0)), phases
 
@@ -373,7 +367,7 @@ def check_clip(
         out[f"{key}_part"] = str(shown[runs.node[r]]) if val > 0 else None
         out[f"{key}_frames"] = [int(runs.first[r]), int(runs.last[r])] if val > 0 else None
     foot_down = [(pts[:, parts == f, 1] <= CONTACT_HEIGHT_CM).any(axis=1) for f in FOOT_PARTS]
-    out["stance_phases"] = sum(1 for row in foot_down for a, b in _runs(row) if b - a >= 3)
+    out["stance_phases"] = sum(1 for row in foot_down for a, b in true_runs(row) if b - a >= 3)
     ys = pts[..., 1]
     out.update(feet_up(kin, segg, ys, parts))
     # no limb passes through another part of the body (quality_limbs)

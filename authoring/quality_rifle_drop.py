@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from authoring.body_parts import SegmentHulls
+from authoring.body_parts import SegmentHulls, true_runs
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, rifle_rest
 from server.motion.channelset import Channelset
 
@@ -33,17 +33,6 @@ GROUND_CM = 6.0
 UPRIGHT_ELEVATION_DEG = 30.0  # degrees: the rifle's long axis this far above the horizontal stands it up
 THROW_LIMIT_M = 1.0  # m: the limit (quality.THRESHOLDS): every death <= 0.64 but the thrown 1.47-2.01
 UPRIGHT_LIMIT_S = 0.2  # s: ... and <= 0.15 but kfire2dead's (0.42-0.9: it stood a second)
-
-
-def _longest_run(mask: np.ndarray) -> tuple[int, int]:
-    """``(first, length)`` of the longest run of True in ``mask`` (``(0, 0)`` if none)."""
-    padded = np.r_[False, mask, False].astype(np.int8)
-    edges = np.flatnonzero(np.diff(padded))
-    if not len(edges):
-        return 0, 0
-    starts, stops = edges[::2], edges[1::2]
-    k = int(np.argmax(stops - starts))
-    return int(starts[k]), int(stops[k] - starts[k])
 
 
 def standing(
@@ -79,7 +68,8 @@ def rifle_drop(
         return {}
     throw = float(np.linalg.norm(centre[-1, [0, 2]] - centre[release, [0, 2]])) / 100.0
     up = standing(rifle_points[release:], centre[release:], axis[release:], hulls, seg_globals[release:])
-    first, length = _longest_run(up)
+    first, stop = max(true_runs(up), key=lambda run: run[1] - run[0], default=(0, 0))
+    length = stop - first
     return {
         "rifle_throw_m": round(throw, 3),
         "rifle_throw_where": f"frames {release}-{cs.nframes - 1}",
