@@ -36,7 +36,7 @@ import numpy as np
 from authoring import ik
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
-from authoring.rifle_swap import _smooth_above
+from authoring.signal_shaping import smooth_above
 from authoring.slave_feet import _runs, part_points, plant_offsets
 from authoring.transitions import ClipFrames, track_solve
 from peabody.model import Figure
@@ -296,5 +296,5 @@ def pin_frames(
 
 
 def _smooth_below(share: np.ndarray, sigma: float) -> np.ndarray:
-    """``share`` smoothed over frames, never above it (the mirror of :func:`_smooth_above`)."""
-    return 1.0 - _smooth_above(1.0 - share, sigma)
+    """``share`` smoothed over frames, never above it (the mirror of :func:`smooth_above`)."""
+    return 1.0 - smooth_above(1.0 - share, sigma)

@@ -34,6 +34,7 @@ import numpy as np
 from authoring import ik
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, SPINE, leg
+from authoring.signal_shaping import smoothstep
 from authoring.transitions import CARRIER, ClipFrames, lift_off_ground
 from peabody import values as V
 from peabody.fk import FigureKinematics, rigid_inverse
@@ -80,11 +81,6 @@ def crawl_arcs() -> list[tuple[str, str, str, bool]]:
         ("CRAWLING", "CRAWLING", "crawl_cycle", True),
         ("CRAWLING", "CRAWL", "crawl_start", False),
     ]
-
-
-def _smooth(s: np.ndarray) -> np.ndarray:
-    s = np.clip(s, 0.0, 1.0)
-    return s * s * (3.0 - 2.0 * s)
 
 
 def _speed() -> float:
@@ -143,13 +139,13 @@ def swings(side: str, t_end: float) -> list[tuple[float, float]]:
 def _progress(s: np.ndarray) -> np.ndarray:
     """How far along its path a moving contact is (0..1) at ``s`` (0..1) of its move: it rises first and
     travels while clear of the ground."""
-    return _smooth((s - 0.12) / 0.76)
+    return smoothstep((s - 0.12) / 0.76)
 
 
 def _rise(s: np.ndarray) -> np.ndarray:
     """Height (fraction of the lift) of a moving contact at ``s`` of its move: up, across, down."""
     inside = (s > 0.0) & (s < 1.0)
-    return np.where(inside, np.minimum(_smooth(s / 0.3), _smooth((1.0 - s) / 0.3)), 0.0)
+    return np.where(inside, np.minimum(smoothstep(s / 0.3), smoothstep((1.0 - s) / 0.3)), 0.0)
 
 
 def contact_track(
@@ -256,7 +252,7 @@ def solve_arms(
         cyc = _track(kin, body, goals, roots, cycle, cyc[-1])
     fwd = _track(kin, body, goals, roots, np.arange(n_start + 1), body[0])
     bwd = _track(kin, body, goals, roots, np.arange(n_start, -1, -1), cyc[0])[::-1]
-    w = _smooth(np.linspace(0.0, 1.0, n_start + 1))[:, None]
+    w = smoothstep(np.linspace(0.0, 1.0, n_start + 1))[:, None]
     blend = fwd + w * (bwd - fwd)
     rows = slice(0, n_start + 1)  # and the blend's hands put back on the rifle, in a few very small steps
     blend, _ = ik.solve(
@@ -319,7 +315,7 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
     tc = t - START  # cycle time (negative during the start)
     q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
     z = body_travel(t)
-    w = _smooth(t / START)  # how far into the cyclic state
+    w = smoothstep(t / START)  # how far into the cyclic state
     g0 = kin.site_globals(q0, root0)
     roots = np.broadcast_to(root0, (n, 4, 4)).copy()
     roots[:, 2, 3] += z

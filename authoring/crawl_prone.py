@@ -26,9 +26,10 @@ from typing import TypedDict
 import numpy as np
 
 from authoring import easing, ik
-from authoring.crawl import _progress, _rise, _smooth
+from authoring.crawl import _progress, _rise
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, arm, leg, palm_targets
+from authoring.signal_shaping import smoothstep
 from authoring.transitions import (
     ClipFrames,
     carrier_globals,
@@ -86,7 +87,7 @@ ARM_TRACKING: _Tracking = {"iterations": 10, "max_dof_step": 0.02}
 
 
 def _ramp(t: np.ndarray, a: float, b: float) -> np.ndarray:
-    return _smooth((t - a) / (b - a))
+    return smoothstep((t - a) / (b - a))
 
 
 def move_track(

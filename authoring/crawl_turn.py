@@ -46,11 +46,11 @@ from authoring.crawl import (
     _hand_goals,
     _progress,
     _rise,
-    _smooth,
     solve_body,
 )
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, arm
+from authoring.signal_shaping import smoothstep
 from authoring.transitions import CARRIER, ClipFrames, lift_off_ground, track_solve
 from authoring.turns import _about
 from peabody.fk import FigureKinematics
@@ -311,7 +311,7 @@ def record_crawl_turn(
     if advance:  # all limbs down, the body still: the arms settle into CRAWL's own solution (carried
         # forward, the left clavicle came to rest 1 cm off it and leapt there in the last frames, 0.33 m/s;
         # turned on the spot they end on it)
-        settle = _smooth((t - t_land) / SETTLE)[:, None]
+        settle = smoothstep((t - t_land) / SETTLE)[:, None]
         poses = (1.0 - settle) * poses + settle * q0
     end = _carried(pivot, np.array([yaw]), b_on[-1:])[0]
     end_offset = (float(end[0, 3]), float(end[2, 3]), yaw)

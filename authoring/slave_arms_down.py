@@ -22,7 +22,8 @@ from authoring import ik
 from authoring.death_specs import spec_of
 from authoring.quality_frames import FigureSet
 from authoring.quality_rest import TORSO_PARTS, rest_frame
-from authoring.slave_contacts import _played, _smooth
+from authoring.signal_shaping import hann_smooth
+from authoring.slave_contacts import SMOOTH_FRAMES, _played
 from authoring.slave_ground import PART_SITES, _chain, _heights
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -118,7 +119,7 @@ def keep_slave_arms_down(master: Channelset, slave: Channelset, figures: FigureS
             kin, pose[rows], goals, loc[rows], iterations=40,
             damping=2.0, rest_pose=pose[rows], rest_gain=0.05, tolerance=0.05, max_dof_step=0.05,
         )  # fmt: skip
-    pose = q + _smooth(pose - q)
+    pose = q + hann_smooth(pose - q, SMOOTH_FRAMES)
     bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
     slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
     left = _rises(kin.site_globals(pose, loc)[:, cols][..., 1, 3], start)

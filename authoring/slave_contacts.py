@@ -30,7 +30,7 @@ from authoring import ik
 from authoring.death_specs import spec_of
 from authoring.postures import leg, segment_heights
 from authoring.quality_frames import FigureSet, play
-from authoring.rifle_swap import _smooth_above
+from authoring.signal_shaping import hann_smooth, smooth_above
 from authoring.slave_rifle import held_rifle, rifle_slide, slide_rifle
 from peabody import quaternion
 from server.motion.binding import bind_channelset
@@ -222,7 +222,7 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
         s_h = part_heights(pose, loc, figures, stype, "forearm")
         short = np.max([w * np.maximum(0.0, np.maximum(m_h[s], 0.0) - s_h[s]) for s, w in crawling.items()],
                        axis=0)  # fmt: skip
-        lift = _smooth_above(short, RIFLE_LIFT_SIGMA_FRAMES)
+        lift = smooth_above(short, RIFLE_LIFT_SIGMA_FRAMES)
         for chan in slave.figure_channels():
             if chan.protofiletype != stype:
                 slave.fig_pos[:, chan.column, 1] += lift.astype(slave.fig_pos.dtype)
@@ -243,7 +243,7 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     # frames solved alone land a few degrees apart where the neck is at its limit: smooth the change over
     # the clip (its ends kept), then put the palms and the eye back exactly (a small, smooth correction)
     change = pose - q
-    smooth = _smooth(change)
+    smooth = hann_smooth(change, SMOOTH_FRAMES)
     for end in (0, -1):  # the ends as solved (so clips meeting at a posture agree), the smoothing faded in
         pin_end(smooth, end, change[end], SMOOTH_FRAMES * 2)
     pose = q + smooth
@@ -299,7 +299,7 @@ def _settle_rifle(
         return False
     slide = rifle_slide(figures, stype, pose, loc, rifle[1:], weight)
     room = np.maximum(0.0, rifle[2][..., 1].min(axis=1) - RIFLE_ABOVE_GROUND_CM)
-    slide[:, 1] -= np.minimum(_smooth_above(weight * np.maximum(0.0, high), RIFLE_LIFT_SIGMA_FRAMES), room)
+    slide[:, 1] -= np.minimum(smooth_above(weight * np.maximum(0.0, high), RIFLE_LIFT_SIGMA_FRAMES), room)
     if np.abs(slide).max() < 0.01:
         return False
     slide_rifle(slave, rifle[0], slide)
@@ -366,16 +366,6 @@ def _fade(height: np.ndarray) -> np.ndarray:
 
 
 SMOOTH_FRAMES = 6  # half-width of the window smoothing the forearm solve's change over a clip (0.1 s)
-
-
-def _smooth(offset: np.ndarray) -> np.ndarray:
-    """``offset`` ``(n, ndof)`` smoothed along the frames (a Hann window, the ends held)."""
-    k = np.hanning(2 * SMOOTH_FRAMES + 3)[1:-1]
-    k /= k.sum()
-    pad = np.concatenate(
-        [np.repeat(offset[:1], SMOOTH_FRAMES, 0), offset, np.repeat(offset[-1:], SMOOTH_FRAMES, 0)]
-    )
-    return np.stack([np.convolve(pad[:, j], k, mode="valid") for j in range(offset.shape[1])], axis=1)
 
 
 def pin_end(data: np.ndarray, frame: int, value: np.ndarray, frames: int) -> None:

@@ -49,7 +49,7 @@ from authoring.death_specs import spec_of
 from authoring.postures import leg
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
-from authoring.rifle_swap import _smooth_above
+from authoring.signal_shaping import smooth_above
 from authoring.slave_contacts import SIDES, _played
 from authoring.transitions import track_solve
 from peabody import quaternion
@@ -170,7 +170,7 @@ def lift_to_master(slave_low: np.ndarray, master_low: np.ndarray) -> np.ndarray:
     is not below the master's (``master_low``) while that is near the ground but not on it."""
     off = (master_low > CONTACT_HEIGHT_CM) & (master_low < NEAR_CM)
     need = np.where(off, np.maximum(0.0, np.minimum(master_low, NEAR_CM) - slave_low), 0.0)
-    return _smooth_above(need, LIFT_SIGMA_FRAMES) if need.any() else need
+    return smooth_above(need, LIFT_SIGMA_FRAMES) if need.any() else need
 
 
 def _stance_weight(stance: np.ndarray) -> np.ndarray:
@@ -278,7 +278,7 @@ def _leg_goal(
             move *= (np.maximum(u, _last_rest(stance)) if death else u)[:, None]
     else:
         # a knee coming down fast let the toes go in 3 frames (40 degrees in one): eased over more
-        u = 1.0 - _smooth_above(1.0 - u, KNEE_SIGMA_FRAMES)
+        u = 1.0 - smooth_above(1.0 - u, KNEE_SIGMA_FRAMES)
         w = _stance_weight(stance) * u
         segs = kin.segment_globals(pose, loc)
         foot, toes = (segs[:, kin.segment_names.index(f"{side}_{seg}")] for seg in ("foot", "toes"))

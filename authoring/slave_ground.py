@@ -24,7 +24,8 @@ from authoring import ik
 from authoring.death_specs import spec_of
 from authoring.quality_frames import FigureSet, play
 from authoring.quality_rest import down_from
-from authoring.slave_contacts import _fade, _played, _smooth, part_heights
+from authoring.signal_shaping import hann_smooth
+from authoring.slave_contacts import SMOOTH_FRAMES, _fade, _played, part_heights
 from peabody import quaternion
 from peabody.fk import FigureKinematics
 from server.motion.binding import bind_channelset
@@ -171,7 +172,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
         if report.root_location is not None:
             loc[sub] = report.root_location
     # frames solved alone can land on different branches of a redundant arm: smooth the change over the clip
-    pose = q + _smooth(pose - q) * frames[:, None]
+    pose = q + hann_smooth(pose - q, SMOOTH_FRAMES) * frames[:, None]
     loc = _smooth_moves(q_loc, loc, frames)
     _write(slave, figures, stype, pose, loc @ np.linalg.inv(q_loc))
     left = needs(pose, loc)
@@ -259,7 +260,7 @@ def _smooth_moves(before: np.ndarray, after: np.ndarray, frames: np.ndarray) -> 
     quat = quaternion.from_matrix(local[:, :3, :3])  # (w, x, y, z), w >= 0: small turns, no sign flips
     parts = np.concatenate([local[:, :3, 3], quat], axis=1)
     ident = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
-    parts = ident + _smooth(parts - ident) * frames[:, None]
+    parts = ident + hann_smooth(parts - ident, SMOOTH_FRAMES) * frames[:, None]
     moved = quaternion.to_transform(
         parts[:, :3], parts[:, 3:] / np.linalg.norm(parts[:, 3:], axis=1)[:, None]
     )
@@ -429,7 +430,7 @@ def clear_rifle(slave: Channelset, figures: FigureSet) -> np.ndarray:
 def _smooth_push(push: np.ndarray) -> np.ndarray:
     """Each component of ``push`` ``(n, 3)`` smoothed over the clip, never shorter than where it points (a
     running maximum of its positive and of its negative part, then Gaussian). Unlike the held rifle's pitch
-    (:func:`authoring.rifle_swap._smooth_above`) the ends are not pinned to the frame's own need: a dropped
+    (:func:`authoring.signal_shaping.smooth_above`) the ends are not pinned to the frame's own need: a dropped
     rifle's last frame belongs to no other clip, and pinned it moved at 1.5 m/s over the last frames."""
     half = int(np.ceil(3.0 * RIFLE_SIGMA_FRAMES))
     k = np.arange(-half, half + 1, dtype=np.float64)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from authoring.signal_shaping import gaussian
 from peabody.fk import FigureKinematics
 from peabody.rotations import axis_angle
 
@@ -51,17 +52,6 @@ def _window(leaps: np.ndarray, n: int) -> np.ndarray:
     return u * u * (3.0 - 2.0 * u) * ends
 
 
-def _gaussian(values: np.ndarray, sigma: float) -> np.ndarray:
-    """``values`` ``(n, k)`` smoothed along the frames by a Gaussian of ``sigma`` frames (ends held; also the
-    slaving's smoothing of a clip, :mod:`authoring.slaving`)."""
-    half = int(np.ceil(3.0 * sigma))
-    k = np.arange(-half, half + 1, dtype=np.float64)
-    kernel = np.exp(-0.5 * (k / sigma) ** 2)
-    kernel /= kernel.sum()
-    padded = np.concatenate([np.repeat(values[:1], half, 0), values, np.repeat(values[-1:], half, 0)])
-    return np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(values.shape[1])], 1)
-
-
 def leap_frames(poses: np.ndarray, copied: np.ndarray, dofs: np.ndarray) -> np.ndarray:
     """Per frame ``(n,)`` whether one of ``dofs`` (indices) moves into it by more than ``LEAP_DEG`` and by
     ``MASTER_MARGIN_DEG`` more than the master's copied angle ``copied`` does."""
@@ -88,5 +78,5 @@ def ease_leaps(
         if not leaps.any():
             continue
         w = _window(leaps, n)[:, None]
-        out[:, dofs] += w * (_gaussian(out[:, dofs], SIGMA_FRAMES) - out[:, dofs])
+        out[:, dofs] += w * (gaussian(out[:, dofs], SIGMA_FRAMES) - out[:, dofs])
     return kin.clamp(out)

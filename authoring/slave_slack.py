@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from authoring.quality_frames import FigureSet
-from authoring.rifle_swap import _smooth_above
+from authoring.signal_shaping import smooth_above
 from authoring.slave_contacts import SIDES, _played
 from authoring.slave_feet import part_points
 from server.motion.binding import bind_channelset
@@ -84,7 +84,7 @@ def _knee_out_of_ground(pose: np.ndarray, loc: np.ndarray, figures: FigureSet, s
     ok = low >= 0.0
     need = np.where(ok.any(axis=0), KNEE_STEPS_DEG[ok.argmax(axis=0)], KNEE_STEPS_DEG[-1])
     if need.any():
-        bend = np.radians(_smooth_above(need, KNEE_SIGMA_FRAMES))
+        bend = np.radians(smooth_above(need, KNEE_SIGMA_FRAMES))
         pose[:, knee] = np.minimum(pose[:, knee] + bend, kin.upper[knee])
 
 

@@ -17,8 +17,9 @@ import numpy as np
 
 from authoring.quality import one_frame_flicks
 from authoring.quality_frames import FigureSet
+from authoring.signal_shaping import gaussian
 from authoring.slave_contacts import _played
-from authoring.slave_leaps import _gaussian, _window
+from authoring.slave_leaps import _window
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
@@ -45,7 +46,7 @@ def eased(slave: np.ndarray, master: np.ndarray) -> tuple[np.ndarray, np.ndarray
     if not at.any():
         return slave, np.zeros(len(slave))
     w = _window(at | np.roll(at, 1), len(slave))  # (a flick at t is the turn from frame t to t+1)
-    return slave + w[:, None] * (_gaussian(slave, SIGMA_FRAMES) - slave), w
+    return slave + w[:, None] * (gaussian(slave, SIGMA_FRAMES) - slave), w
 
 
 def ease_slave_wrists(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:

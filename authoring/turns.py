@@ -46,12 +46,12 @@ from authoring.gait import (
     BaseStance,
     Footfall,
     _frame,
-    _keyed,
     carried_rifle_goals,
     foot_track,
 )
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER
+from authoring.signal_shaping import keyed
 from authoring.transitions import ClipFrames, carrier_globals, carry_of
 from peabody import values as V
 from peabody.fk import FigureKinematics
@@ -267,23 +267,23 @@ def record_plan(
     q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
     turn = body_turn(plan, t)
     body = _about(plan.pivot, turn)
-    body[:, 0, 3] += _keyed(plan.x_keys, t)
-    body[:, 1, 3] += _keyed(plan.rise_keys, t)
+    body[:, 0, 3] += keyed(plan.x_keys, t)
+    body[:, 1, 3] += keyed(plan.rise_keys, t)
     rest = np.broadcast_to(q0, (n, kin.ndof)).copy()
     heels: dict[str, np.ndarray] = {}
     pelvis = (body @ np.array([root0[0, 3], 0.0, root0[2, 3], 1.0]))[:, [0, 2]]
     lean = np.zeros((n, 2))
     for s in SIDES:
         local, toes = foot_track(base.ball[s], plan.falls[s], t, STEP_LIFT)
-        carried = _about(plan.pivot, _keyed(plan.foot_turn.get(s, [(0.0, 0.0)]), t))
-        carried[:, 0, 3] += _keyed(plan.foot_shift.get(s, [(0.0, 0.0)]), t)
+        carried = _about(plan.pivot, keyed(plan.foot_turn.get(s, [(0.0, 0.0)]), t))
+        carried[:, 0, 3] += keyed(plan.foot_shift.get(s, [(0.0, 0.0)]), t)
         heels[s] = carried @ local
         rest[:, kin.dof_slices[f"{s}_toes"]] = toes[:, None]
         if s in plan.lean_keys:  # towards the middle of the foot (where it is when it carries weight)
             mx, mz = 0.5 * (np.array(base.heel[s]) + base.ball_at(s))
             mid = np.array([mx, 0.0, mz, 1.0])
             foot = (carried @ mid)[:, [0, 2]]
-            lean += _keyed(plan.lean_keys[s], t)[:, None] * (foot - pelvis)
+            lean += keyed(plan.lean_keys[s], t)[:, None] * (foot - pelvis)
     body[:, 0, 3] += lean[:, 0]
     body[:, 2, 3] += lean[:, 1]
     roots = body @ root0
