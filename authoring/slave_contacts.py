@@ -29,8 +29,9 @@ from scipy.spatial.transform import Rotation
 from authoring import ik
 from authoring.death_specs import spec_of
 from authoring.postures import leg, segment_heights
-from authoring.quality_frames import FigureSet, play
+from authoring.quality_frames import FigureSet
 from authoring.signal_shaping import hann_smooth, smooth_above
+from authoring.slave_body import part_heights, played_body
 from authoring.slave_rifle import held_rifle, rifle_slide, slide_rifle
 from peabody import quaternion
 from server.motion.binding import bind_channelset
@@ -43,39 +44,10 @@ SIDES = ("left", "right")
 LEG_SEGMENTS = ("upper_leg", "lower_leg", "foot", "toes")
 
 
-def part_heights(
-    poses: np.ndarray,
-    locations: np.ndarray,
-    figures: FigureSet,
-    ptype: str,
-    part: str = "kneecap",
-    sides: tuple[str, ...] = SIDES,
-) -> dict[str, np.ndarray]:
-    """Per side, the height (cm) of the lowest node of ``{side}_{part}`` (as the quality check names body
-    parts: ``kneecap``, ``foot``; ``sides=("",)``: a part with no side, ``belly``) in every frame ``(n,)``."""
-    kin = figures.kin[ptype]
-    nodes, segs = figures.nodes(ptype)
-    parts = figures.node_parts(ptype)
-    out = {}
-    g = kin.segment_globals(poses, locations)[..., 1, :]  # (n, nseg, 4): the rows giving world y
-    for side in sides:
-        sel = parts == (f"{side}_{part}" if side else part)
-        if sel.any():
-            out[side] = np.einsum("fkj,kj->fk", g[:, segs[sel]], nodes[sel]).min(axis=1)
-    return out
-
-
-def _played(cs: Channelset, figures: FigureSet) -> tuple[np.ndarray, np.ndarray, str]:
-    """A clip's body figure played: poses, root globals and its file type (the figure with most DOFs)."""
-    f = play(cs, figures)
-    ptype = max(f.poses, key=lambda k: figures.kin[k].ndof)
-    return f.poses[ptype], f.locations[ptype], ptype
-
-
 def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
     """Lower the slave onto its kneeling knees where the master rests on them (``slave``'s figure and joint
     channels, in place); returns the lowering per frame (cm)."""
-    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    (mq, mloc, mtype), (q, loc, stype) = played_body(master, figures), played_body(slave, figures)
     kin = figures.kin[stype]
     m_h = part_heights(mq, mloc, figures, mtype)
     s_h = part_heights(q, loc, figures, stype)
@@ -152,7 +124,7 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     palms on it rise by what is missing (smoothed, at least that much), and the arms are solved again.
     ``slave``'s joint channels (and, crawling, its rifle's channel) change in place. Returns the worst
     remaining lift per frame (cm)."""
-    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    (mq, mloc, mtype), (q, loc, stype) = played_body(master, figures), played_body(slave, figures)
     kin = figures.kin[stype]
     m_h = part_heights(mq, mloc, figures, mtype, "forearm")
     # lying on the belly (or chest), or on forearms and knees
@@ -390,7 +362,7 @@ def tilt_onto_knees(master: Channelset, slave: Channelset, figures: FigureSet) -
     axis through the ground below the elbows, by the angle that brings the kneecaps down to the master's,
     or less where anything else (the toes) would reach the ground first; the forearms stay where they lie.
     ``slave``'s figure channels change in place. Returns the tilt per frame (rad)."""
-    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    (mq, mloc, mtype), (q, loc, stype) = played_body(master, figures), played_body(slave, figures)
     kin = figures.kin[stype]
     m_h = part_heights(mq, mloc, figures, mtype)
     s_h = part_heights(q, loc, figures, stype)

@@ -50,7 +50,8 @@ from authoring.postures import leg
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
 from authoring.signal_shaping import smooth_above
-from authoring.slave_contacts import SIDES, _played
+from authoring.slave_body import played_body
+from authoring.slave_contacts import SIDES
 from authoring.transitions import track_solve
 from peabody import quaternion
 from peabody.fk import FigureKinematics
@@ -465,10 +466,10 @@ def _smoothed_lower_legs(kin: FigureKinematics, before: np.ndarray, after: np.nd
 def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
     """Hold the slave's feet planted where the master's are on the ground, and off it where his are not
     (``slave``'s joint channels, in place); returns the largest move of a foot in each frame (cm)."""
-    q, loc, stype = _played(slave, figures)
+    q, loc, stype = played_body(slave, figures)
     if getattr(slave, "ground_speed", None) is not None:  # locomotion: recorded in place
         return np.zeros(len(q))
-    mq, mloc, mtype = _played(master, figures)
+    mq, mloc, mtype = played_body(master, figures)
     master_feet = {side: part_points(mq, mloc, figures, mtype, (f"{side}_foot",)) for side in SIDES}
     turns: dict[str, tuple[np.ndarray, np.ndarray] | None] = dict.fromkeys(SIDES)
     knelt = any(_knee_free(q[:1], loc[:1], figures, stype, side)[0] < 1.0 for side in SIDES)

@@ -25,10 +25,10 @@ from authoring.death_specs import spec_of
 from authoring.quality_frames import FigureSet, play
 from authoring.quality_rest import down_from
 from authoring.signal_shaping import hann_smooth
-from authoring.slave_contacts import SMOOTH_FRAMES, _fade, _played, part_heights
+from authoring.slave_body import heights_of, joint_chain, played_body, write_pose
+from authoring.slave_contacts import SMOOTH_FRAMES, _fade
 from peabody import quaternion
 from peabody.fk import FigureKinematics
-from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
 SIDES = ("left", "right")
@@ -71,38 +71,6 @@ DOWN_CM = 3.0
 DOWN_SETTLE_FRAMES = 30
 
 
-def _chain(site: str) -> tuple[str, ...]:
-    """The joints that move ``site``: the whole arm or leg from the clavicle or hip, the neck for the head."""
-    seg = site.split(".", 1)[0]
-    side = seg.split("_", 1)[0]
-    if seg.endswith(("arm", "palm")):
-        return tuple(f"{side}_{j}" for j in ("clavicle", "shoulder", "elbow", "wrist"))
-    if seg.endswith(("leg", "foot", "toes")):
-        return tuple(f"{side}_{j}" for j in ("hip", "knee", "ankle", "toes"))
-    if seg == "lower_torso":
-        return ()  # the pelvis moves with the root alone
-    if seg.endswith("_torso"):
-        return ("waist", "belly", "upper_spine")[: 1 if seg == "middle_torso" else 3]
-    return ("neck", "head")
-
-
-def _heights(
-    poses: np.ndarray, locs: np.ndarray, figures: FigureSet, ptype: str, parts: tuple[str, ...]
-) -> dict[str, np.ndarray]:
-    """Per part of ``parts``, its lowest node's height (cm) in every frame."""
-    out: dict[str, np.ndarray] = {}
-    for part in parts:
-        side, _, rest = part.partition("_")
-        found = (
-            part_heights(poses, locs, figures, ptype, rest, (side,))
-            if side in SIDES
-            else part_heights(poses, locs, figures, ptype, part, ("",))
-        )
-        for h in found.values():
-            out[part] = h
-    return out
-
-
 def _need(master: np.ndarray, slave: np.ndarray) -> np.ndarray:
     """How far (cm, up positive) a slave part should move: to the master's height where his part lies on
     the ground, fading to just out of the ground (``MARGIN_CM``) where it is up in the air, and at least
@@ -124,13 +92,13 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     """Lay the slave's limbs, head and trunk where the master's are after the release (``slave``'s joint and
     body channels, in place); returns the largest remaining distance from the wanted height per frame (cm)."""
     release = getattr(slave, "release_frame", None)
-    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    (mq, mloc, mtype), (q, loc, stype) = played_body(master, figures), played_body(slave, figures)
     n = len(q)
     if release is None or release >= n - 1:
         return np.zeros(n)
     kin = figures.kin[stype]
     parts = tuple(PART_SITES)
-    m_h = _heights(mq, mloc, figures, mtype, parts)
+    m_h = heights_of(mq, mloc, figures, mtype, parts)
     w = _fade_in(n, release)
     q_loc, loc = loc, loc.copy()
     pose = q.copy()
@@ -138,7 +106,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     sub = np.flatnonzero(frames)
 
     def needs(pose: np.ndarray, loc: np.ndarray) -> dict[str, np.ndarray]:
-        s_h = _heights(pose, loc, figures, stype, parts)
+        s_h = heights_of(pose, loc, figures, stype, parts)
         return {p: w * _need(m_h[p], s_h[p]) for p in parts if p in s_h and p in m_h}
 
     limbs = tuple(p for p in parts if p not in TRUNK)
@@ -156,7 +124,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     stages = [(TRUNK, ROOT_DOFS, True), (limbs, (), True)] * LIMB_PASSES + [(limbs, (), False)]
     for k, (group, root_dofs, planting) in enumerate(stages):
         if k % 2 == 0 and k < len(stages) - 1:
-            loc[:, 1, 3] += settle * _trunk_drop(m_h, _heights(pose, loc, figures, stype, TRUNK + HIPS))
+            loc[:, 1, 3] += settle * _trunk_drop(m_h, heights_of(pose, loc, figures, stype, TRUNK + HIPS))
         plants = planted if planting else {}
         if arm_out and planting and group is limbs:  # a part landing as the trunk settles: from the solve
             plants = _plants(unsolved, m_at, m_h, release, (_positions(kin, pose, loc), settle > 0))
@@ -174,7 +142,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     # frames solved alone can land on different branches of a redundant arm: smooth the change over the clip
     pose = q + hann_smooth(pose - q, SMOOTH_FRAMES) * frames[:, None]
     loc = _smooth_moves(q_loc, loc, frames)
-    _write(slave, figures, stype, pose, loc @ np.linalg.inv(q_loc))
+    write_pose(slave, figures, stype, pose, loc @ np.linalg.inv(q_loc))
     left = needs(pose, loc)
     return np.max(np.abs(np.stack(list(left.values()))), axis=0)
 
@@ -349,7 +317,7 @@ def _goals(
         at[keep, 0], at[keep, 2] = hold[keep, 0], hold[keep, 2]
         if arm_out and site.split("_", 1)[-1].startswith(("upper_arm", "lower_arm")):
             at += _sideways(at, sites[:, kin.site_names.index(CHEST), :3, 3], move)
-        chain = () if rigid and site.split(".")[0].endswith("_torso") else _chain(site)
+        chain = () if rigid and site.split(".")[0].endswith("_torso") else joint_chain(site)
         goals.append(ik.Goal(site, at, None, 1.0, 1, chain))
     return goals
 
@@ -363,17 +331,6 @@ def _sideways(at: np.ndarray, chest: np.ndarray, up: np.ndarray) -> np.ndarray:
     out[:, 1] = 0.0
     out /= np.maximum(np.linalg.norm(out, axis=1), 1e-9)[:, None]
     return out * np.maximum(up, 0.0)[:, None]
-
-
-def _write(slave: Channelset, figures: FigureSet, stype: str, pose: np.ndarray, moved: np.ndarray) -> None:
-    """``pose`` into ``slave``'s joint channels; its body's figure channel moved by ``moved`` ``(n, 4, 4)``
-    (world)."""
-    bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
-    slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
-    chan = next(c for c in slave.figure_channels() if c.column == bf.figure_channel)
-    placed = moved @ slave.transforms(chan)
-    slave.fig_pos[:, chan.column] = placed[:, :3, 3].astype(slave.fig_pos.dtype)
-    slave.fig_quat[:, chan.column] = quaternion.from_matrix(placed[:, :3, :3]).astype(slave.fig_quat.dtype)
 
 
 RIFLE_MARGIN_CM = 0.3  # a dropped rifle is put this far clear of the body's hulls and the ground

@@ -20,7 +20,8 @@ import numpy as np
 
 from authoring.quality_frames import FigureSet
 from authoring.signal_shaping import smooth_above
-from authoring.slave_contacts import SIDES, _played
+from authoring.slave_body import played_body
+from authoring.slave_contacts import SIDES
 from authoring.slave_feet import part_points
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -91,8 +92,8 @@ def _knee_out_of_ground(pose: np.ndarray, loc: np.ndarray, figures: FigureSet, s
 def slack_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
     """The slave's ankles and toes follow the master's as his feet go slack (``slave``'s joint channels, in
     place, :func:`follow_slack`); returns the largest change of a foot angle per frame (degrees)."""
-    mq, _, mtype = _played(master, figures)
-    q, loc, stype = _played(slave, figures)
+    mq, _, mtype = played_body(master, figures)
+    q, loc, stype = played_body(slave, figures)
     mkin, kin = figures.kin[mtype], figures.kin[stype]
     names = [f"{side}_{j}" for side in SIDES for j in JOINTS]
     src = np.concatenate([np.arange(mkin.ndof)[mkin.dof_slices[j]] for j in names])

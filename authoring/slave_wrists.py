@@ -18,7 +18,7 @@ import numpy as np
 from authoring.quality import one_frame_flicks
 from authoring.quality_frames import FigureSet
 from authoring.signal_shaping import gaussian
-from authoring.slave_contacts import _played
+from authoring.slave_body import played_body
 from authoring.slave_leaps import _window
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -52,8 +52,8 @@ def eased(slave: np.ndarray, master: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def ease_slave_wrists(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
     """Smooth ``slave``'s wrists around the frames where they flick and ``master``'s do not (in place);
     returns per frame ``(n,)`` whether it was eased."""
-    q, _, stype = _played(slave, figures)
-    mq, _, mtype = _played(master, figures)
+    q, _, stype = played_body(slave, figures)
+    mq, _, mtype = played_body(master, figures)
     skin, mkin = figures.kin[stype], figures.kin[mtype]
     touched = np.zeros(len(q), dtype=bool)
     for wrist in WRISTS:
