@@ -136,13 +136,13 @@ def swings(side: str, t_end: float) -> list[tuple[float, float]]:
     return out
 
 
-def _progress(s: np.ndarray) -> np.ndarray:
+def contact_progress(s: np.ndarray) -> np.ndarray:
     """How far along its path a moving contact is (0..1) at ``s`` (0..1) of its move: it rises first and
     travels while clear of the ground."""
     return smoothstep((s - 0.12) / 0.76)
 
 
-def _rise(s: np.ndarray) -> np.ndarray:
+def contact_rise(s: np.ndarray) -> np.ndarray:
     """Height (fraction of the lift) of a moving contact at ``s`` of its move: up, across, down."""
     inside = (s > 0.0) & (s < 1.0)
     return np.where(inside, np.minimum(smoothstep(s / 0.3), smoothstep((1.0 - s) / 0.3)), 0.0)
@@ -157,8 +157,8 @@ def contact_track(
     for t0, dist in moves:
         late = delay if t0 < delay else 0.0
         s = (t - t0 - late) / (SWING - late)
-        track[:, 2] -= dist * _progress(s)
-        track[:, 1] += lift * _rise(s)
+        track[:, 2] -= dist * contact_progress(s)
+        track[:, 1] += lift * contact_rise(s)
     return track
 
 
@@ -198,7 +198,7 @@ def carried_rifle(
     return out
 
 
-def _hand_goals(
+def rifle_hand_goals(
     kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture, rifles: np.ndarray
 ) -> list[ik.Goal]:
     """Palm centres on the rifle (first priority) and turned to hold it, each exactly as in the posture."""
@@ -348,7 +348,7 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
         arm_goals.append(ik.Goal(site, elbows[side], None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
     chest_now = kin.segment_globals(poses, roots)[:, kin.segment_names.index(CARRIER)]
     rifles = carried_rifle(rifle0, chest0, chest_now, elbows)
-    arm_goals = _hand_goals(kin, rkin, key, rifles) + arm_goals  # the palms on the rifle come first
+    arm_goals = rifle_hand_goals(kin, rkin, key, rifles) + arm_goals  # the palms on the rifle come first
     poses = solve_arms(kin, poses, arm_goals, roots, n_start)
     poses[0], roots[0], rifles[0] = q0, root0, rifle0
     lift_off_ground(kin, poses, roots, rifles)

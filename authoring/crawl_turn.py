@@ -43,9 +43,9 @@ from authoring.crawl import (
     ELBOW_SITE,
     LEG_SITES,
     LIFT,
-    _hand_goals,
-    _progress,
-    _rise,
+    contact_progress,
+    contact_rise,
+    rifle_hand_goals,
     solve_body,
 )
 from authoring.motion import KeyPosture
@@ -209,7 +209,7 @@ def part_yaw(
     """A part's yaw (degrees) about the pivot at ``t``, how far (share of its lift) it is raised, and
     ``(n, 2)`` how far (X, Z cm) it is carried: ``advance`` cm a move along the heading it turns to (or
     along the heading ``along`` degrees, every move). It rises first and moves while clear of the ground
-    (:func:`authoring.crawl._progress`)."""
+    (:func:`authoring.crawl.contact_progress`)."""
     yaw = np.zeros(len(t))
     up = np.zeros(len(t))
     carried = np.zeros((len(t), 2))
@@ -219,9 +219,9 @@ def part_yaw(
         share *= len(moves) / share.sum()
     for (t0, a, b), w in zip(moves, share.tolist(), strict=True):
         s = (t - t0) / duration
-        yaw += (b - a) * _progress(s)
-        up = np.maximum(up, _rise(s))
-        carried += w * advance * _progress(s)[:, None] * _ahead(b if along is None else along)
+        yaw += (b - a) * contact_progress(s)
+        up = np.maximum(up, contact_rise(s))
+        carried += w * advance * contact_progress(s)[:, None] * _ahead(b if along is None else along)
     return yaw, up, carried
 
 
@@ -302,7 +302,7 @@ def record_crawl_turn(
     # the arms on that body: the palms on the rifle the front carries round, then the elbows on their tracks
     rifles = front_moves @ rifle0
     rifles[:, 1, 3] += ELBOW_LIFT * f_up
-    arm_goals = _hand_goals(kin, rkin, key, rifles)
+    arm_goals = rifle_hand_goals(kin, rkin, key, rifles)
     for side in SIDES:
         site = ELBOW_SITE.format(s=side)
         track = limb_track(_site(kin, q0, root0, site), front_moves, f_up, ELBOW_LIFT)
