@@ -48,11 +48,11 @@ from authoring.crawl import (
     rifle_hand_goals,
     solve_body,
 )
+from authoring.ground_frames import turned_about
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, arm
 from authoring.signal_shaping import smoothstep
 from authoring.transitions import CARRIER, ClipFrames, lift_off_ground, track_solve
-from authoring.turns import _about
 from peabody.fk import FigureKinematics
 
 FPS = 60
@@ -227,12 +227,12 @@ def part_yaw(
 
 def _ahead(yaw: float) -> np.ndarray:
     """(X, Z) of the clip's forward (-Z) turned ``yaw`` degrees."""
-    return (_about((0.0, 0.0), np.array([yaw]))[0, :3, :3] @ [0.0, 0.0, -1.0])[[0, 2]]
+    return (turned_about((0.0, 0.0), np.array([yaw]))[0, :3, :3] @ [0.0, 0.0, -1.0])[[0, 2]]
 
 
 def _carried(pivot: tuple[float, float], yaw: np.ndarray, carried: np.ndarray) -> np.ndarray:
     """``(n, 4, 4)`` ground moves: turned ``yaw`` degrees about ``pivot``, then carried ``carried`` (X, Z)."""
-    m = _about(pivot, yaw)
+    m = turned_about(pivot, yaw)
     m[:, 0, 3] += carried[:, 0]
     m[:, 2, 3] += carried[:, 1]
     return m

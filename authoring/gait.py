@@ -46,9 +46,9 @@ from dataclasses import dataclass, field
 from typing import Any, TypedDict
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from authoring import ik
+from authoring.ground_frames import turned_frames
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, arm, leg, palm_targets, spine_angles
 from authoring.signal_shaping import keyed, smoothstep
@@ -196,19 +196,6 @@ class Footfall:
     drop: float = 0.0
 
 
-def _frame(pos: np.ndarray, yaw: ArrayLike, pitch: ArrayLike) -> np.ndarray:
-    """``(n, 4, 4)`` frames at ``pos`` turned ``Ry(yaw) Rx(pitch)`` (degrees)."""
-    a, b = np.asarray(yaw) * DEG, np.asarray(pitch) * DEG
-    ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
-    out = np.zeros((len(a), 4, 4))
-    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = ca, sa * sb, sa * cb
-    out[:, 1, 1], out[:, 1, 2] = cb, -sb
-    out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = -sa, ca * sb, ca * cb
-    out[:, :3, 3] = pos
-    out[:, 3, 3] = 1.0
-    return out
-
-
 def foot_track(
     ball: np.ndarray,
     falls: list[Footfall],
@@ -262,17 +249,17 @@ def foot_track(
         h = np.tile([f.heel[0], 0.0, f.heel[1]], (len(tt), 1))
         # a rocker about the ball keeps the ball where the flat foot (at its landing yaw) had it
         flat_ball = np.array([f.heel[0], 0.0, f.heel[1]]) + V.rot_y(f.yaw * DEG)[:3, :3] @ ball
-        fr = _frame(np.zeros((len(tt), 3)), y, p)
+        fr = turned_frames(np.zeros((len(tt), 3)), y, p)
         h = np.where(on_ball[:, None], flat_ball - fr[:, :3, :3] @ ball, h)
         swing = tt >= f.t_off
         if nxt is not None and swing.any():
             s = (tt[swing] - f.t_off) / max(nxt.t_on - f.t_off, 1e-9)
             u = smoothstep((s - f.rise) / (1.0 - f.rise - f.drop))
-            a = flat_ball - _frame(np.zeros((1, 3)), [yaw_off], [-f.toe_off_pitch])[0, :3, :3] @ ball
+            a = flat_ball - turned_frames(np.zeros((1, 3)), [yaw_off], [-f.toe_off_pitch])[0, :3, :3] @ ball
             b = np.array([nxt.heel[0], 0.0, nxt.heel[1]])
             if nxt.strike < 0:  # landing toes first: aim the heel so the ball touches down at its place
                 nb = b + V.rot_y(nxt.yaw * DEG)[:3, :3] @ ball
-                b = nb - _frame(np.zeros((1, 3)), [nxt.yaw], [nxt.strike])[0, :3, :3] @ ball
+                b = nb - turned_frames(np.zeros((1, 3)), [nxt.yaw], [nxt.strike])[0, :3, :3] @ ball
             hs = a + u[:, None] * (b - a)
             hs[:, 1] += (lift if f.lift is None else f.lift) * np.sin(np.pi * np.clip(s, 0.0, 1.0))
             h[swing] = hs
@@ -280,7 +267,7 @@ def foot_track(
             y[swing] = yaw_off + u * (nxt.yaw - yaw_off)
             on_ball[swing] = False
         heel[live], yaw[live], pitch[live], about_ball[live] = h, y, p, on_ball
-    frames = _frame(heel, yaw, pitch)
+    frames = turned_frames(heel, yaw, pitch)
     toes = np.where(about_ball & (pitch < 0), -pitch, 0.0)
     # after toe-off the toes straighten over the first part of the swing
     for k, f in enumerate(falls[:-1]):
@@ -686,7 +673,7 @@ def record_session(
     sway = -P["sway"] * side * np.sin(np.pi * ph)  # over the supporting foot (left is -x)
     turn = -P["turn"] * side * P["direction"] * np.cos(np.pi * ph)
     base_root = base_key.locations[SOLDIER]
-    gait_rot = _frame(np.zeros((n, 3)), turn, -P["lean"])
+    gait_rot = turned_frames(np.zeros((n, 3)), turn, -P["lean"])
     roots = np.stack([slerp_frames(gait_rot[i], base_root, np.array([beta[i]]))[0] for i in range(n)])
     roots[:, 0, 3] = x + (1.0 - beta) * sway
     roots[:, 1, 3] = beta * base_root[1, 3] + (1.0 - beta) * bob

@@ -45,10 +45,10 @@ from authoring.gait import (
     FPS,
     BaseStance,
     Footfall,
-    _frame,
     carried_rifle_goals,
     foot_track,
 )
+from authoring.ground_frames import turned_about
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER
 from authoring.signal_shaping import keyed
@@ -107,16 +107,8 @@ def ground_move(x: float, z: float, yaw: float) -> np.ndarray:
     return m
 
 
-def _about(pivot: tuple[float, float], yaw: np.ndarray) -> np.ndarray:
-    """``(n, 4, 4)`` turns by ``yaw`` degrees about the vertical through ground point ``pivot``."""
-    c = np.array([pivot[0], 0.0, pivot[1]])
-    r = _frame(np.zeros((len(yaw), 3)), yaw, np.zeros(len(yaw)))
-    r[:, :3, 3] = c - r[:, :3, :3] @ c
-    return r
-
-
 def _turn_move(pivot: tuple[float, float], yaw: float) -> tuple[float, float, float]:
-    m = _about(pivot, np.array([yaw]))[0]
+    m = turned_about(pivot, np.array([yaw]))[0]
     return float(m[0, 3]), float(m[2, 3]), float(yaw)
 
 
@@ -266,7 +258,7 @@ def record_plan(
     t = np.arange(n) / FPS
     q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
     turn = body_turn(plan, t)
-    body = _about(plan.pivot, turn)
+    body = turned_about(plan.pivot, turn)
     body[:, 0, 3] += keyed(plan.x_keys, t)
     body[:, 1, 3] += keyed(plan.rise_keys, t)
     rest = np.broadcast_to(q0, (n, kin.ndof)).copy()
@@ -275,7 +267,7 @@ def record_plan(
     lean = np.zeros((n, 2))
     for s in SIDES:
         local, toes = foot_track(base.ball[s], plan.falls[s], t, STEP_LIFT)
-        carried = _about(plan.pivot, keyed(plan.foot_turn.get(s, [(0.0, 0.0)]), t))
+        carried = turned_about(plan.pivot, keyed(plan.foot_turn.get(s, [(0.0, 0.0)]), t))
         carried[:, 0, 3] += keyed(plan.foot_shift.get(s, [(0.0, 0.0)]), t)
         heels[s] = carried @ local
         rest[:, kin.dof_slices[f"{s}_toes"]] = toes[:, None]
@@ -292,7 +284,7 @@ def record_plan(
     sight = kin.site_globals(q0, root0)[kin.site_names.index("bottom_head.sight"), :3, :3]
     goals = carried_rifle_goals(rkin, rifles, heels)
     ahead = np.clip(body_turn(plan, t + LOOK_AHEAD) - turn, -LOOK_MAX, LOOK_MAX)
-    look = _about(plan.pivot, turn + ahead)[:, :3, :3] @ sight
+    look = turned_about(plan.pivot, turn + ahead)[:, :3, :3] @ sight
     goals.append(ik.Goal("bottom_head.sight", None, look, 1.0, 1, ("neck", "head")))
     poses, report = ik.solve(kin, rest, goals, roots, iterations=60, rest_pose=rest, rest_gain=0.1)
     _REPORTS[plan.name] = report
