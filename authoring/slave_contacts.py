@@ -131,24 +131,25 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     trunk = [h for p in ("belly", "chest") for h in part_heights(mq, mloc, figures, mtype, p, ("",)).values()]
     if not trunk:
         return np.zeros(len(q))
-    prone = _fade(np.min(trunk, axis=0))
+    prone = ground_fade(np.min(trunk, axis=0))
     # on forearms and knees (the crawl), the forearms carry the body: the slave's as high as the master's
     knees = part_heights(mq, mloc, figures, mtype)
-    kneeling = _fade(np.min(list(knees.values()), axis=0)) if knees else np.zeros(len(q))
+    kneeling = ground_fade(np.min(list(knees.values()), axis=0)) if knees else np.zeros(len(q))
     held_rifle = _holding(slave)
     spec = spec_of(master.name)  # the held rifle's slide out of the body, past the release where asked
     slid = _holding(slave, spec.slave_rifle_slid_past if spec else 0)
     crawling = {
-        side: _fade(m_h[side]) * (1.0 - prone) * kneeling * held_rifle for side in SIDES if side in m_h
+        side: ground_fade(m_h[side]) * (1.0 - prone) * kneeling * held_rifle for side in SIDES if side in m_h
     }
-    weight = {side: _fade(m_h[side]) * prone + crawling[side] for side in SIDES if side in m_h}
+    weight = {side: ground_fade(m_h[side]) * prone + crawling[side] for side in SIDES if side in m_h}
     if not weight or not any(w.any() for w in weight.values()):
         return np.zeros(len(q))
     # put at the master's height, up or down: crawling, and prone where a forearm comes down for good in a
     # clip that ends lying with the rifle in his hands (crawl2prstow; not a death, which lets go of it)
     settles = bool(prone[-1] > 0.5 and held_rifle[-1] > 0.5)
     follow = {
-        side: crawling[side] + settles * _landing(m_h[side]) * _fade(m_h[side]) * prone for side in weight
+        side: crawling[side] + settles * _landing(m_h[side]) * ground_fade(m_h[side]) * prone
+        for side in weight
     }
     sites = kin.site_globals(q, loc)
     elbows = {side: sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3] for side in weight}
@@ -331,7 +332,7 @@ RIFLE_LIFT_SIGMA_FRAMES = 4.0  # the crawling rifle's lift is smoothed over the 
 PLANT_FADE_FRAMES = 6  # a planted site's held place eases in and out over this many frames (0.1 s)
 
 
-def _fade(height: np.ndarray) -> np.ndarray:
+def ground_fade(height: np.ndarray) -> np.ndarray:
     """1 for a master's part resting on the ground (``REST_CM``), easing to 0 at ``REACH_CM`` up."""
     w = np.clip((REACH_CM - height) / (REACH_CM - REST_CM), 0.0, 1.0)
     return w * w * (3.0 - 2.0 * w)
@@ -371,9 +372,11 @@ def tilt_onto_knees(master: Channelset, slave: Channelset, figures: FigureSet) -
     if not sides or not m_fore:
         return np.zeros(len(q))
     trunk = [h for p in ("belly", "chest") for h in part_heights(mq, mloc, figures, mtype, p, ("",)).values()]
-    off_trunk = 1.0 - _fade(np.min(trunk, axis=0)) if trunk else np.ones(len(q))
-    on_forearms = _fade(np.min(list(m_fore.values()), axis=0)) * off_trunk * _holding(slave)
-    extra = np.max([_fade(m_h[s]) * np.maximum(0.0, s_h[s] - np.maximum(m_h[s], 0.0)) for s in sides], axis=0)
+    off_trunk = 1.0 - ground_fade(np.min(trunk, axis=0)) if trunk else np.ones(len(q))
+    on_forearms = ground_fade(np.min(list(m_fore.values()), axis=0)) * off_trunk * _holding(slave)
+    extra = np.max(
+        [ground_fade(m_h[s]) * np.maximum(0.0, s_h[s] - np.maximum(m_h[s], 0.0)) for s in sides], axis=0
+    )
     extra *= on_forearms
     if not (extra > TILT_MIN_CM).any():
         return np.zeros(len(q))

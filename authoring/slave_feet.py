@@ -82,7 +82,7 @@ LYING_SIGMA_FRAMES = 2.0  # a lying leg's knee and ankle change from the hold sm
 FOOT_PASSES = 2  # the contact nodes change a little as the foot moves: measure and solve again
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+def merged_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """``(first, last)`` of every run of True in ``mask``, runs closer than ``MERGE_GAP_FRAMES`` merged."""
     edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
     runs: list[tuple[int, int]] = []
@@ -124,7 +124,7 @@ def plant_offsets(
     move = np.zeros((n, 3))
     move[1:] = -step  # the offset's change into frame i
     out = np.zeros((n, 3))
-    runs = _runs(stance)
+    runs = merged_runs(stance)
     for a, b in runs:
         track = np.cumsum(move[a : b + 1], axis=0) - move[a]  # none at touchdown
         if b == n - 1 or (at_lift_off and a > 0):
@@ -192,7 +192,7 @@ def _last_rest(stance: np.ndarray) -> np.ndarray:
     """Per frame 1 over the master's last stance if it lasts to the clip's end and starts after its first
     frame (the foot he dies lying on), easing in (smoothstep) from the end of the stance before it."""
     n = len(stance)
-    runs = _runs(stance)
+    runs = merged_runs(stance)
     out = np.zeros(n)
     if not runs or runs[-1][1] != n - 1 or runs[-1][0] == 0:
         return out
@@ -211,7 +211,7 @@ def _anchored(master: np.ndarray, slave: np.ndarray, stance: np.ndarray) -> np.n
     middle, a long stance's first frames took a short one's turn before it: stfire2dead's DI toes jumped 32
     degrees in a frame.)"""
     m, sl = master[:, :3, :3], slave[:, :3, :3]
-    runs = _runs(stance)
+    runs = merged_runs(stance)
     if not runs:
         return sl.copy()
     starts = np.array([a for a, _ in runs])
@@ -238,7 +238,7 @@ def _ground_to_master(
     lowered: pushing a DI foot that floats 2.6 cm down to his height jumped the hip 30 degrees in a frame
     (kstow2dead)."""
     dy = np.where(stance, np.maximum(np.maximum(master_low, 0.0) - low, 0.0), 0.0)
-    _ease_gaps(dy, _runs(stance))
+    _ease_gaps(dy, merged_runs(stance))
     return np.where(stance, dy, np.maximum(dy, lift_to_master(low, master_low))) * w
 
 
@@ -392,7 +392,7 @@ def _from_touchdown(stance: np.ndarray, down: np.ndarray) -> np.ndarray:
     slave's own foot is ``down`` on. (Held only where it is down, a foot flickering about the contact
     height started a new stance at each touch, each from none: crawl2dead's DI foot slid back 3 cm.)"""
     out = np.zeros_like(stance)
-    for a, b in _runs(stance):
+    for a, b in merged_runs(stance):
         touch = np.flatnonzero(down[a : b + 1])
         if len(touch):
             out[a + touch[0] : b + 1] = True

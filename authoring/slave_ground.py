@@ -26,7 +26,7 @@ from authoring.quality_frames import FigureSet, play
 from authoring.quality_rest import down_from
 from authoring.signal_shaping import hann_smooth
 from authoring.slave_body import heights_of, joint_chain, played_body, write_pose
-from authoring.slave_contacts import SMOOTH_FRAMES, _fade
+from authoring.slave_contacts import SMOOTH_FRAMES, ground_fade
 from peabody import quaternion
 from peabody.fk import FigureKinematics
 from server.motion.channelset import Channelset
@@ -76,7 +76,7 @@ def _need(master: np.ndarray, slave: np.ndarray) -> np.ndarray:
     the ground, fading to just out of the ground (``MARGIN_CM``) where it is up in the air, and at least
     :data:`AIR_SHARE` of the master's height there (a dead leg lifted clear to turn, ``dead_legs``: lowered
     onto the ground with the slave's thigh, DI's foot skidded 9.7 cm as it turned)."""
-    on = _fade(master)
+    on = ground_fade(master)
     rest = np.maximum(master, 0.0) - slave
     clear = np.maximum(0.0, np.maximum(MARGIN_CM, AIR_SHARE * master) - slave)
     return on * rest + (1.0 - on) * clear
@@ -242,7 +242,7 @@ def _trunk_drop(master: dict[str, np.ndarray], slave: dict[str, np.ndarray]) -> 
     trunk = [p for p in TRUNK if p in master and p in slave]
     if not trunk:
         return np.zeros(len(next(iter(slave.values()))))
-    want = np.min([_fade(master[p]) * (np.maximum(master[p], 0.0) - slave[p]) for p in trunk], axis=0)
+    want = np.min([ground_fade(master[p]) * (np.maximum(master[p], 0.0) - slave[p]) for p in trunk], axis=0)
     floor = -np.min([slave[p] for p in (*trunk, *HIPS) if p in slave], axis=0)
     return np.minimum(0.0, np.maximum(want, floor))
 

@@ -42,7 +42,7 @@ def pole_distance(kin: FigureKinematics, joint: str, poses: np.ndarray) -> np.nd
     return np.degrees(np.arccos(np.clip(np.abs(turned @ a1), 0.0, 1.0)))
 
 
-def _window(leaps: np.ndarray, n: int) -> np.ndarray:
+def leap_window(leaps: np.ndarray, n: int) -> np.ndarray:
     """1 at the leaping frames, fading out over ``REACH_FRAMES`` either side and to 0 at the clip's ends
     (they stay the frames solved alone, which every clip meeting at that posture shares)."""
     frames = np.arange(n)
@@ -77,6 +77,6 @@ def ease_leaps(
         leaps = leap_frames(out, copied, dofs) & (pole | np.roll(pole, 1))
         if not leaps.any():
             continue
-        w = _window(leaps, n)[:, None]
+        w = leap_window(leaps, n)[:, None]
         out[:, dofs] += w * (gaussian(out[:, dofs], SIGMA_FRAMES) - out[:, dofs])
     return kin.clamp(out)

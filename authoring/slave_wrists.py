@@ -19,7 +19,7 @@ from authoring.quality import one_frame_flicks
 from authoring.quality_frames import FigureSet
 from authoring.signal_shaping import gaussian
 from authoring.slave_body import played_body
-from authoring.slave_leaps import _window
+from authoring.slave_leaps import leap_window
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
@@ -45,7 +45,7 @@ def eased(slave: np.ndarray, master: np.ndarray) -> tuple[np.ndarray, np.ndarray
     at = ((mine > np.radians(FLICK_DEG)) & (mine > his + np.radians(MASTER_MARGIN_DEG))).any(axis=1)
     if not at.any():
         return slave, np.zeros(len(slave))
-    w = _window(at | np.roll(at, 1), len(slave))  # (a flick at t is the turn from frame t to t+1)
+    w = leap_window(at | np.roll(at, 1), len(slave))  # (a flick at t is the turn from frame t to t+1)
     return slave + w[:, None] * (gaussian(slave, SIGMA_FRAMES) - slave), w
 
 
