@@ -211,7 +211,7 @@ def lift_off_ground(chset: Channelset, body: Figure) -> None:
     ground (the slave's torso is shaped differently from the master's, so a lying DI can dip where the
     soldier did not). In place."""
     from authoring.postures import lowest_point
-    from authoring.rifle_swap import _smooth_above
+    from authoring.signal_shaping import smooth_above
     from server.motion.binding import bind_channelset
 
     bound = bind_channelset(chset, [body])
@@ -221,7 +221,7 @@ def lift_off_ground(chset: Channelset, body: Figure) -> None:
     chan = next(c for c in chset.figure_channels() if c.column == bf.figure_channel)
     lift = np.maximum(0.0, -lowest_point(FigureKinematics(body), poses, chset.transforms(chan)))
     if chset.release_frame is not None:  # a death: lifted frame by frame, the prone body hopped 1.2 cm up
-        lift = _smooth_above(lift, LIFT_SIGMA_FRAMES)
+        lift = smooth_above(lift, LIFT_SIGMA_FRAMES)
     if lift.any():
         held = np.ones(chset.nframes, bool)  # the rifle rises with the hands only while they hold it
         if chset.release_frame is not None:

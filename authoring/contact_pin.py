@@ -36,8 +36,8 @@ import numpy as np
 from authoring import ik
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
-from authoring.rifle_swap import _smooth_above
-from authoring.slave_feet import _runs, part_points, plant_offsets
+from authoring.signal_shaping import smooth_above
+from authoring.slave_feet import merged_runs, part_points, plant_offsets
 from authoring.transitions import ClipFrames, track_solve
 from peabody.model import Figure
 
@@ -171,7 +171,7 @@ def _held_still(site: np.ndarray, points: np.ndarray, held_from: int = 0) -> tup
 
     n = len(site)
     move, turn = np.zeros((n, 3)), np.zeros((n, 3))
-    runs = _runs(np.asarray((points[..., 1] <= CONTACT_HEIGHT_CM).any(axis=1)))
+    runs = merged_runs(np.asarray((points[..., 1] <= CONTACT_HEIGHT_CM).any(axis=1)))
     for a, b in runs:
         if (a == 0 and b == n - 1) or b <= held_from:
             continue
@@ -213,7 +213,7 @@ def _near_stances(move: np.ndarray, points: np.ndarray) -> np.ndarray:
     rifle moved off it, 47 frames before they landed)."""
     out = move.copy()
     stance = np.zeros(len(move), dtype=bool)
-    for a, b in _runs(np.asarray((points[..., 1] <= CONTACT_HEIGHT_CM).any(axis=1))):
+    for a, b in merged_runs(np.asarray((points[..., 1] <= CONTACT_HEIGHT_CM).any(axis=1))):
         stance[a : b + 1] = True
     edges = np.flatnonzero(np.diff(np.r_[True, stance, True].astype(np.int8)))
     for first, stop in zip(edges[::2], edges[1::2], strict=True):  # the gaps [first, stop)
@@ -296,5 +296,5 @@ def pin_frames(
 
 
 def _smooth_below(share: np.ndarray, sigma: float) -> np.ndarray:
-    """``share`` smoothed over frames, never above it (the mirror of :func:`_smooth_above`)."""
-    return 1.0 - _smooth_above(1.0 - share, sigma)
+    """``share`` smoothed over frames, never above it (the mirror of :func:`smooth_above`)."""
+    return 1.0 - smooth_above(1.0 - share, sigma)

@@ -34,6 +34,7 @@ import numpy as np
 from authoring import ik
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, SPINE, leg
+from authoring.signal_shaping import smoothstep
 from authoring.transitions import CARRIER, ClipFrames, lift_off_ground
 from peabody import values as V
 from peabody.fk import FigureKinematics, rigid_inverse
@@ -80,11 +81,6 @@ def crawl_arcs() -> list[tuple[str, str, str, bool]]:
         ("CRAWLING", "CRAWLING", "crawl_cycle", True),
         ("CRAWLING", "CRAWL", "crawl_start", False),
     ]
-
-
-def _smooth(s: np.ndarray) -> np.ndarray:
-    s = np.clip(s, 0.0, 1.0)
-    return s * s * (3.0 - 2.0 * s)
 
 
 def _speed() -> float:
@@ -140,16 +136,16 @@ def swings(side: str, t_end: float) -> list[tuple[float, float]]:
     return out
 
 
-def _progress(s: np.ndarray) -> np.ndarray:
+def contact_progress(s: np.ndarray) -> np.ndarray:
     """How far along its path a moving contact is (0..1) at ``s`` (0..1) of its move: it rises first and
     travels while clear of the ground."""
-    return _smooth((s - 0.12) / 0.76)
+    return smoothstep((s - 0.12) / 0.76)
 
 
-def _rise(s: np.ndarray) -> np.ndarray:
+def contact_rise(s: np.ndarray) -> np.ndarray:
     """Height (fraction of the lift) of a moving contact at ``s`` of its move: up, across, down."""
     inside = (s > 0.0) & (s < 1.0)
-    return np.where(inside, np.minimum(_smooth(s / 0.3), _smooth((1.0 - s) / 0.3)), 0.0)
+    return np.where(inside, np.minimum(smoothstep(s / 0.3), smoothstep((1.0 - s) / 0.3)), 0.0)
 
 
 def contact_track(
@@ -161,8 +157,8 @@ def contact_track(
     for t0, dist in moves:
         late = delay if t0 < delay else 0.0
         s = (t - t0 - late) / (SWING - late)
-        track[:, 2] -= dist * _progress(s)
-        track[:, 1] += lift * _rise(s)
+        track[:, 2] -= dist * contact_progress(s)
+        track[:, 1] += lift * contact_rise(s)
     return track
 
 
@@ -202,7 +198,7 @@ def carried_rifle(
     return out
 
 
-def _hand_goals(
+def rifle_hand_goals(
     kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture, rifles: np.ndarray
 ) -> list[ik.Goal]:
     """Palm centres on the rifle (first priority) and turned to hold it, each exactly as in the posture."""
@@ -256,7 +252,7 @@ def solve_arms(
         cyc = _track(kin, body, goals, roots, cycle, cyc[-1])
     fwd = _track(kin, body, goals, roots, np.arange(n_start + 1), body[0])
     bwd = _track(kin, body, goals, roots, np.arange(n_start, -1, -1), cyc[0])[::-1]
-    w = _smooth(np.linspace(0.0, 1.0, n_start + 1))[:, None]
+    w = smoothstep(np.linspace(0.0, 1.0, n_start + 1))[:, None]
     blend = fwd + w * (bwd - fwd)
     rows = slice(0, n_start + 1)  # and the blend's hands put back on the rifle, in a few very small steps
     blend, _ = ik.solve(
@@ -319,7 +315,7 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
     tc = t - START  # cycle time (negative during the start)
     q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
     z = body_travel(t)
-    w = _smooth(t / START)  # how far into the cyclic state
+    w = smoothstep(t / START)  # how far into the cyclic state
     g0 = kin.site_globals(q0, root0)
     roots = np.broadcast_to(root0, (n, 4, 4)).copy()
     roots[:, 2, 3] += z
@@ -352,7 +348,7 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
         arm_goals.append(ik.Goal(site, elbows[side], None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
     chest_now = kin.segment_globals(poses, roots)[:, kin.segment_names.index(CARRIER)]
     rifles = carried_rifle(rifle0, chest0, chest_now, elbows)
-    arm_goals = _hand_goals(kin, rkin, key, rifles) + arm_goals  # the palms on the rifle come first
+    arm_goals = rifle_hand_goals(kin, rkin, key, rifles) + arm_goals  # the palms on the rifle come first
     poses = solve_arms(kin, poses, arm_goals, roots, n_start)
     poses[0], roots[0], rifles[0] = q0, root0, rifle0
     lift_off_ground(kin, poses, roots, rifles)

@@ -26,9 +26,10 @@ from typing import TypedDict
 import numpy as np
 
 from authoring import easing, ik
-from authoring.crawl import _progress, _rise, _smooth
+from authoring.crawl import contact_progress, contact_rise
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, arm, leg, palm_targets
+from authoring.signal_shaping import smoothstep
 from authoring.transitions import (
     ClipFrames,
     carrier_globals,
@@ -86,7 +87,7 @@ ARM_TRACKING: _Tracking = {"iterations": 10, "max_dof_step": 0.02}
 
 
 def _ramp(t: np.ndarray, a: float, b: float) -> np.ndarray:
-    return _smooth((t - a) / (b - a))
+    return smoothstep((t - a) / (b - a))
 
 
 def move_track(
@@ -95,8 +96,8 @@ def move_track(
     """World track ``(n, 3)`` of a contact planted at ``p0`` that rises ``lift`` cm, travels to ``p1`` while
     clear of the ground and is set down there over ``[start, start + duration]``."""
     s = (t - start) / duration
-    track = p0[None] + _progress(s)[:, None] * (p1 - p0)[None]
-    track[:, 1] += lift * _rise(s)
+    track = p0[None] + contact_progress(s)[:, None] * (p1 - p0)[None]
+    track[:, 1] += lift * contact_rise(s)
     return track
 
 

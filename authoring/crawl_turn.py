@@ -43,16 +43,16 @@ from authoring.crawl import (
     ELBOW_SITE,
     LEG_SITES,
     LIFT,
-    _hand_goals,
-    _progress,
-    _rise,
-    _smooth,
+    contact_progress,
+    contact_rise,
+    rifle_hand_goals,
     solve_body,
 )
+from authoring.ground_frames import turned_about
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, arm
+from authoring.signal_shaping import smoothstep
 from authoring.transitions import CARRIER, ClipFrames, lift_off_ground, track_solve
-from authoring.turns import _about
 from peabody.fk import FigureKinematics
 
 FPS = 60
@@ -209,7 +209,7 @@ def part_yaw(
     """A part's yaw (degrees) about the pivot at ``t``, how far (share of its lift) it is raised, and
     ``(n, 2)`` how far (X, Z cm) it is carried: ``advance`` cm a move along the heading it turns to (or
     along the heading ``along`` degrees, every move). It rises first and moves while clear of the ground
-    (:func:`authoring.crawl._progress`)."""
+    (:func:`authoring.crawl.contact_progress`)."""
     yaw = np.zeros(len(t))
     up = np.zeros(len(t))
     carried = np.zeros((len(t), 2))
@@ -219,20 +219,20 @@ def part_yaw(
         share *= len(moves) / share.sum()
     for (t0, a, b), w in zip(moves, share.tolist(), strict=True):
         s = (t - t0) / duration
-        yaw += (b - a) * _progress(s)
-        up = np.maximum(up, _rise(s))
-        carried += w * advance * _progress(s)[:, None] * _ahead(b if along is None else along)
+        yaw += (b - a) * contact_progress(s)
+        up = np.maximum(up, contact_rise(s))
+        carried += w * advance * contact_progress(s)[:, None] * _ahead(b if along is None else along)
     return yaw, up, carried
 
 
 def _ahead(yaw: float) -> np.ndarray:
     """(X, Z) of the clip's forward (-Z) turned ``yaw`` degrees."""
-    return (_about((0.0, 0.0), np.array([yaw]))[0, :3, :3] @ [0.0, 0.0, -1.0])[[0, 2]]
+    return (turned_about((0.0, 0.0), np.array([yaw]))[0, :3, :3] @ [0.0, 0.0, -1.0])[[0, 2]]
 
 
 def _carried(pivot: tuple[float, float], yaw: np.ndarray, carried: np.ndarray) -> np.ndarray:
     """``(n, 4, 4)`` ground moves: turned ``yaw`` degrees about ``pivot``, then carried ``carried`` (X, Z)."""
-    m = _about(pivot, yaw)
+    m = turned_about(pivot, yaw)
     m[:, 0, 3] += carried[:, 0]
     m[:, 2, 3] += carried[:, 1]
     return m
@@ -302,7 +302,7 @@ def record_crawl_turn(
     # the arms on that body: the palms on the rifle the front carries round, then the elbows on their tracks
     rifles = front_moves @ rifle0
     rifles[:, 1, 3] += ELBOW_LIFT * f_up
-    arm_goals = _hand_goals(kin, rkin, key, rifles)
+    arm_goals = rifle_hand_goals(kin, rkin, key, rifles)
     for side in SIDES:
         site = ELBOW_SITE.format(s=side)
         track = limb_track(_site(kin, q0, root0, site), front_moves, f_up, ELBOW_LIFT)
@@ -311,7 +311,7 @@ def record_crawl_turn(
     if advance:  # all limbs down, the body still: the arms settle into CRAWL's own solution (carried
         # forward, the left clavicle came to rest 1 cm off it and leapt there in the last frames, 0.33 m/s;
         # turned on the spot they end on it)
-        settle = _smooth((t - t_land) / SETTLE)[:, None]
+        settle = smoothstep((t - t_land) / SETTLE)[:, None]
         poses = (1.0 - settle) * poses + settle * q0
     end = _carried(pivot, np.array([yaw]), b_on[-1:])[0]
     end_offset = (float(end[0, 3]), float(end[2, 3]), yaw)

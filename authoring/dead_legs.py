@@ -43,9 +43,9 @@ import numpy as np
 
 from authoring import dead_settle as ds
 from authoring.body_parts import contact_runs
-from authoring.easing import _smoothstep
 from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
 from authoring.quality_rest import LEG_SITES, RISE_LIMIT_CM
+from authoring.signal_shaping import smoothstep
 
 HIP_FLEX = 1  # of a leg's angles (ds.LEG_DOFS order): the hip's second bends it (negative: the knee rises)
 HIP_TURN = 2  # ... its third turns the leg about the thigh
@@ -198,12 +198,12 @@ def progress(
     hip's turn ahead, done by ``lead`` of the way, so the leg rolls out before the knee bends and
     the foot everts) and how far (radians) its hip is extended, up over the first :data:`LIFT_SPAN` and
     down over the last."""
-    turn = np.repeat(_smoothstep(t)[:, None], len(ds.LEG_GRID), axis=1)
-    turn[:, HIP_TURN] = _smoothstep(t / lead)
+    turn = np.repeat(smoothstep(t)[:, None], len(ds.LEG_GRID), axis=1)
+    turn[:, HIP_TURN] = smoothstep(t / lead)
     if feet > 0.0:  # the feet go slack first (the toes lifting as the shin comes down), then the leg rolls
-        turn[:, : FEET[0]] = _smoothstep((t - feet * FEET_OVERLAP) / (1.0 - feet * FEET_OVERLAP))[:, None]
-        turn[:, FEET] = _smoothstep(t / feet)[:, None]
-    up = _smoothstep(np.minimum(t, 1.0 - t) / LIFT_SPAN)
+        turn[:, : FEET[0]] = smoothstep((t - feet * FEET_OVERLAP) / (1.0 - feet * FEET_OVERLAP))[:, None]
+        turn[:, FEET] = smoothstep(t / feet)[:, None]
+    up = smoothstep(np.minimum(t, 1.0 - t) / LIFT_SPAN)
     return turn, np.radians(lift) * up
 
 

@@ -20,6 +20,7 @@ from typing import Protocol, TypeVar
 
 import numpy as np
 
+from authoring.signal_shaping import smoothstep
 from peabody import quaternion
 from peabody.fk import FigureKinematics
 
@@ -56,11 +57,6 @@ def end_speeds(kin: FigureKinematics, rkin: FigureKinematics, clip: Frames) -> t
     return float(v[:END_FRAMES].max(initial=0.0)), float(v[-END_FRAMES:].max(initial=0.0))
 
 
-def _smoothstep(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
-
-
 def warp(n: int, fps: float, ramp_in: float, ramp_out: float) -> np.ndarray:
     """``(n,)`` source times (s) for the frames of a retimed clip of ``n`` frames: the rate ramps up from 0
     over ``ramp_in`` s and down to 0 over the last ``ramp_out`` s (smoothstep), constant in between, and the
@@ -69,9 +65,9 @@ def warp(n: int, fps: float, ramp_in: float, ramp_out: float) -> np.ndarray:
     t = np.linspace(0.0, total, (n - 1) * SUBSTEPS + 1)
     rate = np.ones_like(t)
     if ramp_in > 0:
-        rate *= _smoothstep(t / ramp_in)
+        rate *= smoothstep(t / ramp_in)
     if ramp_out > 0:
-        rate *= _smoothstep((total - t) / ramp_out)
+        rate *= smoothstep((total - t) / ramp_out)
     area = np.concatenate([[0.0], np.cumsum((rate[1:] + rate[:-1]) / 2.0)])
     tau = total * area / area[-1]
     return tau[::SUBSTEPS]

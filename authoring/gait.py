@@ -46,11 +46,12 @@ from dataclasses import dataclass, field
 from typing import Any, TypedDict
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from authoring import ik
+from authoring.ground_frames import turned_frames
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, arm, leg, palm_targets, spine_angles
+from authoring.signal_shaping import keyed, smoothstep
 from authoring.transitions import (
     PARTS,
     ClipFrames,
@@ -195,24 +196,6 @@ class Footfall:
     drop: float = 0.0
 
 
-def _smooth(s: np.ndarray) -> np.ndarray:
-    s = np.clip(s, 0.0, 1.0)
-    return s * s * (3.0 - 2.0 * s)
-
-
-def _frame(pos: np.ndarray, yaw: ArrayLike, pitch: ArrayLike) -> np.ndarray:
-    """``(n, 4, 4)`` frames at ``pos`` turned ``Ry(yaw) Rx(pitch)`` (degrees)."""
-    a, b = np.asarray(yaw) * DEG, np.asarray(pitch) * DEG
-    ca, sa, cb, sb = np.cos(a), np.sin(a), np.cos(b), np.sin(b)
-    out = np.zeros((len(a), 4, 4))
-    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = ca, sa * sb, sa * cb
-    out[:, 1, 1], out[:, 1, 2] = cb, -sb
-    out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = -sa, ca * sb, ca * cb
-    out[:, :3, 3] = pos
-    out[:, 3, 3] = 1.0
-    return out
-
-
 def foot_track(
     ball: np.ndarray,
     falls: list[Footfall],
@@ -244,21 +227,21 @@ def foot_track(
         turn_by = f.t_off if f.turn_by is None else f.turn_by
         y = np.full(len(tt), f.yaw)
         if np.isfinite(f.t_heel) and yaw_off != f.yaw:
-            y = f.yaw + (yaw_off - f.yaw) * _smooth((tt - f.t_heel) / max(turn_by - f.t_heel, 1e-9))
+            y = f.yaw + (yaw_off - f.yaw) * smoothstep((tt - f.t_heel) / max(turn_by - f.t_heel, 1e-9))
         p = np.zeros(len(tt))
         on_ball = np.zeros(len(tt), dtype=bool)
         if f.strike:
             land = tt < f.t_flat
-            p = np.where(land, f.strike * (1.0 - _smooth((tt - f.t_on) / max(f.t_flat - f.t_on, 1e-9))), p)
+            p = np.where(land, f.strike * (1.0 - smoothstep((tt - f.t_on) / max(f.t_flat - f.t_on, 1e-9))), p)
             on_ball |= land & (f.strike < 0)
         t_rise = f.t_heel if f.early is None else min(f.t_heel, f.early[0])
         rising = (tt >= t_rise) & (tt < f.t_off)
         if rising.any():
-            r = _smooth((tt[rising] - f.t_heel) / max(f.t_off - f.t_heel, 1e-9))
+            r = smoothstep((tt[rising] - f.t_heel) / max(f.t_off - f.t_heel, 1e-9))
             if f.early is not None:
                 e0, ej = f.early
-                rj = _smooth(np.array([(ej - f.t_heel) / max(f.t_off - f.t_heel, 1e-9)]))[0]
-                ramp = rj * _smooth((tt[rising] - e0) / max(ej - e0, 1e-9))
+                rj = smoothstep(np.array([(ej - f.t_heel) / max(f.t_off - f.t_heel, 1e-9)]))[0]
+                ramp = rj * smoothstep((tt[rising] - e0) / max(ej - e0, 1e-9))
                 r_early = np.where(tt[rising] <= ej, ramp, 0.0)
                 r = np.maximum(r, r_early)
             p[rising] = -f.toe_off_pitch * r
@@ -266,25 +249,25 @@ def foot_track(
         h = np.tile([f.heel[0], 0.0, f.heel[1]], (len(tt), 1))
         # a rocker about the ball keeps the ball where the flat foot (at its landing yaw) had it
         flat_ball = np.array([f.heel[0], 0.0, f.heel[1]]) + V.rot_y(f.yaw * DEG)[:3, :3] @ ball
-        fr = _frame(np.zeros((len(tt), 3)), y, p)
+        fr = turned_frames(np.zeros((len(tt), 3)), y, p)
         h = np.where(on_ball[:, None], flat_ball - fr[:, :3, :3] @ ball, h)
         swing = tt >= f.t_off
         if nxt is not None and swing.any():
             s = (tt[swing] - f.t_off) / max(nxt.t_on - f.t_off, 1e-9)
-            u = _smooth((s - f.rise) / (1.0 - f.rise - f.drop))
-            a = flat_ball - _frame(np.zeros((1, 3)), [yaw_off], [-f.toe_off_pitch])[0, :3, :3] @ ball
+            u = smoothstep((s - f.rise) / (1.0 - f.rise - f.drop))
+            a = flat_ball - turned_frames(np.zeros((1, 3)), [yaw_off], [-f.toe_off_pitch])[0, :3, :3] @ ball
             b = np.array([nxt.heel[0], 0.0, nxt.heel[1]])
             if nxt.strike < 0:  # landing toes first: aim the heel so the ball touches down at its place
                 nb = b + V.rot_y(nxt.yaw * DEG)[:3, :3] @ ball
-                b = nb - _frame(np.zeros((1, 3)), [nxt.yaw], [nxt.strike])[0, :3, :3] @ ball
+                b = nb - turned_frames(np.zeros((1, 3)), [nxt.yaw], [nxt.strike])[0, :3, :3] @ ball
             hs = a + u[:, None] * (b - a)
             hs[:, 1] += (lift if f.lift is None else f.lift) * np.sin(np.pi * np.clip(s, 0.0, 1.0))
             h[swing] = hs
-            p[swing] = -f.toe_off_pitch + _smooth((s - 0.15) / 0.7) * (nxt.strike + f.toe_off_pitch)
+            p[swing] = -f.toe_off_pitch + smoothstep((s - 0.15) / 0.7) * (nxt.strike + f.toe_off_pitch)
             y[swing] = yaw_off + u * (nxt.yaw - yaw_off)
             on_ball[swing] = False
         heel[live], yaw[live], pitch[live], about_ball[live] = h, y, p, on_ball
-    frames = _frame(heel, yaw, pitch)
+    frames = turned_frames(heel, yaw, pitch)
     toes = np.where(about_ball & (pitch < 0), -pitch, 0.0)
     # after toe-off the toes straighten over the first part of the swing
     for k, f in enumerate(falls[:-1]):
@@ -292,9 +275,9 @@ def foot_track(
         sw = (t >= f.t_off) & (t < nxt.t_on)
         if sw.any() and np.isfinite(f.t_off):
             s = (t[sw] - f.t_off) / max(nxt.t_on - f.t_off, 1e-9)
-            toes[sw] = f.toe_off_pitch * (1.0 - _smooth(s / 0.35))
+            toes[sw] = f.toe_off_pitch * (1.0 - smoothstep(s / 0.35))
             if nxt.strike < 0:
-                toes[sw] += -nxt.strike * _smooth((s - 0.6) / 0.4)
+                toes[sw] += -nxt.strike * smoothstep((s - 0.6) / 0.4)
     return frames, toes.clip(0.0, 60.0) * DEG
 
 
@@ -607,29 +590,18 @@ def _hermite(keys: list[tuple[float, float, float]], t: np.ndarray) -> np.ndarra
     return out
 
 
-def _keyed(keys: list[tuple[float, float]], t: np.ndarray) -> np.ndarray:
-    """Piecewise smoothstep between (time, value) keys."""
-    out = np.full(len(t), float(keys[0][1]))
-    for (t0, a), (t1, b) in itertools.pairwise(keys):
-        sel = (t >= t0) & (t <= t1)
-        if t1 > t0 and sel.any():
-            out[sel] = a + (b - a) * _smooth((t[sel] - t0) / (t1 - t0))
-    out[t > keys[-1][0]] = keys[-1][1]
-    return out
-
-
 def _segment_weights(keys: list[tuple[float, Any]], t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For (time, item) keys: the index of the key before ``t`` and the smoothstep weight to the next one."""
     times = np.array([k[0] for k in keys])
     i = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(keys) - 1)
     j = np.minimum(i + 1, len(keys) - 1)
     span = np.where(j > i, times[j] - times[i], 1.0)
-    w = np.where(j > i, _smooth((t - times[i]) / span), 0.0)
+    w = np.where(j > i, smoothstep((t - times[i]) / span), 0.0)
     return i, w
 
 
 def _gait_param(session: Session, name: str, t: np.ndarray) -> np.ndarray:
-    return _keyed([(k, getattr(g, name)) for k, g in session.gait_keys], t)
+    return keyed([(k, getattr(g, name)) for k, g in session.gait_keys], t)
 
 
 def _phase(session: Session, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -689,8 +661,8 @@ def record_session(
     n = round(session.t_end * FPS) + 1
     t = np.arange(n) / FPS
     z = _hermite(session.z_keys, t)
-    x = _keyed(session.x_keys, t)
-    beta = _keyed(session.base_keys, t)
+    x = keyed(session.x_keys, t)
+    beta = keyed(session.base_keys, t)
     phase, side = _phase(session, t)
     P = {
         k: _gait_param(session, k, t)
@@ -701,7 +673,7 @@ def record_session(
     sway = -P["sway"] * side * np.sin(np.pi * ph)  # over the supporting foot (left is -x)
     turn = -P["turn"] * side * P["direction"] * np.cos(np.pi * ph)
     base_root = base_key.locations[SOLDIER]
-    gait_rot = _frame(np.zeros((n, 3)), turn, -P["lean"])
+    gait_rot = turned_frames(np.zeros((n, 3)), turn, -P["lean"])
     roots = np.stack([slerp_frames(gait_rot[i], base_root, np.array([beta[i]]))[0] for i in range(n)])
     roots[:, 0, 3] = x + (1.0 - beta) * sway
     roots[:, 1, 3] = beta * base_root[1, 3] + (1.0 - beta) * bob
@@ -714,7 +686,7 @@ def record_session(
         old = session.retarget.get(s)
         if old is not None:  # blend from the course to the old landing into the new one
             h0, t0 = foot_track(base.ball[s], old[0], t, lift)
-            u = _smooth((t - old[1]) / max(old[2] - old[1], 1e-9))
+            u = smoothstep((t - old[1]) / max(old[2] - old[1], 1e-9))
             heels[s] = np.stack(
                 [slerp_frames(a, b, np.array([w]))[0] for a, b, w in zip(h0, heels[s], u, strict=True)]
             )

@@ -31,7 +31,7 @@ from authoring import ik
 from authoring.body_parts import contact_runs
 from authoring.quality import CONTACT_HEIGHT_CM, one_frame_flicks
 from authoring.quality_frames import FigureSet
-from authoring.rifle_swap import _smooth_above
+from authoring.signal_shaping import smooth_above
 from authoring.slave_feet import part_points
 from authoring.transitions import ClipFrames
 from peabody.model import Figure
@@ -98,7 +98,7 @@ def _need(points: np.ndarray, window: np.ndarray) -> np.ndarray:
     """``(n,)`` how far (cm) to raise the part so its lowest node is at :data:`LIFT_CM` in ``window``,
     smoothed at or above that need."""
     need = np.where(window, np.maximum(0.0, LIFT_CM - points[..., 1].min(axis=1)), 0.0)
-    return _smooth_above(need, LIFT_SIGMA_FRAMES) if need.any() else need
+    return smooth_above(need, LIFT_SIGMA_FRAMES) if need.any() else need
 
 
 def lifted(frames: ClipFrames, soldier: Figure) -> ClipFrames:
@@ -170,7 +170,7 @@ def eased_legs(fall: ClipFrames, held: ClipFrames, soldier: Figure, sigma: float
     flicks = np.zeros(change.shape, dtype=bool)  # the frames either side of a flicking turn
     flicks[1:-2] = one_frame_flicks(turn) > EASE_FLICK_DEG
     flicks[1:] |= flicks[:-1]
-    where = np.stack([_smooth_above(f * 1.0, sigma) for f in flicks.T], axis=1)
+    where = np.stack([smooth_above(f * 1.0, sigma) for f in flicks.T], axis=1)
     where = np.clip(where, 0.0, 1.0)
     where[[0, -1]] = 0.0
     smooth = gaussian_filter1d(change, sigma, axis=0, mode="nearest")

@@ -22,6 +22,7 @@ import numpy as np
 
 from authoring.death_specs import spec_of
 from authoring.quality import FigureSet
+from authoring.signal_shaping import smooth_above
 from authoring.slaving import MasterSlavePair, create_channelset_motion, reslave_channelset
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
@@ -68,31 +69,6 @@ def pitch_about(locations: np.ndarray, pivot: np.ndarray, degrees: np.ndarray) -
     return np.asarray(locations) @ (to @ rot @ back)
 
 
-def _smooth_above(need: np.ndarray, sigma: float, ease: int | None = None) -> np.ndarray:
-    """A smooth curve at or above ``need``: a running maximum, then Gaussian, so it rises ahead of a rifle
-    that comes down fast. Its first and last values are ``need``'s (the difference fades in linearly over
-    the ends' ``3 sigma`` frames; given ``ease``, smoothly over that many, so it starts and ends at rest): a
-    posture node's pitch depends on its pose alone, so every clip meeting there agrees and none starts with
-    a jump."""
-    n = len(need)
-    half = int(np.ceil(3.0 * sigma))
-    if n < 3 or not need.any():
-        return need.copy()
-    padded = np.pad(need, half, mode="edge")
-    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1)
-    runmax = np.pad(windows.max(axis=-1), half, mode="edge")
-    k = np.arange(-half, half + 1, dtype=np.float64)
-    kernel = np.exp(-0.5 * (k / sigma) ** 2)
-    smooth = np.convolve(runmax, kernel / kernel.sum(), mode="valid")
-    frames = np.arange(n, dtype=np.float64)
-    to_first = np.maximum(0.0, 1.0 - frames / (ease or half))
-    to_last = to_first[::-1]
-    if ease:
-        to_first, to_last = (1.0 - (1.0 - u) ** 2 * (1.0 + 2.0 * u) for u in (to_first, to_last))
-    smooth += to_first * (need[0] - smooth[0]) + to_last * (need[-1] - smooth[-1])
-    return np.maximum(need, smooth)
-
-
 def clear_ground(
     figures: FigureSet, ptype: str, locations: np.ndarray, frames: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -115,7 +91,7 @@ def clear_ground(
         clear = heights >= GROUND_MARGIN_CM
         best = steps[np.argmax(heights, axis=-1)]
         need[low] = np.where(clear.any(-1), steps[np.argmax(clear, axis=-1)], best)
-    pitch = _smooth_above(need, PITCH_SIGMA_FRAMES)
+    pitch = smooth_above(need, PITCH_SIGMA_FRAMES)
     return pitch_about(locs, butt, pitch), pitch
 
 

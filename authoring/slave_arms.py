@@ -20,7 +20,7 @@ from dataclasses import replace
 from authoring.contact_pin import PINS, Pin, pin_contacts
 from authoring.death_specs import spec_of
 from authoring.quality_frames import FigureSet
-from authoring.slave_contacts import _played
+from authoring.slave_body import played_body
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
@@ -43,7 +43,7 @@ def pin_slave_arms(master: Channelset, slave: Channelset, figures: FigureSet) ->
     release = getattr(slave, "release_frame", None)
     if release is None or not arms_pinned(master):
         return 0.0
-    q, loc, stype = _played(slave, figures)
+    q, loc, stype = played_body(slave, figures)
     pose, moved = pin_contacts(
         q, loc, figures, stype, held_turns=True, held_from=release, table=ARM_PINS, head=False
     )

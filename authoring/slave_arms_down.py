@@ -22,8 +22,10 @@ from authoring import ik
 from authoring.death_specs import spec_of
 from authoring.quality_frames import FigureSet
 from authoring.quality_rest import TORSO_PARTS, rest_frame
-from authoring.slave_contacts import _played, _smooth
-from authoring.slave_ground import PART_SITES, _chain, _heights
+from authoring.signal_shaping import hann_smooth
+from authoring.slave_body import heights_of, joint_chain, played_body
+from authoring.slave_contacts import SMOOTH_FRAMES
+from authoring.slave_ground import PART_SITES
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
@@ -91,10 +93,10 @@ def keep_slave_arms_down(master: Channelset, slave: Channelset, figures: FigureS
     does not ask."""
     if not arms_kept_down(master):
         return 0.0
-    q, loc, stype = _played(slave, figures)
+    q, loc, stype = played_body(slave, figures)
     kin = figures.kin[stype]
-    mq, mloc, mtype = _played(master, figures)
-    start = rest_frame(_heights(mq, mloc, figures, mtype, TORSO_PARTS))
+    mq, mloc, mtype = played_body(master, figures)
+    start = rest_frame(heights_of(mq, mloc, figures, mtype, TORSO_PARTS))
     names = sorted({s for p in ARMS for s in PART_SITES[p] if s in kin.site_names})
     if start is None or not names:
         return 0.0
@@ -104,7 +106,7 @@ def keep_slave_arms_down(master: Channelset, slave: Channelset, figures: FigureS
     for _ in range(PASSES):
         at = kin.site_globals(pose, loc)[:, cols][..., :3, 3]
         down = _rises(at[..., 1], start)
-        lows = _heights(pose, loc, figures, stype, ARMS)  # a part's lowest node, the check's measure
+        lows = heights_of(pose, loc, figures, stype, ARMS)  # a part's lowest node, the check's measure
         down, touching = _parts_down(lows, names, down, start)
         held = _held(at, touching)
         if not (down < 0.0).any():
@@ -113,12 +115,12 @@ def keep_slave_arms_down(master: Channelset, slave: Channelset, figures: FigureS
         for k, site in enumerate(names):
             goal = held[rows, k].copy()
             goal[:, 1] = at[rows, k, 1] + down[rows, k]
-            goals.append(ik.Goal(site, goal, None, 1.0, 1, _chain(site)))
+            goals.append(ik.Goal(site, goal, None, 1.0, 1, joint_chain(site)))
         pose[rows], _ = ik.solve(
             kin, pose[rows], goals, loc[rows], iterations=40,
             damping=2.0, rest_pose=pose[rows], rest_gain=0.05, tolerance=0.05, max_dof_step=0.05,
         )  # fmt: skip
-    pose = q + _smooth(pose - q)
+    pose = q + hann_smooth(pose - q, SMOOTH_FRAMES)
     bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
     slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
     left = _rises(kin.site_globals(pose, loc)[:, cols][..., 1, 3], start)

@@ -29,8 +29,9 @@ from scipy.spatial.transform import Rotation
 from authoring import ik
 from authoring.death_specs import spec_of
 from authoring.postures import leg, segment_heights
-from authoring.quality_frames import FigureSet, play
-from authoring.rifle_swap import _smooth_above
+from authoring.quality_frames import FigureSet
+from authoring.signal_shaping import hann_smooth, smooth_above
+from authoring.slave_body import part_heights, played_body
 from authoring.slave_rifle import held_rifle, rifle_slide, slide_rifle
 from peabody import quaternion
 from server.motion.binding import bind_channelset
@@ -43,39 +44,10 @@ SIDES = ("left", "right")
 LEG_SEGMENTS = ("upper_leg", "lower_leg", "foot", "toes")
 
 
-def part_heights(
-    poses: np.ndarray,
-    locations: np.ndarray,
-    figures: FigureSet,
-    ptype: str,
-    part: str = "kneecap",
-    sides: tuple[str, ...] = SIDES,
-) -> dict[str, np.ndarray]:
-    """Per side, the height (cm) of the lowest node of ``{side}_{part}`` (as the quality check names body
-    parts: ``kneecap``, ``foot``; ``sides=("",)``: a part with no side, ``belly``) in every frame ``(n,)``."""
-    kin = figures.kin[ptype]
-    nodes, segs = figures.nodes(ptype)
-    parts = figures.node_parts(ptype)
-    out = {}
-    g = kin.segment_globals(poses, locations)[..., 1, :]  # (n, nseg, 4): the rows giving world y
-    for side in sides:
-        sel = parts == (f"{side}_{part}" if side else part)
-        if sel.any():
-            out[side] = np.einsum("fkj,kj->fk", g[:, segs[sel]], nodes[sel]).min(axis=1)
-    return out
-
-
-def _played(cs: Channelset, figures: FigureSet) -> tuple[np.ndarray, np.ndarray, str]:
-    """A clip's body figure played: poses, root globals and its file type (the figure with most DOFs)."""
-    f = play(cs, figures)
-    ptype = max(f.poses, key=lambda k: figures.kin[k].ndof)
-    return f.poses[ptype], f.locations[ptype], ptype
-
-
 def rest_slave_knees(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
     """Lower the slave onto its kneeling knees where the master rests on them (``slave``'s figure and joint
     channels, in place); returns the lowering per frame (cm)."""
-    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    (mq, mloc, mtype), (q, loc, stype) = played_body(master, figures), played_body(slave, figures)
     kin = figures.kin[stype]
     m_h = part_heights(mq, mloc, figures, mtype)
     s_h = part_heights(q, loc, figures, stype)
@@ -152,31 +124,32 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     palms on it rise by what is missing (smoothed, at least that much), and the arms are solved again.
     ``slave``'s joint channels (and, crawling, its rifle's channel) change in place. Returns the worst
     remaining lift per frame (cm)."""
-    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    (mq, mloc, mtype), (q, loc, stype) = played_body(master, figures), played_body(slave, figures)
     kin = figures.kin[stype]
     m_h = part_heights(mq, mloc, figures, mtype, "forearm")
     # lying on the belly (or chest), or on forearms and knees
     trunk = [h for p in ("belly", "chest") for h in part_heights(mq, mloc, figures, mtype, p, ("",)).values()]
     if not trunk:
         return np.zeros(len(q))
-    prone = _fade(np.min(trunk, axis=0))
+    prone = ground_fade(np.min(trunk, axis=0))
     # on forearms and knees (the crawl), the forearms carry the body: the slave's as high as the master's
     knees = part_heights(mq, mloc, figures, mtype)
-    kneeling = _fade(np.min(list(knees.values()), axis=0)) if knees else np.zeros(len(q))
+    kneeling = ground_fade(np.min(list(knees.values()), axis=0)) if knees else np.zeros(len(q))
     held_rifle = _holding(slave)
     spec = spec_of(master.name)  # the held rifle's slide out of the body, past the release where asked
     slid = _holding(slave, spec.slave_rifle_slid_past if spec else 0)
     crawling = {
-        side: _fade(m_h[side]) * (1.0 - prone) * kneeling * held_rifle for side in SIDES if side in m_h
+        side: ground_fade(m_h[side]) * (1.0 - prone) * kneeling * held_rifle for side in SIDES if side in m_h
     }
-    weight = {side: _fade(m_h[side]) * prone + crawling[side] for side in SIDES if side in m_h}
+    weight = {side: ground_fade(m_h[side]) * prone + crawling[side] for side in SIDES if side in m_h}
     if not weight or not any(w.any() for w in weight.values()):
         return np.zeros(len(q))
     # put at the master's height, up or down: crawling, and prone where a forearm comes down for good in a
     # clip that ends lying with the rifle in his hands (crawl2prstow; not a death, which lets go of it)
     settles = bool(prone[-1] > 0.5 and held_rifle[-1] > 0.5)
     follow = {
-        side: crawling[side] + settles * _landing(m_h[side]) * _fade(m_h[side]) * prone for side in weight
+        side: crawling[side] + settles * _landing(m_h[side]) * ground_fade(m_h[side]) * prone
+        for side in weight
     }
     sites = kin.site_globals(q, loc)
     elbows = {side: sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3] for side in weight}
@@ -222,7 +195,7 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
         s_h = part_heights(pose, loc, figures, stype, "forearm")
         short = np.max([w * np.maximum(0.0, np.maximum(m_h[s], 0.0) - s_h[s]) for s, w in crawling.items()],
                        axis=0)  # fmt: skip
-        lift = _smooth_above(short, RIFLE_LIFT_SIGMA_FRAMES)
+        lift = smooth_above(short, RIFLE_LIFT_SIGMA_FRAMES)
         for chan in slave.figure_channels():
             if chan.protofiletype != stype:
                 slave.fig_pos[:, chan.column, 1] += lift.astype(slave.fig_pos.dtype)
@@ -243,7 +216,7 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     # frames solved alone land a few degrees apart where the neck is at its limit: smooth the change over
     # the clip (its ends kept), then put the palms and the eye back exactly (a small, smooth correction)
     change = pose - q
-    smooth = _smooth(change)
+    smooth = hann_smooth(change, SMOOTH_FRAMES)
     for end in (0, -1):  # the ends as solved (so clips meeting at a posture agree), the smoothing faded in
         pin_end(smooth, end, change[end], SMOOTH_FRAMES * 2)
     pose = q + smooth
@@ -299,7 +272,7 @@ def _settle_rifle(
         return False
     slide = rifle_slide(figures, stype, pose, loc, rifle[1:], weight)
     room = np.maximum(0.0, rifle[2][..., 1].min(axis=1) - RIFLE_ABOVE_GROUND_CM)
-    slide[:, 1] -= np.minimum(_smooth_above(weight * np.maximum(0.0, high), RIFLE_LIFT_SIGMA_FRAMES), room)
+    slide[:, 1] -= np.minimum(smooth_above(weight * np.maximum(0.0, high), RIFLE_LIFT_SIGMA_FRAMES), room)
     if np.abs(slide).max() < 0.01:
         return False
     slide_rifle(slave, rifle[0], slide)
@@ -359,23 +332,13 @@ RIFLE_LIFT_SIGMA_FRAMES = 4.0  # the crawling rifle's lift is smoothed over the 
 PLANT_FADE_FRAMES = 6  # a planted site's held place eases in and out over this many frames (0.1 s)
 
 
-def _fade(height: np.ndarray) -> np.ndarray:
+def ground_fade(height: np.ndarray) -> np.ndarray:
     """1 for a master's part resting on the ground (``REST_CM``), easing to 0 at ``REACH_CM`` up."""
     w = np.clip((REACH_CM - height) / (REACH_CM - REST_CM), 0.0, 1.0)
     return w * w * (3.0 - 2.0 * w)
 
 
 SMOOTH_FRAMES = 6  # half-width of the window smoothing the forearm solve's change over a clip (0.1 s)
-
-
-def _smooth(offset: np.ndarray) -> np.ndarray:
-    """``offset`` ``(n, ndof)`` smoothed along the frames (a Hann window, the ends held)."""
-    k = np.hanning(2 * SMOOTH_FRAMES + 3)[1:-1]
-    k /= k.sum()
-    pad = np.concatenate(
-        [np.repeat(offset[:1], SMOOTH_FRAMES, 0), offset, np.repeat(offset[-1:], SMOOTH_FRAMES, 0)]
-    )
-    return np.stack([np.convolve(pad[:, j], k, mode="valid") for j in range(offset.shape[1])], axis=1)
 
 
 def pin_end(data: np.ndarray, frame: int, value: np.ndarray, frames: int) -> None:
@@ -400,7 +363,7 @@ def tilt_onto_knees(master: Channelset, slave: Channelset, figures: FigureSet) -
     axis through the ground below the elbows, by the angle that brings the kneecaps down to the master's,
     or less where anything else (the toes) would reach the ground first; the forearms stay where they lie.
     ``slave``'s figure channels change in place. Returns the tilt per frame (rad)."""
-    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    (mq, mloc, mtype), (q, loc, stype) = played_body(master, figures), played_body(slave, figures)
     kin = figures.kin[stype]
     m_h = part_heights(mq, mloc, figures, mtype)
     s_h = part_heights(q, loc, figures, stype)
@@ -409,9 +372,11 @@ def tilt_onto_knees(master: Channelset, slave: Channelset, figures: FigureSet) -
     if not sides or not m_fore:
         return np.zeros(len(q))
     trunk = [h for p in ("belly", "chest") for h in part_heights(mq, mloc, figures, mtype, p, ("",)).values()]
-    off_trunk = 1.0 - _fade(np.min(trunk, axis=0)) if trunk else np.ones(len(q))
-    on_forearms = _fade(np.min(list(m_fore.values()), axis=0)) * off_trunk * _holding(slave)
-    extra = np.max([_fade(m_h[s]) * np.maximum(0.0, s_h[s] - np.maximum(m_h[s], 0.0)) for s in sides], axis=0)
+    off_trunk = 1.0 - ground_fade(np.min(trunk, axis=0)) if trunk else np.ones(len(q))
+    on_forearms = ground_fade(np.min(list(m_fore.values()), axis=0)) * off_trunk * _holding(slave)
+    extra = np.max(
+        [ground_fade(m_h[s]) * np.maximum(0.0, s_h[s] - np.maximum(m_h[s], 0.0)) for s in sides], axis=0
+    )
     extra *= on_forearms
     if not (extra > TILT_MIN_CM).any():
         return np.zeros(len(q))

@@ -49,8 +49,9 @@ from authoring.death_specs import spec_of
 from authoring.postures import leg
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
-from authoring.rifle_swap import _smooth_above
-from authoring.slave_contacts import SIDES, _played
+from authoring.signal_shaping import smooth_above
+from authoring.slave_body import played_body
+from authoring.slave_contacts import SIDES
 from authoring.transitions import track_solve
 from peabody import quaternion
 from peabody.fk import FigureKinematics
@@ -81,7 +82,7 @@ LYING_SIGMA_FRAMES = 2.0  # a lying leg's knee and ankle change from the hold sm
 FOOT_PASSES = 2  # the contact nodes change a little as the foot moves: measure and solve again
 
 
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+def merged_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """``(first, last)`` of every run of True in ``mask``, runs closer than ``MERGE_GAP_FRAMES`` merged."""
     edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
     runs: list[tuple[int, int]] = []
@@ -123,7 +124,7 @@ def plant_offsets(
     move = np.zeros((n, 3))
     move[1:] = -step  # the offset's change into frame i
     out = np.zeros((n, 3))
-    runs = _runs(stance)
+    runs = merged_runs(stance)
     for a, b in runs:
         track = np.cumsum(move[a : b + 1], axis=0) - move[a]  # none at touchdown
         if b == n - 1 or (at_lift_off and a > 0):
@@ -170,7 +171,7 @@ def lift_to_master(slave_low: np.ndarray, master_low: np.ndarray) -> np.ndarray:
     is not below the master's (``master_low``) while that is near the ground but not on it."""
     off = (master_low > CONTACT_HEIGHT_CM) & (master_low < NEAR_CM)
     need = np.where(off, np.maximum(0.0, np.minimum(master_low, NEAR_CM) - slave_low), 0.0)
-    return _smooth_above(need, LIFT_SIGMA_FRAMES) if need.any() else need
+    return smooth_above(need, LIFT_SIGMA_FRAMES) if need.any() else need
 
 
 def _stance_weight(stance: np.ndarray) -> np.ndarray:
@@ -191,7 +192,7 @@ def _last_rest(stance: np.ndarray) -> np.ndarray:
     """Per frame 1 over the master's last stance if it lasts to the clip's end and starts after its first
     frame (the foot he dies lying on), easing in (smoothstep) from the end of the stance before it."""
     n = len(stance)
-    runs = _runs(stance)
+    runs = merged_runs(stance)
     out = np.zeros(n)
     if not runs or runs[-1][1] != n - 1 or runs[-1][0] == 0:
         return out
@@ -210,7 +211,7 @@ def _anchored(master: np.ndarray, slave: np.ndarray, stance: np.ndarray) -> np.n
     middle, a long stance's first frames took a short one's turn before it: stfire2dead's DI toes jumped 32
     degrees in a frame.)"""
     m, sl = master[:, :3, :3], slave[:, :3, :3]
-    runs = _runs(stance)
+    runs = merged_runs(stance)
     if not runs:
         return sl.copy()
     starts = np.array([a for a, _ in runs])
@@ -237,7 +238,7 @@ def _ground_to_master(
     lowered: pushing a DI foot that floats 2.6 cm down to his height jumped the hip 30 degrees in a frame
     (kstow2dead)."""
     dy = np.where(stance, np.maximum(np.maximum(master_low, 0.0) - low, 0.0), 0.0)
-    _ease_gaps(dy, _runs(stance))
+    _ease_gaps(dy, merged_runs(stance))
     return np.where(stance, dy, np.maximum(dy, lift_to_master(low, master_low))) * w
 
 
@@ -278,7 +279,7 @@ def _leg_goal(
             move *= (np.maximum(u, _last_rest(stance)) if death else u)[:, None]
     else:
         # a knee coming down fast let the toes go in 3 frames (40 degrees in one): eased over more
-        u = 1.0 - _smooth_above(1.0 - u, KNEE_SIGMA_FRAMES)
+        u = 1.0 - smooth_above(1.0 - u, KNEE_SIGMA_FRAMES)
         w = _stance_weight(stance) * u
         segs = kin.segment_globals(pose, loc)
         foot, toes = (segs[:, kin.segment_names.index(f"{side}_{seg}")] for seg in ("foot", "toes"))
@@ -391,7 +392,7 @@ def _from_touchdown(stance: np.ndarray, down: np.ndarray) -> np.ndarray:
     slave's own foot is ``down`` on. (Held only where it is down, a foot flickering about the contact
     height started a new stance at each touch, each from none: crawl2dead's DI foot slid back 3 cm.)"""
     out = np.zeros_like(stance)
-    for a, b in _runs(stance):
+    for a, b in merged_runs(stance):
         touch = np.flatnonzero(down[a : b + 1])
         if len(touch):
             out[a + touch[0] : b + 1] = True
@@ -465,10 +466,10 @@ def _smoothed_lower_legs(kin: FigureKinematics, before: np.ndarray, after: np.nd
 def plant_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
     """Hold the slave's feet planted where the master's are on the ground, and off it where his are not
     (``slave``'s joint channels, in place); returns the largest move of a foot in each frame (cm)."""
-    q, loc, stype = _played(slave, figures)
+    q, loc, stype = played_body(slave, figures)
     if getattr(slave, "ground_speed", None) is not None:  # locomotion: recorded in place
         return np.zeros(len(q))
-    mq, mloc, mtype = _played(master, figures)
+    mq, mloc, mtype = played_body(master, figures)
     master_feet = {side: part_points(mq, mloc, figures, mtype, (f"{side}_foot",)) for side in SIDES}
     turns: dict[str, tuple[np.ndarray, np.ndarray] | None] = dict.fromkeys(SIDES)
     knelt = any(_knee_free(q[:1], loc[:1], figures, stype, side)[0] < 1.0 for side in SIDES)

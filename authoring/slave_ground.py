@@ -24,10 +24,11 @@ from authoring import ik
 from authoring.death_specs import spec_of
 from authoring.quality_frames import FigureSet, play
 from authoring.quality_rest import down_from
-from authoring.slave_contacts import _fade, _played, _smooth, part_heights
+from authoring.signal_shaping import hann_smooth
+from authoring.slave_body import heights_of, joint_chain, played_body, write_pose
+from authoring.slave_contacts import SMOOTH_FRAMES, ground_fade
 from peabody import quaternion
 from peabody.fk import FigureKinematics
-from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
 SIDES = ("left", "right")
@@ -70,44 +71,12 @@ DOWN_CM = 3.0
 DOWN_SETTLE_FRAMES = 30
 
 
-def _chain(site: str) -> tuple[str, ...]:
-    """The joints that move ``site``: the whole arm or leg from the clavicle or hip, the neck for the head."""
-    seg = site.split(".", 1)[0]
-    side = seg.split("_", 1)[0]
-    if seg.endswith(("arm", "palm")):
-        return tuple(f"{side}_{j}" for j in ("clavicle", "shoulder", "elbow", "wrist"))
-    if seg.endswith(("leg", "foot", "toes")):
-        return tuple(f"{side}_{j}" for j in ("hip", "knee", "ankle", "toes"))
-    if seg == "lower_torso":
-        return ()  # the pelvis moves with the root alone
-    if seg.endswith("_torso"):
-        return ("waist", "belly", "upper_spine")[: 1 if seg == "middle_torso" else 3]
-    return ("neck", "head")
-
-
-def _heights(
-    poses: np.ndarray, locs: np.ndarray, figures: FigureSet, ptype: str, parts: tuple[str, ...]
-) -> dict[str, np.ndarray]:
-    """Per part of ``parts``, its lowest node's height (cm) in every frame."""
-    out: dict[str, np.ndarray] = {}
-    for part in parts:
-        side, _, rest = part.partition("_")
-        found = (
-            part_heights(poses, locs, figures, ptype, rest, (side,))
-            if side in SIDES
-            else part_heights(poses, locs, figures, ptype, part, ("",))
-        )
-        for h in found.values():
-            out[part] = h
-    return out
-
-
 def _need(master: np.ndarray, slave: np.ndarray) -> np.ndarray:
     """How far (cm, up positive) a slave part should move: to the master's height where his part lies on
     the ground, fading to just out of the ground (``MARGIN_CM``) where it is up in the air, and at least
     :data:`AIR_SHARE` of the master's height there (a dead leg lifted clear to turn, ``dead_legs``: lowered
     onto the ground with the slave's thigh, DI's foot skidded 9.7 cm as it turned)."""
-    on = _fade(master)
+    on = ground_fade(master)
     rest = np.maximum(master, 0.0) - slave
     clear = np.maximum(0.0, np.maximum(MARGIN_CM, AIR_SHARE * master) - slave)
     return on * rest + (1.0 - on) * clear
@@ -123,13 +92,13 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     """Lay the slave's limbs, head and trunk where the master's are after the release (``slave``'s joint and
     body channels, in place); returns the largest remaining distance from the wanted height per frame (cm)."""
     release = getattr(slave, "release_frame", None)
-    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    (mq, mloc, mtype), (q, loc, stype) = played_body(master, figures), played_body(slave, figures)
     n = len(q)
     if release is None or release >= n - 1:
         return np.zeros(n)
     kin = figures.kin[stype]
     parts = tuple(PART_SITES)
-    m_h = _heights(mq, mloc, figures, mtype, parts)
+    m_h = heights_of(mq, mloc, figures, mtype, parts)
     w = _fade_in(n, release)
     q_loc, loc = loc, loc.copy()
     pose = q.copy()
@@ -137,7 +106,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     sub = np.flatnonzero(frames)
 
     def needs(pose: np.ndarray, loc: np.ndarray) -> dict[str, np.ndarray]:
-        s_h = _heights(pose, loc, figures, stype, parts)
+        s_h = heights_of(pose, loc, figures, stype, parts)
         return {p: w * _need(m_h[p], s_h[p]) for p in parts if p in s_h and p in m_h}
 
     limbs = tuple(p for p in parts if p not in TRUNK)
@@ -155,7 +124,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     stages = [(TRUNK, ROOT_DOFS, True), (limbs, (), True)] * LIMB_PASSES + [(limbs, (), False)]
     for k, (group, root_dofs, planting) in enumerate(stages):
         if k % 2 == 0 and k < len(stages) - 1:
-            loc[:, 1, 3] += settle * _trunk_drop(m_h, _heights(pose, loc, figures, stype, TRUNK + HIPS))
+            loc[:, 1, 3] += settle * _trunk_drop(m_h, heights_of(pose, loc, figures, stype, TRUNK + HIPS))
         plants = planted if planting else {}
         if arm_out and planting and group is limbs:  # a part landing as the trunk settles: from the solve
             plants = _plants(unsolved, m_at, m_h, release, (_positions(kin, pose, loc), settle > 0))
@@ -171,9 +140,9 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
         if report.root_location is not None:
             loc[sub] = report.root_location
     # frames solved alone can land on different branches of a redundant arm: smooth the change over the clip
-    pose = q + _smooth(pose - q) * frames[:, None]
+    pose = q + hann_smooth(pose - q, SMOOTH_FRAMES) * frames[:, None]
     loc = _smooth_moves(q_loc, loc, frames)
-    _write(slave, figures, stype, pose, loc @ np.linalg.inv(q_loc))
+    write_pose(slave, figures, stype, pose, loc @ np.linalg.inv(q_loc))
     left = needs(pose, loc)
     return np.max(np.abs(np.stack(list(left.values()))), axis=0)
 
@@ -259,7 +228,7 @@ def _smooth_moves(before: np.ndarray, after: np.ndarray, frames: np.ndarray) -> 
     quat = quaternion.from_matrix(local[:, :3, :3])  # (w, x, y, z), w >= 0: small turns, no sign flips
     parts = np.concatenate([local[:, :3, 3], quat], axis=1)
     ident = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
-    parts = ident + _smooth(parts - ident) * frames[:, None]
+    parts = ident + hann_smooth(parts - ident, SMOOTH_FRAMES) * frames[:, None]
     moved = quaternion.to_transform(
         parts[:, :3], parts[:, 3:] / np.linalg.norm(parts[:, 3:], axis=1)[:, None]
     )
@@ -273,7 +242,7 @@ def _trunk_drop(master: dict[str, np.ndarray], slave: dict[str, np.ndarray]) -> 
     trunk = [p for p in TRUNK if p in master and p in slave]
     if not trunk:
         return np.zeros(len(next(iter(slave.values()))))
-    want = np.min([_fade(master[p]) * (np.maximum(master[p], 0.0) - slave[p]) for p in trunk], axis=0)
+    want = np.min([ground_fade(master[p]) * (np.maximum(master[p], 0.0) - slave[p]) for p in trunk], axis=0)
     floor = -np.min([slave[p] for p in (*trunk, *HIPS) if p in slave], axis=0)
     return np.minimum(0.0, np.maximum(want, floor))
 
@@ -348,7 +317,7 @@ def _goals(
         at[keep, 0], at[keep, 2] = hold[keep, 0], hold[keep, 2]
         if arm_out and site.split("_", 1)[-1].startswith(("upper_arm", "lower_arm")):
             at += _sideways(at, sites[:, kin.site_names.index(CHEST), :3, 3], move)
-        chain = () if rigid and site.split(".")[0].endswith("_torso") else _chain(site)
+        chain = () if rigid and site.split(".")[0].endswith("_torso") else joint_chain(site)
         goals.append(ik.Goal(site, at, None, 1.0, 1, chain))
     return goals
 
@@ -362,17 +331,6 @@ def _sideways(at: np.ndarray, chest: np.ndarray, up: np.ndarray) -> np.ndarray:
     out[:, 1] = 0.0
     out /= np.maximum(np.linalg.norm(out, axis=1), 1e-9)[:, None]
     return out * np.maximum(up, 0.0)[:, None]
-
-
-def _write(slave: Channelset, figures: FigureSet, stype: str, pose: np.ndarray, moved: np.ndarray) -> None:
-    """``pose`` into ``slave``'s joint channels; its body's figure channel moved by ``moved`` ``(n, 4, 4)``
-    (world)."""
-    bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
-    slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
-    chan = next(c for c in slave.figure_channels() if c.column == bf.figure_channel)
-    placed = moved @ slave.transforms(chan)
-    slave.fig_pos[:, chan.column] = placed[:, :3, 3].astype(slave.fig_pos.dtype)
-    slave.fig_quat[:, chan.column] = quaternion.from_matrix(placed[:, :3, :3]).astype(slave.fig_quat.dtype)
 
 
 RIFLE_MARGIN_CM = 0.3  # a dropped rifle is put this far clear of the body's hulls and the ground
@@ -429,7 +387,7 @@ def clear_rifle(slave: Channelset, figures: FigureSet) -> np.ndarray:
 def _smooth_push(push: np.ndarray) -> np.ndarray:
     """Each component of ``push`` ``(n, 3)`` smoothed over the clip, never shorter than where it points (a
     running maximum of its positive and of its negative part, then Gaussian). Unlike the held rifle's pitch
-    (:func:`authoring.rifle_swap._smooth_above`) the ends are not pinned to the frame's own need: a dropped
+    (:func:`authoring.signal_shaping.smooth_above`) the ends are not pinned to the frame's own need: a dropped
     rifle's last frame belongs to no other clip, and pinned it moved at 1.5 m/s over the last frames."""
     half = int(np.ceil(3.0 * RIFLE_SIGMA_FRAMES))
     k = np.arange(-half, half + 1, dtype=np.float64)

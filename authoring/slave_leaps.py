@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from authoring.signal_shaping import gaussian
 from peabody.fk import FigureKinematics
 from peabody.rotations import axis_angle
 
@@ -41,7 +42,7 @@ def pole_distance(kin: FigureKinematics, joint: str, poses: np.ndarray) -> np.nd
     return np.degrees(np.arccos(np.clip(np.abs(turned @ a1), 0.0, 1.0)))
 
 
-def _window(leaps: np.ndarray, n: int) -> np.ndarray:
+def leap_window(leaps: np.ndarray, n: int) -> np.ndarray:
     """1 at the leaping frames, fading out over ``REACH_FRAMES`` either side and to 0 at the clip's ends
     (they stay the frames solved alone, which every clip meeting at that posture shares)."""
     frames = np.arange(n)
@@ -49,17 +50,6 @@ def _window(leaps: np.ndarray, n: int) -> np.ndarray:
     u = np.clip(1.0 - gap / REACH_FRAMES, 0.0, 1.0)
     ends = np.clip(np.minimum(frames, frames[::-1]) / (2.0 * SIGMA_FRAMES), 0.0, 1.0)
     return u * u * (3.0 - 2.0 * u) * ends
-
-
-def _gaussian(values: np.ndarray, sigma: float) -> np.ndarray:
-    """``values`` ``(n, k)`` smoothed along the frames by a Gaussian of ``sigma`` frames (ends held; also the
-    slaving's smoothing of a clip, :mod:`authoring.slaving`)."""
-    half = int(np.ceil(3.0 * sigma))
-    k = np.arange(-half, half + 1, dtype=np.float64)
-    kernel = np.exp(-0.5 * (k / sigma) ** 2)
-    kernel /= kernel.sum()
-    padded = np.concatenate([np.repeat(values[:1], half, 0), values, np.repeat(values[-1:], half, 0)])
-    return np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(values.shape[1])], 1)
 
 
 def leap_frames(poses: np.ndarray, copied: np.ndarray, dofs: np.ndarray) -> np.ndarray:
@@ -87,6 +77,6 @@ def ease_leaps(
         leaps = leap_frames(out, copied, dofs) & (pole | np.roll(pole, 1))
         if not leaps.any():
             continue
-        w = _window(leaps, n)[:, None]
-        out[:, dofs] += w * (_gaussian(out[:, dofs], SIGMA_FRAMES) - out[:, dofs])
+        w = leap_window(leaps, n)[:, None]
+        out[:, dofs] += w * (gaussian(out[:, dofs], SIGMA_FRAMES) - out[:, dofs])
     return kin.clamp(out)

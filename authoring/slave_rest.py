@@ -38,9 +38,10 @@ from scipy.optimize import minimize
 from authoring import ik
 from authoring.postures import leg
 from authoring.quality_frames import FigureSet
-from authoring.slave_contacts import SIDES, _played
+from authoring.slave_body import joint_chain, played_body, write_pose
+from authoring.slave_contacts import SIDES
 from authoring.slave_feet import KNEE_DOWN_CM, NEAR_CM, part_points
-from authoring.slave_ground import PART_SITES, _chain, _write
+from authoring.slave_ground import PART_SITES
 from authoring.transitions import track_solve
 from peabody.fk import FigureKinematics
 from server.motion.channelset import Channelset
@@ -335,7 +336,7 @@ def _hold_arms(
     rows = np.arange(min(landed.values()), len(poses))
     goals = []
     for side, f in landed.items():
-        chain = _chain(f"{side}_upper_arm.deltoid")
+        chain = joint_chain(f"{side}_upper_arm.deltoid")
         for joint in chain:
             out[f:, kin.dof_slices[joint]] = poses[f, kin.dof_slices[joint]]
         sites = kin.site_globals(out[rows], locs[rows])[..., :3, 3]
@@ -368,7 +369,7 @@ def rest_slave_trunk(
     release = getattr(slave, "release_frame", None)
     if release is None:
         return np.zeros(len(PARAMS))
-    q, loc, stype = _played(slave, figures)
+    q, loc, stype = played_body(slave, figures)
     n = len(q)
     rest = _Rest(figures, stype, q[-1], loc[-1], SLIDE_CM if slide_cm is None else slide_cm, heels_cm)
     w = _ease(n, max(release, n - 1 - EASE_FRAMES - END_HOLD_FRAMES))
@@ -388,5 +389,5 @@ def rest_slave_trunk(
     landed = _landed_arms(poses, moved @ loc, figures, stype, np.flatnonzero(w > 0)) if arms_held else {}
     if landed:
         poses = _hold_arms(figures.kin[stype], poses, moved @ loc, landed)
-    _write(slave, figures, stype, poses, moved)
+    write_pose(slave, figures, stype, poses, moved)
     return x

@@ -17,8 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from authoring.quality_frames import FigureSet, play
-from authoring.rifle_swap import _smooth_above
-from authoring.slaving import _gaussian
+from authoring.signal_shaping import gaussian, smooth_above
 from server.motion.channelset import Channelset
 
 CLEAR_CM = 0.6  # the rifle slides out until it is at most this deep in the body (the check allows 1 cm)
@@ -75,14 +74,14 @@ def _smoothed(slide: np.ndarray) -> np.ndarray:
     if not size.any():
         return slide
     way = np.divide(slide, size[:, None], out=np.zeros_like(slide), where=size[:, None] > 1e-9)
-    mean = _gaussian(way, PUSH_SIGMA_FRAMES)
+    mean = gaussian(way, PUSH_SIGMA_FRAMES)
     frames = np.arange(len(slide), dtype=np.float64)
     half = np.ceil(3.0 * PUSH_SIGMA_FRAMES)
     to_first, to_last = np.maximum(0.0, 1.0 - frames / half), np.maximum(0.0, 1.0 - frames[::-1] / half)
     mean += to_first[:, None] * (way[0] - mean[0]) + to_last[:, None] * (way[-1] - mean[-1])
     norm = np.linalg.norm(mean, axis=1)
     mean = np.divide(mean, norm[:, None], out=np.zeros_like(mean), where=norm[:, None] > 1e-9)
-    return mean * _smooth_above(size, PUSH_SIGMA_FRAMES, PUSH_EASE_FRAMES)[:, None]
+    return mean * smooth_above(size, PUSH_SIGMA_FRAMES, PUSH_EASE_FRAMES)[:, None]
 
 
 def slide_rifle(slave: Channelset, rtype: str, slide: np.ndarray) -> None:

@@ -19,8 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from authoring.quality_frames import FigureSet
-from authoring.rifle_swap import _smooth_above
-from authoring.slave_contacts import SIDES, _played
+from authoring.signal_shaping import smooth_above
+from authoring.slave_body import played_body
+from authoring.slave_contacts import SIDES
 from authoring.slave_feet import part_points
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -84,15 +85,15 @@ def _knee_out_of_ground(pose: np.ndarray, loc: np.ndarray, figures: FigureSet, s
     ok = low >= 0.0
     need = np.where(ok.any(axis=0), KNEE_STEPS_DEG[ok.argmax(axis=0)], KNEE_STEPS_DEG[-1])
     if need.any():
-        bend = np.radians(_smooth_above(need, KNEE_SIGMA_FRAMES))
+        bend = np.radians(smooth_above(need, KNEE_SIGMA_FRAMES))
         pose[:, knee] = np.minimum(pose[:, knee] + bend, kin.upper[knee])
 
 
 def slack_slave_feet(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
     """The slave's ankles and toes follow the master's as his feet go slack (``slave``'s joint channels, in
     place, :func:`follow_slack`); returns the largest change of a foot angle per frame (degrees)."""
-    mq, _, mtype = _played(master, figures)
-    q, loc, stype = _played(slave, figures)
+    mq, _, mtype = played_body(master, figures)
+    q, loc, stype = played_body(slave, figures)
     mkin, kin = figures.kin[mtype], figures.kin[stype]
     names = [f"{side}_{j}" for side in SIDES for j in JOINTS]
     src = np.concatenate([np.arange(mkin.ndof)[mkin.dof_slices[j]] for j in names])

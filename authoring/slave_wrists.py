@@ -17,8 +17,9 @@ import numpy as np
 
 from authoring.quality import one_frame_flicks
 from authoring.quality_frames import FigureSet
-from authoring.slave_contacts import _played
-from authoring.slave_leaps import _gaussian, _window
+from authoring.signal_shaping import gaussian
+from authoring.slave_body import played_body
+from authoring.slave_leaps import leap_window
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
 
@@ -44,15 +45,15 @@ def eased(slave: np.ndarray, master: np.ndarray) -> tuple[np.ndarray, np.ndarray
     at = ((mine > np.radians(FLICK_DEG)) & (mine > his + np.radians(MASTER_MARGIN_DEG))).any(axis=1)
     if not at.any():
         return slave, np.zeros(len(slave))
-    w = _window(at | np.roll(at, 1), len(slave))  # (a flick at t is the turn from frame t to t+1)
-    return slave + w[:, None] * (_gaussian(slave, SIGMA_FRAMES) - slave), w
+    w = leap_window(at | np.roll(at, 1), len(slave))  # (a flick at t is the turn from frame t to t+1)
+    return slave + w[:, None] * (gaussian(slave, SIGMA_FRAMES) - slave), w
 
 
 def ease_slave_wrists(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
     """Smooth ``slave``'s wrists around the frames where they flick and ``master``'s do not (in place);
     returns per frame ``(n,)`` whether it was eased."""
-    q, _, stype = _played(slave, figures)
-    mq, _, mtype = _played(master, figures)
+    q, _, stype = played_body(slave, figures)
+    mq, _, mtype = played_body(master, figures)
     skin, mkin = figures.kin[stype], figures.kin[mtype]
     touched = np.zeros(len(q), dtype=bool)
     for wrist in WRISTS:

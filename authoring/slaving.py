@@ -51,8 +51,8 @@ from typing import Any
 import numpy as np
 
 from authoring import ik
-from authoring.easing import _smoothstep
-from authoring.slave_leaps import _gaussian, ease_leaps
+from authoring.signal_shaping import gaussian, smoothstep
+from authoring.slave_leaps import ease_leaps
 from peabody.fk import FigureKinematics
 from peabody.model import Figure
 from server.motion.binding import bind_channelset, protofiletype
@@ -366,7 +366,7 @@ class MasterSlavePair:
         start = self.copy_pose(q, mk.segment_globals(q, loc))
         offset = pose - start
         half = int(np.ceil(3.0 * SMOOTH_SIGMA_FRAMES))
-        smooth = _gaussian(offset, SMOOTH_SIGMA_FRAMES)
+        smooth = gaussian(offset, SMOOTH_SIGMA_FRAMES)
         frames = np.arange(n)
         taper = np.minimum(1.0, np.minimum(frames, frames[::-1]) / half)[:, None]
         ends = np.where(frames[:, None] < n / 2, offset[:1], offset[-1:])  # each half leans on its end
@@ -377,7 +377,7 @@ class MasterSlavePair:
             for j in g.joints or ():
                 arms[sk.dof_slices[j]] = True
         base = start.copy()
-        base[:, arms] += taper * (_gaussian(start[:, arms], COPY_SIGMA_FRAMES) - start[:, arms])
+        base[:, arms] += taper * (gaussian(start[:, arms], COPY_SIGMA_FRAMES) - start[:, arms])
         blend = sk.clamp(base + ends + taper * (smooth - ends))
         out = self._track(blend, goals, slave_loc, pose[0], pose[-1])
         if release_frame is None:  # (a death's arms are flung, then blended into the copied angles)
@@ -407,7 +407,7 @@ class MasterSlavePair:
         u = np.arange(1, m)[:, None] / m
         eased = poses.copy()  # (the first frame stays slave_pose's exactly)
         offset = poses[:m] - copied[:m]
-        eased[1:m] = copied[1:m] + offset[0] + _smoothstep(u) * (offset[1:] - offset[0])
+        eased[1:m] = copied[1:m] + offset[0] + smoothstep(u) * (offset[1:] - offset[0])
         return self._palms_back(eased, np.arange(1, min(m, release)), goals, roots)
 
     def _palms_back(

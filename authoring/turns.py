@@ -45,13 +45,13 @@ from authoring.gait import (
     FPS,
     BaseStance,
     Footfall,
-    _frame,
-    _keyed,
     carried_rifle_goals,
     foot_track,
 )
+from authoring.ground_frames import turned_about
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER
+from authoring.signal_shaping import keyed
 from authoring.transitions import ClipFrames, carrier_globals, carry_of
 from peabody import values as V
 from peabody.fk import FigureKinematics
@@ -107,16 +107,8 @@ def ground_move(x: float, z: float, yaw: float) -> np.ndarray:
     return m
 
 
-def _about(pivot: tuple[float, float], yaw: np.ndarray) -> np.ndarray:
-    """``(n, 4, 4)`` turns by ``yaw`` degrees about the vertical through ground point ``pivot``."""
-    c = np.array([pivot[0], 0.0, pivot[1]])
-    r = _frame(np.zeros((len(yaw), 3)), yaw, np.zeros(len(yaw)))
-    r[:, :3, 3] = c - r[:, :3, :3] @ c
-    return r
-
-
 def _turn_move(pivot: tuple[float, float], yaw: float) -> tuple[float, float, float]:
-    m = _about(pivot, np.array([yaw]))[0]
+    m = turned_about(pivot, np.array([yaw]))[0]
     return float(m[0, 3]), float(m[2, 3]), float(yaw)
 
 
@@ -266,24 +258,24 @@ def record_plan(
     t = np.arange(n) / FPS
     q0, root0, rifle0 = key.poses[SOLDIER], key.locations[SOLDIER], key.locations[RIFLE]
     turn = body_turn(plan, t)
-    body = _about(plan.pivot, turn)
-    body[:, 0, 3] += _keyed(plan.x_keys, t)
-    body[:, 1, 3] += _keyed(plan.rise_keys, t)
+    body = turned_about(plan.pivot, turn)
+    body[:, 0, 3] += keyed(plan.x_keys, t)
+    body[:, 1, 3] += keyed(plan.rise_keys, t)
     rest = np.broadcast_to(q0, (n, kin.ndof)).copy()
     heels: dict[str, np.ndarray] = {}
     pelvis = (body @ np.array([root0[0, 3], 0.0, root0[2, 3], 1.0]))[:, [0, 2]]
     lean = np.zeros((n, 2))
     for s in SIDES:
         local, toes = foot_track(base.ball[s], plan.falls[s], t, STEP_LIFT)
-        carried = _about(plan.pivot, _keyed(plan.foot_turn.get(s, [(0.0, 0.0)]), t))
-        carried[:, 0, 3] += _keyed(plan.foot_shift.get(s, [(0.0, 0.0)]), t)
+        carried = turned_about(plan.pivot, keyed(plan.foot_turn.get(s, [(0.0, 0.0)]), t))
+        carried[:, 0, 3] += keyed(plan.foot_shift.get(s, [(0.0, 0.0)]), t)
         heels[s] = carried @ local
         rest[:, kin.dof_slices[f"{s}_toes"]] = toes[:, None]
         if s in plan.lean_keys:  # towards the middle of the foot (where it is when it carries weight)
             mx, mz = 0.5 * (np.array(base.heel[s]) + base.ball_at(s))
             mid = np.array([mx, 0.0, mz, 1.0])
             foot = (carried @ mid)[:, [0, 2]]
-            lean += _keyed(plan.lean_keys[s], t)[:, None] * (foot - pelvis)
+            lean += keyed(plan.lean_keys[s], t)[:, None] * (foot - pelvis)
     body[:, 0, 3] += lean[:, 0]
     body[:, 2, 3] += lean[:, 1]
     roots = body @ root0
@@ -292,7 +284,7 @@ def record_plan(
     sight = kin.site_globals(q0, root0)[kin.site_names.index("bottom_head.sight"), :3, :3]
     goals = carried_rifle_goals(rkin, rifles, heels)
     ahead = np.clip(body_turn(plan, t + LOOK_AHEAD) - turn, -LOOK_MAX, LOOK_MAX)
-    look = _about(plan.pivot, turn + ahead)[:, :3, :3] @ sight
+    look = turned_about(plan.pivot, turn + ahead)[:, :3, :3] @ sight
     goals.append(ik.Goal("bottom_head.sight", None, look, 1.0, 1, ("neck", "head")))
     poses, report = ik.solve(kin, rest, goals, roots, iterations=60, rest_pose=rest, rest_gain=0.1)
     _REPORTS[plan.name] = report

@@ -16,7 +16,7 @@ from authoring.body_parts import contact_slides
 from authoring.build import BuildContext, slaving_context
 from authoring.quality import CONTACT_HEIGHT_CM, check_clip
 from authoring.quality_frames import FigureSet
-from authoring.slave_contacts import _played
+from authoring.slave_body import played_body
 from authoring.slave_feet import part_points
 from server.motion.binding import bind_channelset
 from server.motion.cache import load_channelset
@@ -33,7 +33,7 @@ def figs() -> FigureSet:
 
 def _hand_slide(cs, figs: FigureSet) -> float:
     """The left hand's largest slide over a run of frames on the ground (the check's measure)."""
-    q, loc, stype = _played(cs, figs)
+    q, loc, stype = played_body(cs, figs)
     slide, _ = contact_slides(part_points(q, loc, figs, stype, ("left_hand",)), CONTACT_HEIGHT_CM)
     return float(slide.max())
 
@@ -63,7 +63,7 @@ def test_a_hand_rolling_on_the_ground_is_held_where_it_comes_to_rest(figs: Figur
 
 def _palms(cs, figs: FigureSet) -> np.ndarray:
     """Both palm centres ``(n, 2, 3)`` (cm)."""
-    q, loc, stype = _played(cs, figs)
+    q, loc, stype = played_body(cs, figs)
     kin = figs.kin[stype]
     at = [kin.site_names.index(f"{side}_palm.palmcenter") for side in ("left", "right")]
     return kin.site_globals(q, loc)[..., :3, 3][:, at]

@@ -22,9 +22,9 @@ from authoring.build import (
 )
 from authoring.quality import check_clip
 from authoring.quality_frames import FigureSet, play
+from authoring.slave_body import part_heights
 from authoring.slave_contacts import (
     _planted_tracks,
-    part_heights,
     rest_slave_forearms,
     rest_slave_knees,
     tilt_onto_knees,

@@ -86,9 +86,9 @@ def test_crawl2prstow_slave_left_foot_stays_planted() -> None:
 
 def _foot_turn_deg(cs: Channelset, figs: FigureSet, side: str) -> np.ndarray:
     """Per frame the orientation ``(n, 3, 3)`` of ``side``'s foot segment in the world, as played."""
-    from authoring.slave_contacts import _played
+    from authoring.slave_body import played_body
 
-    q, loc, ptype = _played(cs, figs)
+    q, loc, ptype = played_body(cs, figs)
     kin = figs.kin[ptype]
     return kin.segment_globals(q, loc)[:, kin.segment_names.index(f"{side}_foot"), :3, :3]
 
@@ -193,7 +193,7 @@ def test_a_dying_prone_slaves_foot_is_held_by_its_knee_and_ankle() -> None:
     before, moves these toe-down feet 5.5 cm sideways, which the knee and ankle could take back only by
     turning the ankle ~40 degrees, past its range; it passed on the clip of the soldier propped on his
     elbows because the foot rose above the contact height as it swung.)"""
-    from authoring.slave_contacts import _played
+    from authoring.slave_body import played_body
     from authoring.slave_feet import part_points
     from server.motion.binding import bind_channelset
 
@@ -203,7 +203,7 @@ def test_a_dying_prone_slaves_foot_is_held_by_its_knee_and_ankle() -> None:
     slave = load_channelset(CHANNELSETS / "prfire2dead_low.chset.env", use_cache=False)
     window = slice(23, 48)
     for cs in (master, slave):  # the case's premise: both feet on the ground over the swing
-        q, loc, ptype = _played(cs, figs)
+        q, loc, ptype = played_body(cs, figs)
         low = part_points(q, loc, figs, ptype, ("right_foot",))[window, :, 1].min(axis=1)
         assert (low <= 1.25).all(), (cs.name, low.max())
     bf = bind_channelset(slave, [ctx.di]).figures[0]

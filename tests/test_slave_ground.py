@@ -16,7 +16,8 @@ from authoring.body_parts import SegmentHulls
 from authoring.build import BuildContext, lift_off_ground, slave_pair
 from authoring.postures import lowest_point
 from authoring.quality_frames import FigureSet, play
-from authoring.slave_contacts import part_heights, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
+from authoring.slave_body import part_heights
+from authoring.slave_contacts import rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_ground import clear_rifle, rest_limbs
 from authoring.slaving import reslave_channelset
 from server.motion.cache import load_channelset

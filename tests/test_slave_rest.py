@@ -15,8 +15,7 @@ pytest.importorskip("scipy")
 from authoring import slave_rest
 from authoring.build import BuildContext
 from authoring.quality_frames import FigureSet
-from authoring.slave_contacts import _played
-from authoring.slave_ground import _write
+from authoring.slave_body import played_body, write_pose
 from authoring.slave_rest import AIM_CM, EASE_FRAMES, PARAMS, TRUNK_PARTS, _ease, _lows, _Rest, search
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
@@ -30,7 +29,7 @@ def dead():
     figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
     master = load_channelset(CHANNELSETS / "prfire2dead.chset.env", use_cache=False)
     slave = load_channelset(CHANNELSETS / "prfire2dead_low.chset.env", use_cache=False)
-    q, loc, stype = _played(slave, figs)
+    q, loc, stype = played_body(slave, figs)
     waist = figs.kin[stype].dof_slices["waist"].start + 1
 
     def bent(deg: float) -> tuple[np.ndarray, np.ndarray, float]:
@@ -61,7 +60,7 @@ def test_the_search_brings_a_floating_trunk_down_and_keeps_the_rest_where_it_lie
 def test_the_change_eases_in_over_the_last_half_second(dead, monkeypatch) -> None:
     figs, master, before, stype, _, _ = dead
     figs_kin = figs.kin[stype]
-    last = _played(before, figs)[0][-1]
+    last = played_body(before, figs)[0][-1]
     free = next(  # a spine or leg DOF 4 degrees from its limits (a prone waist lies at its own)
         k
         for k, (joint, i) in enumerate(PARAMS)
@@ -74,8 +73,8 @@ def test_the_change_eases_in_over_the_last_half_second(dead, monkeypatch) -> Non
     monkeypatch.setattr(slave_rest, "search", lambda rest: found)
     slave = copy.deepcopy(before)
     slave_rest.rest_slave_trunk(master, slave, figs)
-    q0, loc0, _ = _played(before, figs)
-    q1, loc1, _ = _played(slave, figs)
+    q0, loc0, _ = played_body(before, figs)
+    q1, loc1, _ = played_body(slave, figs)
     changed = np.flatnonzero(np.abs(q1 - q0).max(axis=1) > 1e-6)
     assert changed[0] >= before.release_frame and changed[-1] == len(q0) - 1
     change = q1 - q0  # in full (at rest) over the last frames
@@ -133,14 +132,14 @@ def test_a_hovering_foot_whose_knee_is_up_is_held_through_the_turn(monkeypatch) 
     found = np.zeros(len(PARAMS))
     found[0] = 3.5  # the root pitch the search finds for it (3.4-3.6 degrees)
     monkeypatch.setattr(slave_rest, "search", lambda rest: found)
-    q0, loc0, stype = _played(before, figs)
+    q0, loc0, stype = played_body(before, figs)
     kin = figs.kin[stype]
     heel = kin.site_names.index("right_foot.heel")
     moved = {}
     for held in (False, True):
         slave = copy.deepcopy(before)
         slave_rest.rest_slave_trunk(master, slave, figs, feet_held=held)
-        q1, loc1, _ = _played(slave, figs)
+        q1, loc1, _ = played_body(slave, figs)
         a, b = (kin.site_globals(q, loc)[:, heel, :3, 3] for q, loc in ((q0, loc0), (q1, loc1)))
         moved[held] = np.linalg.norm(b - a, axis=1).max()
     w = _ease(len(q0), len(q0) - 1 - EASE_FRAMES - slave_rest.END_HOLD_FRAMES)
@@ -218,7 +217,7 @@ def test_an_arm_landing_as_the_trunk_settles_is_held_where_it_lands(monkeypatch)
     figs = FigureSet({"soldier.fig": ctx.soldier, "DI.fig": ctx.di, "AK_47.fig": ctx.rifle})
     master = load_channelset(CHANNELSETS / "prfire2dead.chset.env", use_cache=False)
     before = load_channelset(CHANNELSETS / "prfire2dead_low.chset.env", use_cache=False)
-    q0, loc0, stype = _played(before, figs)
+    q0, loc0, stype = played_body(before, figs)
     kin = figs.kin[stype]
     n, end = len(q0), len(q0) - 1 - slave_rest.END_HOLD_FRAMES
     w = _ease(n, n - 1 - EASE_FRAMES - slave_rest.END_HOLD_FRAMES)
@@ -227,7 +226,7 @@ def test_an_arm_landing_as_the_trunk_settles_is_held_where_it_lands(monkeypatch)
     landed_q = _landing(figs, stype, q0, loc0, land, end)
     low = _arm_low(figs, stype, landed_q, loc0)
     assert (low[eased[0] : land - 8] > 2.0).all() and (low[land:] <= 0.6).all()  # up, then down
-    _write(before, figs, stype, landed_q, np.tile(np.eye(4), (n, 1, 1)))
+    write_pose(before, figs, stype, landed_q, np.tile(np.eye(4), (n, 1, 1)))
     found = np.zeros(len(PARAMS))
     found[0] = 0.5  # a small root pitch: what is held is the arm's own sweep
     monkeypatch.setattr(slave_rest, "search", lambda rest: found)
@@ -236,7 +235,7 @@ def test_an_arm_landing_as_the_trunk_settles_is_held_where_it_lands(monkeypatch)
     for held in (False, True):
         slave = copy.deepcopy(before)
         slave_rest.rest_slave_trunk(master, slave, figs, arms_held=held)
-        q1, loc1, _ = _played(slave, figs)
+        q1, loc1, _ = played_body(slave, figs)
         if not held:  # the landing the hold starts from (found on the trunk-rested poses)
             landed = slave_rest._landed_arms(q1, loc1, figs, stype, eased)
             assert set(landed) == {"right"} and eased[0] < landed["right"] <= land
