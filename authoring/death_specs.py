@@ -286,14 +286,20 @@ KSTOW_ARMS_STILL = 0.5
 STSTOW_DROP = (20.0, 0.0, -90.0)
 # ststow2dead's let-go rifle falls again among his finished body from the last frame the hands hold it
 # (DeathSpec.rifle_refall), flung to his left and a little ahead (pelvis frame): it landed 1.47 m from his
-# hands (STSTOW_DROP, 2.6 m/s), now 0.74. Unflung it lay under his right thigh, squeezed 4.3 cm into the
-# ground; flung (-20..-80, 0, 0..-30) N it landed 0.69-1.37 m off, some through his legs (each was measured)
-STSTOW_REFALL = (-1, (-60.0, 0.0, -20.0))
+# hands (STSTOW_DROP, 2.6 m/s), now 0.87. Unflung it lay under his right thigh, squeezed 4.3 cm into the
+# ground; flung (-20..-80, 0, 0..-30) N it landed 0.69-1.37 m off, some through his legs (each was measured).
+# Flung (-60, 0, -20) it lay on its top, sights down, 0.48 s before rolling onto its side (the check's
+# rifle_top_down_s); a little more ahead, (-55..-65, 0, -28..-32), it lands on its side (each was measured)
+STSTOW_REFALL = (-1, (-60.0, 0.0, -30.0))
 # frames after the release: kfire2dead's let-go rifle falls again among his body from here
 # (DeathSpec.rifle_refall): recorded, it landed butt first by his left boot and stood there, leaning on
 # nothing, 0.4 s (rifle_upright_s; 1 s seen from the front); from 6-8 frames it tips and lies flat by 1 s
 # (from 2: it stood again on his legs at 1.3 s; from 30-40: it leaned on his boot until 1.2 s)
 KFIRE_REFALL = 8
+# N (the start pelvis' frame): kfire2dead's refallen rifle is flung ahead (DeathSpec.rifle_refall_toss):
+# unflung it lay on its top, sights down, by his boot for 0.58 s before rolling onto its side (the check's
+# rifle_top_down_s); flung 15-25 N ahead it lands on its side and lies there (each was measured)
+KFIRE_REFALL_TOSS = (0.0, 0.0, -20.0)
 # frames after the release: kstow2dead's let-go rifle falls again among his body from the last held frame
 # (DeathSpec.rifle_refall), unflung: as recorded it flew 1.97 m, thrown clear as he pitched over; now it
 # slides from his hands, lands by his front boot by 0.67 s and lies there, 0.23 m from where he let it go.
@@ -385,6 +391,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_fall_early_s=KFIRE_ARMS_EARLY,
         slave_arms_down=True,
         rifle_refall=KFIRE_REFALL,
+        rifle_refall_toss=KFIRE_REFALL_TOSS,
         slave_let_go_in_place=True,
     ),
     replace(

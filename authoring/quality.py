@@ -54,6 +54,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
 * ``rifle_throw_m`` and ``rifle_upright_s`` (:mod:`~authoring.quality_rifle_drop`): a clip whose rifle is let
   go, how far it ends from where the hands let it go (a rifle thrown, not dropped), and how long it stands
   on an end on the ground.
+* ``rifle_top_down_s`` and ``rifle_rest_roll_deg`` (:mod:`~authoring.quality_rifle_roll`): a clip whose
+  rifle is let go, how long it lies on the ground on its top (sights down, magazine up), and (ending in DEAD)
+  its roll about the barrel at the end: a dropped rifle lies on a side or its magazine.
 * a clip that ends in DEAD (:mod:`~authoring.quality_rest`): ``rest_rise_cm``, how far a limb rises once
   the body is down, ``limb_rest_lag_s``, how long after the body the last limb part comes to rest,
   ``propped_s`` (limit 1 s: the prone deaths 0.92-1.00, every other death <= 0.25), how
@@ -110,6 +113,7 @@ from authoring.quality_rest import (
 )
 from authoring.quality_rifle_drop import THROW_LIMIT_M, UPRIGHT_LIMIT_S, rifle_drop
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, dropped_rifle_rest
+from authoring.quality_rifle_roll import ROLL_LIMIT_DEG, TOP_DOWN_LIMIT_S, rifle_lie
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
 
@@ -149,6 +153,8 @@ THRESHOLDS: dict[str, float] = {
     "rifle_rest_overhang_cm": OVERHANG_LIMIT_CM,  # ... and the rifle he let go lies on something
     "rifle_throw_m": THROW_LIMIT_M,  # a rifle let go falls by him, not thrown (quality_rifle_drop)
     "rifle_upright_s": UPRIGHT_LIMIT_S,  # ... and does not stand on an end on the ground
+    "rifle_top_down_s": TOP_DOWN_LIMIT_S,  # ... nor lie on its top (quality_rifle_roll)
+    "rifle_rest_roll_deg": ROLL_LIMIT_DEG,  # ... and comes to rest on a side or its magazine, not its top
     "limb_through_cm": LIMB_THROUGH_LIMIT_CM,  # no limb passes through another part of the body
     **POSTURE_LIMITS,
 }
@@ -422,6 +428,7 @@ def check_clip(
         ends = [rs[:, rnames[k], :3, 3] for k in ("butt", "muzzle") if k in rnames]
         axis = ends[1] - ends[0] if len(ends) == 2 else None  # the rifle's long axis, butt to muzzle
         out.update(rifle_drop(cs, rpts + shift[:, None, :], centre, axis, hulls, segg))
+        out.update(rifle_lie(cs, ends_dead, rg[:, 0, :3, :3], rpts + shift[:, None, :]))
         depth, frame, seg = figures.hulls(body_type).depth(rpts, segg)
         out["rifle_in_body_cm"] = round(depth, 3)
         out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None
