@@ -19,6 +19,7 @@ from peabody.loader import read_figure
 from server.motion.cache import load_channelset
 from server.motion.channelset import Channelset
 from server.motion.recording import Recording, recording_to_channelset
+from tests.known_faults import known_faults
 
 ROOT = Path(__file__).resolve().parents[1]
 N = 61  # frames: 1 s at 60 fps
@@ -128,15 +129,7 @@ def shipped_support(clip: str) -> dict[str, Any]:
     return support(clip, heights, frames.channelset.fps)
 
 
-@pytest.mark.parametrize(
-    "clip",
-    [
-        pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=KNOWN_UNSUPPORTED[c]))
-        if c in KNOWN_UNSUPPORTED
-        else c
-        for c in CLIPS
-    ],
-)
+@pytest.mark.parametrize("clip", known_faults(CLIPS, KNOWN_UNSUPPORTED))
 def test_the_shipped_clips_keep_him_on_the_ground(clip: str) -> None:
     """Something of the body is on the ground (a run: but for its flight). The stand-to-kneel drops keep the
     left foot down until the right knee lands; kneeling to standing plays them backwards."""
