@@ -46,6 +46,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``LYING_PELVIS_CM`` of it): the same height while he lies so. A man shot while prone has no fall to fling
   his legs: his lower legs lifting 13-17 cm as his chest came down (branch proneheels-s13) read as a kick
   and passed ``feet_up_cm``; every clip on main that starts lying keeps them within 4 cm.
+* ``unsupported_s`` and, for a run clip, ``flight_s`` (:mod:`~authoring.quality_support`): the longest
+  time nothing of the body is within 2 cm of the ground (a hover, a hop; a run's flight is judged apart).
 * ``limb_through_cm`` (:mod:`~authoring.quality_limbs`): how deep a limb goes through another part of the
   body (an arm into a leg, a forearm into the trunk, a shin into the other leg).
 * ``rifle_rest_overhang_cm`` (:mod:`~authoring.quality_rifle_rest`): a clip that ends in DEAD with its rifle
@@ -114,6 +116,7 @@ from authoring.quality_rest import (
 from authoring.quality_rifle_drop import THROW_LIMIT_M, UPRIGHT_LIMIT_S, rifle_drop
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, dropped_rifle_rest
 from authoring.quality_rifle_roll import ROLL_LIMIT_DEG, TOP_DOWN_LIMIT_S, rifle_lie
+from authoring.quality_support import FLIGHT_LIMIT_S, UNSUPPORTED_LIMIT_S, support
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
 
@@ -156,6 +159,8 @@ THRESHOLDS: dict[str, float] = {
     "rifle_top_down_s": TOP_DOWN_LIMIT_S,  # ... nor lie on its top (quality_rifle_roll)
     "rifle_rest_roll_deg": ROLL_LIMIT_DEG,  # ... and comes to rest on a side or its magazine, not its top
     "limb_through_cm": LIMB_THROUGH_LIMIT_CM,  # no limb passes through another part of the body
+    "unsupported_s": UNSUPPORTED_LIMIT_S,  # something of the body is on the ground (quality_support) ...
+    "flight_s": FLIGHT_LIMIT_S,  # ... but for a run's flight
     **POSTURE_LIMITS,
 }
 POSTURE_KEYS = tuple(POSTURE_LIMITS)
@@ -375,6 +380,7 @@ def check_clip(
     foot_down = [(pts[:, parts == f, 1] <= CONTACT_HEIGHT_CM).any(axis=1) for f in FOOT_PARTS]
     out["stance_phases"] = sum(1 for row in foot_down for a, b in true_runs(row) if b - a >= 3)
     ys = pts[..., 1]
+    out.update(support(name, ys, cs.fps))
     out.update(feet_up(kin, segg, ys, parts))
     # no limb passes through another part of the body (quality_limbs)
     limb_hulls = figures.limb_hulls(body_type)

@@ -33,6 +33,7 @@ from authoring.quality_rest import (
     trunk_rise,
 )
 from server.motion.cache import load_channelset
+from tests.known_faults import known_faults
 from ttes.paths import FIGURES
 
 CHANNELSETS = Path(__file__).resolve().parents[1] / "channelsets"
@@ -236,15 +237,7 @@ KNOWN_RISES: dict[str, str] = {
 }
 
 
-@pytest.mark.parametrize(
-    "clip",
-    [
-        pytest.param(c, marks=pytest.mark.xfail(strict=True, reason=KNOWN_RISES[c]))
-        if c in KNOWN_RISES
-        else c
-        for c in TURNED
-    ],
-)
+@pytest.mark.parametrize("clip", known_faults(TURNED, KNOWN_RISES))
 def test_a_dead_body_s_legs_do_not_rise_after_it_has_landed(clip: str, figures: FigureSet) -> None:
     cf = play(load_channelset(CHANNELSETS / f"{clip}.chset.env"), figures)
     row = rest_rise(cf, figures)

@@ -1,0 +1,140 @@
+"""Nothing of the body hovers (``unsupported_s``; a run's flight is ``flight_s``): constructed clips, and the
+shipped clips the check judges (issue 14, session 19's audit: crawl2prstow floated half a second, every
+stand-to-kneel drop hopped onto the knee)."""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from authoring import ik
+from authoring.quality import THRESHOLDS, FigureSet, check_clip, summarise
+from authoring.quality_frames import play
+from authoring.quality_support import FLIGHT_LIMIT_S, SUPPORT_CM, UNSUPPORTED_LIMIT_S, support
+from peabody.loader import read_figure
+from server.motion.cache import load_channelset
+from server.motion.channelset import Channelset
+from server.motion.recording import Recording, recording_to_channelset
+from tests.known_faults import known_faults
+
+ROOT = Path(__file__).resolve().parents[1]
+N = 61  # frames: 1 s at 60 fps
+
+
+@pytest.fixture(scope="module")
+def figset() -> FigureSet:
+    return FigureSet(
+        {"DI.fig": read_figure(ROOT / "figures/DI.fig"), "AK_47.fig": read_figure(ROOT / "figures/AK_47.fig")}
+    )
+
+
+def _lifted(figset: FigureSet, name: str, frames: slice, up: float) -> Channelset:
+    """DI standing with the rifle held in front (``N`` frames), the whole body and rifle ``up`` cm higher over
+    ``frames``."""
+    kin = figset.kin["DI.fig"]
+    di, ak = figset.figures["DI.fig"], figset.figures["AK_47.fig"]
+    loc = np.eye(4)
+    loc[:3, 3] = (12.0, 110.0, -55.0)
+    goals = [ik.Goal("right_palm.palmcenter", (loc @ ak.site("rifle.grip").location)[:3, 3])]
+    q, _ = ik.solve(kin, kin.neutral_pose(), goals, iterations=50)
+    rec = Recording([di, ak])
+    for k in range(N):
+        lift = np.eye(4)
+        lift[1, 3] = up if k in range(N)[frames] else 0.0
+        rec.append("DI", q, "lower_torso.proximal", lift @ di.location)
+        rec.append("AK_47", np.zeros(0), "rifle.proximal", lift @ loc)
+    return recording_to_channelset(name, rec, 0, N - 1, 60.0)
+
+
+def test_a_hovering_body_fails_and_a_hop_of_two_frames_does_not(figset: FigureSet) -> None:
+    row = check_clip(_lifted(figset, "stand.chset", slice(10, 40), 6.0), figset)  # 0.5 s, 6 cm up
+    assert row["unsupported_s"] == pytest.approx(0.5) and row["unsupported_where"] == "frames 10-39"
+    assert "unsupported_s" in row["failures"] and "flight_s" not in row
+    row = check_clip(_lifted(figset, "stand.chset", slice(10, 12), 6.0), figset)
+    assert row["unsupported_s"] == pytest.approx(2 / 60, abs=1e-4) and "unsupported_s" not in row["failures"]
+    row = check_clip(_lifted(figset, "stand.chset", slice(10, 40), 0.5 * SUPPORT_CM), figset)  # feet 1 cm up
+    assert row["unsupported_s"] == 0.0 and row["unsupported_where"] is None
+
+
+def test_a_runs_flight_is_judged_as_flight(figset: FigureSet) -> None:
+    row = check_clip(_lifted(figset, "run_cycle_l.chset", slice(13, 21), 6.0), figset)  # 0.13 s airborne
+    assert row["flight_s"] == pytest.approx(8 / 60, abs=1e-4) and "unsupported_s" not in row
+    assert "flight_s" not in row["failures"]
+    row = check_clip(_lifted(figset, "walk2run.chset", slice(10, 40), 6.0), figset)  # a run that floats
+    assert "flight_s" in row["failures"]
+    table = summarise([row], [])["thresholds"]
+    assert table["flight_s"]["limit"] == FLIGHT_LIMIT_S and not table["flight_s"]["pass"]
+    assert table["flight_s"]["where"] == "walk2run.chset (frames 10-39)"
+    assert THRESHOLDS["unsupported_s"] == UNSUPPORTED_LIMIT_S
+
+
+def test_a_body_lowered_onto_the_ground_is_supported_until_the_belly_takes_the_weight() -> None:
+    """Going prone: the pelvis comes down from 28 cm while a knee stays on the ground; the knee may rise only
+    once the belly is down. Lifted before that, the body hangs in the air."""
+    t = np.arange(N) / 60.0
+    pelvis = 1.0 + 27.0 * np.clip((0.8 - t) / 0.6, 0.0, 1.0)  # down at 0.8 s
+    for knee_up, passes in ((0.85, True), (0.4, False)):
+        knee = np.where(t < knee_up, 0.5, 8.0)
+        row = support("crawl2prstow.chset", np.stack([pelvis, knee], axis=1), 60.0)
+        assert (row["unsupported_s"] <= UNSUPPORTED_LIMIT_S) is passes, row
+
+
+# Clips the check fails (before: every stand-to-kneel drop too, 0.08-0.13 s, mended in
+# authoring/transitions.py's _kneel_down). Each names what a person sees; strict: a mended clip leaves it.
+_PRONE = "going prone from the crawl he floats: pelvis held ~28 cm up, both knees and both forearms lifted"
+_KNEE = "shot kneeling, he hangs above his knee: knee and front foot ~4 cm up, pelvis 43 cm"
+_FALL = "falling from the knee he lifts clear of the ground"
+_MID = "mid-fall (pelvis 37 cm up) both feet and knees leave the ground, 1.00-1.10 s: right shin 2.7 cm up"
+_REAR = "dead, he rears up off the ground, 1.15-1.28 s: pelvis 5 -> 6.4 cm, head and belly 3.5 cm up"
+_LIFT = "dead, the body lifts 2.5 cm off the ground for 0.1 s (2.68-2.77 s) after it has landed"
+KNOWN_UNSUPPORTED: dict[str, str] = {
+    "crawl2prstow": f"{_PRONE}, 0.43-0.97 s (0.55 s), lowest point up to 5.3 cm",
+    "crawl2prstow_low": f"{_PRONE}, 0.43-0.93 s (0.52 s), lowest point up to 6.0 cm",
+    "crawl2prstow_m16_low": f"{_PRONE}, 0.43-0.93 s (0.52 s), lowest point up to 6.0 cm",
+    "kfire2dead": f"{_FALL}, 0.70-0.87 s: left foot and knee 2.5-3 cm up",
+    "kfire2dead_low": f"{_KNEE}, 0.53-0.87 s (master: 0.18 s at 2.5 cm)",
+    "kfire2dead_m16_low": f"{_KNEE}, 0.53-0.87 s (master: 0.18 s at 2.5 cm)",
+    "kstow2dead": f"{_FALL}, 0.67-0.80 s: left foot and knee 2.7-3 cm up",
+    "kstow2dead_low": f"{_FALL}, 0.55-0.82 s: knee and toes 4.6 cm up (master: 0.15 s at 2.7 cm)",
+    "kstow2dead_m16_low": f"{_FALL}, 0.55-0.82 s: knee and toes 4.6 cm up (master: 0.15 s at 2.7 cm)",
+    "ststow2dead_low": _MID,
+    "ststow2dead_m16_low": _MID,
+    "prfire2dead_low": _REAR,
+    "prfire2dead_m16_low": _REAR,
+    "crawl2dead_low": _LIFT,
+    "crawl2dead_m16_low": _LIFT,
+}
+CLIPS = sorted(p.name.split(".")[0] for p in (ROOT / "channelsets").glob("*.chset.env"))
+
+
+@cache
+def _figures() -> FigureSet:
+    return FigureSet(
+        {n: read_figure(ROOT / "figures" / n) for n in ("soldier.fig", "DI.fig", "AK_47.fig", "M16.fig")}
+    )
+
+
+def shipped_support(clip: str) -> dict[str, Any]:
+    """``unsupported_s`` (or ``flight_s``) of a shipped channelset, from its body mesh nodes' heights."""
+    figures = _figures()
+    frames = play(load_channelset(ROOT / "channelsets" / f"{clip}.chset.env"), figures)
+    body = max(frames.poses, key=lambda k: figures.kin[k].ndof)
+    nodes, segs = figures.nodes(body)
+    segg = figures.kin[body].segment_globals(frames.poses[body], frames.locations[body])
+    heights = np.einsum("fkj,kj->fk", segg[:, segs, 1, :], nodes)
+    return support(clip, heights, frames.channelset.fps)
+
+
+@pytest.mark.parametrize("clip", known_faults(CLIPS, KNOWN_UNSUPPORTED))
+def test_the_shipped_clips_keep_him_on_the_ground(clip: str) -> None:
+    """Something of the body is on the ground (a run: but for its flight). The stand-to-kneel drops keep the
+    left foot down until the right knee lands; kneeling to standing plays them backwards."""
+    row = shipped_support(clip)
+    if "flight_s" in row:
+        assert row["flight_s"] <= FLIGHT_LIMIT_S, row
+    else:
+        assert row["unsupported_s"] <= UNSUPPORTED_LIMIT_S, row
