@@ -37,11 +37,13 @@ from authoring.passive_range import passive_figure, past_live_limits
 from authoring.quality_frames import FigureSet, play
 from authoring.slave_arms import pin_slave_arms
 from authoring.slave_arms_down import keep_slave_arms_down
+from authoring.slave_arms_lift import lift_slave_arms
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
 from authoring.slave_rest import rest_slave_trunk
 from authoring.slave_slack import slack_slave_feet
+from authoring.slave_spine import lay_slave_spine
 from authoring.slave_wrists import ease_slave_wrists
 from authoring.slaving import MasterSlavePair
 from authoring.transitions import ClipFrames, clip_to_channelset
@@ -257,6 +259,7 @@ def slave_one(
         heels_cm=spec.slave_heels_cm if spec else None,
     )
     rests: tuple[Callable[[Channelset, Channelset, FigureSet], object], ...] = (
+        *((lay_slave_spine,) if spec and spec.slave_spine_laid else ()),  # first: its belly out by the spine
         rest_slave_knees,
         rest_slave_forearms,
         tilt_onto_knees,
@@ -271,8 +274,11 @@ def slave_one(
         rests += (slack_slave_feet,)
     if crawl_turn.eases_slave_wrists(chset.name.removesuffix(".chset")):  # a wrist flicking at its limits
         rests += (ease_slave_wrists,)
+    laid = bool(spec and spec.slave_spine_laid)  # its trunk laid by its spine: nothing to lift it for ...
     for rest in rests:
         rest(chset, out, ctx.figure_set)
+        if laid:  # ... nor its arms, out of the ground by the arm (slave_arms_lift)
+            lift_slave_arms(out, ctx.figure_set)
         lift_off_ground(out, ctx.di)
     clear_rifle(out, ctx.figure_set)  # a dropped rifle: out of the body and the ground it now lies on
     return out

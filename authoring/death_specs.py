@@ -179,6 +179,10 @@ class DeathSpec:
     # a prone death's arms, lifted while his chest comes down (authoring.dead_prone), are held low in the air:
     # crawl2dead's left hand rose 5.0 -> 9.4 cm in mid-air after his head was down (rest_rise 4.42 -> 1.06)
     arms_air_low: bool = False
+    # the slaves' spine is bent so their belly and chest lie as high as the master's from the release on,
+    # before the other rests (authoring.slave_spine), their arms lifted by the arm, their trunk not turned
+    # by rest_limbs: prfire2dead's DI belly lay 2.8 cm in the ground, the body lifted out (trunk_rise 5.8)
+    slave_spine_laid: bool = False
 
 
 def _prone(
@@ -413,6 +417,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_settle_arms_still=True,
         slave_rifle_slid_past=PRFIRE_RIFLE_SLID_PAST,
         arms_lifted_level=True,
+        slave_spine_laid=True,
+        slave_arms_pinned=True,  # its right hand, down sooner (not lifted with the body), slid 3.26 cm
     ),
     CRAWL_DEATH,
 )

@@ -119,6 +119,8 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     planted = _plants(unsolved, m_at, m_h, release)
     if _settles_down(master):  # from his trunk down, however his root still turns (slave_settle_down)
         settle = w * _fade_in(n, _trunk_down(m_h), DOWN_SETTLE_FRAMES)
+    if _spine_laid(master):  # its trunk lies as his already (slave_spine): nothing to turn it onto
+        settle = np.zeros(n)
     # once the master lies still, the trunk (the body rolls or pitches onto what the master rests on); the
     # limbs throughout; last, the limbs again unplanted: a part that its plant kept in the ground comes out
     stages = [(TRUNK, ROOT_DOFS, True), (limbs, (), True)] * LIMB_PASSES + [(limbs, (), False)]
@@ -164,6 +166,12 @@ def _settles_arms_still(master: Channelset) -> bool:
     (``DeathSpec.slave_settle_arms_still``)."""
     spec = spec_of(master.name)
     return spec is not None and spec.slave_settle_arms_still
+
+
+def _spine_laid(master: Channelset) -> bool:
+    """Whether this death's slave trunk was laid by its spine (``DeathSpec.slave_spine_laid``)."""
+    spec = spec_of(master.name)
+    return spec is not None and spec.slave_spine_laid
 
 
 def _arms_still(at: dict[str, np.ndarray], fps: float) -> int:

@@ -230,8 +230,6 @@ def figures() -> FigureSet:
 KNOWN_RISES: dict[str, str] = {
     "stfire2dead": "face down, both shins kick up ~45 deg (1.17-1.42 s) and sink by 1.6 s: his knees held "
     "bent by their damping as the thighs swing flat (branch stfirelegs-s18)",
-    "prfire2dead_low": "the whole-body lift out of the ground after each slaving stage: a knee up 4.5 cm",
-    "prfire2dead_m16_low": "the whole-body lift out of the ground after each slaving stage: a knee up 4.5 cm",
     "prstow2dead_low": "the whole-body lift out of the ground after each slaving stage: a knee up 4.3 cm",
     "prstow2dead_m16_low": "the whole-body lift out of the ground after each slaving stage: a knee up 4.0 cm",
 }

@@ -69,9 +69,10 @@ def _palms(cs, figs: FigureSet) -> np.ndarray:
     return kin.site_globals(q, loc)[..., :3, 3][:, at]
 
 
-def test_only_stfire2dead_slaves_pin_their_arms(figs: FigureSet) -> None:
-    """The hold is stfire2dead's own setting: another death's slave is left as it is."""
-    assert {d.name for d in deaths.DEATHS if d.slave_arms_pinned} == {"stfire2dead"}
+def test_only_stfire2dead_and_prfire2dead_slaves_pin_their_arms(figs: FigureSet) -> None:
+    """The hold is stfire2dead's and prfire2dead's own setting (the latter's DI right hand, laid by the spine
+    and no longer lifted with the body, slid 3.26 cm): another death's slave is left as it is."""
+    assert {d.name for d in deaths.DEATHS if d.slave_arms_pinned} == {"stfire2dead", "prfire2dead"}
     master = load_channelset(CHANNELSETS / "ststow2dead.chset.env", use_cache=False)
     slave = load_channelset(CHANNELSETS / "ststow2dead_low.chset.env", use_cache=False)
     before = slave.joint_data.copy()

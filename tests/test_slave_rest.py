@@ -238,7 +238,9 @@ def test_an_arm_landing_as_the_trunk_settles_is_held_where_it_lands(monkeypatch)
         q1, loc1, _ = played_body(slave, figs)
         if not held:  # the landing the hold starts from (found on the trunk-rested poses)
             landed = slave_rest._landed_arms(q1, loc1, figs, stype, eased)
-            assert set(landed) == {"right"} and eased[0] < landed["right"] <= land
+            # (the left too since prfire2dead's slave lies by its spine, slave_spine: its left arm on the
+            # ground from the start of the ease, not lifted 3 cm with the body)
+            assert "right" in landed and eased[0] < landed["right"] <= land
             f = landed["right"]
         elbows = kin.site_globals(q1[f:], loc1[f:])[:, elbow, :3, 3][:, [0, 2]]
         swept[held] = np.linalg.norm(elbows - elbows[0], axis=1).max()
