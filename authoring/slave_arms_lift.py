@@ -22,9 +22,10 @@ import numpy as np
 from authoring import ik
 from authoring.postures import segment_heights
 from authoring.quality_frames import FigureSet
-from authoring.rifle_swap import _smooth_above
-from authoring.slave_contacts import SIDES, _played, _smooth
-from authoring.slave_ground import _goals, _write
+from authoring.signal_shaping import hann_smooth, smooth_above
+from authoring.slave_body import played_body, write_pose
+from authoring.slave_contacts import SIDES, SMOOTH_FRAMES
+from authoring.slave_ground import part_goals
 from server.motion.channelset import Channelset
 
 # an arm part (as rest_limbs names it) -> the psurf segment whose lowest point says how far it is in
@@ -42,7 +43,7 @@ def lift_slave_arms(slave: Channelset, figures: FigureSet) -> np.ndarray:
     """Turn the slave's arms (``slave``'s joint channels, in place) so that after the release no arm part
     is in the ground; returns the largest lift asked per frame (cm)."""
     release = getattr(slave, "release_frame", None)
-    q, loc, stype = _played(slave, figures)
+    q, loc, stype = played_body(slave, figures)
     n = len(q)
     total = np.zeros(n)
     if release is None or release >= n - 1:
@@ -53,7 +54,7 @@ def lift_slave_arms(slave: Channelset, figures: FigureSet) -> np.ndarray:
     for _ in range(PASSES):
         low = segment_heights(kin, pose, loc)
         need = {
-            part: np.where(after, _smooth_above(np.maximum(0.0, MARGIN_CM - low[seg]), SIGMA_FRAMES), 0.0)
+            part: np.where(after, smooth_above(np.maximum(0.0, MARGIN_CM - low[seg]), SIGMA_FRAMES), 0.0)
             for part, seg in ARM_SEGMENTS.items()
             if seg in low
         }
@@ -64,7 +65,7 @@ def lift_slave_arms(slave: Channelset, figures: FigureSet) -> np.ndarray:
         total = np.maximum(total, worst)
         goals = [  # by the clavicle and shoulder alone
             replace(g, joints=tuple(g.joints or ())[:2])
-            for g in _goals(kin, pose[sub], loc[sub], need, sub, {})
+            for g in part_goals(kin, pose[sub], loc[sub], need, sub, {})
         ]
         solved, _ = ik.solve(
             kin, pose[sub], goals, loc[sub], iterations=40,
@@ -72,7 +73,7 @@ def lift_slave_arms(slave: Channelset, figures: FigureSet) -> np.ndarray:
         )  # fmt: skip
         change = np.zeros_like(pose)
         change[sub] = solved - pose[sub]
-        pose = pose + _smooth(change) * after[:, None]
+        pose = pose + hann_smooth(change, SMOOTH_FRAMES) * after[:, None]
     if total.any():
-        _write(slave, figures, stype, pose, np.tile(np.eye(4), (n, 1, 1)))
+        write_pose(slave, figures, stype, pose, np.tile(np.eye(4), (n, 1, 1)))
     return total

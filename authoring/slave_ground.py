@@ -82,7 +82,7 @@ def _need(master: np.ndarray, slave: np.ndarray) -> np.ndarray:
     return on * rest + (1.0 - on) * clear
 
 
-def _fade_in(n: int, release: int, frames: int = FADE_FRAMES) -> np.ndarray:
+def fade_in(n: int, release: int, frames: int = FADE_FRAMES) -> np.ndarray:
     """Per frame, 0 until ``release``, easing to 1 over ``frames``."""
     u = np.clip((np.arange(n) - release) / frames, 0.0, 1.0)
     return u * u * (3.0 - 2.0 * u)
@@ -99,7 +99,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     kin = figures.kin[stype]
     parts = tuple(PART_SITES)
     m_h = heights_of(mq, mloc, figures, mtype, parts)
-    w = _fade_in(n, release)
+    w = fade_in(n, release)
     q_loc, loc = loc, loc.copy()
     pose = q.copy()
     frames = w > 0
@@ -114,11 +114,11 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     in_place = _rolling_in_place(mq, mloc, figures, mtype) if _rolls(master) else None
     settle = w * _settled(mloc, float(master.fps), in_place)
     if _settles_arms_still(master):
-        settle = np.minimum(settle, _fade_in(n, _arms_still(m_at, float(master.fps)), SETTLE_FRAMES))
+        settle = np.minimum(settle, fade_in(n, _arms_still(m_at, float(master.fps)), SETTLE_FRAMES))
     arm_out, rigid = _arm_out(master), _trunk_rigid(master)
     planted = _plants(unsolved, m_at, m_h, release)
     if _settles_down(master):  # from his trunk down, however his root still turns (slave_settle_down)
-        settle = w * _fade_in(n, _trunk_down(m_h), DOWN_SETTLE_FRAMES)
+        settle = w * fade_in(n, _trunk_down(m_h), DOWN_SETTLE_FRAMES)
     if _spine_laid(master):  # its trunk lies as his already (slave_spine): nothing to turn it onto
         settle = np.zeros(n)
     # once the master lies still, the trunk (the body rolls or pitches onto what the master rests on); the
@@ -132,7 +132,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
             plants = _plants(unsolved, m_at, m_h, release, (_positions(kin, pose, loc), settle > 0))
         scale = settle if group is TRUNK else 1.0
         need = {p: v * scale for p, v in needs(pose, loc).items() if p in group}
-        goals = _goals(kin, pose[sub], loc[sub], need, sub, plants, arm_out, rigid)
+        goals = part_goals(kin, pose[sub], loc[sub], need, sub, plants, arm_out, rigid)
         solved, report = ik.solve(
             kin, pose[sub], goals, loc[sub], iterations=40,
             damping=2.0, rest_pose=pose[sub], rest_gain=0.05, tolerance=0.05, max_dof_step=0.05,
@@ -212,7 +212,7 @@ def _settled(root: np.ndarray, fps: float, in_place: np.ndarray | None = None) -
         speed[in_place] = 0.0
     moving = np.flatnonzero(speed > SETTLE_SPEED_CM_S)
     still = int(moving[-1]) + 1 if len(moving) else 0
-    return _fade_in(len(root), still, SETTLE_FRAMES)
+    return fade_in(len(root), still, SETTLE_FRAMES)
 
 
 def _settles_down(master: Channelset) -> bool:
@@ -296,7 +296,7 @@ def _positions(kin: FigureKinematics, pose: np.ndarray, loc: np.ndarray) -> dict
     return {s: g[:, kin.site_names.index(s)] for s in wanted if s in kin.site_names}
 
 
-def _goals(
+def part_goals(
     kin: FigureKinematics,
     pose: np.ndarray,
     loc: np.ndarray,
@@ -363,7 +363,7 @@ def clear_rifle(slave: Channelset, figures: FigureSet) -> np.ndarray:
     hulls = figures.hulls(stype)
     total = np.zeros(n)
     after = np.arange(n) >= release
-    fade = _fade_in(n, release - 1, RIFLE_FADE_FRAMES)  # nothing while the hands hold it
+    fade = fade_in(n, release - 1, RIFLE_FADE_FRAMES)  # nothing while the hands hold it
     for chan in slave.figure_channels():
         if chan.protofiletype == stype:
             continue

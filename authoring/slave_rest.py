@@ -87,7 +87,7 @@ PARAMS = (
 )
 
 
-def _lows(figures: FigureSet, ptype: str, poses: np.ndarray, locs: np.ndarray) -> dict[str, np.ndarray]:
+def part_lows(figures: FigureSet, ptype: str, poses: np.ndarray, locs: np.ndarray) -> dict[str, np.ndarray]:
     """Per body part (and ``chest|belly``, ``lowest``), its lowest mesh node's height ``(m,)`` (cm)."""
     kin = figures.kin[ptype]
     nodes, segs = figures.nodes(ptype)
@@ -129,7 +129,7 @@ class _Rest:
         kin = figures.kin[ptype]
         self.dofs = [[kin.dof_slices[j].start + k for j in _joints(kin, name)] for name, k in PARAMS]
         self.lower, self.upper = kin.lower, kin.upper
-        lows = _lows(figures, ptype, pose[None], loc[None])
+        lows = part_lows(figures, ptype, pose[None], loc[None])
         trunk = min(TRUNK_PARTS, key=lambda p: float(lows[p][0]))
         y = self._node_heights(pose[None], loc[None])[0]
         parts = figures.node_parts(ptype)
@@ -170,13 +170,13 @@ class _Rest:
                 poses[:, dof] = np.clip(turned, self.lower[dof], self.upper[dof])
             if not dofs:
                 locs = to @ _turn(PARAMS[k][1], x[:, k]) @ back @ locs
-        drop = -_lows(self.figures, self.ptype, poses, locs)["lowest"]
+        drop = -part_lows(self.figures, self.ptype, poses, locs)["lowest"]
         return poses, locs, drop
 
     def lows_on_ground(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Per part, its height ``(m,)`` in each candidate lowered onto the ground."""
         poses, locs, drop = self.placed(x)
-        out = {p: v + drop for p, v in _lows(self.figures, self.ptype, poses, locs).items()}
+        out = {p: v + drop for p, v in part_lows(self.figures, self.ptype, poses, locs).items()}
         if self.slides:  # ... and, as ``PART:slide``, how far a resting part's sites move along the ground
             at = self.figures.kin[self.ptype].site_globals(poses, locs)[..., :3, 3]
             for p, idx in self.slides.items():
@@ -309,7 +309,7 @@ def _landed_arms(
     (``ARM_DOWN_CM``) within ``frames`` and lies there to the last of them: the frame it lands (the
     earlier of the two). A part already lying there at the first of ``frames`` is left to the search's
     bounds."""
-    lows = _lows(figures, ptype, q[frames], loc[frames])
+    lows = part_lows(figures, ptype, q[frames], loc[frames])
     out: dict[str, int] = {}
     for part in ARM_PARTS:
         down = lows.get(part, np.full(len(frames), np.inf)) <= ARM_DOWN_CM

@@ -19,10 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from authoring.quality_frames import FigureSet
-from authoring.slave_contacts import _played
-from authoring.slave_ground import _fade_in, _write
-from authoring.slave_leaps import _gaussian
-from authoring.slave_rest import _lows
+from authoring.signal_shaping import gaussian
+from authoring.slave_body import played_body, write_pose
+from authoring.slave_ground import fade_in
+from authoring.slave_rest import part_lows
 from server.motion.channelset import Channelset
 
 SPINE_DOFS = (("waist", 1), ("belly", 1), ("upper_spine", 1))  # the spine's pitch (R(-x): flexion)
@@ -42,16 +42,16 @@ def lay_slave_spine(master: Channelset, slave: Channelset, figures: FigureSet) -
     """Bend the slave's spine so its belly and chest lie as high as the master's once he lets go (``slave``'s
     joint channels, in place); returns the bend per frame ``(n, 3)`` (degrees, :data:`SPINE_DOFS`)."""
     release = getattr(slave, "release_frame", None)
-    (mq, mloc, mtype), (q, loc, stype) = _played(master, figures), _played(slave, figures)
+    (mq, mloc, mtype), (q, loc, stype) = played_body(master, figures), played_body(slave, figures)
     n = len(q)
     if release is None or release >= n - 1:
         return np.zeros((n, len(SPINE_DOFS)))
     kin = figures.kin[stype]
     cols = np.array([kin.dof_slices[j].start + k for j, k in SPINE_DOFS])
-    m_h = _lows(figures, mtype, mq, mloc)
-    w = _fade_in(n, release, FADE_FRAMES)
+    m_h = part_lows(figures, mtype, mq, mloc)
+    w = fade_in(n, release, FADE_FRAMES)
     rows = np.arange(max(0, release - FADE_FRAMES), n)  # solved in full a little before: smoothed, then faded
-    s_h = _lows(figures, stype, q[rows], loc[rows])
+    s_h = part_lows(figures, stype, q[rows], loc[rows])
     want = {p: np.maximum(s_h[p], np.maximum(m_h[p][rows], 0.0)) for p in LAID_PARTS}
     base = np.degrees(q[rows][:, cols])  # a joint already past a limit is not clamped: only bent no further
     lo = np.minimum(np.degrees(kin.lower[cols]), base)
@@ -63,7 +63,7 @@ def lay_slave_spine(master: Channelset, slave: Channelset, figures: FigureSet) -
     def heights(x: np.ndarray) -> np.ndarray:
         pose = q[rows].copy()
         pose[:, cols] = np.radians(np.clip(base + x, lo, hi))
-        h = _lows(figures, stype, pose, loc[rows])
+        h = part_lows(figures, stype, pose, loc[rows])
         at = kin.site_globals(pose, loc[rows])[:, sites, 1, 3] - kept
         return np.concatenate([np.stack([h[p] - want[p] for p in LAID_PARTS], axis=1), at], axis=1)
 
@@ -78,8 +78,8 @@ def lay_slave_spine(master: Channelset, slave: Channelset, figures: FigureSet) -
         x = np.clip(base + x + np.clip(step, -MAX_STEP_DEG, MAX_STEP_DEG), lo, hi) - base
     bend = np.zeros((n, len(cols)))
     bend[rows] = x
-    bend = _gaussian(bend, SMOOTH_SIGMA_FRAMES) * w[:, None]
+    bend = gaussian(bend, SMOOTH_SIGMA_FRAMES) * w[:, None]
     pose = q.copy()
     pose[:, cols] += np.radians(bend)
-    _write(slave, figures, stype, pose, np.tile(np.eye(4), (n, 1, 1)))
+    write_pose(slave, figures, stype, pose, np.tile(np.eye(4), (n, 1, 1)))
     return bend

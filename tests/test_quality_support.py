@@ -89,7 +89,6 @@ _PRONE = "going prone from the crawl he floats: pelvis held ~28 cm up, both knee
 _KNEE = "shot kneeling, he hangs above his knee: knee and front foot ~4 cm up, pelvis 43 cm"
 _FALL = "falling from the knee he lifts clear of the ground"
 _MID = "mid-fall (pelvis 37 cm up) both feet and knees leave the ground, 1.00-1.10 s: right shin 2.7 cm up"
-_REAR = "dead, he rears up off the ground, 1.15-1.28 s: pelvis 5 -> 6.4 cm, head and belly 3.5 cm up"
 _LIFT = "dead, the body lifts 2.5 cm off the ground for 0.1 s (2.68-2.77 s) after it has landed"
 KNOWN_UNSUPPORTED: dict[str, str] = {
     "crawl2prstow": f"{_PRONE}, 0.43-0.97 s (0.55 s), lowest point up to 5.3 cm",
@@ -103,8 +102,6 @@ KNOWN_UNSUPPORTED: dict[str, str] = {
     "kstow2dead_m16_low": f"{_FALL}, 0.55-0.82 s: knee and toes 4.6 cm up (master: 0.15 s at 2.7 cm)",
     "ststow2dead_low": _MID,
     "ststow2dead_m16_low": _MID,
-    "prfire2dead_low": _REAR,
-    "prfire2dead_m16_low": _REAR,
     "crawl2dead_low": _LIFT,
     "crawl2dead_m16_low": _LIFT,
 }

@@ -14,8 +14,7 @@ pytest.importorskip("scipy")
 from authoring.build import BuildContext, slaving_context
 from authoring.postures import segment_heights
 from authoring.slave_arms_lift import lift_slave_arms
-from authoring.slave_contacts import _played
-from authoring.slave_ground import _write
+from authoring.slave_body import played_body, write_pose
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
 
@@ -26,7 +25,7 @@ def test_an_arm_pushed_into_the_ground_comes_out_by_the_arm_alone() -> None:
     master = load_channelset(CHANNELSETS / "prfire2dead.chset.env", use_cache=False)
     figs = slaving_context(BuildContext.load(FIGURES), "prfire2dead", master).figure_set  # as the build
     slave = load_channelset(CHANNELSETS / "prfire2dead_low.chset.env", use_cache=False)
-    q, loc, stype = _played(slave, figs)
+    q, loc, stype = played_body(slave, figs)
     kin = figs.kin[stype]
     arm = ("right_upper_arm", "right_lower_arm", "right_palm")
 
@@ -42,11 +41,11 @@ def test_an_arm_pushed_into_the_ground_comes_out_by_the_arm_alone() -> None:
         if lowest(pushed, loc)[72] < -2.0:
             break
         pushed[:, cl] += np.radians(2.0) * u
-    _write(slave, figs, stype, pushed, np.tile(np.eye(4), (n, 1, 1)))
+    write_pose(slave, figs, stype, pushed, np.tile(np.eye(4), (n, 1, 1)))
     before = copy.deepcopy(slave)
     assert lowest(pushed, loc)[72] < -2.0
     lifted = lift_slave_arms(slave, figs)
-    q1, loc1, _ = _played(slave, figs)
+    q1, loc1, _ = played_body(slave, figs)
     assert lifted.max() >= 2.0
     assert lowest(q1, loc1)[slave.release_frame :].min() >= -0.3  # out (the body lifts the rest)
     np.testing.assert_array_equal(slave.fig_pos, before.fig_pos)  # the body where it was

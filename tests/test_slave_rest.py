@@ -16,7 +16,7 @@ from authoring import slave_rest
 from authoring.build import BuildContext
 from authoring.quality_frames import FigureSet
 from authoring.slave_body import played_body, write_pose
-from authoring.slave_rest import AIM_CM, EASE_FRAMES, PARAMS, TRUNK_PARTS, _ease, _lows, _Rest, search
+from authoring.slave_rest import AIM_CM, EASE_FRAMES, PARAMS, TRUNK_PARTS, _ease, _Rest, part_lows, search
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
 
@@ -35,7 +35,7 @@ def dead():
     def bent(deg: float) -> tuple[np.ndarray, np.ndarray, float]:
         pose, at = q[-1].copy(), loc[-1].copy()
         pose[waist] += np.radians(deg)
-        lows = _lows(figs, stype, pose[None], at[None])
+        lows = part_lows(figs, stype, pose[None], at[None])
         at[1, 3] -= lows["lowest"][0]
         return pose, at, max(lows[p][0] - lows["lowest"][0] for p in TRUNK_PARTS)
 
@@ -176,7 +176,7 @@ def test_kfire2dead_slaves_rest_their_pelvis_on_the_ground(suffix: str) -> None:
 
 def _arm_low(figs: FigureSet, stype: str, q: np.ndarray, loc: np.ndarray) -> np.ndarray:
     """Per frame the height of the right arm's lowest node (upper arm or forearm)."""
-    lows = _lows(figs, stype, q, loc)
+    lows = part_lows(figs, stype, q, loc)
     return np.minimum(lows["right_upper_arm"], lows["right_forearm"])
 
 

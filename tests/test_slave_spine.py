@@ -12,9 +12,8 @@ import pytest
 pytest.importorskip("scipy")
 
 from authoring.build import BuildContext, slaving_context
-from authoring.slave_contacts import _played
-from authoring.slave_ground import _write
-from authoring.slave_rest import _lows
+from authoring.slave_body import played_body, write_pose
+from authoring.slave_rest import part_lows
 from authoring.slave_spine import FADE_FRAMES, SPINE_DOFS, lay_slave_spine
 from server.motion.cache import load_channelset
 from ttes.paths import CHANNELSETS, FIGURES
@@ -26,23 +25,23 @@ def test_a_belly_pushed_into_the_ground_comes_out_by_the_spine_alone() -> None:
     master = load_channelset(CHANNELSETS / "prfire2dead.chset.env", use_cache=False)
     figs = slaving_context(BuildContext.load(FIGURES), "prfire2dead", master).figure_set  # as the build
     slave = load_channelset(CHANNELSETS / "prfire2dead_low.chset.env", use_cache=False)
-    q, loc, stype = _played(slave, figs)
+    q, loc, stype = played_body(slave, figs)
     kin = figs.kin[stype]
     assert slave.release_frame is not None
     n, release = len(q), slave.release_frame
     sunk = np.tile(np.eye(4), (n, 1, 1))
     after = np.clip((np.arange(n) - release + 6) / 6.0, 0.0, 1.0)
-    sunk[:, 1, 3] = -(_lows(figs, stype, q, loc)["belly"] + 2.0) * after
-    _write(slave, figs, stype, q, sunk)
-    q, loc, _ = _played(slave, figs)
+    sunk[:, 1, 3] = -(part_lows(figs, stype, q, loc)["belly"] + 2.0) * after
+    write_pose(slave, figs, stype, q, sunk)
+    q, loc, _ = played_body(slave, figs)
     before = copy.deepcopy(slave)
-    assert _lows(figs, stype, q, loc)["belly"][release:].max() < -1.9
+    assert part_lows(figs, stype, q, loc)["belly"][release:].max() < -1.9
 
     bend = lay_slave_spine(master, slave, figs)
-    q1, loc1, _ = _played(slave, figs)
-    mq, mloc, mtype = _played(master, figs)
-    m_belly = np.maximum(_lows(figs, mtype, mq, mloc)["belly"], 0.0)
-    belly = _lows(figs, stype, q1, loc1)["belly"]
+    q1, loc1, _ = played_body(slave, figs)
+    mq, mloc, mtype = played_body(master, figs)
+    m_belly = np.maximum(part_lows(figs, mtype, mq, mloc)["belly"], 0.0)
+    belly = part_lows(figs, stype, q1, loc1)["belly"]
     assert bend.max() > 2.0
     full = release + FADE_FRAMES  # faded in from the release (the hands hold the rifle until then) ...
     assert (np.diff(belly[release:full]) > 0).all()
