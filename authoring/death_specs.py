@@ -357,6 +357,11 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_arms_pinned=True,
         feet_held=True,
         legs_land_from=STFIRE_LEGS_LAND,
+        # its legs laid sooner, the DI/M16 slaves' left foot slid 3.68 cm after it landed; held where it lands
+        # (slave_feet_landed), their right knee rose 3.01 cm as the trunk rested; its trunk laid by the root
+        # alone too (as ststow2dead's), 0.35 cm
+        slave_trunk_rigid=True,
+        slave_feet_landed=True,
     ),
     DeathSpec(
         "kstow2dead",
