@@ -23,13 +23,11 @@ def kick() -> tuple[FigureSet, ClipFrames]:
     """soldier.fig standing, his feet on the ground, then his right knee bending: the shin kicks up."""
     figs = FigureSet({"body": read_figure(FIGURES / "soldier.fig")})
     kin = figs.kin["body"]
-    pose = np.zeros(kin.ndof)
-    root = np.eye(4)
-    root[1, 3] -= float(lowest_point(kin, pose, root))
-    poses = np.repeat(pose[None], N, axis=0)
+    poses = np.zeros((N, kin.ndof))
     bend = np.clip((np.arange(N) - KICK_FROM) / (KICK_TO - KICK_FROM), 0.0, 1.0)
     poses[:, kin.dof_slices["right_knee"].start] = np.radians(KICK_DEG) * bend
-    roots = np.repeat(root[None], N, axis=0)
+    roots = np.tile(np.eye(4), (N, 1, 1))
+    roots[:, 1, 3] = -float(lowest_point(kin, poses[0], np.eye(4)))  # standing on the ground
     return figs, ClipFrames(poses, roots, roots.copy(), 60.0)
 
 
@@ -68,3 +66,27 @@ def test_a_foot_never_on_the_ground_or_never_off_it_is_left_alone() -> None:
     assert lift_off(np.full(5, 10.0)) is None
     assert lift_off(np.zeros(5)) is None
     assert lift_off(np.array([0.0, 0.5, 3.0, 0.0])) == 1
+
+
+def test_the_shipped_standing_fire_death_lays_its_shins_down_with_him() -> None:
+    """Issue 14: stfire2dead lay face down with both shins up ~45 degrees from 1.17 to 1.5 s, the feet 11-19
+    cm off the ground, his legs lifted to turn out after he was down (the knee rose 6.9 cm): now, once his
+    trunk is down, no leg point rises and his feet are on the ground within 0.25 s."""
+    from authoring.quality_frames import play
+    from authoring.quality_rest import RISE_LIMIT_CM, _heights, down_frame, pelvis_turn, rise_after
+    from server.motion.cache import load_channelset
+    from ttes.paths import CHANNELSETS
+
+    figs = FigureSet.from_dir(FIGURES, ["soldier.fig", "AK_47.fig"])
+    cf = play(load_channelset(CHANNELSETS / "stfire2dead.chset.env", use_cache=False), figs)
+    h = _heights(cf, figs)
+    down = down_frame(h, turned=pelvis_turn(cf, figs))
+    assert down is not None
+    legs = {
+        k: v
+        for k, v in h.items()
+        if k.startswith(("left_foot", "right_foot", "left_lower_leg", "right_lower_leg"))
+    }
+    assert rise_after(legs, down)[0] <= RISE_LIMIT_CM
+    soon = down + round(0.25 * cf.channelset.fps)
+    assert max(h["left_foot"][soon], h["right_foot"][soon]) <= CONTACT_HEIGHT_CM
