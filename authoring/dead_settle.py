@@ -56,11 +56,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from authoring import dead_arms
+from authoring import dead_arms, quality_rest
 from authoring.body_parts import SegmentHulls
 from authoring.quality import CONTACT_HEIGHT_CM
 from authoring.quality_frames import FigureSet
-from authoring.quality_rest import DOWN_CM, NEAR_CM, TORSO_PARTS, rest_frame
+from authoring.quality_rest import DOWN_CM, NEAR_CM, TORSO_PARTS, pelvis_turns, rest_frame
 from authoring.transitions import ClipFrames
 from peabody.model import Figure
 from server.soldier.blend import smoothstep
@@ -547,21 +547,35 @@ def settle(
     return _legs_land(figs, out, down_frame(figs, frames), len(frames.poses) - 1) if legs else out
 
 
-def _legs_land(figs: FigureSet, frames: ClipFrames, k0: int, end: int) -> ClipFrames:
+def legs_landed_from(frames: ClipFrames, soldier: Figure, rifle: Figure, k0: int, end: int) -> ClipFrames:
+    """``frames`` (settled without its legs, the physics ending at frame ``end``) with the legs laid as he
+    lands (:func:`_legs_land`) from frame ``k0``, as his knees land (``DeathSpec.legs_land_from``), not
+    once he is down: a leg may rise only until the check judges the rest from (:func:`checked_down`).
+    Laid once he was down, stfire2dead's lifted legs rose 6.9 cm at the knee after it (rest_rise_cm)."""
+    figs = FigureSet({"body": soldier, "rifle": rifle})
+    if not _face_down(figs.kin["body"], frames.poses[end], frames.roots[end]):
+        return frames  # (as settle: only a body on its front)
+    return _legs_land(figs, frames, k0, end, checked_down(figs, frames) - LANDED_MARGIN)
+
+
+def _legs_land(
+    figs: FigureSet, frames: ClipFrames, k0: int, end: int, landed: int | None = None
+) -> ClipFrames:
     """The legs of a face-down body lifted, turned out and laid down (:func:`_legs_path`, found on the
     physics' last frame ``end``) as it lands: from the frame it is down (``k0``, :func:`down_frame`) in
     :data:`LEGS_LAND_SECONDS`, the physics' own leg motion kept under it (appended after the physics, the
     feet moved 1.2 s after the trunk lay still: stfire2dead's ``limb_rest_lag_s`` 1.18). Until
     :data:`LANDED_MARGIN` frames before the check's rest frame (the pelvis, chest and head down within
-    :data:`~authoring.quality_rest.DOWN_CM`) a leg may rise (:func:`authoring.dead_legs.leg_settle`'s
-    ``free``)."""
+    :data:`~authoring.quality_rest.DOWN_CM`; or until ``landed``) a leg may rise
+    (:func:`authoring.dead_legs.leg_settle`'s ``free``)."""
     last = frames.poses[end]
     body = _Body(figs, last, frames.roots[end], frames.rifles[end])
     leg_dofs = _leg_dofs(body.kin)
     n = round(LEGS_LAND_SECONDS * frames.fps)
     k0 = min(k0, len(frames.poses) - 1 - n)  # laid by the end of the clip
     s = np.arange(1, n + 1) / n
-    landed = _rest_frame(figs, frames, DOWN_CM) - LANDED_MARGIN  # the check's rest_rise_cm judges from then
+    if landed is None:  # (the check's rest_rise_cm once judged from then)
+        landed = _rest_frame(figs, frames, DOWN_CM) - LANDED_MARGIN
     path = _legs_path(body, s, smoothstep(s), min(1.0, max(0.0, (landed - k0) / n)))
     k = len(frames.poses) - k0 - 1
     shift = np.vstack([path, np.repeat(path[-1:], max(0, k - n), axis=0)])[:k] - last[leg_dofs]
@@ -577,15 +591,29 @@ def down_frame(figs: FigureSet, frames: ClipFrames) -> int:
     return _rest_frame(figs, frames, NEAR_CM)
 
 
-def _rest_frame(figs: FigureSet, frames: ClipFrames, near: float) -> int:
-    """The first frame from which the pelvis, chest or belly and head stay within ``near`` (cm) of where
-    they finally lie (:func:`authoring.quality_rest.rest_frame`); the last frame if they never do."""
+def checked_down(figs: FigureSet, frames: ClipFrames) -> int:
+    """The frame the check's ``rest_rise_cm`` judges from (:func:`authoring.quality_rest.down_frame`: the
+    pelvis, chest or belly and head first within :data:`~authoring.quality_rest.NEAR_CM` of where they
+    finally lie, the pelvis no longer rolling); the last frame if they never are."""
+    k = quality_rest.down_frame(
+        _torso_heights(figs, frames), turned=pelvis_turns(figs.kin["body"], frames.poses, frames.roots)
+    )
+    return len(frames.poses) - 1 if k is None else k
+
+
+def _torso_heights(figs: FigureSet, frames: ClipFrames) -> dict[str, np.ndarray]:
+    """Per frame, the heights (cm) of the pelvis', chest's, belly's and head's lowest nodes."""
     kin = figs.kin["body"]
     nodes, segs = figs.nodes("body")
     parts = figs.node_parts("body")
     y = np.einsum("nkj,kj->nk", kin.segment_globals(frames.poses, frames.roots)[:, segs, 1, :], nodes)
-    heights = {p: y[:, parts == p].min(axis=1) for p in TORSO_PARTS if (parts == p).any()}
-    k = rest_frame(heights, near)
+    return {p: y[:, parts == p].min(axis=1) for p in TORSO_PARTS if (parts == p).any()}
+
+
+def _rest_frame(figs: FigureSet, frames: ClipFrames, near: float) -> int:
+    """The first frame from which the pelvis, chest or belly and head stay within ``near`` (cm) of where
+    they finally lie (:func:`authoring.quality_rest.rest_frame`); the last frame if they never do."""
+    k = rest_frame(_torso_heights(figs, frames), near)
     return len(frames.poses) - 1 if k is None else k
 
 

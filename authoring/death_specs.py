@@ -183,6 +183,14 @@ class DeathSpec:
     # before the other rests (authoring.slave_spine), their arms lifted by the arm, their trunk not turned
     # by rest_limbs: prfire2dead's DI belly lay 2.8 cm in the ground, the body lifted out (trunk_rise 5.8)
     slave_spine_laid: bool = False
+    # a standing death's feet stay where they leave the ground as his knees land, the knee, ankle and toes
+    # opening under the falling thigh (authoring.feet_held): stfire2dead's shins swung up 45 degrees, feet
+    # 17 cm off the ground, as his thighs came down flat
+    feet_held: bool = False
+    # s: the settle lays the legs from this time of the fall, as the knees land, a leg rising only until the
+    # check's rest window opens (dead_settle.legs_landed_from); None: from the frame he is down. Laid then,
+    # stfire2dead's legs lifted to turn out rose 6.9 cm at the knee after he was down (rest_rise_cm)
+    legs_land_from: float | None = None
 
 
 def _prone(
@@ -239,6 +247,10 @@ LEGS_ROLL = 0.4
 # s: stfire2dead's (heels 15.4 -> 15.1 cm and its knee's rebound 3.9 -> 2.5 cm; over 0.6 s its left foot slid
 # 6.3 cm as he landed, over 0.7 s the heel lay at 19.4: the fall is chaotic in these, each was measured)
 STFIRE_LEGS_ROLL = 0.8
+# s: stfire2dead's legs are laid from this time of his fall (DeathSpec.legs_land_from), his knees coming down
+# (they land at 1.07-1.17 s, the trunk is down at 1.22): laid once he was down, the legs lifted to turn
+# out rose 6.9 cm at the knee (rest_rise_cm); from 0.87-1.05 s their lift is done by then (rise 1.4-2.4 cm)
+STFIRE_LEGS_LAND = 1.0
 # s: prfire2dead leaves its posture from rest over this (DeathSpec.start_ease): its first frames 0.46 ->
 # 0.14 m/s, its DI/M16 slaves' 0.57/0.67 -> 0.32/0.29 (over 0.25 s with its ankles rolled, branch
 # proneheels14-wip: 0.08, slaves 0.27/0.23, but the DI slave's belly slid 8.1 cm). prstow2dead is not
@@ -353,6 +365,13 @@ DEATHS: tuple[DeathSpec, ...] = (
         legs_roll=STFIRE_LEGS_ROLL,
         toss_to=STFIRE_TOSS,
         slave_arms_pinned=True,
+        feet_held=True,
+        legs_land_from=STFIRE_LEGS_LAND,
+        # its legs laid sooner, the DI/M16 slaves' left foot slid 3.68 cm after it landed; held where it lands
+        # (slave_feet_landed), their right knee rose 3.01 cm as the trunk rested; its trunk laid by the root
+        # alone too (as ststow2dead's), 0.35 cm
+        slave_trunk_rigid=True,
+        slave_feet_landed=True,
     ),
     DeathSpec(
         "kstow2dead",

@@ -48,11 +48,14 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    its frames are moved so that each part's worst slide is least instead (:attr:`DeathSpec.plant_worst`,
    :func:`authoring.planted.plant_least_worst`);
 6. **a face-down body goes limp**: a short kinematic settle drops the head and turns the legs out (heels
-   lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`) — a prone death
-   left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms laid anew
-   and lifted clear of the ground while they move (:mod:`authoring.dead_prone`; the prone deaths from
-   :attr:`DeathSpec.lowered_at` on, as the hit ends, the physics' tail left out but the rifle's: after it,
-   they lay propped on their elbows, head up, until 3.4 and 1.7 s), a crawler's pelvis and
+   lower) where that slides nothing on the ground (:func:`authoring.dead_settle.settle`; stfire2dead's
+   feet are first held where they leave the ground as his knees land, :attr:`DeathSpec.feet_held`,
+   :mod:`authoring.feet_held`: his shins swung up 45 degrees, and his legs laid from then on,
+   :attr:`DeathSpec.legs_land_from`: laid once he was down, lifted to turn out, they rose 6.9 cm) — a
+   prone death left propped on its elbows (:attr:`DeathSpec.propped`) brings its chest down too, the arms
+   laid anew and lifted clear of the ground while they move (:mod:`authoring.dead_prone`; the prone deaths
+   from :attr:`DeathSpec.lowered_at` on, as the hit ends, the physics' tail left out but the rifle's: after
+   it, they lay propped on their elbows, head up, until 3.4 and 1.7 s), a crawler's pelvis and
    belly first, turned down about his thighs (:attr:`DeathSpec.sunk`, :mod:`authoring.dead_crawl`), and its
    feet go slack, the ankles pointing into their passive range before the legs roll, the shins on the
    ground (:attr:`DeathSpec.slack_feet`: he lay on his toes, heels 16-21 cm up); a
@@ -127,6 +130,7 @@ from authoring.death_specs import DeathSpec as DeathSpec
 from authoring.death_specs import dead_node as dead_node
 from authoring.death_specs import death_specs as death_specs
 from authoring.easing import eased_in
+from authoring.feet_held import held_feet
 from authoring.knee_hold import hold_knees
 from authoring.leg_lift import eased_legs, lifted
 from authoring.motion import KeyPosture
@@ -531,6 +535,8 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
         return dead_settle.settle(pin_frames(frames, soldier), soldier, rifle, spec.arms_fall, arms=arms)
     if spec.sunk:  # a crawler's trunk comes down about his thighs first
         frames = dead_crawl.sunk(FigureSet({"body": soldier, "rifle": rifle}), frames)
+    if spec.feet_held:  # the shins do not kick up as the knees land
+        frames = held_feet(frames, soldier)
     if spec.slack_feet:  # settled and pinned past a live soldier's ankles (authoring.passive_range)
         soldier = passive_figure(soldier)
     settled_from = len(frames.poses) - 1  # the frame the settle starts after
@@ -550,7 +556,7 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
             rifle,
             spec.arms_fall,
             spec.propped,
-            legs=spec.legs_settle,
+            legs=spec.legs_settle and spec.legs_land_from is None,
             slack_feet=spec.slack_feet,
             arms=dead_settle.ArmsFall(
                 spec.arms_headward_cm,
@@ -560,6 +566,9 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
                 spec.arms_air_low,
             ),
         )
+        if spec.legs_settle and spec.legs_land_from is not None:  # laid as the knees land
+            k0 = round(spec.legs_land_from * frames.fps)
+            frames = dead_settle.legs_landed_from(frames, soldier, rifle, k0, settled_from)
     if spec.knees_held:  # the body pivots over a knee on the ground (knee_hold)
         frames = hold_knees(frames, soldier, release)
     if not spec.pinned:

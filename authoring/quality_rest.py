@@ -146,10 +146,14 @@ def pelvis_turn(cf: ClipFrames, figures: FigureSet) -> np.ndarray | None:
     """Per frame, the angle (deg) between the pelvis' orientation and its orientation at the last frame
     (None: the body has no ``lower_torso``)."""
     body = max(cf.poses, key=lambda k: figures.kin[k].ndof)
-    kin = figures.kin[body]
+    return pelvis_turns(figures.kin[body], cf.poses[body], cf.locations[body])
+
+
+def pelvis_turns(kin: Any, q: np.ndarray, loc: np.ndarray) -> np.ndarray | None:
+    """:func:`pelvis_turn` of poses ``q`` ``(n, ndof)`` at root globals ``loc`` of a figure's kinematics."""
     if "lower_torso" not in kin.segment_names:
         return None
-    g = kin.segment_globals(cf.poses[body], cf.locations[body])[:, kin.segment_names.index("lower_torso")]
+    g = kin.segment_globals(q, loc)[:, kin.segment_names.index("lower_torso")]
     r = g[:, :3, :3]
     cos = (np.einsum("nij,ij->n", r, r[-1]) - 1.0) / 2.0
     return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))

@@ -473,3 +473,27 @@ def test_the_kneeling_fire_death_is_turned_least_worst_once_his_legs_are_lifted(
     assert [d.name for d in deaths.DEATHS if d.slave_feet_held] == ["kfire2dead"]
     # ... and prfire2dead's alone the arm that lands as their trunk settles (slave_rest arms_held; prfire-s13)
     assert [d.name for d in deaths.DEATHS if d.slave_arms_held] == ["prfire2dead"]
+
+
+def test_legs_laid_as_the_knees_land_rise_only_until_the_checks_window_opens(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Issue 14 (DeathSpec.legs_land_from): laid from the frame he was down, stfire2dead's legs, lifted to
+    turn out, rose 6.9 cm at the knee after it (rest_rise_cm); laid from as his knees land, a leg may rise
+    only until the frame the check judges from (``landed``), not the later rest frame."""
+    n, k0, end, landed = 60, 20, 45, 26
+    poses = np.zeros((n, 80))
+    roots = np.repeat(np.eye(4)[None], n, axis=0)
+    legs = np.array([3, 4, 10, 11])
+    frees: list[float] = []
+
+    def path(body: object, t: np.ndarray, u: np.ndarray, free: float) -> np.ndarray:
+        frees.append(free)
+        return np.zeros((len(t), len(legs)))
+
+    monkeypatch.setattr(dead_settle, "_Body", lambda *a: SimpleNamespace(kin=None))
+    monkeypatch.setattr(dead_settle, "_leg_dofs", lambda kin: legs)
+    monkeypatch.setattr(dead_settle, "_legs_path", path)
+    monkeypatch.setattr(dead_settle, "_rest_frame", lambda figs, fr, near: k0 + 30)
+    dead_settle._legs_land(None, ClipFrames(poses, roots, roots.copy(), 60.0), k0, end, landed)  # type: ignore[arg-type]
+    assert frees == [pytest.approx((landed - k0) / round(dead_settle.LEGS_LAND_SECONDS * 60.0))]

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_quality_rest import KNOWN_RISES
 
 from authoring import deaths
 from authoring.passive_range import PASSIVE_DEG, passive_figure, passive_limits
@@ -61,8 +60,7 @@ def test_a_standing_death_lies_with_its_heels_down(clip: str, figures: FigureSet
     cf = play(load_channelset(CHANNELSETS / f"{clip}.chset.env"), figures)
     row = check_clip(cf, figures, ends_dead=True)
     assert row["joint_limit_violations"] == 0
-    if clip not in KNOWN_RISES:  # a known fault, a strict xfail there (stfire2dead's shins kick up)
-        assert row["rest_rise_cm"] <= THRESHOLDS["rest_rise_cm"]
+    assert row["rest_rise_cm"] <= THRESHOLDS["rest_rise_cm"]
     assert row["foot_skate_cm"] <= THRESHOLDS["foot_skate_cm"]
     heel = rest_endpoint(cf, cf.channelset.nframes - 1, figures, "DEAD")["rest_foot_cm"]
     assert heel <= 15.0
