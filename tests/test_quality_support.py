@@ -90,6 +90,7 @@ _KNEE = "shot kneeling, he hangs above his knee: knee and front foot ~4 cm up, p
 _FALL = "falling from the knee he lifts clear of the ground"
 _MID = "mid-fall (pelvis 37 cm up) both feet and knees leave the ground, 1.00-1.10 s: right shin 2.7 cm up"
 _LIFT = "dead, the body lifts 2.5 cm off the ground for 0.1 s (2.68-2.77 s) after it has landed"
+_PITCH = "pitching from his knees onto his face he clears the ground, 1.03-1.08 s (master: 2 frames)"
 KNOWN_UNSUPPORTED: dict[str, str] = {
     "crawl2prstow": f"{_PRONE}, 0.43-0.97 s (0.55 s), lowest point up to 5.3 cm",
     "crawl2prstow_low": f"{_PRONE}, 0.43-0.93 s (0.52 s), lowest point up to 6.0 cm",
@@ -102,6 +103,8 @@ KNOWN_UNSUPPORTED: dict[str, str] = {
     "kstow2dead_m16_low": f"{_FALL}, 0.55-0.82 s: knee and toes 4.6 cm up (master: 0.15 s at 2.7 cm)",
     "ststow2dead_low": _MID,
     "ststow2dead_m16_low": _MID,
+    "stfire2dead_low": _PITCH,
+    "stfire2dead_m16_low": _PITCH,
     "crawl2dead_low": _LIFT,
     "crawl2dead_m16_low": _LIFT,
 }
