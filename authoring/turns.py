@@ -76,8 +76,10 @@ SIDESTEP_DIP = 4.0  # cm the pelvis lowers while the feet are wide apart
 LOOK_AHEAD = 0.12  # s the head leads the body's turn (the soldier looks where he turns) ...
 LOOK_MAX = 15.0  # ... by at most this many degrees (the neck's twist)
 PIVOT_SHARE = 0.5  # of its next step's turn a standing foot pivots on its ball while the other one swings
-PIVOT_MAX = 30.0  # degrees a foot pivots at most (the ankle and hip turn it further only in a jerk)
-PIVOT_DELAY = 0.05  # s after the other foot lifts off that the standing foot's heel rises to pivot ...
+PIVOT_MAX = 20.0  # degrees a foot pivots at most (the ankle and hip turn it further only in a jerk)
+# s before the other foot lifts off that the standing foot's heel rises to pivot (1 cm or more up by the time
+# it carries the weight alone: the server turns a flat foot about its middle, and its ball slid) ...
+HEEL_LEAD = 0.1
 HEEL_FIRST = 0.1  # s ... the heel starting to rise this much earlier and the foot turning this much later ...
 HEEL_UP = 0.25  # s ... and rising quickly until this long after the rise (off the ground as the foot turns)
 PIVOT_LEAD = 0.12  # s before its own lift-off that a pivoting foot has turned
@@ -230,7 +232,7 @@ def plan_turn(base: BaseStance, direction: str, angle: float) -> StepPlan:
             pivots[other].append(sign * min(PIVOT_SHARE * (nxt - sign * yaw[other]), PIVOT_MAX))
             turned[other] += pivots[other][-1]
         body.append((t_land, body_yaw(turned, sign * angle)))
-        t_heel, t_off = t_off + PIVOT_DELAY, _r(t_land + 0.1)
+        t_heel, t_off = t_off - HEEL_LEAD, _r(t_land + 0.1)
     t_end = _r(t_off + 0.42)
     falls = {s: step_falls(base, s, steps[s], pivots[s]) for s in SIDES}
     return StepPlan(
