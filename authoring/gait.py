@@ -194,6 +194,7 @@ class Footfall:
     # fractions of the swing that leaves this footfall at its start / end where the foot only goes up / down
     rise: float = 0.0
     drop: float = 0.0
+    turn_from: float | None = None  # the turn to ``yaw_off`` starts at this time (default t_heel)
 
 
 def foot_track(
@@ -227,7 +228,8 @@ def foot_track(
         turn_by = f.t_off if f.turn_by is None else f.turn_by
         y = np.full(len(tt), f.yaw)
         if np.isfinite(f.t_heel) and yaw_off != f.yaw:
-            y = f.yaw + (yaw_off - f.yaw) * smoothstep((tt - f.t_heel) / max(turn_by - f.t_heel, 1e-9))
+            t_turn = f.t_heel if f.turn_from is None else f.turn_from
+            y = f.yaw + (yaw_off - f.yaw) * smoothstep((tt - t_turn) / max(turn_by - t_turn, 1e-9))
         p = np.zeros(len(tt))
         on_ball = np.zeros(len(tt), dtype=bool)
         if f.strike:

@@ -11,6 +11,12 @@ Per clip (a channelset bound to its soldier figure and rifle):
   positions over one such run of frames (:mod:`authoring.body_parts`). ``foot_skate_cm`` is the worst
   over the feet (heels, balls, toes), ``contact_slide_cm`` over every other part (knees, hands, forearms,
   upper arms, chest, belly, pelvis, head), ``contact_slide_part`` names it, ``contact_slides`` has each part.
+  A foot node near its foot's pivot (the forefoot round the ball) is judged by its slide about that pivot:
+  a foot turning on its ball does not skate, a heel left on the ground while it turns does
+  (:mod:`~authoring.quality_turns`).
+* turns in place (:mod:`~authoring.quality_turns`): ``turn_travel_cm``, how far a ``turn_*`` clip's
+  ``end_offset`` carries the figure from where it stood (the server keeps it as root offset), and
+  ``pivot_deg`` (every clip, information), the most a foot turns while it touches the ground.
 * ``ground_penetration_cm`` (body mesh below y = 0), ``rifle_penetration_cm`` (rifle mesh below y = 0) and
   ``rifle_in_body_cm``: how deep rifle mesh nodes go into the body, measured against the convex hull (Qhull)
   of each body segment's mesh in the segment's frame — the hands and fingers that hold it excepted — with
@@ -117,6 +123,14 @@ from authoring.quality_rifle_drop import THROW_LIMIT_M, UPRIGHT_LIMIT_S, rifle_d
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, dropped_rifle_rest
 from authoring.quality_rifle_roll import ROLL_LIMIT_DEG, TOP_DOWN_LIMIT_S, rifle_lie
 from authoring.quality_support import FLIGHT_LIMIT_S, UNSUPPORTED_LIMIT_S, support
+from authoring.quality_turns import (
+    TRAVEL_LIMIT_CM,
+    foot_pivots,
+    pivot_slides,
+    segment_yaw,
+    turn_pivot_row,
+    turn_travel,
+)
 from server.motion.channelset import Channelset
 from server.motion.posture_change import load_posture_graph
 
@@ -161,6 +175,7 @@ THRESHOLDS: dict[str, float] = {
     "limb_through_cm": LIMB_THROUGH_LIMIT_CM,  # no limb passes through another part of the body
     "unsupported_s": UNSUPPORTED_LIMIT_S,  # something of the body is on the ground (quality_support) ...
     "flight_s": FLIGHT_LIMIT_S,  # ... but for a run's flight
+    "turn_travel_cm": TRAVEL_LIMIT_CM,  # a turn in place ends where it started (quality_turns)
     **POSTURE_LIMITS,
 }
 POSTURE_KEYS = tuple(POSTURE_LIMITS)
@@ -365,6 +380,14 @@ def check_clip(
     segg = kin.segment_globals(q, loc)  # (n, nseg, 4, 4)
     pts = np.einsum("fkij,kj->fki", segg[:, segs, :3, :], nodes) + shift[:, None, :]
     runs = contact_runs(pts, CONTACT_HEIGHT_CM)
+    # a pivoting foot's nodes are judged about its pivot, a node or its ball or heel (quality_turns)
+    sole = {
+        f: sites[:, [kin.site_names.index(f"{f}.{p}") for p in ("ball", "heel")]][..., :3, 3]
+        + shift[:, None, :]
+        for f in FOOT_PARTS
+        if {f"{f}.ball", f"{f}.heel"} <= set(kin.site_names)
+    }
+    runs.slide = pivot_slides(runs, pts, parts, segment_yaw(segg)[:, segs], CONTACT_HEIGHT_CM, sole)
     slide, _ = runs.per_node(len(parts))
     feet = np.isin(parts, FOOT_PARTS)
     shown = np.char.replace(parts.astype(str), "_kneecap", "_knee")  # a kneecap slides as the knee
@@ -379,6 +402,11 @@ def check_clip(
         out[f"{key}_frames"] = [int(runs.first[r]), int(runs.last[r])] if val > 0 else None
     foot_down = [(pts[:, parts == f, 1] <= CONTACT_HEIGHT_CM).any(axis=1) for f in FOOT_PARTS]
     out["stance_phases"] = sum(1 for row in foot_down for a, b in true_runs(row) if b - a >= 3)
+    foot_yaw = {
+        f: segment_yaw(segg[:, kin.segment_names.index(f)]) for f in FOOT_PARTS if f in kin.segment_names
+    }
+    out.update(foot_pivots(pts, parts, foot_yaw, CONTACT_HEIGHT_CM))
+    out.update(turn_travel(cs))
     ys = pts[..., 1]
     out.update(support(name, ys, cs.fps))
     out.update(feet_up(kin, segg, ys, parts))
@@ -635,6 +663,7 @@ def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[s
             "failing": len(bad),
             "pass": not bad,
         }
+    rows["turn_pivot_deg"] = turn_pivot_row(clips)
     loco = [c for c in clips if c.get("locomotion")]
     missing = [c["name"] for c in loco if not c.get("locomotion_recorded")]
     rows["locomotion_recorded"] = {

@@ -1,26 +1,27 @@
 """Turning in place and side-stepping (issue 14): STAND_STOWED to STAND_STOWED moved on the ground.
 
-A **turn** is a few steps, none of which turns a foot on the ground: the feet take turns, each stepping on
-the spot turned about the inside foot's ball (the inside foot is the one on the side of the turn, the left
-foot for a left turn), the inside foot first and last, each landing at most ``STEP_AHEAD`` degrees beyond
-the other (:func:`turn_steps`: 45 degrees in two steps, 90 in three, 180 in five); the pelvis leans over
-the standing foot. The outer foot thus travels on an arc about the inside ball and never crosses it. The
-body turns about the inside ball, smoothly, through the middle of the yaws both legs can reach once each
-foot has landed (:data:`FOOT_TURN_RANGE`: from STAND_STOWED the legs turn a foot inwards, to the right, by
-up to 60 degrees but outwards hardly at all, so on a left turn the body leads the feet and on a right turn
-it follows them); the head looks a little ahead. (A pivot on the ball of a planted foot, heel up, sweeps
-the ball's contact patch 5-15 cm across the ground over 45-180 degrees, and every mesh node within 2.5 cm
-of the ground is touching it.) A right turn is not a left turn played backwards, so every turn is its own
-clip.
+A **turn** turns the soldier about the vertical through his pelvis, so he ends where he started (issue 14:
+turn in place, pivoting on a planted foot; the check's ``turn_travel_cm``). The feet take turns
+(:func:`turn_steps`: 45 degrees in two steps, 90 in three, 180 in five), each landing at most
+``STEP_AHEAD`` degrees beyond the other in the turned stance; the outer foot steps round first while the
+inside foot (the one on the side of the turn, the left foot for a left turn), its heel up, pivots on its
+ball; after that every standing foot that steps again pivots on its ball while the other one is in the air
+(``PIVOT_SHARE`` of its next step's turn, at most ``PIVOT_MAX`` degrees), and the pelvis leans over the
+standing foot. The body turns smoothly through the middle of the yaws both legs can reach once each foot
+has landed (:data:`FOOT_TURN_RANGE`: from STAND_STOWED the legs turn a foot inwards, to the right, by up to
+60 degrees but outwards hardly at all); the head looks a little ahead. The stance is a fighting stance (the
+left foot 26 cm ahead), so no one foot's ball lies under the pelvis: a turn about a ball carried the
+soldier 10-71 cm (session 19), and a foot must step to its place in the turned stance. A right turn is not
+a left turn played backwards, so every turn is its own clip.
 
 A **side-step** steps the leading foot out sideways (the pelvis first leans over the trailing foot) and
 draws the trailing foot after it to its place in the moved stance; the feet never cross.
 
 Feet use the gait machinery (:mod:`authoring.gait`): a stepping foot's track is a
-:class:`~authoring.gait.Footfall` sequence (heel rising on the ball, lift, flat landing) from
-:func:`~authoring.gait.foot_track`, a step on the spot in the *start* stance carried (turned about
-the inside ball, or shifted sideways) only while it is clear of the ground, so no foot moves across the
-ground while touching it and the outer foot never crosses the inside one. The upper body keeps
+:class:`~authoring.gait.Footfall` sequence (heel rising on the ball, turning on it for a pivot, lift, flat
+landing) from :func:`~authoring.gait.foot_track`, a step on the spot in the *start* stance carried (turned
+about the pelvis, or shifted sideways) only while it is clear of the ground, so no foot moves across the
+ground while touching it but for turning on its ball. The upper body keeps
 STAND_STOWED with the rifle at the ready, turned with the pelvis; IK puts the heels on their tracks and the
 palms on the rifle, as for walking.
 
@@ -74,6 +75,14 @@ CLEAR = 0.12  # s after lift-off before a stepping foot travels, and before land
 SIDESTEP_DIP = 4.0  # cm the pelvis lowers while the feet are wide apart
 LOOK_AHEAD = 0.12  # s the head leads the body's turn (the soldier looks where he turns) ...
 LOOK_MAX = 15.0  # ... by at most this many degrees (the neck's twist)
+PIVOT_SHARE = 0.5  # of its next step's turn a standing foot pivots on its ball while the other one swings
+PIVOT_MAX = 20.0  # degrees a foot pivots at most (the ankle and hip turn it further only in a jerk)
+# s before the other foot lifts off that the standing foot's heel rises to pivot (1 cm or more up by the time
+# it carries the weight alone: the server turns a flat foot about its middle, and its ball slid) ...
+HEEL_LEAD = 0.1
+HEEL_FIRST = 0.1  # s ... the heel starting to rise this much earlier and the foot turning this much later ...
+HEEL_UP = 0.25  # s ... and rising quickly until this long after the rise (off the ground as the foot turns)
+PIVOT_LEAD = 0.12  # s before its own lift-off that a pivoting foot has turned
 
 
 @dataclass
@@ -115,14 +124,29 @@ def _turn_move(pivot: tuple[float, float], yaw: float) -> tuple[float, float, fl
 # --- feet ---------------------------------------------------------------------------------------------------
 
 
-def step_falls(base: BaseStance, side: str, steps: list[tuple[float, float, float]]) -> list[Footfall]:
+def step_falls(
+    base: BaseStance, side: str, steps: list[tuple[float, float, float]], pivots: list[float] | None = None
+) -> list[Footfall]:
     """Footfalls of a foot that stands at its base place and takes ``steps`` = (heel rise, lift-off,
-    landing) on the spot, landing flat (where it lands is the carrying's business)."""
+    landing) on the spot, landing flat (where it lands is the carrying's business). ``pivots``: per step, the
+    degrees the foot turns on its ball before it lifts off (its heel rising from the rise, the turn done by
+    the time it leaves the ground less ``PIVOT_LEAD``)."""
     falls: list[Footfall] = []
     t_on = -np.inf
     heel, yaw = base.heel[side], base.yaw[side]
-    for t_heel, t_off, t_land in steps:
-        falls.append(Footfall(side, t_on, heel, yaw, t_on, t_heel, t_off, 0.0, ADJUST_PITCH, lift=STEP_LIFT))
+    for k, (t_heel, t_off, t_land) in enumerate(steps):
+        turn = 0.0 if pivots is None else pivots[k]
+        pivot: dict[str, Any] = {}
+        if turn:  # the heel clears the ground before the foot turns on its ball
+            pivot = dict(
+                yaw_off=yaw + turn,
+                turn_from=t_heel + HEEL_FIRST,
+                turn_by=t_off - PIVOT_LEAD,
+                early=(t_heel - HEEL_FIRST, t_heel + HEEL_UP),
+            )
+        falls.append(
+            Footfall(side, t_on, heel, yaw, t_on, t_heel, t_off, 0.0, ADJUST_PITCH, lift=STEP_LIFT, **pivot)
+        )
         t_on = t_land
     falls.append(Footfall(side, t_on, heel, yaw, t_on, np.inf, np.inf))
     return falls
@@ -135,12 +159,13 @@ def _r(t: float) -> float:
     return round(t * FPS) / FPS
 
 
-def turn_steps(angle: float) -> list[tuple[str, float]]:
+def turn_steps(angle: float, first: str = "outer") -> list[tuple[str, float]]:
     """("inside" / "outer", yaw reached) of each step of a turn by ``angle`` degrees (> 0): the feet take
-    turns, each at most ``STEP_AHEAD`` degrees beyond the other, the inside foot first and last."""
+    turns, each at most ``STEP_AHEAD`` degrees beyond the other, ``first`` first (the outer foot steps
+    round while the inside one pivots)."""
     yaw = {"inside": 0.0, "outer": 0.0}
     out: list[tuple[str, float]] = []
-    role = "inside"
+    role = first
     while min(yaw.values()) < angle:
         other = "outer" if role == "inside" else "inside"
         yaw[role] = min(yaw[other] + STEP_AHEAD, float(angle))
@@ -163,40 +188,50 @@ def body_yaw(feet: dict[str, float], end: float) -> float:
 
 
 def plan_turn(base: BaseStance, direction: str, angle: float) -> StepPlan:
-    """Turn ``angle`` degrees to ``direction`` ("left" / "right") in the steps of :func:`turn_steps`, every
-    foot turning about the inside foot's ball while it is in the air; the body follows the feet."""
+    """Turn ``angle`` degrees to ``direction`` ("left" / "right") about the vertical through the pelvis, in
+    the steps of :func:`turn_steps`: the outer foot steps round first while the inside foot, its heel up,
+    pivots on its ball; then the feet take turns, each standing foot that steps again pivoting on its ball
+    (``PIVOT_SHARE`` of its next step's turn) while the other one is in the air, and every foot landing in
+    the turned stance, so the soldier ends where he started (``end_offset`` = (0, 0, yaw))."""
     inside = direction
     outer = "right" if inside == "left" else "left"
     role_side = {"inside": inside, "outer": outer}
     sign = 1.0 if direction == "left" else -1.0
-    ball_x, ball_z = base.ball_at(inside)
-    ball = (float(ball_x), float(ball_z))
+    centre = (float(base.pelvis[0]), float(base.pelvis[1]))
+    plan = turn_steps(angle)
     steps: dict[str, list[tuple[float, float, float]]] = {inside: [], outer: []}
+    pivots: dict[str, list[float]] = {inside: [], outer: []}
     keys: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
     lean: dict[str, list[tuple[float, float]]] = {inside: [(0.0, 0.0)], outer: [(0.0, 0.0)]}
     yaw = {inside: 0.0, outer: 0.0}
     body: list[tuple[float, float]] = [(0.0, 0.0), (0.15, 0.0)]  # starting from rest
-    t_heel = FIRST_HEEL
-    for role, target in turn_steps(angle):
+    t_heel, t_off = FIRST_HEEL, _r(FIRST_HEEL + 0.08)
+    for i, (role, target) in enumerate(plan):
         side = role_side[role]
         other = outer if side == inside else inside
         swing = _r(0.35 + 0.15 * (target - sign * yaw[side]) / 90.0)
-        t_off = _r(t_heel + 0.08)
         t_land = _r(t_off + swing)
         steps[side].append((t_heel, t_off, t_land))
+        if len(pivots[side]) < len(steps[side]):  # it lifts off from rest
+            pivots[side].append(0.0)
         keys[side] += [(t_off + CLEAR, yaw[side]), (t_land - CLEAR, sign * target)]
         w = LEAN_IN if other == inside else LEAN_OUT  # the weight onto the standing foot
-        lean[other] += [(t_heel - 0.15, 0.0), (t_off, w), (t_land - 0.05, w), (t_land + 0.12, 0.0)]
+        lean[other] += [(t_off - 0.23, 0.0), (t_off, w), (t_land - 0.05, w), (t_land + 0.12, 0.0)]
         yaw[side] = sign * target
-        body.append((t_land, body_yaw(yaw, sign * angle)))
-        t_heel = t_land - 0.02
-    t_end = _r(t_heel + 0.42)
-    falls = {s: step_falls(base, s, steps[s]) for s in SIDES}
+        nxt = next((y for r, y in plan[i + 1 :] if role_side[r] == other), None)
+        turned = dict(yaw)
+        if nxt is not None:  # the standing foot steps again: it pivots on its ball while this one swings
+            pivots[other].append(sign * min(PIVOT_SHARE * (nxt - sign * yaw[other]), PIVOT_MAX))
+            turned[other] += pivots[other][-1]
+        body.append((t_land, body_yaw(turned, sign * angle)))
+        t_heel, t_off = t_off - HEEL_LEAD, _r(t_land + 0.1)
+    t_end = _r(t_off + 0.42)
+    falls = {s: step_falls(base, s, steps[s], pivots[s]) for s in SIDES}
     return StepPlan(
         f"turn_{direction[0]}{angle:g}",
         t_end,
-        ball,
-        _turn_move(ball, sign * angle),
+        centre,
+        (0.0, 0.0, sign * angle),
         [*body, (t_end, sign * angle)],
         [(0.0, 0.0)],
         [(0.0, 0.0)],

@@ -171,6 +171,13 @@ def stance_slides(world_pts: np.ndarray, height: np.ndarray) -> list[float]:
     return out
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 14 (branch turnpivot-s19): turn_r180_low's left foot pivots 20 deg on its ball, but the "
+    "DI slave's plant_offsets holds the mean of the touching forefoot nodes, not the ball, so the ball "
+    "drifts 1.5 cm (f54-90); served at 2.5x with the pivot's rest turned about it, the left ball slides "
+    "2.4 cm in 0.2 s (limit 2.0)",
+)
 async def test_served_a_pivot_asked_to_kneel_keeps_its_feet_and_kneels_facing_his_heading(
     autojump_clock: trio.abc.Clock,
 ) -> None:

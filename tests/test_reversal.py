@@ -112,7 +112,7 @@ def test_a_reversal_hurries_its_stop_and_its_start(lib) -> None:  # type: ignore
     still first frame, skipped as a request's start: lead_in)."""
     took = paces(lib, [(0.5, 1.4, 20.0), (T_REVERSE, 1.4, 200.0)], 8.0, T_REVERSE)
     assert took["walk_end"] == pytest.approx(1.133 / WALK_MAX_RATE, abs=0.01)
-    assert took["turn_r180"] == pytest.approx(3.417 / REVERSAL_TURN_SPEEDUP, abs=0.01)
+    assert took["turn_r180"] == pytest.approx(3.667 / REVERSAL_TURN_SPEEDUP, abs=0.01)
     assert took["walk_start"] == pytest.approx(1.017 / WALK_MAX_RATE, abs=0.01)
     plain = paces(lib, [(0.5, 1.4, 20.0), (T_REVERSE, 0.0, 20.0)], 7.0, 0.0)
     assert (plain["walk_start"], plain["walk_end"]) == pytest.approx((1.017 - 1 / 60, 1.133), abs=0.01)

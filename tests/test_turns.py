@@ -1,7 +1,7 @@
 """Turns in place and side-steps (committed soldier.fig and DI.fig clips, the M16 ones too): each
-reaches its yaw or its sideways displacement, ends in STAND_STOWED moved by its ``end_offset``, turns a
-foot only while it is in the air (stepping round the inside foot's ball), and never slides a foot that
-touches the ground."""
+reaches its yaw or its sideways displacement, ends in STAND_STOWED moved by its ``end_offset`` (a turn: where
+it started, turned about the pelvis), turns a foot on the ground only by pivoting on its ball (the inside
+foot first, while the outer one steps round), and never slides a foot that touches the ground."""
 
 from __future__ import annotations
 
@@ -93,8 +93,12 @@ def test_clip_ends_in_stand_stowed_moved_by_its_end_offset(name: str, suffix: st
 @pytest.mark.parametrize("suffix", SUFFIXES)
 @pytest.mark.parametrize("name", turns.TURN_CLIPS)
 def test_feet_never_slide_on_or_sink_into_the_ground(name: str, suffix: str, figures: FigureSet):
+    """Each foot point, while it touches the ground, keeps its place about the ball: a foot pivoting on its
+    ball swings its heel and toes round it (the foot's turn is taken out about the ball), the ball stays."""
     _, _, _, kin, sites = _played(name, suffix, figures)
     for side in ("left", "right"):
+        ball = _point(kin, sites, side, "foot.ball")
+        yaw = np.radians(_foot_yaw(kin, sites, side))
         for p in FOOT_POINTS:
             pts = _point(kin, sites, side, p)
             assert pts[:, 1].min() > -1.0, f"{side}_{p} in the ground"
@@ -102,7 +106,11 @@ def test_feet_never_slide_on_or_sink_into_the_ground(name: str, suffix: str, fig
             starts = np.flatnonzero(~touching[:-1] & touching[1:])
             stops = np.flatnonzero(touching[:-1] & ~touching[1:])
             for a, b in zip(starts, stops, strict=True):
-                xz = pts[a:b][:, [0, 2]]
+                turn = yaw[a:b] - yaw[a]
+                arm = (pts[a:b] - ball[a:b])[:, [0, 2]]
+                c, s_ = np.cos(turn), np.sin(turn)
+                back = np.stack([arm[:, 0] * c - arm[:, 1] * s_, arm[:, 0] * s_ + arm[:, 1] * c], axis=1)
+                xz = ball[a:b][:, [0, 2]] + back
                 slide = np.sqrt(((xz[:, None] - xz[None]) ** 2).sum(-1)).max()
                 assert slide <= 2.0, f"{name}{suffix} {side}_{p} slides {slide:.2f} cm in frames {a}..{b}"
 
@@ -114,31 +122,35 @@ def _foot_yaw(kin, sites, side: str) -> np.ndarray:
 
 
 def test_turn_steps_alternate_feet_never_more_than_45_degrees_apart():
-    assert turns.turn_steps(45) == [("inside", 45.0), ("outer", 45.0)]
-    assert turns.turn_steps(90) == [("inside", 45.0), ("outer", 90.0), ("inside", 90.0)]
+    assert turns.turn_steps(45) == [("outer", 45.0), ("inside", 45.0)]
+    assert turns.turn_steps(90) == [("outer", 45.0), ("inside", 90.0), ("outer", 90.0)]
     assert [y for _, y in turns.turn_steps(180)] == [45.0, 90.0, 135.0, 180.0, 180.0]
 
 
 @pytest.mark.parametrize("suffix", SUFFIXES)
 @pytest.mark.parametrize(("name", "side", "angle"), TURNS)
-def test_turn_steps_round_the_inside_ball_and_turns_feet_only_in_the_air(
+def test_a_turn_pivots_on_the_inside_ball_and_ends_where_it_started(
     name: str, side: str, angle: int, suffix: str, figures: FigureSet
 ):
-    _, cf, body, kin, sites = _played(name, suffix, figures)
+    """Issue 14: the inside foot pivots on its ball (heel up, 15 degrees or more) while the outer foot steps
+    round; every foot turning on the ground turns on its ball (above); the pelvis ends where it began."""
+    cs, cf, body, kin, sites = _played(name, suffix, figures)
+    assert cs.end_offset is not None and math.hypot(cs.end_offset[0], cs.end_offset[1]) < 0.01
+    root = cf.locations[body][:, :3, 3]
+    assert math.hypot(*(root[-1] - root[0])[[0, 2]]) < 0.05
     sign = 1.0 if side == "left" else -1.0
-    ball = _point(kin, sites, side, "foot.ball")
-    np.testing.assert_allclose(ball[-1], ball[0], atol=0.5)  # the inside foot ends where it began, turned
     down = {}
     for s in ("left", "right"):
         low = np.min([_point(kin, sites, s, p)[:, 1] for p in FOOT_POINTS], axis=0) <= CONTACT
         down[s] = low
-        yaw = _foot_yaw(kin, sites, s)
         edges = np.flatnonzero(np.diff(np.r_[0, low.astype(int), 0]))
-        for a, b in zip(edges[::2], edges[1::2], strict=True):  # a foot touching the ground does not turn
-            assert np.ptp(yaw[a:b]) < 1.0, f"{name}{suffix} {s} foot turns on the ground in frames {a}..{b}"
         lifts = len(edges) // 2 - 1
         want = sum(1 for role, _ in turns.turn_steps(angle) if (role == "inside") == (s == side))
         assert lifts == want, s
+        if s == side:  # the inside foot stands while the outer one steps first, and pivots on its ball
+            yaw = _foot_yaw(kin, sites, s)
+            first = slice(edges[0], edges[1])
+            assert sign * (yaw[first][-1] - yaw[first][0]) >= 15.0
     assert (down["left"] | down["right"]).all()  # a step, never a hop
     body_yaw = np.array([_yaw(m) for m in cf.locations[body]])
     progress = sign * np.degrees(np.unwrap(np.radians(body_yaw - body_yaw[0])))
@@ -165,7 +177,7 @@ def test_sidestep_leads_with_the_foot_on_its_side_and_never_crosses_the_feet(dir
     assert gap.min() > 10.0  # the left heel stays well to the left (-x) of the right one
 
 
-def test_turn_plan_moves_the_stance_about_the_pivot_ball():
+def test_turn_plan_turns_the_stance_about_the_pelvis():
     base = BaseStance(
         {"left": (-15.0, -12.0), "right": (2.0, 14.0)},
         {"left": -10.0, "right": -25.0},
@@ -175,10 +187,8 @@ def test_turn_plan_moves_the_stance_about_the_pivot_ball():
     for side in ("left", "right"):
         for angle in turns.TURN_ANGLES:
             plan = turns.plan_turn(base, side, angle)
-            assert plan.end_move[2] == (angle if side == "left" else -angle)
-            bx, bz = base.ball_at(side)
-            ball = np.array([bx, 0.0, bz, 1.0])
-            np.testing.assert_allclose(turns.ground_move(*plan.end_move) @ ball, ball, atol=1e-9)
+            assert plan.end_move == (0.0, 0.0, angle if side == "left" else -angle)
+            assert plan.pivot == (0.0, 0.0)  # the pelvis' ground point
 
 
 def test_rebuilding_a_turn_reproduces_the_committed_bytes(tmp_path):
