@@ -54,6 +54,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
   and passed ``feet_up_cm``; every clip on main that starts lying keeps them within 4 cm.
 * ``unsupported_s`` and, for a run clip, ``flight_s`` (:mod:`~authoring.quality_support`): the longest
   time nothing of the body is within 2 cm of the ground (a hover, a hop; a run's flight is judged apart).
+* ``pop_m_s`` (:mod:`~authoring.quality_pops`): the largest one-frame pop of a body part in the world, its
+  frame-to-frame speed's excess over both neighbours' (a hand jumping 15 cm in a frame at the let-go; a
+  swing, however fast, speeds up over several frames).
 * ``limb_through_cm`` (:mod:`~authoring.quality_limbs`): how deep a limb goes through another part of the
   body (an arm into a leg, a forearm into the trunk, a shin into the other leg).
 * ``rifle_rest_overhang_cm`` (:mod:`~authoring.quality_rifle_rest`): a clip that ends in DEAD with its rifle
@@ -109,6 +112,7 @@ from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides, true_
 from authoring.passive_range import passive_limits
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_limbs import LIMB_THROUGH_LIMIT_CM, limbs_through
+from authoring.quality_pops import POP_LIMIT_M_S, pops
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from authoring.quality_rest import (
     LAG_LIMIT_S,
@@ -176,6 +180,7 @@ THRESHOLDS: dict[str, float] = {
     "unsupported_s": UNSUPPORTED_LIMIT_S,  # something of the body is on the ground (quality_support) ...
     "flight_s": FLIGHT_LIMIT_S,  # ... but for a run's flight
     "turn_travel_cm": TRAVEL_LIMIT_CM,  # a turn in place ends where it started (quality_turns)
+    "pop_m_s": POP_LIMIT_M_S,  # no body part jumps for one frame (quality_pops)
     **POSTURE_LIMITS,
 }
 POSTURE_KEYS = tuple(POSTURE_LIMITS)
@@ -409,6 +414,7 @@ def check_clip(
     out.update(turn_travel(cs))
     ys = pts[..., 1]
     out.update(support(name, ys, cs.fps))
+    out.update(pops(pts, parts, cs.fps))
     out.update(feet_up(kin, segg, ys, parts))
     # no limb passes through another part of the body (quality_limbs)
     limb_hulls = figures.limb_hulls(body_type)

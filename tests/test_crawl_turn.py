@@ -11,6 +11,8 @@ import pytest
 from authoring import crawl_turn, turns
 from authoring.quality import FigureSet, play
 from server.motion.cache import load_channelset
+from tests.known_faults import unknown_failures
+from tests.test_quality_pops import KNOWN_POPS
 from ttes.paths import CHANNELSETS, FIGURES
 
 SUFFIXES = {"": "soldier.fig", "_low": "DI.fig", "_m16_low": "DI.fig"}
@@ -121,4 +123,6 @@ def test_a_u_turn_to_his_left_passes_the_check_on_every_figure(name: str, suffix
 
     cs = load_channelset(CHANNELSETS / f"{name}{suffix}.chset.env")
     row = check_clip(cs, FigureSet.from_dir(FIGURES, sorted({c.protofiletype for c in cs.channels})))
-    assert row["failures"] == [], {k: row[k] for k in row["failures"]}
+    known = {"pop_m_s": KNOWN_POPS}  # recorded as strict xfails there
+    failures = unknown_failures(f"{name}{suffix}", row["failures"], known)
+    assert failures == [], {k: row[k] for k in failures}
