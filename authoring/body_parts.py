@@ -84,20 +84,33 @@ def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
 
 
-def contact_runs(points: np.ndarray, height: float) -> ContactRuns:
+def contact_runs(points: np.ndarray, height: float, release: np.ndarray | float | None = None) -> ContactRuns:
     """The contact runs of the nodes of ``points`` ``(n, k, 3)`` (world, cm, +Y up). Contact is judged by
-    height alone, so a fast skim just above the ground counts as sliding."""
+    height alone, so a fast skim just above the ground counts as sliding. With ``release`` (cm, one for
+    every node or per node ``(k,)``, at least ``height``), a node that comes down to ``height`` is on the
+    ground for as long as it stays below ``release`` either side of it: one dragged just above ``height``
+    as it lifts off still slides, one that never comes down to ``height`` is in the air."""
     n, _, _ = points.shape
-    contact = points[..., 1] <= height
-    touching = np.flatnonzero(contact.any(axis=0))
+    heights = points[..., 1]
+    near = heights <= (height if release is None else np.maximum(release, height))
+    touching = np.flatnonzero((heights <= height).any(axis=0))
     if not len(touching):
         empty = np.zeros(0, dtype=int)
         return ContactRuns(empty, empty, empty, np.zeros(0))
     c = np.zeros((len(touching), n + 1), dtype=bool)  # a separator frame between nodes
-    c[:, :n] = contact[:, touching].T
+    c[:, :n] = near[:, touching].T
     flat = c.ravel()
     starts = np.flatnonzero(flat & ~np.r_[False, flat[:-1]])
     stops = np.flatnonzero(flat & ~np.r_[flat[1:], False])
+    if release is not None:  # a run near the ground that never comes down to it is in the air
+        y = np.full((len(touching), n + 1), np.inf)
+        y[:, :n] = heights[:, touching].T
+        down = np.minimum.reduceat(np.where(flat, y.ravel(), np.inf), starts) <= height
+        starts, stops = starts[down], stops[down]
+        edges = np.zeros(len(flat) + 1, dtype=int)
+        np.add.at(edges, starts, 1)
+        np.add.at(edges, stops + 1, -1)
+        flat = np.cumsum(edges[:-1]) > 0
     ang = np.arange(DIRECTIONS) * np.pi / DIRECTIONS
     dirs = np.stack([np.cos(ang), np.sin(ang)])  # (2, D)
     proj = np.zeros((len(touching), n + 1, DIRECTIONS))

@@ -8,7 +8,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
 
 * contacts, by **height alone** (a fast skim just above the ground is sliding, not swinging): every mesh node
   (psurf node) below ``CONTACT_HEIGHT_CM`` is on the ground, and its slide is the horizontal extent of its
-  positions over one such run of frames (:mod:`authoring.body_parts`). ``foot_skate_cm`` is the worst
+  positions over one such run of frames (:mod:`authoring.body_parts`); a part other than a foot stays on
+  the ground while it is within ``LIFT_OFF_CM`` of it either side of such a run (dragged as it lifts off, it
+  slides; one that never comes down is in the air). ``foot_skate_cm`` is the worst
   over the feet (heels, balls, toes), ``contact_slide_cm`` over every other part (knees, hands, forearms,
   upper arms, chest, belly, pelvis, head), ``contact_slide_part`` names it, ``contact_slides`` has each part.
   A foot node near its foot's pivot (the forefoot round the ball) is judged by its slide about that pivot:
@@ -195,6 +197,10 @@ STEPS_PER_CYCLE_CLIP = {"crawl": 2}  # gait.py cuts one step per cycle clip; cra
 FACE_DOWN_COS = 0.5  # the chest's front points down at least this much (cosine): he lies face down
 LYING_PELVIS_CM = 3.0  # face down, the pelvis' lowest node this low: he lies on the ground
 CONTACT_HEIGHT_CM = 1.25  # a 1 cm skim is contact; a toe leaving the ground at 2 cm is not
+# cm: a part other than a foot that came down to the contact height is on the ground until it rises past this
+# (either side of it): crawl2dead's M16 slave's right upper arm swept 1.4-2.5 cm a frame 1.0-2.0 cm up as it
+# lifted off, a drag the contact height alone cut to two frames (a foot's toe leaves the ground stepping)
+LIFT_OFF_CM = 2.0
 END_FRAMES = 3  # frames over which an end's speed is measured
 LIMIT_SLACK = 1e-4  # rad / cm: float32 rounding of recorded angles
 PITCH_WINDOW_S = 0.1  # s over which a rifle's change of pitch is measured
@@ -384,7 +390,8 @@ def check_clip(
     parts = figures.node_parts(body_type)
     segg = kin.segment_globals(q, loc)  # (n, nseg, 4, 4)
     pts = np.einsum("fkij,kj->fki", segg[:, segs, :3, :], nodes) + shift[:, None, :]
-    runs = contact_runs(pts, CONTACT_HEIGHT_CM)
+    feet = np.isin(parts, FOOT_PARTS)
+    runs = contact_runs(pts, CONTACT_HEIGHT_CM, np.where(feet, CONTACT_HEIGHT_CM, LIFT_OFF_CM))
     # a pivoting foot's nodes are judged about its pivot, a node or its ball or heel (quality_turns)
     sole = {
         f: sites[:, [kin.site_names.index(f"{f}.{p}") for p in ("ball", "heel")]][..., :3, 3]
@@ -394,7 +401,6 @@ def check_clip(
     }
     runs.slide = pivot_slides(runs, pts, parts, segment_yaw(segg)[:, segs], CONTACT_HEIGHT_CM, sole)
     slide, _ = runs.per_node(len(parts))
-    feet = np.isin(parts, FOOT_PARTS)
     shown = np.char.replace(parts.astype(str), "_kneecap", "_knee")  # a kneecap slides as the knee
     out["contact_slides"] = {
         str(p): round(float(slide[shown == p].max()), 3) for p in np.unique(shown[slide > 0])

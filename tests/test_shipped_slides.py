@@ -1,0 +1,85 @@
+"""No part but the feet slides on the ground more than ``contact_slide_cm``'s limit in a shipped clip
+(issue 14). A part that came down to the contact height stays on the ground until it rises past
+``LIFT_OFF_CM`` (tests/test_quality_lift_off.py); with that rule 31 shipped clips drag a forearm, knee,
+thigh, upper arm or the belly 3.1-9.9 cm. Each is a strict xfail naming the part, the cm and the contact
+run it slides in, so a mended clip must leave the list."""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from authoring.quality import LOCOMOTION_GRAPH_WORDS, THRESHOLDS, FigureSet, check_clip
+from server.motion.cache import load_channelset
+from server.motion.posture_graph import read_posture_graph
+from tests.known_faults import known_faults
+
+ROOT = Path(__file__).resolve().parents[1]
+CLIPS = sorted(p.name.split(".")[0] for p in (ROOT / "channelsets").glob("*.chset.env"))
+KNOWN_SLIDES: dict[str, str] = {
+    "crawl2dead": "right thigh dragged 3.3 cm along the ground at 0.00-1.67 s (frames 0-100)",
+    "crawl2dead_low": "right forearm dragged 8.3 cm along the ground at 0.22-2.18 s (frames 13-131)",
+    "crawl2dead_m16_low": "right upper arm dragged 9.9 cm along the ground at 0.00-2.18 s (frames 0-131)",
+    "crawl2prstow": "right forearm dragged 5.6 cm along the ground at 0.25-0.38 s (frames 15-23)",
+    "crawl2prstow_m16_low": "right forearm dragged 5.1 cm along the ground at 1.47-1.60 s (frames 88-96)",
+    "crawl_cycle_low": "right forearm dragged 4.2 cm along the ground at 0.37-0.75 s (frames 22-45)",
+    "crawl_start": "right forearm dragged 3.5 cm along the ground at 0.00-0.35 s (frames 0-21)",
+    "crawl_start_low": "right forearm dragged 4.3 cm along the ground at 0.00-0.37 s (frames 0-22)",
+    "crawlarc_l135": "right forearm dragged 3.1 cm along the ground at 3.50-4.23 s (frames 210-254)",
+    "crawlarc_l135_m16_low": "right forearm dragged 4.6 cm along the ground at 3.48-4.23 s (frames 209-254)",
+    "crawlarc_l150": "right thigh dragged 3.8 cm along the ground at 3.10-3.65 s (frames 186-219)",
+    "crawlarc_l150_low": "right knee dragged 5.1 cm along the ground at 3.10-3.53 s (frames 186-212)",
+    "crawlarc_l150_m16_low": "right forearm dragged 5.2 cm along the ground at 3.48-4.23 s (frames 209-254)",
+    "crawlarc_l165_m16_low": "right forearm dragged 4.8 cm along the ground at 4.47-5.22 s (frames 268-313)",
+    "crawlarc_r180_far_low": "left forearm dragged 3.2 cm along the ground at 5.07-5.63 s (frames 304-338)",
+    "kfire2dead": "left thigh dragged 7.9 cm along the ground at 1.20-1.50 s (frames 72-90)",
+    "kfire2dead_low": "left upper arm dragged 6.2 cm along the ground at 1.40-1.82 s (frames 84-109)",
+    "kfire2dead_m16_low": "left upper arm dragged 6.2 cm along the ground at 1.40-1.82 s (frames 84-109)",
+    "kstow2dead": "left thigh dragged 9.4 cm along the ground at 1.10-1.45 s (frames 66-87)",
+    "kstow2dead_low": "belly dragged 6.0 cm along the ground at 2.07-2.67 s (frames 124-160)",
+    "kstow2dead_m16_low": "belly dragged 6.0 cm along the ground at 2.07-2.67 s (frames 124-160)",
+    "prfire2dead": "left thigh dragged 6.0 cm along the ground at 0.55-1.60 s (frames 33-96)",
+    "prfire2dead_low": "right forearm dragged 5.6 cm along the ground at 0.00-0.15 s (frames 0-9)",
+    "prfire2dead_m16_low": "right forearm dragged 3.9 cm along the ground at 0.00-0.62 s (frames 0-37)",
+    "prstow2dead": "left thigh dragged 5.5 cm along the ground at 0.52-1.55 s (frames 31-93)",
+    "prstow2dead_low": "right forearm dragged 4.9 cm along the ground at 0.00-0.15 s (frames 0-9)",
+    "prstow2prfire_low": "left forearm dragged 3.4 cm along the ground at 0.00-0.80 s (frames 0-48)",
+    "prstow_flinch_low": "left forearm dragged 3.1 cm along the ground at 0.00-0.65 s (frames 0-39)",
+    "ststow2dead": "right knee dragged 5.9 cm along the ground at 0.67-1.27 s (frames 40-76)",
+    "ststow2dead_low": "right knee dragged 5.1 cm along the ground at 0.68-0.97 s (frames 41-58)",
+    "ststow2dead_m16_low": "right knee dragged 5.1 cm along the ground at 0.68-0.97 s (frames 41-58)",
+}
+
+
+@cache
+def _figures() -> FigureSet:
+    return FigureSet.from_dir(ROOT / "figures", ["soldier.fig", "DI.fig", "AK_47.fig", "M16.fig"])
+
+
+@cache
+def _locomotion() -> frozenset[str]:
+    """The clips of the locomotion graphs (the check judges their contacts with the root's travel out)."""
+    return frozenset(
+        Path(f).name.split(".")[0]
+        for g in (ROOT / "posture_graphs").glob("*.graph")
+        if any(w in g.stem.lower() for w in LOCOMOTION_GRAPH_WORDS)
+        for f in read_posture_graph(g).files
+    )
+
+
+@cache
+def shipped_slides(clip: str) -> dict[str, Any]:
+    """The check's row of a shipped channelset (as ``ttes author check`` judges its contacts)."""
+    cs = load_channelset(ROOT / "channelsets" / f"{clip}.chset.env")
+    return check_clip(cs, _figures(), locomotion=clip in _locomotion())
+
+
+@pytest.mark.parametrize("clip", known_faults(CLIPS, KNOWN_SLIDES))
+def test_no_shipped_clip_drags_a_part_along_the_ground(clip: str) -> None:
+    row = shipped_slides(clip)
+    assert row["contact_slide_cm"] <= THRESHOLDS["contact_slide_cm"], {
+        k: row[k] for k in ("contact_slide_cm", "contact_slide_part", "contact_slide_frames")
+    }
