@@ -162,12 +162,13 @@ def test_an_arm_in_the_ground_goes_out_sideways_from_the_chest() -> None:
 def test_only_the_crawlers_and_ststow2dead_slaves_move_their_arms_out_sideways() -> None:
     """The sideways move is the crawl death's own setting and ststow2dead's, there with its trunk laid by the
     root alone and its feet held where they land (alone, DI ststow2dead's feet skated 2.35 cm with it, its
-    head rested 6.3 cm up): the other deaths' slaves rebuild unchanged."""
+    head rested 6.3 cm up; stfire2dead's trunk and feet too since its legs are laid from 1.0 s, DI/M16 foot
+    skate 3.68 cm without them): the other deaths' slaves rebuild unchanged."""
     from authoring import deaths
 
     assert {d.name for d in deaths.DEATHS if d.slave_arm_out} == {"crawl2dead", "ststow2dead"}
     both = {d.name for d in deaths.DEATHS if d.slave_trunk_rigid or d.slave_feet_landed}
-    assert both == {"ststow2dead"}
+    assert both == {"ststow2dead", "stfire2dead"}
 
 
 def test_the_trunk_is_down_once_pelvis_and_chest_stay_near_where_they_end() -> None:
