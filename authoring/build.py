@@ -44,6 +44,7 @@ from authoring.slave_ground import clear_rifle, rest_limbs
 from authoring.slave_rest import rest_slave_trunk
 from authoring.slave_slack import slack_slave_feet
 from authoring.slave_spine import lay_slave_spine
+from authoring.slave_start import ease_slave_start
 from authoring.slave_wrists import ease_slave_wrists
 from authoring.slaving import MasterSlavePair
 from authoring.transitions import ClipFrames, clip_to_channelset
@@ -631,6 +632,7 @@ def build(
 
         snap_endpoints(out, committed)
         for name, chset in out.items():  # a snapped end faded into a joint at its limit can pass it by a hair
+            _ease_start(chset, name)  # leaving its snapped start from rest, where the death asks
             clamp_to_limits(chset, slaved_on[name].di)
     written: list[Path] = []
     for name in (j.name for j in jobs):
@@ -643,6 +645,14 @@ def build(
             written.append(path)
     written += write_graphs(root, figure)
     return written
+
+
+def _ease_start(chset: Channelset, name: str) -> None:
+    """A slave of death ``name`` retimed to leave its start from rest (:mod:`authoring.slave_start`), where
+    the death asks (:attr:`deaths.DeathSpec.slave_start_ease`): after the snap, its first frame kept."""
+    spec = deaths.death_specs().get(name)
+    if spec and spec.slave_start_ease:
+        ease_slave_start(chset, spec.slave_start_ease)
 
 
 def _progress(jobs: Sequence[ClipJob], enabled: bool) -> Iterable[ClipJob]:

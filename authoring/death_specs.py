@@ -183,6 +183,9 @@ class DeathSpec:
     # before the other rests (authoring.slave_spine), their arms lifted by the arm, their trunk not turned
     # by rest_limbs: prfire2dead's DI belly lay 2.8 cm in the ground, the body lifted out (trunk_rise 5.8)
     slave_spine_laid: bool = False
+    # s: the slaves leave their start posture from rest over this, their frames up to the release retimed
+    # (authoring.slave_start): prstow2dead's DI, laid by the spine, moved its head 0.59 m/s in frames 2-3
+    slave_start_ease: float = 0.0
     # a standing death's feet stay where they leave the ground as his knees land, the knee, ankle and toes
     # opening under the falling thigh (authoring.feet_held): stfire2dead's shins swung up 45 degrees, feet
     # 17 cm off the ground, as his thighs came down flat
@@ -263,6 +266,11 @@ PRONE_START_EASE = 0.1
 # first frame snapped and that change faded out over 12 frames, the head left at 0.59 m/s (0.62 faded over 24;
 # held over 24: 0.49, the DI slave's 0.46 -> 0.45; it catches up at 1.6 m/s 0.2-0.3 s in, as it falls later)
 PRSTOW_HEAD_HELD = 24
+# s: prstow2dead's slaves, laid by the spine, leave PRONE_STOWED from rest over this (slave_start_ease): the
+# hit presses his hips down 1.7 cm in his first 4 frames and the DI's belly, 1.1 cm into the ground, is lifted
+# out with the body, its head rising 0.6 cm in frame 2-3 as his stays level: first frames 0.59 -> 0.13 m/s
+# (M16 0.60 -> 0.15); 0.05: 0.31, its head then 0.64 m/s in frame 3-4 (0.60 at 4-5 here; his own 0.61)
+PRSTOW_SLAVE_START_EASE = 0.08
 # stfire2dead's rifle is flung to his right, a little down and back (pelvis frame): to his left, away from the
 # fall (the default), he turned onto it and lay with his pelvis on it, 4.8 cm up; to his right it lies flat
 # 32 cm clear of him and the trunk rests 1.7 cm up (right and down (1, -0.7, 0): his thighs skid 5.7 cm as
@@ -425,6 +433,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         lowered_at=PRONE_LOWERED_AT,
         slave_settle_arms_still=True,
         slave_heels_cm=PRSTOW_SLAVE_HEELS,
+        slave_spine_laid=True,  # rest_rise 4.33/4.04 -> 1.57 (DI/M16), trunk_rise 4.42/4.21 -> 1.94/1.73
+        slave_arms_pinned=True,  # laid so, the M16's right forearm slid 4.30 cm on the ground (pinned 2.53)
+        slave_start_ease=PRSTOW_SLAVE_START_EASE,
     ),
     # not eased: see PRONE_START_EASE
     replace(

@@ -69,10 +69,12 @@ def _palms(cs, figs: FigureSet) -> np.ndarray:
     return kin.site_globals(q, loc)[..., :3, 3][:, at]
 
 
-def test_only_stfire2dead_and_prfire2dead_slaves_pin_their_arms(figs: FigureSet) -> None:
-    """The hold is stfire2dead's and prfire2dead's own setting (the latter's DI right hand, laid by the spine
-    and no longer lifted with the body, slid 3.26 cm): another death's slave is left as it is."""
-    assert {d.name for d in deaths.DEATHS if d.slave_arms_pinned} == {"stfire2dead", "prfire2dead"}
+def test_only_stfire2dead_and_the_prone_deaths_slaves_pin_their_arms(figs: FigureSet) -> None:
+    """The hold is stfire2dead's, prfire2dead's and prstow2dead's own setting (laid by the spine and no
+    longer lifted with the body, prfire2dead's DI right hand slid 3.26 cm, prstow2dead's M16 right forearm
+    4.30): another death's slave is left as it is."""
+    pinned = {d.name for d in deaths.DEATHS if d.slave_arms_pinned}
+    assert pinned == {"stfire2dead", "prfire2dead", "prstow2dead"}
     master = load_channelset(CHANNELSETS / "ststow2dead.chset.env", use_cache=False)
     slave = load_channelset(CHANNELSETS / "ststow2dead_low.chset.env", use_cache=False)
     before = slave.joint_data.copy()

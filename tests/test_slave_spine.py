@@ -54,9 +54,10 @@ def test_a_belly_pushed_into_the_ground_comes_out_by_the_spine_alone() -> None:
     assert np.degrees(np.abs(np.diff(q1[:, cols], axis=0)).max()) < 8.0
 
 
-def test_only_prfire2dead_s_slaves_lay_their_trunk_by_the_spine() -> None:
-    """prfire2dead's own setting: every other death's slaves rebuild unchanged (prstow2dead's DI, laid so,
-    passed every limit but end_speed: its head 0.59 m/s in the first frames, 0.45 before)."""
+def test_only_the_prone_deaths_slaves_lay_their_trunk_by_the_spine() -> None:
+    """prfire2dead's and prstow2dead's own setting: every other death's slaves rebuild unchanged
+    (prstow2dead's, laid so, also leave their start from rest: their head 0.59 m/s in the first frames)."""
     from authoring import deaths
 
-    assert {d.name for d in deaths.DEATHS if d.slave_spine_laid} == {"prfire2dead"}
+    assert {d.name for d in deaths.DEATHS if d.slave_spine_laid} == {"prfire2dead", "prstow2dead"}
+    assert {d.name for d in deaths.DEATHS if d.slave_start_ease} == {"prstow2dead"}
