@@ -109,7 +109,6 @@ KNOWN_POPS: dict[str, str] = {
     "kfire2dead": _KFOOT.format(9.1),
     "kfire2dead_low": _KFOOT.format(9.4),
     "kfire2dead_m16_low": _KFOOT.format(9.4),
-    "prstow2dead_low": _TWITCH.format("right", 0.17),
     "prfire2dead_low": _TWITCH.format("left", 0.22),
     "crawl2prstow": "going prone from the crawl, the left knee jumps 8.0 cm in one frame (0.33 s)",
     "crawl2prstow_low": "going prone from the crawl, the left knee jumps 7.8 cm in one frame (0.33 s)",
