@@ -17,6 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 DIRECTIONS = 16
+_ANGLES = np.arange(DIRECTIONS) * np.pi / DIRECTIONS
+# (2, DIRECTIONS) unit ground directions (X, Z) over a half turn: a spread is the largest of its projections
+GROUND_DIRECTIONS = np.stack([np.cos(_ANGLES), np.sin(_ANGLES)])
 CHUNK = 4096  # hull-depth candidates per batch
 SIDE_PARTS = (
     (re.compile(r"(foot|toes)$"), "foot"),
@@ -84,6 +87,13 @@ def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist(), strict=True))
 
 
+def ground_extent(xz: np.ndarray) -> float:
+    """Horizontal spread (cm) of ground points ``(m, 2)`` (X, Z): the largest extent of their projections on
+    :data:`GROUND_DIRECTIONS`, as a contact run's slide is measured."""
+    proj = xz @ GROUND_DIRECTIONS
+    return float((proj.max(axis=0) - proj.min(axis=0)).max())
+
+
 def contact_runs(points: np.ndarray, height: float, release: np.ndarray | float | None = None) -> ContactRuns:
     """The contact runs of the nodes of ``points`` ``(n, k, 3)`` (world, cm, +Y up). Contact is judged by
     height alone, so a fast skim just above the ground counts as sliding. With ``release`` (cm, one for
@@ -111,10 +121,8 @@ def contact_runs(points: np.ndarray, height: float, release: np.ndarray | float 
         np.add.at(edges, starts, 1)
         np.add.at(edges, stops + 1, -1)
         flat = np.cumsum(edges[:-1]) > 0
-    ang = np.arange(DIRECTIONS) * np.pi / DIRECTIONS
-    dirs = np.stack([np.cos(ang), np.sin(ang)])  # (2, D)
     proj = np.zeros((len(touching), n + 1, DIRECTIONS))
-    proj[:, :n] = points[:, touching][..., [0, 2]].transpose(1, 0, 2) @ dirs
+    proj[:, :n] = points[:, touching][..., [0, 2]].transpose(1, 0, 2) @ GROUND_DIRECTIONS
     proj = proj.reshape(-1, DIRECTIONS)
     hi = np.maximum.reduceat(np.where(flat[:, None], proj, -np.inf), starts, axis=0)
     lo = np.minimum.reduceat(np.where(flat[:, None], proj, np.inf), starts, axis=0)

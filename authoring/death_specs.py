@@ -224,6 +224,23 @@ def _prone_dead(name: str, start: str) -> DeathSpec:
     return replace(_prone(name, start), start_ease=PRONE_START_EASE)
 
 
+def _lying_prone(spec: DeathSpec) -> DeathSpec:
+    """A death from a prone posture (PRONE_STOWED, PRONE_FIRE), as every one settles: the legs roll out one
+    after the other, the chest is lowered from :data:`PRONE_LOWERED_AT`, the let-go rifle falls again among
+    the body; its slaves settle once his arms lie still, their trunk laid by the spine (the DI's belly, shaped
+    otherwise, lay 1-3 cm in the ground and the body was lifted out: rest_rise 4.0-4.5 cm) and their hands
+    and forearms held where they rest (laid so, the M16's prstow forearm slid 4.30 cm, prfire's hand 3.26)."""
+    return replace(
+        spec,
+        prone_legs_roll=True,
+        rifle_resettle=True,
+        lowered_at=PRONE_LOWERED_AT,
+        slave_settle_arms_still=True,
+        slave_spine_laid=True,
+        slave_arms_pinned=True,
+    )
+
+
 # A crawler's arms stay propped (limp, his chest dropped onto them and the elbows splayed, the forearms slid
 # 5-6 cm; held by contact_pin they still slid 4.4: the shoulders passed over the elbows) and his legs drawn
 # until he is down (limp from the start, the knees splayed 3.5 cm); the settle lays the chest down. The
@@ -426,29 +443,17 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_let_go_in_place=True,
     ),
     replace(
-        _prone("prstow2dead", "PRONE_STOWED"),
+        _lying_prone(_prone("prstow2dead", "PRONE_STOWED")),
         slave_head_held=PRSTOW_HEAD_HELD,
-        prone_legs_roll=True,
-        rifle_resettle=True,
-        lowered_at=PRONE_LOWERED_AT,
-        slave_settle_arms_still=True,
         slave_heels_cm=PRSTOW_SLAVE_HEELS,
-        slave_spine_laid=True,  # rest_rise 4.33/4.04 -> 1.57 (DI/M16), trunk_rise 4.42/4.21 -> 1.94/1.73
-        slave_arms_pinned=True,  # laid so, the M16's right forearm slid 4.30 cm on the ground (pinned 2.53)
         slave_start_ease=PRSTOW_SLAVE_START_EASE,
     ),
     # not eased: see PRONE_START_EASE
     replace(
-        _prone_dead("prfire2dead", "PRONE_FIRE"),
+        _lying_prone(_prone_dead("prfire2dead", "PRONE_FIRE")),
         slave_arms_held=True,
-        prone_legs_roll=True,
-        rifle_resettle=True,
-        lowered_at=PRONE_LOWERED_AT,
-        slave_settle_arms_still=True,
         slave_rifle_slid_past=PRFIRE_RIFLE_SLID_PAST,
         arms_lifted_level=True,
-        slave_spine_laid=True,
-        slave_arms_pinned=True,  # its right hand, down sooner (not lifted with the body), slid 3.26 cm
     ),
     CRAWL_DEATH,
 )

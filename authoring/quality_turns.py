@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from authoring.body_parts import DIRECTIONS, FOOT_PARTS, ContactRuns, true_runs
+from authoring.body_parts import FOOT_PARTS, ContactRuns, ground_extent, true_runs
 from server.motion.channelset import Channelset
 
 TRAVEL_LIMIT_CM = 10.0
@@ -51,13 +51,6 @@ def segment_yaw(segg: np.ndarray) -> np.ndarray:
     return np.unwrap(np.arctan2(-segg[..., 2, 0], segg[..., 0, 0]), axis=0)
 
 
-def _extent(xz: np.ndarray) -> float:
-    """Horizontal extent (cm) of ground points ``(m, 2)``, as :func:`authoring.body_parts.contact_runs`."""
-    ang = np.arange(DIRECTIONS) * np.pi / DIRECTIONS
-    proj = xz @ np.stack([np.cos(ang), np.sin(ang)])
-    return float((proj.max(axis=0) - proj.min(axis=0)).max())
-
-
 def pivot_slides(
     runs: ContactRuns,
     pts: np.ndarray,
@@ -77,7 +70,7 @@ def pivot_slides(
         if sole is not None and str(parts[k]) in sole:
             foot = np.concatenate([foot, sole[str(parts[k])][a:b]], axis=1)
         touching = (foot[..., 1] <= height).any(axis=0)  # the sole: points that touch during the run
-        own = [_extent(foot[:, j][:, [0, 2]]) for j in np.flatnonzero(touching)]
+        own = [ground_extent(foot[:, j][:, [0, 2]]) for j in np.flatnonzero(touching)]
         c = int(np.flatnonzero(touching)[int(np.argmin(own))])
         arm = pts[a:b, k][:, [0, 2]] - foot[:, c][:, [0, 2]]
         if np.hypot(*arm[0]) > PIVOT_PATCH_CM:
@@ -85,7 +78,7 @@ def pivot_slides(
         turn = yaw[a:b, k] - yaw[a, k]
         cos, sin = np.cos(turn), np.sin(turn)  # take the foot's turn out: Ry(-turn) about the pivot
         back = np.stack([arm[:, 0] * cos - arm[:, 1] * sin, arm[:, 0] * sin + arm[:, 1] * cos], axis=1)
-        slides[r] = min(slides[r], _extent(foot[:, c][:, [0, 2]] + back))
+        slides[r] = min(slides[r], ground_extent(foot[:, c][:, [0, 2]] + back))
     return slides
 
 
