@@ -116,6 +116,7 @@ from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_limbs import LIMB_THROUGH_LIMIT_CM, limbs_through
 from authoring.quality_pops import POP_LIMIT_M_S, pops
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
+from authoring.quality_reactions import REACTION_LIMITS, reaction_amplitude
 from authoring.quality_rest import (
     LAG_LIMIT_S,
     PROPPED_LIMIT_S,
@@ -431,6 +432,7 @@ def check_clip(
     out["ground_penetration_where"] = f"{out['lowest_segment']}[{int(low[0])}]"
     site_pos = sites[..., :3, 3] + shift[:, None, :]
     site_names = list(kin.site_names)
+    muzzle: np.ndarray | None = None
     if rifle_type is not None:
         rk = figures.kin[rifle_type]
         rq, rloc = frames.poses[rifle_type], frames.locations[rifle_type]
@@ -449,12 +451,13 @@ def check_clip(
                     worst = float(d.max())
                     out["palm_rifle_where"] = f"{palm.split('.')[0]}[{int(np.argmax(d))}]"
         out["palm_rifle_cm"] = round(worst, 3)
+        muzzle = rs[:, rnames["muzzle"], :3, 3] + shift if "muzzle" in rnames else None
         if "butt" in rnames and "muzzle" in rnames:
-            butt, muzzle = (rs[:held, rnames[k], :3, 3] for k in ("butt", "muzzle"))
-            jump, a, b = rifle_pitch_jump(butt, muzzle, cs.fps)
+            butt, tip = (rs[:held, rnames[k], :3, 3] for k in ("butt", "muzzle"))
+            jump, a, b = rifle_pitch_jump(butt, tip, cs.fps)
             out["rifle_pitch_jump_deg"] = round(jump, 3)
             out["rifle_pitch_jump_where"] = f"frames {a}-{b}" if jump > 0 else None
-            turn, a, b = rifle_turn(butt, muzzle, cs.fps)
+            turn, a, b = rifle_turn(butt, tip, cs.fps)
             out["rifle_turn_deg"] = round(turn, 3)
             out["rifle_turn_where"] = f"frames {a}-{b}" if turn > 0 else None
         rnodes, rsegs = figures.nodes(rifle_type)
@@ -480,6 +483,8 @@ def check_clip(
         out["rifle_in_body_where"] = f"{kin.segment_names[seg]}[{frame}]" if seg >= 0 else None
         site_pos = np.concatenate([site_pos, rs[..., :3, 3] + shift[:, None, :]], axis=1)
         site_names += list(rk.site_names)
+    # a reaction clip shows: the shoulders, head and muzzle move enough (quality_reactions)
+    out.update(reaction_amplitude(name, site_pos, site_names, muzzle, cs.fps))
     # speeds at the ends that are static postures
     if static_ends is None:
         static_ends = (not locomotion, not locomotion)
@@ -514,6 +519,8 @@ def check_clip(
         out.update(rest_lag(frames, figures))
         out.update(dead_trunk(frames, figures))
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
+    reacted = REACTION_LIMITS.get(out.get("reaction") or "", {})
+    failures += [k for k, lim in reacted.items() if _range_failure(out[k], lim)]
     if locomotion:
         speed, stride = cs.ground_speed, cs.stride_length
         out["stride_length"] = stride
@@ -647,6 +654,26 @@ def _where(row: Mapping[str, Any], key: str) -> str:
     return f"{name} ({detail})" if detail else name
 
 
+def _range_row(
+    key: str,
+    judged: Sequence[tuple[Mapping[str, Any], tuple[float, float] | None]],
+    ranges: Mapping[str, Any],
+) -> dict[str, Any]:
+    """The summary row of a metric judged against a range per family (gaits, reactions): ``judged`` pairs a
+    clip row with its family's range (None: recorded only)."""
+    judged = [(c, lim) for c, lim in judged if lim is not None]
+    bad = [(c, lim) for c, lim in judged if _range_failure(c[key], lim)]
+    # the worst: furthest outside its range, else the value closest to an edge
+    pick = max(judged, key=lambda cl: _range_distance(cl[0][key], cl[1])) if judged else None
+    return {
+        "limit": dict(ranges),
+        "worst": None if pick is None else pick[0][key],
+        "where": None if pick is None else pick[0]["name"],
+        "failing": len(bad),
+        "pass": not bad,
+    }
+
+
 def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """Per threshold: limit, worst value, where, pass; plus counts and the overall verdict."""
     rows: dict[str, Any] = {}
@@ -662,19 +689,13 @@ def summarise(clips: Sequence[Mapping[str, Any]], continuity: Sequence[Mapping[s
                      "pass": failing == 0}  # fmt: skip
     for key in ("gait_speed_m_s", "gait_steps_per_s"):
         judged = [(c, GAIT_LIMITS[c["gait"]][key]) for c in clips if c.get(key) is not None]
-        judged = [(c, lim) for c, lim in judged if lim is not None]  # recorded-only families are not judged
-        ranges = {f: v[key] for f, v in GAIT_LIMITS.items() if v[key] is not None}
-        bad = [(c, lim) for c, lim in judged if _range_failure(c[key], lim)]
-
-        # the worst: furthest outside its range, else the value closest to an edge
-        pick = max(judged, key=lambda cl: _range_distance(cl[0][key], cl[1])) if judged else None
-        rows[key] = {
-            "limit": ranges,
-            "worst": None if pick is None else pick[0][key],
-            "where": None if pick is None else pick[0]["name"],
-            "failing": len(bad),
-            "pass": not bad,
-        }
+        rows[key] = _range_row(key, judged, {f: v[key] for f, v in GAIT_LIMITS.items() if v[key] is not None})
+    for key in sorted({k for v in REACTION_LIMITS.values() for k in v}):
+        ranges = {kind: v[key] for kind, v in REACTION_LIMITS.items() if key in v}
+        judged = [
+            (c, ranges.get(c["reaction"])) for c in clips if c.get(key) is not None and c.get("reaction")
+        ]
+        rows[key] = _range_row(key, judged, ranges)
     rows["turn_pivot_deg"] = turn_pivot_row(clips)
     loco = [c for c in clips if c.get("locomotion")]
     missing = [c["name"] for c in loco if not c.get("locomotion_recorded")]

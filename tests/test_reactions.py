@@ -1,4 +1,5 @@
-"""The committed reaction clips (firing recoil, flinch): self-loops of their postures that keep contacts."""
+"""The committed reaction clips (firing recoil, flinch): self-loops of their postures that keep contacts and
+show (issue 14)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,17 @@ from authoring import postures, reactions
 from authoring.quality import FigureSet, check_clip, play
 from server.motion.cache import load_channelset
 from server.motion.posture_change import load_posture_graph
+from tests.known_faults import known_faults
 from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
+
+# reactions too small to see (authoring/quality_reactions.py) on every figure, strict xfails naming what a
+# person sees; made visible on soldier.fig (branch reactions-s20-prone-wip) their DI and M16 slaves failed
+# other limits
+TOO_SMALL: dict[str, str] = {
+    "prfire_recoil": "prone recoil: the shoulders move 0.4 cm, the head 1.4, the muzzle 2.9 (a twitch)",
+    "prfire_flinch": "prone flinch: the head alone nods 5.6 cm, the shoulders stay still",
+    "prstow_flinch": "prone flinch: the head alone nods 7.0 cm, the shoulders stay still",
+}
 
 
 @pytest.fixture(scope="module")
@@ -40,6 +51,7 @@ def test_reaction_graphs_are_self_loops():
 
 @pytest.mark.parametrize("r", reactions.REACTIONS, ids=lambda r: r.name)
 def test_reaction_leaves_and_returns_to_its_posture_and_keeps_its_contacts(r, figset: FigureSet, keys):
+    """Every limit but the visible amplitude (judged below)."""
     cs = load_channelset(CHANNELSETS / f"{r.name}.chset.env")
     frames = play(cs, figset)
     kin = figset.kin["soldier.fig"]
@@ -57,7 +69,8 @@ def test_reaction_leaves_and_returns_to_its_posture_and_keeps_its_contacts(r, fi
     row = check_clip(cs, figset)
     assert row["foot_skate_cm"] <= 2.0 and row["contact_slide_cm"] <= 3.0, row["contact_slide_part"]
     # every limit of the check (issue 14: the prone recoil swung the right upper arm into the butt's toe)
-    assert not row["failures"], (row["failures"], row["rifle_in_body_where"])
+    failures = [f for f in row["failures"] if not f.startswith("reaction_")]
+    assert not failures, (failures, row["rifle_in_body_where"])
     nose = sites[:, kin.site_names.index("bottom_head.nose")]
     rk = figset.kin["AK_47.fig"]
     gun = rk.site_globals(frames.poses["AK_47.fig"], frames.locations["AK_47.fig"])[..., :3, 3]
@@ -79,3 +92,15 @@ def test_build_of_a_reaction_reproduces_the_committed_bytes(tmp_path):
     assert (tmp_path / rel).read_bytes() == (CHANNELSETS.parent / rel).read_bytes()
     name = "posture_graphs/soldier_react_hi.graph"
     assert (tmp_path / name).read_bytes() == (POSTURE_GRAPHS.parent / name).read_bytes()
+
+
+@pytest.mark.parametrize("name", known_faults([r.name for r in reactions.REACTIONS], TOO_SMALL))
+@pytest.mark.parametrize("suffix", ["", "_low", "_m16_low"])
+def test_reaction_shows_to_a_trainee(name: str, suffix: str) -> None:
+    """Issue 14: a recoil kicks the shoulders, head and muzzle back a few cm, a flinch ducks the head a hand's
+    breadth and hunches the shoulders (quality_reactions.REACTION_LIMITS), on every figure; and passes every
+    other limit (the slaves too)."""
+    cs = load_channelset(CHANNELSETS / f"{name}{suffix}.chset.env")
+    row = check_clip(cs, FigureSet.from_dir(FIGURES, sorted({c.protofiletype for c in cs.channels})))
+    shown = {k: row[k] for k in ("reaction_shoulders_cm", "reaction_head_cm", "reaction_muzzle_cm")}
+    assert not row["failures"], (row["failures"], shown)
