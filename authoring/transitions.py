@@ -527,7 +527,9 @@ def _fold_knee(
 def _goal_weight(steps: Sequence[Step], times: np.ndarray, fade: float = 0.0) -> float | np.ndarray:
     """1 where a foot or knee goal holds, 0 during its ``free`` steps (scalar 1 when it has none); with
     ``fade`` (s) eased from 1 to 0 over a free step's first ``fade`` s (let go gently; taken up again at
-    once: the free limb arrives where its goal resumes)."""
+    once: the free limb arrives where its goal resumes). A step free from the clip's start fades too: its
+    goal holds the first ``fade`` s (faded only where it was let go, ststow2crawl's left foot still popped,
+    1.9 m/s, where its free step ended; fading that end as well skated it 29 cm)."""
     free = [st for st in steps if st.free]
     if not free:
         return 1.0
