@@ -26,6 +26,7 @@ cycle's first frame. Like the gait clips the clips are local motion (the body's 
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
@@ -34,7 +35,7 @@ import numpy as np
 from authoring import ik
 from authoring.motion import KeyPosture
 from authoring.postures import RIFLE, SOLDIER, SPINE, leg
-from authoring.signal_shaping import smoothstep
+from authoring.signal_shaping import hann_smooth, smoothstep
 from authoring.transitions import CARRIER, ClipFrames, lift_off_ground
 from peabody import values as V
 from peabody.fk import FigureKinematics, rigid_inverse
@@ -48,6 +49,12 @@ SWING = 0.36  # seconds a limb takes to move forwards
 LIFT = {"knee": 3.5, "toes": 4.5, "elbow": 5.0}  # cm a contact rises while it moves
 ELBOW_CLEAR = 1.5  # cm the planted elbows sit higher in the cyclic state than in the posture
 ELBOW_DELAY = 0.1  # s the start clip's first elbow move waits (the arm leaves the posture gently)
+# the forearm planted through the start clip turns (the elbow's twist) from the posture's arm to the cycle's:
+# it first lifts clear in START_CLEAR s (straight up, START_HOP cm above its cyclic height), then turns in
+# the air and comes down to the cycle's height; turned on the ground it dragged its underside 3.5 cm sideways
+START_CLEAR = 0.1
+START_HOP = 2.0
+START_SMOOTH = 3  # frames either side the start clip's arms are smoothed over (its tracks' twists jump apart)
 ROLL = 3.0  # degrees the chest rolls towards the planted side
 SWAY = 1.0  # cm the chest sways sideways
 PELVIS_DOFS = ("ty", "rx", "ry", "rz")  # the pelvis rises, pitches, yaws and rolls over the planted knees
@@ -239,21 +246,39 @@ def _track(
 
 
 def solve_arms(
-    kin: FigureKinematics, body: np.ndarray, goals: list[ik.Goal], roots: np.ndarray, n_start: int
+    kin: FigureKinematics,
+    body: np.ndarray,
+    goals: list[ik.Goal],
+    roots: np.ndarray,
+    n_start: int,
+    start_goals: list[ik.Goal] | None = None,
+    start_blend: np.ndarray | None = None,
+    start_smooth: int = 0,
 ) -> np.ndarray:
     """The arms over the start clip and the cycle (frames ``n_start`` to the last, which is the first one
     cycle on): the cycle is tracked from where it ends until its arms come round to where they started (a
     loop without a jump), the start clip forwards from the posture and backwards from the cycle's first
-    frame, the two blended (ease in/out) so it leaves the posture and meets the cycle exactly."""
+    frame, the two blended (ease in/out, or per frame and DOF ``start_blend`` ``(n_start + 1, ndof)``) so it
+    leaves the posture and meets the cycle exactly. ``start_goals`` (default ``goals``) are the start clip's:
+    the cycle is tracked on ``goals`` alone; ``start_smooth``: the blend smoothed over that many frames
+    either side (its ends kept)."""
     n = len(body)
     cycle = np.arange(n_start, n)
     cyc = _track(kin, body, goals, roots, np.arange(n), body[0])[n_start:]
     for _ in range(CYCLE_PASSES):
         cyc = _track(kin, body, goals, roots, cycle, cyc[-1])
+    goals = goals if start_goals is None else start_goals
     fwd = _track(kin, body, goals, roots, np.arange(n_start + 1), body[0])
     bwd = _track(kin, body, goals, roots, np.arange(n_start, -1, -1), cyc[0])[::-1]
-    w = smoothstep(np.linspace(0.0, 1.0, n_start + 1))[:, None]
+    w = smoothstep(np.linspace(0.0, 1.0, n_start + 1))[:, None] if start_blend is None else start_blend
     blend = fwd + w * (bwd - fwd)
+    if start_smooth:  # the tracks' twists swing apart within a few frames: spread the blend's change out
+        ends = smoothstep(np.minimum(np.arange(n_start + 1), np.arange(n_start, -1, -1)) / start_smooth)
+        arms = np.zeros(kin.ndof, dtype=bool)
+        for side in ("left", "right"):
+            for j in (f"{side}_clavicle", f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist"):
+                arms[kin.dof_slices[j]] = True
+        blend[:, arms] += ends[:, None] * (hann_smooth(blend[:, arms], start_smooth) - blend[:, arms])
     rows = slice(0, n_start + 1)  # and the blend's hands put back on the rifle, in a few very small steps
     blend, _ = ik.solve(
         kin,
@@ -348,8 +373,11 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
         arm_goals.append(ik.Goal(site, elbows[side], None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
     chest_now = kin.segment_globals(poses, roots)[:, kin.segment_names.index(CARRIER)]
     rifles = carried_rifle(rifle0, chest0, chest_now, elbows)
-    arm_goals = rifle_hand_goals(kin, rkin, key, rifles) + arm_goals  # the palms on the rifle come first
-    poses = solve_arms(kin, poses, arm_goals, roots, n_start)
+    hands = rifle_hand_goals(kin, rkin, key, rifles)
+    start_goals, start_blend = _start_lift(kin, t, elbows, arm_goals, n_start)
+    poses = solve_arms(
+        kin, poses, hands + arm_goals, roots, n_start, hands + start_goals, start_blend, int(START_SMOOTH)
+    )
     poses[0], roots[0], rifles[0] = q0, root0, rifle0
     lift_off_ground(kin, poses, roots, rifles)
     # the cycle's last frame is its first, one cycle further on (pose, pelvis and rifle)
@@ -358,6 +386,31 @@ def record_crawl(kin: FigureKinematics, rkin: FigureKinematics, key: KeyPosture)
         frames[-1] = frames[n_start]
         frames[-1, 2, 3] += z[-1] - z[n_start]
     return t, poses, roots, rifles, z
+
+
+def _start_lift(
+    kin: FigureKinematics, t: np.ndarray, elbows: dict[str, np.ndarray], goals: list[ik.Goal], n_start: int
+) -> tuple[list[ik.Goal], np.ndarray]:
+    """The start clip's elbow goals and arm blend ``(n_start + 1, ndof)``: the elbow planted through it
+    (its pair moves first in the cycle) lifts clear first (:data:`START_CLEAR`, :data:`START_HOP`) and its
+    arm turns from the posture's into the cycle's only then; the other arm as :func:`solve_arms` blends it."""
+    u = t[: n_start + 1] / START
+    w = smoothstep(u)
+    blend = np.repeat(w[:, None], kin.ndof, axis=1)
+    out = []
+    for side, goal in zip(("left", "right"), goals, strict=True):
+        if any(t0 < START for t0, _ in swings(PAIR["elbow", side], float(t[-1]))):
+            out.append(goal)
+            continue
+        up = smoothstep(t / START_CLEAR)
+        hop = up - smoothstep((t - START_CLEAR) / (START - START_CLEAR))
+        track = elbows[side].copy()
+        track[:, 1] += ELBOW_CLEAR * (up - smoothstep(t / START)) + START_HOP * hop
+        out.append(dataclasses.replace(goal, target_position=track))
+        late = smoothstep((u - START_CLEAR / START) / (1.0 - START_CLEAR / START))
+        for j in (f"{side}_clavicle", f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist"):
+            blend[:, kin.dof_slices[j]] = late[:, None]
+    return out, blend
 
 
 def _cut(

@@ -49,6 +49,7 @@ from authoring.motion import (
     VelocityControl,
 )
 from authoring.postures import RIFLE, SOLDIER, SPINE, arm, leg, palm_targets
+from authoring.signal_shaping import smoothstep
 from peabody import quaternion
 from peabody.fk import FigureKinematics, rigid_inverse
 from peabody.model import Figure
@@ -125,6 +126,9 @@ class TransitionSpec:
     guide_elbow: bool = False
     # degrees per second: the clip is retimed so its rifle's line turns no faster (authoring.rifle_pace)
     rifle_pace: float | None = None
+    # seconds over which a foot or knee goal fades out as its ``free`` step starts (0: let go at once;
+    # ststow2crawl's left foot let go in one frame popped its knee 3.6 cm)
+    free_fade: float = 0.0
 
 
 # --- clip frames --------------------------------------------------------------------------------------------
@@ -520,14 +524,22 @@ def _fold_knee(
     return out
 
 
-def _goal_weight(steps: Sequence[Step], times: np.ndarray) -> float | np.ndarray:
-    """1 where a foot or knee goal holds, 0 during its ``free`` steps (scalar 1 when it has none)."""
+def _goal_weight(steps: Sequence[Step], times: np.ndarray, fade: float = 0.0) -> float | np.ndarray:
+    """1 where a foot or knee goal holds, 0 during its ``free`` steps (scalar 1 when it has none); with
+    ``fade`` (s) eased from 1 to 0 over a free step's first ``fade`` s (let go gently; taken up again at
+    once: the free limb arrives where its goal resumes). A step free from the clip's start fades too: its
+    goal holds the first ``fade`` s (faded only where it was let go, ststow2crawl's left foot still popped,
+    1.9 m/s, where its free step ended; fading that end as well skated it 29 cm)."""
     free = [st for st in steps if st.free]
     if not free:
         return 1.0
     w = np.ones(len(times))
     for st in free:
-        w[(times >= st.start) & (times < st.start + st.duration)] = 0.0
+        inside = (times >= st.start) & (times < st.start + st.duration)
+        if fade > 0.0:
+            w[inside] = np.minimum(w[inside], 1.0 - smoothstep((times[inside] - st.start) / fade))
+        else:
+            w[inside] = 0.0
     return w
 
 
@@ -700,14 +712,14 @@ def record_transition(
             continue
         track = _foot_track(kin, side, steps, keys, first, times)
         track = _fold_knee(kin, side, steps, track, poses, roots, times)
-        w = _goal_weight(steps, times)
+        w = _goal_weight(steps, times, spec.free_fade)
         goals.append(ik.Goal(f"{side}_foot.heel", track[:, :3, 3], track[:, :3, :3], w, 2, leg(side)))
     for knee in KNEES:  # only kneeling transitions have knee steps
         side = knee.split("_")[0]
         steps = [s for s in spec.steps if s.part == knee]
         if steps:
             pos = _knee_track(kin, side, steps, keys, first, times)
-            w = _goal_weight(steps, times)
+            w = _goal_weight(steps, times, spec.free_fade)
             goals.append(ik.Goal(f"{side}_lower_leg.knee", pos, None, w, 2, leg(side)))
     q = track_solve(kin, poses, goals, roots, **_tracking(spec))
     # the ends are the graph's postures exactly
@@ -749,13 +761,14 @@ def _raise_rifle(src: str, dst: str, t: float) -> tuple[Step, ...]:
     )
 
 
-def _kneel_down(dst: str, t: float) -> tuple[Step, ...]:
+def _kneel_down(dst: str, t: float, right: tuple[float, float] = (0.35, 0.5)) -> tuple[Step, ...]:
     """Standing -> kneeling on the right knee: step the left foot forward, lower the hips, right knee down.
     The right foot leaves the ground only once the left has landed (leaving at 0.2 t, with the left still
-    in the air, he hopped 3.4-3.8 cm down onto the knee: nothing held him up for 0.08-0.13 s)."""
+    in the air, he hopped 3.4-3.8 cm down onto the knee: nothing held him up for 0.08-0.13 s); ``right``:
+    when it leaves and how long it takes (fractions of ``t``)."""
     return (
         Step("left_foot", dst, 0.0, 0.35 * t, lift=8.0),
-        Step("right_foot", dst, 0.35 * t, 0.5 * t, lift=10.0, arc_site="ball"),  # once the left is down
+        Step("right_foot", dst, right[0] * t, right[1] * t, lift=10.0, arc_site="ball"),
         Step("root", dst, 0.08 * t, 0.8 * t),
         Step("legs", dst, 0.08 * t, 0.8 * t),
         Step("spine", dst, 0.15 * t, 0.8 * t),
@@ -802,12 +815,15 @@ def _left_knee_down(t0: float, t1: float) -> tuple[Step, ...]:
     )
 
 
+FREE_FADE = 0.15  # s: ststow2crawl lets go of a foot or knee goal gently (TransitionSpec.free_fade)
+
+
 def _stand_to_crawl(ta: float, tb: float, t: float) -> tuple[Step, ...]:
     """Standing -> crawl: kneel down (the right foot steps back onto its knee where the crawl has it, the
     left foot forward: :data:`SHUFFLED` at ``ta``), bring the left knee down beside the right one (``tb``),
     then pivot forward about knees and toes onto the forearms (``t``)."""
     return (
-        *_kneel_down(SHUFFLED, ta),
+        *_kneel_down(SHUFFLED, ta, right=(0.2, 0.65)),  # as recorded before 109971c: none unsupported
         Step("right_knee", SHUFFLED, 0.0, ta, free=True),
         *_arms(RAISED, 0.1 * ta, 0.85 * ta),
         *_left_knee_down(ta, tb),
@@ -876,6 +892,7 @@ TRANSITIONS: tuple[TransitionSpec, ...] = (
         _stand_to_crawl(0.75, 1.35, 2.0),
         hand_turn=(1.4, 1.95),
         rifle_pace=PACE,
+        free_fade=FREE_FADE,
     ),
     TransitionSpec(
         "ststow2kfire",

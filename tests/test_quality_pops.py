@@ -95,7 +95,6 @@ _LETGO = "at the let-go (0.38 s) the right hand flies off the grip {} cm in one 
 _KFOOT = "falling from the knee, the rear foot flips up on its toes {} cm in one frame (0.47 s)"
 _CRAWL = "turning on the crawl, the {} jumps {} cm in one frame ({} s) and stops"
 _ARM = "turning on the crawl, the right upper arm jumps {} cm in one frame ({} s) and stops"
-_KNEE = "the left knee drops {} cm in one frame as it lands ({} s)"
 _TWITCH = "shot prone, the {} forearm twitches 3.2 cm for one frame out of stillness ({} s)"
 KNOWN_POPS: dict[str, str] = {
     "ststow2dead": _LETGO.format(15.5),
@@ -113,9 +112,6 @@ KNOWN_POPS: dict[str, str] = {
     "crawl2prstow": "going prone from the crawl, the left knee jumps 8.0 cm in one frame (0.33 s)",
     "crawl2prstow_low": "going prone from the crawl, the left knee jumps 7.8 cm in one frame (0.33 s)",
     "crawl2prstow_m16_low": "going prone from the crawl, the left knee jumps 7.8 cm in one frame (0.33 s)",
-    "ststow2crawl": _KNEE.format(6.0, 0.75),
-    "ststow2crawl_low": _KNEE.format(6.2, 0.75),
-    "ststow2crawl_m16_low": _KNEE.format(6.2, 0.75),
     "crawlarc_l135": _CRAWL.format("chest", 5.3, 4.33),
     "crawlarc_l135_low": _CRAWL.format("belly", 5.8, 4.33),
     "crawlarc_l135_m16_low": _CRAWL.format("belly", 5.8, 4.33),
