@@ -200,6 +200,9 @@ class DeathSpec:
     # the let-go rifle's neighbours it is still inside of (a forearm) wait until it is clear of them instead
     # of pushing it out (Ragdoll.release's push_out): pushed out, the rifle flung the left forearm it lay in
     letgo_clear: bool = False
+    # the fingers meet only the ground from the let-go on (Ragdoll.release's fingers), as the palms never meet
+    # the rifle: the rifle pushed out of the forearm hit the left fingers wrapped round it
+    letgo_fingers: bool = False
 
 
 def _prone(

@@ -30,9 +30,10 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    while (:attr:`DeathSpec.kept`: limp, his chest dropped onto his forearms and they slid 5 cm);
 3. **the rifle is let go** at :attr:`DeathSpec.release` (the welds to the palms are switched off; the frame
    is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`; a crawler's,
-   cradled across his forearms, forward ahead of his face: :attr:`DeathSpec.toss_to`); the standing deaths
-   let go gently (:attr:`DeathSpec.letgo_clear`, :attr:`DeathSpec.letgo_blend`: the rifle pushed out of the
-   forearm it lay in and the arms' springs aimed at the slump flung the hand 12-17 cm in a frame); it collides
+   cradled across his forearms, forward ahead of his face: :attr:`DeathSpec.toss_to`); a death may let
+   go gently (:attr:`DeathSpec.letgo_clear`, :attr:`DeathSpec.letgo_fingers`,
+   :attr:`DeathSpec.letgo_blend`: the rifle pushed out of the forearm it lay in, into the fingers, and the
+   arms' springs aimed at the slump flung the hand 12-17 cm in a frame); it collides
    with the arms and head it touched in the start pose too (:class:`~authoring.ragdoll.Ragdoll`), and a
    rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`); ststow2dead's falls
    again on its own from where the hands let go, the body keeping its fall (:attr:`DeathSpec.drop_toss`,
@@ -488,7 +489,7 @@ def fall(
             data.xfrc_applied[gun, :3] = toss_mj if tossing else (c * rifle_weight if held else 0.0)
             doll.set_ground(ground0 * (1.0 - _smoothstep(ts / GROUND_RISE)))
             if release_frame is None and ts >= spec.release:
-                doll.release(push_out=not spec.letgo_clear)
+                doll.release(push_out=not spec.letgo_clear, fingers=not spec.letgo_fingers)
                 release_frame = len(poses)
                 rifle_ground0 = min(0.0, doll.rifle_lowest())
                 letgo = let_go(doll, steps - k)

@@ -4,7 +4,7 @@ Session 19's audit: at the release (frame 22, 0.35 s) of ststow2dead and stfire2
 grip 12-17 cm in one 60 Hz frame (``pop_m_s`` 4.9-6.1). In the physics: the rifle, let go inside the left
 forearm it lay on, was pushed out of it (the forearm flung, the rifle swinging into the right arm), and the
 arms' springs, held by the welds, already aimed at the slump far off. :attr:`DeathSpec.letgo_clear` and
-:attr:`DeathSpec.letgo_blend` let the hands go without either."""
+:attr:`DeathSpec.letgo_fingers` and :attr:`DeathSpec.letgo_blend` let the hands go without it."""
 
 from __future__ import annotations
 
@@ -53,6 +53,13 @@ def test_letting_go_at_once_pops_the_right_hand(ctx: BuildContext) -> None:
     pytest.importorskip("mujoco")
     spec = replace(deaths.death_specs()[DEATH], letgo_blend=0.0, letgo_clear=False)
     assert _right_hand_pop(ctx, spec) > 2.0 * POP_LIMIT_M_S  # 4.88 m/s, as the shipped clip (4.879)
+
+
+def test_fingers_that_let_go_of_the_rifle_no_longer_meet_it(ctx: BuildContext) -> None:
+    """The rifle pushed out of the forearm as before, but past the fingers: no pop either."""
+    pytest.importorskip("mujoco")
+    spec = replace(deaths.death_specs()[DEATH], letgo_fingers=True)
+    assert _right_hand_pop(ctx, spec) < 0.5 * POP_LIMIT_M_S  # 0.08 m/s
 
 
 def test_a_gentle_let_go_moves_the_hand_smoothly(ctx: BuildContext) -> None:
