@@ -194,6 +194,15 @@ class DeathSpec:
     # check's rest window opens (dead_settle.legs_landed_from); None: from the frame he is down. Laid then,
     # stfire2dead's legs lifted to turn out rose 6.9 cm at the knee after he was down (rest_rise_cm)
     legs_land_from: float | None = None
+    # s: as the hands let go, the arms' muscles aim where the arms are, turning to the program's shape over
+    # this (deaths._Grip; 0: at once): the welds held the arms against springs aimed at the slump far off
+    letgo_blend: float = 0.0
+    # the let-go rifle's neighbours it is still inside of (a forearm) wait until it is clear of them instead
+    # of pushing it out (Ragdoll.release's push_out): pushed out, the rifle flung the left forearm it lay in
+    letgo_clear: bool = False
+    # the fingers meet only the ground from the let-go on (Ragdoll.release's fingers), as the palms never meet
+    # the rifle: the rifle pushed out of the forearm hit the left fingers wrapped round it
+    letgo_fingers: bool = False
 
 
 def _prone(
