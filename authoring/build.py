@@ -38,6 +38,7 @@ from authoring.quality_frames import FigureSet, play
 from authoring.slave_arms import pin_slave_arms
 from authoring.slave_arms_down import keep_slave_arms_down
 from authoring.slave_arms_lift import lift_slave_arms
+from authoring.slave_belly import lift_slave_belly
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_ground import clear_rifle, rest_limbs
@@ -275,6 +276,8 @@ def slave_one(
         rests += (slack_slave_feet,)
     if crawl_turn.eases_slave_wrists(chset.name.removesuffix(".chset")):  # a wrist flicking at its limits
         rests += (ease_slave_wrists,)
+    if chset.name.removesuffix(".chset") == crawl_prone.NAME:  # last: its belly clear while he turns on it
+        rests += (partial(lift_slave_belly, until_s=crawl_prone.TURN[1], fade_s=crawl_prone.BELLY_DOWN_S),)
     laid = bool(spec and spec.slave_spine_laid)  # its trunk laid by its spine: nothing to lift it for ...
     for rest in rests:
         rest(chset, out, ctx.figure_set)

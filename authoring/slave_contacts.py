@@ -135,6 +135,8 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     # on forearms and knees (the crawl), the forearms carry the body: the slave's as high as the master's
     knees = part_heights(mq, mloc, figures, mtype)
     kneeling = ground_fade(np.min(list(knees.values()), axis=0)) if knees else np.zeros(len(q))
+    # on his forearms alone, knees up (FOREARMS_FOLLOW): they carry him as crawling, the elbows planted
+    kneeling = np.ones(len(q)) if master.name.split(".")[0] in FOREARMS_FOLLOW else kneeling
     held_rifle = _holding(slave)
     spec = spec_of(master.name)  # the held rifle's slide out of the body, past the release where asked
     slid = _holding(slave, spec.slave_rifle_slid_past if spec else 0)
@@ -151,6 +153,8 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
         side: crawling[side] + settles * _landing(m_h[side]) * ground_fade(m_h[side]) * prone
         for side in weight
     }
+    # FOREARMS_FOLLOW: at the master's height, up or down, throughout
+    follow = dict(weight) if master.name.split(".")[0] in FOREARMS_FOLLOW else follow
     sites = kin.site_globals(q, loc)
     elbows = {side: sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3] for side in weight}
     planted = {
@@ -327,6 +331,10 @@ def _holding(slave: Channelset, past: int = 0) -> np.ndarray:
     return u * u * (3.0 - 2.0 * u)
 
 
+# clips whose master's forearms carry him with the knees up (crawl2prstow lowering onto the belly): planted
+# as crawling, and put at the master's height, up or down, wherever they are near the ground (pressed down
+# to it, the slave's stayed there while the master's rose for the turn on the belly: dragged 15 cm round)
+FOREARMS_FOLLOW = ("crawl2prstow",)
 HOLD_FADE_FRAMES = 12  # the crawl's contact handling fades out over this many frames before a release
 RIFLE_LIFT_SIGMA_FRAMES = 4.0  # the crawling rifle's lift is smoothed over the clip (at or above the need)
 PLANT_FADE_FRAMES = 6  # a planted site's held place eases in and out over this many frames (0.1 s)

@@ -25,12 +25,49 @@ def test_graph_arc_time_is_the_recorded_clip_length() -> None:
     assert transition_specs()["crawl2prstow"].duration == crawl_prone.DURATION
 
 
-def test_the_forearms_rise_before_the_chest_sets_off_and_land_after_it_stops() -> None:
+def test_the_forearms_stay_down_until_the_belly_is_down_and_land_after_the_turn() -> None:
     t = np.arange(0, crawl_prone.DURATION + 1e-9, 1 / 60)
     up = crawl_prone.arms_up(t)
     assert up[0] == 0.0 and up[-1] == 0.0  # on the ground in CRAWL and in PRONE_STOWED
-    assert np.all(up[(t >= crawl_prone.BODY[0]) & (t <= crawl_prone.BODY[1])] > 0.5)  # up as the chest turns
-    assert np.all(up[(t >= crawl_prone.ELBOW_UP[1]) & (t <= crawl_prone.BODY[1])] == 1.0)
+    assert np.all(up[t <= crawl_prone.SETTLE[1] - 0.03] == 0.0)  # planted while the pelvis comes down
+    turning = (t >= crawl_prone.ELBOW_UP[1]) & (t <= crawl_prone.ELBOW_DOWN[0])
+    assert np.all(up[turning] == 1.0)  # up as he turns on the belly
+    assert crawl_prone.ELBOW_UP[1] <= crawl_prone.TURN[0]  # up before the turn sets off
+
+
+def test_a_turn_about_the_pelvis_keeps_the_pelvis_in_place() -> None:
+    pelvis = np.array([3.0, 0.0, -2.0])
+    turns = crawl_prone.turn_about(pelvis, np.linspace(0.0, -1.0, 5))
+    moved = np.einsum("fij,j->fi", turns, np.r_[pelvis, 1.0])[:, :3]
+    assert np.allclose(moved, pelvis)
+    assert np.allclose(turns[-1, :3, :3] @ turns[-1, :3, :3].T, np.eye(3))
+
+
+@pytest.mark.parametrize("suffix", ["", "_low", "_m16_low"])
+def test_something_of_him_is_always_on_the_ground_belly_thighs_or_forearms(suffix: str) -> None:
+    """Issue 14: lying down from the crawl he floated 0.52-0.55 s (frames 26-58), daylight under the whole
+    body. In the order a man does it (forearms down while the pelvis comes down onto the belly, then the turn
+    on the belly) his belly or chest, a thigh or a forearm is within the check's support height throughout."""
+    from authoring.quality import FigureSet
+    from authoring.quality_frames import play
+    from authoring.quality_support import SUPPORT_CM, support
+    from server.motion.cache import load_channelset
+    from ttes.paths import CHANNELSETS, FIGURES
+
+    cs = load_channelset(CHANNELSETS / f"crawl2prstow{suffix}.chset.env")
+    figures = FigureSet.from_dir(FIGURES, sorted({c.protofiletype for c in cs.channels}))
+    frames = play(cs, figures)
+    body = max(frames.poses, key=lambda k: figures.kin[k].ndof)
+    kin = figures.kin[body]
+    nodes, segs = figures.nodes(body)
+    segg = kin.segment_globals(frames.poses[body], frames.locations[body])
+    heights = np.einsum("fkj,kj->fk", segg[:, segs, 1, :], nodes)
+    parts = figures.node_parts(body).astype(str)
+    bearing = np.isin(parts, ["belly", "chest", "pelvis", "left_thigh", "right_thigh"]) | np.char.endswith(
+        parts, "forearm"
+    )
+    row = support(cs.name, heights[:, bearing], cs.fps)
+    assert row["unsupported_s"] == 0.0, (row, SUPPORT_CM)
 
 
 @pytest.mark.parametrize("suffix", ["", "_low", "_m16_low"])
