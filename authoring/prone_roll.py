@@ -18,6 +18,12 @@ the best of a small grid (:func:`rolled_leg`): the lowest heel, nothing on the g
 :data:`SLIDE_CM`, nothing going into it, the foot within the check's ``lying_feet_up_cm`` (less
 :data:`FOOT_UP_MARGIN`) and, once the trunk is down, no leg part rising more than :data:`RISE_CM`. Soldier
 DEAD@prstow heels 20.2 -> 11.8 cm, DEAD@prfire 20.2 -> 11.5.
+
+Judged by height alone, a thigh turned out 1.8-2.0 cm above the ground and then laid down was in the air:
+the check (a part that comes down stays on the ground until it rises past its ``LIFT_OFF_CM``) saw it
+slide 5.5-6.0 cm. So :func:`rolled` judges each leg's ways as the check does, on the clip so far
+(:func:`rolled_ways` ``before``, :data:`CHECKED_SLIDE_CM`), and takes the first that, played on the
+whole body, slides nothing further than the check allows or than it slid already.
 """
 
 from __future__ import annotations
@@ -28,8 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from authoring import dead_settle as ds
-from authoring.body_parts import contact_runs
-from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
+from authoring.body_parts import FOOT_PARTS, contact_runs
+from authoring.quality import CONTACT_HEIGHT_CM, LIFT_OFF_CM, THRESHOLDS
 from authoring.quality_frames import FigureSet
 from authoring.transitions import ClipFrames
 from peabody.rotations import axis_angle
@@ -44,19 +50,30 @@ LEG_SECONDS = 0.5  # s, each leg (the second is done within the check's limb_res
 TURNED_DEG = (8.0, -60.0, 30.0)
 HIP_TURNS_DEG = (-57.0, -60.0)
 HIP_MOVES = ((-10.0, -1.0), (-10.0, 0.0), (-10.0, 1.0), (0.0, -1.0), (0.0, 0.0), (0.0, 1.0))
-ROLLS_DEG = (3.0, 4.0, 5.0, 6.0, 8.0)  # the pelvis's roll tried, least first
+ROLLS_DEG = (3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0)  # the pelvis's roll tried, least first
 LEADS = (0.5, 0.75)  # of a leg's time: its hip's turn is done by then (the knee and foot with the whole)
 SPANS = (0.3, 0.45)  # ... the pelvis rolls over this much of it, and back over as much at its end
 COMPS = (0.0, 0.5)  # the hip flexes this much of the roll with it (the thigh kept nearer the ground)
 # cm: a leg node on the ground moves at most this far while on it (the check: 3, the fall's own slide
 # under it)
 SLIDE_CM = 1.9
-FOOT_UP_MARGIN = 3.0  # cm under the check's lying_feet_up_cm: the foot over the pelvis
+# cm: judged on the whole clip as the check judges it (a thigh lifting off or coming down just above the
+# ground, under LIFT_OFF_CM, slides: prstow2dead's left thigh turned out 1.8 cm up and landed, 5.5 cm), a leg
+# node moves at most this far over its whole run on the ground, the fall's own drift in it (prfire2dead's
+# right thigh slid 1.7 cm in the physics)
+CHECKED_SLIDE_CM = 2.6
+CHECKED_MARGIN_CM = 0.005  # cm under the check's contact_slide_cm / foot_skate_cm: any other node's run
+MAX_WAYS = 40  # the best ways of a leg tried on the whole clip, in order
+FOOT_UP_MARGIN = 2.5  # cm under the check's lying_feet_up_cm: the foot over the pelvis
 RISE_CM = 2.5  # cm: once the trunk is down a leg part's lowest node rises at most this (the check: 3)
 DEEP_CM = 0.05  # cm: into the ground, at most
-LUMBAR = ("waist", "vl5", "vl4", "vl3", "vl2", "vl1")  # take the pelvis's roll back: the chest stays
-# ... and the other leg's hip, knee and ankle keep its foot where it lies
-OTHER_LEG = ("hip", "knee", "ankle")
+# the whole spine takes the pelvis's roll back, the shoulders staying (the lumbar spine alone left the
+# chest turned: a forearm lifting off the ground dipped 1 cm and slid 3.0-3.5 cm, prstow2dead 2.3)
+LUMBAR = ("waist", "vl5", "vl4", "vl3", "vl2", "vl1", "vt12", "vt11", "vt10", "vt9", "vt8", "vt7", "vt6",
+          "vt5", "vt4", "vt3", "vt2", "vt1")  # fmt: skip
+# ... and the other leg's hip and knee keep its shin where it lies (its foot too: its thigh, turned about the
+# hip, went 1 cm into the ground and slid 2.8 cm)
+OTHER_LEG = ("hip", "knee")
 LUMBAR_ITERATIONS = 8
 ROT_CM = 30.0  # cm per radian: the chest's turn weighed against its move
 LUMBAR_DAMPING = 1e-2
@@ -104,6 +121,11 @@ def _pivot(body: ds._Body, side: str) -> tuple[np.ndarray, np.ndarray]:
     return pivot, axis
 
 
+def legs_nodes(body: ds._Body) -> np.ndarray:
+    """The mesh nodes of both legs of ``body``."""
+    return np.concatenate([ds._Leg(body, side).nodes for side in ORDER])
+
+
 def _bump(t: np.ndarray, span: float) -> np.ndarray:
     """0 -> 1 over the first ``span`` of ``t``, held, back to 0 over the last."""
     return smoothstep(np.minimum(t, 1.0 - t) / span)
@@ -113,6 +135,18 @@ def rolled_leg(body: ds._Body, side: str, n: int, judged_from: int) -> Roll | No
     """The ``side`` leg's way out over ``n`` frames (:data:`LEG_SECONDS`) that lays its heel lowest, its
     pelvis rolling (see the module docstring); a rise is judged from frame ``judged_from`` on (the trunk
     down). None where no way keeps to the limits or lays the heel lower than it lies."""
+    ways = rolled_ways(body, side, n, judged_from)
+    return ways[0] if ways else None
+
+
+def rolled_ways(
+    body: ds._Body, side: str, n: int, judged_from: int, before: np.ndarray | None = None
+) -> list[Roll]:
+    """The ``side`` leg's ways out over ``n`` frames (:data:`LEG_SECONDS`) that lay its heel lower than it
+    lies, its pelvis rolling (see the module docstring), the heel lowest first; a rise is judged from frame
+    ``judged_from`` on (the trunk down). ``before``: both legs' nodes (:func:`legs_nodes`) over the clip up
+    to this frame: their slides are judged as the check does, with that way on the ground
+    (:data:`CHECKED_SLIDE_CM`); None: the leg's own nodes by height alone (:data:`SLIDE_CM`)."""
     kin, leg = body.kin, ds._Leg(body, side)
     pivot, axis = _pivot(body, side)
     parts = body.parts[leg.nodes]
@@ -120,7 +154,9 @@ def rolled_leg(body: ds._Body, side: str, n: int, judged_from: int) -> Roll | No
     t = np.arange(1, n + 1) / n
     up_limit = THRESHOLDS["lying_feet_up_cm"] - FOOT_UP_MARGIN
     lo, hi = kin.lower[leg.idx], kin.upper[leg.idx]
-    best: tuple[tuple[float, float, float], Roll] | None = None
+    judged = legs_nodes(body)
+    release = np.where(np.isin(body.parts[judged], FOOT_PARTS), CONTACT_HEIGHT_CM, LIFT_OFF_CM)
+    ways: list[tuple[tuple[float, float, float], Roll]] = []
     start_heel = leg._shape(leg.x0[None], 1.0)[1][0]
     start_heel = max(float(start_heel), float(leg.start[leg.foot, 1].min()))
     grid = itertools.product(HIP_MOVES, HIP_TURNS_DEG, ROLLS_DEG, LEADS, SPANS, COMPS)
@@ -145,8 +181,13 @@ def rolled_leg(body: ds._Body, side: str, n: int, judged_from: int) -> Roll | No
         deep = -float(legs[..., 1].min())
         if deep > DEEP_CM - min(0.0, leg.floor):
             continue
-        runs = contact_runs(legs, CONTACT_HEIGHT_CM)
-        if runs.slide.max(initial=0.0) > SLIDE_CM:
+        if before is None:
+            runs = contact_runs(legs, CONTACT_HEIGHT_CM)
+        else:  # as the check judges them: the legs' way on the ground so far, and the lift-off rule
+            both = np.concatenate([body.points[None, judged], pts[:, judged]])
+            runs = contact_runs(np.concatenate([before[:-1], both]), CONTACT_HEIGHT_CM, release)
+            runs.slide = runs.slide[runs.last >= len(before) - 1]  # what is done already is not chosen
+        if runs.slide.max(initial=0.0) > (SLIDE_CM if before is None else CHECKED_SLIDE_CM):
             continue
         foot_up = float((pts[:, leg.nodes[leg.foot], 1].min(axis=1) - pts[:, pelvis, 1].min(axis=1)).max())
         if foot_up > up_limit:
@@ -155,9 +196,9 @@ def rolled_leg(body: ds._Body, side: str, n: int, judged_from: int) -> Roll | No
             continue
         heel = max(float(g[-1, leg.foot_seg, 1, :] @ leg.heel), float(legs[-1, leg.foot, 1].min()))
         key = (round(heel, 1), phi, float(runs.slide.max(initial=0.0)))
-        if heel < start_heel and (best is None or key < best[0]):
-            best = (key, Roll(side, path, roll, pivot, axis, heel))
-    return None if best is None else best[1]
+        if heel < start_heel:
+            ways.append((key, Roll(side, path, roll, pivot, axis, heel)))
+    return [w for _, w in sorted(ways, key=lambda kw: kw[0])]
 
 
 def _rise(pts: np.ndarray, parts: np.ndarray) -> float:
@@ -209,11 +250,44 @@ def _kept(kin, q: np.ndarray, roots: np.ndarray, goal: np.ndarray, joints: tuple
     return q
 
 
+def _points(body: ds._Body, poses: np.ndarray, roots: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """The world points ``(n, k, 3)`` of ``body``'s mesh ``nodes`` over ``poses`` and ``roots``."""
+    g = body.kin.segment_globals(poses, roots)
+    return np.einsum("fkij,kj->fki", g[:, body.segs[nodes], :3, :], body.nodes[nodes])
+
+
+def _slides(points: np.ndarray, parts: np.ndarray) -> np.ndarray:
+    """Per node of ``points`` ``(n, k, 3)``: its worst slide on the ground, as the check judges it (a part
+    but a foot lifting off stays on the ground until it rises past its ``LIFT_OFF_CM``)."""
+    release = np.where(np.isin(parts, FOOT_PARTS), CONTACT_HEIGHT_CM, LIFT_OFF_CM)
+    return contact_runs(points, CONTACT_HEIGHT_CM, release).per_node(points.shape[1])[0]
+
+
+def _rolled_in(
+    kin, clip: tuple[np.ndarray, np.ndarray, np.ndarray], way: Roll, k0: int, other: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """The poses and roots of ``clip`` (poses, roots, the roots as he lies) with ``way`` from frame ``k0``
+    on, the chest and the ``other`` leg's shin kept where they lie (:func:`_kept`)."""
+    poses, roots, lying = (a.copy() for a in clip)
+    n = len(way.path)
+    idx = ds._dofs(kin, tuple(f"{way.side}_{j}" for j in ds.LEG_DOFS))
+    poses[k0 + 1 : k0 + n + 1, idx] = way.path
+    poses[k0 + n + 1 :, idx] = way.path[-1]
+    span = slice(k0 + 1, k0 + n + 1)
+    roots[span] = _rolled_roots(roots[k0], way.pivot, way.axis, way.roll)
+    for chain in (LUMBAR, tuple(f"{other}_{j}" for j in OTHER_LEG)):
+        goal = kin.segment_globals(poses[span], lying[span])[:, _carried(kin, chain)]
+        poses[span] = _kept(kin, poses[span], roots[span], goal, chain)
+    return poses, roots
+
+
 def rolled(figs: FigureSet, frames: ClipFrames, start: int, rest: int, still: int) -> ClipFrames:
     """``frames`` with the legs rolled out from frame ``start`` (the physics' last), each in turn with its
-    pelvis's roll (:func:`rolled_leg`), on top of how they lay there; the trunk is down from frame ``rest``;
-    the clip lengthened to end ``still`` frames after the last leg. The legs as ``frames`` has them where
-    no way out lays a heel lower."""
+    pelvis's roll (:func:`rolled_ways`), on top of how they lay there; the trunk is down from frame ``rest``;
+    the clip lengthened to end ``still`` frames after the last leg. Each leg takes the first of its ways
+    that, played on the whole clip so far, slides no node on the ground (as the check judges it) further
+    than the check allows (a leg's: :data:`CHECKED_SLIDE_CM`) or than it slid already; the legs as
+    ``frames`` has them where none does."""
     kin = figs.kin["body"]
     n = round(LEG_SECONDS * frames.fps)
     end = start + n * len(ORDER) + still + 1
@@ -226,18 +300,18 @@ def rolled(figs: FigureSet, frames: ClipFrames, start: int, rest: int, still: in
     lying = roots.copy()
     for i, side in enumerate(ORDER):
         k0 = start + i * n
-        q = poses[-1].copy()
-        body = ds._Body(figs, q, roots[k0], rifles[-1])
-        way = rolled_leg(body, side, n, max(0, rest - k0))
-        if way is None:
-            continue
-        idx = ds._Leg(body, side).idx
-        poses[k0 + 1 : k0 + n + 1, idx] = way.path
-        poses[k0 + n + 1 :, idx] = way.path[-1]
-        span = slice(k0 + 1, k0 + n + 1)
-        roots[span] = _rolled_roots(roots[k0], way.pivot, way.axis, way.roll)
-        chains = (LUMBAR, tuple(f"{ORDER[1 - i]}_{j}" for j in OTHER_LEG))  # the chest and the other foot
-        for chain in chains:
-            goal = kin.segment_globals(poses[span], lying[span])[:, _carried(kin, chain)]
-            poses[span] = _kept(kin, poses[span], roots[span], goal, chain)
+        body = ds._Body(figs, poses[-1].copy(), roots[k0], rifles[-1])
+        every = np.arange(len(body.parts))
+        before = _points(body, poses[: k0 + 1], roots[: k0 + 1], legs_nodes(body))
+        limit = np.where(np.isin(every, legs_nodes(body)), CHECKED_SLIDE_CM, THRESHOLDS["contact_slide_cm"])
+        limit = np.where(np.isin(body.parts, FOOT_PARTS), THRESHOLDS["foot_skate_cm"], limit)
+        allowed = np.maximum(
+            limit - CHECKED_MARGIN_CM, _slides(_points(body, poses, roots, every), body.parts)
+        )
+        for way in rolled_ways(body, side, n, max(0, rest - k0), before)[:MAX_WAYS]:
+            p, r = _rolled_in(kin, (poses, roots, lying), way, k0, ORDER[1 - i])
+            got = _slides(_points(body, p, r, every), body.parts)
+            if (got <= allowed + 1e-6).all():
+                poses, roots = p, r
+                break
     return ClipFrames(poses, roots, rifles, frames.fps)
