@@ -20,9 +20,8 @@ from tests.known_faults import known_faults
 ROOT = Path(__file__).resolve().parents[1]
 CLIPS = sorted(p.name.split(".")[0] for p in (ROOT / "channelsets").glob("*.chset.env"))
 KNOWN_SLIDES: dict[str, str] = {
-    "crawl2dead": "right thigh dragged 3.3 cm along the ground at 0.00-1.67 s (frames 0-100)",
     "crawl2dead_low": "right forearm dragged 8.3 cm along the ground at 0.22-2.18 s (frames 13-131)",
-    "crawl2dead_m16_low": "right upper arm dragged 9.9 cm along the ground at 0.00-2.18 s (frames 0-131)",
+    "crawl2dead_m16_low": "right upper arm dragged 10.0 cm along the ground at 0.00-2.18 s (frames 0-131)",
     "crawl2prstow": "right forearm dragged 5.6 cm along the ground at 0.25-0.38 s (frames 15-23)",
     "crawl2prstow_m16_low": "right forearm dragged 5.1 cm along the ground at 1.47-1.60 s (frames 88-96)",
     "crawl_cycle_low": "right forearm dragged 4.2 cm along the ground at 0.37-0.75 s (frames 22-45)",
