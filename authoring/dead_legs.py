@@ -43,7 +43,7 @@ import numpy as np
 
 from authoring import dead_settle as ds
 from authoring.body_parts import contact_runs
-from authoring.quality import CONTACT_HEIGHT_CM, THRESHOLDS
+from authoring.quality import CONTACT_HEIGHT_CM, LIFT_OFF_CM, THRESHOLDS
 from authoring.quality_rest import LEG_SITES, RISE_LIMIT_CM
 from authoring.signal_shaping import smoothstep
 
@@ -154,7 +154,7 @@ def _path_cost(
         )
         ys = np.concatenate([np.repeat(y0[None], m, axis=0), ys.reshape(m, steps, -1)], axis=1)
         wrong = np.maximum(0.0, leg.floor - at[..., 1].min(axis=(0, 2)))
-        slid = [contact_runs(at[:, i], CONTACT_HEIGHT_CM).slide.max(initial=0.0) for i in range(m)]
+        slid = [leg_slide(leg, at[:, i]) for i in range(m)]
         wrong += np.maximum(0.0, np.array(slid) - LEG_SLIDE_CM)
         after = ys[:, judged]
         wrong += np.maximum(0.0, (after - np.minimum.accumulate(after, axis=1)).max(axis=(1, 2)) - RISE_CM)
@@ -162,6 +162,15 @@ def _path_cost(
         return high + ds.PENALTY * wrong + ds.MOVE_COST * np.degrees(np.abs(x - leg.x0)).sum(axis=1)
 
     return cost
+
+
+def leg_slide(leg: ds._Leg, pts: np.ndarray) -> float:
+    """The farthest (cm) a node of ``leg`` slides on the ground over its positions ``pts`` ``(n, k, 3)``: the
+    check's contact runs, with its lift-off rule where the body asks (:attr:`ds._Body.lift_off`: a node off
+    the foot that came down stays on the ground until it rises past ``LIFT_OFF_CM``; crawl2dead's left
+    thigh, rolled out at 1.0-1.8 cm, slid 2.3 cm in the settle)."""
+    release = np.where(leg.foot, CONTACT_HEIGHT_CM, LIFT_OFF_CM) if leg.body.lift_off else None
+    return float(contact_runs(pts, CONTACT_HEIGHT_CM, release).slide.max(initial=0.0))
 
 
 def turned_leg(
@@ -230,7 +239,7 @@ def path_faults(leg: ds._Leg, path: np.ndarray) -> tuple[float, float, float]:
     ground (the check's contact runs), how deep (cm) it goes below the floor, and how high (cm) the foot's
     lowest node rises above the pelvis' (the check's ``feet_up_cm``)."""
     pts = np.concatenate([leg.start[None], leg._shape(path, 1.0)[0]])
-    slide = contact_runs(pts, CONTACT_HEIGHT_CM).slide.max(initial=0.0)
+    slide = leg_slide(leg, pts)
     deep = max(0.0, leg.floor - float(pts[..., 1].min()))
     body = leg.body
     pelvis = float(body.points[body.parts == "pelvis", 1].min(initial=0.0))

@@ -128,6 +128,9 @@ class ArmsFall:
     seconds: float | None = None  # s: an arm not laid anew falls this long (None: ARM_FALL_SECONDS)
     still_s: float | None = None  # s: the clip ends this long after the arms land (None: STILL_SECONDS)
     low_air: bool = False  # face down and propped: the arms held low in the air (dead_prone.lowered)
+    # face down and propped: the legs laid as the chest comes down drag no node lifting off the ground
+    # (_Body.lift_off, DeathSpec.legs_lift_off)
+    legs_lift_off: bool = False
 
 
 def _face_down(kin, q: np.ndarray, root: np.ndarray) -> bool:
@@ -179,6 +182,9 @@ class _Body:
         # anywhere; :meth:`_Arm.overhead`)
         self.headward_cm: float | None = None
         self.headward = _headward(self.kin, q, root)
+        # a leg node on the ground stays there until it rises past the check's LIFT_OFF_CM (dead_legs; False:
+        # once above CONTACT_HEIGHT_CM it is free): DeathSpec.legs_lift_off
+        self.lift_off = False
 
     def heights(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         g = self.kin.segment_globals(q, self.root)
@@ -526,8 +532,8 @@ def settle(
     ``arms``: how the arms fall on his back, or go through the air propped (:class:`ArmsFall`; None: the
     defaults)."""
     figs = FigureSet({"body": soldier, "rifle": rifle})
-    low_air = arms is not None and arms.low_air
-    lowered = _lowered(figs, frames, slack_feet, low_air=low_air) if propped else None
+    low_air, lift_off = arms is not None and arms.low_air, arms is not None and arms.legs_lift_off
+    lowered = _lowered(figs, frames, slack_feet, low_air=low_air, lift_off=lift_off) if propped else None
     if lowered is not None:
         return _appended(frames, lowered)
     kin, last = figs.kin["body"], frames.poses[-1]
@@ -671,16 +677,18 @@ def _lowered(
     at: int = -1,
     level: bool = False,
     low_air: bool = False,
+    lift_off: bool = False,
 ) -> np.ndarray | None:
     """The settle poses of a face-down body left propped on its arms (:mod:`authoring.dead_prone`) from
-    its frame ``at`` (the rifle where it finally lies; ``level``: its arms lifted no higher than just clear),
-    then still; None if it is not."""
+    its frame ``at`` (the rifle where it finally lies; ``level``: its arms lifted no higher than just clear;
+    ``lift_off``: :attr:`_Body.lift_off`), then still; None if it is not."""
     from authoring import dead_prone
 
     q, root = frames.poses[at], frames.roots[at]
     body = _Body(figs, q, root, frames.rifles[-1])
     if not _face_down(body.kin, q, root):
         return None
+    body.lift_off = lift_off
     n = round(SETTLE_SECONDS * frames.fps)
     t = np.arange(1, n + 1) / n
     legs = _legs_path(body, t, dead_prone.torso_progress(t), slack_feet=slack_feet)  # a limp leg goes as the

@@ -203,6 +203,9 @@ class DeathSpec:
     # the fingers meet only the ground from the let-go on (Ragdoll.release's fingers), as the palms never meet
     # the rifle: the rifle pushed out of the forearm hit the left fingers wrapped round it
     letgo_fingers: bool = False
+    # a propped death's settle lays his legs dragging no node on the ground as it lifts off (the check's
+    # LIFT_OFF_CM, dead_legs.leg_slide): crawl2dead's left thigh, rolled out at 1.0-1.8 cm up, slid 2.3 cm
+    legs_lift_off: bool = False
 
 
 def _prone(
@@ -250,6 +253,10 @@ def _lying_prone(spec: DeathSpec) -> DeathSpec:
     )
 
 
+# frames: crawl2dead's legs' lift smoothed (DeathSpec.legs_eased): his right thigh and left knee dragged 3.3
+# and 3.1 cm as his legs rolled out (frames 36-72); lifted instead (DeathSpec.legs_lift) an ankle turned 8.3
+# degrees in a frame and a foot popped 1.8 m/s; eased over 3 frames, 3.5 degrees and 0.76 m/s
+CRAWL_LEGS_EASED = 3.0
 # A crawler's arms stay propped (limp, his chest dropped onto them and the elbows splayed, the forearms slid
 # 5-6 cm; held by contact_pin they still slid 4.4: the shoulders passed over the elbows) and his legs drawn
 # until he is down (limp from the start, the knees splayed 3.5 cm); the settle lays the chest down. The
@@ -265,6 +272,9 @@ CRAWL_DEATH = replace(
     arms_air_low=True,
     slave_arm_out=True,
     slave_feet_slack=True,
+    legs_lift_off=True,
+    legs_lift=True,
+    legs_eased=CRAWL_LEGS_EASED,
 )
 # s: the standing deaths' DeathSpec.legs_roll: rolled over KNEE_STRAIGHTEN (1 s) the legs turned on the
 # ground after he lay still (ststow2dead's heels 15.4/17.4 cm from the physics), over this while he lands

@@ -620,6 +620,7 @@ def _held(spec: DeathSpec, frames: ClipFrames, figures: tuple[Figure, Figure], r
                 spec.arms_fall_s,
                 spec.arms_still_s,
                 spec.arms_air_low,
+                spec.legs_lift_off,
             ),
         )
         if spec.legs_settle and spec.legs_land_from is not None:  # laid as the knees land

@@ -228,3 +228,19 @@ def test_a_prone_deaths_leg_rolls_out_without_a_thigh_dragged_as_the_check_sees_
         g = kin.segment_globals(q, prone_roll._rolled_roots(body.root, way.pivot, way.axis, way.roll))
         pts = np.einsum("mkij,kj->mki", g[:, body.segs[judged], :3, :], body.nodes[judged])
         assert _as_checked(np.concatenate([before, pts]), body.parts[judged]) <= prone_roll.CHECKED_SLIDE_CM
+
+
+def test_a_leg_node_lifting_off_slides_by_the_checks_rule_where_the_death_asks(figs: FigureSet) -> None:
+    """(DeathSpec.legs_lift_off) a thigh node that came down to the ground and then rolls 2.5 cm sideways at
+    1.5 cm up (under the check's LIFT_OFF_CM) slides 2.5 cm; judged by the contact height alone, 0.2."""
+    leg = dead_settle._Leg(_on_his_toes(figs), "left")
+    k = len(leg.nodes)
+    thigh = int(np.flatnonzero(~leg.foot)[0])
+    pts = np.tile(leg.start + np.array([0.0, 50.0, 0.0]), (12, 1, 1))  # every other node well up
+    pts[:, thigh] = [[0.02 * i, 0.5 if i < 2 else 1.5, 0.0] for i in range(2)] + [
+        [0.2 + 0.25 * i, 1.5, 0.0] for i in range(10)
+    ]
+    assert pts.shape == (12, k, 3)
+    assert dead_legs.leg_slide(leg, pts) < 0.5
+    leg.body.lift_off = True
+    assert dead_legs.leg_slide(leg, pts) == pytest.approx(2.45, abs=0.05)

@@ -465,8 +465,9 @@ def test_the_kneeling_fire_death_is_turned_least_worst_once_his_legs_are_lifted(
     # ... kfire2dead's turn measures the slides as the check does, and its arms are kept from over his head
     assert [d.name for d in deaths.DEATHS if d.turn_as_checked] == ["kstow2dead", "kfire2dead"]
     assert [d.name for d in deaths.DEATHS if d.arms_headward_cm is not None] == ["kfire2dead"]
-    # ... kstow2dead's legs eased where they flicked, before it is turned (issue 14, kstow-s13)
-    assert [d.name for d in deaths.DEATHS if d.legs_eased] == ["kstow2dead"]
+    # ... kstow2dead's legs eased where they flicked, before it is turned (issue 14, kstow-s13), and
+    # crawl2dead's where its lifted legs flicked (crawldeath-s20)
+    assert [d.name for d in deaths.DEATHS if d.legs_eased] == ["kstow2dead", "crawl2dead"]
     # ... and its slaves hold a foot in every stance of his, their knee down or not (slave_feet)
     assert [d.name for d in deaths.DEATHS if d.slave_feet_knelt] == ["kstow2dead"]
     # ... and its slaves' trunk rest holds the foot they hover (slave_rest feet_held; kneeldeath14)
