@@ -34,7 +34,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
@@ -123,6 +123,15 @@ ADVANCE_FRONT = 0.5
 # each pushed his right upper arm 1.1 cm into the rifle as he edged back; 10.5-28 cm (2 + cos) pulled a
 # planted knee 1.6 cm as he came round (3 + cos: 0.7 and 1.5)
 U_TURN_EVEN = 3.0
+# how a U-turn to his right tracks its arms over the clip (transitions.track_solve): from the start alone,
+# his right arm, its elbow planted near its reach as the knees carry the shoulders on, ran its clavicle,
+# shoulder and wrist into their limits and leapt 9-12 degrees a joint onto another branch in one frame (the
+# upper arm 3.1-4.2 cm, pop_m_s 1.67-1.89) as the knees made their first (135°, 150°: frame 66) or fourth
+# (165°, 180°: frame 242) move. Tracked back from the end the 135° and 150° keep one branch (pop_m_s 1.24,
+# 1.10; from both ends 1.72, 1.54), the 165° and 180° from both ends, blended (1.39, 1.30; back alone 1.47,
+# 1.60). The far U-turn leaps whichever way (1.99 both, 2.45 back): left as it was
+ArmTrack = Literal["forward", "backward", "both"]
+U_TURN_ARMS: dict[float, ArmTrack] = {135.0: "backward", 150.0: "backward", 165.0: "both", 180.0: "both"}
 
 
 def clip_name(direction: str, angle: float, advance: float = 0.0) -> str:
@@ -140,6 +149,7 @@ class Plan(NamedTuple):
     ahead: float = ADVANCE_FRONT  # share of the front's carry in the chest's and the pelvis's
     pelvis_ahead: tuple[float, ...] | None = None  # ... in the pelvis's, each pair of moves (None: ``ahead``)
     slave_wrists_eased: bool = False  # the DI/M16 slaves' wrists eased where they flick (slave_wrists)
+    arms: ArmTrack = "forward"  # the arms tracked from the start, "backward" from the end, "both" blended
 
 
 _PLANS: dict[str, Plan] = {
@@ -149,7 +159,10 @@ _PLANS: dict[str, Plan] = {
     for a in TURN_ANGLES
 }
 _PLANS.update(
-    {clip_name("right", a, ARC_ADVANCE): Plan("right", float(a), ARC_ADVANCE) for a in U_TURN_ANGLES}
+    {
+        clip_name("right", a, ARC_ADVANCE): Plan("right", float(a), ARC_ADVANCE, arms=U_TURN_ARMS[float(a)])
+        for a in U_TURN_ANGLES
+    }
 )
 _PLANS[U_TURN_FAR] = Plan("right", 180.0, ARC_ADVANCE, U_TURN_FAR_STEP, U_TURN_FAR_TEMPO)
 _PLANS.update(
@@ -264,8 +277,9 @@ def record_crawl_turn(
     """The frames of one turn (see the module docstring) by ``plan``: each move carrying its part
     ``plan.advance`` cm forward (its moves of ``plan.step`` degrees at most, at ``plan.tempo`` times MOVE;
     the chest and the pelvis carried ``plan.ahead`` of the front's carry and the rest of the knees', the
-    pelvis ``plan.pelvis_ahead`` a pair of moves where given), and its ``end_offset``."""
-    direction, angle, advance, step, tempo, ahead, pelvis_ahead, _ = plan
+    pelvis ``plan.pelvis_ahead`` a pair of moves where given; the arms tracked ``plan.arms``), and its
+    ``end_offset``."""
+    direction, angle, advance, step, tempo, ahead, pelvis_ahead, _, arms = plan
     moves, t_land = part_moves(direction, angle, step, tempo)
     t_end = round((t_land + SETTLE) * FPS) / FPS
     n = round(t_end * FPS) + 1
@@ -307,7 +321,16 @@ def record_crawl_turn(
         site = ELBOW_SITE.format(s=side)
         track = limb_track(_site(kin, q0, root0, site), front_moves, f_up, ELBOW_LIFT)
         arm_goals.append(ik.Goal(site, track, None, 1.0, 1, (f"{side}_clavicle", *arm(side)[:2])))
-    poses = track_solve(kin, poses, arm_goals, roots, iterations=10, max_dof_step=0.02, forward_only=True)
+    poses = track_solve(
+        kin,
+        poses,
+        arm_goals,
+        roots,
+        iterations=10,
+        max_dof_step=0.02,
+        forward_only=arms == "forward",
+        backward_only=arms == "backward",
+    )
     if advance:  # all limbs down, the body still: the arms settle into CRAWL's own solution (carried
         # forward, the left clavicle came to rest 1 cm off it and leapt there in the last frames, 0.33 m/s;
         # turned on the spot they end on it)

@@ -118,10 +118,6 @@ KNOWN_POPS: dict[str, str] = {
     "crawlarc_l165": _CRAWL.format("chest", 4.4, 5.92),
     "crawlarc_l165_low": _CRAWL.format("belly", 4.5, 5.32),
     "crawlarc_l165_m16_low": _CRAWL.format("belly", 3.9, 5.92),
-    "crawlarc_r135": _ARM.format(3.4, 1.10),
-    "crawlarc_r150": _ARM.format(3.1, 1.10),
-    "crawlarc_r165": _ARM.format(3.8, 4.03),
-    "crawlarc_r180": _ARM.format(4.2, 4.03),
     "crawlarc_r180_far": _ARM.format(4.1, 3.20),
 }
 CLIPS = sorted(p.name.split(".")[0] for p in (ROOT / "channelsets").glob("*.chset.env"))
