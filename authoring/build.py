@@ -40,6 +40,7 @@ from authoring.slave_arms_down import keep_slave_arms_down
 from authoring.slave_arms_lift import lift_slave_arms
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
+from authoring.slave_forearm_lift import lift_slave_forearms
 from authoring.slave_ground import clear_rifle, rest_limbs
 from authoring.slave_rest import rest_slave_trunk
 from authoring.slave_slack import slack_slave_feet
@@ -275,6 +276,8 @@ def slave_one(
         rests += (slack_slave_feet,)
     if crawl_turn.eases_slave_wrists(chset.name.removesuffix(".chset")):  # a wrist flicking at its limits
         rests += (ease_slave_wrists,)
+    if figure == "DI" and crawl.lifts_slave_forearms(chset.name.removesuffix(".chset")):
+        rests += (lift_slave_forearms,)  # last: its forearms down no longer than the master's
     laid = bool(spec and spec.slave_spine_laid)  # its trunk laid by its spine: nothing to lift it for ...
     for rest in rests:
         rest(chset, out, ctx.figure_set)
