@@ -81,6 +81,13 @@ PAIR = {
 CRAWL_NODES: tuple[str, ...] = ("CRAWL", "CRAWLING")
 
 
+def lifts_slave_forearms(name: str) -> bool:
+    """Whether clip ``name``'s DI slave has its arms re-solved by :mod:`authoring.slave_forearm_lift` (its
+    forearms on the ground no longer than the master's): the cycle (4.46 -> 1.98 cm); its M16 slave passes
+    without (2.98; 3.4-3.6 with), and every other clip is slaved as before."""
+    return name == "crawl_cycle"
+
+
 def crawl_arcs() -> list[tuple[str, str, str, bool]]:
     """(from, to, clip, forward) of the crawl graph; ``CRAWLING`` is the cyclic state."""
     return [

@@ -24,7 +24,6 @@ KNOWN_SLIDES: dict[str, str] = {
     "crawl2dead_m16_low": "right upper arm dragged 10.0 cm along the ground at 0.00-2.18 s (frames 0-131)",
     "crawl2prstow_low": "lying down, the right forearm creeps 3.2 cm on the ground at 0-0.57 s (frames 0-34)",
     "crawl2prstow_m16_low": "lying down, right forearm creeps 3.3 cm on the ground, 0-0.58 s (frames 0-35)",
-    "crawl_cycle_low": "right forearm dragged 4.5 cm along the ground at 0.37-0.75 s (frames 22-45)",
     "crawlarc_l135": "right forearm dragged 3.1 cm along the ground at 3.50-4.23 s (frames 210-254)",
     "crawlarc_l135_m16_low": "right forearm dragged 4.6 cm along the ground at 3.48-4.23 s (frames 209-254)",
     "crawlarc_l150": "right thigh dragged 3.8 cm along the ground at 3.10-3.65 s (frames 186-219)",

@@ -1,0 +1,66 @@
+"""A crawling DI slave's forearms on the ground no longer than the master's (issue 14, ``crawl_cycle_low``).
+
+Lowered onto its knees (:func:`~authoring.slave_contacts.rest_slave_knees`) and its forearms put at the
+master's height (:func:`~authoring.slave_contacts.rest_slave_forearms`), DI's forearms still came down
+where the master's hover: the left one, which the master holds 1.6-2 cm up while the body glides over it,
+dipped to 1.2 cm and, in contact, swept 3.8 cm sideways with the arm; the right one, planted, stayed
+down past the master's lift-off and rolled with the rifle's yaw (4.5 cm; the palms kept exactly turned on
+the rifle with the wrists at their limits make the hand's turn the forearm's). Here both arms are solved
+again: the palms' places on the rifle and the elbows' places held (each elbow raised by its forearm's
+shortfall wherever the master's forearm is above :data:`CLEAR_CM`), the palms' turn on the rifle a
+lower-priority goal, so the hand gives way by a few degrees (at most 2.6 on DI) rather than the forearm
+rolling on the ground. The clip's first and last frames are kept as slaved (they meet the posture).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from authoring import ik
+from authoring.quality_frames import FigureSet
+from authoring.signal_shaping import smooth_above
+from authoring.slave_body import part_heights, played_body
+from server.motion.binding import bind_channelset
+from server.motion.channelset import Channelset
+
+SIDES = ("left", "right")
+ARM = ("clavicle", "shoulder", "elbow", "wrist")
+CLEAR_CM = 1.4  # a forearm the master holds above this stays above it (contact starts at 1.25 cm) ...
+LIFT_SIGMA = 3.0  # ... raised by its elbow, the raise smoothed over this many frames (at least as high)
+PASSES = 3  # solved again from the result, the raise re-measured
+
+
+def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
+    """Re-solve ``slave``'s arms (in place) as the module says; returns the per-frame elbow raise (cm, the
+    larger side's) of the last pass."""
+    q, loc, stype = played_body(slave, figures)
+    mq, mloc, mtype = played_body(master, figures)
+    kin = figures.kin[stype]
+    aloft = {s: h > CLEAR_CM for s, h in part_heights(mq, mloc, figures, mtype, "forearm").items()}
+    pose = q.copy()
+    raised = np.zeros(len(q))
+    for _ in range(PASSES):
+        sites = kin.site_globals(pose, loc)
+        heights = part_heights(pose, loc, figures, stype, "forearm")
+        goals: list[ik.Goal] = []
+        raised[:] = 0.0
+        for side in SIDES:
+            chain = tuple(f"{side}_{j}" for j in ARM)
+            palm = sites[:, kin.site_names.index(f"{side}_palm.palmcenter")]
+            elbow = sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3].copy()
+            raise_ = smooth_above(aloft[side] * np.maximum(0.0, CLEAR_CM - heights[side]), LIFT_SIGMA)
+            elbow[:, 1] += raise_
+            raised = np.maximum(raised, raise_)
+            goals += [
+                ik.Goal(f"{side}_palm.palmcenter", palm[:, :3, 3], None, 1.0, 2, chain),
+                ik.Goal(f"{side}_upper_arm.distal", elbow, None, 1.0, 2, chain),
+                ik.Goal(f"{side}_palm.palmcenter", None, palm[:, :3, :3], 1.0, 0, chain),
+            ]
+        pose, _report = ik.solve(
+            kin, pose, goals, loc, iterations=60, damping=2.0, rest_pose=pose, rest_gain=0.05,
+            tolerance=0.02, max_dof_step=0.03,
+        )  # fmt: skip
+    pose[[0, -1]] = q[[0, -1]]  # the ends meet the CRAWLING posture as slaved
+    bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
+    slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
+    return raised
