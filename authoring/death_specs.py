@@ -194,6 +194,10 @@ class DeathSpec:
     # check's rest window opens (dead_settle.legs_landed_from); None: from the frame he is down. Laid then,
     # stfire2dead's legs lifted to turn out rose 6.9 cm at the knee after he was down (rest_rise_cm)
     legs_land_from: float | None = None
+    # the body (master and slaves) is lowered where it hovers, never below the check's contact height
+    # (authoring.grounded): tipped off his knee, kstow2dead's one foot on the ground lifted (leg_lift), he
+    # hung 2.7 cm up for 0.15 s
+    grounded: bool = False
 
 
 def _prone(
