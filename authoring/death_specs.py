@@ -421,6 +421,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_fall_s=KSTOW_ARMS_FALL,
         arms_still_s=KSTOW_ARMS_STILL,
         rifle_refall=KSTOW_REFALL,
+        grounded=True,  # unsupported_s 0.15 (DI/M16 0.28) -> 0
     ),
     DeathSpec(
         "kfire2dead",
@@ -445,6 +446,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         rifle_refall=KFIRE_REFALL,
         rifle_refall_toss=KFIRE_REFALL_TOSS,
         slave_let_go_in_place=True,
+        grounded=True,  # unsupported_s 0.18 (DI/M16 0.35) -> 0
     ),
     replace(
         _lying_prone(_prone("prstow2dead", "PRONE_STOWED")),
