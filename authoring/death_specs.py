@@ -198,6 +198,12 @@ class DeathSpec:
     # (authoring.grounded): tipped off his knee, kstow2dead's one foot on the ground lifted (leg_lift), he
     # hung 2.7 cm up for 0.15 s
     grounded: bool = False
+    # s: as the hands let go, the arms' muscles aim where the arms are, turning to the program's shape over
+    # this (deaths._Grip; 0: at once): the welds held the arms against springs aimed at the slump far off
+    letgo_blend: float = 0.0
+    # the let-go rifle's neighbours it is still inside of (a forearm) wait until it is clear of them instead
+    # of pushing it out (Ragdoll.release's push_out): pushed out, the rifle flung the left forearm it lay in
+    letgo_clear: bool = False
 
 
 def _prone(

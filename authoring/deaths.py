@@ -30,7 +30,9 @@ the ground (by a few millimetres) starts on a ground lowered that far, which ris
    while (:attr:`DeathSpec.kept`: limp, his chest dropped onto his forearms and they slid 5 cm);
 3. **the rifle is let go** at :attr:`DeathSpec.release` (the welds to the palms are switched off; the frame
    is the channelset's ``release_frame``) and flung clear of the falling body (:data:`TOSS`; a crawler's,
-   cradled across his forearms, forward ahead of his face: :attr:`DeathSpec.toss_to`); it collides
+   cradled across his forearms, forward ahead of his face: :attr:`DeathSpec.toss_to`); the standing deaths
+   let go gently (:attr:`DeathSpec.letgo_clear`, :attr:`DeathSpec.letgo_blend`: the rifle pushed out of the
+   forearm it lay in and the arms' springs aimed at the slump flung the hand 12-17 cm in a frame); it collides
    with the arms and head it touched in the start pose too (:class:`~authoring.ragdoll.Ragdoll`), and a
    rifle the posture dipped into the ground rises out of it (:data:`GROUND_RISE`); ststow2dead's falls
    again on its own from where the hands let go, the body keeping its fall (:attr:`DeathSpec.drop_toss`,
@@ -165,6 +167,17 @@ class DeathClip:
     release_frame: int
 
 
+@dataclass(frozen=True)
+class Fall:
+    """The ragdoll's recording (:func:`fall`): poses, roots and rifles per frame, the frame the hands let go
+    (None: never), the rifle as they let go and the pelvis at the start (the frame the tosses are in)."""
+
+    recording: tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]
+    release: int | None
+    letgo: LetGo | None
+    pelvis: np.ndarray
+
+
 # muscle strength (N m / rad) of holding the posture, by joint; the rest gets DEFAULT_GAIN
 GAINS: dict[str, float] = {
     "hip": 900.0,
@@ -190,6 +203,7 @@ KNEE_STRAIGHTEN = 1.0  # s: bottom-up on his knees), slowly after DeathSpec.fade
 KNEE_DAMPING_FADE = 0.3  # s: after DeathSpec.fade the knees' extra damping fades this fast
 KNEES_GIVE_WAY = 0.15  # s: after the slump the knees go limp this fast
 FALL_STIFF = ("hip", "waist", "vl")  # the joints DeathSpec.hip_damping damps (vl: the lumbar vertebrae)
+GRIP = ("clavicle", "shoulder", "elbow", "wrist")  # the joints DeathSpec.letgo_blend eases at the let-go
 DAMPING = 0.1  # joint damping = DAMPING * gain (s), at least MIN_DAMPING
 MIN_DAMPING = 4.0
 
@@ -306,6 +320,30 @@ def _keeper(spec: DeathSpec, names: list[str], hold_ref: np.ndarray) -> Callable
     return keep
 
 
+class _Grip:
+    """The arms' spring references as the hands let go (:attr:`DeathSpec.letgo_blend`): aimed where the arms
+    are held at the let-go, turning to the muscle program's over the blend. The welds to the rifle held the
+    arms against springs already pulling toward the slump; dropped in one step, the hand jumped 12-17 cm in
+    the next frame."""
+
+    def __init__(self, spec: DeathSpec, names: list[str]) -> None:
+        self.seconds = spec.letgo_blend
+        self.arms = np.array([n.endswith(GRIP) for n in names])
+        self.held: tuple[float, np.ndarray] | None = None  # when the hands let go, and the joints then
+
+    def let_go(self, t: float, qpos: np.ndarray) -> None:
+        """The hands let go at ``t`` with the joints at ``qpos``."""
+        if self.seconds > 0.0:
+            self.held = (t, qpos.copy())
+
+    def __call__(self, t: float, ref: np.ndarray) -> np.ndarray:
+        if self.held is None:
+            return ref
+        since, q = self.held
+        w = _smoothstep((t - since) / self.seconds)
+        return np.where(self.arms, q + w * (ref - q), ref)
+
+
 def _smoothstep(u: float) -> float:
     u = min(1.0, max(0.0, u))
     return u * u * (3.0 - 2.0 * u)
@@ -313,6 +351,23 @@ def _smoothstep(u: float) -> float:
 
 def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Figure, Figure]) -> DeathClip:
     """Record one death (see the module docstring)."""
+    rifle = figures[1]
+    fallen = fall(spec, keys, figures)
+    release = int(fallen.release if fallen.release is not None else len(fallen.recording[0]) - 1)
+    _dropped_alone(spec, rifle, fallen.pelvis, fallen.letgo, release, fallen.recording)
+    poses, roots, rifles = (np.array(v) for v in fallen.recording)
+    recorded = ClipFrames(poses, roots, rifles, FPS)
+    clip = _eased(spec, DeathClip(_after_physics(spec, recorded, figures, release), release))
+    return _rifle_resettled(spec, _grounded(spec, clip, figures[0]), figures)
+
+
+def fall(
+    spec: DeathSpec,
+    keys: Mapping[str, KeyPosture],
+    figures: tuple[Figure, Figure],
+    seconds: float = MAX_SECONDS,
+) -> Fall:
+    """The ragdoll's fall of one death (steps 1-4 of the module docstring), at most ``seconds`` long."""
     from authoring.ragdoll import Ragdoll
 
     soldier, rifle = figures
@@ -335,6 +390,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     legs = np.array([n.endswith(LEGS) for n in names])
     arms = np.array([n.endswith(("clavicle", "shoulder", "elbow")) for n in names])
     keep = _keeper(spec, names, hold_ref)
+    grip = _Grip(spec, names)
     tone = np.where(spine, SPINE_TONE, np.where(loose, np.where(arms, spec.arm_tone, 0.0), TONE))
     # once he is down the legs roll outward (hips, ankles) and, standing deaths only, the knees straighten
     # (straightened, a fallen kneeling soldier's knees drag his feet along the ground)
@@ -387,6 +443,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
                 g = g + settle * ur
             g = g + straighten * _straightened(spec, t, us)
         ref, g = keep(t, ref, g)
+        ref = grip(t, ref)
         model.jnt_stiffness[jm.jnt] = gain * g
         model.qpos_spring[jm.qpos] = ref
         damping = np.maximum(MIN_DAMPING, DAMPING * gain * np.maximum(g, 0.3))
@@ -420,7 +477,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     rifle_ground0 = 0.0
     ground0 = min(0.0, doll.lowest())  # a posture dipping into the ground starts on a ground that low
     t = 0.0
-    while t < MAX_SECONDS:
+    while t < seconds:
         for k in range(steps):
             ts = data.time
             set_muscles(ts)
@@ -432,10 +489,12 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
             data.xfrc_applied[gun, :3] = toss_mj if tossing else (c * rifle_weight if held else 0.0)
             doll.set_ground(ground0 * (1.0 - _smoothstep(ts / GROUND_RISE)))
             if release_frame is None and ts >= spec.release:
-                doll.release()
+                doll.release(push_out=not spec.letgo_clear)
                 release_frame = len(poses)
                 rifle_ground0 = min(0.0, doll.rifle_lowest())
                 letgo = let_go(doll, steps - k)
+                grip.let_go(ts, data.qpos[jm.qpos])
+                set_muscles(ts)  # (the same as before the let-go unless the grip blends)
             if release_frame is not None:  # a rifle the posture dipped into the ground is raised out of it
                 doll.set_rifle_ground(rifle_ground0 * (1.0 - _smoothstep((ts - spec.release) / GROUND_RISE)))
             doll.step()
@@ -453,11 +512,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
         still = still + 1 if speed < REST_SPEED and t > spec.fade + spec.release else 0
         if still * dt >= REST_SECONDS:
             break
-    release = int(release_frame if release_frame is not None else len(poses) - 1)
-    _dropped_alone(spec, rifle, pelvis, letgo, release, (poses, roots, rifles))
-    recorded = ClipFrames(np.array(poses), np.array(roots), np.array(rifles), FPS)
-    clip = _eased(spec, DeathClip(_after_physics(spec, recorded, figures, release), release))
-    return _rifle_resettled(spec, _grounded(spec, clip, figures[0]), figures)
+    return Fall((poses, roots, rifles), release_frame, letgo, pelvis)
 
 
 def _grounded(spec: DeathSpec, clip: DeathClip, body: Figure) -> DeathClip:
