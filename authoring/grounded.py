@@ -52,7 +52,14 @@ def ground_channelset(chset: Channelset, body: Figure) -> None:
     poses = np.tile(bf.neutral.astype(np.float64), (chset.nframes, 1))
     poses[:, bf.dst] = chset.joint_data[:, bf.src]
     chan = next(c for c in chset.figure_channels() if c.column == bf.figure_channel)
-    down = drop(lowest_point(FigureKinematics(body), poses, chset.transforms(chan)))
+    kin = FigureKinematics(body)
+    loc = chset.transforms(chan)  # of the channel's root site in each frame: the figure's root's, as played
+    roots = chset.roots(chan)
+    if any(r != kin.root_name for r in roots):
+        g = kin.site_globals(poses, np.broadcast_to(np.eye(4), (chset.nframes, 4, 4)))
+        at = g[np.arange(chset.nframes), [kin.site_names.index(r) for r in roots]]
+        loc = loc @ np.linalg.inv(at) @ g[:, kin.site_names.index(kin.root_name)]
+    down = drop(lowest_point(kin, poses, loc))
     if not down.any():
         return
     held = np.arange(chset.nframes) < (chset.release_frame if chset.release_frame is not None else 0)
