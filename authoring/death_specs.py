@@ -427,7 +427,6 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_fall_s=KSTOW_ARMS_FALL,
         arms_still_s=KSTOW_ARMS_STILL,
         rifle_refall=KSTOW_REFALL,
-        grounded=True,  # unsupported_s 0.15 (DI/M16 0.28) -> 0
     ),
     DeathSpec(
         "kfire2dead",
@@ -452,7 +451,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         rifle_refall=KFIRE_REFALL,
         rifle_refall_toss=KFIRE_REFALL_TOSS,
         slave_let_go_in_place=True,
-        grounded=True,  # unsupported_s 0.18 (DI/M16 0.35) -> 0
+        grounded=True,  # unsupported_s 0.18 (DI/M16 0.35) -> 0 (kstow2dead's DI: lowered as it rolled, its
+        # pelvis then rose 5.7 cm, trunk_rise_cm 1.6 -> 5.7: not yet)
     ),
     replace(
         _lying_prone(_prone("prstow2dead", "PRONE_STOWED")),
