@@ -32,6 +32,7 @@ import numpy as np
 
 from authoring import crawl, crawl_prone, crawl_turn, deaths, gait, postures, reactions, transitions, turns
 from authoring.death_specs import spec_of
+from authoring.grounded import ground_channelset
 from authoring.motion import KeyPosture
 from authoring.passive_range import passive_figure, past_live_limits
 from authoring.quality_frames import FigureSet, play
@@ -287,6 +288,8 @@ def slave_one(
         if laid:  # ... nor its arms, out of the ground by the arm (slave_arms_lift)
             lift_slave_arms(out, ctx.figure_set)
         lift_off_ground(out, ctx.di)
+    if spec and spec.grounded:  # lowered where it hovers (authoring.grounded)
+        ground_channelset(out, ctx.di)
     clear_rifle(out, ctx.figure_set)  # a dropped rifle: out of the body and the ground it now lies on
     return out
 

@@ -194,6 +194,10 @@ class DeathSpec:
     # check's rest window opens (dead_settle.legs_landed_from); None: from the frame he is down. Laid then,
     # stfire2dead's legs lifted to turn out rose 6.9 cm at the knee after he was down (rest_rise_cm)
     legs_land_from: float | None = None
+    # the body (master and slaves) is lowered where it hovers, never below the check's contact height
+    # (authoring.grounded): tipped off his knee, kstow2dead's one foot on the ground lifted (leg_lift), he
+    # hung 2.7 cm up for 0.15 s
+    grounded: bool = False
     # s: as the hands let go, the arms' muscles aim where the arms are, turning to the program's shape over
     # this (deaths._Grip; 0: at once): the welds held the arms against springs aimed at the slump far off
     letgo_blend: float = 0.0
@@ -460,6 +464,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         rifle_refall=KFIRE_REFALL,
         rifle_refall_toss=KFIRE_REFALL_TOSS,
         slave_let_go_in_place=True,
+        grounded=True,  # unsupported_s 0.18 (DI/M16 0.35) -> 0 (kstow2dead's DI: lowered as it rolled, its
+        # pelvis then rose 5.7 cm, trunk_rise_cm 1.6 -> 5.7: not yet)
     ),
     replace(
         _lying_prone(_prone("prstow2dead", "PRONE_STOWED")),

@@ -134,6 +134,7 @@ from authoring.death_specs import dead_node as dead_node
 from authoring.death_specs import death_specs as death_specs
 from authoring.easing import eased_in
 from authoring.feet_held import held_feet
+from authoring.grounded import grounded_frames
 from authoring.knee_hold import hold_knees
 from authoring.leg_lift import eased_legs, lifted
 from authoring.motion import KeyPosture
@@ -358,7 +359,7 @@ def simulate(spec: DeathSpec, keys: Mapping[str, KeyPosture], figures: tuple[Fig
     poses, roots, rifles = (np.array(v) for v in fallen.recording)
     recorded = ClipFrames(poses, roots, rifles, FPS)
     clip = _eased(spec, DeathClip(_after_physics(spec, recorded, figures, release), release))
-    return _rifle_resettled(spec, clip, figures)
+    return _rifle_resettled(spec, _grounded(spec, clip, figures[0]), figures)
 
 
 def fall(
@@ -513,6 +514,14 @@ def fall(
         if still * dt >= REST_SECONDS:
             break
     return Fall((poses, roots, rifles), release_frame, letgo, pelvis)
+
+
+def _grounded(spec: DeathSpec, clip: DeathClip, body: Figure) -> DeathClip:
+    """(:attr:`DeathSpec.grounded`) ``clip`` lowered where it hovers (:mod:`authoring.grounded`), before
+    the rifle falls again among it."""
+    if not spec.grounded:
+        return clip
+    return DeathClip(grounded_frames(clip.frames, body, clip.release_frame), clip.release_frame)
 
 
 def _rifle_resettled(spec: DeathSpec, clip: DeathClip, figures: tuple[Figure, Figure]) -> DeathClip:

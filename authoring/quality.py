@@ -77,7 +77,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
   elbows looks alive), and ``trunk_rise_cm`` (information, no limit yet: the proposed 2 cm fails the DI/M16
   slaves of the prone deaths, 4.2-5.3), how far the pelvis or chest rises once down (a dead man lifting his
   hips), and ``dead_limb_speed_m_s`` (limit 4.5 m/s: every death <= 4.2), the fastest a limb moves once
-  the trunk is down (a dead arm swung, not dropped).
+  the trunk is down (a dead arm swung, not dropped), and ``legs_rise_cm`` (limit 8 cm: every other death
+  <= 6.0), how far a foot, shin or knee rises once the pelvis is near the ground (a dead man's kick).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
   recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
   cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
@@ -119,9 +120,11 @@ from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_
 from authoring.quality_reactions import REACTION_LIMITS, reaction_amplitude
 from authoring.quality_rest import (
     LAG_LIMIT_S,
+    LEGS_RISE_LIMIT_CM,
     PROPPED_LIMIT_S,
     RISE_LIMIT_CM,
     WHIP_M_S,
+    dead_legs,
     dead_trunk,
     rest_lag,
     rest_rise,
@@ -171,6 +174,7 @@ THRESHOLDS: dict[str, float] = {
     "feet_up_cm": 20.0,
     "lying_feet_up_cm": 6.0,  # ... and of a clip that starts lying face down (no fall flings the legs)
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
+    "legs_rise_cm": LEGS_RISE_LIMIT_CM,  # ... nor a leg once the pelvis is down (a dead man's kick)
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
     "dead_limb_speed_m_s": WHIP_M_S,  # ... and no limb is flung once the trunk is down (a whip, not a fall)
     "propped_s": PROPPED_LIMIT_S,  # ... and the head and chest come down with the pelvis (none lies propped)
@@ -518,6 +522,7 @@ def check_clip(
         out.update(rest_rise(frames, figures))
         out.update(rest_lag(frames, figures))
         out.update(dead_trunk(frames, figures))
+        out.update(dead_legs(frames, figures))
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
     reacted = REACTION_LIMITS.get(out.get("reaction") or "", {})
     failures += [k for k, lim in reacted.items() if _range_failure(out[k], lim)]

@@ -45,6 +45,15 @@ he was down, swung its hand round at 8.96 m/s, kstow2dead's left at 7.92 (a limp
 about 3 m/s; every other death's limbs 0.2-3.1 m/s). ``dead_limb_speed_m_s`` is the fastest any limb part's
 centroid moves from the frame the body is down (:func:`rest_frame`, within :data:`NEAR_CM`;
 :func:`limb_whip`, :data:`WHIP_M_S`).
+
+Nor should a dead man's legs rise once his pelvis has reached the ground: kstow2dead, his pelvis down at
+1.07 s, swung his left foot 10 -> 41 cm at 1.27 s and rolled onto his back, legs in the air; kfire2dead's
+right knee rose 20 -> 32 cm, the boot standing up, at 1.38-1.93 s. ``rest_rise_cm`` opens its window only
+once the head is down and he has stopped rolling, and ``feet_up_cm`` judges only while the chest faces down:
+neither saw it. ``legs_rise_cm`` is, from the first frame the pelvis' lowest node comes within
+:data:`PELVIS_NEAR_CM` of where it finally lies, the most any leg point (the feet's, shins' and kneecaps'
+lowest nodes, the heel and knee sites) rises above its lowest since (:func:`legs_rise`,
+:data:`LEGS_RISE_LIMIT_CM`): every other death's legs, rolled out as he lies, rise 0.4-6.0 cm.
 """
 
 from __future__ import annotations
@@ -84,6 +93,10 @@ TRUNK_RISE_PARTS = ("pelvis", "chest")
 # DI/M16 slaves of the prone deaths fail it (4.2-5.3 at frames 75-76; kfire2dead's 5.3 -> 1.2:
 # DeathSpec.slave_settle_down)
 TRUNK_RISE_LIMIT_CM = 2.0
+# cm: the most a foot, shin or knee may rise above its lowest once the pelvis is near the ground (legs_rise):
+# the other deaths' legs rolled out 0.4-6.0 cm (crawl2dead's right knee 6.0), kstow2dead's swung up 28-30 cm
+# and kfire2dead's 19-22 (soldier, DI, M16)
+LEGS_RISE_LIMIT_CM = 8.0
 LIMBS = ("upper_arm", "forearm", "hand", "thigh", "knee", "foot")  # knee: the shin (authoring.body_parts)
 
 
@@ -319,3 +332,23 @@ def dead_trunk(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
     upper = {"head": h["head"]}
     upper.update({k: c[:, 1] for k, c in _centroids(cf, figures, ("chest",)).items()})
     return {**row, **propped_lag(h["pelvis"], upper, cf.channelset.fps)}
+
+
+def legs_rise(h: dict[str, np.ndarray]) -> dict[str, Any]:
+    """From the first frame the pelvis of ``h`` (name: heights, :func:`_heights`) comes within
+    :data:`PELVIS_NEAR_CM` of where it finally lies, the most (cm) any leg point rises above its lowest since,
+    which point and at which frame (None: no pelvis)."""
+    row: dict[str, Any] = {"legs_rise_cm": None, "legs_rise_part": None, "legs_rise_where": None}
+    if "pelvis" not in h:
+        return row
+    start = near_from(h["pelvis"], PELVIS_NEAR_CM)
+    legs = {k: y for k, y in h.items() if k.split("_", 1)[-1] in LEG_PARTS + LEG_SITES}
+    rise, part, frame = rise_after(legs, start)
+    where = f"{part} at frame {frame}, pelvis down from {start}" if part is not None else None
+    row.update(legs_rise_cm=round(rise, 3), legs_rise_part=part, legs_rise_where=where)
+    return row
+
+
+def dead_legs(cf: ClipFrames, figures: FigureSet) -> dict[str, Any]:
+    """:func:`legs_rise` of a played clip."""
+    return legs_rise(_heights(cf, figures))

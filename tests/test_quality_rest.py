@@ -14,6 +14,7 @@ from authoring.quality import THRESHOLDS, check_clip, summarise
 from authoring.quality_frames import FigureSet, play
 from authoring.quality_rest import (
     LAG_LIMIT_S,
+    LEGS_RISE_LIMIT_CM,
     PROPPED_LIMIT_S,
     RISE_LIMIT_CM,
     ROLL_DEG,
@@ -21,6 +22,7 @@ from authoring.quality_rest import (
     WHIP_M_S,
     _heights,
     down_frame,
+    legs_rise,
     limb_rest_lag,
     limb_whip,
     pelvis_turn,
@@ -313,3 +315,48 @@ def test_a_death_whose_dead_arm_whips_fails_the_check() -> None:
     assert (row["failing"], row["pass"]) == (1, False)
     row = summarise([fallen], [])["thresholds"]["dead_limb_speed_m_s"]
     assert (row["failing"], row["pass"]) == (0, True)
+
+
+def test_a_dead_man_s_leg_swung_up_once_his_pelvis_is_down_is_a_kick() -> None:
+    """A constructed death, the pelvis down at frame 30 (within :data:`PELVIS_NEAR_CM` of where it lies):
+    his foot swung up 30 cm after it and laid down again (kstow2dead: 10 -> 41 cm at 1.27 s, as he rolled onto
+    his back, legs in the air) fails ``legs_rise_cm``, while the head is still up (rest_rise's window is not
+    yet open). A foot falling with the body and a knee rolled out 5 cm as he lies (the prone deaths' legs,
+    4.6) pass."""
+    n = 120
+    pelvis = _fall(40.0, 0.5, 0, 36, n)
+    start = int(np.argmax(pelvis <= pelvis[-1] + 10.0))
+    foot = _fall(20.0, 1.0, 0, 30, n) + _fall(0.0, 30.0, 40, 15, n) - _fall(0.0, 30.0, 60, 20, n)
+    row = legs_rise({"pelvis": pelvis, "head": pelvis + 40.0, "left_foot": foot, "left_hand": foot + 50.0})
+    assert row["legs_rise_cm"] == pytest.approx(30.0, abs=0.1) and row["legs_rise_cm"] > LEGS_RISE_LIMIT_CM
+    assert row["legs_rise_part"] == "left_foot"
+    assert row["legs_rise_where"] == f"left_foot at frame 55, pelvis down from {start}"
+    fallen = _fall(20.0, 1.0, 0, 30, n)
+    rolled = _fall(30.0, 12.0, 0, 30, n) + _fall(0.0, 5.0, 60, 20, n)
+    ok = legs_rise({"pelvis": pelvis, "right_foot": fallen, "right_lower_leg.knee": rolled})
+    assert ok["legs_rise_cm"] == pytest.approx(5.0, abs=0.1) and ok["legs_rise_cm"] <= LEGS_RISE_LIMIT_CM
+    assert legs_rise({"left_foot": foot})["legs_rise_cm"] is None  # no pelvis: not judged
+    assert THRESHOLDS["legs_rise_cm"] == LEGS_RISE_LIMIT_CM
+    verdict = summarise([{"name": "kick", **row}, {"name": "roll", **ok}], [])["thresholds"]["legs_rise_cm"]
+    assert (verdict["failing"], verdict["pass"]) == (1, False)
+
+
+# Deaths whose legs rise once the pelvis is down (legs_rise_cm), strict: a clip mended drops out.
+KICKED = "his left foot swings 10 -> 41 cm at 1.27 s as he rolls onto his back, legs in the air"
+BOOT = "his right knee rises 20 -> 32 cm, the boot standing up, at 1.3-1.9 s"
+KNOWN_LEG_RISES: dict[str, str] = {
+    **{f"kstow2dead{s}": KICKED for s in ("", "_low", "_m16_low")},
+    **{f"kfire2dead{s}": BOOT for s in ("", "_low", "_m16_low")},
+}
+DEAD_CLIPS = [
+    f"{c}2dead{s}"
+    for c in ("ststow", "stfire", "kstow", "kfire", "crawl", "prstow", "prfire")
+    for s in ("", "_low", "_m16_low")
+]
+
+
+@pytest.mark.parametrize("clip", known_faults(DEAD_CLIPS, KNOWN_LEG_RISES))
+def test_a_dead_body_s_legs_do_not_rise_once_his_pelvis_is_down(clip: str, figures: FigureSet) -> None:
+    cf = play(load_channelset(CHANNELSETS / f"{clip}.chset.env"), figures)
+    row = check_clip(cf, figures, ends_dead=True)
+    assert row["legs_rise_cm"] <= LEGS_RISE_LIMIT_CM, row["legs_rise_where"]

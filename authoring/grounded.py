@@ -1,0 +1,68 @@
+"""A falling body that hovers a little is lowered onto the ground (issue 14, ``DeathSpec.grounded``).
+
+The check's ``unsupported_s`` (:mod:`authoring.quality_support`) wants some body node within 2 cm of the
+ground in every frame. As the kneeling soldier tips off his knee his front foot is the one part on the
+ground in the physics, and the legs' lift (:mod:`authoring.leg_lift`) raises it to 2.5 cm where it would
+skid: the body hung 2.2-2.7 cm up for 0.15-0.18 s (kstow2dead, kfire2dead, frames 40-52), his DI slaves,
+shaped otherwise, 4.6 cm for 0.28-0.35 s. Where the lowest node is higher
+than :data:`GROUNDED_CM`, the whole body (and a rifle the hands still hold) comes down by a smooth amount
+that brings it there, never below :data:`CLEAR_CM`: over the check's contact height (1.25 cm), so no part
+touches down that did not, and nothing new slides.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from authoring.postures import lowest_point
+from authoring.signal_shaping import smooth_above
+from authoring.transitions import ClipFrames
+from peabody.fk import FigureKinematics
+from peabody.model import Figure
+from server.motion.binding import bind_channelset
+from server.motion.channelset import Channelset
+
+GROUNDED_CM = 1.8  # cm: a hovering body's lowest node comes down to this (the check's SUPPORT_CM: 2)
+CLEAR_CM = 1.3  # cm: ... and no node comes lower than this (the check's CONTACT_HEIGHT_CM: 1.25)
+SIGMA_FRAMES = 1.5  # frames: the drop eases in and out over a few frames (a hover lasts 9-17)
+
+
+def drop(lowest: np.ndarray) -> np.ndarray:
+    """Per frame, how far (cm) to lower a body whose lowest node is ``lowest`` ``(n,)`` cm up: at least
+    down to :data:`GROUNDED_CM`, smooth, never past :data:`CLEAR_CM` (0 where nothing hovers)."""
+    need = np.maximum(0.0, lowest - GROUNDED_CM)
+    if not need.any():
+        return need
+    return np.minimum(smooth_above(need, SIGMA_FRAMES), np.maximum(0.0, lowest - CLEAR_CM))
+
+
+def grounded_frames(frames: ClipFrames, body: Figure, release: int) -> ClipFrames:
+    """A recorded fall lowered where it hovers (:func:`drop`); the rifle with it until ``release``."""
+    down = drop(lowest_point(FigureKinematics(body), frames.poses, frames.roots))
+    roots, rifles = frames.roots.copy(), frames.rifles.copy()
+    roots[:, 1, 3] -= down
+    rifles[:release, 1, 3] -= down[:release]
+    return ClipFrames(frames.poses, roots, rifles, frames.fps)
+
+
+def ground_channelset(chset: Channelset, body: Figure) -> None:
+    """A slave's channelset lowered where its ``body`` hovers (:func:`drop`), every figure channel until
+    its release frame, the body's after it too. In place."""
+    bf = bind_channelset(chset, [body]).figures[0]
+    poses = np.tile(bf.neutral.astype(np.float64), (chset.nframes, 1))
+    poses[:, bf.dst] = chset.joint_data[:, bf.src]
+    chan = next(c for c in chset.figure_channels() if c.column == bf.figure_channel)
+    kin = FigureKinematics(body)
+    loc = chset.transforms(chan)  # of the channel's root site in each frame: the figure's root's, as played
+    roots = chset.roots(chan)
+    if any(r != kin.root_name for r in roots):
+        g = kin.site_globals(poses, np.broadcast_to(np.eye(4), (chset.nframes, 4, 4)))
+        at = g[np.arange(chset.nframes), [kin.site_names.index(r) for r in roots]]
+        loc = loc @ np.linalg.inv(at) @ g[:, kin.site_names.index(kin.root_name)]
+    down = drop(lowest_point(kin, poses, loc))
+    if not down.any():
+        return
+    held = np.arange(chset.nframes) < (chset.release_frame if chset.release_frame is not None else 0)
+    moved = np.where(held[:, None], down[:, None], 0.0).repeat(chset.fig_pos.shape[1], axis=1)
+    moved[:, chan.column] = down
+    chset.fig_pos[:, :, 1] -= moved.astype(np.float32)

@@ -1,0 +1,38 @@
+"""A falling body that hovers a little is lowered onto the ground (authoring/grounded.py, issue 14):
+kstow2dead's soldier rode 2.2-2.7 cm up on his foot's edge (frames 40-52), its DI slave 4.6 cm."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from authoring.grounded import CLEAR_CM, GROUNDED_CM, drop
+from authoring.quality_support import SUPPORT_CM, longest_unsupported
+
+
+def _hover(peak: float, n: int = 60, first: int = 20, frames: int = 16) -> np.ndarray:
+    """The lowest node's height: on the ground, rising to ``peak`` cm over ``frames`` from ``first`` and
+    back (a half sine), on the ground again."""
+    t = np.clip((np.arange(n) - first) / frames, 0.0, 1.0)
+    return 0.3 + (peak - 0.3) * np.sin(np.pi * t)
+
+
+def test_a_body_hovering_on_its_foot_s_edge_is_lowered_until_supported() -> None:
+    """Hovering 2.7 cm (the soldier) or 4.6 cm (the DI slave), it is unsupported for 0.15-0.3 s; lowered
+    by :func:`drop`, it keeps a node within the check's 2 cm in every frame, comes no lower than
+    :data:`CLEAR_CM` where it was higher, comes down no faster than it rose and is not moved where it
+    touched the ground."""
+    for peak in (2.7, 4.6):
+        lowest = _hover(peak)
+        assert longest_unsupported(lowest[:, None])[1] - longest_unsupported(lowest[:, None])[0] > 3
+        down = drop(lowest)
+        after = lowest - down
+        assert (after <= max(GROUNDED_CM, SUPPORT_CM) + 1e-9).all()
+        assert longest_unsupported(after[:, None]) == (0, 0)
+        assert (after >= np.minimum(lowest, CLEAR_CM) - 1e-9).all() and (down >= 0.0).all()
+        assert np.abs(np.diff(down)).max() <= np.abs(np.diff(lowest)).max()
+        assert (down[lowest <= CLEAR_CM] == 0.0).all()
+
+
+def test_a_body_on_the_ground_is_not_moved() -> None:
+    assert not drop(np.full(30, 0.5)).any()
+    assert not drop(np.full(30, GROUNDED_CM)).any()
