@@ -44,6 +44,7 @@ from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_kn
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_forearm_lift import lift_slave_forearms
 from authoring.slave_ground import clear_rifle, rest_limbs
+from authoring.slave_reactions import follow_master
 from authoring.slave_rest import rest_slave_trunk
 from authoring.slave_slack import slack_slave_feet
 from authoring.slave_spine import lay_slave_spine
@@ -641,8 +642,7 @@ def build(
 
         snap_endpoints(out, committed)
         for name, chset in out.items():  # a snapped end faded into a joint at its limit can pass it by a hair
-            _ease_start(chset, name)  # leaving its snapped start from rest, where the death asks
-            clamp_to_limits(chset, slaved_on[name].di)
+            _settle(chset, name, hi[name], slaved_on[name], pairs[id(slaved_on[name])])
     written: list[Path] = []
     for name in (j.name for j in jobs):
         if figure in ("soldier", "all"):
@@ -654,6 +654,18 @@ def build(
             written.append(path)
     written += write_graphs(root, figure)
     return written
+
+
+def _settle(
+    chset: Channelset, name: str, master: Channelset, on: BuildContext, pair: MasterSlavePair
+) -> None:
+    """A slave after the snap: a following reaction from its snapped posture as its master moves
+    (:mod:`authoring.slave_reactions`), a death leaving its snapped start from rest where it asks, every
+    joint within its limits."""
+    if name in reactions.FOLLOWING:
+        follow_master(master, chset, pair, on.figure_set)
+    _ease_start(chset, name)
+    clamp_to_limits(chset, on.di)
 
 
 def _ease_start(chset: Channelset, name: str) -> None:

@@ -61,6 +61,8 @@ class Reaction:
     drop: float = 0.0
     kick: tuple[float, float] = (0.0, 0.0)
     rifle_stays: bool = False
+    slave_follows: bool = False  # slaves: their posture plus the master's change (authoring.slave_reactions)
+    elbows_planted: bool = False  # the elbows on the ground held above the palms (prone: the rifle gives)
 
     @property
     def key(self) -> str:
@@ -77,6 +79,8 @@ _RECOIL = {"neck": (0.0, -3.0, 0.0), "head": (0.0, -2.0, 0.0)}
 # the firing shoulder kicked back: the chest turns and leans back with the rifle, the right clavicle going
 # back further (session 19's 3 degrees of lean alone moved the shoulders 1.7 cm, a nod: now 4.3)
 _KICK = {**_RECOIL, "right_clavicle": (0.0, -3.0)}
+# prone flinch: the head down as far as the neck goes (20 degrees moved the nose 5.6-7.0 cm)
+_PRONE_DUCK = {"neck": (0.0, 30.0, 0.0), "head": (0.0, 12.0, 0.0)}
 
 REACTIONS: tuple[Reaction, ...] = (
     Reaction("stfire_recoil", "STAND_FIRE", "recoil", (0.0, -4.0, -4.0), _KICK, kick=(0.0, 4.0)),
@@ -88,22 +92,45 @@ REACTIONS: tuple[Reaction, ...] = (
     # keeps off the butt's toe (0.99 cm in it, the posture's own 0.9; climbing 1.8 degrees about the butt
     # alone: 1.04 cm; a forward pivot: 1.1-1.3; kicked back 0.3-1 cm: 1.2-1.5). A degree of bend puts DI's
     # right palm 2 mm off the slaved rifle (its elbow out of reach); flexing the spine back fails DI's end
-    # speeds. Too small to see (quality_reactions: shoulders 0.4 cm, muzzle 2.9): tests/test_reactions.py
+    # speeds. Too small to see (quality_reactions: shoulders 0.4 cm, muzzle 2.9): tests/test_reactions.py.
+    # Made visible (5 degrees of lateral bend, 2.5 of climb: shoulders 3.0 cm) the soldier's planted left
+    # elbow rose 4.4 cm on the way back (record_transition tracks the palms, not the elbows): branch
+    # pronereact-s20's report
     Reaction("prfire_recoil", "PRONE_FIRE", "recoil", (-0.7, 0.0, 0.0), _RECOIL, kick=(0.0, 1.4)),
     Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
     Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),
     Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 8.0, -10.0), _HEAD_DOWN, kick=(0.0, -5.0)),
     Reaction("kfire_flinch", "KNEEL_FIRE", "flinch", (0.0, 8.0, 0.0), _DUCK),
-    # on the forearms: the head goes down behind the rifle, which stays where it lies (the head alone moves:
-    # too little to see, quality_reactions; made visible, DI's slaves failed: tests/test_reactions.py)
-    Reaction("prstow_flinch", "PRONE_STOWED", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
-    Reaction("prfire_flinch", "PRONE_FIRE", "flinch", joints=_HEAD_DOWN, rifle_stays=True),
+    # on the forearms: the head goes down behind the rifle, which stays where it lies, and the shoulders
+    # rock over (a shrug is undone by the elbows and palms held; flexing the spine dragged a forearm 6 cm)
+    Reaction(
+        "prstow_flinch",
+        "PRONE_STOWED",
+        "flinch",
+        (-5.0, 0.0, 0.0),
+        _PRONE_DUCK,
+        rifle_stays=True,
+        slave_follows=True,
+        elbows_planted=True,
+    ),
+    # the cheek on the stock, the neck near its limit: the face turns down and away from the blast
+    Reaction(
+        "prfire_flinch",
+        "PRONE_FIRE",
+        "flinch",
+        (-5.0, 0.0, 0.0),
+        {"neck": (0.0, 28.0, -20.0)},
+        rifle_stays=True,
+        slave_follows=True,
+        elbows_planted=True,
+    ),
     # the rifle cradled under the face: the head turns away and the shoulders roll over (ducking 20 degrees
     # put the M16's stock 3.6 cm into the face; session 19 turned the head alone, 6.4 cm)
     Reaction(
         "crawl_flinch", "CRAWL", "flinch", (5.0, 0.0, 0.0), {"neck": (0.0, 5.0, 32.0)}, rifle_stays=True
     ),
 )
+FOLLOWING: frozenset[str] = frozenset(r.name for r in REACTIONS if r.slave_follows)
 REACT_NODES: tuple[str, ...] = tuple(p for p in POSTURES if any(r.posture == p for r in REACTIONS))
 
 
@@ -168,7 +195,8 @@ def reaction_key(kin: FigureKinematics, rkin: FigureKinematics, base: KeyPosture
     for site in arms:
         side = site.split("_")[0]
         i = kin.site_names.index(site)
-        goals.append(ik.Goal(site, g[i, :3, 3], None, 1.0, 2, (f"{side}_clavicle", f"{side}_shoulder")))
+        planted = 4 if r.elbows_planted else 2  # above the palms' 3: the elbow stays, the rifle gives
+        goals.append(ik.Goal(site, g[i, :3, 3], None, 1.0, planted, (f"{side}_clavicle", f"{side}_shoulder")))
     q, _ = ik.solve(kin, q0, goals, root, iterations=200, rest_pose=q0, rest_gain=0.5)
     return KeyPosture(r.key, {SOLDIER: q, RIFLE: np.zeros(0)}, {SOLDIER: root, RIFLE: rifle})
 
