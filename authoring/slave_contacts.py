@@ -30,7 +30,7 @@ from authoring import ik
 from authoring.death_specs import spec_of
 from authoring.postures import leg, segment_heights
 from authoring.quality_frames import FigureSet
-from authoring.signal_shaping import hann_smooth, smooth_above
+from authoring.signal_shaping import hann_smooth, smooth_above, smoothstep
 from authoring.slave_body import part_heights, played_body
 from authoring.slave_rifle import held_rifle, rifle_slide, slide_rifle
 from peabody import quaternion
@@ -136,7 +136,8 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     knees = part_heights(mq, mloc, figures, mtype)
     kneeling = ground_fade(np.min(list(knees.values()), axis=0)) if knees else np.zeros(len(q))
     # on his forearms alone, knees up (FOREARMS_FOLLOW): they carry him as crawling, the elbows planted
-    kneeling = np.ones(len(q)) if master.name.split(".")[0] in FOREARMS_FOLLOW else kneeling
+    follows = _follow_share(master)
+    kneeling = follows + (1.0 - follows) * kneeling
     held_rifle = _holding(slave)
     spec = spec_of(master.name)  # the held rifle's slide out of the body, past the release where asked
     slid = _holding(slave, spec.slave_rifle_slid_past if spec else 0)
@@ -153,8 +154,8 @@ def rest_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
         side: crawling[side] + settles * _landing(m_h[side]) * ground_fade(m_h[side]) * prone
         for side in weight
     }
-    # FOREARMS_FOLLOW: at the master's height, up or down, throughout
-    follow = dict(weight) if master.name.split(".")[0] in FOREARMS_FOLLOW else follow
+    # FOREARMS_FOLLOW: at the master's height, up or down, until it fades out
+    follow = {side: follows * weight[side] + (1.0 - follows) * follow[side] for side in weight}
     sites = kin.site_globals(q, loc)
     elbows = {side: sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3] for side in weight}
     planted = {
@@ -333,8 +334,19 @@ def _holding(slave: Channelset, past: int = 0) -> np.ndarray:
 
 # clips whose master's forearms carry him with the knees up (crawl2prstow lowering onto the belly): planted
 # as crawling, and put at the master's height, up or down, wherever they are near the ground (pressed down
-# to it, the slave's stayed there while the master's rose for the turn on the belly: dragged 15 cm round)
-FOREARMS_FOLLOW = ("crawl2prstow",)
+# to it, the slave's stayed there while the master's rose for the turn on the belly: dragged 15 cm round);
+# faded out over the (start, end) s given, so the clip ends as the plain solve ends, in the pose its posture
+# node's other clips start from (followed to the end, DI's shoulders ended 14 degrees off it)
+FOREARMS_FOLLOW = {"crawl2prstow": (1.4, 1.6)}
+
+
+def _follow_share(master: Channelset) -> np.ndarray:
+    """Per frame, how far ``master``'s slave forearms follow his (:data:`FOREARMS_FOLLOW`; 0 elsewhere)."""
+    t = np.arange(master.nframes) / master.fps
+    fade = FOREARMS_FOLLOW.get(master.name.split(".")[0])
+    return np.zeros(len(t)) if fade is None else 1.0 - smoothstep((t - fade[0]) / (fade[1] - fade[0]))
+
+
 HOLD_FADE_FRAMES = 12  # the crawl's contact handling fades out over this many frames before a release
 RIFLE_LIFT_SIGMA_FRAMES = 4.0  # the crawling rifle's lift is smoothed over the clip (at or above the need)
 PLANT_FADE_FRAMES = 6  # a planted site's held place eases in and out over this many frames (0.1 s)

@@ -89,3 +89,18 @@ def test_the_shipped_clip_meets_every_limit_on_the_master_and_both_slaves(suffix
     }  # recorded as strict xfails there
     failures = unknown_failures(f"crawl2prstow{suffix}", row["failures"], known)
     assert failures == [], {k: row[k] for k in failures}
+
+
+@pytest.mark.parametrize("suffix", ["_low", "_m16_low"])
+def test_the_slaves_end_exactly_in_the_pose_every_other_clip_meets_at_prone_stowed(suffix: str) -> None:
+    """Issue 14: the slaves' forearms, following the master's to the end (slave_contacts.FOREARMS_FOLLOW),
+    ended crawl2prstow_low 13.9 degrees (shoulders) off the PRONE_STOWED pose the other clips start from, and
+    snapping a rebuilt prstow2dead to it would have moved them all. The follow fades out before the end, so
+    the plain slave solve ends the clip where it always did."""
+    from server.motion.cache import load_channelset
+    from ttes.paths import CHANNELSETS
+
+    end = load_channelset(CHANNELSETS / f"crawl2prstow{suffix}.chset.env", use_cache=False)
+    for name in ("prstow2prfire", "prstow2dead", "prstow_flinch"):
+        start = load_channelset(CHANNELSETS / f"{name}{suffix}.chset.env", use_cache=False)
+        assert np.array_equal(end.joint_data[-1], start.joint_data[0]), name
