@@ -169,7 +169,8 @@ def test_the_crawling_slave_tilts_onto_his_knees_about_his_forearms(crawling) ->
     # goes into the ground, and the rifle turns with the body: the palms keep their hold
     elbows = ("right_upper_arm.distal", "left_upper_arm.distal")
     moved = _sites(figs, tilted, elbows) - _sites(figs, slave, elbows)
-    assert np.abs(moved[..., [0, 2]]).max() < 0.05 and np.abs(moved[..., 1]).max() < 0.2
+    # (under a millimetre: crawl_start's forearm lifted first since session 20, the tilt moves it 0.54 mm)
+    assert np.abs(moved[..., [0, 2]]).max() < 0.1 and np.abs(moved[..., 1]).max() < 0.2
     for part in ("forearm", "foot", "kneecap"):
         f = play(tilted, figs)
         for h in part_heights(f.poses["DI.fig"], f.locations["DI.fig"], figs, "DI.fig", part).values():
@@ -200,20 +201,7 @@ def test_a_planted_place_eases_in_and_keeps_the_clip_ends() -> None:
     np.testing.assert_array_equal(held, down)
 
 
-@pytest.mark.parametrize(
-    "figure",
-    [
-        pytest.param(
-            "DI",
-            marks=pytest.mark.xfail(
-                strict=True,  # the check's lift-off rule: a part on the ground until it rises past 2 cm
-                reason="contact_slide_cm 4.25 (limit 3): right forearm dragged on and just above the ground, "
-                "0.00-0.37 s",
-            ),
-        ),
-        "M16",
-    ],
-)
+@pytest.mark.parametrize("figure", ["DI", "M16"])
 def test_the_slaved_crawl_start_passes_the_check_and_rests_at_crawl(figure: str) -> None:
     from authoring.build import slave_one
     from authoring.quality import THRESHOLDS, check_clip
