@@ -38,6 +38,7 @@ from authoring.passive_range import passive_figure, past_live_limits
 from authoring.quality_frames import FigureSet, play
 from authoring.slave_arms import pin_slave_arms
 from authoring.slave_arms_down import keep_slave_arms_down
+from authoring.slave_arms_late import lag_slave_arms
 from authoring.slave_arms_lift import lift_slave_arms
 from authoring.slave_belly import lift_slave_belly
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
@@ -642,6 +643,7 @@ def build(
         snap_endpoints(out, committed)
         for name, chset in out.items():  # a snapped end faded into a joint at its limit can pass it by a hair
             _ease_start(chset, name)  # leaving its snapped start from rest, where the death asks
+            _arms_late(chset, name, slaved_on[name].figure_set)  # its arms leaving it late, where it asks
             clamp_to_limits(chset, slaved_on[name].di)
     written: list[Path] = []
     for name in (j.name for j in jobs):
@@ -662,6 +664,14 @@ def _ease_start(chset: Channelset, name: str) -> None:
     spec = deaths.death_specs().get(name)
     if spec and spec.slave_start_ease:
         ease_slave_start(chset, spec.slave_start_ease)
+
+
+def _arms_late(chset: Channelset, name: str, figures: FigureSet) -> None:
+    """A slave of death ``name`` whose arms leave its snapped start late (:mod:`authoring.slave_arms_late`),
+    where the death asks (:attr:`deaths.DeathSpec.slave_arms_late`)."""
+    spec = deaths.death_specs().get(name)
+    if spec and any(spec.slave_arms_late):
+        lag_slave_arms(chset, figures, *spec.slave_arms_late)
 
 
 def _progress(jobs: Sequence[ClipJob], enabled: bool) -> Iterable[ClipJob]:
