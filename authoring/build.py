@@ -38,6 +38,7 @@ from authoring.passive_range import passive_figure, past_live_limits
 from authoring.quality_frames import FigureSet, play
 from authoring.slave_arms import pin_slave_arms
 from authoring.slave_arms_down import keep_slave_arms_down
+from authoring.slave_arms_late import lag_slave_arms
 from authoring.slave_arms_lift import lift_slave_arms
 from authoring.slave_belly import lift_slave_belly
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
@@ -660,11 +661,12 @@ def _settle(
     chset: Channelset, name: str, master: Channelset, on: BuildContext, pair: MasterSlavePair
 ) -> None:
     """A slave after the snap: a following reaction from its snapped posture as its master moves
-    (:mod:`authoring.slave_reactions`), a death leaving its snapped start from rest where it asks, every
-    joint within its limits."""
+    (:mod:`authoring.slave_reactions`), a death leaving its snapped start from rest and its arms leaving it
+    late where it asks, every joint within its limits."""
     if name in reactions.FOLLOWING:
         follow_master(master, chset, pair, on.figure_set)
     _ease_start(chset, name)
+    _arms_late(chset, name, on.figure_set)
     clamp_to_limits(chset, on.di)
 
 
@@ -674,6 +676,14 @@ def _ease_start(chset: Channelset, name: str) -> None:
     spec = deaths.death_specs().get(name)
     if spec and spec.slave_start_ease:
         ease_slave_start(chset, spec.slave_start_ease)
+
+
+def _arms_late(chset: Channelset, name: str, figures: FigureSet) -> None:
+    """A slave of death ``name`` whose arms leave its snapped start late (:mod:`authoring.slave_arms_late`),
+    where the death asks (:attr:`deaths.DeathSpec.slave_arms_late`)."""
+    spec = deaths.death_specs().get(name)
+    if spec and any(spec.slave_arms_late):
+        lag_slave_arms(chset, figures, *spec.slave_arms_late)
 
 
 def _progress(jobs: Sequence[ClipJob], enabled: bool) -> Iterable[ClipJob]:

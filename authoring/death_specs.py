@@ -210,6 +210,10 @@ class DeathSpec:
     # a propped death's settle lays his legs dragging no node on the ground as it lifts off (the check's
     # LIFT_OFF_CM, dead_legs.leg_slide): crawl2dead's left thigh, rolled out at 1.0-1.8 cm up, slid 2.3 cm
     legs_lift_off: bool = False
+    # frames (held, caught up past the release): the slaves' arms keep their start pose, then catch up with
+    # the solve while the hit lifts the body (authoring.slave_arms_late): prfire2dead's DI right forearm
+    # dragged 5.4 cm along the ground as the snap faded its arm back (frames 0-9)
+    slave_arms_late: tuple[int, int] = (0, 0)
 
 
 def _prone(
@@ -380,6 +384,13 @@ PRSTOW_SLAVE_HEELS = 14.0
 # frames: prfire2dead's slaves' held rifle slides out of the body until this far past the release
 # (DeathSpec.slave_rifle_slid_past)
 PRFIRE_RIFLE_SLID_PAST = 2
+# frames: prfire2dead's slaves' arms keep PRONE_FIRE's pose this long and catch up this far past the release
+# (DeathSpec.slave_arms_late), leaving it from rest over PRFIRE_SLAVE_START_EASE s (slave_start_ease; the
+# held rifle, going with the chest, left at 0.55 m/s otherwise): the DI's right forearm 5.42 -> 2.67 cm,
+# its left forearm's leap at the release 1.65 -> 1.19 m/s; the M16's right forearm 4.44 -> 3.89. Held 6
+# and caught up by the release: a palm 1.01 cm off the rifle; by 4 past it: the left hand 1.55 m/s
+PRFIRE_SLAVE_ARMS_LATE = (5, 6)
+PRFIRE_SLAVE_START_EASE = 0.1
 DEATHS: tuple[DeathSpec, ...] = (
     DeathSpec(
         "ststow2dead",
@@ -479,6 +490,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_arms_held=True,
         slave_rifle_slid_past=PRFIRE_RIFLE_SLID_PAST,
         arms_lifted_level=True,
+        slave_start_ease=PRFIRE_SLAVE_START_EASE,
+        slave_arms_late=PRFIRE_SLAVE_ARMS_LATE,
     ),
     CRAWL_DEATH,
 )

@@ -95,7 +95,6 @@ _LETGO = "at the let-go (0.38 s) the right hand flies off the grip {} cm in one 
 _KFOOT = "falling from the knee, the rear foot flips up on its toes {} cm in one frame (0.47 s)"
 _CRAWL = "turning on the crawl, the {} jumps {} cm in one frame ({} s) and stops"
 _ARM = "turning on the crawl, the right upper arm jumps {} cm in one frame ({} s) and stops"
-_TWITCH = "shot prone, the {} forearm twitches 3.2 cm for one frame out of stillness ({} s)"
 KNOWN_POPS: dict[str, str] = {
     "ststow2dead": _LETGO.format(15.5),
     "ststow2dead_low": _LETGO.format(16.5),
@@ -108,7 +107,6 @@ KNOWN_POPS: dict[str, str] = {
     "kfire2dead": _KFOOT.format(9.1),
     "kfire2dead_low": _KFOOT.format(9.4),
     "kfire2dead_m16_low": _KFOOT.format(9.4),
-    "prfire2dead_low": _TWITCH.format("left", 0.22),
     "crawlarc_l135": _CRAWL.format("chest", 5.3, 4.33),
     "crawlarc_l135_low": _CRAWL.format("belly", 5.8, 4.33),
     "crawlarc_l135_m16_low": _CRAWL.format("belly", 5.8, 4.33),
