@@ -210,6 +210,9 @@ class DeathSpec:
     # a propped death's settle lays his legs dragging no node on the ground as it lifts off (the check's
     # LIFT_OFF_CM, dead_legs.leg_slide): crawl2dead's left thigh, rolled out at 1.0-1.8 cm up, slid 2.3 cm
     legs_lift_off: bool = False
+    # grounded only before the pelvis is down (grounded.pelvis_down): lowered as they rolled onto their back
+    # after, kstow2dead's DI slaves' pelvis rose 5.7 cm (trunk_rise_cm 1.64 -> 5.67)
+    grounded_until_down: bool = False
 
 
 def _prone(
@@ -440,6 +443,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_fall_s=KSTOW_ARMS_FALL,
         arms_still_s=KSTOW_ARMS_STILL,
         rifle_refall=KSTOW_REFALL,
+        grounded=True,  # unsupported_s 0.15 (DI/M16 0.28) -> 0
+        grounded_until_down=True,
     ),
     DeathSpec(
         "kfire2dead",
