@@ -214,6 +214,9 @@ class DeathSpec:
     # the solve while the hit lifts the body (authoring.slave_arms_late): prfire2dead's DI right forearm
     # dragged 5.4 cm along the ground as the snap faded its arm back (frames 0-9)
     slave_arms_late: tuple[int, int] = (0, 0)
+    # grounded only before the pelvis is down (grounded.pelvis_down): lowered as they rolled onto their back
+    # after, kstow2dead's DI slaves' pelvis rose 5.7 cm (trunk_rise_cm 1.64 -> 5.67)
+    grounded_until_down: bool = False
 
 
 def _prone(
@@ -451,6 +454,8 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_fall_s=KSTOW_ARMS_FALL,
         arms_still_s=KSTOW_ARMS_STILL,
         rifle_refall=KSTOW_REFALL,
+        grounded=True,  # unsupported_s 0.15 (DI/M16 0.28) -> 0
+        grounded_until_down=True,
     ),
     DeathSpec(
         "kfire2dead",

@@ -521,7 +521,8 @@ def _grounded(spec: DeathSpec, clip: DeathClip, body: Figure) -> DeathClip:
     the rifle falls again among it."""
     if not spec.grounded:
         return clip
-    return DeathClip(grounded_frames(clip.frames, body, clip.release_frame), clip.release_frame)
+    frames = grounded_frames(clip.frames, body, clip.release_frame, spec.grounded_until_down)
+    return DeathClip(frames, clip.release_frame)
 
 
 def _rifle_resettled(spec: DeathSpec, clip: DeathClip, figures: tuple[Figure, Figure]) -> DeathClip:

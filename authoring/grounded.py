@@ -7,14 +7,17 @@ skid: the body hung 2.2-2.7 cm up for 0.15-0.18 s (kstow2dead, kfire2dead, frame
 shaped otherwise, 4.6 cm for 0.28-0.35 s. Where the lowest node is higher
 than :data:`GROUNDED_CM`, the whole body (and a rifle the hands still hold) comes down by a smooth amount
 that brings it there, never below :data:`CLEAR_CM`: over the check's contact height (1.25 cm), so no part
-touches down that did not, and nothing new slides.
+touches down that did not, and nothing new slides. Where a death asks (``DeathSpec.grounded_until_down``),
+only until the pelvis is down (:func:`pelvis_down`): kstow2dead's DI slaves, lowered up to 3.7 cm as they
+rolled onto their back after, then raised their pelvis 5.7 cm (trunk_rise_cm 1.64 -> 5.67).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from authoring.postures import lowest_point
+from authoring.postures import segment_heights
+from authoring.quality_rest import PELVIS_NEAR_CM, near_from
 from authoring.signal_shaping import smooth_above
 from authoring.transitions import ClipFrames
 from peabody.fk import FigureKinematics
@@ -27,27 +30,47 @@ CLEAR_CM = 1.3  # cm: ... and no node comes lower than this (the check's CONTACT
 SIGMA_FRAMES = 1.5  # frames: the drop eases in and out over a few frames (a hover lasts 9-17)
 
 
-def drop(lowest: np.ndarray) -> np.ndarray:
+PELVIS = "lower_torso"  # the segment whose lowest node is the check's pelvis (body_parts)
+
+
+def drop(lowest: np.ndarray, until: int | None = None) -> np.ndarray:
     """Per frame, how far (cm) to lower a body whose lowest node is ``lowest`` ``(n,)`` cm up: at least
-    down to :data:`GROUNDED_CM`, smooth, never past :data:`CLEAR_CM` (0 where nothing hovers)."""
+    down to :data:`GROUNDED_CM`, smooth, never past :data:`CLEAR_CM` (0 where nothing hovers); a hover
+    from frame ``until`` on left as it is (None: none)."""
     need = np.maximum(0.0, lowest - GROUNDED_CM)
+    if until is not None:
+        need[until:] = 0.0
     if not need.any():
         return need
     return np.minimum(smooth_above(need, SIGMA_FRAMES), np.maximum(0.0, lowest - CLEAR_CM))
 
 
-def grounded_frames(frames: ClipFrames, body: Figure, release: int) -> ClipFrames:
-    """A recorded fall lowered where it hovers (:func:`drop`); the rifle with it until ``release``."""
-    down = drop(lowest_point(FigureKinematics(body), frames.poses, frames.roots))
+def pelvis_down(heights: dict[str, np.ndarray]) -> int:
+    """The first frame the pelvis' lowest node (of segment ``heights``, :func:`postures.segment_heights`)
+    comes within the check's PELVIS_NEAR_CM of where it finally lies (``legs_rise_cm``'s start)."""
+    return near_from(heights[PELVIS], PELVIS_NEAR_CM)
+
+
+def _drop(kin: FigureKinematics, poses: np.ndarray, roots: np.ndarray, until_down: bool) -> np.ndarray:
+    """:func:`drop` of a body in ``poses`` at ``roots``, only before its pelvis is down if ``until_down``."""
+    h = segment_heights(kin, poses, roots)
+    lowest = np.min(np.stack(list(h.values())), axis=0)
+    return drop(lowest, pelvis_down(h) if until_down else None)
+
+
+def grounded_frames(frames: ClipFrames, body: Figure, release: int, until_down: bool = False) -> ClipFrames:
+    """A recorded fall lowered where it hovers (:func:`drop`, only before the pelvis is down if
+    ``until_down``); the rifle with it until ``release``."""
+    down = _drop(FigureKinematics(body), frames.poses, frames.roots, until_down)
     roots, rifles = frames.roots.copy(), frames.rifles.copy()
     roots[:, 1, 3] -= down
     rifles[:release, 1, 3] -= down[:release]
     return ClipFrames(frames.poses, roots, rifles, frames.fps)
 
 
-def ground_channelset(chset: Channelset, body: Figure) -> None:
-    """A slave's channelset lowered where its ``body`` hovers (:func:`drop`), every figure channel until
-    its release frame, the body's after it too. In place."""
+def ground_channelset(chset: Channelset, body: Figure, until_down: bool = False) -> None:
+    """A slave's channelset lowered where its ``body`` hovers (:func:`drop`, only before the pelvis is down
+    if ``until_down``), every figure channel until its release frame, the body's after it too. In place."""
     bf = bind_channelset(chset, [body]).figures[0]
     poses = np.tile(bf.neutral.astype(np.float64), (chset.nframes, 1))
     poses[:, bf.dst] = chset.joint_data[:, bf.src]
@@ -59,7 +82,7 @@ def ground_channelset(chset: Channelset, body: Figure) -> None:
         g = kin.site_globals(poses, np.broadcast_to(np.eye(4), (chset.nframes, 4, 4)))
         at = g[np.arange(chset.nframes), [kin.site_names.index(r) for r in roots]]
         loc = loc @ np.linalg.inv(at) @ g[:, kin.site_names.index(kin.root_name)]
-    down = drop(lowest_point(kin, poses, loc))
+    down = _drop(kin, poses, loc, until_down)
     if not down.any():
         return
     held = np.arange(chset.nframes) < (chset.release_frame if chset.release_frame is not None else 0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from authoring.grounded import CLEAR_CM, GROUNDED_CM, drop
+from authoring.grounded import CLEAR_CM, GROUNDED_CM, PELVIS, drop, pelvis_down
 from authoring.quality_support import SUPPORT_CM, longest_unsupported
 
 
@@ -36,3 +36,21 @@ def test_a_body_hovering_on_its_foot_s_edge_is_lowered_until_supported() -> None
 def test_a_body_on_the_ground_is_not_moved() -> None:
     assert not drop(np.full(30, 0.5)).any()
     assert not drop(np.full(30, GROUNDED_CM)).any()
+
+
+def test_a_hover_after_the_pelvis_is_down_is_left_as_it_is() -> None:
+    """kstow2dead's DI slaves hovered twice: off the knee (frames 33-49) and rolling onto their back after
+    the pelvis was down (68-82); lowered there too, their pelvis then rose 5.7 cm (trunk_rise_cm limit 2).
+    With ``until`` (the pelvis-down frame) the first is lowered, the second left alone."""
+    lowest = np.maximum(_hover(4.6, n=100, first=10), _hover(6.9, n=100, first=60))
+    down = drop(lowest, until=50)
+    assert longest_unsupported((lowest - down)[:50, None]) == (0, 0)
+    assert not down[50:].any()
+    assert np.array_equal(down[:45], drop(lowest)[:45])
+
+
+def test_a_pelvis_is_down_where_the_check_s_legs_rise_starts() -> None:
+    """The window ends where ``legs_rise_cm`` starts: the pelvis' lowest node within PELVIS_NEAR_CM (10 cm)
+    of where it finally lies."""
+    pelvis = np.array([43.0, 40.0, 30.0, 20.0, 15.9, 12.0, 6.0, 9.0, 7.0, 6.0])
+    assert pelvis_down({PELVIS: pelvis, "left_foot": np.zeros(10)}) == 4
