@@ -210,6 +210,12 @@ class DeathSpec:
     # a propped death's settle lays his legs dragging no node on the ground as it lifts off (the check's
     # LIFT_OFF_CM, dead_legs.leg_slide): crawl2dead's left thigh, rolled out at 1.0-1.8 cm up, slid 2.3 cm
     legs_lift_off: bool = False
+    # the slaves alone are lowered where they hover (authoring.grounded; ``grounded`` lowers the master too):
+    # crawl2dead's DI, its belly solved into the ground and the body lifted out, floated 2-3 cm, 0.10 s
+    slave_grounded: bool = False
+    # the slaves' arms go where the master's go after the release, lying or lifted (slave_ground._plants):
+    # unheld once his arm lifted, each solve pass put crawl2dead's DI arm out sideways again, 8-10 cm
+    slave_arms_follow: bool = False
 
 
 def _prone(
@@ -275,6 +281,8 @@ CRAWL_DEATH = replace(
     sunk=True,
     arms_air_low=True,
     slave_arm_out=True,
+    slave_grounded=True,
+    slave_arms_follow=True,
     slave_feet_slack=True,
     legs_lift_off=True,
     legs_lift=True,

@@ -36,3 +36,13 @@ def test_a_body_hovering_on_its_foot_s_edge_is_lowered_until_supported() -> None
 def test_a_body_on_the_ground_is_not_moved() -> None:
     assert not drop(np.full(30, 0.5)).any()
     assert not drop(np.full(30, GROUNDED_CM)).any()
+
+
+def test_only_crawl2dead_s_slaves_are_lowered_alone() -> None:
+    """``DeathSpec.slave_grounded`` lowers the slaves where they hover (crawl2dead's DI floated 2-3 cm for
+    0.10 s after its solved belly was lifted out of the ground), not the master: his clip, recorded with
+    ``grounded`` unset, is the same, and no other death's slaves change."""
+    from authoring.deaths import DEATHS
+
+    assert [d.name for d in DEATHS if d.slave_grounded] == ["crawl2dead"]
+    assert not next(d for d in DEATHS if d.name == "crawl2dead").grounded
