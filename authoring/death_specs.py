@@ -217,6 +217,12 @@ class DeathSpec:
     # grounded only before the pelvis is down (grounded.pelvis_down): lowered as they rolled onto their back
     # after, kstow2dead's DI slaves' pelvis rose 5.7 cm (trunk_rise_cm 1.64 -> 5.67)
     grounded_until_down: bool = False
+    # the slaves alone are lowered where they hover (authoring.grounded; ``grounded`` lowers the master too):
+    # crawl2dead's DI, its belly solved into the ground and the body lifted out, floated 2-3 cm, 0.10 s
+    slave_grounded: bool = False
+    # the slaves' arms go where the master's go after the release, lying or lifted (slave_ground._plants):
+    # unheld once his arm lifted, each solve pass put crawl2dead's DI arm out sideways again, 8-10 cm
+    slave_arms_follow: bool = False
 
 
 def _prone(
@@ -282,6 +288,8 @@ CRAWL_DEATH = replace(
     sunk=True,
     arms_air_low=True,
     slave_arm_out=True,
+    slave_grounded=True,
+    slave_arms_follow=True,
     slave_feet_slack=True,
     legs_lift_off=True,
     legs_lift=True,

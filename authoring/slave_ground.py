@@ -53,6 +53,7 @@ PART_SITES: dict[str, tuple[str, ...]] = {
 TRUNK = ("pelvis", "belly", "chest")
 HIPS = ("left_thigh", "right_thigh")  # turn with the pelvis: the body is not lowered through them either
 LIMB_PASSES = 4  # a part's lowest node moves along it as the limb turns: solve again for what is left
+ARM_PARTS = ("_hand", "_forearm", "_upper_arm")  # held where the master's go (DeathSpec.slave_arms_follow)
 CHEST = "upper_torso.sternum"  # an arm goes out sideways away from this (_sideways)
 ROOT = "lower_torso.proximal"  # a slave site without a master site of its name moves as this one does
 CONTACT_CM = 1.3  # the master's part this low is on the ground (the quality check's 1.25 cm)
@@ -116,7 +117,8 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
     if _settles_arms_still(master):
         settle = np.minimum(settle, fade_in(n, _arms_still(m_at, float(master.fps)), SETTLE_FRAMES))
     arm_out, rigid = _arm_out(master), _trunk_rigid(master)
-    planted = _plants(unsolved, m_at, m_h, release)
+    follow = _arms_follow(master)
+    planted = _plants(unsolved, m_at, m_h, release, follow=follow)
     if _settles_down(master):  # from his trunk down, however his root still turns (slave_settle_down)
         settle = w * fade_in(n, _trunk_down(m_h), DOWN_SETTLE_FRAMES)
     if _spine_laid(master):  # its trunk lies as his already (slave_spine): nothing to turn it onto
@@ -129,7 +131,7 @@ def rest_limbs(master: Channelset, slave: Channelset, figures: FigureSet) -> np.
             loc[:, 1, 3] += settle * _trunk_drop(m_h, heights_of(pose, loc, figures, stype, TRUNK + HIPS))
         plants = planted if planting else {}
         if arm_out and planting and group is limbs:  # a part landing as the trunk settles: from the solve
-            plants = _plants(unsolved, m_at, m_h, release, (_positions(kin, pose, loc), settle > 0))
+            plants = _plants(unsolved, m_at, m_h, release, (_positions(kin, pose, loc), settle > 0), follow)
         scale = settle if group is TRUNK else 1.0
         need = {p: v * scale for p, v in needs(pose, loc).items() if p in group}
         goals = part_goals(kin, pose[sub], loc[sub], need, sub, plants, arm_out, rigid)
@@ -159,6 +161,13 @@ def _trunk_rigid(master: Channelset) -> bool:
     """Whether this death's slave trunk is laid by its root alone (``DeathSpec.slave_trunk_rigid``)."""
     spec = spec_of(master.name)
     return spec is not None and spec.slave_trunk_rigid
+
+
+def _arms_follow(master: Channelset) -> bool:
+    """Whether this death's slave arms go where the master's go after the release, on the ground or not
+    (``DeathSpec.slave_arms_follow``)."""
+    spec = spec_of(master.name)
+    return spec is not None and spec.slave_arms_follow
 
 
 def _settles_arms_still(master: Channelset) -> bool:
@@ -261,6 +270,7 @@ def _plants(
     heights: dict[str, np.ndarray],
     release: int,
     solved: tuple[dict[str, np.ndarray], np.ndarray] | None = None,
+    follow: bool = False,
 ) -> dict[str, np.ndarray]:
     """Per site of :data:`PART_SITES`, where it goes (x, z; NaN where free) while the master's part is on
     the ground (``CONTACT_CM``): from where it was as the contact began (or at the release) it moves as
@@ -268,13 +278,16 @@ def _plants(
     no more than his. ``slave``/``master``: ``(n, 3)`` positions per site name. ``solved``: the positions
     the solve so far has and the frames the trunk settles in; a contact beginning there starts from the
     solve (from the unsolved slave, 3-5 cm off once the trunk went down, the solve jumped there as the part
-    landed and the smoothing made the jump a slide: DI crawl2dead right hand 6.3 cm)."""
+    landed and the smoothing made the jump a slide: DI crawl2dead right hand 6.3 cm). ``follow``: an arm's
+    sites are held so from the release to the end, the arm down or lifted."""
     out: dict[str, np.ndarray] = {}
     n = len(heights[next(iter(heights))])
     for part, names in PART_SITES.items():
         if part not in heights or part in TRUNK:  # the trunk follows the root: it rolls, it is not planted
             continue
         down = np.concatenate([[False], heights[part] <= CONTACT_CM, [False]])
+        if follow and part.endswith(ARM_PARTS):
+            down[1:-1] = np.arange(n) >= release
         edges = np.flatnonzero(np.diff(down.astype(np.int8)))
         for site in names:
             track = np.full((n, 3), np.nan)

@@ -54,3 +54,13 @@ def test_a_pelvis_is_down_where_the_check_s_legs_rise_starts() -> None:
     of where it finally lies."""
     pelvis = np.array([43.0, 40.0, 30.0, 20.0, 15.9, 12.0, 6.0, 9.0, 7.0, 6.0])
     assert pelvis_down({PELVIS: pelvis, "left_foot": np.zeros(10)}) == 4
+
+
+def test_only_crawl2dead_s_slaves_are_lowered_alone() -> None:
+    """``DeathSpec.slave_grounded`` lowers the slaves where they hover (crawl2dead's DI floated 2-3 cm for
+    0.10 s after its solved belly was lifted out of the ground), not the master: his clip, recorded with
+    ``grounded`` unset, is the same, and no other death's slaves change."""
+    from authoring.deaths import DEATHS
+
+    assert [d.name for d in DEATHS if d.slave_grounded] == ["crawl2dead"]
+    assert not next(d for d in DEATHS if d.name == "crawl2dead").grounded

@@ -150,6 +150,30 @@ def test_a_part_landing_as_the_trunk_settles_is_held_where_the_solve_has_it() ->
         np.testing.assert_allclose(hold[2:5][:, [0, 2]], [start] * 3)  # held still from where it landed
 
 
+def test_an_arm_that_follows_is_held_where_the_masters_goes_once_it_lifts() -> None:
+    """DI crawl2dead (issue 14): once the master lifted his arm it was held nowhere, and each solve pass put
+    it out sideways again from where the last left it (8-10 cm, dragged along the ground as it rose).
+    Following (``DeathSpec.slave_arms_follow``), an arm's sites are held from the release to the end where
+    the master's go, from where the slave's were; the legs are planted only while the master's are down."""
+    n, release = 6, 1
+    heights = {"right_hand": np.array([0.0, 0.0, 0.0, 5.0, 5.0, 5.0]), "right_knee": np.zeros(n)}
+    heights["right_knee"][3:] = 5.0
+    sites = (*slave_ground.PART_SITES["right_hand"], *slave_ground.PART_SITES["right_knee"])
+    unsolved = {s: np.tile([1.0, 0.0, 2.0], (n, 1)) for s in sites}
+    master = {slave_ground.ROOT: np.outer(np.arange(n), [1.0, 0.0, 0.0])}  # he moves 1 cm a frame in x
+    held = slave_ground._plants(unsolved, master, heights, release)["right_lower_arm.distal"]
+    assert np.isnan(held[3:]).all()  # unheld once his hand lifts
+    follows = slave_ground._plants(unsolved, master, heights, release, follow=True)
+    hand = follows["right_lower_arm.distal"]
+    assert np.isnan(hand[:release]).all()
+    np.testing.assert_allclose(hand[release:, 0], 1.0 + np.arange(n - release))
+    np.testing.assert_allclose(hand[release:, 2], 2.0)
+    assert np.isnan(follows["right_lower_leg.knee"][3:]).all()
+    from authoring import deaths
+
+    assert [d.name for d in deaths.DEATHS if d.slave_arms_follow] == ["crawl2dead"]
+
+
 def test_an_arm_in_the_ground_goes_out_sideways_from_the_chest() -> None:
     """DI crawl2dead's forearm lay 2-7 cm in the ground under its chest and the arm could not lift it (its
     shoulder is on the chest): it goes out horizontally, away from the chest, as far as it must go up."""
