@@ -488,8 +488,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         rifle_refall=KFIRE_REFALL,
         rifle_refall_toss=KFIRE_REFALL_TOSS,
         slave_let_go_in_place=True,
-        grounded=True,  # unsupported_s 0.18 (DI/M16 0.35) -> 0 (kstow2dead's DI: lowered as it rolled, its
-        # pelvis then rose 5.7 cm, trunk_rise_cm 1.6 -> 5.7: not yet)
+        grounded=True,  # unsupported_s 0.18 (DI/M16 0.35) -> 0
     ),
     replace(
         _lying_prone(_prone("prstow2dead", "PRONE_STOWED")),
