@@ -10,6 +10,11 @@ again: the palms' places on the rifle and the elbows' places held (each elbow ra
 shortfall wherever the master's forearm is above :data:`CLEAR_CM`), the palms' turn on the rifle a
 lower-priority goal, so the hand gives way by a few degrees (at most 2.6 on DI) rather than the forearm
 rolling on the ground. The clip's first and last frames are kept as slaved (they meet the posture).
+
+Prone, prstow2prfire's master keeps his left forearm 1.8 cm up and still while the rifle comes to the
+shoulder, but DI's forearm lies on the ground at both ends (PRONE_STOWED, PRONE_FIRE) 3.4 cm apart, and
+slid there (the check's lift-off rule holds a part on the ground until it is 2 cm up). Such a clip
+(:data:`STEPS`) has its forearm lifted clear of that in between, a step eased in and out from the ends.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import numpy as np
 
 from authoring import ik
 from authoring.quality_frames import FigureSet
-from authoring.signal_shaping import smooth_above
+from authoring.signal_shaping import smooth_above, smoothstep
 from authoring.slave_body import part_heights, played_body
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -28,6 +33,9 @@ ARM = ("clavicle", "shoulder", "elbow", "wrist")
 CLEAR_CM = 1.4  # a forearm the master holds above this stays above it (contact starts at 1.25 cm) ...
 LIFT_SIGMA = 3.0  # ... raised by its elbow, the raise smoothed over this many frames (at least as high)
 PASSES = 3  # solved again from the result, the raise re-measured
+# master clip: (cm, s) the slave's forearm is lifted to in between, the lift eased in and out over this long
+# from either end (above the check's 2 cm lift-off, so the forearm steps, not slides, to its new place)
+STEPS = {"prstow2prfire": (2.3, 0.25)}
 
 
 def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
@@ -36,7 +44,16 @@ def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     q, loc, stype = played_body(slave, figures)
     mq, mloc, mtype = played_body(master, figures)
     kin = figures.kin[stype]
-    aloft = {s: h > CLEAR_CM for s, h in part_heights(mq, mloc, figures, mtype, "forearm").items()}
+    aloft: dict[str, np.ndarray] = {
+        s: (h > CLEAR_CM).astype(float) for s, h in part_heights(mq, mloc, figures, mtype, "forearm").items()
+    }
+    clear, window = CLEAR_CM, np.ones(len(q))
+    step = STEPS.get(master.name.split(".")[0])
+    if step is not None:
+        clear, ease = step
+        t = np.arange(len(q)) / slave.fps
+        window = np.minimum(smoothstep(t / ease), smoothstep((t[-1] - t) / ease))
+        aloft = {s: a * window for s, a in aloft.items()}
     pose = q.copy()
     raised = np.zeros(len(q))
     for _ in range(PASSES):
@@ -48,7 +65,7 @@ def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
             chain = tuple(f"{side}_{j}" for j in ARM)
             palm = sites[:, kin.site_names.index(f"{side}_palm.palmcenter")]
             elbow = sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3].copy()
-            raise_ = smooth_above(aloft[side] * np.maximum(0.0, CLEAR_CM - heights[side]), LIFT_SIGMA)
+            raise_ = smooth_above(aloft[side] * np.maximum(0.0, clear - heights[side]), LIFT_SIGMA)
             elbow[:, 1] += raise_
             raised = np.maximum(raised, raise_)
             goals += [
@@ -60,7 +77,8 @@ def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
             kin, pose, goals, loc, iterations=60, damping=2.0, rest_pose=pose, rest_gain=0.05,
             tolerance=0.02, max_dof_step=0.03,
         )  # fmt: skip
-    pose[[0, -1]] = q[[0, -1]]  # the ends meet the CRAWLING posture as slaved
+    pose = q + window[:, None] * (pose - q)  # a step eases in and out of the ends, both as slaved ...
+    pose[[0, -1]] = q[[0, -1]]  # ... which meet the posture (CRAWLING)
     bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
     slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
     return raised
