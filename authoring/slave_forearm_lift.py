@@ -36,6 +36,19 @@ PASSES = 3  # solved again from the result, the raise re-measured
 # master clip: (cm, s) the slave's forearm is lifted to in between, the lift eased in and out over this long
 # from either end (above the check's 2 cm lift-off, so the forearm steps, not slides, to its new place)
 STEPS = {"prstow2prfire": (2.3, 0.25)}
+# master clip: (sides, cm, (s, s) eased in over, (s, s) eased out over): the slave's forearm on those sides is
+# lifted to that height (wherever it is lower) over that time, whatever the master's does. crawl2prstow's
+# DI chest moves 2.3 cm further from the planted right elbow than the master's as his pelvis comes down
+# (0.33-0.57 s), and its forearm, held down as his, was dragged 3.2 cm (M16 3.3) along the ground before he
+# lifted it; lifted from 0.25 s, it steps over instead (the master's rises at 0.52 s)
+TIMED_STEPS = {"crawl2prstow": (("right",), 2.3, (0.2, 0.35), (1.15, 1.3))}
+
+
+def steps_forearm(name: str) -> bool:
+    """Whether clip ``name``'s DI slave has a forearm stepped over at a set time (:data:`TIMED_STEPS`). Not
+    its M16 slave: its left forearm is up then, so lifting the right left it with nothing on the ground for
+    0.15 s, and its right arm's re-solve flipped 40 degrees in a frame."""
+    return name in TIMED_STEPS
 
 
 def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
@@ -54,6 +67,12 @@ def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
         t = np.arange(len(q)) / slave.fps
         window = np.minimum(smoothstep(t / ease), smoothstep((t[-1] - t) / ease))
         aloft = {s: a * window for s, a in aloft.items()}
+    timed = TIMED_STEPS.get(master.name.split(".")[0])
+    if timed is not None:
+        sides, clear, (a0, a1), (b0, b1) = timed
+        t = np.arange(len(q)) / slave.fps
+        window = np.minimum(smoothstep((t - a0) / (a1 - a0)), 1.0 - smoothstep((t - b0) / (b1 - b0)))
+        aloft = {s: window * (s in sides) for s in aloft}
     pose = q.copy()
     raised = np.zeros(len(q))
     for _ in range(PASSES):
