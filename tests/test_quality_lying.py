@@ -4,7 +4,6 @@ shipped clip."""
 
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -12,17 +11,15 @@ import pytest
 
 from authoring.postures import lowest_point
 from authoring.quality import THRESHOLDS, FigureSet, check_clip
-from authoring.quality_frames import play
 from authoring.quality_lying import FEET_RAISED_CM, LYING_PELVIS_CM, RAISED_LIMIT_S, lying_feet_raised
 from peabody.loader import read_figure
-from server.motion.cache import load_channelset
 from server.motion.channelset import Channelset
 from server.motion.recording import Recording, recording_to_channelset
+from tests.test_quality_support import CLIPS, shipped_heights
 
 ROOT = Path(__file__).resolve().parents[1]
 N = 61  # frames: 1 s at 60 fps
 PARTS = np.array(["pelvis", "left_foot", "right_foot"], dtype=object)
-CLIPS = sorted(p.name.split(".")[0] for p in (ROOT / "channelsets").glob("*.chset.env"))
 
 
 def _lying(bend: np.ndarray) -> Channelset:
@@ -75,26 +72,8 @@ def test_only_both_feet_up_while_the_pelvis_lies_count() -> None:
     assert lying_feet_raised(kneeling, PARTS, 60.0)["lying_feet_raised_s"] == 0.0
 
 
-@cache
-def _figures() -> FigureSet:
-    return FigureSet(
-        {n: read_figure(ROOT / "figures" / n) for n in ("soldier.fig", "DI.fig", "AK_47.fig", "M16.fig")}
-    )
-
-
-def _shipped_raised(clip: str) -> dict[str, object]:
-    """``lying_feet_raised_s`` of a shipped channelset, from its body mesh nodes' heights."""
-    figures = _figures()
-    frames = play(load_channelset(ROOT / "channelsets" / f"{clip}.chset.env"), figures)
-    body = max(frames.poses, key=lambda k: figures.kin[k].ndof)
-    nodes, segs = figures.nodes(body)
-    segg = figures.kin[body].segment_globals(frames.poses[body], frames.locations[body])
-    heights = np.einsum("fkj,kj->fk", segg[:, segs, 1, :], nodes)
-    return lying_feet_raised(heights, figures.node_parts(body), frames.channelset.fps)
-
-
 @pytest.mark.parametrize("clip", CLIPS)
 def test_the_shipped_clips_lie_with_their_feet_down(clip: str) -> None:
     """crawl2prstow (all three sets) held both feet 8-15 cm up for 0.9 s; every other clip <= 0.27 s."""
-    row = _shipped_raised(clip)
+    row = lying_feet_raised(*shipped_heights(clip))
     assert row["lying_feet_raised_s"] <= RAISED_LIMIT_S, row
