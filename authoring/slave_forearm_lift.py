@@ -47,7 +47,9 @@ TIMED_STEPS = {"crawl2prstow": (("right",), 2.3, (0.2, 0.35), (1.15, 1.3))}
 def steps_forearm(name: str) -> bool:
     """Whether clip ``name``'s DI slave has a forearm stepped over at a set time (:data:`TIMED_STEPS`). Not
     its M16 slave: its left forearm is up then, so lifting the right left it with nothing on the ground for
-    0.15 s, and its right arm's re-solve flipped 40 degrees in a frame."""
+    0.15 s, and its right arm's re-solve flipped 40 degrees in a frame. Stepped over 0.22-0.46 s alone it
+    kept support and slid 1.25 cm, but the re-solve still turned its elbow's and wrist's twist 48/40 degrees
+    in one frame (21-22; slaved, they sweep it over 13 frames): not yet."""
     return name in TIMED_STEPS
 
 
