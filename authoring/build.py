@@ -43,7 +43,8 @@ from authoring.slave_arms_lift import lift_slave_arms
 from authoring.slave_belly import lift_slave_belly
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
-from authoring.slave_forearm_lift import lift_slave_forearms
+from authoring.slave_feet_down import lower_slave_feet
+from authoring.slave_forearm_lift import lift_slave_forearms, steps_forearm
 from authoring.slave_ground import clear_rifle, rest_limbs
 from authoring.slave_reactions import follow_master
 from authoring.slave_rest import rest_slave_trunk
@@ -282,8 +283,10 @@ def slave_one(
         rests += (ease_slave_wrists,)
     if chset.name.removesuffix(".chset") == crawl_prone.NAME:  # last: its belly clear while he turns on it
         rests += (partial(lift_slave_belly, until_s=crawl_prone.TURN[1], fade_s=crawl_prone.BELLY_DOWN_S),)
-    if figure == "DI" and crawl.lifts_slave_forearms(chset.name.removesuffix(".chset")):
-        rests += (lift_slave_forearms,)  # last: its forearms down no longer than the master's
+        rests += (partial(lower_slave_feet, window=crawl_prone.SLAVE_FEET_DOWN),)  # ... its feet down as his
+    stepped = steps_forearm(chset.name.removesuffix(".chset"))
+    if figure == "DI" and (crawl.lifts_slave_forearms(chset.name.removesuffix(".chset")) or stepped):
+        rests += (lift_slave_forearms,)  # last: its forearms down no longer than the master's (or stepped)
     laid = bool(spec and spec.slave_spine_laid)  # its trunk laid by its spine: nothing to lift it for ...
     for rest in rests:
         rest(chset, out, ctx.figure_set)

@@ -84,8 +84,13 @@ CRAWL_NODES: tuple[str, ...] = ("CRAWL", "CRAWLING")
 def lifts_slave_forearms(name: str) -> bool:
     """Whether clip ``name``'s DI slave has its arms re-solved by :mod:`authoring.slave_forearm_lift` (its
     forearms on the ground no longer than the master's): the cycle (4.46 -> 1.98 cm); its M16 slave passes
-    without (2.98; 3.4-3.6 with), and every other clip is slaved as before."""
-    return name == "crawl_cycle"
+    without (2.98; 3.4-3.6 with). Also prstow2prfire (prone, not a crawl): the master's left forearm stays
+    1.8 cm up and still while the rifle comes up, DI's dipped to 1.23 cm and slid 3.4 cm with the arm (its
+    M16 slave 1.3). Every other clip is slaved as before."""
+    return name in SLAVE_FOREARMS_LIFTED
+
+
+SLAVE_FOREARMS_LIFTED = ("crawl_cycle", "prstow2prfire")
 
 
 def crawl_arcs() -> list[tuple[str, str, str, bool]]:

@@ -61,8 +61,11 @@ MOVES = {
 }
 LIFT = {"knee": 10.0, "toes": 8.0, "elbow": 6.0}  # cm a contact rises while it moves
 SHORT = {"knee": 0.1, "toes": 0.3}  # share of the way back a knee or toes stop short before the turn
-LEGS_CLEAR = {"knee": 6.0, "toes": 8.0}  # cm the legs are held up while the body turns over on the belly
+LEGS_CLEAR = {"knee": 3.0, "toes": 1.5}  # cm the legs are held up while the body turns over on the belly
 LEGS_DOWN = (1.35, 1.5)  # s
+# s: a DI/M16 slave's feet, held higher than his by its belly's lift, brought down to his (slave_feet_down):
+# eased in as the pelvis comes down, out as the legs are set down (the clip's ends as slaved)
+SLAVE_FEET_DOWN = ((0.3, 0.5), (1.4, 1.58))
 # how hard the pelvis keeps to its path against the legs' tracks (softer, it rolls over a moving leg)
 ROOT_WEIGHT = 1.5
 ROOT_DOFS: tuple[str, ...] = ()

@@ -54,6 +54,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
   ``LYING_PELVIS_CM`` of it): the same height while he lies so. A man shot while prone has no fall to fling
   his legs: his lower legs lifting 13-17 cm as his chest came down (branch proneheels-s13) read as a kick
   and passed ``feet_up_cm``; every clip on main that starts lying keeps them within 4 cm.
+* ``lying_feet_raised_s`` (:mod:`~authoring.quality_lying`): the longest time both feet are held up while
+  the pelvis lies on the ground (crawl2prstow's "superman": both feet 8-15 cm up for 0.9 s as he turned).
 * ``unsupported_s`` and, for a run clip, ``flight_s`` (:mod:`~authoring.quality_support`): the longest
   time nothing of the body is within 2 cm of the ground (a hover, a hop; a run's flight is judged apart).
 * ``pop_m_s`` (:mod:`~authoring.quality_pops`): the largest one-frame pop of a body part in the world, its
@@ -115,6 +117,7 @@ from authoring.body_parts import FOOT_PARTS, contact_runs, contact_slides, true_
 from authoring.passive_range import passive_limits
 from authoring.quality_frames import ClipFrames, FigureSet, QualityError, play
 from authoring.quality_limbs import LIMB_THROUGH_LIMIT_CM, limbs_through
+from authoring.quality_lying import RAISED_LIMIT_S, lying_feet_raised
 from authoring.quality_pops import POP_LIMIT_M_S, pops
 from authoring.quality_postures import POSTURE_LIMITS, check_continuity, static_nodes
 from authoring.quality_reactions import REACTION_LIMITS, reaction_amplitude
@@ -173,6 +176,7 @@ THRESHOLDS: dict[str, float] = {
     "ankle_flick_deg": 8.0,  # ... an ankle's (a foot twitching at 60 fps)
     "feet_up_cm": 20.0,
     "lying_feet_up_cm": 6.0,  # ... and of a clip that starts lying face down (no fall flings the legs)
+    "lying_feet_raised_s": RAISED_LIMIT_S,  # lying, both feet are not held up (quality_lying)
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     "legs_rise_cm": LEGS_RISE_LIMIT_CM,  # ... nor a leg once the pelvis is down (a dead man's kick)
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
@@ -427,6 +431,7 @@ def check_clip(
     out.update(support(name, ys, cs.fps))
     out.update(pops(pts, parts, cs.fps))
     out.update(feet_up(kin, segg, ys, parts))
+    out.update(lying_feet_raised(ys, parts, cs.fps))
     # no limb passes through another part of the body (quality_limbs)
     limb_hulls = figures.limb_hulls(body_type)
     out.update(limbs_through(pts - shift[:, None, :], parts, limb_hulls, segg, list(kin.segment_names)))

@@ -10,6 +10,11 @@ again: the palms' places on the rifle and the elbows' places held (each elbow ra
 shortfall wherever the master's forearm is above :data:`CLEAR_CM`), the palms' turn on the rifle a
 lower-priority goal, so the hand gives way by a few degrees (at most 2.6 on DI) rather than the forearm
 rolling on the ground. The clip's first and last frames are kept as slaved (they meet the posture).
+
+Prone, prstow2prfire's master keeps his left forearm 1.8 cm up and still while the rifle comes to the
+shoulder, but DI's forearm lies on the ground at both ends (PRONE_STOWED, PRONE_FIRE) 3.4 cm apart, and
+slid there (the check's lift-off rule holds a part on the ground until it is 2 cm up). Such a clip
+(:data:`STEPS`) has its forearm lifted clear of that in between, a step eased in and out from the ends.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import numpy as np
 
 from authoring import ik
 from authoring.quality_frames import FigureSet
-from authoring.signal_shaping import smooth_above
+from authoring.signal_shaping import smooth_above, smoothstep
 from authoring.slave_body import part_heights, played_body
 from server.motion.binding import bind_channelset
 from server.motion.channelset import Channelset
@@ -28,6 +33,24 @@ ARM = ("clavicle", "shoulder", "elbow", "wrist")
 CLEAR_CM = 1.4  # a forearm the master holds above this stays above it (contact starts at 1.25 cm) ...
 LIFT_SIGMA = 3.0  # ... raised by its elbow, the raise smoothed over this many frames (at least as high)
 PASSES = 3  # solved again from the result, the raise re-measured
+# master clip: (cm, s) the slave's forearm is lifted to in between, the lift eased in and out over this long
+# from either end (above the check's 2 cm lift-off, so the forearm steps, not slides, to its new place)
+STEPS = {"prstow2prfire": (2.3, 0.25)}
+# master clip: (sides, cm, (s, s) eased in over, (s, s) eased out over): the slave's forearm on those sides is
+# lifted to that height (wherever it is lower) over that time, whatever the master's does. crawl2prstow's
+# DI chest moves 2.3 cm further from the planted right elbow than the master's as his pelvis comes down
+# (0.33-0.57 s), and its forearm, held down as his, was dragged 3.2 cm (M16 3.3) along the ground before he
+# lifted it; lifted from 0.25 s, it steps over instead (the master's rises at 0.52 s)
+TIMED_STEPS = {"crawl2prstow": (("right",), 2.3, (0.2, 0.35), (1.15, 1.3))}
+
+
+def steps_forearm(name: str) -> bool:
+    """Whether clip ``name``'s DI slave has a forearm stepped over at a set time (:data:`TIMED_STEPS`). Not
+    its M16 slave: its left forearm is up then, so lifting the right left it with nothing on the ground for
+    0.15 s, and its right arm's re-solve flipped 40 degrees in a frame. Stepped over 0.22-0.46 s alone it
+    kept support and slid 1.25 cm, but the re-solve still turned its elbow's and wrist's twist 48/40 degrees
+    in one frame (21-22; slaved, they sweep it over 13 frames): not yet."""
+    return name in TIMED_STEPS
 
 
 def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSet) -> np.ndarray:
@@ -36,7 +59,22 @@ def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
     q, loc, stype = played_body(slave, figures)
     mq, mloc, mtype = played_body(master, figures)
     kin = figures.kin[stype]
-    aloft = {s: h > CLEAR_CM for s, h in part_heights(mq, mloc, figures, mtype, "forearm").items()}
+    aloft: dict[str, np.ndarray] = {
+        s: (h > CLEAR_CM).astype(float) for s, h in part_heights(mq, mloc, figures, mtype, "forearm").items()
+    }
+    clear, window = CLEAR_CM, np.ones(len(q))
+    step = STEPS.get(master.name.split(".")[0])
+    if step is not None:
+        clear, ease = step
+        t = np.arange(len(q)) / slave.fps
+        window = np.minimum(smoothstep(t / ease), smoothstep((t[-1] - t) / ease))
+        aloft = {s: a * window for s, a in aloft.items()}
+    timed = TIMED_STEPS.get(master.name.split(".")[0])
+    if timed is not None:
+        sides, clear, (a0, a1), (b0, b1) = timed
+        t = np.arange(len(q)) / slave.fps
+        window = np.minimum(smoothstep((t - a0) / (a1 - a0)), 1.0 - smoothstep((t - b0) / (b1 - b0)))
+        aloft = {s: window * (s in sides) for s in aloft}
     pose = q.copy()
     raised = np.zeros(len(q))
     for _ in range(PASSES):
@@ -48,7 +86,7 @@ def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
             chain = tuple(f"{side}_{j}" for j in ARM)
             palm = sites[:, kin.site_names.index(f"{side}_palm.palmcenter")]
             elbow = sites[:, kin.site_names.index(f"{side}_upper_arm.distal"), :3, 3].copy()
-            raise_ = smooth_above(aloft[side] * np.maximum(0.0, CLEAR_CM - heights[side]), LIFT_SIGMA)
+            raise_ = smooth_above(aloft[side] * np.maximum(0.0, clear - heights[side]), LIFT_SIGMA)
             elbow[:, 1] += raise_
             raised = np.maximum(raised, raise_)
             goals += [
@@ -60,7 +98,8 @@ def lift_slave_forearms(master: Channelset, slave: Channelset, figures: FigureSe
             kin, pose, goals, loc, iterations=60, damping=2.0, rest_pose=pose, rest_gain=0.05,
             tolerance=0.02, max_dof_step=0.03,
         )  # fmt: skip
-    pose[[0, -1]] = q[[0, -1]]  # the ends meet the CRAWLING posture as slaved
+    pose = q + window[:, None] * (pose - q)  # a step eases in and out of the ends, both as slaved ...
+    pose[[0, -1]] = q[[0, -1]]  # ... which meet the posture (CRAWLING)
     bf = bind_channelset(slave, [figures.figures[stype]]).figures[0]
     slave.joint_data[:, bf.src] = pose[:, bf.dst].astype(slave.joint_data.dtype)
     return raised

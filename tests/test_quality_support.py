@@ -110,15 +110,21 @@ def _figures() -> FigureSet:
     )
 
 
-def shipped_support(clip: str) -> dict[str, Any]:
-    """``unsupported_s`` (or ``flight_s``) of a shipped channelset, from its body mesh nodes' heights."""
+def shipped_heights(clip: str) -> tuple[np.ndarray, np.ndarray, float]:
+    """A shipped channelset's body mesh nodes' heights ``(n, k)`` (cm), their body parts and its fps."""
     figures = _figures()
     frames = play(load_channelset(ROOT / "channelsets" / f"{clip}.chset.env"), figures)
     body = max(frames.poses, key=lambda k: figures.kin[k].ndof)
     nodes, segs = figures.nodes(body)
     segg = figures.kin[body].segment_globals(frames.poses[body], frames.locations[body])
     heights = np.einsum("fkj,kj->fk", segg[:, segs, 1, :], nodes)
-    return support(clip, heights, frames.channelset.fps)
+    return heights, figures.node_parts(body), frames.channelset.fps
+
+
+def shipped_support(clip: str) -> dict[str, Any]:
+    """``unsupported_s`` (or ``flight_s``) of a shipped channelset, from its body mesh nodes' heights."""
+    heights, _, fps = shipped_heights(clip)
+    return support(clip, heights, fps)
 
 
 @pytest.mark.parametrize("clip", known_faults(CLIPS, KNOWN_UNSUPPORTED))

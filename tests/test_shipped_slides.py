@@ -22,7 +22,6 @@ CLIPS = sorted(p.name.split(".")[0] for p in (ROOT / "channelsets").glob("*.chse
 KNOWN_SLIDES: dict[str, str] = {
     "crawl2dead_low": "left forearm dragged out sideways 6.5 cm as it lifts, 0.00-2.20 s (frames 0-132)",
     "crawl2dead_m16_low": "left forearm dragged out sideways 6.7 cm as it lifts, 0.25-2.20 s (frames 15-132)",
-    "crawl2prstow_low": "lying down, the right forearm creeps 3.2 cm on the ground at 0-0.57 s (frames 0-34)",
     "crawl2prstow_m16_low": "lying down, right forearm creeps 3.3 cm on the ground, 0-0.58 s (frames 0-35)",
     "crawlarc_l135": "right forearm dragged 3.3 cm along the ground at 3.50-4.23 s (frames 210-254)",
     "crawlarc_l135_m16_low": "right forearm dragged 4.5 cm along the ground at 3.48-4.23 s (frames 209-254)",
@@ -42,7 +41,6 @@ KNOWN_SLIDES: dict[str, str] = {
     "prfire2dead_m16_low": "right forearm dragged 3.9 cm along the ground at 0.22-0.62 s (frames 13-37)",
     "prstow2dead_low": "left forearm dragged 3.3 cm along the ground at 0.32-0.40 s (frames 19-24)",
     "prstow2dead_m16_low": "left forearm dragged 4.3 cm along the ground at 0.33-0.40 s (frames 20-24)",
-    "prstow2prfire_low": "left forearm dragged 3.4 cm along the ground at 0.00-0.80 s (frames 0-48)",
     "ststow2dead": "right knee dragged 5.9 cm along the ground at 0.67-1.27 s (frames 40-76)",
     "ststow2dead_low": "right knee dragged 5.1 cm along the ground at 0.68-0.97 s (frames 41-58)",
     "ststow2dead_m16_low": "right knee dragged 5.1 cm along the ground at 0.68-0.97 s (frames 41-58)",
