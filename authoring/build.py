@@ -46,6 +46,7 @@ from authoring.slave_feet import plant_slave_feet
 from authoring.slave_feet_down import lower_slave_feet
 from authoring.slave_forearm_lift import lift_slave_forearms, steps_forearm
 from authoring.slave_ground import clear_rifle, rest_limbs
+from authoring.slave_lying import lay_slave_forearms
 from authoring.slave_reactions import follow_master
 from authoring.slave_rest import rest_slave_trunk
 from authoring.slave_slack import slack_slave_feet
@@ -277,6 +278,8 @@ def slave_one(
     )
     if spec and spec.slave_arms_pinned:
         rests += (pin_slave_arms,)
+    if spec and spec.slave_forearms_lying:  # then its forearms lie still where his do (slave_forearms_lying)
+        rests += (lay_slave_forearms,)
     if spec and spec.slave_feet_slack:  # last: the feet go slack as his, from where the slave's lay
         rests += (slack_slave_feet,)
     if crawl_turn.eases_slave_wrists(chset.name.removesuffix(".chset")):  # a wrist flicking at its limits

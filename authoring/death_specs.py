@@ -223,6 +223,9 @@ class DeathSpec:
     # the slaves' arms go where the master's go after the release, lying or lifted (slave_ground._plants):
     # unheld once his arm lifted, each solve pass put crawl2dead's DI arm out sideways again, 8-10 cm
     slave_arms_follow: bool = False
+    # the slaves' forearms lie still on the ground where the master's do, last (authoring.slave_lying):
+    # prstow2dead's DI left forearm hovered 1.5-2.3 cm up and drifted 7 cm where his lay still
+    slave_forearms_lying: bool = False
 
 
 def _prone(
@@ -267,6 +270,7 @@ def _lying_prone(spec: DeathSpec) -> DeathSpec:
         slave_settle_arms_still=True,
         slave_spine_laid=True,
         slave_arms_pinned=True,
+        slave_forearms_lying=True,
     )
 
 
