@@ -13,18 +13,20 @@ of the posture).
 * **recoil** (standing, kneeling and prone fire, 0.3 s): the rifle kicks back, the shoulders and head
   rocking back with it (the chest turning and leaning back, the firing shoulder 4 cm; the butt stays in the
   shoulder pocket: kicked further, it went into the arm), and its muzzle climbs a few degrees; then it all
-  settles back. How much shows is judged by :mod:`authoring.quality_reactions`.
+  settles back. Prone, the elbows stay planted on every frame and the rifle turns where the forearms let
+  it. How much shows is judged by :mod:`authoring.quality_reactions`.
 * **flinch** (every posture but dead, 0.65 s): a duck in 0.2 s — head down, shoulders up, back hunched,
   knees giving a little — held a moment, then back.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from authoring import ik
 from authoring.motion import KeyPosture
@@ -42,6 +44,9 @@ from peabody.model import Figure
 
 SIDES = ("left", "right")
 CONTACT_CM = 6.0  # a site this close to the ground in the posture touches it (elbow centres sit ~4 cm up)
+RIFLE_FIT_ROUNDS = 4  # elbows held: solve, put the rifle where the planted arms hold it, solve again
+BUTT_RIDE = 0.5  # ... its butt going this share of the way with the firing shoulder (1: 1.8 cm into the arm)
+YAW_DEG = np.linspace(-12.0, 12.0, 241)  # ... turned about the vertical through the butt, one of these
 LEG_CONTACTS = ("foot.heel", "foot.ball", "toes.distal", "lower_leg.knee")
 ARM_CONTACTS = ("upper_arm.distal", "lower_arm.distal")  # elbow and wrist: a forearm on the ground
 
@@ -63,6 +68,8 @@ class Reaction:
     rifle_stays: bool = False
     slave_follows: bool = False  # slaves: their posture plus the master's change (authoring.slave_reactions)
     elbows_planted: bool = False  # the elbows on the ground held above the palms (prone: the rifle gives)
+    elbows_held: bool = False  # ... and held there on every frame of the clip, not in the key alone
+    timing: tuple[float, float, float] | None = None  # (s) to the key, held, back: TIMING[kind] if None
 
     @property
     def key(self) -> str:
@@ -85,18 +92,24 @@ _PRONE_DUCK = {"neck": (0.0, 30.0, 0.0), "head": (0.0, 12.0, 0.0)}
 REACTIONS: tuple[Reaction, ...] = (
     Reaction("stfire_recoil", "STAND_FIRE", "recoil", (0.0, -4.0, -4.0), _KICK, kick=(0.0, 4.0)),
     Reaction("kfire_recoil", "KNEEL_FIRE", "recoil", (0.0, -4.0, -4.0), _KICK, kick=(0.0, 4.0)),
-    # prone, on the elbows: a smaller climb (more kick moved the elbows 2-3 cm with the hands, and so did
-    # 1.2 degrees: the elbow swivels round the raised handguard). Lying angled to the line of fire, 0.7 degree
-    # of lateral bend rocks the shoulders (0.2-0.3 cm) and the rifle (0.5 cm) back with the kick, and the
-    # muzzle climbs 1.6 degrees (1.4 in the carry): the right hand rises less, so the raised right upper arm
-    # keeps off the butt's toe (0.99 cm in it, the posture's own 0.9; climbing 1.8 degrees about the butt
-    # alone: 1.04 cm; a forward pivot: 1.1-1.3; kicked back 0.3-1 cm: 1.2-1.5). A degree of bend puts DI's
-    # right palm 2 mm off the slaved rifle (its elbow out of reach); flexing the spine back fails DI's end
-    # speeds. Too small to see (quality_reactions: shoulders 0.4 cm, muzzle 2.9): tests/test_reactions.py.
-    # Made visible (5 degrees of lateral bend, 2.5 of climb: shoulders 3.0 cm) the soldier's planted left
-    # elbow rose 4.4 cm on the way back (record_transition tracks the palms, not the elbows): branch
-    # pronereact-s20's report
-    Reaction("prfire_recoil", "PRONE_FIRE", "recoil", (-0.7, 0.0, 0.0), _RECOIL, kick=(0.0, 1.4)),
+    # prone, on the elbows: lying angled to the line of fire, 5 degrees of lateral bend rock the shoulders
+    # back 3 cm with the kick, the head rides the stock back (4 cm) and the muzzle climbs 2.5 degrees about
+    # the butt, reaching its peak in 0.12 s (the M16's left palm went 0.59 m/s in the first frames in 0.07).
+    # The elbows stay planted on every frame (held by the palms alone they rose 4.4 cm: pronereact-s20) and
+    # the rifle goes where the planted forearms hold it (_on_planted_arms); before (0.7 degree of bend, 1.4
+    # of climb) the shoulders moved 0.4 cm and the muzzle 2.9, unseen
+    Reaction(
+        "prfire_recoil",
+        "PRONE_FIRE",
+        "recoil",
+        (-5.0, 0.0, 0.0),
+        {"neck": (0.0, -4.0, 0.0), "head": (0.0, -3.0, 0.0)},
+        kick=(0.0, 2.5),
+        timing=(0.12, 0.0, 0.23),
+        slave_follows=True,
+        elbows_planted=True,
+        elbows_held=True,
+    ),
     Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
     Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),
     Reaction("kstow_flinch", "KNEEL_STOWED", "flinch", (0.0, 8.0, -10.0), _HEAD_DOWN, kick=(0.0, -5.0)),
@@ -131,6 +144,8 @@ REACTIONS: tuple[Reaction, ...] = (
     ),
 )
 FOLLOWING: frozenset[str] = frozenset(r.name for r in REACTIONS if r.slave_follows)
+# slaves whose rifle turns to their palms about the grip (the butt in the shoulder), not slid to them
+RIFLE_TURNS: frozenset[str] = frozenset(r.name for r in REACTIONS if r.elbows_held)
 REACT_NODES: tuple[str, ...] = tuple(p for p in POSTURES if any(r.posture == p for r in REACTIONS))
 
 
@@ -182,30 +197,73 @@ def reaction_key(kin: FigureKinematics, rkin: FigureKinematics, base: KeyPosture
     rifle = rifle @ _kick(*r.kick, butt)
     g = kin.site_globals(base.poses[SOLDIER], base.locations[SOLDIER])
     legs, arms = ground_contacts(kin, base)
-    goals = []
-    for side in SIDES:  # each palm where it holds the rifle in the posture (so no change solves it exactly)
-        i = kin.site_names.index(f"{side}_palm.palmcenter")
-        t = rifle @ rigid_inverse(base.locations[RIFLE]) @ g[i]
-        goals.append(ik.Goal(f"{side}_palm.palmcenter", t[:3, 3], None, 1.0, 3, arm(side)))
-        goals.append(ik.Goal(f"{side}_palm.palmcenter", None, t[:3, :3], 1.0, 1, arm(side), 8.0))
-    for site in legs:
-        i = kin.site_names.index(site)
-        rot = g[i, :3, :3] if site.endswith("heel") else None
-        goals.append(ik.Goal(site, g[i, :3, 3], rot, 1.0, 2, leg(site.split("_")[0])))
-    for site in arms:
-        side = site.split("_")[0]
-        i = kin.site_names.index(site)
-        planted = 4 if r.elbows_planted else 2  # above the palms' 3: the elbow stays, the rifle gives
-        goals.append(ik.Goal(site, g[i, :3, 3], None, 1.0, planted, (f"{side}_clavicle", f"{side}_shoulder")))
-    q, _ = ik.solve(kin, q0, goals, root, iterations=200, rest_pose=q0, rest_gain=0.5)
+    palms = [kin.site_names.index(f"{side}_palm.palmcenter") for side in SIDES]
+
+    def held(rifle: np.ndarray) -> list[np.ndarray]:  # each palm where it holds the rifle in the posture
+        return [rifle @ rigid_inverse(base.locations[RIFLE]) @ g[i] for i in palms]
+
+    def solve(rifle: np.ndarray) -> np.ndarray:
+        goals = []
+        for side, t in zip(SIDES, held(rifle), strict=True):  # (so no change solves it exactly)
+            goals.append(ik.Goal(f"{side}_palm.palmcenter", t[:3, 3], None, 1.0, 3, arm(side)))
+            goals.append(ik.Goal(f"{side}_palm.palmcenter", None, t[:3, :3], 1.0, 1, arm(side), 8.0))
+        for site in legs:
+            i = kin.site_names.index(site)
+            rot = g[i, :3, :3] if site.endswith("heel") else None
+            goals.append(ik.Goal(site, g[i, :3, 3], rot, 1.0, 2, leg(site.split("_")[0])))
+        for site in arms:
+            side = site.split("_")[0]
+            i = kin.site_names.index(site)
+            planted = 4 if r.elbows_planted else 2  # above the palms' 3: the elbow stays, the rifle gives
+            chain = (f"{side}_clavicle", f"{side}_shoulder")
+            goals.append(ik.Goal(site, g[i, :3, 3], None, 1.0, planted, chain))
+        return ik.solve(kin, q0, goals, root, iterations=200, rest_pose=q0, rest_gain=0.5)[0]
+
+    q = solve(rifle)
+    for _ in range(RIFLE_FIT_ROUNDS if r.elbows_held else 0):
+        rifle = _on_planted_arms(kin, rifle, butt, kin.site_globals(q, root), base)
+        q = solve(rifle)
     return KeyPosture(r.key, {SOLDIER: q, RIFLE: np.zeros(0)}, {SOLDIER: root, RIFLE: rifle})
 
 
-def reaction_spec(r: Reaction, legs: list[str]) -> TransitionSpec:
+def _on_planted_arms(
+    kin: FigureKinematics, rifle: np.ndarray, butt: np.ndarray, now: np.ndarray, base: KeyPosture
+) -> np.ndarray:
+    """``rifle`` (the kicked carry's placement, world) put where the prone arms can hold it with the elbows
+    planted, ``now`` the key's site globals so far: the butt rides ``BUTT_RIDE`` of the firing shoulder's
+    move from the posture (carried with the chest it went 1.5 cm into the raised right upper arm), and the
+    rifle turns about the vertical through it until the handguard lies as far from the planted left elbow
+    as the palm does in the posture; its muzzle keeps its climb (slid or turned to the palms, it lost it)."""
+    g = kin.site_globals(base.poses[SOLDIER], base.locations[SOLDIER])
+    shoulder, palm, elbow = (
+        kin.site_names.index(s)
+        for s in ("right_clavicle.acromion", "left_palm.palmcenter", "left_upper_arm.distal")
+    )
+    at = (rifle @ np.append(butt, 1.0))[:3]
+    rode = (base.locations[RIFLE] @ np.append(butt, 1.0))[:3] + BUTT_RIDE * (now[shoulder] - g[shoulder])[
+        :3, 3
+    ]
+    rifle = _moved(rode - at) @ rifle
+    hold = (rifle @ rigid_inverse(base.locations[RIFLE]) @ g[palm])[:3, 3] - rode
+    reach = np.linalg.norm(g[palm, :3, 3] - g[elbow, :3, 3])
+    yaws = Rotation.from_euler("y", YAW_DEG[:, None], degrees=True)
+    miss = np.abs(np.linalg.norm(yaws.apply(hold) + rode - g[elbow, :3, 3], axis=1) - reach)
+    turn = np.eye(4)
+    turn[:3, :3] = yaws[int(np.argmin(miss + 0.01 * np.radians(np.abs(YAW_DEG))))].as_matrix()
+    return _moved(rode) @ turn @ _moved(-rode) @ rifle
+
+
+def _moved(by: np.ndarray) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, 3] = by
+    return out
+
+
+def reaction_spec(r: Reaction, legs: list[str], arms: Sequence[str] = ()) -> TransitionSpec:
     """The primitive motions: every body part and the rifle to the key and back; the feet and kneecaps on
     the ground planted. The forearms on the ground stay by interpolation between two poses that have them
     in the same place (IK holding them too over-constrained the arms: the wrists shook)."""
-    go, hold, back = TIMING[r.kind]
+    go, hold, back = r.timing or TIMING[r.kind]
     t = go + hold + back
     steps: list[Step] = []
     for part in ("root", "legs", "spine", "arms", "rifle"):
@@ -217,7 +275,8 @@ def reaction_spec(r: Reaction, legs: list[str]) -> TransitionSpec:
             steps.append(Step(f"{side}_foot", r.posture, 0.0, t))
         if f"{side}_lower_leg.knee" in legs:
             steps.append(Step(f"{side}_knee", r.posture, 0.0, t))
-    return TransitionSpec(r.name, r.posture, r.posture, round(t, 6), tuple(steps))
+    planted = tuple(arms) if r.elbows_held else ()
+    return TransitionSpec(r.name, r.posture, r.posture, round(t, 6), tuple(steps), planted=planted)
 
 
 def record_reaction(
@@ -226,9 +285,9 @@ def record_reaction(
     """Solve the reaction key on its posture and record the clip."""
     kin, rkin = FigureKinematics(figures[0]), FigureKinematics(figures[1])
     base = keys[r.posture]
-    legs, _ = ground_contacts(kin, base)
+    legs, arms = ground_contacts(kin, base)
     key = reaction_key(kin, rkin, base, r)
-    return record_transition(reaction_spec(r, legs), {**keys, r.key: key}, figures)
+    return record_transition(reaction_spec(r, legs, arms), {**keys, r.key: key}, figures)
 
 
 def reaction_clips() -> dict[str, Callable[[Any], tuple[ClipFrames, None, None]]]:

@@ -34,7 +34,9 @@ FIT_ROUNDS = 4  # solve the arms, move the rifle to the palms, again
 GROUND_CM = 6.0  # an elbow or wrist site this low lies on the ground (its centre sits ~4 cm up)
 
 
-def follow_master(master: Channelset, slave: Channelset, pair: MasterSlavePair, figures: FigureSet) -> None:
+def follow_master(
+    master: Channelset, slave: Channelset, pair: MasterSlavePair, figures: FigureSet, turned: bool = False
+) -> None:
     """``slave`` (in place) as its first frame plus ``master``'s change from its first frame, its palms
     then held on the rifle and its elbows and wrists on the ground where they lie (:func:`hold_arms`)."""
     mq, mloc, mtype = played_body(master, figures)
@@ -55,7 +57,7 @@ def follow_master(master: Channelset, slave: Channelset, pair: MasterSlavePair, 
         slave.fig_quat[:, chan.column] = quaternion.make_continuous(quat).astype(slave.fig_quat.dtype)
     pose = np.tile(pair.slave_kin.neutral_pose(), (len(q), 1))
     pose[:, bound.dst] = q
-    pose, placed["rifle"] = hold_arms(pair.slave_kin, pose, placed["body"], placed["rifle"])
+    pose, placed["rifle"] = hold_arms(pair.slave_kin, pose, placed["body"], placed["rifle"], turned)
     slave.joint_data[:, bound.src] = pose[:, bound.dst].astype(slave.joint_data.dtype)
     for chan in slave.figure_channels():
         if chan.protofiletype != protofiletype(pair.slave):
@@ -65,7 +67,7 @@ def follow_master(master: Channelset, slave: Channelset, pair: MasterSlavePair, 
 
 
 def hold_arms(
-    kin: FigureKinematics, poses: np.ndarray, roots: np.ndarray, rifles: np.ndarray
+    kin: FigureKinematics, poses: np.ndarray, roots: np.ndarray, rifles: np.ndarray, turned: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """``poses`` ``(n, ndof)`` with the arms eased to their solve at the peak and back, and the rifle's
     placements ``(n, 4, 4)`` moved with them from ``rifles`` (the master's): each elbow (and a wrist within
@@ -103,16 +105,14 @@ def hold_arms(
             rest_gain=0.5, max_dof_step=TRACK_DOF_STEP,
         )  # fmt: skip
         g = kin.site_globals(key[0], roots[peak])
+        got = [g[kin.site_names.index(c.slave_site), :3, 3] for c in palms]
+        if turned:
+            rifle = _turned_to(rifle, got, [t[:3, 3] for t in hold])
+            continue
         moved = np.eye(
             4
         )  # the rifle slid (not turned: a palm's turn is held loosely) to the palms' mean miss
-        moved[:3, 3] = np.mean(
-            [
-                g[kin.site_names.index(c.slave_site), :3, 3] - t[:3, 3]
-                for c, t in zip(palms, hold, strict=True)
-            ],
-            axis=0,
-        )
+        moved[:3, 3] = np.mean([a - t[:3, 3] for a, t in zip(got, hold, strict=True)], axis=0)
         rifle = moved @ rifle
     # how far along to the peak the trunk is (the head lags it: measured with it, the arms lagged the trunk
     # and the palms were 2.7 cm off the rifle on the way)
@@ -123,6 +123,18 @@ def hold_arms(
     q = poses.copy()
     q[:, arms] = poses[0, arms] + share[:, None] * (key[0, arms] - poses[0, arms])
     return q, _blend(rifles[0], rifle, share)
+
+
+def _turned_to(rifle: np.ndarray, got: list[np.ndarray], want: list[np.ndarray]) -> np.ndarray:
+    """``rifle`` turned about the right palm's hold (the grip, by the butt in the shoulder) so that the left
+    palm's hold comes to where the left palm got (``got``/``want``: left, right)."""
+    about = np.eye(4)
+    about[:3, 3] = got[1]
+    turn = np.eye(4)
+    turn[:3, :3] = Rotation.align_vectors([got[0] - got[1]], [want[0] - want[1]])[0].as_matrix()
+    shift = np.eye(4)
+    shift[:3, 3] = got[1] - want[1]
+    return about @ turn @ np.linalg.inv(about) @ shift @ rifle
 
 
 def _dofs(kin: FigureKinematics, joint: str) -> np.ndarray:

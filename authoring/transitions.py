@@ -129,6 +129,9 @@ class TransitionSpec:
     # seconds over which a foot or knee goal fades out as its ``free`` step starts (0: let go at once;
     # ststow2crawl's left foot let go in one frame popped its knee 3.6 cm)
     free_fade: float = 0.0
+    # sites (``segment.site``) held on every frame where they lie in the start key, above the palms (a prone
+    # reaction's planted elbows: the rifle gives, not the elbow; tracking the palms alone lifted one 4.4 cm)
+    planted: tuple[str, ...] = ()
 
 
 # --- clip frames --------------------------------------------------------------------------------------------
@@ -670,6 +673,23 @@ def _elbow_guide(
     return ik.Goal("left_upper_arm.distal", pos, None, 1.0 - _turn_weight(spec, times), 1, arm("left"))
 
 
+def _planted_goals(kin: FigureKinematics, key: KeyPosture, sites: Sequence[str]) -> list[ik.Goal]:
+    """Each of ``sites`` (an arm's) held where it lies in ``key``, above the palms' priority (3): the
+    clavicle and the arm give round it."""
+    g = kin.site_globals(key.poses[SOLDIER], key.locations[SOLDIER])
+    return [
+        ik.Goal(
+            s,
+            g[kin.site_names.index(s), :3, 3],
+            None,
+            1.0,
+            4,
+            (f"{s.split('_')[0]}_clavicle", *arm(s.split("_")[0])),
+        )
+        for s in sites
+    ]
+
+
 def record_transition(
     spec: TransitionSpec, keys: Mapping[str, KeyPosture], figures: Sequence[Figure], fps: float = FPS
 ) -> ClipFrames:
@@ -705,6 +725,7 @@ def record_transition(
         )
     if spec.guide_elbow:
         goals.append(_elbow_guide(kin, first, last, poses, roots, times, spec))
+    goals += _planted_goals(kin, first, spec.planted)
     for foot in FEET:
         side = foot.split("_")[0]
         steps = [s for s in spec.steps if s.part == foot]

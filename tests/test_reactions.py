@@ -13,14 +13,11 @@ from server.motion.posture_change import load_posture_graph
 from tests.known_faults import known_faults
 from ttes.paths import CHANNELSETS, FIGURES, POSTURE_GRAPHS
 
-# reaction clips that fail the check, strict xfails naming what a person sees: the prone recoil too small to
-# see on every figure (made visible, the soldier's planted left elbow rose 4.4 cm: branch pronereact-s20);
-# the prone flinch on DI with the AK
-_TWITCH = "prone recoil: the shoulders move 0.4-2.7 cm, the head 1.3-1.4, the muzzle 2.9-4.3 (a twitch)"
+# reaction clips that fail the check, strict xfails naming what a person sees: the prone recoil's DI/M16
+# slaves (the soldier's kicks back over his planted elbows and passes) and the prone flinch on DI with the AK
 TOO_SMALL: dict[str, str] = {
-    "prfire_recoil": _TWITCH,
-    "prfire_recoil_low": _TWITCH,
-    "prfire_recoil_m16_low": _TWITCH,
+    "prfire_recoil_low": "DI's shoulders kick 8.6 cm (8 at most); the AK's butt 4.5 cm in his right arm",
+    "prfire_recoil_m16_low": "the left palm 1.08 cm off the M16's handguard, its butt 1.01 cm in the arm",
     "prfire_flinch_low": "DI's right upper arm swings 4.2 cm into the AK's butt; its first frames 0.53 m/s",
 }
 
@@ -84,6 +81,27 @@ def test_reaction_leaves_and_returns_to_its_posture_and_keeps_its_contacts(r, fi
     else:  # the head ducks (or, over a cradled rifle, turns away)
         assert np.linalg.norm(nose - nose[0], axis=1).max() >= 3.0
         assert 0.5 <= cs.duration <= 0.8
+
+
+def test_the_prone_recoil_kicks_the_shoulders_back_over_planted_elbows(figset: FigureSet) -> None:
+    """Issue 14: prone, the butt pushes the shoulders back and the muzzle climbs, the head riding the stock,
+    while the elbows stay where they lie (made visible with only the palms held, the left elbow rose 4.4 cm:
+    branch pronereact-s20; before, the shoulders moved 0.4 cm and the muzzle rose 2.4)."""
+    cs = load_channelset(CHANNELSETS / "prfire_recoil.chset.env")
+    frames = play(cs, figset)
+    kin, rk = figset.kin["soldier.fig"], figset.kin["AK_47.fig"]
+    sites = kin.site_globals(frames.poses["soldier.fig"], frames.locations["soldier.fig"])[..., :3, 3]
+
+    def moved(site: str) -> float:
+        p = sites[:, kin.site_names.index(site)]
+        return float(np.linalg.norm(p - p[0], axis=1).max())
+
+    assert max(moved(f"{s}_upper_arm.distal") for s in ("left", "right")) < 1.5
+    assert min(moved(f"{s}_clavicle.acromion") for s in ("left", "right")) >= 2.5
+    assert moved("bottom_head.nose") >= 3.0
+    gun = rk.site_globals(frames.poses["AK_47.fig"], frames.locations["AK_47.fig"])[..., :3, 3]
+    muzzle = gun[:, rk.site_names.index("rifle.muzzle"), 1]
+    assert muzzle.max() - muzzle[0] >= 5.0
 
 
 def test_build_of_a_reaction_reproduces_the_committed_bytes(tmp_path):
