@@ -116,13 +116,9 @@ def test_a_u_turn_to_his_left_ends_where_the_one_to_his_right_ends_mirrored(angl
 # U-turns to his left that fail the check's lift-off rule (a part is on the ground until it rises past 2 cm):
 # contact_slide_cm, limit 3 (tests/test_shipped_slides.py names the part and frames)
 SLIDING_U_TURNS = {
-    "crawlarc_l135": "right forearm dragged 3.25 cm on and just above the ground",
-    "crawlarc_l135_m16_low": "right forearm dragged 4.54 cm on and just above the ground",
     "crawlarc_l150": "right thigh dragged 4.12 cm on and just above the ground",
     "crawlarc_l150_low": "right knee dragged 5.10 cm on and just above the ground",
     "crawlarc_l150_m16_low": "right forearm dragged 7.52 cm on and just above the ground",
-    "crawlarc_l165": "right forearm dragged 3.04 cm on and just above the ground",
-    "crawlarc_l165_m16_low": "right forearm dragged 4.90 cm on and just above the ground",
 }
 
 
