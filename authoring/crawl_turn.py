@@ -139,6 +139,14 @@ U_TURN_ARMS: dict[float, ArmTrack] = {135.0: "backward", 150.0: "backward", 165.
 # 0.65 m/s; sigma 1.5: 1.41 but the right forearm slid 5.3 cm; solved frame after frame, each from the last,
 # or to full convergence, the spine jittered as much)
 LEFT_U_TURN_SPINE_SIGMA = 0.8
+# share of each front move at either end the U-turns to his left lift and set down their forearms in place
+# (Plan.front_clear): travelling from 0.12 to 0.88 of the move (authoring.crawl.contact_progress), 3 cm up at
+# most, the forearms came down still travelling and the planted right forearm skimmed 2.5 cm as it landed,
+# within the check's LIFT_OFF_CM (135°: the right forearm 3.25 -> 1.31 cm; M16 4.54 -> 2.24 but its belly pops
+# 1.72 m/s; 165°: 3.04 -> 1.81, M16 4.90 -> 2.80 and its right upper arm's pop 2.03 -> 0.89). At 150° the
+# right thigh and the DI's right knee drag with the pelvis whatever the forearms do (4.1, 5.2 cm), and the
+# slaves popped 1.8-2.1 m/s: left as it was. Lifted 4.5 cm as well, the DI's right forearm slid 4.8 cm at 165°
+LEFT_U_TURN_FRONT_CLEAR = {135.0: 0.1, 165.0: 0.1}
 
 
 def clip_name(direction: str, angle: float, advance: float = 0.0) -> str:
@@ -158,6 +166,7 @@ class Plan(NamedTuple):
     slave_wrists_eased: bool = False  # the DI/M16 slaves' wrists eased where they flick (slave_wrists)
     arms: ArmTrack = "forward"  # the arms tracked from the start, "backward" from the end, "both" blended
     spine_sigma: float = 0.0  # frames the body solve's spine is smoothed over before the arms (0: not)
+    front_clear: float = 0.0  # share of a front move at either end the forearms rise or land in place
 
 
 _PLANS: dict[str, Plan] = {
@@ -183,11 +192,17 @@ _PLANS.update(
             pelvis_ahead=LEFT_U_TURN_PELVIS_AHEAD[float(a)],
             slave_wrists_eased=a in LEFT_U_TURN_WRISTS_EASED,
             spine_sigma=LEFT_U_TURN_SPINE_SIGMA,
+            front_clear=LEFT_U_TURN_FRONT_CLEAR.get(float(a), 0.0),
         )
         for a in LEFT_U_TURN_ANGLES
     }
 )
 CRAWL_TURN_CLIPS: tuple[str, ...] = tuple(_PLANS)
+
+
+def plan_of(name: str) -> Plan:
+    """How clip ``name`` (one of :data:`CRAWL_TURN_CLIPS`) is recorded."""
+    return _PLANS[name]
 
 
 def eases_slave_wrists(name: str) -> bool:
@@ -227,6 +242,7 @@ def part_yaw(
     duration: float,
     advance: float = 0.0,
     along: float | None = None,
+    clear: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A part's yaw (degrees) about the pivot at ``t``, how far (share of its lift) it is raised, and
     ``(n, 2)`` how far (X, Z cm) it is carried: ``advance`` cm a move along the heading it turns to (or
@@ -241,9 +257,10 @@ def part_yaw(
         share *= len(moves) / share.sum()
     for (t0, a, b), w in zip(moves, share.tolist(), strict=True):
         s = (t - t0) / duration
-        yaw += (b - a) * contact_progress(s)
+        go = contact_progress((s - clear) / (1.0 - 2.0 * clear))
+        yaw += (b - a) * go
         up = np.maximum(up, contact_rise(s))
-        carried += w * advance * contact_progress(s)[:, None] * _ahead(b if along is None else along)
+        carried += w * advance * go[:, None] * _ahead(b if along is None else along)
     return yaw, up, carried
 
 
@@ -298,7 +315,7 @@ def record_crawl_turn(
     the chest and the pelvis carried ``plan.ahead`` of the front's carry and the rest of the knees', the
     pelvis ``plan.pelvis_ahead`` a pair of moves where given; the arms tracked ``plan.arms``), and its
     ``end_offset``."""
-    direction, angle, advance, step, tempo, ahead, pelvis_ahead, _, arms, spine_sigma = plan
+    direction, angle, advance, step, tempo, ahead, pelvis_ahead, _, arms, spine_sigma, clear = plan
     moves, t_land = part_moves(direction, angle, step, tempo)
     t_end = round((t_land + SETTLE) * FPS) / FPS
     n = round(t_end * FPS) + 1
@@ -308,7 +325,8 @@ def record_crawl_turn(
     yaw = (1.0 if direction == "left" else -1.0) * angle
     along = yaw if angle > max(TURN_ANGLES) else None  # a U-turn: every move along the end heading
     (front, f_up, f_on), (back, b_up, b_on) = (
-        part_yaw(t, moves[p], MOVE[p] * tempo, advance, along) for p in ("front", "back")
+        part_yaw(t, moves[p], MOVE[p] * tempo, advance, along, clear if p == "front" else 0.0)
+        for p in ("front", "back")
     )
 
     def mix(share: float, carry: float | np.ndarray) -> np.ndarray:

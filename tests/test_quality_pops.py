@@ -106,7 +106,7 @@ KNOWN_POPS: dict[str, str] = {
     "kfire2dead": _KFOOT.format(9.1),
     "kfire2dead_low": _KFOOT.format(9.4),
     "kfire2dead_m16_low": _KFOOT.format(9.4),
-    "crawlarc_l165_m16_low": "turning on the crawl, the right upper arm pops 2.03 m/s in one frame (4.75 s)",
+    "crawlarc_l135_m16_low": "turning on the crawl, the belly pops 1.72 m/s in one frame (2.53 s)",
     "crawlarc_r180_far": _ARM.format(4.1, 3.20),
 }
 CLIPS = sorted(p.name.split(".")[0] for p in (ROOT / "channelsets").glob("*.chset.env"))
