@@ -103,7 +103,7 @@ KNOWN_POPS: dict[str, str] = {
     "kstow2dead": "at the let-go (0.20 s) the right hand flies off the grip 12.2 cm in one frame",
     "kstow2dead_low": "at the let-go (0.20 s) the right hand flies off the grip 13.6 cm in one frame",
     "kstow2dead_m16_low": "falling from the knee, the right foot kicks 9.3 cm in one frame (0.48 s)",
-    "kfire2dead": _KFOOT.format(9.1),
+    "kfire2dead": "landing on his side (1.28 s) his left upper arm and chest drop 7.4-7.9 cm in one frame",
     "kfire2dead_low": _KFOOT.format(9.4),
     "kfire2dead_m16_low": _KFOOT.format(9.4),
     "crawlarc_l165_m16_low": "turning on the crawl, the right upper arm pops 2.03 m/s in one frame (4.75 s)",
