@@ -226,6 +226,10 @@ class DeathSpec:
     # the slaves' forearms lie still on the ground where the master's do, last (authoring.slave_lying):
     # prstow2dead's DI left forearm hovered 1.5-2.3 cm up and drifted 7 cm where his lay still
     slave_forearms_lying: bool = False
+    # (joint name prefix, degrees): the legs' lift (legs_lift) turns those joints at most this much a frame
+    # beyond the fall's own turn (leg_lift.lifted; others: leg_lift.STEP_DEG, 10): kfire2dead's rear foot,
+    # lifted, popped 4.33 m/s
+    legs_lift_step_deg: tuple[tuple[str, float], ...] = ()
 
 
 def _prone(
@@ -352,6 +356,12 @@ KFIRE_ARMS_EARLY = 0.8
 # as he lands 4.51 -> 2.02 cm and the chest's 4.48 -> 3.00 (plant_worst got the thigh 2.53 but its arms' fall
 # then slid the chest 5.87)
 KSTOW_LEGS_EASED = 1.5
+# degrees a frame: kfire2dead's right leg's lift (DeathSpec.legs_lift_step_deg). At 10 the lift of his
+# tucked rear foot turned the right knee 101.5 -> 111.3 degrees in one frame (0.47 s) and the foot popped
+# 4.33 m/s, then the right hip 10 degrees at 1.33 s as he rolled onto his side (3.09 m/s); at 4: 0.93 (2.5:
+# the foot, lifted later, slid 1.84 cm; eased instead, legs_eased 1.5: 2.53 m/s at 1.35 s). Both legs at 4,
+# the left foot's lift came later and it skated 2.05 cm (the check's foot_skate 2)
+KFIRE_LIFT_STEP = (("right_", 4.0),)
 # s: kstow2dead's arms fall this long from when he is down (DeathSpec.arms_fall_s): his left hand, 45 cm up
 # as he came down half on his side, swept round to his side while he rolled onto his back at 7.92 m/s in
 # 0.4 s; 0.65 s: 5.02 (chest slide 3.05); 0.8 s: 4.09, limb_rest_lag 0.07 -> 0.2 s. Let go early instead
@@ -493,6 +503,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         rifle_refall_toss=KFIRE_REFALL_TOSS,
         slave_let_go_in_place=True,
         grounded=True,  # unsupported_s 0.18 (DI/M16 0.35) -> 0
+        legs_lift_step_deg=KFIRE_LIFT_STEP,  # the right (rear) foot's pop 4.33 -> 0.93 m/s
     ),
     replace(
         _lying_prone(_prone("prstow2dead", "PRONE_STOWED")),

@@ -582,7 +582,7 @@ def _after_physics(
     skid lifted (step 8)."""
     planted = (plant_least_worst if spec.plant_worst else plant)(frames, figures[0])
     frames = _held(spec, planted, figures, release)
-    frames = lifted(frames, figures[0]) if spec.legs_lift else frames
+    frames = lifted(frames, figures[0], spec.legs_lift_step_deg) if spec.legs_lift else frames
     frames = eased_legs(planted, frames, figures[0], spec.legs_eased) if spec.legs_eased else frames
     if not spec.turn_worst:
         return frames

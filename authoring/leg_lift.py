@@ -101,9 +101,11 @@ def _need(points: np.ndarray, window: np.ndarray) -> np.ndarray:
     return smooth_above(need, LIFT_SIGMA_FRAMES) if need.any() else need
 
 
-def lifted(frames: ClipFrames, soldier: Figure) -> ClipFrames:
+def lifted(frames: ClipFrames, soldier: Figure, steps: tuple[tuple[str, float], ...] = ()) -> ClipFrames:
     """``frames`` (a planted, pinned fall of ``soldier``) with every leg part that would skid lifted instead
-    (see the module docstring)."""
+    (see the module docstring); the lift turns a joint whose name starts with one of ``steps``' prefixes at
+    most its degrees a frame beyond the fall's own turn, any other :data:`STEP_DEG`
+    (``DeathSpec.legs_lift_step_deg``)."""
     figs = FigureSet({"body": soldier})
     kin = figs.kin["body"]
     poses, roots = np.array(frames.poses), frames.roots
@@ -129,15 +131,21 @@ def lifted(frames: ClipFrames, soldier: Figure) -> ClipFrames:
             kin, poses[rows], [g.rows(rows) for g in goals], roots[rows], iterations=IK_ITERATIONS
         )
         poses[rows] = solved
-    return ClipFrames(_no_leaps(np.asarray(frames.poses), poses), frames.roots, frames.rifles, frames.fps)
+    step = np.full(kin.ndof, STEP_DEG)
+    for prefix, deg in steps:
+        for joint, sl in kin.dof_slices.items():
+            step[sl] = deg if joint.startswith(prefix) else step[sl]
+    smooth = _no_leaps(np.asarray(frames.poses), poses, step)
+    return ClipFrames(smooth, frames.roots, frames.rifles, frames.fps)
 
 
-def _no_leaps(fall: np.ndarray, lifted_poses: np.ndarray) -> np.ndarray:
+def _no_leaps(fall: np.ndarray, lifted_poses: np.ndarray, step_deg: np.ndarray) -> np.ndarray:
     """``lifted_poses`` with the lift (their difference from ``fall``, ``(n, ndof)``) following its own
-    course only as fast as keeps each joint's turn between two frames within :data:`STEP_DEG` or the fall's
-    own turn there (kstow2dead's knee already turns 19.5 degrees in one frame as the leg lands)."""
+    course only as fast as keeps each DOF's turn between two frames within its ``step_deg`` ``(ndof,)`` or
+    the fall's own turn there (kstow2dead's knee already turns 19.5 degrees in one frame as the leg
+    lands)."""
     step = np.diff(fall, axis=0)
-    room = np.maximum(np.abs(step), np.radians(STEP_DEG))
+    room = np.maximum(np.abs(step), np.radians(step_deg))
     lift = lifted_poses - fall
     out = lift.copy()
     for f in range(1, len(fall)):

@@ -468,6 +468,8 @@ def test_the_kneeling_fire_death_is_turned_least_worst_once_his_legs_are_lifted(
     # ... kstow2dead's legs eased where they flicked, before it is turned (issue 14, kstow-s13), and
     # crawl2dead's where its lifted legs flicked (crawldeath-s20)
     assert [d.name for d in deaths.DEATHS if d.legs_eased] == ["kstow2dead", "crawl2dead"]
+    # ... and kfire2dead's alone lifts its legs more slowly (its rear foot popped 4.33 m/s; kfire-s21)
+    assert [d.name for d in deaths.DEATHS if d.legs_lift_step_deg] == ["kfire2dead"]
     # ... and its slaves hold a foot in every stance of his, their knee down or not (slave_feet)
     assert [d.name for d in deaths.DEATHS if d.slave_feet_knelt] == ["kstow2dead"]
     # ... and its slaves' trunk rest holds the foot they hover (slave_rest feet_held; kneeldeath14)

@@ -19,6 +19,7 @@ from ttes.paths import FIGURES
 N, SKID_FROM, SKID_TO = 60, 15, 35  # frames; the body skids between these
 SKID_CM = 6.0  # this far sideways (kfire2dead's tucked toes: 7 cm in 4 frames, kstow2dead's knee 5.9)
 FEET = ("left_foot", "right_foot")
+SLOW_STEP_DEG = 2.0  # degrees a frame: a slower lift than this skid's default one
 
 
 def test_the_window_runs_from_the_slide_to_where_the_node_comes_to_rest() -> None:
@@ -94,3 +95,24 @@ def test_a_leg_let_go_in_one_frame_turns_over_a_few(skid: tuple[FigureSet, ClipF
     waist = kin.dof_slices["waist"]
     np.testing.assert_array_equal(out.poses[:, waist], held[:, waist])
     assert abs(np.degrees(out.poses[32, knee] - held[32, knee])) < 0.5  # away from the jumps: as held
+
+
+def test_a_death_may_lift_its_legs_more_slowly(skid: tuple[FigureSet, ClipFrames]) -> None:
+    """Issue 14 (kfire-s21): lifting kfire2dead's tucked rear foot turned the right knee 9.8 degrees in one
+    frame and the foot popped 4.33 m/s; a death's own step (``DeathSpec.legs_lift_step_deg``) lets the lift
+    turn a leg's joints at most that much a frame, the feet still lifting off as the body skids."""
+    figs, frames = skid
+    kin = figs.kin["body"]
+    right = np.zeros(kin.ndof, dtype=bool)
+    for joint, sl in kin.dof_slices.items():
+        right[sl] = joint.startswith("right_")
+    for steps in ((("right_", SLOW_STEP_DEG),), ()):
+        out = lifted(frames, figs.figures["body"], steps)
+        turn = np.degrees(np.abs(np.diff(out.poses, axis=0))).max(axis=0)
+        if not steps:
+            assert turn[right].max() > SLOW_STEP_DEG + 0.25  # the default (leg_lift.STEP_DEG) is faster here
+            continue
+        assert turn[right].max() <= SLOW_STEP_DEG + 1e-6
+        assert turn[~right].max() > SLOW_STEP_DEG + 0.25  # the left leg lifts as fast as before
+        assert _slide(figs, out, FEET) < THRESHOLDS["foot_skate_cm"]
+        np.testing.assert_allclose(out.poses[[0, -1]], frames.poses[[0, -1]], atol=1e-6)
