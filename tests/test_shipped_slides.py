@@ -43,9 +43,7 @@ KNOWN_SLIDES: dict[str, str] = {
     "prstow2dead_low": "left forearm dragged 3.3 cm along the ground at 0.32-0.40 s (frames 19-24)",
     "prstow2dead_m16_low": "left forearm dragged 4.3 cm along the ground at 0.33-0.40 s (frames 20-24)",
     "prstow2prfire_low": "left forearm dragged 3.4 cm along the ground at 0.00-0.80 s (frames 0-48)",
-    "ststow2dead": "right knee dragged 5.9 cm along the ground at 0.67-1.27 s (frames 40-76)",
-    "ststow2dead_low": "right knee dragged 5.1 cm along the ground at 0.68-0.97 s (frames 41-58)",
-    "ststow2dead_m16_low": "right knee dragged 5.1 cm along the ground at 0.68-0.97 s (frames 41-58)",
+    "ststow2dead": "face down, his head slides 3.9 cm as he settles, 2.23-2.98 s (frames 134-179)",
 }
 
 
