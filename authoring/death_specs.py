@@ -230,6 +230,12 @@ class DeathSpec:
     # beyond the fall's own turn (leg_lift.lifted; others: leg_lift.STEP_DEG, 10): kfire2dead's rear foot,
     # lifted, popped 4.33 m/s
     legs_lift_step_deg: tuple[tuple[str, float], ...] = ()
+    # frames: after the physics the arms leave the grip at their held pace, turning into the recorded fall
+    # over this many (authoring.letgo_ease; 0: as recorded): ststow2dead's right hand jumped 15 cm (5.04 m/s)
+    letgo_eased: int = 0
+    # the legs' change is smoothed (legs_eased) at every leg DOF where any flicks (leg_lift.eased_legs'
+    # together): ststow2dead's left knee, held by knee_hold, stuttered 6.4/0.6/5.0 degrees (pop 1.69 m/s)
+    legs_eased_together: bool = False
 
 
 def _prone(
@@ -384,6 +390,14 @@ STSTOW_DROP = (20.0, 0.0, -90.0)
 # Flung (-60, 0, -20) it lay on its top, sights down, 0.48 s before rolling onto its side (the check's
 # rifle_top_down_s); a little more ahead, (-55..-65, 0, -28..-32), it lands on its side (each was measured)
 STSTOW_REFALL = (-1, (-60.0, 0.0, -30.0))
+# frames: ststow2dead's arms leave the grip over this many after the physics (DeathSpec.letgo_eased): the
+# let-go's one-frame jump (left wrist 16.2 degrees, right hand 15 cm) spread out, the chaotic fall as it was
+# (eased in the physics instead, letgo_fingers / knee_damping re-rolled it: he lay curled, pelvis 18 cm up)
+STSTOW_LETGO_EASED = 8
+# frames: ststow2dead's legs' change by the knee hold, the pins and the lift smoothed where it flicks, all the
+# legs' DOFs together (DeathSpec.legs_eased, legs_eased_together): the knee hold stuttered his left knee
+# 6.4/0.6/5.0 degrees a frame as he landed (pop 1.69 m/s, frame 90); eased DOF by DOF, the foot popped 3.91
+STSTOW_LEGS_EASED = 1.0
 # frames after the release: kfire2dead's let-go rifle falls again among his body from here
 # (DeathSpec.rifle_refall): recorded, it landed butt first by his left boot and stood there, leaning on
 # nothing, 0.4 s (rifle_upright_s; 1 s seen from the front); from 6-8 frames it tips and lies flat by 1 s
@@ -434,6 +448,11 @@ DEATHS: tuple[DeathSpec, ...] = (
         slave_arm_out=True,
         slave_trunk_rigid=True,
         slave_feet_landed=True,
+        letgo_eased=STSTOW_LETGO_EASED,  # the let-go's right hand pop 5.04 m/s (DI 6.11) gone, the fall kept
+        legs_lift=True,  # the right knee that dragged 5.88 cm as he pitched off it lifts: 2.07
+        legs_eased=STSTOW_LEGS_EASED,
+        legs_eased_together=True,
+        slave_grounded=True,  # the DI/M16 slaves hung 2 cm up, frames 60-66 (unsupported_s 0.12 -> 0)
     ),
     DeathSpec(
         "stfire2dead",

@@ -137,6 +137,7 @@ from authoring.feet_held import held_feet
 from authoring.grounded import grounded_frames
 from authoring.knee_hold import hold_knees
 from authoring.leg_lift import eased_legs, lifted
+from authoring.letgo_ease import eased_letgo
 from authoring.motion import KeyPosture
 from authoring.passive_range import passive_figure
 from authoring.planted import WORST_DIRECTIONS, least_worst_turned, plant, plant_least_worst
@@ -580,10 +581,13 @@ def _after_physics(
     the ground held and (:attr:`DeathSpec.pinned`) its limbs on the ground held where they touched down
     (steps 5-7 of the module docstring), then (:attr:`DeathSpec.legs_lift`) its feet and knees that would
     skid lifted (step 8)."""
+    if spec.letgo_eased:  # the arms leave the grip over frames, not in one
+        frames = eased_letgo(frames, FigureKinematics(figures[0]), release, spec.letgo_eased)
     planted = (plant_least_worst if spec.plant_worst else plant)(frames, figures[0])
     frames = _held(spec, planted, figures, release)
     frames = lifted(frames, figures[0], spec.legs_lift_step_deg) if spec.legs_lift else frames
-    frames = eased_legs(planted, frames, figures[0], spec.legs_eased) if spec.legs_eased else frames
+    if spec.legs_eased:
+        frames = eased_legs(planted, frames, figures[0], spec.legs_eased, spec.legs_eased_together)
     if not spec.turn_worst:
         return frames
     return least_worst_turned(frames, figures[0], DIRECTIONS if spec.turn_as_checked else WORST_DIRECTIONS)

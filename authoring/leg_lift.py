@@ -155,7 +155,9 @@ def _no_leaps(fall: np.ndarray, lifted_poses: np.ndarray, step_deg: np.ndarray) 
     return fall + out
 
 
-def eased_legs(fall: ClipFrames, held: ClipFrames, soldier: Figure, sigma: float) -> ClipFrames:
+def eased_legs(
+    fall: ClipFrames, held: ClipFrames, soldier: Figure, sigma: float, together: bool = False
+) -> ClipFrames:
     """``held`` (``fall`` pinned and lifted) with its legs' change from ``fall`` smoothed (Gaussian,
     ``sigma`` frames) where that change flicks (a frame's turn differing by :data:`EASE_FLICK_DEG` from both
     its neighbours', as the check measures): a pin that lets a leg go in one frame, or a lift that turns an
@@ -165,7 +167,8 @@ def eased_legs(fall: ClipFrames, held: ClipFrames, soldier: Figure, sigma: float
     throughout, the slaves' legs, solved from his, dragged a foot 9.6 cm: their kneeling rest is
     sensitive to every millimetre of the master's legs). Frames ``held`` appends past ``fall`` (still frames
     after an arms' fall that outlasts the physics, kstow2dead's early-going arms) are measured against
-    ``fall``'s last."""
+    ``fall``'s last. ``together``: where one leg DOF's change flicks, every leg DOF's is smoothed (smoothed
+    one by one, ststow2dead's left knee held still as its hip turned on: the foot jumped 3.9 m/s)."""
     kin = FigureSet({"body": soldier}).kin["body"]
     before, poses = np.asarray(fall.poses), np.array(held.poses)
     before = np.concatenate([before, np.repeat(before[-1:], len(poses) - len(before), axis=0)])
@@ -178,6 +181,8 @@ def eased_legs(fall: ClipFrames, held: ClipFrames, soldier: Figure, sigma: float
     flicks = np.zeros(change.shape, dtype=bool)  # the frames either side of a flicking turn
     flicks[1:-2] = one_frame_flicks(turn) > EASE_FLICK_DEG
     flicks[1:] |= flicks[:-1]
+    if together:
+        flicks[:] = flicks.any(axis=1, keepdims=True)
     where = np.stack([smooth_above(f * 1.0, sigma) for f in flicks.T], axis=1)
     where = np.clip(where, 0.0, 1.0)
     where[[0, -1]] = 0.0

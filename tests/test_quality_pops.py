@@ -94,8 +94,6 @@ def test_a_swing_at_its_fastest_or_a_landing_is_not_a_twitch() -> None:
 _LETGO = "at the let-go (0.38 s) the right hand flies off the grip {} cm in one frame"
 _ARM = "turning on the crawl, the right upper arm jumps {} cm in one frame ({} s) and stops"
 KNOWN_POPS: dict[str, str] = {
-    "ststow2dead": _LETGO.format(15.5),
-    "ststow2dead_low": _LETGO.format(16.5),
     "stfire2dead": _LETGO.format(12.8),
     "stfire2dead_low": _LETGO.format(13.3),
     "stfire2dead_m16_low": "at the let-go (0.38 s) the left forearm jumps 5.1 cm in one frame",

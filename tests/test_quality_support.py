@@ -90,13 +90,10 @@ def test_a_body_lowered_onto_the_ground_is_supported_until_the_belly_takes_the_w
 # after they landed, by DeathSpec.slave_grounded). Each names what a person sees; strict: a mended clip
 # leaves it.
 _ROLL = "rolling from his thigh onto his back he lifts clear of the ground, 1.13-1.37 s: trunk 6.9 cm up"
-_MID = "mid-fall (pelvis 37 cm up) both feet and knees leave the ground, 1.00-1.10 s: right shin 2.7 cm up"
 _PITCH = "pitching from his knees onto his face he clears the ground, 1.03-1.08 s (master: 2 frames)"
 KNOWN_UNSUPPORTED: dict[str, str] = {
     "kstow2dead_low": _ROLL,
     "kstow2dead_m16_low": _ROLL,
-    "ststow2dead_low": _MID,
-    "ststow2dead_m16_low": _MID,
     "stfire2dead_low": _PITCH,
     "stfire2dead_m16_low": _PITCH,
 }

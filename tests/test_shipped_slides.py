@@ -37,9 +37,7 @@ KNOWN_SLIDES: dict[str, str] = {
     "prfire2dead_m16_low": "belly dragged 3.8 cm along the ground at 0.40-1.60 s (frames 24-96)",
     "prstow2dead_low": "right forearm dragged 3.1 cm by the snap to PRONE_STOWED, 0-0.12 s (frames 0-7)",
     "prstow2dead_m16_low": "right forearm dragged 3.0 cm along the ground at 0.00-0.55 s (frames 0-33)",
-    "ststow2dead": "right knee dragged 5.9 cm along the ground at 0.67-1.27 s (frames 40-76)",
-    "ststow2dead_low": "right knee dragged 5.1 cm along the ground at 0.68-0.97 s (frames 41-58)",
-    "ststow2dead_m16_low": "right knee dragged 5.1 cm along the ground at 0.68-0.97 s (frames 41-58)",
+    "ststow2dead": "face down, his head slides 3.9 cm as he settles, 2.23-2.98 s (frames 134-179)",
 }
 
 

@@ -256,10 +256,6 @@ def test_a_foot_landing_in_the_last_stance_is_held_where_it_lands() -> None:
     assert np.array_equal(_held_from_landing(never, stance, move), move)
 
 
-@pytest.mark.xfail(
-    strict=True,  # the check's lift-off rule: a part on the ground until it rises past 2 cm
-    reason="contact_slide_cm 5.13 (limit 3): right knee dragged on and just above the ground, 0.68-0.97 s",
-)
 def test_ststow2dead_di_slave_lies_on_the_ground_with_its_feet_still() -> None:
     """Issue 14: DI ststow2dead's head slid 8.15 cm (its trunk swung by the spine), laid by the root alone its
     feet skated 3.1 cm after they landed; both within the check's limits now."""
