@@ -80,7 +80,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
   slaves of the prone deaths, 4.2-5.3), how far the pelvis or chest rises once down (a dead man lifting his
   hips), and ``dead_limb_speed_m_s`` (limit 4.5 m/s: every death <= 4.2), the fastest a limb moves once
   the trunk is down (a dead arm swung, not dropped), and ``legs_rise_cm`` (limit 8 cm: every other death
-  <= 6.0), how far a foot, shin or knee rises once the pelvis is near the ground (a dead man's kick).
+  <= 6.0), how far a foot, shin or knee rises once the pelvis is near the ground (a dead man's kick);
+  and ``dying_rise_cm`` (:mod:`~authoring.quality_rising`, limit 7 cm: every death <= 5.61), how far the
+  pelvis' or chest's lowest node rises above the first frame (a dying man getting up).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
   recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
   cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
@@ -135,6 +137,7 @@ from authoring.quality_rest import (
 from authoring.quality_rifle_drop import THROW_LIMIT_M, UPRIGHT_LIMIT_S, rifle_drop
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, dropped_rifle_rest
 from authoring.quality_rifle_roll import ROLL_LIMIT_DEG, TOP_DOWN_LIMIT_S, rifle_lie
+from authoring.quality_rising import DYING_RISE_LIMIT_CM, dying_rise
 from authoring.quality_support import FLIGHT_LIMIT_S, UNSUPPORTED_LIMIT_S, support
 from authoring.quality_turns import (
     TRAVEL_LIMIT_CM,
@@ -179,6 +182,7 @@ THRESHOLDS: dict[str, float] = {
     "lying_feet_raised_s": RAISED_LIMIT_S,  # lying, both feet are not held up (quality_lying)
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     "legs_rise_cm": LEGS_RISE_LIMIT_CM,  # ... nor a leg once the pelvis is down (a dead man's kick)
+    "dying_rise_cm": DYING_RISE_LIMIT_CM,  # ... nor his hips or chest above the first frame (quality_rising)
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
     "dead_limb_speed_m_s": WHIP_M_S,  # ... and no limb is flung once the trunk is down (a whip, not a fall)
     "propped_s": PROPPED_LIMIT_S,  # ... and the head and chest come down with the pelvis (none lies propped)
@@ -528,6 +532,7 @@ def check_clip(
         out.update(rest_lag(frames, figures))
         out.update(dead_trunk(frames, figures))
         out.update(dead_legs(frames, figures))
+        out.update(dying_rise(ys, parts))
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
     reacted = REACTION_LIMITS.get(out.get("reaction") or "", {})
     failures += [k for k, lim in reacted.items() if _range_failure(out[k], lim)]
