@@ -10,7 +10,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
   (psurf node) below ``CONTACT_HEIGHT_CM`` is on the ground, and its slide is the horizontal extent of its
   positions over one such run of frames (:mod:`authoring.body_parts`); a part other than a foot stays on
   the ground while it is within ``LIFT_OFF_CM`` of it either side of such a run (dragged as it lifts off, it
-  slides; one that never comes down is in the air). ``foot_skate_cm`` is the worst
+  slides; one that never comes down is in the air, but one within ``LIFT_OFF_CM`` at a static end rests
+  there, as the posture check's ``rest_contact_cm`` holds it). ``foot_skate_cm`` is the worst
   over the feet (heels, balls, toes), ``contact_slide_cm`` over every other part (knees, hands, forearms,
   upper arms, chest, belly, pelvis, head), ``contact_slide_part`` names it, ``contact_slides`` has each part.
   A foot node near its foot's pivot (the forefoot round the ball) is judged by its slide about that pivot:
@@ -404,7 +405,11 @@ def check_clip(
     segg = kin.segment_globals(q, loc)  # (n, nseg, 4, 4)
     pts = np.einsum("fkij,kj->fki", segg[:, segs, :3, :], nodes) + shift[:, None, :]
     feet = np.isin(parts, FOOT_PARTS)
-    runs = contact_runs(pts, CONTACT_HEIGHT_CM, np.where(feet, CONTACT_HEIGHT_CM, LIFT_OFF_CM))
+    if static_ends is None:
+        static_ends = (not locomotion, not locomotion)
+    # a part resting at a static end within LIFT_OFF_CM lies on the ground there (body_parts.contact_runs)
+    lift = np.where(feet, CONTACT_HEIGHT_CM, LIFT_OFF_CM)
+    runs = contact_runs(pts, CONTACT_HEIGHT_CM, lift, rest_ends=static_ends)
     # a pivoting foot's nodes are judged about its pivot, a node or its ball or heel (quality_turns)
     sole = {
         f: sites[:, [kin.site_names.index(f"{f}.{p}") for p in ("ball", "heel")]][..., :3, 3]
@@ -499,8 +504,6 @@ def check_clip(
     # a reaction clip shows: the shoulders, head and muzzle move enough (quality_reactions)
     out.update(reaction_amplitude(name, site_pos, site_names, muzzle, cs.fps))
     # speeds at the ends that are static postures
-    if static_ends is None:
-        static_ends = (not locomotion, not locomotion)
     speeds = end_speeds(site_pos, site_names, cs.fps)
     checked = [(end, *speeds[end]) for end, ok in zip(("first", "last"), static_ends, strict=True) if ok]
     out["end_speeds_m_s"] = {end: round(v, 3) for end, (v, _) in speeds.items()}
