@@ -39,6 +39,9 @@ TRUNK_PARTS = (
 )
 FOOT_PARTS = ("left_foot", "right_foot")
 HAND_PARTS = ("left_hand", "right_hand")
+REST_SLACK_CM = (
+    0.1  # cm: a node at rest at a resting end stays on the ground while no higher than this above it
+)
 KNEE_RADIUS_CM = 10.0  # lower-leg nodes this close to the ``knee`` site make up the kneecap
 
 
@@ -94,16 +97,27 @@ def ground_extent(xz: np.ndarray) -> float:
     return float((proj.max(axis=0) - proj.min(axis=0)).max())
 
 
-def contact_runs(points: np.ndarray, height: float, release: np.ndarray | float | None = None) -> ContactRuns:
+def contact_runs(
+    points: np.ndarray,
+    height: float,
+    release: np.ndarray | float | None = None,
+    rest_ends: tuple[bool, bool] = (False, False),
+) -> ContactRuns:
     """The contact runs of the nodes of ``points`` ``(n, k, 3)`` (world, cm, +Y up). Contact is judged by
     height alone, so a fast skim just above the ground counts as sliding. With ``release`` (cm, one for
     every node or per node ``(k,)``, at least ``height``), a node that comes down to ``height`` is on the
     ground for as long as it stays below ``release`` either side of it: one dragged just above ``height``
-    as it lifts off still slides, one that never comes down to ``height`` is in the air."""
+    as it lifts off still slides, one that never comes down to ``height`` is in the air. ``rest_ends``:
+    whether the first and the last frame are resting postures; a node below ``release`` there rests on the
+    ground for as long as it stays no higher than it rests there (:func:`_resting`; the posture check's
+    ``rest_contact_cm`` holds a part within 2 cm as resting: DI's right elbow lies 1.58 cm up in
+    PRONE_FIRE, and a recoil that slid it 3.3 cm while it dipped to 1.31 cm read 0)."""
     n, _, _ = points.shape
     heights = points[..., 1]
     near = heights <= (height if release is None else np.maximum(release, height))
-    touching = np.flatnonzero((heights <= height).any(axis=0))
+    touching = np.flatnonzero(
+        (heights <= height).any(axis=0) | (near[0] & rest_ends[0]) | (near[-1] & rest_ends[1])
+    )
     if not len(touching):
         empty = np.zeros(0, dtype=int)
         return ContactRuns(empty, empty, empty, np.zeros(0))
@@ -121,12 +135,33 @@ def contact_runs(points: np.ndarray, height: float, release: np.ndarray | float 
         np.add.at(edges, starts, 1)
         np.add.at(edges, stops + 1, -1)
         flat = np.cumsum(edges[:-1]) > 0
+        if any(rest_ends):
+            flat |= _resting(y[:, :n], height, near[:, touching].T, rest_ends).ravel()
+            starts = np.flatnonzero(flat & ~np.r_[False, flat[:-1]])
+            stops = np.flatnonzero(flat & ~np.r_[flat[1:], False])
     proj = np.zeros((len(touching), n + 1, DIRECTIONS))
     proj[:, :n] = points[:, touching][..., [0, 2]].transpose(1, 0, 2) @ GROUND_DIRECTIONS
     proj = proj.reshape(-1, DIRECTIONS)
     hi = np.maximum.reduceat(np.where(flat[:, None], proj, -np.inf), starts, axis=0)
     lo = np.minimum.reduceat(np.where(flat[:, None], proj, np.inf), starts, axis=0)
     return ContactRuns(touching[starts // (n + 1)], starts % (n + 1), stops % (n + 1), (hi - lo).max(axis=1))
+
+
+def _resting(y: np.ndarray, height: float, near: np.ndarray, rest_ends: tuple[bool, bool]) -> np.ndarray:
+    """Per node of heights ``y`` ``(m, n)`` (frames along axis 1), the frames ``(m, n + 1)`` (a separator
+    frame last) of its rest at each resting end of ``rest_ends`` where it is ``near`` the ground: the
+    frames from that end over which it stays no higher than it rests there (:data:`REST_SLACK_CM`). A
+    limb landing at a shallow angle near the ground before it rests there is not on the ground yet."""
+    m, n = y.shape
+    out = np.zeros((m, n + 1), dtype=bool)
+    for end, at in ((rest_ends[0], 0), (rest_ends[1], n - 1)):
+        if not end:
+            continue
+        level = np.maximum(y[:, at], height) + REST_SLACK_CM
+        ok = (y <= level[:, None]) & near & near[:, at : at + 1]
+        run = np.logical_and.accumulate(ok if at == 0 else ok[:, ::-1], axis=1)
+        out[:, :n] |= run if at == 0 else run[:, ::-1]
+    return out
 
 
 def contact_slides(points: np.ndarray, height: float) -> tuple[np.ndarray, np.ndarray]:

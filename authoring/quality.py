@@ -10,7 +10,8 @@ Per clip (a channelset bound to its soldier figure and rifle):
   (psurf node) below ``CONTACT_HEIGHT_CM`` is on the ground, and its slide is the horizontal extent of its
   positions over one such run of frames (:mod:`authoring.body_parts`); a part other than a foot stays on
   the ground while it is within ``LIFT_OFF_CM`` of it either side of such a run (dragged as it lifts off, it
-  slides; one that never comes down is in the air). ``foot_skate_cm`` is the worst
+  slides; one that never comes down is in the air, but one within ``LIFT_OFF_CM`` at a static end rests
+  there, as the posture check's ``rest_contact_cm`` holds it). ``foot_skate_cm`` is the worst
   over the feet (heels, balls, toes), ``contact_slide_cm`` over every other part (knees, hands, forearms,
   upper arms, chest, belly, pelvis, head), ``contact_slide_part`` names it, ``contact_slides`` has each part.
   A foot node near its foot's pivot (the forefoot round the ball) is judged by its slide about that pivot:
@@ -80,7 +81,9 @@ Per clip (a channelset bound to its soldier figure and rifle):
   slaves of the prone deaths, 4.2-5.3), how far the pelvis or chest rises once down (a dead man lifting his
   hips), and ``dead_limb_speed_m_s`` (limit 4.5 m/s: every death <= 4.2), the fastest a limb moves once
   the trunk is down (a dead arm swung, not dropped), and ``legs_rise_cm`` (limit 8 cm: every other death
-  <= 6.0), how far a foot, shin or knee rises once the pelvis is near the ground (a dead man's kick).
+  <= 6.0), how far a foot, shin or knee rises once the pelvis is near the ground (a dead man's kick);
+  and ``dying_rise_cm`` (:mod:`~authoring.quality_rising`, limit 7 cm: every death <= 5.61), how far the
+  pelvis' or chest's lowest node rises above the first frame (a dying man getting up).
 * locomotion clips: ``stride_length`` (cm), ``ground_speed`` (cm/s) and the cadence they imply must be
   recorded (``locomotion_recorded``) unless the clip has an ``end_offset`` (it moves, it is not in place);
   cycle clips are judged for realism, ``gait_speed_m_s`` and ``gait_steps_per_s`` against ``GAIT_LIMITS`` (a
@@ -135,6 +138,7 @@ from authoring.quality_rest import (
 from authoring.quality_rifle_drop import THROW_LIMIT_M, UPRIGHT_LIMIT_S, rifle_drop
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM, dropped_rifle_rest
 from authoring.quality_rifle_roll import ROLL_LIMIT_DEG, TOP_DOWN_LIMIT_S, rifle_lie
+from authoring.quality_rising import DYING_RISE_LIMIT_CM, dying_rise
 from authoring.quality_support import FLIGHT_LIMIT_S, UNSUPPORTED_LIMIT_S, support
 from authoring.quality_turns import (
     TRAVEL_LIMIT_CM,
@@ -179,6 +183,7 @@ THRESHOLDS: dict[str, float] = {
     "lying_feet_raised_s": RAISED_LIMIT_S,  # lying, both feet are not held up (quality_lying)
     "rest_rise_cm": RISE_LIMIT_CM,  # a clip that ends in DEAD: nothing rises once the body is down
     "legs_rise_cm": LEGS_RISE_LIMIT_CM,  # ... nor a leg once the pelvis is down (a dead man's kick)
+    "dying_rise_cm": DYING_RISE_LIMIT_CM,  # ... nor his hips or chest above the first frame (quality_rising)
     "limb_rest_lag_s": LAG_LIMIT_S,  # ... and no limb comes to rest long after the trunk
     "dead_limb_speed_m_s": WHIP_M_S,  # ... and no limb is flung once the trunk is down (a whip, not a fall)
     "propped_s": PROPPED_LIMIT_S,  # ... and the head and chest come down with the pelvis (none lies propped)
@@ -400,7 +405,11 @@ def check_clip(
     segg = kin.segment_globals(q, loc)  # (n, nseg, 4, 4)
     pts = np.einsum("fkij,kj->fki", segg[:, segs, :3, :], nodes) + shift[:, None, :]
     feet = np.isin(parts, FOOT_PARTS)
-    runs = contact_runs(pts, CONTACT_HEIGHT_CM, np.where(feet, CONTACT_HEIGHT_CM, LIFT_OFF_CM))
+    if static_ends is None:
+        static_ends = (not locomotion, not locomotion)
+    # a part resting at a static end within LIFT_OFF_CM lies on the ground there (body_parts.contact_runs)
+    lift = np.where(feet, CONTACT_HEIGHT_CM, LIFT_OFF_CM)
+    runs = contact_runs(pts, CONTACT_HEIGHT_CM, lift, rest_ends=static_ends)
     # a pivoting foot's nodes are judged about its pivot, a node or its ball or heel (quality_turns)
     sole = {
         f: sites[:, [kin.site_names.index(f"{f}.{p}") for p in ("ball", "heel")]][..., :3, 3]
@@ -495,8 +504,6 @@ def check_clip(
     # a reaction clip shows: the shoulders, head and muzzle move enough (quality_reactions)
     out.update(reaction_amplitude(name, site_pos, site_names, muzzle, cs.fps))
     # speeds at the ends that are static postures
-    if static_ends is None:
-        static_ends = (not locomotion, not locomotion)
     speeds = end_speeds(site_pos, site_names, cs.fps)
     checked = [(end, *speeds[end]) for end, ok in zip(("first", "last"), static_ends, strict=True) if ok]
     out["end_speeds_m_s"] = {end: round(v, 3) for end, (v, _) in speeds.items()}
@@ -528,6 +535,7 @@ def check_clip(
         out.update(rest_lag(frames, figures))
         out.update(dead_trunk(frames, figures))
         out.update(dead_legs(frames, figures))
+        out.update(dying_rise(ys, parts))
     failures = [k for k, lim in THRESHOLDS.items() if k in out and out[k] is not None and out[k] > lim]
     reacted = REACTION_LIMITS.get(out.get("reaction") or "", {})
     failures += [k for k, lim in reacted.items() if _range_failure(out[k], lim)]
