@@ -670,7 +670,14 @@ def _settle(
     (:mod:`authoring.slave_reactions`), a death leaving its snapped start from rest and its arms leaving it
     late where it asks, every joint within its limits."""
     if name in reactions.FOLLOWING:
-        follow_master(master, chset, pair, on.figure_set, name in reactions.RIFLE_TURNS)
+        follow_master(
+            master,
+            chset,
+            pair,
+            on.figure_set,
+            name in reactions.RIFLE_TURNS,
+            name in reactions.SHOULDERS_KEPT,
+        )
     _ease_start(chset, name)
     _arms_late(chset, name, on.figure_set)
     clamp_to_limits(chset, on.di)

@@ -70,6 +70,7 @@ class Reaction:
     elbows_planted: bool = False  # the elbows on the ground held above the palms (prone: the rifle gives)
     elbows_held: bool = False  # ... and held there on every frame of the clip, not in the key alone
     timing: tuple[float, float, float] | None = None  # (s) to the key, held, back: TIMING[kind] if None
+    slave_shoulders_kept: bool = False  # slaves: each acromion kept where the trunk takes it
 
     @property
     def key(self) -> str:
@@ -109,6 +110,7 @@ REACTIONS: tuple[Reaction, ...] = (
         slave_follows=True,
         elbows_planted=True,
         elbows_held=True,
+        slave_shoulders_kept=True,
     ),
     Reaction("ststow_flinch", "STAND_STOWED", "flinch", (0.0, 12.0, 0.0), _DUCK, drop=6.0),
     Reaction("stfire_flinch", "STAND_FIRE", "flinch", (0.0, 10.0, 0.0), _DUCK, drop=6.0),
@@ -136,6 +138,7 @@ REACTIONS: tuple[Reaction, ...] = (
         rifle_stays=True,
         slave_follows=True,
         elbows_planted=True,
+        slave_shoulders_kept=True,
     ),
     # the rifle cradled under the face: the head turns away and the shoulders roll over (ducking 20 degrees
     # put the M16's stock 3.6 cm into the face; session 19 turned the head alone, 6.4 cm)
@@ -146,6 +149,8 @@ REACTIONS: tuple[Reaction, ...] = (
 FOLLOWING: frozenset[str] = frozenset(r.name for r in REACTIONS if r.slave_follows)
 # slaves whose rifle turns to their palms about the grip (the butt in the shoulder), not slid to them
 RIFLE_TURNS: frozenset[str] = frozenset(r.name for r in REACTIONS if r.elbows_held)
+# slaves whose clavicles keep the shoulders where the trunk takes them while the arms hold the rifle
+SHOULDERS_KEPT: frozenset[str] = frozenset(r.name for r in REACTIONS if r.slave_shoulders_kept)
 REACT_NODES: tuple[str, ...] = tuple(p for p in POSTURES if any(r.posture == p for r in REACTIONS))
 
 

@@ -31,11 +31,17 @@ from server.motion.channelset import Channelset
 TRACK_DOF_STEP = 0.05  # rad per iteration: a tracked frame stays on its neighbour's branch
 PINNED = 4  # priority of an elbow or wrist on the ground: above the palms' 3 (the rifle gives, not the elbow)
 FIT_ROUNDS = 4  # solve the arms, move the rifle to the palms, again
+SHOULDER_KEPT = PINNED  # an acromion kept as firmly as the elbows (at 2, under the palms, it swung as free)
 GROUND_CM = 6.0  # an elbow or wrist site this low lies on the ground (its centre sits ~4 cm up)
 
 
 def follow_master(
-    master: Channelset, slave: Channelset, pair: MasterSlavePair, figures: FigureSet, turned: bool = False
+    master: Channelset,
+    slave: Channelset,
+    pair: MasterSlavePair,
+    figures: FigureSet,
+    turned: bool = False,
+    shoulders_kept: bool = False,
 ) -> None:
     """``slave`` (in place) as its first frame plus ``master``'s change from its first frame, its palms
     then held on the rifle and its elbows and wrists on the ground where they lie (:func:`hold_arms`)."""
@@ -57,7 +63,9 @@ def follow_master(
         slave.fig_quat[:, chan.column] = quaternion.make_continuous(quat).astype(slave.fig_quat.dtype)
     pose = np.tile(pair.slave_kin.neutral_pose(), (len(q), 1))
     pose[:, bound.dst] = q
-    pose, placed["rifle"] = hold_arms(pair.slave_kin, pose, placed["body"], placed["rifle"], turned)
+    pose, placed["rifle"] = hold_arms(
+        pair.slave_kin, pose, placed["body"], placed["rifle"], turned, shoulders_kept
+    )
     slave.joint_data[:, bound.src] = pose[:, bound.dst].astype(slave.joint_data.dtype)
     for chan in slave.figure_channels():
         if chan.protofiletype != protofiletype(pair.slave):
@@ -67,7 +75,12 @@ def follow_master(
 
 
 def hold_arms(
-    kin: FigureKinematics, poses: np.ndarray, roots: np.ndarray, rifles: np.ndarray, turned: bool = False
+    kin: FigureKinematics,
+    poses: np.ndarray,
+    roots: np.ndarray,
+    rifles: np.ndarray,
+    turned: bool = False,
+    shoulders_kept: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``poses`` ``(n, ndof)`` with the arms eased to their solve at the peak and back, and the rifle's
     placements ``(n, 4, 4)`` moved with them from ``rifles`` (the master's): each elbow (and a wrist within
@@ -88,6 +101,13 @@ def hold_arms(
                 at = g0[kin.site_names.index(site), :3, 3]
                 if site == c.slave_site or at[1] <= GROUND_CM:
                     pinned.append(ik.Goal(site, at, None, 1.0, PINNED, c.joints))
+    if shoulders_kept:  # each acromion where the trunk took it (the palms' clavicles swung DI's 8.6 cm)
+        gp = kin.site_globals(poses[peak], roots[peak])
+        for side in ("left", "right"):
+            at = gp[kin.site_names.index(f"{side}_clavicle.acromion"), :3, 3]
+            pinned.append(
+                ik.Goal(f"{side}_clavicle.acromion", at, None, 1.0, SHOULDER_KEPT, (f"{side}_clavicle",))
+            )
     # the arms solved once, at the reaction's peak, from the posture (tracked frame by frame with the elbows
     # pinned, DI's clavicles jumped 16-23 degrees in a frame); the rifle then goes where the held palms
     # can take it (held where the master's goes, DI's left palm stayed 2.6-4.4 cm short of it)
