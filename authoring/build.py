@@ -41,6 +41,7 @@ from authoring.slave_arms_down import keep_slave_arms_down
 from authoring.slave_arms_late import lag_slave_arms
 from authoring.slave_arms_lift import lift_slave_arms
 from authoring.slave_belly import lift_slave_belly
+from authoring.slave_belly_held import hold_slave_belly
 from authoring.slave_contacts import pin_end, rest_slave_forearms, rest_slave_knees, tilt_onto_knees
 from authoring.slave_feet import plant_slave_feet
 from authoring.slave_feet_down import lower_slave_feet
@@ -278,6 +279,8 @@ def slave_one(
     )
     if spec and spec.slave_arms_pinned:
         rests += (pin_slave_arms,)
+    if spec and spec.slave_belly_held:  # its root back by a share of its belly's slide (slave_belly_held)
+        rests += (hold_slave_belly,)
     if spec and spec.slave_forearms_lying:  # then its forearms lie still where his do (slave_forearms_lying)
         rests += (lay_slave_forearms,)
     if spec and spec.slave_feet_slack:  # last: the feet go slack as his, from where the slave's lay

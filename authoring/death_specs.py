@@ -236,6 +236,9 @@ class DeathSpec:
     # the legs' change is smoothed (legs_eased) at every leg DOF where any flicks (leg_lift.eased_legs'
     # together): ststow2dead's left knee, held by knee_hold, stuttered 6.4/0.6/5.0 degrees (pop 1.69 m/s)
     legs_eased_together: bool = False
+    # share: the slaves' root moves back by this share of their belly node's slide on the ground as the trunk
+    # turns (authoring.slave_belly_held): prfire2dead's DI belly, 0.6-1 cm up, swung 3.8 cm as he rocked
+    slave_belly_held: float = 0.0
 
 
 def _prone(
@@ -335,6 +338,11 @@ PRONE_START_EASE = 0.1
 # first frame snapped and that change faded out over 12 frames, the head left at 0.59 m/s (0.62 faded over 24;
 # held over 24: 0.49, the DI slave's 0.46 -> 0.45; it catches up at 1.6 m/s 0.2-0.3 s in, as it falls later)
 PRSTOW_HEAD_HELD = 24
+# share: prfire2dead's slaves' root takes back this much of their belly's slide (DeathSpec.slave_belly_held):
+# the DI's belly node slid 3.83 cm (frames 25-96) as the root moved 2.5 cm over its pelvis and back; all of
+# it: the pelvis slid 3.85 cm, a thigh 3.94, a foot 3.8; 0.45: belly 2.11, but the left foot skated
+# 2.07 cm (M16 2.05; the check's foot_skate 2); 0.6: belly 1.53
+PRFIRE_SLAVE_BELLY_HELD = 0.3
 # s: prstow2dead's slaves, laid by the spine, leave PRONE_STOWED from rest over this (slave_start_ease): the
 # hit presses his hips down 1.7 cm in his first 4 frames and the DI's belly, 1.1 cm into the ground, is lifted
 # out with the body, its head rising 0.6 cm in frame 2-3 as his stays level: first frames 0.59 -> 0.13 m/s
@@ -538,6 +546,7 @@ DEATHS: tuple[DeathSpec, ...] = (
         arms_lifted_level=True,
         slave_start_ease=PRFIRE_SLAVE_START_EASE,
         slave_arms_late=PRFIRE_SLAVE_ARMS_LATE,
+        slave_belly_held=PRFIRE_SLAVE_BELLY_HELD,
     ),
     CRAWL_DEATH,
 )

@@ -35,8 +35,6 @@ KNOWN_SLIDES: dict[str, str] = {
     "kstow2dead": "left thigh dragged 9.4 cm along the ground at 1.10-1.45 s (frames 66-87)",
     "kstow2dead_low": "belly dragged 6.0 cm along the ground at 2.07-2.67 s (frames 124-160)",
     "kstow2dead_m16_low": "belly dragged 6.0 cm along the ground at 2.07-2.67 s (frames 124-160)",
-    "prfire2dead_low": "belly dragged 3.8 cm along the ground at 0.42-1.60 s (frames 25-96)",
-    "prfire2dead_m16_low": "belly dragged 3.8 cm along the ground at 0.40-1.60 s (frames 24-96)",
     "prstow2dead_low": "right forearm dragged 3.1 cm by the snap to PRONE_STOWED, 0-0.12 s (frames 0-7)",
     "prstow2dead_m16_low": "right forearm dragged 3.0 cm along the ground at 0.00-0.55 s (frames 0-33)",
     "ststow2dead": "face down, his head slides 3.9 cm as he settles, 2.23-2.98 s (frames 134-179)",
