@@ -300,7 +300,7 @@ def slave_one(
             lift_slave_arms(out, ctx.figure_set)
         lift_off_ground(out, ctx.di)
     if spec and (spec.grounded or spec.slave_grounded):  # lowered where it hovers (authoring.grounded)
-        ground_channelset(out, ctx.di, spec.grounded_until_down)
+        ground_channelset(out, ctx.di, spec.grounded_until_down, spec.slave_grounded_leave)
     clear_rifle(out, ctx.figure_set)  # a dropped rifle: out of the body and the ground it now lies on
     return out
 

@@ -239,6 +239,10 @@ class DeathSpec:
     # share: the slaves' root moves back by this share of their belly node's slide on the ground as the trunk
     # turns (authoring.slave_belly_held): prfire2dead's DI belly, 0.6-1 cm up, swung 3.8 cm as he rocked
     slave_belly_held: float = 0.0
+    # frames: (with slave_grounded) only each hover's first frames come down, its last this many
+    # left in the air, no part off the ground lowered into contact (authoring.grounded.drop's leave):
+    # stfire2dead's DI slaves, lowered whole, put their reaching hands down early (left hand slid 4.29 cm)
+    slave_grounded_leave: int = 0
 
 
 def _prone(
@@ -406,6 +410,16 @@ STSTOW_LETGO_EASED = 8
 # legs' DOFs together (DeathSpec.legs_eased, legs_eased_together): the knee hold stuttered his left knee
 # 6.4/0.6/5.0 degrees a frame as he landed (pop 1.69 m/s, frame 90); eased DOF by DOF, the foot popped 3.91
 STSTOW_LEGS_EASED = 1.0
+# frames: stfire2dead's arms leave the grip over this many after the physics (DeathSpec.letgo_eased, as
+# ststow2dead's): the let-go jumped his right hand in one frame (pop 4.88 m/s, DI 5.25, M16 forearm 2.27);
+# over 6, 8 or 10 frames no arm pops (1.46 m/s), but the held right arm runs on into the falling rifle the
+# longer it is eased: rifle_in_body 0.83 / 1.09 / 1.23 cm (limit 1; each was measured)
+STFIRE_LETGO_EASED = 6
+# frames: stfire2dead's DI/M16 slaves, pushing off their toes and reaching for the ground, hover 4 frames
+# (62-65; the check allows 3): lowered at the hover's start only (DeathSpec.slave_grounded_leave), its last
+# 3 left in the air. Lowered whole (slave_grounded alone), the reaching hands touched down two frames early
+# and slid there (left hand 1.31 -> 4.29 cm)
+STFIRE_SLAVE_HOVER_LEFT = 3
 # frames after the release: kfire2dead's let-go rifle falls again among his body from here
 # (DeathSpec.rifle_refall): recorded, it landed butt first by his left boot and stood there, leaning on
 # nothing, 0.4 s (rifle_upright_s; 1 s seen from the front); from 6-8 frames it tips and lies flat by 1 s
@@ -483,6 +497,9 @@ DEATHS: tuple[DeathSpec, ...] = (
         # alone too (as ststow2dead's), 0.35 cm
         slave_trunk_rigid=True,
         slave_feet_landed=True,
+        letgo_eased=STFIRE_LETGO_EASED,  # the let-go's right hand pop 4.88 -> 1.46 m/s, the fall kept
+        slave_grounded=True,  # the DI/M16 slaves' 4-frame hover (unsupported_s 0.067 -> 0.05)
+        slave_grounded_leave=STFIRE_SLAVE_HOVER_LEFT,
     ),
     DeathSpec(
         "kstow2dead",

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from authoring.body_parts import true_runs
 from authoring.postures import segment_heights
+from authoring.quality import LIFT_OFF_CM
 from authoring.quality_rest import PELVIS_NEAR_CM, near_from
 from authoring.signal_shaping import smooth_above
 from authoring.transitions import ClipFrames
@@ -28,21 +30,43 @@ from server.motion.channelset import Channelset
 GROUNDED_CM = 1.8  # cm: a hovering body's lowest node comes down to this (the check's SUPPORT_CM: 2)
 CLEAR_CM = 1.3  # cm: ... and no node comes lower than this (the check's CONTACT_HEIGHT_CM: 1.25)
 SIGMA_FRAMES = 1.5  # frames: the drop eases in and out over a few frames (a hover lasts 9-17)
+AIR_CM = LIFT_OFF_CM + 0.05  # cm: (``leave``) a part left in the air stays this high
 
 
 PELVIS = "lower_torso"  # the segment whose lowest node is the check's pelvis (body_parts)
 
 
-def drop(lowest: np.ndarray, until: int | None = None) -> np.ndarray:
+def drop(
+    lowest: np.ndarray, until: int | None = None, leave: int = 0, parts: np.ndarray | None = None
+) -> np.ndarray:
     """Per frame, how far (cm) to lower a body whose lowest node is ``lowest`` ``(n,)`` cm up: at least
     down to :data:`GROUNDED_CM`, smooth, never past :data:`CLEAR_CM` (0 where nothing hovers); a hover
-    from frame ``until`` on left as it is (None: none)."""
+    from frame ``until`` on left as it is (None: none). Given ``leave``, only each hover's first frames
+    come down, its last ``leave`` left in the air (:func:`_lead_only`), and elsewhere no part of
+    ``parts`` ``(k, n)`` (cm up; default: ``lowest``) off the ground comes within the lift-off height."""
     need = np.maximum(0.0, lowest - GROUNDED_CM)
     if until is not None:
         need[until:] = 0.0
+    if leave:
+        need = _lead_only(need, leave)
     if not need.any():
         return need
-    return np.minimum(smooth_above(need, SIGMA_FRAMES), np.maximum(0.0, lowest - CLEAR_CM))
+    floor = np.maximum(0.0, lowest - CLEAR_CM)
+    if leave:  # a part in the air stays above the lift-off height: it touches down where and when it did
+        h = lowest[None] if parts is None else parts
+        kept = np.where(h <= LIFT_OFF_CM, h - CLEAR_CM, h - AIR_CM).min(axis=0)
+        floor = np.where(need > 0, floor, np.maximum(0.0, kept))
+    return np.minimum(smooth_above(need, SIGMA_FRAMES), floor)
+
+
+def _lead_only(need: np.ndarray, leave: int) -> np.ndarray:
+    """``need`` kept in each hover's frames but its last ``leave``: the body leaving the ground comes down
+    where it does (stfire2dead's DI slaves' toes, pushing off); the hands reaching for the ground at the
+    hover's end are left as they were (lowered with the body, they touched down early and slid 4.29 cm)."""
+    out = np.zeros_like(need)
+    for a, b in true_runs(need > 0):
+        out[a : max(a, b - leave)] = need[a : max(a, b - leave)]
+    return out
 
 
 def pelvis_down(heights: dict[str, np.ndarray]) -> int:
@@ -51,11 +75,13 @@ def pelvis_down(heights: dict[str, np.ndarray]) -> int:
     return near_from(heights[PELVIS], PELVIS_NEAR_CM)
 
 
-def _drop(kin: FigureKinematics, poses: np.ndarray, roots: np.ndarray, until_down: bool) -> np.ndarray:
+def _drop(
+    kin: FigureKinematics, poses: np.ndarray, roots: np.ndarray, until_down: bool, leave: int = 0
+) -> np.ndarray:
     """:func:`drop` of a body in ``poses`` at ``roots``, only before its pelvis is down if ``until_down``."""
     h = segment_heights(kin, poses, roots)
-    lowest = np.min(np.stack(list(h.values())), axis=0)
-    return drop(lowest, pelvis_down(h) if until_down else None)
+    parts = np.stack(list(h.values()))
+    return drop(parts.min(axis=0), pelvis_down(h) if until_down else None, leave, parts)
 
 
 def grounded_frames(frames: ClipFrames, body: Figure, release: int, until_down: bool = False) -> ClipFrames:
@@ -68,7 +94,7 @@ def grounded_frames(frames: ClipFrames, body: Figure, release: int, until_down: 
     return ClipFrames(frames.poses, roots, rifles, frames.fps)
 
 
-def ground_channelset(chset: Channelset, body: Figure, until_down: bool = False) -> None:
+def ground_channelset(chset: Channelset, body: Figure, until_down: bool = False, leave: int = 0) -> None:
     """A slave's channelset lowered where its ``body`` hovers (:func:`drop`, only before the pelvis is down
     if ``until_down``), every figure channel until its release frame, the body's after it too. In place."""
     bf = bind_channelset(chset, [body]).figures[0]
@@ -82,7 +108,7 @@ def ground_channelset(chset: Channelset, body: Figure, until_down: bool = False)
         g = kin.site_globals(poses, np.broadcast_to(np.eye(4), (chset.nframes, 4, 4)))
         at = g[np.arange(chset.nframes), [kin.site_names.index(r) for r in roots]]
         loc = loc @ np.linalg.inv(at) @ g[:, kin.site_names.index(kin.root_name)]
-    down = _drop(kin, poses, loc, until_down)
+    down = _drop(kin, poses, loc, until_down, leave)
     if not down.any():
         return
     held = np.arange(chset.nframes) < (chset.release_frame if chset.release_frame is not None else 0)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from authoring.grounded import CLEAR_CM, GROUNDED_CM, PELVIS, drop, pelvis_down
+from authoring.quality import LIFT_OFF_CM
 from authoring.quality_support import SUPPORT_CM, longest_unsupported
 
 
@@ -56,11 +57,35 @@ def test_a_pelvis_is_down_where_the_check_s_legs_rise_starts() -> None:
     assert pelvis_down({PELVIS: pelvis, "left_foot": np.zeros(10)}) == 4
 
 
-def test_only_crawl2dead_s_slaves_are_lowered_alone() -> None:
+def test_only_these_deaths_slaves_are_lowered_alone() -> None:
     """``DeathSpec.slave_grounded`` lowers the slaves where they hover (crawl2dead's DI floated 2-3 cm for
-    0.10 s after its solved belly was lifted out of the ground), not the master: his clip, recorded with
-    ``grounded`` unset, is the same, and no other death's slaves change."""
+    0.10 s after its solved belly was lifted out of the ground; ststow2dead's and stfire2dead's DI/M16 hung
+    2-7 cm up as they fell forward), not the master: his clip, recorded with ``grounded`` unset, is the
+    same, and no other death's slaves change; stfire2dead's alone keep the hover's end in the air."""
     from authoring.deaths import DEATHS
 
-    assert [d.name for d in DEATHS if d.slave_grounded] == ["crawl2dead"]
-    assert not next(d for d in DEATHS if d.name == "crawl2dead").grounded
+    alone = [d for d in DEATHS if d.slave_grounded]
+    assert [d.name for d in alone] == ["ststow2dead", "stfire2dead", "crawl2dead"]
+    assert not any(d.grounded for d in alone)
+    assert [d.name for d in DEATHS if d.slave_grounded_leave] == ["stfire2dead"]
+
+
+def test_a_fall_left_in_the_air_at_its_end_is_lowered_at_its_start_only() -> None:
+    """stfire2dead's DI slaves hover 4 frames (62-65) as they push off their toes and reach for the ground
+    with their hands; lowered whole, a hand 2.5 cm up came down two frames early and slid 4.29 cm. With
+    ``leave`` 3 only the hover's first frame comes down (the check allows 3 in the air), and no part off
+    the ground elsewhere comes within the check's lift-off height: the hand lands where and when it did."""
+    toes = np.r_[np.full(8, 0.5), 1.6, 1.96, 3.34, 5.9, 8.7, 9.5, np.full(6, 10.0)]
+    hand = np.r_[np.full(10, 30.0), 20.0, 12.0, 7.2, 2.52, np.full(6, 0.9)]
+    parts = np.stack([toes, hand])
+    lowest = parts.min(axis=0)
+    assert longest_unsupported(lowest[:, None]) == (10, 14)  # 4 frames: 0.067 s
+    down = drop(lowest, leave=3, parts=parts)
+    a, b = longest_unsupported((lowest - down)[:, None])
+    assert b - a == 3 and not down[14:].any()
+    assert (lowest - down >= np.minimum(lowest, CLEAR_CM) - 1e-9).all()
+    off = parts > LIFT_OFF_CM
+    off[:, 9:11] = False  # the hover's first frames (above GROUNDED_CM from frame 9), lowered
+    assert ((parts - down)[off] > LIFT_OFF_CM).all()  # the reaching hand not put down a frame early
+    whole = drop(lowest)  # lowered whole: the hand comes within the lift-off height before it landed
+    assert (hand - whole)[13] <= LIFT_OFF_CM
