@@ -146,6 +146,10 @@ LEFT_U_TURN_SPINE_SIGMA = 0.8
 # 1.72 m/s; 165°: 3.04 -> 1.81, M16 4.90 -> 2.80 and its right upper arm's pop 2.03 -> 0.89). At 150° the
 # right thigh and the DI's right knee drag with the pelvis whatever the forearms do (4.1, 5.2 cm), and the
 # slaves popped 1.8-2.1 m/s: left as it was. Lifted 4.5 cm as well, the DI's right forearm slid 4.8 cm at 165°
+# (s21: with 0.1 and the fourth pair's pelvis 0.6, 0.75, 0.85 the thigh stays put but the planted right
+# forearm drags as the knees' move carries the pelvis the rest, frames 208-254: 5.49, 5.70, 3.56 cm; the DI's
+# right knee 4.27 cm at 0.85 (right foot pop 1.34-1.79 m/s), the M16's right forearm 7.76-7.88 whatever the
+# pelvis; 0.92: the soldier's right forearm 3.23 cm; 0.85 without front_clear: 4.30)
 LEFT_U_TURN_FRONT_CLEAR = {135.0: 0.1, 165.0: 0.1}
 
 
