@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_quality import FIGURES, N, _clip, _lying
+from test_quality import FIGURES, N, _clip, _lying, _rifle_verdict
 from test_quality_rifle_rest import _on_ground, _rifle_points, _rot
 
 from authoring.quality import THRESHOLDS, FigureSet, check_clip
@@ -27,7 +27,7 @@ def _dead(figset: FigureSet, rifles: np.ndarray, name: str) -> dict:
     """DI lying on his back, the rifle at ``rifles`` (one location per frame), let go at frame 0."""
     poses, body, _ = _lying(figset)
     cs = _clip(name, figset, poses, body, rifles)
-    return check_clip(dataclasses.replace(cs, release_frame=0), figset, ends_dead=True)
+    return _rifle_verdict(check_clip(dataclasses.replace(cs, release_frame=0), figset, ends_dead=True))
 
 
 def _flat(figset: FigureSet, x: float, z: float) -> np.ndarray:

@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_quality import FIGURES, _clip, _lying
+from test_quality import FIGURES, _clip, _lying, _rifle_verdict
 
 from authoring.quality import THRESHOLDS, FigureSet, check_clip
 from authoring.quality_rifle_rest import OVERHANG_LIMIT_CM
@@ -38,7 +38,7 @@ def _dead(figset: FigureSet, rifle: np.ndarray, name: str) -> dict:
     """DI lying on his back, the rifle at ``rifle`` (one location, every frame), let go at frame 0."""
     poses, body, _ = _lying(figset)
     cs = _clip(name, figset, poses, body, np.tile(rifle, (len(poses), 1, 1)))
-    return check_clip(dataclasses.replace(cs, release_frame=0), figset, ends_dead=True)
+    return _rifle_verdict(check_clip(dataclasses.replace(cs, release_frame=0), figset, ends_dead=True))
 
 
 def _on_ground(figset: FigureSet, loc: np.ndarray) -> np.ndarray:
